@@ -1,0 +1,37 @@
+# Quick start: `make demo` and `make test` (see README). Both are idempotent.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: all setup fmus demo test lint bench clean
+
+all: fmus
+
+setup: $(STAMP)
+
+# (Re)install only when the project's dependency list changes.
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(BIN)/python -m pip install --quiet --upgrade pip
+	$(BIN)/python -m pip install --quiet -e '.[train,dev]'
+	touch $(STAMP)
+
+# Rebuilds only when the C sources or model descriptions change (cosim build-fmu checks).
+fmus: $(STAMP)
+	$(BIN)/cosim build-fmu
+
+demo: fmus
+	$(BIN)/cosim run scenarios/paper_steps.csv --out results/demo
+
+test: fmus
+	$(BIN)/python -m pytest
+
+lint: $(STAMP)
+	$(BIN)/ruff check .
+
+bench: fmus
+	for b in benchmarks/bench_*.py; do $(BIN)/python $$b || exit 1; done
+
+clean:
+	rm -rf fmus/build fmus/*.fmu results .pytest_cache

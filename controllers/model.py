@@ -1,0 +1,249 @@
+"""The GRU model file (``controllers/models/*.json``): weights, normalisation, metadata.
+
+Format (JSON, no pickle anywhere)::
+
+    {
+      "format": "gru-mpc-model", "version": 1,
+      "Ts": 25.0,
+      "inputs":  [{"name": "qa", "unit": "m3/s"}, ...],          # m entries
+      "outputs": [{"name": "h1", "unit": "m"}, ...],             # p entries
+      "W_z": [[...]], "U_z": [[...]], "b_z": [...],               # n×m, n×n, n
+      "W_r": ..., "U_r": ..., "b_r": ..., "W_h": ..., "U_h": ..., "b_h": ...,
+      "U_o": [[...]], "b_o": [...],                               # p×n, p
+      "normalization": {"u_offset": [...], "u_scale": [...],
+                        "y_offset": [...], "y_scale": [...]},    # normalised = (raw − offset)/scale
+      "training": {...},                                          # free-form record
+      "observer": {"L_z": [[...]], "L_r": [[...]]},               # optional, n×p each
+      "w_y_bar": 0.12                                             # optional, normalised units
+    }
+
+Matrices are nested lists, row-major. Inputs are normalised so that the saturation box maps
+to ``‖u‖∞ ≤ 1`` (``eq:input-constraint``).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controllers.gru import PARAM_NAMES
+from cosim.errors import CosimError
+
+FORMAT_NAME = "gru-mpc-model"
+FORMAT_VERSION = 1
+NORMALIZATION_KEYS = ("u_offset", "u_scale", "y_offset", "y_scale")
+
+
+class ModelFileError(CosimError):
+    """A model file that cannot be used; the message names the file and the entry."""
+
+
+@dataclass
+class GRUModel:
+    """A GRU model in the paper's convention with its physical-unit normalisation.
+
+    Attributes
+    ----------
+    params : dict of ndarray
+        ``W_z U_z b_z W_r U_r b_r W_h U_h b_h U_o b_o`` (``eq:gru``).
+    u_offset, u_scale, y_offset, y_scale : ndarray
+        ``normalised = (raw − offset) / scale``.
+    input_names, input_units, output_names, output_units : list of str
+    Ts : float
+        Sample time [s].
+    training : dict
+        Free-form training record (seed, epochs, FIT, ν, …).
+    L_z, L_r : ndarray or None
+        Observer gains of ``eq:observer`` (n×p), when designed.
+    w_y_bar : float or None
+        Bound of the output perturbation, normalised units (``W_y``).
+    """
+
+    params: dict[str, np.ndarray]
+    u_offset: np.ndarray
+    u_scale: np.ndarray
+    y_offset: np.ndarray
+    y_scale: np.ndarray
+    input_names: list[str]
+    input_units: list[str]
+    output_names: list[str]
+    output_units: list[str]
+    Ts: float
+    training: dict[str, Any] = field(default_factory=dict)
+    L_z: np.ndarray | None = None
+    L_r: np.ndarray | None = None
+    w_y_bar: float | None = None
+
+    @property
+    def n(self) -> int:
+        """Number of states."""
+        return self.params["U_z"].shape[0]
+
+    @property
+    def m(self) -> int:
+        """Number of inputs."""
+        return self.params["W_z"].shape[1]
+
+    @property
+    def p(self) -> int:
+        """Number of outputs."""
+        return self.params["U_o"].shape[0]
+
+    # -- unit conversion ---------------------------------------------------------------
+    def normalize_u(self, u: np.ndarray) -> np.ndarray:
+        """Physical inputs → normalised inputs."""
+        return (np.asarray(u, dtype=float) - self.u_offset) / self.u_scale
+
+    def denormalize_u(self, u: np.ndarray) -> np.ndarray:
+        """Normalised inputs → physical inputs."""
+        return np.asarray(u, dtype=float) * self.u_scale + self.u_offset
+
+    def normalize_y(self, y: np.ndarray) -> np.ndarray:
+        """Physical outputs → normalised outputs."""
+        return (np.asarray(y, dtype=float) - self.y_offset) / self.y_scale
+
+    def denormalize_y(self, y: np.ndarray) -> np.ndarray:
+        """Normalised outputs → physical outputs."""
+        return np.asarray(y, dtype=float) * self.y_scale + self.y_offset
+
+    # -- (de)serialisation -------------------------------------------------------------
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON document of this model (see the module docstring)."""
+        doc: dict[str, Any] = {
+            "format": FORMAT_NAME,
+            "version": FORMAT_VERSION,
+            "Ts": float(self.Ts),
+            "inputs": [{"name": n, "unit": u}
+                       for n, u in zip(self.input_names, self.input_units, strict=True)],
+            "outputs": [{"name": n, "unit": u}
+                        for n, u in zip(self.output_names, self.output_units, strict=True)],
+        }
+        for name in PARAM_NAMES:
+            doc[name] = np.asarray(self.params[name], dtype=float).tolist()
+        doc["normalization"] = {k: np.asarray(getattr(self, k), dtype=float).tolist()
+                                for k in NORMALIZATION_KEYS}
+        doc["training"] = self.training
+        if self.L_z is not None and self.L_r is not None:
+            doc["observer"] = {"L_z": self.L_z.tolist(), "L_r": self.L_r.tolist()}
+        if self.w_y_bar is not None:
+            doc["w_y_bar"] = float(self.w_y_bar)
+        return doc
+
+    def save(self, path: str | Path) -> None:
+        """Write the model file (JSON, full float precision)."""
+        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+
+    @classmethod
+    def load(cls, path: str | Path) -> GRUModel:
+        """Read and validate a model file; raise :class:`ModelFileError` on any fault."""
+        path = Path(path)
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise ModelFileError(f"{path}: cannot read model file ({exc.strerror})") from None
+        try:
+            doc = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise ModelFileError(
+                f"{path}:{exc.lineno}:{exc.colno}: invalid JSON ({exc.msg})") from None
+        return cls.from_dict(doc, source=str(path))
+
+    @classmethod
+    def from_dict(cls, doc: Any, source: str = "<model>") -> GRUModel:
+        """Build a model from its JSON document, validating names, shapes and values."""
+        if not isinstance(doc, dict):
+            raise ModelFileError(f"{source}: top level must be a JSON object")
+        if doc.get("format", FORMAT_NAME) != FORMAT_NAME:
+            raise ModelFileError(f"{source}: 'format' is {doc.get('format')!r}, "
+                                 f"expected {FORMAT_NAME!r}")
+
+        def array(value: Any, key: str, ndim: int) -> np.ndarray:
+            try:
+                arr = np.array(value, dtype=float)
+            except (TypeError, ValueError):
+                raise ModelFileError(f"{source}: '{key}' is not a numeric array") from None
+            if arr.ndim != ndim:
+                raise ModelFileError(f"{source}: '{key}' must be a {ndim}-D array, "
+                                     f"got shape {arr.shape}")
+            if not np.all(np.isfinite(arr)):
+                raise ModelFileError(f"{source}: '{key}' has a non-finite value")
+            return arr
+
+        params: dict[str, np.ndarray] = {}
+        for name in PARAM_NAMES:
+            if name not in doc:
+                raise ModelFileError(f"{source}: missing array '{name}'")
+            params[name] = array(doc[name], name, 1 if name.startswith("b") else 2)
+        n, m = params["W_z"].shape
+        p = params["U_o"].shape[0]
+        expected = {"W_z": (n, m), "U_z": (n, n), "b_z": (n,), "W_r": (n, m), "U_r": (n, n),
+                    "b_r": (n,), "W_h": (n, m), "U_h": (n, n), "b_h": (n,), "U_o": (p, n),
+                    "b_o": (p,)}
+        for name, shape in expected.items():
+            if params[name].shape != shape:
+                raise ModelFileError(f"{source}: '{name}' has shape {params[name].shape}, "
+                                     f"expected {shape} (n={n}, m={m}, p={p})")
+
+        norm = doc.get("normalization")
+        if not isinstance(norm, dict):
+            raise ModelFileError(f"{source}: missing object 'normalization'")
+        scales: dict[str, np.ndarray] = {}
+        for key in NORMALIZATION_KEYS:
+            if key not in norm:
+                raise ModelFileError(f"{source}: missing 'normalization.{key}'")
+            scales[key] = array(norm[key], f"normalization.{key}", 1)
+            size = m if key.startswith("u") else p
+            if scales[key].shape != (size,):
+                raise ModelFileError(f"{source}: 'normalization.{key}' must have {size} "
+                                     f"entries, got {scales[key].shape[0]}")
+            if key.endswith("scale") and np.any(scales[key] == 0):
+                raise ModelFileError(f"{source}: 'normalization.{key}' has a zero entry")
+
+        def signals(key: str, count: int) -> tuple[list[str], list[str]]:
+            entries = doc.get(key)
+            if not isinstance(entries, list) or len(entries) != count:
+                raise ModelFileError(f"{source}: '{key}' must list {count} signals")
+            names, units = [], []
+            for i, entry in enumerate(entries):
+                if not isinstance(entry, dict) or not isinstance(entry.get("name"), str):
+                    raise ModelFileError(f"{source}: '{key}[{i}]' needs a string 'name'")
+                names.append(entry["name"])
+                units.append(str(entry.get("unit", "")))
+            return names, units
+
+        input_names, input_units = signals("inputs", m)
+        output_names, output_units = signals("outputs", p)
+        Ts = doc.get("Ts")
+        if not isinstance(Ts, int | float) or not math.isfinite(Ts) or Ts <= 0:
+            raise ModelFileError(f"{source}: 'Ts' must be a positive number, got {Ts!r}")
+
+        L_z = L_r = None
+        observer = doc.get("observer")
+        if observer is not None:
+            if not isinstance(observer, dict) or not {"L_z", "L_r"} <= observer.keys():
+                raise ModelFileError(f"{source}: 'observer' must hold 'L_z' and 'L_r'")
+            L_z = array(observer["L_z"], "observer.L_z", 2)
+            L_r = array(observer["L_r"], "observer.L_r", 2)
+            for key, gain in (("L_z", L_z), ("L_r", L_r)):
+                if gain.shape != (n, p):
+                    raise ModelFileError(f"{source}: 'observer.{key}' has shape {gain.shape}, "
+                                         f"expected {(n, p)}")
+        w_y_bar = doc.get("w_y_bar")
+        if w_y_bar is not None and (not isinstance(w_y_bar, int | float) or w_y_bar < 0
+                                    or not math.isfinite(w_y_bar)):
+            raise ModelFileError(f"{source}: 'w_y_bar' must be a non-negative number")
+        training = doc.get("training", {})
+        if not isinstance(training, dict):
+            raise ModelFileError(f"{source}: 'training' must be an object")
+
+        return cls(params=params, u_offset=scales["u_offset"], u_scale=scales["u_scale"],
+                   y_offset=scales["y_offset"], y_scale=scales["y_scale"],
+                   input_names=input_names, input_units=input_units,
+                   output_names=output_names, output_units=output_units, Ts=float(Ts),
+                   training=training, L_z=L_z, L_r=L_r,
+                   w_y_bar=None if w_y_bar is None else float(w_y_bar))

@@ -1,0 +1,1 @@
+"""One module per ``cosim`` sub-command; see :data:`cosim.cli.COMMANDS`."""
