@@ -41,12 +41,19 @@ class Component(ABC):
         Declared signals; the master wires them by name.
     direct_feedthrough : bool
         Whether outputs over ``[t, t+dt)`` depend on inputs at ``t`` (controllers, sensors).
+    sample_time : float or None
+        Natural sample time [s] (a controller's Ts); the master's default communication step.
+    bounds : dict of (float, float)
+        Box constraints by signal name, for KPIs (violations) and figures; may name signals
+        the component does not own (a controller declares the plant outputs it constrains).
     """
 
     name: str = "component"
     inputs: tuple[Signal, ...] = ()
     outputs: tuple[Signal, ...] = ()
     direct_feedthrough: bool = False
+    sample_time: float | None = None
+    bounds: dict[str, tuple[float, float]] = {}  # noqa: RUF012 - read-only class default
 
     def setup(self, t0: float) -> None:  # noqa: B027 - optional hook
         """Prepare for a run starting at ``t0`` (instantiate, initialise)."""
