@@ -1,0 +1,229 @@
+"""Build the four-tank plant FMUs from their C sources.
+
+``build_fmus()`` compiles ``fmus/fourtank/*.c`` with gcc against the FMI headers shipped with
+fmpy (``fmpy/c-code``) and zips two source-and-binary FMUs:
+
+* ``fmus/FourTank.fmu`` -- FMI 2.0, Co-Simulation and Model Exchange, binary under
+  ``binaries/linux64/``;
+* ``fmus/FourTank3.fmu`` -- FMI 3.0, Co-Simulation and Model Exchange, binary under
+  ``binaries/x86_64-linux/``, with ``sources/buildDescription.xml``.
+
+Intermediate files go to ``fmus/build/``. An FMU is rebuilt only when its inputs change: the
+SHA-256 of the sources, the model description, the compiler command and the compiler version
+is stored in ``fmus/build/<name>.sha256`` and inside the FMU as ``sources/BUILD_HASH``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import platform
+import shutil
+import subprocess
+import tempfile
+import zipfile
+from dataclasses import dataclass
+from pathlib import Path
+
+from cosim.errors import CosimError
+
+#: Repository root (the package is installed in editable mode).
+ROOT = Path(__file__).resolve().parents[1]
+SOURCE_DIR = ROOT / "fmus" / "fourtank"
+FMU_DIR = ROOT / "fmus"
+BUILD_DIR = FMU_DIR / "build"
+MODEL_IDENTIFIER = "FourTank"
+
+#: Compiler flags: strict C99, warnings are errors, only the FMI functions are exported.
+CFLAGS = (
+    "-std=c99",
+    "-Wall",
+    "-Wextra",
+    "-Werror",
+    "-pedantic",
+    "-O2",
+    "-fPIC",
+    "-shared",
+    "-fvisibility=hidden",
+)
+LDFLAGS = ("-Wl,--no-undefined", "-lm")
+
+
+@dataclass(frozen=True)
+class Target:
+    """One FMU to build: its FMI version, file name, glue source and binary folder."""
+
+    fmi_version: int
+    fmu_name: str
+    glue: str
+    model_description: str
+    platform_dir: str
+
+    @property
+    def fmu_path(self) -> Path:
+        return FMU_DIR / self.fmu_name
+
+    @property
+    def sources(self) -> tuple[str, ...]:
+        """Files shipped under ``sources/`` (FMI 3 adds its buildDescription.xml)."""
+        extra = ("buildDescription.xml",) if self.fmi_version == 3 else ()
+        return ("model.h", "model.c", self.glue, *extra)
+
+
+TARGETS = (
+    Target(2, "FourTank.fmu", "fmi2.c", "modelDescription2.xml", "linux64"),
+    Target(3, "FourTank3.fmu", "fmi3.c", "modelDescription3.xml", "x86_64-linux"),
+)
+
+
+def fmi_headers_dir() -> Path:
+    """Return fmpy's folder of FMI 1/2/3 C headers (``fmpy/c-code``)."""
+    import fmpy
+
+    path = Path(fmpy.__file__).parent / "c-code"
+    if not (path / "fmi2Functions.h").is_file() or not (path / "fmi3Functions.h").is_file():
+        raise CosimError(f"FMI headers not found in {path}: reinstall fmpy")
+    return path
+
+
+def compiler() -> str:
+    """Return the C compiler to use (``$CC`` or ``gcc``), or raise :class:`CosimError`."""
+    cc = os.environ.get("CC", "gcc")
+    found = shutil.which(cc)
+    if found is None:
+        raise CosimError(
+            f"C compiler '{cc}' not found: install gcc (e.g. apt-get install gcc) to build the FMUs"
+        )
+    return found
+
+
+def display_path(path: Path) -> str:
+    """``path`` relative to the repository when inside it (for one-line messages)."""
+    try:
+        return str(path.relative_to(ROOT))
+    except ValueError:
+        return str(path)
+
+
+def _compiler_version(cc: str) -> str:
+    try:
+        out = subprocess.run([cc, "--version"], capture_output=True, text=True, check=False)
+    except OSError as exc:
+        raise CosimError(f"cannot run C compiler {cc}: {exc}") from exc
+    return out.stdout.splitlines()[0] if out.stdout else ""
+
+
+def _source_hash(target: Target, cc: str) -> str:
+    digest = hashlib.sha256()
+    for name in (*target.sources, target.model_description):
+        path = SOURCE_DIR / name
+        if not path.is_file():
+            raise CosimError(f"missing FMU source {display_path(path)}")
+        digest.update(name.encode() + b"\0" + path.read_bytes() + b"\0")
+    digest.update(" ".join((*CFLAGS, *LDFLAGS)).encode())
+    digest.update(_compiler_version(cc).encode())
+    digest.update(Path(__file__).read_bytes())
+    return digest.hexdigest()
+
+
+def _check_platform() -> None:
+    if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
+        raise CosimError(
+            f"building the FMUs is supported on x86_64 Linux only, not "
+            f"{platform.system()} {platform.machine()}"
+        )
+
+
+def _compile(target: Target, cc: str, out: Path) -> None:
+    include = fmi_headers_dir()
+    sources = [str(SOURCE_DIR / name) for name in target.sources if name.endswith(".c")]
+    cmd = [cc, *CFLAGS, f"-I{include}", f"-I{SOURCE_DIR}", "-o", str(out), *sources, *LDFLAGS]
+    try:
+        result = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    except OSError as exc:
+        raise CosimError(f"cannot run C compiler {cc}: {exc}") from exc
+    if result.returncode != 0:
+        lines = [ln for ln in result.stderr.splitlines() if "error" in ln] or [
+            ln for ln in result.stderr.splitlines() if ln.strip()
+        ]
+        first = lines[0].strip() if lines else f"exit status {result.returncode}"
+        raise CosimError(f"compiling {target.fmu_name} failed: {first}")
+
+
+def _zip_fmu(target: Target, binary: Path, digest: str) -> None:
+    """Write the FMU atomically (temporary file, then rename)."""
+    FMU_DIR.mkdir(parents=True, exist_ok=True)
+    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.fmu_name}.", dir=FMU_DIR)
+    os.close(fd)
+    tmp = Path(tmp_name)
+    try:
+        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+            zf.write(SOURCE_DIR / target.model_description, "modelDescription.xml")
+            zf.write(binary, f"binaries/{target.platform_dir}/{MODEL_IDENTIFIER}.so")
+            for name in target.sources:
+                zf.write(SOURCE_DIR / name, f"sources/{name}")
+            zf.writestr("sources/BUILD_HASH", digest + "\n")
+        umask = os.umask(0)
+        os.umask(umask)
+        tmp.chmod(0o666 & ~umask)  # mkstemp creates 0600; an FMU is an ordinary file
+        tmp.replace(target.fmu_path)
+    finally:
+        tmp.unlink(missing_ok=True)
+
+
+def _stored_hash(target: Target) -> str | None:
+    stamp = BUILD_DIR / f"{target.fmu_name}.sha256"
+    if not target.fmu_path.is_file() or not stamp.is_file():
+        return None
+    try:
+        with zipfile.ZipFile(target.fmu_path) as zf:
+            inside = zf.read("sources/BUILD_HASH").decode().strip()
+    except (KeyError, zipfile.BadZipFile, OSError):
+        return None
+    beside = stamp.read_text().strip()
+    return inside if inside == beside else None
+
+
+def build_fmu(target: Target, force: bool = False) -> bool:
+    """Build one FMU if its inputs changed (or ``force``); return True when it was rebuilt."""
+    cc = compiler()
+    digest = _source_hash(target, cc)
+    if not force and _stored_hash(target) == digest:
+        return False
+    _check_platform()
+    out_dir = BUILD_DIR / f"fmi{target.fmi_version}"
+    out_dir.mkdir(parents=True, exist_ok=True)
+    # Compile to a private name first: concurrent builds (parallel test runs) never zip a
+    # half-written library.
+    binary = out_dir / f"{MODEL_IDENTIFIER}.{os.getpid()}.so"
+    try:
+        _compile(target, cc, binary)
+        binary = binary.replace(out_dir / f"{MODEL_IDENTIFIER}.so")
+        _zip_fmu(target, binary, digest)
+    finally:
+        (out_dir / f"{MODEL_IDENTIFIER}.{os.getpid()}.so").unlink(missing_ok=True)
+    (BUILD_DIR / f"{target.fmu_name}.sha256").write_text(digest + "\n")
+    return True
+
+
+def build_fmus(force: bool = False) -> list[Path]:
+    """Build ``fmus/FourTank.fmu`` (FMI 2.0) and ``fmus/FourTank3.fmu`` (FMI 3.0).
+
+    Parameters
+    ----------
+    force
+        Rebuild even when the sources are unchanged.
+
+    Returns
+    -------
+    list of Path
+        The two FMU paths (FMI 2.0 first), whether rebuilt or already up to date.
+
+    Raises
+    ------
+    CosimError
+        gcc is missing, the platform is not x86_64 Linux, or compilation failed.
+    """
+    for target in TARGETS:
+        build_fmu(target, force=force)
+    return [target.fmu_path for target in TARGETS]
