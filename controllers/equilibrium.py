@@ -1,0 +1,200 @@
+"""Equilibria of the GRU model: ``x̄ = f(x̄, ū)``, ``U_o x̄ + b_o = ȳ``, ``‖ū‖∞ ≤ 1``.
+
+The FHOCP (``eq:optimization``) penalises ``x − x̄`` and ``u − ū`` where ``(x̄, ū)`` is the
+model equilibrium whose output is the set-point ``ȳ`` (paper section IV-B); the observer
+starts at the equilibrium for the first measured output (paper section V).
+
+Method (deterministic, numpy + scipy): for a fixed ``u`` the state equilibrium ``x(u)`` is
+the unique fixed point of the contraction ``f(·, u)`` when ``ν < 1`` (``lem:Vs``); it is
+found by Newton's method on ``f(x, u) − x = 0``, with fixed-point iterations as a fallback.
+The output equation ``U_o x(u) + b_o = ȳ`` is then solved for ``u`` in the box
+``[−1, 1]^m`` by bounded least squares (scipy ``least_squares``, exact Jacobian from the
+implicit-function theorem ``dx/du = (I − f_x)^{-1} f_u``) from a fixed set of starting
+points. ``‖x̄‖∞ < 1`` holds automatically: ``x̄ = h(x̄, ū)`` with ``|h| < 1``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from controllers.gru import NUMPY_OPS, gates, step
+from cosim.errors import CosimError
+
+#: Residual (∞-norm, normalised units) below which a set-point counts as reached.
+REACH_TOL = 1e-8
+
+
+class UnreachableSetpoint(CosimError):
+    """A set-point the model cannot hold with inputs inside the saturation box."""
+
+
+def _params(model_or_params: Any) -> dict[str, np.ndarray]:
+    p = getattr(model_or_params, "params", model_or_params)
+    return {k: np.asarray(v, dtype=float) for k, v in p.items()}
+
+
+def jacobians(params: Mapping[str, np.ndarray], x: np.ndarray,
+              u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Exact Jacobians ``(∂f/∂x, ∂f/∂u)`` of the GRU state update ``eq:gru`` at ``(x, u)``."""
+    z, r, h = gates(params, x, u, NUMPY_OPS)
+    dz = (z * (1 - z))[:, None]
+    dr = (r * (1 - r))[:, None]
+    dh = (1 - h**2)[:, None]
+    z_x, z_u = dz * params["U_z"], dz * params["W_z"]
+    r_x, r_u = dr * params["U_r"], dr * params["W_r"]
+    rx_x = np.diag(r) + x[:, None] * r_x          # ∂(r∘x)/∂x
+    rx_u = x[:, None] * r_u                        # ∂(r∘x)/∂u
+    h_x = dh * (params["U_h"] @ rx_x)
+    h_u = dh * (params["W_h"] + params["U_h"] @ rx_u)
+    f_x = np.diag(z) + (x - h)[:, None] * z_x + (1 - z)[:, None] * h_x
+    f_u = (x - h)[:, None] * z_u + (1 - z)[:, None] * h_u
+    return f_x, f_u
+
+
+def state_equilibrium(params: Mapping[str, np.ndarray], u: np.ndarray,
+                      x0: np.ndarray | None = None, tol: float = 1e-13,
+                      max_iter: int = 100) -> np.ndarray:
+    """The state ``x`` with ``x = f(x, u)`` for a fixed input ``u`` (Newton, then iteration).
+
+    Unique in ``‖x‖∞ ≤ 1`` when the model is δISS (``lem:Vs``: ``f(·, u)`` contracts).
+    """
+    p = params
+    n = p["U_z"].shape[0]
+    u = np.asarray(u, dtype=float)
+    x = np.zeros(n) if x0 is None else np.array(x0, dtype=float)
+    eye = np.eye(n)
+    for _ in range(max_iter):
+        F = step(p, x, u) - x
+        if np.max(np.abs(F)) < tol:
+            return x
+        f_x, _ = jacobians(p, x, u)
+        try:
+            dx = np.linalg.solve(f_x - eye, -F)
+        except np.linalg.LinAlgError:
+            break
+        # damped step: stay in the box and reduce the residual
+        t = 1.0
+        while t > 1e-4:
+            xn = np.clip(x + t * dx, -1.0, 1.0)
+            if np.max(np.abs(step(p, xn, u) - xn)) < np.max(np.abs(F)):
+                break
+            t *= 0.5
+        else:
+            break
+        x = xn
+    # fallback: plain fixed-point iteration (converges when f(·, u) contracts)
+    for _ in range(20000):
+        xn = step(p, x, u)
+        if np.max(np.abs(xn - x)) < tol:
+            return xn
+        x = xn
+    return x
+
+
+def _solve(params: dict[str, np.ndarray], y: np.ndarray) -> tuple[np.ndarray, np.ndarray,
+                                                                   float]:
+    """Bounded least squares for ``u``; returns ``(x, u, residual ∞-norm)`` of the best
+    start."""
+    from scipy.optimize import least_squares
+
+    n, m = params["W_z"].shape
+    Uo, bo = params["U_o"], params["b_o"]
+    eye = np.eye(n)
+    cache = {"x": np.zeros(n)}
+
+    def x_of(u: np.ndarray) -> np.ndarray:
+        x = state_equilibrium(params, u, cache["x"])
+        cache["x"] = x
+        return x
+
+    def res(u: np.ndarray) -> np.ndarray:
+        return Uo @ x_of(u) + bo - y
+
+    def jac(u: np.ndarray) -> np.ndarray:
+        x = x_of(u)
+        f_x, f_u = jacobians(params, x, u)
+        return Uo @ np.linalg.solve(eye - f_x, f_u)
+
+    starts = [np.zeros(m)]
+    for s in (0.5, -0.5):
+        starts.append(np.full(m, s))
+    for i in range(m):
+        for s in (0.5, -0.5):
+            v = np.zeros(m)
+            v[i] = s
+            starts.append(v)
+    best: tuple[np.ndarray, np.ndarray, float] | None = None
+    agree = 0
+    for u0 in starts:
+        cache["x"] = np.zeros(n)
+        sol = least_squares(res, u0, jac=jac, bounds=(-np.ones(m), np.ones(m)),
+                            method="trf", xtol=1e-14, ftol=1e-14, gtol=1e-14, max_nfev=100)
+        u = np.clip(sol.x, -1.0, 1.0)
+        x = state_equilibrium(params, u, None)
+        err = float(np.max(np.abs(Uo @ x + bo - y)))
+        if best is not None and np.max(np.abs(u - best[1])) < 1e-7:
+            agree += 1  # another start found the same point
+        if best is None or err < best[2] - 1e-15:
+            best = (x, u, err)
+        if err < REACH_TOL * 1e-3 or agree >= 2:
+            break
+    assert best is not None
+    return best
+
+
+def _describe(model: Any, y: np.ndarray) -> str:
+    names = getattr(model, "output_names", None)
+    if names is not None and hasattr(model, "denormalize_y"):
+        phys = model.denormalize_y(y)
+        units = getattr(model, "output_units", [""] * len(phys))
+        return ", ".join(f"{nm}={v:.4g}{(' ' + un) if un else ''}"
+                         for nm, v, un in zip(names, phys, units, strict=True))
+    return "[" + ", ".join(f"{v:.6g}" for v in y) + "] (normalised)"
+
+
+def equilibrium(model_or_params: Any, y_bar_norm: Sequence[float]) -> tuple[np.ndarray,
+                                                                             np.ndarray]:
+    """Model equilibrium ``(x̄, ū)`` with output ``ȳ`` (normalised) and ``‖ū‖∞ ≤ 1``.
+
+    Solves ``x̄ = f(x̄, ū)``, ``U_o x̄ + b_o = ȳ`` (``eq:gru``; the reference of the FHOCP
+    ``eq:optimization``).
+
+    Parameters
+    ----------
+    model_or_params : GRUModel or mapping of arrays
+        With a :class:`GRUModel`, error messages are in physical units.
+    y_bar_norm : (p,) array
+        Set-point in normalised units.
+
+    Raises
+    ------
+    UnreachableSetpoint
+        (a :class:`CosimError`) when no ``‖ū‖∞ ≤ 1`` reaches ``ȳ``; the message names the
+        set-point and the closest reachable equilibrium output.
+    """
+    params = _params(model_or_params)
+    y = np.asarray(y_bar_norm, dtype=float).reshape(-1)
+    x, u, err = _solve(params, y)
+    if err > REACH_TOL:
+        reach = params["U_o"] @ x + params["b_o"]
+        raise UnreachableSetpoint(
+            f"set-point {_describe(model_or_params, y)} is not reachable with inputs inside "
+            f"the saturation box (‖u‖∞ ≤ 1); the closest reachable equilibrium output is "
+            f"{_describe(model_or_params, reach)}")
+    return x, u
+
+
+def equilibrium_for_output(model_or_params: Any,
+                           y_norm: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+    """Equilibrium ``(x, u)`` whose output is closest to ``y`` (normalised), never raising.
+
+    Used for the observer's initial state ``x̂_0`` (paper section V: the equilibrium for the
+    first measured output); when ``y`` is not reachable the closest reachable equilibrium
+    (least squares over ``‖u‖∞ ≤ 1``) is returned.
+    """
+    params = _params(model_or_params)
+    x, u, _ = _solve(params, np.asarray(y_norm, dtype=float).reshape(-1))
+    return x, u

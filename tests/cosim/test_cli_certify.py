@@ -1,0 +1,155 @@
+"""``cosim certify``: table, JSON keys, exit codes, --save, --auto-gain-scale, --data."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "controllers"))
+from random_gru import random_gru_model
+
+from controllers import certificates as certs
+from controllers.model import GRUModel
+from cosim.cli import main
+
+KEYS = ["sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r", "nu_o", "rho_o",
+        "c_o", "kappa", "L_max", "w_y_bar", "w_bar", "w_L", "a", "b", "e_o0", "e_inf", "s",
+        "alpha", "assumption_1", "recursive_feasibility"]
+
+
+@pytest.fixture()
+def model_file(tmp_path: Path) -> Path:
+    m = random_gru_model(0)
+    m.w_y_bar = 0.01
+    path = tmp_path / "model.json"
+    m.save(path)
+    return path
+
+
+def test_table_passes_with_exit_0(model_file: Path, capsys) -> None:
+    assert main(["certify", str(model_file), "--setpoint", "1.0,1.0"]) == 0
+    out = capsys.readouterr().out
+    for name in ("nu", "rho_s", "nu_o", "kappa", "L_max", "w_bar", "e_inf", "s", "alpha"):
+        assert f"  {name} " in out or f"{name} =" in out
+    assert "th:stability-bonassi" in out and "eq:def-alpha" in out
+    assert "admissible set-points" in out and "FAILED" not in out
+
+
+def test_json_keys_and_values(model_file: Path, capsys) -> None:
+    assert main(["certify", str(model_file), "--setpoint", "1.0,1.0", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert list(doc) == KEYS
+    m = GRUModel.load(model_file)
+    cert = certs.compute_certificate(m)
+    y = m.normalize_y(np.array([1.0, 1.0]))
+    assert doc["nu"] == pytest.approx(cert.nu) and doc["alpha"] == pytest.approx(cert.alpha(y))
+    assert doc["assumption_1"] is True and doc["recursive_feasibility"] is True
+    assert len(doc["a"]) == 16  # i = 0..N with N = 15
+
+
+def test_json_several_setpoints_is_a_list(model_file: Path, capsys) -> None:
+    main(["certify", str(model_file), "--setpoint", "1,1", "--setpoint", "0.8,1.2", "--json",
+          "--N", "5"])
+    docs = json.loads(capsys.readouterr().out)
+    assert isinstance(docs, list) and len(docs) == 2 and all(list(d) == KEYS for d in docs)
+    assert len(docs[0]["b"]) == 6
+
+
+def test_failing_setpoint_exit_1_names_the_hypothesis(model_file: Path, capsys) -> None:
+    # 1.99 m is next to the 2 m constraint: Assumption 1 fails
+    assert main(["certify", str(model_file), "--setpoint", "1.99,1.0"]) == 1
+    captured = capsys.readouterr()
+    assert "Assumption 1 (ass:setpoint) fails" in captured.out
+    assert "hypothesis check(s) failed" in captured.err
+
+
+def test_non_delta_iss_model_exit_1(tmp_path: Path, capsys) -> None:
+    m = random_gru_model(0)
+    m.params["U_z"] *= 40
+    m.w_y_bar = 0.01
+    path = tmp_path / "bad.json"
+    m.save(path)
+    assert main(["certify", str(path)]) == 1
+    assert "th:stability-bonassi" in capsys.readouterr().out
+
+
+def test_bad_model_file_exit_2_one_line(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "broken.json"
+    path.write_text('{"format": "gru-mpc-model", "W_z": [[1, 2]')
+    assert main(["certify", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "broken.json" in err and err.count("\n") == 1 and "Traceback" not in err
+    assert main(["certify", str(tmp_path / "missing.json")]) == 2
+    capsys.readouterr()
+
+
+def test_bad_setpoint_and_missing_w_y_bar_exit_2(tmp_path: Path, model_file: Path,
+                                                 capsys) -> None:
+    assert main(["certify", str(model_file), "--setpoint", "1.0"]) == 2
+    assert "--setpoint" in capsys.readouterr().err
+    m = random_gru_model(0)
+    path = tmp_path / "now.json"
+    m.save(path)
+    assert main(["certify", str(path)]) == 2
+    assert "--data" in capsys.readouterr().err
+
+
+def test_auto_gain_scale_and_save(tmp_path: Path, capsys) -> None:
+    m = random_gru_model(1)
+    m.w_y_bar = 0.15  # large enough that the LP gains fail and must be scaled
+    path = tmp_path / "model.json"
+    m.save(path)
+    assert main(["certify", str(path), "--setpoint", "0.8,0.8", "--setpoint", "1.2,1.2"]) == 1
+    capsys.readouterr()
+    assert main(["certify", str(path), "--setpoint", "0.8,0.8", "--setpoint", "1.2,1.2",
+                 "--auto-gain-scale", "--save"]) == 0
+    out = capsys.readouterr().out
+    assert "(auto)" in out
+    saved = GRUModel.load(path)
+    Lz, Lr = certs.observer_gains_lp(m.params)
+    theta = saved.L_z.ravel() @ Lz.ravel() / (Lz.ravel() @ Lz.ravel())
+    assert 0 < theta < 1
+    assert saved.L_z == pytest.approx(theta * Lz) and saved.L_r == pytest.approx(theta * Lr)
+    assert saved.w_y_bar == 0.15
+    # the saved gains are the default next time, and they pass
+    assert main(["certify", str(path), "--setpoint", "0.8,0.8", "--setpoint", "1.2,1.2"]) == 0
+    assert "gains from the model file" in capsys.readouterr().out
+
+
+def test_explicit_gain_scale(model_file: Path, capsys) -> None:
+    assert main(["certify", str(model_file), "--gain-scale", "0", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["kappa"] == 0 and doc["nu_o"] == pytest.approx(doc["nu"])
+    assert main(["certify", str(model_file), "--gain-scale", "-1"]) == 2
+    capsys.readouterr()
+
+
+def test_data_option_estimates_w_y_bar(tmp_path: Path, model_file: Path, capsys) -> None:
+    from controllers.gru import simulate
+
+    m = GRUModel.load(model_file)
+    rng = np.random.default_rng(0)
+    u = np.repeat(rng.uniform(-1, 1, (60, 2)), 10, axis=0)
+    _, xi = simulate(m.params, np.zeros(20), u)
+    w = rng.uniform(-0.02, 0.02, xi.shape)
+    w[550, 0] = -0.035
+    y, up = m.denormalize_y(xi + w), m.denormalize_u(u)
+    split = ["train"] * 200 + ["val"] * 200 + ["test"] * 200
+    rows = ["time,qa,qb,h1,h2,split"] + [
+        f"{25.0 * k},{up[k, 0]:.17g},{up[k, 1]:.17g},{y[k, 0]:.17g},{y[k, 1]:.17g},{split[k]}"
+        for k in range(600)]
+    data = tmp_path / "data.csv"
+    data.write_text("\n".join(rows) + "\n")
+    assert main(["certify", str(model_file), "--data", str(data), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["w_y_bar"] == pytest.approx(0.035, abs=1e-4)
+
+
+def test_plot_writes_a_figure(model_file: Path, tmp_path: Path, capsys) -> None:
+    png = tmp_path / "fig" / "cert.png"
+    assert main(["certify", str(model_file), "--setpoint", "1,1", "--plot", str(png)]) == 0
+    assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20000
+    assert "figure written" in capsys.readouterr().err
