@@ -1,0 +1,492 @@
+"""Run any FMI 2.0 or 3.0 FMU (Co-Simulation or Model Exchange) as a :class:`Component`.
+
+fmpy loads the FMU's native library into this process; an FMU is native code that may
+crash, so :mod:`cosim.isolated` offers the same component in a worker process.
+
+Signals are the FMU's real-valued inputs and outputs under their project names (a
+:class:`~cosim.varmap.VarMap` renames and converts them; without one, the FMU's names are
+used as they are). Value references are looked up once; per-step calls reuse preallocated
+ctypes buffers.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import math
+import shutil
+import tempfile
+import zipfile
+from collections import deque
+from collections.abc import Mapping
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+from cosim.component import Component, Signal
+from cosim.errors import CosimError, SimulationFailed
+from cosim.varmap import VarMap, variable_unit
+
+#: Refuse archives that would unpack to more than this many bytes (zip bombs).
+MAX_UNPACKED_BYTES = 2 * 1024**3
+
+_REAL_TYPES = ("Real", "Float64")
+
+# ---------------------------------------------------------------------------------------------
+# FMU log messages. fmpy formats FMI 2 variadic log messages in a small native proxy that keeps
+# ONE Python logger per process, so messages are routed here by instance name.
+_LOG_SINKS: dict[str, deque[str]] = {}
+_LABELS = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
+
+
+def _sink_message(instance: bytes | None, status: int, category: bytes | None,
+                  message: bytes | None) -> None:
+    name = (instance or b"").decode("utf-8", "replace")
+    text = " ".join((message or b"").decode("utf-8", "replace").split())
+    label = _LABELS[status] if 0 <= status < len(_LABELS) else str(status)
+    sink = _LOG_SINKS.get(name)
+    if sink is None:
+        print(f"[{label}] {name}: {text}")
+    elif status >= 1:  # keep warnings and errors: they explain failures
+        sink.append(f"[{label}] {text}")
+
+
+def _fmi2_callbacks() -> Any:
+    from fmpy import fmi2
+
+    global _FMI2_CALLBACKS
+    if _FMI2_CALLBACKS is None:
+        def logger(env, instance, status, category, message):
+            _sink_message(instance, status, category, message)
+
+        cb = fmi2.fmi2CallbackFunctions()
+        # the native proxy keeps a bare pointer to the Python logger: hold every callback
+        # object for the life of the process
+        _CALLBACK_REFS.extend([fmi2.fmi2CallbackLoggerTYPE(logger),
+                               fmi2.fmi2CallbackAllocateMemoryTYPE(fmi2.calloc),
+                               fmi2.fmi2CallbackFreeMemoryTYPE(fmi2.free), logger])
+        cb.logger, cb.allocateMemory, cb.freeMemory = _CALLBACK_REFS[:3]
+        try:
+            from fmpy.logging import addLoggerProxy
+
+            addLoggerProxy(ctypes.byref(cb))
+        except Exception:  # pragma: no cover - proxy missing on this platform
+            pass
+        _FMI2_CALLBACKS = cb
+    return _FMI2_CALLBACKS
+
+
+_FMI2_CALLBACKS: Any = None
+_CALLBACK_REFS: list[Any] = []
+#: FMU objects whose libraries stay loaded until the process ends (never dlclose'd).
+_KEEP_LOADED: list[Any] = []
+_INSTANCE_COUNTER = [0]
+
+
+def safe_extract(path: Path, into: Path) -> Path:
+    """Extract an FMU archive after checking every member name.
+
+    Rejects absolute paths, drive letters, backslashes, ``..`` components and archives that
+    would unpack to more than :data:`MAX_UNPACKED_BYTES`.
+
+    Raises
+    ------
+    CosimError
+        Naming the FMU and the offending member.
+    """
+    try:
+        with zipfile.ZipFile(path) as zf:
+            total = 0
+            for info in zf.infolist():
+                name = info.filename
+                parts = PurePosixPath(name).parts
+                if (name.startswith("/") or "\\" in name or ":" in name or ".." in parts):
+                    raise CosimError(f"{path}: unsafe path '{name}' in the FMU archive")
+                total += info.file_size
+            if total > MAX_UNPACKED_BYTES:
+                raise CosimError(f"{path}: archive unpacks to {total} bytes, more than allowed")
+            zf.extractall(into)
+    except zipfile.BadZipFile as exc:
+        raise CosimError(f"{path}: not an FMU (not a zip archive: {exc})") from None
+    return into
+
+
+def read_model_description(path: str | Path) -> Any:
+    """``fmpy.read_model_description`` with errors as one-line :class:`CosimError`."""
+    import fmpy
+
+    path = Path(path)
+    if not path.is_file():
+        raise CosimError(f"{path}: FMU not found")
+    try:
+        return fmpy.read_model_description(str(path), validate=False)
+    except Exception as exc:
+        msg = " ".join(str(exc).split())
+        raise CosimError(f"{path}: cannot read modelDescription.xml: {msg}") from None
+
+
+class FmuComponent(Component):
+    """A plant (or any block) implemented by an FMU.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``.fmu`` file (FMI 2.0 or 3.0).
+    name : str
+        Component name (prefix of recorded signals).
+    interface : {"cs", "me"}
+        Co-Simulation (the FMU's own solver) or Model Exchange (fmpy's CVode).
+    start_values : dict, optional
+        FMU variable (or map signal) → value, applied before initialisation.
+    varmap : VarMap, optional
+        Renames/converts signals (see :mod:`cosim.varmap`).
+    rtol : float
+        CVode relative tolerance for Model Exchange.
+
+    Notes
+    -----
+    Construction only reads the modelDescription; :meth:`setup` extracts the archive and
+    loads the native code.
+    """
+
+    direct_feedthrough = False
+
+    def __init__(self, path: str | Path, name: str = "plant", interface: str = "cs",
+                 start_values: Mapping[str, float] | None = None,
+                 varmap: VarMap | None = None, rtol: float = 1e-8) -> None:
+        self.path = Path(path)
+        self.name = name
+        if interface not in ("cs", "me"):
+            raise CosimError(f"{self.path}: unknown interface '{interface}' (use cs or me)")
+        self.interface = interface
+        self.varmap = varmap or VarMap.identity()
+        self.rtol = rtol
+        self.md = read_model_description(self.path)
+        self.fmi_version = self.md.fmiVersion
+        if not (self.fmi_version == "2.0" or self.fmi_version.startswith("3.")):
+            raise CosimError(f"{self.path}: FMI {self.fmi_version} is not supported "
+                             "(FMI 2.0 and 3.0 are)")
+        kind = self.md.coSimulation if interface == "cs" else self.md.modelExchange
+        if kind is None:
+            other = "me" if interface == "cs" else "cs"
+            raise CosimError(f"{self.path}: the FMU has no "
+                             f"{'Co-Simulation' if interface == 'cs' else 'Model Exchange'} "
+                             f"interface (try --interface {other})")
+        self.model_identifier = kind.modelIdentifier
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        real = [v for v in self.md.modelVariables if v.type in _REAL_TYPES and not v.shape]
+        sig = self.varmap.signal_of
+        self.inputs = tuple(Signal(sig(v.name), variable_unit(v) or "", v.description or "")
+                            for v in real if v.causality == "input")
+        self.outputs = tuple(Signal(sig(v.name), variable_unit(v) or "", v.description or "")
+                             for v in real if v.causality == "output")
+        self.tunables = tuple(sig(v.name) for v in real
+                              if v.causality == "parameter" and v.variability == "tunable")
+        self.parameters = tuple(sig(v.name) for v in real if v.causality == "parameter")
+        self.start_values = dict(start_values or {})
+        self._out_names = [s.name for s in self.outputs]
+        self._out_maps = [self.varmap.lookup(n) for n in self._out_names]
+        self._fmu: Any = None
+        self._tmpdir: Path | None = None
+        self._log: deque[str] = deque(maxlen=20)
+        self._instance_name = ""
+        self._dirty = False
+        self._t = 0.0
+        self._failed = False
+        self._fatal = False
+
+    # -- name resolution ----------------------------------------------------------------------
+    def variable_of(self, signal: str) -> Any:
+        """The fmpy ModelVariable behind a project signal or FMU variable name."""
+        m = self.varmap.lookup(signal)
+        var = self.variables.get(m.variable)
+        if var is None:
+            var = self.variables.get(signal)
+        if var is None:
+            raise CosimError(f"{self.path}: no variable '{signal}'")
+        return var
+
+    def settable(self, at_start: bool = False) -> set[str]:
+        """Names a scenario may set: inputs and tunable (or, at start, all) parameters."""
+        names = {s.name for s in self.inputs}
+        names |= set(self.parameters if at_start else self.tunables)
+        # a mapped variable may also be named as the FMU names it (then in FMU units)
+        names |= {m.variable for m in self.varmap.signals.values() if m.signal in names}
+        return names
+
+    def check_signals(self, inputs: list[str], outputs: list[str],
+                      units: Mapping[str, str] | None = None) -> None:
+        """Check the signals a run wires to this FMU (see :meth:`VarMap.check`)."""
+        self.varmap.check(self.variables, inputs, outputs, units, fmu=str(self.path))
+
+    # -- life cycle ---------------------------------------------------------------------------
+    def _fail(self, what: str, exc: BaseException | str) -> SimulationFailed:
+        text = str(exc)
+        self._failed = True
+        if "status 4" in text or "(fatal)" in text.lower():
+            self._fatal = True
+        log = f" (FMU log: {' | '.join(self._log)})" if self._log else ""
+        msg = " ".join(str(exc).split())
+        return SimulationFailed(f"{self.path.name}: {what} failed: {msg}{log}")
+
+    def setup(self, t0: float, stop_time: float | None = None) -> None:
+        """Extract, load, instantiate and initialise the FMU at ``t0``."""
+        from fmpy import fmi2, fmi3
+
+        self._tmpdir = Path(tempfile.mkdtemp(prefix="cosim-fmu-"))
+        safe_extract(self.path, self._tmpdir)
+        _INSTANCE_COUNTER[0] += 1
+        self._instance_name = f"{self.name}{_INSTANCE_COUNTER[0]}"
+        _LOG_SINKS[self._instance_name] = self._log
+        fmi3_ = self.fmi_version.startswith("3.")
+        cls = {("2", "cs"): fmi2.FMU2Slave, ("2", "me"): fmi2.FMU2Model,
+               ("3", "cs"): fmi3.FMU3Slave, ("3", "me"): fmi3.FMU3Model}[
+                   ("3" if fmi3_ else "2", self.interface)]
+        guid = self.md.instantiationToken if fmi3_ else self.md.guid
+        try:
+            self._fmu = cls(guid=guid, unzipDirectory=str(self._tmpdir),
+                            modelIdentifier=self.model_identifier,
+                            instanceName=self._instance_name)
+        except Exception as exc:
+            raise self._fail("loading the binary", exc) from None
+        self._fmi3 = fmi3_
+        try:
+            if fmi3_:
+                def log3(env, status, category, message):
+                    _sink_message(self._instance_name.encode(), status, category, message)
+
+                self._fmu.instantiate(logMessage=log3, loggingOn=True)
+            else:
+                self._fmu.instantiate(callbacks=_fmi2_callbacks(), loggingOn=True)
+        except Exception as exc:
+            raise self._fail("instantiation", exc) from None
+        self._prepare_buffers()
+        try:
+            if not fmi3_:
+                self._fmu.setupExperiment(startTime=t0)
+            for key, value in self.start_values.items():
+                self._set_var(key, value)
+            if fmi3_:
+                self._fmu.enterInitializationMode(startTime=t0)
+            else:
+                self._fmu.enterInitializationMode()
+            self._fmu.exitInitializationMode()
+            if self.interface == "me":
+                self._init_me(t0)
+        except CosimError:
+            raise
+        except Exception as exc:
+            raise self._fail(f"initialisation at t={t0!r}", exc) from None
+        self._t = t0
+
+    def _raw(self, fname: str) -> Any:
+        """The FMU's C function as a bare ctypes function (no argument conversion).
+
+        The hot path passes ctypes instances built once (pointers to preallocated buffers),
+        which skips fmpy's per-call wrapper and ctypes' argument conversion.
+        """
+        addr = ctypes.cast(self._fmu._functions[fname], ctypes.c_void_p).value
+        return ctypes.CFUNCTYPE(ctypes.c_int)(addr)
+
+    @staticmethod
+    def _check(fname: str, status: int) -> None:
+        if status > 1:  # fmi2Warning = fmi3Warning = 1
+            label = _LABELS[status] if status < len(_LABELS) else "?"
+            raise RuntimeError(f"{fname} failed with status {status} ({label})")
+
+    def _prepare_buffers(self) -> None:
+        n = len(self._out_names)
+        vrs = [self.variable_of(s).valueReference for s in self._out_names]
+        self._out_vr = (ctypes.c_uint32 * n)(*vrs)
+        self._out_val = (ctypes.c_double * n)()
+        self._out_identity = all(m.scale == 1.0 and m.offset == 0.0 for m in self._out_maps)
+        self._comp_p = ctypes.c_void_p(self._fmu.component)
+        size_t, addr = ctypes.c_size_t, ctypes.addressof
+        out_args = [self._comp_p, ctypes.c_void_p(addr(self._out_vr)), size_t(n),
+                    ctypes.c_void_p(addr(self._out_val))]
+        if self._fmi3:
+            out_args.append(size_t(n))
+            self._cget, self._cset = self._raw("fmi3GetFloat64"), self._raw("fmi3SetFloat64")
+            self._get_name, self._set_name = "fmi3GetFloat64", "fmi3SetFloat64"
+        else:
+            self._cget, self._cset = self._raw("fmi2GetReal"), self._raw("fmi2SetReal")
+            self._get_name, self._set_name = "fmi2GetReal", "fmi2SetReal"
+            if self.interface == "cs":
+                self._cdo_step = self._raw("fmi2DoStep")
+        self._out_args = tuple(out_args)
+        self._set_plans: dict[tuple[str, ...], tuple[Any, tuple, list[Any]]] = {}
+
+    def _get(self) -> None:
+        status = self._cget(*self._out_args)
+        if status > 1:
+            self._check(self._get_name, status)
+
+    def _plan(self, names: tuple[str, ...]) -> tuple[Any, tuple, list[Any]]:
+        """Buffer, call arguments and converters for setting ``names`` in one call."""
+        plan = self._set_plans.get(names)
+        if plan is None:
+            vrs = []
+            for name in names:
+                var = self.variable_of(name)
+                if var.type not in _REAL_TYPES:
+                    raise CosimError(f"{self.path}: variable '{var.name}' is not real-valued")
+                vrs.append(var.valueReference)
+            k = len(names)
+            vr, buf = (ctypes.c_uint32 * k)(*vrs), (ctypes.c_double * k)()
+            args = [self._comp_p, ctypes.c_void_p(ctypes.addressof(vr)), ctypes.c_size_t(k),
+                    ctypes.c_void_p(ctypes.addressof(buf))]
+            if self._fmi3:
+                args.append(ctypes.c_size_t(k))
+            maps = [self.varmap.signals.get(name) for name in names]
+            plan = (buf, (vr, *args), [m.to_plant if m else None for m in maps])
+            self._set_plans[names] = plan
+        return plan
+
+    def _set_var(self, name: str, value: float) -> None:
+        self._set_many({name: value})
+
+    def _set_many(self, values: Mapping[str, float]) -> None:
+        buf, args, conv = self._plan(tuple(values))
+        if any(conv):
+            buf[:] = [v if c is None else c(v) for v, c in zip(values.values(), conv, strict=True)]
+        else:
+            buf[:] = [*values.values()]
+        status = self._cset(*args[1:])
+        if status > 1:
+            self._check(self._set_name, status)
+
+    def _init_me(self, t0: float) -> None:
+        from fmpy.sundials import CVodeSolver
+
+        self._event_update()
+        self._fmu.enterContinuousTimeMode()
+        nx = self.md.numberOfContinuousStates
+        fmu = self._fmu
+
+        class _NoInput:
+            def apply(self, *args: object, **kwargs: object) -> None:
+                return None
+
+        self._solver = CVodeSolver(
+            nx=nx, nz=self.md.numberOfEventIndicators,
+            get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
+            get_dx=fmu.getContinuousStateDerivatives if self._fmi3 else fmu.getDerivatives,
+            get_z=fmu.getEventIndicators,
+            get_nominals=fmu.getNominalsOfContinuousStates, set_time=fmu.setTime,
+            input=_NoInput(), startTime=t0, relativeTolerance=self.rtol, maxNumSteps=100000)
+        self._next_event: float | None = None
+
+    def _event_update(self) -> None:
+        """Iterate discrete states to convergence (FMU in event/initialisation mode left)."""
+        update = self._fmu.updateDiscreteStates if self._fmi3 else self._fmu.newDiscreteStates
+        needed = True
+        while needed:
+            needed, terminate, _, _, defined, next_time = update()
+            if terminate:
+                raise RuntimeError("the FMU requested termination")
+        self._next_event = next_time if defined else None
+
+    # -- stepping -----------------------------------------------------------------------------
+    def set_inputs(self, values: Mapping[str, float]) -> None:
+        """Set inputs by project name (converted through the variable map)."""
+        try:
+            self._set_many(values)
+        except CosimError:
+            raise
+        except Exception as exc:
+            raise self._fail(f"setting inputs at t={self._t!r}", exc) from None
+        self._dirty = True
+
+    def set_parameter(self, name: str, value: float) -> None:
+        """Change a tunable parameter (or an input) during the run."""
+        if self._fmu is None:
+            self.start_values[name] = value
+            return
+        if self.interface == "me":
+            try:
+                self._fmu.enterEventMode()
+                self._set_var(name, value)
+                self._event_update()
+                self._fmu.enterContinuousTimeMode()
+            except Exception as exc:
+                raise self._fail(f"setting {name} at t={self._t!r}", exc) from None
+            self._dirty = True
+        else:
+            self.set_inputs({name: value})
+
+    def step(self, t: float, dt: float) -> None:
+        """Advance from ``t`` to ``t + dt`` with the inputs held."""
+        try:
+            if self.interface == "cs":
+                if self._fmi3:
+                    _, terminate, early, _ = self._fmu.doStep(t, dt)
+                    if terminate or early:
+                        raise RuntimeError("the FMU requested termination"
+                                           if terminate else "early return")
+                else:
+                    status = self._cdo_step(self._comp_p, ctypes.c_double(t),
+                                            ctypes.c_double(dt), ctypes.c_int(1))
+                    if status > 1:
+                        self._check("fmi2DoStep", status)
+            else:
+                self._step_me(t, t + dt)
+        except Exception as exc:
+            raise self._fail(f"doStep at t={t!r}", exc) from None
+        self._t = t + dt
+
+    def _step_me(self, t: float, t_end: float) -> None:
+        fmu, solver = self._fmu, self._solver
+        if self._dirty:
+            solver.reset(t)
+            self._dirty = False
+        time = t
+        while time < t_end and not math.isclose(time, t_end, rel_tol=1e-12, abs_tol=1e-12):
+            target = t_end
+            if self._next_event is not None and time < self._next_event < t_end:
+                target = self._next_event
+            state_event, _, time = solver.step(time, target)
+            fmu.setTime(time)
+            step_event = False
+            if self.md.modelExchange.needsCompletedIntegratorStep:
+                step_event, terminate = fmu.completedIntegratorStep()
+                if terminate:
+                    raise RuntimeError("the FMU requested termination")
+            time_event = self._next_event is not None and math.isclose(time, self._next_event)
+            if state_event or step_event or time_event:
+                fmu.enterEventMode()
+                self._event_update()
+                fmu.enterContinuousTimeMode()
+                solver.reset(time)
+
+    def get_outputs(self) -> dict[str, float]:
+        """Outputs at the current time, by project name."""
+        try:
+            self._get()
+        except Exception as exc:
+            raise self._fail(f"reading outputs at t={self._t!r}", exc) from None
+        vals = self._out_val[:]
+        if self._out_identity:
+            return dict(zip(self._out_names, vals, strict=True))
+        return {m.signal: m.from_plant(v) for m, v in zip(self._out_maps, vals, strict=True)}
+
+    def terminate(self) -> None:
+        """Terminate and free the instance, remove the extracted files (idempotent).
+
+        After an error the FMU is not terminated (FMI forbids it), after a fatal error not
+        even freed. The shared library is never unloaded: FMUs that embed an interpreter
+        (pythonfmu) leave objects behind that point into it, and unloading is a common
+        source of crashes.
+        """
+        fmu, self._fmu = self._fmu, None
+        if fmu is not None:
+            if not self._failed:
+                with contextlib.suppress(Exception):
+                    fmu.terminate()
+            if not self._fatal:
+                with contextlib.suppress(Exception):
+                    free = fmu.fmi3FreeInstance if self._fmi3 else fmu.fmi2FreeInstance
+                    free(fmu.component)
+            _KEEP_LOADED.append(fmu)
+        _LOG_SINKS.pop(self._instance_name, None)
+        if self._tmpdir is not None:
+            shutil.rmtree(self._tmpdir, ignore_errors=True)
+            self._tmpdir = None

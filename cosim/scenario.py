@@ -1,0 +1,281 @@
+"""Scenario CSV files: set-points and perturbations as piecewise-constant signals.
+
+Format (one file per scenario)::
+
+    time,ref.h1,ref.h2,plant.qd1,sensor.h1.bias,sensor.h2.noise
+    0,0.8,0.8,,,
+    5000,1.0,,,,
+    7500,,,-1e-5,0.02,
+    15000,,,,,
+
+* The first column is ``time`` [s]; rows are in strictly increasing time. The first row's
+  time is the start time and the last row's time is the stop time.
+* Each other column is one signal; a value holds until the next row that sets it (piecewise
+  constant, zero-order hold); a blank cell means "unchanged".
+* Column names: ``ref.<output>`` set-points (every reference needs a value in the first row),
+  ``plant.<variable>`` a plant input or tunable parameter (by its FMU name or by the name of
+  a variable-map signal), ``sensor.<output>.bias`` an additive measurement bias and
+  ``sensor.<output>.noise`` the standard deviation of seeded Gaussian measurement noise.
+* Comma separated, header names may be quoted (FMI cross-check CSV conventions).
+
+Every error is a :class:`~cosim.errors.CosimError` that starts with ``file:line:column``
+(1-based; the header is line 1) and names the column.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Collection
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cosim.errors import CosimError
+
+#: Column kinds.
+REF, PLANT, BIAS, NOISE = "ref", "plant", "bias", "noise"
+
+
+@dataclass(frozen=True)
+class Column:
+    """One signal column of a scenario.
+
+    Attributes
+    ----------
+    index : int
+        1-based column number in the file (``time`` is column 1).
+    name : str
+        The header as written, e.g. ``"sensor.h1.bias"``.
+    kind : str
+        :data:`REF`, :data:`PLANT`, :data:`BIAS` or :data:`NOISE`.
+    target : str
+        The signal it acts on: ``"h1"`` for ``ref.h1`` and ``sensor.h1.bias``, ``"qd1"`` for
+        ``plant.qd1``.
+    """
+
+    index: int
+    name: str
+    kind: str
+    target: str
+
+
+@dataclass(frozen=True)
+class Event:
+    """The values a scenario row sets at ``time`` (only the non-blank cells)."""
+
+    time: float
+    line: int
+    values: tuple[tuple[Column, float], ...]
+
+
+@dataclass
+class Scenario:
+    """A parsed scenario: columns and events, first event at the start time.
+
+    Use :func:`load` to read one and :meth:`validate` once the plant's and the controller's
+    signals are known.
+    """
+
+    path: Path
+    columns: tuple[Column, ...]
+    events: tuple[Event, ...]
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def start_time(self) -> float:
+        """Time of the first row [s]."""
+        return self.events[0].time
+
+    @property
+    def stop_time(self) -> float:
+        """Time of the last row [s]."""
+        return self.events[-1].time
+
+    def columns_of(self, kind: str) -> tuple[Column, ...]:
+        """The columns of one kind, in file order."""
+        return tuple(c for c in self.columns if c.kind == kind)
+
+    def perturbation_times(self) -> list[float]:
+        """Times (after the start) at which a ``plant.*`` or ``sensor.*`` value changes."""
+        times = []
+        for event in self.events[1:-1]:
+            if any(col.kind != REF for col, _ in event.values):
+                times.append(event.time)
+        return times
+
+    def reference_times(self) -> list[float]:
+        """Times (after the start) at which a set-point is set."""
+        return [e.time for e in self.events[1:-1] if any(c.kind == REF for c, _ in e.values)]
+
+    def validate(
+        self,
+        plant_settable: Collection[str],
+        controller_refs: Collection[str],
+        measured: Collection[str] = (),
+        driven: Collection[str] = (),
+        plant_tunable: Collection[str] | None = None,
+    ) -> None:
+        """Check every column name against the run's signals.
+
+        Parameters
+        ----------
+        plant_settable : collection of str
+            Plant inputs and tunable parameters a ``plant.<name>`` column may set.
+        controller_refs : collection of str
+            Outputs the controller takes a set-point for (``h1`` for input ``ref.h1``).
+        measured : collection of str
+            Measured plant outputs a ``sensor.<name>.*`` column may perturb.
+        driven : collection of str
+            Plant inputs driven by the controller (a scenario must not set them).
+        plant_tunable : collection of str, optional
+            The subset of ``plant_settable`` that may change after the first row (inputs and
+            tunable parameters); default: all of ``plant_settable``.
+
+        Raises
+        ------
+        CosimError
+            ``file:1:col: unknown ...`` for the first column that names nothing known.
+        """
+        for col in self.columns:
+            where = f"{self.path}:1:{col.index}"
+            if col.kind == REF and col.target not in controller_refs:
+                known = ", ".join(f"ref.{r}" for r in sorted(controller_refs)) or "none"
+                raise CosimError(f"{where}: unknown reference '{col.name}': the controller "
+                                 f"takes set-points for {known}")
+            if col.kind == PLANT:
+                if col.target in driven:
+                    raise CosimError(f"{where}: column '{col.name}' sets a plant input that "
+                                     "the controller drives")
+                if col.target not in plant_settable:
+                    raise CosimError(f"{where}: unknown plant variable '{col.name}': not an "
+                                     "input or tunable parameter of the plant")
+            if col.kind in (BIAS, NOISE) and col.target not in measured:
+                known = ", ".join(sorted(measured)) or "none"
+                raise CosimError(f"{where}: unknown measured output in '{col.name}' "
+                                 f"(measured: {known})")
+        if plant_tunable is None:
+            return
+        for event in self.events[1:]:
+            for col, _ in event.values:
+                if col.kind == PLANT and col.target not in plant_tunable:
+                    raise CosimError(
+                        f"{self.path}:{event.line}:{col.index}: column '{col.name}': "
+                        f"'{col.target}' can only be set in the first row (before "
+                        "initialisation); it is not an input or tunable parameter")
+
+
+def _parse_header(path: Path, header: list[str]) -> tuple[Column, ...]:
+    if not header or not header[0].strip():
+        raise CosimError(f"{path}:1:1: empty header: the first column must be 'time'")
+    if header[0].strip() != "time":
+        raise CosimError(f"{path}:1:1: the first column must be 'time', not '{header[0]}'")
+    columns = []
+    seen: dict[str, int] = {}
+    for i, raw in enumerate(header[1:], start=2):
+        name = raw.strip()
+        where = f"{path}:1:{i}"
+        if not name:
+            raise CosimError(f"{where}: empty column name")
+        if name in seen:
+            raise CosimError(f"{where}: duplicate column '{name}' (also column {seen[name]})")
+        seen[name] = i
+        parts = name.split(".")
+        if parts[0] == "ref" and len(parts) == 2 and parts[1]:
+            columns.append(Column(i, name, REF, parts[1]))
+        elif parts[0] == "plant" and len(parts) >= 2 and all(parts[1:]):
+            columns.append(Column(i, name, PLANT, name[len("plant."):]))
+        elif (parts[0] == "sensor" and len(parts) >= 3 and parts[-1] in ("bias", "noise")
+              and all(parts[1:-1])):
+            kind = BIAS if parts[-1] == "bias" else NOISE
+            columns.append(Column(i, name, kind, ".".join(parts[1:-1])))
+        else:
+            raise CosimError(
+                f"{where}: unknown signal '{name}': expected ref.<output>, plant.<variable>, "
+                "sensor.<output>.bias or sensor.<output>.noise")
+    return tuple(columns)
+
+
+def _number(path: Path, line: int, col: int, name: str, cell: str) -> float:
+    try:
+        value = float(cell)
+    except ValueError:
+        raise CosimError(f"{path}:{line}:{col}: column '{name}': '{cell}' is not a number"
+                         ) from None
+    if not math.isfinite(value):
+        raise CosimError(f"{path}:{line}:{col}: column '{name}': {cell} is not a finite number")
+    return value
+
+
+def load(path: str | Path) -> Scenario:
+    """Read and check a scenario CSV file (syntax, time, values; names by prefix only).
+
+    Parameters
+    ----------
+    path : str or Path
+        The scenario file.
+
+    Returns
+    -------
+    Scenario
+
+    Raises
+    ------
+    CosimError
+        ``file:line:column: ...`` for a missing file, a bad header, a non-increasing or
+        missing time, a non-numeric, NaN or infinite value, a negative noise level, a
+        reference without a first value, a row with the wrong number of cells, an empty body,
+        or a stop time not after the start time.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8-sig")
+    except FileNotFoundError:
+        raise CosimError(f"{path}: scenario file not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CosimError(f"{path}: cannot read scenario: {exc}") from None
+
+    reader = csv.reader(text.splitlines())
+    try:
+        header = next(reader, None)
+        if header is None:
+            raise CosimError(f"{path}:1:1: empty file: expected a header starting with 'time'")
+        columns = _parse_header(path, header)
+        ncells = len(columns) + 1
+        events: list[Event] = []
+        for row in reader:
+            line = reader.line_num
+            if not any(cell.strip() for cell in row):
+                continue  # blank line
+            if len(row) != ncells:
+                raise CosimError(f"{path}:{line}:{min(len(row), ncells) + 1}: row has "
+                                 f"{len(row)} cells, the header has {ncells}")
+            cell = row[0].strip()
+            if not cell:
+                raise CosimError(f"{path}:{line}:1: column 'time': missing time")
+            t = _number(path, line, 1, "time", cell)
+            if events and t <= events[-1].time:
+                raise CosimError(f"{path}:{line}:1: column 'time': time {cell} is not after "
+                                 f"the previous row's time {events[-1].time!r}")
+            values = []
+            for col in columns:
+                cell = row[col.index - 1].strip()
+                if not cell:
+                    if not events and col.kind == REF:
+                        raise CosimError(f"{path}:{line}:{col.index}: column '{col.name}': "
+                                         "a reference needs a value in the first row")
+                    continue
+                v = _number(path, line, col.index, col.name, cell)
+                if col.kind == NOISE and v < 0:
+                    raise CosimError(f"{path}:{line}:{col.index}: column '{col.name}': noise "
+                                     f"standard deviation {cell} is negative")
+                values.append((col, v))
+            events.append(Event(t, line, tuple(values)))
+    except csv.Error as exc:
+        raise CosimError(f"{path}:{reader.line_num}:1: malformed CSV: {exc}") from None
+
+    if not events:
+        raise CosimError(f"{path}:2:1: empty body: the scenario has no data rows")
+    if len(events) < 2:
+        raise CosimError(f"{path}:{events[0].line}:1: column 'time': a single row; the last "
+                         "row's time is the stop time and must come after the first row's")
+    return Scenario(path=path, columns=columns, events=tuple(events))

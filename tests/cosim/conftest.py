@@ -1,0 +1,22 @@
+"""Fixtures for the co-simulation tests: FMUs from other exporters (pythonfmu, pythonfmu3)."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+import pyfmu_models
+
+
+@pytest.fixture(scope="session")
+def pyfmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder with the test FMUs of :mod:`pyfmu_models` and the swap-in map."""
+    dest = tmp_path_factory.mktemp("pyfmus")
+    for kind in ("swapin", "failing", "segfault"):
+        pyfmu_models.build(kind, dest)
+    (dest / "quadtank.map.toml").write_text(pyfmu_models.MAP)
+    return dest

@@ -1,0 +1,146 @@
+"""Small FMUs built by other exporters (pythonfmu / pythonfmu3) for the master's tests.
+
+* ``swapin``: a four-tank variant exported by pythonfmu3 (FMI 3.0) with other variable names and
+  units: inputs ``Fa``, ``Fb`` [l/min], outputs ``L1``..``L4`` [cm], tunable ``gammaA``.
+* ``failing``: an FMI 2.0 (pythonfmu) single tank whose ``do_step`` raises once ``t ≥ 500 s``.
+* ``segfault``: the same tank, but ``do_step`` kills its own process with SIGSEGV at
+  ``t ≥ 500 s`` (a crashing native FMU, for ``--isolate``).
+
+These FMUs run inside a Python host that has pythonfmu's runtime (the project venv).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+SWAPIN = '''
+import math
+from pythonfmu3 import Fmi3Causality, Fmi3Slave, Fmi3Variability, Float64, Unit
+
+
+class QuadTank(Fmi3Slave):
+    author = "tests"
+    description = "four-tank variant: l/min in, cm out"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.S, self.g = 0.06, 9.81
+        self.a = [1.31e-4, 1.51e-4, 9.27e-5, 8.82e-5]
+        self.gammaA, self.gammaB = 0.3, 0.4
+        self.Fa, self.Fb = 27.0, 33.0
+        self.h = [0.65, 0.65, 0.6514, 0.6638]
+        self.L1 = self.L2 = self.L3 = self.L4 = 0.0
+        self._publish()
+        self.register_units([Unit("l/min", m=3, s=-1, factor=1.0 / 60000.0),
+                             Unit("cm", m=1, factor=0.01)])
+        self.register_variable(Float64("time", causality=Fmi3Causality.independent,
+                                       variability=Fmi3Variability.continuous))
+        for name in ("Fa", "Fb"):
+            self.register_variable(Float64(name, causality=Fmi3Causality.input,
+                                           variability=Fmi3Variability.continuous,
+                                           start=getattr(self, name), unit="l/min"))
+        for name in ("L1", "L2", "L3", "L4"):
+            self.register_variable(Float64(name, causality=Fmi3Causality.output,
+                                           variability=Fmi3Variability.continuous, unit="cm"))
+        self.register_variable(Float64("gammaA", causality=Fmi3Causality.parameter,
+                                       variability=Fmi3Variability.tunable, start=0.3))
+
+    def _publish(self):
+        self.L1, self.L2, self.L3, self.L4 = (100.0 * x for x in self.h)
+
+    def _rhs(self, h, qa, qb):
+        s = [ai * math.sqrt(2 * self.g * max(hi, 0.0)) for ai, hi in zip(self.a, h)]
+        ga, gb = self.gammaA, self.gammaB
+        return [(-s[0] + s[2] + ga * qa) / self.S, (-s[1] + s[3] + gb * qb) / self.S,
+                (-s[2] + (1 - gb) * qb) / self.S, (-s[3] + (1 - ga) * qa) / self.S]
+
+    def do_step(self, current_time, step_size):
+        qa, qb = self.Fa / 60000.0, self.Fb / 60000.0
+        n = max(1, int(round(step_size / 0.5)))
+        dt = step_size / n
+        h = self.h
+        for _ in range(n):
+            k1 = self._rhs(h, qa, qb)
+            k2 = self._rhs([x + 0.5 * dt * k for x, k in zip(h, k1)], qa, qb)
+            k3 = self._rhs([x + 0.5 * dt * k for x, k in zip(h, k2)], qa, qb)
+            k4 = self._rhs([x + dt * k for x, k in zip(h, k3)], qa, qb)
+            h = [max(x + dt / 6 * (p + 2 * q + 2 * r + w), 0.0)
+                 for x, p, q, r, w in zip(h, k1, k2, k3, k4)]
+        self.h = h
+        self._publish()
+        return True
+'''
+
+_TANK = '''
+import math
+import os
+import signal
+from pythonfmu import Fmi2Causality, Fmi2Slave, Real
+
+
+class {cls}(Fmi2Slave):
+    author = "tests"
+    description = "single tank that {what} at t >= 500 s"
+
+    def __init__(self, **kwargs):
+        super().__init__(**kwargs)
+        self.qa = 0.0
+        self.qb = 0.0
+        self.h1 = 0.5
+        self.h2 = 0.5
+        for name in ("qa", "qb"):
+            self.register_variable(Real(name, causality=Fmi2Causality.input))
+        for name in ("h1", "h2"):
+            self.register_variable(Real(name, causality=Fmi2Causality.output))
+
+    def do_step(self, current_time, step_size):
+        if current_time >= 500.0:
+{action}
+        self.h1 += step_size * (self.qa - 1e-4 * math.sqrt(self.h1)) / 0.06
+        self.h2 += step_size * (self.qb - 1e-4 * math.sqrt(self.h2)) / 0.06
+        return True
+'''
+
+FAILING = _TANK.format(cls="Failing", what="raises",
+                       action='            raise RuntimeError("tank ruptured")')
+SEGFAULT = _TANK.format(cls="Segfault", what="segfaults",
+                        action="            os.kill(os.getpid(), signal.SIGSEGV)")
+
+MAP = '''\
+[signals.qa]
+variable = "Fa"
+unit = "l/min"
+scale = 60000.0
+
+[signals.qb]
+variable = "Fb"
+unit = "l/min"
+scale = 60000.0
+
+[signals.h1]
+variable = "L1"
+unit = "cm"
+scale = 100.0
+
+[signals.h2]
+variable = "L2"
+unit = "cm"
+scale = 100.0
+
+[signals.gamma_a]
+variable = "gammaA"
+'''
+
+
+def build(kind: str, dest: Path) -> Path:
+    """Build one of the test FMUs into ``dest`` and return its path."""
+    dest.mkdir(parents=True, exist_ok=True)
+    src = {"swapin": ("quadtank.py", SWAPIN), "failing": ("failing.py", FAILING),
+           "segfault": ("segfault.py", SEGFAULT)}[kind]
+    script = dest / src[0]
+    script.write_text(src[1])
+    if kind == "swapin":
+        from pythonfmu3.builder import FmuBuilder
+    else:
+        from pythonfmu.builder import FmuBuilder
+    return Path(FmuBuilder.build_FMU(script, dest=dest))

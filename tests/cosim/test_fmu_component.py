@@ -1,0 +1,158 @@
+"""FmuComponent on the real four-tank FMUs (FMI 2/3, CS/ME), other exporters, and faults."""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path
+
+import pytest
+
+from cosim.errors import CosimError, SimulationFailed
+from cosim.fmu import FmuComponent, safe_extract
+from cosim.isolated import IsolatedFmuComponent
+from cosim.varmap import load as load_map
+
+U = {"qa": 6.0e-4, "qb": 4.0e-4}
+
+
+def simulate(comp: FmuComponent, steps: int = 40, dt: float = 25.0,
+             changes: dict[int, tuple[str, float]] | None = None) -> list[dict[str, float]]:
+    comp.setup(0.0)
+    try:
+        out = [comp.get_outputs()]
+        for k in range(steps):
+            if changes and k in changes:
+                comp.set_parameter(*changes[k])
+            comp.set_inputs(U)
+            comp.step(k * dt, dt)
+            out.append(comp.get_outputs())
+        return out
+    finally:
+        comp.terminate()
+
+
+def test_signals_by_name(fmu2_path: Path) -> None:
+    comp = FmuComponent(fmu2_path)
+    assert [s.name for s in comp.outputs] == ["h1", "h2", "h3", "h4"]
+    assert {s.name for s in comp.inputs} == {"qa", "qb", "qd1", "qd2", "qd3", "qd4"}
+    assert {s.unit for s in comp.outputs} == {"m"}
+    assert {"S", "a1", "gamma_a", "gamma_b"} <= set(comp.tunables)
+    assert "h1_start" in comp.settable(at_start=True)
+    assert "h1_start" not in comp.settable()
+
+
+def test_fmi2_and_fmi3_cs_agree_and_move(fmu2_path: Path, fmu3_path: Path) -> None:
+    a = simulate(FmuComponent(fmu2_path))
+    b = simulate(FmuComponent(fmu3_path))
+    assert a == b  # same C model, same solver: bit-identical
+    assert a[-1]["h4"] > a[0]["h4"] + 0.05  # qa = 6e-4 fills tank 4 over 1000 s
+
+
+@pytest.mark.parametrize("which", ["fmu2_path", "fmu3_path"])
+def test_model_exchange_matches_co_simulation(which: str, request: pytest.FixtureRequest) -> None:
+    path = request.getfixturevalue(which)
+    cs = simulate(FmuComponent(path), changes={10: ("a1", 1.0e-4)})
+    me = simulate(FmuComponent(path, interface="me"), changes={10: ("a1", 1.0e-4)})
+    for x, y in zip(cs, me, strict=True):
+        for name in x:
+            assert y[name] == pytest.approx(x[name], abs=2e-6)
+
+
+def test_tunable_parameter_changes_the_trajectory(fmu2_path: Path) -> None:
+    base = simulate(FmuComponent(fmu2_path))
+    smaller_outlet = simulate(FmuComponent(fmu2_path), changes={20: ("a1", 0.8e-4)})
+    assert smaller_outlet[20] == base[20]
+    assert smaller_outlet[-1]["h1"] > base[-1]["h1"] + 0.01
+    assert smaller_outlet[-1]["h2"] == pytest.approx(base[-1]["h2"], abs=1e-12)
+
+
+def test_start_values(fmu3_path: Path) -> None:
+    comp = FmuComponent(fmu3_path, start_values={"h1_start": 1.25})
+    comp.setup(0.0)
+    try:
+        assert comp.get_outputs()["h1"] == 1.25
+    finally:
+        comp.terminate()
+        comp.terminate()  # idempotent
+
+
+def test_fmu_error_becomes_simulation_failed_with_its_log(fmu2_path: Path) -> None:
+    comp = FmuComponent(fmu2_path)
+    comp.setup(0.0)
+    try:
+        comp.step(0.0, 25.0)
+        with pytest.raises(SimulationFailed) as info:
+            comp.step(0.0, 25.0)  # wrong communication point
+    finally:
+        comp.terminate()
+    msg = str(info.value)
+    assert msg.startswith("FourTank.fmu: doStep at t=0.0 failed:")
+    assert "FMU log:" in msg and "\n" not in msg
+
+
+def test_unsafe_archives_are_rejected(tmp_path: Path) -> None:
+    for i, bad in enumerate(["../evil.so", "/etc/evil", "a/../../x", "a\\b"]):
+        path = tmp_path / f"bad{i}.fmu"
+        with zipfile.ZipFile(path, "w") as zf:
+            zf.writestr("modelDescription.xml", "<x/>")
+            zf.writestr(bad, "x")
+        with pytest.raises(CosimError, match="unsafe path"):
+            safe_extract(path, tmp_path / f"out{i}")
+        assert not (tmp_path / "evil.so").exists()
+
+
+def test_bad_files(tmp_path: Path, pyfmu_dir: Path) -> None:
+    with pytest.raises(CosimError, match="FMU not found"):
+        FmuComponent(tmp_path / "missing.fmu")
+    junk = tmp_path / "junk.fmu"
+    junk.write_text("not a zip")
+    with pytest.raises(CosimError, match=r"junk.fmu: cannot read modelDescription.xml"):
+        FmuComponent(junk)
+    with pytest.raises(CosimError, match="no Model Exchange interface"):
+        FmuComponent(pyfmu_dir / "Failing.fmu", interface="me")
+
+
+def test_pythonfmu3_swap_in_with_map(pyfmu_dir: Path, fmu2_path: Path) -> None:
+    vm = load_map(pyfmu_dir / "quadtank.map.toml")
+    comp = FmuComponent(pyfmu_dir / "QuadTank.fmu", varmap=vm)
+    assert {s.name for s in comp.inputs} == {"qa", "qb"}
+    assert [s.name for s in comp.outputs] == ["h1", "h2", "L3", "L4"]
+    comp.check_signals(["qa", "qb"], ["h1", "h2"])
+    assert {"qa", "Fa", "gamma_a", "gammaA"} <= comp.settable()
+    swapped = simulate(comp)
+    ours = simulate(FmuComponent(fmu2_path))
+    # l/min in, cm out, converted by the map: same physics, another integrator
+    assert swapped[-1]["h1"] == pytest.approx(ours[-1]["h1"], abs=1e-5)
+    assert swapped[-1]["L4"] == pytest.approx(100 * ours[-1]["h4"], abs=1e-3)
+
+
+def test_isolated_matches_in_process(fmu2_path: Path) -> None:
+    changes = {5: ("gamma_a", 0.35)}
+    assert simulate(IsolatedFmuComponent(fmu2_path), steps=10, changes=changes) == \
+        simulate(FmuComponent(fmu2_path), steps=10, changes=changes)
+
+
+def test_isolated_segfault_is_a_clean_failure(pyfmu_dir: Path) -> None:
+    comp = IsolatedFmuComponent(pyfmu_dir / "Segfault.fmu")
+    comp.setup(0.0)
+    try:
+        for k in range(20):
+            comp.set_inputs({"qa": 1e-4, "qb": 1e-4})
+            comp.step(25.0 * k, 25.0)
+        with pytest.raises(SimulationFailed, match=r"Segfault.fmu: doStep at t=500.0 failed: "
+                                                   r"worker died \(signal 11"):
+            comp.step(500.0, 25.0)
+    finally:
+        comp.terminate()
+
+
+def test_python_exception_in_fmu_is_reported(pyfmu_dir: Path) -> None:
+    comp = FmuComponent(pyfmu_dir / "Failing.fmu")
+    comp.setup(0.0)
+    try:
+        for k in range(20):
+            comp.step(25.0 * k, 25.0)
+        with pytest.raises(SimulationFailed, match=r"doStep at t=500.0 failed: .*tank ruptured"):
+            comp.step(500.0, 25.0)
+    finally:
+        comp.terminate()

@@ -1,0 +1,62 @@
+"""KPIs on hand-made rows, and the results.csv / summary.json formats."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from cosim import kpis
+from cosim.master import RunResult
+from cosim.results import write, write_csv
+
+COLUMNS = ["time", "ref.h1", "plant.h1", "ctrl.qa", "ctrl.cost"]
+ROWS = [
+    [0.0, 1.0, 0.5, 1.0, 3.0],
+    [10.0, 1.0, 0.8, 3.0, math.nan],
+    [20.0, 2.0, 2.5, -1.0, 1.0],
+    [30.0, 2.0, 2.0, 0.0, 0.1 + 0.2],
+]
+
+
+def test_kpis_by_hand() -> None:
+    k = kpis.compute(COLUMNS, ROWS, ["h1"], ["h1"], ["qa"], {"h1": (0.0, 2.0), "qa": (0.0, 2.0)})
+    # |ref - y| held over each 10 s interval: 0.5, 0.2, 0.5 (the last row closes the run)
+    assert k["iae"]["h1"] == pytest.approx(10 * (0.5 + 0.2 + 0.5))
+    assert k["final_error"]["h1"] == 0.0
+    assert k["violations"]["h1"] == {"max": 0.5, "count": 1}
+    assert k["violations"]["qa"] == {"max": 1.0, "count": 2}
+    assert k["control_effort"]["qa"]["integral_square"] == pytest.approx(10 * (1 + 9 + 1))
+    assert k["control_effort"]["qa"]["total_variation"] == pytest.approx(2 + 4 + 1)
+
+
+def test_csv_follows_cross_check_conventions(tmp_path: Path) -> None:
+    path = tmp_path / "r.csv"
+    write_csv(path, COLUMNS, ROWS)
+    lines = path.read_text().splitlines()
+    assert lines[0] == '"time","ref.h1","plant.h1","ctrl.qa","ctrl.cost"'
+    assert lines[4] == "30.0,2.0,2.0,0.0,0.30000000000000004"  # full precision
+    assert not any(line.endswith(",") for line in lines)
+    back = list(csv.reader(lines))
+    assert [float(x) for x in back[4]] == ROWS[3]  # round-trips exactly
+
+
+def test_write_summary_and_figure(tmp_path: Path) -> None:
+    result = RunResult(columns=COLUMNS, rows=[list(r) for r in ROWS], status="failed",
+                       reason="plant: doStep at t=30.0 failed: x", steps=3, steps_planned=9,
+                       step_size=10.0, stop_time=90.0, outputs=["h1"], references=["h1"],
+                       inputs=["qa"], bounds={"h1": (0.0, 2.0), "qa": (0.0, 2.0)},
+                       perturbation_times=[15.0], controller_summary={"solves": 4, "x": math.inf})
+    doc = write(tmp_path, result, {"scenario": "s.csv", "controller": "pi"})
+    on_disk = json.loads((tmp_path / "summary.json").read_text())
+    assert on_disk == doc
+    assert doc["status"] == "failed" and doc["reason"].startswith("plant: doStep")
+    assert doc["steps"] == 3 and doc["steps_planned"] == 9
+    assert doc["controller"] == "pi"
+    assert doc["controller_summary"] == {"solves": 4, "x": None}  # JSON has no inf
+    assert set(doc["kpis"]) == {"iae", "final_error", "violations", "control_effort"}
+    assert (tmp_path / "figure.png").stat().st_size > 10_000
+    assert (tmp_path / "results.csv").read_text().count("\n") == 5

@@ -1,0 +1,88 @@
+"""Variable maps: parsing, conversion, and checks against a real FMU's modelDescription."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cosim.errors import CosimError
+from cosim.fmu import FmuComponent
+from cosim.varmap import MappedSignal, VarMap, load
+
+
+def write(tmp_path: Path, text: str) -> Path:
+    path = tmp_path / "plant.map.toml"
+    path.write_text(text)
+    return path
+
+
+def test_load_and_convert(tmp_path: Path) -> None:
+    vm = load(write(tmp_path, '[signals.qa]\nvariable = "Fa"\nunit = "l/min"\nscale = 60000.0\n'
+                              '[signals.T]\nvariable = "TC"\nscale = 1\noffset = -273.15\n'))
+    qa = vm.signals["qa"]
+    assert qa == MappedSignal("qa", "Fa", "l/min", 60000.0, 0.0)
+    assert qa.to_plant(1e-4) == pytest.approx(6.0)
+    assert qa.from_plant(qa.to_plant(3.7e-4)) == pytest.approx(3.7e-4, rel=1e-15)
+    assert vm.signals["T"].to_plant(300.0) == pytest.approx(26.85)
+    assert vm.lookup("h1") == MappedSignal("h1", "h1")  # unmapped: identity
+    assert vm.signal_of("Fa") == "qa" and vm.signal_of("h3") == "h3"
+
+
+@pytest.mark.parametrize(("text", "words"), [
+    ("[signals.qa\nvariable='x'\n", "invalid TOML"),
+    ("title = 'x'\n", "unknown top-level key"),
+    ("[plant]\n", "no [signals.<name>] tables"),
+    ("[signals.qa]\nunit = 'l/min'\n", "signal 'qa': 'variable' (the FMU variable name) is "
+                                       "missing"),
+    ("[signals.qa]\nvariable = 'Fa'\nscale = 0\n", "signal 'qa': 'scale' must not be zero"),
+    ("[signals.qa]\nvariable = 'Fa'\nscale = 'big'\n", "'scale' must be a finite number"),
+    ("[signals.qa]\nvariable = 'Fa'\nfactor = 2\n", "unknown key(s) ['factor']"),
+    ("[signals.qa]\nvariable = 'F'\n[signals.qb]\nvariable = 'F'\n",
+     "signal 'qb': variable 'F' is already mapped by signal 'qa'"),
+])
+def test_bad_maps_are_one_line_errors_naming_the_file(tmp_path: Path, text: str,
+                                                      words: str) -> None:
+    path = write(tmp_path, text)
+    with pytest.raises(CosimError) as info:
+        load(path)
+    msg = str(info.value)
+    assert msg.startswith(str(path)) and words in msg and "\n" not in msg
+
+
+def test_missing_map_file(tmp_path: Path) -> None:
+    with pytest.raises(CosimError, match="variable map not found"):
+        load(tmp_path / "none.toml")
+
+
+def test_check_against_the_four_tank_fmu(tmp_path: Path, fmu2_path: Path) -> None:
+    variables = FmuComponent(fmu2_path).variables
+    units = {"qa": "m3/s", "qb": "m3/s", "h1": "m", "h2": "m"}
+    VarMap.identity().check(variables, ["qa", "qb"], ["h1", "h2"], units)
+
+    missing = load(write(tmp_path, '[signals.qa]\nvariable = "Fa"\n'))
+    with pytest.raises(CosimError, match=r"signal 'qa' -> variable 'Fa': the FMU has no such "
+                                         "variable"):
+        missing.check(variables, ["qa"], ["h1"], units)
+
+    causality = load(write(tmp_path, '[signals.qa]\nvariable = "h3"\n'))
+    with pytest.raises(CosimError, match=r"signal 'qa' -> variable 'h3': causality is 'output'"
+                                         ", a controller output must drive an FMU input"):
+        causality.check(variables, ["qa"], ["h1"], units)
+    as_output = load(write(tmp_path, '[signals.h1]\nvariable = "qd1"\n'))
+    with pytest.raises(CosimError, match=r"causality is 'input', a measured signal must be an "
+                                         "FMU output"):
+        as_output.check(variables, ["qa"], ["h1"], units)
+
+    unit = load(write(tmp_path, '[signals.qa]\nvariable = "qa"\nunit = "l/min"\n'
+                                'scale = 60000.0\n'))
+    with pytest.raises(CosimError) as info:
+        unit.check(variables, ["qa"], ["h1"], units)
+    msg = str(info.value)
+    assert msg.startswith(str(tmp_path / "plant.map.toml"))
+    assert "signal 'qa' -> variable 'qa': unit mismatch: the map expects 'l/min', the FMU " \
+           "declares 'm3/s'" in msg
+    # identity mapping, project unit differs from the FMU's: also a mismatch
+    with pytest.raises(CosimError, match=r"^plant.fmu: signal 'h1' \(not in a variable map\): "
+                                         "unit mismatch: the controller expects 'cm'"):
+        VarMap.identity().check(variables, ["qa"], ["h1"], {"h1": "cm"}, fmu="plant.fmu")
