@@ -1,0 +1,143 @@
+"""The regression cases: every shipped scenario × controller (× third-party plant).
+
+Each case runs through the ``cosim run`` command line in its own process (exactly what a user
+runs), and its ``results.csv`` is compared by :mod:`cosim.compare` with
+``scenarios/references/<scenario>__<controller>[__<plant>].csv``.
+
+References hold every column of ``results.csv`` except :data:`NOT_COMPARED` (wall-clock
+timings, which differ from run to run, and solver bookkeeping such as iteration counts, which
+may differ between machines without changing the closed loop).
+"""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import os
+import subprocess
+import sys
+from collections.abc import Iterable
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+SCENARIOS = ROOT / "scenarios"
+REFERENCES = SCENARIOS / "references"
+THIRDPARTY = ROOT / "fmus" / "thirdparty"
+#: Controllers every scenario is run with.
+CONTROLLERS = ("pi", "robust-mpc")
+#: Name of the third-party plant in reference file names; it runs with this controller.
+THIRDPARTY_PLANT = "quadruple_tank"
+THIRDPARTY_CONTROLLER = "robust-mpc"
+#: Column-name endings that are recorded but never compared (nor stored in references).
+NOT_COMPARED = (".solve_ms", ".iterations", ".status")
+#: How to regenerate references (quoted in failure messages).
+UPDATE_HINT = ("regenerate deliberately with `.venv/bin/pytest tests/regression "
+               "--update-references` and commit scenarios/references/")
+
+
+@dataclass(frozen=True)
+class Case:
+    """One regression run."""
+
+    scenario: Path
+    controller: str
+    plant: str | None = None           # None: the project's FourTank.fmu
+    options: tuple[str, ...] = field(default=())
+
+    @property
+    def id(self) -> str:
+        parts = [self.scenario.stem, self.controller]
+        if self.plant:
+            parts.append(self.plant)
+        return "__".join(parts)
+
+    @property
+    def reference(self) -> Path:
+        return REFERENCES / f"{self.id}.csv"
+
+
+def shipped_cases() -> list[Case]:
+    """Every scenario × :data:`CONTROLLERS`, plus every scenario on the third-party plant."""
+    cases = []
+    for scenario in sorted(SCENARIOS.glob("*.csv")):
+        cases += [Case(scenario, c) for c in CONTROLLERS]
+        cases.append(Case(scenario, THIRDPARTY_CONTROLLER, THIRDPARTY_PLANT))
+    return cases
+
+
+def controller_available(name: str) -> str | None:
+    """``None`` when the controller can be imported, else the reason it cannot."""
+    from cosim import registry
+    from cosim.errors import CosimError
+
+    try:
+        registry.resolve(name)
+    except CosimError as exc:
+        return str(exc)
+    return None
+
+
+def build_thirdparty(out_dir: Path) -> Path:
+    """Build the third-party example FMU with ``fmus/thirdparty/build.py``."""
+    spec = importlib.util.spec_from_file_location("thirdparty_build", THIRDPARTY / "build.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.build(out_dir)
+
+
+def compared_columns(names: Iterable[str]) -> list[str]:
+    """The signal columns that are compared (and stored in references)."""
+    return [n for n in names if not n.endswith(NOT_COMPARED)]
+
+
+@dataclass
+class Run:
+    """Outcome of running one case."""
+
+    case: Case
+    out: Path
+    returncode: int
+    output: str
+
+    @property
+    def results(self) -> Path:
+        return self.out / "results.csv"
+
+
+def run_case(case: Case, out: Path, fmus: dict[str | None, Path],
+             extra_pythonpath: Iterable[Path] = ()) -> Run:
+    """Run one case with ``python -m cosim.cli run`` in a fresh process."""
+    cmd = [sys.executable, "-m", "cosim.cli", "run", str(case.scenario),
+           "--controller", case.controller, "--plant", str(fmus[case.plant]),
+           "--out", str(out), "--quiet", "--no-figure", *case.options]
+    if case.plant == THIRDPARTY_PLANT:
+        cmd += ["--map", str(THIRDPARTY / f"{THIRDPARTY_PLANT}.map.toml")]
+    env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
+               PYTHONHASHSEED="0")
+    paths = [str(p) for p in extra_pythonpath] + [env.get("PYTHONPATH", "")]
+    env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
+    proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, check=False)
+    return Run(case, out, proc.returncode, (proc.stdout + proc.stderr).strip())
+
+
+def run_cases(cases: list[Case], out_root: Path, fmus: dict[str | None, Path],
+              workers: int = 2, extra_pythonpath: Iterable[Path] = ()) -> dict[str, Run]:
+    """Run cases in parallel processes (``workers`` at a time); results by case id."""
+    paths = list(extra_pythonpath)
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        futures = {c.id: pool.submit(run_case, c, out_root / c.id, fmus, paths) for c in cases}
+        return {k: f.result() for k, f in futures.items()}
+
+
+def write_reference(results: Path, reference: Path) -> None:
+    """Copy the compared columns of ``results`` to ``reference`` (values as written)."""
+    with results.open(newline="", encoding="utf-8") as fh:
+        rows = list(csv.reader(fh))
+    keep = [0] + [j for j, n in enumerate(rows[0]) if j and n in compared_columns([n])]
+    reference.parent.mkdir(parents=True, exist_ok=True)
+    with reference.open("w", newline="", encoding="utf-8") as fh:
+        writer = csv.writer(fh, quoting=csv.QUOTE_MINIMAL, lineterminator="\n")
+        for row in rows:
+            writer.writerow([row[j] for j in keep])

@@ -1,0 +1,42 @@
+"""Deliberately perturbed controllers: the regression suite must notice each of them.
+
+Used as ``cosim run --controller regression_perturbed:<Class>`` (this folder on PYTHONPATH).
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from controllers.component import DEFAULT_MODEL, RobustMPCController
+from controllers.pi import PAIRINGS, PIController
+
+
+class PIGainUp(PIController):
+    """The PI baseline with every loop gain ×1.1."""
+
+    def __init__(self) -> None:
+        super().__init__(pairing=tuple(replace(loop, K=1.1 * loop.K)
+                                       for loop in PAIRINGS["cross"]))
+
+
+class MPCInputWeight(RobustMPCController):
+    """The robust MPC with R = 0.02·I instead of the paper's 0.01·I."""
+
+    def __init__(self) -> None:
+        super().__init__(R=0.02 * np.eye(2))
+
+
+class MPCModelWeight(RobustMPCController):
+    """The robust MPC on the shipped GRU with one weight (``U_o[0][0]``) changed by 1e-3."""
+
+    def __init__(self) -> None:
+        doc = json.loads(DEFAULT_MODEL.read_text(encoding="utf-8"))
+        doc["U_o"][0][0] += 1e-3
+        path = Path(tempfile.mkdtemp(prefix="perturbed_model_")) / "model.json"
+        path.write_text(json.dumps(doc), encoding="utf-8")
+        super().__init__(model=path)

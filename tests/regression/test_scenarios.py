@@ -1,0 +1,39 @@
+"""Every shipped scenario, with the MPC and the PI baseline (and on the third-party plant),
+must reproduce its reference in ``scenarios/references/`` within the default tolerances of
+:mod:`cosim.compare`."""
+
+from __future__ import annotations
+
+import pytest
+import regression_cases as rc
+
+from cosim.compare import compare, read_table
+
+CASES = rc.shipped_cases()
+
+
+def test_scenarios_are_shipped() -> None:
+    assert CASES, "no scenarios/*.csv found"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_matches_reference(case: rc.Case, regression_runs: dict[str, rc.Run],
+                           update_references: bool) -> None:
+    reason = rc.controller_available(case.controller)
+    if reason is not None:
+        pytest.skip(f"controller '{case.controller}' not available: {reason}")
+    run = regression_runs[case.id]
+    assert run.returncode == 0, f"cosim run failed for {case.id}:\n{run.output}"
+    if update_references:
+        rc.write_reference(run.results, case.reference)
+        return
+    if not case.reference.is_file():
+        pytest.fail(f"no reference {case.reference.relative_to(rc.ROOT)} for {case.id}; "
+                    f"{rc.UPDATE_HINT}")
+    reference = read_table(case.reference)
+    result = compare(run.results, case.reference,
+                     signals=rc.compared_columns(reference.names))
+    if not result.passed:
+        pytest.fail(f"{case.id} deviates from its reference "
+                    f"(if intended, {rc.UPDATE_HINT}):\n{result.report()}", pytrace=False)
