@@ -1,0 +1,218 @@
+"""``cosim train``: train a δISS GRU on a data set and write the model file."""
+
+from __future__ import annotations
+
+import argparse
+
+HELP = "train a δISS GRU (paper's eq. 3) on a data set from 'cosim generate-data'"
+
+DESCRIPTION = """\
+Train the GRU of the paper (eq:gru, n states, inputs qa qb, outputs h1 h2) with torch on the
+training split, select the epoch with the best validation FIT, and write the model file
+(JSON) with its training record, plus a figure of the test-split prediction beside it.
+
+Defaults are the paper's: truncated subsequences of 500 steps, batch 5. The δISS condition
+of Theorem 1 (nu < 1) is enforced by rescaling the recurrent weights so that
+nu <= 1 - margin at every step (--constraint project, default) or by the paper's penalty
+(--constraint penalty). A model with nu >= 1 is never saved.
+
+Normalisation: u = (q - mid-range) / half-range, so the saturation box is |u| <= 1;
+y = (h - 1 m) / 1 m, so the output box [0, 2] m is |y| <= 1.
+
+examples:
+  cosim train data/fourtank.csv
+  cosim train data/fourtank.csv --epochs 20 --out /tmp/m.json
+  cosim train data/fourtank.csv --init controllers/models/fourtank_gru.json --lr 1e-3"""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``train`` sub-command."""
+    from controllers.training import TrainOptions
+
+    d = TrainOptions()
+    parser = subparsers.add_parser("train", help=HELP, description=DESCRIPTION,
+                                   formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("data", metavar="DATA.csv", help="data set from 'cosim generate-data'")
+    parser.add_argument("--out", default="controllers/models/fourtank_gru.json",
+                        metavar="MODEL.json", help="model file to write "
+                        "(default: controllers/models/fourtank_gru.json)")
+    parser.add_argument("--figure", default=None, metavar="PNG",
+                        help="test-split prediction figure (default: <out>_test.png)")
+    parser.add_argument("--init", default=None, metavar="MODEL.json",
+                        help="start from this model file's weights (fine-tuning)")
+    parser.add_argument("--seed", type=int, default=d.seed, help=f"random seed ({d.seed})")
+    parser.add_argument("--epochs", type=int, default=d.epochs,
+                        help=f"maximum epochs ({d.epochs})")
+    parser.add_argument("--n", type=int, default=d.n, help=f"GRU states ({d.n})")
+    parser.add_argument("--seq-len", type=int, default=d.seq_len,
+                        help=f"training subsequence length ({d.seq_len})")
+    parser.add_argument("--stride", type=int, default=None,
+                        help="offset between subsequence starts (default: --seq-len)")
+    parser.add_argument("--batch", type=int, default=d.batch,
+                        help=f"subsequences per step, 0 = all ({d.batch})")
+    parser.add_argument("--washout", type=int, default=d.washout,
+                        help=f"initial steps of each subsequence left out of the loss "
+                        f"({d.washout})")
+    parser.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate ({d.lr})")
+    parser.add_argument("--lr-final", type=float, default=d.lr_final,
+                        help=f"learning rate reached at the last epoch ({d.lr_final})")
+    parser.add_argument("--nu-margin", type=float, default=d.nu_margin,
+                        help=f"enforce nu <= 1 - margin ({d.nu_margin})")
+    parser.add_argument("--constraint", choices=("project", "penalty"), default=d.constraint,
+                        help=f"how nu < 1 is enforced ({d.constraint})")
+    parser.add_argument("--penalty-weight", type=float, default=None,
+                        help="weight of relu(nu - (1 - margin)) in the loss "
+                        "(default: 10 with --constraint penalty, else 0)")
+    parser.add_argument("--uo-weight", type=float, default=d.uo_weight,
+                        help=f"weight of the penalty on ||U_o||_inf above --uo-max "
+                        f"({d.uo_weight})")
+    parser.add_argument("--uo-max", type=float, default=d.uo_max,
+                        help=f"||U_o||_inf allowed without penalty ({d.uo_max})")
+    parser.add_argument("--bz-init", type=float, default=d.bz_init,
+                        help=f"initial update-gate bias ({d.bz_init})")
+    parser.add_argument("--train-uz", action="store_true",
+                        help="also train U_z (default: U_z = 0, the nu budget goes to U_h)")
+    parser.add_argument("--sigma-z-max", type=float, default=d.sigma_z_max,
+                        help="with --constraint project, also keep sigma_z_bar <= this "
+                        "(0 = no cap; it sets the contraction rates rho_s, rho_o)")
+    parser.add_argument("--history", default=None, metavar="CSV",
+                        help="append per-epoch loss, validation FIT and nu to this CSV "
+                        "as training goes")
+    parser.add_argument("--patience", type=int, default=d.patience,
+                        help="stop after this many epochs without a better validation FIT "
+                        "(0 = off)")
+    parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    parser.set_defaults(func=run)
+
+
+def _command(argv: list[str]) -> str:
+    """The command line that trained the model, without output-only options."""
+    kept, skip = [], False
+    for arg in argv:
+        if skip:
+            skip = False
+            continue
+        if arg in ("--out", "--figure", "--history"):
+            skip = True
+            continue
+        if arg.split("=")[0] in ("--out", "--figure", "--history") or arg == "--quiet":
+            continue
+        kept.append(arg)
+    return " ".join(["cosim train", *kept])
+
+
+def run(args: argparse.Namespace) -> int:
+    """Train, check ν < 1, write the model file and the figure."""
+    import sys
+    import time
+    from pathlib import Path
+
+    import numpy as np
+
+    from controllers import certificates, metrics, training
+    from controllers.model import GRUModel
+    from controllers.problem import FOURTANK
+    from cosim import datagen
+    from cosim.errors import CosimError
+
+    data = datagen.read_csv(args.data)
+    for name in datagen.SPLITS:
+        if not np.any(data.split == name):
+            raise CosimError(f"{args.data}: no rows in split '{name}'")
+    missing = [s for s in FOURTANK.inputs if s not in data.input_names]
+    if missing:
+        raise CosimError(f"{args.data}: no input column '{missing[0]}'")
+    penalty = args.penalty_weight
+    if penalty is None:
+        penalty = 10.0 if args.constraint == "penalty" else 0.0
+    opts = training.TrainOptions(
+        n=args.n, seq_len=args.seq_len, stride=args.stride, batch=args.batch,
+        epochs=args.epochs, lr=args.lr, lr_final=args.lr_final, washout=args.washout,
+        nu_margin=args.nu_margin, constraint=args.constraint, penalty_weight=penalty,
+        uo_weight=args.uo_weight, uo_max=args.uo_max, bz_init=args.bz_init,
+        patience=args.patience, sigma_z_max=args.sigma_z_max, train_uz=args.train_uz,
+        seed=args.seed)
+    if not 0 <= opts.washout < opts.seq_len:
+        raise CosimError(f"--washout must be in [0, --seq-len), got {opts.washout}")
+    if not 0 < opts.nu_margin < 1:
+        raise CosimError(f"--nu-margin must be in (0, 1), got {opts.nu_margin}")
+
+    norm = training.normalization(FOURTANK)
+    u_all = (data.u[:, [data.input_names.index(s) for s in FOURTANK.inputs]]
+             - norm["u_offset"]) / norm["u_scale"]
+    y_all = (data.outputs(FOURTANK.outputs) - norm["y_offset"]) / norm["y_scale"]
+    train_mask = data.split == "train"
+    init = None
+    if args.init:
+        start = GRUModel.load(args.init)
+        if start.params["W_z"].shape != (opts.n, len(FOURTANK.inputs)):
+            raise CosimError(f"{args.init}: model has n={start.n}, but --n is {opts.n}")
+        init = start.params
+
+    progress = not args.quiet and sys.stderr.isatty()
+    callback = None
+    if args.history:
+        history = Path(args.history)
+        history.parent.mkdir(parents=True, exist_ok=True)
+        with history.open("w") as fh:
+            fh.write("epoch,time_s,loss,nu,fit_val_h1,fit_val_h2,U_o_inf_norm\n")
+
+        def callback(epoch: int, rec: dict, _weights: dict) -> None:
+            with history.open("a") as fh:
+                fh.write(f"{epoch},{rec['time']:.2f},{rec['loss']:.6e},{rec['nu']:.6f},"
+                         f"{rec['fit_val'][0]:.4f},{rec['fit_val'][1]:.4f},"
+                         f"{rec['uo_norm']:.4f}\n")
+
+    t0 = time.perf_counter()
+    result = training.train(u_all[train_mask], y_all[train_mask], u_all, y_all, data.split,
+                            opts, progress=progress, init=init, callback=callback)
+    scores = metrics.split_scores(result.params, u_all, y_all, data.split)
+    names = list(FOURTANK.outputs)
+    sz, sr, ph = certificates.gate_bounds(result.params)
+    meta_path = Path(args.data).with_suffix(".json")
+    record = {
+        "command": _command(sys.argv[2:]),
+        "data": str(args.data),
+        "data_meta": (__import__("json").loads(meta_path.read_text())
+                      if meta_path.exists() else None),
+        "seed": opts.seed,
+        "init": args.init,
+        "epochs_run": result.epochs_run,
+        "best_epoch": result.best_epoch,
+        "options": result.options,
+        "fit": {s: dict(zip(names, scores[s]["fit"], strict=True)) for s in scores},
+        "max_abs_err": {s: scores[s]["max_abs_err"] for s in scores},
+        "fit_protocol": "open-loop simulation of the whole record from x = 0, inputs only; "
+                        "FIT per split on its rows (normalised units)",
+        "nu": result.nu,
+        "sigma_z_bar": sz, "sigma_r_bar": sr, "phi_h_bar": ph,
+        "U_o_inf_norm": certificates.inf_norm(result.params["U_o"]),
+        "normalization_note": "u = (q - mid)/half-range of the saturation box; "
+                              "y = (h - 1 m)/1 m",
+        "wall_time_s": round(time.perf_counter() - t0, 1),
+        "torch_version": __import__("torch").__version__,
+    }
+    w_y_bar = scores["test"]["max_abs_err"]
+    model = training.build_model(result.params, FOURTANK, norm, record, w_y_bar=w_y_bar)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    model.save(out)
+
+    figure = Path(args.figure) if args.figure else out.with_name(out.stem + "_test.png")
+    test = data.split == "test"
+    xi = metrics.open_loop(result.params, u_all)
+    metrics.prediction_figure(
+        data.time[test], model.denormalize_y(y_all[test]), model.denormalize_y(xi[test]),
+        names, list(FOURTANK.output_units), scores["test"]["fit"], str(figure),
+        f"GRU n={opts.n}, test split: open-loop prediction vs plant "
+        f"(nu = {result.nu:.3f})")
+    if not args.quiet:
+        for s in ("train", "val", "test"):
+            fits = ", ".join(f"{n} {f:.2f} %" for n, f in zip(names, scores[s]["fit"],
+                                                             strict=True))
+            print(f"{s:5s} FIT {fits}   max |error| {scores[s]['max_abs_err']:.4f}")
+        print(f"nu = {result.nu:.4f}, ||U_o||_inf = {record['U_o_inf_norm']:.2f}, "
+              f"best epoch {result.best_epoch} of {result.epochs_run}, "
+              f"{record['wall_time_s']:.0f} s")
+        print(f"wrote {out} and {figure}")
+    return 0

@@ -1,0 +1,233 @@
+"""Identification data: a multilevel pseudo-random excitation of a plant, sampled every Ts.
+
+The paper's section V (``sec:numerical-example``): ``qa`` and ``qb`` are piecewise constant
+with random levels inside the saturation box and random hold times; the plant response is
+sampled every ``Ts = 25 s``; 20,000 steps are split 15,000 / 2,500 / 2,500 into training,
+validation and test data.
+
+Row ``k`` of the data set holds ``u_k`` (applied over ``[t_k, t_k + Ts)``) and ``y_k``
+(measured at ``t_k``, before ``u_k`` acts), which is the timing of ``eq:gru``:
+``ξ_k = g(x_k)``, ``x_{k+1} = f(x_k, u_k)``.
+
+CSV format: a header ``time,<inputs...>,<outputs...>,split`` then one row per sample, with
+``split`` one of ``train``, ``val``, ``test``. A sidecar ``<name>.json`` records how the data
+were made (seed, plant, hold times, splits) so that they can be regenerated exactly.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cosim.component import Component
+from cosim.errors import CosimError
+
+#: Names of the three parts of a data set, in time order.
+SPLITS = ("train", "val", "test")
+
+
+@dataclass
+class Dataset:
+    """An input/output record with its split.
+
+    Attributes
+    ----------
+    time : (T,) array
+    u : (T, m) array
+        Inputs, physical units.
+    y : (T, q) array
+        Measured outputs, physical units (all plant outputs recorded, e.g. h1..h4).
+    input_names, output_names : list of str
+    split : (T,) array of str
+        ``train`` / ``val`` / ``test`` per row.
+    """
+
+    time: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    input_names: list[str]
+    output_names: list[str]
+    split: np.ndarray
+
+    def part(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """Inputs and outputs of one split (``train``, ``val`` or ``test``)."""
+        mask = self.split == name
+        return self.u[mask], self.y[mask]
+
+    def outputs(self, names: Sequence[str]) -> np.ndarray:
+        """Columns of :attr:`y` by name."""
+        try:
+            idx = [self.output_names.index(n) for n in names]
+        except ValueError as exc:
+            raise CosimError(f"data set has no output {exc.args[0].split()[0]}; it has "
+                             f"{', '.join(self.output_names)}") from None
+        return self.y[:, idx]
+
+
+def split_sizes(steps: int, fractions: tuple[float, float] = (0.75, 0.125)) -> tuple[int, ...]:
+    """Train/validation/test sizes; 20,000 steps give the paper's 15,000/2,500/2,500."""
+    n_train = round(steps * fractions[0])
+    n_val = round(steps * fractions[1])
+    return n_train, n_val, steps - n_train - n_val
+
+
+def multilevel_signal(steps: int, bounds: Sequence[tuple[float, float]],
+                      rng: np.random.Generator, hold: tuple[int, int] = (2, 80)) -> np.ndarray:
+    """Multilevel pseudo-random signal: piecewise constant, random levels and hold times.
+
+    Each input channel is independent. Levels are uniform inside its ``(min, max)`` box; hold
+    times (in samples) are log-uniform on ``[hold[0], hold[1]]``, so that short holds excite
+    the fast dynamics and long ones let the tanks settle (the four-tank time constants are
+    about 7-17 samples of 25 s).
+
+    Returns
+    -------
+    (steps, m) array
+    """
+    lo_hold, hi_hold = hold
+    if not 1 <= lo_hold <= hi_hold:
+        raise CosimError(f"hold times must satisfy 1 <= min <= max, got {hold}")
+    u = np.empty((steps, len(bounds)))
+    for j, (lo, hi) in enumerate(bounds):
+        k = 0
+        while k < steps:
+            length = int(np.exp(rng.uniform(np.log(lo_hold), np.log(hi_hold + 1))))
+            length = max(lo_hold, min(hi_hold, length))
+            u[k:k + length, j] = rng.uniform(lo, hi)
+            k += length
+    return u
+
+
+def collect(plant: Component, u: np.ndarray, Ts: float, input_names: Sequence[str],
+            output_names: Sequence[str], progress: bool = True) -> np.ndarray:
+    """Drive ``plant`` with ``u`` (one row per sample) and sample its outputs.
+
+    Returns ``y`` with ``y[k]`` measured at ``t_k = k Ts`` before ``u[k]`` acts.
+    """
+    from tqdm import tqdm
+
+    steps = u.shape[0]
+    y = np.empty((steps, len(output_names)))
+    plant.setup(0.0)
+    try:
+        for k in tqdm(range(steps), desc="generate-data", unit="step", disable=not progress):
+            out = plant.get_outputs()
+            try:
+                y[k] = [out[name] for name in output_names]
+            except KeyError as exc:
+                raise CosimError(f"plant has no output {exc.args[0]!r}") from None
+            plant.set_inputs(dict(zip(input_names, u[k].tolist(), strict=True)))
+            plant.step(k * Ts, Ts)
+    finally:
+        plant.terminate()
+    if not np.all(np.isfinite(y)):
+        raise CosimError("plant produced non-finite outputs")
+    return y
+
+
+def generate(plant: Component, steps: int, seed: int, bounds: Sequence[tuple[float, float]],
+             input_names: Sequence[str], output_names: Sequence[str], Ts: float,
+             hold: tuple[int, int] = (2, 80), progress: bool = True) -> Dataset:
+    """Excite ``plant`` with :func:`multilevel_signal` and return the split data set."""
+    rng = np.random.default_rng(seed)
+    u = multilevel_signal(steps, bounds, rng, hold)
+    y = collect(plant, u, Ts, input_names, output_names, progress)
+    sizes = split_sizes(steps)
+    split = np.repeat(np.array(SPLITS), sizes)
+    return Dataset(time=np.arange(steps) * Ts, u=u, y=y, input_names=list(input_names),
+                   output_names=list(output_names), split=split)
+
+
+def write_csv(data: Dataset, path: str | Path, meta: dict | None = None) -> Path:
+    """Write the CSV and its ``.json`` sidecar (``meta`` plus split sizes); return the CSV."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as fh:
+        writer = csv.writer(fh)
+        writer.writerow(["time", *data.input_names, *data.output_names, "split"])
+        for k in range(data.time.shape[0]):
+            writer.writerow([repr(float(data.time[k])), *map(repr, data.u[k].tolist()),
+                             *map(repr, data.y[k].tolist()), data.split[k]])
+    sidecar = dict(meta or {})
+    sidecar.update({"inputs": data.input_names, "outputs": data.output_names,
+                    "steps": int(data.time.shape[0]),
+                    "splits": {s: int(np.sum(data.split == s)) for s in SPLITS}})
+    path.with_suffix(".json").write_text(json.dumps(sidecar, indent=1) + "\n")
+    return path
+
+
+def read_csv(path: str | Path, n_inputs: int | None = None,
+             input_names: Sequence[str] | None = None) -> Dataset:
+    """Read a data set written by :func:`write_csv`.
+
+    The inputs are the columns named ``input_names`` (default: the sidecar's ``inputs``, else
+    the first ``n_inputs`` after ``time``, else ``qa, qb``); every other numeric column except
+    ``time`` and ``split`` is an output. Errors name the file and line.
+    """
+    path = Path(path)
+    try:
+        fh = path.open(newline="")
+    except OSError as exc:
+        raise CosimError(f"{path}: cannot read data file ({exc.strerror})") from None
+    with fh:
+        reader = csv.reader(fh)
+        header = next(reader, None)
+        if not header or header[0] != "time" or header[-1] != "split":
+            raise CosimError(f"{path}:1: header must be 'time,<signals...>,split'")
+        signals = header[1:-1]
+        rows, split = [], []
+        for line, row in enumerate(reader, start=2):
+            if len(row) != len(header):
+                raise CosimError(f"{path}:{line}: expected {len(header)} fields, got {len(row)}")
+            try:
+                values = [float(v) for v in row[:-1]]
+            except ValueError:
+                raise CosimError(f"{path}:{line}: non-numeric value") from None
+            if not all(np.isfinite(values)):
+                raise CosimError(f"{path}:{line}: non-finite value")
+            if row[-1] not in SPLITS:
+                raise CosimError(f"{path}:{line}: split must be one of {', '.join(SPLITS)}, "
+                                 f"got {row[-1]!r}")
+            rows.append(values)
+            split.append(row[-1])
+    if not rows:
+        raise CosimError(f"{path}: no data rows")
+    if input_names is None:
+        sidecar = path.with_suffix(".json")
+        if sidecar.exists():
+            try:
+                input_names = json.loads(sidecar.read_text())["inputs"]
+            except (json.JSONDecodeError, KeyError, TypeError):
+                input_names = None
+        if input_names is None:
+            input_names = signals[:n_inputs] if n_inputs else ["qa", "qb"]
+    missing = [n for n in input_names if n not in signals]
+    if missing:
+        raise CosimError(f"{path}:1: no input column {missing[0]!r}")
+    arr = np.array(rows)
+    in_idx = [1 + signals.index(n) for n in input_names]
+    out_names = [n for n in signals if n not in input_names]
+    out_idx = [1 + signals.index(n) for n in out_names]
+    return Dataset(time=arr[:, 0], u=arr[:, in_idx], y=arr[:, out_idx],
+                   input_names=list(input_names), output_names=out_names,
+                   split=np.array(split))
+
+
+#: A factory making the plant component (kept behind a function so that the FMU driver can
+#: be swapped without touching the data-generation logic).
+PlantFactory = Callable[[], Component]
+
+
+def fmu_plant(path: str | Path, map_path: str | Path | None = None,
+              interface: str = "cs") -> Component:
+    """The plant FMU as a :class:`~cosim.fmu.FmuComponent` (with an optional variable map)."""
+    from cosim import varmap
+    from cosim.fmu import FmuComponent
+
+    vm = varmap.load(map_path) if map_path else None
+    return FmuComponent(path, name="plant", interface=interface, varmap=vm)

@@ -1,0 +1,114 @@
+"""Model file (``controllers/models/*.json``): round trip and one-line errors."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from controllers import training
+from controllers.model import GRUModel, ModelFileError
+from controllers.problem import FOURTANK
+
+
+def make_model(seed: int = 0) -> GRUModel:
+    p = training.init_params(5, 2, 2, seed)
+    return training.build_model(p, FOURTANK, training.normalization(FOURTANK),
+                                {"seed": seed, "note": "test"}, w_y_bar=0.05)
+
+
+def write(tmp_path, doc, name="m.json"):
+    path = tmp_path / name
+    path.write_text(json.dumps(doc, indent=1))
+    return path
+
+
+def test_round_trip_keeps_every_value(tmp_path):
+    model = make_model()
+    model.L_z = np.full((5, 2), 0.01)
+    model.L_r = np.full((5, 2), -0.02)
+    path = tmp_path / "m.json"
+    model.save(path)
+    back = GRUModel.load(path)
+    for k, v in model.params.items():
+        assert np.array_equal(back.params[k], v), k
+    for k in ("u_offset", "u_scale", "y_offset", "y_scale"):
+        assert np.array_equal(getattr(back, k), getattr(model, k))
+    assert np.array_equal(back.L_z, model.L_z) and np.array_equal(back.L_r, model.L_r)
+    assert back.w_y_bar == 0.05 and back.Ts == 25.0
+    assert back.input_names == ["qa", "qb"] and back.output_names == ["h1", "h2"]
+    assert back.training["seed"] == 0
+    assert (back.n, back.m, back.p) == (5, 2, 2)
+
+
+def test_normalization_maps_saturation_box_to_unit_box():
+    model = make_model()
+    lo = np.array([b[0] for b in FOURTANK.input_bounds])
+    hi = np.array([b[1] for b in FOURTANK.input_bounds])
+    assert np.allclose(model.normalize_u(lo), -1) and np.allclose(model.normalize_u(hi), 1)
+    assert np.allclose(model.normalize_y([0.0, 2.0]), [-1, 1])
+    q = np.array([3e-4, 7e-4])
+    assert np.allclose(model.denormalize_u(model.normalize_u(q)), q)
+
+
+def test_bad_json_names_line_and_column(tmp_path):
+    path = tmp_path / "bad.json"
+    path.write_text('{\n "W_z": [[1, 2],\n  oops]\n}\n')
+    with pytest.raises(ModelFileError, match=r"bad\.json:3:3: invalid JSON"):
+        GRUModel.load(path)
+
+
+def test_missing_file(tmp_path):
+    with pytest.raises(ModelFileError, match="cannot read model file"):
+        GRUModel.load(tmp_path / "nope.json")
+
+
+def test_missing_array(tmp_path):
+    doc = make_model().to_dict()
+    del doc["U_h"]
+    with pytest.raises(ModelFileError, match="missing array 'U_h'"):
+        GRUModel.load(write(tmp_path, doc))
+
+
+def test_wrong_shape(tmp_path):
+    doc = make_model().to_dict()
+    doc["U_r"] = doc["U_r"][:-1]
+    with pytest.raises(ModelFileError, match=r"'U_r' has shape \(4, 5\), expected \(5, 5\)"):
+        GRUModel.load(write(tmp_path, doc))
+
+
+def test_nan_value(tmp_path):
+    doc = make_model().to_dict()
+    doc["b_h"][2] = math.nan  # json.dumps writes NaN, json.loads reads it back
+    with pytest.raises(ModelFileError, match="'b_h' has a non-finite value"):
+        GRUModel.load(write(tmp_path, doc))
+
+
+@pytest.mark.parametrize(("key", "value", "message"), [
+    ("u_scale", [1.0, 0.0], "'normalization.u_scale' has a zero entry"),
+    ("y_offset", [1.0], "'normalization.y_offset' must have 2 entries"),
+    ("u_offset", "abc", "'normalization.u_offset' is not a numeric array"),
+])
+def test_bad_normalization(tmp_path, key, value, message):
+    doc = make_model().to_dict()
+    doc["normalization"][key] = value
+    with pytest.raises(ModelFileError, match=message):
+        GRUModel.load(write(tmp_path, doc))
+
+
+def test_missing_normalization(tmp_path):
+    doc = make_model().to_dict()
+    del doc["normalization"]
+    with pytest.raises(ModelFileError, match="missing object 'normalization'"):
+        GRUModel.load(write(tmp_path, doc))
+
+
+def test_error_messages_are_one_line_and_name_the_file(tmp_path):
+    doc = make_model().to_dict()
+    doc["W_h"] = [[1.0, "x"]] * 5
+    path = write(tmp_path, doc, "weights.json")
+    with pytest.raises(ModelFileError) as info:
+        GRUModel.load(path)
+    assert "\n" not in str(info.value) and "weights.json" in str(info.value)

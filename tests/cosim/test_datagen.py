@@ -1,0 +1,139 @@
+"""``cosim generate-data``: seeded, split, inside the saturation box, on the real plant FMU."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controllers.problem import FOURTANK
+from cosim import datagen
+from cosim.cli import main
+from cosim.errors import CosimError
+
+ROOT = Path(__file__).resolve().parents[2]
+FMU = ROOT / "fmus" / "FourTank.fmu"
+needs_fmu = pytest.mark.skipif(not FMU.exists(), reason="run 'cosim build-fmu' first")
+
+
+def test_multilevel_signal_is_seeded_piecewise_constant_and_bounded():
+    bounds = FOURTANK.input_bounds
+    a = datagen.multilevel_signal(3000, bounds, np.random.default_rng(1), (2, 80))
+    b = datagen.multilevel_signal(3000, bounds, np.random.default_rng(1), (2, 80))
+    c = datagen.multilevel_signal(3000, bounds, np.random.default_rng(2), (2, 80))
+    assert np.array_equal(a, b) and not np.array_equal(a, c)
+    for j, (lo, hi) in enumerate(bounds):
+        assert lo <= a[:, j].min() and a[:, j].max() <= hi
+        assert a[:, j].max() - a[:, j].min() > 0.8 * (hi - lo)  # the box is covered
+        # hold times: runs of equal values between 2 and 80 samples (last run may be cut)
+        change = np.flatnonzero(np.diff(a[:, j]) != 0)
+        runs = np.diff(np.concatenate([[-1], change]))
+        assert runs.min() >= 2 and runs.max() <= 80
+        assert runs.min() <= 4 and runs.max() >= 40  # both fast and slow excitation
+
+
+def test_split_sizes_are_the_papers():
+    assert datagen.split_sizes(20000) == (15000, 2500, 2500)
+    assert sum(datagen.split_sizes(1001)) == 1001
+
+
+def test_bad_hold_times_rejected():
+    with pytest.raises(CosimError, match="hold times"):
+        datagen.multilevel_signal(10, FOURTANK.input_bounds, np.random.default_rng(0), (5, 2))
+
+
+@needs_fmu
+def test_generate_data_from_the_plant_fmu_is_reproducible(tmp_path):
+    out_a, out_b = tmp_path / "a.csv", tmp_path / "b.csv"
+    assert main(["generate-data", "--steps", "400", "--seed", "7", "--out", str(out_a),
+                 "--quiet"]) == 0
+    assert main(["generate-data", "--steps", "400", "--seed", "7", "--out", str(out_b),
+                 "--quiet"]) == 0
+    assert out_a.read_text() == out_b.read_text()
+    data = datagen.read_csv(out_a)
+    assert data.input_names == ["qa", "qb"]
+    assert data.output_names == ["h1", "h2", "h3", "h4"]
+    assert [int(np.sum(data.split == s)) for s in datagen.SPLITS] == [300, 50, 50]
+    assert list(data.split[:300]) == ["train"] * 300 and data.split[-1] == "test"
+    assert np.allclose(np.diff(data.time), FOURTANK.Ts)
+    for j, (lo, hi) in enumerate(FOURTANK.input_bounds):
+        assert lo <= data.u[:, j].min() and data.u[:, j].max() <= hi
+    assert np.all(data.y >= 0) and np.all(data.y < 3)
+    # the plant responds: levels move with the inputs
+    assert np.ptp(data.y[:, 0]) > 0.1 and np.ptp(data.y[:, 1]) > 0.1
+    meta = json.loads(out_a.with_suffix(".json").read_text())
+    assert meta["seed"] == 7 and meta["splits"] == {"train": 300, "val": 50, "test": 50}
+
+
+@needs_fmu
+def test_plant_physics_one_step(tmp_path):
+    """y[k+1] follows the four-tank ODE from y[k] under u[k] (checked with scipy)."""
+    from scipy.integrate import solve_ivp
+
+    out = tmp_path / "d.csv"
+    assert main(["generate-data", "--steps", "20", "--seed", "1", "--out", str(out),
+                 "--quiet"]) == 0
+    d = datagen.read_csv(out)
+    S, a, ga, gb, g = 0.06, (1.31e-4, 1.51e-4, 9.27e-5, 8.82e-5), 0.3, 0.4, 9.81
+
+    def rhs(t, h, qa, qb):
+        s = np.sqrt(2 * g * np.maximum(h, 0))
+        return [(-a[0] * s[0] + a[2] * s[2] + ga * qa) / S,
+                (-a[1] * s[1] + a[3] * s[3] + gb * qb) / S,
+                (-a[2] * s[2] + (1 - gb) * qb) / S, (-a[3] * s[3] + (1 - ga) * qa) / S]
+
+    for k in (0, 5, 18):
+        sol = solve_ivp(rhs, (0, 25), d.y[k], args=tuple(d.u[k]), rtol=1e-10, atol=1e-12)
+        assert np.max(np.abs(sol.y[:, -1] - d.y[k + 1])) < 1e-6
+
+
+def test_missing_plant_is_a_one_line_error(tmp_path, capsys):
+    code = main(["generate-data", "--plant", str(tmp_path / "none.fmu"), "--out",
+                 str(tmp_path / "x.csv"), "--quiet"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "none.fmu: plant FMU not found" in err and err.count("\n") == 1
+
+
+def test_read_csv_errors_name_file_and_line(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_text("time,qa,qb,h1,h2,split\n0,1,2,3,4,train\n25,1,x,3,4,train\n")
+    with pytest.raises(CosimError, match=r"d\.csv:3: non-numeric value"):
+        datagen.read_csv(path)
+    path.write_text("time,qa,qb,h1,h2,split\n0,1,2,3,4,later\n")
+    with pytest.raises(CosimError, match=r"d\.csv:2: split must be one of"):
+        datagen.read_csv(path)
+    path.write_text("t,qa\n")
+    with pytest.raises(CosimError, match=r"d\.csv:1: header"):
+        datagen.read_csv(path)
+
+
+@needs_fmu
+def test_generate_data_through_a_variable_map(tmp_path):
+    """--map converts plant units: here the FMU's h1 is read as if it were in centimetres."""
+    vmap = tmp_path / "cm.toml"
+    vmap.write_text('[signals.h1]\nvariable = "h1"\nscale = 100.0\n'
+                    '[signals.qa]\nvariable = "qa"\nunit = "m3/s"\n')
+    plain, mapped = tmp_path / "plain.csv", tmp_path / "mapped.csv"
+    assert main(["generate-data", "--steps", "50", "--seed", "2", "--out", str(plain),
+                 "--quiet"]) == 0
+    assert main(["generate-data", "--steps", "50", "--seed", "2", "--map", str(vmap),
+                 "--out", str(mapped), "--quiet"]) == 0
+    a, b = datagen.read_csv(plain), datagen.read_csv(mapped)
+    assert np.array_equal(a.u, b.u)
+    assert np.allclose(b.outputs(["h1"]), a.outputs(["h1"]) / 100.0, rtol=1e-12)
+    assert np.array_equal(b.outputs(["h2"]), a.outputs(["h2"]))
+    assert json.loads(mapped.with_suffix(".json").read_text())["map"] == str(vmap)
+
+
+@needs_fmu
+def test_map_naming_a_missing_variable_is_a_one_line_error(tmp_path, capsys):
+    vmap = tmp_path / "bad.toml"
+    vmap.write_text('[signals.qa]\nvariable = "Fa"\n')
+    code = main(["generate-data", "--steps", "20", "--map", str(vmap), "--out",
+                 str(tmp_path / "x.csv"), "--quiet"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "qa" in err
