@@ -1,0 +1,243 @@
+"""The robust GRU MPC of the paper (Fig. 1: observer + FHOCP) as a co-simulation component.
+
+``RobustMPCController`` reads the measured levels ``h1``, ``h2`` and the set-points
+``ref.h1``, ``ref.h2`` (metres) and writes the pump flows ``qa``, ``qb`` (m³/s). Internally it
+works in the model file's normalised units:
+
+1. when ``ȳ`` changes: the equilibrium ``(x̄, ū)`` and ``α`` (``eq:def-alpha``) via
+   :meth:`controllers.certificates.Certificate.reference`, which also checks Assumption 1
+   (``ass:setpoint``) and ``eq:condition-recursive-feasibility``;
+2. ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.mpc.RobustMPC`: the FHOCP
+   ``eq:optimization`` with the shifted-candidate fallback);
+3. the observer ``eq:observer`` advances to ``x̂_{k+1}`` with ``u_k`` and ``y_k``, and
+   ``ê_o`` by ``eq:eo-evolution`` (:class:`controllers.observer.GRUObserver`). ``x̂_0`` is the
+   model equilibrium for the first measured output (paper section V).
+
+Set-points outside the theory (unreachable, or failing Assumption 1 / eq. 11): the controller
+keeps regulating to the last admissible set-point, counts the step in ``setpoint_rejected``
+(diagnostics and summary) and names the failed hypothesis in the summary. A first set-point
+that is already inadmissible is a configuration error (:class:`cosim.errors.CosimError`).
+
+Option outside the theorem (off by default): ``offset_free=True`` shifts the model set-point
+by a filtered estimate ``d̂`` of the output mismatch ``y − ŷ`` (``ȳ_model = ȳ − d̂``), to remove
+the small static offset the paper reports; the shifted set-point must still pass the checks.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controllers.problem import FOURTANK
+from cosim.component import Component, Signal
+from cosim.errors import CosimError
+
+DEFAULT_MODEL = Path(__file__).resolve().parent / "models" / "fourtank_gru.json"
+
+#: Set-points (metres) used to choose the observer-gain scale when the model file has no
+#: gains (same grid as ``cosim certify --auto-gain-scale``).
+GAIN_SETPOINTS = [(a, b) for a in (0.5, 1.0, 1.5) for b in (0.5, 1.0, 1.5)]
+
+
+class RobustMPCController(Component):
+    """Robust MPC with GRU model and observer (Schimperna & Magni), normalised internally.
+
+    Parameters
+    ----------
+    model : str or Path, optional
+        Model file (default: the shipped ``controllers/models/fourtank_gru.json``).
+    N : int
+        Prediction horizon (paper: 15).
+    Q, R : arrays, optional
+        Cost weights (default ``I_n`` and ``0.01 I_m``, paper section V).
+    e_o0 : float
+        ``ê_o,0`` (paper: 0.02).
+    gain_scale : float, optional
+        Observer gains = ``gain_scale`` × the LP gains; default: the gains in the model file
+        (``cosim certify --save``), else the largest scale passing every hypothesis on
+        :data:`GAIN_SETPOINTS` (:func:`controllers.certificates.choose_gain_scale`).
+    offset_free : bool
+        Offset-free set-point correction (outside the theorem, see the module docstring).
+    offset_filter : float
+        Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)``.
+    setpoint_rate : float, optional
+        Outside the theorem: move the set-point given to the FHOCP towards the requested one
+        by at most this many metres per sample (a rate-limiting reference governor), so that
+        the terminal set stays reachable after large steps. Off by default.
+    ipopt_options : dict, optional
+        Overrides of :data:`controllers.mpc.FAST_IPOPT_OPTIONS`.
+    name : str
+        Component name.
+    """
+
+    direct_feedthrough = True
+
+    def __init__(self, model: str | Path | None = None, N: int = 15,
+                 Q: np.ndarray | None = None, R: np.ndarray | None = None,
+                 e_o0: float = 0.02, gain_scale: float | None = None,
+                 offset_free: bool = False, offset_filter: float = 0.05,
+                 setpoint_rate: float | None = None,
+                 ipopt_options: Mapping[str, Any] | None = None, name: str = "mpc") -> None:
+        from controllers import certificates as certs
+        from controllers.model import GRUModel
+        from controllers.mpc import FHOCP, RobustMPC
+        from controllers.observer import GRUObserver
+
+        self.name = name
+        self.model_path = Path(model) if model is not None else DEFAULT_MODEL
+        self.model = GRUModel.load(self.model_path)
+        problem = FOURTANK
+        if list(self.model.output_names) != list(problem.outputs) or list(
+                self.model.input_names) != list(problem.inputs):
+            raise CosimError(f"{self.model_path}: model signals {self.model.input_names} → "
+                             f"{self.model.output_names} do not match the control problem "
+                             f"{list(problem.inputs)} → {list(problem.outputs)}")
+        kwargs: dict[str, Any] = {"N": N, "Q": Q, "R": R, "e_o0": e_o0}
+        if gain_scale is None and self.model.L_z is None:
+            targets = [self.model.normalize_y(np.array(y)) for y in GAIN_SETPOINTS]
+            theta, cert = certs.choose_gain_scale(self.model, targets, **kwargs)
+            if theta is None:
+                cert = certs.compute_certificate(self.model, gain_scale=0.0, **kwargs)
+        else:
+            cert = certs.compute_certificate(self.model, gain_scale=gain_scale, **kwargs)
+        self.cert = cert
+        self.fhocp = FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L,
+                           cert.a, cert.b, cert.s, ipopt_options=ipopt_options)
+        self.mpc = RobustMPC(self.fhocp)
+        self.observer = GRUObserver.from_certificate(cert)
+        self.offset_free = bool(offset_free)
+        self.offset_filter = float(offset_filter)
+        self.setpoint_rate = None if setpoint_rate is None else float(setpoint_rate)
+        self.inputs = (Signal("h1", "m", "measured level of tank 1"),
+                       Signal("h2", "m", "measured level of tank 2"),
+                       Signal("ref.h1", "m", "set-point of h1"),
+                       Signal("ref.h2", "m", "set-point of h2"))
+        self.outputs = (Signal("qa", "m3/s", "pump a flow"), Signal("qb", "m3/s", "pump b flow"))
+        self.sample_time = float(self.model.Ts)
+        self.bounds = problem.bounds()
+        self._lo = np.array([b[0] for b in problem.input_bounds])
+        self._hi = np.array([b[1] for b in problem.input_bounds])
+        self._values: dict[str, float] = {}
+        self.setup(0.0)
+
+    # -- Component interface -----------------------------------------------------------
+    def setup(self, t0: float) -> None:
+        """Reset the observer, the MPC and all counters for a run starting at ``t0``."""
+        self.observer.reset(e_o0=self.cert.e_o0)
+        self.fhocp.reset_warm_start()
+        self.mpc.plan = None
+        self.mpc.records = []
+        self.mpc.x_bar = None
+        self._y_ref: np.ndarray | None = None      # requested set-point (normalised)
+        self._y_model: np.ndarray | None = None    # set-point given to the FHOCP
+        self._d_hat: np.ndarray | None = None
+        self._u_phys = 0.5 * (self._lo + self._hi)
+        self._diag: dict[str, float] = {}
+        self.rejected = 0
+        self.rejections: list[str] = []
+        self.setpoint_changes = 0
+
+    def set_inputs(self, values: Mapping[str, float]) -> None:
+        self._values.update({k: float(v) for k, v in values.items()})
+
+    def get_outputs(self) -> dict[str, float]:
+        return {"qa": float(self._u_phys[0]), "qb": float(self._u_phys[1])}
+
+    def step(self, t: float, dt: float) -> None:
+        """Compute ``u_k`` from ``h1, h2`` and the set-points at ``t``; advance the observer."""
+        try:
+            y_phys = np.array([self._values["h1"], self._values["h2"]])
+            r_phys = np.array([self._values["ref.h1"], self._values["ref.h2"]])
+        except KeyError as exc:
+            raise CosimError(f"controller {self.name!r}: input {exc.args[0]!r} was never set "
+                             "(wire h1, h2, ref.h1, ref.h2)") from None
+        if not (np.all(np.isfinite(y_phys)) and np.all(np.isfinite(r_phys))):
+            raise CosimError(f"controller {self.name!r}: non-finite input at t={t:g} s "
+                             f"(h={y_phys.tolist()}, ref={r_phys.tolist()})")
+        y = self.model.normalize_y(y_phys)
+        y_ref = self.model.normalize_y(r_phys)
+        if self.observer.x_hat is None:
+            self.observer.init_from_output(y)
+            self._d_hat = np.zeros_like(y)
+        rejected = self._update_reference(y_ref, y, t)
+        rec = self.mpc.make_step(self.observer.x_hat, self.observer.e_o)
+        e_o = self.observer.e_o
+        self.observer.make_step(rec.u, y)
+        self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
+        res = rec.result
+        from controllers.mpc import OTHER_STATUS, STATUS_CODES
+
+        self._diag = {
+            "solve_ms": res.solve_time * 1e3,
+            "iterations": float(res.iterations),
+            "status": float(STATUS_CODES.get(res.status, OTHER_STATUS)),
+            "cost": float(res.cost) if math.isfinite(res.cost) else float("nan"),
+            "alpha": self.mpc.alpha,
+            "e_o": e_o,
+            "x_hat_error_bound": e_o,
+            "active_constraints": float(res.active),
+            "fallback": float(rec.fallback),
+            "setpoint_rejected": float(rejected),
+            "y_model_h1": float(self.model.denormalize_y(self._y_model)[0]),
+            "y_model_h2": float(self.model.denormalize_y(self._y_model)[1]),
+        }
+
+    def diagnostics(self) -> dict[str, float]:
+        return dict(self._diag)
+
+    def summary(self) -> dict:
+        out = self.mpc.summary()
+        out.update({
+            "controller": "robust-mpc",
+            "model": str(self.model_path),
+            "N": self.fhocp.N,
+            "formulation": self.fhocp.formulation,
+            "offset_free": self.offset_free,
+            "setpoint_rate": self.setpoint_rate,
+            "gain_scale": self.cert.gain_scale,
+            "setpoint_changes": self.setpoint_changes,
+            "setpoint_rejected_steps": self.rejected,
+            "setpoint_rejections": self.rejections[:20],
+        })
+        return out
+
+    def terminate(self) -> None:
+        """Nothing to release (the casadi solver is freed with the object)."""
+
+    # -- set-point handling ------------------------------------------------------------
+    def _update_reference(self, y_ref: np.ndarray, y: np.ndarray, t: float) -> bool:
+        """Recompute ``(x̄, ū, α)`` when the set-point changes; ``True`` when rejected."""
+        target = y_ref
+        if self.setpoint_rate is not None and self._y_model is not None:
+            step = self.setpoint_rate / np.abs(self.model.y_scale)
+            base = self._y_model + (self._d_hat if self.offset_free and self._d_hat is not None
+                                    else 0.0)
+            target = base + np.clip(y_ref - base, -step, step)
+        if self.offset_free and self._d_hat is not None:
+            self._d_hat = self._d_hat + self.offset_filter * (
+                y - self.observer.y_hat() - self._d_hat)
+            target = y_ref - self._d_hat
+        if self._y_model is not None and np.max(np.abs(target - self._y_model)) < (
+                1e-3 if self.offset_free else 1e-12):
+            return False
+        requested_changed = self._y_ref is None or np.any(y_ref != self._y_ref)
+        try:
+            ref = self.cert.reference(target)
+        except CosimError as exc:
+            if self._y_model is None:
+                raise CosimError(f"controller {self.name!r} at t={t:g} s: {exc}") from None
+            if requested_changed:
+                self.rejections.append(f"t={t:g} s: {exc}")
+            self._y_ref = y_ref
+            self.rejected += 1
+            return True
+        if requested_changed:
+            self.setpoint_changes += 1
+        self._y_ref = y_ref
+        self._y_model = target
+        self.mpc.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
+        return False

@@ -1,0 +1,118 @@
+"""The ``robust-mpc`` controller component: with the model as plant, and end to end."""
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from controllers.component import RobustMPCController
+from controllers.model_plant import GRUPlant
+from controllers.problem import FOURTANK
+from cosim import scenario
+from cosim.errors import CosimError
+from cosim.master import Master
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.fixture(scope="module")
+def ctrl():
+    return RobustMPCController()
+
+
+def write_scenario(tmp_path, rows):
+    path = tmp_path / "sc.csv"
+    path.write_text("time,ref.h1,ref.h2\n" + "\n".join(rows) + "\n")
+    return scenario.load(path)
+
+
+def test_interface(ctrl):
+    assert ctrl.direct_feedthrough is True
+    assert ctrl.sample_time == ctrl.model.Ts == 25.0
+    assert ctrl.bounds == FOURTANK.bounds()
+    assert [s.name for s in ctrl.inputs] == ["h1", "h2", "ref.h1", "ref.h2"]
+    assert [s.name for s in ctrl.outputs] == ["qa", "qb"]
+    # the certificate the controller runs on passes its hypotheses at a nominal set-point
+    assert ctrl.cert.ok(ctrl.model.normalize_y(np.array([1.0, 1.0])))
+
+
+def test_short_closed_loop_with_model_as_plant(ctrl, tmp_path):
+    sc = write_scenario(tmp_path, ["0,0.8,0.8", "250,1.0,0.9", "1000,,"])
+    plant = GRUPlant(ctrl.model, y0=np.array([0.8, 0.8]))
+    res = Master(plant, ctrl, sc).run()
+    assert res.status == "ok", res.reason
+    cols = res.columns
+    rows = np.array(res.rows)
+    for name, (lo, hi) in FOURTANK.bounds().items():
+        col = next(c for c in cols if c.endswith("." + name) and not c.startswith("ref"))
+        v = rows[:, cols.index(col)]
+        assert np.all(v >= lo - 1e-12) and np.all(v <= hi + 1e-12), name
+    diag = ctrl.diagnostics()
+    for key in ("solve_ms", "iterations", "status", "cost", "alpha", "e_o",
+                "x_hat_error_bound", "active_constraints", "fallback"):
+        assert key in diag and np.isfinite(diag[key]), key
+    s = ctrl.summary()
+    assert s["steps"] == len(res.rows)
+    assert s["setpoint_changes"] == 2 and s["setpoint_rejected_steps"] == 0
+    assert s["solve_ms_median"] > 0 and s["fallbacks"] <= s["failures"]
+    # the level moved towards the new set-point (the model is the plant: small offset only)
+    h1 = rows[:, cols.index(next(c for c in cols if c.endswith(".h1")
+                             and not c.startswith("ref")))]
+    assert abs(h1[-1] - 1.0) < 0.05
+
+
+def test_inadmissible_setpoint_is_held_and_reported(tmp_path):
+    ctrl = RobustMPCController()
+    sc = write_scenario(tmp_path, ["0,0.8,0.8", "100,1.98,0.8", "200,,"])
+    plant = GRUPlant(ctrl.model, y0=np.array([0.8, 0.8]))
+    res = Master(plant, ctrl, sc).run()
+    assert res.status == "ok", res.reason
+    s = ctrl.summary()
+    assert s["setpoint_rejected_steps"] >= 4  # t = 100, 125, 150, 175 (and 200)
+    assert "Assumption 1" in s["setpoint_rejections"][0]
+    assert ctrl.diagnostics()["setpoint_rejected"] == 1.0
+    assert ctrl.diagnostics()["y_model_h1"] == pytest.approx(0.8)
+
+
+def test_inadmissible_first_setpoint_is_an_error(tmp_path):
+    ctrl = RobustMPCController()
+    ctrl.set_inputs({"h1": 0.8, "h2": 0.8, "ref.h1": 1.99, "ref.h2": 0.8})
+    with pytest.raises(CosimError, match="Assumption 1"):
+        ctrl.step(0.0, 25.0)
+
+
+@pytest.mark.slow
+def test_cosim_run_paper_scenario_end_to_end(tmp_path, fmu_paths):
+    assert fmu_paths[0].exists()  # built by the session fixture (cosim build-fmu)
+    out = tmp_path / "paper"
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "run",
+                           str(ROOT / "scenarios" / "paper_steps.csv"), "--controller",
+                           "robust-mpc", "--out", str(out), "--quiet"],
+                          capture_output=True, text=True, env=env, cwd=ROOT, timeout=900)
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "ok"
+    for name, v in summary["kpis"]["violations"].items():
+        assert v["count"] == 0, name
+    cs = summary["controller_summary"]
+    assert cs["steps"] >= 1600
+    assert cs["setpoint_rejected_steps"] == 0
+
+
+def test_options_outside_the_theorem(tmp_path):
+    """setpoint_rate ramps the FHOCP set-point; offset_free shifts it by the filtered y − ŷ."""
+    sc = write_scenario(tmp_path, ["0,0.8,0.8", "100,1.0,0.8", "400,,"])
+    ctrl = RobustMPCController(setpoint_rate=0.02, offset_free=True)
+    plant = GRUPlant(ctrl.model, y0=np.array([0.8, 0.8]), w_y_max=0.02, seed=2)
+    res = Master(plant, ctrl, sc).run()
+    assert res.status == "ok", res.reason
+    cols, rows = res.columns, np.array(res.rows)
+    y_model = rows[:, cols.index("ctrl.y_model_h1")]
+    steps = np.diff(y_model[(rows[:, 0] >= 100)])
+    assert np.max(steps) <= 0.02 + 0.01  # ramp of 0.02 m/sample plus the offset correction
+    assert ctrl.summary()["setpoint_rate"] == 0.02 and ctrl.summary()["offset_free"] is True

@@ -1,0 +1,190 @@
+"""The FHOCP ``eq:optimization`` (controllers.mpc): optimum, constraints, recursive
+feasibility in closed loop (``th:feasibility-stability``) and the fallback path."""
+
+import numpy as np
+import pytest
+from random_gru import random_gru_model
+
+from controllers import certificates as certs
+from controllers.equilibrium import equilibrium
+from controllers.gru import output, simulate, step
+from controllers.model_plant import GRUPlant
+from controllers.mpc import FEAS_TOL, FHOCP, RobustMPC
+from controllers.observer import GRUObserver
+
+N = 15
+#: Output box |y| ≤ 0.25 (normalised): tight enough for the random model to hit it.
+L_BOX = np.vstack([np.eye(2), -np.eye(2)])
+H_BOX = np.full(4, 0.25)
+
+
+@pytest.fixture(scope="module")
+def model():
+    return random_gru_model(0)
+
+
+@pytest.fixture(scope="module")
+def cert(model):
+    # a small w̄_y so that every hypothesis of th:feasibility-stability holds
+    theta, c = certs.choose_gain_scale(model, [np.array([0.1, 0.1]), np.array([0.0, 0.05])],
+                                       N=N, w_y_bar=0.002, L=L_BOX, h=H_BOX)
+    assert theta is not None, "test design: the hypotheses must hold"
+    return c
+
+
+def make(cert, max_iter=200, **kw):
+    kw.setdefault("ipopt_options", {"max_iter": max_iter})
+    return FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a,
+                 cert.b, cert.s, **kw).setup()
+
+
+@pytest.fixture(scope="module")
+def fast(cert):
+    return make(cert)
+
+
+@pytest.fixture(scope="module")
+def reference(cert):
+    return make(cert, formulation="multiple-shooting",
+                ipopt_options={"tol": 1e-11, "constr_viol_tol": 1e-11, "max_iter": 3000})
+
+
+def start_state(model, y):
+    x, _ = equilibrium(model, y)
+    return x
+
+
+@pytest.mark.parametrize("y0, y_bar", [((0.0, 0.0), (0.1, 0.1)),
+                                       ((0.15, -0.1), (0.0, 0.05)),
+                                       ((-0.1, 0.15), (0.1, 0.1))])
+def test_optimum_matches_tight_reference(model, cert, fast, reference, y0, y_bar):
+    x_hat = start_state(model, np.array(y0))
+    ref = cert.reference(np.array(y_bar))
+    fast.reset_warm_start()
+    a = fast.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
+    # the reference starts from the fast answer and from ū: the better of the two local optima
+    b1 = reference.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, u_init=a.u, warm=False)
+    b2 = reference.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
+    assert a.success and b1.success, (a.status, b1.status)
+    best = min(b.cost for b in (b1, b2) if b.success)
+    assert a.cost == pytest.approx(b1.cost, rel=1e-6, abs=1e-9)
+    assert a.cost <= best * (1 + 1e-6) + 1e-9
+    # independent checks of the answer (numpy rollout, not the solver's numbers)
+    x, xi = simulate(model.params, x_hat, a.u)
+    np.testing.assert_allclose(x, a.x, atol=1e-12)
+    ub = fast.tightened_bounds(0.02)
+    assert np.all(xi @ cert.L.T + cert.w_L <= cert.h - cert.a[:N] * 0.02 - cert.b[:N] + 1e-7)
+    assert np.all(xi @ cert.L.T <= ub + cert.L @ model.params["b_o"] + 1e-7)
+    assert np.max(np.abs(a.u)) <= 1 + 1e-9
+    assert np.max(np.abs(x[N] - ref.x_bar)) <= ref.alpha + 1e-7
+    assert a.constraint_violation <= FEAS_TOL and a.terminal_violation <= FEAS_TOL
+    assert a.defect <= 1e-8
+
+
+def test_constraints_become_active_and_hold(model, cert, fast):
+    """A set-point near the tightened bound: output constraints active, never violated."""
+    x_hat = start_state(model, np.array([-0.1, -0.1]))
+    y_bar = np.array([0.12, 0.12])
+    assert cert.assumption_1(y_bar)
+    ref = cert.reference(y_bar)
+    res = fast.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
+    assert res.success
+    assert res.active >= 1
+    lhs = res.x[:N] @ fast.LUo.T
+    assert np.all(lhs <= fast.tightened_bounds(0.02) + 1e-7)
+
+
+def test_infeasible_initial_constraint_is_reported_without_solving(model, cert, fast):
+    x_hat = start_state(model, np.array([0.0, 0.0]))
+    ref = cert.reference(np.array([0.1, 0.1]))
+    huge = 1.0  # a_0 ê_o alone exceeds the output range: the i = 0 row fails at x̂
+    assert fast.check_x0(x_hat, huge) > 0
+    res = fast.solve(x_hat, huge, ref.x_bar, ref.u_bar, ref.alpha)
+    assert res.status == "infeasible_x0" and not res.success
+    assert res.iterations == 0
+
+
+def test_recursive_feasibility_closed_loop_with_bounded_noise(model, cert):
+    """th:feasibility-stability: plant = model, ‖w_y‖∞ ≤ w̄_y, observer with ê_o: the FHOCP
+    stays feasible at every step and the outputs satisfy the constraints."""
+    y_bar = np.array([0.1, 0.1])
+    assert cert.ok(y_bar)
+    ref = cert.reference(y_bar)
+    ctrl = RobustMPC(make(cert))
+    ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
+    plant = GRUPlant(model, y0=model.denormalize_y(np.array([0.0, 0.05])),
+                     w_y_max=cert.w_y_bar, seed=3)
+    obs = GRUObserver.from_certificate(cert)
+    # ‖x_0 − x̂_0‖∞ ≤ ê_o,0: start the observer inside the assumed error ball
+    obs.reset(x0=plant.x + np.random.default_rng(0).uniform(-1, 1, model.n) * cert.e_o0 * 0.9)
+    worst = -np.inf
+    for _ in range(3 * N):
+        y = plant.y_norm()
+        worst = max(worst, float(np.max(cert.L @ y - cert.h)))
+        rec = ctrl.make_step(obs.x_hat, obs.e_o)
+        assert rec.result.success, rec.result.status
+        assert not rec.fallback
+        obs.make_step(rec.u, y)
+        plant.u = rec.u
+        plant.step(0.0, model.Ts)
+    assert worst <= 0.0
+    assert ctrl.summary()["fallbacks"] == 0
+    # the loop converged towards the set-point (ISS, small w_y)
+    assert np.max(np.abs(output(model.params, plant.x) - y_bar)) < 0.05
+
+
+def test_fallback_applies_shifted_previous_solution_when_solver_raises(model, cert):
+    fh = make(cert)
+    ctrl = RobustMPC(fh)
+    ref = cert.reference(np.array([0.1, 0.1]))
+    ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
+    x = start_state(model, np.array([0.0, 0.05]))
+    first = ctrl.make_step(x, 0.02)
+    assert first.result.success and not first.fallback
+    x = step(model.params, x, first.u)
+
+    def broken(args):
+        raise RuntimeError("solver crashed")
+
+    fh._call_solver = broken
+    second = ctrl.make_step(x, 0.02)
+    assert second.fallback and second.result.status.startswith("solver_error")
+    np.testing.assert_array_equal(second.u, first.result.u[1])
+    np.testing.assert_array_equal(ctrl.plan[-1], ref.u_bar)
+    third = ctrl.make_step(step(model.params, x, second.u), 0.02)
+    np.testing.assert_array_equal(third.u, first.result.u[2])
+    s = ctrl.summary()
+    assert s["fallbacks"] == 2 and s["failures"] == 2
+    assert s["failures_by_status"] == {"solver_error": 2}
+
+
+@pytest.mark.parametrize("options", [{"ipopt_options": {"max_iter": 0}},
+                                     {"time_budget": 0.0}])
+def test_fallback_when_solver_fails(model, cert, options):
+    ctrl = RobustMPC(make(cert, **options))
+    ref = cert.reference(np.array([0.1, 0.1]))
+    ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
+    x = start_state(model, np.array([0.0, 0.05]))
+    rec = ctrl.make_step(x, 0.02)
+    assert rec.fallback and not rec.result.success
+    np.testing.assert_array_equal(rec.u, ref.u_bar)  # no previous solution: ū
+    assert ctrl.summary()["fallbacks"] == 1
+
+
+def test_residual_check_rejects_wrong_answers(model, cert):
+    """A solver that reports success with a wrong answer is caught by the residual checks."""
+    fh = make(cert)
+    ref = cert.reference(np.array([0.1, 0.1]))
+    x = start_state(model, np.array([-0.15, 0.15]))
+    real = fh._call_solver
+
+    def lying(args):
+        sol, stats = real(args)
+        assert stats["success"]
+        sol["x"] = sol["x"] * 0 + 1.0  # u = 1, t = 1: violates t ≤ α
+        return sol, stats
+
+    fh._call_solver = lying
+    res = fh.solve(x, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
+    assert not res.success
+    assert res.terminal_violation > 0 or res.constraint_violation > 0
