@@ -46,6 +46,9 @@ class Component(ABC):
     bounds : dict of (float, float)
         Box constraints by signal name, for KPIs (violations) and figures; may name signals
         the component does not own (a controller declares the plant outputs it constrains).
+    timing_diagnostics : frozenset of str
+        Diagnostics that are wall-clock measurements (e.g. ``solve_ms``). The master records
+        them apart (``timings.csv``) so that ``results.csv`` stays reproducible byte for byte.
     """
 
     name: str = "component"
@@ -54,6 +57,7 @@ class Component(ABC):
     direct_feedthrough: bool = False
     sample_time: float | None = None
     bounds: dict[str, tuple[float, float]] = {}  # noqa: RUF012 - read-only class default
+    timing_diagnostics: frozenset[str] = frozenset()
 
     def setup(self, t0: float) -> None:  # noqa: B027 - optional hook
         """Prepare for a run starting at ``t0`` (instantiate, initialise)."""

@@ -73,6 +73,8 @@ class RunResult:
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
     perturbation_times: list[float] = field(default_factory=list)
     controller_summary: dict = field(default_factory=dict)
+    timing_columns: list[str] = field(default_factory=list)
+    timing_rows: list[list[float]] = field(default_factory=list)
     wall_time_s: float = 0.0
     loop_time_s: float = 0.0
     error: BaseException | None = None
@@ -233,6 +235,8 @@ class Master:
         diag_names: list[str] = []
         diag_index: dict[str, int] = {}
         rows = result.rows
+        timing_names = sorted(getattr(ctrl, "timing_diagnostics", ()) or ())
+        timing_rows = result.timing_rows
         measured, ctrl_out, plant_out = self.measured, self.ctrl_outputs, self.plant_outputs
         ref_keys = list(refs)
         held_keys = list(held)
@@ -280,6 +284,11 @@ class Master:
                         ctrl.step(t, self.dt * ratio)
                         u = ctrl.get_outputs()
                         diag = ctrl.diagnostics()
+                        if timing_names:
+                            diag = dict(diag)
+                            timing_rows.append(
+                                [t, *(_as_float(diag.pop(name, math.nan))
+                                      for name in timing_names)])
                     except (CosimError, SimulationFailed):
                         raise
                     except Exception as exc:
@@ -334,6 +343,8 @@ class Master:
                 with contextlib.suppress(Exception):
                     comp.terminate()
         result.columns = base_cols + [f"{PREFIX_CTRL}.{d}" for d in diag_names]
+        if timing_names:
+            result.timing_columns = ["time", *(f"{PREFIX_CTRL}.{d}" for d in timing_names)]
         width = len(result.columns)
         for row in rows:
             if len(row) < width:

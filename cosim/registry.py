@@ -6,6 +6,10 @@ Controllers are :class:`~cosim.component.Component` classes constructible withou
 from __future__ import annotations
 
 import importlib
+import inspect
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 from cosim.component import Component
 from cosim.errors import CosimError
@@ -45,11 +49,38 @@ def resolve(name: str) -> type[Component]:
     return cls
 
 
-def create(name: str) -> Component:
-    """Instantiate a controller by name (no arguments)."""
+def parse_options(items: Sequence[str]) -> dict[str, Any]:
+    """Parse ``KEY=VALUE`` strings; a value is read as JSON when it parses, else as text.
+
+    ``setpoint_rate=0.02`` gives a float, ``offset_free=true`` a bool, ``R=[[0.02,0],[0,0.02]]``
+    a nested list, ``model=my.json`` the string ``"my.json"``.
+    """
+    options: dict[str, Any] = {}
+    for item in items:
+        key, sep, text = item.partition("=")
+        key = key.strip()
+        if not sep or not key.isidentifier():
+            raise CosimError(f"controller option '{item}': expected KEY=VALUE")
+        try:
+            options[key] = json.loads(text)
+        except json.JSONDecodeError:
+            options[key] = text
+    return options
+
+
+def create(name: str, options: Mapping[str, Any] | None = None) -> Component:
+    """Instantiate a controller by name, with keyword ``options`` for its constructor."""
     cls = resolve(name)
+    options = dict(options or {})
+    params = inspect.signature(cls).parameters
+    if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+        for key in options:
+            if key not in params:
+                known = ", ".join(k for k in params if k != "self") or "none"
+                raise CosimError(f"controller '{name}' has no option '{key}' (options: "
+                                 f"{known})")
     try:
-        return cls()
+        return cls(**options)
     except CosimError:
         raise
     except Exception as exc:

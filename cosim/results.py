@@ -70,12 +70,18 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
           figure: bool = True) -> dict:
     """Write ``results.csv``, ``summary.json`` and (optionally) ``figure.png`` into ``out_dir``.
 
+    Wall-clock diagnostics (the controller's ``timing_diagnostics``, e.g. solve times) go to
+    ``timings.csv`` (``time`` then one column each, one row per controller step), so that
+    ``results.csv`` is identical across runs of the same scenario.
+
     The figure is best effort: a plotting error is recorded in the summary under
     ``figure_error`` instead of hiding the results.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_csv(out / "results.csv", result.columns, result.rows)
+    if result.timing_columns:
+        write_csv(out / "timings.csv", result.timing_columns, result.timing_rows)
     doc = summary(result, meta)
     if figure:
         try:

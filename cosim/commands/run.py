@@ -33,6 +33,7 @@ examples:
   cosim run scenarios/paper_steps.csv
   cosim run scenarios/leak_tank1.csv --controller pi --out results/leak --quiet
   cosim run scenarios/paper_steps.csv --plant other.fmu --map other.map.toml --isolate
+  cosim run scenarios/paper_steps.csv --model my_gru.json --option offset_free=true
 
 exit codes: 0 ok, 1 run failed mid-way (partial results kept), 2 bad input, 130 interrupted"""
 
@@ -52,6 +53,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(checked against its modelDescription before the first step)")
     p.add_argument("--controller", metavar="NAME", default=None,
                    help="controller: 'robust-mpc' (default), 'pi', or module:Class")
+    p.add_argument("--model", metavar="FILE", default=None,
+                   help="GRU model file for the robust MPC (default: the shipped "
+                        "controllers/models/fourtank_gru.json); same as --option model=FILE")
+    p.add_argument("--option", metavar="KEY=VALUE", action="append", default=[],
+                   help="controller constructor option, repeatable; VALUE is read as JSON "
+                        "when it parses (e.g. --option setpoint_rate=0.02 --option "
+                        "offset_free=true --option N=20)")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="output folder (default: results/<scenario name>)")
     p.add_argument("--interface", choices=("cs", "me"), default="cs",
@@ -101,7 +109,10 @@ def run(args: argparse.Namespace) -> int:
     vmap = varmap.load(args.map) if args.map else None
     plant_path = _plant_path(args.plant)
     ctrl_name = args.controller or registry.DEFAULT
-    controller = registry.create(ctrl_name)
+    options = registry.parse_options(args.option)
+    if args.model is not None:
+        options["model"] = args.model
+    controller = registry.create(ctrl_name, options)
     if args.isolate:
         from cosim.isolated import IsolatedFmuComponent as Plant
     else:
@@ -134,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
     meta = {"scenario": str(sc.path), "plant": str(plant_path),
             "fmi_version": plant.fmi_version, "interface": args.interface,
             "isolated": bool(args.isolate), "map": str(args.map) if args.map else None,
-            "controller": ctrl_name, "seed": args.seed}
+            "controller": ctrl_name, "controller_options": options, "seed": args.seed}
     doc = results.write(out, result, meta, figure=not args.no_figure)
     if result.error is not None:
         if isinstance(result.error, KeyboardInterrupt):

@@ -199,6 +199,23 @@ def test_bad_options(tmp_path: Path, fmu2_path: Path, capsys: pytest.CaptureFixt
     code, _, err = run(capsys, scenario, "--controller", "pi", "--plant", str(fmu2_path),
                        "--map", str(tmp_path / "none.toml"))
     assert code == 2 and "variable map not found" in err
+    code, _, err = run(capsys, scenario, "--controller", "pi", "--plant", str(fmu2_path),
+                       "--option", "gain=3")
+    assert code == 2 and "controller 'pi' has no option 'gain'" in err
+    bad_model = tmp_path / "bad.json"
+    bad_model.write_text('{"format": "gru-mpc-model",\n "W_z": [[1, 2]\n')
+    code, _, err = run(capsys, scenario, "--plant", str(fmu2_path), "--model", str(bad_model))
+    assert code == 2 and f"{bad_model}:3:1: invalid JSON" in err and "Traceback" not in err
+
+
+def test_controller_options_reach_the_controller(tmp_path: Path, fmu2_path: Path,
+                                                  capsys: pytest.CaptureFixture) -> None:
+    scenario = str(ROOT / "scenarios" / "leak_tank1.csv")
+    code, _, _ = run(capsys, scenario, "--controller", "pi", "--plant", str(fmu2_path),
+                     "--option", "pairing=diagonal", "--out", str(tmp_path), "--quiet")
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    assert code == 0 and summary["controller_options"] == {"pairing": "diagonal"}
+    assert summary["controller_summary"]["pairing"] == {"h1": "qa", "h2": "qb"}
 
 
 def test_swap_in_parameter_change_through_the_map(tmp_path: Path, pyfmu_dir: Path,

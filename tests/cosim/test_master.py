@@ -192,3 +192,26 @@ def test_interrupt_keeps_rows(tmp_path: Path, fmu2_path: Path) -> None:
     result = Master(FmuComponent(fmu2_path), Impatient(), sc).run()
     assert result.status == "interrupted" and isinstance(result.error, KeyboardInterrupt)
     assert [row[0] for row in result.rows] == [0.0, 25.0, 50.0, 75.0]
+
+
+class TimedRecorder(Recorder):
+    """A controller that also reports a wall-clock diagnostic."""
+
+    timing_diagnostics = frozenset({"step_ms"})
+
+    def diagnostics(self) -> dict[str, float]:
+        return {"calls": len(self.seen), "step_ms": 1000.0 * len(self.seen) + 0.5}
+
+
+def test_timing_diagnostics_are_kept_out_of_results(tmp_path: Path, fmu2_path: Path) -> None:
+    from cosim import results
+
+    sc = scenario(tmp_path, "time,ref.h1\n0,0.7\n100,\n")
+    result = Master(FmuComponent(fmu2_path), TimedRecorder(), sc).run()
+    assert "ctrl.step_ms" not in result.columns and "ctrl.calls" in result.columns
+    assert result.timing_columns == ["time", "ctrl.step_ms"]
+    assert result.timing_rows == [[25.0 * k, 1000.0 * (k + 1) + 0.5] for k in range(5)]
+    results.write(tmp_path / "out", result, figure=False)
+    timings = (tmp_path / "out" / "timings.csv").read_text().splitlines()
+    assert timings[0] == '"time","ctrl.step_ms"' and timings[1] == "0.0,1000.5"
+    assert "step_ms" not in (tmp_path / "out" / "results.csv").read_text()

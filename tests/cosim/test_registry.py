@@ -25,3 +25,21 @@ def test_names_and_specs() -> None:
 def test_errors(name: str, words: str) -> None:
     with pytest.raises(CosimError, match=words):
         resolve(name)
+
+
+def test_options_are_parsed_as_json_or_text() -> None:
+    from cosim.registry import parse_options
+
+    assert parse_options(["a=0.02", "b=true", "c=[1, 2]", "model=my.json", "e="]) == {
+        "a": 0.02, "b": True, "c": [1, 2], "model": "my.json", "e": ""}
+    with pytest.raises(CosimError, match="expected KEY=VALUE"):
+        parse_options(["novalue"])
+
+
+def test_create_passes_options_and_names_unknown_ones() -> None:
+    ctrl = create("pi", {"pairing": "diagonal"})
+    assert [(loop.y, loop.u) for loop in ctrl.loops] == [("h1", "qa"), ("h2", "qb")]
+    with pytest.raises(CosimError, match="controller 'pi' has no option 'gain'"):
+        create("pi", {"gain": 2.0})
+    with pytest.raises(CosimError, match="cannot create PIController"):
+        create("pi", {"pairing": "sideways"})
