@@ -1,7 +1,8 @@
 """Build the four-tank plant FMUs from their C sources.
 
-``build_fmus()`` compiles ``fmus/fourtank/*.c`` with gcc against the FMI headers shipped with
-fmpy (``fmpy/c-code``) and zips two source-and-binary FMUs:
+``build_fmus()`` compiles ``fmus/fourtank/*.c`` (``model.c``, ``instance.c`` and the FMI 2 or
+FMI 3 glue) with gcc against the FMI headers shipped with fmpy (``fmpy/c-code``) and zips two
+source-and-binary FMUs:
 
 * ``fmus/FourTank.fmu`` -- FMI 2.0, Co-Simulation and Model Exchange, binary under
   ``binaries/linux64/``;
@@ -51,7 +52,11 @@ LDFLAGS = ("-Wl,--no-undefined", "-lm")
 
 @dataclass(frozen=True)
 class Target:
-    """One FMU to build: its FMI version, file name, glue source and binary folder."""
+    """One FMU to build: its FMI version, file name, glue source and binary folder.
+
+    Both FMUs share ``model.c`` (equations) and ``instance.c`` (the FMI-version-independent
+    layer); ``glue`` is the thin FMI 2.0 or 3.0 adapter.
+    """
 
     fmi_version: int
     fmu_name: str
@@ -67,7 +72,7 @@ class Target:
     def sources(self) -> tuple[str, ...]:
         """Files shipped under ``sources/`` (FMI 3 adds its buildDescription.xml)."""
         extra = ("buildDescription.xml",) if self.fmi_version == 3 else ()
-        return ("model.h", "model.c", self.glue, *extra)
+        return ("model.h", "model.c", "instance.h", "instance.c", self.glue, *extra)
 
 
 TARGETS = (

@@ -4,8 +4,9 @@
  * The equations are those of section V of Schimperna & Magni, "Robust constrained nonlinear
  * MPC with a GRU model" (parameters from Alvarado et al. 2011); see model.c.
  *
- * This header is shared by the FMI 2.0 glue (fmi2.c) and the FMI 3.0 glue (fmi3.c): the
- * model knows nothing about FMI, the glue knows nothing about the equations.
+ * This header is used by the FMI-version-independent layer (instance.c), on which the thin
+ * FMI 2.0 (fmi2.c) and FMI 3.0 (fmi3.c) glue sits: the model knows nothing about FMI, the
+ * FMI layers know nothing about the equations.
  */
 #ifndef FOURTANK_MODEL_H
 #define FOURTANK_MODEL_H

@@ -30,6 +30,8 @@ def test_fmus_contain_model_description_binary_and_sources(fmu2_path, fmu3_path)
             "binaries/linux64/FourTank.so",
             "sources/model.c",
             "sources/model.h",
+            "sources/instance.h",
+            "sources/instance.c",
             "sources/fmi2.c",
         },
         fmu3_path: {
@@ -37,6 +39,8 @@ def test_fmus_contain_model_description_binary_and_sources(fmu2_path, fmu3_path)
             "binaries/x86_64-linux/FourTank.so",
             "sources/model.c",
             "sources/model.h",
+            "sources/instance.h",
+            "sources/instance.c",
             "sources/fmi3.c",
             "sources/buildDescription.xml",
         },

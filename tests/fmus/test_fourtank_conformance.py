@@ -120,17 +120,11 @@ def test_interface_names_and_units(which, request):
 
 def test_default_parameters_are_the_papers(fmu2_path):
     md = read_model_description(fmu2_path)
+    from fourtank_reference import PARAMETERS  # Alvarado et al. 2011, as in the paper
+
     start = {v.name: float(v.start) for v in md.modelVariables if v.start is not None}
-    expected = {
-        "S": 0.06,
-        "a1": 1.31e-4,
-        "a2": 1.51e-4,
-        "a3": 9.27e-5,
-        "a4": 8.82e-5,
-        "gamma_a": 0.3,
-        "gamma_b": 0.4,
-    }
-    for name, value in expected.items():
+    assert set(PARAMETERS) == set(TUNABLES)
+    for name, value in PARAMETERS.items():
         assert start[name] == value
 
 
@@ -150,7 +144,7 @@ def test_source_fmu_compiles_from_its_own_sources(which, request, tmp_path):
     assert ("sources/buildDescription.xml" in names) == md.fmiVersion.startswith("3")
     sources = [f for c in md.buildConfigurations for s in c.sourceFileSets for f in s.sourceFiles]
     platform = "linux64" if md.fmiVersion.startswith("2") else "x86_64-linux"
-    assert sorted(sources) == sorted(["model.c", f"fmi{md.fmiVersion[0]}.c"])
+    assert sorted(sources) == sorted(["model.c", "instance.c", f"fmi{md.fmiVersion[0]}.c"])
     src = tmp_path / "fmu" / "sources"
     binary = tmp_path / "fmu" / "binaries" / platform / "FourTank.so"
     binary.unlink()
