@@ -525,6 +525,42 @@ class Certificate:
         return doc
 
 
+#: Largest prediction horizon accepted (the FHOCP grows linearly with ``N``).
+MAX_HORIZON = 1000
+
+
+def _horizon(N: Any) -> int:
+    """``N`` as an int in ``1 … MAX_HORIZON`` (an integer-valued float is accepted)."""
+    ok = isinstance(N, (int, np.integer)) and not isinstance(N, bool)
+    if isinstance(N, (float, np.floating)) and math.isfinite(N) and float(N).is_integer():
+        ok, N = True, int(N)
+    if not ok:
+        raise CosimError(f"horizon N must be an integer >= 1, got {N!r}")
+    if not 1 <= N <= MAX_HORIZON:
+        raise CosimError(f"horizon N must be >= 1 and <= {MAX_HORIZON}, got {N}")
+    return int(N)
+
+
+def _weight(value: Any, name: str, size: int, default: float) -> np.ndarray:
+    """Cost weight ``Q`` or ``R`` (``eq:optimization``): a symmetric positive definite
+    ``(size, size)`` matrix; ``None`` gives ``default · I``."""
+    if value is None:
+        return default * np.eye(size)
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise CosimError(f"cost weight {name} must be a {size}x{size} matrix of numbers, "
+                         f"got {value!r}") from None
+    if arr.shape != (size, size):
+        raise CosimError(f"cost weight {name} must be a {size}x{size} matrix, got shape "
+                         f"{arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise CosimError(f"cost weight {name} has non-finite entries")
+    if not np.allclose(arr, arr.T) or np.min(np.linalg.eigvalsh(arr)) <= 0:
+        raise CosimError(f"cost weight {name} must be symmetric positive definite")
+    return arr
+
+
 def _gain(value: Any, name: str, n: int, p: int) -> np.ndarray:
     arr = np.asarray(value, dtype=float)
     if arr.shape != (n, p):
@@ -565,12 +601,17 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
     params = {k: np.asarray(v, dtype=float) for k, v in model.params.items()}
     n, m = params["W_z"].shape
     p = params["U_o"].shape[0]
-    if N < 1:
-        raise CosimError(f"horizon N must be >= 1, got {N}")
-    if not (math.isfinite(e_o0) and e_o0 >= 0):
-        raise CosimError(f"e_o0 must be a non-negative number, got {e_o0}")
-    Q = np.eye(n) if Q is None else np.asarray(Q, dtype=float)
-    R = 0.01 * np.eye(m) if R is None else np.asarray(R, dtype=float)
+    N = _horizon(N)
+    if (isinstance(e_o0, bool) or not isinstance(e_o0, (int, float, np.number))
+            or not (math.isfinite(e_o0) and e_o0 >= 0)):
+        raise CosimError(f"e_o0 must be a non-negative number, got {e_o0!r}")
+    if gain_scale is not None:
+        if (isinstance(gain_scale, bool) or not isinstance(gain_scale, (int, float, np.number))
+                or not (math.isfinite(gain_scale) and gain_scale >= 0)):
+            raise CosimError(f"gain scale must be a non-negative number, got {gain_scale!r}")
+        gain_scale = float(gain_scale)
+    Q = _weight(Q, "Q", n, 1.0)
+    R = _weight(R, "R", m, 0.01)
 
     if (L_z is None) != (L_r is None):
         raise CosimError("give both observer gains L_z and L_r, or neither")
@@ -580,8 +621,6 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
             L_z, L_r = gain_scale * L_z, gain_scale * L_r
     elif gain_scale is not None or getattr(model, "L_z", None) is None:
         theta = 1.0 if gain_scale is None else float(gain_scale)
-        if not (math.isfinite(theta) and theta >= 0):
-            raise CosimError(f"gain scale must be a non-negative number, got {theta}")
         Lz_lp, Lr_lp = observer_gains_lp(params)
         L_z, L_r, gain_scale = theta * Lz_lp, theta * Lr_lp, theta
     else:

@@ -143,9 +143,12 @@ class GRUModel:
         """Read and validate a model file; raise :class:`ModelFileError` on any fault."""
         path = Path(path)
         try:
-            text = path.read_text()
+            text = path.read_text(encoding="utf-8")
         except OSError as exc:
             raise ModelFileError(f"{path}: cannot read model file ({exc.strerror})") from None
+        except UnicodeDecodeError as exc:
+            raise ModelFileError(f"{path}: not a JSON model file (byte {exc.start} is not "
+                                 "UTF-8)") from None
         try:
             doc = json.loads(text)
         except json.JSONDecodeError as exc:
@@ -161,6 +164,10 @@ class GRUModel:
         if doc.get("format", FORMAT_NAME) != FORMAT_NAME:
             raise ModelFileError(f"{source}: 'format' is {doc.get('format')!r}, "
                                  f"expected {FORMAT_NAME!r}")
+        version = doc.get("version", FORMAT_VERSION)
+        if version != FORMAT_VERSION or isinstance(version, bool):
+            raise ModelFileError(f"{source}: 'version' is {version!r}, this cosim reads "
+                                 f"version {FORMAT_VERSION}")
 
         def array(value: Any, key: str, ndim: int) -> np.ndarray:
             try:
@@ -219,7 +226,8 @@ class GRUModel:
         input_names, input_units = signals("inputs", m)
         output_names, output_units = signals("outputs", p)
         Ts = doc.get("Ts")
-        if not isinstance(Ts, int | float) or not math.isfinite(Ts) or Ts <= 0:
+        if (not isinstance(Ts, int | float) or isinstance(Ts, bool) or not math.isfinite(Ts)
+                or Ts <= 0):
             raise ModelFileError(f"{source}: 'Ts' must be a positive number, got {Ts!r}")
 
         L_z = L_r = None

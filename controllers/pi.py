@@ -19,11 +19,14 @@ h2 with qa. ``pairing="diagonal"`` selects h1–qa, h2–qb (with the tuning fou
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 from controllers.problem import FOURTANK, ControlProblem
 from cosim.component import Component, Signal
+from cosim.errors import CosimError
 
 
 @dataclass(frozen=True)
@@ -47,6 +50,26 @@ PAIRINGS: dict[str, tuple[PILoop, PILoop]] = {
 }
 
 
+def _initial_inputs(values: Any, problem: ControlProblem) -> dict[str, float]:
+    """Check the ``initial_inputs`` option: plant input name → finite number."""
+    if values is None:
+        return {}
+    if not isinstance(values, Mapping):
+        raise CosimError(f"controller 'pi': initial_inputs must map inputs to numbers, "
+                         f"got {values!r}")
+    out = {}
+    for name, value in values.items():
+        if name not in problem.inputs:
+            raise CosimError(f"controller 'pi': initial_inputs: unknown input {name!r} "
+                             f"(inputs: {', '.join(problem.inputs)})")
+        if (isinstance(value, bool) or not isinstance(value, int | float)
+                or not math.isfinite(value)):
+            raise CosimError(f"controller 'pi': initial_inputs: {name} must be a finite "
+                             f"number, got {value!r}")
+        out[name] = float(value)
+    return out
+
+
 class PIController(Component):
     """Decentralised PI with anti-windup and input saturation (see the module docstring).
 
@@ -67,7 +90,16 @@ class PIController(Component):
                  initial_inputs: Mapping[str, float] | None = None) -> None:
         self.name = "pi"
         self.problem = problem
-        self.loops = PAIRINGS[pairing] if isinstance(pairing, str) else tuple(pairing)
+        if isinstance(pairing, str):
+            if pairing not in PAIRINGS:
+                raise CosimError(f"controller 'pi': unknown pairing {pairing!r} (known: "
+                                 f"{', '.join(PAIRINGS)})")
+            self.loops = PAIRINGS[pairing]
+        elif isinstance(pairing, tuple | list) and all(isinstance(p, PILoop) for p in pairing):
+            self.loops = tuple(pairing)
+        else:
+            raise CosimError(f"controller 'pi': pairing must be one of {', '.join(PAIRINGS)}, "
+                             f"got {pairing!r}")
         self.sample_time = problem.Ts
         self.bounds = problem.bounds()
         self.inputs = tuple(Signal(y, unit) for y, unit in
@@ -76,7 +108,7 @@ class PIController(Component):
             zip(problem.outputs, problem.output_units, strict=True))
         self.outputs = tuple(Signal(u, unit) for u, unit in
                              zip(problem.inputs, problem.input_units, strict=True))
-        self.initial_inputs = dict(initial_inputs or {})
+        self.initial_inputs = _initial_inputs(initial_inputs, problem)
         self._values: dict[str, float] = {}
         self.setup(0.0)
 

@@ -21,6 +21,7 @@ import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -171,38 +172,53 @@ def read_csv(path: str | Path, n_inputs: int | None = None,
     """
     path = Path(path)
     try:
-        fh = path.open(newline="")
+        fh = path.open(newline="", encoding="utf-8")
     except OSError as exc:
         raise CosimError(f"{path}: cannot read data file ({exc.strerror})") from None
-    with fh:
-        reader = csv.reader(fh)
-        header = next(reader, None)
-        if not header or header[0] != "time" or header[-1] != "split":
-            raise CosimError(f"{path}:1: header must be 'time,<signals...>,split'")
-        signals = header[1:-1]
-        rows, split = [], []
-        for line, row in enumerate(reader, start=2):
-            if len(row) != len(header):
-                raise CosimError(f"{path}:{line}: expected {len(header)} fields, got {len(row)}")
-            try:
-                values = [float(v) for v in row[:-1]]
-            except ValueError:
-                raise CosimError(f"{path}:{line}: non-numeric value") from None
-            if not all(np.isfinite(values)):
-                raise CosimError(f"{path}:{line}: non-finite value")
-            if row[-1] not in SPLITS:
-                raise CosimError(f"{path}:{line}: split must be one of {', '.join(SPLITS)}, "
-                                 f"got {row[-1]!r}")
-            rows.append(values)
-            split.append(row[-1])
+    reader = csv.reader(fh)
+    try:
+        with fh:
+            return _read_rows(path, reader, n_inputs, input_names)
+    except UnicodeDecodeError as exc:
+        raise CosimError(f"{path}:{reader.line_num + 1}: not a text CSV file (byte "
+                         f"{exc.start} of a read block is not UTF-8)") from None
+    except csv.Error as exc:
+        raise CosimError(f"{path}:{reader.line_num}: malformed CSV ({exc})") from None
+
+
+def _read_rows(path: Path, reader: Any, n_inputs: int | None,
+               input_names: Sequence[str] | None) -> Dataset:
+    """Parse the rows of :func:`read_csv`'s file (errors name the file and line)."""
+    header = next(reader, None)
+    if not header or header[0] != "time" or header[-1] != "split":
+        raise CosimError(f"{path}:1: header must be 'time,<signals...>,split'")
+    signals = header[1:-1]
+    rows, split = [], []
+    for line, row in enumerate(reader, start=2):
+        if len(row) != len(header):
+            raise CosimError(f"{path}:{line}: expected {len(header)} fields, got {len(row)}")
+        try:
+            values = [float(v) for v in row[:-1]]
+        except ValueError:
+            raise CosimError(f"{path}:{line}: non-numeric value") from None
+        if not all(np.isfinite(values)):
+            raise CosimError(f"{path}:{line}: non-finite value")
+        if row[-1] not in SPLITS:
+            raise CosimError(f"{path}:{line}: split must be one of {', '.join(SPLITS)}, "
+                             f"got {row[-1]!r}")
+        rows.append(values)
+        split.append(row[-1])
     if not rows:
         raise CosimError(f"{path}: no data rows")
     if input_names is None:
         sidecar = path.with_suffix(".json")
         if sidecar.exists():
             try:
-                input_names = json.loads(sidecar.read_text())["inputs"]
-            except (json.JSONDecodeError, KeyError, TypeError):
+                input_names = json.loads(sidecar.read_text(encoding="utf-8"))["inputs"]
+            except (OSError, ValueError, KeyError, TypeError):
+                input_names = None
+            if not (isinstance(input_names, list)
+                    and all(isinstance(n, str) for n in input_names)):
                 input_names = None
         if input_names is None:
             input_names = signals[:n_inputs] if n_inputs else ["qa", "qb"]

@@ -14,6 +14,7 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import math
+import os
 import shutil
 import tempfile
 import zipfile
@@ -115,6 +116,8 @@ def read_model_description(path: str | Path) -> Any:
     import fmpy
 
     path = Path(path)
+    if path.is_dir():
+        raise CosimError(f"{path}: is a folder, not an FMU file (.fmu zip archive)")
     if not path.is_file():
         raise CosimError(f"{path}: FMU not found")
     try:
@@ -242,12 +245,20 @@ class FmuComponent(Component):
                ("3", "cs"): fmi3.FMU3Slave, ("3", "me"): fmi3.FMU3Model}[
                    ("3" if fmi3_ else "2", self.interface)]
         guid = self.md.instantiationToken if fmi3_ else self.md.guid
+        self._check_binary(fmi3_)
+        cwd = os.getcwd()
         try:
             self._fmu = cls(guid=guid, unzipDirectory=str(self._tmpdir),
                             modelIdentifier=self.model_identifier,
                             instanceName=self._instance_name)
         except Exception as exc:
-            raise self._fail("loading the binary", exc) from None
+            # nothing has run yet: a binary that does not load is a bad FMU (exit 2)
+            msg = " ".join(str(exc).replace(str(self._tmpdir), "<fmu>").split())
+            raise CosimError(f"{self.path}: cannot load the FMU's binary: {msg}") from None
+        finally:
+            # fmpy changes into the binaries folder to load and does not change back when
+            # loading fails; that folder is deleted by terminate()
+            os.chdir(cwd)
         self._fmi3 = fmi3_
         try:
             if fmi3_:
@@ -277,6 +288,21 @@ class FmuComponent(Component):
         except Exception as exc:
             raise self._fail(f"initialisation at t={t0!r}", exc) from None
         self._t = t0
+
+    def _check_binary(self, fmi3_: bool) -> None:
+        """Raise :class:`CosimError` if the FMU has no binary for this platform."""
+        import fmpy
+
+        platform = fmpy.platform_tuple if fmi3_ else fmpy.platform
+        rel = f"binaries/{platform}/{self.model_identifier}{fmpy.sharedLibraryExtension}"
+        assert self._tmpdir is not None
+        if (self._tmpdir / rel).is_file():
+            return
+        bins = self._tmpdir / "binaries"
+        have = sorted(p.name for p in bins.iterdir() if p.is_dir()) if bins.is_dir() else []
+        also = f" (it has binaries for: {', '.join(have)})" if have else " (it has no binaries)"
+        raise CosimError(f"{self.path}: no binary for this platform: '{rel}' is missing"
+                         f"{also}")
 
     def _raw(self, fname: str) -> Any:
         """The FMU's C function as a bare ctypes function (no argument conversion).

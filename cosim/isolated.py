@@ -27,6 +27,8 @@ def _worker(conn: Any, path: str, name: str, interface: str,
             mapping: tuple[tuple[str, str, str | None, float, float], ...],
             map_path: str) -> None:  # pragma: no cover - runs in the child process
     """Serve one FMU: ``(op, *args)`` requests, ``("ok", result)`` or ``(kind, msg)`` replies."""
+    # Ctrl-C reaches the whole process group: the parent handles it (and stops this worker)
+    _signal.signal(_signal.SIGINT, _signal.SIG_IGN)
     varmap = VarMap(Path(map_path), {m[0]: MappedSignal(*m) for m in mapping})
     comp = FmuComponent(path, name=name, interface=interface,
                         start_values=dict(start_values), varmap=varmap)

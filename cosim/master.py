@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import contextlib
 import math
+import signal
+import threading
 import time as _time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -80,6 +82,10 @@ class RunResult:
     error: BaseException | None = None
 
 
+#: Most communication steps one run may take (results are held in memory).
+MAX_STEPS = 1_000_000
+
+
 def communication_times(t0: float, stop: float, dt: float) -> list[float]:
     """``t0, t0 + dt, ...`` up to ``stop``; a last, shorter step lands exactly on ``stop``."""
     n = math.floor((stop - t0) / dt + 1e-9)
@@ -115,7 +121,12 @@ class Master:
         self.plant = plant
         self.controller = controller
         self.scenario = scenario
+        if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
+            raise CosimError(f"--seed must be a non-negative integer, got {seed!r}")
         self.seed = seed
+        if step is not None and not (math.isfinite(step) and step > 0):
+            raise CosimError(f"--step {step!r}: the communication step must be a positive, "
+                             "finite number of seconds")
         dt = step if step is not None else controller.sample_time
         if dt is None or not dt > 0:
             raise CosimError("no communication step: the controller has no sample time; "
@@ -129,6 +140,13 @@ class Master:
                 raise CosimError(f"communication step {self.dt!r} s does not divide the "
                                  f"controller's sample time {ts!r} s")
             self.ratio = round(r)
+        n = (scenario.stop_time - scenario.start_time) / self.dt
+        if n > MAX_STEPS:
+            where = (f"--step {self.dt!r}" if step is not None else
+                     f"{scenario.path}:{scenario.events[-1].line}:1")
+            raise CosimError(f"{where}: {n:.3g} communication steps of {self.dt!r} s from "
+                             f"{scenario.start_time!r} s to {scenario.stop_time!r} s, more than "
+                             f"the {MAX_STEPS} allowed")
         self._wire()
 
     # -- wiring -------------------------------------------------------------------------------
@@ -247,6 +265,17 @@ class Master:
         t = times[0]
         u: dict[str, float] = {}
         loop0: float | None = None
+        # Ctrl-C raises KeyboardInterrupt as usual; the flag catches an interrupt that a
+        # library swallowed (casadi turns one inside an IPOPT solve into a failed solve)
+        interrupted: list[bool] = []
+        previous_handler = None
+        if (threading.current_thread() is threading.main_thread()
+                and signal.getsignal(signal.SIGINT) is not signal.SIG_IGN):
+            def on_sigint(signum: int, frame: object) -> None:
+                interrupted.append(True)
+                raise KeyboardInterrupt
+
+            previous_handler = signal.signal(signal.SIGINT, on_sigint)
         try:
             try:
                 plant.setup(t)
@@ -295,6 +324,8 @@ class Master:
                         raise SimulationFailed(
                             f"controller '{ctrl.name}': step at t={t!r} failed: "
                             f"{type(exc).__name__}: {exc}") from exc
+                    if interrupted:
+                        raise KeyboardInterrupt
                 row = [t]
                 row += map(refs.__getitem__, ref_keys)
                 row += map(held.__getitem__, held_keys)
@@ -324,6 +355,8 @@ class Master:
                 result.steps = k
                 if on_step is not None:
                     on_step(k)
+                if interrupted:
+                    raise KeyboardInterrupt
         except KeyboardInterrupt as exc:
             result.status, result.reason, result.error = "interrupted", "interrupted", exc
         except (CosimError, SimulationFailed) as exc:
@@ -332,6 +365,8 @@ class Master:
             err = SimulationFailed(f"at t={t!r}: {type(exc).__name__}: {exc}")
             result.status, result.reason, result.error = "failed", str(err), err
         finally:
+            if previous_handler is not None:
+                signal.signal(signal.SIGINT, previous_handler)
             result.wall_time_s = _time.perf_counter() - wall0
             if loop0 is not None:
                 result.loop_time_s = _time.perf_counter() - loop0

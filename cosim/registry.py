@@ -84,5 +84,6 @@ def create(name: str, options: Mapping[str, Any] | None = None) -> Component:
     except CosimError:
         raise
     except Exception as exc:
+        msg = " ".join(str(exc).split())  # one line (casadi's messages span several)
         raise CosimError(f"controller '{name}': cannot create {cls.__name__}: "
-                         f"{type(exc).__name__}: {exc}") from None
+                         f"{type(exc).__name__}: {msg}") from None

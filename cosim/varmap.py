@@ -174,8 +174,11 @@ def load(path: str | Path) -> VarMap:
             raise CosimError(f"{where}: unknown key(s) {sorted(unknown)}; "
                              f"allowed: {sorted(_KEYS)}")
         variable = entry.get("variable")
-        if not isinstance(variable, str) or not variable:
+        if variable is None:
             raise CosimError(f"{where}: 'variable' (the FMU variable name) is missing")
+        if not isinstance(variable, str) or not variable:
+            raise CosimError(f"{where}: 'variable' must be the FMU variable name as a "
+                             f"non-empty string, got {variable!r}")
         if variable in variables:
             raise CosimError(f"{where}: variable '{variable}' is already mapped by signal "
                              f"'{variables[variable]}'")

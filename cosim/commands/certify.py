@@ -122,6 +122,27 @@ def _admissible_ranges(cert: Any, model: Any) -> list[str]:
     return out
 
 
+def _certificate(args: argparse.Namespace, model: Any, setpoints: list,
+                 kwargs: dict) -> tuple[Any, str]:
+    """The certificate for the options in ``args`` and a note on the observer gains."""
+    import numpy as np
+
+    from controllers import certificates as certs
+
+    if args.auto_gain_scale:
+        targets = setpoints or [model.normalize_y(np.array(s)) for s in DEFAULT_SETPOINTS]
+        theta, cert = certs.choose_gain_scale(model, targets, **kwargs)
+        note = ("LP gains × θ = 0 (no θ in [0, 1] passes)" if theta is None
+                else f"LP gains × θ = {theta:.6g} (auto)")
+    else:
+        cert = certs.compute_certificate(model, gain_scale=args.gain_scale, **kwargs)
+        if cert.gain_scale is not None:
+            note = f"LP gains × θ = {cert.gain_scale:.6g}"
+        else:
+            note = "gains from the model file"
+    return cert, note
+
+
 def run(args: argparse.Namespace) -> int:
     """Compute the certificate, print it, check it; returns the exit code."""
     import numpy as np
@@ -137,6 +158,10 @@ def run(args: argparse.Namespace) -> int:
     if args.gain_scale is not None and not (math.isfinite(args.gain_scale)
                                             and args.gain_scale >= 0):
         raise CosimError(f"--gain-scale must be a non-negative number, got {args.gain_scale}")
+    if args.plot:
+        from cosim.outpaths import figure_file
+
+        figure_file(args.plot, "--plot")
     model = GRUModel.load(args.model)
     names = list(model.output_names)
     setpoints_phys = [_parse_setpoint(s, names) for s in args.setpoint]
@@ -147,18 +172,12 @@ def run(args: argparse.Namespace) -> int:
         raise CosimError(f"{args.model}: no 'w_y_bar' in the model file; estimate it with "
                          "--data DATA.csv")
     kwargs = dict(N=args.N, e_o0=args.e_o0, w_y_bar=w_y_bar)
-    note = ""
-    if args.auto_gain_scale:
-        targets = setpoints or [model.normalize_y(np.array(s)) for s in DEFAULT_SETPOINTS]
-        theta, cert = certs.choose_gain_scale(model, targets, **kwargs)
-        note = ("LP gains × θ = 0 (no θ in [0, 1] passes)" if theta is None
-                else f"LP gains × θ = {theta:.6g} (auto)")
-    else:
-        cert = certs.compute_certificate(model, gain_scale=args.gain_scale, **kwargs)
-        if cert.gain_scale is not None:
-            note = f"LP gains × θ = {cert.gain_scale:.6g}"
-        else:
-            note = "gains from the model file"
+    try:
+        cert, note = _certificate(args, model, setpoints, kwargs)
+    except CosimError as exc:
+        if str(exc).startswith(f"{args.model}:"):
+            raise
+        raise CosimError(f"{args.model}: {exc}") from None
 
     failures = cert.failures()
     n_design = len(failures)

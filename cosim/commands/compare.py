@@ -111,6 +111,10 @@ def run(args: argparse.Namespace) -> int:
 
     if args.window is not None and not args.band:
         raise CosimError("--window applies only with --band")
+    if args.plot:
+        from cosim.outpaths import figure_file
+
+        figure_file(args.plot, "--plot")
     signals = args.signals.split(",") if args.signals is not None else None
     rtol = DEFAULT_RTOL if args.rtol is None else args.rtol
     atol = DEFAULT_ATOL if args.atol is None else args.atol
@@ -122,8 +126,9 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         try:
             path = plot(result, args.plot)
-        except OSError as exc:
-            raise CosimError(f"{args.plot}: cannot write the figure: {exc.strerror}") from None
+        except (OSError, ValueError) as exc:
+            why = exc.strerror if isinstance(exc, OSError) else str(exc)
+            raise CosimError(f"{args.plot}: cannot write the figure: {why}") from None
         if not args.quiet:
             print(f"figure:    {path}")
     return EXIT_OK if result.passed else EXIT_FAILED

@@ -53,11 +53,14 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from controllers.problem import FOURTANK
-    from cosim import datagen
+    from cosim import datagen, outpaths
     from cosim.errors import CosimError
 
     if args.steps < 10:
         raise CosimError(f"--steps must be at least 10, got {args.steps}")
+    if args.seed < 0:
+        raise CosimError(f"--seed must be a non-negative integer, got {args.seed}")
+    outpaths.out_file(args.out, "--out")
     plant_path = Path(args.plant)
     if not plant_path.is_file():
         hint = " (run 'cosim build-fmu' first)" if args.plant == "fmus/FourTank.fmu" else ""

@@ -84,6 +84,8 @@ def _plant_path(arg: str | None) -> Path:
 
     if arg is not None:
         path = Path(arg)
+        if path.is_dir():
+            raise CosimError(f"{path}: is a folder, not an FMU file (.fmu zip archive)")
         if not path.is_file():
             raise CosimError(f"{path}: FMU not found")
         return path
@@ -101,7 +103,7 @@ def _plant_path(arg: str | None) -> Path:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``cosim run``; returns the exit code (raises CosimError/SimulationFailed)."""
-    from cosim import registry, results, scenario, varmap
+    from cosim import outpaths, registry, results, scenario, varmap
     from cosim.errors import EXIT_OK, CosimError, SimulationFailed
     from cosim.master import Master, communication_times
 
@@ -120,6 +122,7 @@ def run(args: argparse.Namespace) -> int:
     plant = Plant(plant_path, name="plant", interface=args.interface, varmap=vmap)
     master = Master(plant, controller, sc, step=args.step, seed=args.seed)
     out = Path(args.out) if args.out else Path("results") / sc.path.stem
+    outpaths.out_dir(out, "--out")
 
     show = not args.quiet and sys.stderr.isatty()
     bar = None

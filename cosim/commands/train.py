@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 HELP = "train a δISS GRU (paper's eq. 3) on a data set from 'cosim generate-data'"
 
@@ -101,6 +102,45 @@ def _command(argv: list[str]) -> str:
     return " ".join(["cosim train", *kept])
 
 
+def _sidecar(path: Path) -> dict | None:
+    """The data set's JSON sidecar, or None when it is missing or unreadable."""
+    import json
+
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def _check_options(args: argparse.Namespace) -> None:
+    """Reject option values the training cannot use (one-line CosimError naming the option)."""
+    import math
+
+    from cosim.errors import CosimError
+
+    ints = {"--epochs": (args.epochs, 1), "--n": (args.n, 1), "--seq-len": (args.seq_len, 1),
+            "--batch": (args.batch, 0), "--patience": (args.patience, 0),
+            "--seed": (args.seed, 0)}
+    if args.stride is not None:
+        ints["--stride"] = (args.stride, 1)
+    for option, (value, low) in ints.items():
+        if value < low:
+            raise CosimError(f"{option} must be an integer >= {low}, got {value}")
+    positive = {"--lr": args.lr, "--lr-final": args.lr_final}
+    for option, value in positive.items():
+        if not (math.isfinite(value) and value > 0):
+            raise CosimError(f"{option} must be a positive number, got {value}")
+    non_negative = {"--uo-weight": args.uo_weight, "--uo-max": args.uo_max,
+                    "--penalty-weight": args.penalty_weight}
+    for option, value in non_negative.items():
+        if value is not None and not (math.isfinite(value) and value >= 0):
+            raise CosimError(f"{option} must be a non-negative number, got {value}")
+    if not (math.isfinite(args.bz_init)):
+        raise CosimError(f"--bz-init must be a finite number, got {args.bz_init}")
+    if not 0 <= args.sigma_z_max < 1:
+        raise CosimError(f"--sigma-z-max must be in [0, 1), got {args.sigma_z_max}")
+
+
 def run(args: argparse.Namespace) -> int:
     """Train, check ν < 1, write the model file and the figure."""
     import sys
@@ -112,7 +152,7 @@ def run(args: argparse.Namespace) -> int:
     from controllers import certificates, metrics, training
     from controllers.model import GRUModel
     from controllers.problem import FOURTANK
-    from cosim import datagen
+    from cosim import datagen, outpaths
     from cosim.errors import CosimError
 
     data = datagen.read_csv(args.data)
@@ -136,6 +176,12 @@ def run(args: argparse.Namespace) -> int:
         raise CosimError(f"--washout must be in [0, --seq-len), got {opts.washout}")
     if not 0 < opts.nu_margin < 1:
         raise CosimError(f"--nu-margin must be in (0, 1), got {opts.nu_margin}")
+    _check_options(args)
+    out = outpaths.out_file(args.out, "--out")
+    figure = (outpaths.figure_file(args.figure, "--figure") if args.figure
+              else out.with_name(out.stem + "_test.png"))
+    if args.history:
+        outpaths.out_file(args.history, "--history")
 
     norm = training.normalization(FOURTANK)
     u_all = (data.u[:, [data.input_names.index(s) for s in FOURTANK.inputs]]
@@ -173,8 +219,7 @@ def run(args: argparse.Namespace) -> int:
     record = {
         "command": _command(sys.argv[2:]),
         "data": str(args.data),
-        "data_meta": (__import__("json").loads(meta_path.read_text())
-                      if meta_path.exists() else None),
+        "data_meta": _sidecar(meta_path),
         "seed": opts.seed,
         "init": args.init,
         "epochs_run": result.epochs_run,
@@ -194,13 +239,12 @@ def run(args: argparse.Namespace) -> int:
     }
     w_y_bar = scores["test"]["max_abs_err"]
     model = training.build_model(result.params, FOURTANK, norm, record, w_y_bar=w_y_bar)
-    out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     model.save(out)
 
-    figure = Path(args.figure) if args.figure else out.with_name(out.stem + "_test.png")
     test = data.split == "test"
     xi = metrics.open_loop(result.params, u_all)
+    figure.parent.mkdir(parents=True, exist_ok=True)
     metrics.prediction_figure(
         data.time[test], model.denormalize_y(y_all[test]), model.denormalize_y(xi[test]),
         names, list(FOURTANK.output_units), scores["test"]["fit"], str(figure),

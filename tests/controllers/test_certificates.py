@@ -377,3 +377,31 @@ def test_candidate_solution_deviation_bound() -> None:
             if i <= c.N:
                 cand = step(p, cand, u[i])
     assert 0 < worst <= 1
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"N": 2.5}, "horizon N must be an integer >= 1, got 2.5"),
+    ({"N": True}, "horizon N must be an integer >= 1, got True"),
+    ({"N": "abc"}, "horizon N must be an integer >= 1, got 'abc'"),
+    ({"N": 0}, "horizon N must be >= 1 and <= 1000, got 0"),
+    ({"N": 10**9}, "horizon N must be >= 1 and <= 1000, got 1000000000"),
+    ({"e_o0": -1}, "e_o0 must be a non-negative number, got -1"),
+    ({"e_o0": "x"}, "e_o0 must be a non-negative number, got 'x'"),
+    ({"R": -1}, "cost weight R must be a 1x1 matrix, got shape ()"),
+    ({"R": "abc"}, "cost weight R must be a 1x1 matrix of numbers, got 'abc'"),
+    ({"R": [[-0.01]]}, "cost weight R must be symmetric positive definite"),
+    ({"Q": [1, 2]}, "cost weight Q must be a 2x2 matrix, got shape (2,)"),
+    ({"Q": [[1, 0.5], [0, 1]]}, "cost weight Q must be symmetric positive definite"),
+    ({"Q": [[1, 0], [0, float("nan")]]}, "cost weight Q has non-finite entries"),
+    ({"gain_scale": -1}, "gain scale must be a non-negative number, got -1"),
+    ({"gain_scale": "x"}, "gain scale must be a non-negative number, got 'x'"),
+])
+def test_bad_design_parameters_are_one_line_errors(kwargs, message) -> None:
+    with pytest.raises(CosimError) as info:
+        certs.compute_certificate(hand_model(), **kwargs)
+    assert str(info.value) == message
+
+
+def test_integer_valued_float_horizon_is_accepted() -> None:
+    cert = certs.compute_certificate(hand_model(), N=3.0)
+    assert cert.N == 3 and isinstance(cert.N, int) and len(cert.a) >= 3

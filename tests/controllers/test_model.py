@@ -112,3 +112,26 @@ def test_error_messages_are_one_line_and_name_the_file(tmp_path):
     with pytest.raises(ModelFileError) as info:
         GRUModel.load(path)
     assert "\n" not in str(info.value) and "weights.json" in str(info.value)
+
+
+def test_binary_file_is_a_one_line_error(tmp_path):
+    path = tmp_path / "m.json"
+    path.write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(ModelFileError, match=r"m\.json: not a JSON model file \(byte 0 is not "
+                                             r"UTF-8\)"):
+        GRUModel.load(path)
+
+
+@pytest.mark.parametrize("version", [99, 0, "1", True])
+def test_unknown_format_version_is_refused(tmp_path, version):
+    doc = make_model().to_dict()
+    doc["version"] = version
+    with pytest.raises(ModelFileError, match=r"'version' is .*, this cosim reads version 1"):
+        GRUModel.load(write(tmp_path, doc))
+
+
+def test_boolean_sample_time_is_refused(tmp_path):
+    doc = make_model().to_dict()
+    doc["Ts"] = True
+    with pytest.raises(ModelFileError, match=r"'Ts' must be a positive number, got True"):
+        GRUModel.load(write(tmp_path, doc))

@@ -68,3 +68,25 @@ def test_closed_loop_on_the_fmu(tmp_path: Path, fmu2_path: Path, pairing: str) -
     else:  # the negative-RGA pairing: stable with its tuning, but far slower
         err = np.abs(h1 - 1.1)[-40:].max()
         assert err > 2e-3
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"pairing": "sideways"}, "unknown pairing 'sideways' (known: cross, diagonal)"),
+    ({"pairing": 3}, "pairing must be one of cross, diagonal, got 3"),
+    ({"initial_inputs": [1, 2]}, "initial_inputs must map inputs to numbers"),
+    ({"initial_inputs": {"qz": 1e-4}}, "initial_inputs: unknown input 'qz' (inputs: qa, qb)"),
+    ({"initial_inputs": {"qa": "x"}}, "initial_inputs: qa must be a finite number, got 'x'"),
+    ({"initial_inputs": {"qa": float("nan")}}, "initial_inputs: qa must be a finite number"),
+])
+def test_bad_options_are_one_line_errors(kwargs, message) -> None:
+    from cosim.errors import CosimError
+
+    with pytest.raises(CosimError) as info:
+        PIController(**kwargs)
+    assert str(info.value).startswith("controller 'pi': ") and message in str(info.value)
+
+
+def test_initial_inputs_start_the_integrators() -> None:
+    ctrl = PIController(initial_inputs={"qa": 4e-4})
+    assert ctrl._u["qa"] == 4e-4 and ctrl.initial_inputs == {"qa": 4e-4}
+    assert PIController(pairing=PAIRINGS["diagonal"]).loops == PAIRINGS["diagonal"]

@@ -153,3 +153,26 @@ def test_plot_writes_a_figure(model_file: Path, tmp_path: Path, capsys) -> None:
     assert main(["certify", str(model_file), "--setpoint", "1,1", "--plot", str(png)]) == 0
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 20000
     assert "figure written" in capsys.readouterr().err
+
+
+def test_bad_plot_target_exit_2_before_computing(model_file: Path, tmp_path: Path,
+                                                 capsys) -> None:
+    assert main(["certify", str(model_file), "--plot", str(tmp_path / "alpha.csv")]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1
+    assert "alpha.csv: --plot: unknown figure type '.csv'" in captured.err
+    (tmp_path / "blocker").write_text("a file")
+    assert main(["certify", str(model_file), "--plot", str(tmp_path / "blocker" / "a.png")]) == 2
+    assert "is not a folder" in capsys.readouterr().err
+
+
+def test_model_with_other_signal_names_names_the_file(tmp_path: Path, capsys) -> None:
+    doc = json.loads(json.dumps(random_gru_model(0).to_dict()))
+    doc["w_y_bar"] = 0.01
+    doc["outputs"][0]["name"] = "H1"
+    path = tmp_path / "renamed.json"
+    path.write_text(json.dumps(doc))
+    assert main(["certify", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"cosim certify: error: {path}: model output 'H1'")
+    assert err.count("\n") == 1

@@ -240,3 +240,115 @@ def test_swap_in_parameter_change_through_the_map(tmp_path: Path, pyfmu_dir: Pat
     for name in ("mapped", "raw"):
         assert np.abs(results[name]["plant.h2"] - results["ours"]["plant.h2"]).max() < 1e-4
     assert results["raw"]["plant.gammaA"][-1] == 0.36
+
+
+SHORT = "time,ref.h1,ref.h2\n0,0.65,0.65\n100,,\n"
+
+
+@pytest.mark.parametrize("step, message", [
+    ("-5", "--step -5.0: the communication step must be a positive, finite number"),
+    ("0", "--step 0.0: the communication step must be a positive, finite number"),
+    ("nan", "--step nan: the communication step must be a positive, finite number"),
+    ("1e-9", "--step 1e-09: 1e+11 communication steps of 1e-09 s from 0.0 s to 100.0 s, "
+             "more than the 1000000 allowed"),
+])
+def test_bad_step_exit_2_before_running(step: str, message: str, tmp_path: Path,
+                                        fmu2_path: Path, capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / "s.csv"
+    scenario.write_text(SHORT)
+    code, _, err = run(capsys, str(scenario), "--controller", "pi", "--plant", str(fmu2_path),
+                       f"--step={step}", "--out", str(tmp_path / "out"))
+    assert code == 2 and err.startswith(f"cosim run: error: {message}")
+    assert err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
+
+
+def test_out_that_is_a_file_exit_2_before_running(tmp_path: Path, fmu2_path: Path,
+                                                  capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / "s.csv"
+    scenario.write_text(SHORT)
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file")
+    code, _, err = run(capsys, str(scenario), "--controller", "pi", "--plant", str(fmu2_path),
+                       "--out", str(blocker))
+    assert code == 2 and err == f"cosim run: error: {blocker}: --out must be a folder, but this " \
+                                "is a file\n"
+    code, _, err = run(capsys, str(scenario), "--controller", "pi", "--plant", str(fmu2_path),
+                       "--out", str(blocker / "sub"))
+    assert code == 2 and err == f"cosim run: error: {blocker / 'sub'}: --out: '{blocker}' is not " \
+                                "a folder\n"
+    assert blocker.read_text() == "a file"
+
+
+def test_negative_seed_exit_2(tmp_path: Path, fmu2_path: Path,
+                              capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / "s.csv"
+    scenario.write_text("time,ref.h1,ref.h2,sensor.h1.noise\n0,0.65,0.65,0.01\n100,,,\n")
+    code, _, err = run(capsys, str(scenario), "--controller", "pi", "--plant", str(fmu2_path),
+                       "--seed", "-1", "--out", str(tmp_path / "out"))
+    assert code == 2 and err == "cosim run: error: --seed must be a non-negative integer, got -1\n"
+
+
+def test_plant_for_another_platform_exit_2(tmp_path: Path, fmu2_path: Path,
+                                           capsys: pytest.CaptureFixture) -> None:
+    import zipfile
+
+    scenario = tmp_path / "s.csv"
+    scenario.write_text(SHORT)
+    fmu = tmp_path / "win.fmu"
+    with zipfile.ZipFile(fmu2_path) as zin, zipfile.ZipFile(fmu, "w") as zout:
+        for info in zin.infolist():
+            if not info.filename.startswith("binaries/"):
+                zout.writestr(info, zin.read(info))
+    code, _, err = run(capsys, str(scenario), "--controller", "pi", "--plant", str(fmu),
+                       "--out", str(tmp_path / "out"))
+    assert code == 2 and err.count("\n") == 1
+    assert err.startswith(f"cosim run: error: {fmu}: no binary for this platform: ")
+    assert "(it has no binaries)" in err
+
+
+@pytest.mark.parametrize("option, message", [
+    ('pairing="sideways"', "controller 'pi': unknown pairing 'sideways' (known: cross, "
+                           "diagonal)"),
+    ('initial_inputs={"qa": "x"}', "controller 'pi': initial_inputs: qa must be a finite "
+                                   "number, got 'x'"),
+    ('initial_inputs={"qz": 1}', "controller 'pi': initial_inputs: unknown input 'qz'"),
+])
+def test_bad_pi_options_exit_2(option: str, message: str, tmp_path: Path, fmu2_path: Path,
+                               capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / "s.csv"
+    scenario.write_text(SHORT)
+    code, _, err = run(capsys, str(scenario), "--controller", "pi", "--plant", str(fmu2_path),
+                       "--option", option, "--out", str(tmp_path / "out"))
+    assert code == 2 and err.startswith(f"cosim run: error: {message}") and err.count("\n") == 1
+    assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.parametrize("option, message", [
+    ("N=2.5", "horizon N must be an integer >= 1, got 2.5"),
+    ("N=true", "horizon N must be an integer >= 1, got True"),
+    ("N=100000", "horizon N must be >= 1 and <= 1000, got 100000"),
+    ('R="abc"', "cost weight R must be a 2x2 matrix of numbers, got 'abc'"),
+    ("R=-1", "cost weight R must be a 2x2 matrix, got shape ()"),
+    ("R=[[0.01,0],[0,-0.01]]", "cost weight R must be symmetric positive definite"),
+    ('gain_scale="x"', "gain scale must be a non-negative number, got 'x'"),
+])
+def test_bad_robust_mpc_options_exit_2(option: str, message: str, tmp_path: Path,
+                                       fmu2_path: Path, capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / "s.csv"
+    scenario.write_text(SHORT)
+    code, _, err = run(capsys, str(scenario), "--plant", str(fmu2_path), "--option", option,
+                       "--out", str(tmp_path / "out"))
+    assert code == 2 and err == f"cosim run: error: {message}\n"
+    assert not (tmp_path / "out").exists()
+
+
+def test_scenario_too_long_for_memory_exit_2(tmp_path: Path, fmu2_path: Path,
+                                             capsys: pytest.CaptureFixture) -> None:
+    scenario = tmp_path / "s.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n\n1e12,,\n")
+    code, _, err = run(capsys, str(scenario), "--controller", "pi", "--plant", str(fmu2_path),
+                       "--out", str(tmp_path / "out"))
+    assert code == 2 and err == (f"cosim run: error: {scenario}:4:1: 4e+10 communication steps "
+                                 "of 25.0 s from 0.0 s to 1000000000000.0 s, more than the "
+                                 "1000000 allowed\n")

@@ -231,3 +231,26 @@ def test_plot_is_written(tmp_path: Path, ref: Path, capsys) -> None:
     assert main(["compare", str(res), str(ref), "--plot", str(png)]) == 1
     assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n" and png.stat().st_size > 10_000
     assert f"figure:    {png}" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("target, message", [
+    ("dir", "unknown figure type ''"),
+    ("cmp.csv", "unknown figure type '.csv'"),
+    ("blocker/cmp.png", "is not a folder"),
+])
+def test_bad_plot_target_exit_2_before_comparing(target: str, message: str, tmp_path: Path,
+                                                 ref: Path, capsys) -> None:
+    (tmp_path / "dir").mkdir()
+    (tmp_path / "blocker").write_text("a file")
+    assert main(["compare", str(ref), str(ref), "--plot", str(tmp_path / target)]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == ""  # nothing compared, no verdict printed
+    assert captured.err.startswith(f"cosim compare: error: {tmp_path / target}: --plot")
+    assert message in captured.err and captured.err.count("\n") == 1
+
+
+def test_plot_target_that_is_a_folder_named_like_a_figure(tmp_path: Path, ref: Path,
+                                                          capsys) -> None:
+    (tmp_path / "fig.png").mkdir()
+    assert main(["compare", str(ref), str(ref), "--plot", str(tmp_path / "fig.png")]) == 2
+    assert "--plot must name a file, but this is a folder" in capsys.readouterr().err

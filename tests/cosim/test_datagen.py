@@ -137,3 +137,39 @@ def test_map_naming_a_missing_variable_is_a_one_line_error(tmp_path, capsys):
     assert code == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "qa" in err
+
+
+def test_read_csv_rejects_binary_and_malformed_files(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_bytes(b"time,qa,qb,h1,split\n\xd0\x9f\xff\xfe,1,2,3,train\n")
+    with pytest.raises(CosimError, match=r"d\.csv:\d+: not a text CSV file"):
+        datagen.read_csv(path)
+    path.write_text('time,qa,qb,h1,split\n0,1,2,3,"' + "x" * 200_000 + '"\n')
+    with pytest.raises(CosimError, match=r"d\.csv:2: malformed CSV \(field larger"):
+        datagen.read_csv(path)
+
+
+def test_read_csv_ignores_a_broken_sidecar(tmp_path):
+    path = tmp_path / "d.csv"
+    path.write_text("time,qa,qb,h1,split\n0,1,2,3,train\n")
+    path.with_suffix(".json").write_bytes(b"\xff{not json")
+    data = datagen.read_csv(path)
+    assert data.input_names == ["qa", "qb"] and data.output_names == ["h1"]
+    path.with_suffix(".json").write_text('{"inputs": "qa"}')
+    assert datagen.read_csv(path).input_names == ["qa", "qb"]
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--seed", "-1"], "--seed must be a non-negative integer, got -1"),
+    (["--out", "{tmp}"], "{tmp}: --out must name a file, but this is a folder"),
+    (["--out", "{tmp}/blocker/d.csv"], "{tmp}/blocker/d.csv: --out: '{tmp}/blocker' is not a "
+                                       "folder"),
+])
+def test_bad_generate_data_options_exit_2(args, message, tmp_path, capsys):
+    (tmp_path / "blocker").write_text("a file")
+    args = [a.format(tmp=tmp_path) for a in args]
+    if "--out" not in args:
+        args += ["--out", str(tmp_path / "d.csv")]
+    assert main(["generate-data", "--steps", "40", "--quiet", *args]) == 2
+    err = capsys.readouterr().err
+    assert err == f"cosim generate-data: error: {message.format(tmp=tmp_path)}\n"

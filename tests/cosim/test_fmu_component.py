@@ -156,3 +156,69 @@ def test_python_exception_in_fmu_is_reported(pyfmu_dir: Path) -> None:
             comp.step(500.0, 25.0)
     finally:
         comp.terminate()
+
+
+def _rezip(src: Path, dst: Path, edit) -> Path:
+    """Copy the FMU ``src`` to ``dst``, passing each member (name, bytes) through ``edit``
+    (which returns the new pair, or None to drop the member)."""
+    with zipfile.ZipFile(src) as zin, zipfile.ZipFile(dst, "w") as zout:
+        for info in zin.infolist():
+            member = edit(info.filename, zin.read(info))
+            if member is not None:
+                zout.writestr(*member)
+    return dst
+
+
+def test_fmu_without_a_binary_for_this_platform_is_bad_input(tmp_path: Path,
+                                                              fmu2_path: Path) -> None:
+    def to_win64(name: str, data: bytes) -> tuple[str, bytes]:
+        if name.startswith("binaries/linux64/"):
+            return "binaries/win64/FourTank.dll", data
+        return name, data
+
+    fmu = _rezip(fmu2_path, tmp_path / "win.fmu", to_win64)
+    for cls in (FmuComponent, IsolatedFmuComponent):
+        comp = cls(fmu)
+        with pytest.raises(CosimError, match=r"win\.fmu: no binary for this platform: "
+                           r"'binaries/linux64/FourTank\.so' is missing \(it has binaries for: "
+                           r"win64\)") as info:
+            comp.setup(0.0)
+        comp.terminate()
+        assert not isinstance(info.value, SimulationFailed)
+
+
+def test_fmu_with_a_corrupt_binary_is_bad_input(tmp_path: Path, fmu2_path: Path) -> None:
+    def corrupt(name: str, data: bytes) -> tuple[str, bytes]:
+        return name, (b"not a shared library" if name.endswith(".so") else data)
+
+    fmu = _rezip(fmu2_path, tmp_path / "corrupt.fmu", corrupt)
+    cwd = Path.cwd()
+    comp = FmuComponent(fmu)
+    with pytest.raises(CosimError, match=r"corrupt\.fmu: cannot load the FMU's binary: ") as info:
+        comp.setup(0.0)
+    comp.terminate()
+    assert not isinstance(info.value, SimulationFailed)
+    assert "\n" not in str(info.value) and "cosim-fmu-" not in str(info.value)
+    assert Path.cwd() == cwd  # fmpy changes into the (now deleted) binaries folder
+
+
+def test_a_folder_is_not_an_fmu(tmp_path: Path) -> None:
+    with pytest.raises(CosimError, match="is a folder, not an FMU file"):
+        FmuComponent(tmp_path)
+
+
+def test_isolated_worker_leaves_ctrl_c_to_the_parent(fmu2_path: Path) -> None:
+    import os
+    import signal
+    import time
+
+    comp = IsolatedFmuComponent(fmu2_path)
+    comp.setup(0.0)
+    try:
+        os.kill(comp._proc.pid, signal.SIGINT)  # Ctrl-C reaches the whole process group
+        time.sleep(0.2)
+        comp.set_inputs(U)
+        comp.step(0.0, 25.0)  # the worker is alive and serves requests
+        assert comp._proc.is_alive() and 0.0 < comp.get_outputs()["h1"] < 2.0
+    finally:
+        comp.terminate()

@@ -215,3 +215,41 @@ def test_timing_diagnostics_are_kept_out_of_results(tmp_path: Path, fmu2_path: P
     timings = (tmp_path / "out" / "timings.csv").read_text().splitlines()
     assert timings[0] == '"time","ctrl.step_ms"' and timings[1] == "0.0,1000.5"
     assert "step_ms" not in (tmp_path / "out" / "results.csv").read_text()
+
+
+class SwallowsInterrupt(Recorder):
+    """Like casadi in an IPOPT solve: Ctrl-C arrives inside ``step``, which swallows it."""
+
+    def step(self, t: float, dt: float) -> None:
+        import contextlib
+        import os
+        import signal
+
+        super().step(t, dt)
+        if t == 100.0:
+            # swallowed: the solve "fails" and the controller carries on
+            with contextlib.suppress(KeyboardInterrupt):
+                os.kill(os.getpid(), signal.SIGINT)
+
+
+def test_interrupt_swallowed_by_the_controller_still_stops_the_run(tmp_path: Path,
+                                                                    fmu2_path: Path) -> None:
+    import signal
+
+    handler = signal.getsignal(signal.SIGINT)
+    sc = scenario(tmp_path, "time,ref.h1\n0,0.7\n1000,\n")
+    ctrl = SwallowsInterrupt()
+    result = Master(FmuComponent(fmu2_path), ctrl, sc).run()
+    assert result.status == "interrupted" and isinstance(result.error, KeyboardInterrupt)
+    # rows up to t = 75 s are kept; the step whose solve was interrupted is not recorded
+    assert [row[0] for row in result.rows] == [0.0, 25.0, 50.0, 75.0]
+    assert signal.getsignal(signal.SIGINT) is handler and ctrl.terminated == 1
+
+
+def test_step_and_seed_are_checked(tmp_path: Path) -> None:
+    sc = scenario(tmp_path, "time,ref.h1\n0,0.7\n100,\n")
+    for step in (-1.0, 0.0, math.nan, math.inf):
+        with pytest.raises(CosimError, match="must be a positive, finite number"):
+            Master(Recorder(), Recorder(), sc, step=step)
+    with pytest.raises(CosimError, match=r"--seed must be a non-negative integer, got -1"):
+        Master(Recorder(), Recorder(), sc, seed=-1)

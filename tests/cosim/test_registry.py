@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import sys
+
 import pytest
 
 from controllers.pi import PIController
@@ -41,5 +43,25 @@ def test_create_passes_options_and_names_unknown_ones() -> None:
     assert [(loop.y, loop.u) for loop in ctrl.loops] == [("h1", "qa"), ("h2", "qb")]
     with pytest.raises(CosimError, match="controller 'pi' has no option 'gain'"):
         create("pi", {"gain": 2.0})
-    with pytest.raises(CosimError, match="cannot create PIController"):
+    with pytest.raises(CosimError, match="cannot create PIController: AttributeError"):
+        create("pi", {"problem": 1})
+    with pytest.raises(CosimError, match="controller 'pi': unknown pairing 'sideways'"):
         create("pi", {"pairing": "sideways"})
+
+
+def test_constructor_errors_are_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
+    import types
+
+    from controllers.pi import PIController
+
+    class Fails(PIController):
+        def __init__(self) -> None:
+            raise RuntimeError("first line\nsecond line:\n  third")
+
+    module = types.ModuleType("cosim_test_fails")
+    module.Fails = Fails
+    monkeypatch.setitem(sys.modules, "cosim_test_fails", module)
+    with pytest.raises(CosimError) as info:
+        create("cosim_test_fails:Fails")
+    assert str(info.value) == ("controller 'cosim_test_fails:Fails': cannot create Fails: "
+                               "RuntimeError: first line second line: third")

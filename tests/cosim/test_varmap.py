@@ -40,6 +40,10 @@ def test_load_and_convert(tmp_path: Path) -> None:
     ("[signals.qa]\nvariable = 'Fa'\nfactor = 2\n", "unknown key(s) ['factor']"),
     ("[signals.qa]\nvariable = 'F'\n[signals.qb]\nvariable = 'F'\n",
      "signal 'qb': variable 'F' is already mapped by signal 'qa'"),
+    ("[signals.qa]\nvariable = 3\n", "signal 'qa': 'variable' must be the FMU variable name "
+                                     "as a non-empty string, got 3"),
+    ("[signals.qa]\nvariable = ''\n", "'variable' must be the FMU variable name as a "
+                                      "non-empty string, got ''"),
 ])
 def test_bad_maps_are_one_line_errors_naming_the_file(tmp_path: Path, text: str,
                                                       words: str) -> None:
