@@ -92,13 +92,15 @@ def main(argv: list[str] | None = None) -> int:
                     help="plant (default: the FMU when built, else the GRU model)")
     ap.add_argument("--no-baseline", action="store_true", help="time the controller only")
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "paper_steps.csv"))
+    ap.add_argument("--no-governor", action="store_true",
+                    help="the paper's controller: no reference governor after set-point steps")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args(argv)
 
     from cosim import scenario as scenario_mod
     from cosim.master import Master
 
-    ctrl = RobustMPCController()
+    ctrl = RobustMPCController(governor=not args.no_governor)
     cert = ctrl.cert
     baseline = None if args.no_baseline else FHOCP(
         cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a, cert.b, cert.s,
@@ -140,12 +142,15 @@ def main(argv: list[str] | None = None) -> int:
             bar.close()
         plant.terminate()
     s = ctrl.summary()
-    print(f"plant: {kind}; steps: {len(timed.step_ms)}; model n={ctrl.model.n}, N={cert.N}")
+    print(f"plant: {kind}; steps: {len(timed.step_ms)}; model n={ctrl.model.n}, N={cert.N}; "
+          f"load average {os.getloadavg()[0]:.2f} (1 min) at the end")
     print(f"fast   (single shooting, exact Hessian, IPOPT warm start), controller step: "
           f"{stats(timed.step_ms)}")
     print(f"       FHOCP solve only: median {s['solve_ms_median']:.2f}, p99 "
           f"{s['solve_ms_p99']:.2f} ms; iterations median {s['iterations_median']:.0f}; "
-          f"failures {s['failures']} {s['failures_by_status']}; fallbacks {s['fallbacks']}")
+          f"failures {s['failures']} {s['failures_by_status']}; fallbacks {s['fallbacks']}; "
+          f"suboptimal (capped, feasible) {s['suboptimal_steps']}; governor steps "
+          f"{s['governor_steps']} (held {s['governor_holds']})")
     if timed.base:
         bms = [b[0] for b in timed.base]
         print(f"plain  (multiple shooting, do-mpc style IPOPT):                  {stats(bms)}")

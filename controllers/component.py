@@ -18,6 +18,13 @@ keeps regulating to the last admissible set-point, counts the step in ``setpoint
 (diagnostics and summary) and names the failed hypothesis in the summary. A first set-point
 that is already inadmissible is a configuration error (:class:`cosim.errors.CosimError`).
 
+Set-point changes go through the admissible reference governor of
+:mod:`controllers.governor` (on by default, ``governor=False`` gives the paper's controller,
+which switches ``(x̄, ū, α)`` at once): the set-point handed to the FHOCP moves towards the
+requested one only as far as a sequence known to be feasible exists, by at most a fraction
+``λ_max`` of the way that halves after a solve that did not converge and doubles after one
+that did; that sequence is the solver's initial guess and the fallback.
+
 Option outside the theorem (off by default): ``offset_free=True`` shifts the model set-point
 by a filtered estimate ``d̂`` of the output mismatch ``y − ŷ`` (``ȳ_model = ȳ − d̂``), to remove
 the small static offset the paper reports; the shifted set-point must still pass the checks.
@@ -42,6 +49,11 @@ DEFAULT_MODEL = Path(__file__).resolve().parent / "models" / "fourtank_gru.json"
 #: gains (same grid as ``cosim certify --auto-gain-scale``).
 GAIN_SETPOINTS = [(a, b) for a in (0.5, 1.0, 1.5) for b in (0.5, 1.0, 1.5)]
 
+#: The governor's adaptive step limit ``λ_max``: smallest value, and growth factor after a
+#: converged solve that followed a move (it halves after a solve that did not converge).
+LAM_MIN = 0.0625
+LAM_GROW = 2.0
+
 
 class RobustMPCController(Component):
     """Robust MPC with GRU model and observer (Schimperna & Magni), normalised internally.
@@ -64,6 +76,10 @@ class RobustMPCController(Component):
         Offset-free set-point correction (outside the theorem, see the module docstring).
     offset_filter : float
         Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)``.
+    governor : bool
+        Admissible reference governor after set-point changes (default on; see the module
+        docstring and :mod:`controllers.governor`). ``False``: the paper's FHOCP with the
+        new ``(x̄, ū, α)`` at once.
     setpoint_rate : float, optional
         Outside the theorem: move the set-point given to the FHOCP towards the requested one
         by at most this many metres per sample (a rate-limiting reference governor), so that
@@ -75,14 +91,17 @@ class RobustMPCController(Component):
     """
 
     direct_feedthrough = True
+    #: wall-clock diagnostics: written by the master to timings.csv, not results.csv
+    timing_diagnostics = frozenset({"solve_ms"})
 
     def __init__(self, model: str | Path | None = None, N: int = 15,
                  Q: np.ndarray | None = None, R: np.ndarray | None = None,
                  e_o0: float = 0.02, gain_scale: float | None = None,
                  offset_free: bool = False, offset_filter: float = 0.05,
-                 setpoint_rate: float | None = None,
+                 setpoint_rate: float | None = None, governor: bool = True,
                  ipopt_options: Mapping[str, Any] | None = None, name: str = "mpc") -> None:
         from controllers import certificates as certs
+        from controllers.governor import ReferenceGovernor
         from controllers.model import GRUModel
         from controllers.mpc import FHOCP, RobustMPC
         from controllers.observer import GRUObserver
@@ -107,7 +126,13 @@ class RobustMPCController(Component):
         self.cert = cert
         self.fhocp = FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L,
                            cert.a, cert.b, cert.s, ipopt_options=ipopt_options)
+        # build the solver and load scipy.optimize (the observer's x̂_0 equilibrium) now, so
+        # that the first control step is a normal one (importing scipy.optimize: ~0.2 s)
+        import scipy.optimize  # noqa: F401
+
+        self.fhocp.setup()
         self.mpc = RobustMPC(self.fhocp)
+        self.governor = ReferenceGovernor(cert, self.fhocp) if governor else None
         self.observer = GRUObserver.from_certificate(cert)
         self.offset_free = bool(offset_free)
         self.offset_filter = float(offset_filter)
@@ -140,6 +165,12 @@ class RobustMPCController(Component):
         self.rejected = 0
         self.rejections: list[str] = []
         self.setpoint_changes = 0
+        self.governed_steps = 0     # steps with the FHOCP set-point short of the requested
+        self.governor_holds = 0     # of which the governor could not move it at all
+        self._lam = 1.0
+        self._lam_max = 1.0
+        self._moved = False
+        self._candidate: np.ndarray | None = None
 
     def set_inputs(self, values: Mapping[str, float]) -> None:
         self._values.update({k: float(v) for k, v in values.items()})
@@ -163,8 +194,10 @@ class RobustMPCController(Component):
         if self.observer.x_hat is None:
             self.observer.init_from_output(y)
             self._d_hat = np.zeros_like(y)
+        self._candidate = None
         rejected = self._update_reference(y_ref, y, t)
-        rec = self.mpc.make_step(self.observer.x_hat, self.observer.e_o)
+        rec = self.mpc.make_step(self.observer.x_hat, self.observer.e_o,
+                                 candidate=self._candidate)
         e_o = self.observer.e_o
         self.observer.make_step(rec.u, y)
         self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
@@ -181,7 +214,9 @@ class RobustMPCController(Component):
             "x_hat_error_bound": e_o,
             "active_constraints": float(res.active),
             "fallback": float(rec.fallback),
+            "suboptimal": float(rec.suboptimal),
             "setpoint_rejected": float(rejected),
+            "governor_lambda": self._lam,
             "y_model_h1": float(self.model.denormalize_y(self._y_model)[0]),
             "y_model_h2": float(self.model.denormalize_y(self._y_model)[1]),
         }
@@ -198,6 +233,9 @@ class RobustMPCController(Component):
             "formulation": self.fhocp.formulation,
             "offset_free": self.offset_free,
             "setpoint_rate": self.setpoint_rate,
+            "governor": self.governor is not None,
+            "governor_steps": self.governed_steps,
+            "governor_holds": self.governor_holds,
             "gain_scale": self.cert.gain_scale,
             "setpoint_changes": self.setpoint_changes,
             "setpoint_rejected_steps": self.rejected,
@@ -220,24 +258,76 @@ class RobustMPCController(Component):
         if self.offset_free and self._d_hat is not None:
             self._d_hat = self._d_hat + self.offset_filter * (
                 y - self.observer.y_hat() - self._d_hat)
-            target = y_ref - self._d_hat
-        if self._y_model is not None and np.max(np.abs(target - self._y_model)) < (
-                1e-3 if self.offset_free else 1e-12):
+            target = target - self._d_hat
+        tol = 1e-3 if self.offset_free else 1e-12
+        self._lam = 1.0
+        if self._y_model is not None and np.max(np.abs(target - self._y_model)) < tol:
             return False
         requested_changed = self._y_ref is None or np.any(y_ref != self._y_ref)
+        if self.governor is not None and self._y_model is not None:
+            return self._govern(target, y_ref, requested_changed, t)
         try:
             ref = self.cert.reference(target)
         except CosimError as exc:
             if self._y_model is None:
                 raise CosimError(f"controller {self.name!r} at t={t:g} s: {exc}") from None
-            if requested_changed:
-                self.rejections.append(f"t={t:g} s: {exc}")
-            self._y_ref = y_ref
-            self.rejected += 1
+            self._reject(exc, y_ref, requested_changed, t)
             return True
         if requested_changed:
             self.setpoint_changes += 1
         self._y_ref = y_ref
         self._y_model = target
         self.mpc.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
+        return False
+
+    def _reject(self, exc: Exception, y_ref: np.ndarray, requested_changed: bool,
+                t: float) -> None:
+        if requested_changed:
+            self.rejections.append(f"t={t:g} s: {exc}")
+        self._y_ref = y_ref
+        self.rejected += 1
+
+    def _govern(self, target: np.ndarray, y_ref: np.ndarray, requested_changed: bool,
+                t: float) -> bool:
+        """Move the FHOCP set-point towards an admissible ``target`` with the governor."""
+        from controllers.governor import equilibrium_newton
+
+        assert self.governor is not None and self._y_model is not None
+        failed = self.cert.failures(target)
+        if failed:
+            from controllers.equilibrium import _describe
+
+            self._reject(CosimError(f"set-point {_describe(self.model, target)}: "
+                                    + "; ".join(failed)), y_ref, requested_changed, t)
+            return True
+        if requested_changed and equilibrium_newton(
+                self.cert.params, target, self.mpc.x_bar, self.mpc.u_bar) is None:
+            try:  # reachable with ‖ū‖∞ ≤ 1? (the multi-start solve decides)
+                self.cert.reference(target)
+            except CosimError as exc:
+                self._reject(exc, y_ref, requested_changed, t)
+                return True
+        if requested_changed:
+            self.setpoint_changes += 1
+        self._y_ref = y_ref
+        self.governed_steps += 1
+        mpc = self.mpc
+        last = mpc.records[-1] if mpc.records else None
+        # adapt the largest step to the last solve: halve it after a solve that did not
+        # converge, grow it after a converged solve that followed a move
+        if last is not None and not last.result.success:
+            self._lam_max = max(self._lam_max * 0.5, LAM_MIN)
+        elif self._moved and last is not None:
+            self._lam_max = min(1.0, self._lam_max * LAM_GROW)
+        gs = self.governor.step(self.observer.x_hat, self.observer.e_o, self._y_model,
+                                mpc.x_bar, mpc.u_bar, target, mpc.plan, self._lam_max)
+        self._moved = gs.lam > 0.0
+        if gs.lam == 0.0:
+            self._lam = 0.0
+            self.governor_holds += 1
+            return False
+        self._lam = gs.lam
+        self._y_model = gs.y
+        mpc.set_reference(gs.x_bar, gs.u_bar, gs.alpha)
+        self._candidate = gs.candidate
         return False

@@ -20,9 +20,10 @@ Two formulations of the same problem:
     :class:`controllers.shooting.GRUShooting` (dense numpy products, checked against casadi AD
     of :func:`controllers.gru.step`) and reach IPOPT through zero-copy casadi callbacks. IPOPT
     is warm started with the primal and dual solution shifted by one stage
-    (``warm_start_init_point``, small ``mu_init``, adaptive barrier) and capped at 10
-    iterations (deterministic). The ``i = 0`` constraint involves only ``x̂`` (no decision
-    variable): it is checked before the solve, and a violated one is reported as
+    (``warm_start_init_point``, small ``mu_init``, adaptive barrier, ``tol`` 1e-6) and capped
+    at 15 iterations (deterministic; no wall-clock limit by default). The ``i = 0``
+    constraint involves only ``x̂`` (no decision variable): it is checked before the
+    solve, and a violated one is reported as
     ``"infeasible_x0"`` without calling the solver. docs/readme/mpc.md lists the alternatives
     measured (Gauss-Newton Hessian, SX/MX graphs, C code generation, an own SQP) and why they
     lost.
@@ -57,10 +58,11 @@ DEFECT_TOL = 1e-8
 
 #: IPOPT options of the fast formulation (chosen by measurement, see docs/readme/mpc.md).
 FAST_IPOPT_OPTIONS: dict[str, Any] = {
-    "tol": 1e-8,
-    "acceptable_tol": 1e-6,
+    "tol": 1e-6,
+    "acceptable_tol": 1e-5,
     "constr_viol_tol": 1e-9,
     "mu_strategy": "adaptive",
+    "fast_step_computation": "yes",   # no KKT residual check per linear solve: −0.4 ms
     "nlp_scaling_method": "none",
     "mumps_scaling": 0,
     "mumps_permuting_scaling": 0,
@@ -72,8 +74,7 @@ FAST_IPOPT_OPTIONS: dict[str, Any] = {
     "warm_start_slack_bound_push": 1e-6,
     "warm_start_slack_bound_frac": 1e-6,
     "warm_start_mult_bound_push": 1e-6,
-    "max_iter": 10,
-    "max_wall_time": 0.5,
+    "max_iter": 15,
     "print_level": 0,
     "sb": "yes",
 }
@@ -349,6 +350,7 @@ class FHOCP:
         self.ng = (N - 1) * q + 2 * n
         self._cache: dict[str, Any] = {"key": None}
         iu = self.iu.ravel()
+        stages = np.arange(N)
         triu_r, triu_c = np.triu_indices(nw)
         order = np.lexsort((triu_r, triu_c))  # casadi stores nonzeros column by column
         triu_r, triu_c = triu_r[order], triu_c[order]
@@ -428,12 +430,11 @@ class FHOCP:
             Huu = SW.reshape(N * N * m, n).reshape(N, N * m, n)
             Huu = np.matmul(Huu.transpose(1, 0, 2).reshape(N * m, N * n),
                             S.reshape(N * n, N * m))
-            C = np.matmul(ST, W[:, :n, n:])  # (N, Nm, m)
-            for i in range(N):
-                blk = slice(i * m, (i + 1) * m)
-                Huu[:, blk] += C[i]
-                Huu[blk, :] += C[i].T
-                Huu[blk, blk] += W[i, n:, n:] + 2 * lf * self.R
+            C = np.matmul(ST, W[:, :n, n:])  # (N, Nm, m): ∂²/∂u ∂u_i of the x–u terms
+            Ct = C.transpose(1, 0, 2).reshape(N * m, N * m)   # column block i = C[i]
+            Huu += Ct + Ct.T
+            Hv = Huu.reshape(N, m, N, m)
+            Hv[stages, :, stages, :] += W[:, n:, n:] + 2 * lf * self.R
             H[np.ix_(iu, iu)] = Huu
             H[self.it, self.it] = 2 * lf * self.s
             return [H[triu_r, triu_c]]
@@ -453,9 +454,15 @@ class FHOCP:
         fcb, gcb, gradcb, jaccb, hesscb = self._callbacks
         w = ca.MX.sym("w", nw)
         par = ca.MX.sym("p", npar)
-        self._xtraj = lambda wv, pv: self._shoot.rollout(
-            np.asarray(pv).ravel()[:n], np.asarray(wv).ravel()[iu].reshape(N, m),
-            derivatives=False).x
+        def xtraj(wv: np.ndarray, pv: np.ndarray) -> np.ndarray:
+            # the solver's own trajectory at its answer: usually the last point evaluated
+            wv, pv = np.asarray(wv, dtype=float).ravel(), np.asarray(pv, dtype=float).ravel()
+            c = self._cache
+            if c["key"] == (wv.tobytes(), pv.tobytes()):
+                return c["ro"].x
+            return self._shoot.rollout(pv[:n], wv[iu].reshape(N, m), derivatives=False).x
+
+        self._xtraj = xtraj
         def stop_fn(*_: np.ndarray) -> list[np.ndarray]:
             # IPOPT stops ("User_Requested_Stop") when the iteration callback returns nonzero
             return [np.array([1.0 if time.perf_counter() > self._deadline else 0.0])]
@@ -485,6 +492,14 @@ class FHOCP:
         """Right-hand sides ``h − a_i ê_o − b_i − w_L − L b_o`` for ``i = 0 … N−1`` (N×q)."""
         return self.h - self.a * e_o - self.b - self.w_L - self.Lbo
 
+    def rollout(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
+        """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m)."""
+        if self._solver is None:
+            self.setup()
+        if self.formulation == "single-shooting":
+            return self._shoot.rollout(x_hat, u_seq, derivatives=False).x
+        return gru.simulate(self.params, x_hat, u_seq)[0]
+
     def check_x0(self, x_hat: np.ndarray, e_o: float) -> float:
         """Violation of the ``i = 0`` constraint at ``x̂`` (≤ 0 when satisfied)."""
         return float(np.max(self.LUo @ x_hat - self.tightened_bounds(e_o)[0]))
@@ -506,8 +521,7 @@ class FHOCP:
         dx = x[: self.N] - x_bar
         du = u - u_bar
         tN = float(np.max(np.abs(x[self.N] - x_bar))) if t is None else t
-        return float(np.einsum("ij,jk,ik->", dx, self.Q, dx)
-                     + np.einsum("ij,jk,ik->", du, self.R, du) + self.s * tN ** 2)
+        return float(np.vdot(dx @ self.Q, dx) + np.vdot(du @ self.R, du) + self.s * tN ** 2)
 
     def _residuals(self, res: FHOCPResult, x: np.ndarray, e_o: float, x_bar: np.ndarray,
                    alpha: float) -> None:
@@ -703,6 +717,7 @@ class StepRecord:
     result: FHOCPResult
     fallback: bool
     candidate_feasible: bool = True
+    suboptimal: bool = False
     x_hat: np.ndarray | None = None
     e_o: float = 0.0
 
@@ -716,14 +731,23 @@ class RobustMPC:
     applied instead, and the next step shifts it again. Before any successful solve the
     candidate is ``ū`` repeated.
 
+    Suboptimal MPC (``accept_suboptimal``, default on): when the solve stops at the
+    iteration cap with an iterate that passes every residual check (feasible) and costs no
+    more than the candidate, that iterate is applied instead of the candidate (Scokaert,
+    Mayne & Rawlings 1999: feasibility and the candidate's cost decrease are what the proof of
+    ``th:feasibility-stability`` uses). Counted as ``suboptimal_steps``, not as fallbacks.
+
     Parameters
     ----------
     fhocp : FHOCP
         The problem (set up on first use).
+    accept_suboptimal : bool
+        Apply feasible capped iterates (see above); ``False``: only converged solves.
     """
 
-    def __init__(self, fhocp: FHOCP) -> None:
+    def __init__(self, fhocp: FHOCP, accept_suboptimal: bool = True) -> None:
         self.fhocp = fhocp
+        self.accept_suboptimal = bool(accept_suboptimal)
         self.x_bar: np.ndarray | None = None
         self.u_bar: np.ndarray | None = None
         self.alpha: float = float("nan")
@@ -743,16 +767,23 @@ class RobustMPC:
             return np.tile(self.u_bar, (self.fhocp.N, 1))
         return np.vstack([self.plan[1:], self.u_bar])
 
-    def make_step(self, x_hat: np.ndarray, e_o: float) -> StepRecord:
-        """Compute ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``), with the fallback."""
+    def make_step(self, x_hat: np.ndarray, e_o: float,
+                  candidate: np.ndarray | None = None) -> StepRecord:
+        """Compute ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``), with the fallback.
+
+        ``candidate`` (N, m), optional: a sequence known to be feasible (the reference
+        governor's, :mod:`controllers.governor`); it is the initial guess of the solve and
+        the fallback, in place of the shifted previous plan.
+        """
         if self.x_bar is None or self.u_bar is None:
             raise RuntimeError("set_reference() must be called before make_step()")
-        cand = self.candidate()
+        cand = self.candidate() if candidate is None else np.asarray(candidate, dtype=float)
         # the FHOCP warm-starts from its own last iterate shifted by one stage: the candidate
         # itself after a success, the partially converged iterate after a failure
         t0 = time.perf_counter()
         try:
-            res = self.fhocp.solve(x_hat, e_o, self.x_bar, self.u_bar, self.alpha)
+            res = self.fhocp.solve(x_hat, e_o, self.x_bar, self.u_bar, self.alpha,
+                                   u_init=candidate)
         except Exception as exc:
             res = self.fhocp.candidate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha)
             res.status = f"solver_error: {type(exc).__name__}: {exc}"[:200]
@@ -761,9 +792,18 @@ class RobustMPC:
             self.plan = res.u.copy()
             rec = StepRecord(u=res.u[0].copy(), result=res, fallback=False)
             rec.x_hat, rec.e_o = np.array(x_hat, dtype=float), float(e_o)
+            self.records.append(rec)
+            return rec
+        chk = self.fhocp.candidate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha)
+        feasible = chk.constraint_violation <= FEAS_TOL and chk.terminal_violation <= FEAS_TOL
+        if self.accept_suboptimal and res.feasible and (
+                not feasible or res.cost <= chk.cost):
+            # suboptimal MPC: a feasible iterate no costlier than the candidate keeps the
+            # proof's arguments (feasibility, and the cost decrease the candidate gives)
+            self.plan = res.u.copy()
+            rec = StepRecord(u=res.u[0].copy(), result=res, fallback=False, suboptimal=True,
+                             x_hat=np.array(x_hat, dtype=float), e_o=float(e_o))
         else:
-            chk = self.fhocp.candidate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha)
-            feasible = chk.constraint_violation <= FEAS_TOL and chk.terminal_violation <= FEAS_TOL
             self.plan = cand
             rec = StepRecord(u=np.clip(cand[0], -1.0, 1.0), result=res, fallback=True,
                              candidate_feasible=bool(feasible),
@@ -797,6 +837,7 @@ def solver_summary(records: list[StepRecord]) -> dict[str, Any]:
         "failures": int(sum(statuses.values())),
         "failures_by_status": statuses,
         "fallbacks": int(sum(r.fallback for r in records)),
+        "suboptimal_steps": int(sum(r.suboptimal for r in records)),
         "fallback_candidates_infeasible": int(sum(r.fallback and not r.candidate_feasible
                                                   for r in records)),
     }

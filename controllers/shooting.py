@@ -37,6 +37,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.special import expit
 
 from controllers import gru
 
@@ -107,13 +108,16 @@ class GRUShooting:
         # input terms of all stages at once; one (2n × n) product per stage for z and r
         a_u = u @ self._W_zrh.T + self._b_zrh          # (N, 3n)
         U_zr, U_h = self._U_zr, P["U_h"]
+        a_zr, a_h = a_u[:, : 2 * n], a_u[:, 2 * n:]
         for i in range(N):
             xi = x[i]
-            zr = 1.0 / (1.0 + np.exp(-(a_u[i, : 2 * n] + U_zr @ xi)))
-            z[i] = zr[:n]
+            zr = expit(a_zr[i] + U_zr @ xi)
+            zi = zr[:n]
+            z[i] = zi
             r[i] = zr[n:]
-            h[i] = np.tanh(a_u[i, 2 * n:] + U_h @ (zr[n:] * xi))
-            x[i + 1] = h[i] + z[i] * (xi - h[i])
+            hi = np.tanh(a_h[i] + U_h @ (zr[n:] * xi))
+            h[i] = hi
+            x[i + 1] = hi + zi * (xi - hi)
         if not derivatives:
             return Rollout(x, u, z, r, h, {}, np.empty(0), np.empty(0), np.empty(0))
         xs = x[:N]

@@ -161,7 +161,7 @@ def test_fallback_applies_shifted_previous_solution_when_solver_raises(model, ce
 @pytest.mark.parametrize("options", [{"ipopt_options": {"max_iter": 0}},
                                      {"time_budget": 0.0}])
 def test_fallback_when_solver_fails(model, cert, options):
-    ctrl = RobustMPC(make(cert, **options))
+    ctrl = RobustMPC(make(cert, **options), accept_suboptimal=False)
     ref = cert.reference(np.array([0.1, 0.1]))
     ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     x = start_state(model, np.array([0.0, 0.05]))
@@ -188,3 +188,25 @@ def test_residual_check_rejects_wrong_answers(model, cert):
     res = fh.solve(x, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
     assert not res.success
     assert res.terminal_violation > 0 or res.constraint_violation > 0
+
+
+def test_capped_feasible_iterate_is_applied_as_suboptimal(model, cert):
+    """Suboptimal MPC: an iteration-capped solve whose iterate is feasible and no costlier
+    than the shifted candidate is applied (not the candidate); otherwise the fallback."""
+    ref = cert.reference(np.array([0.1, 0.1]))
+    x = start_state(model, np.array([0.0, 0.05]))
+    ctrl = RobustMPC(make(cert, max_iter=2))
+    ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
+    rec = ctrl.make_step(x, 0.02)
+    assert not rec.result.success and rec.result.status == "Maximum_Iterations_Exceeded"
+    cand = ctrl.fhocp.candidate(x, np.tile(ref.u_bar, (N, 1)), ref.x_bar, ref.u_bar, 0.02,
+                                ref.alpha)
+    if rec.result.feasible:
+        assert rec.suboptimal and not rec.fallback
+        np.testing.assert_array_equal(rec.u, rec.result.u[0])
+        assert rec.result.cost <= cand.cost or not (cand.constraint_violation <= FEAS_TOL
+                                                    and cand.terminal_violation <= FEAS_TOL)
+    else:
+        assert rec.fallback and not rec.suboptimal
+    s = ctrl.summary()
+    assert s["suboptimal_steps"] + s["fallbacks"] == 1
