@@ -73,6 +73,7 @@ class RunResult:
     references: list[str] = field(default_factory=list)
     inputs: list[str] = field(default_factory=list)
     bounds: dict[str, tuple[float, float]] = field(default_factory=dict)
+    units: dict[str, str] = field(default_factory=dict)
     perturbation_times: list[float] = field(default_factory=list)
     controller_summary: dict = field(default_factory=dict)
     timing_columns: list[str] = field(default_factory=list)
@@ -223,6 +224,7 @@ class Master:
             start_time=sc.start_time, stop_time=sc.stop_time, outputs=list(self.measured),
             references=list(self.refs), inputs=list(self.ctrl_outputs),
             bounds=dict(getattr(ctrl, "bounds", {}) or {}),
+            units={s.name: s.unit for s in (*ctrl.inputs, *ctrl.outputs) if s.unit},
             perturbation_times=sc.perturbation_times())
         refs = {f"ref.{r}": math.nan for r in self.refs}
         held = dict.fromkeys(self.scenario_plant, math.nan)

@@ -56,7 +56,8 @@ def figure(path: str | Path, result: RunResult, title: str = "") -> Path:
             ax.set_ylim(lo - 0.1 * span, hi + 0.1 * span)
         for tp in result.perturbation_times:
             ax.axvline(tp, color="0.4", ls=":", lw=0.9)
-        ax.set_ylabel(name)
+        unit = result.units.get(name)
+        ax.set_ylabel(f"{name} [{unit}]" if unit else name)
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=7)
     axes[-1, 0].set_xlabel("time [s]")
