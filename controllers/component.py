@@ -55,6 +55,30 @@ LAM_MIN = 0.0625
 LAM_GROW = 2.0
 
 
+def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_rate: Any,
+                   governor: Any, ipopt_options: Any) -> None:
+    """Reject controller options of the wrong type or range with a one-line error."""
+
+    def number(value: Any) -> bool:
+        return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(
+            value)
+
+    if not isinstance(name, str) or not name:
+        raise CosimError(f"option name={name!r}: expected a non-empty string")
+    for key, value in (("offset_free", offset_free), ("governor", governor)):
+        if not isinstance(value, bool):
+            raise CosimError(f"option {key}={value!r}: expected true or false")
+    if not number(offset_filter) or not 0 < offset_filter <= 1:
+        raise CosimError(f"option offset_filter={offset_filter!r}: expected a number in (0, 1]")
+    if setpoint_rate is not None and (not number(setpoint_rate) or setpoint_rate <= 0):
+        raise CosimError(f"option setpoint_rate={setpoint_rate!r}: expected a positive number "
+                         "of metres per sample")
+    if ipopt_options is not None and (not isinstance(ipopt_options, Mapping) or not all(
+            isinstance(k, str) for k in ipopt_options)):
+        raise CosimError(f"option ipopt_options={ipopt_options!r}: expected an object of "
+                         "IPOPT option names and values")
+
+
 class RobustMPCController(Component):
     """Robust MPC with GRU model and observer (Schimperna & Magni), normalised internally.
 
@@ -106,6 +130,9 @@ class RobustMPCController(Component):
         from controllers.mpc import FHOCP, RobustMPC
         from controllers.observer import GRUObserver
 
+        _check_options(name=name, offset_free=offset_free, offset_filter=offset_filter,
+                       setpoint_rate=setpoint_rate, governor=governor,
+                       ipopt_options=ipopt_options)
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
         self.model = GRUModel.load(self.model_path)

@@ -151,3 +151,19 @@ def test_governor_keeps_fhocp_feasible_after_large_step(tmp_path):
     assert np.max(np.abs(h[-1] - 1.4)) < 0.05
     _, again = _large_step_run(tmp_path)
     assert again.columns == res.columns and again.rows == res.rows
+
+
+@pytest.mark.parametrize(("options", "words"), [
+    ({"offset_filter": 2}, "offset_filter=2: expected a number in (0, 1]"),
+    ({"offset_filter": "x"}, "offset_filter='x'"),
+    ({"setpoint_rate": 0}, "setpoint_rate=0: expected a positive number"),
+    ({"setpoint_rate": -1.0}, "setpoint_rate=-1.0"),
+    ({"offset_free": "no"}, "offset_free='no': expected true or false"),
+    ({"governor": 1}, "governor=1: expected true or false"),
+    ({"ipopt_options": 3}, "ipopt_options=3: expected an object"),
+    ({"name": 3}, "name=3: expected a non-empty string"),
+])
+def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
+    with pytest.raises(CosimError) as info:
+        RobustMPCController(**options)
+    assert words in str(info.value) and "\n" not in str(info.value)
