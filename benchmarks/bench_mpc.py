@@ -11,6 +11,12 @@ times, the speed ratio and how well the optimal costs agree.
 Usage::
 
     .venv/bin/python benchmarks/bench_mpc.py [--steps N] [--plant fmu|model] [--quiet]
+        [--no-baseline] [--no-governor] [--solver ipopt|sqp]
+
+The controller runs with its default solver, casadi's ``sqpmethod`` (``--solver sqp``), and at
+every step the same FHOCP is also solved with IPOPT on the same single-shooting callbacks (its
+own warm start) to compare the optimal costs and times (``--no-reference`` skips it);
+``--solver ipopt`` runs the controller with IPOPT instead.
 
 Targets (issue 5): median ≤ 5 ms, p99 ≤ 25 ms per controller step, ≥ 10× faster than the
 plain formulation, optimal costs agreeing.
@@ -42,9 +48,12 @@ BASELINE_OPTIONS = {"max_wall_time": 2.0}
 class TimedController(Component):
     """Wraps the controller: times each ``step`` and solves the baseline FHOCP alongside."""
 
-    def __init__(self, ctrl: RobustMPCController, baseline: FHOCP | None) -> None:
+    def __init__(self, ctrl: RobustMPCController, baseline: FHOCP | None,
+                 reference: FHOCP | None = None) -> None:
         self.ctrl = ctrl
         self.baseline = baseline
+        self.reference = reference
+        self.ref: list[tuple[float, bool, str, float]] = []  # ms, success, status, cost
         self.name, self.inputs, self.outputs = ctrl.name, ctrl.inputs, ctrl.outputs
         self.direct_feedthrough = True
         self.sample_time, self.bounds = ctrl.sample_time, ctrl.bounds
@@ -68,10 +77,13 @@ class TimedController(Component):
         t0 = time.perf_counter()
         self.ctrl.step(t, dt)
         self.step_ms.append((time.perf_counter() - t0) * 1e3)
-        if self.baseline is None:
-            return
         mpc = self.ctrl.mpc
         rec = mpc.records[-1]
+        if self.reference is not None:
+            r = self.reference.solve(rec.x_hat, rec.e_o, mpc.x_bar, mpc.u_bar, mpc.alpha)
+            self.ref.append((r.solve_time * 1e3, r.success, r.status, r.cost))
+        if self.baseline is None:
+            return
         res = self.baseline.solve(rec.x_hat, rec.e_o, mpc.x_bar, mpc.u_bar, mpc.alpha,
                                   u_init=self._u_prev, warm=False)
         if res.success:
@@ -94,6 +106,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "paper_steps.csv"))
     ap.add_argument("--no-governor", action="store_true",
                     help="the paper's controller: no reference governor after set-point steps")
+    ap.add_argument("--solver", choices=("ipopt", "sqp"), default="sqp",
+                    help="NLP solver of the controller's FHOCP (default sqp: casadi sqpmethod "
+                         "+ qpOASES, with IPOPT solving the same problems alongside for "
+                         "comparison; ipopt: the previous default)")
+    ap.add_argument("--no-reference", action="store_true",
+                    help="with --solver sqp: do not solve with IPOPT alongside (timing only)")
+    ap.add_argument("--sqp-options", default="{}",
+                    help='JSON overrides of controllers.mpc.SQP_OPTIONS, e.g. \'{"tol_du": 1e-4}\'')
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args(argv)
 
@@ -102,10 +122,22 @@ def main(argv: list[str] | None = None) -> int:
 
     ctrl = RobustMPCController(governor=not args.no_governor)
     cert = ctrl.cert
+    reference = None
+    if args.solver == "sqp":
+        import json
+
+        ctrl.fhocp.solver = "sqp"
+        ctrl.fhocp.sqp_options.update(json.loads(args.sqp_options))
+        if not args.no_reference:
+            reference = FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L,
+                              cert.a, cert.b, cert.s, solver="ipopt").setup()
+    else:
+        ctrl.fhocp.solver = "ipopt"
+    ctrl.fhocp.setup()
     baseline = None if args.no_baseline else FHOCP(
         cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a, cert.b, cert.s,
         formulation="multiple-shooting", ipopt_options=BASELINE_OPTIONS).setup()
-    timed = TimedController(ctrl, baseline)
+    timed = TimedController(ctrl, baseline, reference)
     sc = scenario_mod.load(args.scenario)
     fmu = ROOT / "fmus" / "FourTank.fmu"
     kind = args.plant or ("fmu" if fmu.exists() else "model")
@@ -144,13 +176,30 @@ def main(argv: list[str] | None = None) -> int:
     s = ctrl.summary()
     print(f"plant: {kind}; steps: {len(timed.step_ms)}; model n={ctrl.model.n}, N={cert.N}; "
           f"load average {os.getloadavg()[0]:.2f} (1 min) at the end")
-    print(f"fast   (single shooting, exact Hessian, IPOPT warm start), controller step: "
+    label = "IPOPT" if args.solver == "ipopt" else "sqpmethod + qpOASES"
+    print(f"fast   (single shooting, exact Hessian, {label} warm start), controller step: "
           f"{stats(timed.step_ms)}")
     print(f"       FHOCP solve only: median {s['solve_ms_median']:.2f}, p99 "
           f"{s['solve_ms_p99']:.2f} ms; iterations median {s['iterations_median']:.0f}; "
           f"failures {s['failures']} {s['failures_by_status']}; fallbacks {s['fallbacks']}; "
           f"suboptimal (capped, feasible) {s['suboptimal_steps']}; governor steps "
           f"{s['governor_steps']} (held {s['governor_holds']})")
+    if timed.ref:
+        rms = [r[0] for r in timed.ref]
+        sms = [r.result.solve_time * 1e3 for r in ctrl.mpc.records]
+        print(f"ipopt  same FHOCPs, default IPOPT solver alongside: {stats(rms)}")
+        print(f"       FHOCP solve ms, sqp vs ipopt: median {np.median(sms):.2f} vs "
+              f"{np.median(rms):.2f}, p99 {np.percentile(sms, 99):.2f} vs "
+              f"{np.percentile(rms, 99):.2f}")
+        rel = [(rec.result.cost - r[3]) / (1.0 + abs(r[3]))
+               for rec, r in zip(ctrl.mpc.records, timed.ref, strict=False)
+               if rec.result.success and r[1]]
+        n_ref = sum(r[1] for r in timed.ref)
+        if rel:
+            ra = np.asarray(rel)
+            print(f"costs  sqp vs ipopt, both optimal at {len(ra)} of {n_ref} ipopt-optimal "
+                  f"steps: within 1e-6 {np.mean(np.abs(ra) <= 1e-6) * 100:.1f} %, max "
+                  f"{np.max(ra):.1e}, min {np.min(ra):.1e}")
     if timed.base:
         bms = [b[0] for b in timed.base]
         print(f"plain  (multiple shooting, do-mpc style IPOPT):                  {stats(bms)}")

@@ -56,7 +56,7 @@ LAM_GROW = 2.0
 
 
 def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_rate: Any,
-                   governor: Any, ipopt_options: Any) -> None:
+                   governor: Any, solver: Any, ipopt_options: Any) -> None:
     """Reject controller options of the wrong type or range with a one-line error."""
 
     def number(value: Any) -> bool:
@@ -73,6 +73,8 @@ def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_
     if setpoint_rate is not None and (not number(setpoint_rate) or setpoint_rate <= 0):
         raise CosimError(f"option setpoint_rate={setpoint_rate!r}: expected a positive number "
                          "of metres per sample")
+    if solver is not None and solver not in ("sqp", "ipopt"):
+        raise CosimError(f"option solver={solver!r}: expected \"sqp\" or \"ipopt\"")
     if ipopt_options is not None and (not isinstance(ipopt_options, Mapping) or not all(
             isinstance(k, str) for k in ipopt_options)):
         raise CosimError(f"option ipopt_options={ipopt_options!r}: expected an object of "
@@ -108,6 +110,9 @@ class RobustMPCController(Component):
         Outside the theorem: move the set-point given to the FHOCP towards the requested one
         by at most this many metres per sample (a rate-limiting reference governor), so that
         the terminal set stays reachable after large steps. Off by default.
+    solver : {"sqp", "ipopt"}, optional
+        NLP solver of the FHOCP (default: SQP with a dense QP, or IPOPT when
+        ``ipopt_options`` are given; see :class:`controllers.mpc.FHOCP`).
     ipopt_options : dict, optional
         Overrides of :data:`controllers.mpc.FAST_IPOPT_OPTIONS`.
     name : str
@@ -123,6 +128,7 @@ class RobustMPCController(Component):
                  e_o0: float = 0.02, gain_scale: float | None = None,
                  offset_free: bool = False, offset_filter: float = 0.05,
                  setpoint_rate: float | None = None, governor: bool = True,
+                 solver: str | None = None,
                  ipopt_options: Mapping[str, Any] | None = None, name: str = "mpc") -> None:
         from controllers import certificates as certs
         from controllers.governor import ReferenceGovernor
@@ -131,7 +137,7 @@ class RobustMPCController(Component):
         from controllers.observer import GRUObserver
 
         _check_options(name=name, offset_free=offset_free, offset_filter=offset_filter,
-                       setpoint_rate=setpoint_rate, governor=governor,
+                       setpoint_rate=setpoint_rate, governor=governor, solver=solver,
                        ipopt_options=ipopt_options)
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
@@ -152,7 +158,7 @@ class RobustMPCController(Component):
             cert = certs.compute_certificate(self.model, gain_scale=gain_scale, **kwargs)
         self.cert = cert
         self.fhocp = FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L,
-                           cert.a, cert.b, cert.s, ipopt_options=ipopt_options)
+                           cert.a, cert.b, cert.s, ipopt_options=ipopt_options, solver=solver)
         # build the solver and load scipy.optimize (the observer's x̂_0 equilibrium) now, so
         # that the first control step is a normal one (importing scipy.optimize: ~0.2 s)
         import scipy.optimize  # noqa: F401

@@ -18,15 +18,17 @@ Two formulations of the same problem:
     Decision variables ``u_0 … u_{N−1}, t`` only (31 for N = 15, m = 2). The states, their
     sensitivities and the exact Hessian of the Lagrangian come from
     :class:`controllers.shooting.GRUShooting` (dense numpy products, checked against casadi AD
-    of :func:`controllers.gru.step`) and reach IPOPT through zero-copy casadi callbacks. IPOPT
-    is warm started with the primal and dual solution shifted by one stage
-    (``warm_start_init_point``, small ``mu_init``, adaptive barrier, ``tol`` 1e-6) and capped
-    at 15 iterations (deterministic; no wall-clock limit by default). The ``i = 0``
-    constraint involves only ``x̂`` (no decision variable): it is checked before the
-    solve, and a violated one is reported as
-    ``"infeasible_x0"`` without calling the solver. docs/readme/mpc.md lists the alternatives
-    measured (Gauss-Newton Hessian, SX/MX graphs, C code generation, an own SQP) and why they
-    lost.
+    of :func:`controllers.gru.step`) and reach the solver through zero-copy casadi callbacks.
+    Default solver: casadi ``sqpmethod`` (:data:`SQP_OPTIONS`: exact Hessian with its
+    eigenvalues clipped at 1e-2, dense active-set QPs by qpOASES, ℓ1-merit line search, at
+    most 15 iterations), warm started with the primal and dual solution shifted by one stage;
+    ``solver="ipopt"`` (or giving ``ipopt_options``) uses IPOPT instead
+    (``warm_start_init_point``, small ``mu_init``, adaptive barrier, ``tol`` 1e-6, 15
+    iterations). No wall-clock limit by default (deterministic). The ``i = 0`` constraint
+    involves only ``x̂`` (no decision variable): it is checked before the solve, and a
+    violated one is reported as ``"infeasible_x0"`` without calling the solver.
+    docs/readme/mpc.md lists the alternatives measured (Gauss-Newton Hessian, SX/MX graphs,
+    C code generation, IPOPT vs SQP) and why they won or lost.
 
 ``"multiple-shooting"`` (the plain baseline, what do-mpc builds)
     States and inputs are all decision variables in stage order with the dynamics as equality
@@ -42,8 +44,11 @@ residuals are within tolerance.
 
 from __future__ import annotations
 
+import contextlib
+import os
+import sys
 import time
-from collections.abc import Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -77,6 +82,27 @@ FAST_IPOPT_OPTIONS: dict[str, Any] = {
     "max_iter": 15,
     "print_level": 0,
     "sb": "yes",
+}
+
+#: Options of the default solver (``solver="sqp"``, casadi ``sqpmethod``), chosen by
+#: measurement (docs/readme/mpc.md): exact Hessian from the same callbacks with its eigenvalues
+#: clipped at ``hessian_eigen_clip`` (numpy ``eigh`` in the callback; our key, not passed to
+#: casadi) for the QP — sqpmethod's ``regularize`` (Gershgorin shift) makes the iterates crawl,
+#: a 1e-7 margin gives steps the ℓ1-merit line search rejects, its ``eigen-clip`` needs many
+#: Jacobi sweeps (at the default 200 it aborts without a status) —, dense active-set QPs by
+#: ``qpOASES`` (``daqp`` stalled at zero steps near regulation: 157 fallbacks on
+#: leak_tank1), ``tol_pr`` below the residual check's 1e-7, the same 15-iteration cap as IPOPT.
+SQP_OPTIONS: dict[str, Any] = {
+    "qpsol": "qpoases",
+    "qpsol_options": {"printLevel": "none", "sparse": False, "error_on_fail": False},
+    "hessian_eigen_clip": 1e-2,
+    "tol_pr": 1e-8,
+    "tol_du": 1e-6,
+    "max_iter": 15,
+    "print_header": False,
+    "print_iteration": False,
+    "print_status": False,
+    "error_on_fail": False,
 }
 
 
@@ -130,6 +156,20 @@ class FHOCPResult:
     feasible: bool = False
     lam_x: np.ndarray | None = field(default=None, repr=False)
     lam_g: np.ndarray | None = field(default=None, repr=False)
+
+
+@contextlib.contextmanager
+def _quiet_stdout() -> Iterator[None]:
+    """Silence the C-level standard output (file descriptor 1) for the block."""
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+        yield
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 class _NumpyFunction(ca.Callback):
@@ -200,6 +240,13 @@ class FHOCP:
         defaults for multiple shooting).
     warm_duals : bool
         Warm start the multipliers too (single shooting default; off for the plain baseline).
+    solver : {"sqp", "ipopt"}, optional
+        NLP solver of the single-shooting formulation: ``"sqp"`` (casadi ``sqpmethod``, exact
+        convexified Hessian, dense qpOASES QPs, :data:`SQP_OPTIONS`) or ``"ipopt"``
+        (:data:`FAST_IPOPT_OPTIONS`). Default: ``"sqp"``, or ``"ipopt"`` when
+        ``ipopt_options`` are given or for multiple shooting (always IPOPT).
+    sqp_options : dict, optional
+        Overrides of :data:`SQP_OPTIONS`.
     time_budget : float, optional
         Wall-time budget of one single-shooting solve [s]; past it the next IPOPT iteration
         is stopped by an iteration callback (status ``"time_budget_exceeded"``) so that the
@@ -212,9 +259,19 @@ class FHOCP:
                  L: np.ndarray, h: np.ndarray, w_L: np.ndarray, a: np.ndarray, b: np.ndarray,
                  s: float, *, formulation: str = "single-shooting",
                  ipopt_options: Mapping[str, Any] | None = None,
-                 warm_duals: bool | None = None, time_budget: float | None = None) -> None:
+                 warm_duals: bool | None = None, time_budget: float | None = None,
+                 solver: str | None = None,
+                 sqp_options: Mapping[str, Any] | None = None) -> None:
         if formulation not in ("single-shooting", "multiple-shooting"):
             raise ValueError(f"unknown formulation {formulation!r}")
+        if solver is None:
+            solver = "sqp" if formulation == "single-shooting" and not ipopt_options else "ipopt"
+        if solver not in ("ipopt", "sqp") or (solver == "sqp"
+                                               and formulation != "single-shooting"):
+            raise ValueError(f"unknown solver {solver!r} for formulation {formulation!r}")
+        self.solver = solver
+        self.sqp_options = {**SQP_OPTIONS, **(sqp_options or {})}
+        self._eigen_clip: float | None = None
         self.params = {k: np.asarray(v, dtype=float) for k, v in params.items()}
         self.n, self.m, self.p = gru.dimensions(self.params)
         self.N = int(N)
@@ -303,8 +360,22 @@ class FHOCP:
         else:
             nlp, opts = self._multiple_shooting()
         self._bounds()
-        self._solver = ca.nlpsol("fhocp", "ipopt", nlp, opts)
+        if self.solver == "sqp":
+            opts = {k: v for k, v in opts.items()
+                    if k not in ("ipopt", "grad_f", "jac_g", "hess_lag")}
+            opts.update(self._sqp_callbacks)
+            sqp = dict(self.sqp_options)
+            clip = sqp.pop("hessian_eigen_clip", None)
+            self._eigen_clip = None if clip is None else float(clip)
+            opts.update(sqp)
+            with _quiet_stdout():  # qpOASES prints its licence banner on construction
+                self._solver = ca.nlpsol("fhocp", "sqpmethod", nlp, opts)
+        else:
+            self._solver = ca.nlpsol("fhocp", "ipopt", nlp, opts)
         self._buffer = None
+        if self.solver == "sqp":
+            with _quiet_stdout():  # … or when its memory is allocated
+                self._call_solver_setup()
         self._warm: dict[str, np.ndarray] | None = None
         return self
 
@@ -408,6 +479,10 @@ class FHOCP:
             return [g_of(pv, wv, ro), J]
 
         def hess_fn(wv, pv, lf, lg):
+            H = hess_full(wv, pv, lf, lg)
+            return [H[triu_r, triu_c]]
+
+        def hess_full(wv, pv, lf, lg):
             ro = roll(wv, pv, True)
             x_bar, _ = split(pv)
             lf = float(lf[0])
@@ -437,7 +512,7 @@ class FHOCP:
             Hv[stages, :, stages, :] += W[:, n:, n:] + 2 * lf * self.R
             H[np.ix_(iu, iu)] = Huu
             H[self.it, self.it] = 2 * lf * self.s
-            return [H[triu_r, triu_c]]
+            return H
 
         sp = ca.Sparsity.dense
         self._callbacks = [
@@ -452,6 +527,33 @@ class FHOCP:
                            [sp_triu], ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
         ]
         fcb, gcb, gradcb, jaccb, hesscb = self._callbacks
+
+        def jac_fg_fn(wv, pv):
+            f, grad = grad_fn(wv, pv)
+            g, J = jac_fn(wv, pv)
+            return [f, grad, g, J]
+
+        def hess_full_fn(wv, pv, lf, lg):
+            H = hess_full(wv, pv, lf, lg)
+            if self._eigen_clip is not None:
+                # convexified for the QP: eigenvalues below the margin clipped (LAPACK eigh,
+                # ~40 µs for 31×31, instead of sqpmethod's Jacobi sweeps)
+                ev, V = np.linalg.eigh(H)
+                if ev[0] < self._eigen_clip:
+                    H = (V * np.maximum(ev, self._eigen_clip)) @ V.T
+            return [H]
+
+        # sqpmethod (``solver="sqp"``) takes f, ∇f, g, ∂g/∂w in one function and the full
+        # (symmetric) Hessian of the Lagrangian
+        self._callbacks_sqp = [
+            _NumpyFunction("nlp_jac_fg", jac_fg_fn, [sp(nw), sp(npar)],
+                           [sp(1), sp(nw), sp(self.ng), sp(self.ng, nw)], ["x", "p"],
+                           ["f", "grad_f_x", "g", "jac_g_x"]),
+            _NumpyFunction("nlp_hess_l", hess_full_fn, [sp(nw), sp(npar), sp(1), sp(self.ng)],
+                           [sp(nw, nw)], ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]),
+        ]
+        self._sqp_callbacks = {"jac_fg": self._callbacks_sqp[0],
+                               "hess_lag": self._callbacks_sqp[1]}
         w = ca.MX.sym("w", nw)
         par = ca.MX.sym("p", npar)
         def xtraj(wv: np.ndarray, pv: np.ndarray) -> np.ndarray:
@@ -594,6 +696,9 @@ class FHOCP:
             res.status = "optimal"
         elif ok_status and not res.success:
             res.status = "residual_check_failed"
+        elif res.status == "Solve_Succeeded":
+            # sqpmethod aborted (e.g. a failed QP) and left the previous solve's status
+            res.status = "solver_aborted"
         if res.success or (np.all(np.isfinite(wopt)) and np.all(np.isfinite(res.lam_g))
                            and np.all(np.isfinite(res.lam_x))):
             # after a failure (time budget, infeasibility) the last primal-dual iterate is
@@ -601,29 +706,37 @@ class FHOCP:
             self._warm = {"w": wopt, "lam_x": res.lam_x, "lam_g": res.lam_g}
         return res
 
+    def _call_solver_setup(self) -> None:
+        """Bind numpy arrays to the solver's zero-copy argument and result buffers."""
+        fn = self._solver
+        buf, trigger = fn.buffer()
+        ins = {name: np.zeros(fn.sparsity_in(i).nnz()) for i, name in enumerate(fn.name_in())}
+        outs = {name: np.zeros(fn.sparsity_out(i).nnz())
+                for i, name in enumerate(fn.name_out())}
+        for i, name in enumerate(fn.name_in()):
+            buf.set_arg(i, memoryview(ins[name]))
+        for i, name in enumerate(fn.name_out()):
+            buf.set_res(i, memoryview(outs[name]))
+        self._buffer = (buf, trigger, ins, outs)
+
     def _call_solver(self, args: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict]:
-        """Run IPOPT; returns the solution arrays and the solver statistics.
+        """Run the solver; returns the solution arrays and the solver statistics.
 
         Arguments and results go through casadi's zero-copy buffers: converting numpy arrays
         to and from ``DM`` costs tens of microseconds per vector.
         """
         if self._buffer is None:
-            fn = self._solver
-            buf, trigger = fn.buffer()
-            ins = {name: np.zeros(fn.sparsity_in(i).nnz())
-                   for i, name in enumerate(fn.name_in())}
-            outs = {name: np.zeros(fn.sparsity_out(i).nnz())
-                    for i, name in enumerate(fn.name_out())}
-            for i, name in enumerate(fn.name_in()):
-                buf.set_arg(i, memoryview(ins[name]))
-            for i, name in enumerate(fn.name_out()):
-                buf.set_res(i, memoryview(outs[name]))
-            self._buffer = (buf, trigger, ins, outs)
+            self._call_solver_setup()
         buf, trigger, ins, outs = self._buffer
         for name, arr in ins.items():
             arr[:] = args.get(name, 0.0)
         trigger()
-        return {k: v.copy() for k, v in outs.items()}, buf.stats()
+        try:
+            stats = buf.stats()
+        except RuntimeError:
+            # casadi 3.8 sqpmethod: no return status after a failed line search
+            stats = {"return_status": "Solver_Stats_Unavailable", "success": False}
+        return {k: v.copy() for k, v in outs.items()}, stats
 
     def reset_warm_start(self) -> None:
         """Forget the previous solution (next solve starts cold)."""

@@ -162,8 +162,14 @@ def test_governor_keeps_fhocp_feasible_after_large_step(tmp_path):
     ({"governor": 1}, "governor=1: expected true or false"),
     ({"ipopt_options": 3}, "ipopt_options=3: expected an object"),
     ({"name": 3}, "name=3: expected a non-empty string"),
+    ({"solver": "fatrop"}, "solver='fatrop': expected \"sqp\" or \"ipopt\""),
 ])
 def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
     with pytest.raises(CosimError) as info:
         RobustMPCController(**options)
     assert words in str(info.value) and "\n" not in str(info.value)
+
+
+def test_solver_option_selects_the_nlp_solver() -> None:
+    assert RobustMPCController().fhocp.solver == "sqp"
+    assert RobustMPCController(solver="ipopt").fhocp.solver == "ipopt"

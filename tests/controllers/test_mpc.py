@@ -210,3 +210,78 @@ def test_capped_feasible_iterate_is_applied_as_suboptimal(model, cert):
         assert rec.fallback and not rec.suboptimal
     s = ctrl.summary()
     assert s["suboptimal_steps"] + s["fallbacks"] == 1
+
+
+@pytest.fixture(scope="module")
+def sqp(cert):
+    return make(cert, solver="sqp", sqp_options={"max_iter": 100})  # cold starts too
+
+
+@pytest.mark.parametrize("y0, y_bar", [((0.0, 0.0), (0.1, 0.1)),
+                                       ((0.15, -0.1), (0.0, 0.05))])
+def test_sqp_option_agrees_with_ipopt_and_passes_checks(model, cert, fast, reference, sqp,
+                                                        y0, y_bar):
+    """``solver="sqp"`` (casadi sqpmethod + qpOASES on the same callbacks) reaches IPOPT's
+    optimum, and its answer passes the same independent residual checks."""
+    x_hat = start_state(model, np.array(y0))
+    ref = cert.reference(np.array(y_bar))
+    fast.reset_warm_start()
+    sqp.reset_warm_start()
+    a = fast.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
+    b = sqp.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, u_init=a.u, warm=False)
+    c = sqp.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
+    assert a.success and b.success and c.success, (a.status, b.status, c.status)
+    assert b.cost == pytest.approx(a.cost, rel=1e-6, abs=1e-9)
+    tight = reference.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, u_init=c.u,
+                            warm=False)
+    assert tight.success and c.cost == pytest.approx(tight.cost, rel=1e-6, abs=1e-9)
+    x, _ = simulate(model.params, x_hat, c.u)
+    np.testing.assert_allclose(x, c.x, atol=1e-12)
+    assert c.constraint_violation <= FEAS_TOL and c.terminal_violation <= FEAS_TOL
+    assert c.defect <= 1e-8 and c.status == "optimal"
+
+
+def test_sqp_closed_loop_warm_start_and_rejects_wrong_answers(model, cert):
+    """Closed loop with the SQP option: warm-started solves succeed in few iterations; a
+    solver answer that violates the terminal set is rejected by the residual checks."""
+    fh = make(cert, solver="sqp")
+    ctrl = RobustMPC(fh)
+    ref = cert.reference(np.array([0.1, 0.1]))
+    ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
+    x = start_state(model, np.array([0.0, 0.05]))
+    for _ in range(N):
+        rec = ctrl.make_step(x, 0.02)
+        assert rec.result.success and not rec.fallback, rec.result.status
+        x = step(model.params, x, rec.u)
+    assert rec.result.iterations <= 3
+    real = fh._call_solver
+
+    def lying(args):
+        sol, stats = real(args)
+        sol["x"] = sol["x"] * 0 + 1.0
+        return sol, stats
+
+    fh._call_solver = lying
+    res = fh.solve(x, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
+    assert not res.success and res.terminal_violation > 0
+
+
+def test_sqp_time_budget_stops_the_solve(model, cert):
+    fh = make(cert, solver="sqp", time_budget=0.0)
+    ref = cert.reference(np.array([0.1, 0.1]))
+    res = fh.solve(start_state(model, np.array([0.0, 0.05])), 0.02, ref.x_bar, ref.u_bar,
+                   ref.alpha, warm=False)
+    assert res.status == "time_budget_exceeded" and not res.success
+
+
+def test_default_solver_is_sqp_unless_ipopt_options_given(cert):
+    args = (cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a, cert.b,
+            cert.s)
+    assert FHOCP(*args).solver == "sqp"
+    assert FHOCP(*args, ipopt_options={"max_iter": 100}).solver == "ipopt"
+    assert FHOCP(*args, formulation="multiple-shooting").solver == "ipopt"
+
+
+def test_sqp_solver_rejected_for_multiple_shooting(cert):
+    with pytest.raises(ValueError, match="solver"):
+        make(cert, formulation="multiple-shooting", solver="sqp")
