@@ -6,6 +6,9 @@ import math
 
 import numpy as np
 
+#: Rows at the end of a set-point interval over which the static offset is averaged.
+SETTLE_ROWS = 20
+
 
 def _col(columns: list[str], data: np.ndarray, name: str) -> np.ndarray | None:
     try:
@@ -39,9 +42,11 @@ def compute(columns: list[str], rows: list[list[float]], outputs: list[str],
         ``iae`` (∫|ref − y| dt per output, zero-order hold), ``final_error`` (ref − y at the
         last row), ``violations`` per constrained output and input (``max``: largest amount
         outside the bounds, ``count``: rows outside), ``control_effort`` per input
-        (``integral_square`` ∫u² dt, ``total_variation`` Σ|Δu|).
+        (``integral_square`` ∫u² dt, ``total_variation`` Σ|Δu|), ``setpoints``: one entry
+        per interval of constant set-points (see :func:`setpoint_errors`).
     """
-    kpis: dict = {"iae": {}, "final_error": {}, "violations": {}, "control_effort": {}}
+    kpis: dict = {"iae": {}, "final_error": {}, "violations": {}, "control_effort": {},
+                  "setpoints": []}
     if not rows:
         return kpis
     data = np.asarray(rows, dtype=float)
@@ -71,7 +76,38 @@ def compute(columns: list[str], rows: list[list[float]], outputs: list[str],
         isq = float(np.sum(v[:-1] ** 2 * dt)) if len(t) > 1 else 0.0
         tv = float(np.sum(np.abs(np.diff(v))))
         kpis["control_effort"][u] = {"integral_square": isq, "total_variation": tv}
+    kpis["setpoints"] = setpoint_errors(columns, data, references)
     return _finite(kpis)
+
+
+def setpoint_errors(columns: list[str], data: np.ndarray, references: list[str],
+                    settle_rows: int = SETTLE_ROWS) -> list[dict]:
+    """Tracking error at each set-point: the static offset the paper reports.
+
+    For each interval over which every ``ref.<o>`` is constant: ``start``/``end`` times,
+    the set-points ``ref``, and ``offset`` = mean of ``y − ref`` over the interval's last
+    ``settle_rows`` rows (or its second half when shorter), per output.
+    """
+    refs = [(o, _col(columns, data, f"ref.{o}"), _col(columns, data, f"plant.{o}"))
+            for o in references]
+    refs = [(o, r, y) for o, r, y in refs if r is not None and y is not None]
+    if not refs or len(data) == 0:
+        return []
+    t = data[:, 0]
+    ref_matrix = np.column_stack([r for _, r, _ in refs])
+    changes = np.flatnonzero(np.any(np.diff(ref_matrix, axis=0) != 0.0, axis=1)) + 1
+    starts = [0, *changes.tolist()]
+    ends = [*changes.tolist(), len(t)]
+    segments = []
+    for i0, i1 in zip(starts, ends, strict=True):
+        tail = slice(max(i0 + (i1 - i0) // 2, i1 - settle_rows), i1)
+        segments.append({
+            "start": float(t[i0]),
+            "end": float(t[i1 - 1]),
+            "ref": {o: float(r[i0]) for o, r, _ in refs},
+            "offset": {o: float(np.mean(y[tail] - r[tail])) for o, r, y in refs},
+        })
+    return segments
 
 
 def _finite(obj: object) -> object:

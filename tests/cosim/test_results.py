@@ -31,6 +31,11 @@ def test_kpis_by_hand() -> None:
     assert k["violations"]["qa"] == {"max": 1.0, "count": 2}
     assert k["control_effort"]["qa"]["integral_square"] == pytest.approx(10 * (1 + 9 + 1))
     assert k["control_effort"]["qa"]["total_variation"] == pytest.approx(2 + 4 + 1)
+    # two set-point intervals; the offset is averaged over each interval's second half
+    assert k["setpoints"] == [
+        {"start": 0.0, "end": 10.0, "ref": {"h1": 1.0}, "offset": {"h1": pytest.approx(-0.2)}},
+        {"start": 20.0, "end": 30.0, "ref": {"h1": 2.0}, "offset": {"h1": pytest.approx(0.0)}},
+    ]
 
 
 def test_csv_follows_cross_check_conventions(tmp_path: Path) -> None:
@@ -57,6 +62,7 @@ def test_write_summary_and_figure(tmp_path: Path) -> None:
     assert doc["steps"] == 3 and doc["steps_planned"] == 9
     assert doc["controller"] == "pi"
     assert doc["controller_summary"] == {"solves": 4, "x": None}  # JSON has no inf
-    assert set(doc["kpis"]) == {"iae", "final_error", "violations", "control_effort"}
+    assert set(doc["kpis"]) == {"iae", "final_error", "violations", "control_effort",
+                                "setpoints"}
     assert (tmp_path / "figure.png").stat().st_size > 10_000
     assert (tmp_path / "results.csv").read_text().count("\n") == 5
