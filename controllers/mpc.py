@@ -27,8 +27,8 @@ Two formulations of the same problem:
     iterations). No wall-clock limit by default (deterministic). The ``i = 0`` constraint
     involves only ``x̂`` (no decision variable): it is checked before the solve, and a
     violated one is reported as ``"infeasible_x0"`` without calling the solver.
-    docs/readme/mpc.md lists the alternatives measured (Gauss-Newton Hessian, SX/MX graphs,
-    C code generation, IPOPT vs SQP) and why they won or lost.
+    The README (section "Robust MPC") lists the alternatives measured (Gauss-Newton Hessian,
+    SX/MX graphs, C code generation, IPOPT vs SQP) and why they won or lost.
 
 ``"multiple-shooting"`` (the plain baseline, what do-mpc builds)
     States and inputs are all decision variables in stage order with the dynamics as equality
@@ -61,7 +61,7 @@ from controllers import gru
 FEAS_TOL = 1e-7
 DEFECT_TOL = 1e-8
 
-#: IPOPT options of the fast formulation (chosen by measurement, see docs/readme/mpc.md).
+#: IPOPT options of the fast formulation (chosen by measurement; README, "Robust MPC").
 FAST_IPOPT_OPTIONS: dict[str, Any] = {
     "tol": 1e-6,
     "acceptable_tol": 1e-5,
@@ -85,13 +85,14 @@ FAST_IPOPT_OPTIONS: dict[str, Any] = {
 }
 
 #: Options of the default solver (``solver="sqp"``, casadi ``sqpmethod``), chosen by
-#: measurement (docs/readme/mpc.md): exact Hessian from the same callbacks with its eigenvalues
-#: clipped at ``hessian_eigen_clip`` (numpy ``eigh`` in the callback; our key, not passed to
-#: casadi) for the QP — sqpmethod's ``regularize`` (Gershgorin shift) makes the iterates crawl,
-#: a 1e-7 margin gives steps the ℓ1-merit line search rejects, its ``eigen-clip`` needs many
-#: Jacobi sweeps (at the default 200 it aborts without a status) —, dense active-set QPs by
-#: ``qpOASES`` (``daqp`` stalled at zero steps near regulation: 157 fallbacks on
-#: leak_tank1), ``tol_pr`` below the residual check's 1e-7, the same 15-iteration cap as IPOPT.
+#: measurement (README, "Robust MPC"): the exact Hessian from the same callbacks, with its
+#: eigenvalues clipped at ``hessian_eigen_clip`` (numpy ``eigh`` in the callback; our key,
+#: not passed to casadi) for the QP. Rejected: sqpmethod's ``regularize`` (Gershgorin shift)
+#: makes the iterates crawl; a 1e-7 clipping margin gives steps the ℓ1-merit line search
+#: rejects; its ``eigen-clip`` needs many Jacobi sweeps (at the default 200 it aborts without
+#: a status). Dense active-set QPs by ``qpOASES`` (``daqp`` stalled at zero steps near
+#: regulation: 157 fallbacks on leak_tank1); ``tol_pr`` below the residual check's 1e-7; the
+#: same 15-iteration cap as IPOPT.
 SQP_OPTIONS: dict[str, Any] = {
     "qpsol": "qpoases",
     "qpsol_options": {"printLevel": "none", "sparse": False, "error_on_fail": False},
