@@ -33,3 +33,25 @@ def random_gru_model(seed: int = 0, n: int = 20, m: int = 2, p: int = 2) -> GRUM
                     input_names=list(FOURTANK.inputs)[:m], input_units=["m3/s"] * m,
                     output_names=list(FOURTANK.outputs)[:p], output_units=["m"] * p,
                     Ts=FOURTANK.Ts, training={"source": f"random_gru_model(seed={seed})"})
+
+
+#: Horizon and output box |y| ≤ 0.25 (normalised) of the certified test problem: tight enough
+#: for the random model to hit the output constraints.
+N = 15
+L_BOX = np.vstack([np.eye(2), -np.eye(2)])
+H_BOX = np.full(4, 0.25)
+
+
+def certified_random_problem(setpoints: list[np.ndarray], seed: int = 0):
+    """``(model, certificate)`` for :func:`random_gru_model` on the box ``L_BOX y ≤ H_BOX``.
+
+    A small w̄_y (0.002) and the largest observer-gain scale for which every hypothesis of
+    ``th:feasibility-stability`` holds at ``setpoints`` (normalised).
+    """
+    from controllers import certificates as certs
+
+    model = random_gru_model(seed)
+    theta, cert = certs.choose_gain_scale(model, setpoints, N=N, w_y_bar=0.002, L=L_BOX,
+                                          h=H_BOX)
+    assert theta is not None, "test design: the hypotheses must hold"
+    return model, cert

@@ -3,30 +3,27 @@ every step it takes comes with a sequence that is feasible for the new set-point
 
 import numpy as np
 import pytest
-from random_gru import random_gru_model
+from random_gru import N, certified_random_problem
 
-from controllers import certificates as certs
 from controllers.equilibrium import equilibrium
 from controllers.governor import ReferenceGovernor, equilibrium_newton
 from controllers.gru import output, simulate
 from controllers.mpc import FHOCP
 
-N = 15
-L_BOX = np.vstack([np.eye(2), -np.eye(2)])
-H_BOX = np.full(4, 0.25)
+
+@pytest.fixture(scope="module")
+def problem():
+    return certified_random_problem([np.array([0.1, 0.1]), np.array([-0.1, -0.1])])
 
 
 @pytest.fixture(scope="module")
-def model():
-    return random_gru_model(0)
+def model(problem):
+    return problem[0]
 
 
 @pytest.fixture(scope="module")
-def cert(model):
-    theta, c = certs.choose_gain_scale(model, [np.array([0.1, 0.1]), np.array([-0.1, -0.1])],
-                                       N=N, w_y_bar=0.002, L=L_BOX, h=H_BOX)
-    assert theta is not None, "test design: the hypotheses must hold"
-    return c
+def cert(problem):
+    return problem[1]
 
 
 @pytest.fixture(scope="module")

@@ -3,33 +3,28 @@ feasibility in closed loop (``th:feasibility-stability``) and the fallback path.
 
 import numpy as np
 import pytest
-from random_gru import random_gru_model
+from random_gru import N, certified_random_problem
 
-from controllers import certificates as certs
 from controllers.equilibrium import equilibrium
 from controllers.gru import output, simulate, step
 from controllers.model_plant import GRUPlant
 from controllers.mpc import FEAS_TOL, FHOCP, RobustMPC
 from controllers.observer import GRUObserver
 
-N = 15
-#: Output box |y| ≤ 0.25 (normalised): tight enough for the random model to hit it.
-L_BOX = np.vstack([np.eye(2), -np.eye(2)])
-H_BOX = np.full(4, 0.25)
+
+@pytest.fixture(scope="module")
+def problem():
+    return certified_random_problem([np.array([0.1, 0.1]), np.array([0.0, 0.05])])
 
 
 @pytest.fixture(scope="module")
-def model():
-    return random_gru_model(0)
+def model(problem):
+    return problem[0]
 
 
 @pytest.fixture(scope="module")
-def cert(model):
-    # a small w̄_y so that every hypothesis of th:feasibility-stability holds
-    theta, c = certs.choose_gain_scale(model, [np.array([0.1, 0.1]), np.array([0.0, 0.05])],
-                                       N=N, w_y_bar=0.002, L=L_BOX, h=H_BOX)
-    assert theta is not None, "test design: the hypotheses must hold"
-    return c
+def cert(problem):
+    return problem[1]
 
 
 def make(cert, max_iter=200, **kw):
