@@ -77,15 +77,49 @@ def gate_bounds(params: Mapping[str, np.ndarray]) -> tuple[float, float, float]:
     ``σ̄_z = σ(‖[W_z U_z b_z]‖∞)``, ``σ̄_r = σ(‖[W_r U_r b_r]‖∞)``,
     ``φ̄_h = tanh(‖[W_h U_h b_h]‖∞)`` (``th:stability-bonassi``, ``eq:gates-bounds``).
     """
-    def stacked(g: str) -> float:
-        return inf_norm(np.hstack([params[f"W_{g}"], params[f"U_{g}"],
-                                   np.reshape(params[f"b_{g}"], (-1, 1))]))
+    return (_sigmoid(_gate_norm(params, "z")), _sigmoid(_gate_norm(params, "r")),
+            math.tanh(_gate_norm(params, "h")))
 
-    return _sigmoid(stacked("z")), _sigmoid(stacked("r")), math.tanh(stacked("h"))
+
+def _gate_norm(params: Mapping[str, np.ndarray], g: str) -> float:
+    """``‖[W_g U_g b_g]‖∞``, the argument of the gate bound of gate ``g`` (``z``, ``r``, ``h``)."""
+    return inf_norm(np.hstack([params[f"W_{g}"], params[f"U_{g}"],
+                               np.reshape(params[f"b_{g}"], (-1, 1))]))
+
+
+def check_gates(params: Mapping[str, np.ndarray], source: str | None = None) -> None:
+    """Raise when the update gate saturates: σ̄_z rounds to 1 in floating point.
+
+    ``ν`` and ``ν_o`` divide by ``1 − σ̄_z`` (``th:stability-bonassi``) and ``ρ_s = ρ_o = 1``
+    (no contraction): none of the certificates exists. That happens once
+    ``‖[W_z U_z b_z]‖∞`` exceeds about 36.7.
+
+    Raises
+    ------
+    CosimError
+        One line naming σ̄_z and its argument (prefixed by ``source``, the model file, when
+        given); also when that argument is not finite (NaN weights).
+    """
+    norm = _gate_norm(params, "z")
+    where = f"{source}: " if source else ""
+    if not math.isfinite(norm):
+        raise CosimError(f"{where}sigma_z (σ̄_z = σ(‖[W_z U_z b_z]‖∞), th:stability-bonassi) "
+                         f"is undefined: ‖[W_z U_z b_z]‖∞ = {norm}, the weights are not finite")
+    if 1.0 - _sigmoid(norm) > 0:
+        return
+    raise CosimError(
+        f"{where}sigma_z (σ̄_z = σ(‖[W_z U_z b_z]‖∞) = σ({norm:.6g}), "
+        "th:stability-bonassi) rounds to 1: the update gate saturates, 1 − σ̄_z = 0, so nu "
+        "and nu_o (÷ (1 − σ̄_z)) are undefined and rho_s = 1; the model has no certificate "
+        "(train with a smaller update-gate bias, or cap it: cosim train --sigma-z-max)")
 
 
 def _index(params: Mapping[str, np.ndarray], Ur: np.ndarray, Uz: np.ndarray) -> float:
-    """``‖U_h‖∞ (¼‖Ur‖∞ + σ̄_r) + ¼ (1 + φ̄_h)/(1 − σ̄_z) ‖Uz‖∞`` (ν, ν_o)."""
+    """``‖U_h‖∞ (¼‖Ur‖∞ + σ̄_r) + ¼ (1 + φ̄_h)/(1 − σ̄_z) ‖Uz‖∞`` (ν, ν_o).
+
+    Raises :class:`CosimError` when σ̄_z rounds to 1 (:func:`check_gates`).
+    """
+    check_gates(params)
     sz, sr, ph = gate_bounds(params)
     return (inf_norm(params["U_h"]) * (0.25 * inf_norm(Ur) + sr)
             + 0.25 * (1.0 + ph) / (1.0 - sz) * inf_norm(Uz))
@@ -597,10 +631,18 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
     L, h : arrays, optional
         Output constraints ``L y ≤ h`` (normalised); default from ``problem``
         (:func:`output_constraints`).
+
+    Raises
+    ------
+    CosimError
+        A bad design argument, or a model without certificate: the update gate saturates
+        (σ̄_z rounds to 1, :func:`check_gates`; the message names the model file when the
+        model has a ``source``).
     """
     params = {k: np.asarray(v, dtype=float) for k, v in model.params.items()}
     n, m = params["W_z"].shape
     p = params["U_o"].shape[0]
+    check_gates(params, getattr(model, "source", None))
     N = _horizon(N)
     if (isinstance(e_o0, bool) or not isinstance(e_o0, (int, float, np.number))
             or not (math.isfinite(e_o0) and e_o0 >= 0)):
@@ -685,6 +727,8 @@ def choose_gain_scale(model: Any, setpoints_norm: Iterable[Sequence[float]], *,
         At ``theta`` (at ``θ = 0`` when ``theta`` is None).
     """
     setpoints = [np.asarray(y, dtype=float) for y in setpoints_norm]
+    check_gates({k: np.asarray(v, dtype=float) for k, v in model.params.items()},
+                getattr(model, "source", None))
     if L_z is None or L_r is None:
         L_z, L_r = observer_gains_lp(model.params)
     if grid is None:

@@ -56,7 +56,7 @@ LAM_GROW = 2.0
 
 
 def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_rate: Any,
-                   governor: Any, solver: Any, ipopt_options: Any) -> None:
+                   governor: Any, solver: Any, ipopt_options: Any, max_iter: Any) -> None:
     """Reject controller options of the wrong type or range with a one-line error."""
 
     def number(value: Any) -> bool:
@@ -73,6 +73,8 @@ def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_
     if setpoint_rate is not None and (not number(setpoint_rate) or setpoint_rate <= 0):
         raise CosimError(f"option setpoint_rate={setpoint_rate!r}: expected a positive number "
                          "of metres per sample")
+    if isinstance(max_iter, bool) or not isinstance(max_iter, int) or not 1 <= max_iter <= 10000:
+        raise CosimError(f"option max_iter={max_iter!r}: expected an integer in [1, 10000]")
     if solver is not None and solver not in ("sqp", "ipopt"):
         raise CosimError(f"option solver={solver!r}: expected \"sqp\" or \"ipopt\"")
     if ipopt_options is not None and (not isinstance(ipopt_options, Mapping) or not all(
@@ -115,6 +117,11 @@ class RobustMPCController(Component):
         ``ipopt_options`` are given; see :class:`controllers.mpc.FHOCP`).
     ipopt_options : dict, optional
         Overrides of :data:`controllers.mpc.FAST_IPOPT_OPTIONS`.
+    max_iter : int
+        Iteration cap of one FHOCP solve (default 15, the real-time bound). A solve that
+        reaches it applies its feasible iterate (suboptimal MPC) or the fallback; that iterate
+        depends on the last bits of the arithmetic, so the regression references are recorded
+        with a cap every solve converges within (``max_iter=200``).
     name : str
         Component name.
     """
@@ -129,7 +136,8 @@ class RobustMPCController(Component):
                  offset_free: bool = False, offset_filter: float = 0.05,
                  setpoint_rate: float | None = None, governor: bool = True,
                  solver: str | None = None,
-                 ipopt_options: Mapping[str, Any] | None = None, name: str = "mpc") -> None:
+                 ipopt_options: Mapping[str, Any] | None = None, max_iter: int = 15,
+                 name: str = "mpc") -> None:
         from controllers import certificates as certs
         from controllers.governor import ReferenceGovernor
         from controllers.model import GRUModel
@@ -138,7 +146,7 @@ class RobustMPCController(Component):
 
         _check_options(name=name, offset_free=offset_free, offset_filter=offset_filter,
                        setpoint_rate=setpoint_rate, governor=governor, solver=solver,
-                       ipopt_options=ipopt_options)
+                       ipopt_options=ipopt_options, max_iter=max_iter)
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
         self.model = GRUModel.load(self.model_path)
@@ -158,7 +166,10 @@ class RobustMPCController(Component):
             cert = certs.compute_certificate(self.model, gain_scale=gain_scale, **kwargs)
         self.cert = cert
         self.fhocp = FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L,
-                           cert.a, cert.b, cert.s, ipopt_options=ipopt_options, solver=solver)
+                           cert.a, cert.b, cert.s, solver=solver,
+                           ipopt_options={"max_iter": max_iter, **(ipopt_options or {})}
+                           if ipopt_options or solver == "ipopt" else None,
+                           sqp_options={"max_iter": max_iter})
         # build the solver and load scipy.optimize (the observer's x̂_0 equilibrium) now, so
         # that the first control step is a normal one (importing scipy.optimize: ~0.2 s)
         import scipy.optimize  # noqa: F401

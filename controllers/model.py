@@ -23,8 +23,11 @@ to ``‖u‖∞ ≤ 1`` (``eq:input-constraint``).
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
+import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -62,6 +65,8 @@ class GRUModel:
         Observer gains of ``eq:observer`` (n×p), when designed.
     w_y_bar : float or None
         Bound of the output perturbation, normalised units (``W_y``).
+    source : str or None
+        The file the model was loaded from (:meth:`load`), for error messages; not saved.
     """
 
     params: dict[str, np.ndarray]
@@ -78,6 +83,7 @@ class GRUModel:
     L_z: np.ndarray | None = None
     L_r: np.ndarray | None = None
     w_y_bar: float | None = None
+    source: str | None = field(default=None, compare=False, repr=False)
 
     @property
     def n(self) -> int:
@@ -134,9 +140,23 @@ class GRUModel:
             doc["w_y_bar"] = float(self.w_y_bar)
         return doc
 
+    def to_json(self) -> str:
+        """The text of the model file (JSON, full float precision, newline-terminated)."""
+        return json.dumps(self.to_dict(), indent=1) + "\n"
+
     def save(self, path: str | Path) -> None:
-        """Write the model file (JSON, full float precision)."""
-        Path(path).write_text(json.dumps(self.to_dict(), indent=1) + "\n")
+        """Write the model file atomically (JSON, full float precision).
+
+        The text goes to a temporary file beside ``path`` that is flushed to disk and renamed
+        onto ``path`` (:func:`write_atomic`): a failed write (full disk, unwritable folder)
+        leaves the previous file byte-identical.
+
+        Raises
+        ------
+        OSError
+            When the file cannot be written; ``path`` is then unchanged.
+        """
+        write_atomic(path, self.to_json())
 
     @classmethod
     def load(cls, path: str | Path) -> GRUModel:
@@ -154,7 +174,13 @@ class GRUModel:
         except json.JSONDecodeError as exc:
             raise ModelFileError(
                 f"{path}:{exc.lineno}:{exc.colno}: invalid JSON ({exc.msg})") from None
-        return cls.from_dict(doc, source=str(path))
+        except RecursionError:
+            raise ModelFileError(f"{path}: invalid model file (JSON nested too deeply)") from None
+        except ValueError as exc:  # e.g. an integer literal with more than 4300 digits
+            raise ModelFileError(f"{path}: invalid JSON ({exc})") from None
+        model = cls.from_dict(doc, source=str(path))
+        model.source = str(path)
+        return model
 
     @classmethod
     def from_dict(cls, doc: Any, source: str = "<model>") -> GRUModel:
@@ -255,3 +281,45 @@ class GRUModel:
                    output_names=output_names, output_units=output_units, Ts=float(Ts),
                    training=training, L_z=L_z, L_r=L_r,
                    w_y_bar=None if w_y_bar is None else float(w_y_bar))
+
+
+def _file_mode() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def write_atomic(path: str | Path, text: str) -> None:
+    """Replace ``path`` with ``text`` (UTF-8) in one step: temporary file, fsync, rename.
+
+    The temporary file ``.<name>.<random>.tmp<suffix>`` is created in the target's folder
+    (created when missing), flushed to disk and renamed onto ``path`` with ``os.replace``
+    (atomic on POSIX). On any failure the temporary file is removed and ``path`` keeps its
+    previous content. The file gets the permissions ``open(path, "w")`` would give.
+
+    Raises
+    ------
+    OSError
+        When creating, writing or renaming fails.
+    """
+    path = Path(path)
+    folder = path.parent
+    folder.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(dir=folder, prefix=f".{path.name}.", suffix=".tmp" + path.suffix)
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8", newline="") as fh:
+            fh.write(text)
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(name, _file_mode())
+        os.replace(name, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(name)
+        raise
+    with contextlib.suppress(OSError):
+        dir_fd = os.open(folder, os.O_RDONLY)
+        try:
+            os.fsync(dir_fd)
+        finally:
+            os.close(dir_fd)

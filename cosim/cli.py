@@ -6,21 +6,23 @@ Exit codes (also in the README):
 * 1 -- a run failed mid-way (results up to the fault are kept), or ``compare`` found a
   deviation outside the tolerance band;
 * 2 -- bad input or usage (scenario, map, model file, FMU, options): nothing was run;
-* 130 -- interrupted.
+* 128 + N -- stopped by signal N: 130 SIGINT (Ctrl-C), 143 SIGTERM, 129 SIGHUP (results up
+  to the signal are kept).
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib
+import signal
 import sys
 from collections.abc import Sequence
 
-from cosim import __version__
+from cosim import __version__, interrupts
 from cosim.errors import (
     EXIT_FAILED,
     EXIT_INPUT_ERROR,
-    EXIT_INTERRUPTED,
+    EXIT_SIGNAL_BASE,
     CosimError,
     SimulationFailed,
 )
@@ -39,9 +41,10 @@ COMMANDS = (
 
 EPILOG = """exit codes:
   0    success
-  1    a run failed mid-way (partial results kept) or compare found deviations
+  1    a run failed mid-way (partial results kept), an output file could not be written,
+       or compare found deviations
   2    bad input or usage; nothing was run
-  130  interrupted"""
+  130  interrupted by Ctrl-C (SIGINT); 143 by SIGTERM, 129 by SIGHUP (partial results kept)"""
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -70,16 +73,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     try:
-        return int(args.func(args) or 0)
+        with interrupts.handling_signals():
+            return int(args.func(args) or 0)
     except SimulationFailed as exc:
         print(f"cosim {args.command}: failed: {exc}", file=sys.stderr)
         return EXIT_FAILED
     except CosimError as exc:
         print(f"cosim {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_INPUT_ERROR
-    except KeyboardInterrupt:
-        print(f"cosim {args.command}: interrupted", file=sys.stderr)
-        return EXIT_INTERRUPTED
+    except KeyboardInterrupt as exc:
+        signum = getattr(exc, "signum", signal.SIGINT)
+        print(f"cosim {args.command}: interrupted ({interrupts.signal_name(signum)})",
+              file=sys.stderr)
+        return EXIT_SIGNAL_BASE + signum
 
 
 if __name__ == "__main__":

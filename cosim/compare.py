@@ -225,6 +225,19 @@ def window_extrema(t: np.ndarray, y: np.ndarray, at: np.ndarray,
     return lo, hi
 
 
+def _check_tolerance_names(label: str, value: Tolerance, signals: Sequence[str]) -> None:
+    """A per-signal tolerance must name a compared signal (``"*"`` is the default)."""
+    if not isinstance(value, Mapping):
+        return
+    for name in value:
+        if name == "*" or name in signals:
+            continue
+        close = [s for s in signals if s.rpartition(".")[2] == name]
+        hint = ("; did you mean " + " or ".join(f"'{c}'" for c in close) + "?") if close else ""
+        raise CosimError(f"--{label} {name}={value[name]:g}: '{name}' is not a compared signal "
+                         f"(compared: {_names(list(signals))}){hint}")
+
+
 def _tol(value: Tolerance, name: str, default: float) -> float:
     if isinstance(value, Mapping):
         return float(value.get(name, value.get("*", default)))
@@ -363,8 +376,8 @@ def compare_tables(result: Table, reference: Table, signals: Sequence[str] | Non
     Raises
     ------
     CosimError
-        A signal missing in one file, no signals, a bad tolerance or window, or a cell that is
-        not a number.
+        A signal missing in one file, no signals, a bad tolerance or window, a per-signal
+        tolerance naming a signal that is not compared, or a cell that is not a number.
     """
     if signals is None:
         only_res = [n for n in result.names if n not in reference.names]
@@ -389,6 +402,8 @@ def compare_tables(result: Table, reference: Table, signals: Sequence[str] | Non
             if missing:
                 raise CosimError(f"{table.path}: no signal {_names(missing)} in the {where} "
                                  f"(it has {_names(table.names)})")
+    for label, tol in (("rtol", rtol), ("atol", atol)):
+        _check_tolerance_names(label, tol, signals)
     if window is not None and not (math.isfinite(window) and window >= 0):
         raise CosimError(f"window must be a finite number ≥ 0 s, got {window}")
     if band and window is None:
@@ -509,7 +524,9 @@ def format_report(c: Comparison, quiet: bool = False) -> str:
 def plot(c: Comparison, path: str | Path, max_signals: int = 16) -> Path:
     """Write a figure: per signal the reference, the result, the band and failing points.
 
-    Failing signals are drawn first; at most ``max_signals`` panels.
+    Failing signals are drawn first; at most ``max_signals`` panels. The file is replaced
+    atomically (:mod:`cosim.atomicio`): a failed write raises
+    :class:`~cosim.errors.OutputError` and leaves the previous file unchanged.
     """
     import matplotlib
 
@@ -542,7 +559,11 @@ def plot(c: Comparison, path: str | Path, max_signals: int = 16) -> Path:
                                                    if more else "")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
+    from cosim.atomicio import replacing
+
+    try:
+        with replacing(path) as tmp:  # a failed write keeps the previous figure
+            fig.savefig(tmp, dpi=100)
+    finally:
+        plt.close(fig)
     return path

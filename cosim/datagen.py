@@ -11,7 +11,9 @@ Row ``k`` of the data set holds ``u_k`` (applied over ``[t_k, t_k + Ts)``) and `
 
 CSV format: a header ``time,<inputs...>,<outputs...>,split`` then one row per sample, with
 ``split`` one of ``train``, ``val``, ``test``. A sidecar ``<name>.json`` records how the data
-were made (seed, plant, hold times, splits) so that they can be regenerated exactly.
+were made (seed, plant, hold times, splits) so that they can be regenerated exactly. Both
+files are written atomically (:mod:`cosim.atomicio`): a failed write leaves the previous pair
+unchanged.
 """
 
 from __future__ import annotations
@@ -145,20 +147,43 @@ def generate(plant: Component, steps: int, seed: int, bounds: Sequence[tuple[flo
 
 
 def write_csv(data: Dataset, path: str | Path, meta: dict | None = None) -> Path:
-    """Write the CSV and its ``.json`` sidecar (``meta`` plus split sizes); return the CSV."""
+    """Write the CSV and its ``.json`` sidecar (``meta`` plus split sizes); return the CSV.
+
+    Both files are written to temporary files first and renamed onto their targets only when
+    both are complete (:func:`cosim.atomicio.replacing`), so a failed write leaves the
+    previous CSV and sidecar unchanged.
+
+    Raises
+    ------
+    OutputError
+        Naming the file that could not be written (full disk, unwritable folder).
+    CosimError
+        When ``path`` ends in ``.json`` (the sidecar would overwrite the data).
+    """
+    from cosim.atomicio import output_error, replacing
+
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as fh:
-        writer = csv.writer(fh)
-        writer.writerow(["time", *data.input_names, *data.output_names, "split"])
-        for k in range(data.time.shape[0]):
-            writer.writerow([repr(float(data.time[k])), *map(repr, data.u[k].tolist()),
-                             *map(repr, data.y[k].tolist()), data.split[k]])
+    side = path.with_suffix(".json")
+    if side == path:
+        raise CosimError(f"{path}: a data file cannot end in .json: that name is its sidecar")
     sidecar = dict(meta or {})
     sidecar.update({"inputs": data.input_names, "outputs": data.output_names,
                     "steps": int(data.time.shape[0]),
                     "splits": {s: int(np.sum(data.split == s)) for s in SPLITS}})
-    path.with_suffix(".json").write_text(json.dumps(sidecar, indent=1) + "\n")
+    with replacing(path) as tmp_csv, replacing(side) as tmp_json:
+        try:
+            with open(tmp_csv, "w", newline="", encoding="utf-8") as fh:
+                writer = csv.writer(fh)
+                writer.writerow(["time", *data.input_names, *data.output_names, "split"])
+                for k in range(data.time.shape[0]):
+                    writer.writerow([repr(float(data.time[k])), *map(repr, data.u[k].tolist()),
+                                     *map(repr, data.y[k].tolist()), data.split[k]])
+        except OSError as exc:
+            raise output_error(path, exc) from None
+        try:
+            tmp_json.write_text(json.dumps(sidecar, indent=1) + "\n", encoding="utf-8")
+        except OSError as exc:
+            raise output_error(side, exc) from None
     return path
 
 
@@ -215,8 +240,8 @@ def _read_rows(path: Path, reader: Any, n_inputs: int | None,
         if sidecar.exists():
             try:
                 input_names = json.loads(sidecar.read_text(encoding="utf-8"))["inputs"]
-            except (OSError, ValueError, KeyError, TypeError):
-                input_names = None
+            except (OSError, ValueError, KeyError, TypeError, RecursionError):
+                input_names = None  # an unreadable sidecar is ignored, as if missing
             if not (isinstance(input_names, list)
                     and all(isinstance(n, str) for n in input_names)):
                 input_names = None

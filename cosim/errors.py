@@ -23,11 +23,21 @@ class SimulationFailed(CosimError):
     """
 
 
+class OutputError(SimulationFailed):
+    """An output file could not be written (full disk, unwritable target).
+
+    The message names the file; the previous content of that file, if any, is intact
+    (see :mod:`cosim.atomicio`). The CLI maps it to exit code 1 (:data:`EXIT_FAILED`).
+    """
+
+
 #: The command did what was asked.
 EXIT_OK = 0
 #: A run failed mid-way (partial results kept), or ``compare`` found a deviation.
 EXIT_FAILED = 1
 #: Bad input or usage: nothing was run.
 EXIT_INPUT_ERROR = 2
-#: Interrupted by the user (Ctrl-C).
+#: Interrupted by the user (Ctrl-C, SIGINT); any signal N gives ``EXIT_SIGNAL_BASE + N``.
 EXIT_INTERRUPTED = 130
+#: Stopped by signal N (SIGINT, SIGTERM, SIGHUP): exit status ``128 + N`` (130, 143, 129).
+EXIT_SIGNAL_BASE = 128

@@ -144,6 +144,10 @@ class FmuComponent(Component):
         Renames/converts signals (see :mod:`cosim.varmap`).
     rtol : float
         CVode relative tolerance for Model Exchange.
+    unpack_dir : str or Path, optional
+        An existing empty folder to extract the archive into; its owner removes it (the
+        isolated worker's parent does, so that nothing is left behind when the worker dies).
+        Default: a new ``cosim-fmu-*`` temporary folder removed by :meth:`terminate`.
 
     Notes
     -----
@@ -155,8 +159,10 @@ class FmuComponent(Component):
 
     def __init__(self, path: str | Path, name: str = "plant", interface: str = "cs",
                  start_values: Mapping[str, float] | None = None,
-                 varmap: VarMap | None = None, rtol: float = 1e-8) -> None:
+                 varmap: VarMap | None = None, rtol: float = 1e-8,
+                 unpack_dir: str | Path | None = None) -> None:
         self.path = Path(path)
+        self.unpack_dir = None if unpack_dir is None else Path(unpack_dir)
         self.name = name
         if interface not in ("cs", "me"):
             raise CosimError(f"{self.path}: unknown interface '{interface}' (use cs or me)")
@@ -218,7 +224,16 @@ class FmuComponent(Component):
 
     def check_signals(self, inputs: list[str], outputs: list[str],
                       units: Mapping[str, str] | None = None) -> None:
-        """Check the signals a run wires to this FMU (see :meth:`VarMap.check`)."""
+        """Check the signals a run wires to this FMU, and every entry of its variable map.
+
+        See :meth:`VarMap.check`: an entry the run does not use is checked too (its variable
+        must exist, with a usable causality, a real type and the unit the map declares).
+
+        Raises
+        ------
+        CosimError
+            One line naming the map file (or this FMU), the signal and the variable.
+        """
         self.varmap.check(self.variables, inputs, outputs, units, fmu=str(self.path))
 
     # -- life cycle ---------------------------------------------------------------------------
@@ -235,7 +250,8 @@ class FmuComponent(Component):
         """Extract, load, instantiate and initialise the FMU at ``t0``."""
         from fmpy import fmi2, fmi3
 
-        self._tmpdir = Path(tempfile.mkdtemp(prefix="cosim-fmu-"))
+        self._tmpdir = (self.unpack_dir if self.unpack_dir is not None
+                        else Path(tempfile.mkdtemp(prefix="cosim-fmu-")))
         safe_extract(self.path, self._tmpdir)
         _INSTANCE_COUNTER[0] += 1
         self._instance_name = f"{self.name}{_INSTANCE_COUNTER[0]}"
@@ -513,6 +529,6 @@ class FmuComponent(Component):
                     free(fmu.component)
             _KEEP_LOADED.append(fmu)
         _LOG_SINKS.pop(self._instance_name, None)
-        if self._tmpdir is not None:
+        if self._tmpdir is not None and self.unpack_dir is None:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
-            self._tmpdir = None
+        self._tmpdir = None

@@ -26,11 +26,12 @@ from __future__ import annotations
 import contextlib
 import math
 import signal
-import threading
 import time as _time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Protocol
 
+from cosim import interrupts
 from cosim.component import Component
 from cosim.errors import CosimError, SimulationFailed
 from cosim.scenario import BIAS, NOISE, PLANT, REF, Scenario
@@ -182,6 +183,7 @@ class Master:
                 raise CosimError(f"{sc.path}:1:1: no column 'ref.{r}': the controller needs a "
                                  f"set-point for '{r}'")
         self.plant_outputs = plant_out
+        self.refs_keys = [f"ref.{r}" for r in self.refs]
         self.scenario_plant = [c.target for c in sc.columns_of(PLANT)]
         self.use_sensor = bool(sc.columns_of(BIAS) or sc.columns_of(NOISE))
 
@@ -203,190 +205,310 @@ class Master:
         return cols
 
     # -- run ----------------------------------------------------------------------------------
-    def run(self, on_step: Callable[[int], None] | None = None) -> RunResult:
+    def run(self, on_step: Callable[[int], None] | None = None, *,
+            record: RowSink | None = None, step_timeout: float | None = None,
+            deadline: float | None = None) -> RunResult:
         """Run the scenario; never raises for a fault inside the run (see ``result.error``).
 
         Parameters
         ----------
         on_step : callable, optional
             Called with the number of completed plant steps after each step (progress bars).
+        record : RowSink, optional
+            Receives every row as it is recorded (``record.append(row, columns)``), e.g. a
+            :class:`cosim.results.ResultsStream` that streams ``results.csv`` to disk. An
+            exception it raises ends the run (status ``failed``).
+        step_timeout : float, optional
+            Wall-clock limit [s] of one controller step (``SIGALRM`` in the main thread, so a
+            controller hung in Python code is stopped; elsewhere the step is measured after
+            it returns). Plant steps are bounded by the plant itself (see
+            :class:`cosim.isolated.IsolatedFmuComponent`).
+        deadline : float, optional
+            ``time.monotonic()`` value past which the run stops with status ``failed``
+            (checked between steps: the whole-run timeout of campaigns).
 
         Raises
         ------
         CosimError
             Only for problems found before the first step.
         """
-        sc, plant, ctrl = self.scenario, self.plant, self.controller
-        times = communication_times(sc.start_time, sc.stop_time, self.dt)
-        base_cols = self.columns()
-        result = RunResult(
-            columns=base_cols, rows=[], steps_planned=len(times) - 1, step_size=self.dt,
-            start_time=sc.start_time, stop_time=sc.stop_time, outputs=list(self.measured),
-            references=list(self.refs), inputs=list(self.ctrl_outputs),
+        if step_timeout is not None and not (math.isfinite(step_timeout) and step_timeout > 0):
+            raise CosimError(f"--step-timeout {step_timeout!r}: expected a positive number of "
+                             "seconds")
+        run = _Run(self, record, step_timeout, deadline)
+        own = interrupts.current() is None
+        with interrupts.handling_signals() as guard:
+            run.guard = guard
+            # signals raise inside the step loop only; elsewhere they are recorded
+            with guard.deferred() if guard is not None else contextlib.nullcontext():
+                run.execute(on_step)
+        if own and guard is not None and guard.signum is not None \
+                and run.result.status != "interrupted":
+            # arrived while the run was being wound up: deliver it to the caller's handler
+            signal.raise_signal(guard.signum)
+        return run.result
+
+
+class RowSink(Protocol):
+    """Where :meth:`Master.run` hands each recorded row (see ``record``)."""
+
+    def append(self, row: list[float], columns: list[str]) -> None:
+        """Take one row; ``columns`` names its cells (it grows when diagnostics appear)."""
+
+
+class _Run:
+    """One execution of a :class:`Master`: the loop state and the step phases.
+
+    One communication step is :meth:`_apply_events`, :meth:`_measure` (plant outputs, the
+    non-finite guard, the sensor), :meth:`_control` (the controller step, its timeout),
+    :meth:`_record` and :meth:`_advance` (the plant step); :meth:`execute` maps what goes
+    wrong in any of them onto the result's status.
+    """
+
+    def __init__(self, master: Master, record: RowSink | None, step_timeout: float | None,
+                 deadline: float | None) -> None:
+        self.m = master
+        self.sink = record
+        self.step_timeout = step_timeout
+        self.deadline = deadline
+        self.guard: interrupts.SignalGuard | None = None
+        sc, ctrl = master.scenario, master.controller
+        self.times = communication_times(sc.start_time, sc.stop_time, master.dt)
+        self.base_cols = master.columns()
+        self.result = RunResult(
+            columns=list(self.base_cols), rows=[], steps_planned=len(self.times) - 1,
+            step_size=master.dt, start_time=sc.start_time, stop_time=sc.stop_time,
+            outputs=list(master.measured), references=list(master.refs),
+            inputs=list(master.ctrl_outputs),
             bounds=dict(getattr(ctrl, "bounds", {}) or {}),
             units={s.name: s.unit for s in (*ctrl.inputs, *ctrl.outputs) if s.unit},
             perturbation_times=sc.perturbation_times())
-        refs = {f"ref.{r}": math.nan for r in self.refs}
-        held = dict.fromkeys(self.scenario_plant, math.nan)
-        sensor = SensorModel(self.measured, seed=self.seed) if self.use_sensor else None
-        set_param = getattr(plant, "set_parameter", None)
+        self.refs = {f"ref.{r}": math.nan for r in master.refs}
+        self.held = dict.fromkeys(master.scenario_plant, math.nan)
+        self.sensor = SensorModel(master.measured, seed=master.seed) if master.use_sensor \
+            else None
+        self.set_param = getattr(master.plant, "set_parameter", None)
+        self.next_event = 0
+        self.diag_names: list[str] = []
+        self.diag_index: dict[str, int] = {}
+        self.timing_names = sorted(getattr(ctrl, "timing_diagnostics", ()) or ())
+        self.cin: dict[str, float] = {}
+        self.u: dict[str, float] = {}
+        self.diag: dict[str, float] = {}
+        self.t = self.times[0]
+        self.loop0: float | None = None
 
-        def apply(event_values: tuple, started: bool) -> None:
-            for col, value in event_values:
-                kind = col.kind
-                if kind == REF:
-                    refs["ref." + col.target] = value
-                elif kind == PLANT:
-                    held[col.target] = value
-                    if set_param is not None:
-                        set_param(col.target, value)
-                    elif started:
-                        plant.set_inputs({col.target: value})
-                elif kind == BIAS:
-                    sensor.set_bias(col.target, value)
-                else:
-                    sensor.set_noise(col.target, value)
+    # -- phases -------------------------------------------------------------------------------
+    def _apply(self, event_values: tuple, started: bool) -> None:
+        plant, sensor = self.m.plant, self.sensor
+        for col, value in event_values:
+            kind = col.kind
+            if kind == REF:
+                self.refs["ref." + col.target] = value
+            elif kind == PLANT:
+                self.held[col.target] = value
+                if self.set_param is not None:
+                    self.set_param(col.target, value)
+                elif started:
+                    plant.set_inputs({col.target: value})
+            elif kind == BIAS:
+                sensor.set_bias(col.target, value)  # type: ignore[union-attr]
+            else:
+                sensor.set_noise(col.target, value)  # type: ignore[union-attr]
 
-        events = sc.events
-        wall0 = _time.perf_counter()
-        # first row: start values (before the plant is initialised), initial set-points
-        apply(events[0].values, started=False)
-        next_event = 1
-        diag_names: list[str] = []
-        diag_index: dict[str, int] = {}
-        rows = result.rows
-        timing_names = sorted(getattr(ctrl, "timing_diagnostics", ()) or ())
-        timing_rows = result.timing_rows
-        measured, ctrl_out, plant_out = self.measured, self.ctrl_outputs, self.plant_outputs
-        ref_keys = list(refs)
-        held_keys = list(held)
-        cin: dict[str, float] = {}
-        ratio = self.ratio
-        isfinite = math.isfinite
-        k = 0
-        t = times[0]
-        u: dict[str, float] = {}
-        loop0: float | None = None
-        # Ctrl-C raises KeyboardInterrupt as usual; the flag catches an interrupt that a
-        # library swallowed (casadi turns one inside an IPOPT solve into a failed solve)
-        interrupted: list[bool] = []
-        previous_handler = None
-        if (threading.current_thread() is threading.main_thread()
-                and signal.getsignal(signal.SIGINT) is not signal.SIG_IGN):
-            def on_sigint(signum: int, frame: object) -> None:
-                interrupted.append(True)
-                raise KeyboardInterrupt
+    def _apply_events(self, t: float) -> None:
+        events = self.m.scenario.events
+        tol = 1e-9 * max(1.0, abs(t))
+        while self.next_event < len(events) and events[self.next_event].time <= t + tol:
+            self._apply(events[self.next_event].values, started=True)
+            self.next_event += 1
 
-            previous_handler = signal.signal(signal.SIGINT, on_sigint)
+    def _start(self) -> None:
+        """Start values and first set-points, then set up plant and controller."""
+        m, t = self.m, self.t
+        self._apply(m.scenario.events[0].values, started=False)
+        self.next_event = 1
         try:
-            try:
-                plant.setup(t)
-                if set_param is None:
-                    plant.set_inputs({p: v for p, v in held.items() if not math.isnan(v)})
-                ctrl.setup(t)
-            except (CosimError, SimulationFailed):
-                raise
-            except Exception as exc:
-                raise SimulationFailed(f"setup at t={t!r} failed: {exc}") from exc
-            n = len(times) - 1
-            loop0 = _time.perf_counter()
-            while True:
-                t = times[k]
-                tol = 1e-9 * max(1.0, abs(t))
-                while next_event < len(events) and events[next_event].time <= t + tol:
-                    apply(events[next_event].values, started=True)
-                    next_event += 1
-                y = plant.get_outputs()
-                if not all(map(isfinite, y.values())):
-                    bad = next(n for n in plant_out if not isfinite(y[n]))
-                    raise SimulationFailed(f"plant output '{bad}' is {y[bad]!r} at t={t!r}")
-                if sensor is not None:
-                    sensor.set_inputs(y)
-                    sensor.step(t, self.dt)
-                    ym = sensor.get_outputs()
-                else:
-                    ym = y
-                if k % ratio == 0:
-                    for name in measured:
-                        cin[name] = ym[name]
-                    cin.update(refs)
-                    try:
-                        ctrl.set_inputs(cin)
-                        ctrl.step(t, self.dt * ratio)
-                        u = ctrl.get_outputs()
-                        diag = ctrl.diagnostics()
-                        if timing_names:
-                            diag = dict(diag)
-                            timing_rows.append(
-                                [t, *(_as_float(diag.pop(name, math.nan))
-                                      for name in timing_names)])
-                    except (CosimError, SimulationFailed):
-                        raise
-                    except Exception as exc:
-                        raise SimulationFailed(
-                            f"controller '{ctrl.name}': step at t={t!r} failed: "
-                            f"{type(exc).__name__}: {exc}") from exc
-                    if interrupted:
-                        raise KeyboardInterrupt
-                row = [t]
-                row += map(refs.__getitem__, ref_keys)
-                row += map(held.__getitem__, held_keys)
-                row += map(y.__getitem__, plant_out)
-                if sensor is not None:
-                    row += map(ym.__getitem__, measured)
-                row += map(u.__getitem__, ctrl_out)
-                if diag:
-                    if list(diag) == diag_names:  # same diagnostics as before: fast path
-                        row += map(_as_float, diag.values())
-                    else:
-                        extra = [math.nan] * len(diag_names)
-                        for key, value in diag.items():
-                            j = diag_index.get(key)
-                            if j is None:
-                                j = diag_index[key] = len(diag_names)
-                                diag_names.append(key)
-                                extra.append(math.nan)
-                            extra[j] = _as_float(value)
-                        row += extra
-                rows.append(row)
-                if k == n:
-                    break
-                plant.set_inputs(u)
-                plant.step(t, times[k + 1] - t)
-                k += 1
-                result.steps = k
-                if on_step is not None:
-                    on_step(k)
-                if interrupted:
-                    raise KeyboardInterrupt
+            m.plant.setup(t)
+            if self.set_param is None:
+                m.plant.set_inputs({p: v for p, v in self.held.items() if not math.isnan(v)})
+            m.controller.setup(t)
+        except (CosimError, SimulationFailed):
+            raise
+        except Exception as exc:
+            raise SimulationFailed(f"setup at t={t!r} failed: {exc}") from exc
+
+    def _measure(self, t: float) -> tuple[dict[str, float], dict[str, float]]:
+        """Plant outputs ``y(t)`` (all finite) and what the controller measures."""
+        y = self.m.plant.get_outputs()
+        if not all(map(math.isfinite, y.values())):
+            bad = next(n for n in self.m.plant_outputs if not math.isfinite(y[n]))
+            raise SimulationFailed(f"plant output '{bad}' is {y[bad]!r} at t={t!r}")
+        sensor = self.sensor
+        if sensor is None:
+            return y, y
+        sensor.set_inputs(y)
+        sensor.step(t, self.m.dt)
+        return y, sensor.get_outputs()
+
+    def _control(self, t: float, ym: dict[str, float]) -> None:
+        """The controller step: ``u`` and the diagnostics from ``y_m(t)`` and the set-points."""
+        ctrl, cin, limit = self.m.controller, self.cin, self.step_timeout
+        for name in self.m.measured:
+            cin[name] = ym[name]
+        cin.update(self.refs)
+        fired: list[bool] = []
+        t0 = _time.perf_counter()
+        try:
+            if limit is None:
+                self._controller_step(t)
+            else:
+                with interrupts.alarm(limit) as fired:
+                    self._controller_step(t)
+        except (CosimError, SimulationFailed):
+            raise
+        except Exception as exc:
+            if fired:
+                raise self._timeout(t) from None
+            raise SimulationFailed(f"controller '{ctrl.name}': step at t={t!r} failed: "
+                                   f"{type(exc).__name__}: {exc}") from exc
+        if fired or (limit is not None and _time.perf_counter() - t0 > limit):
+            raise self._timeout(t)
+
+    def _controller_step(self, t: float) -> None:
+        ctrl = self.m.controller
+        ctrl.set_inputs(self.cin)
+        ctrl.step(t, self.m.dt * self.m.ratio)
+        self.u = ctrl.get_outputs()
+        diag = ctrl.diagnostics()
+        if self.timing_names:
+            diag = dict(diag)
+            self.result.timing_rows.append(
+                [t, *(_as_float(diag.pop(name, math.nan)) for name in self.timing_names)])
+        self.diag = diag
+
+    def _timeout(self, t: float) -> SimulationFailed:
+        return SimulationFailed(f"controller '{self.m.controller.name}': step at t={t!r} took "
+                                f"longer than the step timeout of {self.step_timeout:g} s")
+
+    def _record(self, t: float, y: dict[str, float], ym: dict[str, float]) -> None:
+        m = self.m
+        row = [t]
+        row += map(self.refs.__getitem__, m.refs_keys)
+        row += map(self.held.__getitem__, m.scenario_plant)
+        row += map(y.__getitem__, m.plant_outputs)
+        if self.sensor is not None:
+            row += map(ym.__getitem__, m.measured)
+        row += map(self.u.__getitem__, m.ctrl_outputs)
+        diag = self.diag
+        if diag:
+            names = self.diag_names
+            if list(diag) == names:  # same diagnostics as before: fast path
+                row += map(_as_float, diag.values())
+            else:
+                extra = [math.nan] * len(names)
+                for key, value in diag.items():
+                    j = self.diag_index.get(key)
+                    if j is None:
+                        j = self.diag_index[key] = len(names)
+                        names.append(key)
+                        extra.append(math.nan)
+                        self.result.columns.append(f"{PREFIX_CTRL}.{key}")
+                    extra[j] = _as_float(value)
+                row += extra
+        self.result.rows.append(row)
+        if self.sink is not None:
+            self.sink.append(row, self.result.columns)
+
+    def _advance(self, k: int) -> None:
+        """The plant step from ``t_k`` to ``t_k+1`` with ``u_k`` held."""
+        plant, t = self.m.plant, self.times[k]
+        plant.set_inputs(self.u)
+        plant.step(t, self.times[k + 1] - t)
+
+    def _check_interrupt(self) -> None:
+        if self.guard is not None:
+            self.guard.check()
+        if self.deadline is not None and _time.monotonic() > self.deadline:
+            raise SimulationFailed(f"run timeout: stopped at t={self.t!r} after "
+                                   f"{self.result.steps} of {self.result.steps_planned} steps")
+
+    # -- the loop -----------------------------------------------------------------------------
+    def execute(self, on_step: Callable[[int], None] | None) -> None:
+        """Run every step; map a fault or a signal onto the result (never raises)."""
+        result, guard = self.result, self.guard
+        wall0 = _time.perf_counter()
+        try:
+            with guard.raising() if guard is not None else contextlib.nullcontext():
+                self._loop(on_step)
         except KeyboardInterrupt as exc:
-            result.status, result.reason, result.error = "interrupted", "interrupted", exc
+            self._interrupted(exc)
         except (CosimError, SimulationFailed) as exc:
-            result.status, result.reason, result.error = "failed", str(exc), exc
+            self._failed(exc)
         except Exception as exc:  # a bug or an unexpected library error: keep the rows
-            err = SimulationFailed(f"at t={t!r}: {type(exc).__name__}: {exc}")
-            result.status, result.reason, result.error = "failed", str(err), err
+            self._failed(SimulationFailed(f"at t={self.t!r}: {type(exc).__name__}: {exc}"))
         finally:
-            if previous_handler is not None:
-                signal.signal(signal.SIGINT, previous_handler)
             result.wall_time_s = _time.perf_counter() - wall0
-            if loop0 is not None:
-                result.loop_time_s = _time.perf_counter() - loop0
-            try:
-                result.controller_summary = dict(ctrl.summary() or {})
-            except Exception as exc:
-                result.controller_summary = {"error": f"summary failed: {exc}"}
-            for comp in (ctrl, plant):
-                with contextlib.suppress(Exception):
-                    comp.terminate()
-        result.columns = base_cols + [f"{PREFIX_CTRL}.{d}" for d in diag_names]
-        if timing_names:
-            result.timing_columns = ["time", *(f"{PREFIX_CTRL}.{d}" for d in timing_names)]
+            if self.loop0 is not None:
+                result.loop_time_s = _time.perf_counter() - self.loop0
+            self._finish()
+
+    def _loop(self, on_step: Callable[[int], None] | None) -> None:
+        result, ratio, times = self.result, self.m.ratio, self.times
+        n = len(times) - 1
+        self._start()
+        self.loop0 = _time.perf_counter()
+        k = 0
+        while True:
+            self.t = t = times[k]
+            self._apply_events(t)
+            y, ym = self._measure(t)
+            if k % ratio == 0:
+                self._control(t, ym)
+                self._check_interrupt()
+            self._record(t, y, ym)
+            if k == n:
+                break
+            self._advance(k)
+            k += 1
+            result.steps = k
+            if on_step is not None:
+                on_step(k)
+            self._check_interrupt()
+
+    def _interrupted(self, exc: KeyboardInterrupt) -> None:
+        if not isinstance(exc, interrupts.Interrupted):
+            exc = interrupts.Interrupted(signal.SIGINT)
+        r = self.result
+        r.status, r.error = "interrupted", exc
+        r.reason = f"interrupted by {interrupts.signal_name(exc.signum)} at t={self.t!r}"
+
+    def _failed(self, exc: CosimError) -> None:
+        guard = self.guard
+        if guard is not None and guard.signum is not None:
+            # the signal reached library code (an FMU's doStep written in Python, a solver
+            # callback) and came back as an error: the run was interrupted, not broken
+            self._interrupted(interrupts.Interrupted(guard.signum))
+            return
+        r = self.result
+        r.status, r.reason, r.error = "failed", str(exc), exc
+
+    def _finish(self) -> None:
+        """Controller summary, terminate both components, pad short rows."""
+        result, m = self.result, self.m
+        try:
+            result.controller_summary = dict(m.controller.summary() or {})
+        except Exception as exc:
+            result.controller_summary = {"error": f"summary failed: {exc}"}
+        for comp in (m.controller, m.plant):
+            with contextlib.suppress(Exception):
+                comp.terminate()
+        if self.timing_names:
+            result.timing_columns = ["time", *(f"{PREFIX_CTRL}.{d}" for d in self.timing_names)]
         width = len(result.columns)
-        for row in rows:
+        for row in result.rows:
             if len(row) < width:
                 row.extend([math.nan] * (width - len(row)))
-        return result
 
 
 def _as_float(value: object) -> float:

@@ -2,7 +2,8 @@
 
 A command that would compute for minutes and then fail to write its result checks the
 target first: each helper raises a one-line :class:`~cosim.errors.CosimError` naming the
-path and the option. Nothing is created here (a failed command leaves no empty folder);
+path and the option (an :class:`~cosim.errors.OutputError`, exit 1, when the folder is not
+writable). Nothing is created here (a failed command leaves no empty folder);
 the writer creates missing folders.
 """
 
@@ -11,7 +12,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from cosim.errors import CosimError
+from cosim.errors import CosimError, OutputError
 
 #: File types a figure option can write (matplotlib's, by file name suffix).
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".eps", ".ps", ".tif",
@@ -27,7 +28,9 @@ def _check_parents(folder: Path, path: Path, option: str) -> None:
     if not probe.is_dir():
         raise CosimError(f"{path}: {option}: '{probe}' is not a folder")
     if not os.access(probe, os.W_OK | os.X_OK):
-        raise CosimError(f"{path}: {option}: the folder '{probe}' is not writable")
+        # an unwritable target is an output failure (exit 1), like a full disk
+        raise OutputError(f"{path}: cannot write: {option}: the folder '{probe}' is not "
+                          "writable")
 
 
 def out_dir(path: str | Path, option: str = "--out") -> Path:

@@ -65,6 +65,9 @@ def parse_options(items: Sequence[str]) -> dict[str, Any]:
             options[key] = json.loads(text)
         except json.JSONDecodeError:
             options[key] = text
+        except (RecursionError, ValueError) as exc:
+            why = "nested too deeply" if isinstance(exc, RecursionError) else str(exc)
+            raise CosimError(f"controller option '{key}': invalid JSON value ({why})") from None
     return options
 
 

@@ -1,4 +1,14 @@
-"""Writing a run to disk: ``results.csv``, ``summary.json`` (and the figure, via plots).
+"""Writing a run to disk: ``results.csv``, ``timings.csv``, ``summary.json``, ``figure.png``.
+
+While a run goes, :class:`ResultsStream` streams its rows into ``results.csv.part`` in the
+output folder, flushed to disk at least once a second of wall time: a run killed outright
+(SIGKILL, the OOM killer, a power loss) leaves every row but the last second's there, in the
+same CSV format. When the run ends, however it ends (ok, failed, interrupted), :func:`write`
+renames that file to ``results.csv`` and writes ``timings.csv``, ``summary.json`` and
+``figure.png``, each to a temporary file renamed into place (:mod:`cosim.atomicio`): a failed
+write leaves the previous file intact. Files of an earlier run in the same folder that this
+run does not write (a ``figure.png`` when ``--no-figure`` is given) are removed, so a folder
+never mixes two runs.
 
 ``results.csv`` follows the FMI cross-check CSV rules: comma separated, the header row holds
 the column names in double quotes, ``time`` first, numbers unquoted in full precision
@@ -11,20 +21,160 @@ input), ``ctrl.<diagnostic>`` (controller diagnostics; ``nan`` where a step had 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
+import os
+import time
 from pathlib import Path
 
+from cosim import atomicio
 from cosim import kpis as _kpis
+from cosim.errors import OutputError
 from cosim.master import RunResult
 
+__all__ = ["PART_SUFFIX", "RUN_FILES", "ResultsStream", "summary", "write", "write_csv"]
 
-def write_csv(path: Path, columns: list[str], rows: list[list[float]]) -> None:
-    """Write rows in cross-check CSV format (see the module docstring)."""
-    with open(path, "w", encoding="utf-8", newline="\n") as f:
-        f.write(",".join('"' + c.replace('"', '""') + '"' for c in columns) + "\n")
-        rep = float.__repr__
-        f.writelines(",".join([rep(float(v)) for v in row]) + "\n" for row in rows)
+#: Every file a run writes into its folder.
+RUN_FILES = ("results.csv", "timings.csv", "summary.json", "figure.png")
+#: Suffix of the file ``results.csv`` is streamed into while the run goes.
+PART_SUFFIX = ".part"
+#: Most seconds of wall time between two flushes of the streamed rows.
+FLUSH_INTERVAL = 1.0
+
+
+def _header(columns: list[str]) -> str:
+    return ",".join('"' + c.replace('"', '""') + '"' for c in columns) + "\n"
+
+
+def _lines(rows: list[list[float]], width: int | None = None) -> str:
+    rep = float.__repr__
+    if width is None:
+        return "".join(",".join([rep(float(v)) for v in row]) + "\n" for row in rows)
+    pad = ["nan"] * width
+    return "".join(",".join(([rep(float(v)) for v in row[:width]] + pad)[:width]) + "\n"
+                   for row in rows)
+
+
+def write_csv(path: str | Path, columns: list[str], rows: list[list[float]]) -> None:
+    """Write rows in cross-check CSV format (see the module docstring), atomically.
+
+    Raises
+    ------
+    OutputError
+        The file could not be written; a previous ``path`` is intact.
+    """
+    with atomicio.open_replacing(path, "w", newline="\n") as f:
+        f.write(_header(columns))
+        f.write(_lines(rows))
+
+
+class ResultsStream:
+    """``results.csv`` streamed to ``results.csv.part`` as the run goes (a ``RowSink``).
+
+    Rows are buffered and written with ``flush`` + ``fsync`` at least every
+    ``flush_interval`` seconds of wall time (and at the first row, with the header).
+    :meth:`finish` renames the file onto ``results.csv``. A write that fails (full disk)
+    truncates the file back to its last complete row, raises :class:`OutputError` (which
+    ends the run) and keeps what was written in ``results.csv.part``.
+
+    Parameters
+    ----------
+    path : str or Path
+        The final ``results.csv``.
+    flush_interval : float
+        Most seconds between flushes.
+    """
+
+    def __init__(self, path: str | Path, flush_interval: float = FLUSH_INTERVAL) -> None:
+        self.path = Path(path)
+        self.part = self.path.with_name(self.path.name + PART_SUFFIX)
+        self.flush_interval = float(flush_interval)
+        self.columns: list[str] | None = None
+        self.error: OutputError | None = None
+        self._fh: object = None
+        self._pending: list[list[float]] = []
+        self._last = 0.0
+        self._good = 0
+        self._stale = False
+
+    def append(self, row: list[float], columns: list[str]) -> None:
+        """Take one row (``columns`` names its cells); flush when it is time."""
+        self._pending.append(row)
+        if self.columns is None or time.monotonic() - self._last >= self.flush_interval:
+            self.flush(columns)
+
+    def flush(self, columns: list[str]) -> None:
+        """Write the buffered rows to disk now."""
+        if self.error is not None:
+            raise self.error
+        fh = self._fh
+        try:
+            if fh is None:
+                self.columns = list(columns)
+                fh = self._fh = open(self.part, "w", encoding="utf-8", newline="\n")  # noqa: SIM115
+                os.chmod(self.part, atomicio.FILE_MODE)
+                fh.write(_header(self.columns))
+            width = len(self.columns)
+            if any(len(r) > width for r in self._pending):
+                self._stale = True  # a diagnostic appeared: finish() rewrites the file
+            fh.write(_lines(self._pending, width))
+            fh.flush()
+            os.fsync(fh.fileno())
+            self._good = fh.tell()
+        except OSError as exc:
+            self._fail(exc)
+        self._pending.clear()
+        self._last = time.monotonic()
+
+    def _fail(self, exc: OSError) -> None:
+        fh, self._fh = self._fh, None
+        if fh is not None:
+            with contextlib.suppress(OSError):
+                fh.truncate(self._good)  # the file ends with a complete row
+            with contextlib.suppress(OSError):
+                fh.close()
+        kept = f" (rows written so far kept in {self.part.name})" if self._good else ""
+        self.error = OutputError(f"{self.path}: cannot write: "
+                                 f"{exc.strerror or exc}{kept}")
+        raise self.error
+
+    def finish(self, columns: list[str], rows: list[list[float]]) -> None:
+        """The run has ended: complete the file and rename it onto ``results.csv``.
+
+        When the columns changed after the header was written (a diagnostic appeared
+        mid-run), or nothing was streamed, the file is written again from ``rows``.
+
+        Raises
+        ------
+        OutputError
+            A write failed (also one that failed earlier during the run); ``results.csv``
+            is then left as it was.
+        """
+        if self.error is not None:
+            raise self.error
+        fh = self._fh
+        if fh is None or self._stale or list(columns) != self.columns:
+            self.close()
+            write_csv(self.path, columns, rows)
+            with contextlib.suppress(OSError):
+                self.part.unlink()
+            return
+        self.flush(columns)
+        self._fh = None
+        try:
+            fh.close()
+            os.replace(self.part, self.path)
+        except OSError as exc:
+            raise atomicio.output_error(self.path, exc) from None
+        atomicio.fsync_folder(self.path.parent)
+
+    def close(self) -> None:
+        """Close the file without renaming it (it stays as ``results.csv.part``)."""
+        fh, self._fh = self._fh, None
+        if fh is not None:
+            with contextlib.suppress(OSError):
+                fh.close()
 
 
 def summary(result: RunResult, meta: dict | None = None) -> dict:
@@ -67,29 +217,92 @@ def _jsonable(obj: object) -> object:
 
 
 def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
-          figure: bool = True) -> dict:
-    """Write ``results.csv``, ``summary.json`` and (optionally) ``figure.png`` into ``out_dir``.
+          figure: bool = True, stream: ResultsStream | None = None) -> dict:
+    """Write a run into ``out_dir``: ``results.csv``, ``timings.csv``, ``summary.json``,
+    ``figure.png``, each atomically; remove the files of an earlier run it does not write.
 
     Wall-clock diagnostics (the controller's ``timing_diagnostics``, e.g. solve times) go to
     ``timings.csv`` (``time`` then one column each, one row per controller step), so that
     ``results.csv`` is identical across runs of the same scenario.
 
+    Parameters
+    ----------
+    stream : ResultsStream, optional
+        The stream the run's rows went to; it is finished (renamed onto ``results.csv``)
+        instead of writing the rows again.
+
+    Returns
+    -------
+    dict
+        The summary document.
+
+    Raises
+    ------
+    OutputError
+        For the first file that could not be written (it keeps its previous content). When
+        ``results.csv`` cannot be written nothing else is (the folder keeps the previous run
+        whole); otherwise every other file is still tried.
+
+    Notes
+    -----
     The figure is best effort: a plotting error is recorded in the summary under
     ``figure_error`` instead of hiding the results.
     """
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "results.csv", result.columns, result.rows)
+    errors: list[OutputError] = []
+    written: set[str] = set()
+
+    def attempt(name: str, fn: object, *args: object) -> None:
+        try:
+            fn(*args)  # type: ignore[operator]
+            written.add(name)
+        except OutputError as exc:
+            errors.append(exc)
+        except _NotDrawn:
+            pass
+
+    if stream is not None:
+        attempt("results.csv", stream.finish, result.columns, result.rows)
+    else:
+        attempt("results.csv", write_csv, out / "results.csv", result.columns, result.rows)
+    if errors:
+        # no results.csv, so no files that would describe it: the folder keeps the previous
+        # run whole (and the rows of this one in results.csv.part)
+        raise errors[0]
     if result.timing_columns:
-        write_csv(out / "timings.csv", result.timing_columns, result.timing_rows)
+        attempt("timings.csv", write_csv, out / "timings.csv", result.timing_columns,
+                result.timing_rows)
     doc = summary(result, meta)
     if figure:
-        try:
-            from cosim import plots
+        attempt("figure.png", _figure, out / "figure.png", result, doc,
+                str((meta or {}).get("scenario", "")))
+    if errors:
+        doc["write_error"] = str(errors[0])  # the figure's
+    text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
+    attempt("summary.json", atomicio.write_text, out / "summary.json", text)
+    # an earlier run's files this run did not write would be mistaken for its own
+    for name in RUN_FILES:
+        if name not in written:
+            with contextlib.suppress(FileNotFoundError):
+                (out / name).unlink()
+    if errors:
+        raise errors[0]
+    return doc
 
-            plots.figure(out / "figure.png", result, title=str((meta or {}).get("scenario", "")))
+
+def _figure(path: Path, result: RunResult, doc: dict, title: str) -> None:
+    """Draw the figure atomically; a plotting error goes to ``doc["figure_error"]``."""
+    from cosim import plots
+
+    with atomicio.replacing(path) as tmp:
+        try:
+            plots.figure(tmp, result, title=title)
+        except OSError:
+            raise
         except Exception as exc:  # pragma: no cover - plotting must not lose the results
             doc["figure_error"] = f"{type(exc).__name__}: {exc}"
-    (out / "summary.json").write_text(json.dumps(doc, indent=2, allow_nan=False) + "\n",
-                                      encoding="utf-8")
-    return doc
+            raise _NotDrawn from None
+
+
+class _NotDrawn(Exception):
+    """The figure could not be drawn (recorded in the summary, not an output error)."""

@@ -14,7 +14,8 @@ not name are looked up in the FMU under their own name.
 
 Before the first step :meth:`VarMap.check` holds the map against the FMU's
 modelDescription: a missing variable, a wrong causality or a unit mismatch is a one-line
-:class:`~cosim.errors.CosimError` naming the map file, the signal and the variable.
+:class:`~cosim.errors.CosimError` naming the map file, the signal and the variable. Every
+entry is checked, including those the run does not use.
 """
 
 from __future__ import annotations
@@ -28,6 +29,10 @@ from pathlib import Path
 from cosim.errors import CosimError
 
 _KEYS = {"variable", "unit", "scale", "offset"}
+#: Causalities a map entry may point at (what a run sets or reads).
+_MAPPABLE = ("input", "output", "parameter")
+#: fmpy's type names of real-valued variables (FMI 2.0, FMI 3.0).
+_REAL_TYPES = ("Real", "Float64")
 
 
 @dataclass(frozen=True)
@@ -97,10 +102,16 @@ class VarMap:
         fmu : str
             The FMU file, named in errors about signals the map does not mention.
 
+        Every entry of the map is checked too, whether the run uses its signal or not (a
+        typo in an entry the scenario does not use would otherwise go unnoticed, or rename a
+        recorded column): its variable must exist, be a real-valued input, output or
+        parameter of the FMU, and have the unit the entry declares.
+
         Raises
         ------
         CosimError
-            ``MAP: signal 'qa' -> variable 'Fa': ...`` on the first problem found.
+            ``MAP: signal 'qa' -> variable 'Fa': ...`` on the first problem found (the
+            signals the run uses first, then the other map entries in file order).
         """
         units = units or {}
         for signals, causality in ((inputs, "input"), (outputs, "output")):
@@ -127,6 +138,27 @@ class VarMap:
                     who = "the map" if m.unit else "the controller"
                     raise CosimError(f"{where}: unit mismatch: {who} expects '{expected}', "
                                      f"the FMU declares '{fmu_unit}'")
+        for m in self.signals.values():
+            self._check_entry(m, model_variables)
+
+    def _check_entry(self, m: MappedSignal, model_variables: Mapping[str, object]) -> None:
+        """Check one map entry on its own: variable, causality, type and unit."""
+        where = f"{self.path}: signal '{m.signal}' -> variable '{m.variable}'"
+        var = model_variables.get(m.variable)
+        if var is None:
+            raise CosimError(f"{where}: the FMU has no such variable")
+        causality = getattr(var, "causality", None)
+        if causality not in _MAPPABLE:
+            raise CosimError(f"{where}: causality is '{causality}'; a map entry must name an "
+                             "FMU input, output or parameter")
+        kind = getattr(var, "type", None)
+        if kind is not None and kind not in _REAL_TYPES:
+            raise CosimError(f"{where}: the variable is of type '{kind}'; only real-valued "
+                             "variables can be mapped")
+        fmu_unit = variable_unit(var)
+        if m.unit and fmu_unit and m.unit != fmu_unit:
+            raise CosimError(f"{where}: unit mismatch: the map expects '{m.unit}', the FMU "
+                             f"declares '{fmu_unit}'")
 
 
 def variable_unit(var: object) -> str | None:
@@ -154,6 +186,8 @@ def load(path: str | Path) -> VarMap:
         raise CosimError(f"{path}: variable map not found") from None
     except tomllib.TOMLDecodeError as exc:
         raise CosimError(f"{path}: invalid TOML: {exc}") from None
+    except RecursionError:
+        raise CosimError(f"{path}: invalid TOML: nested too deeply") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise CosimError(f"{path}: cannot read variable map: {exc}") from None
 

@@ -2,7 +2,9 @@
 
 Prints every quantity of the theory (δISS, observer, tightening, terminal ingredients) with its
 paper reference, or JSON with the paper's names; checks the hypotheses of
-``th:feasibility-stability`` at the requested set-points. Exit 1 when a hypothesis fails.
+``th:feasibility-stability`` at the requested set-points. Exit 1 when a hypothesis fails or
+the admissible set-point range is empty. ``--save`` writes the observer gains into the model
+file only when every check passes, atomically (a failed write leaves the file unchanged).
 """
 
 from __future__ import annotations
@@ -36,7 +38,11 @@ EPILOG = """design levers:
   --N, --e-o0            horizon and initial observer-error bound (paper: 15, 0.02)
   --data DATA.csv        estimate w_y_bar as the largest test-set output error (normalised)
 
-exit codes: 0 all hypotheses hold, 1 a hypothesis fails (named), 2 bad input."""
+--save writes only when every check passes (otherwise the model file is left unchanged),
+atomically: a failed write (full disk) leaves the previous file byte-identical.
+
+exit codes: 0 all hypotheses hold, 1 a hypothesis fails (named), the admissible set-point
+range is empty, or the model file could not be written, 2 bad input."""
 
 
 def register(subparsers: Any) -> None:
@@ -62,7 +68,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--data", metavar="DATA.csv",
                    help="estimate w̄_y from this data set's test split (cosim generate-data)")
     p.add_argument("--save", action="store_true",
-                   help="write L_z, L_r and w̄_y into the model file")
+                   help="write L_z, L_r and w̄_y into the model file, only when every check "
+                        "passes (atomic: a failed write leaves the file unchanged)")
     p.add_argument("--plot", metavar="PNG",
                    help="also draw a figure: α over the set-point plane with the admissible "
                         "and reachable regions, ê_o,k, and the tightened output bounds")
@@ -93,19 +100,24 @@ def _fmt(v: Any) -> str:
     return "[" + ", ".join(f"{x:.4g}" for x in arr.ravel()) + "]"
 
 
-def _admissible_ranges(cert: Any, model: Any) -> list[str]:
-    """Per-output admissible set-point interval (physical units) from the box rows of L."""
+def _admissible(cert: Any, model: Any) -> list[tuple[str, float | None, float | None]]:
+    """Per-output admissible set-point interval ``(name, lo, hi)`` in physical units, from the
+    box rows of L (``ass:setpoint`` and ``eq:condition-recursive-feasibility``);
+    ``(name, None, None)`` when it is empty (or undefined: a NaN bound)."""
     import numpy as np
 
     rhs = cert.admissible_box()
-    out = []
+    out: list[tuple[str, float | None, float | None]] = []
     for j, name in enumerate(model.output_names):
         lo, hi = -math.inf, math.inf
         for row, r in zip(cert.L, rhs, strict=True):
             others = np.delete(row, j)
             if row[j] == 0 or np.any(others != 0):
                 continue
-            bound = r / row[j]
+            bound = float(r / row[j])
+            if math.isnan(bound):
+                lo, hi = math.inf, -math.inf
+                break
             if row[j] > 0:
                 hi = min(hi, bound)
             else:
@@ -114,11 +126,18 @@ def _admissible_ranges(cert: Any, model: Any) -> list[str]:
                     hi * model.y_scale[j] + model.y_offset[j])
         if model.y_scale[j] < 0:
             plo, phi = phi, plo
-        unit = model.output_units[j]
-        if not plo <= phi:
+        out.append((name, float(plo), float(phi)) if plo <= phi else (name, None, None))
+    return out
+
+
+def _admissible_ranges(cert: Any, model: Any) -> list[str]:
+    """Per-output admissible set-point interval (physical units), as text."""
+    out = []
+    for j, (name, lo, hi) in enumerate(_admissible(cert, model)):
+        if lo is None or hi is None:
             out.append(f"{name}: none")
         else:
-            out.append(f"{name} ∈ [{plo:.4g}, {phi:.4g}] {unit}".rstrip())
+            out.append(f"{name} ∈ [{lo:.4g}, {hi:.4g}] {model.output_units[j]}".rstrip())
     return out
 
 
@@ -175,12 +194,13 @@ def run(args: argparse.Namespace) -> int:
     try:
         cert, note = _certificate(args, model, setpoints, kwargs)
     except CosimError as exc:
-        if str(exc).startswith(f"{args.model}:"):
+        if str(exc).startswith((f"{args.model}:", f"{Path(args.model)}:")):
             raise
         raise CosimError(f"{args.model}: {exc}") from None
 
     failures = cert.failures()
     n_design = len(failures)
+    empty = [name for name, lo, _ in _admissible(cert, model) if lo is None]
     per_setpoint = []
     for sp_phys, sp in zip(setpoints_phys, setpoints, strict=True):
         label = ", ".join(f"{n}={v:g}" for n, v in zip(names, sp_phys, strict=True))
@@ -193,6 +213,9 @@ def run(args: argparse.Namespace) -> int:
             f.append(f"equilibrium: {exc}")
         per_setpoint.append((label, sp, u_bar, f))
         failures += [f"set-point {label}: {msg}" for msg in f]
+    if empty:
+        failures.append("admissible set-points (ass:setpoint and eq:condition-recursive-"
+                        f"feasibility): none for {', '.join(empty)}")
 
     if args.json:
         docs = [cert.to_json(sp) for _, sp, _, _ in per_setpoint] or [cert.to_json()]
@@ -206,9 +229,17 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         path = figure(args.plot, model, cert, setpoints_phys)
         print(f"figure written to {path}", file=sys.stderr)
-    if args.save:
+    if args.save and failures:
+        print(f"cosim certify: not saved: {args.model} is unchanged (--save writes only when "
+              "every check passes)", file=sys.stderr)
+    elif args.save:
+        from cosim.atomicio import output_error
+
         model.L_z, model.L_r, model.w_y_bar = cert.L_z, cert.L_r, cert.w_y_bar
-        model.save(args.model)
+        try:
+            model.save(args.model)
+        except OSError as exc:
+            raise output_error(args.model, exc) from None
         print(f"saved L_z, L_r and w_y_bar to {args.model}", file=sys.stderr)
     if failures:
         print(f"cosim certify: {len(failures)} hypothesis check(s) failed", file=sys.stderr)
@@ -353,9 +384,13 @@ def figure(path: str | Path, model: Any, cert: Any, setpoints: list) -> Path:
     ax.set_title("tightened output bounds h − a_i ê_o − b_i − w_L (physical)", fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    from cosim.atomicio import replacing
+
+    try:
+        with replacing(path) as tmp:
+            fig.savefig(tmp, dpi=110)
+    finally:
+        plt.close(fig)
     return path
 
 

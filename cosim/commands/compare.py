@@ -28,18 +28,21 @@ tolerances, the number and fraction of points outside the band and PASS/FAIL; th
 each failing signal, its first and worst time outside the band."""
 
 EPILOG = """\
-tolerances per signal: --atol/--rtol take a number or NAME=VALUE pairs, e.g.
-  --atol 1e-9,h1=1e-4,h2=1e-4  (a bare number is the default for the others)
+tolerances per signal: --atol/--rtol take a number or NAME=VALUE pairs, NAME a compared
+signal as its column is named (results.csv: plant.h1, ctrl.qa, ...), e.g.
+  --atol 1e-9,plant.h1=1e-4,plant.h2=1e-4  (a bare number is the default for the others;
+  a NAME that is not compared is an error)
 
 exit codes:
   0  every compared signal within the tolerance band
   1  at least one signal outside the band
   2  error: missing or unreadable file, unparseable CSV (file:line:column), a signal
-     missing in one file, no common signals, non-increasing time, bad option
+     missing in one file, no common signals, non-increasing time, bad option (a
+     --atol/--rtol NAME that is not a compared signal)
 
 example:
   cosim compare results/run/results.csv scenarios/references/paper_steps__pi.csv \\
-      --signals h1,h2,qa,qb --band --plot compare.png"""
+      --signals plant.h1,plant.h2,ctrl.qa,ctrl.qb --band --plot compare.png"""
 
 
 def _tolerance(text: str) -> float | dict[str, float]:
@@ -51,6 +54,8 @@ def _tolerance(text: str) -> float | dict[str, float]:
             continue
         name, sep, value = part.rpartition("=")
         key = name.strip() if sep else "*"
+        if sep and not key:
+            raise argparse.ArgumentTypeError(f"'{part}': no signal name before '='")
         try:
             number = float(value)
         except ValueError:
@@ -125,10 +130,9 @@ def run(args: argparse.Namespace) -> int:
         print(text)
     if args.plot:
         try:
-            path = plot(result, args.plot)
-        except (OSError, ValueError) as exc:
-            why = exc.strerror if isinstance(exc, OSError) else str(exc)
-            raise CosimError(f"{args.plot}: cannot write the figure: {why}") from None
+            path = plot(result, args.plot)  # a failed write: OutputError, exit 1
+        except ValueError as exc:
+            raise CosimError(f"{args.plot}: cannot draw the figure: {exc}") from None
         if not args.quiet:
             print(f"figure:    {path}")
     return EXIT_OK if result.passed else EXIT_FAILED

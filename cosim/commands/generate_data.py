@@ -3,6 +3,12 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
+
+import cosim
+
+#: The plant used when --plant is not given: the project's FMU, whatever the current folder.
+DEFAULT_PLANT = Path(cosim.__file__).resolve().parents[1] / "fmus" / "FourTank.fmu"
 
 HELP = "excite a plant FMU with a multilevel pseudo-random signal and record the data set"
 
@@ -14,7 +20,9 @@ it was made. The record is split train/validation/test in the proportions 75/12.
 (15,000/2,500/2,500 for the default 20,000 steps). The same seed gives the same file.
 
 With --map, the plant may be a third-party FMU whose variables differ in name or unit (see
-the README on variable maps); the CSV is always in project names and SI units.
+the README on variable maps); every map entry is checked against the FMU before the first
+step. The CSV is always in project names and SI units. The CSV and its sidecar are written
+atomically: a failed write leaves the previous files unchanged (exit 1).
 
 examples:
   cosim generate-data                              # data/fourtank.csv, seed 0
@@ -26,14 +34,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``generate-data`` sub-command."""
     parser = subparsers.add_parser("generate-data", help=HELP, description=DESCRIPTION,
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--plant", default="fmus/FourTank.fmu", metavar="FMU",
-                        help="plant FMU (default: fmus/FourTank.fmu)")
+    parser.add_argument("--plant", default=None, metavar="FMU",
+                        help="plant FMU (default: the project's fmus/FourTank.fmu, built if "
+                             "missing; not relative to the current folder)")
     parser.add_argument("--map", default=None, metavar="MAP",
                         help="variable map (TOML) for a third-party plant")
     parser.add_argument("--interface", choices=("cs", "me"), default="cs",
                         help="FMI interface to use (default: cs)")
     parser.add_argument("--steps", type=int, default=20000,
-                        help="number of samples (default: 20000)")
+                        help="number of samples, 10 to 1,000,000 (default: 20000)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--hold-min", type=int, default=2,
                         help="shortest input hold time in samples (default: 2)")
@@ -45,26 +54,56 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
+def _plant_path(arg: str | None) -> Path:
+    """The --plant FMU; without it the project's FMU, built when missing."""
+    from cosim.errors import CosimError
+
+    if arg is not None:
+        path = Path(arg)
+        if path.is_dir():
+            raise CosimError(f"{path}: is a folder, not an FMU file (.fmu zip archive)")
+        if not path.is_file():
+            raise CosimError(f"{path}: plant FMU not found")
+        return path
+    if not DEFAULT_PLANT.is_file():
+        try:
+            from cosim.build import build_fmus
+        except ImportError:
+            raise CosimError(f"{DEFAULT_PLANT}: plant FMU not found and cannot be built here; "
+                             "run 'cosim build-fmu' or give --plant") from None
+        build_fmus()
+        if not DEFAULT_PLANT.is_file():
+            raise CosimError(f"{DEFAULT_PLANT}: not produced by cosim build-fmu")
+    return DEFAULT_PLANT
+
+
 def run(args: argparse.Namespace) -> int:
     """Generate the data set and print a one-line summary per split."""
     import sys
-    from pathlib import Path
 
     import numpy as np
 
     from controllers.problem import FOURTANK
     from cosim import datagen, outpaths
     from cosim.errors import CosimError
+    from cosim.master import MAX_STEPS
 
     if args.steps < 10:
         raise CosimError(f"--steps must be at least 10, got {args.steps}")
+    if args.steps > MAX_STEPS:
+        raise CosimError(f"--steps must be at most {MAX_STEPS}, got {args.steps}")
     if args.seed < 0:
         raise CosimError(f"--seed must be a non-negative integer, got {args.seed}")
-    outpaths.out_file(args.out, "--out")
-    plant_path = Path(args.plant)
-    if not plant_path.is_file():
-        hint = " (run 'cosim build-fmu' first)" if args.plant == "fmus/FourTank.fmu" else ""
-        raise CosimError(f"{plant_path}: plant FMU not found{hint}")
+    if args.hold_max > MAX_STEPS:
+        raise CosimError(f"--hold-max must be at most {MAX_STEPS} samples, got {args.hold_max}")
+    if not 1 <= args.hold_min <= args.hold_max:
+        raise CosimError(f"--hold-min and --hold-max must satisfy 1 <= --hold-min <= "
+                         f"--hold-max, got {args.hold_min} and {args.hold_max}")
+    out = outpaths.out_file(args.out, "--out")
+    if out.suffix.lower() == ".json":
+        raise CosimError(f"{out}: --out must not end in .json: that name is the data's JSON "
+                         "sidecar (use .csv)")
+    plant_path = _plant_path(args.plant)
     plant = datagen.fmu_plant(plant_path, args.map, args.interface)
     # every plant output is recorded (h1..h4 for the four tanks); inputs and the controlled
     # outputs are checked against the FMU (and the map): names, causality, units

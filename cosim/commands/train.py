@@ -5,12 +5,28 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+#: The shipped model: never written unless named explicitly with --out.
+SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "controllers" / "models" / "fourtank_gru.json"
+#: Largest --epochs accepted (the paper's recipe runs 2,000).
+MAX_EPOCHS = 100_000
+#: Largest --n accepted (the paper's GRU has 20 states; the MPC solves grow with n²).
+MAX_STATES = 1000
+
 HELP = "train a δISS GRU (paper's eq. 3) on a data set from 'cosim generate-data'"
 
 DESCRIPTION = """\
 Train the GRU of the paper (eq:gru, n states, inputs qa qb, outputs h1 h2) with torch on the
 training split, select the epoch with the best validation FIT, and write the model file
 (JSON) with its training record, plus a figure of the test-split prediction beside it.
+
+The model file goes to --out, by default models/<DATA stem>_gru.json in the CURRENT folder
+(data/fourtank.csv -> models/fourtank_gru.json). The shipped model
+controllers/models/fourtank_gru.json is replaced only when --out names it explicitly
+(cosim train data/fourtank.csv --out controllers/models/fourtank_gru.json). The model file,
+the figure and the --history CSV are each written atomically (temporary file, then rename):
+a failed write leaves the previous file byte-identical (exit 1). The --history lines go to a
+temporary file beside it, one per epoch, which replaces the --history file when training
+ends (an interrupted or failed training leaves the previous --history file unchanged).
 
 Defaults are the paper's: truncated subsequences of 500 steps, batch 5. The δISS condition
 of Theorem 1 (nu < 1) is enforced by rescaling the recurrent weights so that
@@ -21,8 +37,9 @@ Normalisation: u = (q - mid-range) / half-range, so the saturation box is |u| <=
 y = (h - 1 m) / 1 m, so the output box [0, 2] m is |y| <= 1.
 
 examples:
-  cosim train data/fourtank.csv
+  cosim train data/fourtank.csv                  # models/fourtank_gru.json + _test.png
   cosim train data/fourtank.csv --epochs 20 --out /tmp/m.json
+  cosim train data/fourtank.csv --out controllers/models/fourtank_gru.json  # replace shipped
   cosim train data/fourtank.csv --init controllers/models/fourtank_gru.json --lr 1e-3"""
 
 
@@ -34,17 +51,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("train", help=HELP, description=DESCRIPTION,
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("data", metavar="DATA.csv", help="data set from 'cosim generate-data'")
-    parser.add_argument("--out", default="controllers/models/fourtank_gru.json",
-                        metavar="MODEL.json", help="model file to write "
-                        "(default: controllers/models/fourtank_gru.json)")
+    parser.add_argument("--out", default=None, metavar="MODEL.json",
+                        help="model file to write (default: models/<DATA stem>_gru.json in "
+                        "the current folder; the shipped controllers/models/fourtank_gru.json "
+                        "is written only when named here)")
     parser.add_argument("--figure", default=None, metavar="PNG",
                         help="test-split prediction figure (default: <out>_test.png)")
     parser.add_argument("--init", default=None, metavar="MODEL.json",
                         help="start from this model file's weights (fine-tuning)")
     parser.add_argument("--seed", type=int, default=d.seed, help=f"random seed ({d.seed})")
     parser.add_argument("--epochs", type=int, default=d.epochs,
-                        help=f"maximum epochs ({d.epochs})")
-    parser.add_argument("--n", type=int, default=d.n, help=f"GRU states ({d.n})")
+                        help=f"maximum epochs, at most {MAX_EPOCHS} ({d.epochs})")
+    parser.add_argument("--n", type=int, default=d.n,
+                        help=f"GRU states, at most {MAX_STATES} ({d.n})")
     parser.add_argument("--seq-len", type=int, default=d.seq_len,
                         help=f"training subsequence length ({d.seq_len})")
     parser.add_argument("--stride", type=int, default=None,
@@ -77,8 +96,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="with --constraint project, also keep sigma_z_bar <= this "
                         "(0 = no cap; it sets the contraction rates rho_s, rho_o)")
     parser.add_argument("--history", default=None, metavar="CSV",
-                        help="append per-epoch loss, validation FIT and nu to this CSV "
-                        "as training goes")
+                        help="write per-epoch loss, validation FIT and nu to this CSV "
+                        "(appended to a temporary file as training goes, which replaces CSV "
+                        "when training ends)")
     parser.add_argument("--patience", type=int, default=d.patience,
                         help="stop after this many epochs without a better validation FIT "
                         "(0 = off)")
@@ -108,8 +128,21 @@ def _sidecar(path: Path) -> dict | None:
 
     try:
         return json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
+    except (OSError, ValueError, RecursionError):
         return None
+
+
+def _out_path(args: argparse.Namespace) -> Path:
+    """--out, or models/<data stem>_gru.json; never the shipped model unless named."""
+    from cosim.errors import CosimError
+
+    if args.out is not None:
+        return Path(args.out)
+    out = Path("models") / f"{Path(args.data).stem}_gru.json"
+    if out.resolve() == SHIPPED_MODEL.resolve():
+        raise CosimError(f"{out}: the default --out is the shipped model here; give "
+                         f"--out {out} explicitly to replace it, or another --out")
+    return out
 
 
 def _check_options(args: argparse.Namespace) -> None:
@@ -126,6 +159,11 @@ def _check_options(args: argparse.Namespace) -> None:
     for option, (value, low) in ints.items():
         if value < low:
             raise CosimError(f"{option} must be an integer >= {low}, got {value}")
+    highs = {"--epochs": (args.epochs, MAX_EPOCHS), "--n": (args.n, MAX_STATES),
+             "--seed": (args.seed, 2**63 - 1)}
+    for option, (value, high) in highs.items():
+        if value > high:
+            raise CosimError(f"{option} must be an integer <= {high}, got {value}")
     positive = {"--lr": args.lr, "--lr-final": args.lr_final}
     for option, value in positive.items():
         if not (math.isfinite(value) and value > 0):
@@ -143,6 +181,7 @@ def _check_options(args: argparse.Namespace) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Train, check ν < 1, write the model file and the figure."""
+    import contextlib
     import sys
     import time
     from pathlib import Path
@@ -153,6 +192,7 @@ def run(args: argparse.Namespace) -> int:
     from controllers.model import GRUModel
     from controllers.problem import FOURTANK
     from cosim import datagen, outpaths
+    from cosim.atomicio import output_error, replacing
     from cosim.errors import CosimError
 
     data = datagen.read_csv(args.data)
@@ -177,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
     if not 0 < opts.nu_margin < 1:
         raise CosimError(f"--nu-margin must be in (0, 1), got {opts.nu_margin}")
     _check_options(args)
-    out = outpaths.out_file(args.out, "--out")
+    out = outpaths.out_file(_out_path(args), "--out")
     figure = (outpaths.figure_file(args.figure, "--figure") if args.figure
               else out.with_name(out.stem + "_test.png"))
     if args.history:
@@ -196,22 +236,31 @@ def run(args: argparse.Namespace) -> int:
         init = start.params
 
     progress = not args.quiet and sys.stderr.isatty()
-    callback = None
-    if args.history:
-        history = Path(args.history)
-        history.parent.mkdir(parents=True, exist_ok=True)
-        with history.open("w") as fh:
-            fh.write("epoch,time_s,loss,nu,fit_val_h1,fit_val_h2,U_o_inf_norm\n")
-
-        def callback(epoch: int, rec: dict, _weights: dict) -> None:
-            with history.open("a") as fh:
-                fh.write(f"{epoch},{rec['time']:.2f},{rec['loss']:.6e},{rec['nu']:.6f},"
-                         f"{rec['fit_val'][0]:.4f},{rec['fit_val'][1]:.4f},"
-                         f"{rec['uo_norm']:.4f}\n")
-
     t0 = time.perf_counter()
-    result = training.train(u_all[train_mask], y_all[train_mask], u_all, y_all, data.split,
-                            opts, progress=progress, init=init, callback=callback)
+    with contextlib.ExitStack() as stack:
+        callback = None
+        if args.history:
+            history = Path(args.history)
+            # lines go to a temporary file beside --history, renamed onto it at the end
+            tmp = stack.enter_context(replacing(history))
+            fh = stack.enter_context(open(tmp, "w", encoding="utf-8", newline=""))
+
+            def log(line: str) -> None:
+                try:
+                    fh.write(line)
+                    fh.flush()
+                except OSError as exc:
+                    raise output_error(history, exc) from None
+
+            log("epoch,time_s,loss,nu,fit_val_h1,fit_val_h2,U_o_inf_norm\n")
+
+            def callback(epoch: int, rec: dict, _weights: dict) -> None:
+                log(f"{epoch},{rec['time']:.2f},{rec['loss']:.6e},{rec['nu']:.6f},"
+                    f"{rec['fit_val'][0]:.4f},{rec['fit_val'][1]:.4f},{rec['uo_norm']:.4f}\n")
+
+        result = training.train(u_all[train_mask], y_all[train_mask], u_all, y_all,
+                                data.split, opts, progress=progress, init=init,
+                                callback=callback)
     scores = metrics.split_scores(result.params, u_all, y_all, data.split)
     names = list(FOURTANK.outputs)
     sz, sr, ph = certificates.gate_bounds(result.params)
@@ -239,17 +288,19 @@ def run(args: argparse.Namespace) -> int:
     }
     w_y_bar = scores["test"]["max_abs_err"]
     model = training.build_model(result.params, FOURTANK, norm, record, w_y_bar=w_y_bar)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    model.save(out)
+    try:
+        model.save(out)  # atomic: a failed write leaves the previous file unchanged
+    except OSError as exc:
+        raise output_error(out, exc) from None
 
     test = data.split == "test"
     xi = metrics.open_loop(result.params, u_all)
-    figure.parent.mkdir(parents=True, exist_ok=True)
-    metrics.prediction_figure(
-        data.time[test], model.denormalize_y(y_all[test]), model.denormalize_y(xi[test]),
-        names, list(FOURTANK.output_units), scores["test"]["fit"], str(figure),
-        f"GRU n={opts.n}, test split: open-loop prediction vs plant "
-        f"(nu = {result.nu:.3f})")
+    with replacing(figure) as tmp_figure:
+        metrics.prediction_figure(
+            data.time[test], model.denormalize_y(y_all[test]), model.denormalize_y(xi[test]),
+            names, list(FOURTANK.output_units), scores["test"]["fit"], str(tmp_figure),
+            f"GRU n={opts.n}, test split: open-loop prediction vs plant "
+            f"(nu = {result.nu:.3f})")
     if not args.quiet:
         for s in ("train", "val", "test"):
             fits = ", ".join(f"{n} {f:.2f} %" for n, f in zip(names, scores[s]["fit"],

@@ -405,3 +405,24 @@ def test_bad_design_parameters_are_one_line_errors(kwargs, message) -> None:
 def test_integer_valued_float_horizon_is_accepted() -> None:
     cert = certs.compute_certificate(hand_model(), N=3.0)
     assert cert.N == 3 and isinstance(cert.N, int) and len(cert.a) >= 3
+
+
+def test_saturated_or_non_finite_update_gate_is_a_one_line_error() -> None:
+    """σ̄_z rounds to 1 once ‖[W_z U_z b_z]‖∞ > ~36.7: ν would divide by zero."""
+    m = hand_model()
+    m.params["b_z"] = np.array([36.0, 1.0])  # σ(36.6) < 1 in floating point: still defined
+    assert math.isfinite(certs.nu(m.params))
+    m.params["b_z"] = np.array([40.0, 1.0])  # ‖·‖∞ = 40.6: σ̄_z == 1.0
+    assert certs.gate_bounds(m.params)[0] == 1.0
+    for call in (lambda: certs.nu(m.params), lambda: certs.compute_certificate(m),
+                 lambda: certs.choose_gain_scale(m, [np.zeros(1)])):
+        with pytest.raises(CosimError, match=r"^sigma_z \(σ̄_z = σ\(‖\[W_z U_z b_z\]‖∞\) = "
+                                             r"σ\(40\.6\), th:stability-bonassi\) rounds to 1"):
+            call()
+    m.source = "m.json"
+    with pytest.raises(CosimError, match=r"^m\.json: sigma_z .* rounds to 1"):
+        certs.compute_certificate(m)
+    m.params["b_z"] = np.array([np.nan, 1.0])
+    with pytest.raises(CosimError, match=r"is undefined: ‖\[W_z U_z b_z\]‖∞ = nan, the "
+                                         "weights are not finite"):
+        certs.nu(m.params)

@@ -135,3 +135,42 @@ def test_boolean_sample_time_is_refused(tmp_path):
     doc["Ts"] = True
     with pytest.raises(ModelFileError, match=r"'Ts' must be a positive number, got True"):
         GRUModel.load(write(tmp_path, doc))
+
+
+@pytest.mark.parametrize("text, message", [
+    ("[" * 100_000 + "]" * 100_000, "invalid model file (JSON nested too deeply)"),
+    ('{"Ts": ' + "1" * 5000 + "}", "invalid JSON (Exceeds the limit (4300 digits)"),
+])
+def test_deeply_nested_or_huge_json_is_a_one_line_error(tmp_path, text, message):
+    path = tmp_path / "deep.json"
+    path.write_text(text)
+    with pytest.raises(ModelFileError) as info:
+        GRUModel.load(path)
+    msg = str(info.value)
+    assert msg.startswith(f"{path}: {message}") and "\n" not in msg
+
+
+def test_save_replaces_the_file_in_one_step(tmp_path):
+    """save() writes a temporary file and renames it: nothing is left beside the target,
+    and a save that cannot complete leaves the previous file byte-identical."""
+    path = tmp_path / "m.json"
+    path.write_text("previous")
+    model = make_model()
+    model.save(path)
+    assert GRUModel.load(path).training["note"] == "test"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.json"]
+    assert path.read_text() == model.to_json()
+    # the target is a folder: the rename fails, the folder and its content stay as they were
+    folder = tmp_path / "dir.json"
+    folder.mkdir()
+    (folder / "keep").write_text("x")
+    with pytest.raises(OSError):
+        model.save(folder)
+    assert [p.name for p in folder.iterdir()] == ["keep"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["dir.json", "m.json"]
+
+
+def test_load_records_the_source_file(tmp_path):
+    path = tmp_path / "m.json"
+    make_model().save(path)
+    assert GRUModel.load(path).source == str(path) and make_model().source is None

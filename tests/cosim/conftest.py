@@ -16,7 +16,7 @@ import pyfmu_models
 def pyfmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A folder with the test FMUs of :mod:`pyfmu_models` and the swap-in map."""
     dest = tmp_path_factory.mktemp("pyfmus")
-    for kind in ("swapin", "failing", "segfault"):
+    for kind in pyfmu_models.KINDS:
         pyfmu_models.build(kind, dest)
     (dest / "quadtank.map.toml").write_text(pyfmu_models.MAP)
     return dest

@@ -5,6 +5,12 @@
 * ``failing``: an FMI 2.0 (pythonfmu) single tank whose ``do_step`` raises once ``t ≥ 500 s``.
 * ``segfault``: the same tank, but ``do_step`` kills its own process with SIGSEGV at
   ``t ≥ 500 s`` (a crashing native FMU, for ``--isolate``).
+* ``exits``: ``do_step`` ends its process with ``os._exit(3)`` at ``t ≥ 500 s``.
+* ``hang``: ``do_step`` spins in a Python loop for ever at ``t ≥ 500 s``.
+* ``native_hang``: ``do_step`` blocks in native code for ever at ``t ≥ 500 s`` (libc
+  ``pause()``; in the isolated worker, which ignores signals, nothing wakes it).
+* ``nan``: ``do_step`` makes the level ``h1`` NaN at ``t ≥ 500 s``.
+* ``slow``: a healthy tank whose every ``do_step`` sleeps 20 ms (a long run, for signals).
 
 These FMUs run inside a Python host that has pythonfmu's runtime (the project venv).
 """
@@ -72,15 +78,17 @@ class QuadTank(Fmi3Slave):
 '''
 
 _TANK = '''
+import ctypes
 import math
 import os
 import signal
+import time
 from pythonfmu import Fmi2Causality, Fmi2Slave, Real
 
 
 class {cls}(Fmi2Slave):
     author = "tests"
-    description = "single tank that {what} at t >= 500 s"
+    description = "single tank that {what} at t >= {at} s"
 
     def __init__(self, **kwargs):
         super().__init__(**kwargs)
@@ -94,17 +102,35 @@ class {cls}(Fmi2Slave):
             self.register_variable(Real(name, causality=Fmi2Causality.output))
 
     def do_step(self, current_time, step_size):
-        if current_time >= 500.0:
+        if current_time >= {at}:
 {action}
-        self.h1 += step_size * (self.qa - 1e-4 * math.sqrt(self.h1)) / 0.06
-        self.h2 += step_size * (self.qb - 1e-4 * math.sqrt(self.h2)) / 0.06
+        self.h1 = max(0.0, self.h1 + step_size * (self.qa - 1e-4 * math.sqrt(self.h1)) / 0.06)
+        self.h2 = max(0.0, self.h2 + step_size * (self.qb - 1e-4 * math.sqrt(self.h2)) / 0.06)
         return True
 '''
 
-FAILING = _TANK.format(cls="Failing", what="raises",
+FAILING = _TANK.format(cls="Failing", what="raises", at=500.0,
                        action='            raise RuntimeError("tank ruptured")')
-SEGFAULT = _TANK.format(cls="Segfault", what="segfaults",
+SEGFAULT = _TANK.format(cls="Segfault", what="segfaults", at=500.0,
                         action="            os.kill(os.getpid(), signal.SIGSEGV)")
+EXITS = _TANK.format(cls="Exits", what="ends its process", at=500.0,
+                     action="            os._exit(3)")
+HANG = _TANK.format(cls="Hang", what="spins for ever", at=500.0,
+                    action="            while True:\n                pass")
+NATIVE_HANG = _TANK.format(cls="NativeHang", what="blocks in native code", at=500.0,
+                           action="            ctypes.CDLL(None).pause()")
+NAN = _TANK.format(cls="Nan", what="turns NaN", at=500.0,
+                   action='            self.h1 = float("nan")\n            return True')
+SLOW = _TANK.format(cls="Slow", what="sleeps 20 ms per step", at=0.0,
+                    action="            time.sleep(0.02)")
+
+#: Test FMU kinds: (script name, source). The FMU is named after the class.
+KINDS = {
+    "swapin": ("quadtank.py", SWAPIN), "failing": ("failing.py", FAILING),
+    "segfault": ("segfault.py", SEGFAULT), "exits": ("exits.py", EXITS),
+    "hang": ("hang.py", HANG), "native_hang": ("nativehang.py", NATIVE_HANG),
+    "nan": ("nan.py", NAN), "slow": ("slow.py", SLOW),
+}
 
 MAP = '''\
 [signals.qa]
@@ -135,8 +161,7 @@ variable = "gammaA"
 def build(kind: str, dest: Path) -> Path:
     """Build one of the test FMUs into ``dest`` and return its path."""
     dest.mkdir(parents=True, exist_ok=True)
-    src = {"swapin": ("quadtank.py", SWAPIN), "failing": ("failing.py", FAILING),
-           "segfault": ("segfault.py", SEGFAULT)}[kind]
+    src = KINDS[kind]
     script = dest / src[0]
     script.write_text(src[1])
     if kind == "swapin":

@@ -15,6 +15,7 @@ from random_gru import random_gru_model
 from controllers import certificates as certs
 from controllers.model import GRUModel
 from cosim.cli import main
+from cosim.errors import CosimError
 
 KEYS = ["sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r", "nu_o", "rho_o",
         "c_o", "kappa", "L_max", "w_y_bar", "w_bar", "w_L", "a", "b", "e_o0", "e_inf", "s",
@@ -176,3 +177,118 @@ def test_model_with_other_signal_names_names_the_file(tmp_path: Path, capsys) ->
     err = capsys.readouterr().err
     assert err.startswith(f"cosim certify: error: {path}: model output 'H1'")
     assert err.count("\n") == 1
+
+
+def test_saturated_update_gate_exit_2_naming_sigma_z(tmp_path: Path, capsys) -> None:
+    """b_z = 40: σ̄_z rounds to 1, so ν = … /(1 − σ̄_z) is undefined (was ZeroDivisionError)."""
+    m = random_gru_model(0)
+    m.params["b_z"][:] = 40.0
+    m.w_y_bar = 0.01
+    path = tmp_path / "saturated.json"
+    m.save(path)
+    for extra in ([], ["--json"], ["--auto-gain-scale"], ["--gain-scale", "0.5"]):
+        assert main(["certify", str(path), *extra]) == 2
+        captured = capsys.readouterr()
+        assert captured.out == "" and captured.err.count("\n") == 1
+        assert captured.err.startswith(f"cosim certify: error: {path}: sigma_z (σ̄_z = "
+                                       "σ(‖[W_z U_z b_z]‖∞) = σ(")
+        assert "rounds to 1" in captured.err and "1 − σ̄_z = 0" in captured.err
+    with pytest.raises(CosimError, match=r"^sigma_z .* rounds to 1"):
+        certs.nu(m.params)
+
+
+@pytest.fixture()
+def no_admissible_setpoint(tmp_path: Path) -> Path:
+    """ν, ν_o < 1 but w̄_y = 1.2 > the half-width of the normalised output box: the tightened
+    bounds cross and no set-point is admissible."""
+    m = random_gru_model(0)
+    m.w_y_bar = 1.2
+    path = tmp_path / "wide.json"
+    m.save(path)
+    return path
+
+
+def test_empty_admissible_range_exits_1(no_admissible_setpoint: Path, capsys) -> None:
+    path = str(no_admissible_setpoint)
+    assert main(["certify", path, "--gain-scale", "0"]) == 1
+    captured = capsys.readouterr()
+    assert ("admissible set-points (ass:setpoint and eq:condition-recursive-feasibility): "
+            "h1: none; h2: none") in captured.out
+    assert ("FAILED: admissible set-points (ass:setpoint and eq:condition-recursive-"
+            "feasibility): none for h1, h2") in captured.out
+    assert captured.err == "cosim certify: 1 hypothesis check(s) failed\n"
+    assert main(["certify", path, "--gain-scale", "0", "--json"]) == 1
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["nu"] < 1
+    assert "none for h1, h2" in captured.err
+
+
+@pytest.mark.parametrize("case", ["nu", "admissible"])
+def test_save_writes_only_when_every_hypothesis_holds(case: str, tmp_path: Path,
+                                                      no_admissible_setpoint: Path,
+                                                      capsys) -> None:
+    if case == "nu":  # ν ≥ 1 (th:stability-bonassi fails)
+        m = random_gru_model(0)
+        m.params["U_z"] *= 40
+        m.w_y_bar = 0.01
+        path = tmp_path / "bad.json"
+        m.save(path)
+        extra: list[str] = []
+    else:
+        path, extra = no_admissible_setpoint, ["--gain-scale", "0"]
+    before = path.read_bytes()
+    assert main(["certify", str(path), "--save", *extra]) == 1
+    err = capsys.readouterr().err
+    assert f"cosim certify: not saved: {path} is unchanged" in err
+    assert "saved L_z" not in err
+    assert path.read_bytes() == before
+    assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp file
+
+
+def test_save_on_a_full_disk_keeps_the_model_file(model_file: Path, tmp_path: Path) -> None:
+    """A real EFBIG: the process may not write files beyond LIMIT bytes (RLIMIT_FSIZE, with
+    SIGXFSZ ignored so that the write fails instead of killing the process)."""
+    import os
+    import resource
+    import signal
+    import subprocess
+
+    before = model_file.read_bytes()
+    limit = 4096
+    assert len(before) > 4 * limit  # the file --save writes is larger than the limit
+
+    def full_disk() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+        signal.signal(signal.SIGXFSZ, signal.SIG_IGN)
+
+    env = {**os.environ, "PYTHONDONTWRITEBYTECODE": "1"}
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "certify", str(model_file),
+                           "--save"], capture_output=True, text=True, env=env,
+                          preexec_fn=full_disk, timeout=300)
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stderr == f"cosim certify: failed: {model_file}: cannot write: File too large\n"
+    assert model_file.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == [model_file.name]
+    # without the limit the same command saves the gains
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "certify", str(model_file),
+                           "--save"], capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert GRUModel.load(model_file).L_z is not None and model_file.read_bytes() != before
+
+
+def test_deeply_nested_model_file_exit_2_one_line(tmp_path: Path, capsys) -> None:
+    path = tmp_path / "deep.json"
+    path.write_text("[" * 100_000 + "]" * 100_000)
+    assert main(["certify", str(path)]) == 2
+    assert capsys.readouterr().err == (f"cosim certify: error: {path}: invalid model file "
+                                       "(JSON nested too deeply)\n")
+
+
+def test_plot_replaces_the_figure_atomically(model_file: Path, tmp_path: Path,
+                                             capsys) -> None:
+    png = tmp_path / "cert.png"
+    png.write_bytes(b"old")
+    assert main(["certify", str(model_file), "--plot", str(png)]) == 0
+    capsys.readouterr()
+    assert png.read_bytes()[:4] == b"\x89PNG"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["cert.png", "model.json"]

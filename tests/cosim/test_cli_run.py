@@ -352,3 +352,39 @@ def test_scenario_too_long_for_memory_exit_2(tmp_path: Path, fmu2_path: Path,
     assert code == 2 and err == (f"cosim run: error: {scenario}:4:1: 4e+10 communication steps "
                                  "of 25.0 s from 0.0 s to 1000000000000.0 s, more than the "
                                  "1000000 allowed\n")
+
+
+@pytest.mark.parametrize("entry, signal, variable", [
+    ('[signals.h3]\nvariable = "level3"\n', "h3", "level3"),   # an output nobody reads
+    ('[signals.qd1]\nvariable = "Fin1"\n', "qd1", "Fin1"),     # an input the scenario leaves
+])
+def test_typo_in_an_unused_map_entry_exit_2_before_running(
+        entry: str, signal: str, variable: str, tmp_path: Path, pyfmu_dir: Path,
+        capsys: pytest.CaptureFixture) -> None:
+    """Every map entry is checked against the FMU, whether the run uses it or not."""
+    bad = tmp_path / "typo.map.toml"
+    bad.write_text((pyfmu_dir / "quadtank.map.toml").read_text() + entry)
+    code, out, err = run(capsys, str(ROOT / "scenarios" / "sensor_bias.csv"), "--controller",
+                         "pi", "--out", str(tmp_path / "x"), "--plant",
+                         str(pyfmu_dir / "QuadTank.fmu"), "--map", str(bad))
+    assert code == 2 and out == ""
+    assert err == (f"cosim run: error: {bad}: signal '{signal}' -> variable '{variable}': "
+                   "the FMU has no such variable\n")
+    assert not (tmp_path / "x").exists()
+
+
+def test_model_with_saturated_update_gate_exit_2_naming_sigma_z(
+        tmp_path: Path, fmu2_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """b_z = 40 everywhere: σ̄_z rounds to 1 and ν divides by 1 − σ̄_z = 0."""
+    doc = json.loads((ROOT / "controllers" / "models" / "fourtank_gru.json").read_text())
+    doc["b_z"] = [40.0] * len(doc["b_z"])
+    model = tmp_path / "saturated.json"
+    model.write_text(json.dumps(doc))
+    scenario = tmp_path / "s.csv"
+    scenario.write_text(SHORT)
+    code, out, err = run(capsys, str(scenario), "--plant", str(fmu2_path), "--model",
+                         str(model), "--out", str(tmp_path / "out"))
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert err.startswith(f"cosim run: error: {model}: sigma_z (σ̄_z = σ(‖[W_z U_z b_z]‖∞) = σ(")
+    assert "rounds to 1" in err and "Traceback" not in err
+    assert not (tmp_path / "out").exists()

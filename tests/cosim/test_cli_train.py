@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from controllers.model import GRUModel
 from cosim.cli import main
 
 
-@pytest.fixture
-def data(tmp_path: Path) -> Path:
+def _write_data(path: Path) -> Path:
     """A small data set in the format of ``cosim generate-data`` (400 rows, 75/12.5/12.5)."""
     rng = np.random.default_rng(0)
     rows = ["time,qa,qb,h1,h2,h3,h4,split"]
@@ -20,9 +20,14 @@ def data(tmp_path: Path) -> Path:
         u = rng.uniform(1e-4, 9e-4, 2)
         y = rng.uniform(0.3, 1.5, 4)
         rows.append(",".join(repr(float(v)) for v in (25.0 * k, *u, *y)) + f",{split}")
-    path = tmp_path / "data.csv"
     path.write_text("\n".join(rows) + "\n")
     return path
+
+
+@pytest.fixture
+def data(tmp_path: Path) -> Path:
+    """A small data set in the format of ``cosim generate-data`` (400 rows, 75/12.5/12.5)."""
+    return _write_data(tmp_path / "data.csv")
 
 
 FAST = ["--epochs", "1", "--seq-len", "20", "--washout", "5", "--quiet"]
@@ -30,6 +35,9 @@ FAST = ["--epochs", "1", "--seq-len", "20", "--washout", "5", "--quiet"]
 
 @pytest.mark.parametrize("args, message", [
     (["--epochs", "0"], "--epochs must be an integer >= 1, got 0"),
+    (["--epochs", "100001"], "--epochs must be an integer <= 100000, got 100001"),
+    (["--n", "1001"], "--n must be an integer <= 1000, got 1001"),
+    (["--seed", str(2**64)], f"--seed must be an integer <= {2**63 - 1}, got {2**64}"),
     (["--n", "0"], "--n must be an integer >= 1, got 0"),
     (["--seed", "-1"], "--seed must be an integer >= 0, got -1"),
     (["--stride", "0"], "--stride must be an integer >= 1, got 0"),
@@ -75,3 +83,86 @@ def test_broken_sidecar_does_not_fail_after_training(data: Path, tmp_path: Path,
     out = tmp_path / "new" / "m.json"
     assert main(["train", str(data), "--out", str(out), *FAST]) == 0
     assert out.is_file() and (tmp_path / "new" / "m_test.png").is_file()
+
+
+FAST_SMALL = [*FAST, "--n", "3"]
+
+
+def test_default_out_is_in_the_current_folder_never_the_shipped_model(
+        data: Path, tmp_path: Path, monkeypatch: pytest.MonkeyPatch,
+        capsys: pytest.CaptureFixture) -> None:
+    """Without --out the model goes to models/<data stem>_gru.json in the current folder
+    (was controllers/models/fourtank_gru.json: the shipped model, from the repo root)."""
+    from cosim.commands import train
+
+    shipped = train.SHIPPED_MODEL.read_bytes()
+    work = tmp_path / "work"
+    work.mkdir()
+    monkeypatch.chdir(work)
+    assert main(["train", str(data), *FAST_SMALL]) == 0
+    assert GRUModel.load(work / "models" / "data_gru.json").n == 3
+    assert (work / "models" / "data_gru_test.png").read_bytes()[:4] == b"\x89PNG"
+    assert sorted(p.name for p in work.rglob("*")) == ["data_gru.json", "data_gru_test.png",
+                                                       "models"]
+    assert train.SHIPPED_MODEL.read_bytes() == shipped
+    with pytest.raises(SystemExit):
+        main(["train", "--help"])
+    assert "models/<DATA stem>_gru.json" in capsys.readouterr().out
+
+
+def test_shipped_model_is_replaced_only_when_named_with_out(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture) -> None:
+    """Where the default --out resolves to the shipped model (a stand-in here: the real one
+    is never touched by this test), training is refused before it starts; naming the file
+    with --out replaces it."""
+    from cosim.commands import train
+
+    controllers = tmp_path / "controllers"
+    shipped = controllers / "models" / "fourtank_gru.json"
+    shipped.parent.mkdir(parents=True)
+    shipped.write_text("the shipped model")
+    monkeypatch.setattr(train, "SHIPPED_MODEL", shipped)
+    csv = _write_data(tmp_path / "fourtank.csv")
+    monkeypatch.chdir(controllers)
+    assert main(["train", str(csv), *FAST_SMALL]) == 2
+    assert capsys.readouterr().err == (
+        "cosim train: error: models/fourtank_gru.json: the default --out is the shipped model "
+        "here; give --out models/fourtank_gru.json explicitly to replace it, or another --out\n")
+    assert shipped.read_text() == "the shipped model"
+    assert sorted(p.name for p in controllers.rglob("*")) == ["fourtank_gru.json", "models"]
+    assert main(["train", str(csv), *FAST_SMALL, "--out", "models/fourtank_gru.json"]) == 0
+    assert GRUModel.load(shipped).n == 3
+
+
+def test_history_is_replaced_only_when_training_ends(data: Path, tmp_path: Path,
+                                                     capsys: pytest.CaptureFixture) -> None:
+    history = tmp_path / "h" / "history.csv"
+    history.parent.mkdir()
+    history.write_text("previous\n")
+    out = tmp_path / "m.json"
+    # training fails at its start (subsequences longer than the data): history unchanged
+    assert main(["train", str(data), *FAST_SMALL, "--seq-len", "5000", "--out", str(out),
+                 "--history", str(history)]) == 2
+    assert "fewer than --seq-len 5000" in capsys.readouterr().err
+    assert history.read_text() == "previous\n" and not out.exists()
+    assert [p.name for p in history.parent.iterdir()] == ["history.csv"]  # no temp file
+    assert main(["train", str(data), *FAST_SMALL, "--epochs", "3", "--out", str(out),
+                 "--history", str(history)]) == 0
+    lines = history.read_text().splitlines()
+    assert lines[0].startswith("epoch,time_s,loss,nu") and len(lines) == 4
+    assert [p.name for p in history.parent.iterdir()] == ["history.csv"]
+
+
+def test_deeply_nested_sidecar_and_init_model(data: Path, tmp_path: Path,
+                                              capsys: pytest.CaptureFixture) -> None:
+    deep = "[" * 100_000 + "]" * 100_000
+    data.with_suffix(".json").write_text(deep)  # ignored, like any unreadable sidecar
+    out = tmp_path / "m.json"
+    assert main(["train", str(data), *FAST_SMALL, "--out", str(out)]) == 0
+    assert GRUModel.load(out).training["data_meta"] is None
+    init = tmp_path / "init.json"
+    init.write_text(deep)
+    assert main(["train", str(data), *FAST_SMALL, "--out", str(out), "--init",
+                 str(init)]) == 2
+    assert capsys.readouterr().err == (f"cosim train: error: {init}: invalid model file (JSON "
+                                       "nested too deeply)\n")

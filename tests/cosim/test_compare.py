@@ -254,3 +254,40 @@ def test_plot_target_that_is_a_folder_named_like_a_figure(tmp_path: Path, ref: P
     (tmp_path / "fig.png").mkdir()
     assert main(["compare", str(ref), str(ref), "--plot", str(tmp_path / "fig.png")]) == 2
     assert "--plot must name a file, but this is a folder" in capsys.readouterr().err
+
+
+def test_tolerance_for_a_signal_that_is_not_compared_exit_2(tmp_path: Path, ref: Path,
+                                                             capsys) -> None:
+    """A per-signal --atol/--rtol must name a compared signal (it was silently ignored)."""
+    res = write(tmp_path / "res.csv", T, {"h1": step(100) + 1e-3, "qa": 1e-4 * step(200)})
+    assert main(["compare", str(res), str(ref), "--atol", "1e-9,h3=2e-3"]) == 2
+    assert capsys.readouterr().err == ("cosim compare: error: --atol h3=0.002: 'h3' is not a "
+                                       "compared signal (compared: 'h1', 'qa')\n")
+    # in the files but not among the --signals compared
+    assert main(["compare", str(res), str(ref), "--signals", "qa", "--rtol", "h1=1"]) == 2
+    assert capsys.readouterr().err == ("cosim compare: error: --rtol h1=1: 'h1' is not a "
+                                       "compared signal (compared: 'qa')\n")
+    with pytest.raises(CosimError, match=r"'H1' is not a compared signal"):
+        compare(res, ref, atol={"H1": 1.0})
+    with pytest.raises(SystemExit) as info:  # an argparse usage error
+        main(["compare", str(res), str(ref), "--atol", "=1"])
+    assert info.value.code == 2
+    assert "argument --atol: '=1': no signal name before '='" in capsys.readouterr().err
+
+
+def test_help_example_tolerance_names_real_result_columns(tmp_path: Path, capsys) -> None:
+    """The --help example (plant.h1=...) works on real result files; a bare h1 is refused
+    with a hint."""
+    reference = Path(__file__).resolve().parents[2] / "scenarios" / "references" \
+        / "leak_tank1__pi.csv"
+    with pytest.raises(SystemExit):
+        main(["compare", "--help"])
+    text = capsys.readouterr().out
+    assert "--atol 1e-9,plant.h1=1e-4,plant.h2=1e-4" in text and "h1=1e-3" not in text
+    assert main(["compare", str(reference), str(reference), "--quiet",
+                 "--atol", "1e-9,plant.h1=1e-4,plant.h2=1e-4"]) == 0
+    assert main(["compare", str(reference), str(reference), "--atol", "h1=1e-3"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("cosim compare: error: --atol h1=0.001: 'h1' is not a compared "
+                          "signal (compared: 'ref.h1', ")
+    assert err.endswith("; did you mean 'ref.h1' or 'plant.h1'?\n")

@@ -173,3 +173,77 @@ def test_bad_generate_data_options_exit_2(args, message, tmp_path, capsys):
     assert main(["generate-data", "--steps", "40", "--quiet", *args]) == 2
     err = capsys.readouterr().err
     assert err == f"cosim generate-data: error: {message.format(tmp=tmp_path)}\n"
+
+
+@needs_fmu
+def test_default_plant_does_not_depend_on_the_current_folder(tmp_path):
+    """From any folder, the default --plant is the project's FMU (was fmus/FourTank.fmu
+    relative to the current folder: 'plant FMU not found')."""
+    import subprocess
+    import sys
+
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "generate-data", "--steps", "20",
+                           "--seed", "3", "--quiet"], cwd=tmp_path, capture_output=True,
+                          text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    out = tmp_path / "data" / "fourtank.csv"
+    assert datagen.read_csv(out).u.shape == (20, 2)
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert Path(meta["plant"]) == FMU.resolve()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--steps", "1000001"], "--steps must be at most 1000000, got 1000001"),
+    (["--hold-max", "100000000000000000000"],
+     "--hold-max must be at most 1000000 samples, got 100000000000000000000"),
+    (["--hold-min", "0"], "--hold-min and --hold-max must satisfy 1 <= --hold-min <= "
+                          "--hold-max, got 0 and 80"),
+    (["--out", "{tmp}/d.json"], "{tmp}/d.json: --out must not end in .json: that name is the "
+                                "data's JSON sidecar (use .csv)"),
+])
+def test_bad_generate_data_limits_exit_2(args, message, tmp_path, capsys):
+    args = [a.format(tmp=tmp_path) for a in args]
+    if "--out" not in args:
+        args += ["--out", str(tmp_path / "d.csv")]
+    steps = [] if "--steps" in args else ["--steps", "40"]
+    assert main(["generate-data", "--quiet", *steps, *args]) == 2
+    message = message.format(tmp=tmp_path)
+    assert capsys.readouterr().err == f"cosim generate-data: error: {message}\n"
+    assert list(tmp_path.iterdir()) == []
+
+
+@needs_fmu
+def test_failed_write_keeps_the_previous_data_and_sidecar(tmp_path, capsys):
+    """The CSV and its sidecar are replaced together: when the sidecar cannot be written
+    (here its name is taken by a folder), the previous CSV is left byte-identical."""
+    out = tmp_path / "d.csv"
+    out.write_text("previous data\n")
+    (tmp_path / "d.json").mkdir()
+    assert main(["generate-data", "--steps", "20", "--out", str(out), "--quiet"]) == 1
+    err = capsys.readouterr().err
+    assert err.startswith(f"cosim generate-data: failed: {tmp_path / 'd.json'}: cannot write: ")
+    assert err.count("\n") == 1
+    assert out.read_text() == "previous data\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.csv", "d.json"]  # no temp file
+    assert list((tmp_path / "d.json").iterdir()) == []
+
+
+@needs_fmu
+def test_typo_in_an_unused_map_entry_is_a_one_line_error(tmp_path, capsys):
+    vmap = tmp_path / "typo.toml"
+    vmap.write_text('[signals.qa]\nvariable = "qa"\n[signals.qd3]\nvariable = "qd_3"\n')
+    code = main(["generate-data", "--steps", "20", "--map", str(vmap), "--out",
+                 str(tmp_path / "x.csv"), "--quiet"])
+    assert code == 2
+    assert capsys.readouterr().err == (f"cosim generate-data: error: {vmap}: signal 'qd3' -> "
+                                       "variable 'qd_3': the FMU has no such variable\n")
+    assert not (tmp_path / "x.csv").exists()
+
+
+def test_read_csv_ignores_a_deeply_nested_sidecar(tmp_path):
+    """Like any unreadable sidecar, a JSON nested too deeply for the parser is ignored."""
+    path = tmp_path / "d.csv"
+    path.write_text("time,qa,qb,h1,split\n0,1,2,3,train\n")
+    path.with_suffix(".json").write_text("[" * 100_000 + "]" * 100_000)
+    data = datagen.read_csv(path)
+    assert data.input_names == ["qa", "qb"] and data.output_names == ["h1"]

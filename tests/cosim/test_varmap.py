@@ -90,3 +90,36 @@ def test_check_against_the_four_tank_fmu(tmp_path: Path, fmu2_path: Path) -> Non
     with pytest.raises(CosimError, match=r"^plant.fmu: signal 'h1' \(not in a variable map\): "
                                          "unit mismatch: the controller expects 'cm'"):
         VarMap.identity().check(variables, ["qa"], ["h1"], {"h1": "cm"}, fmu="plant.fmu")
+
+
+@pytest.mark.parametrize(("entry", "words"), [
+    ('[signals.h3]\nvariable = "level3"\n',
+     "signal 'h3' -> variable 'level3': the FMU has no such variable"),
+    ('[signals.qd1]\nvariable = "qd_1"\n',
+     "signal 'qd1' -> variable 'qd_1': the FMU has no such variable"),
+    ('[signals.gravity]\nvariable = "g"\n',
+     "signal 'gravity' -> variable 'g': causality is 'local'; a map entry must name an FMU "
+     "input, output or parameter"),
+    ('[signals.S]\nvariable = "S"\nunit = "cm2"\n',
+     "signal 'S' -> variable 'S': unit mismatch: the map expects 'cm2', the FMU declares "
+     "'m2'"),
+])
+def test_every_map_entry_is_checked_even_when_the_run_does_not_use_it(
+        tmp_path: Path, fmu2_path: Path, entry: str, words: str) -> None:
+    """A typo in an entry the controller does not read is found before anything runs."""
+    good = '[signals.qa]\nvariable = "qa"\nunit = "m3/s"\n[signals.h1]\nvariable = "h1"\n'
+    units = {"qa": "m3/s", "qb": "m3/s", "h1": "m", "h2": "m"}
+    comp = FmuComponent(fmu2_path, varmap=load(write(tmp_path, good)))
+    comp.check_signals(["qa", "qb"], ["h1", "h2"], units)  # a map of good entries passes
+    path = write(tmp_path, good + entry)
+    comp = FmuComponent(fmu2_path, varmap=load(path))
+    with pytest.raises(CosimError) as info:
+        comp.check_signals(["qa", "qb"], ["h1", "h2"], units)
+    assert str(info.value) == f"{path}: {words}"
+
+
+def test_deeply_nested_toml_is_a_one_line_error(tmp_path: Path) -> None:
+    path = write(tmp_path, "[signals.qa]\nvariable = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    with pytest.raises(CosimError) as info:
+        load(path)
+    assert str(info.value) == f"{path}: invalid TOML: nested too deeply"

@@ -23,7 +23,7 @@ SHORT = """time,ref.h1,ref.h2
 #: Perturbed controller (``regression_perturbed:<Class>``) -> the controller it perturbs.
 PERTURBED = {
     "regression_perturbed:PIGainUp": "pi",                  # PI gains ×1.1
-    "regression_perturbed:MPCInputWeight": "robust-mpc",    # R = 0.01 I -> 0.02 I
+    "regression_perturbed:MPCInputWeight": "robust-mpc",    # R = 0.01 I -> 0.011 I
     "regression_perturbed:MPCModelWeight": "robust-mpc",    # U_o[0][0] + 1e-3
 }
 
@@ -36,8 +36,8 @@ def short_runs(tmp_path_factory: pytest.TempPathFactory,
     scenario = root / "short.csv"
     scenario.write_text(SHORT)
     names = ["pi", "robust-mpc", *PERTURBED]
-    cases = [rc.Case(scenario, n) for n in names
-             if rc.controller_available(PERTURBED.get(n, n)) is None]
+    cases = [rc.Case(scenario, n, options=rc.recording_options(n, PERTURBED.get(n)))
+             for n in names if rc.controller_available(PERTURBED.get(n, n)) is None]
     runs = {}
     for repeat in ("a", "b"):
         batch = [c for c in cases if repeat == "a" or ":" not in c.controller]
