@@ -37,8 +37,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from controllers.component import RobustMPCController  # noqa: E402
-from controllers.mpc import FHOCP  # noqa: E402
+from controllers.fhocp import FHOCP  # noqa: E402
+from controllers.mpc_controller import RobustMPCController  # noqa: E402
 from cosim.component import Component  # noqa: E402
 
 #: The plain baseline may take seconds to declare infeasibility; cap it so the run ends.
@@ -113,7 +113,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--no-reference", action="store_true",
                     help="with --solver sqp: do not solve with IPOPT alongside (timing only)")
     ap.add_argument("--sqp-options", default="{}",
-                    help='JSON overrides of controllers.mpc.SQP_OPTIONS, e.g. \'{"tol_du": 1e-4}\'')
+                    help="JSON overrides of controllers.solver_settings.SQP_OPTIONS, e.g. "
+                         "'{\"tol_du\": 1e-4}'")
     ap.add_argument("--quiet", action="store_true")
     args = ap.parse_args(argv)
 
@@ -129,14 +130,12 @@ def main(argv: list[str] | None = None) -> int:
         ctrl.fhocp.solver = "sqp"
         ctrl.fhocp.sqp_options.update(json.loads(args.sqp_options))
         if not args.no_reference:
-            reference = FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L,
-                              cert.a, cert.b, cert.s, solver="ipopt").setup()
+            reference = FHOCP.from_certificate(cert, solver="ipopt").setup()
     else:
         ctrl.fhocp.solver = "ipopt"
     ctrl.fhocp.setup()
-    baseline = None if args.no_baseline else FHOCP(
-        cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a, cert.b, cert.s,
-        formulation="multiple-shooting", ipopt_options=BASELINE_OPTIONS).setup()
+    baseline = None if args.no_baseline else FHOCP.from_certificate(
+        cert, formulation="multiple-shooting", ipopt_options=BASELINE_OPTIONS).setup()
     timed = TimedController(ctrl, baseline, reference)
     sc = scenario_mod.load(args.scenario)
     fmu = ROOT / "fmus" / "FourTank.fmu"

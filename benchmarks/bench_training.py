@@ -33,7 +33,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from controllers import certificates, metrics, training  # noqa: E402
+from controllers import bounds, metrics, training  # noqa: E402
 from controllers.problem import FOURTANK  # noqa: E402
 from cosim import datagen  # noqa: E402
 from cosim.cli import main as cosim_main  # noqa: E402
@@ -63,7 +63,7 @@ def run(name: str, opts: training.TrainOptions, u, y, split, max_s: float) -> di
         state["epochs"] = epoch + 1
         if np.mean(fit) > np.mean(state["best"]):
             state["best"] = tuple(fit)
-        beaten = fit[0] > PAPER[0] and fit[1] > PAPER[1] and certificates.nu(weights) < 1
+        beaten = fit[0] > PAPER[0] and fit[1] > PAPER[1] and bounds.nu(weights) < 1
         if beaten and state["t_hit"] is None:
             state["t_hit"] = elapsed
             state["epoch_hit"] = epoch

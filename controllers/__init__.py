@@ -1,5 +1,69 @@
-"""GRU model, δISS certificates, observer, constraint tightening and robust MPC.
+"""The numerical core: GRU model, δISS certificates, observer, constraint tightening, MPC.
 
-This package knows nothing of FMUs: it works on arrays in normalised units. Only
-:mod:`controllers.training` needs torch; everything else runs on numpy and casadi.
+This package knows nothing of FMUs or of co-simulation: it works on arrays in normalised units
+and raises its own errors (:mod:`controllers.errors`). Only the adapters that implement the
+co-simulation ``Component`` interface import ``cosim``: :mod:`controllers.mpc_controller`
+(the robust MPC), :mod:`controllers.pi` (the PI baseline) and :mod:`controllers.model_plant`
+(the GRU model as a plant). Only :mod:`controllers.training` needs torch.
+
+The main names, importable from here::
+
+    from controllers import GRUModel, compute_certificate, FHOCP, RobustMPC, GRUObserver
+
+Names are imported on first use (``import controllers`` stays fast).
 """
+
+from __future__ import annotations
+
+from typing import Any
+
+__all__ = [
+    "DEFAULT_MODEL",
+    "FHOCP",
+    "Certificate",
+    "ControllersError",
+    "FHOCPResult",
+    "GRUModel",
+    "GRUObserver",
+    "ReferenceGovernor",
+    "RobustMPC",
+    "RobustMPCController",
+    "choose_gain_scale",
+    "compute_certificate",
+    "equilibrium",
+    "observer_gains_lp",
+]
+
+_EXPORTS = {
+    "GRUModel": ("controllers.model", "GRUModel"),
+    "DEFAULT_MODEL": ("controllers.model", "DEFAULT_MODEL"),
+    "Certificate": ("controllers.certificates", "Certificate"),
+    "compute_certificate": ("controllers.certificates", "compute_certificate"),
+    "choose_gain_scale": ("controllers.gain_design", "choose_gain_scale"),
+    "observer_gains_lp": ("controllers.gain_design", "observer_gains_lp"),
+    "equilibrium": ("controllers.equilibrium", "equilibrium"),
+    "FHOCP": ("controllers.fhocp", "FHOCP"),
+    "FHOCPResult": ("controllers.fhocp", "FHOCPResult"),
+    "RobustMPC": ("controllers.robust_mpc", "RobustMPC"),
+    "GRUObserver": ("controllers.observer", "GRUObserver"),
+    "ReferenceGovernor": ("controllers.governor", "ReferenceGovernor"),
+    "RobustMPCController": ("controllers.mpc_controller", "RobustMPCController"),
+    "ControllersError": ("controllers.errors", "ControllersError"),
+}
+
+
+def __getattr__(name: str) -> Any:
+    """Import an exported name on first use (PEP 562)."""
+    try:
+        module, attr = _EXPORTS[name]
+    except KeyError:
+        raise AttributeError(f"module 'controllers' has no attribute {name!r}") from None
+    import importlib
+
+    value = getattr(importlib.import_module(module), attr)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -20,15 +20,14 @@ from typing import Any
 
 import numpy as np
 
+from controllers.errors import UnreachableSetpoint
 from controllers.gru import NUMPY_OPS, gates, step
-from cosim.errors import CosimError
+
+__all__ = ["EQ_TOL", "REACH_TOL", "describe", "equilibrium", "equilibrium_for_output",
+           "equilibrium_newton", "jacobians", "reachable_boundary", "state_equilibrium"]
 
 #: Residual (∞-norm, normalised units) below which a set-point counts as reached.
 REACH_TOL = 1e-8
-
-
-class UnreachableSetpoint(CosimError):
-    """A set-point the model cannot hold with inputs inside the saturation box."""
 
 
 def _params(model_or_params: Any) -> dict[str, np.ndarray]:
@@ -145,7 +144,9 @@ def _solve(params: dict[str, np.ndarray], y: np.ndarray) -> tuple[np.ndarray, np
     return best
 
 
-def _describe(model: Any, y: np.ndarray) -> str:
+def describe(model: Any, y: np.ndarray) -> str:
+    """A set-point for messages: ``h1=0.9 m, h2=1.2 m`` with a model (physical units), else
+    the normalised vector."""
     names = getattr(model, "output_names", None)
     if names is not None and hasattr(model, "denormalize_y"):
         phys = model.denormalize_y(y)
@@ -172,8 +173,8 @@ def equilibrium(model_or_params: Any, y_bar_norm: Sequence[float]) -> tuple[np.n
     Raises
     ------
     UnreachableSetpoint
-        (a :class:`CosimError`) when no ``‖ū‖∞ ≤ 1`` reaches ``ȳ``; the message names the
-        set-point and the closest reachable equilibrium output.
+        (a :class:`~controllers.errors.SetpointError`) when no ``‖ū‖∞ ≤ 1`` reaches
+        ``ȳ``; the message names the set-point and the closest reachable equilibrium output.
     """
     params = _params(model_or_params)
     y = np.asarray(y_bar_norm, dtype=float).reshape(-1)
@@ -181,9 +182,9 @@ def equilibrium(model_or_params: Any, y_bar_norm: Sequence[float]) -> tuple[np.n
     if err > REACH_TOL:
         reach = params["U_o"] @ x + params["b_o"]
         raise UnreachableSetpoint(
-            f"set-point {_describe(model_or_params, y)} is not reachable with inputs inside "
+            f"set-point {describe(model_or_params, y)} is not reachable with inputs inside "
             f"the saturation box (‖u‖∞ ≤ 1); the closest reachable equilibrium output is "
-            f"{_describe(model_or_params, reach)}")
+            f"{describe(model_or_params, reach)}")
     return x, u
 
 
@@ -198,3 +199,49 @@ def equilibrium_for_output(model_or_params: Any,
     params = _params(model_or_params)
     x, u, _ = _solve(params, np.asarray(y_norm, dtype=float).reshape(-1))
     return x, u
+
+
+#: Residual ∞-norm accepted for an equilibrium from Newton's method (normalised units).
+EQ_TOL = 1e-11
+
+
+def equilibrium_newton(params: Mapping[str, np.ndarray], y: np.ndarray, x0: np.ndarray,
+                       u0: np.ndarray, max_iter: int = 20,
+                       ) -> tuple[np.ndarray, np.ndarray] | None:
+    """Equilibrium ``x = f(x, u)``, ``U_o x + b_o = y`` (``eq:gru``) by Newton's method from
+    ``(x0, u0)``; ``None`` when it does not converge or leaves ``‖u‖∞ ≤ 1``."""
+    n = x0.shape[0]
+    m = u0.shape[0]
+    Uo, bo = params["U_o"], params["b_o"]
+    x, u = np.array(x0, dtype=float), np.array(u0, dtype=float)
+    K = np.zeros((n + Uo.shape[0], n + m))
+    eye = np.eye(n)
+    for _ in range(max_iter):
+        F = np.concatenate([step(params, x, u) - x, Uo @ x + bo - y])
+        if np.max(np.abs(F)) < EQ_TOL:
+            return (x, u) if np.max(np.abs(u)) <= 1.0 else None
+        f_x, f_u = jacobians(params, x, u)
+        K[:n, :n] = f_x - eye
+        K[:n, n:] = f_u
+        K[n:, :n] = Uo
+        try:
+            d = np.linalg.solve(K, -F)
+        except np.linalg.LinAlgError:
+            return None
+        x = x + d[:n]
+        u = u + d[n:]
+    return None
+
+
+def reachable_boundary(model: Any, points: int = 60) -> np.ndarray:
+    """Physical outputs of the model equilibria along the boundary of the input box
+    (``‖u‖∞ = 1``): the edge of the set of reachable set-points (``p = m = 2``)."""
+    s = np.linspace(-1.0, 1.0, points)
+    edges = [np.c_[s, -np.ones_like(s)], np.c_[np.ones_like(s), s],
+             np.c_[s[::-1], np.ones_like(s)], np.c_[-np.ones_like(s), s[::-1]]]
+    us = np.vstack(edges)
+    ys, x = [], None
+    for u in us:
+        x = state_equilibrium(model.params, u, x)
+        ys.append(model.denormalize_y(model.params["U_o"] @ x + model.params["b_o"]))
+    return np.array(ys)

@@ -24,51 +24,29 @@ between two admissible set-points is admissible too. Once ``v = r`` the controll
 paper's.
 
 Equilibria along the segment come from a Newton continuation from ``(x̄(v), ū(v))``
-(:func:`equilibrium_newton`, a few 22×22 solves) instead of the multi-start least squares of
-:func:`controllers.equilibrium.equilibrium`.
+(:func:`controllers.equilibrium.equilibrium_newton`, a few 22×22 solves) instead of the
+multi-start least squares of :func:`controllers.equilibrium.equilibrium`.
+
+The largest fraction tried, ``λ_max``, adapts to the solver (:meth:`ReferenceGovernor.
+govern`): it halves (down to :data:`LAM_MIN`) after a solve that did not converge and doubles
+(up to 1) after a converged solve that followed a move.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from controllers import gru
-from controllers.equilibrium import jacobians
+from controllers.equilibrium import equilibrium_newton
 
-#: Residual ∞-norm accepted for an equilibrium from Newton's method (normalised units).
-EQ_TOL = 1e-11
+__all__ = ["LAM_GROW", "LAM_MIN", "GovernorStep", "ReferenceGovernor"]
 
-
-def equilibrium_newton(params: Mapping[str, np.ndarray], y: np.ndarray, x0: np.ndarray,
-                       u0: np.ndarray, max_iter: int = 20,
-                       ) -> tuple[np.ndarray, np.ndarray] | None:
-    """Equilibrium ``x = f(x, u)``, ``U_o x + b_o = y`` (``eq:gru``) by Newton's method from
-    ``(x0, u0)``; ``None`` when it does not converge or leaves ``‖u‖∞ ≤ 1``."""
-    n = x0.shape[0]
-    m = u0.shape[0]
-    Uo, bo = params["U_o"], params["b_o"]
-    x, u = np.array(x0, dtype=float), np.array(u0, dtype=float)
-    K = np.zeros((n + Uo.shape[0], n + m))
-    eye = np.eye(n)
-    for _ in range(max_iter):
-        F = np.concatenate([gru.step(params, x, u) - x, Uo @ x + bo - y])
-        if np.max(np.abs(F)) < EQ_TOL:
-            return (x, u) if np.max(np.abs(u)) <= 1.0 else None
-        f_x, f_u = jacobians(params, x, u)
-        K[:n, :n] = f_x - eye
-        K[:n, n:] = f_u
-        K[n:, :n] = Uo
-        try:
-            d = np.linalg.solve(K, -F)
-        except np.linalg.LinAlgError:
-            return None
-        x = x + d[:n]
-        u = u + d[n:]
-    return None
+#: The adaptive step limit ``λ_max``: smallest value, and growth factor after a converged
+#: solve that followed a move (it halves after a solve that did not converge).
+LAM_MIN = 0.0625
+LAM_GROW = 2.0
 
 
 @dataclass
@@ -91,10 +69,15 @@ class ReferenceGovernor:
     ----------
     cert : controllers.certificates.Certificate
         Gives ``α(ȳ)`` (``eq:def-alpha``) and the admissibility checks.
-    fhocp : controllers.mpc.FHOCP
+    fhocp : controllers.fhocp.FHOCP
         Gives the tightened bounds and the rollout.
     levels : int
         Number of step fractions tried: ``1, 1/2, …, 2^{1−levels}``.
+
+    Attributes
+    ----------
+    lam_max : float
+        The largest fraction of ``r − v`` the next step may move (adapted by :meth:`govern`).
     """
 
     def __init__(self, cert: Any, fhocp: Any, levels: int = 5) -> None:
@@ -102,6 +85,28 @@ class ReferenceGovernor:
         self.fhocp = fhocp
         self.params = cert.params
         self.levels = int(levels)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the adaptation (a new run): ``λ_max = 1``."""
+        self.lam_max = 1.0
+        self._moved = False
+
+    def govern(self, x_hat: np.ndarray, e_o: float, v: np.ndarray, x_bar: np.ndarray,
+               u_bar: np.ndarray, r: np.ndarray, plan: np.ndarray | None,
+               last_success: bool | None) -> GovernorStep:
+        """:meth:`step` with ``λ_max`` adapted to the last solve (``None``: no solve yet).
+
+        ``λ_max`` halves after a solve that did not converge (not below :data:`LAM_MIN`) and
+        doubles after a converged solve that followed a move (not above 1).
+        """
+        if last_success is False:
+            self.lam_max = max(self.lam_max * 0.5, LAM_MIN)
+        elif self._moved and last_success is not None:
+            self.lam_max = min(1.0, self.lam_max * LAM_GROW)
+        gs = self.step(x_hat, e_o, v, x_bar, u_bar, r, plan, self.lam_max)
+        self._moved = gs.lam > 0.0
+        return gs
 
     def feasible(self, x_hat: np.ndarray, e_o: float, u_seq: np.ndarray, x_bar: np.ndarray,
                  alpha: float) -> bool:

@@ -1,4 +1,8 @@
-"""Accuracy of a model: open-loop simulation and the FIT index of the paper's section V."""
+"""Accuracy of a model: open-loop simulation and the FIT index of the paper's section V.
+
+The figure of a prediction is :func:`cosim.plots.prediction_figure` (this numerical core
+draws nothing).
+"""
 
 from __future__ import annotations
 
@@ -7,6 +11,8 @@ from collections.abc import Mapping
 import numpy as np
 
 from controllers import gru
+
+__all__ = ["fit", "open_loop", "split_scores"]
 
 
 def fit(y: np.ndarray, xi: np.ndarray) -> np.ndarray:
@@ -54,28 +60,3 @@ def split_scores(p: Mapping[str, np.ndarray], u: np.ndarray, y: np.ndarray,
         out[name] = {"fit": fit(y[mask], xi[mask]).tolist(),
                      "max_abs_err": float(np.max(np.abs(y[mask] - xi[mask])))}
     return out
-
-
-def prediction_figure(time: np.ndarray, y: np.ndarray, xi: np.ndarray, names: list[str],
-                      units: list[str], fits: list[float], path: str, title: str) -> None:
-    """Save a figure of measured vs predicted outputs (one panel per output, Agg backend)."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    t = (time - time[0]) / 3600.0
-    fig, axes = plt.subplots(len(names), 1, figsize=(10, 2.6 * len(names)), sharex=True,
-                             squeeze=False)
-    for j, ax in enumerate(axes[:, 0]):
-        ax.plot(t, y[:, j], color="tab:blue", lw=1.0, label="measured (plant FMU)")
-        ax.plot(t, xi[:, j], color="tab:red", lw=1.0, ls="--", label="GRU, open loop")
-        ax.set_ylabel(f"{names[j]} [{units[j]}]")
-        ax.set_title(f"{names[j]}: FIT {fits[j]:.1f} %", fontsize=9, loc="left")
-        ax.grid(alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[-1, 0].set_xlabel("time from start of test split [h]")
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)

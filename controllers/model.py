@@ -34,16 +34,19 @@ from typing import Any
 
 import numpy as np
 
+from controllers.errors import ModelFileError
 from controllers.gru import PARAM_NAMES
-from cosim.errors import CosimError
+
+__all__ = ["DEFAULT_MODEL", "FORMAT_NAME", "FORMAT_VERSION", "NORMALIZATION_KEYS", "GRUModel",
+           "write_atomic"]
+
+#: The shipped model: the four-tank GRU of ``controllers/models/`` (trained by ``cosim
+#: train``, observer gains by ``cosim certify --auto-gain-scale --save``).
+DEFAULT_MODEL = Path(__file__).resolve().parent / "models" / "fourtank_gru.json"
 
 FORMAT_NAME = "gru-mpc-model"
 FORMAT_VERSION = 1
 NORMALIZATION_KEYS = ("u_offset", "u_scale", "y_offset", "y_scale")
-
-
-class ModelFileError(CosimError):
-    """A model file that cannot be used; the message names the file and the entry."""
 
 
 @dataclass

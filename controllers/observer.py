@@ -24,6 +24,8 @@ import numpy as np
 from controllers.equilibrium import equilibrium_for_output
 from controllers.gru import output, step
 
+__all__ = ["GRUObserver"]
+
 
 class GRUObserver:
     """State observer ``eq:observer`` for a GRU model (normalised units).

@@ -28,6 +28,8 @@ from controllers.problem import FOURTANK, ControlProblem
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
 
+__all__ = ["PAIRINGS", "PIController", "PILoop"]
+
 
 @dataclass(frozen=True)
 class PILoop:

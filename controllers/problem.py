@@ -7,6 +7,13 @@ so that constraints are declared once. Bounds are in physical units.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controllers.errors import DesignError
+
+__all__ = ["FOURTANK", "ControlProblem", "constraint_names", "output_constraints"]
 
 
 @dataclass(frozen=True)
@@ -53,3 +60,41 @@ FOURTANK = ControlProblem(
     output_units=("m", "m"),
     Ts=25.0,
 )
+
+
+def output_constraints(model: Any, problem: ControlProblem = FOURTANK) -> tuple[np.ndarray,
+                                                                               np.ndarray]:
+    """``(L, h)`` of ``eq:output-constraint`` (``L y ≤ h``) in the model's normalised units.
+
+    For each model output ``j`` (matched by name with ``problem.outputs``) two rows:
+    ``+y_j ≤ (max − offset)/scale`` and ``−y_j ≤ −(min − offset)/scale``; a negative scale
+    swaps the two bounds.
+    """
+    names = list(model.output_names)
+    rows, rhs = [], []
+    bounds = dict(zip(problem.outputs, problem.output_bounds, strict=True))
+    for j, name in enumerate(names):
+        if name not in bounds:
+            raise DesignError(f"model output {name!r} has no bounds in the control problem "
+                             f"(outputs {', '.join(problem.outputs)})")
+        lo, hi = bounds[name]
+        off, sc = float(model.y_offset[j]), float(model.y_scale[j])
+        nlo, nhi = sorted(((lo - off) / sc, (hi - off) / sc))
+        e = np.zeros(len(names))
+        e[j] = 1.0
+        rows += [e, -e]
+        rhs += [nhi, -nlo]
+    return np.array(rows), np.array(rhs)
+
+
+def constraint_names(model: Any, problem: ControlProblem = FOURTANK) -> list[str]:
+    """Readable names of the rows of :func:`output_constraints` (e.g. ``h1 <= 2 m``)."""
+    bounds = dict(zip(problem.outputs, problem.output_bounds, strict=True))
+    units = dict(zip(problem.outputs, problem.output_units, strict=True))
+    names = []
+    for j, name in enumerate(model.output_names):
+        lo, hi = bounds[name]
+        if model.y_scale[j] < 0:
+            lo, hi = hi, lo
+        names += [f"{name} <= {hi:g} {units[name]}", f"{name} >= {lo:g} {units[name]}"]
+    return names

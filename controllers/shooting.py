@@ -41,6 +41,8 @@ from scipy.special import expit
 
 from controllers import gru
 
+__all__ = ["GRUShooting", "Rollout"]
+
 
 @dataclass
 class Rollout:

@@ -34,8 +34,11 @@ from typing import Any
 import numpy as np
 
 from controllers import gru, metrics
-from controllers.certificates import nu as nu_numpy
-from cosim.errors import CosimError
+from controllers.bounds import nu as nu_numpy
+from controllers.errors import DataError, DesignError, TrainingError
+
+__all__ = ["CONSTRAINED", "TrainOptions", "TrainResult", "build_model", "constrain", "init_params",
+           "normalization", "nu_torch", "subsequences", "train"]
 
 
 @dataclass
@@ -123,7 +126,7 @@ class TrainResult:
 def nu_torch(p: dict[str, Any]) -> Any:
     """ν of ``th:stability-bonassi`` on torch tensors, differentiable (subgradients).
 
-    Same expression as :func:`controllers.certificates.nu`; ∞-norms are max row sums of
+    Same expression as :func:`controllers.bounds.nu`; ∞-norms are max row sums of
     absolute values.
     """
     import torch
@@ -202,7 +205,7 @@ def init_params(n: int, m: int, p: int, seed: int, bz_init: float = 2.0,
 def subsequences(T: int, seq_len: int, stride: int | None) -> list[int]:
     """Start indices of the truncated training subsequences of a record of length ``T``."""
     if seq_len > T:
-        raise CosimError(f"training data has {T} steps, fewer than --seq-len {seq_len}")
+        raise DataError(f"training data has {T} steps, fewer than seq_len = {seq_len}")
     stride = stride or seq_len
     return list(range(0, T - seq_len + 1, stride))
 
@@ -249,7 +252,7 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
 
     opt = options or TrainOptions()
     if opt.constraint not in ("project", "penalty"):
-        raise CosimError(f"unknown constraint mode {opt.constraint!r} (project or penalty)")
+        raise DesignError(f"unknown constraint mode {opt.constraint!r} (project or penalty)")
     torch.set_num_threads(1)
     torch.manual_seed(opt.seed)
     rng = np.random.default_rng(opt.seed)
@@ -374,7 +377,7 @@ def build_model(params: dict[str, np.ndarray], problem: Any, norm: dict[str, np.
 
     Raises
     ------
-    CosimError
+    TrainingError
         When the weights violate ``th:stability-bonassi`` (ν ≥ 1): such a model carries no
         δISS certificate and the MPC's guarantees would not hold.
     """
@@ -382,9 +385,9 @@ def build_model(params: dict[str, np.ndarray], problem: Any, norm: dict[str, np.
 
     v = nu_numpy(params)
     if not v < 1.0:
-        raise CosimError(f"trained model has nu = {v:.4f} >= 1 (th:stability-bonassi fails); "
-                         "not saved: train longer, raise --nu-margin or use --constraint "
-                         "project")
+        raise TrainingError(f"trained model has nu = {v:.4f} >= 1 (th:stability-bonassi fails); "
+                            "not saved: train longer, raise nu_margin or use constraint "
+                            "'project'")
     return GRUModel(params={k: np.asarray(a, dtype=float) for k, a in params.items()},
                     u_offset=norm["u_offset"], u_scale=norm["u_scale"],
                     y_offset=norm["y_offset"], y_scale=norm["y_scale"],

@@ -28,6 +28,10 @@ from pathlib import Path
 
 from cosim.errors import CosimError
 
+__all__ = ["BUILD_DIR", "CFLAGS", "FMU_DIR", "LDFLAGS", "MODEL_IDENTIFIER", "ROOT", "SOURCE_DIR",
+           "TARGETS", "Target", "build_fmu", "build_fmus", "compiler", "display_path",
+           "fmi_headers_dir"]
+
 #: Repository root (the package is installed in editable mode).
 ROOT = Path(__file__).resolve().parents[1]
 SOURCE_DIR = ROOT / "fmus" / "fourtank"

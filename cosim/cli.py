@@ -1,13 +1,9 @@
 """The ``cosim`` command line: one sub-command per module in :mod:`cosim.commands`.
 
-Exit codes (also in the README):
-
-* 0 -- success;
-* 1 -- a run failed mid-way (results up to the fault are kept), or ``compare`` found a
-  deviation outside the tolerance band;
-* 2 -- bad input or usage (scenario, map, model file, FMU, options): nothing was run;
-* 128 + N -- stopped by signal N: 130 SIGINT (Ctrl-C), 143 SIGTERM, 129 SIGHUP (results up
-  to the signal are kept).
+Exit codes: :data:`cosim.errors.EXIT_CODES` (also in the README), which ``cosim --help``
+prints with what a code also means for each command (the commands' ``EXIT_NOTES``):
+:class:`~cosim.errors.SimulationFailed` exits 1, any other
+:class:`~cosim.errors.CosimError` 2, a signal N ``128 + N``.
 """
 
 from __future__ import annotations
@@ -18,6 +14,7 @@ import signal
 import sys
 from collections.abc import Sequence
 
+from controllers.errors import ControllersError
 from cosim import __version__, interrupts
 from cosim.errors import (
     EXIT_FAILED,
@@ -25,11 +22,16 @@ from cosim.errors import (
     EXIT_SIGNAL_BASE,
     CosimError,
     SimulationFailed,
+    exit_codes_help,
 )
 
+__all__ = ["COMMANDS", "build_parser", "main"]
+
 #: Sub-command modules, in the order ``cosim --help`` lists them. Each defines
-#: ``register(subparsers)`` that adds its parser and sets ``func(args) -> int``; heavy imports
-#: (casadi, torch, fmpy) happen inside ``func`` so that ``--help`` stays fast.
+#: ``register(subparsers)`` that adds its parser and sets ``func(args) -> int``, and may define
+#: ``EXIT_NOTES`` (exit code → what it also means for the command, shown by
+#: :func:`~cosim.errors.exit_codes_help`); heavy imports (casadi, torch, fmpy) happen inside
+#: ``func`` so that ``--help`` stays fast.
 COMMANDS = (
     "cosim.commands.run",
     "cosim.commands.build_fmu",
@@ -37,26 +39,19 @@ COMMANDS = (
     "cosim.commands.train",
     "cosim.commands.certify",
     "cosim.commands.compare",
+    "cosim.commands.campaign",
 )
-
-EPILOG = """exit codes:
-  0    success
-  1    a run failed mid-way (partial results kept), an output file could not be written,
-       or compare found deviations
-  2    bad input or usage; nothing was run
-  130  interrupted by Ctrl-C (SIGINT); 143 by SIGTERM, 129 by SIGHUP (partial results kept)"""
-
 
 def build_parser() -> argparse.ArgumentParser:
     """Return the top-level parser with every available sub-command registered."""
     parser = argparse.ArgumentParser(
         prog="cosim",
         description="Robust GRU-based MPC tested by FMI co-simulation.",
-        epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"cosim {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
+    notes: dict[str, dict[int, str]] = {}
     for module_name in COMMANDS:
         try:
             module = importlib.import_module(module_name)
@@ -65,6 +60,9 @@ def build_parser() -> argparse.ArgumentParser:
                 continue  # command not shipped in this build
             raise
         module.register(subparsers)
+        if getattr(module, "EXIT_NOTES", None):
+            notes[list(subparsers.choices)[-1]] = module.EXIT_NOTES
+    parser.epilog = exit_codes_help(notes)
     return parser
 
 
@@ -79,6 +77,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"cosim {args.command}: failed: {exc}", file=sys.stderr)
         return EXIT_FAILED
     except CosimError as exc:
+        print(f"cosim {args.command}: error: {exc}", file=sys.stderr)
+        return EXIT_INPUT_ERROR
+    except ControllersError as exc:
+        # the numerical core's errors: a ValueError is bad input, a RuntimeError a failure
+        if isinstance(exc, RuntimeError):
+            print(f"cosim {args.command}: failed: {exc}", file=sys.stderr)
+            return EXIT_FAILED
         print(f"cosim {args.command}: error: {exc}", file=sys.stderr)
         return EXIT_INPUT_ERROR
     except KeyboardInterrupt as exc:

@@ -26,11 +26,14 @@ Tolerance band
   tolerates small time shifts of steps and events.
 
 Two NaNs (or two equal infinities) at the same point agree; a NaN against a number does not.
+
+The files are read by :func:`cosim.csvio.read_table` (re-exported here with
+:class:`~cosim.csvio.Table`); the figure of ``cosim compare --plot`` is
+:func:`cosim.plots.compare_figure`.
 """
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -38,7 +41,23 @@ from pathlib import Path
 
 import numpy as np
 
+from cosim.csvio import Table, read_table
 from cosim.errors import CosimError
+
+__all__ = [
+    "DEFAULT_ATOL",
+    "DEFAULT_RTOL",
+    "Comparison",
+    "SignalComparison",
+    "Table",
+    "Tolerance",
+    "compare",
+    "compare_tables",
+    "format_report",
+    "read_table",
+    "resample",
+    "window_extrema",
+]
 
 #: Default relative tolerance: tight enough that a small change of tuning or model fails.
 DEFAULT_RTOL = 1e-4
@@ -46,128 +65,6 @@ DEFAULT_RTOL = 1e-4
 DEFAULT_ATOL = 1e-9
 
 Tolerance = float | Mapping[str, float]
-
-
-# --------------------------------------------------------------------------------------------
-# Reading
-# --------------------------------------------------------------------------------------------
-
-@dataclass
-class Table:
-    """A result CSV: the time column parsed, signal columns parsed on demand.
-
-    Attributes
-    ----------
-    path : Path
-    time_name : str
-        Header of the first column.
-    names : list of str
-        Signal column headers, in file order (time excluded).
-    time : ndarray
-        Strictly increasing times [s].
-    """
-
-    path: Path
-    time_name: str
-    names: list[str]
-    time: np.ndarray
-    _rows: list[list[str]] = field(repr=False)
-    _lines: list[int] = field(repr=False)
-    _cache: dict[str, np.ndarray] = field(default_factory=dict, repr=False)
-
-    def column(self, name: str) -> np.ndarray:
-        """Values of one signal column as floats.
-
-        Raises
-        ------
-        CosimError
-            ``file:line:column: ...`` for an empty or non-numeric cell.
-        """
-        if name in self._cache:
-            return self._cache[name]
-        try:
-            j = self.names.index(name) + 1
-        except ValueError:
-            raise CosimError(f"{self.path}: no column '{name}'") from None
-        values = np.empty(len(self._rows))
-        for i, row in enumerate(self._rows):
-            values[i] = _number(row[j], self.path, self._lines[i], j + 1, name)
-        self._cache[name] = values
-        return values
-
-
-def _number(text: str, path: Path, line: int, col: int, name: str) -> float:
-    text = text.strip()
-    if not text:
-        raise CosimError(f"{path}:{line}:{col}: empty value in column '{name}'")
-    try:
-        return float(text)
-    except ValueError:
-        raise CosimError(f"{path}:{line}:{col}: '{text}' is not a number "
-                         f"(column '{name}')") from None
-
-
-def read_table(path: str | Path) -> Table:
-    """Read a result CSV, checking the header, the row lengths and the time column.
-
-    Raises
-    ------
-    CosimError
-        One line naming the file (and ``line:column`` where it applies): missing or
-        unreadable file, empty file, duplicate or empty column names, a row with the wrong
-        number of cells, a non-numeric or non-finite time, non-increasing time, no data rows.
-    """
-    path = Path(path)
-    try:
-        with path.open(newline="", encoding="utf-8") as fh:
-            reader = csv.reader(fh)
-            header = next(reader, None)
-            if header is None:
-                raise CosimError(f"{path}:1:1: empty file, expected a header row")
-            header = [h.strip() for h in header]
-            rows: list[list[str]] = []
-            lines: list[int] = []
-            for row in reader:
-                if not row or all(not c.strip() for c in row):
-                    continue  # blank line
-                if len(row) != len(header):
-                    raise CosimError(f"{path}:{reader.line_num}:1: {len(row)} cells, the header "
-                                     f"has {len(header)}")
-                rows.append(row)
-                lines.append(reader.line_num)
-    except FileNotFoundError:
-        raise CosimError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise CosimError(f"{path}: is a directory, expected a CSV file") from None
-    except UnicodeDecodeError as exc:
-        raise CosimError(f"{path}: not a text CSV file ({exc.reason})") from None
-    except csv.Error as exc:
-        raise CosimError(f"{path}: malformed CSV: {exc}") from None
-    except OSError as exc:
-        raise CosimError(f"{path}: cannot read: {exc.strerror}") from None
-
-    if len(header) < 2:
-        raise CosimError(f"{path}:1:1: expected a time column and at least one signal column")
-    seen: dict[str, int] = {}
-    for j, name in enumerate(header, start=1):
-        if not name:
-            raise CosimError(f"{path}:1:{j}: empty column name")
-        if name in seen:
-            raise CosimError(f"{path}:1:{j}: duplicate column '{name}' (also column {seen[name]})")
-        seen[name] = j
-    if not rows:
-        raise CosimError(f"{path}:2:1: no data rows")
-
-    time = np.empty(len(rows))
-    for i, row in enumerate(rows):
-        t = _number(row[0], path, lines[i], 1, header[0])
-        if not math.isfinite(t):
-            raise CosimError(f"{path}:{lines[i]}:1: time must be finite, got '{row[0].strip()}'")
-        if i and t <= time[i - 1]:
-            raise CosimError(f"{path}:{lines[i]}:1: time {t:g} is not greater than the previous "
-                             f"time {time[i - 1]:g} (line {lines[i - 1]}); times must increase")
-        time[i] = t
-    return Table(path, header[0], header[1:], time, rows, lines)
 
 
 # --------------------------------------------------------------------------------------------
@@ -461,7 +358,7 @@ def _names(names: Sequence[str], limit: int = 8) -> str:
 
 
 # --------------------------------------------------------------------------------------------
-# Report and plot
+# Report
 # --------------------------------------------------------------------------------------------
 
 def _g(x: float, digits: int = 4) -> str:
@@ -519,51 +416,3 @@ def format_report(c: Comparison, quiet: bool = False) -> str:
         lines.append("")
         lines.append(f"PASS: all {len(c.signals)} signals within the tolerance band")
     return "\n".join(lines)
-
-
-def plot(c: Comparison, path: str | Path, max_signals: int = 16) -> Path:
-    """Write a figure: per signal the reference, the result, the band and failing points.
-
-    Failing signals are drawn first; at most ``max_signals`` panels. The file is replaced
-    atomically (:mod:`cosim.atomicio`): a failed write raises
-    :class:`~cosim.errors.OutputError` and leaves the previous file unchanged.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    path = Path(path)
-    ordered = c.failed + [s for s in c.signals if s.passed]
-    shown = ordered[:max_signals]
-    fig, axes = plt.subplots(len(shown), 1, sharex=True, squeeze=False,
-                             figsize=(9, 1.2 + 2.0 * len(shown)))
-    for ax, s in zip(axes[:, 0], shown, strict=True):
-        ax.fill_between(s.time, s.lower, s.upper, color="tab:blue", alpha=0.2, lw=0,
-                        label="tolerance band")
-        ax.plot(s.time, s.reference, color="tab:blue", lw=1.0, label="reference")
-        ax.plot(s.time, s.result, color="tab:orange", lw=1.0, ls="--", label="result")
-        if not s.passed:
-            bad = s.outside & ~np.isnan(s.result)
-            ax.plot(s.time[bad], s.result[bad], "x", color="tab:red", ms=5,
-                    label=f"outside ({s.n_outside})")
-        ax.set_ylabel(s.name)
-        ax.set_title(f"{s.name}: {'PASS' if s.passed else 'FAIL'}", fontsize=9, loc="left",
-                     color="black" if s.passed else "tab:red")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7, loc="best")
-    axes[-1, 0].set_xlabel("time [s]")
-    more = len(ordered) - len(shown)
-    title = f"{c.result_path.name} vs {c.reference_path.name}: " \
-            f"{'PASS' if c.passed else 'FAIL'}" + (f" ({more} more signals not shown)"
-                                                   if more else "")
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    from cosim.atomicio import replacing
-
-    try:
-        with replacing(path) as tmp:  # a failed write keeps the previous figure
-            fig.savefig(tmp, dpi=100)
-    finally:
-        plt.close(fig)
-    return path

@@ -20,6 +20,8 @@ from abc import ABC, abstractmethod
 from collections.abc import Mapping
 from dataclasses import dataclass
 
+__all__ = ["Component", "Signal"]
+
 
 @dataclass(frozen=True)
 class Signal:

@@ -18,17 +18,19 @@ unchanged.
 
 from __future__ import annotations
 
-import csv
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
+from cosim import csvio
 from cosim.component import Component
 from cosim.errors import CosimError
+
+__all__ = ["DATA_WORDING", "SPLITS", "Dataset", "collect", "fmu_plant",
+           "generate", "multilevel_signal", "read_csv", "split_sizes", "write_csv"]
 
 #: Names of the three parts of a data set, in time order.
 SPLITS = ("train", "val", "test")
@@ -173,11 +175,10 @@ def write_csv(data: Dataset, path: str | Path, meta: dict | None = None) -> Path
     with replacing(path) as tmp_csv, replacing(side) as tmp_json:
         try:
             with open(tmp_csv, "w", newline="", encoding="utf-8") as fh:
-                writer = csv.writer(fh)
-                writer.writerow(["time", *data.input_names, *data.output_names, "split"])
-                for k in range(data.time.shape[0]):
-                    writer.writerow([repr(float(data.time[k])), *map(repr, data.u[k].tolist()),
-                                     *map(repr, data.y[k].tolist()), data.split[k]])
+                csvio.write_table(fh, ["time", *data.input_names, *data.output_names, "split"],
+                                  ([float(data.time[k]), *data.u[k].tolist(),
+                                    *data.y[k].tolist(), data.split[k]]
+                                   for k in range(data.time.shape[0])))
         except OSError as exc:
             raise output_error(path, exc) from None
         try:
@@ -185,6 +186,21 @@ def write_csv(data: Dataset, path: str | Path, meta: dict | None = None) -> Path
         except OSError as exc:
             raise output_error(side, exc) from None
     return path
+
+
+#: How data sets word the errors of :class:`~cosim.csvio.CsvReader`.
+DATA_WORDING = csvio.Wording(
+    not_found="{path}: cannot read data file ({strerror})",
+    is_folder="{path}: cannot read data file ({strerror})",
+    unreadable="{path}: cannot read data file ({strerror})",
+    not_text="{path}:{line}: not a text CSV file (byte {start} of a read block is not UTF-8)",
+    malformed="{path}:{line}: malformed CSV ({error})",
+    empty="{path}:1: header must be 'time,<signals...>,split'",
+    cell_count="{path}:{line}: expected {expected} fields, got {cells}",
+    empty_value=None,
+    not_a_number="{path}:{line}: non-numeric value",
+    not_finite="{path}:{line}: non-finite value",
+)
 
 
 def read_csv(path: str | Path, n_inputs: int | None = None,
@@ -196,57 +212,25 @@ def read_csv(path: str | Path, n_inputs: int | None = None,
     ``time`` and ``split`` is an output. Errors name the file and line.
     """
     path = Path(path)
-    try:
-        fh = path.open(newline="", encoding="utf-8")
-    except OSError as exc:
-        raise CosimError(f"{path}: cannot read data file ({exc.strerror})") from None
-    reader = csv.reader(fh)
-    try:
-        with fh:
-            return _read_rows(path, reader, n_inputs, input_names)
-    except UnicodeDecodeError as exc:
-        raise CosimError(f"{path}:{reader.line_num + 1}: not a text CSV file (byte "
-                         f"{exc.start} of a read block is not UTF-8)") from None
-    except csv.Error as exc:
-        raise CosimError(f"{path}:{reader.line_num}: malformed CSV ({exc})") from None
-
-
-def _read_rows(path: Path, reader: Any, n_inputs: int | None,
-               input_names: Sequence[str] | None) -> Dataset:
-    """Parse the rows of :func:`read_csv`'s file (errors name the file and line)."""
-    header = next(reader, None)
-    if not header or header[0] != "time" or header[-1] != "split":
-        raise CosimError(f"{path}:1: header must be 'time,<signals...>,split'")
-    signals = header[1:-1]
-    rows, split = [], []
-    for line, row in enumerate(reader, start=2):
-        if len(row) != len(header):
-            raise CosimError(f"{path}:{line}: expected {len(header)} fields, got {len(row)}")
-        try:
-            values = [float(v) for v in row[:-1]]
-        except ValueError:
-            raise CosimError(f"{path}:{line}: non-numeric value") from None
-        if not all(np.isfinite(values)):
-            raise CosimError(f"{path}:{line}: non-finite value")
-        if row[-1] not in SPLITS:
-            raise CosimError(f"{path}:{line}: split must be one of {', '.join(SPLITS)}, "
-                             f"got {row[-1]!r}")
-        rows.append(values)
-        split.append(row[-1])
+    with csvio.CsvReader(path, DATA_WORDING) as f:
+        header = f.header()
+        if not header or header[0] != "time" or header[-1] != "split":
+            raise f.error(DATA_WORDING.empty)
+        signals = header[1:-1]
+        rows, split = [], []
+        for line, row in f.rows(len(header), skip_blank=False):
+            values = [f.number(v, line, j, name, finite=False)
+                      for j, (v, name) in enumerate(zip(row[:-1], header, strict=False), start=1)]
+            if not all(np.isfinite(values)):
+                raise f.error(DATA_WORDING.not_finite, line=line)
+            if row[-1] not in SPLITS:
+                raise CosimError(f"{path}:{line}: split must be one of {', '.join(SPLITS)}, "
+                                 f"got {row[-1]!r}")
+            rows.append(values)
+            split.append(row[-1])
     if not rows:
         raise CosimError(f"{path}: no data rows")
-    if input_names is None:
-        sidecar = path.with_suffix(".json")
-        if sidecar.exists():
-            try:
-                input_names = json.loads(sidecar.read_text(encoding="utf-8"))["inputs"]
-            except (OSError, ValueError, KeyError, TypeError, RecursionError):
-                input_names = None  # an unreadable sidecar is ignored, as if missing
-            if not (isinstance(input_names, list)
-                    and all(isinstance(n, str) for n in input_names)):
-                input_names = None
-        if input_names is None:
-            input_names = signals[:n_inputs] if n_inputs else ["qa", "qb"]
+    input_names = _input_names(path, signals, n_inputs, input_names)
     missing = [n for n in input_names if n not in signals]
     if missing:
         raise CosimError(f"{path}:1: no input column {missing[0]!r}")
@@ -259,9 +243,22 @@ def _read_rows(path: Path, reader: Any, n_inputs: int | None,
                    split=np.array(split))
 
 
-#: A factory making the plant component (kept behind a function so that the FMU driver can
-#: be swapped without touching the data-generation logic).
-PlantFactory = Callable[[], Component]
+def _input_names(path: Path, signals: list[str], n_inputs: int | None,
+                 input_names: Sequence[str] | None) -> Sequence[str]:
+    """The input columns: as given, else the sidecar's, else the first ``n_inputs``."""
+    if input_names is not None:
+        return input_names
+    sidecar = path.with_suffix(".json")
+    if sidecar.exists():
+        try:
+            input_names = json.loads(sidecar.read_text(encoding="utf-8"))["inputs"]
+        except (OSError, ValueError, KeyError, TypeError, RecursionError):
+            input_names = None  # an unreadable sidecar is ignored, as if missing
+        if not (isinstance(input_names, list) and all(isinstance(n, str) for n in input_names)):
+            input_names = None
+    if input_names is None:
+        input_names = signals[:n_inputs] if n_inputs else ["qa", "qb"]
+    return input_names
 
 
 def fmu_plant(path: str | Path, map_path: str | Path | None = None,

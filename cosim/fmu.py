@@ -7,124 +7,40 @@ Signals are the FMU's real-valued inputs and outputs under their project names (
 :class:`~cosim.varmap.VarMap` renames and converts them; without one, the FMU's names are
 used as they are). Value references are looked up once; per-step calls reuse preallocated
 ctypes buffers.
+
+An FMU call that fails raises :class:`~cosim.errors.FmuError` (a
+:class:`~cosim.errors.SimulationFailed`) carrying the FMI status it returned. The archive
+and the modelDescription are read by :mod:`cosim.fmu_archive`; the FMU's log messages are
+routed by :mod:`cosim.fmu_log`.
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import itertools
 import math
 import os
 import shutil
 import tempfile
-import zipfile
 from collections import deque
 from collections.abc import Mapping
-from pathlib import Path, PurePosixPath
+from pathlib import Path
 from typing import Any
 
+from cosim import fmu_log
 from cosim.component import Component, Signal
-from cosim.errors import CosimError, SimulationFailed
+from cosim.errors import CosimError, FmuError
+from cosim.fmu_archive import check_binary, read_model_description, safe_extract
 from cosim.varmap import VarMap, variable_unit
 
-#: Refuse archives that would unpack to more than this many bytes (zip bombs).
-MAX_UNPACKED_BYTES = 2 * 1024**3
+__all__ = ["FmuComponent"]
 
 _REAL_TYPES = ("Real", "Float64")
-
-# ---------------------------------------------------------------------------------------------
-# FMU log messages. fmpy formats FMI 2 variadic log messages in a small native proxy that keeps
-# ONE Python logger per process, so messages are routed here by instance name.
-_LOG_SINKS: dict[str, deque[str]] = {}
-_LABELS = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
-
-
-def _sink_message(instance: bytes | None, status: int, category: bytes | None,
-                  message: bytes | None) -> None:
-    name = (instance or b"").decode("utf-8", "replace")
-    text = " ".join((message or b"").decode("utf-8", "replace").split())
-    label = _LABELS[status] if 0 <= status < len(_LABELS) else str(status)
-    sink = _LOG_SINKS.get(name)
-    if sink is None:
-        print(f"[{label}] {name}: {text}")
-    elif status >= 1:  # keep warnings and errors: they explain failures
-        sink.append(f"[{label}] {text}")
-
-
-def _fmi2_callbacks() -> Any:
-    from fmpy import fmi2
-
-    global _FMI2_CALLBACKS
-    if _FMI2_CALLBACKS is None:
-        def logger(env, instance, status, category, message):
-            _sink_message(instance, status, category, message)
-
-        cb = fmi2.fmi2CallbackFunctions()
-        # the native proxy keeps a bare pointer to the Python logger: hold every callback
-        # object for the life of the process
-        _CALLBACK_REFS.extend([fmi2.fmi2CallbackLoggerTYPE(logger),
-                               fmi2.fmi2CallbackAllocateMemoryTYPE(fmi2.calloc),
-                               fmi2.fmi2CallbackFreeMemoryTYPE(fmi2.free), logger])
-        cb.logger, cb.allocateMemory, cb.freeMemory = _CALLBACK_REFS[:3]
-        try:
-            from fmpy.logging import addLoggerProxy
-
-            addLoggerProxy(ctypes.byref(cb))
-        except Exception:  # pragma: no cover - proxy missing on this platform
-            pass
-        _FMI2_CALLBACKS = cb
-    return _FMI2_CALLBACKS
-
-
-_FMI2_CALLBACKS: Any = None
-_CALLBACK_REFS: list[Any] = []
 #: FMU objects whose libraries stay loaded until the process ends (never dlclose'd).
 _KEEP_LOADED: list[Any] = []
-_INSTANCE_COUNTER = [0]
-
-
-def safe_extract(path: Path, into: Path) -> Path:
-    """Extract an FMU archive after checking every member name.
-
-    Rejects absolute paths, drive letters, backslashes, ``..`` components and archives that
-    would unpack to more than :data:`MAX_UNPACKED_BYTES`.
-
-    Raises
-    ------
-    CosimError
-        Naming the FMU and the offending member.
-    """
-    try:
-        with zipfile.ZipFile(path) as zf:
-            total = 0
-            for info in zf.infolist():
-                name = info.filename
-                parts = PurePosixPath(name).parts
-                if (name.startswith("/") or "\\" in name or ":" in name or ".." in parts):
-                    raise CosimError(f"{path}: unsafe path '{name}' in the FMU archive")
-                total += info.file_size
-            if total > MAX_UNPACKED_BYTES:
-                raise CosimError(f"{path}: archive unpacks to {total} bytes, more than allowed")
-            zf.extractall(into)
-    except zipfile.BadZipFile as exc:
-        raise CosimError(f"{path}: not an FMU (not a zip archive: {exc})") from None
-    return into
-
-
-def read_model_description(path: str | Path) -> Any:
-    """``fmpy.read_model_description`` with errors as one-line :class:`CosimError`."""
-    import fmpy
-
-    path = Path(path)
-    if path.is_dir():
-        raise CosimError(f"{path}: is a folder, not an FMU file (.fmu zip archive)")
-    if not path.is_file():
-        raise CosimError(f"{path}: FMU not found")
-    try:
-        return fmpy.read_model_description(str(path), validate=False)
-    except Exception as exc:
-        msg = " ".join(str(exc).split())
-        raise CosimError(f"{path}: cannot read modelDescription.xml: {msg}") from None
+#: Numbers the instances of this process (FMU log messages are routed by instance name).
+_INSTANCE_NUMBERS = itertools.count(1)
 
 
 class FmuComponent(Component):
@@ -237,14 +153,21 @@ class FmuComponent(Component):
         self.varmap.check(self.variables, inputs, outputs, units, fmu=str(self.path))
 
     # -- life cycle ---------------------------------------------------------------------------
-    def _fail(self, what: str, exc: BaseException | str) -> SimulationFailed:
-        text = str(exc)
+    def _fail(self, what: str, exc: BaseException) -> FmuError:
+        """The :class:`FmuError` for ``exc`` raised by ``what``, with the FMU's recent log.
+
+        The FMI status comes from ``exc`` (an :class:`FmuError` of :meth:`_check`, or
+        fmpy's ``FMICallException``); after a fatal one the instance is not even freed.
+        """
         self._failed = True
-        if "status 4" in text or "(fatal)" in text.lower():
+        status = getattr(exc, "status", None)
+        status = status if isinstance(status, int) else None
+        if status == FmuError.FATAL:
             self._fatal = True
         log = f" (FMU log: {' | '.join(self._log)})" if self._log else ""
         msg = " ".join(str(exc).split())
-        return SimulationFailed(f"{self.path.name}: {what} failed: {msg}{log}")
+        return FmuError(f"{self.path.name}: {what} failed: {msg}{log}",
+                        function=str(getattr(exc, "function", "") or ""), status=status)
 
     def setup(self, t0: float, stop_time: float | None = None) -> None:
         """Extract, load, instantiate and initialise the FMU at ``t0``."""
@@ -253,15 +176,14 @@ class FmuComponent(Component):
         self._tmpdir = (self.unpack_dir if self.unpack_dir is not None
                         else Path(tempfile.mkdtemp(prefix="cosim-fmu-")))
         safe_extract(self.path, self._tmpdir)
-        _INSTANCE_COUNTER[0] += 1
-        self._instance_name = f"{self.name}{_INSTANCE_COUNTER[0]}"
-        _LOG_SINKS[self._instance_name] = self._log
+        self._instance_name = f"{self.name}{next(_INSTANCE_NUMBERS)}"
+        fmu_log.attach(self._instance_name, self._log)
         fmi3_ = self.fmi_version.startswith("3.")
         cls = {("2", "cs"): fmi2.FMU2Slave, ("2", "me"): fmi2.FMU2Model,
                ("3", "cs"): fmi3.FMU3Slave, ("3", "me"): fmi3.FMU3Model}[
                    ("3" if fmi3_ else "2", self.interface)]
         guid = self.md.instantiationToken if fmi3_ else self.md.guid
-        self._check_binary(fmi3_)
+        check_binary(self.path, self._tmpdir, self.model_identifier, fmi3_)
         cwd = os.getcwd()
         try:
             self._fmu = cls(guid=guid, unzipDirectory=str(self._tmpdir),
@@ -278,12 +200,10 @@ class FmuComponent(Component):
         self._fmi3 = fmi3_
         try:
             if fmi3_:
-                def log3(env, status, category, message):
-                    _sink_message(self._instance_name.encode(), status, category, message)
-
-                self._fmu.instantiate(logMessage=log3, loggingOn=True)
+                self._fmu.instantiate(logMessage=fmu_log.fmi3_logger(self._instance_name),
+                                      loggingOn=True)
             else:
-                self._fmu.instantiate(callbacks=_fmi2_callbacks(), loggingOn=True)
+                self._fmu.instantiate(callbacks=fmu_log.fmi2_callbacks(), loggingOn=True)
         except Exception as exc:
             raise self._fail("instantiation", exc) from None
         self._prepare_buffers()
@@ -299,26 +219,13 @@ class FmuComponent(Component):
             self._fmu.exitInitializationMode()
             if self.interface == "me":
                 self._init_me(t0)
+        except FmuError as exc:  # a status check (a CosimError, but raised by the FMU)
+            raise self._fail(f"initialisation at t={t0!r}", exc) from None
         except CosimError:
             raise
         except Exception as exc:
             raise self._fail(f"initialisation at t={t0!r}", exc) from None
         self._t = t0
-
-    def _check_binary(self, fmi3_: bool) -> None:
-        """Raise :class:`CosimError` if the FMU has no binary for this platform."""
-        import fmpy
-
-        platform = fmpy.platform_tuple if fmi3_ else fmpy.platform
-        rel = f"binaries/{platform}/{self.model_identifier}{fmpy.sharedLibraryExtension}"
-        assert self._tmpdir is not None
-        if (self._tmpdir / rel).is_file():
-            return
-        bins = self._tmpdir / "binaries"
-        have = sorted(p.name for p in bins.iterdir() if p.is_dir()) if bins.is_dir() else []
-        also = f" (it has binaries for: {', '.join(have)})" if have else " (it has no binaries)"
-        raise CosimError(f"{self.path}: no binary for this platform: '{rel}' is missing"
-                         f"{also}")
 
     def _raw(self, fname: str) -> Any:
         """The FMU's C function as a bare ctypes function (no argument conversion).
@@ -331,9 +238,11 @@ class FmuComponent(Component):
 
     @staticmethod
     def _check(fname: str, status: int) -> None:
+        """Raise :class:`FmuError` when ``fname`` returned worse than a warning."""
         if status > 1:  # fmi2Warning = fmi3Warning = 1
-            label = _LABELS[status] if status < len(_LABELS) else "?"
-            raise RuntimeError(f"{fname} failed with status {status} ({label})")
+            labels = fmu_log.STATUS_LABELS
+            label = labels[status] if status < len(labels) else "?"
+            raise FmuError(f"{fname} failed with status {status} ({label})", fname, status)
 
     def _prepare_buffers(self) -> None:
         n = len(self._out_names)
@@ -432,6 +341,8 @@ class FmuComponent(Component):
         """Set inputs by project name (converted through the variable map)."""
         try:
             self._set_many(values)
+        except FmuError as exc:  # a status check (a CosimError, but raised by the FMU)
+            raise self._fail(f"setting inputs at t={self._t!r}", exc) from None
         except CosimError:
             raise
         except Exception as exc:
@@ -528,7 +439,7 @@ class FmuComponent(Component):
                     free = fmu.fmi3FreeInstance if self._fmi3 else fmu.fmi2FreeInstance
                     free(fmu.component)
             _KEEP_LOADED.append(fmu)
-        _LOG_SINKS.pop(self._instance_name, None)
+        fmu_log.detach(self._instance_name)
         if self._tmpdir is not None and self.unpack_dir is None:
             shutil.rmtree(self._tmpdir, ignore_errors=True)
         self._tmpdir = None

@@ -33,7 +33,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import CosimError, SimulationFailed
+from cosim.errors import CosimError, ParameterError, SimulationFailed
 from cosim.fmu import FmuComponent
 from cosim.varmap import MappedSignal, VarMap
 
@@ -121,8 +121,8 @@ class IsolatedFmuComponent(FmuComponent):
     def __init__(self, *args: Any, timeout: float | None = None, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
         if timeout is not None and not (timeout > 0 and timeout < float("inf")):
-            raise CosimError(f"--step-timeout {timeout!r}: expected a positive number of "
-                             "seconds")
+            raise ParameterError("step_timeout", f" {timeout!r}: expected a positive number "
+                                 "of seconds")
         self.timeout = timeout
         self._proc: Any = None
         self._conn: Any = None

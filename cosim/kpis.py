@@ -6,6 +6,8 @@ import math
 
 import numpy as np
 
+__all__ = ["SETTLE_ROWS", "compute", "setpoint_errors"]
+
 #: Rows at the end of a set-point interval over which the static offset is averaged.
 SETTLE_ROWS = 20
 

@@ -14,6 +14,8 @@ from pathlib import Path
 
 from cosim.errors import CosimError, OutputError
 
+__all__ = ["FIGURE_SUFFIXES", "figure_file", "out_dir", "out_file"]
+
 #: File types a figure option can write (matplotlib's, by file name suffix).
 FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".svgz", ".jpg", ".jpeg", ".eps", ".ps", ".tif",
                    ".tiff", ".webp", ".gif")

@@ -14,10 +14,12 @@ from typing import Any
 from cosim.component import Component
 from cosim.errors import CosimError
 
+__all__ = ["CONTROLLERS", "DEFAULT", "create", "parse_options", "resolve"]
+
 #: Built-in controllers.
 CONTROLLERS: dict[str, str] = {
     "pi": "controllers.pi:PIController",
-    "robust-mpc": "controllers.component:RobustMPCController",
+    "robust-mpc": "controllers.mpc_controller:RobustMPCController",
 }
 
 #: The controller ``cosim run`` uses when none is named.

@@ -10,9 +10,10 @@ write leaves the previous file intact. Files of an earlier run in the same folde
 run does not write (a ``figure.png`` when ``--no-figure`` is given) are removed, so a folder
 never mixes two runs.
 
-``results.csv`` follows the FMI cross-check CSV rules: comma separated, the header row holds
-the column names in double quotes, ``time`` first, numbers unquoted in full precision
-(Python ``repr``, which round-trips exactly), one row per communication point, no comments.
+``results.csv`` follows the FMI cross-check CSV rules (written by :func:`cosim.csvio.write_csv`,
+re-exported here): comma separated, the header row holds the column names in double quotes,
+``time`` first, numbers unquoted in full precision (Python ``repr``, which round-trips
+exactly), one row per communication point, no comments.
 Column names are ``<source>.<signal>``: ``ref.h1`` (set-point), ``plant.h1`` (true plant
 output, or a plant input/parameter the scenario sets), ``sensor.h1`` (measured value the
 controller saw, only when the scenario perturbs it), ``ctrl.qa`` (controller output = plant
@@ -30,10 +31,11 @@ from pathlib import Path
 
 from cosim import atomicio
 from cosim import kpis as _kpis
+from cosim.csvio import header_line, row_lines, write_csv
 from cosim.errors import OutputError
 from cosim.master import RunResult
 
-__all__ = ["PART_SUFFIX", "RUN_FILES", "ResultsStream", "summary", "write", "write_csv"]
+__all__ = ["PART_SUFFIX", "RUN_FILES", "ResultsStream", "jsonable", "summary", "write", "write_csv"]
 
 #: Every file a run writes into its folder.
 RUN_FILES = ("results.csv", "timings.csv", "summary.json", "figure.png")
@@ -41,32 +43,6 @@ RUN_FILES = ("results.csv", "timings.csv", "summary.json", "figure.png")
 PART_SUFFIX = ".part"
 #: Most seconds of wall time between two flushes of the streamed rows.
 FLUSH_INTERVAL = 1.0
-
-
-def _header(columns: list[str]) -> str:
-    return ",".join('"' + c.replace('"', '""') + '"' for c in columns) + "\n"
-
-
-def _lines(rows: list[list[float]], width: int | None = None) -> str:
-    rep = float.__repr__
-    if width is None:
-        return "".join(",".join([rep(float(v)) for v in row]) + "\n" for row in rows)
-    pad = ["nan"] * width
-    return "".join(",".join(([rep(float(v)) for v in row[:width]] + pad)[:width]) + "\n"
-                   for row in rows)
-
-
-def write_csv(path: str | Path, columns: list[str], rows: list[list[float]]) -> None:
-    """Write rows in cross-check CSV format (see the module docstring), atomically.
-
-    Raises
-    ------
-    OutputError
-        The file could not be written; a previous ``path`` is intact.
-    """
-    with atomicio.open_replacing(path, "w", newline="\n") as f:
-        f.write(_header(columns))
-        f.write(_lines(rows))
 
 
 class ResultsStream:
@@ -114,11 +90,11 @@ class ResultsStream:
                 self.columns = list(columns)
                 fh = self._fh = open(self.part, "w", encoding="utf-8", newline="\n")  # noqa: SIM115
                 os.chmod(self.part, atomicio.FILE_MODE)
-                fh.write(_header(self.columns))
+                fh.write(header_line(self.columns))
             width = len(self.columns)
             if any(len(r) > width for r in self._pending):
                 self._stale = True  # a diagnostic appeared: finish() rewrites the file
-            fh.write(_lines(self._pending, width))
+            fh.write(row_lines(self._pending, width))
             fh.flush()
             os.fsync(fh.fileno())
             self._good = fh.tell()
@@ -199,16 +175,20 @@ def summary(result: RunResult, meta: dict | None = None) -> dict:
     doc["kpis"] = _kpis.compute(result.columns, result.rows, result.outputs, result.references,
                                 result.inputs, result.bounds)
     doc["controller_summary"] = result.controller_summary
-    return _jsonable(doc)
+    return jsonable(doc)
 
 
-def _jsonable(obj: object) -> object:
+def jsonable(obj: object) -> object:
+    """``obj`` with JSON types only: numpy scalars as numbers, non-finite floats as ``None``
+    (JSON has no NaN), unknown objects as their text."""
     if isinstance(obj, dict):
-        return {str(k): _jsonable(v) for k, v in obj.items()}
+        return {str(k): jsonable(v) for k, v in obj.items()}
     if isinstance(obj, list | tuple):
-        return [_jsonable(v) for v in obj]
+        return [jsonable(v) for v in obj]
     if isinstance(obj, bool | int | str) or obj is None:
         return obj
+    if hasattr(obj, "dtype") and getattr(obj.dtype, "kind", "") in "iub":
+        return obj.item()  # type: ignore[attr-defined]
     try:
         f = float(obj)  # numpy scalars
     except (TypeError, ValueError):
@@ -296,7 +276,7 @@ def _figure(path: Path, result: RunResult, doc: dict, title: str) -> None:
 
     with atomicio.replacing(path) as tmp:
         try:
-            plots.figure(tmp, result, title=title)
+            plots.run_figure(tmp, result, title=title)
         except OSError:
             raise
         except Exception as exc:  # pragma: no cover - plotting must not lose the results

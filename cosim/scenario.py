@@ -15,7 +15,9 @@ Format (one file per scenario)::
 * Column names: ``ref.<output>`` set-points (every reference needs a value in the first row),
   ``plant.<variable>`` a plant input or tunable parameter (by its FMU name or by the name of
   a variable-map signal), ``sensor.<output>.bias`` an additive measurement bias and
-  ``sensor.<output>.noise`` the standard deviation of seeded Gaussian measurement noise.
+  ``sensor.<output>.noise`` the standard deviation of seeded Gaussian measurement noise,
+  ``sensor.<output>.uniform`` the half-width ``a`` of seeded measurement noise uniform in
+  ``[−a, a]`` (a bounded perturbation, as ``w_y`` in the paper).
 * Comma separated, header names may be quoted (FMI cross-check CSV conventions).
 
 Every error is a :class:`~cosim.errors.CosimError` that starts with ``file:line:column``
@@ -24,16 +26,20 @@ Every error is a :class:`~cosim.errors.CosimError` that starts with ``file:line:
 
 from __future__ import annotations
 
-import csv
-import math
-from collections.abc import Collection
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from cosim import csvio
 from cosim.errors import CosimError
 
+__all__ = ["BIAS", "NOISE", "PLANT", "REF", "SCENARIO_WORDING", "SENSOR_KINDS", "UNIFORM",
+           "Column", "Event", "Scenario", "load"]
+
 #: Column kinds.
-REF, PLANT, BIAS, NOISE = "ref", "plant", "bias", "noise"
+REF, PLANT, BIAS, NOISE, UNIFORM = "ref", "plant", "bias", "noise", "uniform"
+#: The suffixes of ``sensor.<output>.<suffix>`` columns, by kind.
+SENSOR_KINDS = {"bias": BIAS, "noise": NOISE, "uniform": UNIFORM}
 
 
 @dataclass(frozen=True)
@@ -47,7 +53,7 @@ class Column:
     name : str
         The header as written, e.g. ``"sensor.h1.bias"``.
     kind : str
-        :data:`REF`, :data:`PLANT`, :data:`BIAS` or :data:`NOISE`.
+        :data:`REF`, :data:`PLANT`, :data:`BIAS`, :data:`NOISE` or :data:`UNIFORM`.
     target : str
         The signal it acts on: ``"h1"`` for ``ref.h1`` and ``sensor.h1.bias``, ``"qd1"`` for
         ``plant.qd1``.
@@ -107,6 +113,68 @@ class Scenario:
         """Times (after the start) at which a set-point is set."""
         return [e.time for e in self.events[1:-1] if any(c.kind == REF for c, _ in e.values)]
 
+    def with_changes(self, at_start: Mapping[str, float] | None = None,
+                     setpoints: Sequence[tuple[float, Mapping[str, float]]] | None = None,
+                     stop_time: float | None = None) -> Scenario:
+        """A copy with values set in the first row, the set-points replaced, or a new stop.
+
+        Parameters
+        ----------
+        at_start : mapping, optional
+            Column name (``plant.a1``, ``sensor.h1.noise``, ``ref.h1``) → value applied at
+            the start time, replacing the first row's value of an existing column or adding
+            a column; later rows keep their values.
+        setpoints : sequence of (time, {output: value}), optional
+            Replace every ``ref.*`` value of the scenario by these set-point changes.
+        stop_time : float, optional
+            New stop time; later events are dropped.
+
+        Raises
+        ------
+        CosimError
+            A column name that is not a scenario column, or a stop time not after the start.
+        """
+        start = self.start_time
+        stop = self.stop_time if stop_time is None else float(stop_time)
+        if not stop > start:
+            raise CosimError(f"{self.path}: stop time {stop!r} is not after the start time "
+                             f"{start!r}")
+        columns = list(self.columns)
+        by_name = {c.name: c for c in columns}
+        names = list(at_start or {})
+        if setpoints:
+            names += [f"ref.{o}" for _, values in setpoints for o in values]
+        new = [n for n in dict.fromkeys(names) if n not in by_name]
+        if new:
+            parsed = _parse_header(self.path, ["time", *new])
+            for c in parsed:
+                col = Column(len(columns) + 2, c.name, c.kind, c.target)
+                columns.append(col)
+                by_name[col.name] = col
+        table: dict[float, dict[str, float]] = {}
+        lines: dict[float, int] = {}
+        for event in self.events:
+            if event.time > stop + 1e-9 * max(1.0, abs(stop)):
+                break
+            row = table.setdefault(event.time, {})
+            lines[event.time] = event.line
+            for col, value in event.values:
+                if not (setpoints and col.kind == REF):
+                    row[col.name] = value
+        table.setdefault(start, {}).update(at_start or {})
+        for t, values in setpoints or ():
+            if start <= t < stop:
+                table.setdefault(float(t), {}).update({f"ref.{o}": v for o, v in values.items()})
+        table.setdefault(stop, {})
+        events = []
+        for t in sorted(table):
+            if t > stop:
+                continue
+            values = tuple((by_name[n], v) for n, v in table[t].items())
+            events.append(Event(t, lines.get(t, 0), values))
+        return Scenario(path=self.path, columns=tuple(columns), events=tuple(events),
+                        meta=dict(self.meta))
+
     def validate(
         self,
         plant_settable: Collection[str],
@@ -149,7 +217,7 @@ class Scenario:
                 if col.target not in plant_settable:
                     raise CosimError(f"{where}: unknown plant variable '{col.name}': not an "
                                      "input or tunable parameter of the plant")
-            if col.kind in (BIAS, NOISE) and col.target not in measured:
+            if col.kind in SENSOR_KINDS.values() and col.target not in measured:
                 known = ", ".join(sorted(measured)) or "none"
                 raise CosimError(f"{where}: unknown measured output in '{col.name}' "
                                  f"(measured: {known})")
@@ -184,26 +252,29 @@ def _parse_header(path: Path, header: list[str]) -> tuple[Column, ...]:
             columns.append(Column(i, name, REF, parts[1]))
         elif parts[0] == "plant" and len(parts) >= 2 and all(parts[1:]):
             columns.append(Column(i, name, PLANT, name[len("plant."):]))
-        elif (parts[0] == "sensor" and len(parts) >= 3 and parts[-1] in ("bias", "noise")
+        elif (parts[0] == "sensor" and len(parts) >= 3 and parts[-1] in SENSOR_KINDS
               and all(parts[1:-1])):
-            kind = BIAS if parts[-1] == "bias" else NOISE
-            columns.append(Column(i, name, kind, ".".join(parts[1:-1])))
+            columns.append(Column(i, name, SENSOR_KINDS[parts[-1]], ".".join(parts[1:-1])))
         else:
             raise CosimError(
                 f"{where}: unknown signal '{name}': expected ref.<output>, plant.<variable>, "
-                "sensor.<output>.bias or sensor.<output>.noise")
+                "sensor.<output>.bias, sensor.<output>.noise or sensor.<output>.uniform")
     return tuple(columns)
 
 
-def _number(path: Path, line: int, col: int, name: str, cell: str) -> float:
-    try:
-        value = float(cell)
-    except ValueError:
-        raise CosimError(f"{path}:{line}:{col}: column '{name}': '{cell}' is not a number"
-                         ) from None
-    if not math.isfinite(value):
-        raise CosimError(f"{path}:{line}:{col}: column '{name}': {cell} is not a finite number")
-    return value
+#: How scenario files word the errors of :class:`~cosim.csvio.CsvReader`.
+SCENARIO_WORDING = csvio.Wording(
+    not_found="{path}: scenario file not found",
+    is_folder="{path}: cannot read scenario: {error}",
+    unreadable="{path}: cannot read scenario: {error}",
+    not_text="{path}: cannot read scenario: {error}",
+    malformed="{path}:{line}:1: malformed CSV: {error}",
+    empty="{path}:1:1: empty file: expected a header starting with 'time'",
+    cell_count="{path}:{line}:{col}: row has {cells} cells, the header has {expected}",
+    empty_value=None,
+    not_a_number="{path}:{line}:{col}: column '{name}': '{cell}' is not a number",
+    not_finite="{path}:{line}:{col}: column '{name}': {cell} is not a finite number",
+)
 
 
 def load(path: str | Path) -> Scenario:
@@ -227,32 +298,15 @@ def load(path: str | Path) -> Scenario:
         or a stop time not after the start time.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except FileNotFoundError:
-        raise CosimError(f"{path}: scenario file not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CosimError(f"{path}: cannot read scenario: {exc}") from None
-
-    reader = csv.reader(text.splitlines())
-    try:
-        header = next(reader, None)
-        if header is None:
-            raise CosimError(f"{path}:1:1: empty file: expected a header starting with 'time'")
-        columns = _parse_header(path, header)
-        ncells = len(columns) + 1
+    with csvio.CsvReader(path, SCENARIO_WORDING, encoding="utf-8-sig",
+                         whole_file=True) as f:
+        columns = _parse_header(path, f.header())
         events: list[Event] = []
-        for row in reader:
-            line = reader.line_num
-            if not any(cell.strip() for cell in row):
-                continue  # blank line
-            if len(row) != ncells:
-                raise CosimError(f"{path}:{line}:{min(len(row), ncells) + 1}: row has "
-                                 f"{len(row)} cells, the header has {ncells}")
+        for line, row in f.rows(len(columns) + 1):
             cell = row[0].strip()
             if not cell:
                 raise CosimError(f"{path}:{line}:1: column 'time': missing time")
-            t = _number(path, line, 1, "time", cell)
+            t = f.number(cell, line, 1, "time")
             if events and t <= events[-1].time:
                 raise CosimError(f"{path}:{line}:1: column 'time': time {cell} is not after "
                                  f"the previous row's time {events[-1].time!r}")
@@ -264,14 +318,13 @@ def load(path: str | Path) -> Scenario:
                         raise CosimError(f"{path}:{line}:{col.index}: column '{col.name}': "
                                          "a reference needs a value in the first row")
                     continue
-                v = _number(path, line, col.index, col.name, cell)
-                if col.kind == NOISE and v < 0:
+                v = f.number(cell, line, col.index, col.name)
+                if col.kind in (NOISE, UNIFORM) and v < 0:
+                    what = ("standard deviation" if col.kind == NOISE else "half-width")
                     raise CosimError(f"{path}:{line}:{col.index}: column '{col.name}': noise "
-                                     f"standard deviation {cell} is negative")
+                                     f"{what} {cell} is negative")
                 values.append((col, v))
             events.append(Event(t, line, tuple(values)))
-    except csv.Error as exc:
-        raise CosimError(f"{path}:{reader.line_num}:1: malformed CSV: {exc}") from None
 
     if not events:
         raise CosimError(f"{path}:2:1: empty body: the scenario has no data rows")

@@ -1,4 +1,5 @@
-"""Measurement perturbations between plant and controller: bias and seeded Gaussian noise."""
+"""Measurement perturbations between plant and controller: bias and seeded random noise
+(Gaussian with a standard deviation, or uniform in ``[−a, a]``)."""
 
 from __future__ import annotations
 
@@ -8,9 +9,11 @@ import numpy as np
 
 from cosim.component import Component, Signal
 
+__all__ = ["SensorModel"]
+
 
 class SensorModel(Component):
-    """``y_measured = y + bias + noise``, with ``noise ~ N(0, sd²)`` drawn each step.
+    """``y_measured = y + bias + noise``, ``noise ~ N(0, sd²) + U(−a, a)`` drawn each step.
 
     Parameters
     ----------
@@ -22,9 +25,9 @@ class SensorModel(Component):
 
     Notes
     -----
-    Noise is drawn only for signals with a positive standard deviation, in the order of
-    ``signals``, so adding noise to one signal does not change another's sequence unless
-    both are noisy.
+    Noise is drawn only for signals with a positive standard deviation (or half-width), in the
+    order of ``signals`` (the Gaussian draw before the uniform one), so adding noise to one
+    signal does not change another's sequence unless both are noisy.
     """
 
     direct_feedthrough = True
@@ -36,6 +39,7 @@ class SensorModel(Component):
         self.outputs = self.inputs
         self.bias = dict.fromkeys(names, 0.0)
         self.noise = dict.fromkeys(names, 0.0)
+        self.uniform = dict.fromkeys(names, 0.0)
         self._rng = np.random.default_rng(seed)
         self._in = dict.fromkeys(names, 0.0)
         self._out = dict.fromkeys(names, 0.0)
@@ -50,6 +54,12 @@ class SensorModel(Component):
             raise ValueError(f"noise standard deviation of {signal} is negative")
         self.noise[signal] = float(sd)
 
+    def set_uniform(self, signal: str, half_width: float) -> None:
+        """Set the half-width ``a`` of uniform noise in ``[−a, a]`` (signal units, ≥ 0)."""
+        if half_width < 0:
+            raise ValueError(f"uniform noise half-width of {signal} is negative")
+        self.uniform[signal] = float(half_width)
+
     def set_inputs(self, values: Mapping[str, float]) -> None:
         """True plant outputs."""
         for k in self._in:
@@ -60,8 +70,9 @@ class SensorModel(Component):
         """Compute the measured values for ``[t, t + dt)``."""
         rng = self._rng
         for k, y in self._in.items():
-            sd = self.noise[k]
-            self._out[k] = y + self.bias[k] + (rng.normal(0.0, sd) if sd > 0 else 0.0)
+            sd, a = self.noise[k], self.uniform[k]
+            v = y + self.bias[k] + (rng.normal(0.0, sd) if sd > 0 else 0.0)
+            self._out[k] = v + rng.uniform(-a, a) if a > 0 else v
 
     def get_outputs(self) -> dict[str, float]:
         """Measured values."""

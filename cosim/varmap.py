@@ -28,6 +28,8 @@ from pathlib import Path
 
 from cosim.errors import CosimError
 
+__all__ = ["MappedSignal", "VarMap", "load", "variable_unit"]
+
 _KEYS = {"variable", "unit", "scale", "offset"}
 #: Causalities a map entry may point at (what a run sets or reads).
 _MAPPABLE = ("input", "output", "parameter")

@@ -4,6 +4,10 @@ from __future__ import annotations
 
 import argparse
 
+from cosim.errors import exit_codes_help
+
+__all__ = ["DESCRIPTION", "HELP", "register", "run"]
+
 HELP = "compile the four-tank plant FMUs (fmus/FourTank.fmu, fmus/FourTank3.fmu)"
 
 DESCRIPTION = """\
@@ -23,6 +27,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         "build-fmu",
         help=HELP,
         description=DESCRIPTION,
+        epilog=exit_codes_help(),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument(

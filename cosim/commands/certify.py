@@ -2,9 +2,10 @@
 
 Prints every quantity of the theory (δISS, observer, tightening, terminal ingredients) with its
 paper reference, or JSON with the paper's names; checks the hypotheses of
-``th:feasibility-stability`` at the requested set-points. Exit 1 when a hypothesis fails or
-the admissible set-point range is empty. ``--save`` writes the observer gains into the model
-file only when every check passes, atomically (a failed write leaves the file unchanged).
+``th:feasibility-stability`` at the requested set-points; the exit codes are
+:data:`cosim.errors.EXIT_CODES` with this command's :data:`EXIT_NOTES`. ``--save`` writes
+the observer gains into the model file only when every check passes, atomically (a failed
+write leaves the file unchanged).
 """
 
 from __future__ import annotations
@@ -16,7 +17,16 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import EXIT_FAILED, EXIT_OK, CosimError
+from cosim.errors import EXIT_FAILED, EXIT_OK, CosimError, exit_codes_help
+
+__all__ = ["DEFAULT_MODEL", "DEFAULT_SETPOINTS", "EPILOG", "EXIT_NOTES", "HELP", "figure",
+           "register", "run"]
+
+#: What the exit codes also mean for ``cosim certify`` (:func:`cosim.errors.exit_codes_help`).
+EXIT_NOTES = {
+    EXIT_OK: "every hypothesis holds",
+    EXIT_FAILED: "a hypothesis fails (named), or the admissible set-point range is empty",
+}
 
 DEFAULT_MODEL = Path(__file__).resolve().parents[2] / "controllers" / "models" / "fourtank_gru.json"
 #: Set-points (metres) used by ``--auto-gain-scale`` when none are given: a 3×3 grid.
@@ -41,8 +51,7 @@ EPILOG = """design levers:
 --save writes only when every check passes (otherwise the model file is left unchanged),
 atomically: a failed write (full disk) leaves the previous file byte-identical.
 
-exit codes: 0 all hypotheses hold, 1 a hypothesis fails (named), the admissible set-point
-range is empty, or the model file could not be written, 2 bad input."""
+""" + exit_codes_help({"certify": EXIT_NOTES})
 
 
 def register(subparsers: Any) -> None:
@@ -101,33 +110,11 @@ def _fmt(v: Any) -> str:
 
 
 def _admissible(cert: Any, model: Any) -> list[tuple[str, float | None, float | None]]:
-    """Per-output admissible set-point interval ``(name, lo, hi)`` in physical units, from the
-    box rows of L (``ass:setpoint`` and ``eq:condition-recursive-feasibility``);
-    ``(name, None, None)`` when it is empty (or undefined: a NaN bound)."""
-    import numpy as np
+    """Per-output admissible set-point interval (:func:`controllers.certificates.
+    admissible_ranges`)."""
+    from controllers.certificates import admissible_ranges
 
-    rhs = cert.admissible_box()
-    out: list[tuple[str, float | None, float | None]] = []
-    for j, name in enumerate(model.output_names):
-        lo, hi = -math.inf, math.inf
-        for row, r in zip(cert.L, rhs, strict=True):
-            others = np.delete(row, j)
-            if row[j] == 0 or np.any(others != 0):
-                continue
-            bound = float(r / row[j])
-            if math.isnan(bound):
-                lo, hi = math.inf, -math.inf
-                break
-            if row[j] > 0:
-                hi = min(hi, bound)
-            else:
-                lo = max(lo, bound)
-        plo, phi = (lo * model.y_scale[j] + model.y_offset[j],
-                    hi * model.y_scale[j] + model.y_offset[j])
-        if model.y_scale[j] < 0:
-            plo, phi = phi, plo
-        out.append((name, float(plo), float(phi)) if plo <= phi else (name, None, None))
-    return out
+    return admissible_ranges(cert, model)
 
 
 def _admissible_ranges(cert: Any, model: Any) -> list[str]:
@@ -141,16 +128,31 @@ def _admissible_ranges(cert: Any, model: Any) -> list[str]:
     return out
 
 
+def _w_y_bar_from_csv(model: Any, path: str) -> float:
+    """``w̄_y`` from a ``cosim generate-data`` record (``--data``)."""
+    from controllers.certificates import w_y_bar_from_data
+    from controllers.errors import DataError
+    from cosim.datagen import read_csv
+
+    data = read_csv(path, input_names=list(model.input_names))
+    u = data.u[:, [data.input_names.index(n) for n in model.input_names]]
+    try:
+        return w_y_bar_from_data(model, u, data.outputs(list(model.output_names)), data.split)
+    except DataError as exc:
+        raise CosimError(f"{path}: {exc}") from None
+
+
 def _certificate(args: argparse.Namespace, model: Any, setpoints: list,
                  kwargs: dict) -> tuple[Any, str]:
     """The certificate for the options in ``args`` and a note on the observer gains."""
     import numpy as np
 
     from controllers import certificates as certs
+    from controllers import gain_design
 
     if args.auto_gain_scale:
         targets = setpoints or [model.normalize_y(np.array(s)) for s in DEFAULT_SETPOINTS]
-        theta, cert = certs.choose_gain_scale(model, targets, **kwargs)
+        theta, cert = gain_design.choose_gain_scale(model, targets, **kwargs)
         note = ("LP gains × θ = 0 (no θ in [0, 1] passes)" if theta is None
                 else f"LP gains × θ = {theta:.6g} (auto)")
     else:
@@ -166,8 +168,8 @@ def run(args: argparse.Namespace) -> int:
     """Compute the certificate, print it, check it; returns the exit code."""
     import numpy as np
 
-    from controllers import certificates as certs
-    from controllers.equilibrium import UnreachableSetpoint, equilibrium
+    from controllers.equilibrium import equilibrium
+    from controllers.errors import ControllersError, UnreachableSetpoint
     from controllers.model import GRUModel
 
     if args.N < 1:
@@ -186,16 +188,16 @@ def run(args: argparse.Namespace) -> int:
     setpoints_phys = [_parse_setpoint(s, names) for s in args.setpoint]
     setpoints = [model.normalize_y(np.array(s)) for s in setpoints_phys]
 
-    w_y_bar = certs.w_y_bar_from_data(model, args.data) if args.data else None
+    w_y_bar = _w_y_bar_from_csv(model, args.data) if args.data else None
     if w_y_bar is None and model.w_y_bar is None:
         raise CosimError(f"{args.model}: no 'w_y_bar' in the model file; estimate it with "
                          "--data DATA.csv")
     kwargs = dict(N=args.N, e_o0=args.e_o0, w_y_bar=w_y_bar)
     try:
         cert, note = _certificate(args, model, setpoints, kwargs)
-    except CosimError as exc:
+    except (CosimError, ControllersError) as exc:
         if str(exc).startswith((f"{args.model}:", f"{Path(args.model)}:")):
-            raise
+            raise CosimError(str(exc)) from None
         raise CosimError(f"{args.model}: {exc}") from None
 
     failures = cert.failures()
@@ -248,7 +250,7 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print_table(path: str, model: Any, cert: Any, note: str, per_setpoint: list) -> None:
-    from controllers.certificates import inf_norm
+    from controllers.bounds import inf_norm
 
     N = cert.N
     rows = [
@@ -295,103 +297,14 @@ def _print_table(path: str, model: Any, cert: Any, note: str, per_setpoint: list
               f"ū: {ubar}")
 
 
-def reachable_boundary(model: Any, points: int = 60) -> Any:
-    """Physical outputs of the model equilibria along the boundary of the input box
-    (``‖u‖∞ = 1``): the edge of the set of reachable set-points (``p = m = 2``)."""
-    import numpy as np
-
-    from controllers.equilibrium import state_equilibrium
-
-    s = np.linspace(-1.0, 1.0, points)
-    edges = [np.c_[s, -np.ones_like(s)], np.c_[np.ones_like(s), s],
-             np.c_[s[::-1], np.ones_like(s)], np.c_[-np.ones_like(s), s[::-1]]]
-    us = np.vstack(edges)
-    ys, x = [], None
-    for u in us:
-        x = state_equilibrium(model.params, u, x)
-        ys.append(model.denormalize_y(model.params["U_o"] @ x + model.params["b_o"]))
-    return np.array(ys)
-
-
 def figure(path: str | Path, model: Any, cert: Any, setpoints: list) -> Path:
-    """Certificate figure (Agg): α(ȳ) map with the admissible set (``ass:setpoint`` and
-    ``eq:condition-recursive-feasibility``) and the reachable set, the ``ê_o,k`` bound
-    (``eq:eo-evolution``) and the tightened output bounds along the horizon
-    (``eq:optimization-constraint``), in physical units."""
-    import matplotlib
+    """The ``--plot`` figure (:func:`cosim.plots.certificate_figure`), with the output bounds
+    and, for two outputs, the edge of the reachable set."""
+    from controllers.equilibrium import reachable_boundary
+    from cosim import plots
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    import numpy as np
-
-    path = Path(path)
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
-    names, units = model.output_names, model.output_units
-    ax = axes[0]
-    if model.p == 2:
-        lo = [b[0] for b in _bounds(model)]
-        hi = [b[1] for b in _bounds(model)]
-        g1 = np.linspace(lo[0], hi[0], 121)
-        g2 = np.linspace(lo[1], hi[1], 121)
-        A = np.array([[cert.alpha(model.normalize_y(np.array([a, b]))) for a in g1]
-                      for b in g2])
-        top = max(float(np.nanmax(A)), 1e-9)
-        im = ax.pcolormesh(g1, g2, np.clip(A, 0, None), shading="auto", cmap="viridis",
-                           vmin=0, vmax=top)
-        fig.colorbar(im, ax=ax, label="α (eq:def-alpha, normalised)")
-        ax.contour(g1, g2, A, levels=[0.0], colors="red", linewidths=1.2)
-        amin = cert.alpha_min()
-        if np.isfinite(amin) and amin > 0:
-            ax.contour(g1, g2, A, levels=[amin], colors="white", linewidths=1.2,
-                       linestyles="--")
-        rb = reachable_boundary(model)
-        ax.plot(rb[:, 0], rb[:, 1], color="orange", lw=1.5)
-        for sp in setpoints:
-            ax.plot(sp[0], sp[1], "k+", ms=10)
-        ax.set_xlabel(f"{names[0]} set-point [{units[0]}]")
-        ax.set_ylabel(f"{names[1]} set-point [{units[1]}]")
-        ax.set_title("α; red: α = 0 (ass:setpoint); white: α = α_min\n"
-                     "(eq:condition-recursive-feasibility); orange: reachable, ‖u‖∞ ≤ 1",
-                     fontsize=9)
-    else:
-        ax.set_axis_off()
-    ax = axes[1]
-    steps = int(min(20000, max(50, 6.0 / max(1e-12, 1 - cert.rho_o))))
-    e = cert.e_o(steps)
-    ax.plot(np.arange(steps + 1), e, label="ê_o,k")
-    if np.isfinite(cert.e_inf):
-        ax.axhline(cert.e_inf, color="grey", ls="--", label="ē_∞")
-    ax.set_xlabel("k [samples]")
-    ax.set_title("observer error bound (eq:eo-evolution)", fontsize=9)
-    ax.legend()
-    ax = axes[2]
-    i = np.arange(cert.N + 1)
-    for e_val, style in ((cert.e_o0, "-"), (cert.e_tilde, "--")):
-        tb = cert.tightened_bounds(e_val)
-        for j in range(cert.q):
-            row = cert.L[j]
-            k = int(np.flatnonzero(row)[0]) if np.count_nonzero(row) == 1 else None
-            if k is None:
-                continue
-            bound = tb[:, j] / row[k]
-            phys = bound * model.y_scale[k] + model.y_offset[k]
-            ax.plot(i, phys, style, color=f"C{k}",
-                    label=f"{names[k]} {'≤' if row[k] > 0 else '≥'} (ê_o = {e_val:.3g})")
-    for lo_b, hi_b in _bounds(model):
-        ax.axhline(lo_b, color="k", lw=0.8)
-        ax.axhline(hi_b, color="k", lw=0.8)
-    ax.set_xlabel("prediction step i")
-    ax.set_title("tightened output bounds h − a_i ê_o − b_i − w_L (physical)", fontsize=9)
-    ax.legend(fontsize=7)
-    fig.tight_layout()
-    from cosim.atomicio import replacing
-
-    try:
-        with replacing(path) as tmp:
-            fig.savefig(tmp, dpi=110)
-    finally:
-        plt.close(fig)
-    return path
+    reachable = reachable_boundary(model) if model.p == 2 else None
+    return plots.certificate_figure(path, model, cert, setpoints, _bounds(model), reachable)
 
 
 def _bounds(model: Any) -> list[tuple[float, float]]:

@@ -5,7 +5,17 @@ from __future__ import annotations
 import argparse
 import math
 
-from cosim.errors import EXIT_FAILED, EXIT_OK, CosimError
+from cosim.errors import EXIT_FAILED, EXIT_INPUT_ERROR, EXIT_OK, CosimError, exit_codes_help
+
+__all__ = ["DESCRIPTION", "EPILOG", "EXIT_NOTES", "register", "run"]
+
+#: What the exit codes also mean for ``cosim compare`` (:func:`cosim.errors.exit_codes_help`).
+EXIT_NOTES = {
+    EXIT_OK: "every compared signal within the tolerance band",
+    EXIT_FAILED: "at least one signal outside the band",
+    EXIT_INPUT_ERROR: "also a signal missing in one file, no common signals, non-increasing "
+                      "time, a --atol/--rtol NAME that is not a compared signal",
+}
 
 DESCRIPTION = """\
 Compare RESULT.csv with REFERENCE.csv signal by signal.
@@ -27,18 +37,13 @@ The report is a table: per signal the largest |result - reference| and its time,
 tolerances, the number and fraction of points outside the band and PASS/FAIL; then, for
 each failing signal, its first and worst time outside the band."""
 
-EPILOG = """\
+EPILOG = f"""\
 tolerances per signal: --atol/--rtol take a number or NAME=VALUE pairs, NAME a compared
 signal as its column is named (results.csv: plant.h1, ctrl.qa, ...), e.g.
   --atol 1e-9,plant.h1=1e-4,plant.h2=1e-4  (a bare number is the default for the others;
   a NAME that is not compared is an error)
 
-exit codes:
-  0  every compared signal within the tolerance band
-  1  at least one signal outside the band
-  2  error: missing or unreadable file, unparseable CSV (file:line:column), a signal
-     missing in one file, no common signals, non-increasing time, bad option (a
-     --atol/--rtol NAME that is not a compared signal)
+{exit_codes_help({"compare": EXIT_NOTES})}
 
 example:
   cosim compare results/run/results.csv scenarios/references/paper_steps__pi.csv \\
@@ -112,7 +117,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``cosim compare``; returns 0 (pass) or 1 (fail), raises CosimError (exit 2)."""
-    from cosim.compare import DEFAULT_ATOL, DEFAULT_RTOL, compare, plot
+    from cosim.compare import DEFAULT_ATOL, DEFAULT_RTOL, compare
+    from cosim.plots import compare_figure
 
     if args.window is not None and not args.band:
         raise CosimError("--window applies only with --band")
@@ -130,7 +136,7 @@ def run(args: argparse.Namespace) -> int:
         print(text)
     if args.plot:
         try:
-            path = plot(result, args.plot)  # a failed write: OutputError, exit 1
+            path = compare_figure(result, args.plot)  # a failed write: OutputError, exit 1
         except ValueError as exc:
             raise CosimError(f"{args.plot}: cannot draw the figure: {exc}") from None
         if not args.quiet:

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
-import cosim
+from cosim.errors import exit_codes_help
+
+__all__ = ["DESCRIPTION", "HELP", "register", "run"]
 
 #: The plant used when --plant is not given: the project's FMU, whatever the current folder.
-DEFAULT_PLANT = Path(cosim.__file__).resolve().parents[1] / "fmus" / "FourTank.fmu"
 
 HELP = "excite a plant FMU with a multilevel pseudo-random signal and record the data set"
 
@@ -33,6 +33,7 @@ examples:
 def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``generate-data`` sub-command."""
     parser = subparsers.add_parser("generate-data", help=HELP, description=DESCRIPTION,
+                                   epilog=exit_codes_help(),
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--plant", default=None, metavar="FMU",
                         help="plant FMU (default: the project's fmus/FourTank.fmu, built if "
@@ -52,29 +53,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="output CSV (default: data/fourtank.csv)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     parser.set_defaults(func=run)
-
-
-def _plant_path(arg: str | None) -> Path:
-    """The --plant FMU; without it the project's FMU, built when missing."""
-    from cosim.errors import CosimError
-
-    if arg is not None:
-        path = Path(arg)
-        if path.is_dir():
-            raise CosimError(f"{path}: is a folder, not an FMU file (.fmu zip archive)")
-        if not path.is_file():
-            raise CosimError(f"{path}: plant FMU not found")
-        return path
-    if not DEFAULT_PLANT.is_file():
-        try:
-            from cosim.build import build_fmus
-        except ImportError:
-            raise CosimError(f"{DEFAULT_PLANT}: plant FMU not found and cannot be built here; "
-                             "run 'cosim build-fmu' or give --plant") from None
-        build_fmus()
-        if not DEFAULT_PLANT.is_file():
-            raise CosimError(f"{DEFAULT_PLANT}: not produced by cosim build-fmu")
-    return DEFAULT_PLANT
 
 
 def run(args: argparse.Namespace) -> int:
@@ -103,7 +81,9 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() == ".json":
         raise CosimError(f"{out}: --out must not end in .json: that name is the data's JSON "
                          "sidecar (use .csv)")
-    plant_path = _plant_path(args.plant)
+    from cosim.api import plant_path as find_plant
+
+    plant_path = find_plant(args.plant)
     plant = datagen.fmu_plant(plant_path, args.map, args.interface)
     # every plant output is recorded (h1..h4 for the four tanks); inputs and the controlled
     # outputs are checked against the FMU (and the map): names, causality, units

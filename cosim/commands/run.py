@@ -3,14 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import contextlib
 import sys
 from pathlib import Path
 
+from cosim.errors import exit_codes_help
 from cosim.isolated import DEFAULT_STEP_TIMEOUT
-
-#: The project's plant FMU (built on first use), whatever the current folder.
-DEFAULT_PLANT = Path(__file__).resolve().parents[2] / "fmus" / "FourTank.fmu"
 
 DESCRIPTION = """\
 Run a scenario in closed loop: the plant FMU and the controller are stepped in lockstep at a
@@ -49,9 +46,7 @@ examples:
   cosim run scenarios/paper_steps.csv --plant other.fmu --map other.map.toml --isolate
   cosim run scenarios/paper_steps.csv --model my_gru.json --option offset_free=true
 
-exit codes: 0 ok, 1 run failed mid-way (partial results kept) or an output could not be
-written, 2 bad input (nothing run), 130 / 143 / 129 interrupted by SIGINT (Ctrl-C) / SIGTERM /
-SIGHUP (partial results kept)"""
+""" + exit_codes_help()
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -62,8 +57,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", metavar="SCENARIO", help="scenario CSV file")
     p.add_argument("--plant", metavar="FMU", default=None,
-                   help=f"plant FMU, FMI 2.0 or 3.0 (default: {DEFAULT_PLANT}, built if "
-                        "missing)")
+                   help="plant FMU, FMI 2.0 or 3.0 (default: the project's "
+                        "fmus/FourTank.fmu, built if missing), or model:FILE for the GRU "
+                        "model itself as the plant (the paper's eq:perturbed-model; its "
+                        "h1_start, h2_start, w_y_max, dx_<i> are scenario plant.* columns)")
     p.add_argument("--map", metavar="MAP", default=None,
                    help="variable map TOML for a plant whose variable names or units differ "
                         "(checked against its modelDescription before the first step)")
@@ -100,121 +97,46 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _plant_path(arg: str | None) -> Path:
-    from cosim.errors import CosimError
-
-    if arg is not None:
-        path = Path(arg)
-        if path.is_dir():
-            raise CosimError(f"{path}: is a folder, not an FMU file (.fmu zip archive)")
-        if not path.is_file():
-            raise CosimError(f"{path}: FMU not found")
-        return path
-    if not DEFAULT_PLANT.is_file():
-        try:
-            from cosim.build import build_fmus
-        except ImportError:
-            raise CosimError(f"{DEFAULT_PLANT} not found and cannot be built here; run "
-                             "'cosim build-fmu' or give --plant") from None
-        build_fmus()
-        if not DEFAULT_PLANT.is_file():
-            raise CosimError(f"{DEFAULT_PLANT}: not produced by cosim build-fmu")
-    return DEFAULT_PLANT
-
-
-def _step_timeout(args: argparse.Namespace) -> float | None:
-    """The plant/controller step limit: --step-timeout, else the isolated default."""
-    import math
-
-    from cosim.errors import CosimError
-
-    limit = args.step_timeout
-    if limit is None:
-        return DEFAULT_STEP_TIMEOUT if args.isolate else None
-    if not (math.isfinite(limit) and limit > 0):
-        raise CosimError(f"--step-timeout {limit!r}: expected a positive number of seconds")
-    return float(limit)
+#: The options of this command that name a library parameter (their errors are reworded).
+FLAGS = ("seed", "step", "step_timeout")
 
 
 def run(args: argparse.Namespace) -> int:
-    """Execute ``cosim run``; returns the exit code (raises CosimError/SimulationFailed)."""
-    from cosim import interrupts, outpaths, registry, results, scenario, varmap
-    from cosim.errors import EXIT_OK, CosimError, SimulationFailed
-    from cosim.master import Master, communication_times
-    from cosim.runfolder import RunFolder
+    """Execute ``cosim run`` through :func:`cosim.api.run`; returns the exit code."""
+    from cosim import api, registry
+    from cosim.errors import EXIT_OK, CosimError, ParameterError, SimulationFailed
 
-    sc = scenario.load(args.scenario)
-    vmap = varmap.load(args.map) if args.map else None
-    plant_path = _plant_path(args.plant)
-    step_timeout = _step_timeout(args)
-    isolate = bool(args.isolate or args.step_timeout is not None)
-    ctrl_name = args.controller or registry.DEFAULT
     options = registry.parse_options(args.option)
-    if args.model is not None:
-        options["model"] = args.model
-    out = Path(args.out) if args.out else Path("results") / sc.path.stem
-    outpaths.out_dir(out, "--out")
-    controller = registry.create(ctrl_name, options)
-    if isolate:
-        from cosim.isolated import IsolatedFmuComponent
+    out = Path(args.out) if args.out else None
+    try:
+        if out is None:
+            from cosim import scenario
 
-        plant = IsolatedFmuComponent(plant_path, name="plant", interface=args.interface,
-                                     varmap=vmap, timeout=step_timeout)
-    else:
-        from cosim.fmu import FmuComponent
-
-        plant = FmuComponent(plant_path, name="plant", interface=args.interface, varmap=vmap)
-    master = Master(plant, controller, sc, step=args.step, seed=args.seed)
-    meta = {"scenario": str(sc.path), "plant": str(plant_path),
-            "fmi_version": plant.fmi_version, "interface": args.interface,
-            "isolated": isolate, "step_timeout": step_timeout,
-            "map": str(args.map) if args.map else None, "controller": ctrl_name,
-            "controller_options": options, "seed": args.seed}
-
-    guard = interrupts.current()
-    with RunFolder(out, "--out") as folder, \
-            guard.deferred() if guard is not None else contextlib.nullcontext():
-        # signals raise only inside the master's step loop; around it (set-up, writing the
-        # results) they are recorded and acted on once everything is on disk
-        stream = results.ResultsStream(folder.path / "results.csv")
-        bar = _progress_bar(args, sc, master, communication_times)
-        try:
-            result = master.run(on_step=None if bar is None else lambda k: bar.update(1),
-                                record=stream, step_timeout=step_timeout)
-        except BaseException:
-            stream.close()
-            raise
-        finally:
-            if bar is not None:
-                bar.close()
-        if (not result.rows and isinstance(result.error, CosimError)
-                and not isinstance(result.error, SimulationFailed)):
-            raise result.error  # bad input found while loading the FMU: nothing was run
-        doc = results.write(folder.path, result, meta, figure=not args.no_figure,
-                            stream=stream)
+            out = Path("results") / scenario.load(args.scenario).path.stem
+        output = api.run(args.scenario, plant=args.plant,
+                         controller=args.controller or registry.DEFAULT, map=args.map,
+                         model=args.model, options=options, out=out,
+                         interface=args.interface, step=args.step, isolate=args.isolate,
+                         step_timeout=args.step_timeout, seed=args.seed,
+                         figure=not args.no_figure,
+                         progress=not args.quiet and sys.stderr.isatty())
+    except ParameterError as exc:
+        raise (exc.as_option() if exc.parameter in FLAGS else CosimError(str(exc))) from None
+    result = output.result
     if result.error is not None:
         if isinstance(result.error, KeyboardInterrupt):
             raise result.error
         raise SimulationFailed(f"{result.reason} (partial results: {result.steps} of "
                                f"{result.steps_planned} steps in {out})")
+    from cosim import interrupts
+
+    guard = interrupts.current()
     if guard is not None:
         guard.check()  # a signal that arrived while the results were written
     if not args.quiet:
-        k = doc["kpis"]
+        k = output.summary["kpis"]
         iae = ", ".join(f"{o}={v:.4g}" for o, v in k["iae"].items())
         viol = sum(v["count"] for v in k["violations"].values())
         print(f"cosim run: ok: {result.steps} steps in {result.wall_time_s:.2f} s; IAE {iae} "
               f"m·s; {viol} constraint violations; results in {out}")
     return EXIT_OK
-
-
-def _progress_bar(args: argparse.Namespace, sc: object, master: object,
-                  communication_times: object) -> object:
-    """A tqdm bar over the plant steps on an interactive terminal, else ``None``."""
-    if args.quiet or not sys.stderr.isatty():
-        return None
-    from tqdm import tqdm
-
-    total = len(communication_times(sc.start_time, sc.stop_time, master.dt)) - 1
-    return tqdm(total=total, unit="step", desc=sc.path.stem, file=sys.stderr,
-                dynamic_ncols=True)

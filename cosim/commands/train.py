@@ -5,6 +5,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from cosim.errors import exit_codes_help
+
+__all__ = ["DESCRIPTION", "HELP", "MAX_EPOCHS", "MAX_STATES", "SHIPPED_MODEL", "register",
+           "run"]
+
 #: The shipped model: never written unless named explicitly with --out.
 SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "controllers" / "models" / "fourtank_gru.json"
 #: Largest --epochs accepted (the paper's recipe runs 2,000).
@@ -49,6 +54,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
     d = TrainOptions()
     parser = subparsers.add_parser("train", help=HELP, description=DESCRIPTION,
+                                   epilog=exit_codes_help(),
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("data", metavar="DATA.csv", help="data set from 'cosim generate-data'")
     parser.add_argument("--out", default=None, metavar="MODEL.json",
@@ -188,10 +194,10 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from controllers import certificates, metrics, training
+    from controllers import bounds, metrics, training
     from controllers.model import GRUModel
     from controllers.problem import FOURTANK
-    from cosim import datagen, outpaths
+    from cosim import datagen, outpaths, plots
     from cosim.atomicio import output_error, replacing
     from cosim.errors import CosimError
 
@@ -202,6 +208,10 @@ def run(args: argparse.Namespace) -> int:
     missing = [s for s in FOURTANK.inputs if s not in data.input_names]
     if missing:
         raise CosimError(f"{args.data}: no input column '{missing[0]}'")
+    n_train = int(np.count_nonzero(data.split == "train"))
+    if n_train < args.seq_len:
+        raise CosimError(f"{args.data}: training data has {n_train} steps, fewer than "
+                         f"--seq-len {args.seq_len}")
     penalty = args.penalty_weight
     if penalty is None:
         penalty = 10.0 if args.constraint == "penalty" else 0.0
@@ -263,7 +273,7 @@ def run(args: argparse.Namespace) -> int:
                                 callback=callback)
     scores = metrics.split_scores(result.params, u_all, y_all, data.split)
     names = list(FOURTANK.outputs)
-    sz, sr, ph = certificates.gate_bounds(result.params)
+    sz, sr, ph = bounds.gate_bounds(result.params)
     meta_path = Path(args.data).with_suffix(".json")
     record = {
         "command": _command(sys.argv[2:]),
@@ -280,7 +290,7 @@ def run(args: argparse.Namespace) -> int:
                         "FIT per split on its rows (normalised units)",
         "nu": result.nu,
         "sigma_z_bar": sz, "sigma_r_bar": sr, "phi_h_bar": ph,
-        "U_o_inf_norm": certificates.inf_norm(result.params["U_o"]),
+        "U_o_inf_norm": bounds.inf_norm(result.params["U_o"]),
         "normalization_note": "u = (q - mid)/half-range of the saturation box; "
                               "y = (h - 1 m)/1 m",
         "wall_time_s": round(time.perf_counter() - t0, 1),
@@ -296,7 +306,7 @@ def run(args: argparse.Namespace) -> int:
     test = data.split == "test"
     xi = metrics.open_loop(result.params, u_all)
     with replacing(figure) as tmp_figure:
-        metrics.prediction_figure(
+        plots.prediction_figure(
             data.time[test], model.denormalize_y(y_all[test]), model.denormalize_y(xi[test]),
             names, list(FOURTANK.output_units), scores["test"]["fit"], str(tmp_figure),
             f"GRU n={opts.n}, test split: open-loop prediction vs plant "

@@ -48,10 +48,10 @@ def certified_random_problem(setpoints: list[np.ndarray], seed: int = 0):
     A small w̄_y (0.002) and the largest observer-gain scale for which every hypothesis of
     ``th:feasibility-stability`` holds at ``setpoints`` (normalised).
     """
-    from controllers import certificates as certs
+    from controllers import gain_design
 
     model = random_gru_model(seed)
-    theta, cert = certs.choose_gain_scale(model, setpoints, N=N, w_y_bar=0.002, L=L_BOX,
+    theta, cert = gain_design.choose_gain_scale(model, setpoints, N=N, w_y_bar=0.002, L=L_BOX,
                                           h=H_BOX)
     assert theta is not None, "test design: the hypotheses must hold"
     return model, cert

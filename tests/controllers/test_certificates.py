@@ -11,13 +11,14 @@ import math
 
 import numpy as np
 import pytest
-from random_gru import random_gru_model
 from scipy.optimize import linprog, minimize
 
+from controllers import bounds, gain_design, problem
 from controllers import certificates as certs
+from controllers.errors import ControllersError, DataError
 from controllers.gru import output, step
 from controllers.model import GRUModel
-from cosim.errors import CosimError
+from tests.controllers.random_gru import random_gru_model
 
 
 def hand_model(w_y_bar: float | None = 0.05) -> GRUModel:
@@ -72,11 +73,11 @@ def hand_cert() -> certs.Certificate:
 
 
 def test_gate_bounds_nu_rho_s_hand(hand_cert: certs.Certificate) -> None:
-    assert certs.gate_bounds(hand_model().params) == pytest.approx((SZ, SR, PH), rel=1e-12)
+    assert bounds.gate_bounds(hand_model().params) == pytest.approx((SZ, SR, PH), rel=1e-12)
     assert hand_cert.sigma_z == pytest.approx(SZ, rel=1e-12)
     assert hand_cert.nu == pytest.approx(NU, rel=1e-12)
     assert hand_cert.rho_s == pytest.approx(RHO_S, rel=1e-12)
-    assert certs.rho_s(hand_model().params) == pytest.approx(RHO_S, rel=1e-12)
+    assert bounds.rho_s(hand_model().params) == pytest.approx(RHO_S, rel=1e-12)
     assert hand_cert.c_s == pytest.approx([3.0, 3.0])
     assert pytest.approx(np.array([[1.0], [-1.0]])) == hand_cert.L
     assert hand_cert.h == pytest.approx([1.0, 1.0])
@@ -135,16 +136,16 @@ def test_eo_evolution_monotone_to_e_inf(hand_cert: certs.Certificate) -> None:
 
 
 def test_inf_norm_of_a_row_is_the_sum_of_absolute_values() -> None:
-    assert certs.inf_norm([1.0, -2.0, 0.5]) == 3.5
-    assert certs.inf_norm([[1.0, -2.0], [0.5, 0.5]]) == 3.0
-    assert certs.row_norms([[1.0, -2.0], [0.5, 0.5]]) == pytest.approx([3.0, 1.0])
+    assert bounds.inf_norm([1.0, -2.0, 0.5]) == 3.5
+    assert bounds.inf_norm([[1.0, -2.0], [0.5, 0.5]]) == 3.0
+    assert bounds.row_norms([[1.0, -2.0], [0.5, 0.5]]) == pytest.approx([3.0, 1.0])
 
 
 def test_output_constraints_in_normalised_units() -> None:
     m = random_gru_model(0)
     m.y_offset = np.array([1.0, 0.5])
     m.y_scale = np.array([0.5, 2.0])
-    L, h = certs.output_constraints(m)
+    L, h = problem.output_constraints(m)
     assert pytest.approx(np.array([[1, 0], [-1, 0], [0, 1], [0, -1]], dtype=float)) == L
     # h1 ∈ [0, 2]: (2 − 1)/0.5 = 2, −(0 − 1)/0.5 = 2 ; h2: (2 − 0.5)/2 = 0.75, −(0 − 0.5)/2
     assert h == pytest.approx([2.0, 2.0, 0.75, 0.25])
@@ -189,9 +190,9 @@ def test_explicit_gains_scale_and_missing_w_y_bar() -> None:
     assert c0.nu_o == pytest.approx(NU) and c0.kappa == 0 and c0.L_max == 0 and c0.w_bar == 0
     m.L_z, m.L_r = 0.1 * LZ, 0.1 * LR  # saved gains are the default
     assert certs.compute_certificate(m, N=2).L_r == pytest.approx(0.1 * LR)
-    with pytest.raises(CosimError, match="w_y_bar"):
+    with pytest.raises(ControllersError, match="w_y_bar"):
         certs.compute_certificate(hand_model(w_y_bar=None))
-    with pytest.raises(CosimError, match="shape"):
+    with pytest.raises(ControllersError, match="shape"):
         certs.compute_certificate(m, L_z=np.zeros((3, 1)), L_r=np.zeros((3, 1)))
 
 
@@ -200,7 +201,7 @@ def test_lp_gains_are_optimal() -> None:
     rng = np.random.default_rng(3)
     for seed in range(3):
         p = random_gru_model(seed, n=6).params
-        Lz, Lr = certs.observer_gains_lp(p)
+        Lz, Lr = gain_design.observer_gains_lp(p)
         Uo = p["U_o"]
         for U, Lg in ((p["U_z"], Lz), (p["U_r"], Lr)):
             for i in range(U.shape[0]):
@@ -219,15 +220,15 @@ def test_lp_gains_are_optimal() -> None:
                                method="Nelder-Mead", options={"xatol": 1e-10, "fatol": 1e-12})
                 assert res.fun >= val - 1e-9
         # and the ∞-norm, hence ν_o, is no larger than with zero gains or any other tried
-        assert certs.nu_o(p, Lz, Lr) <= certs.nu(p) + 1e-12
+        assert bounds.nu_o(p, Lz, Lr) <= bounds.nu(p) + 1e-12
         for _ in range(20):
-            assert certs.nu_o(p, Lz + rng.normal(0, 0.01, Lz.shape),
-                          Lr + rng.normal(0, 0.01, Lr.shape)) >= certs.nu_o(p, Lz, Lr) - 1e-12
+            assert bounds.nu_o(p, Lz + rng.normal(0, 0.01, Lz.shape),
+                          Lr + rng.normal(0, 0.01, Lr.shape)) >= bounds.nu_o(p, Lz, Lr) - 1e-12
 
 
 def test_lp_gains_brute_force_grid_p1() -> None:
     m = hand_model()
-    Lz, Lr = certs.observer_gains_lp(m.params)
+    Lz, Lr = gain_design.observer_gains_lp(m.params)
     grid = np.linspace(-0.5, 0.5, 20001)
     Uo = m.params["U_o"][0]
     for U, Lg in ((m.params["U_z"], Lz), (m.params["U_r"], Lr)):
@@ -263,19 +264,19 @@ def test_choose_gain_scale_returns_the_largest_passing_scale() -> None:
     m = random_gru_model(1)
     m.w_y_bar = 0.02  # small model error: the LP gains themselves pass
     setpoints = [m.normalize_y(np.array(s)) for s in ((0.5, 0.5), (1.0, 1.4), (1.5, 1.5))]
-    assert certs.choose_gain_scale(m, setpoints)[0] == 1.0
+    assert gain_design.choose_gain_scale(m, setpoints)[0] == 1.0
     m.w_y_bar = 0.15  # larger error: the LP gains fail, a smaller scale passes (≈ 0.42)
-    theta, c = certs.choose_gain_scale(m, setpoints)
+    theta, c = gain_design.choose_gain_scale(m, setpoints)
     assert theta is not None and 0.1 < theta < 1
     assert not certs.compute_certificate(m).ok(setpoints[0])
     assert c.gain_scale == theta and all(c.ok(y) for y in setpoints)
-    Lz, Lr = certs.observer_gains_lp(m.params)
+    Lz, Lr = gain_design.observer_gains_lp(m.params)
     assert c.L_z == pytest.approx(theta * Lz)
     # slightly larger gains fail somewhere (eq. 11 is the binding condition here)
     c2 = certs.compute_certificate(m, L_z=1.001 * theta * Lz, L_r=1.001 * theta * Lr)
     assert not all(c2.ok(y) for y in setpoints)
     # an impossible set-point (on the constraint) fails even with θ = 0
-    theta_bad, c_bad = certs.choose_gain_scale(m, [m.normalize_y(np.array([2.0, 1.0]))])
+    theta_bad, c_bad = gain_design.choose_gain_scale(m, [m.normalize_y(np.array([2.0, 1.0]))])
     assert theta_bad is None and c_bad.gain_scale == 0.0
 
 
@@ -294,17 +295,10 @@ def test_w_y_bar_from_data_recovers_the_output_perturbation(tmp_path) -> None:
     w[1234, 1] = 0.04  # the test maximum (normalised); train/val have larger noise
     y = m.denormalize_y(xi + w)
     up = m.denormalize_u(u)
-    lines = ["time,qa,qb,h1,h2,split"]
-    lines += [f"{25.0 * k},{up[k, 0]:.17g},{up[k, 1]:.17g},{y[k, 0]:.17g},{y[k, 1]:.17g},"
-              f"{split[k]}" for k in range(T)]
-    path = tmp_path / "data.csv"
-    path.write_text("\n".join(lines) + "\n")
-    assert certs.w_y_bar_from_data(m, path) == pytest.approx(0.04, abs=1e-5)
-    # an inconsistent record (no test rows) is a one-line error naming the file
-    path2 = tmp_path / "no_test.csv"
-    path2.write_text("\n".join(lines[:1001]) + "\n")
-    with pytest.raises(CosimError, match=r"no_test\.csv"):
-        certs.w_y_bar_from_data(m, path2)
+    assert certs.w_y_bar_from_data(m, up, y, split) == pytest.approx(0.04, abs=1e-5)
+    # an inconsistent record (no test rows) is a one-line error naming the split
+    with pytest.raises(DataError, match="no rows in split 'test'"):
+        certs.w_y_bar_from_data(m, up[:1000], y[:1000], split[:1000])
 
 
 def test_alpha_positive_iff_assumption_1() -> None:
@@ -328,10 +322,10 @@ def test_reference_gives_equilibrium_and_alpha_or_a_clear_error() -> None:
     assert output(m.params, ref.x_bar) == pytest.approx(y, abs=1e-9)
     assert np.max(np.abs(step(m.params, ref.x_bar, ref.u_bar) - ref.x_bar)) < 1e-12
     # on the constraint: Assumption 1 fails, named with the set-point in metres
-    with pytest.raises(CosimError, match=r"set-point h1=2 m, h2=1 m: .*Assumption 1"):
+    with pytest.raises(ControllersError, match=r"set-point h1=2 m, h2=1 m: .*Assumption 1"):
         c.reference(m.normalize_y(np.array([2.0, 1.0])))
     # admissible for the certificate but not reachable by the model
-    with pytest.raises(CosimError, match="not reachable"):
+    with pytest.raises(ControllersError, match="not reachable"):
         c.reference(m.normalize_y(np.array([0.5, 1.5])))
 
 
@@ -397,7 +391,7 @@ def test_candidate_solution_deviation_bound() -> None:
     ({"gain_scale": "x"}, "gain scale must be a non-negative number, got 'x'"),
 ])
 def test_bad_design_parameters_are_one_line_errors(kwargs, message) -> None:
-    with pytest.raises(CosimError) as info:
+    with pytest.raises(ControllersError) as info:
         certs.compute_certificate(hand_model(), **kwargs)
     assert str(info.value) == message
 
@@ -411,18 +405,18 @@ def test_saturated_or_non_finite_update_gate_is_a_one_line_error() -> None:
     """σ̄_z rounds to 1 once ‖[W_z U_z b_z]‖∞ > ~36.7: ν would divide by zero."""
     m = hand_model()
     m.params["b_z"] = np.array([36.0, 1.0])  # σ(36.6) < 1 in floating point: still defined
-    assert math.isfinite(certs.nu(m.params))
+    assert math.isfinite(bounds.nu(m.params))
     m.params["b_z"] = np.array([40.0, 1.0])  # ‖·‖∞ = 40.6: σ̄_z == 1.0
-    assert certs.gate_bounds(m.params)[0] == 1.0
-    for call in (lambda: certs.nu(m.params), lambda: certs.compute_certificate(m),
-                 lambda: certs.choose_gain_scale(m, [np.zeros(1)])):
-        with pytest.raises(CosimError, match=r"^sigma_z \(σ̄_z = σ\(‖\[W_z U_z b_z\]‖∞\) = "
+    assert bounds.gate_bounds(m.params)[0] == 1.0
+    for call in (lambda: bounds.nu(m.params), lambda: certs.compute_certificate(m),
+                 lambda: gain_design.choose_gain_scale(m, [np.zeros(1)])):
+        with pytest.raises(ControllersError, match=r"^sigma_z \(σ̄_z = σ\(‖\[W_z U_z b_z\]‖∞\) = "
                                              r"σ\(40\.6\), th:stability-bonassi\) rounds to 1"):
             call()
     m.source = "m.json"
-    with pytest.raises(CosimError, match=r"^m\.json: sigma_z .* rounds to 1"):
+    with pytest.raises(ControllersError, match=r"^m\.json: sigma_z .* rounds to 1"):
         certs.compute_certificate(m)
     m.params["b_z"] = np.array([np.nan, 1.0])
-    with pytest.raises(CosimError, match=r"is undefined: ‖\[W_z U_z b_z\]‖∞ = nan, the "
+    with pytest.raises(ControllersError, match=r"is undefined: ‖\[W_z U_z b_z\]‖∞ = nan, the "
                                          "weights are not finite"):
-        certs.nu(m.params)
+        bounds.nu(m.params)

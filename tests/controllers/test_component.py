@@ -9,8 +9,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.component import RobustMPCController
+from controllers.model import DEFAULT_MODEL
 from controllers.model_plant import GRUPlant
+from controllers.mpc_controller import RobustMPCController
 from controllers.problem import FOURTANK
 from cosim import scenario
 from cosim.errors import CosimError
@@ -173,3 +174,41 @@ def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
 def test_solver_option_selects_the_nlp_solver() -> None:
     assert RobustMPCController().fhocp.solver == "sqp"
     assert RobustMPCController(solver="ipopt").fhocp.solver == "ipopt"
+
+
+def test_gru_plant_start_parameters() -> None:
+    from controllers.equilibrium import equilibrium_for_output
+    from controllers.model import GRUModel
+
+    model = GRUModel.load(DEFAULT_MODEL)
+    plant = GRUPlant(model)
+    assert {"h1_start", "h2_start", "w_y_max", "seed", "dx_1", f"dx_{model.n}"} <= \
+        plant.settable(True)
+    assert plant.settable(False) == {"qa", "qb"}
+    plant.set_parameter("h1_start", 0.9)
+    plant.set_parameter("dx_2", 0.01)
+    plant.set_parameter("w_y_max", 0.05)
+    plant.setup(0.0)
+    x_eq, _ = equilibrium_for_output(model, model.normalize_y(np.array([0.9, 1.0])))
+    assert np.allclose(plant.x - x_eq, np.eye(model.n)[1] * 0.01)
+    outs = [plant.get_outputs()["h1"] for _ in range(3) if not plant.step(0.0, 25.0)]
+    assert len(set(outs)) == 3  # the perturbation is drawn every step
+    with pytest.raises(CosimError, match="no plant parameter 'dx_99'"):
+        plant.set_parameter("dx_99", 0.0)
+    with pytest.raises(CosimError, match=r"'w_y_max' = -1\.0 is negative"):
+        plant.set_parameter("w_y_max", -1.0)
+
+
+def test_reused_controller_gives_the_results_of_a_new_one() -> None:
+    """A campaign worker reuses one controller for many runs: setup() restarts it exactly."""
+    from cosim.scenario import load
+
+    ctrl = RobustMPCController()
+    sc = load(ROOT / "scenarios" / "paper_steps.csv").with_changes(stop_time=5000.0)
+
+    def rows(c: RobustMPCController) -> np.ndarray:
+        return np.asarray(Master(GRUPlant(c.model, y0=np.array([0.7, 0.7])), c, sc).run().rows)
+
+    first, again, fresh = rows(ctrl), rows(ctrl), rows(RobustMPCController())
+    assert np.array_equal(first, again, equal_nan=True)
+    assert np.array_equal(first, fresh, equal_nan=True)

@@ -6,7 +6,6 @@ import math
 
 import numpy as np
 import pytest
-from random_gru import random_gru_model
 
 from controllers.equilibrium import (
     UnreachableSetpoint,
@@ -15,8 +14,9 @@ from controllers.equilibrium import (
     jacobians,
     state_equilibrium,
 )
+from controllers.errors import ControllersError
 from controllers.gru import output, step
-from cosim.errors import CosimError
+from tests.controllers.random_gru import random_gru_model
 
 
 def test_jacobians_match_finite_differences() -> None:
@@ -71,7 +71,7 @@ def test_closed_form_scalar_model() -> None:
 def test_unreachable_setpoint_message_in_physical_units() -> None:
     m = random_gru_model(0)
     y_far = m.normalize_y(np.array([5.0, 1.0]))
-    with pytest.raises(CosimError) as info:
+    with pytest.raises(ControllersError) as info:
         equilibrium(m, y_far)
     msg = str(info.value)
     assert "h1=5 m, h2=1 m" in msg and "not reachable" in msg and "\n" not in msg

@@ -3,33 +3,17 @@ every step it takes comes with a sequence that is feasible for the new set-point
 
 import numpy as np
 import pytest
-from random_gru import N, certified_random_problem
 
 from controllers.equilibrium import equilibrium
+from controllers.fhocp import FHOCP
 from controllers.governor import ReferenceGovernor, equilibrium_newton
 from controllers.gru import output, simulate
-from controllers.mpc import FHOCP
-
-
-@pytest.fixture(scope="module")
-def problem():
-    return certified_random_problem([np.array([0.1, 0.1]), np.array([-0.1, -0.1])])
-
-
-@pytest.fixture(scope="module")
-def model(problem):
-    return problem[0]
-
-
-@pytest.fixture(scope="module")
-def cert(problem):
-    return problem[1]
+from tests.controllers.random_gru import N
 
 
 @pytest.fixture(scope="module")
 def fhocp(cert):
-    return FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a,
-                 cert.b, cert.s).setup()
+    return FHOCP.from_certificate(cert).setup()
 
 
 def test_equilibrium_by_continuation_matches_least_squares(model):

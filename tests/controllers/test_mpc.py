@@ -3,34 +3,20 @@ feasibility in closed loop (``th:feasibility-stability``) and the fallback path.
 
 import numpy as np
 import pytest
-from random_gru import N, certified_random_problem
 
 from controllers.equilibrium import equilibrium
+from controllers.fhocp import FHOCP
 from controllers.gru import output, simulate, step
 from controllers.model_plant import GRUPlant
-from controllers.mpc import FEAS_TOL, FHOCP, RobustMPC
 from controllers.observer import GRUObserver
-
-
-@pytest.fixture(scope="module")
-def problem():
-    return certified_random_problem([np.array([0.1, 0.1]), np.array([0.0, 0.05])])
-
-
-@pytest.fixture(scope="module")
-def model(problem):
-    return problem[0]
-
-
-@pytest.fixture(scope="module")
-def cert(problem):
-    return problem[1]
+from controllers.robust_mpc import RobustMPC
+from controllers.solver_settings import FEAS_TOL
+from tests.controllers.random_gru import N
 
 
 def make(cert, max_iter=200, **kw):
     kw.setdefault("ipopt_options", {"max_iter": max_iter})
-    return FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a,
-                 cert.b, cert.s, **kw).setup()
+    return FHOCP.from_certificate(cert, **kw).setup()
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers import certificates, metrics
+from controllers import bounds, metrics
 from controllers.model import GRUModel
 from controllers.problem import FOURTANK
 from cosim import datagen
@@ -37,7 +37,7 @@ def test_shipped_model_is_the_papers_structure(model):
 
 
 def test_shipped_model_is_delta_iss(model):
-    nu = certificates.nu(model.params)
+    nu = bounds.nu(model.params)
     assert nu < 1
     assert model.training["nu"] == pytest.approx(nu, abs=1e-12)
 

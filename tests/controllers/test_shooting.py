@@ -3,10 +3,10 @@
 import casadi as ca
 import numpy as np
 import pytest
-from random_gru import random_gru_model
 
 from controllers import gru
 from controllers.shooting import GRUShooting
+from tests.controllers.random_gru import random_gru_model
 
 
 @pytest.fixture(scope="module")

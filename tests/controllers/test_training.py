@@ -9,12 +9,12 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from controllers import certificates, training  # noqa: E402
+from controllers import bounds, training  # noqa: E402
+from controllers.errors import ControllersError  # noqa: E402
 from controllers.model import GRUModel  # noqa: E402
 from controllers.problem import FOURTANK  # noqa: E402
 from cosim import datagen  # noqa: E402
 from cosim.cli import main  # noqa: E402
-from cosim.errors import CosimError  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 FMU = ROOT / "fmus" / "FourTank.fmu"
@@ -50,16 +50,16 @@ def random_params(seed: int, n: int = 6) -> dict[str, np.ndarray]:
 def test_torch_nu_equals_numpy_nu(seed):
     p = random_params(seed)
     pt = {k: torch.tensor(v, dtype=torch.float64) for k, v in p.items()}
-    assert abs(float(training.nu_torch(pt)) - certificates.nu(p)) < 1e-12
+    assert abs(float(training.nu_torch(pt)) - bounds.nu(p)) < 1e-12
 
 
 def test_constrain_enforces_the_bound_and_is_differentiable():
     p = random_params(4)
     pt = {k: torch.tensor(v, dtype=torch.float64, requires_grad=True) for k, v in p.items()}
-    assert certificates.nu(p) > 1
+    assert bounds.nu(p) > 1
     q, v_raw = training.constrain(pt, 0.9)
-    assert abs(v_raw.item() - certificates.nu(p)) < 1e-12
-    assert certificates.nu({k: t.detach().numpy() for k, t in q.items()}) <= 0.9 + 1e-12
+    assert abs(v_raw.item() - bounds.nu(p)) < 1e-12
+    assert bounds.nu({k: t.detach().numpy() for k, t in q.items()}) <= 0.9 + 1e-12
     (q["U_h"].sum() + q["U_z"].sum()).backward()
     assert pt["U_h"].grad is not None and torch.any(pt["W_z"].grad != 0)  # through σ̄_z
     # already inside: unchanged
@@ -70,13 +70,13 @@ def test_constrain_enforces_the_bound_and_is_differentiable():
 
 def test_init_params_are_delta_iss():
     for seed in range(3):
-        assert certificates.nu(training.init_params(20, 2, 2, seed)) <= 0.5 + 1e-12
+        assert bounds.nu(training.init_params(20, 2, 2, seed)) <= 0.5 + 1e-12
 
 
 def test_refuses_to_build_a_model_with_nu_at_least_one():
     p = random_params(5)
-    assert certificates.nu(p) >= 1
-    with pytest.raises(CosimError, match=r"nu = .* >= 1"):
+    assert bounds.nu(p) >= 1
+    with pytest.raises(ControllersError, match=r"nu = .* >= 1"):
         training.build_model(p, FOURTANK, training.normalization(FOURTANK), {})
 
 
@@ -108,9 +108,9 @@ def test_cosim_train_writes_a_loadable_model_and_figure(short_data, tmp_path):
                  "--seq-len", "150", "--batch", "0", "--washout", "20", "--quiet"]) == 0
     model = GRUModel.load(out)
     assert model.n == 5 and model.input_names == ["qa", "qb"]
-    assert certificates.nu(model.params) < 1
+    assert bounds.nu(model.params) < 1
     rec = model.training
-    assert rec["nu"] == pytest.approx(certificates.nu(model.params), abs=1e-12)
+    assert rec["nu"] == pytest.approx(bounds.nu(model.params), abs=1e-12)
     assert set(rec["fit"]) == {"train", "val", "test"} and rec["options"]["seq_len"] == 150
     assert model.w_y_bar == pytest.approx(rec["max_abs_err"]["test"])
     assert (tmp_path / "m_test.png").stat().st_size > 10_000

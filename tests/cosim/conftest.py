@@ -2,14 +2,11 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-import pyfmu_models
+from tests.cosim import pyfmu_models
 
 
 @pytest.fixture(scope="session")

@@ -11,6 +11,8 @@
   ``pause()``; in the isolated worker, which ignores signals, nothing wakes it).
 * ``nan``: ``do_step`` makes the level ``h1`` NaN at ``t ≥ 500 s``.
 * ``slow``: a healthy tank whose every ``do_step`` sleeps 20 ms (a long run, for signals).
+* ``crashy``: a healthy tank with a tunable parameter ``crash_at`` [s] (default 1e9): its
+  ``do_step`` segfaults once ``t ≥ crash_at`` (a plant that crashes in some draws).
 
 These FMUs run inside a Python host that has pythonfmu's runtime (the project venv).
 """
@@ -124,12 +126,24 @@ NAN = _TANK.format(cls="Nan", what="turns NaN", at=500.0,
 SLOW = _TANK.format(cls="Slow", what="sleeps 20 ms per step", at=0.0,
                     action="            time.sleep(0.02)")
 
+CRASHY = _TANK.format(cls="Crashy", what="segfaults from crash_at", at="self.crash_at",
+                      action="            os.kill(os.getpid(), signal.SIGSEGV)").replace(
+    """        for name in ("h1", "h2"):
+            self.register_variable(Real(name, causality=Fmi2Causality.output))""",
+    """        for name in ("h1", "h2"):
+            self.register_variable(Real(name, causality=Fmi2Causality.output))
+        self.crash_at = 1e9
+        self.register_variable(Real("crash_at", causality=Fmi2Causality.parameter,
+                                    variability=Fmi2Variability.tunable))""").replace(
+    "from pythonfmu import Fmi2Causality, Fmi2Slave, Real",
+    "from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real")
+
 #: Test FMU kinds: (script name, source). The FMU is named after the class.
 KINDS = {
     "swapin": ("quadtank.py", SWAPIN), "failing": ("failing.py", FAILING),
     "segfault": ("segfault.py", SEGFAULT), "exits": ("exits.py", EXITS),
     "hang": ("hang.py", HANG), "native_hang": ("nativehang.py", NATIVE_HANG),
-    "nan": ("nan.py", NAN), "slow": ("slow.py", SLOW),
+    "nan": ("nan.py", NAN), "slow": ("slow.py", SLOW), "crashy": ("crashy.py", CRASHY),
 }
 
 MAP = '''\

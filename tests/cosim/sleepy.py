@@ -1,5 +1,5 @@
-"""Controllers for the fault tests of ``cosim run`` (``--controller sleepy:<Class>``, this
-folder on ``PYTHONPATH``): the PI baseline made slow, or hung from some time on."""
+"""Controllers for the fault tests of ``cosim run`` (``--controller tests.cosim.sleepy:<Class>``
+from the repository root): the PI baseline made slow, or hung from some time on."""
 
 from __future__ import annotations
 

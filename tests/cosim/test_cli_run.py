@@ -388,3 +388,21 @@ def test_model_with_saturated_update_gate_exit_2_naming_sigma_z(
     assert err.startswith(f"cosim run: error: {model}: sigma_z (σ̄_z = σ(‖[W_z U_z b_z]‖∞) = σ(")
     assert "rounds to 1" in err and "Traceback" not in err
     assert not (tmp_path / "out").exists()
+
+
+@pytest.mark.slow
+def test_gru_model_as_the_plant(tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    model = ROOT / "controllers" / "models" / "fourtank_gru.json"
+    sc = tmp_path / "sc.csv"
+    sc.write_text("time,ref.h1,ref.h2,plant.h1_start,plant.w_y_max\n0,0.8,0.8,0.75,0.01\n"
+                  "500,,,,\n")
+    code, _, err = run(capsys, str(sc), "--plant", f"model:{model}", "--controller", "pi",
+                       "--out", str(tmp_path / "out"), "--quiet", "--no-figure", "--seed", "4")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "out" / "summary.json").read_text())
+    assert summary["plant"] == f"model:{model}" and summary["status"] == "ok"
+    r = load_csv(tmp_path / "out" / "results.csv")
+    assert abs(r["plant.h1"][0] - 0.75) <= 0.01 + 1e-9  # the start output, ± the noise bound
+    code, _, err = run(capsys, str(sc), "--plant", f"model:{model}", "--isolate",
+                       "--out", str(tmp_path / "o2"))
+    assert code == 2 and "takes no --map, --isolate" in err

@@ -7,8 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from cosim.errors import CosimError, SimulationFailed
-from cosim.fmu import FmuComponent, safe_extract
+from cosim.errors import CosimError, FmuError, SimulationFailed
+from cosim.fmu import FmuComponent
+from cosim.fmu_archive import safe_extract
 from cosim.isolated import IsolatedFmuComponent
 from cosim.varmap import load as load_map
 
@@ -88,6 +89,26 @@ def test_fmu_error_becomes_simulation_failed_with_its_log(fmu2_path: Path) -> No
     msg = str(info.value)
     assert msg.startswith("FourTank.fmu: doStep at t=0.0 failed:")
     assert "FMU log:" in msg and "\n" not in msg
+    assert isinstance(info.value, FmuError)
+    assert (info.value.function, info.value.status, info.value.fatal) == ("fmi2DoStep", 3, False)
+
+
+@pytest.mark.parametrize(("status", "fatal"), [(3, False), (4, True), (None, False)])
+def test_fmu_error_status_decides_whether_the_instance_is_freed(fmu3_path: Path, status,
+                                                                fatal: bool) -> None:
+    """The FMI status travels as an attribute (fmpy's FMICallException, our checks); after a
+    fatal one the instance is neither terminated nor freed."""
+
+    class CallFailed(Exception):
+        function = "fmi3DoStep"
+
+    exc = CallFailed("fmi3DoStep failed with status 4 (fatal).")  # the text is not read
+    exc.status = status
+    comp = FmuComponent(fmu3_path)
+    err = comp._fail("doStep at t=0.0", exc)
+    assert isinstance(err, FmuError) and err.status == status and comp._fatal is fatal
+    assert str(err) == "FourTank3.fmu: doStep at t=0.0 failed: fmi3DoStep failed with " \
+                       "status 4 (fatal)."
 
 
 def test_unsafe_archives_are_rejected(tmp_path: Path) -> None:

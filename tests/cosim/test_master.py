@@ -251,5 +251,40 @@ def test_step_and_seed_are_checked(tmp_path: Path) -> None:
     for step in (-1.0, 0.0, math.nan, math.inf):
         with pytest.raises(CosimError, match="must be a positive, finite number"):
             Master(Recorder(), Recorder(), sc, step=step)
-    with pytest.raises(CosimError, match=r"--seed must be a non-negative integer, got -1"):
+    with pytest.raises(CosimError, match=r"^seed must be a non-negative integer, got -1"):
         Master(Recorder(), Recorder(), sc, seed=-1)
+
+
+def test_uniform_noise_is_bounded_and_seeded(tmp_path: Path, fmu2_path: Path) -> None:
+    sc = scenario(tmp_path, "time,ref.h1,sensor.h1.uniform\n0,0.7,0.02\n2500,,\n")
+
+    def noise(seed: int) -> np.ndarray:
+        c = table(Master(FmuComponent(fmu2_path), Recorder(), sc, seed=seed).run())
+        return c["sensor.h1"] - c["plant.h1"]
+
+    a, b = noise(3), noise(3)
+    assert np.array_equal(a, b) and not np.array_equal(a, noise(4))
+    assert np.max(np.abs(a)) <= 0.02 and np.max(a) > 0.015 and np.min(a) < -0.015
+
+
+def test_a_stream_gets_every_row_as_it_is_recorded(tmp_path: Path, fmu2_path: Path) -> None:
+    sc = scenario(tmp_path, "time,ref.h1\n0,0.7\n200,\n")
+    seen: list[tuple[int, int]] = []
+
+    class Sink:
+        def append(self, row: list[float], columns: list[str]) -> None:
+            seen.append((len(row), len(columns)))
+
+    result = Master(FmuComponent(fmu2_path), Recorder(), sc).run(record=Sink())
+    assert len(seen) == len(result.rows) == 9
+    # the columns grow when a diagnostic appears (``late`` from the third step)
+    assert seen[0] == (seen[0][1], seen[0][1]) and seen[-1][1] == seen[0][1] + 1
+
+
+def test_run_deadline_stops_between_steps(tmp_path: Path, fmu2_path: Path) -> None:
+    import time
+
+    sc = scenario(tmp_path, "time,ref.h1\n0,0.7\n1000,\n")
+    result = Master(FmuComponent(fmu2_path), Recorder(), sc).run(deadline=time.monotonic())
+    assert result.status == "failed" and result.reason.startswith("run timeout")
+    assert result.steps < 40

@@ -40,7 +40,7 @@ def scenario(tmp_path: Path, text: str = LONG, name: str = "sc.csv") -> Path:
 def env_for(tmp_path: Path) -> dict[str, str]:
     tmp = tmp_path / "tmp"
     tmp.mkdir(exist_ok=True)
-    paths = [str(HERE), str(ROOT), os.environ.get("PYTHONPATH", "")]
+    paths = [str(ROOT), os.environ.get("PYTHONPATH", "")]
     return dict(os.environ, TMPDIR=str(tmp), PYTHONPATH=os.pathsep.join(p for p in paths if p))
 
 
@@ -188,7 +188,7 @@ def test_step_timeout_stops_a_hung_plant(fmu: str, tmp_path: Path, pyfmu_dir: Pa
 def test_step_timeout_stops_a_hung_controller(tmp_path: Path, fmu2_path: Path) -> None:
     out = tmp_path / "out"
     proc = run(tmp_path, scenario(tmp_path, SHORT), "--plant", fmu2_path,
-               "--controller", "sleepy:SleepyPI", "--option", "hang_at=100",
+               "--controller", "tests.cosim.sleepy:SleepyPI", "--option", "hang_at=100",
                "--out", out, "--step-timeout", "1")
     assert proc.returncode == 1, proc.stderr
     assert ("controller 'pi': step at t=100.0 took longer than the step timeout of 1 s"
@@ -298,7 +298,7 @@ def test_second_run_into_the_same_folder_is_refused(tmp_path: Path, pyfmu_dir: P
 def test_rerun_leaves_no_file_of_the_previous_run(tmp_path: Path, fmu2_path: Path) -> None:
     out = tmp_path / "out"
     sc = scenario(tmp_path, SHORT)
-    first = run(tmp_path, sc, "--plant", fmu2_path, "--controller", "sleepy:TimedPI",
+    first = run(tmp_path, sc, "--plant", fmu2_path, "--controller", "tests.cosim.sleepy:TimedPI",
                 "--out", out)
     assert first.returncode == 0, first.stderr
     assert {p.name for p in out.iterdir()} == {"results.csv", "summary.json", "figure.png",

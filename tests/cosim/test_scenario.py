@@ -119,3 +119,27 @@ def test_paper_scenario_is_long_and_moderate() -> None:
     values = [v for e in sc.events for c, v in e.values if c.kind == REF]
     assert min(values) >= 0.5 and max(values) <= 1.4
     assert len(sc.reference_times()) >= 10
+
+
+def test_with_changes_sets_first_row_replaces_setpoints_and_stop(tmp_path: Path) -> None:
+    path = write(tmp_path, "time,ref.h1,ref.h2,plant.qd1\n0,0.8,0.7,0\n100,0.9,,-1e-5\n"
+                           "300,,0.6,\n400,,,\n")
+    sc = load(path)
+    changed = sc.with_changes({"plant.qd1": 2e-5, "sensor.h1.uniform": 0.01},
+                              [(0.0, {"h1": 1.1, "h2": 1.2}), (150.0, {"h1": 1.3})],
+                              stop_time=350.0)
+    assert changed.start_time == 0.0 and changed.stop_time == 350.0
+    rows = [(e.time, {c.name: v for c, v in e.values}) for e in changed.events]
+    assert rows == [
+        (0.0, {"plant.qd1": 2e-5, "sensor.h1.uniform": 0.01, "ref.h1": 1.1, "ref.h2": 1.2}),
+        (100.0, {"plant.qd1": -1e-5}),
+        (150.0, {"ref.h1": 1.3}),
+        (300.0, {}),
+        (350.0, {}),
+    ]
+    assert [c.kind for c in changed.columns][-1] == "uniform"
+    assert sc.stop_time == 400.0  # the original is unchanged
+    with pytest.raises(CosimError, match="unknown signal 'plant'"):
+        sc.with_changes({"plant": 1.0})
+    with pytest.raises(CosimError, match="not after the start time"):
+        sc.with_changes(stop_time=0.0)

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from fourtank_reference import (
+
+from tests.fmus.fourtank_reference import (
     H_START,
     PARAMETERS,
     Q_EQ,
@@ -16,7 +17,7 @@ from fourtank_reference import (
     simulate_reference,
     step_scenario,
 )
-from fourtank_run import LEVELS, Plant, run_cs
+from tests.fmus.fourtank_run import LEVELS, Plant, run_cs
 
 TOL = 1e-6  # [m], the accuracy requirement
 

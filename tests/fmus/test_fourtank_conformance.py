@@ -120,7 +120,7 @@ def test_interface_names_and_units(which, request):
 
 def test_default_parameters_are_the_papers(fmu2_path):
     md = read_model_description(fmu2_path)
-    from fourtank_reference import PARAMETERS  # Alvarado et al. 2011, as in the paper
+    from tests.fmus.fourtank_reference import PARAMETERS  # Alvarado et al. 2011, as in the paper
 
     start = {v.name: float(v.start) for v in md.modelVariables if v.start is not None}
     assert set(PARAMETERS) == set(TUNABLES)
@@ -131,9 +131,8 @@ def test_default_parameters_are_the_papers(fmu2_path):
 @pytest.mark.parametrize("which", ["fmu2_path", "fmu3_path"])
 def test_source_fmu_compiles_from_its_own_sources(which, request, tmp_path):
     """The sources inside the FMU build a working binary (source FMU)."""
-    from fourtank_run import LEVELS, Plant
-
     from cosim.build import fmi_headers_dir
+    from tests.fmus.fourtank_run import LEVELS, Plant
 
     fmu = request.getfixturevalue(which)
     with zipfile.ZipFile(fmu) as zf:

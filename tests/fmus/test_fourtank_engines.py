@@ -6,8 +6,9 @@ from __future__ import annotations
 import fmpy
 import numpy as np
 import pytest
-from fourtank_reference import random_inputs
-from fourtank_run import LEVELS, run_cs
+
+from tests.fmus.fourtank_reference import random_inputs
+from tests.fmus.fourtank_run import LEVELS, run_cs
 
 TS = 25.0
 

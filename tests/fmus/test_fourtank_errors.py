@@ -7,7 +7,8 @@ import math
 
 import pytest
 from fmpy.fmi1 import FMICallException
-from fourtank_run import LEVELS, Plant, fmi2_callbacks
+
+from tests.fmus.fourtank_run import LEVELS, Plant, fmi2_callbacks
 
 VERSIONS = ("fmu2", "fmu3")
 

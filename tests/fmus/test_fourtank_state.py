@@ -4,8 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from fourtank_reference import random_inputs
-from fourtank_run import LEVELS, Plant
+
+from tests.fmus.fourtank_reference import random_inputs
+from tests.fmus.fourtank_run import LEVELS, Plant
 
 
 def _run(plant: Plant, u: np.ndarray) -> np.ndarray:

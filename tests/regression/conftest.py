@@ -9,14 +9,11 @@ A normal run never writes them.
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).parent))
-
-import regression_cases as rc
+from tests.regression import regression_cases as rc
 
 HERE = Path(__file__).parent
 

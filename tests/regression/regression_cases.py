@@ -170,8 +170,7 @@ class Run:
         return self.out / "results.csv"
 
 
-def run_case(case: Case, out: Path, fmus: dict[str | None, Path],
-             extra_pythonpath: Iterable[Path] = ()) -> Run:
+def run_case(case: Case, out: Path, fmus: dict[str | None, Path]) -> Run:
     """Run one case with ``python -m cosim.cli run`` in a fresh process."""
     cmd = [sys.executable, "-m", "cosim.cli", "run", str(case.scenario),
            "--controller", case.controller, "--plant", str(fmus[case.plant]),
@@ -181,18 +180,15 @@ def run_case(case: Case, out: Path, fmus: dict[str | None, Path],
         cmd += ["--map", str(vmap)]
     env = dict(os.environ, OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1",
                PYTHONHASHSEED="0")
-    paths = [str(p) for p in extra_pythonpath] + [env.get("PYTHONPATH", "")]
-    env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
     proc = subprocess.run(cmd, cwd=ROOT, env=env, capture_output=True, text=True, check=False)
     return Run(case, out, proc.returncode, (proc.stdout + proc.stderr).strip())
 
 
 def run_cases(cases: list[Case], out_root: Path, fmus: dict[str | None, Path],
-              workers: int = 2, extra_pythonpath: Iterable[Path] = ()) -> dict[str, Run]:
+              workers: int = 2) -> dict[str, Run]:
     """Run cases in parallel processes (``workers`` at a time); results by case id."""
-    paths = list(extra_pythonpath)
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        futures = {c.id: pool.submit(run_case, c, out_root / c.id, fmus, paths) for c in cases}
+        futures = {c.id: pool.submit(run_case, c, out_root / c.id, fmus) for c in cases}
         return {k: f.result() for k, f in futures.items()}
 
 
@@ -201,8 +197,10 @@ def write_reference(results: Path, reference: Path) -> None:
     with results.open(newline="", encoding="utf-8") as fh:
         rows = list(csv.reader(fh))
     keep = [0] + [j for j, n in enumerate(rows[0]) if j and n in compared_columns([n])]
-    reference.parent.mkdir(parents=True, exist_ok=True)
-    with reference.open("w", newline="", encoding="utf-8") as fh:
+    from cosim import atomicio
+
+    # a temporary file renamed into place: an interrupted update never truncates a reference
+    with atomicio.open_replacing(reference, "w", newline="") as fh:
         writer = csv.writer(fh, quoting=csv.QUOTE_MINIMAL, lineterminator="\n")
         for row in rows:
             writer.writerow([row[j] for j in keep])

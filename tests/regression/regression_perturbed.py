@@ -1,6 +1,7 @@
 """Deliberately perturbed controllers: the regression suite must notice each of them.
 
-Used as ``cosim run --controller regression_perturbed:<Class>`` (this folder on PYTHONPATH).
+Used as ``cosim run --controller tests.regression.regression_perturbed:<Class>`` (from the
+repository root).
 """
 
 from __future__ import annotations
@@ -12,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-from controllers.component import DEFAULT_MODEL, RobustMPCController
+from controllers.model import DEFAULT_MODEL
+from controllers.mpc_controller import RobustMPCController
 from controllers.pi import PAIRINGS, PIController
 
 

@@ -13,9 +13,9 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-import regression_cases as rc
 
 from cosim.compare import compare, read_table
+from tests.regression import regression_cases as rc
 
 CASES = rc.shipped_cases()
 #: Start-level perturbation [m].

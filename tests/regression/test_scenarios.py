@@ -5,9 +5,9 @@ must reproduce its reference in ``scenarios/references/`` within the default tol
 from __future__ import annotations
 
 import pytest
-import regression_cases as rc
 
 from cosim.compare import compare, read_table
+from tests.regression import regression_cases as rc
 
 CASES = rc.shipped_cases()
 

@@ -8,9 +8,9 @@ import sys
 from pathlib import Path
 
 import pytest
-import regression_cases as rc
 
 from cosim.compare import compare, read_table
+from tests.regression import regression_cases as rc
 
 HERE = Path(__file__).parent
 #: A short scenario (80 steps of 25 s) with a set-point step on each output.
@@ -22,9 +22,9 @@ SHORT = """time,ref.h1,ref.h2
 """
 #: Perturbed controller (``regression_perturbed:<Class>``) -> the controller it perturbs.
 PERTURBED = {
-    "regression_perturbed:PIGainUp": "pi",                  # PI gains ×1.1
-    "regression_perturbed:MPCInputWeight": "robust-mpc",    # R = 0.01 I -> 0.011 I
-    "regression_perturbed:MPCModelWeight": "robust-mpc",    # U_o[0][0] + 1e-3
+    "tests.regression.regression_perturbed:PIGainUp": "pi",                  # PI gains ×1.1
+    "tests.regression.regression_perturbed:MPCInputWeight": "robust-mpc",    # R = 0.01 I -> 0.011 I
+    "tests.regression.regression_perturbed:MPCModelWeight": "robust-mpc",    # U_o[0][0] + 1e-3
 }
 
 
@@ -42,7 +42,7 @@ def short_runs(tmp_path_factory: pytest.TempPathFactory,
     for repeat in ("a", "b"):
         batch = [c for c in cases if repeat == "a" or ":" not in c.controller]
         for key, run in rc.run_cases(batch, root / repeat, plant_fmus, workers=2,
-                                     extra_pythonpath=[HERE]).items():
+                                     ).items():
             runs[f"{key}#{repeat}"] = run
     return runs
 

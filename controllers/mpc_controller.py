@@ -7,7 +7,7 @@ works in the model file's normalised units:
 1. when ``ȳ`` changes: the equilibrium ``(x̄, ū)`` and ``α`` (``eq:def-alpha``) via
    :meth:`controllers.certificates.Certificate.reference`, which also checks Assumption 1
    (``ass:setpoint``) and ``eq:condition-recursive-feasibility``;
-2. ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.mpc.RobustMPC`: the FHOCP
+2. ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.robust_mpc.RobustMPC`: the FHOCP
    ``eq:optimization`` with the shifted-candidate fallback);
 3. the observer ``eq:observer`` advances to ``x̂_{k+1}`` with ``u_k`` and ``y_k``, and
    ``ê_o`` by ``eq:eo-evolution`` (:class:`controllers.observer.GRUObserver`). ``x̂_0`` is the
@@ -17,6 +17,9 @@ Set-points outside the theory (unreachable, or failing Assumption 1 / eq. 11): t
 keeps regulating to the last admissible set-point, counts the step in ``setpoint_rejected``
 (diagnostics and summary) and names the failed hypothesis in the summary. A first set-point
 that is already inadmissible is a configuration error (:class:`cosim.errors.CosimError`).
+
+This module is the co-simulation adapter (a :class:`cosim.component.Component`) of the
+numerical core: the core modules know nothing of ``cosim``.
 
 Set-point changes go through the admissible reference governor of
 :mod:`controllers.governor` (on by default, ``governor=False`` gives the paper's controller,
@@ -39,20 +42,13 @@ from typing import Any
 
 import numpy as np
 
+from controllers.errors import ControllersError, SetpointError
+from controllers.model import DEFAULT_MODEL
 from controllers.problem import FOURTANK
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
 
-DEFAULT_MODEL = Path(__file__).resolve().parent / "models" / "fourtank_gru.json"
-
-#: Set-points (metres) used to choose the observer-gain scale when the model file has no
-#: gains (same grid as ``cosim certify --auto-gain-scale``).
-GAIN_SETPOINTS = [(a, b) for a in (0.5, 1.0, 1.5) for b in (0.5, 1.0, 1.5)]
-
-#: The governor's adaptive step limit ``λ_max``: smallest value, and growth factor after a
-#: converged solve that followed a move (it halves after a solve that did not converge).
-LAM_MIN = 0.0625
-LAM_GROW = 2.0
+__all__ = ["RobustMPCController"]
 
 
 def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_rate: Any,
@@ -99,7 +95,8 @@ class RobustMPCController(Component):
     gain_scale : float, optional
         Observer gains = ``gain_scale`` × the LP gains; default: the gains in the model file
         (``cosim certify --save``), else the largest scale passing every hypothesis on
-        :data:`GAIN_SETPOINTS` (:func:`controllers.certificates.choose_gain_scale`).
+        :data:`controllers.gain_design.DEFAULT_SETPOINTS`
+        (:func:`controllers.gain_design.choose_gain_scale`).
     offset_free : bool
         Offset-free set-point correction (outside the theorem, see the module docstring).
     offset_filter : float
@@ -114,9 +111,9 @@ class RobustMPCController(Component):
         the terminal set stays reachable after large steps. Off by default.
     solver : {"sqp", "ipopt"}, optional
         NLP solver of the FHOCP (default: SQP with a dense QP, or IPOPT when
-        ``ipopt_options`` are given; see :class:`controllers.mpc.FHOCP`).
+        ``ipopt_options`` are given; see :class:`controllers.fhocp.FHOCP`).
     ipopt_options : dict, optional
-        Overrides of :data:`controllers.mpc.FAST_IPOPT_OPTIONS`.
+        Overrides of :data:`controllers.solver_settings.FAST_IPOPT_OPTIONS`.
     max_iter : int
         Iteration cap of one FHOCP solve (default 15, the real-time bound). A solve that
         reaches it applies its feasible iterate (suboptimal MPC) or the fallback; that iterate
@@ -139,17 +136,22 @@ class RobustMPCController(Component):
                  ipopt_options: Mapping[str, Any] | None = None, max_iter: int = 15,
                  name: str = "mpc") -> None:
         from controllers import certificates as certs
+        from controllers import gain_design
+        from controllers.fhocp import FHOCP
         from controllers.governor import ReferenceGovernor
         from controllers.model import GRUModel
-        from controllers.mpc import FHOCP, RobustMPC
         from controllers.observer import GRUObserver
+        from controllers.robust_mpc import RobustMPC
 
         _check_options(name=name, offset_free=offset_free, offset_filter=offset_filter,
                        setpoint_rate=setpoint_rate, governor=governor, solver=solver,
                        ipopt_options=ipopt_options, max_iter=max_iter)
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
-        self.model = GRUModel.load(self.model_path)
+        try:
+            self.model = GRUModel.load(self.model_path)
+        except ControllersError as exc:
+            raise CosimError(str(exc)) from None
         problem = FOURTANK
         if list(self.model.output_names) != list(problem.outputs) or list(
                 self.model.input_names) != list(problem.inputs):
@@ -157,24 +159,26 @@ class RobustMPCController(Component):
                              f"{self.model.output_names} do not match the control problem "
                              f"{list(problem.inputs)} → {list(problem.outputs)}")
         kwargs: dict[str, Any] = {"N": N, "Q": Q, "R": R, "e_o0": e_o0}
-        if gain_scale is None and self.model.L_z is None:
-            targets = [self.model.normalize_y(np.array(y)) for y in GAIN_SETPOINTS]
-            theta, cert = certs.choose_gain_scale(self.model, targets, **kwargs)
-            if theta is None:
-                cert = certs.compute_certificate(self.model, gain_scale=0.0, **kwargs)
-        else:
-            cert = certs.compute_certificate(self.model, gain_scale=gain_scale, **kwargs)
+        try:
+            if gain_scale is None and self.model.L_z is None:
+                targets = [self.model.normalize_y(np.array(y))
+                           for y in gain_design.DEFAULT_SETPOINTS]
+                theta, cert = gain_design.choose_gain_scale(self.model, targets, **kwargs)
+                if theta is None:
+                    cert = certs.compute_certificate(self.model, gain_scale=0.0, **kwargs)
+            else:
+                cert = certs.compute_certificate(self.model, gain_scale=gain_scale, **kwargs)
+        except ControllersError as exc:  # a bad design or a model without certificate
+            raise CosimError(str(exc)) from None
         self.cert = cert
-        self.fhocp = FHOCP(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L,
-                           cert.a, cert.b, cert.s, solver=solver,
-                           ipopt_options={"max_iter": max_iter, **(ipopt_options or {})}
-                           if ipopt_options or solver == "ipopt" else None,
-                           sqp_options={"max_iter": max_iter})
+        self.fhocp = FHOCP.from_certificate(
+            cert, solver=solver, sqp_options={"max_iter": max_iter},
+            ipopt_options={"max_iter": max_iter, **(ipopt_options or {})}
+            if ipopt_options or solver == "ipopt" else None)
         # build the solver and load scipy.optimize (the observer's x̂_0 equilibrium) now, so
         # that the first control step is a normal one (importing scipy.optimize: ~0.2 s)
         import scipy.optimize  # noqa: F401
 
-        self.fhocp.setup()
         self.mpc = RobustMPC(self.fhocp)
         self.governor = ReferenceGovernor(cert, self.fhocp) if governor else None
         self.observer = GRUObserver.from_certificate(cert)
@@ -191,16 +195,27 @@ class RobustMPCController(Component):
         self._lo = np.array([b[0] for b in problem.input_bounds])
         self._hi = np.array([b[1] for b in problem.input_bounds])
         self._values: dict[str, float] = {}
+        #: The observer's initial state ``x̂_0`` (normalised), or ``None``: the equilibrium for
+        #: the first measured output (paper section V). Read by :meth:`setup`.
+        self.initial_estimate: np.ndarray | None = None
         self.setup(0.0)
 
     # -- Component interface -----------------------------------------------------------
     def setup(self, t0: float) -> None:
-        """Reset the observer, the MPC and all counters for a run starting at ``t0``."""
-        self.observer.reset(e_o0=self.cert.e_o0)
-        self.fhocp.reset_warm_start()
-        self.mpc.plan = None
-        self.mpc.records = []
-        self.mpc.x_bar = None
+        """Reset the observer, the MPC and all counters for a run starting at ``t0``.
+
+        The FHOCP's solver is built anew (3 ms): the QP solver keeps state between solves,
+        so a controller reused for another run gives exactly the results of a new one. The
+        observer starts at :attr:`initial_estimate` when it is set, else at the model
+        equilibrium for the first measured output.
+        """
+        x0 = None if self.initial_estimate is None else np.asarray(self.initial_estimate,
+                                                                    dtype=float)
+        self.observer.reset(x0=x0, e_o0=self.cert.e_o0)
+        self.fhocp.setup()
+        self.mpc.reset()
+        if self.governor is not None:
+            self.governor.reset()
         self._y_ref: np.ndarray | None = None      # requested set-point (normalised)
         self._y_model: np.ndarray | None = None    # set-point given to the FHOCP
         self._d_hat: np.ndarray | None = None
@@ -212,8 +227,6 @@ class RobustMPCController(Component):
         self.governed_steps = 0     # steps with the FHOCP set-point short of the requested
         self.governor_holds = 0     # of which the governor could not move it at all
         self._lam = 1.0
-        self._lam_max = 1.0
-        self._moved = False
         self._candidate: np.ndarray | None = None
 
     def set_inputs(self, values: Mapping[str, float]) -> None:
@@ -237,6 +250,7 @@ class RobustMPCController(Component):
         y_ref = self.model.normalize_y(r_phys)
         if self.observer.x_hat is None:
             self.observer.init_from_output(y)
+        if self._d_hat is None:
             self._d_hat = np.zeros_like(y)
         self._candidate = None
         rejected = self._update_reference(y_ref, y, t)
@@ -246,7 +260,7 @@ class RobustMPCController(Component):
         self.observer.make_step(rec.u, y)
         self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
         res = rec.result
-        from controllers.mpc import OTHER_STATUS, STATUS_CODES
+        from controllers.robust_mpc import OTHER_STATUS, STATUS_CODES
 
         self._diag = {
             "solve_ms": res.solve_time * 1e3,
@@ -312,7 +326,7 @@ class RobustMPCController(Component):
             return self._govern(target, y_ref, requested_changed, t)
         try:
             ref = self.cert.reference(target)
-        except CosimError as exc:
+        except SetpointError as exc:
             if self._y_model is None:
                 raise CosimError(f"controller {self.name!r} at t={t:g} s: {exc}") from None
             self._reject(exc, y_ref, requested_changed, t)
@@ -334,21 +348,19 @@ class RobustMPCController(Component):
     def _govern(self, target: np.ndarray, y_ref: np.ndarray, requested_changed: bool,
                 t: float) -> bool:
         """Move the FHOCP set-point towards an admissible ``target`` with the governor."""
-        from controllers.governor import equilibrium_newton
+        from controllers.equilibrium import describe, equilibrium_newton
 
         assert self.governor is not None and self._y_model is not None
         failed = self.cert.failures(target)
         if failed:
-            from controllers.equilibrium import _describe
-
-            self._reject(CosimError(f"set-point {_describe(self.model, target)}: "
-                                    + "; ".join(failed)), y_ref, requested_changed, t)
+            self._reject(SetpointError(f"set-point {describe(self.model, target)}: "
+                                       + "; ".join(failed)), y_ref, requested_changed, t)
             return True
         if requested_changed and equilibrium_newton(
                 self.cert.params, target, self.mpc.x_bar, self.mpc.u_bar) is None:
             try:  # reachable with ‖ū‖∞ ≤ 1? (the multi-start solve decides)
                 self.cert.reference(target)
-            except CosimError as exc:
+            except SetpointError as exc:
                 self._reject(exc, y_ref, requested_changed, t)
                 return True
         if requested_changed:
@@ -356,16 +368,9 @@ class RobustMPCController(Component):
         self._y_ref = y_ref
         self.governed_steps += 1
         mpc = self.mpc
-        last = mpc.records[-1] if mpc.records else None
-        # adapt the largest step to the last solve: halve it after a solve that did not
-        # converge, grow it after a converged solve that followed a move
-        if last is not None and not last.result.success:
-            self._lam_max = max(self._lam_max * 0.5, LAM_MIN)
-        elif self._moved and last is not None:
-            self._lam_max = min(1.0, self._lam_max * LAM_GROW)
-        gs = self.governor.step(self.observer.x_hat, self.observer.e_o, self._y_model,
-                                mpc.x_bar, mpc.u_bar, target, mpc.plan, self._lam_max)
-        self._moved = gs.lam > 0.0
+        last = mpc.records[-1].result.success if mpc.records else None
+        gs = self.governor.govern(self.observer.x_hat, self.observer.e_o, self._y_model,
+                                  mpc.x_bar, mpc.u_bar, target, mpc.plan, last)
         if gs.lam == 0.0:
             self._lam = 0.0
             self.governor_holds += 1

@@ -1,0 +1,115 @@
+"""Campaign throughput on local Dask clusters: runs per minute with 1 and 2 workers.
+
+The same robust-MPC runs of the paper scenario (1,600 steps each; the plant's valve split
+drawn per run) are executed three ways, in the same process:
+
+* baseline: one after the other in this process, through the very function a Dask worker
+  calls (:func:`cosim.campaign.task.run_task`) and the client's writer, no Dask;
+* a local cluster with 1 worker, and with 2 workers (processes, one thread each).
+
+Printed: runs per minute of each, the 2-worker speed-up over 1 worker (target ≥ 1.7× on
+2 cores), the per-run overhead of the engine (1-worker time minus the baseline, per run, with
+and without the cluster's start; target ≤ 0.3 s), the client's writing time per run, and
+each worker's resident memory after its runs. From these numbers it extrapolates what a
+100-worker cluster would do, in runs per hour.
+
+Usage: ``python benchmarks/bench_campaign.py [--runs 8] [--scenario scenarios/paper_steps.csv]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from cosim.campaign import engine  # noqa: E402
+from cosim.campaign.spec import load  # noqa: E402
+from cosim.campaign.task import run_task  # noqa: E402
+
+SPEC = """\
+[campaign]
+name = "bench"
+runs = {runs}
+seed = 5
+scenario = "{scenario}"
+controller = "robust-mpc"
+
+[draw]
+"plant.gamma_b" = {{ uniform = [0.38, 0.42] }}
+"""
+
+
+def _memory(client: object) -> dict[str, float]:
+    def rss() -> float:
+        import psutil
+
+        return psutil.Process().memory_info().rss / 2**20
+
+    return client.run(rss)  # type: ignore[attr-defined]
+
+
+def timed_campaign(plan: object, out: Path, workers: int) -> tuple[float, object]:
+    """Wall time of every run on a fresh local cluster of ``workers`` (start included)."""
+    t0 = time.perf_counter()
+    stats = engine._execute(plan, plan.tasks, out, workers, None,  # type: ignore[attr-defined]
+                            lambda status: None, probe=_memory)
+    return time.perf_counter() - t0, stats
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--runs", type=int, default=8)
+    parser.add_argument("--scenario", default=str(ROOT / "scenarios" / "paper_steps.csv"))
+    args = parser.parse_args()
+    work = Path(tempfile.mkdtemp(prefix="bench-campaign-"))
+    try:
+        spec_path = work / "bench.toml"
+        spec_path.write_text(SPEC.format(runs=args.runs, scenario=args.scenario))
+        plan = engine.prepare(load(spec_path))
+        n = len(plan.tasks)
+        print(f"{n} robust-mpc runs of {Path(args.scenario).name}")
+
+        # baseline: the worker's function and the client's writer, one after the other
+        out0 = work / "inproc"
+        run_task(plan.tasks[0], plan.assets)  # build the controller once, as a worker does
+        t0 = time.perf_counter()
+        for task in plan.tasks:
+            outcome = run_task(task, plan.assets)
+            engine._write_run(out0, plan.spec, task, outcome, None)
+        t_base = time.perf_counter() - t0
+        t1, s1 = timed_campaign(plan, work / "one", 1)
+        t2, s2 = timed_campaign(plan, work / "two", 2)
+
+        per_min = {name: 60.0 * n / t for name, t in (("in-process", t_base), ("1 worker", t1),
+                                                       ("2 workers", t2))}
+        for name, rate in per_min.items():
+            print(f"  {name:11s} {rate:7.2f} runs/min")
+        speedup = t1 / t2
+        print(f"2 workers vs 1: {speedup:.2f}x (target >= 1.7x)")
+        overhead = (t1 - t_base) / n
+        steady = (t1 - s1.startup_s - t_base) / n
+        print(f"engine overhead per run: {overhead:.3f} s with the cluster's start "
+              f"({s1.startup_s:.2f} s), {steady:.3f} s without (target <= 0.3 s)")
+        print(f"client writing per run: {s1.write_s / n * 1e3:.1f} ms")
+        mem = [f"{v:.0f}" for v in (s2.probe or {}).values()]
+        print(f"worker memory after the runs: {', '.join(mem)} MiB")
+        per_run = t_base / n
+        client_cap = 3600.0 * n / max(s1.write_s, 1e-9)
+        cluster = 100 * 3600.0 / (per_run + max(steady, 0.0))
+        print(f"a 100-worker cluster (same CPUs): ~{min(cluster, client_cap):,.0f} runs/h "
+              f"({per_run:.1f} s per run; the client writes at most {client_cap:,.0f} runs/h)")
+        ok = speedup >= 1.7 and steady <= 0.3
+        print("PASS" if ok else "BELOW TARGET")
+        return 0
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+
+
+if __name__ == "__main__":
+    sys.exit(main())

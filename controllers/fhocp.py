@@ -1,0 +1,497 @@
+"""The FHOCP of the robust MPC, ``eq:optimization`` (Definition 5): declare, set up, solve.
+
+    min_u  Σ_{i=0}^{N-1} ‖x_i − x̄‖²_Q + ‖u_i − ū‖²_R  +  s ‖x_N − x̄‖²_∞
+    s.t.   x_0 = x̂_k,  x_{i+1} = f(x_i, u_i)                          (eq:gru)
+           L(U_o x_i + b_o) + w_L ≤ h − a_i ê_o,k − b_i,  i = 0 … N−1  (eq:optimization-constraint)
+           ‖u_i‖∞ ≤ 1                                                   (eq:input-constraint)
+           ‖x_N − x̄‖∞ ≤ α                                               (eq:terminal_constraint)
+
+(the paper's ``x_N + x̄`` in the terminal cost is a typo: it is ``x_N − x̄``). The ∞-norm term is
+written with an epigraph variable ``t``: ``−t ≤ x_N − x̄ ≤ t`` element-wise, cost ``s t²``,
+``0 ≤ t ≤ α`` (so the terminal set is a bound on ``t``). Everything that depends on the
+set-point or on time (x̂, x̄, ū, α, ê_o and the tightened bounds) is a parameter or a bound, so
+the problem is built once (:meth:`FHOCP.setup`) and solved every step (:meth:`FHOCP.solve`).
+
+Two formulations of the same problem: ``"single-shooting"`` (default, fast: the inputs and
+``t`` are the variables, exact derivatives from numpy callbacks; :mod:`controllers.
+nlp_single_shooting`), solved by casadi ``sqpmethod`` with dense qpOASES QPs
+(:data:`~controllers.solver_settings.SQP_OPTIONS`, at most 15 iterations, no wall-clock
+limit: deterministic) or by IPOPT (``solver="ipopt"``), warm started with the primal and
+dual solution shifted by one stage; and ``"multiple-shooting"`` (the plain baseline, what
+do-mpc builds; :mod:`controllers.nlp_multiple_shooting`). The ``i = 0`` constraint involves
+only ``x̂``: it is checked before the solve, and a violated one is reported as
+``"infeasible_x0"`` without calling the solver. The design record (docs, "Design records")
+lists the alternatives measured and why they won or lost.
+
+Every answer is checked independently of the solver's status: the inputs are rolled out with
+numpy (:func:`controllers.gru.simulate`) and the constraint violations, the terminal-set
+violation and the defect between the solver's and numpy's trajectories are measured (see
+:class:`FHOCPResult`). An answer is accepted only when the solver reports success AND these
+residuals are within tolerance.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import casadi as ca
+import numpy as np
+
+from controllers import gru
+from controllers.casadi_callbacks import quiet_stdout
+from controllers.errors import DesignError
+from controllers.solver_settings import DEFECT_TOL, FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
+
+__all__ = ["FHOCP", "FHOCPResult"]
+
+
+@dataclass
+class FHOCPResult:
+    """One solve of ``eq:optimization``.
+
+    Attributes
+    ----------
+    u : (N, m) array
+        Optimal (or last) input sequence, normalised.
+    x : (N + 1, n) array
+        Its state trajectory, rolled out with numpy from ``x̂``.
+    cost : float
+        Cost ``eq:optimization-cost`` of ``(x, u)`` evaluated with numpy.
+    status : str
+        ``"optimal"``, ``"infeasible_x0"`` (the ``i = 0`` constraint fails at ``x̂``), or the
+        solver's return status when it failed.
+    success : bool
+        Solver success AND residual checks passed.
+    iterations : int
+    solve_time : float
+        Wall time of the solve [s].
+    constraint_violation : float
+        ``max(0, max_i,j (L(U_o x_i + b_o) + w_L − h + a_i ê_o + b_i)_j)`` over ``i = 0 … N−1``,
+        together with input-box violations.
+    terminal_violation : float
+        ``max(0, ‖x_N − x̄‖∞ − α)``.
+    defect : float
+        ``max ‖x_solver − x_numpy‖∞`` (dynamics defect for multiple shooting; casadi-vs-numpy
+        model check for single shooting).
+    active : int
+        Number of output / terminal / input constraints active (within 1e-6) at the answer.
+    feasible : bool
+        The answer satisfies every constraint (a solver that stopped early may still return
+        a feasible, suboptimal sequence).
+    """
+
+    u: np.ndarray
+    x: np.ndarray
+    cost: float
+    status: str
+    success: bool
+    iterations: int = 0
+    solve_time: float = 0.0
+    constraint_violation: float = 0.0
+    terminal_violation: float = 0.0
+    defect: float = 0.0
+    active: int = 0
+    t: float = 0.0
+    feasible: bool = False
+    lam_x: np.ndarray | None = field(default=None, repr=False)
+    lam_g: np.ndarray | None = field(default=None, repr=False)
+
+
+class FHOCP:
+    """The FHOCP ``eq:optimization``: declare, :meth:`setup` once, :meth:`solve` each step.
+
+    Parameters
+    ----------
+    params : mapping of arrays
+        GRU weights (``eq:gru``).
+    N : int
+        Prediction horizon.
+    Q, R : arrays
+        Positive definite weights (n×n, m×m).
+    L, h : arrays
+        Output polytope ``L y ≤ h`` (``eq:output-constraint``), normalised units.
+    w_L : (q,) array
+        Output-noise tightening ``w_L(j) = Σ_k |L_jk| w̄_y``.
+    a, b : (N + 1, q) arrays
+        Tightening coefficients ``eq:constraint_tightening_parameters``.
+    s : float
+        Terminal weight ``eq:definition_s``.
+    formulation : {"single-shooting", "multiple-shooting"}
+    ipopt_options : dict, optional
+        Overrides of the IPOPT options (``FAST_IPOPT_OPTIONS`` for single shooting, IPOPT
+        defaults for multiple shooting).
+    warm_duals : bool
+        Warm start the multipliers too (single shooting default; off for the plain baseline).
+    solver : {"sqp", "ipopt"}, optional
+        Solver of the single-shooting formulation (default ``"sqp"``; ``"ipopt"`` when
+        ``ipopt_options`` are given, and always for multiple shooting).
+    sqp_options : dict, optional
+        Overrides of :data:`~controllers.solver_settings.SQP_OPTIONS`.
+    time_budget : float, optional
+        Wall-time budget of one IPOPT solve [s] (status ``"time_budget_exceeded"``). Off by
+        default: a wall-clock limit makes closed-loop results depend on the machine.
+    """
+
+    def __init__(self, params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
+                 L: np.ndarray, h: np.ndarray, w_L: np.ndarray, a: np.ndarray, b: np.ndarray,
+                 s: float, *, formulation: str = "single-shooting",
+                 ipopt_options: Mapping[str, Any] | None = None,
+                 warm_duals: bool | None = None, time_budget: float | None = None,
+                 solver: str | None = None,
+                 sqp_options: Mapping[str, Any] | None = None) -> None:
+        if formulation not in ("single-shooting", "multiple-shooting"):
+            raise DesignError(f"unknown formulation {formulation!r}")
+        if solver is None:
+            solver = "sqp" if formulation == "single-shooting" and not ipopt_options else "ipopt"
+        if solver not in ("ipopt", "sqp") or (solver == "sqp"
+                                               and formulation != "single-shooting"):
+            raise DesignError(f"unknown solver {solver!r} for formulation {formulation!r}")
+        self.solver = solver
+        self.sqp_options = {**SQP_OPTIONS, **(sqp_options or {})}
+        self.params = {k: np.asarray(v, dtype=float) for k, v in params.items()}
+        self.n, self.m, self.p = gru.dimensions(self.params)
+        self.N = int(N)
+        self.Q = np.asarray(Q, dtype=float)
+        self.R = np.asarray(R, dtype=float)
+        self.L = np.atleast_2d(np.asarray(L, dtype=float))
+        self.q = self.L.shape[0]
+        self.h = np.asarray(h, dtype=float).reshape(self.q)
+        self.w_L = np.asarray(w_L, dtype=float).reshape(self.q)
+        self.a = np.asarray(a, dtype=float)
+        self.b = np.asarray(b, dtype=float)
+        if self.a.shape[0] < self.N or self.b.shape[0] < self.N:
+            raise DesignError(f"a and b need at least N = {self.N} rows (i = 0 … N−1)")
+        self.a = self.a[: self.N].reshape(self.N, self.q)
+        self.b = self.b[: self.N].reshape(self.N, self.q)
+        self.s = float(s)
+        self.formulation = formulation
+        self.time_budget = None if time_budget is None else float(time_budget)
+        self.warm_duals = (formulation == "single-shooting") if warm_duals is None else warm_duals
+        base = dict(FAST_IPOPT_OPTIONS) if formulation == "single-shooting" else {
+            "print_level": 0, "sb": "yes"}
+        base.update(ipopt_options or {})
+        self.ipopt_options = base
+        self.LUo = self.L @ self.params["U_o"]
+        self.Lbo = self.L @ self.params["b_o"]
+        self._pair_rows()
+        self._solver = None
+        self._nlp: Any = None
+        self._buffer: tuple | None = None
+
+    # -- construction ------------------------------------------------------------------
+    def _pair_rows(self) -> None:
+        """Merge opposite rows of ``L`` (``L_k = −L_j``, a box) into two-sided constraints.
+
+        The single-shooting NLP then has one row ``D U_o x_i`` with bounds
+        ``[−rhs_k, rhs_j]`` per pair instead of two: a smaller KKT system for IPOPT. ``up[r]``
+        / ``lo[r]`` are the ``L`` rows giving the upper / lower bound of reduced row ``r``
+        (−1: none).
+        """
+        used: set[int] = set()
+        rows, up, lo = [], [], []
+        for j in range(self.q):
+            if j in used:
+                continue
+            used.add(j)
+            k = next((k for k in range(j + 1, self.q) if k not in used
+                      and np.allclose(self.L[k], -self.L[j], rtol=0, atol=1e-15)), -1)
+            if k >= 0:
+                used.add(k)
+            rows.append(j)
+            up.append(j)
+            lo.append(k)
+        self.qr = len(rows)
+        self.DUo = self.LUo[rows]
+        self._up = np.array(up)
+        self._lo = np.array(lo)
+
+    def _layout(self) -> None:
+        n, m, N = self.n, self.m, self.N
+        if self.formulation == "single-shooting":
+            self.nw = N * m + 1
+            self.iu = np.arange(N * m).reshape(N, m)
+            self.it = N * m
+            self.ix = None
+        else:
+            # stage order x0, u0, x1, u1, …, x_N, t (what structure-exploiting solvers want)
+            idx = 0
+            ix, iu = [], []
+            for _ in range(N):
+                ix.append(np.arange(idx, idx + n))
+                idx += n
+                iu.append(np.arange(idx, idx + m))
+                idx += m
+            ix.append(np.arange(idx, idx + n))
+            idx += n
+            self.ix = np.array(ix)
+            self.iu = np.array(iu)
+            self.it = idx
+            self.nw = idx + 1
+
+    @classmethod
+    def from_certificate(cls, cert: Any, **options: Any) -> FHOCP:
+        """The FHOCP of a :class:`~controllers.certificates.Certificate` (its weights,
+        constraints, tightening and terminal weight); ``options`` as the constructor's
+        keyword arguments (``formulation``, ``solver``, ``sqp_options``, ...)."""
+        return cls(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a,
+                   cert.b, cert.s, **options)
+
+    def setup(self) -> FHOCP:
+        """Build the solver (a few ms; again after :meth:`setup` to restart it exactly).
+        Returns ``self``."""
+        self._layout()
+        if self.formulation == "single-shooting":
+            from controllers.nlp_single_shooting import SingleShootingNLP
+
+            self._nlp = SingleShootingNLP(self)
+            self._shoot = self._nlp.shoot
+            self.ng = self._nlp.ng
+            nlp, opts = self._nlp.ipopt_problem(self.ipopt_options, self.time_budget)
+            self._xtraj = self._nlp.trajectory
+        else:
+            from controllers.nlp_multiple_shooting import multiple_shooting_problem
+
+            nlp, opts, self._xtraj, self.ng = multiple_shooting_problem(self)
+        self._bounds()
+        if self.solver == "sqp":
+            opts = {k: v for k, v in opts.items()
+                    if k not in ("ipopt", "grad_f", "jac_g", "hess_lag")}
+            opts.update(self._nlp.sqp_functions())
+            sqp = dict(self.sqp_options)
+            clip = sqp.pop("hessian_eigen_clip", None)
+            self._nlp.eigen_clip = None if clip is None else float(clip)
+            opts.update(sqp)
+            with quiet_stdout():  # qpOASES prints its licence banner on construction
+                self._solver = ca.nlpsol("fhocp", "sqpmethod", nlp, opts)
+        else:
+            self._solver = ca.nlpsol("fhocp", "ipopt", nlp, opts)
+        self._buffer = None
+        if self.solver == "sqp":
+            with quiet_stdout():  # … or when its memory is allocated
+                self._call_solver_setup()
+        self._warm: dict[str, np.ndarray] | None = None
+        return self
+
+    def _bounds(self) -> None:
+        lbx = np.full(self.nw, -np.inf)
+        ubx = np.full(self.nw, np.inf)
+        lbx[self.iu.ravel()] = -1.0
+        ubx[self.iu.ravel()] = 1.0
+        lbx[self.it] = 0.0
+        self._lbx, self._ubx = lbx, ubx
+
+    # -- solving -----------------------------------------------------------------------
+    def tightened_bounds(self, e_o: float) -> np.ndarray:
+        """Right-hand sides ``h − a_i ê_o − b_i − w_L − L b_o`` for ``i = 0 … N−1`` (N×q)."""
+        return self.h - self.a * e_o - self.b - self.w_L - self.Lbo
+
+    def rollout(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
+        """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m)."""
+        if self._solver is None:
+            self.setup()
+        if self.formulation == "single-shooting":
+            return self._shoot.rollout(x_hat, u_seq, derivatives=False).x
+        return gru.simulate(self.params, x_hat, u_seq)[0]
+
+    def check_x0(self, x_hat: np.ndarray, e_o: float) -> float:
+        """Violation of the ``i = 0`` constraint at ``x̂`` (≤ 0 when satisfied)."""
+        return float(np.max(self.LUo @ x_hat - self.tightened_bounds(e_o)[0]))
+
+    def candidate(self, x_hat: np.ndarray, u_seq: np.ndarray, x_bar: np.ndarray,
+                  u_bar: np.ndarray, e_o: float, alpha: float) -> FHOCPResult:
+        """Evaluate a given input sequence (cost, trajectory, residuals) without solving."""
+        u_seq = np.clip(np.asarray(u_seq, dtype=float), -1.0, 1.0)
+        x, _ = gru.simulate(self.params, np.asarray(x_hat, dtype=float), u_seq)
+        tN = float(np.max(np.abs(x[-1] - x_bar)))
+        res = FHOCPResult(u=u_seq, x=x, cost=self.cost(x, u_seq, x_bar, u_bar, tN),
+                          status="candidate", success=False, t=tN)
+        self._residuals(res, x, e_o, x_bar, alpha)
+        return res
+
+    def cost(self, x: np.ndarray, u: np.ndarray, x_bar: np.ndarray, u_bar: np.ndarray,
+             t: float | None = None) -> float:
+        """Cost ``eq:optimization-cost`` (``t`` defaults to ``‖x_N − x̄‖∞``)."""
+        dx = x[: self.N] - x_bar
+        du = u - u_bar
+        tN = float(np.max(np.abs(x[self.N] - x_bar))) if t is None else t
+        return float(np.vdot(dx @ self.Q, dx) + np.vdot(du @ self.R, du) + self.s * tN ** 2)
+
+    def _residuals(self, res: FHOCPResult, x: np.ndarray, e_o: float, x_bar: np.ndarray,
+                   alpha: float) -> None:
+        ub = self.tightened_bounds(e_o)
+        lhs = x[: self.N] @ self.LUo.T
+        viol = max(0.0, float(np.max(lhs - ub)),
+                   float(np.max(np.abs(res.u))) - 1.0)
+        res.constraint_violation = viol
+        dN = float(np.max(np.abs(x[self.N] - x_bar)))
+        res.terminal_violation = max(0.0, dN - alpha)
+        act = int(np.sum(lhs[1:] - ub[1:] > -1e-6)) + int(dN - alpha > -1e-6)
+        act += int(np.sum(np.abs(res.u) > 1 - 1e-6))
+        res.active = act
+
+    def _initial_guess(self, x_hat: np.ndarray, u_init: np.ndarray, t_init: float,
+                       ) -> np.ndarray:
+        w0 = np.zeros(self.nw)
+        w0[self.iu] = u_init
+        w0[self.it] = t_init
+        if self.ix is not None:
+            x, _ = gru.simulate(self.params, x_hat, u_init)
+            w0[self.ix] = x
+        return w0
+
+    def solve(self, x_hat: np.ndarray, e_o: float, x_bar: np.ndarray, u_bar: np.ndarray,
+              alpha: float, u_init: np.ndarray | None = None, warm: bool = True,
+              ) -> FHOCPResult:
+        """Solve ``eq:optimization`` at ``x̂`` with ``ê_o``, set-point ``(x̄, ū)``, terminal α.
+
+        Parameters
+        ----------
+        u_init : (N, m) array, optional
+            Initial guess of the inputs; default: the previous solution shifted by one stage
+            with ``ū`` appended (and its multipliers, shifted too) when ``warm``, else ``ū``.
+        """
+        if self._solver is None:
+            self.setup()
+        x_hat = np.asarray(x_hat, dtype=float).reshape(self.n)
+        x_bar = np.asarray(x_bar, dtype=float).reshape(self.n)
+        u_bar = np.asarray(u_bar, dtype=float).reshape(self.m)
+        t0 = time.perf_counter()
+        if self.formulation == "single-shooting" and self.check_x0(x_hat, e_o) > 0:
+            res = self.candidate(x_hat, np.tile(u_bar, (self.N, 1)), x_bar, u_bar, e_o, alpha)
+            res.status = "infeasible_x0"
+            res.solve_time = time.perf_counter() - t0
+            return res
+        args = self._arguments(x_hat, e_o, x_bar, u_bar, alpha, u_init, warm)
+        if self._nlp is not None:
+            self._nlp.deadline = t0 + (self.time_budget if self.time_budget is not None
+                                       else np.inf)
+        sol, stats = self._call_solver(args)
+        if stats.get("return_status") == "User_Requested_Stop":
+            stats = {**stats, "return_status": "time_budget_exceeded", "success": False}
+        elapsed = time.perf_counter() - t0
+        wopt = np.asarray(sol["x"]).ravel()
+        u = np.clip(wopt[self.iu], -1.0, 1.0)  # IPOPT may overshoot a bound by ~1e-9
+        xs = np.asarray(self._xtraj(wopt, args["p"]))
+        x, _ = gru.simulate(self.params, x_hat, np.clip(u, -1.0, 1.0))
+        t = float(wopt[self.it])
+        res = FHOCPResult(u=u, x=x, cost=self.cost(x, u, x_bar, u_bar), status=str(
+            stats.get("return_status", "unknown")), success=False,
+            iterations=int(stats.get("iter_count", 0)), solve_time=elapsed, t=t,
+            lam_x=np.asarray(sol["lam_x"]).ravel(), lam_g=np.asarray(sol["lam_g"]).ravel())
+        res.defect = float(np.max(np.abs(xs - x)))
+        self._residuals(res, x, e_o, x_bar, alpha)
+        ok_status = bool(stats.get("success", False))
+        res.feasible = bool(np.all(np.isfinite(wopt)) and res.constraint_violation <= FEAS_TOL
+                            and res.terminal_violation <= FEAS_TOL
+                            and res.defect <= DEFECT_TOL)
+        res.success = ok_status and res.feasible
+        if ok_status and res.status == "Solve_Succeeded":
+            res.status = "optimal"
+        elif ok_status and not res.success:
+            res.status = "residual_check_failed"
+        elif res.status == "Solve_Succeeded":
+            # sqpmethod aborted (e.g. a failed QP) and left the previous solve's status
+            res.status = "solver_aborted"
+        if res.success or (np.all(np.isfinite(wopt)) and np.all(np.isfinite(res.lam_g))
+                           and np.all(np.isfinite(res.lam_x))):
+            # after a failure (time budget, infeasibility) the last primal-dual iterate is
+            # the best start for the next step: the optimisation continues across steps
+            self._warm = {"w": wopt, "lam_x": res.lam_x, "lam_g": res.lam_g}
+        return res
+
+    def _call_solver_setup(self) -> None:
+        """Bind numpy arrays to the solver's zero-copy argument and result buffers."""
+        fn = self._solver
+        buf, trigger = fn.buffer()
+        ins = {name: np.zeros(fn.sparsity_in(i).nnz()) for i, name in enumerate(fn.name_in())}
+        outs = {name: np.zeros(fn.sparsity_out(i).nnz())
+                for i, name in enumerate(fn.name_out())}
+        for i, name in enumerate(fn.name_in()):
+            buf.set_arg(i, memoryview(ins[name]))
+        for i, name in enumerate(fn.name_out()):
+            buf.set_res(i, memoryview(outs[name]))
+        self._buffer = (buf, trigger, ins, outs)
+
+    def _call_solver(self, args: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict]:
+        """Run the solver; returns the solution arrays and the solver statistics.
+
+        Arguments and results go through casadi's zero-copy buffers: converting numpy arrays
+        to and from ``DM`` costs tens of microseconds per vector.
+        """
+        if self._buffer is None:
+            self._call_solver_setup()
+        buf, trigger, ins, outs = self._buffer
+        for name, arr in ins.items():
+            arr[:] = args.get(name, 0.0)
+        trigger()
+        try:
+            stats = buf.stats()
+        except RuntimeError:
+            # casadi 3.8 sqpmethod: no return status after a failed line search
+            stats = {"return_status": "Solver_Stats_Unavailable", "success": False}
+        return {k: v.copy() for k, v in outs.items()}, stats
+
+    def reset_warm_start(self) -> None:
+        """Forget the previous solution (next solve starts cold)."""
+        self._warm = None
+
+    def _arguments(self, x_hat: np.ndarray, e_o: float, x_bar: np.ndarray, u_bar: np.ndarray,
+                   alpha: float, u_init: np.ndarray | None, warm: bool) -> dict[str, Any]:
+        N, q, n = self.N, self.q, self.n
+        ub = self.tightened_bounds(e_o)
+        lbg = np.full(self.ng, -np.inf)
+        ubg = np.full(self.ng, np.inf)
+        if self.formulation == "single-shooting":
+            qr, up, lo = self.qr, self._up, self._lo
+            ubg[: (N - 1) * qr] = ub[1:, up].ravel()
+            lower = np.where(lo >= 0, -ub[1:, np.maximum(lo, 0)], -np.inf)
+            lbg[: (N - 1) * qr] = lower.ravel()
+            off = (N - 1) * qr
+        else:
+            neq = (N + 1) * n
+            lbg[:neq] = 0.0
+            ubg[:neq] = 0.0
+            ubg[neq: neq + N * q] = ub.ravel()
+            off = neq + N * q
+        ubg[off: off + n] = 0.0
+        lbg[off + n: off + 2 * n] = 0.0
+        ubx = self._ubx.copy()
+        ubx[self.it] = alpha
+        args: dict[str, Any] = {"p": np.concatenate([x_hat, x_bar, u_bar]), "lbx": self._lbx,
+                                "ubx": ubx, "lbg": lbg, "ubg": ubg}
+        prev = self._warm if warm else None
+        if u_init is None:
+            if prev is not None:
+                u_prev = prev["w"][self.iu]
+                u_init = np.vstack([u_prev[1:], u_bar])
+            else:
+                u_init = np.tile(u_bar, (N, 1))
+        u_init = np.clip(u_init, -1.0, 1.0)
+        if self.formulation == "single-shooting":
+            x = self._shoot.rollout(x_hat, u_init, derivatives=False).x
+        else:
+            x, _ = gru.simulate(self.params, x_hat, u_init)
+        t_init = min(max(float(np.max(np.abs(x[-1] - x_bar))), 1e-6), max(alpha, 0.0))
+        args["x0"] = self._initial_guess(x_hat, u_init, t_init)
+        if prev is not None and self.warm_duals:
+            args["lam_x0"] = self._shift(prev["lam_x"], "x")
+            args["lam_g0"] = self._shift(prev["lam_g"], "g")
+        return args
+
+    def _shift(self, lam: np.ndarray, kind: str) -> np.ndarray:
+        """Shift multipliers by one stage (the last stage keeps its values)."""
+        lam = lam.copy()
+        N, q = self.N, self.qr
+        if kind == "x":
+            lu = lam[self.iu]
+            lam[self.iu] = np.vstack([lu[1:], lu[-1:]])
+            if self.ix is not None:
+                lx = lam[self.ix]
+                lam[self.ix] = np.vstack([lx[1:], lx[-1:]])
+        elif self.formulation == "single-shooting":
+            blk = lam[: (N - 1) * q].reshape(N - 1, q)
+            lam[: (N - 1) * q] = np.vstack([blk[1:], blk[-1:]]).ravel()
+        return lam

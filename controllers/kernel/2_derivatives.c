@@ -1,0 +1,355 @@
+/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
+ * generated header and 1_rollout.c ... 4_api.c into one translation unit): f, g, their derivatives and the Hessian of the Lagrangian. */
+/* ---------------------------------------------------------------- f, g, grad f, jac g */
+HOT static double cost(const double *w, const double *p) {
+  const double *xb = p + NX, *ub = p + 2 * NX, t = w[NUU];
+  double acc = 0.0;
+  for (int i = 0; i < NH; i++) {
+    double d[NX];
+    for (int k = 0; k < NX; k++) d[k] = X[i * NX + k] - xb[k];
+    for (int k = 0; k < NX; k++) {
+      double s = 0.0;
+      for (int j = 0; j < NX; j++) s += d[j] * QW[j * NX + k];
+      acc += s * d[k];
+    }
+  }
+  for (int i = 0; i < NH; i++) {
+    double d[NU];
+    for (int k = 0; k < NU; k++) d[k] = w[i * NU + k] - ub[k];
+    for (int k = 0; k < NU; k++) {
+      double s = 0.0;
+      for (int j = 0; j < NU; j++) s += d[j] * RW[j * NU + k];
+      acc += s * d[k];
+    }
+  }
+  return acc + SW * t * t;
+}
+
+HOT static void constraints(const double *w, const double *p, double *g) {
+  const double *xb = p + NX, t = w[NUU];
+  for (int i = 1; i < NH; i++)
+    for (int a = 0; a < NQ; a++) {
+      double s = 0.0;
+      for (int k = 0; k < NX; k++) s += DUO[a * NX + k] * X[i * NX + k];
+      g[(i - 1) * NQ + a] = s;
+    }
+  const double *xN = X + NH * NX;
+  for (int k = 0; k < NX; k++) {
+    const double d = xN[k] - xb[k];
+    g[(NH - 1) * NQ + k] = d - t;
+    g[(NH - 1) * NQ + NX + k] = d + t;
+  }
+}
+
+HOT static void gradient(const double *w, const double *p, double *grad) {
+  const double *xb = p + NX, *ub = p + 2 * NX;
+  for (int c = 0; c < NUU; c++) grad[c] = 0.0;
+  for (int i = 1; i < NH; i++) {
+    double dq[NX];
+    for (int k = 0; k < NX; k++) {
+      double s = 0.0;
+      for (int j = 0; j < NX; j++) s += (X[i * NX + j] - xb[j]) * (2.0 * QW[j * NX + k]);
+      dq[k] = s;
+    }
+    const double *Si = S + i * NX * NUU;
+    const int K = i * NU;
+    for (int k = 0; k < NX; k++) {
+      const double a = dq[k], *sk = Si + k * NUU;
+      for (int c = 0; c < K; c++) grad[c] += a * sk[c];
+    }
+  }
+  for (int i = 0; i < NH; i++)
+    for (int k = 0; k < NU; k++) {
+      double s = 0.0;
+      for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * RW[j * NU + k]);
+      grad[i * NU + k] += s;
+    }
+  grad[NUU] = 2.0 * SW * w[NUU];
+}
+
+/* dense column-major NG x NW */
+HOT static void jacobian(double *J) {
+  memset(J, 0, sizeof(double) * NG * NW);
+  for (int i = 1; i < NH; i++) {
+    const double *Si = S + i * NX * NUU;
+    const int K = i * NU;
+    for (int a = 0; a < NQ; a++) {
+      double row[NUU];
+      for (int c = 0; c < K; c++) row[c] = 0.0;
+      for (int k = 0; k < NX; k++) {
+        const double d = DUO[a * NX + k], *sk = Si + k * NUU;
+        for (int c = 0; c < K; c++) row[c] += d * sk[c];
+      }
+      const int r = (i - 1) * NQ + a;
+      for (int c = 0; c < K; c++) J[c * NG + r] = row[c];
+    }
+  }
+  const double *SN = S + NH * NX * NUU;
+  const int r0 = (NH - 1) * NQ;
+  for (int c = 0; c < NUU; c++) {
+    double *col = J + c * NG + r0;
+    for (int k = 0; k < NX; k++) {
+      col[k] = SN[k * NUU + c];
+      col[NX + k] = SN[k * NUU + c];
+    }
+  }
+  for (int k = 0; k < NX; k++) {
+    J[NUU * NG + r0 + k] = -1.0;
+    J[NUU * NG + r0 + NX + k] = 1.0;
+  }
+}
+
+/* ---------------------------------------------------------------- Hessian of the Lagrangian */
+#ifndef GK_CONTRACT
+/* W = grad^2_(x,u) mu^T f(x_i, u_i) of stage i (NV x NV, row-major, symmetric) */
+HOT static void stage_hessian(int i, const double *mu, double *W) {
+  const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
+  const double *jh = JH + i * NX * NV;
+  double v[NX], nu[NX], d1[NX], d2[NX], d3[NX], d4[NX], d5[NX], d6[NX];
+  static double Ph[NX * NV], Pz[NX * NV], Pr[NX * NV], G[NX * NV];
+  for (int k = 0; k < NX; k++) {
+    const double hp = 1.0 - h[k] * h[k];
+    v[k] = mu[k] * (1.0 - z[k]) * hp;
+    nu[k] = 0.0;
+  }
+  for (int k = 0; k < NX; k++) {      /* nu = U_h^T v */
+    const double vk = v[k], *uh = UH + k * NX;
+    for (int j = 0; j < NX; j++) nu[j] += vk * uh[j];
+  }
+  for (int k = 0; k < NX; k++) {
+    const double zp = z[k] * (1.0 - z[k]), rp = r[k] * (1.0 - r[k]), hp = 1.0 - h[k] * h[k];
+    const double zpp = zp * (1.0 - 2.0 * z[k]), rpp = rp * (1.0 - 2.0 * r[k]);
+    const double hpp = -2.0 * h[k] * hp;
+    d1[k] = mu[k] * (1.0 - z[k]) * hpp;
+    d2[k] = nu[k] * rpp * x[k];
+    d3[k] = mu[k] * (x[k] - h[k]) * zpp;
+    d4[k] = mu[k] * zp * hp;
+    d5[k] = mu[k] * zp;
+    d6[k] = nu[k] * rp;
+  }
+  for (int k = 0; k < NX; k++) {
+    const double *jhk = jh + k * NV, *jz = JZ + k * NV, *jr = JR + k * NV;
+    double *ph = Ph + k * NV, *pz = Pz + k * NV, *pr = Pr + k * NV, *gk = G + k * NV;
+    for (int c = 0; c < NV; c++) {
+      ph[c] = d1[k] * jhk[c] - d4[k] * jz[c];
+      pz[c] = d3[k] * jz[c] - d4[k] * jhk[c];
+      pr[c] = d2[k] * jr[c];
+      gk[c] = d5[k] * jz[c] + d6[k] * jr[c];
+    }
+  }
+  /* W = J_h^T P_h + J_z^T P_z + J_r^T P_r (symmetric: upper triangle, then mirrored) */
+#ifdef GK_BLAS_HESS   /* measured slower than the loops below (full instead of upper W) */
+  rm_gemm(1, 0, NV, NV, NX, jh, NV, Ph, NV, 0.0, W, NV);
+  rm_gemm(1, 0, NV, NV, NX, JZ, NV, Pz, NV, 1.0, W, NV);
+  rm_gemm(1, 0, NV, NV, NX, JR, NV, Pr, NV, 1.0, W, NV);
+#else
+  for (int c = 0; c < NV * NV; c++) W[c] = 0.0;
+  for (int k = 0; k < NX; k++) {
+    const double *jhk = jh + k * NV, *jz = JZ + k * NV, *jr = JR + k * NV;
+    const double *ph = Ph + k * NV, *pz = Pz + k * NV, *pr = Pr + k * NV;
+    for (int a = 0; a < NV; a++) {
+      const double ca = jhk[a], cb = jz[a], cc = jr[a];
+      double *__restrict wa = W + a * NV;
+      /* from the multiple of 4 at or below a (whole vectors; the extra lower entries are
+       * overwritten by the mirror below) */
+#pragma GCC ivdep
+      for (int b = a & ~3; b < NV; b++) wa[b] += ca * ph[b] + cb * pz[b] + cc * pr[b];
+    }
+  }
+#endif
+  /* + T + T^T terms: W[a,b] += G[b,a] (b < NX) + G[a,b] (a < NX), upper triangle */
+  for (int a = 0; a < NV; a++)
+    for (int b = a; b < NV; b++) {
+      double t = 0.0;
+      if (b < NX) t += G[b * NV + a];
+      if (a < NX) t += G[a * NV + b];
+      W[a * NV + b] += t;
+    }
+  for (int a = 0; a < NV; a++)
+    for (int b = 0; b < a; b++) W[a * NV + b] = W[b * NV + a];
+}
+
+/* full Hessian of the Lagrangian, row-major NW x NW (symmetric) */
+HOT static void hessian(const double *w, const double *p, double lf, const double *lg, double *H) {
+  const double *xb = p + NX;
+  static double MU[(NH + 1) * NX];
+  static double W[NV * NV], Y[NX * NUU];
+  /* adjoints mu_i, i = N .. 1 */
+  const int r0 = (NH - 1) * NQ;
+  for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
+  for (int i = NH - 1; i >= 1; i--) {
+    double *mu = MU + i * NX;
+    const double *mun = MU + (i + 1) * NX, *df = DF + i * NX * NV, *lam = lg + (i - 1) * NQ;
+    for (int k = 0; k < NX; k++) {
+      double s = 0.0;
+      for (int j = 0; j < NX; j++) s += (X[i * NX + j] - xb[j]) * QW[j * NX + k];
+      s *= 2.0 * lf;
+      for (int a = 0; a < NQ; a++) s += lam[a] * DUO[a * NX + k];
+      mu[k] = s;
+    }
+    for (int j = 0; j < NX; j++) {      /* + A_i^T mu_{i+1} */
+      const double mj = mun[j], *dfj = df + j * NV;
+      for (int k = 0; k < NX; k++) mu[k] += dfj[k] * mj;
+    }
+  }
+  memset(H, 0, sizeof(double) * NW * NW);
+  for (int i = 0; i < NH; i++) {
+    stage_hessian(i, MU + (i + 1) * NX, W);
+    if (i >= 1)
+      for (int a = 0; a < NX; a++)
+        for (int b = 0; b < NX; b++) W[a * NV + b] += 2.0 * lf * QW[a * NX + b];
+    const int K = i * NU;
+    const double *Si = S + i * NX * NUU;
+    if (K > 0) {
+#ifdef GK_BLAS_HESS
+      rm_gemm(0, 0, NX, K, NX, W, NV, Si, NUU, 0.0, Y, NUU);
+      rm_gemm(1, 0, K, K, NX, Si, NUU, Y, NUU, 1.0, H, NW);
+#else
+      /* Y = W_xx S_i (NX x K) */
+      for (int a = 0; a < NX; a++) {
+        double *ya = Y + a * NUU;
+        for (int c = 0; c < K; c++) ya[c] = 0.0;
+        for (int b = 0; b < NX; b++) {
+          const double wab = W[a * NV + b], *sb = Si + b * NUU;
+#pragma GCC ivdep
+          for (int c = 0; c < K; c++) ya[c] += wab * sb[c];
+        }
+      }
+      /* H[:K, :K] += S_i^T Y (upper triangle; mirrored at the end) */
+      for (int c1 = 0; c1 < K; c1++) {
+        double *__restrict hrow = H + c1 * NW;
+        for (int a = 0; a < NX; a++) {
+          const double s1 = Si[a * NUU + c1], *ya = Y + a * NUU;
+#pragma GCC ivdep
+          for (int c2 = c1 & ~3; c2 < K; c2++) hrow[c2] += s1 * ya[c2];
+        }
+      }
+#endif
+      /* C = S_i^T W_xu (K x NU) into H[:K, K:K+NU] and its transpose */
+      for (int c = 0; c < K; c++)
+        for (int j = 0; j < NU; j++) {
+          double s = 0.0;
+          for (int a = 0; a < NX; a++) s += Si[a * NUU + c] * W[a * NV + NX + j];
+          H[c * NW + K + j] += s;
+        }
+    }
+    for (int j1 = 0; j1 < NU; j1++)
+      for (int j2 = j1; j2 < NU; j2++)
+        H[(K + j1) * NW + K + j2] += W[(NX + j1) * NV + NX + j2] + 2.0 * lf * RW[j1 * NU + j2];
+  }
+  for (int r = 0; r < NUU; r++)
+    for (int c = 0; c < r; c++) H[r * NW + c] = H[c * NW + r];
+  H[NUU * NW + NUU] = 2.0 * lf * SW;
+}
+
+#else /* GK_CONTRACT */
+/* Hessian of the Lagrangian, contracted mode: per stage
+ *   Z^T W Z = L^T R,  L = [PH; PZ; PR; S; G],  R = [D1 PH - D4 PZ; D3 PZ - D4 PH; D2 PR; G; S]
+ * with G = diag(d5) PZ + diag(d6) PR + lf Q S (the T + T^T terms of stage_hessian and the
+ * state cost), i.e. the same sums as W-mode, regrouped; 5 n Kc^2 per stage. */
+HOT static void hessian(const double *w, const double *p, double lf, const double *lg, double *H) {
+  const double *xb = p + NX;
+  static double MU[(NH + 1) * NX];
+  static double L[5 * NX * NUU], R[5 * NX * NUU], QS[NX * NUU];
+  (void)w;
+  const int r0 = (NH - 1) * NQ;
+  for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
+  for (int i = NH - 1; i >= 1; i--) {
+    double *mu = MU + i * NX;
+    const double *v = MU + (i + 1) * NX, *lam = lg + (i - 1) * NQ;
+    const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
+    for (int k = 0; k < NX; k++) {
+      double s = 0.0;
+      for (int j = 0; j < NX; j++) s += (X[i * NX + j] - xb[j]) * QW[j * NX + k];
+      s *= 2.0 * lf;
+      for (int a = 0; a < NQ; a++) s += lam[a] * DUO[a * NX + k];
+      mu[k] = s;
+    }
+    /* + A_i^T v = U_z^T (a v) + U_r^T (c1 q) + r q + z v, q = U_h^T (b v) */
+    double av[NX], bv[NX], q[NX], cq[NX];
+    for (int k = 0; k < NX; k++) {
+      const double zp = z[k] * (1.0 - z[k]), hp = 1.0 - h[k] * h[k];
+      av[k] = (x[k] - h[k]) * zp * v[k];
+      bv[k] = (1.0 - z[k]) * hp * v[k];
+      q[k] = 0.0;
+    }
+    for (int k = 0; k < NX; k++) {
+      const double bk = bv[k], *uh = UH + k * NX;
+      for (int j = 0; j < NX; j++) q[j] += bk * uh[j];
+    }
+    for (int k = 0; k < NX; k++) cq[k] = x[k] * (r[k] * (1.0 - r[k])) * q[k];
+    for (int k = 0; k < NX; k++) {
+      const double ak = av[k], ck = cq[k], *uz = UZ + k * NX, *ur = UR + k * NX;
+      for (int j = 0; j < NX; j++) mu[j] += ak * uz[j] + ck * ur[j];
+    }
+    for (int k = 0; k < NX; k++) mu[k] += r[k] * q[k] + z[k] * v[k];
+  }
+  memset(H, 0, sizeof(double) * NW * NW);
+  for (int i = 0; i < NH; i++) {
+    const double *mu = MU + (i + 1) * NX;
+    const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
+    const double *Si = S + i * NX * NUU;
+    const double *pz = PZ + i * NX * NUU, *pr = PR + i * NX * NUU, *ph = PH + i * NX * NUU;
+    const int K = i * NU, Kc = K + NU;
+    double vv[NX], nu[NX];
+    for (int k = 0; k < NX; k++) {
+      vv[k] = mu[k] * (1.0 - z[k]) * (1.0 - h[k] * h[k]);
+      nu[k] = 0.0;
+    }
+    for (int k = 0; k < NX; k++) {
+      const double vk = vv[k], *uh = UH + k * NX;
+      for (int j = 0; j < NX; j++) nu[j] += vk * uh[j];
+    }
+    if (i >= 1) {
+#if QDIAG
+      for (int k = 0; k < NX; k++)
+        for (int c = 0; c < K; c++) QS[k * NUU + c] = QW[k * NX + k] * Si[k * NUU + c];
+#else
+      mm(NX, K, NX, QW, NX, Si, NUU, QS, NUU);
+#endif
+    }
+    for (int k = 0; k < NX; k++) {
+      const double zp = z[k] * (1.0 - z[k]), rp = r[k] * (1.0 - r[k]), hp = 1.0 - h[k] * h[k];
+      const double zpp = zp * (1.0 - 2.0 * z[k]), rpp = rp * (1.0 - 2.0 * r[k]);
+      const double hpp = -2.0 * h[k] * hp;
+      const double d1 = mu[k] * (1.0 - z[k]) * hpp, d2 = nu[k] * rpp * x[k];
+      const double d3 = mu[k] * (x[k] - h[k]) * zpp, d4 = mu[k] * zp * hp;
+      const double d5 = mu[k] * zp, d6 = nu[k] * rp;
+      const double *phk = ph + k * NUU, *pzk = pz + k * NUU, *prk = pr + k * NUU;
+      const double *sk = Si + k * NUU, *qsk = QS + k * NUU;
+      double *L0 = L + k * NUU, *L1 = L + (NX + k) * NUU, *L2 = L + (2 * NX + k) * NUU;
+      double *L3 = L + (3 * NX + k) * NUU, *L4 = L + (4 * NX + k) * NUU;
+      double *R0 = R + k * NUU, *R1 = R + (NX + k) * NUU, *R2 = R + (2 * NX + k) * NUU;
+      double *R3 = R + (3 * NX + k) * NUU, *R4 = R + (4 * NX + k) * NUU;
+      for (int c = 0; c < Kc; c++) {
+        const double sc = c < K ? sk[c] : 0.0;
+        const double g = d5 * pzk[c] + d6 * prk[c] + ((i >= 1 && c < K) ? lf * qsk[c] : 0.0);
+        L0[c] = phk[c]; R0[c] = d1 * phk[c] - d4 * pzk[c];
+        L1[c] = pzk[c]; R1[c] = d3 * pzk[c] - d4 * phk[c];
+        L2[c] = prk[c]; R2[c] = d2 * prk[c];
+        L3[c] = sc;     R3[c] = g;
+        L4[c] = g;      R4[c] = sc;
+      }
+    }
+#ifdef GK_BLAS
+    rm_gemm(1, 0, Kc, Kc, 5 * NX, L, NUU, R, NUU, 1.0, H, NW);
+#else
+    for (int c1 = 0; c1 < Kc; c1++) {
+      double *__restrict hrow = H + c1 * NW;
+      for (int k = 0; k < 5 * NX; k++) {
+        const double l = L[k * NUU + c1], *rk = R + k * NUU;
+        if (l == 0.0) continue;
+#pragma GCC ivdep
+        for (int c2 = c1 & ~3; c2 < Kc; c2++) hrow[c2] += l * rk[c2];
+      }
+    }
+#endif
+    for (int j1 = 0; j1 < NU; j1++)
+      for (int j2 = j1; j2 < NU; j2++) H[(K + j1) * NW + K + j2] += 2.0 * lf * RW[j1 * NU + j2];
+  }
+  for (int rr = 0; rr < NUU; rr++)
+    for (int c = 0; c < rr; c++) H[rr * NW + c] = H[c * NW + rr];
+  H[NUU * NW + NUU] = 2.0 * lf * SW;
+}
+#endif /* GK_CONTRACT */
+

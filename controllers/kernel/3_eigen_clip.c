@@ -1,0 +1,397 @@
+/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
+ * generated header and 1_rollout.c ... 4_api.c into one translation unit): eigenvalue clipping of the Hessian (convex QPs for the SQP). */
+/* ---------------------------------------------------------------- eigenvalue clipping */
+/* Householder tridiagonalisation + implicit QL (JAMA / EISPACK tred2, tql2). V (n x n,
+ * row-major) holds the symmetric matrix on entry, the eigenvectors as ROWS on exit (row j:
+ * eigenvector of d[j]); d the eigenvalues (unsorted). Returns 0, or -1 when QL does not
+ * converge. */
+HOT static void tred2(int n, double *V, double *d, double *e) {
+#define VV(i, j) V[(i) * n + (j)]
+  for (int j = 0; j < n; j++) d[j] = VV(n - 1, j);
+  for (int i = n - 1; i > 0; i--) {
+    double scale = 0.0, h = 0.0;
+    for (int k = 0; k < i; k++) scale += fabs(d[k]);
+    if (scale == 0.0) {
+      e[i] = d[i - 1];
+      for (int j = 0; j < i; j++) {
+        d[j] = VV(i - 1, j);
+        VV(i, j) = 0.0;
+        VV(j, i) = 0.0;
+      }
+    } else {
+      for (int k = 0; k < i; k++) {
+        d[k] /= scale;
+        h += d[k] * d[k];
+      }
+      double f = d[i - 1], g = sqrt(h);
+      if (f > 0) g = -g;
+      e[i] = scale * g;
+      h = h - f * g;
+      d[i - 1] = f - g;
+      for (int j = 0; j < i; j++) e[j] = 0.0;
+      for (int j = 0; j < i; j++) {
+        f = d[j];
+        VV(j, i) = f;
+        g = e[j] + VV(j, j) * f;
+        for (int k = j + 1; k <= i - 1; k++) {
+          g += VV(k, j) * d[k];
+          e[k] += VV(k, j) * f;
+        }
+        e[j] = g;
+      }
+      f = 0.0;
+      for (int j = 0; j < i; j++) {
+        e[j] /= h;
+        f += e[j] * d[j];
+      }
+      const double hh = f / (h + h);
+      for (int j = 0; j < i; j++) e[j] -= hh * d[j];
+      for (int j = 0; j < i; j++) {
+        f = d[j];
+        g = e[j];
+        for (int k = j; k <= i - 1; k++) VV(k, j) -= (f * e[k] + g * d[k]);
+        d[j] = VV(i - 1, j);
+        VV(i, j) = 0.0;
+      }
+    }
+    d[i] = h;
+  }
+  for (int i = 0; i < n - 1; i++) {
+    VV(n - 1, i) = VV(i, i);
+    VV(i, i) = 1.0;
+    const double h = d[i + 1];
+    if (h != 0.0) {
+      for (int k = 0; k <= i; k++) d[k] = VV(k, i + 1) / h;
+      for (int j = 0; j <= i; j++) {
+        double g = 0.0;
+        for (int k = 0; k <= i; k++) g += VV(k, i + 1) * VV(k, j);
+        for (int k = 0; k <= i; k++) VV(k, j) -= g * d[k];
+      }
+    }
+    for (int k = 0; k <= i; k++) VV(k, i + 1) = 0.0;
+  }
+  for (int j = 0; j < n; j++) {
+    d[j] = VV(n - 1, j);
+    VV(n - 1, j) = 0.0;
+  }
+  VV(n - 1, n - 1) = 1.0;
+  e[0] = 0.0;
+#undef VV
+}
+
+HOT static int tql2(int n, double *V, double *d, double *e) {
+#define VV(i, j) V[(i) * n + (j)]
+  /* transpose: eigenvector j becomes row j, so that the QL rotations act on two
+   * contiguous rows (vectorisable) */
+  for (int i = 0; i < n; i++)
+    for (int j = i + 1; j < n; j++) {
+      const double tmp = VV(i, j);
+      VV(i, j) = VV(j, i);
+      VV(j, i) = tmp;
+    }
+  /* QL */
+  for (int i = 1; i < n; i++) e[i - 1] = e[i];
+  e[n - 1] = 0.0;
+  double f = 0.0, tst1 = 0.0;
+  const double eps = 2.220446049250313e-16;
+  for (int l = 0; l < n; l++) {
+    tst1 = fmax(tst1, fabs(d[l]) + fabs(e[l]));
+    int m = l;
+    while (m < n) {
+      if (fabs(e[m]) <= eps * tst1) break;
+      m++;
+    }
+    if (m == n) m = n - 1;
+    if (m > l) {
+      int iter = 0;
+      do {
+        if (++iter > 60) return -1;
+        double g = d[l];
+        double p = (d[l + 1] - g) / (2.0 * e[l]);
+        double r = hypot(p, 1.0);
+        if (p < 0) r = -r;
+        d[l] = e[l] / (p + r);
+        d[l + 1] = e[l] * (p + r);
+        const double dl1 = d[l + 1];
+        double h = g - d[l];
+        for (int i = l + 2; i < n; i++) d[i] -= h;
+        f += h;
+        p = d[m];
+        double c = 1.0, c2 = c, c3 = c, s = 0.0, s2 = 0.0;
+        const double el1 = e[l + 1];
+        for (int i = m - 1; i >= l; i--) {
+          c3 = c2;
+          c2 = c;
+          s2 = s;
+          g = c * e[i];
+          h = c * p;
+          r = hypot(p, e[i]);
+          e[i + 1] = s * r;
+          s = e[i] / r;
+          c = p / r;
+          p = c * d[i] - s * g;
+          d[i + 1] = h + s * (c * g + s * d[i]);
+          double *vi = V + i * n, *vi1 = V + (i + 1) * n;
+          for (int k = 0; k < n; k++) {
+            const double hk = vi1[k], gk = vi[k];
+            vi1[k] = s * gk + c * hk;
+            vi[k] = c * gk - s * hk;
+          }
+        }
+        p = -s * s2 * c3 * el1 * e[l] / dl1;
+        e[l] = s * p;
+        d[l] = c * p;
+      } while (fabs(e[l]) > eps * tst1);
+    }
+    d[l] += f;
+    e[l] = 0.0;
+  }
+  return 0;
+#undef VV
+}
+
+static int symm_eig(int n, double *V, double *d, double *e) {
+  tred2(n, V, d, e);
+  return tql2(n, V, d, e);
+}
+
+/* eigenvalues only of the tridiagonal (d, e) left by tred2 (implicit QL, as tql2 without
+ * the vectors); d: eigenvalues (unsorted), e destroyed */
+HOT static int tql1(int n, double *d, double *e) {
+  for (int i = 1; i < n; i++) e[i - 1] = e[i];
+  e[n - 1] = 0.0;
+  double f = 0.0, tst1 = 0.0;
+  const double eps = 2.220446049250313e-16;
+  for (int l = 0; l < n; l++) {
+    tst1 = fmax(tst1, fabs(d[l]) + fabs(e[l]));
+    int m = l;
+    while (m < n) {
+      if (fabs(e[m]) <= eps * tst1) break;
+      m++;
+    }
+    if (m == n) m = n - 1;
+    if (m > l) {
+      int iter = 0;
+      do {
+        if (++iter > 60) return -1;
+        double g = d[l];
+        double p = (d[l + 1] - g) / (2.0 * e[l]);
+        double r = hypot(p, 1.0);
+        if (p < 0) r = -r;
+        d[l] = e[l] / (p + r);
+        d[l + 1] = e[l] * (p + r);
+        const double dl1 = d[l + 1];
+        double h = g - d[l];
+        for (int i = l + 2; i < n; i++) d[i] -= h;
+        f += h;
+        p = d[m];
+        double c = 1.0, c2 = c, c3 = c, s = 0.0, s2 = 0.0;
+        const double el1 = e[l + 1];
+        for (int i = m - 1; i >= l; i--) {
+          c3 = c2;
+          c2 = c;
+          s2 = s;
+          g = c * e[i];
+          h = c * p;
+          r = hypot(p, e[i]);
+          e[i + 1] = s * r;
+          s = e[i] / r;
+          c = p / r;
+          p = c * d[i] - s * g;
+          d[i + 1] = h + s * (c * g + s * d[i]);
+        }
+        p = -s * s2 * c3 * el1 * e[l] / dl1;
+        e[l] = s * p;
+        d[l] = c * p;
+      } while (fabs(e[l]) > eps * tst1);
+    }
+    d[l] += f;
+    e[l] = 0.0;
+  }
+  return 0;
+}
+
+/* eigenvector of the tridiagonal T (diagonal a, off-diagonal b[i] = T[i][i+1]) for the
+ * eigenvalue lam by inverse iteration (LU with partial pivoting of T - lam I, as LAPACK
+ * dgttrf/dgtts2 and dstein), orthogonalised against the k vectors in Y (rows, length n)
+ * computed before; result normalised into y */
+static void tri_inverse_iteration(int n, const double *a, const double *b, double lam,
+                                  double tnorm, const double *Y, int k, double *y) {
+  double dd[NUU], du[NUU], du2[NUU], dl[NUU];
+  int piv[NUU];
+  const double eps = 2.220446049250313e-16, tiny = eps * tnorm;
+  for (int i = 0; i < n; i++) dd[i] = a[i] - lam;
+  for (int i = 0; i < n - 1; i++) { du[i] = b[i]; dl[i] = b[i]; }
+  for (int i = 0; i < n; i++) du2[i] = 0.0;
+  for (int i = 0; i < n - 1; i++) {
+    if (fabs(dd[i]) >= fabs(dl[i])) {
+      piv[i] = i;
+      if (dd[i] == 0.0) dd[i] = tiny;
+      const double fact = dl[i] / dd[i];
+      dl[i] = fact;
+      dd[i + 1] -= fact * du[i];
+    } else {
+      piv[i] = i + 1;
+      const double fact = dd[i] / dl[i];
+      dd[i] = dl[i];
+      dl[i] = fact;
+      const double temp = du[i];
+      du[i] = dd[i + 1];
+      dd[i + 1] = temp - fact * dd[i + 1];
+      if (i < n - 2) {
+        du2[i] = du[i + 1];
+        du[i + 1] = -fact * du[i + 1];
+      }
+    }
+  }
+  for (int i = 0; i < n; i++)
+    if (fabs(dd[i]) < tiny) dd[i] = dd[i] < 0 ? -tiny : tiny;
+  /* deterministic start vector, as dstein (uniform-ish entries) */
+  for (int i = 0; i < n; i++) y[i] = 1.0 + 0.1 * (double)((i * 7 + k * 3) % 11) / 11.0;
+  for (int it = 0; it < 4; it++) {
+    for (int q = 0; q < k; q++) {            /* orthogonalise against earlier vectors */
+      const double *yq = Y + q * n;
+      double dot = 0.0;
+      for (int i = 0; i < n; i++) dot += yq[i] * y[i];
+      for (int i = 0; i < n; i++) y[i] -= dot * yq[i];
+    }
+    for (int i = 0; i < n - 1; i++) {        /* L solve */
+      const int ip = piv[i];
+      const double temp = y[i + 1 - ip + i] - dl[i] * y[ip];
+      y[i] = y[ip];
+      y[i + 1] = temp;
+    }
+    y[n - 1] /= dd[n - 1];                   /* U solve */
+    if (n > 1) y[n - 2] = (y[n - 2] - du[n - 2] * y[n - 1]) / dd[n - 2];
+    for (int i = n - 3; i >= 0; i--)
+      y[i] = (y[i] - du[i] * y[i + 1] - du2[i] * y[i + 2]) / dd[i];
+    double nrm = 0.0;
+    for (int i = 0; i < n; i++) nrm += y[i] * y[i];
+    nrm = sqrt(nrm);
+    for (int i = 0; i < n; i++) y[i] /= nrm;
+  }
+  for (int q = 0; q < k; q++) {              /* final orthogonalisation */
+    const double *yq = Y + q * n;
+    double dot = 0.0;
+    for (int i = 0; i < n; i++) dot += yq[i] * y[i];
+    for (int i = 0; i < n; i++) y[i] -= dot * yq[i];
+  }
+  double nrm = 0.0;
+  for (int i = 0; i < n; i++) nrm += y[i] * y[i];
+  nrm = sqrt(nrm);
+  for (int i = 0; i < n; i++) y[i] /= nrm;
+}
+
+
+/* Cholesky of a copy of H - clip I (n x n, lower triangle read); 1 when positive definite */
+HOT static int pd_shifted(const double *H, int n, double clip, double *L) {
+  memcpy(L, H, sizeof(double) * n * n);
+  for (int j = 0; j < n; j++) {
+    double djj = L[j * n + j] - clip;
+    for (int k = 0; k < j; k++) djj -= L[j * n + k] * L[j * n + k];
+    if (!(djj > 0.0)) return 0;
+    djj = sqrt(djj);
+    L[j * n + j] = djj;
+    for (int i = j + 1; i < n; i++) {
+      double s = L[i * n + j];
+      for (int k = 0; k < j; k++) s -= L[i * n + k] * L[j * n + k];
+      L[i * n + j] = s / djj;
+    }
+  }
+  return 1;
+}
+
+static long n_clipped = 0, n_eig = 0, n_calls = 0, n_evs = 0;
+
+/* eigenvalues of H below CLIP raised to CLIP: H += sum_j (CLIP - ev_j) v_j v_j^T.
+ * H (NW x NW, row-major) is block diagonal: the u-block (NUU x NUU) and H[t, t] (the cost
+ * s t^2 does not couple t with u, and no constraint is nonlinear in t), so the u-block is
+ * decomposed alone; same result as the eigendecomposition of the whole matrix. */
+HOT static int clip_hessian(double *H) {
+  static double V[NUU * NUU], Hu[NUU * NUU], d[NUU], e[NUU];
+  n_calls++;
+  if (CLIP < 0) return 0;
+  if (H[NUU * NW + NUU] < CLIP) H[NUU * NW + NUU] = CLIP;
+  for (int i = 0; i < NUU; i++)
+    for (int j = 0; j < NUU; j++) Hu[i * NUU + j] = H[i * NW + j];
+  if (pd_shifted(Hu, NUU, CLIP, V)) return 0;
+  n_eig++;
+  /* symmetric copy from the lower triangle H[i][j], i >= j (what numpy's eigh reads) */
+  for (int i = 0; i < NUU; i++)
+    for (int j = 0; j < NUU; j++) V[i * NUU + j] = (j <= i) ? Hu[i * NUU + j] : Hu[j * NUU + i];
+  int any = 0;
+#ifndef GK_PARTIAL_EIG
+  /* full decomposition (tred2 + tql2; LAPACK dsyevd with GK_LAPACK_EIG): eigenvectors as
+   * rows of V (default: as fast as the partial variant below in closed loop, ~2.4
+   * eigenvalues clipped per decomposition) */
+#ifdef GK_LAPACK_EIG
+  {
+    /* row-major symmetric V = column-major V; eigenvectors come back as columns of the
+     * column-major array = rows of the row-major one */
+    static double work[1 + 6 * NUU + 2 * NUU * NUU];
+    static int iwork[3 + 5 * NUU];
+    const int nn = NUU, lwork = 1 + 6 * NUU + 2 * NUU * NUU, liwork = 3 + 5 * NUU;
+    int info = 0;
+    dsyevd_("V", "U", &nn, V, &nn, d, work, &lwork, iwork, &liwork, &info);
+    if (info != 0) return -1;
+  }
+#else
+  if (symm_eig(NUU, V, d, e) != 0) return -1;
+#endif
+  for (int j = 0; j < NUU; j++) {
+    if (d[j] >= CLIP) continue;
+    any = 1;
+    n_evs++;
+    const double a = CLIP - d[j], *vj = V + j * NUU;
+    for (int r = 0; r < NUU; r++) {
+      const double vr = a * vj[r];
+      double *hr = H + r * NW;
+      for (int c = 0; c < NUU; c++) hr[c] += vr * vj[c];
+    }
+  }
+#else
+  /* (-DGK_PARTIAL_EIG) only the eigenpairs below CLIP: Householder tridiagonalisation Q T Q^T (tred2),
+   * eigenvalues of T (QL without vectors), eigenvectors of T for those below CLIP by inverse
+   * iteration, back-transformed by Q */
+  static double ta[NUU], tb[NUU], lam[NUU], Y[NUU * NUU], v[NUU];
+  tred2(NUU, V, d, e);
+  double tnorm = 0.0;
+  for (int i = 0; i < NUU; i++) {
+    ta[i] = d[i];
+    tb[i] = (i + 1 < NUU) ? e[i + 1] : 0.0;
+  }
+  for (int i = 0; i < NUU; i++) {
+    const double t = fabs(ta[i]) + fabs(tb[i]) + (i ? fabs(tb[i - 1]) : 0.0);
+    tnorm = t > tnorm ? t : tnorm;
+  }
+  if (tql1(NUU, d, e) != 0) return -1;
+  int k = 0;
+  for (int j = 0; j < NUU; j++)
+    if (d[j] < CLIP) lam[k++] = d[j];
+  for (int i = 1; i < k; i++)                 /* ascending (insertion sort) */
+    for (int j = i; j > 0 && lam[j - 1] > lam[j]; j--) {
+      const double t = lam[j]; lam[j] = lam[j - 1]; lam[j - 1] = t;
+    }
+  for (int q = 0; q < k; q++) {
+    double *y = Y + q * NUU;
+    tri_inverse_iteration(NUU, ta, tb, lam[q], tnorm, Y, q, y);
+    for (int r = 0; r < NUU; r++) {          /* v = Q y */
+      const double *vr = V + r * NUU;
+      double s = 0.0;
+      for (int c = 0; c < NUU; c++) s += vr[c] * y[c];
+      v[r] = s;
+    }
+    any = 1;
+    n_evs++;
+    const double a = CLIP - lam[q];
+    for (int r = 0; r < NUU; r++) {
+      const double vr = a * v[r];
+      double *hr = H + r * NW;
+      for (int c = 0; c < NUU; c++) hr[c] += vr * v[c];
+    }
+  }
+#endif
+  if (any) n_clipped++;
+  return 0;
+}
+

@@ -1,0 +1,209 @@
+/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
+ * generated header and 1_rollout.c ... 4_api.c into one translation unit): exported entry points: casadi external functions and a plain C API. */
+/* ---------------------------------------------------------------- casadi external API */
+static const casadi_int SP_X[3] = {NW, 1, 1}, SP_P[3] = {NP, 1, 1}, SP_1[3] = {1, 1, 1},
+                        SP_G[3] = {NG, 1, 1}, SP_J[3] = {NG, NW, 1}, SP_H[3] = {NW, NW, 1};
+
+#define ARG(i, zero) (arg[i] ? arg[i] : (zero))
+
+EXPORT int PFX(fg)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  TK_START
+  const double *x = ARG(0, ZERO_W), *p = ARG(1, ZERO_P);
+  roll(x, p, 0);
+  if (res[0]) res[0][0] = cost(x, p);
+  if (res[1]) constraints(x, p, res[1]);
+  TK_STOP(0)
+  return 0;
+}
+
+EXPORT int PFX(jac_fg)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  TK_START
+  const double *x = ARG(0, ZERO_W), *p = ARG(1, ZERO_P);
+  roll(x, p, 1);
+  if (res[0]) res[0][0] = cost(x, p);
+  if (res[1]) gradient(x, p, res[1]);
+  if (res[2]) constraints(x, p, res[2]);
+  if (res[3]) jacobian(res[3]);
+  TK_STOP(1)
+  return 0;
+}
+
+HOT static int hess_common(const double **arg, double **res, int clip) {
+  static double Hrm[NW * NW];
+  const double *x = ARG(0, ZERO_W), *p = ARG(1, ZERO_P), *lg = ARG(3, ZERO_G);
+  const double lf = arg[2] ? arg[2][0] : 0.0;
+  if (!res[0]) return 0;
+  roll(x, p, 1);
+  hessian(x, p, lf, lg, Hrm);
+  int flag = 0;
+  if (clip) flag = clip_hessian(Hrm);
+  /* column-major output: H is symmetric up to rounding; write the transpose */
+  for (int i = 0; i < NW; i++)
+    for (int j = 0; j < NW; j++) res[0][j * NW + i] = Hrm[i * NW + j];
+  return flag;
+}
+
+EXPORT int PFX(hess_l)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  TK_START
+  int rc = hess_common(arg, res, 1);
+  TK_STOP(2)
+  return rc;
+}
+
+EXPORT int PFX(hess_raw)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {
+  (void)iw; (void)w; (void)mem;
+  return hess_common(arg, res, 0);
+}
+
+/* boilerplate of the casadi external interface for function F with given I/O */
+#define CASADI_BOILERPLATE(F, NIN, NOUT, NAMES_IN, NAMES_OUT, SP_IN, SP_OUT)                  \
+  EXPORT casadi_int PFX(F##_n_in)(void) { return NIN; }                                       \
+  EXPORT casadi_int PFX(F##_n_out)(void) { return NOUT; }                                     \
+  EXPORT const char *PFX(F##_name_in)(casadi_int i) {                                         \
+    static const char *n[] = NAMES_IN;                                                        \
+    return (i >= 0 && i < NIN) ? n[i] : 0;                                                    \
+  }                                                                                           \
+  EXPORT const char *PFX(F##_name_out)(casadi_int i) {                                        \
+    static const char *n[] = NAMES_OUT;                                                       \
+    return (i >= 0 && i < NOUT) ? n[i] : 0;                                                   \
+  }                                                                                           \
+  EXPORT const casadi_int *PFX(F##_sparsity_in)(casadi_int i) {                               \
+    static const casadi_int *s[] = SP_IN;                                                     \
+    return (i >= 0 && i < NIN) ? s[i] : 0;                                                    \
+  }                                                                                           \
+  EXPORT const casadi_int *PFX(F##_sparsity_out)(casadi_int i) {                              \
+    static const casadi_int *s[] = SP_OUT;                                                    \
+    return (i >= 0 && i < NOUT) ? s[i] : 0;                                                   \
+  }                                                                                           \
+  EXPORT int PFX(F##_work)(casadi_int * sz_arg, casadi_int * sz_res, casadi_int * sz_iw,      \
+                           casadi_int * sz_w) {                                               \
+    if (sz_arg) *sz_arg = NIN;                                                                \
+    if (sz_res) *sz_res = NOUT;                                                               \
+    if (sz_iw) *sz_iw = 0;                                                                    \
+    if (sz_w) *sz_w = 0;                                                                      \
+    return 0;                                                                                 \
+  }                                                                                           \
+  EXPORT int PFX(F##_checkout)(void) { return 0; }                                            \
+  EXPORT void PFX(F##_release)(int mem) { (void)mem; }                                        \
+  EXPORT void PFX(F##_incref)(void) {}                                                        \
+  EXPORT void PFX(F##_decref)(void) {}
+
+#define LIST(...) {__VA_ARGS__}
+CASADI_BOILERPLATE(fg, 2, 2, LIST("x", "p"), LIST("f", "g"), LIST(SP_X, SP_P), LIST(SP_1, SP_G))
+CASADI_BOILERPLATE(jac_fg, 2, 4, LIST("x", "p"), LIST("f", "grad_f_x", "g", "jac_g_x"),
+                   LIST(SP_X, SP_P), LIST(SP_1, SP_X, SP_G, SP_J))
+CASADI_BOILERPLATE(hess_l, 4, 1, LIST("x", "p", "lam_f", "lam_g"), LIST("hess_gamma_x_x"),
+                   LIST(SP_X, SP_P, SP_1, SP_G), LIST(SP_H))
+CASADI_BOILERPLATE(hess_raw, 4, 1, LIST("x", "p", "lam_f", "lam_g"), LIST("hess_gamma_x_x"),
+                   LIST(SP_X, SP_P, SP_1, SP_G), LIST(SP_H))
+
+/* ---------------------------------------------------------------- plain C API (ctypes) */
+/* states x_0..x_N (NH+1 x NX) from x0 under u (NH x NU); does not touch the cache */
+EXPORT void PFX(simulate)(const double *x0, const double *u, double *x) {
+  static double z[NH * NX], r[NH * NX], h[NH * NX];
+  simulate(x0, u, x, z, r, h);
+}
+
+/* the solver's trajectory at (w, p): the cached one when (w, p) matches, else a rollout */
+EXPORT void PFX(xtraj)(const double *w, const double *p, double *x) {
+  roll(w, p, 0);
+  memcpy(x, X, sizeof X);
+}
+
+/* Equilibrium x = f(x, u), U_o x + b_o = y by Newton's method from (x0, u0), as
+ * controllers.governor.equilibrium_newton (square system: NU == NY). Returns 0 when
+ * max|F| < tol was reached (x, u written; the caller checks |u| <= 1), 1 when not converged
+ * in max_iter iterations, 2 on a singular Newton matrix. */
+#if NU == NY
+HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u0, int max_iter,
+                              double tol, double *xo, double *uo) {
+  enum { NE = NX + NY };
+  double x[NX], u[NU], F[NE], K[NE * NE], z[NX], r[NX], h[NX], jh[NX * NV], df[NX * NV];
+  double xn[NX];
+  memcpy(x, x0, sizeof x);
+  memcpy(u, u0, sizeof u);
+  for (int it = 0; it < max_iter; it++) {
+    simulate_stage(x, u, z, r, h, xn);
+    double fmax = 0.0;
+    for (int k = 0; k < NX; k++) F[k] = xn[k] - x[k];
+    for (int a = 0; a < NY; a++) {
+      double s = BO[a];
+      for (int k = 0; k < NX; k++) s += UO[a * NX + k] * x[k];
+      F[NX + a] = s - y[a];
+    }
+    for (int k = 0; k < NE; k++) fmax = fmax > fabs(F[k]) ? fmax : fabs(F[k]);
+    if (!(fmax == fmax)) return 1;   /* NaN */
+    if (fmax < tol) {
+      memcpy(xo, x, sizeof x);
+      memcpy(uo, u, sizeof u);
+      return 0;
+    }
+    stage_jac(x, z, r, h, jh, df);
+    for (int k = 0; k < NX; k++) {
+      for (int c = 0; c < NV; c++) K[k * NE + c] = df[k * NV + c];
+      K[k * NE + k] -= 1.0;
+    }
+    for (int a = 0; a < NY; a++) {
+      for (int c = 0; c < NX; c++) K[(NX + a) * NE + c] = UO[a * NX + c];
+      for (int c = 0; c < NU; c++) K[(NX + a) * NE + NX + c] = 0.0;
+    }
+    /* solve K d = -F: Gaussian elimination with partial pivoting (as LAPACK gesv) */
+    double d[NE];
+    for (int k = 0; k < NE; k++) d[k] = -F[k];
+    for (int c = 0; c < NE; c++) {
+      int piv = c;
+      double best = fabs(K[c * NE + c]);
+      for (int rr = c + 1; rr < NE; rr++)
+        if (fabs(K[rr * NE + c]) > best) { best = fabs(K[rr * NE + c]); piv = rr; }
+      if (best == 0.0) return 2;
+      if (piv != c) {
+        for (int q = 0; q < NE; q++) {
+          const double t = K[c * NE + q]; K[c * NE + q] = K[piv * NE + q]; K[piv * NE + q] = t;
+        }
+        const double t = d[c]; d[c] = d[piv]; d[piv] = t;
+      }
+      const double inv = 1.0 / K[c * NE + c];
+      for (int rr = c + 1; rr < NE; rr++) {
+        const double l = K[rr * NE + c] * inv;
+        if (l == 0.0) continue;
+        for (int q = c; q < NE; q++) K[rr * NE + q] -= l * K[c * NE + q];
+        d[rr] -= l * d[c];
+      }
+    }
+    for (int c = NE - 1; c >= 0; c--) {
+      double s = d[c];
+      for (int q = c + 1; q < NE; q++) s -= K[c * NE + q] * d[q];
+      d[c] = s / K[c * NE + c];
+    }
+    for (int k = 0; k < NX; k++) x[k] += d[k];
+    for (int k = 0; k < NU; k++) u[k] += d[NX + k];
+  }
+  return 1;
+}
+#endif
+
+EXPORT void PFX(dims)(long *out) {
+  out[0] = NX; out[1] = NU; out[2] = NH; out[3] = NQ; out[4] = NW; out[5] = NG; out[6] = NP;
+}
+
+EXPORT void PFX(counters)(long *out) {
+  out[0] = n_calls; out[1] = n_eig; out[2] = n_clipped; out[3] = n_evs;
+}
+
+EXPORT void PFX(invalidate)(void) { c_level = -1; }
+
+EXPORT void PFX(timers)(double *out) {
+#ifdef GK_TIMERS
+  for (int i = 0; i < 4; i++) out[i] = tk_acc[i];
+#else
+  for (int i = 0; i < 4; i++) out[i] = -1.0;
+#endif
+}
+
+/* test hook: clip a symmetric NW x NW row-major matrix in place (block structure assumed:
+ * row/column NUU only on the diagonal) */
+EXPORT int PFX(clip)(double *H) { return clip_hessian(H); }
+

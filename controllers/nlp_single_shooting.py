@@ -1,0 +1,254 @@
+"""The FHOCP ``eq:optimization`` as a single-shooting NLP with exact numpy derivatives.
+
+Decision variables ``w = (u_0 … u_{N−1}, t)`` (``N m + 1``: 31 for N = 15, m = 2); the
+states, their sensitivities and the exact Hessian of the Lagrangian come from
+:class:`controllers.shooting.GRUShooting` (dense numpy products, checked against casadi AD of
+:func:`controllers.gru.step`) and reach the solver through zero-copy casadi callbacks
+(:class:`controllers.casadi_callbacks.NumpyCallback`). Constraints, in this order:
+
+* ``D U_o x_i`` for ``i = 1 … N−1``, one row per pair of opposite rows of ``L`` (a box),
+  bounded by the tightened bounds (``eq:optimization-constraint``; ``i = 0`` involves only
+  ``x̂`` and is checked before the solve);
+* ``x_N − x̄ − t ≤ 0`` and ``x_N − x̄ + t ≥ 0``: the epigraph of ``‖x_N − x̄‖∞`` (terminal cost
+  ``s t²``, terminal set ``0 ≤ t ≤ α``).
+
+The rollout at one point is cached and shared by the cost, constraint, gradient, Jacobian
+and Hessian evaluations at that point (one rollout serves a whole SQP iteration).
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING, Any
+
+import casadi as ca
+import numpy as np
+
+from controllers.casadi_callbacks import NumpyCallback
+
+if TYPE_CHECKING:
+    from controllers.fhocp import FHOCP
+
+__all__ = ["SingleShootingNLP"]
+
+
+class SingleShootingNLP:
+    """The numpy side of the single-shooting FHOCP: function and derivative evaluations.
+
+    Parameters
+    ----------
+    fhocp : FHOCP
+        The problem (dimensions, weights, constraint rows, layout of ``w``).
+
+    Attributes
+    ----------
+    ng : int
+        Number of constraints.
+    eigen_clip : float or None
+        Eigenvalues of the Hessian handed to an SQP's QP are clipped at this margin
+        (:meth:`hessian_convex`); ``None``: the exact Hessian.
+    deadline : float
+        ``time.perf_counter()`` value past which IPOPT's iteration callback stops the solve.
+    """
+
+    def __init__(self, fhocp: FHOCP) -> None:
+        from controllers.shooting import GRUShooting
+
+        self.p = fhocp
+        self.shoot = GRUShooting(fhocp.params, fhocp.N)
+        self.ng = (fhocp.N - 1) * fhocp.qr + 2 * fhocp.n
+        self.iu = fhocp.iu.ravel()
+        self.eigen_clip: float | None = None
+        self.deadline = float("inf")
+        self._key: tuple[bytes, bytes] | None = None
+        self._deriv = False
+        self._ro: Any = None
+        nw = fhocp.nw
+        triu_r, triu_c = np.triu_indices(nw)
+        order = np.lexsort((triu_r, triu_c))  # casadi stores nonzeros column by column
+        self._triu = (triu_r[order], triu_c[order])
+        self.callbacks: list[NumpyCallback] = []
+
+    # -- one point ----------------------------------------------------------------------
+    def rollout(self, wv: np.ndarray, pv: np.ndarray, deriv: bool) -> Any:
+        """States (and with ``deriv`` sensitivities) at ``(w, p)``, cached per point."""
+        key = (wv.tobytes(), pv.tobytes())
+        if self._key == key and (self._deriv or not deriv):
+            return self._ro
+        p = self.p
+        ro = self.shoot.rollout(pv[:p.n], wv[self.iu].reshape(p.N, p.m), derivatives=deriv)
+        self._key, self._deriv, self._ro = key, deriv, ro
+        return ro
+
+    def _reference(self, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = self.p.n
+        return pv[n:2 * n], pv[2 * n:]
+
+    def objective(self, wv: np.ndarray, pv: np.ndarray, ro: Any) -> float:
+        """``eq:optimization-cost`` at the rolled-out point."""
+        x_bar, u_bar = self._reference(pv)
+        return self.p.cost(ro.x, ro.u, x_bar, u_bar, float(wv[self.p.it]))
+
+    def constraints(self, wv: np.ndarray, pv: np.ndarray, ro: Any) -> np.ndarray:
+        """The constraint vector (see the module docstring)."""
+        p = self.p
+        x_bar, _ = self._reference(pv)
+        t = wv[p.it]
+        dN = ro.x[p.N] - x_bar
+        return np.concatenate([(ro.x[1:p.N] @ p.DUo.T).ravel(), dN - t, dN + t])
+
+    # f and g are evaluated at trial points that the solver mostly accepts; computing the
+    # derivatives there too saves a second rollout when ∇f, ∂g/∂w and the Hessian follow
+    def f(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        return [self.objective(wv, pv, self.rollout(wv, pv, True))]
+
+    def g(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        return [self.constraints(wv, pv, self.rollout(wv, pv, True))]
+
+    def gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[f, ∇f]``."""
+        p = self.p
+        ro = self.rollout(wv, pv, True)
+        x_bar, u_bar = self._reference(pv)
+        N, n, m = p.N, p.n, p.m
+        grad = np.zeros(p.nw)
+        dx = (ro.x[1:N] - x_bar) @ (2 * p.Q)
+        grad[self.iu] = dx.ravel() @ ro.S[1:N].reshape((N - 1) * n, N * m) + (
+            (ro.u - u_bar) @ (2 * p.R)).ravel()
+        grad[p.it] = 2 * p.s * wv[p.it]
+        return [self.objective(wv, pv, ro), grad]
+
+    def jacobian(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[g, ∂g/∂w]``."""
+        p = self.p
+        ro = self.rollout(wv, pv, True)
+        N, n, q, iu = p.N, p.n, p.qr, self.iu
+        J = np.zeros((self.ng, p.nw))
+        J[: (N - 1) * q, iu] = np.matmul(p.DUo[None], ro.S[1:N]).reshape((N - 1) * q, N * p.m)
+        J[(N - 1) * q:(N - 1) * q + n, iu] = ro.S[N]
+        J[(N - 1) * q + n:, iu] = ro.S[N]
+        J[(N - 1) * q:(N - 1) * q + n, p.it] = -1.0
+        J[(N - 1) * q + n:, p.it] = 1.0
+        return [self.constraints(wv, pv, ro), J]
+
+    def jac_fg(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[f, ∇f, g, ∂g/∂w]`` in one call (what ``sqpmethod`` asks for)."""
+        f, grad = self.gradient(wv, pv)
+        g, J = self.jacobian(wv, pv)
+        return [f, grad, g, J]
+
+    def hessian(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
+                lg: np.ndarray) -> np.ndarray:
+        """The exact Hessian of the Lagrangian ``λ_f f + λ_g·g`` (dense, symmetric)."""
+        p = self.p
+        ro = self.rollout(wv, pv, True)
+        x_bar, _ = self._reference(pv)
+        N, n, m, q, nw, iu = p.N, p.n, p.m, p.qr, p.nw, self.iu
+        lf = float(lf[0])
+        lam_out = lg[: (N - 1) * q].reshape(N - 1, q)
+        lam_term = lg[(N - 1) * q:(N - 1) * q + n] + lg[(N - 1) * q + n:]
+        # adjoints μ_i of the state terms, i = 1 … N
+        c = np.zeros((N + 1, n))
+        c[1:N] = 2 * lf * (ro.x[1:N] - x_bar) @ p.Q + lam_out @ p.DUo
+        c[N] = lam_term
+        mu = np.zeros((N + 1, n))
+        mu[N] = c[N]
+        for i in range(N - 1, 0, -1):
+            mu[i] = c[i] + ro.A[i].T @ mu[i + 1]
+        W = self.shoot.stage_hessians(ro, mu[1:])
+        W[1:, :n, :n] += 2 * lf * p.Q
+        S = ro.S[:N]
+        H = np.zeros((nw, nw))
+        ST = np.transpose(S, (0, 2, 1))
+        SW = np.matmul(ST, W[:, :n, :n])
+        Huu = SW.reshape(N * N * m, n).reshape(N, N * m, n)
+        Huu = np.matmul(Huu.transpose(1, 0, 2).reshape(N * m, N * n),
+                        S.reshape(N * n, N * m))
+        C = np.matmul(ST, W[:, :n, n:])  # (N, Nm, m): ∂²/∂u ∂u_i of the x–u terms
+        Ct = C.transpose(1, 0, 2).reshape(N * m, N * m)   # column block i = C[i]
+        Huu += Ct + Ct.T
+        Hv = Huu.reshape(N, m, N, m)
+        stages = np.arange(N)
+        Hv[stages, :, stages, :] += W[:, n:, n:] + 2 * lf * p.R
+        H[np.ix_(iu, iu)] = Huu
+        H[p.it, p.it] = 2 * lf * p.s
+        return H
+
+    def hessian_triu(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
+                     lg: np.ndarray) -> list:
+        """The upper triangle of :meth:`hessian` (IPOPT's ``hess_lag``)."""
+        return [self.hessian(wv, pv, lf, lg)[self._triu]]
+
+    def hessian_convex(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
+                       lg: np.ndarray) -> list:
+        """:meth:`hessian` with its eigenvalues clipped at :attr:`eigen_clip` (an SQP's QP
+        needs it convex; LAPACK ``eigh``, ~40 µs for 31×31)."""
+        H = self.hessian(wv, pv, lf, lg)
+        if self.eigen_clip is not None:
+            ev, V = np.linalg.eigh(H)
+            if ev[0] < self.eigen_clip:
+                H = (V * np.maximum(ev, self.eigen_clip)) @ V.T
+        return [H]
+
+    def trajectory(self, wv: np.ndarray, pv: np.ndarray) -> np.ndarray:
+        """The states the solver's answer ``w`` gives (usually the last point evaluated)."""
+        wv = np.asarray(wv, dtype=float).ravel()
+        pv = np.asarray(pv, dtype=float).ravel()
+        if self._key == (wv.tobytes(), pv.tobytes()):
+            return self._ro.x
+        p = self.p
+        return self.shoot.rollout(pv[:p.n], wv[self.iu].reshape(p.N, p.m),
+                                  derivatives=False).x
+
+    def stop(self, *_: np.ndarray) -> list:
+        """IPOPT's iteration callback: nonzero ("User_Requested_Stop") past the deadline."""
+        return [np.array([1.0 if time.perf_counter() > self.deadline else 0.0])]
+
+    # -- casadi -------------------------------------------------------------------------
+    def ipopt_problem(self, ipopt_options: dict[str, Any],
+                      time_budget: float | None) -> tuple[dict, dict]:
+        """The casadi NLP and the ``nlpsol("ipopt")`` options with every callback."""
+        p = self.p
+        nw, npar, ng = p.nw, 2 * p.n + p.m, self.ng
+        sp = ca.Sparsity.dense
+        cb = [
+            NumpyCallback("fhocp_f", self.f, [sp(nw), sp(npar)], [sp(1)], ["x", "p"], ["f"]),
+            NumpyCallback("fhocp_g", self.g, [sp(nw), sp(npar)], [sp(ng)], ["x", "p"], ["g"]),
+            NumpyCallback("nlp_grad_f", self.gradient, [sp(nw), sp(npar)], [sp(1), sp(nw)],
+                          ["x", "p"], ["f", "grad_f_x"]),
+            NumpyCallback("nlp_jac_g", self.jacobian, [sp(nw), sp(npar)],
+                          [sp(ng), sp(ng, nw)], ["x", "p"], ["g", "jac_g_x"]),
+            NumpyCallback("nlp_hess_l", self.hessian_triu,
+                          [sp(nw), sp(npar), sp(1), sp(ng)], [ca.Sparsity.upper(nw)],
+                          ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"]),
+            NumpyCallback("time_budget", self.stop,
+                          [sp(nw), sp(1), sp(ng), sp(nw), sp(ng), sp(npar)], [sp(1)],
+                          ["x", "f", "g", "lam_x", "lam_g", "lam_p"], ["ret"]),
+        ]
+        self.callbacks += cb
+        fcb, gcb, gradcb, jaccb, hesscb, stopcb = cb
+        w = ca.MX.sym("w", nw)
+        par = ca.MX.sym("p", npar)
+        opts: dict[str, Any] = {"ipopt": dict(ipopt_options), "print_time": False,
+                                "grad_f": gradcb, "jac_g": jaccb, "hess_lag": hesscb,
+                                "no_nlp_grad": True, "calc_lam_p": False,
+                                "calc_lam_x": False, "calc_f": False, "calc_g": False}
+        if time_budget is not None:
+            opts["iteration_callback"] = stopcb
+        return {"x": w, "p": par, "f": fcb(w, par), "g": gcb(w, par)}, opts
+
+    def sqp_functions(self) -> dict[str, NumpyCallback]:
+        """``sqpmethod``'s ``jac_fg`` (f, ∇f, g, ∂g/∂w) and full ``hess_lag`` (convexified)."""
+        p = self.p
+        nw, npar, ng = p.nw, 2 * p.n + p.m, self.ng
+        sp = ca.Sparsity.dense
+        cb = [
+            NumpyCallback("nlp_jac_fg", self.jac_fg, [sp(nw), sp(npar)],
+                          [sp(1), sp(nw), sp(ng), sp(ng, nw)], ["x", "p"],
+                          ["f", "grad_f_x", "g", "jac_g_x"]),
+            NumpyCallback("nlp_hess_l", self.hessian_convex,
+                          [sp(nw), sp(npar), sp(1), sp(ng)], [sp(nw, nw)],
+                          ["x", "p", "lam_f", "lam_g"], ["hess_gamma_x_x"]),
+        ]
+        self.callbacks += cb
+        return {"jac_fg": cb[0], "hess_lag": cb[1]}

@@ -1,0 +1,178 @@
+"""The robust MPC law ``eq:mpc``: the FHOCP each step, with the fallback of the proof.
+
+:class:`RobustMPC` solves :class:`~controllers.fhocp.FHOCP` every step from the candidate of
+the proof of ``th:feasibility-stability`` (the previous sequence shifted by one stage with
+``ū`` appended) and applies that candidate when a solve fails; :class:`StepRecord` says what
+happened at each step and :func:`solver_summary` sums it up.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from controllers.fhocp import FEAS_TOL, FHOCP, FHOCPResult
+
+__all__ = ["OTHER_STATUS", "STATUS_CODES", "RobustMPC", "StepRecord", "solver_summary"]
+
+
+#: Integer codes of the step status recorded in the diagnostics.
+STATUS_CODES = {"optimal": 0, "infeasible_x0": 1, "Infeasible_Problem_Detected": 2,
+                "Maximum_Iterations_Exceeded": 3, "Maximum_WallTime_Exceeded": 3,
+                "Maximum_CpuTime_Exceeded": 3, "time_budget_exceeded": 3,
+                "residual_check_failed": 4}
+OTHER_STATUS = 5
+
+
+@dataclass
+class StepRecord:
+    """What happened at one controller step (normalised units).
+
+    Attributes
+    ----------
+    u : (m,) array
+        Applied input.
+    result : FHOCPResult
+        The solve (its ``status`` says why a fallback happened).
+    fallback : bool
+        The shifted previous solution (``ū`` appended) was applied instead of the optimum.
+    candidate_feasible : bool
+        For a fallback: whether that shifted sequence satisfies the FHOCP constraints at
+        ``x̂_k`` (Theorem 3 says it does when its hypotheses hold).
+    """
+
+    u: np.ndarray
+    result: FHOCPResult
+    fallback: bool
+    candidate_feasible: bool = True
+    suboptimal: bool = False
+    x_hat: np.ndarray | None = None
+    e_o: float = 0.0
+
+
+class RobustMPC:
+    """The MPC law ``eq:mpc`` with the fallback of the proof of ``th:feasibility-stability``.
+
+    At each step the FHOCP is solved from the candidate of the proof (the previous sequence
+    shifted by one stage with ``ū`` appended). When the solve fails (solver failure,
+    infeasibility, iteration or time limit, or a failed residual check) that candidate is
+    applied instead, and the next step shifts it again. Before any successful solve the
+    candidate is ``ū`` repeated.
+
+    Suboptimal MPC (``accept_suboptimal``, default on): when the solve stops at the
+    iteration cap with an iterate that passes every residual check (feasible) and costs no
+    more than the candidate, that iterate is applied instead of the candidate (Scokaert,
+    Mayne & Rawlings 1999: feasibility and the candidate's cost decrease are what the proof of
+    ``th:feasibility-stability`` uses). Counted as ``suboptimal_steps``, not as fallbacks.
+
+    Parameters
+    ----------
+    fhocp : FHOCP
+        The problem (set up on first use).
+    accept_suboptimal : bool
+        Apply feasible capped iterates (see above); ``False``: only converged solves.
+    """
+
+    def __init__(self, fhocp: FHOCP, accept_suboptimal: bool = True) -> None:
+        self.fhocp = fhocp
+        self.accept_suboptimal = bool(accept_suboptimal)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the set-point, the plan and the records (a new run)."""
+        self.x_bar: np.ndarray | None = None
+        self.u_bar: np.ndarray | None = None
+        self.alpha: float = float("nan")
+        self.plan: np.ndarray | None = None
+        self.records: list[StepRecord] = []
+
+    def set_reference(self, x_bar: np.ndarray, u_bar: np.ndarray, alpha: float) -> None:
+        """Set-point data ``(x̄, ū, α)`` (``eq:def-alpha``); call again when ``ȳ`` changes."""
+        self.x_bar = np.asarray(x_bar, dtype=float)
+        self.u_bar = np.asarray(u_bar, dtype=float)
+        self.alpha = float(alpha)
+
+    def candidate(self) -> np.ndarray:
+        """The shifted previous sequence with ``ū`` appended (``ū`` repeated at first)."""
+        assert self.u_bar is not None
+        if self.plan is None:
+            return np.tile(self.u_bar, (self.fhocp.N, 1))
+        return np.vstack([self.plan[1:], self.u_bar])
+
+    def make_step(self, x_hat: np.ndarray, e_o: float,
+                  candidate: np.ndarray | None = None) -> StepRecord:
+        """Compute ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``), with the fallback.
+
+        ``candidate`` (N, m), optional: a sequence known to be feasible (the reference
+        governor's, :mod:`controllers.governor`); it is the initial guess of the solve and
+        the fallback, in place of the shifted previous plan.
+        """
+        if self.x_bar is None or self.u_bar is None:
+            raise RuntimeError("set_reference() must be called before make_step()")
+        cand = self.candidate() if candidate is None else np.asarray(candidate, dtype=float)
+        # the FHOCP warm-starts from its own last iterate shifted by one stage: the candidate
+        # itself after a success, the partially converged iterate after a failure
+        t0 = time.perf_counter()
+        try:
+            res = self.fhocp.solve(x_hat, e_o, self.x_bar, self.u_bar, self.alpha,
+                                   u_init=candidate)
+        except Exception as exc:
+            res = self.fhocp.candidate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha)
+            res.status = f"solver_error: {type(exc).__name__}: {exc}"[:200]
+            res.solve_time = time.perf_counter() - t0
+        if res.success:
+            self.plan = res.u.copy()
+            rec = StepRecord(u=res.u[0].copy(), result=res, fallback=False)
+            rec.x_hat, rec.e_o = np.array(x_hat, dtype=float), float(e_o)
+            self.records.append(rec)
+            return rec
+        chk = self.fhocp.candidate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha)
+        feasible = chk.constraint_violation <= FEAS_TOL and chk.terminal_violation <= FEAS_TOL
+        if self.accept_suboptimal and res.feasible and (
+                not feasible or res.cost <= chk.cost):
+            # suboptimal MPC: a feasible iterate no costlier than the candidate keeps the
+            # proof's arguments (feasibility, and the cost decrease the candidate gives)
+            self.plan = res.u.copy()
+            rec = StepRecord(u=res.u[0].copy(), result=res, fallback=False, suboptimal=True,
+                             x_hat=np.array(x_hat, dtype=float), e_o=float(e_o))
+        else:
+            self.plan = cand
+            rec = StepRecord(u=np.clip(cand[0], -1.0, 1.0), result=res, fallback=True,
+                             candidate_feasible=bool(feasible),
+                             x_hat=np.array(x_hat, dtype=float), e_o=float(e_o))
+        self.records.append(rec)
+        return rec
+
+    def summary(self) -> dict[str, Any]:
+        """Solver statistics over the steps so far."""
+        return solver_summary(self.records)
+
+
+def solver_summary(records: list[StepRecord]) -> dict[str, Any]:
+    """Median / p99 / max solve time [ms], iterations, failures by status, fallbacks."""
+    if not records:
+        return {"steps": 0}
+    t = np.array([r.result.solve_time for r in records]) * 1e3
+    it = np.array([r.result.iterations for r in records])
+    statuses: dict[str, int] = {}
+    for r in records:
+        if not r.result.success:
+            key = r.result.status.split(":")[0]
+            statuses[key] = statuses.get(key, 0) + 1
+    return {
+        "steps": len(records),
+        "solve_ms_median": float(np.median(t)),
+        "solve_ms_p99": float(np.percentile(t, 99)),
+        "solve_ms_max": float(np.max(t)),
+        "iterations_median": float(np.median(it)),
+        "iterations_max": int(np.max(it)),
+        "failures": int(sum(statuses.values())),
+        "failures_by_status": statuses,
+        "fallbacks": int(sum(r.fallback for r in records)),
+        "suboptimal_steps": int(sum(r.suboptimal for r in records)),
+        "fallback_candidates_infeasible": int(sum(r.fallback and not r.candidate_feasible
+                                                  for r in records)),
+    }

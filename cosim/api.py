@@ -1,0 +1,264 @@
+"""The Python API: ``cosim.run`` and ``cosim.run_campaign``, the twins of the commands.
+
+    >>> import cosim
+    >>> out = cosim.run("scenarios/leak_tank1.csv", controller="pi")
+    >>> out.status, out.summary["kpis"]["iae"]["h1"] > 0
+    ('ok', True)
+    >>> out.to_pandas()[["time", "plant.h1", "ctrl.qa"]].shape
+    (401, 3)
+
+:func:`run` does what ``cosim run`` does (the command calls it): it loads the scenario, the
+plant (an FMU, or a GRU model with ``"model:FILE"``) and the controller, runs the closed loop
+and, when ``out`` is given, writes ``results.csv`` (streamed), ``summary.json``,
+``figure.png`` and ``timings.csv`` there. Bad input raises :class:`~cosim.errors.CosimError`
+(or a :class:`ValueError` of the numerical core) before anything runs; a run that fails or is
+interrupted returns with ``status`` ``"failed"`` or ``"interrupted"``, its rows kept.
+"""
+
+from __future__ import annotations
+
+import contextlib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cosim.master import RunResult
+
+__all__ = ["DEFAULT_PLANT", "RunOutput", "plant_path", "run"]
+
+#: The project's plant FMU (built on first use), whatever the current folder.
+DEFAULT_PLANT = Path(__file__).resolve().parents[1] / "fmus" / "FourTank.fmu"
+
+
+def plant_path(arg: str | Path | None) -> Path:
+    """The plant FMU: ``arg``, or the project's, built when missing.
+
+    Raises
+    ------
+    CosimError
+        ``arg`` is a folder or does not exist; the project's FMU cannot be built here.
+    """
+    from cosim.errors import CosimError
+
+    if arg is not None:
+        path = Path(arg)
+        if path.is_dir():
+            raise CosimError(f"{path}: is a folder, not an FMU file (.fmu zip archive)")
+        if not path.is_file():
+            raise CosimError(f"{path}: plant FMU not found")
+        return path
+    if not DEFAULT_PLANT.is_file():
+        try:
+            from cosim.build import build_fmus
+        except ImportError:
+            raise CosimError(f"{DEFAULT_PLANT}: plant FMU not found and cannot be built here; "
+                             "run 'cosim build-fmu' or give --plant") from None
+        build_fmus()
+        if not DEFAULT_PLANT.is_file():
+            raise CosimError(f"{DEFAULT_PLANT}: not produced by cosim build-fmu")
+    return DEFAULT_PLANT
+
+
+@dataclass
+class RunOutput:
+    """A finished closed-loop run.
+
+    Attributes
+    ----------
+    result : RunResult
+        Everything recorded (columns, rows, timings), status and reason.
+    summary : dict
+        The ``summary.json`` document: status, KPIs, controller statistics, what was run.
+    out : Path or None
+        The folder the files were written to (``None`` when ``out`` was not given).
+    """
+
+    result: RunResult
+    summary: dict
+    out: Path | None = None
+    meta: dict = field(default_factory=dict)
+
+    @property
+    def status(self) -> str:
+        """``"ok"``, ``"failed"`` or ``"interrupted"``."""
+        return self.result.status
+
+    @property
+    def reason(self) -> str:
+        """Why the run did not finish (empty when ok)."""
+        return self.result.reason
+
+    def to_pandas(self) -> Any:
+        """``results.csv`` as a DataFrame: ``time``, ``ref.h1``, ``plant.h1``, ``ctrl.qa`` …"""
+        import pandas as pd
+
+        return pd.DataFrame(self.result.rows, columns=self.result.columns)
+
+    def timings_to_pandas(self) -> Any:
+        """``timings.csv`` (wall-clock diagnostics of the controller) as a DataFrame."""
+        import pandas as pd
+
+        return pd.DataFrame(self.result.timing_rows, columns=self.result.timing_columns)
+
+
+def _plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
+           step_timeout: float | None, seed: int) -> tuple[Any, str]:
+    from controllers.model_plant import MODEL_PREFIX
+    from cosim.errors import CosimError
+
+    if plant is not None and str(plant).startswith(MODEL_PREFIX):
+        from controllers.model_plant import GRUPlant
+
+        if varmap is not None or isolate or interface != "cs":
+            raise CosimError(f"--plant {plant}: a GRU-model plant takes no --map, --isolate, "
+                             "--step-timeout or --interface")
+        return GRUPlant.from_file(str(plant), seed=seed), str(plant)
+    path = plant_path(plant)
+    if isolate:
+        from cosim.isolated import IsolatedFmuComponent
+
+        return IsolatedFmuComponent(path, name="plant", interface=interface, varmap=varmap,
+                                    timeout=step_timeout), str(path)
+    from cosim.fmu import FmuComponent
+
+    return FmuComponent(path, name="plant", interface=interface, varmap=varmap), str(path)
+
+
+def run(scenario: str | Path, plant: str | Path | None = None,
+        controller: str = "robust-mpc", map: str | Path | None = None,
+        model: str | Path | None = None, options: Mapping[str, Any] | None = None, *,
+        out: str | Path | None = None, interface: str = "cs", step: float | None = None,
+        isolate: bool = False, step_timeout: float | None = None, seed: int = 0,
+        figure: bool = True, progress: bool = False,
+        on_step: Callable[[int], None] | None = None) -> RunOutput:
+    """Run a scenario in closed loop (the Python twin of ``cosim run``).
+
+    Parameters
+    ----------
+    scenario : path
+        Scenario CSV file.
+    plant : path or str, optional
+        Plant FMU (FMI 2.0 or 3.0; default: the project's ``fmus/FourTank.fmu``, built if
+        missing), or ``"model:FILE"``: the GRU model itself as the plant.
+    controller : str
+        ``"robust-mpc"``, ``"pi"`` or ``"module:Class"``.
+    map : path, optional
+        Variable map (TOML) of a plant whose names or units differ.
+    model : path, optional
+        Model file of the robust MPC (same as ``options={"model": ...}``).
+    options : mapping, optional
+        Controller constructor options (``{"offset_free": True}``).
+    out : path, optional
+        Folder to write the run's files into (streamed ``results.csv``, ``summary.json``,
+        ``figure.png``, ``timings.csv``); nothing is written without it.
+    interface : {"cs", "me"}
+        FMI interface: Co-Simulation, or Model Exchange with fmpy's CVode.
+    step : float, optional
+        Communication step [s] (default: the controller's sample time).
+    isolate : bool
+        Run the FMU in a worker process (a crash fails the run instead of this process).
+    step_timeout : float, optional
+        Wall-clock limit of one plant or controller step [s] (implies ``isolate``).
+    seed : int
+        Seed of the measurement noise (and of a GRU plant's perturbation).
+    figure : bool
+        Draw ``figure.png`` (with ``out``).
+    progress : bool
+        Show a progress bar over the steps on standard error.
+    on_step : callable, optional
+        Called with the number of completed steps (progress bars).
+
+    Returns
+    -------
+    RunOutput
+
+    Raises
+    ------
+    CosimError
+        Bad input (scenario, map, FMU, options, output folder): nothing was run.
+    OutputError
+        ``out`` could not be written (the previous files there are intact).
+    """
+    from cosim import outpaths, registry, varmap
+    from cosim import scenario as scenario_mod
+    from cosim.isolated import DEFAULT_STEP_TIMEOUT
+    from cosim.master import Master
+
+    sc = scenario_mod.load(scenario)
+    vmap = varmap.load(map) if map is not None else None
+    isolate = bool(isolate or step_timeout is not None)
+    limit = step_timeout if step_timeout is not None else (
+        DEFAULT_STEP_TIMEOUT if isolate else None)
+    opts = dict(options or {})
+    if model is not None:
+        opts["model"] = str(model)
+    if out is not None:
+        outpaths.out_dir(out, "--out")
+    ctrl = registry.create(controller, opts)
+    plant_obj, plant_name = _plant(plant, vmap, interface, isolate, limit, seed)
+    master = Master(plant_obj, ctrl, sc, step=step, seed=seed)
+    meta = {"scenario": str(sc.path), "plant": plant_name,
+            "fmi_version": plant_obj.fmi_version, "interface": interface,
+            "isolated": isolate, "step_timeout": limit,
+            "map": str(map) if map is not None else None, "controller": controller,
+            "controller_options": opts, "seed": seed}
+    bar = None
+    if progress:
+        import sys
+
+        from tqdm import tqdm
+
+        from cosim.master import communication_times
+
+        total = len(communication_times(sc.start_time, sc.stop_time, master.dt)) - 1
+        bar = tqdm(total=total, unit="step", desc=sc.path.stem, file=sys.stderr,
+                   dynamic_ncols=True)
+        user_step = on_step
+
+        def on_step(k: int) -> None:
+            bar.update(1)
+            if user_step is not None:
+                user_step(k)
+
+    try:
+        return _execute(master, meta, out, figure, on_step, limit)
+    finally:
+        if bar is not None:
+            bar.close()
+
+
+def _execute(master: Any, meta: dict, out: str | Path | None, figure: bool,
+             on_step: Callable[[int], None] | None, limit: float | None) -> RunOutput:
+    """Run ``master`` (writing into ``out`` when given) and wrap the result."""
+    from cosim import interrupts, results
+    from cosim.errors import CosimError, SimulationFailed
+
+    if out is None:
+        result = master.run(on_step=on_step, step_timeout=limit)
+        _raise_load_error(result, CosimError, SimulationFailed)
+        return RunOutput(result, results.summary(result, meta), None, meta)
+
+    from cosim.runfolder import RunFolder
+
+    guard = interrupts.current()
+    with RunFolder(out, "--out") as folder, \
+            guard.deferred() if guard is not None else contextlib.nullcontext():
+        # signals raise only inside the master's step loop; around it (set-up, writing the
+        # results) they are recorded and acted on once everything is on disk
+        stream = results.ResultsStream(folder.path / "results.csv")
+        try:
+            result = master.run(on_step=on_step, record=stream, step_timeout=limit)
+        except BaseException:
+            stream.close()
+            raise
+        _raise_load_error(result, CosimError, SimulationFailed)
+        doc = results.write(folder.path, result, meta, figure=figure, stream=stream)
+    return RunOutput(result, doc, folder.path, meta)
+
+
+def _raise_load_error(result: RunResult, cosim_error: type, failed: type) -> None:
+    """A bad FMU found while loading it is bad input: nothing ran, nothing is written."""
+    if (not result.rows and isinstance(result.error, cosim_error)
+            and not isinstance(result.error, failed)):
+        raise result.error

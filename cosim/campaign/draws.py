@@ -1,0 +1,189 @@
+"""What each run of a campaign draws: seeded, and depending on (seed, run) only.
+
+Every ``[draw]`` key has its own random stream, ``numpy.random.default_rng([seed, run,
+crc32(key)])``: adding or removing one key does not change what the others draw, and a run
+draws the same values whichever worker runs it, in whatever order. Set-point sequences and
+initial states have streams of their own, and the run's noise seed (sensor noise, a GRU
+plant's output perturbation) is ``[seed, run]`` hashed to 32 bits. Variants of a run share all
+of it: controllers are compared on the same draws.
+"""
+
+from __future__ import annotations
+
+import zlib
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from controllers.errors import SetpointError
+from cosim.campaign.spec import CampaignSpec, Distribution
+from cosim.errors import CosimError
+
+__all__ = ["DrawContext", "RunDraw", "draw_run", "run_seed"]
+
+#: Candidates tried per set-point before a certified range is declared unusable.
+MAX_TRIES = 10_000
+
+
+def _stream(seed: int, run: int, label: str) -> np.random.Generator:
+    return np.random.default_rng([seed, run, zlib.crc32(label.encode("utf-8"))])
+
+
+def run_seed(seed: int, run: int) -> int:
+    """The noise seed of run ``run``: 32 bits of ``SeedSequence([seed, run])``."""
+    return int(np.random.SeedSequence([seed, run]).generate_state(1, dtype=np.uint32)[0])
+
+
+@dataclass(frozen=True)
+class RunDraw:
+    """Everything random about one run (shared by its variants).
+
+    Attributes
+    ----------
+    run : int
+    seed : int
+        Noise seed of the run (``cosim run --seed``; a GRU plant's perturbation too).
+    values : dict
+        ``[draw]`` key → value, applied at the start of the run (scenario column names).
+    setpoints : tuple
+        ``(time, {output: value})`` set-point changes replacing the scenario's references,
+        times from the scenario's start; empty when the spec has no ``[setpoints]``.
+    stop_time : float or None
+        The run's stop time when ``[setpoints]`` sets it.
+    plant_start : dict
+        GRU-model plant start parameters (``h1_start`` …, ``dx_1`` …).
+    initial_estimate : list of float or None
+        The observer's ``x̂_0`` (normalised) for ``[initial_state]``.
+    """
+
+    run: int
+    seed: int
+    values: dict[str, float] = field(default_factory=dict)
+    setpoints: tuple[tuple[float, dict[str, float]], ...] = ()
+    stop_time: float | None = None
+    plant_start: dict[str, float] = field(default_factory=dict)
+    initial_estimate: list[float] | None = None
+
+
+@dataclass
+class DrawContext:
+    """What drawing needs beyond the spec: the scenario's times and the model certificate.
+
+    Attributes
+    ----------
+    start_time : float
+        The scenario's start [s].
+    outputs : list of str
+        Controlled outputs that set-points are drawn for.
+    model : GRUModel or None
+        The robust MPC's (or the GRU plant's) model: normalisation, equilibria.
+    cert : Certificate or None
+        Its certificate (default set-point ranges; ``ê_o,0``).
+    ranges : dict
+        Output → certified admissible ``(lo, hi)`` [physical units].
+    """
+
+    start_time: float
+    outputs: list[str]
+    model: Any = None
+    cert: Any = None
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+    @classmethod
+    def build(cls, spec: CampaignSpec, start_time: float) -> DrawContext:
+        """Load the model and certificate when the spec needs them."""
+        needs_model = spec.initial_state is not None or (
+            spec.setpoints is not None and not spec.setpoints.ranges)
+        if not needs_model:
+            outputs = list(spec.setpoints.ranges) if spec.setpoints else []
+            return cls(start_time, outputs)
+        from controllers import certificates as certs
+        from controllers.model import DEFAULT_MODEL, GRUModel
+
+        model_path = spec.options.get("model") or spec.model or DEFAULT_MODEL
+        if spec.model_plant and spec.model is None and "model" not in spec.options:
+            model_path = spec.plant[len("model:"):]  # type: ignore[index]
+        model = GRUModel.load(model_path)
+        cert = certs.compute_certificate(model)
+        ranges = {}
+        for name, lo, hi in certs.admissible_ranges(cert, model):
+            if lo is None or hi is None:
+                raise CosimError(f"{spec.path}: [setpoints]: the certified admissible range "
+                                 f"of {name} is empty for {model_path} (give the ranges)")
+            ranges[name] = (lo, hi)
+        outputs = list(spec.setpoints.ranges or model.output_names) if spec.setpoints else \
+            list(model.output_names)
+        return cls(start_time, outputs, model, cert, ranges)
+
+
+def _sample(dist: Distribution, rng: np.random.Generator) -> float:
+    if dist.kind == "constant":
+        return dist.params[0]
+    if dist.kind == "uniform":
+        return float(rng.uniform(dist.params[0], dist.params[1]))
+    if dist.kind == "normal":
+        return float(rng.normal(dist.params[0], dist.params[1]))
+    return float(dist.params[int(rng.integers(len(dist.params)))])
+
+
+def _setpoint(spec: CampaignSpec, ctx: DrawContext, rng: np.random.Generator) -> dict[str,
+                                                                                       float]:
+    ranges = spec.setpoints.ranges if spec.setpoints else {}  # type: ignore[union-attr]
+    if ranges:
+        return {o: float(rng.uniform(lo, hi)) for o, (lo, hi) in ranges.items()}
+    model, cert = ctx.model, ctx.cert
+    for _ in range(MAX_TRIES):
+        y = {o: float(rng.uniform(*ctx.ranges[o])) for o in model.output_names}
+        y_norm = model.normalize_y(np.array([y[o] for o in model.output_names]))
+        if cert.failures(y_norm):
+            continue
+        try:
+            cert.reference(y_norm, check=False)  # reachable with ‖ū‖∞ ≤ 1
+        except SetpointError:
+            continue
+        return y
+    raise CosimError(f"{spec.path}: [setpoints]: no certified, reachable set-point found in "
+                     f"{MAX_TRIES} draws")
+
+
+def draw_run(spec: CampaignSpec, run: int, ctx: DrawContext) -> RunDraw:
+    """The draws of run ``run`` (see the module docstring)."""
+    values = {d.key: _sample(d, _stream(spec.seed, run, "draw:" + d.key)) for d in spec.draws}
+    setpoints: list[tuple[float, dict[str, float]]] = []
+    stop = None
+    if spec.setpoints is not None:
+        rng = _stream(spec.seed, run, "setpoints")
+        sp = spec.setpoints
+        setpoints = [(ctx.start_time + j * sp.hold, _setpoint(spec, ctx, rng))
+                     for j in range(sp.count)]
+        stop = ctx.start_time + sp.count * sp.hold
+    plant_start: dict[str, float] = {}
+    x_hat0 = None
+    if spec.initial_state is not None:
+        plant_start, x_hat0 = _initial_state(spec, ctx, run, setpoints, values)
+    return RunDraw(run, run_seed(spec.seed, run), values, tuple(setpoints), stop, plant_start,
+                   x_hat0)
+
+
+def _initial_state(spec: CampaignSpec, ctx: DrawContext, run: int,
+                   setpoints: list[tuple[float, dict[str, float]]],
+                   values: dict[str, float]) -> tuple[dict[str, float], list[float]]:
+    """Start output near the first set-point, state offset within the observer bound."""
+    from controllers.equilibrium import equilibrium_for_output
+
+    model, init = ctx.model, spec.initial_state
+    assert init is not None and model is not None
+    rng = _stream(spec.seed, run, "initial_state")
+    first = setpoints[0][1] if setpoints else {
+        o: values.get(f"ref.{o}", float(model.y_offset[j]))
+        for j, o in enumerate(model.output_names)}
+    start = {o: first[o] + float(rng.uniform(-init.output_offset, init.output_offset))
+             for o in model.output_names}
+    bound = init.observer_error if init.observer_error is not None else ctx.cert.e_o0
+    dx = rng.uniform(-bound, bound, model.n)
+    x_eq, _ = equilibrium_for_output(model, model.normalize_y(
+        np.array([start[o] for o in model.output_names])))
+    plant = {f"{o}_start": v for o, v in start.items()}
+    plant.update({f"dx_{i + 1}": float(v) for i, v in enumerate(dx)})
+    return plant, [float(v) for v in x_eq]

@@ -1,0 +1,557 @@
+"""Running a campaign on Dask: prepare, submit, collect, write, report.
+
+The engine is Dask distributed: by default a ``LocalCluster`` on 127.0.0.1 (worker processes,
+one thread each, as many as asked, default the number of cores), or an existing cluster
+(``scheduler="tcp://host:port"``, started with ``dask scheduler`` and ``dask worker``). No
+filesystem is shared: the client sends the campaign's files once (:class:`~cosim.campaign.
+task.Assets`, scattered to every worker) and each task returns its results as data; this
+process writes every file under the output folder:
+
+* ``campaign.json``: the spec, its fingerprint (spec text and input files), the plan;
+* ``runs/<run>-<variant>/results.csv`` and ``summary.json`` as ``cosim run`` writes them, as
+  soon as the run comes back (a campaign stopped by Ctrl-C or SIGTERM keeps them, and
+  ``resume=True`` runs only the runs that are missing);
+* ``runs.parquet``, ``summary.json`` and ``report.png`` (:mod:`cosim.campaign.report`).
+
+A run that fails, times out or kills its worker (a segfault in an FMU) is recorded as failed
+with its reason; the campaign goes on. With the local cluster a worker that dies is
+restarted and its run is not retried (``distributed.scheduler.allowed-failures = 0``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import logging
+import math
+import os
+import shutil
+import signal
+import sys
+import time
+from collections.abc import Callable, Iterator
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim import atomicio, interrupts
+from cosim.campaign import report
+from cosim.campaign.draws import DrawContext, RunDraw, draw_run
+from cosim.campaign.spec import CampaignSpec, load
+from cosim.campaign.task import Assets, run_task
+from cosim.errors import CosimError
+
+__all__ = ["CampaignResult", "default_workers", "run_campaign"]
+
+#: Seconds a run may take by default: this much plus :data:`TIMEOUT_PER_STEP` per step.
+TIMEOUT_BASE = 60.0
+TIMEOUT_PER_STEP = 0.5
+#: Files of a campaign folder (besides ``runs/``).
+CAMPAIGN_FILES = ("campaign.json", "runs.parquet", "summary.json", "report.png")
+
+
+@dataclass
+class CampaignResult:
+    """What a campaign did.
+
+    Attributes
+    ----------
+    out : Path
+        The output folder.
+    table : pandas.DataFrame
+        ``runs.parquet``: one row per run and variant on disk.
+    summary : dict
+        ``summary.json``.
+    status : str
+        ``"ok"`` (every planned run ran), ``"failed"`` (some runs failed) or
+        ``"interrupted"``.
+    ran : int
+        Runs executed by this call (resumed ones excluded).
+    """
+
+    out: Path
+    table: Any
+    summary: dict
+    status: str
+    ran: int
+    error: BaseException | None = None
+
+
+def default_workers() -> int:
+    """Number of local workers when none is given: the cores this process may use."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+# ---------------------------------------------------------------------------------------------
+# Preparation (client side, before any run): everything a bad spec can get wrong fails here
+# ---------------------------------------------------------------------------------------------
+
+@dataclass
+class _Plan:
+    spec: CampaignSpec
+    assets: Assets
+    tasks: list[dict[str, Any]]      # one per (run, variant), draws included
+    fingerprint: str
+    timeout: float
+
+
+def _read(path: Path, what: str) -> bytes:
+    try:
+        return path.read_bytes()
+    except OSError as exc:
+        raise CosimError(f"{path}: cannot read the {what}: {exc.strerror}") from None
+
+
+def _plant_file(spec: CampaignSpec) -> Path:
+    if spec.plant is not None and not spec.model_plant:
+        return Path(spec.plant)
+    from cosim.api import plant_path
+
+    return plant_path(None)
+
+
+def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, Any]) -> float:
+    """Wire run 0 of every variant (as a worker will) and return the controller sample time.
+
+    Raises :class:`CosimError` naming the spec's line for a draw key the plant or the
+    scenario does not know.
+    """
+    from cosim import scenario as scenario_mod
+    from cosim import varmap
+    from cosim.master import Master
+
+    if spec.model_plant:
+        from controllers.model_plant import GRUPlant
+
+        plant: Any = GRUPlant.from_file(spec.plant or "")
+    else:
+        from cosim.fmu import FmuComponent
+
+        vmap = varmap.load(spec.map) if spec.map else None
+        plant = FmuComponent(_plant_file(spec), interface=spec.interface, varmap=vmap)
+    sc = scenario_mod.load(spec.scenario)
+    at_start = dict(draw.values)
+    at_start.update({f"plant.{k}": v for k, v in draw.plant_start.items()})
+    from cosim.campaign.spec import _Locator
+
+    loc = _Locator(spec.path, spec.text)
+    settable = plant.settable(True) if hasattr(plant, "settable") else set()
+    measured = {s.name for s in plant.outputs}
+    for key in draw.values:
+        parts = key.split(".")
+        if parts[0] == "plant" and key[len("plant."):] not in settable:
+            raise loc.error(f"draw '{key}': the plant has no input or parameter "
+                            f"'{key[len('plant.'):]}'", "draw", key)
+        if parts[0] == "sensor" and ".".join(parts[1:-1]) not in measured:
+            raise loc.error(f"draw '{key}': the plant has no output "
+                            f"'{'.'.join(parts[1:-1])}'", "draw", key)
+    sc = sc.with_changes(at_start, list(draw.setpoints) or None, draw.stop_time)
+    sample = None
+    for name, ctrl in variant_controllers.items():
+        try:
+            Master(plant, ctrl, sc, seed=draw.seed)
+        except CosimError as exc:
+            raise CosimError(f"{spec.path}: variant '{name}': {exc}") from None
+        sample = sample or getattr(ctrl, "sample_time", None)
+    return float(sample or 1.0)
+
+
+def prepare(spec: CampaignSpec) -> _Plan:
+    """Check the spec against the real plant and controllers, draw every run, pack the
+    files; raises :class:`CosimError` (exit 2) before anything runs."""
+    from controllers.model import DEFAULT_MODEL
+    from cosim import registry
+    from cosim import scenario as scenario_mod
+
+    files: dict[str, bytes] = {"scenario.csv": _read(spec.scenario, "scenario")}
+    if spec.model_plant:
+        plant = ("model", "plant_model.json")
+        files["plant_model.json"] = _read(Path(spec.plant[len("model:"):]),  # type: ignore[index]
+                                          "plant model")
+    else:
+        plant = ("fmu", "plant.fmu")
+        files["plant.fmu"] = _read(_plant_file(spec), "plant FMU")
+    if spec.map is not None:
+        files["plant.map.toml"] = _read(spec.map, "variable map")
+    sc = scenario_mod.load(spec.scenario)
+    ctx = DrawContext.build(spec, sc.start_time)
+    draws = [draw_run(spec, i, ctx) for i in range(spec.runs)]
+    controllers, variant_options = {}, {}
+    for k, v in enumerate(spec.variants):
+        options = dict(v.options)
+        if "model" not in options and registry.CONTROLLERS.get(v.controller) == \
+                registry.CONTROLLERS["robust-mpc"]:
+            options["model"] = str(DEFAULT_MODEL)
+        local = dict(options)
+        if "model" in options:
+            name = f"model_{k}.json"
+            files[name] = _read(Path(options["model"]), "model file")
+            options["model"] = name
+        try:
+            controllers[v.name] = registry.create(v.controller, local)
+        except CosimError as exc:
+            raise CosimError(f"{spec.path}:{v.line or 1}: variant '{v.name}': {exc}") from None
+        variant_options[v.name] = options
+    sample = _validate(spec, draws[0], controllers)
+    duration = (draws[0].stop_time or sc.stop_time) - sc.start_time
+    timeout = spec.timeout or TIMEOUT_BASE + TIMEOUT_PER_STEP * duration / sample
+    assets = Assets.of(files)
+    fingerprint = hashlib.sha256(spec.text.encode() + assets.digest.encode()).hexdigest()
+    tasks = []
+    for d in draws:
+        for v in spec.variants:
+            tasks.append({
+                "run": d.run, "variant": v.name, "controller": v.controller,
+                "options": variant_options[v.name], "draw": asdict(d),
+                "scenario": "scenario.csv", "scenario_name": str(spec.scenario),
+                "plant": plant, "map": "plant.map.toml" if spec.map else None,
+                "interface": spec.interface, "isolate": spec.isolate,
+                "step_timeout": spec.step_timeout, "timeout": timeout,
+            })
+    return _Plan(spec, assets, tasks, fingerprint, timeout)
+
+
+# ---------------------------------------------------------------------------------------------
+# The output folder
+# ---------------------------------------------------------------------------------------------
+
+def _finished(runs_dir: Path, task: dict[str, Any]) -> bool:
+    path = runs_dir / report.run_folder_name(task["run"], task["variant"]) / "summary.json"
+    try:
+        doc = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return doc.get("status") in ("ok", "failed")
+
+
+def _open_folder(plan: _Plan, out: Path, resume: bool, force: bool) -> list[dict[str, Any]]:
+    """Check or start ``campaign.json``; returns the tasks still to run."""
+    spec = plan.spec
+    marker = out / "campaign.json"
+    runs_dir = out / "runs"
+    if marker.exists() and not (resume or force):
+        raise CosimError(f"{out}: holds a campaign already; --resume to finish it, --force to "
+                         "start it over, or choose another --out")
+    if marker.exists() and resume:
+        try:
+            old = json.loads(marker.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise CosimError(f"{marker}: unreadable ({exc}); use --force to start over") \
+                from None
+        if old.get("fingerprint") != plan.fingerprint:
+            raise CosimError(f"{out}: --resume: the spec or its input files changed since this "
+                             "campaign started (fingerprint differs); use --force to start "
+                             "over or another --out")
+    elif force:
+        shutil.rmtree(runs_dir, ignore_errors=True)
+        for name in CAMPAIGN_FILES:
+            with contextlib.suppress(FileNotFoundError):
+                (out / name).unlink()
+    doc = {"name": spec.name, "fingerprint": plan.fingerprint, "runs": spec.runs,
+           "seed": spec.seed, "variants": [v.name for v in spec.variants],
+           "timeout_s": plan.timeout, "spec_file": str(spec.path), "spec": spec.text}
+    atomicio.write_text(marker, json.dumps(doc, indent=2) + "\n")
+    runs_dir.mkdir(parents=True, exist_ok=True)
+    return [t for t in plan.tasks if not (resume and _finished(runs_dir, t))]
+
+
+def _write_run(out: Path, spec: CampaignSpec, task: dict[str, Any],
+               outcome: dict[str, Any] | None, error: BaseException | None) -> str:
+    """Write one run's folder (as ``cosim run`` does); returns its status."""
+    from cosim import results
+    from cosim.master import RunResult
+
+    if outcome is None:
+        reason = _error_reason(error, task)
+        result = RunResult(columns=["time"], rows=[], status="failed", reason=reason)
+        theorem = None
+    else:
+        result = outcome["result"]
+        rows = np.asarray(result.rows, dtype=float)
+        result.rows = rows.tolist()
+        theorem = outcome.get("theorem")
+    draw = task["draw"]
+    meta: dict[str, Any] = {
+        "scenario": task["scenario_name"], "plant": str(spec.plant or "project FMU"),
+        "controller": task["controller"], "controller_options": task["options"],
+        "seed": draw["seed"],
+        "campaign": {"name": spec.name, "run": task["run"], "variant": task["variant"],
+                     "draws": draw["values"], "setpoints": draw["setpoints"],
+                     "plant_start": draw["plant_start"]},
+    }
+    folder = out / "runs" / report.run_folder_name(task["run"], task["variant"])
+    if theorem is not None:
+        from cosim import kpis
+
+        k = kpis.compute(result.columns, result.rows, result.outputs, result.references,
+                         result.inputs, result.bounds)
+        meta["campaign"]["theorem"] = report.theorem_checks(
+            result.columns, np.asarray(result.rows, dtype=float).reshape(len(result.rows), -1),
+            theorem, k)
+    results.write(folder, result, meta, figure=spec.figures)
+    return result.status
+
+
+def _error_reason(error: BaseException | None, task: dict[str, Any]) -> str:
+    name = type(error).__name__ if error is not None else "unknown error"
+    if name == "KilledWorker":
+        return ("the run killed its worker process (a crash in native code, or stuck past "
+                f"its timeout of {task['timeout']:g} s); the worker was restarted")
+    return f"{name}: {error}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Dask
+# ---------------------------------------------------------------------------------------------
+
+@contextlib.contextmanager
+def _signals_ignored() -> Iterator[None]:
+    """Worker processes started in the block ignore Ctrl-C, SIGTERM and SIGHUP: the client
+    handles them (and closes the cluster), so a signal to the process group does not kill
+    workers half-way."""
+    saved = {}
+    for sig in interrupts.HANDLED:
+        with contextlib.suppress(ValueError, OSError):
+            saved[sig] = signal.signal(sig, signal.SIG_IGN)
+    try:
+        yield
+    finally:
+        for sig, old in saved.items():
+            signal.signal(sig, old)
+
+
+@contextlib.contextmanager
+def _cluster(workers: int | None, scheduler: str | None) -> Iterator[Any]:
+    """A Dask client on a new local cluster, or on the cluster at ``scheduler``."""
+    import dask
+    from distributed import Client, LocalCluster
+
+    loggers = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
+    levels = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL)
+    cluster = None
+    try:
+        if scheduler:
+            try:
+                client = Client(scheduler, timeout="10s")
+            except (OSError, TimeoutError) as exc:
+                raise CosimError(f"--scheduler {scheduler}: cannot connect: {exc}") from None
+        else:
+            config = {"distributed.scheduler.allowed-failures": 0,
+                      # a worker holds only the run it executes: when it dies, no other run
+                      # is lost with it
+                      "distributed.scheduler.worker-saturation": 1.0,
+                      # the isolated FMU worker is a child process of the Dask worker
+                      "distributed.worker.daemon": False,
+                      "distributed.admin.tick.limit": "1h"}
+            with dask.config.set(config), _signals_ignored():
+                # every server on 127.0.0.1, on free ports (no dashboard on 8787 for all)
+                cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
+                                       processes=True, host="127.0.0.1",
+                                       dashboard_address="127.0.0.1:0",
+                                       worker_dashboard_address="127.0.0.1:0",
+                                       silence_logs=logging.CRITICAL)
+                client = Client(cluster)
+        try:
+            yield client
+        finally:
+            guard = interrupts.current()
+            with guard.deferred() if guard is not None else contextlib.nullcontext():
+                with contextlib.suppress(Exception):
+                    client.close(timeout=10)
+                if cluster is not None:
+                    with contextlib.suppress(Exception):
+                        cluster.close(timeout=10)
+    finally:
+        for lg, level in zip(loggers, levels, strict=True):
+            lg.setLevel(level)
+
+
+def _identity(value: Any) -> Any:
+    return value
+
+
+@dataclass
+class ExecutionStats:
+    """What :func:`_execute` measured: runs done, seconds spent writing them (client side),
+    seconds until the cluster was ready, and whatever ``probe`` returned."""
+
+    done: int = 0
+    write_s: float = 0.0
+    startup_s: float = 0.0
+    probe: Any = None
+
+
+def _execute(plan: _Plan, pending: list[dict[str, Any]], out: Path, workers: int | None,
+             scheduler: str | None, on_done: Callable[[str], None],
+             probe: Callable[[Any], Any] | None = None) -> ExecutionStats:
+    """Run ``pending`` on Dask, writing each run as it comes back.
+
+    ``probe(client)``, when given, is called after the last run, before the cluster closes
+    (the benchmark reads the workers' memory with it).
+    """
+    from distributed import as_completed
+
+    stats = ExecutionStats()
+    t0 = time.perf_counter()
+    with _cluster(workers, scheduler) as client:
+        stats.startup_s = time.perf_counter() - t0
+        # a task returning the files, not scattered data: the scheduler keeps its definition,
+        # so the files are recomputed if every worker holding them dies (a crashing plant)
+        assets = client.submit(_identity, plan.assets, key=f"cosim-assets-{plan.assets.digest}",
+                               pure=False)
+        futures = {}
+        for task in pending:
+            key = f"cosim-{plan.fingerprint[:10]}-{task['run']}-{task['variant']}"
+            futures[client.submit(run_task, task, assets, key=key, pure=False)] = task
+        try:
+            for future in as_completed(futures):
+                task = futures.pop(future)
+                try:
+                    # blocks when the result was lost with its worker and is being recomputed
+                    outcome, error = future.result(), None
+                except Exception as exc:  # KilledWorker, CancelledError, a bug on the worker
+                    outcome, error = None, exc
+                guard = interrupts.current()
+                t1 = time.perf_counter()
+                with guard.deferred() if guard is not None else contextlib.nullcontext():
+                    status = _write_run(out, plan.spec, task, outcome, error)
+                stats.write_s += time.perf_counter() - t1
+                stats.done += 1
+                on_done(status)
+                if guard is not None:
+                    guard.check()
+            if probe is not None:
+                stats.probe = probe(client)
+        finally:
+            if futures:
+                with contextlib.suppress(Exception):
+                    client.cancel(list(futures), force=True)
+    return stats
+
+
+# ---------------------------------------------------------------------------------------------
+# The whole campaign
+# ---------------------------------------------------------------------------------------------
+
+def build_report(spec: CampaignSpec, out: Path, write: bool = True) -> tuple[Any, dict]:
+    """Rebuild ``runs.parquet``, ``summary.json`` and ``report.png`` from the run folders."""
+    import pandas as pd
+
+    rows = []
+    keys = [d.key for d in spec.draws]
+    for run in range(spec.runs):
+        for v in spec.variants:
+            path = out / "runs" / report.run_folder_name(run, v.name) / "summary.json"
+            try:
+                doc = json.loads(path.read_text(encoding="utf-8"))
+            except (OSError, ValueError):
+                continue
+            rows.append(report.kpi_row(doc, keys))
+    columns = ["run", "seed", "variant", "status", "reason", *keys, *report.KPI_COLUMNS]
+    table = pd.DataFrame(rows, columns=None if rows else columns)
+    summary = report.summarize(table, spec.name, spec.runs * len(spec.variants)) if rows \
+        else {"campaign": spec.name, "planned": spec.runs * len(spec.variants), "runs": 0}
+    if write:
+        report.write_table(table, out / "runs.parquet")
+        report.write_summary(summary, out / "summary.json")
+        if rows:
+            report.write_figure(table, out / "runs", out / "report.png",
+                                f"campaign {spec.name}: {len(table)} runs")
+    return table, summary
+
+
+def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None, *,
+                 workers: int | None = None, scheduler: str | None = None,
+                 resume: bool = False, force: bool = False,
+                 progress: bool = False) -> CampaignResult:
+    """Run a campaign (the Python twin of ``cosim campaign``).
+
+    Parameters
+    ----------
+    spec : CampaignSpec or path
+        The specification (:func:`cosim.campaign.spec.load` reads a file).
+    out : path, optional
+        Output folder (default ``results/campaigns/<name>``).
+    workers : int, optional
+        Local Dask workers (default: the number of cores); ignored with ``scheduler``.
+    scheduler : str, optional
+        Address of an existing Dask scheduler (``tcp://host:port``).
+    resume : bool
+        Run only the runs that are not on disk yet (the spec must be unchanged).
+    force : bool
+        Start over in a folder that holds a campaign.
+    progress : bool
+        Show a progress bar over runs on standard error.
+
+    Returns
+    -------
+    CampaignResult
+        Also when interrupted (``status="interrupted"``, ``error`` the
+        :class:`~cosim.interrupts.Interrupted`).
+
+    Raises
+    ------
+    CosimError
+        A bad spec or configuration, before any run.
+    """
+    from cosim.runfolder import RunFolder
+
+    if not isinstance(spec, CampaignSpec):
+        spec = load(spec)
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise CosimError(f"--workers {workers!r}: expected a positive integer")
+    out = Path(out) if out is not None else Path("results") / "campaigns" / spec.name
+    plan = prepare(spec)
+    workers = workers or default_workers()
+    error: BaseException | None = None
+    with RunFolder(out, "--out") as folder:
+        pending = _open_folder(plan, folder.path, resume, force)
+        bar = None
+        if progress and pending:
+            from tqdm import tqdm
+
+            bar = tqdm(total=len(pending), unit="run", desc=spec.name, file=sys.stderr,
+                       dynamic_ncols=True)
+        failed_now = [0]
+
+        def on_done(status: str) -> None:
+            failed_now[0] += status != "ok"
+            if bar is not None:
+                bar.update(1)
+                bar.set_postfix(failed=failed_now[0], refresh=False)
+
+        ran = 0
+        t0 = time.perf_counter()
+        try:
+            if pending:
+                ran = _execute(plan, pending, folder.path, workers, scheduler, on_done).done
+        except KeyboardInterrupt as exc:
+            error = exc
+        finally:
+            if bar is not None:
+                bar.close()
+        guard = interrupts.current()
+        with guard.deferred() if guard is not None else contextlib.nullcontext():
+            table, summary = build_report(spec, folder.path)
+            summary["wall_time_s"] = round(time.perf_counter() - t0, 3)
+            summary["workers"] = scheduler or workers
+            report.write_summary(summary, folder.path / "summary.json")
+    complete = summary.get("runs", 0) == spec.runs * len(spec.variants)
+    status = ("interrupted" if error is not None or not complete
+              else "failed" if summary.get("failed", 0) else "ok")
+    return CampaignResult(folder.path, table, summary, status, ran, error)
+
+
+def _fmt(value: Any) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "-"
+    return f"{value:.3g}" if isinstance(value, float) else str(value)

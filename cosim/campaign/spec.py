@@ -1,0 +1,442 @@
+"""Campaign specification files (TOML): what to run, how often, and what to draw per run.
+
+A campaign runs one scenario many times, each run with its own seeded draws (plant parameters,
+sensor perturbations, set-point sequences, initial states), once per controller *variant*, so
+that controllers are compared on the same draws. Example::
+
+    [campaign]
+    name = "pump-mismatch"
+    runs = 50
+    seed = 3
+    scenario = "scenarios/paper_steps.csv"
+    controller = "robust-mpc"          # registry name or module:Class (as cosim run)
+    # plant = "fmus/FourTank.fmu"      # or "model:controllers/models/fourtank_gru.json"
+    # map = "...", model = "...", interface = "cs", timeout = 600, isolate = false
+
+    [controller.options]               # as cosim run --option
+    offset_free = true
+
+    [draw]                             # per-run constants at t = 0, keyed like scenario columns
+    "plant.gamma_b" = { uniform = [0.37, 0.43] }
+    "plant.a2" = { normal = [1.51e-4, 3e-6] }
+    "sensor.h1.noise" = { uniform = [0.0, 0.003] }
+
+    [setpoints]                        # random set-point sequences replacing the scenario's
+    count = 4                          # set-points per run
+    hold = 2500                        # seconds each; the run lasts count × hold
+    # h1 = [0.6, 1.4]                  # range per output; default: the certified admissible
+                                       # (and reachable) set-points of the robust MPC's model
+
+    [initial_state]                    # GRU-model plants ("model:...") only
+    output_offset = 0.05               # start at the equilibrium of the first set-point ± this
+    # observer_error = 0.02            # ‖x_0 − x̂_0‖∞ drawn up to this (default ê_o,0)
+
+    [[variant]]                        # optional; default: one variant, the campaign's
+    name = "offset-free"
+    controller = "robust-mpc"
+    options = { offset_free = true }
+
+Relative paths are looked up beside the spec file first, then in the current folder. Every
+error is a :class:`~cosim.errors.CosimError` ``file:line: message`` (exit 2).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cosim.errors import CosimError
+
+__all__ = ["CampaignSpec", "Distribution", "InitialState", "SetpointSpec", "Variant", "load"]
+
+#: Most runs one campaign may ask for.
+MAX_RUNS = 1_000_000
+#: Distributions a ``[draw]`` entry may name, with their parameter count.
+DISTRIBUTIONS = {"uniform": 2, "normal": 2, "choice": None}
+_CAMPAIGN_KEYS = {"name", "runs", "seed", "scenario", "controller", "plant", "map", "model",
+                  "interface", "timeout", "isolate", "step_timeout", "figures"}
+_TOP_KEYS = {"campaign", "controller", "draw", "setpoints", "initial_state", "variant"}
+_VARIANT_KEYS = {"name", "controller", "options", "model"}
+_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+
+
+@dataclass(frozen=True)
+class Distribution:
+    """One ``[draw]`` entry: ``kind`` in uniform/normal/choice/constant and its parameters."""
+
+    key: str
+    kind: str
+    params: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class SetpointSpec:
+    """``[setpoints]``: ``count`` set-points held ``hold`` seconds each; ``ranges`` per output
+    (physical units), empty for the certified admissible range."""
+
+    count: int
+    hold: float
+    ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class InitialState:
+    """``[initial_state]`` of a GRU-model plant: start output offset [m] and observer error
+    bound (normalised; ``None``: ``ê_o,0`` of the certificate)."""
+
+    output_offset: float = 0.0
+    observer_error: float | None = None
+
+
+@dataclass(frozen=True)
+class Variant:
+    """A controller configuration every draw is run with."""
+
+    name: str
+    controller: str
+    options: dict[str, Any]
+    line: int = 0
+
+
+@dataclass
+class CampaignSpec:
+    """A parsed campaign specification (see the module docstring)."""
+
+    path: Path
+    name: str
+    runs: int
+    seed: int
+    scenario: Path
+    controller: str
+    options: dict[str, Any]
+    plant: str | None = None
+    map: Path | None = None
+    model: Path | None = None
+    interface: str = "cs"
+    timeout: float | None = None
+    isolate: bool = False
+    step_timeout: float | None = None
+    figures: bool = False
+    draws: tuple[Distribution, ...] = ()
+    setpoints: SetpointSpec | None = None
+    initial_state: InitialState | None = None
+    variants: tuple[Variant, ...] = ()
+    text: str = ""
+
+    @property
+    def model_plant(self) -> bool:
+        """The plant is a GRU model file (``plant = "model:..."``)."""
+        return self.plant is not None and self.plant.startswith("model:")
+
+
+class _Locator:
+    """``file:line`` of keys in a TOML text (tomllib gives no positions)."""
+
+    def __init__(self, path: Path, text: str) -> None:
+        self.path = path
+        self.lines = text.splitlines()
+
+    def line(self, table: str | None, key: str | None = None, nth: int = 0) -> int:
+        """Line of ``key`` in ``[table]`` (the ``nth`` ``[[table]]``), or of the header."""
+        current, count, header = None, -1, 0
+        for i, raw in enumerate(self.lines, start=1):
+            s = raw.strip()
+            m = re.match(r"^\[\[\s*([^\]]+?)\s*\]\]", s) or re.match(r"^\[\s*([^\]]+?)\s*\]", s)
+            if m:
+                current = m.group(1).replace('"', "").replace(" ", "")
+                if current == table:
+                    count += 1
+                    if count == nth:
+                        header = i
+                continue
+            if key is None or current != table or count != nth:
+                continue
+            k = re.match(r'^("([^"]*)"|([A-Za-z0-9_.-]+))\s*=', s)
+            if k and (k.group(2) if k.group(2) is not None else k.group(3)) == key:
+                return i
+        if table is None and key is not None:
+            k = re.escape(key)
+            for i, raw in enumerate(self.lines, start=1):
+                if re.match(rf'^\s*("?{k}"?\s*=|\[\[?\s*"?{k}"?\s*[\].])', raw):
+                    return i
+        return header or 1
+
+    def error(self, message: str, table: str | None, key: str | None = None,
+              nth: int = 0) -> CosimError:
+        return CosimError(f"{self.path}:{self.line(table, key, nth)}: {message}")
+
+
+def _resolve(raw: str, base: Path) -> Path:
+    path = Path(raw).expanduser()
+    if path.is_absolute():
+        return path
+    beside = base / path
+    return beside if beside.exists() or not path.exists() else path
+
+
+def _number(value: Any, loc: _Locator, table: str, key: str, *, low: float | None = None,
+            integer: bool = False, positive: bool = False) -> float:
+    ok = isinstance(value, int | float) and not isinstance(value, bool)
+    if ok and integer:
+        ok = isinstance(value, int)
+    if ok and not math.isfinite(value):
+        ok = False
+    if ok and low is not None and value < low:
+        ok = False
+    if ok and positive and value <= 0:
+        ok = False
+    if not ok:
+        what = "an integer" if integer else "a number"
+        if positive:
+            what = f"a positive {what.split()[-1]}"
+        elif low is not None:
+            what = f"{what} >= {low:g}"
+        raise loc.error(f"{key} = {value!r}: expected {what}", table, key)
+    return value
+
+
+def _file(value: Any, loc: _Locator, table: str, key: str, kind: str) -> Path:
+    if not isinstance(value, str) or not value:
+        raise loc.error(f"{key}: expected the path of the {kind} as a string", table, key)
+    path = _resolve(value, loc.path.parent)
+    if not path.is_file():
+        raise loc.error(f"{key} = {value!r}: {kind} not found (looked beside the spec, "
+                        f"{loc.path.parent}, and in the current folder)", table, key)
+    return path
+
+
+def _distribution(key: str, value: Any, loc: _Locator) -> Distribution:
+    if isinstance(value, int | float) and not isinstance(value, bool):
+        return Distribution(key, "constant", (float(_number(value, loc, "draw", key)),))
+    if not isinstance(value, dict) or len(value) != 1:
+        raise loc.error(f"draw '{key}': expected a number or one of "
+                        "{ uniform = [low, high] }, { normal = [mean, sd] }, "
+                        "{ choice = [v1, v2, ...] }", "draw", key)
+    (kind, params), = value.items()
+    if kind not in DISTRIBUTIONS:
+        raise loc.error(f"draw '{key}': unknown distribution '{kind}' (known: "
+                        f"{', '.join(DISTRIBUTIONS)})", "draw", key)
+    if not isinstance(params, list) or not params or not all(
+            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+            for v in params):
+        raise loc.error(f"draw '{key}': {kind} needs a list of finite numbers", "draw", key)
+    want = DISTRIBUTIONS[kind]
+    if want is not None and len(params) != want:
+        raise loc.error(f"draw '{key}': {kind} needs {want} numbers, got {len(params)}",
+                        "draw", key)
+    if kind == "uniform" and params[0] > params[1]:
+        raise loc.error(f"draw '{key}': uniform = [{params[0]}, {params[1]}]: the low end is "
+                        "above the high end", "draw", key)
+    if kind == "normal" and params[1] < 0:
+        raise loc.error(f"draw '{key}': normal standard deviation {params[1]} is negative",
+                        "draw", key)
+    return Distribution(key, kind, tuple(float(v) for v in params))
+
+
+def _draw_key(key: str, loc: _Locator) -> None:
+    parts = key.split(".")
+    ok = ((parts[0] == "plant" and len(parts) >= 2 and all(parts[1:]))
+          or (parts[0] == "sensor" and len(parts) >= 3 and all(parts[1:])
+              and parts[-1] in ("bias", "noise", "uniform"))
+          or (parts[0] == "ref" and len(parts) == 2 and parts[1]))
+    if not ok:
+        raise loc.error(f"draw '{key}': expected a scenario column name: plant.<variable>, "
+                        "sensor.<output>.bias|noise|uniform or ref.<output>", "draw", key)
+
+
+def _setpoints(table: Any, loc: _Locator) -> SetpointSpec:
+    if not isinstance(table, dict):
+        raise loc.error("[setpoints] must be a table", "setpoints")
+    count = int(_number(table.get("count", 1), loc, "setpoints", "count", integer=True,
+                        positive=True))
+    if "hold" not in table:
+        raise loc.error("[setpoints]: 'hold' (seconds each set-point is held) is missing",
+                        "setpoints")
+    hold = float(_number(table["hold"], loc, "setpoints", "hold", positive=True))
+    ranges = {}
+    for key, value in table.items():
+        if key in ("count", "hold"):
+            continue
+        if (not isinstance(value, list) or len(value) != 2 or not all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value) or value[0] > value[1]):
+            raise loc.error(f"[setpoints] {key} = {value!r}: expected a range [low, high] of "
+                            "the output (physical units)", "setpoints", key)
+        ranges[key] = (float(value[0]), float(value[1]))
+    return SetpointSpec(count, hold, ranges)
+
+
+def _initial_state(table: Any, loc: _Locator) -> InitialState:
+    if not isinstance(table, dict):
+        raise loc.error("[initial_state] must be a table", "initial_state")
+    unknown = set(table) - {"output_offset", "observer_error"}
+    if unknown:
+        key = sorted(unknown)[0]
+        raise loc.error(f"[initial_state]: unknown key '{key}' (known: output_offset, "
+                        "observer_error)", "initial_state", key)
+    offset = float(_number(table.get("output_offset", 0.0), loc, "initial_state",
+                           "output_offset", low=0.0))
+    err = table.get("observer_error")
+    if err is not None:
+        err = float(_number(err, loc, "initial_state", "observer_error", low=0.0))
+    return InitialState(offset, err)
+
+
+def _variants(items: Any, loc: _Locator, controller: str,
+              options: dict[str, Any]) -> tuple[Variant, ...]:
+    if not isinstance(items, list):
+        raise loc.error("variant: use [[variant]] tables", None, "variant")
+    out, seen = [], set()
+    for k, item in enumerate(items):
+        line = loc.line("variant", None, k)
+        if not isinstance(item, dict):
+            raise loc.error("[[variant]] must be a table", "variant", None, k)
+        unknown = set(item) - _VARIANT_KEYS
+        if unknown:
+            key = sorted(unknown)[0]
+            raise loc.error(f"[[variant]]: unknown key '{key}' (known: "
+                            f"{', '.join(sorted(_VARIANT_KEYS))})", "variant", key, k)
+        name = item.get("name")
+        if not isinstance(name, str) or not _NAME.match(name):
+            raise loc.error(f"[[variant]] name = {name!r}: expected a name of letters, digits "
+                            "and _ . + -", "variant", "name", k)
+        if name in seen:
+            raise loc.error(f"[[variant]]: duplicate name '{name}'", "variant", "name", k)
+        seen.add(name)
+        ctrl = item.get("controller", controller)
+        if not isinstance(ctrl, str) or not ctrl:
+            raise loc.error(f"[[variant]] controller = {ctrl!r}: expected a controller name",
+                            "variant", "controller", k)
+        own = item.get("options", {})
+        if not isinstance(own, dict):
+            raise loc.error("[[variant]] options: expected a table { key = value }",
+                            "variant", "options", k)
+        merged = {**(options if ctrl == controller else {}), **own}
+        if "model" in item:
+            merged["model"] = str(_file(item["model"], loc, "variant", "model", "model file"))
+        out.append(Variant(name, ctrl, merged, line))
+    return tuple(out)
+
+
+def load(path: str | Path) -> CampaignSpec:
+    """Read and check a campaign specification.
+
+    Raises
+    ------
+    CosimError
+        ``file:line: message`` for TOML syntax, an unknown table or key, a missing or bad
+        value, a file that does not exist, an unknown distribution.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CosimError(f"{path}: campaign spec not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CosimError(f"{path}: cannot read the campaign spec: {exc}") from None
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        raise CosimError(f"{path}:{m.group(1) if m else 1}: invalid TOML: {exc}") from None
+    except RecursionError:
+        raise CosimError(f"{path}:1: invalid TOML: nested too deeply") from None
+    loc = _Locator(path, text)
+    unknown = set(doc) - _TOP_KEYS
+    if unknown:
+        key = sorted(unknown)[0]
+        raise loc.error(f"unknown table or key '{key}' (known: "
+                        f"{', '.join(sorted(_TOP_KEYS))})", None, key)
+    camp = doc.get("campaign")
+    if not isinstance(camp, dict):
+        raise CosimError(f"{path}:1: no [campaign] table")
+    unknown = set(camp) - _CAMPAIGN_KEYS
+    if unknown:
+        key = sorted(unknown)[0]
+        raise loc.error(f"[campaign]: unknown key '{key}' (known: "
+                        f"{', '.join(sorted(_CAMPAIGN_KEYS))})", "campaign", key)
+    for required in ("runs", "scenario"):
+        if required not in camp:
+            raise loc.error(f"[campaign]: '{required}' is missing", "campaign")
+    name = camp.get("name", path.stem)
+    if not isinstance(name, str) or not _NAME.match(name):
+        raise loc.error(f"name = {name!r}: expected a name of letters, digits and _ . + -",
+                        "campaign", "name")
+    runs = int(_number(camp["runs"], loc, "campaign", "runs", integer=True, positive=True))
+    if runs > MAX_RUNS:
+        raise loc.error(f"runs = {runs}: at most {MAX_RUNS}", "campaign", "runs")
+    seed = int(_number(camp.get("seed", 0), loc, "campaign", "seed", integer=True, low=0))
+    scenario = _file(camp["scenario"], loc, "campaign", "scenario", "scenario")
+    controller = camp.get("controller", "robust-mpc")
+    if not isinstance(controller, str) or not controller:
+        raise loc.error(f"controller = {controller!r}: expected a controller name",
+                        "campaign", "controller")
+    plant = camp.get("plant")
+    if plant is not None:
+        if not isinstance(plant, str) or not plant:
+            raise loc.error("plant: expected an FMU path or model:<model file>", "campaign",
+                            "plant")
+        if plant.startswith("model:"):
+            plant = "model:" + str(_file(plant[len("model:"):], loc, "campaign", "plant",
+                                         "model file"))
+        else:
+            plant = str(_file(plant, loc, "campaign", "plant", "plant FMU"))
+    vmap = _file(camp["map"], loc, "campaign", "map", "variable map") if "map" in camp else None
+    model = (_file(camp["model"], loc, "campaign", "model", "model file")
+             if "model" in camp else None)
+    interface = camp.get("interface", "cs")
+    if interface not in ("cs", "me"):
+        raise loc.error(f"interface = {interface!r}: expected \"cs\" or \"me\"", "campaign",
+                        "interface")
+    timeout = camp.get("timeout")
+    if timeout is not None:
+        timeout = float(_number(timeout, loc, "campaign", "timeout", positive=True))
+    step_timeout = camp.get("step_timeout")
+    if step_timeout is not None:
+        step_timeout = float(_number(step_timeout, loc, "campaign", "step_timeout",
+                                     positive=True))
+    flags = {}
+    for key in ("isolate", "figures"):
+        value = camp.get(key, False)
+        if not isinstance(value, bool):
+            raise loc.error(f"{key} = {value!r}: expected true or false", "campaign", key)
+        flags[key] = value
+    ctrl_table = doc.get("controller", {})
+    if not isinstance(ctrl_table, dict) or set(ctrl_table) - {"options"}:
+        raise loc.error("[controller]: only [controller.options] is allowed", "controller")
+    options = ctrl_table.get("options", {})
+    if not isinstance(options, dict):
+        raise loc.error("[controller.options] must be a table", "controller.options")
+    if model is not None:
+        options = {**options, "model": str(model)}
+    draws_table = doc.get("draw", {})
+    if not isinstance(draws_table, dict):
+        raise loc.error("[draw] must be a table", "draw")
+    draws = []
+    for key, value in draws_table.items():
+        if "." not in key and isinstance(value, dict) and not (
+                len(value) == 1 and next(iter(value)) in DISTRIBUTIONS):
+            # a dotted key without quotes ("plant.a2" written as plant.a2) nests tables
+            dotted = f"{key}.{next(iter(value), '')}"
+            raise loc.error(f"draw '{dotted}': quote dotted column names: \"{dotted}\" = …",
+                            "draw", dotted)
+        _draw_key(key, loc)
+        draws.append(_distribution(key, value, loc))
+    setpoints = _setpoints(doc["setpoints"], loc) if "setpoints" in doc else None
+    initial = _initial_state(doc["initial_state"], loc) if "initial_state" in doc else None
+    if initial is not None and not (isinstance(plant, str) and plant.startswith("model:")):
+        raise loc.error("[initial_state] needs a GRU-model plant (plant = \"model:FILE\")",
+                        "initial_state")
+    variants = (_variants(doc["variant"], loc, controller, options) if "variant" in doc
+                else (Variant(controller, controller, dict(options)),))
+    spec = CampaignSpec(
+        path=path, name=name, runs=runs, seed=seed, scenario=scenario, controller=controller,
+        options=dict(options), plant=plant, map=vmap, model=model, interface=interface,
+        timeout=timeout, isolate=flags["isolate"] or step_timeout is not None,
+        step_timeout=step_timeout, figures=flags["figures"], draws=tuple(draws),
+        setpoints=setpoints, initial_state=initial, variants=variants, text=text)
+    return spec

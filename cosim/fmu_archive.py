@@ -1,0 +1,79 @@
+"""An FMU file before it runs: its archive, its modelDescription, its native binary.
+
+An ``.fmu`` is a zip archive; :func:`safe_extract` unpacks it after checking every member
+name and the unpacked size, :func:`read_model_description` reads its ``modelDescription.xml``
+(through fmpy) and :func:`check_binary` checks that it has a binary for this platform. Each
+fault is a one-line :class:`~cosim.errors.CosimError` naming the FMU.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from pathlib import Path, PurePosixPath
+from typing import Any
+
+from cosim.errors import CosimError
+
+__all__ = ["MAX_UNPACKED_BYTES", "check_binary", "read_model_description", "safe_extract"]
+
+#: Refuse archives that would unpack to more than this many bytes (zip bombs).
+MAX_UNPACKED_BYTES = 2 * 1024**3
+
+
+def safe_extract(path: Path, into: Path) -> Path:
+    """Extract an FMU archive after checking every member name.
+
+    Rejects absolute paths, drive letters, backslashes, ``..`` components and archives that
+    would unpack to more than :data:`MAX_UNPACKED_BYTES`.
+
+    Raises
+    ------
+    CosimError
+        Naming the FMU and the offending member.
+    """
+    try:
+        with zipfile.ZipFile(path) as zf:
+            total = 0
+            for info in zf.infolist():
+                name = info.filename
+                parts = PurePosixPath(name).parts
+                if (name.startswith("/") or "\\" in name or ":" in name or ".." in parts):
+                    raise CosimError(f"{path}: unsafe path '{name}' in the FMU archive")
+                total += info.file_size
+            if total > MAX_UNPACKED_BYTES:
+                raise CosimError(f"{path}: archive unpacks to {total} bytes, more than allowed")
+            zf.extractall(into)
+    except zipfile.BadZipFile as exc:
+        raise CosimError(f"{path}: not an FMU (not a zip archive: {exc})") from None
+    return into
+
+
+def read_model_description(path: str | Path) -> Any:
+    """``fmpy.read_model_description`` with errors as one-line :class:`CosimError`."""
+    import fmpy
+
+    path = Path(path)
+    if path.is_dir():
+        raise CosimError(f"{path}: is a folder, not an FMU file (.fmu zip archive)")
+    if not path.is_file():
+        raise CosimError(f"{path}: FMU not found")
+    try:
+        return fmpy.read_model_description(str(path), validate=False)
+    except Exception as exc:
+        msg = " ".join(str(exc).split())
+        raise CosimError(f"{path}: cannot read modelDescription.xml: {msg}") from None
+
+
+def check_binary(path: Path, unzipped: Path, model_identifier: str, fmi3: bool) -> None:
+    """Raise :class:`CosimError` if the FMU unpacked in ``unzipped`` has no binary for this
+    platform (``path`` is the ``.fmu`` file, for the message)."""
+    import fmpy
+
+    platform = fmpy.platform_tuple if fmi3 else fmpy.platform
+    rel = f"binaries/{platform}/{model_identifier}{fmpy.sharedLibraryExtension}"
+    if (unzipped / rel).is_file():
+        return
+    bins = unzipped / "binaries"
+    have = sorted(p.name for p in bins.iterdir() if p.is_dir()) if bins.is_dir() else []
+    also = f" (it has binaries for: {', '.join(have)})" if have else " (it has no binaries)"
+    raise CosimError(f"{path}: no binary for this platform: '{rel}' is missing{also}")

@@ -1,0 +1,289 @@
+"""One execution of a :class:`~cosim.master.Master`: the loop state and the step phases.
+
+One communication step ``[t_k, t_k+1)`` is :meth:`Run._apply_events` (scenario events due at
+``t_k``), :meth:`Run._measure` (plant outputs, the non-finite guard, the sensor),
+:meth:`Run._control` (the controller step and its timeout), :meth:`Run._record` (the row,
+handed to the :class:`RowSink` too) and :meth:`Run._advance` (the plant step);
+:meth:`Run.execute` maps what goes wrong in any of them, or a signal, onto the result's
+status and never raises.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import signal
+import time as _time
+from collections.abc import Callable
+from typing import TYPE_CHECKING
+
+from cosim import interrupts
+from cosim.errors import CosimError, SimulationFailed
+from cosim.master import PREFIX_CTRL, RunResult, communication_times
+from cosim.scenario import BIAS, PLANT, REF, UNIFORM
+from cosim.sensor import SensorModel
+
+if TYPE_CHECKING:
+    from cosim.master import Master, RowSink
+
+__all__ = ["RowSink", "Run"]
+
+
+class Run:
+    """One execution of a :class:`~cosim.master.Master` (see the module docstring)."""
+
+    def __init__(self, master: Master, record: RowSink | None, step_timeout: float | None,
+                 deadline: float | None) -> None:
+        self.m = master
+        self.sink = record
+        self.step_timeout = step_timeout
+        self.deadline = deadline
+        self.guard: interrupts.SignalGuard | None = None
+        sc, ctrl = master.scenario, master.controller
+        self.times = communication_times(sc.start_time, sc.stop_time, master.dt)
+        self.base_cols = master.columns()
+        self.result = RunResult(
+            columns=list(self.base_cols), rows=[], steps_planned=len(self.times) - 1,
+            step_size=master.dt, start_time=sc.start_time, stop_time=sc.stop_time,
+            outputs=list(master.measured), references=list(master.refs),
+            inputs=list(master.ctrl_outputs),
+            bounds=dict(getattr(ctrl, "bounds", {}) or {}),
+            units={s.name: s.unit for s in (*ctrl.inputs, *ctrl.outputs) if s.unit},
+            perturbation_times=sc.perturbation_times())
+        self.refs = {f"ref.{r}": math.nan for r in master.refs}
+        self.held = dict.fromkeys(master.scenario_plant, math.nan)
+        self.sensor = SensorModel(master.measured, seed=master.seed) if master.use_sensor \
+            else None
+        self.set_param = getattr(master.plant, "set_parameter", None)
+        self.next_event = 0
+        self.diag_names: list[str] = []
+        self.diag_index: dict[str, int] = {}
+        self.timing_names = sorted(getattr(ctrl, "timing_diagnostics", ()) or ())
+        self.cin: dict[str, float] = {}
+        self.u: dict[str, float] = {}
+        self.diag: dict[str, float] = {}
+        self.t = self.times[0]
+        self.loop0: float | None = None
+
+    # -- phases -------------------------------------------------------------------------------
+    def _apply(self, event_values: tuple, started: bool) -> None:
+        plant, sensor = self.m.plant, self.sensor
+        for col, value in event_values:
+            kind = col.kind
+            if kind == REF:
+                self.refs["ref." + col.target] = value
+            elif kind == PLANT:
+                self.held[col.target] = value
+                if self.set_param is not None:
+                    self.set_param(col.target, value)
+                elif started:
+                    plant.set_inputs({col.target: value})
+            elif kind == BIAS:
+                sensor.set_bias(col.target, value)  # type: ignore[union-attr]
+            elif kind == UNIFORM:
+                sensor.set_uniform(col.target, value)  # type: ignore[union-attr]
+            else:
+                sensor.set_noise(col.target, value)  # type: ignore[union-attr]
+
+    def _apply_events(self, t: float) -> None:
+        events = self.m.scenario.events
+        tol = 1e-9 * max(1.0, abs(t))
+        while self.next_event < len(events) and events[self.next_event].time <= t + tol:
+            self._apply(events[self.next_event].values, started=True)
+            self.next_event += 1
+
+    def _start(self) -> None:
+        """Start values and first set-points, then set up plant and controller."""
+        m, t = self.m, self.t
+        self._apply(m.scenario.events[0].values, started=False)
+        self.next_event = 1
+        try:
+            m.plant.setup(t)
+            if self.set_param is None:
+                m.plant.set_inputs({p: v for p, v in self.held.items() if not math.isnan(v)})
+            m.controller.setup(t)
+        except (CosimError, SimulationFailed):
+            raise
+        except Exception as exc:
+            raise SimulationFailed(f"setup at t={t!r} failed: {exc}") from exc
+
+    def _measure(self, t: float) -> tuple[dict[str, float], dict[str, float]]:
+        """Plant outputs ``y(t)`` (all finite) and what the controller measures."""
+        y = self.m.plant.get_outputs()
+        if not all(map(math.isfinite, y.values())):
+            bad = next(n for n in self.m.plant_outputs if not math.isfinite(y[n]))
+            raise SimulationFailed(f"plant output '{bad}' is {y[bad]!r} at t={t!r}")
+        sensor = self.sensor
+        if sensor is None:
+            return y, y
+        sensor.set_inputs(y)
+        sensor.step(t, self.m.dt)
+        return y, sensor.get_outputs()
+
+    def _control(self, t: float, ym: dict[str, float]) -> None:
+        """The controller step: ``u`` and the diagnostics from ``y_m(t)`` and the set-points."""
+        ctrl, cin, limit = self.m.controller, self.cin, self.step_timeout
+        for name in self.m.measured:
+            cin[name] = ym[name]
+        cin.update(self.refs)
+        fired: list[bool] = []
+        t0 = _time.perf_counter()
+        try:
+            if limit is None:
+                self._controller_step(t)
+            else:
+                with interrupts.alarm(limit) as fired:
+                    self._controller_step(t)
+        except (CosimError, SimulationFailed):
+            raise
+        except Exception as exc:
+            if fired:
+                raise self._timeout(t) from None
+            raise SimulationFailed(f"controller '{ctrl.name}': step at t={t!r} failed: "
+                                   f"{type(exc).__name__}: {exc}") from exc
+        if fired or (limit is not None and _time.perf_counter() - t0 > limit):
+            raise self._timeout(t)
+
+    def _controller_step(self, t: float) -> None:
+        ctrl = self.m.controller
+        ctrl.set_inputs(self.cin)
+        ctrl.step(t, self.m.dt * self.m.ratio)
+        self.u = ctrl.get_outputs()
+        diag = ctrl.diagnostics()
+        if self.timing_names:
+            diag = dict(diag)
+            self.result.timing_rows.append(
+                [t, *(_as_float(diag.pop(name, math.nan)) for name in self.timing_names)])
+        self.diag = diag
+
+    def _timeout(self, t: float) -> SimulationFailed:
+        return SimulationFailed(f"controller '{self.m.controller.name}': step at t={t!r} took "
+                                f"longer than the step timeout of {self.step_timeout:g} s")
+
+    def _record(self, t: float, y: dict[str, float], ym: dict[str, float]) -> None:
+        m = self.m
+        row = [t]
+        row += map(self.refs.__getitem__, m.refs_keys)
+        row += map(self.held.__getitem__, m.scenario_plant)
+        row += map(y.__getitem__, m.plant_outputs)
+        if self.sensor is not None:
+            row += map(ym.__getitem__, m.measured)
+        row += map(self.u.__getitem__, m.ctrl_outputs)
+        diag = self.diag
+        if diag:
+            names = self.diag_names
+            if list(diag) == names:  # same diagnostics as before: fast path
+                row += map(_as_float, diag.values())
+            else:
+                extra = [math.nan] * len(names)
+                for key, value in diag.items():
+                    j = self.diag_index.get(key)
+                    if j is None:
+                        j = self.diag_index[key] = len(names)
+                        names.append(key)
+                        extra.append(math.nan)
+                        self.result.columns.append(f"{PREFIX_CTRL}.{key}")
+                    extra[j] = _as_float(value)
+                row += extra
+        self.result.rows.append(row)
+        if self.sink is not None:
+            self.sink.append(row, self.result.columns)
+
+    def _advance(self, k: int) -> None:
+        """The plant step from ``t_k`` to ``t_k+1`` with ``u_k`` held."""
+        plant, t = self.m.plant, self.times[k]
+        plant.set_inputs(self.u)
+        plant.step(t, self.times[k + 1] - t)
+
+    def _check_interrupt(self) -> None:
+        if self.guard is not None:
+            self.guard.check()
+        if self.deadline is not None and _time.monotonic() > self.deadline:
+            raise SimulationFailed(f"run timeout: stopped at t={self.t!r} after "
+                                   f"{self.result.steps} of {self.result.steps_planned} steps")
+
+    # -- the loop -----------------------------------------------------------------------------
+    def execute(self, on_step: Callable[[int], None] | None) -> None:
+        """Run every step; map a fault or a signal onto the result (never raises)."""
+        result, guard = self.result, self.guard
+        wall0 = _time.perf_counter()
+        try:
+            with guard.raising() if guard is not None else contextlib.nullcontext():
+                self._loop(on_step)
+        except KeyboardInterrupt as exc:
+            self._interrupted(exc)
+        except (CosimError, SimulationFailed) as exc:
+            self._failed(exc)
+        except Exception as exc:  # a bug or an unexpected library error: keep the rows
+            self._failed(SimulationFailed(f"at t={self.t!r}: {type(exc).__name__}: {exc}"))
+        finally:
+            result.wall_time_s = _time.perf_counter() - wall0
+            if self.loop0 is not None:
+                result.loop_time_s = _time.perf_counter() - self.loop0
+            self._finish()
+
+    def _loop(self, on_step: Callable[[int], None] | None) -> None:
+        result, ratio, times = self.result, self.m.ratio, self.times
+        n = len(times) - 1
+        self._start()
+        self.loop0 = _time.perf_counter()
+        k = 0
+        while True:
+            self.t = t = times[k]
+            self._apply_events(t)
+            y, ym = self._measure(t)
+            if k % ratio == 0:
+                self._control(t, ym)
+                self._check_interrupt()
+            self._record(t, y, ym)
+            if k == n:
+                break
+            self._advance(k)
+            k += 1
+            result.steps = k
+            if on_step is not None:
+                on_step(k)
+            self._check_interrupt()
+
+    def _interrupted(self, exc: KeyboardInterrupt) -> None:
+        if not isinstance(exc, interrupts.Interrupted):
+            exc = interrupts.Interrupted(signal.SIGINT)
+        r = self.result
+        r.status, r.error = "interrupted", exc
+        r.reason = f"interrupted by {interrupts.signal_name(exc.signum)} at t={self.t!r}"
+
+    def _failed(self, exc: CosimError) -> None:
+        guard = self.guard
+        if guard is not None and guard.signum is not None:
+            # the signal reached library code (an FMU's doStep written in Python, a solver
+            # callback) and came back as an error: the run was interrupted, not broken
+            self._interrupted(interrupts.Interrupted(guard.signum))
+            return
+        r = self.result
+        r.status, r.reason, r.error = "failed", str(exc), exc
+
+    def _finish(self) -> None:
+        """Controller summary, terminate both components, pad short rows."""
+        result, m = self.result, self.m
+        try:
+            result.controller_summary = dict(m.controller.summary() or {})
+        except Exception as exc:
+            result.controller_summary = {"error": f"summary failed: {exc}"}
+        for comp in (m.controller, m.plant):
+            with contextlib.suppress(Exception):
+                comp.terminate()
+        if self.timing_names:
+            result.timing_columns = ["time", *(f"{PREFIX_CTRL}.{d}" for d in self.timing_names)]
+        width = len(result.columns)
+        for row in result.rows:
+            if len(row) < width:
+                row.extend([math.nan] * (width - len(row)))
+
+
+def _as_float(value: object) -> float:
+    if value.__class__ is float:
+        return value  # type: ignore[return-value]
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return math.nan

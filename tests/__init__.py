@@ -1,0 +1,1 @@
+"""Tests, mirroring the packages (see the README and docs: "Regression tests")."""
