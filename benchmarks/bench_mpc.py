@@ -1,25 +1,28 @@
-"""Speed of the robust MPC controller step (observer + FHOCP) against a plain formulation.
+"""Speed of the robust MPC controller step: the compiled kernel against the numpy baseline.
 
-Runs the paper scenario (``scenarios/paper_steps.csv``) in closed loop with the plant FMU
-(``fmus/FourTank.fmu`` through :class:`cosim.fmu.FmuComponent`; the GRU model itself as
-plant when no FMU is built) and the ``robust-mpc`` controller, timing every controller step.
-In the same run, at every step, the same FHOCP (same ``x̂_k``, ``ê_o,k``, ``x̄``, ``ū``, ``α``)
-is solved by the plain formulation do-mpc would build: multiple shooting, exact Hessian,
-IPOPT defaults, warm start with the previous solution (primal only). Prints median / p99
-times, the speed ratio and how well the optimal costs agree.
+The controller step (observer + reference governor + FHOCP: what ``ctrl.step`` does, as in
+``timings.csv``) on the paper scenario (``scenarios/paper_steps.csv``, 1,600 steps) in closed
+loop with the plant FMU (the GRU model itself when no FMU is built), two ways in the same
+process, alternating run by run so that the machine's load hits both alike:
+
+* ``compiled``: the default controller, the SQP's derivatives, eigenvalue clipping and the
+  governor's equilibria from the compiled kernel (:mod:`controllers.compiled_kernel`);
+* ``numpy``: the same controller with ``kernel="numpy"``, the implementation before the
+  kernel (numpy callbacks), kept as the baseline.
+
+Printed: median and p99 of the step (wall clock and thread CPU time) for each, their ratios
+(targets: ≥ 4× at the median, ≥ 5× at the p99), and the answers: the compiled controller's
+optima against a tight IPOPT solve of the same FHOCP at every step (``--reference``) and
+the two closed loops against each other.
+
+``--scaling`` times random δISS GRUs (GRU plant, 5 set-points × 60 steps) for N = 15, 30, 60
+(n = 20) and n = 20, 40, 80 (N = 15), compiled and numpy, and fits the growth exponents.
+``--plain`` adds the do-mpc-style baseline of issue 5 (multiple shooting, IPOPT defaults).
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_mpc.py [--steps N] [--plant fmu|model] [--quiet]
-        [--no-baseline] [--no-governor] [--solver ipopt|sqp]
-
-The controller runs with its default solver, casadi's ``sqpmethod`` (``--solver sqp``), and at
-every step the same FHOCP is also solved with IPOPT on the same single-shooting callbacks (its
-own warm start) to compare the optimal costs and times (``--no-reference`` skips it);
-``--solver ipopt`` runs the controller with IPOPT instead.
-
-Targets (issue 5): median ≤ 5 ms, p99 ≤ 25 ms per controller step, ≥ 10× faster than the
-plain formulation, optimal costs agreeing.
+    .venv/bin/python benchmarks/bench_mpc.py [--rounds 2] [--steps N] [--reference]
+        [--scaling] [--plain] [--plant fmu|model]
 """
 
 from __future__ import annotations
@@ -42,24 +45,24 @@ from controllers.mpc_controller import RobustMPCController  # noqa: E402
 from cosim.component import Component  # noqa: E402
 
 #: The plain baseline may take seconds to declare infeasibility; cap it so the run ends.
-BASELINE_OPTIONS = {"max_wall_time": 2.0}
+PLAIN_OPTIONS = {"max_wall_time": 2.0}
 
 
 class TimedController(Component):
-    """Wraps the controller: times each ``step`` and solves the baseline FHOCP alongside."""
+    """Wraps a controller: wall and thread-CPU time of each ``step``; optionally solves the
+    same FHOCP with a reference formulation alongside."""
 
-    def __init__(self, ctrl: RobustMPCController, baseline: FHOCP | None,
-                 reference: FHOCP | None = None) -> None:
+    def __init__(self, ctrl: RobustMPCController, others: dict[str, FHOCP] | None = None
+                 ) -> None:
         self.ctrl = ctrl
-        self.baseline = baseline
-        self.reference = reference
-        self.ref: list[tuple[float, bool, str, float]] = []  # ms, success, status, cost
+        self.others = others or {}
         self.name, self.inputs, self.outputs = ctrl.name, ctrl.inputs, ctrl.outputs
         self.direct_feedthrough = True
         self.sample_time, self.bounds = ctrl.sample_time, ctrl.bounds
-        self.step_ms: list[float] = []
-        self.base: list[tuple[float, bool, str, float]] = []  # ms, success, status, cost
-        self._u_prev: np.ndarray | None = None
+        self.wall_ms: list[float] = []
+        self.cpu_ms: list[float] = []
+        self.u: list[np.ndarray] = []
+        self.solves: dict[str, list[tuple[float, bool, float]]] = {k: [] for k in self.others}
 
     def setup(self, t0: float) -> None:
         self.ctrl.setup(t0)
@@ -74,154 +77,174 @@ class TimedController(Component):
         return self.ctrl.diagnostics()
 
     def step(self, t: float, dt: float) -> None:
-        t0 = time.perf_counter()
+        c0, w0 = time.thread_time(), time.perf_counter()
         self.ctrl.step(t, dt)
-        self.step_ms.append((time.perf_counter() - t0) * 1e3)
+        self.wall_ms.append((time.perf_counter() - w0) * 1e3)
+        self.cpu_ms.append((time.thread_time() - c0) * 1e3)
         mpc = self.ctrl.mpc
         rec = mpc.records[-1]
-        if self.reference is not None:
-            r = self.reference.solve(rec.x_hat, rec.e_o, mpc.x_bar, mpc.u_bar, mpc.alpha)
-            self.ref.append((r.solve_time * 1e3, r.success, r.status, r.cost))
-        if self.baseline is None:
-            return
-        res = self.baseline.solve(rec.x_hat, rec.e_o, mpc.x_bar, mpc.u_bar, mpc.alpha,
-                                  u_init=self._u_prev, warm=False)
-        if res.success:
-            self._u_prev = res.u
-        self.base.append((res.solve_time * 1e3, res.success, res.status, res.cost))
+        self.u.append(rec.u.copy())
+        for name, fh in self.others.items():
+            r = fh.solve(rec.x_hat, rec.e_o, mpc.x_bar, mpc.u_bar, mpc.alpha)
+            self.solves[name].append((r.solve_time * 1e3, r.success, r.cost))
 
 
-def stats(ms: list[float]) -> str:
-    a = np.asarray(ms)
-    return (f"median {np.median(a):7.2f}  p90 {np.percentile(a, 90):7.2f}  "
-            f"p99 {np.percentile(a, 99):7.2f}  max {np.max(a):8.2f} ms")
+def closed_loop(ctrl: RobustMPCController, scenario: Path, plant_kind: str, steps: int | None,
+                others: dict[str, FHOCP] | None = None) -> TimedController:
+    """One closed-loop run; returns the timed wrapper."""
+    from cosim import scenario as scenario_mod
+    from cosim.master import Master
+
+    sc = scenario_mod.load(scenario)
+    if steps:
+        sc = sc.with_changes(stop_time=sc.start_time + steps * ctrl.sample_time)
+    if plant_kind == "fmu":
+        from cosim.fmu import FmuComponent
+
+        plant = FmuComponent(ROOT / "fmus" / "FourTank.fmu")
+    else:
+        from controllers.model_plant import GRUPlant
+
+        plant = GRUPlant(ctrl.model, y0=np.array([0.65, 0.65]))
+    timed = TimedController(ctrl, others)
+    result = Master(plant, timed, sc).run()
+    if result.status != "ok":
+        raise SystemExit(f"bench_mpc: the run failed: {result.reason}")
+    return timed
+
+
+def _p(a: list[float], q: float) -> float:
+    return float(np.percentile(np.asarray(a), q))
+
+
+def compare_kernel(args: argparse.Namespace) -> None:
+    """The compiled controller against the numpy baseline on the scenario."""
+    plant = args.plant or ("fmu" if (ROOT / "fmus" / "FourTank.fmu").exists() else "model")
+    variants = {"compiled": RobustMPCController(), "numpy": RobustMPCController(kernel="numpy")}
+    if variants["compiled"].fhocp.kernel is None:
+        reason = variants["compiled"].fhocp.kernel_error
+        raise SystemExit(f"bench_mpc: no compiled kernel ({reason})")
+    wall = {k: [] for k in variants}
+    cpu = {k: [] for k in variants}
+    last = {}
+    for r in range(args.rounds):
+        for name, ctrl in variants.items():
+            others = {}
+            if name == "compiled" and args.reference and r == 0:
+                others["ipopt"] = FHOCP.from_certificate(ctrl.cert, solver="ipopt",
+                                                         ipopt_options={"tol": 1e-10,
+                                                                        "max_iter": 500})
+                others["ipopt"].setup()
+            t = closed_loop(ctrl, Path(args.scenario), plant, args.steps, others)
+            wall[name] += t.wall_ms
+            cpu[name] += t.cpu_ms
+            last[name] = t
+            print(f"round {r + 1} {name:8s}: median {np.median(t.wall_ms):6.2f} ms, p99 "
+                  f"{_p(t.wall_ms, 99):6.2f} ms (wall)", flush=True)
+    n = len(last["compiled"].wall_ms)
+    print(f"\nplant {plant}; {n} steps × {args.rounds} rounds each; model n="
+          f"{variants['compiled'].model.n}, N={variants['compiled'].fhocp.N}; load average "
+          f"{os.getloadavg()[0]:.2f} at the end")
+    for metric, data in (("wall", wall), ("thread CPU", cpu)):
+        c, b = data["compiled"], data["numpy"]
+        print(f"{metric:10s} numpy    median {np.median(b):7.2f}  p99 {_p(b, 99):7.2f} ms")
+        print(f"{metric:10s} compiled median {np.median(c):7.2f}  p99 {_p(c, 99):7.2f} ms")
+        print(f"{metric:10s} speed-up median {np.median(b) / np.median(c):5.2f}x  p99 "
+              f"{_p(b, 99) / _p(c, 99):5.2f}x   (targets >= 4x, >= 5x)")
+    solve = {k: [r.result.solve_time * 1e3 for r in v.mpc.records] for k, v in variants.items()}
+    c, b = solve["compiled"], solve["numpy"]
+    print(f"FHOCP solve only (timings.csv solve_ms, last round): numpy median {np.median(b):.2f}"
+          f" p99 {_p(b, 99):.2f} ms; compiled median {np.median(c):.2f} p99 {_p(c, 99):.2f} "
+          f"ms; speed-up {np.median(b) / np.median(c):.2f}x, {_p(b, 99) / _p(c, 99):.2f}x")
+    uc, un = np.array(last["compiled"].u), np.array(last["numpy"].u)
+    k = int(np.argmax(np.any(np.abs(uc - un) > 1e-6, axis=1))) if np.any(
+        np.abs(uc - un) > 1e-6) else len(uc)
+    print(f"answers    the two closed loops apply the same inputs (within 1e-6) for the "
+          f"first {k} of {len(uc)} steps")
+    ref = last["compiled"].solves.get("ipopt")
+    if ref:
+        recs = variants["compiled"].mpc.records
+        rel = [abs(rec.result.cost - c) / (1 + abs(c)) for rec, (_, ok, c) in
+               zip(recs, ref, strict=False) if ok and rec.result.success]
+        print(f"answers    compiled optimum vs tight IPOPT (tol 1e-10) at {len(rel)} steps "
+              f"where both converged: max relative cost difference {max(rel):.1e}; within "
+              f"1e-6: {np.mean(np.asarray(rel) <= 1e-6) * 100:.1f} %")
+    if args.plain:
+        plain = FHOCP.from_certificate(variants["numpy"].cert, formulation="multiple-shooting",
+                                       ipopt_options=PLAIN_OPTIONS).setup()
+        t = closed_loop(RobustMPCController(), Path(args.scenario), plant, args.steps,
+                        {"plain": plain})
+        ms = [s[0] for s in t.solves["plain"]]
+        print(f"plain      do-mpc-style multiple shooting (IPOPT): median {np.median(ms):.2f}, "
+              f"p99 {_p(ms, 99):.2f} ms; {np.median(ms) / np.median(t.wall_ms):.0f}x the "
+              "compiled controller step (median)")
+
+
+def scaling(args: argparse.Namespace) -> None:
+    """Median step time for N = 15, 30, 60 and n = 20, 40, 80 (random δISS GRUs)."""
+    from controllers import gain_design
+    from controllers.model_plant import GRUPlant
+    from cosim.master import Master
+    from cosim.scenario import Column, Event, Scenario
+    from tests.controllers.random_gru import random_gru_model
+
+    rows = []
+    setpoints = [np.array([0.9 + 0.05 * j, 1.0 - 0.05 * j]) for j in range(5)]
+    cols = (Column(2, "ref.h1", "ref", "h1"), Column(3, "ref.h2", "ref", "h2"))
+    events = [Event(1500.0 * j, 0, tuple(zip(cols, sp, strict=True)))
+              for j, sp in enumerate(setpoints)]
+    sc = Scenario(Path("scaling.csv"), cols, (*events, Event(7500.0, 0, ())))
+    for n, N in ((20, 15), (20, 30), (20, 60), (40, 15), (80, 15)):
+        model = random_gru_model(0, n=n)
+        model.w_y_bar = 0.002
+        targets = [model.normalize_y(sp) for sp in setpoints]
+        theta, cert = gain_design.choose_gain_scale(model, targets, N=N)
+        if theta is None:
+            print(f"n={n}, N={N}: no certified design; skipped")
+            continue
+        path = ROOT / "controllers" / "models" / f".bench_scaling_{n}.json"
+        model.L_z, model.L_r = cert.L_z, cert.L_r
+        model.save(path)
+        try:
+            med = {}
+            for kernel in ("auto", "numpy"):
+                ctrl = RobustMPCController(model=path, N=N, kernel=kernel)
+                timed = TimedController(ctrl)
+                Master(GRUPlant(ctrl.model, y0=setpoints[0]), timed, sc).run()
+                med[kernel] = (np.median(timed.wall_ms), _p(timed.wall_ms, 99))
+        finally:
+            path.unlink(missing_ok=True)
+        rows.append((n, N, *med["numpy"], *med["auto"]))
+        print(f"n={n:3d} N={N:3d}: numpy median {med['numpy'][0]:7.2f} ms p99 "
+              f"{med['numpy'][1]:7.2f}; compiled median {med['auto'][0]:6.2f} ms p99 "
+              f"{med['auto'][1]:6.2f}; speed-up {med['numpy'][0] / med['auto'][0]:.1f}x",
+              flush=True)
+    for label, sel, col in (("N (n = 20)", [r for r in rows if r[0] == 20], 1),
+                            ("n (N = 15)", [r for r in rows if r[1] == 15], 0)):
+        if len(sel) >= 2:
+            x = np.log([r[col] for r in sel])
+            for name, j in (("numpy", 2), ("compiled", 4)):
+                slope = np.polyfit(x, np.log([r[j] for r in sel]), 1)[0]
+                print(f"median grows as {label.split()[0]}^{slope:.2f} ({name}, {label})")
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--rounds", type=int, default=2, help="runs of each variant (alternating)")
     ap.add_argument("--steps", type=int, default=None, help="stop after this many steps")
     ap.add_argument("--plant", choices=("fmu", "model"), default=None,
                     help="plant (default: the FMU when built, else the GRU model)")
-    ap.add_argument("--no-baseline", action="store_true", help="time the controller only")
     ap.add_argument("--scenario", default=str(ROOT / "scenarios" / "paper_steps.csv"))
-    ap.add_argument("--no-governor", action="store_true",
-                    help="the paper's controller: no reference governor after set-point steps")
-    ap.add_argument("--solver", choices=("ipopt", "sqp"), default="sqp",
-                    help="NLP solver of the controller's FHOCP (default sqp: casadi sqpmethod "
-                         "+ qpOASES, with IPOPT solving the same problems alongside for "
-                         "comparison; ipopt: the previous default)")
-    ap.add_argument("--no-reference", action="store_true",
-                    help="with --solver sqp: do not solve with IPOPT alongside (timing only)")
-    ap.add_argument("--sqp-options", default="{}",
-                    help="JSON overrides of controllers.solver_settings.SQP_OPTIONS, e.g. "
-                         "'{\"tol_du\": 1e-4}'")
-    ap.add_argument("--quiet", action="store_true")
+    ap.add_argument("--reference", action="store_true",
+                    help="solve every FHOCP of the first compiled run with tight IPOPT too")
+    ap.add_argument("--scaling", action="store_true", help="the N and n scaling instead")
+    ap.add_argument("--plain", action="store_true",
+                    help="also time the do-mpc-style multiple-shooting baseline")
     args = ap.parse_args(argv)
-
-    from cosim import scenario as scenario_mod
-    from cosim.master import Master
-
-    ctrl = RobustMPCController(governor=not args.no_governor)
-    cert = ctrl.cert
-    reference = None
-    if args.solver == "sqp":
-        import json
-
-        ctrl.fhocp.solver = "sqp"
-        ctrl.fhocp.sqp_options.update(json.loads(args.sqp_options))
-        if not args.no_reference:
-            reference = FHOCP.from_certificate(cert, solver="ipopt").setup()
+    if args.scaling:
+        scaling(args)
     else:
-        ctrl.fhocp.solver = "ipopt"
-    ctrl.fhocp.setup()
-    baseline = None if args.no_baseline else FHOCP.from_certificate(
-        cert, formulation="multiple-shooting", ipopt_options=BASELINE_OPTIONS).setup()
-    timed = TimedController(ctrl, baseline, reference)
-    sc = scenario_mod.load(args.scenario)
-    fmu = ROOT / "fmus" / "FourTank.fmu"
-    kind = args.plant or ("fmu" if fmu.exists() else "model")
-    y0 = np.array([0.65, 0.65])  # the paper scenario's first set-point
-    if kind == "fmu":
-        from cosim.fmu import FmuComponent
-        plant = FmuComponent(fmu)
-    else:
-        from controllers.model_plant import GRUPlant
-        plant = GRUPlant(ctrl.model, y0=y0)
-    master = Master(plant, timed, sc)
-    total = round(sc.stop_time / ctrl.sample_time)
-    limit = min(total, args.steps) if args.steps else total
-    bar = None
-    if not args.quiet and sys.stderr.isatty():
-        from tqdm import tqdm
-        bar = tqdm(total=limit, unit="step", desc="bench_mpc")
-
-    class _Stop(Exception):
-        pass
-
-    def on_step(k: int) -> None:
-        if bar is not None:
-            bar.update(1)
-        if k + 1 >= limit:
-            raise _Stop
-
-    try:
-        master.run(on_step=on_step)
-    except _Stop:
-        pass
-    finally:
-        if bar is not None:
-            bar.close()
-        plant.terminate()
-    s = ctrl.summary()
-    print(f"plant: {kind}; steps: {len(timed.step_ms)}; model n={ctrl.model.n}, N={cert.N}; "
-          f"load average {os.getloadavg()[0]:.2f} (1 min) at the end")
-    label = "IPOPT" if args.solver == "ipopt" else "sqpmethod + qpOASES"
-    print(f"fast   (single shooting, exact Hessian, {label} warm start), controller step: "
-          f"{stats(timed.step_ms)}")
-    print(f"       FHOCP solve only: median {s['solve_ms_median']:.2f}, p99 "
-          f"{s['solve_ms_p99']:.2f} ms; iterations median {s['iterations_median']:.0f}; "
-          f"failures {s['failures']} {s['failures_by_status']}; fallbacks {s['fallbacks']}; "
-          f"suboptimal (capped, feasible) {s['suboptimal_steps']}; governor steps "
-          f"{s['governor_steps']} (held {s['governor_holds']})")
-    if timed.ref:
-        rms = [r[0] for r in timed.ref]
-        sms = [r.result.solve_time * 1e3 for r in ctrl.mpc.records]
-        print(f"ipopt  same FHOCPs, default IPOPT solver alongside: {stats(rms)}")
-        print(f"       FHOCP solve ms, sqp vs ipopt: median {np.median(sms):.2f} vs "
-              f"{np.median(rms):.2f}, p99 {np.percentile(sms, 99):.2f} vs "
-              f"{np.percentile(rms, 99):.2f}")
-        rel = [(rec.result.cost - r[3]) / (1.0 + abs(r[3]))
-               for rec, r in zip(ctrl.mpc.records, timed.ref, strict=False)
-               if rec.result.success and r[1]]
-        n_ref = sum(r[1] for r in timed.ref)
-        if rel:
-            ra = np.asarray(rel)
-            print(f"costs  sqp vs ipopt, both optimal at {len(ra)} of {n_ref} ipopt-optimal "
-                  f"steps: within 1e-6 {np.mean(np.abs(ra) <= 1e-6) * 100:.1f} %, max "
-                  f"{np.max(ra):.1e}, min {np.min(ra):.1e}")
-    if timed.base:
-        bms = [b[0] for b in timed.base]
-        print(f"plain  (multiple shooting, do-mpc style IPOPT):                  {stats(bms)}")
-        fast_ms = np.asarray(timed.step_ms[: len(bms)])
-        print(f"ratio  plain / fast: median {np.median(bms) / np.median(fast_ms):.1f}x, "
-              f"p99 {np.percentile(bms, 99) / np.percentile(fast_ms, 99):.1f}x, "
-              f"total {np.sum(bms) / np.sum(fast_ms):.1f}x")
-        both, rel = 0, []
-        only_fast = only_base = 0
-        for rec, b in zip(ctrl.mpc.records, timed.base, strict=False):
-            if rec.result.success and b[1]:
-                both += 1
-                rel.append((rec.result.cost - b[3]) / (1.0 + abs(b[3])))
-            elif rec.result.success:
-                only_fast += 1
-            elif b[1]:
-                only_base += 1
-        rel_a = np.asarray(rel)
-        if both:
-            print(f"costs  both optimal at {both} steps: (fast − plain)/(1 + |plain|) median "
-                  f"{np.median(rel_a):.1e}, max {np.max(rel_a):.1e}, min {np.min(rel_a):.1e};"
-                  f" within 1e-6: {np.mean(np.abs(rel_a) <= 1e-6) * 100:.1f} %")
-        print(f"       solved by fast only: {only_fast}, by plain only: {only_base}")
+        compare_kernel(args)
     return 0
 
 

@@ -158,10 +158,23 @@ class Certificate:
         return self.rho_s**self.N * (self.L_max * self.e_tilde + self.w_bar) / (1 - self.rho_s)
 
     # -- set-point dependent ---------------------------------------------------------------
+    def _set_point(self, y_bar_norm: Sequence[float]) -> tuple[np.ndarray, float]:
+        """Margins ``h − ẽ_o a_N − b_N − w_L − L ȳ`` and ``α`` at ``ȳ`` (the last set-point's
+        are kept: the governor asks for the same ``ȳ`` several times per step)."""
+        y = np.asarray(y_bar_norm, dtype=float).reshape(-1)
+        key = y.tobytes()
+        memo = self.__dict__.get("_memo")
+        if memo is not None and memo[0] == key:
+            return memo[1], memo[2]
+        m = (-self.L @ y + self.h - self.e_tilde * self.a[self.N] - self.b[self.N]
+             - self.w_L)
+        pos = self.c_s > 0
+        a = float(np.min(m[pos] / self.c_s[pos])) if np.any(pos) else math.inf
+        self.__dict__["_memo"] = (key, m, a)
+        return m, a
+
     def _margins(self, y_bar_norm: Sequence[float]) -> np.ndarray:
-        y = np.asarray(y_bar_norm, dtype=float)
-        return (-self.L @ y + self.h - self.e_tilde * self.a[self.N] - self.b[self.N]
-                - self.w_L)
+        return self._set_point(y_bar_norm)[0]
 
     def alpha(self, y_bar_norm: Sequence[float]) -> float:
         """Terminal set radius ``α`` for the set-point ``ȳ`` (normalised), ``eq:def-alpha``.
@@ -169,10 +182,7 @@ class Certificate:
         ``α = min_j (−L_(j*) ȳ + h_j − ẽ_o a_N(j) − b_N(j) − w_L(j)) / ‖(L U_o)_(j*)‖∞``.
         Rows with ``‖(L U_o)_(j*)‖∞ = 0`` do not restrict ``α``.
         """
-        m = self._margins(y_bar_norm)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratios = np.where(self.c_s > 0, m / np.where(self.c_s > 0, self.c_s, 1.0), np.inf)
-        return float(np.min(ratios))
+        return self._set_point(y_bar_norm)[1]
 
     def assumption_1(self, y_bar_norm: Sequence[float]) -> bool:
         """``ass:setpoint``: ``L ȳ < h − ẽ_o a_N − b_N − w_L`` (every row)."""

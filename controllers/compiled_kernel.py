@@ -57,6 +57,8 @@ last_error: str | None = None
 
 #: Kernels loaded in this process, by library path (a library is loaded once per process).
 _LOADED: dict[str, Kernel] = {}
+#: Builds that failed in this process, by cache key: not retried (the reason is kept).
+_FAILED: dict[str, str] = {}
 
 
 def default_cache_dir() -> Path:
@@ -285,6 +287,9 @@ def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray
         return None
     key = hashlib.sha256("\0".join([GENERATOR_VERSION, _compiler_id(cc), " ".join(flags),
                                     " ".join(libs), src]).encode()).hexdigest()[:16]
+    if key in _FAILED:
+        last_error = _FAILED[key]
+        return None
     prefix = f"gk{key}_"
     cdir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     so = cdir / f"gk{key}.so"
@@ -302,7 +307,8 @@ def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray
             res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
             if res.returncode != 0:
                 os.unlink(tmp)
-                last_error = f"{' '.join(cmd)} failed: {res.stderr.strip()[:2000]}"
+                first = (res.stderr.strip().splitlines() or ["no message"])[0]
+                last_error = _FAILED[key] = f"{cc} failed on {csrc}: {first[:300]}"
                 return None
             os.replace(tmp, so)      # atomic: concurrent builders agree on the content
             meta = {"flags": list(flags), "libs": libs, "compiler": _compiler_id(cc),
@@ -311,7 +317,7 @@ def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray
             if verbose:
                 print(f"compiled FHOCP kernel: built {so}")
         except (OSError, subprocess.SubprocessError) as exc:
-            last_error = f"kernel build failed: {exc}"
+            last_error = _FAILED[key] = f"kernel build failed: {exc}"
             return None
     try:
         k = Kernel(so, prefix)
@@ -319,5 +325,5 @@ def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray
         _LOADED[str(so)] = k
         return k
     except OSError as exc:
-        last_error = f"cannot load {so}: {exc}"
+        last_error = _FAILED[key] = f"cannot load {so}: {exc}"
         return None

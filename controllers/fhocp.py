@@ -43,9 +43,14 @@ import numpy as np
 from controllers import gru
 from controllers.casadi_callbacks import quiet_stdout
 from controllers.errors import DesignError
+from controllers.fhocp_layout import FHOCPLayout
 from controllers.solver_settings import DEFECT_TOL, FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
-__all__ = ["FHOCP", "FHOCPResult"]
+__all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPResult"]
+
+#: Largest relative difference between the compiled kernel and the numpy derivatives at the
+#: load-time self-test (they agree to ~1e-14).
+KERNEL_SELF_TEST_TOL = 1e-9
 
 
 @dataclass
@@ -133,6 +138,10 @@ class FHOCP:
     time_budget : float, optional
         Wall-time budget of one IPOPT solve [s] (status ``"time_budget_exceeded"``). Off by
         default: a wall-clock limit makes closed-loop results depend on the machine.
+    kernel : {"auto", "numpy"}
+        Derivatives of the single-shooting SQP: ``"auto"`` the compiled kernel
+        (:mod:`controllers.compiled_kernel`) when it can be built, ``"numpy"`` the numpy
+        callbacks (the reference implementation, and the fallback).
     """
 
     def __init__(self, params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
@@ -141,9 +150,14 @@ class FHOCP:
                  ipopt_options: Mapping[str, Any] | None = None,
                  warm_duals: bool | None = None, time_budget: float | None = None,
                  solver: str | None = None,
-                 sqp_options: Mapping[str, Any] | None = None) -> None:
+                 sqp_options: Mapping[str, Any] | None = None, kernel: str = "auto") -> None:
         if formulation not in ("single-shooting", "multiple-shooting"):
             raise DesignError(f"unknown formulation {formulation!r}")
+        if kernel not in ("auto", "numpy"):
+            raise DesignError(f"kernel must be \"auto\" or \"numpy\", got {kernel!r}")
+        self.kernel_mode = kernel
+        self.kernel: Any = None
+        self.kernel_error: str | None = None
         if solver is None:
             solver = "sqp" if formulation == "single-shooting" and not ipopt_options else "ipopt"
         if solver not in ("ipopt", "sqp") or (solver == "sqp"
@@ -186,8 +200,8 @@ class FHOCP:
         """Merge opposite rows of ``L`` (``L_k = −L_j``, a box) into two-sided constraints.
 
         The single-shooting NLP then has one row ``D U_o x_i`` with bounds
-        ``[−rhs_k, rhs_j]`` per pair instead of two: a smaller KKT system for IPOPT. ``up[r]``
-        / ``lo[r]`` are the ``L`` rows giving the upper / lower bound of reduced row ``r``
+        ``[−rhs_k, rhs_j]`` per pair instead of two: a smaller KKT system. ``pair_up[r]`` /
+        ``pair_lo[r]`` are the ``L`` rows giving the upper / lower bound of reduced row ``r``
         (−1: none).
         """
         used: set[int] = set()
@@ -205,31 +219,8 @@ class FHOCP:
             lo.append(k)
         self.qr = len(rows)
         self.DUo = self.LUo[rows]
-        self._up = np.array(up)
-        self._lo = np.array(lo)
-
-    def _layout(self) -> None:
-        n, m, N = self.n, self.m, self.N
-        if self.formulation == "single-shooting":
-            self.nw = N * m + 1
-            self.iu = np.arange(N * m).reshape(N, m)
-            self.it = N * m
-            self.ix = None
-        else:
-            # stage order x0, u0, x1, u1, …, x_N, t (what structure-exploiting solvers want)
-            idx = 0
-            ix, iu = [], []
-            for _ in range(N):
-                ix.append(np.arange(idx, idx + n))
-                idx += n
-                iu.append(np.arange(idx, idx + m))
-                idx += m
-            ix.append(np.arange(idx, idx + n))
-            idx += n
-            self.ix = np.array(ix)
-            self.iu = np.array(iu)
-            self.it = idx
-            self.nw = idx + 1
+        self.pair_up = np.array(up)
+        self.pair_lo = np.array(lo)
 
     @classmethod
     def from_certificate(cls, cert: Any, **options: Any) -> FHOCP:
@@ -241,25 +232,37 @@ class FHOCP:
 
     def setup(self) -> FHOCP:
         """Build the solver (a few ms; again after :meth:`setup` to restart it exactly).
-        Returns ``self``."""
-        self._layout()
-        if self.formulation == "single-shooting":
+
+        The single-shooting SQP takes its derivatives from the compiled kernel
+        (:mod:`controllers.compiled_kernel`) unless ``kernel="numpy"``, or when it cannot be
+        built or fails its self-test (then the numpy callbacks, with a one-line warning).
+        Returns ``self``.
+        """
+        single = self.formulation == "single-shooting"
+        self.kernel = None
+        self.layout = FHOCPLayout(self, single)
+        lay = self.layout
+        self.nw, self.iu, self.it, self.ix, self.ng = lay.nw, lay.iu, lay.it, lay.ix, lay.ng
+        if single:
             from controllers.nlp_single_shooting import SingleShootingNLP
 
-            self._nlp = SingleShootingNLP(self)
+            if self.solver == "sqp" and self.kernel_mode == "auto":
+                self.kernel = _load_kernel(self)
+            self._nlp = SingleShootingNLP(self, self.kernel)
             self._shoot = self._nlp.shoot
-            self.ng = self._nlp.ng
             nlp, opts = self._nlp.ipopt_problem(self.ipopt_options, self.time_budget)
             self._xtraj = self._nlp.trajectory
         else:
             from controllers.nlp_multiple_shooting import multiple_shooting_problem
 
-            nlp, opts, self._xtraj, self.ng = multiple_shooting_problem(self)
-        self._bounds()
+            self._nlp = None
+            nlp, opts, xtraj, _ = multiple_shooting_problem(self)
+            self._xtraj = lambda w, p: np.asarray(xtraj(w, p))
         if self.solver == "sqp":
             opts = {k: v for k, v in opts.items()
                     if k not in ("ipopt", "grad_f", "jac_g", "hess_lag")}
-            opts.update(self._nlp.sqp_functions())
+            nlp, functions = self._nlp.sqp_problem(nlp)
+            opts.update(functions)
             sqp = dict(self.sqp_options)
             clip = sqp.pop("hessian_eigen_clip", None)
             self._nlp.eigen_clip = None if clip is None else float(clip)
@@ -268,20 +271,19 @@ class FHOCP:
                 self._solver = ca.nlpsol("fhocp", "sqpmethod", nlp, opts)
         else:
             self._solver = ca.nlpsol("fhocp", "ipopt", nlp, opts)
-        self._buffer = None
-        if self.solver == "sqp":
-            with quiet_stdout():  # … or when its memory is allocated
-                self._call_solver_setup()
+        with quiet_stdout():  # … or when its memory is allocated
+            self._buffer = _bind_buffers(self._solver)
         self._warm: dict[str, np.ndarray] | None = None
         return self
 
-    def _bounds(self) -> None:
-        lbx = np.full(self.nw, -np.inf)
-        ubx = np.full(self.nw, np.inf)
-        lbx[self.iu.ravel()] = -1.0
-        ubx[self.iu.ravel()] = 1.0
-        lbx[self.it] = 0.0
-        self._lbx, self._ubx = lbx, ubx
+    def simulate(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
+        """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m): the compiled
+        kernel's plain rollout when there is one, else numpy (:func:`controllers.gru.
+        simulate`)."""
+        if self.kernel is not None:
+            return self.kernel.simulate(np.asarray(x_hat, dtype=float),
+                                        np.asarray(u_seq, dtype=float))
+        return gru.simulate(self.params, x_hat, u_seq)[0]
 
     # -- solving -----------------------------------------------------------------------
     def tightened_bounds(self, e_o: float) -> np.ndarray:
@@ -292,6 +294,8 @@ class FHOCP:
         """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m)."""
         if self._solver is None:
             self.setup()
+        if self.kernel is not None:
+            return self.simulate(x_hat, u_seq)
         if self.formulation == "single-shooting":
             return self._shoot.rollout(x_hat, u_seq, derivatives=False).x
         return gru.simulate(self.params, x_hat, u_seq)[0]
@@ -304,7 +308,7 @@ class FHOCP:
                   u_bar: np.ndarray, e_o: float, alpha: float) -> FHOCPResult:
         """Evaluate a given input sequence (cost, trajectory, residuals) without solving."""
         u_seq = np.clip(np.asarray(u_seq, dtype=float), -1.0, 1.0)
-        x, _ = gru.simulate(self.params, np.asarray(x_hat, dtype=float), u_seq)
+        x = self.simulate(np.asarray(x_hat, dtype=float), u_seq)
         tN = float(np.max(np.abs(x[-1] - x_bar)))
         res = FHOCPResult(u=u_seq, x=x, cost=self.cost(x, u_seq, x_bar, u_bar, tN),
                           status="candidate", success=False, t=tN)
@@ -332,16 +336,6 @@ class FHOCP:
         act += int(np.sum(np.abs(res.u) > 1 - 1e-6))
         res.active = act
 
-    def _initial_guess(self, x_hat: np.ndarray, u_init: np.ndarray, t_init: float,
-                       ) -> np.ndarray:
-        w0 = np.zeros(self.nw)
-        w0[self.iu] = u_init
-        w0[self.it] = t_init
-        if self.ix is not None:
-            x, _ = gru.simulate(self.params, x_hat, u_init)
-            w0[self.ix] = x
-        return w0
-
     def solve(self, x_hat: np.ndarray, e_o: float, x_bar: np.ndarray, u_bar: np.ndarray,
               alpha: float, u_init: np.ndarray | None = None, warm: bool = True,
               ) -> FHOCPResult:
@@ -364,23 +358,34 @@ class FHOCP:
             res.status = "infeasible_x0"
             res.solve_time = time.perf_counter() - t0
             return res
-        args = self._arguments(x_hat, e_o, x_bar, u_bar, alpha, u_init, warm)
+        buf, trigger, ins, outs = self._buffer
+        simulate = (self.simulate if self.kernel is not None or self._nlp is None
+                    else lambda xh, u: self._shoot.rollout(xh, u, derivatives=False).x)
+        self.layout.write(ins, self.tightened_bounds(e_o), x_hat, x_bar, u_bar, alpha, u_init,
+                          self._warm if warm else None, self.warm_duals, simulate)
         if self._nlp is not None:
             self._nlp.deadline = t0 + (self.time_budget if self.time_budget is not None
                                        else np.inf)
-        sol, stats = self._call_solver(args)
+        trigger()
+        try:
+            stats = buf.stats()
+        except RuntimeError:
+            # casadi 3.8 sqpmethod: no return status after a failed line search
+            stats = {"return_status": "Solver_Stats_Unavailable", "success": False}
         if stats.get("return_status") == "User_Requested_Stop":
             stats = {**stats, "return_status": "time_budget_exceeded", "success": False}
         elapsed = time.perf_counter() - t0
-        wopt = np.asarray(sol["x"]).ravel()
+        wopt = outs["x"].copy()
         u = np.clip(wopt[self.iu], -1.0, 1.0)  # IPOPT may overshoot a bound by ~1e-9
-        xs = np.asarray(self._xtraj(wopt, args["p"]))
-        x, _ = gru.simulate(self.params, x_hat, np.clip(u, -1.0, 1.0))
+        xs = self._xtraj(wopt, ins["p"])
+        # the independent check: a rollout apart from the solver's (the kernel's plain one,
+        # cross-checked against numpy when loaded, or numpy's)
+        x = self.simulate(x_hat, u)
         t = float(wopt[self.it])
         res = FHOCPResult(u=u, x=x, cost=self.cost(x, u, x_bar, u_bar), status=str(
             stats.get("return_status", "unknown")), success=False,
             iterations=int(stats.get("iter_count", 0)), solve_time=elapsed, t=t,
-            lam_x=np.asarray(sol["lam_x"]).ravel(), lam_g=np.asarray(sol["lam_g"]).ravel())
+            lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
         res.defect = float(np.max(np.abs(xs - x)))
         self._residuals(res, x, e_o, x_bar, alpha)
         ok_status = bool(stats.get("success", False))
@@ -402,96 +407,55 @@ class FHOCP:
             self._warm = {"w": wopt, "lam_x": res.lam_x, "lam_g": res.lam_g}
         return res
 
-    def _call_solver_setup(self) -> None:
-        """Bind numpy arrays to the solver's zero-copy argument and result buffers."""
-        fn = self._solver
-        buf, trigger = fn.buffer()
-        ins = {name: np.zeros(fn.sparsity_in(i).nnz()) for i, name in enumerate(fn.name_in())}
-        outs = {name: np.zeros(fn.sparsity_out(i).nnz())
-                for i, name in enumerate(fn.name_out())}
-        for i, name in enumerate(fn.name_in()):
-            buf.set_arg(i, memoryview(ins[name]))
-        for i, name in enumerate(fn.name_out()):
-            buf.set_res(i, memoryview(outs[name]))
-        self._buffer = (buf, trigger, ins, outs)
-
-    def _call_solver(self, args: dict[str, Any]) -> tuple[dict[str, np.ndarray], dict]:
-        """Run the solver; returns the solution arrays and the solver statistics.
-
-        Arguments and results go through casadi's zero-copy buffers: converting numpy arrays
-        to and from ``DM`` costs tens of microseconds per vector.
-        """
-        if self._buffer is None:
-            self._call_solver_setup()
-        buf, trigger, ins, outs = self._buffer
-        for name, arr in ins.items():
-            arr[:] = args.get(name, 0.0)
-        trigger()
-        try:
-            stats = buf.stats()
-        except RuntimeError:
-            # casadi 3.8 sqpmethod: no return status after a failed line search
-            stats = {"return_status": "Solver_Stats_Unavailable", "success": False}
-        return {k: v.copy() for k, v in outs.items()}, stats
-
     def reset_warm_start(self) -> None:
         """Forget the previous solution (next solve starts cold)."""
         self._warm = None
 
-    def _arguments(self, x_hat: np.ndarray, e_o: float, x_bar: np.ndarray, u_bar: np.ndarray,
-                   alpha: float, u_init: np.ndarray | None, warm: bool) -> dict[str, Any]:
-        N, q, n = self.N, self.q, self.n
-        ub = self.tightened_bounds(e_o)
-        lbg = np.full(self.ng, -np.inf)
-        ubg = np.full(self.ng, np.inf)
-        if self.formulation == "single-shooting":
-            qr, up, lo = self.qr, self._up, self._lo
-            ubg[: (N - 1) * qr] = ub[1:, up].ravel()
-            lower = np.where(lo >= 0, -ub[1:, np.maximum(lo, 0)], -np.inf)
-            lbg[: (N - 1) * qr] = lower.ravel()
-            off = (N - 1) * qr
-        else:
-            neq = (N + 1) * n
-            lbg[:neq] = 0.0
-            ubg[:neq] = 0.0
-            ubg[neq: neq + N * q] = ub.ravel()
-            off = neq + N * q
-        ubg[off: off + n] = 0.0
-        lbg[off + n: off + 2 * n] = 0.0
-        ubx = self._ubx.copy()
-        ubx[self.it] = alpha
-        args: dict[str, Any] = {"p": np.concatenate([x_hat, x_bar, u_bar]), "lbx": self._lbx,
-                                "ubx": ubx, "lbg": lbg, "ubg": ubg}
-        prev = self._warm if warm else None
-        if u_init is None:
-            if prev is not None:
-                u_prev = prev["w"][self.iu]
-                u_init = np.vstack([u_prev[1:], u_bar])
-            else:
-                u_init = np.tile(u_bar, (N, 1))
-        u_init = np.clip(u_init, -1.0, 1.0)
-        if self.formulation == "single-shooting":
-            x = self._shoot.rollout(x_hat, u_init, derivatives=False).x
-        else:
-            x, _ = gru.simulate(self.params, x_hat, u_init)
-        t_init = min(max(float(np.max(np.abs(x[-1] - x_bar))), 1e-6), max(alpha, 0.0))
-        args["x0"] = self._initial_guess(x_hat, u_init, t_init)
-        if prev is not None and self.warm_duals:
-            args["lam_x0"] = self._shift(prev["lam_x"], "x")
-            args["lam_g0"] = self._shift(prev["lam_g"], "g")
-        return args
 
-    def _shift(self, lam: np.ndarray, kind: str) -> np.ndarray:
-        """Shift multipliers by one stage (the last stage keeps its values)."""
-        lam = lam.copy()
-        N, q = self.N, self.qr
-        if kind == "x":
-            lu = lam[self.iu]
-            lam[self.iu] = np.vstack([lu[1:], lu[-1:]])
-            if self.ix is not None:
-                lx = lam[self.ix]
-                lam[self.ix] = np.vstack([lx[1:], lx[-1:]])
-        elif self.formulation == "single-shooting":
-            blk = lam[: (N - 1) * q].reshape(N - 1, q)
-            lam[: (N - 1) * q] = np.vstack([blk[1:], blk[-1:]]).ravel()
-        return lam
+def _bind_buffers(solver: Any) -> tuple:
+    """Bind numpy arrays to the solver's zero-copy argument and result buffers (converting
+    numpy arrays to and from ``DM`` costs tens of microseconds per vector)."""
+    buf, trigger = solver.buffer()
+    ins = {name: np.zeros(solver.sparsity_in(i).nnz())
+           for i, name in enumerate(solver.name_in())}
+    outs = {name: np.zeros(solver.sparsity_out(i).nnz())
+            for i, name in enumerate(solver.name_out())}
+    for i, name in enumerate(solver.name_in()):
+        buf.set_arg(i, memoryview(ins[name]))
+    for i, name in enumerate(solver.name_out()):
+        buf.set_res(i, memoryview(outs[name]))
+    return buf, trigger, ins, outs
+
+
+#: Kernel libraries checked against the numpy callbacks in this process, with the outcome.
+_SELF_TESTED: dict[str, float] = {}
+#: Reasons already warned about (one warning per reason and process).
+_WARNED: set[str] = set()
+
+
+def _load_kernel(fhocp: FHOCP) -> Any:
+    """The compiled kernel of ``fhocp``'s problem, self-tested; ``None`` (with a one-line
+    warning) when it cannot be built or disagrees with the numpy callbacks."""
+    import warnings
+
+    from controllers import compiled_kernel as ck
+
+    clip = fhocp.sqp_options.get("hessian_eigen_clip")
+    k = ck.build(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s, clip)
+    reason = ck.last_error
+    if k is not None:
+        key = str(k.path)
+        if key not in _SELF_TESTED:
+            from controllers.nlp_single_shooting import SingleShootingNLP
+
+            _SELF_TESTED[key] = SingleShootingNLP(fhocp, None).self_test(k, clip)
+        if _SELF_TESTED[key] > KERNEL_SELF_TEST_TOL:
+            reason = (f"self-test against the numpy derivatives failed (relative difference "
+                      f"{_SELF_TESTED[key]:.1e})")
+            k = None
+    if k is None and reason not in _WARNED:
+        _WARNED.add(reason)
+        warnings.warn(f"compiled FHOCP kernel unavailable ({reason}); using the numpy "
+                      "derivatives", RuntimeWarning, stacklevel=3)
+    fhocp.kernel_error = None if k is not None else reason
+    return k

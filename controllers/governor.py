@@ -92,6 +92,15 @@ class ReferenceGovernor:
         self.lam_max = 1.0
         self._moved = False
 
+    def newton(self, y: np.ndarray, x0: np.ndarray,
+               u0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """:func:`controllers.equilibrium.equilibrium_newton` from ``(x0, u0)``: the FHOCP's
+        compiled kernel when it has one (same iteration, ~25× faster), else numpy."""
+        kernel = getattr(self.fhocp, "kernel", None)
+        if kernel is not None:
+            return kernel.eq_newton(y, x0, u0)
+        return equilibrium_newton(self.params, y, x0, u0)
+
     def govern(self, x_hat: np.ndarray, e_o: float, v: np.ndarray, x_bar: np.ndarray,
                u_bar: np.ndarray, r: np.ndarray, plan: np.ndarray | None,
                last_success: bool | None) -> GovernorStep:
@@ -109,11 +118,14 @@ class ReferenceGovernor:
         return gs
 
     def feasible(self, x_hat: np.ndarray, e_o: float, u_seq: np.ndarray, x_bar: np.ndarray,
-                 alpha: float) -> bool:
-        """``u_seq`` satisfies every constraint of ``eq:optimization`` from ``x̂``."""
+                 alpha: float, bounds: np.ndarray | None = None) -> bool:
+        """``u_seq`` satisfies every constraint of ``eq:optimization`` from ``x̂``
+        (``bounds``: the tightened bounds at ``ê_o``, when already computed)."""
         fh = self.fhocp
         x = fh.rollout(x_hat, u_seq)
-        if np.max(x[1: fh.N] @ fh.LUo.T - fh.tightened_bounds(e_o)[1:]) > 0.0:
+        if bounds is None:
+            bounds = fh.tightened_bounds(e_o)
+        if np.max(x[1: fh.N] @ fh.LUo.T - bounds[1:]) > 0.0:
             return False
         return bool(np.max(np.abs(x[fh.N] - x_bar)) <= alpha)
 
@@ -126,18 +138,19 @@ class ReferenceGovernor:
         if plan is None:
             return hold
         lam = float(lam_max)
+        bounds = self.fhocp.tightened_bounds(e_o)
         for _ in range(self.levels):
             y = v + lam * (r - v)
             if self.cert.failures(y):
                 lam *= 0.5
                 continue
-            eq = equilibrium_newton(self.params, y, x_bar, u_bar)
+            eq = self.newton(y, x_bar, u_bar)
             if eq is not None:
                 xb, ub = eq
                 alpha = self.cert.alpha(y)
                 shifted = np.vstack([plan[1:], ub])
                 for cand in (shifted, np.clip(shifted + (ub - u_bar), -1.0, 1.0)):
-                    if self.feasible(x_hat, e_o, cand, xb, alpha):
+                    if self.feasible(x_hat, e_o, cand, xb, alpha, bounds):
                         return GovernorStep(lam, y, xb, ub, alpha, cand)
             lam *= 0.5
         return hold

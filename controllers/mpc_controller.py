@@ -52,7 +52,8 @@ __all__ = ["RobustMPCController"]
 
 
 def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_rate: Any,
-                   governor: Any, solver: Any, ipopt_options: Any, max_iter: Any) -> None:
+                   governor: Any, solver: Any, ipopt_options: Any, max_iter: Any,
+                   kernel: Any) -> None:
     """Reject controller options of the wrong type or range with a one-line error."""
 
     def number(value: Any) -> bool:
@@ -71,6 +72,8 @@ def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_
                          "of metres per sample")
     if isinstance(max_iter, bool) or not isinstance(max_iter, int) or not 1 <= max_iter <= 10000:
         raise CosimError(f"option max_iter={max_iter!r}: expected an integer in [1, 10000]")
+    if kernel not in ("auto", "numpy"):
+        raise CosimError(f"option kernel={kernel!r}: expected \"auto\" or \"numpy\"")
     if solver is not None and solver not in ("sqp", "ipopt"):
         raise CosimError(f"option solver={solver!r}: expected \"sqp\" or \"ipopt\"")
     if ipopt_options is not None and (not isinstance(ipopt_options, Mapping) or not all(
@@ -114,6 +117,10 @@ class RobustMPCController(Component):
         ``ipopt_options`` are given; see :class:`controllers.fhocp.FHOCP`).
     ipopt_options : dict, optional
         Overrides of :data:`controllers.solver_settings.FAST_IPOPT_OPTIONS`.
+    kernel : {"auto", "numpy"}
+        Where the SQP's derivatives come from: the compiled kernel (``"auto"``, built on
+        first use; the numpy callbacks when no C compiler is found) or the numpy callbacks
+        (``"numpy"``, the reference implementation). Same answers either way.
     max_iter : int
         Iteration cap of one FHOCP solve (default 15, the real-time bound). A solve that
         reaches it applies its feasible iterate (suboptimal MPC) or the fallback; that iterate
@@ -134,7 +141,7 @@ class RobustMPCController(Component):
                  setpoint_rate: float | None = None, governor: bool = True,
                  solver: str | None = None,
                  ipopt_options: Mapping[str, Any] | None = None, max_iter: int = 15,
-                 name: str = "mpc") -> None:
+                 kernel: str = "auto", name: str = "mpc") -> None:
         from controllers import certificates as certs
         from controllers import gain_design
         from controllers.fhocp import FHOCP
@@ -145,7 +152,7 @@ class RobustMPCController(Component):
 
         _check_options(name=name, offset_free=offset_free, offset_filter=offset_filter,
                        setpoint_rate=setpoint_rate, governor=governor, solver=solver,
-                       ipopt_options=ipopt_options, max_iter=max_iter)
+                       ipopt_options=ipopt_options, max_iter=max_iter, kernel=kernel)
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
         try:
@@ -172,7 +179,7 @@ class RobustMPCController(Component):
             raise CosimError(str(exc)) from None
         self.cert = cert
         self.fhocp = FHOCP.from_certificate(
-            cert, solver=solver, sqp_options={"max_iter": max_iter},
+            cert, solver=solver, sqp_options={"max_iter": max_iter}, kernel=kernel,
             ipopt_options={"max_iter": max_iter, **(ipopt_options or {})}
             if ipopt_options or solver == "ipopt" else None)
         # build the solver and load scipy.optimize (the observer's x̂_0 equilibrium) now, so
@@ -289,6 +296,7 @@ class RobustMPCController(Component):
             "model": str(self.model_path),
             "N": self.fhocp.N,
             "formulation": self.fhocp.formulation,
+            "kernel": "compiled" if self.fhocp.kernel is not None else "numpy",
             "offset_free": self.offset_free,
             "setpoint_rate": self.setpoint_rate,
             "governor": self.governor is not None,
@@ -348,7 +356,7 @@ class RobustMPCController(Component):
     def _govern(self, target: np.ndarray, y_ref: np.ndarray, requested_changed: bool,
                 t: float) -> bool:
         """Move the FHOCP set-point towards an admissible ``target`` with the governor."""
-        from controllers.equilibrium import describe, equilibrium_newton
+        from controllers.equilibrium import describe
 
         assert self.governor is not None and self._y_model is not None
         failed = self.cert.failures(target)
@@ -356,8 +364,8 @@ class RobustMPCController(Component):
             self._reject(SetpointError(f"set-point {describe(self.model, target)}: "
                                        + "; ".join(failed)), y_ref, requested_changed, t)
             return True
-        if requested_changed and equilibrium_newton(
-                self.cert.params, target, self.mpc.x_bar, self.mpc.u_bar) is None:
+        if requested_changed and self.governor.newton(
+                target, self.mpc.x_bar, self.mpc.u_bar) is None:
             try:  # reachable with ‖ū‖∞ ≤ 1? (the multi-start solve decides)
                 self.cert.reference(target)
             except SetpointError as exc:

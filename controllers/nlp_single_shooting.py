@@ -14,6 +14,10 @@ states, their sensitivities and the exact Hessian of the Lagrangian come from
 
 The rollout at one point is cached and shared by the cost, constraint, gradient, Jacobian
 and Hessian evaluations at that point (one rollout serves a whole SQP iteration).
+
+With a compiled kernel (:mod:`controllers.compiled_kernel`: the same mathematics in C, checked
+against these numpy functions by :meth:`SingleShootingNLP.self_test`), the SQP's functions
+are the kernel's casadi ``external`` functions instead: no Python runs inside the solver.
 """
 
 from __future__ import annotations
@@ -39,6 +43,9 @@ class SingleShootingNLP:
     ----------
     fhocp : FHOCP
         The problem (dimensions, weights, constraint rows, layout of ``w``).
+    kernel : compiled_kernel.Kernel, optional
+        The compiled kernel of this problem: :meth:`sqp_problem` and :meth:`trajectory` use
+        it.
 
     Attributes
     ----------
@@ -51,10 +58,11 @@ class SingleShootingNLP:
         ``time.perf_counter()`` value past which IPOPT's iteration callback stops the solve.
     """
 
-    def __init__(self, fhocp: FHOCP) -> None:
+    def __init__(self, fhocp: FHOCP, kernel: Any = None) -> None:
         from controllers.shooting import GRUShooting
 
         self.p = fhocp
+        self.kernel = kernel
         self.shoot = GRUShooting(fhocp.params, fhocp.N)
         self.ng = (fhocp.N - 1) * fhocp.qr + 2 * fhocp.n
         self.iu = fhocp.iu.ravel()
@@ -192,6 +200,8 @@ class SingleShootingNLP:
 
     def trajectory(self, wv: np.ndarray, pv: np.ndarray) -> np.ndarray:
         """The states the solver's answer ``w`` gives (usually the last point evaluated)."""
+        if self.kernel is not None:
+            return self.kernel.xtraj(wv, pv)
         wv = np.asarray(wv, dtype=float).ravel()
         pv = np.asarray(pv, dtype=float).ravel()
         if self._key == (wv.tobytes(), pv.tobytes()):
@@ -237,8 +247,50 @@ class SingleShootingNLP:
             opts["iteration_callback"] = stopcb
         return {"x": w, "p": par, "f": fcb(w, par), "g": gcb(w, par)}, opts
 
+    def sqp_problem(self, nlp: dict) -> tuple[dict, dict[str, Any]]:
+        """The NLP and ``sqpmethod``'s derivative functions: the compiled kernel's
+        ``external`` functions (``f``, ``g`` from its ``fg``) when there is a kernel, else
+        ``nlp`` as it is and :meth:`sqp_functions`."""
+        k = self.kernel
+        if k is None:
+            return nlp, self.sqp_functions()
+        f, g = k.external("fg")(nlp["x"], nlp["p"])
+        return ({"x": nlp["x"], "p": nlp["p"], "f": f, "g": g},
+                {"jac_fg": k.external("jac_fg"), "hess_lag": k.external("hess_l")})
+
+    def self_test(self, kernel: Any, clip: float | None, trials: int = 3,
+                  seed: int = 12345) -> float:
+        """Largest relative difference between ``kernel`` and these numpy functions at random
+        points: f, ∇f, g, ∂g/∂w, the clipped Hessian and the plain rollout."""
+        p = self.p
+        rng = np.random.default_rng(seed)
+        n, m, N = p.n, p.m, p.N
+        saved, self.eigen_clip = self.eigen_clip, None if clip is None else float(clip)
+        worst = 0.0
+        try:
+            jac_c, hess_c = kernel.external("jac_fg"), kernel.external("hess_l")
+            for _ in range(trials):
+                wv = np.concatenate([rng.uniform(-1, 1, N * m), rng.uniform(0, 0.1, 1)])
+                pv = np.concatenate([rng.uniform(-0.5, 0.5, 2 * n), rng.uniform(-1, 1, m)])
+                lg = rng.normal(0, 1, self.ng)
+                pairs = list(zip(jac_c(wv, pv), self.jac_fg(wv, pv), strict=True))
+                pairs.append((hess_c(wv, pv, 1.0, lg),
+                              self.hessian_convex(wv, pv, np.array([1.0]), lg)[0]))
+                u = wv[: N * m].reshape(N, m)
+                pairs.append((kernel.simulate(pv[:n], u),
+                              self.shoot.rollout(pv[:n], u, derivatives=False).x))
+                for a, b in pairs:
+                    b = np.asarray(b, dtype=float)
+                    a = np.asarray(a, dtype=float).reshape(b.shape)
+                    scale = max(1.0, float(np.max(np.abs(b))))
+                    worst = max(worst, float(np.max(np.abs(a - b))) / scale)
+        finally:
+            self.eigen_clip = saved
+        return worst
+
     def sqp_functions(self) -> dict[str, NumpyCallback]:
-        """``sqpmethod``'s ``jac_fg`` (f, ∇f, g, ∂g/∂w) and full ``hess_lag`` (convexified)."""
+        """``sqpmethod``'s ``jac_fg`` (f, ∇f, g, ∂g/∂w) and full ``hess_lag`` (convexified),
+        as numpy callbacks."""
         p = self.p
         nw, npar, ng = p.nw, 2 * p.n + p.m, self.ng
         sp = ca.Sparsity.dense

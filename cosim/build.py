@@ -159,6 +159,19 @@ def _compile(target: Target, cc: str, out: Path) -> None:
         raise CosimError(f"compiling {target.fmu_name} failed: {first}")
 
 
+#: Time stamp of every FMU member: the same sources give the same FMU, byte for byte (a
+#: campaign's fingerprint, ``--resume``, survives a rebuild).
+ZIP_DATE = (2000, 1, 1, 0, 0, 0)
+
+
+def _add(zf: zipfile.ZipFile, arcname: str, data: bytes, executable: bool = False) -> None:
+    """One member with a fixed time stamp and permissions (a reproducible archive)."""
+    info = zipfile.ZipInfo(arcname, date_time=ZIP_DATE)
+    info.compress_type = zipfile.ZIP_DEFLATED
+    info.external_attr = (0o755 if executable else 0o644) << 16
+    zf.writestr(info, data)
+
+
 def _zip_fmu(target: Target, binary: Path, digest: str) -> None:
     """Write the FMU atomically (temporary file, then rename)."""
     FMU_DIR.mkdir(parents=True, exist_ok=True)
@@ -167,11 +180,12 @@ def _zip_fmu(target: Target, binary: Path, digest: str) -> None:
     tmp = Path(tmp_name)
     try:
         with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-            zf.write(SOURCE_DIR / target.model_description, "modelDescription.xml")
-            zf.write(binary, f"binaries/{target.platform_dir}/{MODEL_IDENTIFIER}.so")
-            for name in target.sources:
-                zf.write(SOURCE_DIR / name, f"sources/{name}")
-            zf.writestr("sources/BUILD_HASH", digest + "\n")
+            members = [(SOURCE_DIR / target.model_description, "modelDescription.xml"),
+                       (binary, f"binaries/{target.platform_dir}/{MODEL_IDENTIFIER}.so")]
+            members += [(SOURCE_DIR / name, f"sources/{name}") for name in target.sources]
+            for path, arcname in members:
+                _add(zf, arcname, path.read_bytes(), executable=arcname.endswith(".so"))
+            _add(zf, "sources/BUILD_HASH", (digest + "\n").encode())
         umask = os.umask(0)
         os.umask(umask)
         tmp.chmod(0o666 & ~umask)  # mkstemp creates 0600; an FMU is an ordinary file

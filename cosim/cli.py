@@ -12,6 +12,7 @@ import argparse
 import importlib
 import signal
 import sys
+import warnings
 from collections.abc import Sequence
 
 from controllers.errors import ControllersError
@@ -35,6 +36,7 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 COMMANDS = (
     "cosim.commands.run",
     "cosim.commands.build_fmu",
+    "cosim.commands.build_kernel",
     "cosim.commands.generate_data",
     "cosim.commands.train",
     "cosim.commands.certify",
@@ -70,6 +72,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``cosim`` console script; returns the exit code."""
     parser = build_parser()
     args = parser.parse_args(argv)
+
+    def one_line_warning(message: Warning | str, category: type[Warning], filename: str,
+                         lineno: int, file: object = None, line: str | None = None) -> None:
+        print(f"cosim {args.command}: warning: {message}", file=sys.stderr)
+
+    warnings.showwarning = one_line_warning
     try:
         with interrupts.handling_signals():
             return int(args.func(args) or 0)
