@@ -1,10 +1,10 @@
-# Quick start: `make demo` and `make test` (see README). Both are idempotent.
+# Quick start: `make demo` and `make test` (see README.md and docs/index.md). Both are idempotent.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all setup fmus demo test lint bench clean
+.PHONY: all setup fmus demo test docs lint bench clean
 
 all: fmus
 
@@ -27,8 +27,12 @@ fmus: $(STAMP)
 demo: fmus
 	$(BIN)/cosim run scenarios/paper_steps.csv --out results/demo
 
-test: fmus
+test: fmus docs
 	$(BIN)/python -m pytest
+
+# The documentation site (mkdocs.yml, docs/): a strict build, any warning is an error.
+docs: $(STAMP)
+	NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --site-dir site
 
 lint: $(STAMP)
 	$(BIN)/ruff check .
@@ -37,4 +41,4 @@ bench: fmus
 	for b in benchmarks/bench_*.py; do $(BIN)/python $$b || exit 1; done
 
 clean:
-	rm -rf fmus/build fmus/*.fmu results .pytest_cache
+	rm -rf fmus/build fmus/*.fmu results site .pytest_cache

@@ -21,17 +21,23 @@ import numpy as np
 __all__ = ["NumpyCallback", "quiet_stdout"]
 
 
+_DEVNULL: list[int] = []
+
+
 @contextlib.contextmanager
 def quiet_stdout() -> Iterator[None]:
-    """Silence the C-level standard output (file descriptor 1) for the block.
+    """Silence the C-level standard output (file descriptor 1) for the block (~5 µs).
 
-    qpOASES prints its licence banner when a solver is built or its memory allocated.
+    qpOASES prints its licence banner when a solver is built or its memory allocated, and
+    prints its errors (an infeasible QP inside an SQP iteration, which the SQP handles) to
+    standard output whatever its ``printLevel``: every solve runs in this block.
     """
+    if not _DEVNULL:
+        _DEVNULL.append(os.open(os.devnull, os.O_WRONLY))
     sys.stdout.flush()
     saved = os.dup(1)
     try:
-        with open(os.devnull, "w") as null:
-            os.dup2(null.fileno(), 1)
+        os.dup2(_DEVNULL[0], 1)
         yield
     finally:
         os.dup2(saved, 1)

@@ -5,7 +5,7 @@ its derivatives: rollout, sensitivities, the Hessian of the Lagrangian and its e
 clipping. The kernel does the same mathematics in C (``controllers/kernel/*.c``) and is
 handed to casadi ``sqpmethod`` as ``external`` functions, so that the SQP loop runs without
 Python. It agrees with the numpy callbacks to ~1e-14 (checked at load time, once per library
-and process: :func:`self_test`).
+and process: :meth:`controllers.nlp_single_shooting.SingleShootingNLP.self_test`).
 
 The C source is the fixed template (``kernel/1_rollout.c`` … ``4_api.c``) preceded by a
 generated header holding the

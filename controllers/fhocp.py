@@ -20,7 +20,7 @@ limit: deterministic) or by IPOPT (``solver="ipopt"``), warm started with the pr
 dual solution shifted by one stage; and ``"multiple-shooting"`` (the plain baseline, what
 do-mpc builds; :mod:`controllers.nlp_multiple_shooting`). The ``i = 0`` constraint involves
 only ``x̂``: it is checked before the solve, and a violated one is reported as
-``"infeasible_x0"`` without calling the solver. The design record (docs, "Design records")
+``"infeasible_x0"`` without calling the solver. The design record (docs: design/solver.md)
 lists the alternatives measured and why they won or lost.
 
 Every answer is checked independently of the solver's status: the inputs are rolled out with
@@ -366,7 +366,8 @@ class FHOCP:
         if self._nlp is not None:
             self._nlp.deadline = t0 + (self.time_budget if self.time_budget is not None
                                        else np.inf)
-        trigger()
+        with quiet_stdout():  # qpOASES prints the errors its SQP handles
+            trigger()
         try:
             stats = buf.stats()
         except RuntimeError:

@@ -1,4 +1,4 @@
-"""Solver settings of the FHOCP, chosen by measurement (docs: "Design records").
+"""Solver settings of the FHOCP, chosen by measurement (docs: design/solver.md).
 
 The tolerances an answer must meet to be applied, the IPOPT options of the fast
 formulation, and the options of the default solver, casadi ``sqpmethod`` with dense qpOASES
@@ -15,7 +15,7 @@ __all__ = ["DEFECT_TOL", "FAST_IPOPT_OPTIONS", "FEAS_TOL", "SQP_OPTIONS"]
 FEAS_TOL = 1e-7
 DEFECT_TOL = 1e-8
 
-#: IPOPT options of the fast formulation (chosen by measurement; README, "Robust MPC").
+#: IPOPT options of the fast formulation (chosen by measurement; docs: design/solver.md).
 FAST_IPOPT_OPTIONS: dict[str, Any] = {
     "tol": 1e-6,
     "acceptable_tol": 1e-5,
@@ -39,7 +39,7 @@ FAST_IPOPT_OPTIONS: dict[str, Any] = {
 }
 
 #: Options of the default solver (``solver="sqp"``, casadi ``sqpmethod``), chosen by
-#: measurement (README, "Robust MPC"): the exact Hessian from the same callbacks, with its
+#: measurement (docs: design/solver.md): the exact Hessian from the same callbacks, with its
 #: eigenvalues clipped at ``hessian_eigen_clip`` (numpy ``eigh`` in the callback; our key,
 #: not passed to casadi) for the QP. Rejected: sqpmethod's ``regularize`` (Gershgorin shift)
 #: makes the iterates crawl; a 1e-7 clipping margin gives steps the ℓ1-merit line search

@@ -1,6 +1,6 @@
 """The ``cosim`` command line: one sub-command per module in :mod:`cosim.commands`.
 
-Exit codes: :data:`cosim.errors.EXIT_CODES` (also in the README), which ``cosim --help``
+Exit codes: :data:`cosim.errors.EXIT_CODES` (docs: guide/running.md), which ``cosim --help``
 prints with what a code also means for each command (the commands' ``EXIT_NOTES``):
 :class:`~cosim.errors.SimulationFailed` exits 1, any other
 :class:`~cosim.errors.CosimError` 2, a signal N ``128 + N``.

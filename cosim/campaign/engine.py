@@ -22,11 +22,9 @@ from __future__ import annotations
 
 import contextlib
 import hashlib
-import json
 import logging
 import math
 import os
-import shutil
 import signal
 import sys
 import time
@@ -35,10 +33,8 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from cosim import atomicio, interrupts
-from cosim.campaign import report
+from cosim import interrupts
+from cosim.campaign import report, store
 from cosim.campaign.draws import DrawContext, RunDraw, draw_run
 from cosim.campaign.spec import CampaignSpec, load
 from cosim.campaign.task import Assets, run_task
@@ -49,8 +45,6 @@ __all__ = ["CampaignResult", "default_workers", "run_campaign"]
 #: Seconds a run may take by default: this much plus :data:`TIMEOUT_PER_STEP` per step.
 TIMEOUT_BASE = 60.0
 TIMEOUT_PER_STEP = 0.5
-#: Files of a campaign folder (besides ``runs/``).
-CAMPAIGN_FILES = ("campaign.json", "runs.parquet", "summary.json", "report.png")
 
 
 @dataclass
@@ -93,7 +87,11 @@ def default_workers() -> int:
 # ---------------------------------------------------------------------------------------------
 
 @dataclass
-class _Plan:
+class Plan:
+    """A checked campaign ready to run (:func:`prepare`): the spec, the files the workers
+    get, one task per (run, variant) with its draws, the fingerprint ``--resume`` compares,
+    and the run timeout [s]."""
+
     spec: CampaignSpec
     assets: Assets
     tasks: list[dict[str, Any]]      # one per (run, variant), draws included
@@ -162,7 +160,7 @@ def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, 
     return float(sample or 1.0)
 
 
-def prepare(spec: CampaignSpec) -> _Plan:
+def prepare(spec: CampaignSpec) -> Plan:
     """Check the spec against the real plant and controllers, draw every run, pack the
     files; raises :class:`CosimError` (exit 2) before anything runs."""
     from controllers.model import DEFAULT_MODEL
@@ -214,96 +212,7 @@ def prepare(spec: CampaignSpec) -> _Plan:
                 "interface": spec.interface, "isolate": spec.isolate,
                 "step_timeout": spec.step_timeout, "timeout": timeout,
             })
-    return _Plan(spec, assets, tasks, fingerprint, timeout)
-
-
-# ---------------------------------------------------------------------------------------------
-# The output folder
-# ---------------------------------------------------------------------------------------------
-
-def _finished(runs_dir: Path, task: dict[str, Any]) -> bool:
-    path = runs_dir / report.run_folder_name(task["run"], task["variant"]) / "summary.json"
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return False
-    return doc.get("status") in ("ok", "failed")
-
-
-def _open_folder(plan: _Plan, out: Path, resume: bool, force: bool) -> list[dict[str, Any]]:
-    """Check or start ``campaign.json``; returns the tasks still to run."""
-    spec = plan.spec
-    marker = out / "campaign.json"
-    runs_dir = out / "runs"
-    if marker.exists() and not (resume or force):
-        raise CosimError(f"{out}: holds a campaign already; --resume to finish it, --force to "
-                         "start it over, or choose another --out")
-    if marker.exists() and resume:
-        try:
-            old = json.loads(marker.read_text(encoding="utf-8"))
-        except (OSError, ValueError) as exc:
-            raise CosimError(f"{marker}: unreadable ({exc}); use --force to start over") \
-                from None
-        if old.get("fingerprint") != plan.fingerprint:
-            raise CosimError(f"{out}: --resume: the spec or its input files changed since this "
-                             "campaign started (fingerprint differs); use --force to start "
-                             "over or another --out")
-    elif force:
-        shutil.rmtree(runs_dir, ignore_errors=True)
-        for name in CAMPAIGN_FILES:
-            with contextlib.suppress(FileNotFoundError):
-                (out / name).unlink()
-    doc = {"name": spec.name, "fingerprint": plan.fingerprint, "runs": spec.runs,
-           "seed": spec.seed, "variants": [v.name for v in spec.variants],
-           "timeout_s": plan.timeout, "spec_file": str(spec.path), "spec": spec.text}
-    atomicio.write_text(marker, json.dumps(doc, indent=2) + "\n")
-    runs_dir.mkdir(parents=True, exist_ok=True)
-    return [t for t in plan.tasks if not (resume and _finished(runs_dir, t))]
-
-
-def _write_run(out: Path, spec: CampaignSpec, task: dict[str, Any],
-               outcome: dict[str, Any] | None, error: BaseException | None) -> str:
-    """Write one run's folder (as ``cosim run`` does); returns its status."""
-    from cosim import results
-    from cosim.master import RunResult
-
-    if outcome is None:
-        reason = _error_reason(error, task)
-        result = RunResult(columns=["time"], rows=[], status="failed", reason=reason)
-        theorem = None
-    else:
-        result = outcome["result"]
-        rows = np.asarray(result.rows, dtype=float)
-        result.rows = rows.tolist()
-        theorem = outcome.get("theorem")
-    draw = task["draw"]
-    meta: dict[str, Any] = {
-        "scenario": task["scenario_name"], "plant": str(spec.plant or "project FMU"),
-        "controller": task["controller"], "controller_options": task["options"],
-        "seed": draw["seed"],
-        "campaign": {"name": spec.name, "run": task["run"], "variant": task["variant"],
-                     "draws": draw["values"], "setpoints": draw["setpoints"],
-                     "plant_start": draw["plant_start"]},
-    }
-    folder = out / "runs" / report.run_folder_name(task["run"], task["variant"])
-    if theorem is not None:
-        from cosim import kpis
-
-        k = kpis.compute(result.columns, result.rows, result.outputs, result.references,
-                         result.inputs, result.bounds)
-        meta["campaign"]["theorem"] = report.theorem_checks(
-            result.columns, np.asarray(result.rows, dtype=float).reshape(len(result.rows), -1),
-            theorem, k)
-    results.write(folder, result, meta, figure=spec.figures)
-    return result.status
-
-
-def _error_reason(error: BaseException | None, task: dict[str, Any]) -> str:
-    name = type(error).__name__ if error is not None else "unknown error"
-    if name == "KilledWorker":
-        return ("the run killed its worker process (a crash in native code, or stuck past "
-                f"its timeout of {task['timeout']:g} s); the worker was restarted")
-    return f"{name}: {error}"
+    return Plan(spec, assets, tasks, fingerprint, timeout)
 
 
 # ---------------------------------------------------------------------------------------------
@@ -381,15 +290,17 @@ def _identity(value: Any) -> Any:
 @dataclass
 class ExecutionStats:
     """What :func:`_execute` measured: runs done, seconds spent writing them (client side),
-    seconds until the cluster was ready, and whatever ``probe`` returned."""
+    seconds the workers spent inside the runs, seconds until the cluster was ready, and
+    whatever ``probe`` returned."""
 
     done: int = 0
     write_s: float = 0.0
+    run_s: float = 0.0
     startup_s: float = 0.0
     probe: Any = None
 
 
-def _execute(plan: _Plan, pending: list[dict[str, Any]], out: Path, workers: int | None,
+def _execute(plan: Plan, pending: list[dict[str, Any]], out: Path, workers: int | None,
              scheduler: str | None, on_done: Callable[[str], None],
              probe: Callable[[Any], Any] | None = None) -> ExecutionStats:
     """Run ``pending`` on Dask, writing each run as it comes back.
@@ -422,8 +333,10 @@ def _execute(plan: _Plan, pending: list[dict[str, Any]], out: Path, workers: int
                 guard = interrupts.current()
                 t1 = time.perf_counter()
                 with guard.deferred() if guard is not None else contextlib.nullcontext():
-                    status = _write_run(out, plan.spec, task, outcome, error)
+                    status = store.write_run(out, plan.spec, task, outcome, error)
                 stats.write_s += time.perf_counter() - t1
+                if outcome is not None:
+                    stats.run_s += outcome["wall_time_s"]
                 stats.done += 1
                 on_done(status)
                 if guard is not None:
@@ -440,33 +353,6 @@ def _execute(plan: _Plan, pending: list[dict[str, Any]], out: Path, workers: int
 # ---------------------------------------------------------------------------------------------
 # The whole campaign
 # ---------------------------------------------------------------------------------------------
-
-def build_report(spec: CampaignSpec, out: Path, write: bool = True) -> tuple[Any, dict]:
-    """Rebuild ``runs.parquet``, ``summary.json`` and ``report.png`` from the run folders."""
-    import pandas as pd
-
-    rows = []
-    keys = [d.key for d in spec.draws]
-    for run in range(spec.runs):
-        for v in spec.variants:
-            path = out / "runs" / report.run_folder_name(run, v.name) / "summary.json"
-            try:
-                doc = json.loads(path.read_text(encoding="utf-8"))
-            except (OSError, ValueError):
-                continue
-            rows.append(report.kpi_row(doc, keys))
-    columns = ["run", "seed", "variant", "status", "reason", *keys, *report.KPI_COLUMNS]
-    table = pd.DataFrame(rows, columns=None if rows else columns)
-    summary = report.summarize(table, spec.name, spec.runs * len(spec.variants)) if rows \
-        else {"campaign": spec.name, "planned": spec.runs * len(spec.variants), "runs": 0}
-    if write:
-        report.write_table(table, out / "runs.parquet")
-        report.write_summary(summary, out / "summary.json")
-        if rows:
-            report.write_figure(table, out / "runs", out / "report.png",
-                                f"campaign {spec.name}: {len(table)} runs")
-    return table, summary
-
 
 def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None, *,
                  workers: int | None = None, scheduler: str | None = None,
@@ -514,7 +400,7 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
     workers = workers or default_workers()
     error: BaseException | None = None
     with RunFolder(out, "--out") as folder:
-        pending = _open_folder(plan, folder.path, resume, force)
+        pending = store.open_folder(plan, folder.path, resume, force)
         bar = None
         if progress and pending:
             from tqdm import tqdm
@@ -541,7 +427,7 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
                 bar.close()
         guard = interrupts.current()
         with guard.deferred() if guard is not None else contextlib.nullcontext():
-            table, summary = build_report(spec, folder.path)
+            table, summary = store.build_report(spec, folder.path)
             summary["wall_time_s"] = round(time.perf_counter() - t0, 3)
             summary["workers"] = scheduler or workers
             report.write_summary(summary, folder.path / "summary.json")

@@ -18,10 +18,12 @@ the worker process 30 s later, which the client records as a killed worker.
 
 from __future__ import annotations
 
+import atexit
 import hashlib
 import json
 import math
 import os
+import shutil
 import tempfile
 import threading
 import time
@@ -76,10 +78,21 @@ def materialize(assets: Assets) -> Path:
         if folder is not None and folder.is_dir():
             return folder
         folder = Path(tempfile.mkdtemp(prefix=f"cosim-campaign-{assets.digest[:12]}-"))
+        _remove_at_exit(folder)
         for name, data in assets.files.items():
             (folder / name).write_bytes(data)
         _FOLDERS[assets.digest] = folder
         return folder
+
+
+def _remove_at_exit(folder: Path) -> None:
+    """Remove ``folder`` when this process ends: at interpreter exit, and at the exit of a
+    ``multiprocessing`` child (a Dask worker), which skips ``atexit``. (A worker killed by a
+    crash leaves it behind, in the system's temporary folder.)"""
+    from multiprocessing import util
+
+    atexit.register(shutil.rmtree, folder, True)
+    util.Finalize(None, shutil.rmtree, args=(folder, True), exitpriority=0)
 
 
 def _controller(name: str, options: dict[str, Any]) -> Any:

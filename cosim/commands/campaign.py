@@ -40,7 +40,7 @@ Writes into DIR (default results/campaigns/<name>):
 
 A run that fails, exceeds its timeout or kills its worker is recorded as failed with its
 reason and the campaign goes on. Ctrl-C or SIGTERM keeps every finished run; --resume then
-runs only the missing ones. The spec format is in the README (section "Campaigns") and in
+runs only the missing ones. The spec format is in the docs (docs/guide/campaigns.md) and in
 scenarios/campaigns/*.toml."""
 
 EPILOG = """\

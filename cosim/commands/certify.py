@@ -19,8 +19,7 @@ from typing import Any
 
 from cosim.errors import EXIT_FAILED, EXIT_OK, CosimError, exit_codes_help
 
-__all__ = ["DEFAULT_MODEL", "DEFAULT_SETPOINTS", "EPILOG", "EXIT_NOTES", "HELP", "figure",
-           "register", "run"]
+__all__ = ["EPILOG", "EXIT_NOTES", "HELP", "figure", "register", "run"]
 
 #: What the exit codes also mean for ``cosim certify`` (:func:`cosim.errors.exit_codes_help`).
 EXIT_NOTES = {
@@ -28,9 +27,6 @@ EXIT_NOTES = {
     EXIT_FAILED: "a hypothesis fails (named), or the admissible set-point range is empty",
 }
 
-DEFAULT_MODEL = Path(__file__).resolve().parents[2] / "controllers" / "models" / "fourtank_gru.json"
-#: Set-points (metres) used by ``--auto-gain-scale`` when none are given: a 3×3 grid.
-DEFAULT_SETPOINTS = [(a, b) for a in (0.5, 1.0, 1.5) for b in (0.5, 1.0, 1.5)]
 
 HELP = """Compute and check the certificates of the robust GRU MPC (Schimperna & Magni) for a
 model file: the gate bounds and the δISS index nu (th:stability-bonassi), rho_s and c_s
@@ -59,7 +55,7 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser("certify", help="compute and check the paper's certificates",
                               description=HELP, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("model", nargs="?", default=str(DEFAULT_MODEL),
+    p.add_argument("model", nargs="?", default=None,
                    help="GRU model file (default: the shipped controllers/models/"
                         "fourtank_gru.json)")
     p.add_argument("--setpoint", action="append", metavar="H1,H2", default=[],
@@ -151,6 +147,8 @@ def _certificate(args: argparse.Namespace, model: Any, setpoints: list,
     from controllers import gain_design
 
     if args.auto_gain_scale:
+        from controllers.gain_design import DEFAULT_SETPOINTS
+
         targets = setpoints or [model.normalize_y(np.array(s)) for s in DEFAULT_SETPOINTS]
         theta, cert = gain_design.choose_gain_scale(model, targets, **kwargs)
         note = ("LP gains × θ = 0 (no θ in [0, 1] passes)" if theta is None
@@ -170,7 +168,10 @@ def run(args: argparse.Namespace) -> int:
 
     from controllers.equilibrium import equilibrium
     from controllers.errors import ControllersError, UnreachableSetpoint
-    from controllers.model import GRUModel
+    from controllers.model import DEFAULT_MODEL, GRUModel
+
+    if args.model is None:
+        args.model = str(DEFAULT_MODEL)
 
     if args.N < 1:
         raise CosimError(f"--N must be >= 1, got {args.N}")

@@ -19,10 +19,10 @@ and write a CSV (time, inputs, all plant outputs, split) plus a JSON sidecar rec
 it was made. The record is split train/validation/test in the proportions 75/12.5/12.5 %
 (15,000/2,500/2,500 for the default 20,000 steps). The same seed gives the same file.
 
-With --map, the plant may be a third-party FMU whose variables differ in name or unit (see
-the README on variable maps); every map entry is checked against the FMU before the first
-step. The CSV is always in project names and SI units. The CSV and its sidecar are written
-atomically: a failed write leaves the previous files unchanged (exit 1).
+With --map, the plant may be a third-party FMU whose variables differ in name or unit
+(variable maps: docs/guide/own-plant.md); every map entry is checked against the FMU before
+the first step. The CSV is always in project names and SI units. The CSV and its sidecar
+are written atomically: a failed write leaves the previous files unchanged (exit 1).
 
 examples:
   cosim generate-data                              # data/fourtank.csv, seed 0

@@ -36,9 +36,9 @@ and --step-timeout so that a hung one is stopped (it implies --isolate).
 """
 
 EPILOG = """\
-scenario CSV: time,ref.<output>,plant.<variable>,sensor.<output>.bias,sensor.<output>.noise
+scenario CSV: time,ref.<output>,plant.<variable>,sensor.<output>.bias|noise|uniform
   piecewise constant; a blank cell keeps the previous value; the last row's time is the
-  stop time (see the README, section "Scenarios").
+  stop time (see docs/guide/running.md, "Scenarios").
 
 examples:
   cosim run scenarios/paper_steps.csv

@@ -1,1 +1,1 @@
-"""Tests, mirroring the packages (see the README and docs: "Regression tests")."""
+"""Tests, mirroring the packages (docs: guide/regression.md)."""

@@ -19,8 +19,12 @@ def make(cert, max_iter=200, **kw):
     return FHOCP.from_certificate(cert, **kw).setup()
 
 
-@pytest.fixture(scope="module")
-def fast(cert):
+@pytest.fixture(scope="module", params=["ipopt", "sqp"])
+def fast(cert, request):
+    """The fast single-shooting FHOCP: with IPOPT, and with the default solver (SQP on the
+    compiled kernel when a C compiler is found)."""
+    if request.param == "sqp":
+        return FHOCP.from_certificate(cert, sqp_options={"max_iter": 200}).setup()
     return make(cert)
 
 

@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -102,7 +103,10 @@ def test_external_cluster_gives_the_local_engines_kpis(tmp_path: Path,
                                                         dask_scheduler: str) -> None:
     spec = tmp_path / "spec.toml"
     spec.write_text(spec_text(tmp_path))
+    before = set(Path(tempfile.gettempdir()).glob("cosim-campaign-*"))
     local = run_campaign(spec, tmp_path / "local", workers=1)
+    # the local workers removed the files they were sent when they ended
+    assert set(Path(tempfile.gettempdir()).glob("cosim-campaign-*")) <= before
     remote = run_campaign(spec, tmp_path / "remote", scheduler=dask_scheduler)
     assert local.status == remote.status == "ok"
     assert len(local.table) == 6 and set(local.table["variant"]) == {"mpc", "pi"}

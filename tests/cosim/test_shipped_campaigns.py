@@ -1,5 +1,5 @@
 """The shipped campaigns (``scenarios/campaigns/``) parse, match the model they certify, and
-run: two runs of each here (the full campaigns and their results are in the README)."""
+run: two runs of each here (the full campaigns and their results: docs/guide/campaigns.md)."""
 
 from __future__ import annotations
 
