@@ -185,9 +185,15 @@ class Run:
                         self.result.columns.append(f"{PREFIX_CTRL}.{key}")
                     extra[j] = _as_float(value)
                 row += extra
-        self.result.rows.append(row)
-        if self.sink is not None:
-            self.sink.append(row, self.result.columns)
+        guard = self.guard
+        # a signal while the row is stored is recorded and raised after the step: raised
+        # inside a sink's write, it would leave the row half written or written twice
+        with guard.deferred() if guard is not None else contextlib.nullcontext():
+            self.result.rows.append(row)
+            if self.sink is not None:
+                self.sink.append(row, self.result.columns)
+        if guard is not None:
+            guard.check()
 
     def _advance(self, k: int) -> None:
         """The plant step from ``t_k`` to ``t_k+1`` with ``u_k`` held."""

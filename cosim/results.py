@@ -85,6 +85,7 @@ class ResultsStream:
         if self.error is not None:
             raise self.error
         fh = self._fh
+        pending, self._pending = self._pending, []  # never written twice
         try:
             if fh is None:
                 self.columns = list(columns)
@@ -92,15 +93,14 @@ class ResultsStream:
                 os.chmod(self.part, atomicio.FILE_MODE)
                 fh.write(header_line(self.columns))
             width = len(self.columns)
-            if any(len(r) > width for r in self._pending):
+            if any(len(r) > width for r in pending):
                 self._stale = True  # a diagnostic appeared: finish() rewrites the file
-            fh.write(row_lines(self._pending, width))
+            fh.write(row_lines(pending, width))
             fh.flush()
             os.fsync(fh.fileno())
             self._good = fh.tell()
         except OSError as exc:
             self._fail(exc)
-        self._pending.clear()
         self._last = time.monotonic()
 
     def _fail(self, exc: OSError) -> None:

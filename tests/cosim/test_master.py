@@ -288,3 +288,37 @@ def test_run_deadline_stops_between_steps(tmp_path: Path, fmu2_path: Path) -> No
     result = Master(FmuComponent(fmu2_path), Recorder(), sc).run(deadline=time.monotonic())
     assert result.status == "failed" and result.reason.startswith("run timeout")
     assert result.steps < 40
+
+
+def test_a_signal_inside_the_stream_write_neither_cuts_nor_repeats_rows(
+        tmp_path: Path, fmu2_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIGTERM arriving while the streamed rows are being written (the CI failure of stop 13:
+    the rows of one flush were written twice, and results.csv went back in time)."""
+    import os
+    import signal
+
+    from cosim.results import ResultsStream
+
+    class SteadyRecorder(Recorder):  # the same columns throughout: the stream is kept
+        def diagnostics(self) -> dict[str, float]:
+            return {"calls": len(self.seen)}
+
+    stream = ResultsStream(tmp_path / "results.csv", flush_interval=0.0)
+    fsync = os.fsync
+
+    def fsync_then_signal(fd: int) -> None:
+        fsync(fd)
+        if len(calls) == 4:
+            os.kill(os.getpid(), signal.SIGTERM)  # the handler runs here, mid-flush
+        calls.append(fd)
+
+    calls: list[int] = []
+    monkeypatch.setattr(os, "fsync", fsync_then_signal)
+    sc = scenario(tmp_path, "time,ref.h1\n0,0.7\n1000,\n")
+    result = Master(FmuComponent(fmu2_path), SteadyRecorder(), sc).run(record=stream)
+    monkeypatch.undo()
+    assert result.status == "interrupted" and "SIGTERM" in result.reason
+    stream.finish(result.columns, result.rows)
+    lines = (tmp_path / "results.csv").read_text().splitlines()[1:]
+    assert [float(line.split(",")[0]) for line in lines] == [row[0] for row in result.rows]
+    assert [row[0] for row in result.rows] == [0.0, 25.0, 50.0, 75.0, 100.0]
