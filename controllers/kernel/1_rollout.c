@@ -20,8 +20,6 @@
  *                    J_h and A_i; O(N^2 n^2 m) instead of O(N n^3); best for large n.
  *   GK_BLAS          the n x n x (n+m) / n x n x K products through dgemm (casadi's OpenBLAS).
  *   GK_LAPACK_EIG    eigenvalue clipping with LAPACK dsyevd instead of tred2/tql2 (N m >= 90).
- *   GK_PARTIAL_EIG   only the eigenpairs below CLIP (tql1 + inverse iteration): not faster in
- *                    closed loop, kept for reference.
  *   GK_TIMERS        in-kernel wall-clock accumulators (PFX(timers)).
  *   GK_NO_CLONES     no AVX2/FMA function clones (target_clones) on x86-64.
  *

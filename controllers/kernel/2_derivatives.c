@@ -1,27 +1,24 @@
 /* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
  * generated header and 1_rollout.c ... 4_api.c into one translation unit): f, g, their derivatives and the Hessian of the Lagrangian. */
 /* ---------------------------------------------------------------- f, g, grad f, jac g */
+/* acc + (v - ref)^T W (v - ref), n <= NX + NU, W row-major n x n (terms added one by one) */
+static inline double add_quad(double acc, const double *v, const double *ref,
+                              const double *W, int n) {
+  double d[NX + NU];
+  for (int k = 0; k < n; k++) d[k] = v[k] - ref[k];
+  for (int k = 0; k < n; k++) {
+    double s = 0.0;
+    for (int j = 0; j < n; j++) s += d[j] * W[j * n + k];
+    acc += s * d[k];
+  }
+  return acc;
+}
+
 HOT static double cost(const double *w, const double *p) {
   const double *xb = p + NX, *ub = p + 2 * NX, t = w[NUU];
   double acc = 0.0;
-  for (int i = 0; i < NH; i++) {
-    double d[NX];
-    for (int k = 0; k < NX; k++) d[k] = X[i * NX + k] - xb[k];
-    for (int k = 0; k < NX; k++) {
-      double s = 0.0;
-      for (int j = 0; j < NX; j++) s += d[j] * QW[j * NX + k];
-      acc += s * d[k];
-    }
-  }
-  for (int i = 0; i < NH; i++) {
-    double d[NU];
-    for (int k = 0; k < NU; k++) d[k] = w[i * NU + k] - ub[k];
-    for (int k = 0; k < NU; k++) {
-      double s = 0.0;
-      for (int j = 0; j < NU; j++) s += d[j] * RW[j * NU + k];
-      acc += s * d[k];
-    }
-  }
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, X + i * NX, xb, QW, NX);
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU);
   return acc + SW * t * t;
 }
 
