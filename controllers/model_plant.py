@@ -131,12 +131,6 @@ class GRUPlant(Component):
         self._dirty = False
         self._draw()
 
-    def initial_equilibrium(self) -> np.ndarray:
-        """The equilibrium state for ``y0`` (without ``dx0``), normalised."""
-        from controllers.equilibrium import equilibrium_for_output
-
-        return equilibrium_for_output(self.model, self.model.normalize_y(self.y0))[0]
-
     def _draw(self) -> None:
         p = self.model.p
         self.w_y = self.rng.uniform(-self.w_y_max, self.w_y_max, p) if self.w_y_max else (
