@@ -1,0 +1,225 @@
+"""Why some FHOCP solves need many SQP iterations: the study behind the p99 of the controller
+step (docs/design/compiled-kernel.md, "Why the capped solves are slow to converge").
+
+The paper scenario in closed loop with the plant FMU and the default robust MPC. Printed:
+
+1. the solves that stop at the 15-iteration cap, and how many iterations the same run's
+   solves need without the cap (``max_iter=200``);
+2. casadi's per-call timers of ``sqpmethod`` (QP, Hessian, Jacobian, function values and
+   line search), per iteration, over all solves and over the capped ones;
+3. the active sets at the last iterate (multipliers ≠ 0): rows of the ∞-norm terminal
+   epigraph, output-constraint rows, input bounds, in capped solves and in solves of at most
+   3 iterations;
+4. at the first capped solve: the Hessian of the Lagrangian against central differences of
+   the Lagrangian's gradient, and its smallest eigenvalues;
+5. with ``--sweep``: the capped solves under other SQP settings (clipping margin, ``tol_du``,
+   ``merit_memory``, ``c1``, ``init_feasible``) and with ``H + ρ JₐᵀJₐ`` (active constraints
+   and input bounds) before the clipping, on the numpy path.
+
+It reads solver internals (the FHOCP's casadi buffer and NLP object) on purpose: it is a
+study, not an API user. Not part of ``make bench`` (it measures no speed target).
+
+Usage: ``.venv/bin/python benchmarks/study_capped_solves.py [--sweep]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import sys
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from controllers import nlp_single_shooting  # noqa: E402
+from controllers.mpc_controller import RobustMPCController  # noqa: E402
+from controllers.solver_settings import SQP_OPTIONS  # noqa: E402
+
+SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
+CAP = 15
+TIMERS = ("QP", "nlp_hess_l", "nlp_jac_fg", "nlp_fg", "linesearch")
+
+
+@contextlib.contextmanager
+def sqp_settings(overrides: dict[str, Any]) -> Iterator[None]:
+    """``SQP_OPTIONS`` with ``overrides`` while controllers are built (an FHOCP copies them)."""
+    saved = dict(SQP_OPTIONS)
+    SQP_OPTIONS.update(overrides)
+    try:
+        yield
+    finally:
+        SQP_OPTIONS.clear()
+        SQP_OPTIONS.update(saved)
+
+
+@contextlib.contextmanager
+def active_set_convexification(rho: float) -> Iterator[None]:
+    """The numpy path's QP Hessian becomes ``H + ρ JₐᵀJₐ`` (rows of the constraints with a
+    nonzero multiplier, and inputs at a bound) before the eigenvalue clipping."""
+    cls = nlp_single_shooting.SingleShootingNLP
+    original = cls.hessian_convex
+
+    def hessian_convex(self: Any, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
+                       lg: np.ndarray) -> list:
+        H = self.hessian(wv, pv, lf, lg)
+        _, J = self.jacobian(wv, pv)
+        Ja = J[np.abs(lg) > 0]
+        H = H + rho * Ja.T @ Ja
+        at_bound = self.iu[np.abs(wv[self.iu]) >= 1 - 1e-9]
+        H[at_bound, at_bound] += rho
+        ev, V = np.linalg.eigh(H)
+        if ev[0] < self.eigen_clip:
+            H = (V * np.maximum(ev, self.eigen_clip)) @ V.T
+        return [H]
+
+    cls.hessian_convex = hessian_convex
+    try:
+        yield
+    finally:
+        cls.hessian_convex = original
+
+
+def closed_loop(kernel: str = "auto", max_iter: int = CAP,
+                sqp: dict[str, Any] | None = None) -> tuple[Any, list[dict[str, Any]]]:
+    """One run of the paper scenario; per solve: the result, its iterations, its timers
+    [s], the FHOCP's data and parameter vector, and the solver's last iterate."""
+    from cosim import scenario
+    from cosim.fmu import FmuComponent
+    from cosim.master import Master
+
+    with sqp_settings(sqp or {}):
+        ctrl = RobustMPCController(kernel=kernel, max_iter=max_iter)
+    fh, solves, before = ctrl.fhocp, [], dict.fromkeys(TIMERS, 0.0)
+    solve = fh.solve
+
+    def recorded(x_hat: np.ndarray, e_o: float, x_bar: np.ndarray, u_bar: np.ndarray,
+                 alpha: float, *args: Any, **kwargs: Any) -> Any:
+        res = solve(x_hat, e_o, x_bar, u_bar, alpha, *args, **kwargs)
+        buf, _, ins, outs = fh._buffer
+        stats = buf.stats()
+        timers = {k: stats.get(f"t_wall_{k}", 0.0) - before[k] for k in TIMERS}
+        before.update({k: stats.get(f"t_wall_{k}", 0.0) for k in TIMERS})
+        solves.append({"result": res, "iterations": res.iterations, "timers": timers,
+                       "p": ins["p"].copy(), "w": outs["x"].copy()})
+        return res
+
+    fh.solve = recorded
+    result = Master(FmuComponent(ROOT / "fmus" / "FourTank.fmu"), ctrl,
+                    scenario.load(SCENARIO)).run()
+    if result.status != "ok":
+        raise SystemExit(f"study_capped_solves: the run failed: {result.reason}")
+    return ctrl, solves
+
+
+def capped(solves: list[dict[str, Any]]) -> np.ndarray:
+    return np.array([s["iterations"] >= CAP for s in solves])
+
+
+def report_iterations(solves: list[dict[str, Any]], uncapped: list[dict[str, Any]]) -> None:
+    it = np.array([s["iterations"] for s in solves])
+    it_free = np.array([s["iterations"] for s in uncapped])
+    print(f"1. {len(it)} solves: {capped(solves).sum()} stop at the {CAP}-iteration cap "
+          f"(mean {it.mean():.2f} iterations); without the cap (max_iter=200) "
+          f"{np.sum(it_free >= CAP)} solves need {CAP} or more, "
+          f"{it_free[it_free >= CAP].min()}–{it_free.max()} iterations")
+
+
+def report_timers(solves: list[dict[str, Any]]) -> None:
+    mask = capped(solves)
+    for label, group in (("all iterations", solves),
+                         ("capped solves", [s for s, c in zip(solves, mask, strict=True) if c])):
+        iters = sum(s["iterations"] for s in group)
+        parts = ", ".join(f"{k} {1e3 * sum(s['timers'][k] for s in group) / iters:.3f}"
+                          for k in TIMERS)
+        print(f"2. per SQP iteration [ms], {label} ({iters}): {parts}")
+
+
+def report_active_sets(ctrl: Any, solves: list[dict[str, Any]]) -> None:
+    p = ctrl.fhocp._nlp.p
+    n_out = (p.N - 1) * p.qr
+    iu = ctrl.fhocp.iu.ravel()
+    counts = np.array([[np.sum(np.abs(s["result"].lam_g[n_out:]) > 1e-10),
+                        np.sum(np.abs(s["result"].lam_g[:n_out]) > 1e-10),
+                        np.sum(np.abs(s["result"].lam_x[iu]) > 1e-10)] for s in solves])
+    its = np.array([s["iterations"] for s in solves])
+    for label, m in (("capped", its >= CAP), ("<= 3 iterations", its <= 3)):
+        c = counts[m]
+        print(f"3. {label:16s} ({m.sum():4d} solves): terminal epigraph rows active "
+              f"{c[:, 0].mean():.1f} of {2 * p.n} (max {c[:, 0].max()}), output rows "
+              f"{c[:, 1].mean():.2f}, an input bound active in {np.mean(c[:, 2] > 0):.0%}")
+
+
+def report_hessian(ctrl: Any, solves: list[dict[str, Any]]) -> None:
+    k = next(i for i, s in enumerate(solves) if s["iterations"] >= CAP)
+    first = solves[k]
+    nlp, w, p = ctrl.fhocp._nlp, first["w"], first["p"]
+    lg = first["result"].lam_g
+    H = nlp.hessian(w, p, np.array([1.0]), lg)
+
+    def grad_lagrangian(wv: np.ndarray) -> np.ndarray:
+        _, grad = nlp.gradient(wv, p)
+        _, J = nlp.jacobian(wv, p)
+        return grad + np.asarray(J).T @ lg
+
+    eps = 1e-6
+    H_fd = np.empty_like(H)
+    for j in range(len(w)):
+        d = np.zeros(len(w))
+        d[j] = eps
+        H_fd[:, j] = (grad_lagrangian(w + d) - grad_lagrangian(w - d)) / (2 * eps)
+    ev = np.linalg.eigvalsh(H)
+    print(f"4. Hessian at the first capped solve (step {k}, t = {25.0 * k:g} s): largest "
+          f"|H - central differences| {np.max(np.abs(H - H_fd)):.1e} on entries up to "
+          f"{np.max(np.abs(H)):.1e}; smallest eigenvalues {np.array2string(ev[:3], precision=3)}")
+
+
+SWEEP: list[tuple[str, dict[str, Any], float | None]] = [
+    ("default", {}, None),
+    *[(f"hessian_eigen_clip={c:g}", {"hessian_eigen_clip": c}, None)
+      for c in (1e-6, 1e-4, 1e-3, 3e-3, 3e-2)],
+    ("tol_du=1e-5", {"tol_du": 1e-5}, None),
+    ("merit_memory=1", {"merit_memory": 1}, None),
+    ("merit_memory=10", {"merit_memory": 10}, None),
+    ("c1=1e-8", {"c1": 1e-8}, None),
+    ("init_feasible", {"init_feasible": True}, None),
+    *[(f"numpy path, H + {r:g} JaᵀJa", {}, r) for r in (1.0, 10.0, 100.0)],
+]
+
+
+def sweep() -> None:
+    for label, sqp, rho in SWEEP:
+        with active_set_convexification(rho) if rho else contextlib.nullcontext():
+            ctrl, solves = closed_loop(kernel="numpy" if rho else "auto", sqp=sqp)
+        it = np.array([s["iterations"] for s in solves])
+        summary = ctrl.summary()
+        print(f"5. {label:32s} capped {capped(solves).sum():3d}, mean iterations "
+              f"{it.mean():.2f}, fallbacks {summary['fallbacks']}, suboptimal "
+              f"{summary['suboptimal_steps']}")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--sweep", action="store_true", help="also run the SQP-setting sweep")
+    args = ap.parse_args()
+    if not (ROOT / "fmus" / "FourTank.fmu").exists():
+        raise SystemExit("study_capped_solves: build the plant FMU first (make fmus)")
+    ctrl, solves = closed_loop()
+    _, uncapped = closed_loop(max_iter=200)
+    report_iterations(solves, uncapped)
+    report_timers(solves)
+    report_active_sets(ctrl, solves)
+    report_hessian(ctrl, solves)
+    if args.sweep:
+        sweep()
+
+
+if __name__ == "__main__":
+    main()
