@@ -19,11 +19,12 @@ local optimum of the nonconvex FHOCP) and the two closed loops against each othe
 ``--scaling`` times random δISS GRUs (GRU plant, 5 set-points × 60 steps) for N = 15, 30, 60
 (n = 20) and n = 20, 40, 80 (N = 15), compiled and numpy, and fits the growth exponents.
 ``--plain`` adds the do-mpc-style baseline of issue 5 (multiple shooting, IPOPT defaults).
+``--clip`` times the Hessian's eigenvalue clipping, own tred2/tql2 against LAPACK dsyevr.
 
 Usage::
 
     .venv/bin/python benchmarks/bench_mpc.py [--rounds 2] [--steps N] [--reference]
-        [--scaling] [--plain] [--plant fmu|model]
+        [--scaling] [--plain] [--clip] [--plant fmu|model]
 """
 
 from __future__ import annotations
@@ -69,6 +70,8 @@ class TimedController(Component):
         self.solves: dict[str, list[tuple[float, bool, float]]] = {k: [] for k in self.others}
         #: the FHOCP data of each step (x̂, ê_o, x̄, ū, α) when solving alongside
         self.problems: list[tuple] = []
+        #: the controller's initial guess of each step's solve (its inputs, N×m)
+        self.starts: list[np.ndarray] = []
 
     def setup(self, t0: float) -> None:
         self.ctrl.setup(t0)
@@ -93,6 +96,8 @@ class TimedController(Component):
         if self.others:
             self.problems.append((rec.x_hat.copy(), rec.e_o, np.array(mpc.x_bar, copy=True),
                                   np.array(mpc.u_bar, copy=True), mpc.alpha))
+            fh = self.ctrl.fhocp   # the solver's argument buffer still holds its start
+            self.starts.append(fh._buffer[2]["x0"][fh.iu].reshape(fh.N, fh.m).copy())
         for name, fh in self.others.items():
             r = fh.solve(*self.problems[-1])
             self.solves[name].append((r.solve_time * 1e3, r.success, r.cost))
@@ -197,17 +202,31 @@ def report_reference(timed: TimedController, recs: list) -> None:
           f"{len(rel)} steps where both converged: relative cost difference within 1e-6 at "
           f"{np.mean(np.abs(rel) <= 1e-6) * 100:.1f} %, median {np.median(rel):.1e}, "
           f"largest {np.max(rel):.1e} (compiled costlier), {np.min(rel):.1e} (cheaper)")
+    ip = FHOCP.from_certificate(timed.ctrl.cert, solver="ipopt",
+                                ipopt_options={"tol": 1e-10, "max_iter": 500}).setup()
+    # the same problem from the same start: tight IPOPT from the compiled solve's own initial
+    # guess (cold multipliers), so that both solvers look for the optimum in the same place
+    same = []
+    for k, r, _ in pairs:
+        rr = ip.solve(*timed.problems[k], u_init=timed.starts[k], warm=False)
+        if rr.success:
+            same.append((r.cost - rr.cost) / (1 + abs(rr.cost)))
+    same_a = np.array(same)
+    print(f"answers    compiled optimum vs tight IPOPT from the same initial guess at "
+          f"{len(same_a)} steps where both converged: relative cost difference within 1e-6 "
+          f"at {np.mean(np.abs(same_a) <= 1e-6) * 100:.1f} % ({int(np.sum(np.abs(same_a) > 1e-6))}"
+          f" apart), median {np.median(same_a):.1e}, largest {np.max(same_a):.1e}, "
+          f"{np.min(same_a):.1e}")
     apart = [(k, r) for k, r, d in pairs if abs(d) > 1e-6]
     if not apart:
         return
     # the FHOCP is nonconvex: two solvers may stop at different local optima. Restart tight
     # IPOPT from the compiled answer: if it stays, that answer is a local optimum too.
-    ip = FHOCP.from_certificate(timed.ctrl.cert, solver="ipopt",
-                                ipopt_options={"tol": 1e-10, "max_iter": 500}).setup()
-    stays = near = 0
+    stays = near = within = 0
     for k, r in apart:
         rr = ip.solve(*timed.problems[k], u_init=r.u, warm=False)
         d = (rr.cost - r.cost) / (1 + abs(r.cost))
+        within += int(rr.success and abs(d) <= 1e-6)
         if rr.success and abs(d) <= 1e-7:
             stays += 1
         elif rr.success and abs(d) <= 1e-5:
@@ -217,6 +236,9 @@ def report_reference(timed: TimedController, recs: list) -> None:
           f"cheaper): IPOPT restarted from the compiled answer stays there (within 1e-7) at "
           f"{stays}, ends within 1e-5 of it at {near}, moves away at "
           f"{len(apart) - stays - near}")
+    print(f"answers    the compiled answer is a local optimum of the FHOCP to 1e-6 (tight "
+          f"IPOPT agrees from its own warm start, or stays there when restarted from it) at "
+          f"{(len(pairs) - len(apart) + within) / len(pairs) * 100:.1f} % of the steps")
 
 
 def _equilibrium_output(model: Any, u: np.ndarray) -> np.ndarray:
@@ -281,6 +303,48 @@ def scaling(args: argparse.Namespace) -> None:
                 print(f"median grows as {label.split()[0]}^{slope:.2f} ({name}, {label})")
 
 
+def clip_variants(args: argparse.Namespace) -> None:
+    """The Hessian's eigenvalue clipping: own tred2/tql2 against LAPACK dsyevr (the eigenpairs
+    below the margin only), on Hessian-like matrices (eigenvalues 0.05 … 6e4, three below the
+    margin, as the paper scenario's ~2.4 per decomposition), for N m = 30 … 120."""
+    import ctypes
+
+    from controllers import compiled_kernel as ck
+    from tests.controllers.test_compiled_kernel import random_fhocp
+
+    saved = ck.LAPACK_EIG_MIN_NU
+    try:
+        for N in (15, 24, 30, 45, 60):
+            fh = random_fhocp(20, N, seed=1, kernel="numpy")
+            us, out = {}, {}
+            for name, thr in (("own", 10**6), ("dsyevr", 1)):
+                ck.LAPACK_EIG_MIN_NU = thr
+                k = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo)
+                if k is None or (name == "dsyevr") != ("-DGK_LAPACK_EIG" in k.flags):
+                    print(f"N m = {N * fh.m}: no {name} kernel ({ck.last_error})")
+                    return
+                clip = getattr(k.lib, k.prefix + "clip")
+                rng = np.random.default_rng(0)
+                q, _ = np.linalg.qr(rng.normal(size=(k.nw - 1, k.nw - 1)))
+                lam = np.geomspace(0.05, 6e4, k.nw - 1)
+                lam[:3] = [-3.0, -0.1, 0.005]
+                H0 = np.zeros((k.nw, k.nw))
+                H0[:-1, :-1] = (q * lam) @ q.T
+                H0[-1, -1] = 1.0
+                H = H0.copy()
+                t0 = time.perf_counter()
+                for _ in range(500):
+                    H[:] = H0
+                    clip(ctypes.c_void_p(H.ctypes.data))
+                us[name], out[name] = (time.perf_counter() - t0) / 500 * 1e6, H.copy()
+            print(f"N m = {N * fh.m:3d}: own {us['own']:7.1f} µs, dsyevr {us['dsyevr']:7.1f} µs "
+                  f"({us['own'] / us['dsyevr']:.2f}x); clipped matrices differ by "
+                  f"{np.max(np.abs(out['own'] - out['dsyevr'])) / 6e4:.1e} (relative)")
+    finally:
+        ck.LAPACK_EIG_MIN_NU = saved
+    print(f"the kernel uses dsyevr from N m = {saved}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--rounds", type=int, default=2, help="runs of each variant (alternating)")
@@ -293,8 +357,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--scaling", action="store_true", help="the N and n scaling instead")
     ap.add_argument("--plain", action="store_true",
                     help="also time the do-mpc-style multiple-shooting baseline")
+    ap.add_argument("--clip", action="store_true",
+                    help="the eigenvalue clipping's two variants instead (own QL, dsyevr)")
     args = ap.parse_args(argv)
-    if args.scaling:
+    if args.clip:
+        clip_variants(args)
+    elif args.scaling:
         scaling(args)
     else:
         compare_kernel(args)

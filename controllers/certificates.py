@@ -265,8 +265,14 @@ class Certificate:
         return Reference(y_bar=y, x_bar=x_bar, u_bar=u_bar, alpha=self.alpha(y))
 
     def ok(self, y_bar_norm: Sequence[float] | None = None) -> bool:
-        """``True`` when :meth:`failures` is empty."""
-        return not self.failures(y_bar_norm)
+        """``True`` when :meth:`failures` is empty (the same checks, without the messages:
+        the reference governor asks at every level)."""
+        if not (self.nu < 1 and self.nu_o < 1):
+            return False
+        if y_bar_norm is None:
+            return True
+        return bool(self.assumption_1(y_bar_norm) and self.alpha(y_bar_norm) > 0
+                    and self.recursive_feasibility(y_bar_norm))
 
     # -- output --------------------------------------------------------------------------
     def to_json(self, setpoint: Sequence[float] | None = None) -> dict[str, Any]:

@@ -194,6 +194,8 @@ class FHOCP:
         self._solver = None
         self._nlp: Any = None
         self._buffer: tuple | None = None
+        self._bounds_eo = float("nan")
+        self._bounds = np.zeros((self.N, self.q))
 
     # -- construction ------------------------------------------------------------------
     def _pair_rows(self) -> None:
@@ -287,8 +289,14 @@ class FHOCP:
 
     # -- solving -----------------------------------------------------------------------
     def tightened_bounds(self, e_o: float) -> np.ndarray:
-        """Right-hand sides ``h − a_i ê_o − b_i − w_L − L b_o`` for ``i = 0 … N−1`` (N×q)."""
-        return self.h - self.a * e_o - self.b - self.w_L - self.Lbo
+        """Right-hand sides ``h − a_i ê_o − b_i − w_L − L b_o`` for ``i = 0 … N−1`` (N×q,
+        read-only: the last one is kept, ``ê_o`` settles at its fixed point)."""
+        e_o = float(e_o)
+        if self._bounds_eo != e_o:
+            bounds = self.h - self.a * e_o - self.b - self.w_L - self.Lbo
+            bounds.flags.writeable = False
+            self._bounds_eo, self._bounds = e_o, bounds
+        return self._bounds
 
     def rollout(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
         """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m)."""
@@ -308,12 +316,33 @@ class FHOCP:
                   u_bar: np.ndarray, e_o: float, alpha: float) -> FHOCPResult:
         """Evaluate a given input sequence (cost, trajectory, residuals) without solving."""
         u_seq = np.clip(np.asarray(u_seq, dtype=float), -1.0, 1.0)
+        if self.kernel is not None:   # the same check in one compiled call
+            x, out = self.kernel.assess(x_hat, u_seq, x_bar, u_bar,
+                                        self.tightened_bounds(e_o), alpha)
+            res = FHOCPResult(u=u_seq, x=x, cost=float(out[0]), status="candidate",
+                              success=False, t=float(out[4]))
+            _set_residuals(res, out, alpha)
+            return res
         x = self.simulate(np.asarray(x_hat, dtype=float), u_seq)
         tN = float(np.max(np.abs(x[-1] - x_bar)))
         res = FHOCPResult(u=u_seq, x=x, cost=self.cost(x, u_seq, x_bar, u_bar, tN),
                           status="candidate", success=False, t=tN)
         self._residuals(res, x, e_o, x_bar, alpha)
         return res
+
+    def assess(self, x_hat: np.ndarray, u_seq: np.ndarray, x_bar: np.ndarray, e_o: float,
+               alpha: float) -> tuple[float, float]:
+        """``(max output violation at i = 1 … N−1, ‖x_N − x̄‖∞)`` of ``u_seq`` (N, m) from
+        ``x̂`` (the reference governor's feasibility test; the i = 0 row only involves
+        ``x̂``)."""
+        bounds = self.tightened_bounds(e_o)
+        if self.kernel is not None:
+            _, out = self.kernel.assess(x_hat, u_seq, x_bar, np.zeros(self.m), bounds, alpha)
+            return float(out[2]), float(out[4])
+        x = self.rollout(x_hat, u_seq)
+        viol = float(np.max(x[1: self.N] @ self.LUo.T - bounds[1:])) if self.N > 1 else (
+            -np.inf)
+        return viol, float(np.max(np.abs(x[self.N] - x_bar)))
 
     def cost(self, x: np.ndarray, u: np.ndarray, x_bar: np.ndarray, u_bar: np.ndarray,
              t: float | None = None) -> float:
@@ -377,18 +406,29 @@ class FHOCP:
             stats = {**stats, "return_status": "time_budget_exceeded", "success": False}
         elapsed = time.perf_counter() - t0
         wopt = outs["x"].copy()
-        u = np.clip(wopt[self.iu], -1.0, 1.0)  # IPOPT may overshoot a bound by ~1e-9
-        xs = self._xtraj(wopt, ins["p"])
-        # the independent check: a rollout apart from the solver's (the kernel's plain one,
-        # cross-checked against numpy when loaded, or numpy's)
-        x = self.simulate(x_hat, u)
         t = float(wopt[self.it])
-        res = FHOCPResult(u=u, x=x, cost=self.cost(x, u, x_bar, u_bar), status=str(
-            stats.get("return_status", "unknown")), success=False,
-            iterations=int(stats.get("iter_count", 0)), solve_time=elapsed, t=t,
-            lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
-        res.defect = float(np.max(np.abs(xs - x)))
-        self._residuals(res, x, e_o, x_bar, alpha)
+        status = str(stats.get("return_status", "unknown"))
+        iters = int(stats.get("iter_count", 0))
+        # the independent check: a rollout apart from the solver's (the kernel's plain one,
+        # cross-checked against numpy when loaded, in one call; or numpy's). IPOPT may
+        # overshoot a bound by ~1e-9: u is clipped
+        if self.kernel is not None:
+            u, x, out = self.kernel.assess_w(wopt, ins["p"], self.tightened_bounds(e_o),
+                                             alpha)
+            res = FHOCPResult(u=u, x=x, cost=float(out[0]), status=status, success=False,
+                              iterations=iters, solve_time=elapsed, t=t,
+                              lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
+            res.defect = float(out[6])
+            _set_residuals(res, out, alpha)
+        else:
+            u = np.clip(wopt[self.iu], -1.0, 1.0)
+            xs = self._xtraj(wopt, ins["p"])
+            x = self.simulate(x_hat, u)
+            res = FHOCPResult(u=u, x=x, cost=self.cost(x, u, x_bar, u_bar), status=status,
+                              success=False, iterations=iters, solve_time=elapsed, t=t,
+                              lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
+            res.defect = float(np.max(np.abs(xs - x)))
+            self._residuals(res, x, e_o, x_bar, alpha)
         ok_status = bool(stats.get("success", False))
         res.feasible = bool(np.all(np.isfinite(wopt)) and res.constraint_violation <= FEAS_TOL
                             and res.terminal_violation <= FEAS_TOL
@@ -411,6 +451,14 @@ class FHOCP:
     def reset_warm_start(self) -> None:
         """Forget the previous solution (next solve starts cold)."""
         self._warm = None
+
+
+def _set_residuals(res: FHOCPResult, out: np.ndarray, alpha: float) -> None:
+    """:meth:`FHOCP._residuals` from the compiled check's ``out`` (:meth:`controllers.
+    compiled_kernel.Kernel.assess`)."""
+    res.constraint_violation = max(0.0, float(out[1]), float(out[2]), float(out[3]) - 1.0)
+    res.terminal_violation = max(0.0, float(out[4]) - alpha)
+    res.active = int(out[5])
 
 
 def _bind_buffers(solver: Any) -> tuple:
@@ -442,7 +490,8 @@ def _load_kernel(fhocp: FHOCP) -> Any:
     from controllers import compiled_kernel as ck
 
     clip = fhocp.sqp_options.get("hessian_eigen_clip")
-    k = ck.build(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s, clip)
+    k = ck.build(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s, clip,
+                 LUo=fhocp.LUo)
     reason = ck.last_error
     if k is not None:
         key = str(k.path)

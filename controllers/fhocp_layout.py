@@ -82,6 +82,7 @@ class FHOCPLayout:
         n, N, q, qr = p.n, p.N, p.q, p.qr
         self._lbg0 = np.full(self.ng, -np.inf)
         self._ubg0 = np.full(self.ng, np.inf)
+        self._g_bounds: np.ndarray | None = None   # the bounds self._lbg, self._ubg hold
         if self.single:
             rows = np.arange(1, N)[:, None]
             self._up_idx = (rows * q + p.pair_up[None, :]).ravel()  # into bounds.ravel()
@@ -146,13 +147,15 @@ class FHOCPLayout:
         ubx = ins["ubx"]
         ubx[:] = self.ubx
         ubx[self.it] = alpha
-        flat = bounds.ravel()
-        lbg, ubg = ins["lbg"], ins["ubg"]
-        lbg[:] = self._lbg0
-        ubg[:] = self._ubg0
-        ubg[self._rows] = flat[self._up_idx]
-        if self.single:
-            lbg[self._rows] = np.where(self._lo_has, -flat[self._lo_idx], -np.inf)
+        if self._g_bounds is not bounds:   # the same bounds object: the same rows
+            flat = bounds.ravel()
+            lbg, ubg = self._lbg0.copy(), self._ubg0.copy()
+            ubg[self._rows] = flat[self._up_idx]
+            if self.single:
+                lbg[self._rows] = np.where(self._lo_has, -flat[self._lo_idx], -np.inf)
+            self._g_bounds, self._lbg, self._ubg = bounds, lbg, ubg
+        ins["lbg"][:] = self._lbg
+        ins["ubg"][:] = self._ubg
         if u_init is None:
             if prev is not None:
                 u = np.concatenate([prev["w"][self._u_next], u_bar])

@@ -118,16 +118,10 @@ class ReferenceGovernor:
         return gs
 
     def feasible(self, x_hat: np.ndarray, e_o: float, u_seq: np.ndarray, x_bar: np.ndarray,
-                 alpha: float, bounds: np.ndarray | None = None) -> bool:
-        """``u_seq`` satisfies every constraint of ``eq:optimization`` from ``x̂``
-        (``bounds``: the tightened bounds at ``ê_o``, when already computed)."""
-        fh = self.fhocp
-        x = fh.rollout(x_hat, u_seq)
-        if bounds is None:
-            bounds = fh.tightened_bounds(e_o)
-        if np.max(x[1: fh.N] @ fh.LUo.T - bounds[1:]) > 0.0:
-            return False
-        return bool(np.max(np.abs(x[fh.N] - x_bar)) <= alpha)
+                 alpha: float) -> bool:
+        """``u_seq`` satisfies every constraint of ``eq:optimization`` from ``x̂``."""
+        viol, dist = self.fhocp.assess(x_hat, u_seq, x_bar, e_o, alpha)
+        return bool(not viol > 0.0 and dist <= alpha)
 
     def step(self, x_hat: np.ndarray, e_o: float, v: np.ndarray, x_bar: np.ndarray,
              u_bar: np.ndarray, r: np.ndarray, plan: np.ndarray | None,
@@ -138,10 +132,9 @@ class ReferenceGovernor:
         if plan is None:
             return hold
         lam = float(lam_max)
-        bounds = self.fhocp.tightened_bounds(e_o)
         for _ in range(self.levels):
             y = v + lam * (r - v)
-            if self.cert.failures(y):
+            if not self.cert.ok(y):
                 lam *= 0.5
                 continue
             eq = self.newton(y, x_bar, u_bar)
@@ -150,7 +143,7 @@ class ReferenceGovernor:
                 alpha = self.cert.alpha(y)
                 shifted = np.vstack([plan[1:], ub])
                 for cand in (shifted, np.clip(shifted + (ub - u_bar), -1.0, 1.0)):
-                    if self.feasible(x_hat, e_o, cand, xb, alpha, bounds):
+                    if self.feasible(x_hat, e_o, cand, xb, alpha):
                         return GovernorStep(lam, y, xb, ub, alpha, cand)
             lam *= 0.5
         return hold

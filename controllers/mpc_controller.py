@@ -220,6 +220,7 @@ class RobustMPCController(Component):
                                                                     dtype=float)
         self.observer.reset(x0=x0, e_o0=self.cert.e_o0)
         self.fhocp.setup()
+        self.observer.kernel = self.fhocp.kernel   # its compiled GRU step (same model)
         self.mpc.reset()
         if self.governor is not None:
             self.governor.reset()

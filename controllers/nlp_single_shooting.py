@@ -261,7 +261,11 @@ class SingleShootingNLP:
     def self_test(self, kernel: Any, clip: float | None, trials: int = 3,
                   seed: int = 12345) -> float:
         """Largest relative difference between ``kernel`` and these numpy functions at random
-        points: f, ∇f, g, ∂g/∂w, the clipped Hessian and the plain rollout."""
+        points: f, ∇f, g, ∂g/∂w, the clipped Hessian, the plain rollout, the observer's GRU
+        step and the answer check (cost and residuals, :meth:`FHOCP.candidate`)."""
+        from controllers import gru
+        from controllers.fhocp import FHOCPResult, _set_residuals
+
         p = self.p
         rng = np.random.default_rng(seed)
         n, m, N = p.n, p.m, p.N
@@ -277,8 +281,24 @@ class SingleShootingNLP:
                 pairs.append((hess_c(wv, pv, 1.0, lg),
                               self.hessian_convex(wv, pv, np.array([1.0]), lg)[0]))
                 u = wv[: N * m].reshape(N, m)
-                pairs.append((kernel.simulate(pv[:n], u),
-                              self.shoot.rollout(pv[:n], u, derivatives=False).x))
+                x_np = self.shoot.rollout(pv[:n], u, derivatives=False).x
+                pairs.append((kernel.simulate(pv[:n], u), x_np))
+                dz, dr = rng.normal(0, 0.1, n), rng.normal(0, 0.1, n)
+                pairs.append((kernel.gru_step(pv[:n], u[0], dz, dr),
+                              gru.step(p.params, pv[:n], u[0], dz=dz, dr=dr)))
+                # the answer check: cost and residuals as FHOCP.cost / FHOCP._residuals
+                e_o, alpha = float(rng.uniform(0, 0.05)), float(rng.uniform(0, 0.5))
+                x_k, out = kernel.assess(pv[:n], u, pv[n:2 * n], pv[2 * n:],
+                                         p.tightened_bounds(e_o), alpha)
+                ref = FHOCPResult(u=u, x=x_np, cost=0.0, status="", success=False)
+                p._residuals(ref, x_np, e_o, pv[n:2 * n], alpha)
+                got = FHOCPResult(u=u, x=x_k, cost=0.0, status="", success=False)
+                _set_residuals(got, out, alpha)
+                pairs.append((x_k, x_np))
+                pairs.append((np.array([out[0], got.constraint_violation,
+                                        got.terminal_violation]),
+                              np.array([p.cost(x_np, u, pv[n:2 * n], pv[2 * n:]),
+                                        ref.constraint_violation, ref.terminal_violation])))
                 for a, b in pairs:
                     b = np.asarray(b, dtype=float)
                     a = np.asarray(a, dtype=float).reshape(b.shape)

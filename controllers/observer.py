@@ -52,6 +52,10 @@ class GRUObserver:
         Current bound ``ê_o,k``.
     k : int
         Number of updates done.
+    kernel : compiled_kernel.Kernel or None
+        When set (by the controller: its FHOCP's kernel, built for the same model), the
+        state update runs as one compiled call (:meth:`~controllers.compiled_kernel.Kernel.
+        gru_step`); else numpy (:func:`controllers.gru.step`).
     """
 
     def __init__(self, params: Mapping[str, np.ndarray], L_z: np.ndarray, L_r: np.ndarray,
@@ -66,6 +70,7 @@ class GRUObserver:
         self.x_hat: np.ndarray | None = None if x0 is None else np.array(x0, dtype=float)
         self.e_o = self.e_o0
         self.k = 0
+        self.kernel: Any = None
 
     @classmethod
     def from_certificate(cls, cert: Any, x0: np.ndarray | None = None) -> GRUObserver:
@@ -108,7 +113,11 @@ class GRUObserver:
         if self.x_hat is None:
             self.init_from_output(y)
         dz, dr = self.correction(y)
-        self.x_hat = step(self.params, self.x_hat, np.asarray(u, dtype=float), dz=dz, dr=dr)
+        if self.kernel is not None:
+            self.x_hat = self.kernel.gru_step(self.x_hat, u, dz, dr)
+        else:
+            self.x_hat = step(self.params, self.x_hat, np.asarray(u, dtype=float), dz=dz,
+                              dr=dr)
         self.e_o = self.rho_o * self.e_o + self.w_bar
         self.k += 1
         return self.x_hat.copy()

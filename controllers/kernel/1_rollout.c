@@ -19,7 +19,8 @@
  *   GK_CONTRACT      contracted mode: J_z Z_i, J_r Z_i, J_h Z_i carried forward instead of
  *                    J_h and A_i; O(N^2 n^2 m) instead of O(N n^3); best for large n.
  *   GK_BLAS          the n x n x (n+m) / n x n x K products through dgemm (casadi's OpenBLAS).
- *   GK_LAPACK_EIG    eigenvalue clipping with LAPACK dsyevd instead of tred2/tql2 (N m >= 90).
+ *   GK_LAPACK_EIG    eigenvalue clipping with LAPACK dsyevr (only the eigenpairs below the
+ *                    margin) instead of tred2/tql2 (all of them).
  *   GK_TIMERS        in-kernel wall-clock accumulators (PFX(timers)).
  *   GK_NO_CLONES     no AVX2/FMA function clones (target_clones) on x86-64.
  *
@@ -30,7 +31,9 @@
  *
  * Exported: casadi external functions (casadi's codegen calling convention) PFX(fg),
  * PFX(jac_fg), PFX(hess_l) (clipped), PFX(hess_raw) (unclipped), and plain C entry points for
- * ctypes: PFX(simulate), PFX(xtraj), PFX(eq_newton), PFX(clip), PFX(dims), PFX(counters).
+ * ctypes: PFX(simulate), PFX(xtraj), PFX(gru_step), PFX(assess), PFX(assess_w),
+ * PFX(eq_newton), PFX(clip), PFX(dims), PFX(counters). The answer check (assess) also needs
+ * NL and LUO (NL x NX), the full output-constraint rows L U_o.
  */
 #include <math.h>
 #include <string.h>
@@ -81,6 +84,135 @@ static const double ZERO_G[NG];
 
 static double sigm(double a) { return 1.0 / (1.0 + exp(-a)); }
 
+/* ---------------------------------------------------------------- small dense products */
+/* Row-major C (m x n, ldc) = (acc ? C : 0) + op(A) B, op(A) = A (m x k, lda) or, when ta,
+ * A^T (A is k x m). Every entry is summed over p = 0 .. k-1 in order, by both variants:
+ *  - gk_gemm_loops: one row of C at a time (loads and stores the row per multiply-add);
+ *  - gk_gemm_v4 (x86-64 with AVX2/FMA, chosen at run time): blocks of 4 rows x 8 / 4 / 2
+ *    columns held in vector registers across the k loop, 2-5x faster on the kernel's
+ *    20 x 20 x K products. It is its own function with an AVX2 target (not a clone) so
+ *    that its 256-bit vectors are never emulated by the portable clone. */
+static inline void gk_gemm_loops(int ta, int m, int n, int k, const double *A, int lda,
+                                 const double *B, int ldb, double *C, int ldc, int acc) {
+  for (int i = 0; i < m; i++) {
+    double *__restrict ci = C + i * ldc;
+    if (!acc)
+      for (int j = 0; j < n; j++) ci[j] = 0.0;
+    for (int p = 0; p < k; p++) {
+      const double a = ta ? A[p * lda + i] : A[i * lda + p], *bp = B + p * ldb;
+#pragma GCC ivdep
+      for (int j = 0; j < n; j++) ci[j] += a * bp[j];
+    }
+  }
+}
+
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 11 && \
+    !defined(GK_NO_CLONES)
+#define GK_HAVE_V4 1
+typedef double gk_v4 __attribute__((vector_size(32)));
+typedef double gk_v4u __attribute__((vector_size(32), aligned(8)));
+typedef double gk_v2 __attribute__((vector_size(16)));
+typedef double gk_v2u __attribute__((vector_size(16), aligned(8)));
+#define GK_A(r, p) (ta ? A[(p) * lda + (r)] : A[(r) * lda + (p)])
+#define GK_L4(ptr) (*(const gk_v4u *)(ptr))
+#define GK_L2(ptr) (*(const gk_v2u *)(ptr))
+#define GK_S4(ptr, v) (*(gk_v4u *)(ptr) = (v))
+#define GK_S2(ptr, v) (*(gk_v2u *)(ptr) = (v))
+__attribute__((target("arch=x86-64-v3"))) static void gk_gemm_v4(
+    int ta, int m, int n, int k, const double *A, int lda, const double *B, int ldb,
+    double *C, int ldc, int acc) {
+  int i = 0;
+  for (; i + 4 <= m; i += 4) {
+    double *C0 = C + i * ldc, *C1 = C0 + ldc, *C2 = C1 + ldc, *C3 = C2 + ldc;
+    int j = 0;
+    for (; j + 8 <= n; j += 8) {
+      const gk_v4 z = {0, 0, 0, 0};
+      gk_v4 c00 = acc ? GK_L4(C0 + j) : z, c01 = acc ? GK_L4(C0 + j + 4) : z;
+      gk_v4 c10 = acc ? GK_L4(C1 + j) : z, c11 = acc ? GK_L4(C1 + j + 4) : z;
+      gk_v4 c20 = acc ? GK_L4(C2 + j) : z, c21 = acc ? GK_L4(C2 + j + 4) : z;
+      gk_v4 c30 = acc ? GK_L4(C3 + j) : z, c31 = acc ? GK_L4(C3 + j + 4) : z;
+      for (int p = 0; p < k; p++) {
+        const gk_v4 b0 = GK_L4(B + p * ldb + j), b1 = GK_L4(B + p * ldb + j + 4);
+        const double a0 = GK_A(i, p), a1 = GK_A(i + 1, p), a2 = GK_A(i + 2, p),
+                     a3 = GK_A(i + 3, p);
+        c00 += a0 * b0; c01 += a0 * b1; c10 += a1 * b0; c11 += a1 * b1;
+        c20 += a2 * b0; c21 += a2 * b1; c30 += a3 * b0; c31 += a3 * b1;
+      }
+      GK_S4(C0 + j, c00); GK_S4(C0 + j + 4, c01); GK_S4(C1 + j, c10); GK_S4(C1 + j + 4, c11);
+      GK_S4(C2 + j, c20); GK_S4(C2 + j + 4, c21); GK_S4(C3 + j, c30); GK_S4(C3 + j + 4, c31);
+    }
+    for (; j + 4 <= n; j += 4) {
+      const gk_v4 z = {0, 0, 0, 0};
+      gk_v4 c0 = acc ? GK_L4(C0 + j) : z, c1 = acc ? GK_L4(C1 + j) : z;
+      gk_v4 c2 = acc ? GK_L4(C2 + j) : z, c3 = acc ? GK_L4(C3 + j) : z;
+      for (int p = 0; p < k; p++) {
+        const gk_v4 b0 = GK_L4(B + p * ldb + j);
+        c0 += GK_A(i, p) * b0; c1 += GK_A(i + 1, p) * b0;
+        c2 += GK_A(i + 2, p) * b0; c3 += GK_A(i + 3, p) * b0;
+      }
+      GK_S4(C0 + j, c0); GK_S4(C1 + j, c1); GK_S4(C2 + j, c2); GK_S4(C3 + j, c3);
+    }
+    for (; j + 2 <= n; j += 2) {
+      const gk_v2 z = {0, 0};
+      gk_v2 c0 = acc ? GK_L2(C0 + j) : z, c1 = acc ? GK_L2(C1 + j) : z;
+      gk_v2 c2 = acc ? GK_L2(C2 + j) : z, c3 = acc ? GK_L2(C3 + j) : z;
+      for (int p = 0; p < k; p++) {
+        const gk_v2 b0 = GK_L2(B + p * ldb + j);
+        c0 += GK_A(i, p) * b0; c1 += GK_A(i + 1, p) * b0;
+        c2 += GK_A(i + 2, p) * b0; c3 += GK_A(i + 3, p) * b0;
+      }
+      GK_S2(C0 + j, c0); GK_S2(C1 + j, c1); GK_S2(C2 + j, c2); GK_S2(C3 + j, c3);
+    }
+    for (; j < n; j++) {
+      double s0 = acc ? C0[j] : 0.0, s1 = acc ? C1[j] : 0.0, s2 = acc ? C2[j] : 0.0,
+             s3 = acc ? C3[j] : 0.0;
+      for (int p = 0; p < k; p++) {
+        const double b = B[p * ldb + j];
+        s0 += GK_A(i, p) * b; s1 += GK_A(i + 1, p) * b;
+        s2 += GK_A(i + 2, p) * b; s3 += GK_A(i + 3, p) * b;
+      }
+      C0[j] = s0; C1[j] = s1; C2[j] = s2; C3[j] = s3;
+    }
+  }
+  for (; i < m; i++) {
+    double *Ci = C + i * ldc;
+    int j = 0;
+    for (; j + 8 <= n; j += 8) {
+      const gk_v4 z = {0, 0, 0, 0};
+      gk_v4 c0 = acc ? GK_L4(Ci + j) : z, c1 = acc ? GK_L4(Ci + j + 4) : z;
+      for (int p = 0; p < k; p++) {
+        const double a = GK_A(i, p);
+        c0 += a * GK_L4(B + p * ldb + j);
+        c1 += a * GK_L4(B + p * ldb + j + 4);
+      }
+      GK_S4(Ci + j, c0); GK_S4(Ci + j + 4, c1);
+    }
+    for (; j < n; j++) {
+      double s = acc ? Ci[j] : 0.0;
+      for (int p = 0; p < k; p++) s += GK_A(i, p) * B[p * ldb + j];
+      Ci[j] = s;
+    }
+  }
+}
+static int gk_v4_ok = -1;   /* the CPU runs gk_gemm_v4 (checked once) */
+#endif
+
+static inline void gk_gemm(int ta, int m, int n, int k, const double *A, int lda,
+                           const double *B, int ldb, double *C, int ldc, int acc) {
+  if (m <= 0 || n <= 0) return;
+#ifdef GK_HAVE_V4
+  if (gk_v4_ok < 0) {
+    __builtin_cpu_init();
+    gk_v4_ok = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  }
+  if (gk_v4_ok) {
+    gk_gemm_v4(ta, m, n, k, A, lda, B, ldb, C, ldc, acc);
+    return;
+  }
+#endif
+  gk_gemm_loops(ta, m, n, k, A, lda, B, ldb, C, ldc, acc);
+}
+
 #if defined(GK_BLAS_HESS) && !defined(GK_BLAS)
 #define GK_BLAS
 #endif
@@ -90,8 +222,10 @@ extern void dgemm_(const char *, const char *, const int *, const int *, const i
                    const double *, const double *, const int *, const double *, const int *,
                    const double *, double *, const int *);
 extern void openblas_set_num_threads(int);
-extern void dsyevd_(const char *, const char *, const int *, double *, const int *, double *,
-                    double *, const int *, int *, const int *, int *);
+extern void dsyevr_(const char *, const char *, const char *, const int *, double *,
+                    const int *, const double *, const double *, const int *, const int *,
+                    const double *, int *, double *, double *, const int *, int *, double *,
+                    const int *, int *, const int *, int *);
 /* row-major C (m x n, ldc) = op(A) op(B) + beta C, op(X) = X^T when tX */
 static void rm_gemm(int ta, int tb, int m, int n, int k, const double *A, int lda,
                     const double *B, int ldb, double beta, double *C, int ldc) {
@@ -159,15 +293,7 @@ static inline void mm(int m, int n, int k, const double *A, int lda, const doubl
 #ifdef GK_BLAS
   rm_gemm(0, 0, m, n, k, A, lda, B, ldb, 0.0, C, ldc);
 #else
-  for (int r = 0; r < m; r++) {
-    double *__restrict cr = C + r * ldc;
-    for (int c = 0; c < n; c++) cr[c] = 0.0;
-    for (int j = 0; j < k; j++) {
-      const double a = A[r * lda + j], *bj = B + j * ldb;
-#pragma GCC ivdep
-      for (int c = 0; c < n; c++) cr[c] += a * bj[c];
-    }
-  }
+  gk_gemm(0, m, n, k, A, lda, B, ldb, C, ldc, 0);
 #endif
 }
 
@@ -188,13 +314,12 @@ static inline void stage_jac(const double *x, const double *z, const double *r, 
     for (int c = 0; c < NU; c++) row[NX + c] += WH[k * NU + c];
   }
 #else
+  double M[NX * NX];
+  for (int k = 0; k < NX; k++)
+    for (int j = 0; j < NX; j++) M[k * NX + j] = UH[k * NX + j] * c1[j];
+  gk_gemm(0, NX, NV, NX, M, NX, JR, NV, jh, NV, 0);
   for (int k = 0; k < NX; k++) {
     double *row = jh + k * NV;
-    for (int c = 0; c < NV; c++) row[c] = 0.0;
-    for (int j = 0; j < NX; j++) {
-      const double a = UH[k * NX + j] * c1[j], *jr = JR + j * NV;
-      for (int c = 0; c < NV; c++) row[c] += a * jr[c];
-    }
     for (int j = 0; j < NX; j++) row[j] += UH[k * NX + j] * r[j];
     for (int c = 0; c < NU; c++) row[NX + c] += WH[k * NU + c];
   }
@@ -226,17 +351,9 @@ HOT static void derivatives(void) {
     for (int k = 0; k < NX; k++)
       for (int c = 0; c < NU; c++) Sn[k * NUU + K + c] = df[k * NV + NX + c];
 #else
-    for (int k = 0; k < NX; k++) {
-      double *srow = Sn + k * NUU;
-      const double *dfk = df + k * NV;
-      for (int c = 0; c < K; c++) srow[c] = 0.0;
-      for (int j = 0; j < NX; j++) {
-        const double a = dfk[j], *sj = Si + j * NUU;
-#pragma GCC ivdep
-        for (int c = 0; c < K; c++) srow[c] += a * sj[c];
-      }
-      for (int c = 0; c < NU; c++) srow[K + c] = dfk[NX + c];
-    }
+    gk_gemm(0, NX, K, NX, df, NV, Si, NUU, Sn, NUU, 0);
+    for (int k = 0; k < NX; k++)
+      for (int c = 0; c < NU; c++) Sn[k * NUU + K + c] = df[k * NV + NX + c];
 #endif
   }
 }

@@ -140,19 +140,10 @@ HOT static void stage_hessian(int i, const double *mu, double *W) {
   rm_gemm(1, 0, NV, NV, NX, JZ, NV, Pz, NV, 1.0, W, NV);
   rm_gemm(1, 0, NV, NV, NX, JR, NV, Pr, NV, 1.0, W, NV);
 #else
-  for (int c = 0; c < NV * NV; c++) W[c] = 0.0;
-  for (int k = 0; k < NX; k++) {
-    const double *jhk = jh + k * NV, *jz = JZ + k * NV, *jr = JR + k * NV;
-    const double *ph = Ph + k * NV, *pz = Pz + k * NV, *pr = Pr + k * NV;
-    for (int a = 0; a < NV; a++) {
-      const double ca = jhk[a], cb = jz[a], cc = jr[a];
-      double *__restrict wa = W + a * NV;
-      /* from the multiple of 4 at or below a (whole vectors; the extra lower entries are
-       * overwritten by the mirror below) */
-#pragma GCC ivdep
-      for (int b = a & ~3; b < NV; b++) wa[b] += ca * ph[b] + cb * pz[b] + cc * pr[b];
-    }
-  }
+  /* the full products (the lower triangle is overwritten by the mirror below) */
+  gk_gemm(1, NV, NV, NX, jh, NV, Ph, NV, W, NV, 0);
+  gk_gemm(1, NV, NV, NX, JZ, NV, Pz, NV, W, NV, 1);
+  gk_gemm(1, NV, NV, NX, JR, NV, Pr, NV, W, NV, 1);
 #endif
   /* + T + T^T terms: W[a,b] += G[b,a] (b < NX) + G[a,b] (a < NX), upper triangle */
   for (int a = 0; a < NV; a++)
@@ -202,25 +193,10 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
       rm_gemm(0, 0, NX, K, NX, W, NV, Si, NUU, 0.0, Y, NUU);
       rm_gemm(1, 0, K, K, NX, Si, NUU, Y, NUU, 1.0, H, NW);
 #else
-      /* Y = W_xx S_i (NX x K) */
-      for (int a = 0; a < NX; a++) {
-        double *ya = Y + a * NUU;
-        for (int c = 0; c < K; c++) ya[c] = 0.0;
-        for (int b = 0; b < NX; b++) {
-          const double wab = W[a * NV + b], *sb = Si + b * NUU;
-#pragma GCC ivdep
-          for (int c = 0; c < K; c++) ya[c] += wab * sb[c];
-        }
-      }
-      /* H[:K, :K] += S_i^T Y (upper triangle; mirrored at the end) */
-      for (int c1 = 0; c1 < K; c1++) {
-        double *__restrict hrow = H + c1 * NW;
-        for (int a = 0; a < NX; a++) {
-          const double s1 = Si[a * NUU + c1], *ya = Y + a * NUU;
-#pragma GCC ivdep
-          for (int c2 = c1 & ~3; c2 < K; c2++) hrow[c2] += s1 * ya[c2];
-        }
-      }
+      /* Y = W_xx S_i (NX x K); H[:K, :K] += S_i^T Y (all of it: the lower triangle is
+       * overwritten by the mirror at the end) */
+      gk_gemm(0, NX, K, NX, W, NV, Si, NUU, Y, NUU, 0);
+      gk_gemm(1, K, K, NX, Si, NUU, Y, NUU, H, NW, 1);
 #endif
       /* C = S_i^T W_xu (K x NU) into H[:K, K:K+NU] and its transpose */
       for (int c = 0; c < K; c++)

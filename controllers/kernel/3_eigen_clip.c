@@ -191,26 +191,32 @@ HOT static int clip_hessian(double *H) {
   /* symmetric copy from the lower triangle H[i][j], i >= j (what numpy's eigh reads) */
   for (int i = 0; i < NUU; i++)
     for (int j = 0; j < NUU; j++) V[i * NUU + j] = (j <= i) ? Hu[i * NUU + j] : Hu[j * NUU + i];
-  int any = 0;
-  /* full decomposition (tred2 + tql2; LAPACK dsyevd with GK_LAPACK_EIG): eigenvectors as
-   * rows of V. Computing only the eigenpairs below CLIP (QL without vectors + inverse
-   * iteration) was measured no faster in closed loop (~2.4 eigenvalues clipped per
-   * decomposition) and removed. */
+  int any = 0, ne = NUU;
 #ifdef GK_LAPACK_EIG
   {
-    /* row-major symmetric V = column-major V; eigenvectors come back as columns of the
-     * column-major array = rows of the row-major one */
-    static double work[1 + 6 * NUU + 2 * NUU * NUU];
-    static int iwork[3 + 5 * NUU];
-    const int nn = NUU, lwork = 1 + 6 * NUU + 2 * NUU * NUU, liwork = 3 + 5 * NUU;
+    /* LAPACK dsyevr: only the eigenpairs below CLIP (the tridiagonal reduction is shared;
+     * MRRR then finds the ~2 clipped pairs without the full QL). Row-major symmetric V =
+     * column-major V; eigenvector j comes back as column j of the column-major Z = row j of
+     * the row-major one. */
+    static double Z[NUU * NUU], work[26 * NUU];
+    static int iwork[10 * NUU], isuppz[2 * NUU];
+    const int nn = NUU, lwork = 26 * NUU, liwork = 10 * NUU, il = 1, iu = NUU;
+    const double vl = -1e300, vu = CLIP, abstol = 0.0;
+    static int init = 0;   /* one thread: small problems, and one kernel per campaign worker */
+    if (!init) { openblas_set_num_threads(1); init = 1; }
     int info = 0;
-    dsyevd_("V", "U", &nn, V, &nn, d, work, &lwork, iwork, &liwork, &info);
+    dsyevr_("V", "V", "U", &nn, V, &nn, &vl, &vu, &il, &iu, &abstol, &ne, d, Z, &nn, isuppz,
+            work, &lwork, iwork, &liwork, &info);
     if (info != 0) return -1;
+    memcpy(V, Z, sizeof(double) * NUU * ne);
   }
 #else
+  /* full decomposition (tred2 + tql2): eigenvectors as rows of V. Computing only the
+   * eigenpairs below CLIP by hand (QL without vectors + inverse iteration) was measured no
+   * faster in closed loop (~2.4 eigenvalues clipped per decomposition) and removed. */
   if (symm_eig(NUU, V, d, e) != 0) return -1;
 #endif
-  for (int j = 0; j < NUU; j++) {
+  for (int j = 0; j < ne; j++) {
     if (d[j] >= CLIP) continue;
     any = 1;
     n_evs++;

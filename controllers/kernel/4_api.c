@@ -113,6 +113,115 @@ EXPORT void PFX(xtraj)(const double *w, const double *p, double *x) {
   memcpy(x, X, sizeof X);
 }
 
+/* One GRU step x+ = f(x, u) with extra gate inputs dz, dr (the observer eq:observer, as
+ * controllers.gru.step) */
+EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
+                          const double *dr, double *xn) {
+  double az[NX], ar[NX], ah[NX], rho[NX], zz[NX];
+  for (int k = 0; k < NX; k++) {
+    double sz = BZ[k], sr = BR[k], sh = BH[k];
+    for (int j = 0; j < NU; j++) {
+      sz += WZ[k * NU + j] * u[j];
+      sr += WR[k * NU + j] * u[j];
+      sh += WH[k * NU + j] * u[j];
+    }
+    az[k] = sz;
+    ar[k] = sr;
+    ah[k] = sh;
+  }
+  for (int j = 0; j < NX; j++) {
+    const double xj = x[j], *uzt = UZT + j * NX, *urt = URT + j * NX;
+    for (int k = 0; k < NX; k++) {
+      az[k] += uzt[k] * xj;
+      ar[k] += urt[k] * xj;
+    }
+  }
+  for (int k = 0; k < NX; k++) {
+    zz[k] = sigm(az[k] + dz[k]);
+    rho[k] = sigm(ar[k] + dr[k]) * x[k];
+  }
+  for (int j = 0; j < NX; j++) {
+    const double rj = rho[j], *uht = UHT + j * NX;
+    for (int k = 0; k < NX; k++) ah[k] += uht[k] * rj;
+  }
+  for (int k = 0; k < NX; k++) {
+    const double hk = tanh(ah[k]);
+    xn[k] = zz[k] * x[k] + (1.0 - zz[k]) * hk;
+  }
+}
+
+/* The independent check of an input sequence (controllers.fhocp: FHOCP.cost and
+ * FHOCP._residuals on a plain rollout, in one call): states x (NH+1 x NX) from xh under u
+ * (NH x NU, used as given), and
+ *   out[0] cost of eq:optimization-cost with t = |x_N - x_bar|_inf,
+ *   out[1] max_j (L U_o x_0 - bnd_0)_j, the i = 0 output rows (-inf when NL = 0),
+ *   out[2] max_{i>=1, j} (L U_o x_i - bnd_i)_j (-inf when none),
+ *   out[3] max |u|, out[4] |x_N - x_bar|_inf,
+ *   out[5] active constraints: output rows i >= 1 and the terminal set within 1e-6, inputs
+ *          with |u| > 1 - 1e-6 (as FHOCP._residuals counts them).
+ * bnd: the tightened bounds h - a_i e_o - b_i - w_L - L b_o (NH x NL); alpha the terminal
+ * set's radius. */
+static void assess_core(const double *xh, const double *u, const double *xb, const double *ub,
+                        const double *bnd, double alpha, double *x, double *out) {
+  static double z[NH * NX], r[NH * NX], h[NH * NX];
+  simulate(xh, u, x, z, r, h);
+  double acc = 0.0;
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, x + i * NX, xb, QW, NX);
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, u + i * NU, ub, RW, NU);
+  double dN = 0.0;
+  for (int k = 0; k < NX; k++) {
+    const double d = fabs(x[NH * NX + k] - xb[k]);
+    if (d > dN || d != d) dN = d;
+  }
+  double v0 = -INFINITY, v1 = -INFINITY, umax = 0.0;
+  int act = 0;
+  for (int i = 0; i < NH; i++)
+    for (int j = 0; j < NL; j++) {
+      double s = 0.0;
+      for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * x[i * NX + k];
+      const double d = s - bnd[i * NL + j];
+      if (i == 0) {
+        if (d > v0) v0 = d;
+      } else {
+        if (d > v1) v1 = d;
+        if (d > -1e-6) act++;
+      }
+    }
+  for (int c = 0; c < NUU; c++) {
+    const double a = fabs(u[c]);
+    if (a > umax) umax = a;
+    if (a > 1.0 - 1e-6) act++;
+  }
+  if (dN - alpha > -1e-6) act++;
+  out[0] = acc + SW * dN * dN;
+  out[1] = v0;
+  out[2] = v1;
+  out[3] = umax;
+  out[4] = dN;
+  out[5] = act;
+}
+
+EXPORT void PFX(assess)(const double *xh, const double *u, const double *xb, const double *ub,
+                        const double *bnd, double alpha, double *x, double *out) {
+  assess_core(xh, u, xb, ub, bnd, alpha, x, out);
+}
+
+/* The check of the solver's answer w at p = (x_hat, x_bar, u_bar): u = clip(w_u, -1, 1)
+ * into uc, assess_core of uc into x and out[0..5], and out[6] the defect
+ * max |x_solver - x| against the solver's own trajectory at (w, p) (the cached rollout). */
+EXPORT void PFX(assess_w)(const double *w, const double *p, const double *bnd, double alpha,
+                          double *uc, double *x, double *out) {
+  for (int c = 0; c < NUU; c++) uc[c] = w[c] < -1.0 ? -1.0 : (w[c] > 1.0 ? 1.0 : w[c]);
+  assess_core(p, uc, p + NX, p + 2 * NX, bnd, alpha, x, out);
+  roll(w, p, 0);
+  double d = 0.0;
+  for (int c = 0; c < (NH + 1) * NX; c++) {
+    const double e = fabs(X[c] - x[c]);
+    if (e > d || e != e) d = e;
+  }
+  out[6] = d;
+}
+
 /* Equilibrium x = f(x, u), U_o x + b_o = y by Newton's method from (x0, u0), as
  * controllers.governor.equilibrium_newton (square system: NU == NY). Returns 0 when
  * max|F| < tol was reached (x, u written; the caller checks |u| <= 1), 1 when not converged
@@ -188,6 +297,8 @@ HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u
 EXPORT void PFX(dims)(long *out) {
   out[0] = NX; out[1] = NU; out[2] = NH; out[3] = NQ; out[4] = NW; out[5] = NG; out[6] = NP;
 }
+
+EXPORT int PFX(n_assess_rows)(void) { return NL; }
 
 EXPORT void PFX(counters)(long *out) {
   out[0] = n_calls; out[1] = n_eig; out[2] = n_clipped; out[3] = n_evs;

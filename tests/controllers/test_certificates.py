@@ -178,7 +178,7 @@ def test_failures_name_the_delta_iss_and_observer_conditions() -> None:
     f = c.failures([0.0])
     assert any("th:stability-bonassi" in s and "nu =" in s for s in f)
     assert any("eq:condition-observer-convergence" in s for s in f)
-    assert not c.ok()
+    assert not c.ok() and not c.ok([0.0])
 
 
 def test_explicit_gains_scale_and_missing_w_y_bar() -> None:
@@ -308,6 +308,19 @@ def test_alpha_positive_iff_assumption_1() -> None:
     for y in np.random.default_rng(1).uniform(-1, 1, (200, 2)):
         assert (c.alpha(y) > 0) == c.assumption_1(y)
         assert math.isfinite(c.alpha(y))
+
+
+def test_ok_is_exactly_no_failures() -> None:
+    """ok() (the governor's fast test) agrees with failures() on admissible and inadmissible
+    set-points alike."""
+    m = random_gru_model(4)
+    m.w_y_bar = 0.05
+    c = certs.compute_certificate(m)
+    verdicts = set()
+    for y in np.random.default_rng(2).uniform(-1.5, 1.5, (300, 2)):
+        assert c.ok(y) == (not c.failures(y))
+        verdicts.add(c.ok(y))
+    assert verdicts == {True, False} and c.ok() == (not c.failures())
 
 
 def test_reference_gives_equilibrium_and_alpha_or_a_clear_error() -> None:

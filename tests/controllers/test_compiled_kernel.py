@@ -138,3 +138,113 @@ def test_cache_reuses_a_build_and_keys_on_the_problem(cert, tmp_path: Path,
 def test_ipopt_and_multiple_shooting_keep_numpy(cert) -> None:
     assert FHOCP.from_certificate(cert, solver="ipopt").setup().kernel is None
     assert FHOCP.from_certificate(cert, formulation="multiple-shooting").setup().kernel is None
+
+
+@needs_cc
+@pytest.mark.parametrize(("n", "N"), [(20, 15), (9, 7)])
+def test_answer_check_and_observer_step_match_numpy(n: int, N: int) -> None:
+    """assess / assess_w (cost, residuals, defect of an answer) and gru_step (eq:observer's
+    update) against FHOCP.cost, FHOCP._residuals and controllers.gru.step, including answers
+    outside the input box, violated output rows and terminal sets."""
+    from controllers import gru
+    from controllers.fhocp import FHOCPResult
+
+    fh = random_fhocp(n, N, seed=3 * n + N, kernel="numpy")
+    k = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo)
+    assert k is not None and k.nl == fh.q, ck.last_error
+    rng = np.random.default_rng(7)
+    seen = set()
+    for _ in range(40):
+        x0 = rng.uniform(-0.7, 0.7, n)
+        x_bar, u_bar = rng.uniform(-0.7, 0.7, n), rng.uniform(-0.9, 0.9, fh.m)
+        w = np.concatenate([rng.uniform(-1.3, 1.3, N * fh.m), [0.05]])
+        e_o, alpha = rng.uniform(0.0, 0.05), rng.uniform(0.0, 1.5)
+        bounds = fh.tightened_bounds(e_o) * rng.choice([0.05, 1.0])  # some rows violated
+        u = np.clip(w[:-1].reshape(N, fh.m), -1.0, 1.0)
+        x = gru.simulate(fh.params, x0, u)[0]
+        ref = FHOCPResult(u=u, x=x, cost=0.0, status="", success=False)
+        _residuals_with(fh, ref, x, bounds, x_bar, alpha)
+        uc, xk, out = k.assess_w(w, np.concatenate([x0, x_bar, u_bar]), bounds, alpha)
+        # the defect: the solver's trajectory (unclipped inputs) against the check's
+        xs = gru.simulate(fh.params, x0, w[:-1].reshape(N, fh.m))[0]
+        assert np.array_equal(uc, u) and rel(xk, x) < 1e-13
+        assert abs(out[6] - np.max(np.abs(xs - x))) < 1e-13
+        assert rel(out[0], fh.cost(x, u, x_bar, u_bar)) < 1e-12
+        viol = max(0.0, out[1], out[2], out[3] - 1.0)
+        assert abs(viol - ref.constraint_violation) < 1e-12
+        assert abs(max(0.0, out[4] - alpha) - ref.terminal_violation) < 1e-12
+        assert int(out[5]) == ref.active
+        seen.add((ref.constraint_violation > 0, ref.terminal_violation > 0))
+        dz, dr = rng.normal(0, 0.2, n), rng.normal(0, 0.2, n)
+        assert rel(k.gru_step(x0, u[0], dz, dr),
+                   gru.step(fh.params, x0, u[0], dz=dz, dr=dr)) < 1e-14
+    assert seen == {(False, False), (False, True), (True, False), (True, True)}
+
+
+def _residuals_with(fh: FHOCP, res, x, bounds, x_bar, alpha) -> None:
+    """FHOCP._residuals with given bounds (its formulas, written out again)."""
+    lhs = x[: fh.N] @ fh.LUo.T
+    res.constraint_violation = max(0.0, float(np.max(lhs - bounds)),
+                                   float(np.max(np.abs(res.u))) - 1.0)
+    dN = float(np.max(np.abs(x[fh.N] - x_bar)))
+    res.terminal_violation = max(0.0, dN - alpha)
+    res.active = (int(np.sum(lhs[1:] - bounds[1:] > -1e-6)) + int(dN - alpha > -1e-6)
+                  + int(np.sum(np.abs(res.u) > 1 - 1e-6)))
+
+
+@needs_cc
+def test_compiled_candidate_and_governor_test_match_numpy(cert) -> None:
+    """FHOCP.candidate and FHOCP.assess (the governor's feasibility test) give the numpy
+    path's numbers with the kernel."""
+    a = FHOCP.from_certificate(cert, kernel="numpy").setup()
+    b = FHOCP.from_certificate(cert).setup()
+    assert b.kernel is not None
+    ref = cert.reference(np.array([0.1, 0.05]))
+    x_hat, _ = equilibrium(cert.params, np.array([0.0, 0.0]))
+    rng = np.random.default_rng(3)
+    for _ in range(10):
+        u = rng.uniform(-1.2, 1.2, (a.N, a.m))
+        ra = a.candidate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
+        rb = b.candidate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
+        assert rel(rb.x, ra.x) < 1e-13 and rel(rb.cost, ra.cost) < 1e-12
+        assert abs(rb.t - ra.t) < 1e-13 and rb.active == ra.active
+        assert abs(rb.constraint_violation - ra.constraint_violation) < 1e-12
+        assert abs(rb.terminal_violation - ra.terminal_violation) < 1e-12
+        va, da = a.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
+        vb, db = b.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
+        assert abs(va - vb) < 1e-12 and abs(da - db) < 1e-13
+
+
+def test_tightened_bounds_are_kept_per_e_o_and_read_only(cert) -> None:
+    fh = FHOCP.from_certificate(cert, kernel="numpy")
+    b1 = fh.tightened_bounds(0.02)
+    assert fh.tightened_bounds(0.02) is b1 and not b1.flags.writeable
+    b2 = fh.tightened_bounds(0.03)
+    assert b2 is not b1 and np.array_equal(
+        b2, fh.h - fh.a * 0.03 - fh.b - fh.w_L - fh.Lbo)
+    assert np.array_equal(b1, fh.h - fh.a * 0.02 - fh.b - fh.w_L - fh.Lbo)
+
+
+@needs_cc
+def test_portable_build_gives_the_same_derivatives(tmp_path: Path,
+                                                   monkeypatch: pytest.MonkeyPatch) -> None:
+    """GK_NO_CLONES (no AVX2 clones, no register-blocked products: the path of CPUs without
+    AVX2/FMA) against numpy and against the default build."""
+    monkeypatch.setenv("GRU_MPC_KERNEL_CACHE", str(tmp_path))
+    fh = random_fhocp(20, 15, seed=5, kernel="numpy")
+    fast = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2)
+    portable = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2,
+                        cflags=(*ck.DEFAULT_CFLAGS, "-DGK_NO_CLONES"))
+    assert fast is not None and portable is not None and fast.path != portable.path
+    nlp = SingleShootingNLP(fh, None)
+    nlp.eigen_clip = 1e-2
+    rng = np.random.default_rng(1)
+    for _ in range(3):
+        w = np.concatenate([rng.uniform(-1, 1, fh.N * fh.m), [0.05]])
+        p = np.concatenate([rng.uniform(-0.7, 0.7, 2 * fh.n), rng.uniform(-0.9, 0.9, fh.m)])
+        lg = rng.normal(0, 1, fh.ng)
+        for k in (portable, fast):
+            for a, b in zip(k.external("jac_fg")(w, p), nlp.jac_fg(w, p), strict=True):
+                assert rel(a, b) < 1e-12
+            assert rel(k.external("hess_l")(w, p, 1.0, lg),
+                       nlp.hessian_convex(w, p, np.array([1.0]), lg)[0]) < 1e-12

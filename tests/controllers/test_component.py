@@ -176,6 +176,16 @@ def test_solver_option_selects_the_nlp_solver() -> None:
     assert RobustMPCController(solver="ipopt").fhocp.solver == "ipopt"
 
 
+def test_the_observer_uses_the_fhocp_kernel() -> None:
+    """The observer's update runs in the FHOCP's compiled kernel when there is one, in numpy
+    with kernel="numpy"; the summary says which."""
+    c = RobustMPCController()
+    assert c.observer.kernel is c.fhocp.kernel
+    assert c.summary()["kernel"] == ("compiled" if c.fhocp.kernel is not None else "numpy")
+    n = RobustMPCController(kernel="numpy")
+    assert n.observer.kernel is None and n.summary()["kernel"] == "numpy"
+
+
 def test_gru_plant_start_parameters() -> None:
     from controllers.equilibrium import equilibrium_for_output
     from controllers.model import GRUModel

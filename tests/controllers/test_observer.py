@@ -6,6 +6,9 @@ x⁺ = f(x, u), y = U_o x + b_o + w_y, ‖w_y‖∞ ≤ w̄_y.
 
 from __future__ import annotations
 
+import os
+import shutil
+
 import numpy as np
 import pytest
 
@@ -43,6 +46,28 @@ def test_observer_implements_eq_observer() -> None:
         xh = observer_by_hand(p, Lz, Lr, xh, u, y)
         assert obs.make_step(u, y) == pytest.approx(xh, abs=1e-14)
     assert obs.k == 30
+
+
+@pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,
+                    reason="no C compiler")
+def test_observer_with_the_compiled_step_implements_eq_observer() -> None:
+    """With a compiled kernel attached (what RobustMPCController does), the same update."""
+    from controllers import compiled_kernel as ck
+
+    m = random_gru_model(0, n=6)
+    p = m.params
+    k = ck.build(p, 3, np.eye(6), np.eye(2), np.zeros((1, 6)), 1.0, None)
+    assert k is not None, ck.last_error
+    rng = np.random.default_rng(0)
+    Lz, Lr = rng.normal(0, 0.3, (6, 2)), rng.normal(0, 0.3, (6, 2))
+    x0 = rng.uniform(-1, 1, 6)
+    obs = GRUObserver(p, Lz, Lr, x0=x0)
+    obs.kernel = k
+    xh = x0.copy()
+    for _ in range(30):
+        u, y = rng.uniform(-1, 1, 2), rng.uniform(-1, 1, 2)
+        xh = observer_by_hand(p, Lz, Lr, xh, u, y)
+        assert obs.make_step(u, y) == pytest.approx(xh, abs=1e-14)
 
 
 def test_zero_gains_is_the_open_loop_model() -> None:
