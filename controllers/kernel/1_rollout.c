@@ -239,7 +239,9 @@ static void rm_gemm(int ta, int tb, int m, int n, int k, const double *A, int ld
 #endif
 
 /* one stage: gates z, r, h and x+ = f(x, u) */
-static inline void simulate_stage(const double *xi, const double *ui, double *zi, double *ri,
+/* always inlined: compiled inside each AVX2 / portable clone of its callers */
+__attribute__((always_inline)) static inline void simulate_stage(
+    const double *xi, const double *ui, double *zi, double *ri,
                                   double *hi, double *xn) {
   double az[NX], ar[NX], ah[NX], rho[NX];
   for (int k = 0; k < NX; k++) {

@@ -2,10 +2,14 @@
  * generated header and 1_rollout.c ... 4_api.c into one translation unit): f, g, their derivatives and the Hessian of the Lagrangian. */
 /* ---------------------------------------------------------------- f, g, grad f, jac g */
 /* acc + (v - ref)^T W (v - ref), n <= NX + NU, W row-major n x n (terms added one by one) */
-static inline double add_quad(double acc, const double *v, const double *ref,
-                              const double *W, int n) {
+__attribute__((always_inline)) static inline double add_quad(
+    double acc, const double *v, const double *ref, const double *W, int n, int diag) {
   double d[NX + NU];
   for (int k = 0; k < n; k++) d[k] = v[k] - ref[k];
+  if (diag) {   /* the same sums: the off-diagonal terms are exact zeros */
+    for (int k = 0; k < n; k++) acc += (d[k] * W[k * n + k]) * d[k];
+    return acc;
+  }
   for (int k = 0; k < n; k++) {
     double s = 0.0;
     for (int j = 0; j < n; j++) s += d[j] * W[j * n + k];
@@ -17,8 +21,8 @@ static inline double add_quad(double acc, const double *v, const double *ref,
 HOT static double cost(const double *w, const double *p) {
   const double *xb = p + NX, *ub = p + 2 * NX, t = w[NUU];
   double acc = 0.0;
-  for (int i = 0; i < NH; i++) acc = add_quad(acc, X + i * NX, xb, QW, NX);
-  for (int i = 0; i < NH; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU);
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, X + i * NX, xb, QW, NX, QDIAG);
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU, 0);
   return acc + SW * t * t;
 }
 
@@ -307,15 +311,8 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
 #ifdef GK_BLAS
     rm_gemm(1, 0, Kc, Kc, 5 * NX, L, NUU, R, NUU, 1.0, H, NW);
 #else
-    for (int c1 = 0; c1 < Kc; c1++) {
-      double *__restrict hrow = H + c1 * NW;
-      for (int k = 0; k < 5 * NX; k++) {
-        const double l = L[k * NUU + c1], *rk = R + k * NUU;
-        if (l == 0.0) continue;
-#pragma GCC ivdep
-        for (int c2 = c1 & ~3; c2 < Kc; c2++) hrow[c2] += l * rk[c2];
-      }
-    }
+    /* all of L^T R (the lower triangle is overwritten by the mirror at the end) */
+    gk_gemm(1, Kc, Kc, 5 * NX, L, NUU, R, NUU, H, NW, 1);
 #endif
     for (int j1 = 0; j1 < NU; j1++)
       for (int j2 = j1; j2 < NU; j2++) H[(K + j1) * NW + K + j2] += 2.0 * lf * RW[j1 * NU + j2];

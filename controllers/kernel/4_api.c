@@ -166,8 +166,8 @@ static void assess_core(const double *xh, const double *u, const double *xb, con
   static double z[NH * NX], r[NH * NX], h[NH * NX];
   simulate(xh, u, x, z, r, h);
   double acc = 0.0;
-  for (int i = 0; i < NH; i++) acc = add_quad(acc, x + i * NX, xb, QW, NX);
-  for (int i = 0; i < NH; i++) acc = add_quad(acc, u + i * NU, ub, RW, NU);
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, x + i * NX, xb, QW, NX, QDIAG);
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, u + i * NU, ub, RW, NU, 0);
   double dN = 0.0;
   for (int k = 0; k < NX; k++) {
     const double d = fabs(x[NH * NX + k] - xb[k]);
