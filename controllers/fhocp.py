@@ -412,22 +412,22 @@ class FHOCP:
         # the independent check: a rollout apart from the solver's (the kernel's plain one,
         # cross-checked against numpy when loaded, in one call; or numpy's). IPOPT may
         # overshoot a bound by ~1e-9: u is clipped
+        out = None
         if self.kernel is not None:
             u, x, out = self.kernel.assess_w(wopt, ins["p"], self.tightened_bounds(e_o),
                                              alpha)
-            res = FHOCPResult(u=u, x=x, cost=float(out[0]), status=status, success=False,
-                              iterations=iters, solve_time=elapsed, t=t,
-                              lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
-            res.defect = float(out[6])
-            _set_residuals(res, out, alpha)
+            cost, defect = float(out[0]), float(out[6])
         else:
             u = np.clip(wopt[self.iu], -1.0, 1.0)
-            xs = self._xtraj(wopt, ins["p"])
             x = self.simulate(x_hat, u)
-            res = FHOCPResult(u=u, x=x, cost=self.cost(x, u, x_bar, u_bar), status=status,
-                              success=False, iterations=iters, solve_time=elapsed, t=t,
-                              lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
-            res.defect = float(np.max(np.abs(xs - x)))
+            cost = self.cost(x, u, x_bar, u_bar)
+            defect = float(np.max(np.abs(self._xtraj(wopt, ins["p"]) - x)))
+        res = FHOCPResult(u=u, x=x, cost=cost, status=status, success=False,
+                          iterations=iters, solve_time=elapsed, t=t, defect=defect,
+                          lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
+        if out is not None:
+            _set_residuals(res, out, alpha)
+        else:
             self._residuals(res, x, e_o, x_bar, alpha)
         ok_status = bool(stats.get("success", False))
         res.feasible = bool(np.all(np.isfinite(wopt)) and res.constraint_violation <= FEAS_TOL

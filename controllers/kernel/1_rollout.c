@@ -118,6 +118,19 @@ typedef double gk_v2u __attribute__((vector_size(16), aligned(8)));
 #define GK_L2(ptr) (*(const gk_v2u *)(ptr))
 #define GK_S4(ptr, v) (*(gk_v4u *)(ptr) = (v))
 #define GK_S2(ptr, v) (*(gk_v2u *)(ptr) = (v))
+/* rows i .. i+3 of C at columns j .. j+W-1, one vector of type VT per row (W = 4 or 2) */
+#define GK_TILE4(VT, LD, ST)                                                             \
+  {                                                                                      \
+    const VT z = {0};                                                                    \
+    VT c0 = acc ? LD(C0 + j) : z, c1 = acc ? LD(C1 + j) : z;                             \
+    VT c2 = acc ? LD(C2 + j) : z, c3 = acc ? LD(C3 + j) : z;                             \
+    for (int p = 0; p < k; p++) {                                                        \
+      const VT b0 = LD(B + p * ldb + j);                                                 \
+      c0 += GK_A(i, p) * b0; c1 += GK_A(i + 1, p) * b0;                                  \
+      c2 += GK_A(i + 2, p) * b0; c3 += GK_A(i + 3, p) * b0;                              \
+    }                                                                                    \
+    ST(C0 + j, c0); ST(C1 + j, c1); ST(C2 + j, c2); ST(C3 + j, c3);                      \
+  }
 __attribute__((target("arch=x86-64-v3"))) static void gk_gemm_v4(
     int ta, int m, int n, int k, const double *A, int lda, const double *B, int ldb,
     double *C, int ldc, int acc) {
@@ -141,28 +154,8 @@ __attribute__((target("arch=x86-64-v3"))) static void gk_gemm_v4(
       GK_S4(C0 + j, c00); GK_S4(C0 + j + 4, c01); GK_S4(C1 + j, c10); GK_S4(C1 + j + 4, c11);
       GK_S4(C2 + j, c20); GK_S4(C2 + j + 4, c21); GK_S4(C3 + j, c30); GK_S4(C3 + j + 4, c31);
     }
-    for (; j + 4 <= n; j += 4) {
-      const gk_v4 z = {0, 0, 0, 0};
-      gk_v4 c0 = acc ? GK_L4(C0 + j) : z, c1 = acc ? GK_L4(C1 + j) : z;
-      gk_v4 c2 = acc ? GK_L4(C2 + j) : z, c3 = acc ? GK_L4(C3 + j) : z;
-      for (int p = 0; p < k; p++) {
-        const gk_v4 b0 = GK_L4(B + p * ldb + j);
-        c0 += GK_A(i, p) * b0; c1 += GK_A(i + 1, p) * b0;
-        c2 += GK_A(i + 2, p) * b0; c3 += GK_A(i + 3, p) * b0;
-      }
-      GK_S4(C0 + j, c0); GK_S4(C1 + j, c1); GK_S4(C2 + j, c2); GK_S4(C3 + j, c3);
-    }
-    for (; j + 2 <= n; j += 2) {
-      const gk_v2 z = {0, 0};
-      gk_v2 c0 = acc ? GK_L2(C0 + j) : z, c1 = acc ? GK_L2(C1 + j) : z;
-      gk_v2 c2 = acc ? GK_L2(C2 + j) : z, c3 = acc ? GK_L2(C3 + j) : z;
-      for (int p = 0; p < k; p++) {
-        const gk_v2 b0 = GK_L2(B + p * ldb + j);
-        c0 += GK_A(i, p) * b0; c1 += GK_A(i + 1, p) * b0;
-        c2 += GK_A(i + 2, p) * b0; c3 += GK_A(i + 3, p) * b0;
-      }
-      GK_S2(C0 + j, c0); GK_S2(C1 + j, c1); GK_S2(C2 + j, c2); GK_S2(C3 + j, c3);
-    }
+    for (; j + 4 <= n; j += 4) GK_TILE4(gk_v4, GK_L4, GK_S4)
+    for (; j + 2 <= n; j += 2) GK_TILE4(gk_v2, GK_L2, GK_S2)
     for (; j < n; j++) {
       double s0 = acc ? C0[j] : 0.0, s1 = acc ? C1[j] : 0.0, s2 = acc ? C2[j] : 0.0,
              s3 = acc ? C3[j] : 0.0;
@@ -238,11 +231,11 @@ static void rm_gemm(int ta, int tb, int m, int n, int k, const double *A, int ld
 }
 #endif
 
-/* one stage: gates z, r, h and x+ = f(x, u) */
-/* always inlined: compiled inside each AVX2 / portable clone of its callers */
-__attribute__((always_inline)) static inline void simulate_stage(
-    const double *xi, const double *ui, double *zi, double *ri,
-                                  double *hi, double *xn) {
+/* gates z, r, h of one stage at (x, u), with extra gate inputs dz, dr (eq:observer; NULL:
+ * none). Always inlined: compiled inside each AVX2 / portable clone of its callers. */
+__attribute__((always_inline)) static inline void stage_gates(
+    const double *xi, const double *ui, const double *dz, const double *dr, double *zi,
+    double *ri, double *hi) {
   double az[NX], ar[NX], ah[NX], rho[NX];
   for (int k = 0; k < NX; k++) {
     double sz = BZ[k], sr = BR[k], sh = BH[k];
@@ -264,19 +257,22 @@ __attribute__((always_inline)) static inline void simulate_stage(
     }
   }
   for (int k = 0; k < NX; k++) {
-    zi[k] = sigm(az[k]);
-    ri[k] = sigm(ar[k]);
+    zi[k] = sigm(dz ? az[k] + dz[k] : az[k]);
+    ri[k] = sigm(dr ? ar[k] + dr[k] : ar[k]);
     rho[k] = ri[k] * xi[k];
   }
   for (int j = 0; j < NX; j++) {
     const double rj = rho[j], *uht = UHT + j * NX;
     for (int k = 0; k < NX; k++) ah[k] += uht[k] * rj;
   }
-  for (int k = 0; k < NX; k++) {
-    const double hk = tanh(ah[k]);
-    hi[k] = hk;
-    xn[k] = hk + zi[k] * (xi[k] - hk);
-  }
+  for (int k = 0; k < NX; k++) hi[k] = tanh(ah[k]);
+}
+
+/* one stage: gates z, r, h and x+ = f(x, u) */
+__attribute__((always_inline)) static inline void simulate_stage(
+    const double *xi, const double *ui, double *zi, double *ri, double *hi, double *xn) {
+  stage_gates(xi, ui, 0, 0, zi, ri, hi);
+  for (int k = 0; k < NX; k++) xn[k] = hi[k] + zi[k] * (xi[k] - hi[k]);
 }
 
 /* states x_0..x_N and gates from x_0 = xh under u (NH x NU) into x, z, r, h */

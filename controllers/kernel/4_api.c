@@ -117,37 +117,9 @@ EXPORT void PFX(xtraj)(const double *w, const double *p, double *x) {
  * controllers.gru.step) */
 EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
                           const double *dr, double *xn) {
-  double az[NX], ar[NX], ah[NX], rho[NX], zz[NX];
-  for (int k = 0; k < NX; k++) {
-    double sz = BZ[k], sr = BR[k], sh = BH[k];
-    for (int j = 0; j < NU; j++) {
-      sz += WZ[k * NU + j] * u[j];
-      sr += WR[k * NU + j] * u[j];
-      sh += WH[k * NU + j] * u[j];
-    }
-    az[k] = sz;
-    ar[k] = sr;
-    ah[k] = sh;
-  }
-  for (int j = 0; j < NX; j++) {
-    const double xj = x[j], *uzt = UZT + j * NX, *urt = URT + j * NX;
-    for (int k = 0; k < NX; k++) {
-      az[k] += uzt[k] * xj;
-      ar[k] += urt[k] * xj;
-    }
-  }
-  for (int k = 0; k < NX; k++) {
-    zz[k] = sigm(az[k] + dz[k]);
-    rho[k] = sigm(ar[k] + dr[k]) * x[k];
-  }
-  for (int j = 0; j < NX; j++) {
-    const double rj = rho[j], *uht = UHT + j * NX;
-    for (int k = 0; k < NX; k++) ah[k] += uht[k] * rj;
-  }
-  for (int k = 0; k < NX; k++) {
-    const double hk = tanh(ah[k]);
-    xn[k] = zz[k] * x[k] + (1.0 - zz[k]) * hk;
-  }
+  double z[NX], r[NX], h[NX];
+  stage_gates(x, u, dz, dr, z, r, h);
+  for (int k = 0; k < NX; k++) xn[k] = z[k] * x[k] + (1.0 - z[k]) * h[k];   /* as numpy */
 }
 
 /* The independent check of an input sequence (controllers.fhocp: FHOCP.cost and
