@@ -17,7 +17,9 @@ the two differ, IPOPT restarted from the compiled answer tells whether that answ
 local optimum of the nonconvex FHOCP) and the two closed loops against each other.
 
 ``--scaling`` times random δISS GRUs (GRU plant, 5 set-points × 60 steps) for N = 15, 30, 60
-(n = 20) and n = 20, 40, 80 (N = 15), compiled and numpy, and fits the growth exponents.
+(n = 20) and n = 20, 40, 80 (N = 15), compiled and numpy (``--rounds`` each, alternating),
+splits the compiled median step into the SQP's QP, Hessian, Jacobian and the rest, and fits
+the growth exponents.
 ``--plain`` adds the do-mpc-style baseline of issue 5 (multiple shooting, IPOPT defaults).
 ``--clip`` times the Hessian's eigenvalue clipping, own tred2/tql2 against LAPACK dsyevr.
 
@@ -250,8 +252,39 @@ def _equilibrium_output(model: Any, u: np.ndarray) -> np.ndarray:
     return model.denormalize_y(np.asarray(gru.output(model.params, x), dtype=float))
 
 
+#: casadi ``sqpmethod`` timers of one solve, in the order printed by ``--scaling``
+SPLIT = (("QP", "t_wall_QP"), ("Hessian", "t_wall_nlp_hess_l"),
+         ("Jacobian", "t_wall_nlp_jac_fg"), ("f, g", "t_wall_nlp_fg"))
+
+
+class SplitController(TimedController):
+    """:class:`TimedController` that also keeps, per step, the SQP's own timers (ms) of the
+    step's solve, read after the timed part (casadi accumulates them over the solver's
+    lifetime: the step's share is the difference)."""
+
+    def __init__(self, ctrl: RobustMPCController) -> None:
+        super().__init__(ctrl)
+        self.split: list[tuple[float, ...]] = []
+        self._last = np.zeros(len(SPLIT))
+
+    def step(self, t: float, dt: float) -> None:
+        super().step(t, dt)
+        try:
+            st = self.ctrl.fhocp._buffer[0].stats()
+        except RuntimeError:   # no stats after an aborted solve: the step is left out
+            return
+        now = np.array([st.get(key, 0.0) * 1e3 for _, key in SPLIT])
+        self.split.append((self.wall_ms[-1], *(now - self._last)))
+        self._last = now
+
+
 def scaling(args: argparse.Namespace) -> None:
-    """Median step time for N = 15, 30, 60 and n = 20, 40, 80 (random δISS GRUs)."""
+    """Median step time for N = 15, 30, 60 and n = 20, 40, 80 (random δISS GRUs).
+
+    ``--rounds`` closed loops of each variant, alternating; a size's median is the median of
+    the rounds' medians. For the compiled controller, the split of its median steps (the
+    steps within 20 % of the median) into the SQP's QP, Hessian, Jacobian and f, g time, and
+    the rest (Python, the answer check, the observer)."""
     from controllers import gain_design
     from controllers.model_plant import GRUPlant
     from cosim.master import Master
@@ -279,19 +312,41 @@ def scaling(args: argparse.Namespace) -> None:
             path = folder / f"gru_{n}.json"
             model.L_z, model.L_r = cert.L_z, cert.L_r
             model.save(path)
-            med = {}
-            for kernel in ("auto", "numpy"):
-                ctrl = RobustMPCController(model=path, N=N, kernel=kernel)
-                timed = TimedController(ctrl)
-                result = Master(GRUPlant(ctrl.model, y0=setpoints[0]), timed, sc).run()
-                if result.status != "ok" or not timed.wall_ms:
-                    raise SystemExit(f"bench_mpc: n={n}, N={N} ({kernel}): {result.reason}")
-                med[kernel] = (np.median(timed.wall_ms), _p(timed.wall_ms, 99))
+            ctrls = {k: RobustMPCController(model=path, N=N, kernel=k)
+                     for k in ("auto", "numpy")}
+            meds: dict[str, list[float]] = {k: [] for k in ctrls}
+            p99s: dict[str, list[float]] = {k: [] for k in ctrls}
+            split: list[tuple[float, ...]] = []
+            for _ in range(max(1, args.rounds)):
+                for kernel, ctrl in ctrls.items():
+                    timed = SplitController(ctrl) if kernel == "auto" else TimedController(ctrl)
+                    result = Master(GRUPlant(ctrl.model, y0=setpoints[0]), timed, sc).run()
+                    if result.status != "ok" or not timed.wall_ms:
+                        raise SystemExit(f"bench_mpc: n={n}, N={N} ({kernel}): {result.reason}")
+                    meds[kernel].append(float(np.median(timed.wall_ms)))
+                    p99s[kernel].append(_p(timed.wall_ms, 99))
+                    if isinstance(timed, SplitController):
+                        split += timed.split
+            med = {k: (float(np.median(meds[k])), float(np.median(p99s[k]))) for k in ctrls}
+            fh = ctrls["auto"].fhocp
+            variant = "numpy" if fh.kernel is None else next(
+                (name for flag, name in (("-DGK_CONTRACT", "contract"),
+                                         ("-DGK_BACKWARD", "backward"))
+                 if flag in fh.kernel.flags), "w")
             rows.append((n, N, *med["numpy"], *med["auto"]))
             print(f"n={n:3d} N={N:3d}: numpy median {med['numpy'][0]:7.2f} ms p99 "
-                  f"{med['numpy'][1]:7.2f}; compiled median {med['auto'][0]:6.2f} ms p99 "
-                  f"{med['auto'][1]:6.2f}; speed-up {med['numpy'][0] / med['auto'][0]:.1f}x",
-                  flush=True)
+                  f"{med['numpy'][1]:7.2f}; compiled ({variant}) median {med['auto'][0]:6.2f}"
+                  f" ms p99 {med['auto'][1]:6.2f}; speed-up "
+                  f"{med['numpy'][0] / med['auto'][0]:.1f}x; rounds' medians "
+                  f"{' '.join(f'{v:.2f}' for v in meds['auto'])} ms", flush=True)
+            a = np.asarray(split)
+            if len(a):
+                sel = a[np.abs(a[:, 0] - med["auto"][0]) <= 0.2 * med["auto"][0]]
+                parts = np.median(sel, axis=0) if len(sel) else np.median(a, axis=0)
+                rest = parts[0] - float(np.sum(parts[1:]))
+                print("    compiled median step: " + ", ".join(
+                    f"{name} {v:.2f}" for (name, _), v in zip(SPLIT, parts[1:], strict=True))
+                      + f", rest {rest:.2f} ms", flush=True)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     for label, sel, col in (("N (n = 20)", [r for r in rows if r[0] == 20], 1),

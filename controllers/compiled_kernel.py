@@ -136,26 +136,42 @@ def casadi_openblas() -> Path | None:
 #: the default kernel then needs no OpenBLAS.
 LAPACK_EIG_MIN_NU = 40
 
-#: BLAS for the big products when n >= this (below it the C loops are faster: ~1 µs call
-#: overhead per product, 5 products per stage).
-BLAS_MIN_N = 32
+#: BLAS (casadi's OpenBLAS) for the big products when n >= this; None: never by default
+#: (``GRU_MPC_KERNEL_BLAS=on`` still asks for it). The register-blocked products beat it at
+#: every size measured: Jacobian / Hessian evaluations at N = 15, blocked against BLAS,
+#: 164 / 445 and 325 / 475 µs at n = 40, 469 / 1364 and 564 / 861 µs at n = 80,
+#: 1.87 / 4.21 and 1.58 / 2.08 ms at n = 160; closed-loop median at n = 80: 2.3–2.9 against
+#: 4.5–4.6 ms.
+BLAS_MIN_N: int | None = None
 
 
 def choose_mode(n: int, m: int, N: int) -> str:
-    """"w" (explicit stage Jacobians and stage Hessians W_i, then Z^T W Z) or "contract"
-    (everything contracted with Z_i = [S_i; E_i] first), by a flop model of one Jacobian +
-    Hessian evaluation: W-mode is O(N n^3 + N^2 n^2 m + N^3 n m^2), contracted mode
-    O(N^2 n^2 m + N^3 n m^2) with larger constants. Env GRU_MPC_KERNEL_MODE overrides."""
+    """The kernel's variant for a GRU of ``n`` states, ``m`` inputs and horizon ``N``, by a
+    flop model of one Jacobian + Hessian evaluation:
+
+    - ``"w"``: explicit stage Jacobians and stage Hessians ``W_i``, then ``Σ Z_iᵀ W_i Z_i``;
+      O(N n³ + N² n² m + N³ n m²);
+    - ``"contract"``: everything contracted with ``Z_i = [S_i; E_i]`` first;
+      O(N² n² m + N³ n m²) with larger constants, for large n;
+    - ``"backward"``: the W-mode stage blocks condensed backward from the end of the horizon
+      (a Riccati-like recursion for the Hessian); O(N n³ + N² n m²), for long horizons.
+
+    Contracted mode is taken when its count is below 0.8× W-mode's, backward mode when its
+    count is below both others (at n = 20, m = 2 its Hessian measured 1.8–2.0× faster at
+    N = 30 and 60, 1.7× slower at N = 15). Env ``GRU_MPC_KERNEL_MODE`` overrides."""
     env = os.environ.get("GRU_MPC_KERNEL_MODE", "auto")
-    if env in ("w", "contract"):
+    if env in ("w", "contract", "backward"):
         return env
     v = n + m
-    cw = cc = 0.0
+    cw = cc = cb = 0.0
     for i in range(N):
         K = i * m
         Kc = K + m
         cw += n * n * v + 2 * n * n * K + 1.5 * n * v * v + 0.5 * n * K * K
         cc += 3 * n * n * Kc + 2.5 * n * Kc * Kc + n * n * K
+        cb += 2 * n * n * v + n * n * K + 2.5 * n * v * v + m * n * K
+    if cb < min(cw, cc):
+        return "backward"
     return "contract" if cc < 0.8 * cw else "w"
 
 
@@ -313,12 +329,13 @@ def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray
     libs: list[str] = []
     n_states = np.shape(params["W_z"])[0]
     blas = casadi_openblas()
-    use_blas = {"auto": blas is not None and n_states >= BLAS_MIN_N,
+    use_blas = {"auto": blas is not None and BLAS_MIN_N is not None
+                and n_states >= BLAS_MIN_N,
                 "on": blas is not None, "off": False}[os.environ.get("GRU_MPC_KERNEL_BLAS",
                                                                     "auto")]
     mode = choose_mode(n_states, np.shape(params["W_z"])[1], int(N))
-    if mode == "contract":
-        flags = (*flags, "-DGK_CONTRACT")
+    if mode != "w":
+        flags = (*flags, {"contract": "-DGK_CONTRACT", "backward": "-DGK_BACKWARD"}[mode])
     lapack_eig = (blas is not None and clip is not None
                   and int(N) * np.shape(params["W_z"])[1] >= LAPACK_EIG_MIN_NU
                   and os.environ.get("GRU_MPC_KERNEL_BLAS", "auto") != "off")

@@ -161,12 +161,10 @@ HOT static void stage_hessian(int i, const double *mu, double *W) {
     for (int b = 0; b < a; b++) W[a * NV + b] = W[b * NV + a];
 }
 
-/* full Hessian of the Lagrangian, row-major NW x NW (symmetric) */
-HOT static void hessian(const double *w, const double *p, double lf, const double *lg, double *H) {
+/* adjoints mu_i = d(Lagrangian)/dx_i, i = N .. 1, into MU */
+__attribute__((always_inline)) static inline void adjoints(const double *p, double lf,
+                                                         const double *lg, double *MU) {
   const double *xb = p + NX;
-  static double MU[(NH + 1) * NX];
-  static double W[NV * NV], Y[NX * NUU];
-  /* adjoints mu_i, i = N .. 1 */
   const int r0 = (NH - 1) * NQ;
   for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
   for (int i = NH - 1; i >= 1; i--) {
@@ -184,6 +182,59 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
       for (int k = 0; k < NX; k++) mu[k] += dfj[k] * mj;
     }
   }
+}
+
+#ifdef GK_BACKWARD
+/* full Hessian of the Lagrangian, row-major NW x NW (symmetric), by backward condensing
+ * (long horizons): the same sum sum_i Z_i^T W_i Z_i (+ costs) regrouped stage by stage from
+ * the end. With T_i = W_i + [A_i B_i]^T P_{i+1} [A_i B_i] (+ 2 Q on x_i, i >= 1), P_N = 0
+ * and P_i = T_i^xx (the Hessian-to-go of x_i):
+ *   H[u_i, u_i] = T_i^uu + 2 R,   H[u_i, u_j] = T_i^ux S_i[:, j]  (j < i).
+ * O(N n^3 + N^2 n m^2) instead of W-mode's O(N^2 n^2 m + N^3 n m^2). */
+HOT static void hessian(const double *w, const double *p, double lf, const double *lg, double *H) {
+  static double MU[(NH + 1) * NX];
+  static double T[NV * NV], P[NX * NX], Y[NX * NV];
+  (void)w;
+  adjoints(p, lf, lg, MU);
+  memset(H, 0, sizeof(double) * NW * NW);
+  for (int i = NH - 1; i >= 0; i--) {
+    const double *df = DF + i * NX * NV;
+    stage_hessian(i, MU + (i + 1) * NX, T);
+    if (i >= 1)
+      for (int a = 0; a < NX; a++)
+        for (int b = 0; b < NX; b++) T[a * NV + b] += 2.0 * lf * QW[a * NX + b];
+    if (i < NH - 1) {     /* + D_f^T P_{i+1} D_f */
+      gk_gemm(0, NX, NV, NX, P, NX, df, NV, Y, NV, 0);
+      gk_gemm(1, NV, NV, NX, df, NV, Y, NV, T, NV, 1);
+    }
+    const int K = i * NU;
+    const double *Si = S + i * NX * NUU;
+    /* (T^ux S_i)^T into the upper triangle: H[u_j, u_i], j < i */
+    for (int j = 0; j < NU; j++) {
+      const double *tj = T + (NX + j) * NV;
+      for (int c = 0; c < K; c++) {
+        double s = 0.0;
+        for (int a = 0; a < NX; a++) s += tj[a] * Si[a * NUU + c];
+        H[c * NW + K + j] = s;
+      }
+    }
+    for (int j1 = 0; j1 < NU; j1++)
+      for (int j2 = j1; j2 < NU; j2++)
+        H[(K + j1) * NW + K + j2] = T[(NX + j1) * NV + NX + j2] + 2.0 * lf * RW[j1 * NU + j2];
+    for (int a = 0; a < NX; a++)
+      for (int b = 0; b < NX; b++) P[a * NX + b] = T[a * NV + b];
+  }
+  for (int r = 0; r < NUU; r++)
+    for (int c = 0; c < r; c++) H[r * NW + c] = H[c * NW + r];
+  H[NUU * NW + NUU] = 2.0 * lf * SW;
+}
+#else
+/* full Hessian of the Lagrangian, row-major NW x NW (symmetric) */
+HOT static void hessian(const double *w, const double *p, double lf, const double *lg, double *H) {
+  static double MU[(NH + 1) * NX];
+  static double W[NV * NV], Y[NX * NUU];
+  (void)w;
+  adjoints(p, lf, lg, MU);
   memset(H, 0, sizeof(double) * NW * NW);
   for (int i = 0; i < NH; i++) {
     stage_hessian(i, MU + (i + 1) * NX, W);
@@ -218,6 +269,7 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
     for (int c = 0; c < r; c++) H[r * NW + c] = H[c * NW + r];
   H[NUU * NW + NUU] = 2.0 * lf * SW;
 }
+#endif /* GK_BACKWARD */
 
 #else /* GK_CONTRACT */
 /* Hessian of the Lagrangian, contracted mode: per stage

@@ -40,13 +40,25 @@ def random_fhocp(n: int, N: int, seed: int, **kw: object) -> FHOCP:
 
 @needs_cc
 @pytest.mark.parametrize(("n", "N", "mode"), [(20, 15, "w"), (20, 15, "contract"),
-                                              (9, 7, "w"), (12, 30, "w")])
+                                              (20, 15, "backward"), (9, 7, "w"),
+                                              (12, 30, "w"), (12, 30, "backward"),
+                                              (33, 6, "w+blas"), (33, 6, "contract+blas"),
+                                              (33, 6, "backward+blas")])
 def test_kernel_matches_the_numpy_derivatives(n: int, N: int, mode: str,
                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    """Every variant (``+blas``: the products through casadi's OpenBLAS, off by default)."""
+    mode, _, blas = mode.partition("+")
     monkeypatch.setenv("GRU_MPC_KERNEL_MODE", mode)
+    if blas:
+        if ck.casadi_openblas() is None:
+            pytest.skip("casadi ships no OpenBLAS here")
+        monkeypatch.setenv("GRU_MPC_KERNEL_BLAS", "on")
     fh = random_fhocp(n, N, seed=n + N, kernel="numpy")
     k = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2)
     assert k is not None, ck.last_error
+    assert ("-DGK_BLAS" in k.flags) == bool(blas)
+    assert ({"w": None, "contract": "-DGK_CONTRACT", "backward": "-DGK_BACKWARD"}[mode]
+            in (*k.flags, None))
     nlp = SingleShootingNLP(fh, None)
     nlp.eigen_clip = 1e-2
     rng = np.random.default_rng(0)
@@ -62,6 +74,14 @@ def test_kernel_matches_the_numpy_derivatives(n: int, N: int, mode: str,
                    nlp.hessian_convex(w, p, np.array([1.0]), lg)[0]) < 1e-12
         u = w[:-1].reshape(N, fh.m)
         assert rel(k.simulate(p[:n], u), nlp.shoot.rollout(p[:n], u).x) < 1e-13
+
+
+def test_the_variant_follows_the_flop_model(monkeypatch: pytest.MonkeyPatch) -> None:
+    """W-mode for the paper's problem, contracted for large n, backward for long N."""
+    monkeypatch.delenv("GRU_MPC_KERNEL_MODE", raising=False)
+    assert ck.choose_mode(20, 2, 15) == "w"
+    assert ck.choose_mode(80, 2, 15) == "contract"
+    assert ck.choose_mode(20, 2, 60) == "backward"
 
 
 @needs_cc
