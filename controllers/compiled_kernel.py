@@ -136,13 +136,6 @@ def casadi_openblas() -> Path | None:
 #: the default kernel then needs no OpenBLAS.
 LAPACK_EIG_MIN_NU = 40
 
-#: BLAS (casadi's OpenBLAS) for the big products when n >= this; None: never by default
-#: (``GRU_MPC_KERNEL_BLAS=on`` still asks for it). The register-blocked products beat it at
-#: every size measured: Jacobian / Hessian evaluations at N = 15, blocked against BLAS,
-#: 164 / 445 and 325 / 475 µs at n = 40, 469 / 1364 and 564 / 861 µs at n = 80,
-#: 1.87 / 4.21 and 1.58 / 2.08 ms at n = 160; closed-loop median at n = 80: 2.3–2.9 against
-#: 4.5–4.6 ms.
-BLAS_MIN_N: int | None = None
 
 
 def choose_mode(n: int, m: int, N: int) -> str:
@@ -329,10 +322,12 @@ def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray
     libs: list[str] = []
     n_states = np.shape(params["W_z"])[0]
     blas = casadi_openblas()
-    use_blas = {"auto": blas is not None and BLAS_MIN_N is not None
-                and n_states >= BLAS_MIN_N,
-                "on": blas is not None, "off": False}[os.environ.get("GRU_MPC_KERNEL_BLAS",
-                                                                    "auto")]
+    # BLAS (casadi's OpenBLAS) for the big products only when GRU_MPC_KERNEL_BLAS=on: the
+    # register-blocked products beat it at every size measured (Jacobian / Hessian at
+    # N = 15, blocked against BLAS: 164 / 445 and 325 / 475 µs at n = 40, 469 / 1364 and
+    # 564 / 861 µs at n = 80, 1.87 / 4.21 and 1.58 / 2.08 ms at n = 160; closed-loop median
+    # at n = 80: 2.3–2.9 against 4.5–4.6 ms)
+    use_blas = blas is not None and os.environ.get("GRU_MPC_KERNEL_BLAS") == "on"
     mode = choose_mode(n_states, np.shape(params["W_z"])[1], int(N))
     if mode != "w":
         flags = (*flags, {"contract": "-DGK_CONTRACT", "backward": "-DGK_BACKWARD"}[mode])

@@ -100,6 +100,14 @@ HOT static void jacobian(double *J) {
   }
 }
 
+/* the last lines of every Hessian variant: the upper triangle of the input block mirrored
+ * into the lower one, and the terminal slack's entry */
+__attribute__((always_inline)) static inline void hessian_finish(double *H, double lf) {
+  for (int r = 0; r < NUU; r++)
+    for (int c = 0; c < r; c++) H[r * NW + c] = H[c * NW + r];
+  H[NUU * NW + NUU] = 2.0 * lf * SW;
+}
+
 /* ---------------------------------------------------------------- Hessian of the Lagrangian */
 #ifndef GK_CONTRACT
 /* W = grad^2_(x,u) mu^T f(x_i, u_i) of stage i (NV x NV, row-major, symmetric) */
@@ -224,9 +232,7 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
     for (int a = 0; a < NX; a++)
       for (int b = 0; b < NX; b++) P[a * NX + b] = T[a * NV + b];
   }
-  for (int r = 0; r < NUU; r++)
-    for (int c = 0; c < r; c++) H[r * NW + c] = H[c * NW + r];
-  H[NUU * NW + NUU] = 2.0 * lf * SW;
+  hessian_finish(H, lf);
 }
 #else
 /* full Hessian of the Lagrangian, row-major NW x NW (symmetric) */
@@ -265,9 +271,7 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
       for (int j2 = j1; j2 < NU; j2++)
         H[(K + j1) * NW + K + j2] += W[(NX + j1) * NV + NX + j2] + 2.0 * lf * RW[j1 * NU + j2];
   }
-  for (int r = 0; r < NUU; r++)
-    for (int c = 0; c < r; c++) H[r * NW + c] = H[c * NW + r];
-  H[NUU * NW + NUU] = 2.0 * lf * SW;
+  hessian_finish(H, lf);
 }
 #endif /* GK_BACKWARD */
 
@@ -369,9 +373,7 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
     for (int j1 = 0; j1 < NU; j1++)
       for (int j2 = j1; j2 < NU; j2++) H[(K + j1) * NW + K + j2] += 2.0 * lf * RW[j1 * NU + j2];
   }
-  for (int rr = 0; rr < NUU; rr++)
-    for (int c = 0; c < rr; c++) H[rr * NW + c] = H[c * NW + rr];
-  H[NUU * NW + NUU] = 2.0 * lf * SW;
+  hessian_finish(H, lf);
 }
 #endif /* GK_CONTRACT */
 
