@@ -16,8 +16,13 @@ on the worker and in-process, the client's writing time per run, and
 each worker's resident memory after its runs. From these numbers it extrapolates what a
 100-worker cluster would do, in runs per hour.
 
+``--kernel-gain`` measures instead what the compiled FHOCP kernel (issue 11) gives a
+campaign: the same draws run in-process, one after the other, as two controller variants
+(``[[variant]]``): the default controller and ``kernel = "numpy"`` (the numpy derivatives),
+alternating run by run; printed are the runs per minute of each and their ratio.
+
 Usage: ``python benchmarks/bench_campaign.py [--runs 12] [--repeats 2]
-[--scenario scenarios/paper_steps.csv]``
+[--scenario scenarios/paper_steps.csv] [--kernel-gain]``
 """
 
 from __future__ import annotations
@@ -49,6 +54,45 @@ controller = "robust-mpc"
 """
 
 
+#: ``--kernel-gain``: the same draws with the compiled kernel and with the numpy derivatives
+KERNEL_VARIANTS = """
+[[variant]]
+name = "compiled"
+
+[[variant]]
+name = "numpy"
+options = { kernel = "numpy" }
+"""
+
+
+def kernel_gain(work: Path, runs: int, scenario: str) -> int:
+    """In-process runs per minute of the two kernel variants on the same draws."""
+    spec_path = work / "kernels.toml"
+    spec_path.write_text(SPEC.format(runs=runs, scenario=scenario) + KERNEL_VARIANTS)
+    plan = engine.prepare(load(spec_path))
+    spent: dict[str, float] = {}
+    counts: dict[str, int] = {}
+    for task in plan.tasks[:2]:   # build each variant's controller once, as a worker does
+        run_task(task, plan.assets)
+    for task in plan.tasks:       # run by run, the two variants one after the other
+        t0 = time.perf_counter()
+        outcome = run_task(task, plan.assets)
+        dt = time.perf_counter() - t0
+        if outcome["result"].status != "ok":
+            raise SystemExit(f"bench_campaign: run {task['run']} ({task['variant']}) "
+                             f"failed: {outcome['result'].reason}")
+        spent[task["variant"]] = spent.get(task["variant"], 0.0) + dt
+        counts[task["variant"]] = counts.get(task["variant"], 0) + 1
+    rate = {k: 60.0 * counts[k] / spent[k] for k in spent}
+    print(f"{counts['compiled']} draws of {Path(scenario).name}, in-process, each with both "
+          "kernels")
+    for name in ("compiled", "numpy"):
+        print(f"  {name:9s} {rate[name]:7.2f} runs/min ({spent[name] / counts[name]:.2f} s a run)")
+    print(f"compiled kernel vs numpy derivatives: {rate['compiled'] / rate['numpy']:.2f}x the "
+          "runs per minute")
+    return 0
+
+
 def _memory(client: object) -> dict[str, float]:
     def rss() -> float:
         import psutil
@@ -73,9 +117,13 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=2,
                         help="campaigns per layout; the fastest counts")
     parser.add_argument("--scenario", default=str(ROOT / "scenarios" / "paper_steps.csv"))
+    parser.add_argument("--kernel-gain", action="store_true",
+                        help="the compiled kernel's gain in runs per minute instead")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="bench-campaign-"))
     try:
+        if args.kernel_gain:
+            return kernel_gain(work, args.runs, args.scenario)
         spec_path = work / "bench.toml"
         spec_path.write_text(SPEC.format(runs=args.runs, scenario=args.scenario))
         plan = engine.prepare(load(spec_path))

@@ -5,10 +5,11 @@ The controller step (observer + reference governor + FHOCP: what ``ctrl.step`` d
 loop with the plant FMU (the GRU model itself when no FMU is built), two ways in the same
 process, alternating run by run so that the machine's load hits both alike:
 
-* ``compiled``: the default controller, the SQP's derivatives, eigenvalue clipping and the
-  governor's equilibria from the compiled kernel (:mod:`controllers.compiled_kernel`);
+* ``compiled``: the default controller: the whole SQP (derivatives, eigenvalue clipping,
+  QP, line search) and the governor's equilibria in the compiled kernel
+  (:mod:`controllers.compiled_kernel`, :mod:`controllers.kernel_sqp`);
 * ``numpy``: the same controller with ``kernel="numpy"``, the implementation before the
-  kernel (numpy callbacks), kept as the baseline.
+  kernel (numpy callbacks in casadi ``sqpmethod`` with qpOASES), kept as the baseline.
 
 Printed: median and p99 of the step (wall clock and thread CPU time) for each, their ratios
 (targets: ≥ 4× at the median, ≥ 5× at the p99), and the answers: the compiled controller's
@@ -17,9 +18,10 @@ the two differ, IPOPT restarted from the compiled answer tells whether that answ
 local optimum of the nonconvex FHOCP) and the two closed loops against each other.
 
 ``--scaling`` times random δISS GRUs (GRU plant, 5 set-points × 60 steps) for N = 15, 30, 60
-(n = 20) and n = 20, 40, 80 (N = 15), compiled and numpy (``--rounds`` each, alternating),
-splits the compiled median step into the SQP's QP, Hessian, Jacobian and the rest, and fits
-the growth exponents.
+(n = 20; ``--horizons``) and n = 20, 40, 80 (N = 15; ``--states``), compiled and numpy
+(``--rounds`` each, alternating), splits both median steps into the SQP's QP, Hessian,
+Jacobian, f, g and the rest, fits the growth exponents of the step and of its QP, and prints
+the step time one more stage (state) adds, from the smallest size to the largest.
 ``--plain`` adds the do-mpc-style baseline of issue 5 (multiple shooting, IPOPT defaults).
 ``--clip`` times the Hessian's eigenvalue clipping, own tred2/tql2 against LAPACK dsyevr.
 
@@ -279,12 +281,13 @@ class SplitController(TimedController):
 
 
 def scaling(args: argparse.Namespace) -> None:
-    """Median step time for N = 15, 30, 60 and n = 20, 40, 80 (random δISS GRUs).
+    """Median step time for N in ``--horizons`` (n = 20) and n in ``--states`` (N = 15),
+    random δISS GRUs.
 
     ``--rounds`` closed loops of each variant, alternating; a size's median is the median of
-    the rounds' medians. For the compiled controller, the split of its median steps (the
-    steps within 20 % of the median) into the SQP's QP, Hessian, Jacobian and f, g time, and
-    the rest (Python, the answer check, the observer)."""
+    the rounds' medians. For both variants, the split of the median steps (the steps within
+    20 % of the median) into the SQP's QP, Hessian, Jacobian and f, g time, and the rest
+    (Python, the answer check, the observer): the QP is the same qpOASES call in both."""
     from controllers import gain_design
     from controllers.model_plant import GRUPlant
     from cosim.master import Master
@@ -295,7 +298,9 @@ def scaling(args: argparse.Namespace) -> None:
     cols = (Column(2, "ref.h1", "ref", "h1"), Column(3, "ref.h2", "ref", "h2"))
     folder = Path(tempfile.mkdtemp(prefix="bench-scaling-"))
     try:
-        for n, N in ((20, 15), (20, 30), (20, 60), (40, 15), (80, 15)):
+        cases = []
+        for n, N in [(20, N) for N in args.horizons] + [(n, 15) for n in args.states
+                                                         if n != 20]:
             model = random_gru_model(0, n=n)
             model.w_y_bar = 0.002
             # five set-points the model reaches: its equilibria for inputs inside the box
@@ -309,44 +314,50 @@ def scaling(args: argparse.Namespace) -> None:
             if theta is None:
                 print(f"n={n}, N={N}: no certified design; skipped")
                 continue
-            path = folder / f"gru_{n}.json"
+            path = folder / f"gru_{n}_{N}.json"
             model.L_z, model.L_r = cert.L_z, cert.L_r
             model.save(path)
             ctrls = {k: RobustMPCController(model=path, N=N, kernel=k)
                      for k in ("auto", "numpy")}
-            meds: dict[str, list[float]] = {k: [] for k in ctrls}
-            p99s: dict[str, list[float]] = {k: [] for k in ctrls}
-            split: list[tuple[float, ...]] = []
-            for _ in range(max(1, args.rounds)):
-                for kernel, ctrl in ctrls.items():
-                    timed = SplitController(ctrl) if kernel == "auto" else TimedController(ctrl)
-                    result = Master(GRUPlant(ctrl.model, y0=setpoints[0]), timed, sc).run()
+            cases.append({"n": n, "N": N, "y0": setpoints[0], "scenario": sc, "ctrls": ctrls,
+                          "meds": {k: [] for k in ctrls}, "p99s": {k: [] for k in ctrls},
+                          "split": {k: [] for k in ctrls}})
+        # round by round over every size and variant: the machine's drift over minutes hits
+        # all sizes alike instead of biasing the exponents
+        for _ in range(max(1, args.rounds)):
+            for case in cases:
+                for kernel, ctrl in case["ctrls"].items():
+                    timed = SplitController(ctrl)
+                    result = Master(GRUPlant(ctrl.model, y0=case["y0"]), timed,
+                                    case["scenario"]).run()
                     if result.status != "ok" or not timed.wall_ms:
-                        raise SystemExit(f"bench_mpc: n={n}, N={N} ({kernel}): {result.reason}")
-                    meds[kernel].append(float(np.median(timed.wall_ms)))
-                    p99s[kernel].append(_p(timed.wall_ms, 99))
-                    if isinstance(timed, SplitController):
-                        split += timed.split
-            med = {k: (float(np.median(meds[k])), float(np.median(p99s[k]))) for k in ctrls}
+                        raise SystemExit(f"bench_mpc: n={case['n']}, N={case['N']} "
+                                         f"({kernel}): {result.reason}")
+                    case["meds"][kernel].append(float(np.median(timed.wall_ms)))
+                    case["p99s"][kernel].append(_p(timed.wall_ms, 99))
+                    case["split"][kernel] += timed.split
+        for case in cases:
+            n, N, ctrls, meds = case["n"], case["N"], case["ctrls"], case["meds"]
+            med = {k: (float(np.median(meds[k])), float(np.median(case["p99s"][k])))
+                   for k in ctrls}
             fh = ctrls["auto"].fhocp
             variant = "numpy" if fh.kernel is None else next(
                 (name for flag, name in (("-DGK_CONTRACT", "contract"),
                                          ("-DGK_BACKWARD", "backward"))
                  if flag in fh.kernel.flags), "w")
-            rows.append((n, N, *med["numpy"], *med["auto"]))
+            parts = {k: _median_split(case["split"][k], med[k][0]) for k in ctrls}
+            rows.append((n, N, *med["numpy"], *med["auto"], parts["numpy"][0],
+                         parts["auto"][0], meds["auto"]))
             print(f"n={n:3d} N={N:3d}: numpy median {med['numpy'][0]:7.2f} ms p99 "
                   f"{med['numpy'][1]:7.2f}; compiled ({variant}) median {med['auto'][0]:6.2f}"
                   f" ms p99 {med['auto'][1]:6.2f}; speed-up "
                   f"{med['numpy'][0] / med['auto'][0]:.1f}x; rounds' medians "
                   f"{' '.join(f'{v:.2f}' for v in meds['auto'])} ms", flush=True)
-            a = np.asarray(split)
-            if len(a):
-                sel = a[np.abs(a[:, 0] - med["auto"][0]) <= 0.2 * med["auto"][0]]
-                parts = np.median(sel, axis=0) if len(sel) else np.median(a, axis=0)
-                rest = parts[0] - float(np.sum(parts[1:]))
-                print("    compiled median step: " + ", ".join(
-                    f"{name} {v:.2f}" for (name, _), v in zip(SPLIT, parts[1:], strict=True))
-                      + f", rest {rest:.2f} ms", flush=True)
+            for kernel, label in (("auto", "compiled"), ("numpy", "numpy")):
+                print(f"    {label} median step: " + ", ".join(
+                    f"{name} {v:.2f}" for (name, _), v in zip(SPLIT, parts[kernel][:-1],
+                                                              strict=True))
+                      + f", rest {parts[kernel][-1]:.2f} ms", flush=True)
     finally:
         shutil.rmtree(folder, ignore_errors=True)
     for label, sel, col in (("N (n = 20)", [r for r in rows if r[0] == 20], 1),
@@ -356,6 +367,33 @@ def scaling(args: argparse.Namespace) -> None:
             for name, j in (("numpy", 2), ("compiled", 4)):
                 slope = np.polyfit(x, np.log([r[j] for r in sel]), 1)[0]
                 print(f"median grows as {label.split()[0]}^{slope:.2f} ({name}, {label})")
+            per_round = [np.polyfit(x, np.log([r[8][k] for r in sel]), 1)[0]
+                         for k in range(min(len(r[8]) for r in sel))]
+            print(f"  compiled, round by round: "
+                  f"{', '.join(f'{label.split()[0]}^{v:.2f}' for v in per_round)}")
+            for name, j in (("numpy", 6), ("compiled", 7)):
+                slope = np.polyfit(x, np.log([r[j] for r in sel]), 1)[0]
+                print(f"the QP in its median step grows as {label.split()[0]}^{slope:.2f} "
+                      f"({name}, {label})")
+            # what one more stage (state) costs: the time added between the smallest and the
+            # largest size, per unit of size
+            lo, hi = sel[0], sel[-1]
+            added = {name: (hi[j] - lo[j]) / (hi[col] - lo[col])
+                     for name, j in (("numpy", 2), ("compiled", 4))}
+            print(f"median step time added per unit of {label.split()[0]} from "
+                  f"{lo[col]} to {hi[col]}: numpy {added['numpy']:.3f} ms, compiled "
+                  f"{added['compiled']:.3f} ms ({added['numpy'] / added['compiled']:.1f}x less)")
+
+
+def _median_split(split: list[tuple[float, ...]], median: float) -> np.ndarray:
+    """QP, Hessian, Jacobian, f, g and the rest (ms) of the steps within 20 % of the median
+    step (all steps when none is)."""
+    a = np.asarray(split)
+    if not len(a):
+        return np.full(len(SPLIT) + 1, np.nan)
+    sel = a[np.abs(a[:, 0] - median) <= 0.2 * median]
+    parts = np.median(sel if len(sel) else a, axis=0)
+    return np.append(parts[1:], parts[0] - float(np.sum(parts[1:])))
 
 
 def clip_variants(args: argparse.Namespace) -> None:
@@ -410,6 +448,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--reference", action="store_true",
                     help="solve every FHOCP of the first compiled run with tight IPOPT too")
     ap.add_argument("--scaling", action="store_true", help="the N and n scaling instead")
+    ap.add_argument("--horizons", type=int, nargs="+", default=[15, 30, 60],
+                    help="--scaling: the horizons N timed at n = 20")
+    ap.add_argument("--states", type=int, nargs="+", default=[20, 40, 80],
+                    help="--scaling: the state sizes n timed at N = 15")
     ap.add_argument("--plain", action="store_true",
                     help="also time the do-mpc-style multiple-shooting baseline")
     ap.add_argument("--clip", action="store_true",

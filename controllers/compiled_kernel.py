@@ -2,12 +2,14 @@
 
 The single-shooting FHOCP (:mod:`controllers.nlp_single_shooting`) spends most of its time in
 its derivatives: rollout, sensitivities, the Hessian of the Lagrangian and its eigenvalue
-clipping. The kernel does the same mathematics in C (``controllers/kernel/*.c``) and is
-handed to casadi ``sqpmethod`` as ``external`` functions, so that the SQP loop runs without
-Python. It agrees with the numpy callbacks to ~1e-14 (checked at load time, once per library
-and process: :meth:`controllers.nlp_single_shooting.SingleShootingNLP.self_test`).
+clipping. The kernel does the same mathematics in C (``controllers/kernel/*.c``) and either
+runs the whole SQP itself (``6_sqp.c`` with the dense dual active-set QP of ``5_qp.c``;
+:mod:`controllers.kernel_sqp`, the default) or is handed to casadi ``sqpmethod`` as
+``external`` functions (``loop="casadi"``); either way the SQP runs without Python. It
+agrees with the numpy callbacks to ~1e-14 (checked at load time, once per library and
+process: :meth:`controllers.nlp_single_shooting.SingleShootingNLP.self_test`).
 
-The C source is the fixed template (``kernel/1_rollout.c`` … ``4_api.c``) preceded by a
+The C source is the fixed template (``kernel/1_rollout.c`` … ``6_sqp.c``) preceded by a
 generated header holding the
 problem's dimensions and constants (GRU weights, Q, R, s, the reduced constraint rows
 ``D U_o``, the eigenvalue-clipping margin) as ``static const`` arrays, so that gcc sees every
@@ -45,10 +47,10 @@ __all__ = ["GENERATOR_VERSION", "Kernel", "build", "default_cache_dir", "generat
            "last_error"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-2"
+GENERATOR_VERSION = "gru-fhocp-kernel-3"
 #: The C template, concatenated in this order after the generated header.
 TEMPLATE_PARTS = tuple(Path(__file__).with_name("kernel") / name for name in (
-    "1_rollout.c", "2_derivatives.c", "3_eigen_clip.c", "4_api.c"))
+    "1_rollout.c", "2_derivatives.c", "3_eigen_clip.c", "4_api.c", "5_qp.c", "6_sqp.c"))
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")
 PREFIX_PLACEHOLDER = "@PFX@"
 
@@ -206,6 +208,9 @@ class Kernel:
             f = self._fn(name)
             f.argtypes, f.restype = args, rest
             self._c[name] = f
+        f = self._fn("sqp")
+        f.argtypes, f.restype = [vp] * 12, ci
+        self._c["sqp"] = f
         if hasattr(self.lib, prefix + "eq_newton"):
             f = self._fn("eq_newton")
             f.argtypes, f.restype = [vp, vp, vp, ci, cd, vp, vp], ci
@@ -292,6 +297,39 @@ class Kernel:
         if rc != 0 or max(abs(uo)) > 1.0:
             return None
         return b["xe"].copy(), uo.copy()
+
+    def sqp_call(self, arrays: Mapping[str, np.ndarray]) -> Any:
+        """A function running the kernel's SQP (``6_sqp.c``) on these persistent arrays:
+        ``p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, g, f, opt, info`` (float64, contiguous;
+        ``w``, ``lam_x``, ``lam_g`` hold the initial guess and receive the answer). Their
+        addresses are taken once: calling it costs ~1 µs besides the solve."""
+        names = ("p", "lbx", "ubx", "lbg", "ubg", "w", "lam_x", "lam_g", "g", "f", "opt",
+                 "info")
+        for name in names:
+            a = arrays[name]
+            if a.dtype != np.float64 or not a.flags.c_contiguous:
+                raise ValueError(f"sqp array {name!r} must be contiguous float64")
+        keep = {name: arrays[name] for name in names}   # alive as long as the function
+        addr = [int(keep[name].ctypes.data) for name in names]
+        fn = self._c["sqp"]
+        return lambda _keep=keep: fn(*addr)
+
+    def qp(self, H: np.ndarray, g: np.ndarray, A: np.ndarray, lbx: np.ndarray,
+           ubx: np.ndarray, lba: np.ndarray, uba: np.ndarray
+           ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, int]:
+        """The kernel's QP (``5_qp.c``) on one problem of its dimensions (H: nw×nw, A:
+        ng×nw; infinite bounds allowed): ``(status, d, lam_x, lam_a, working-set changes)``,
+        status 0 optimal, 1 infeasible, 2 change limit, 3 H not positive definite. A test
+        hook: the SQP calls the QP inside the kernel."""
+        def arr(a: np.ndarray, order: str = "C") -> np.ndarray:
+            return np.clip(np.array(a, dtype=float, order=order), -1e301, 1e301)
+        args = [arr(H), arr(g), arr(A, "F"), arr(lbx), arr(ubx), arr(lba), arr(uba)]
+        d, lx, la = np.zeros(self.nw), np.zeros(self.nw), np.zeros(self.ng)
+        changes = ctypes.c_int(0)
+        P = ctypes.POINTER(ctypes.c_double)
+        status = self._fn("qp")(*(a.ctypes.data_as(P) for a in (*args, d, lx, la)),
+                                ctypes.byref(changes))
+        return int(status), d, lx, la, int(changes.value)
 
     def counters(self) -> dict[str, int]:
         c = (ctypes.c_long * 4)()

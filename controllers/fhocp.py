@@ -14,9 +14,10 @@ the problem is built once (:meth:`FHOCP.setup`) and solved every step (:meth:`FH
 
 Two formulations of the same problem: ``"single-shooting"`` (default, fast: the inputs and
 ``t`` are the variables, exact derivatives from numpy callbacks; :mod:`controllers.
-nlp_single_shooting`), solved by casadi ``sqpmethod`` with dense qpOASES QPs
-(:data:`~controllers.solver_settings.SQP_OPTIONS`, at most 15 iterations, no wall-clock
-limit: deterministic) or by IPOPT (``solver="ipopt"``), warm started with the primal and
+nlp_single_shooting`), solved by an SQP (:data:`~controllers.solver_settings.SQP_OPTIONS`,
+at most 15 iterations, no wall-clock limit: deterministic) -- inside the compiled kernel
+with its own dense QP (:mod:`controllers.kernel_sqp`), else casadi ``sqpmethod`` with dense
+qpOASES QPs -- or by IPOPT (``solver="ipopt"``), warm started with the primal and
 dual solution shifted by one stage; and ``"multiple-shooting"`` (the plain baseline, what
 do-mpc builds; :mod:`controllers.nlp_multiple_shooting`). The ``i = 0`` constraint involves
 only ``x̂``: it is checked before the solve, and a violated one is reported as
@@ -134,9 +135,10 @@ class FHOCP:
         Solver of the single-shooting formulation (default ``"sqp"``; ``"ipopt"`` when
         ``ipopt_options`` are given, and always for multiple shooting).
     sqp_options : dict, optional
-        Overrides of :data:`~controllers.solver_settings.SQP_OPTIONS`.
+        Overrides of :data:`~controllers.solver_settings.SQP_OPTIONS` (``loop``:
+        ``"kernel"``, the SQP in the compiled kernel, or ``"casadi"``, ``sqpmethod``).
     time_budget : float, optional
-        Wall-time budget of one IPOPT solve [s] (status ``"time_budget_exceeded"``). Off by
+        Wall-time budget of one solve [s] (status ``"time_budget_exceeded"``). Off by
         default: a wall-clock limit makes closed-loop results depend on the machine.
     kernel : {"auto", "numpy"}
         Derivatives of the single-shooting SQP: ``"auto"`` the compiled kernel
@@ -165,6 +167,9 @@ class FHOCP:
             raise DesignError(f"unknown solver {solver!r} for formulation {formulation!r}")
         self.solver = solver
         self.sqp_options = {**SQP_OPTIONS, **(sqp_options or {})}
+        if self.sqp_options["loop"] not in ("kernel", "casadi"):
+            raise DesignError(f"sqp_options loop must be \"kernel\" or \"casadi\", got "
+                              f"{self.sqp_options['loop']!r}")
         self.params = {k: np.asarray(v, dtype=float) for k, v in params.items()}
         self.n, self.m, self.p = gru.dimensions(self.params)
         self.N = int(N)
@@ -267,8 +272,16 @@ class FHOCP:
             opts.update(functions)
             sqp = dict(self.sqp_options)
             clip = sqp.pop("hessian_eigen_clip", None)
+            loop = sqp.pop("loop")
             self._nlp.eigen_clip = None if clip is None else float(clip)
             opts.update(sqp)
+            if loop == "kernel" and self.kernel is not None:
+                from controllers.kernel_sqp import KernelSQP
+
+                self._solver = KernelSQP(self.kernel, sqp, self.time_budget)
+                self._buffer = self._solver.buffers()
+                self._warm = None
+                return self
             with quiet_stdout():  # qpOASES prints its licence banner on construction
                 self._solver = ca.nlpsol("fhocp", "sqpmethod", nlp, opts)
         else:

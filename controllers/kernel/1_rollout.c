@@ -32,8 +32,9 @@
  * Exported: casadi external functions (casadi's codegen calling convention) PFX(fg),
  * PFX(jac_fg), PFX(hess_l) (clipped), PFX(hess_raw) (unclipped), and plain C entry points for
  * ctypes: PFX(simulate), PFX(xtraj), PFX(gru_step), PFX(assess), PFX(assess_w),
- * PFX(eq_newton), PFX(clip), PFX(dims), PFX(counters). The answer check (assess) also needs
- * NL and LUO (NL x NX), the full output-constraint rows L U_o.
+ * PFX(eq_newton), PFX(clip), PFX(dims), PFX(counters), and the SQP of the FHOCP in one call,
+ * PFX(sqp) (6_sqp.c, with the QP of 5_qp.c; PFX(qp) is its test hook). The answer check
+ * (assess) also needs NL and LUO (NL x NX), the full output-constraint rows L U_o.
  */
 #include <math.h>
 #include <string.h>

@@ -1,5 +1,5 @@
 /* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 1_rollout.c ... 4_api.c into one translation unit): f, g, their derivatives and the Hessian of the Lagrangian. */
+ * generated header and 1_rollout.c ... 6_sqp.c into one translation unit): f, g, their derivatives and the Hessian of the Lagrangian. */
 /* ---------------------------------------------------------------- f, g, grad f, jac g */
 /* acc + (v - ref)^T W (v - ref), n <= NX + NU, W row-major n x n (terms added one by one) */
 __attribute__((always_inline)) static inline double add_quad(

@@ -1,5 +1,5 @@
 /* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 1_rollout.c ... 4_api.c into one translation unit): eigenvalue clipping of the Hessian (convex QPs for the SQP). */
+ * generated header and 1_rollout.c ... 6_sqp.c into one translation unit): eigenvalue clipping of the Hessian (convex QPs for the SQP). */
 /* ---------------------------------------------------------------- eigenvalue clipping */
 /* Householder tridiagonalisation + implicit QL (JAMA / EISPACK tred2, tql2). V (n x n,
  * row-major) holds the symmetric matrix on entry, the eigenvectors as ROWS on exit (row j:

@@ -1,5 +1,5 @@
 /* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 1_rollout.c ... 4_api.c into one translation unit): exported entry points: casadi external functions and a plain C API. */
+ * generated header and 1_rollout.c ... 6_sqp.c into one translation unit): exported entry points: casadi external functions and a plain C API. */
 /* ---------------------------------------------------------------- casadi external API */
 static const casadi_int SP_X[3] = {NW, 1, 1}, SP_P[3] = {NP, 1, 1}, SP_1[3] = {1, 1, 1},
                         SP_G[3] = {NG, 1, 1}, SP_J[3] = {NG, NW, 1}, SP_H[3] = {NW, NW, 1};

@@ -86,9 +86,11 @@ def test_the_variant_follows_the_flop_model(monkeypatch: pytest.MonkeyPatch) -> 
 
 @needs_cc
 def test_same_solves_as_the_numpy_fhocp(cert) -> None:
-    """Same status and iterations, the optimum to 1e-9, from identical warm starts."""
+    """Same status and iterations, the optimum to 1e-9, from identical warm starts (the
+    kernel's derivatives in casadi's SQP loop, as the numpy callbacks; its own loop:
+    tests/controllers/test_kernel_sqp.py)."""
     a = FHOCP.from_certificate(cert, kernel="numpy").setup()
-    b = FHOCP.from_certificate(cert).setup()
+    b = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi"}).setup()
     assert a.kernel is None and b.kernel is not None
     x_hat, _ = equilibrium(cert.params, np.array([0.0, 0.0]))
     for y in ([0.1, 0.1], [0.0, 0.05], [0.1, 0.1]):

@@ -250,8 +250,9 @@ def test_sqp_closed_loop_warm_start_and_rejects_wrong_answers(model, cert):
     assert not res.success and res.terminal_violation > 0
 
 
-def test_sqp_time_budget_stops_the_solve(model, cert):
-    fh = make(cert, solver="sqp", time_budget=0.0)
+@pytest.mark.parametrize("loop", ["kernel", "casadi"])
+def test_sqp_time_budget_stops_the_solve(model, cert, loop):
+    fh = make(cert, solver="sqp", time_budget=0.0, sqp_options={"loop": loop})
     ref = cert.reference(np.array([0.1, 0.1]))
     res = fh.solve(start_state(model, np.array([0.0, 0.05])), 0.02, ref.x_bar, ref.u_bar,
                    ref.alpha, warm=False)

@@ -1,0 +1,116 @@
+"""The FHOCP's SQP run inside the compiled kernel (``controllers/kernel/6_sqp.c``).
+
+casadi ``sqpmethod`` calls its QP through a conic plugin, and its only dense active-set
+plugin, qpOASES, rebuilds the projected Hessian ``Zᵀ H Z`` at every call because H changes:
+O((N m)³) per QP, 3 ms of a 5.7 ms step at N = 60 and 27 of 35 ms at N = 120 (docs:
+design/compiled-kernel.md). The kernel therefore carries the whole SQP: the same iteration
+as ``sqpmethod`` (exact eigenvalue-clipped Hessian, ℓ1-merit Armijo line search, the same
+stopping tests and return statuses) with a dense Goldfarb–Idnani dual active-set QP
+(``controllers/kernel/5_qp.c``) that factorises H once per QP and updates its factors per
+working-set change.
+
+:class:`KernelSQP` stands where the casadi solver stood in :class:`controllers.fhocp.FHOCP`:
+the same named argument and result arrays (``x0, p, lbx, ubx, lbg, ubg, lam_x0, lam_g0`` →
+``x, f, g, lam_x, lam_g, lam_p``), a trigger, and ``stats()`` with casadi's keys
+(``return_status``, ``success``, ``iter_count`` and the cumulative ``t_wall_*`` timers of
+``sqpmethod``), so that the answer check and the warm start are unchanged.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from controllers.errors import DesignError
+
+__all__ = ["STATUS", "KernelSQP"]
+
+#: The kernel SQP's status codes, as casadi ``sqpmethod`` names them (3 and 4: the QP; 5: the
+#: time budget ran out, which :class:`controllers.fhocp.FHOCP` reports as
+#: ``"time_budget_exceeded"``, as for casadi's loop).
+STATUS = ("Solve_Succeeded", "Maximum_Iterations_Exceeded",
+          "Search_Direction_Becomes_Too_Small", "QP_Infeasible", "QP_Failed",
+          "User_Requested_Stop")
+
+#: casadi ``sqpmethod`` defaults of the line search and the step test (casadi 3.8).
+LINE_SEARCH_DEFAULTS = {"min_step_size": 1e-10, "c1": 1e-4, "beta": 0.8, "max_iter_ls": 3}
+#: ``sqpmethod`` options that do not change the iteration (its QP plugin, printing).
+IGNORED = {"qpsol", "qpsol_options", "print_header", "print_iteration", "print_status",
+           "print_time", "error_on_fail", "verbose"}
+
+
+class KernelSQP:
+    """The SQP of one FHOCP in one compiled call.
+
+    Parameters
+    ----------
+    kernel : controllers.compiled_kernel.Kernel
+        The problem's kernel (its derivatives, eigenvalue clipping, QP and SQP loop).
+    options : mapping
+        ``tol_pr``, ``tol_du``, ``max_iter`` and optionally ``min_step_size``, ``c1``,
+        ``beta``, ``max_iter_ls`` (casadi ``sqpmethod``'s meanings and defaults).
+    time_budget : float, optional
+        Wall-time budget of one solve [s] (status ``"User_Requested_Stop"`` when it runs out
+        before convergence); none by default.
+    """
+
+    def __init__(self, kernel: Any, options: Mapping[str, Any],
+                 time_budget: float | None = None) -> None:
+        known = {"tol_pr", "tol_du", "max_iter", *LINE_SEARCH_DEFAULTS, *IGNORED}
+        unknown = sorted(set(options) - known)
+        if unknown:
+            raise DesignError(f"sqp_options {unknown[0]!r} is not supported by the kernel's "
+                              "SQP (loop=\"kernel\"); use loop=\"casadi\" for sqpmethod's "
+                              "other options")
+        opts = {**LINE_SEARCH_DEFAULTS, **options}
+        nw, ng, npar = kernel.nw, kernel.ng, kernel.npar
+        self.ins = {name: np.zeros(size) for name, size in (
+            ("x0", nw), ("p", npar), ("lbx", nw), ("ubx", nw), ("lbg", ng), ("ubg", ng),
+            ("lam_x0", nw), ("lam_g0", ng))}
+        self.outs = {name: np.zeros(size) for name, size in (
+            ("x", nw), ("f", 1), ("g", ng), ("lam_x", nw), ("lam_g", ng), ("lam_p", npar))}
+        self._opt = np.array([float(opts["tol_pr"]), float(opts["tol_du"]),
+                              float(opts["max_iter"]), float(opts["min_step_size"]),
+                              float(opts["c1"]), float(opts["beta"]),
+                              float(opts["max_iter_ls"]),
+                              np.inf if time_budget is None else float(time_budget)])
+        self._info = np.zeros(8)
+        self._timers = np.zeros(4)    # QP, Hessian, f/g/derivatives, line search [s]
+        self._stats: dict[str, Any] | None = None
+        i, o = self.ins, self.outs
+        self._call = kernel.sqp_call({
+            "p": i["p"], "lbx": i["lbx"], "ubx": i["ubx"], "lbg": i["lbg"], "ubg": i["ubg"],
+            "w": o["x"], "lam_x": o["lam_x"], "lam_g": o["lam_g"], "g": o["g"], "f": o["f"],
+            "opt": self._opt, "info": self._info})
+
+    def buffers(self) -> tuple[KernelSQP, Any, dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """``(self, trigger, ins, outs)``, as :func:`controllers.fhocp._bind_buffers` gives
+        for a casadi solver."""
+        return self, self.solve, self.ins, self.outs
+
+    def solve(self) -> None:
+        """Run the SQP from ``ins`` (the initial guess and the problem's data) into
+        ``outs``."""
+        o, i = self.outs, self.ins
+        o["x"][:] = i["x0"]
+        o["lam_x"][:] = i["lam_x0"]
+        o["lam_g"][:] = i["lam_g0"]
+        status = int(self._call())
+        info = self._info
+        self._timers += info[4:8]
+        t = self._timers
+        self._stats = {
+            "return_status": STATUS[status], "success": status == 0,
+            "iter_count": int(info[1]), "qp_working_set_changes": int(info[2]),
+            "line_search_failures": int(info[3]),
+            "t_wall_QP": t[0], "t_wall_nlp_hess_l": t[1], "t_wall_nlp_jac_fg": t[2],
+            "t_wall_nlp_fg": t[3]}
+
+    def stats(self) -> dict[str, Any]:
+        """The last solve's status and counts; the ``t_wall_*`` timers accumulate over the
+        object's lifetime, as casadi's do."""
+        if self._stats is None:
+            raise RuntimeError("no stats available: the kernel SQP has not run")
+        return dict(self._stats)

@@ -1,0 +1,183 @@
+"""The SQP inside the compiled kernel (controllers.kernel_sqp, kernel/5_qp.c and 6_sqp.c): its
+dual active-set QP against the KKT conditions and qpOASES, degenerate and infeasible QPs, and
+its FHOCP solves against casadi ``sqpmethod`` from the same starts."""
+
+from __future__ import annotations
+
+import copy
+import ctypes
+import os
+import shutil
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from controllers import compiled_kernel as ck
+from controllers.casadi_callbacks import quiet_stdout
+from controllers.equilibrium import equilibrium
+from controllers.errors import DesignError
+from controllers.fhocp import FHOCP
+from controllers.kernel_sqp import KernelSQP
+from tests.controllers.test_compiled_kernel import random_fhocp
+
+needs_cc = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,
+                              reason="no C compiler")
+
+
+@pytest.fixture(scope="module")
+def kernel() -> ck.Kernel:
+    """A small kernel (n = 5, N = 6): the QP's dimensions nw = 13, ng = 20."""
+    fh = random_fhocp(5, 6, seed=3)
+    assert fh.kernel is not None, fh.kernel_error
+    return fh.kernel
+
+
+def random_qp(rng: np.random.Generator, nw: int, ng: int, dependent: bool = False) -> dict:
+    """A strictly convex QP that is feasible by construction, its unconstrained minimum
+    outside the feasible set (constraints active at the optimum); ``dependent``: rows that
+    are copies and sums of others, and a ± pair sharing a slack column, all tight."""
+    M = rng.normal(size=(nw, nw))
+    H = M @ M.T / nw + 0.05 * np.eye(nw)
+    A = rng.normal(size=(ng, nw))
+    x0 = rng.uniform(-0.5, 0.5, nw)
+    if dependent:
+        A[1] = A[0]
+        A[2] = A[0] + A[3]
+        A[4] = -A[5]
+        A[6, :-1], A[7, :-1] = A[8, :-1], A[8, :-1]
+        A[6, -1], A[7, -1] = -1.0, 1.0     # a_k x - t and a_k x + t, as the terminal rows
+    ax = A @ x0
+    lba, uba = ax - rng.uniform(0.0, 0.3, ng), ax + rng.uniform(0.0, 0.3, ng)
+    if dependent:
+        lba[:9], uba[:9] = ax[:9] - 1e-3, ax[:9]
+    lba[rng.random(ng) < 0.2] = -np.inf
+    uba[rng.random(ng) < 0.2] = np.inf
+    lbx, ubx = x0 - rng.uniform(0.0, 0.5, nw), x0 + rng.uniform(0.0, 0.5, nw)
+    lbx[rng.random(nw) < 0.3] = -np.inf
+    g = -H @ (x0 + rng.normal(scale=3.0, size=nw))
+    return {"h": H, "g": g, "a": A, "lbx": lbx, "ubx": ubx, "lba": lba, "uba": uba}
+
+
+def qpoases(q: dict) -> np.ndarray:
+    nw, ng = q["a"].shape[1], q["a"].shape[0]
+    with quiet_stdout():   # qpOASES' licence banner
+        s = ca.conic("s", "qpoases", {"h": ca.Sparsity.dense(nw, nw),
+                                      "a": ca.Sparsity.dense(ng, nw)},
+                     {"printLevel": "none", "error_on_fail": True})
+        return np.array(s(**q)["x"]).ravel()
+
+
+def kkt_residuals(q: dict, d: np.ndarray, lx: np.ndarray, la: np.ndarray) -> dict:
+    """Stationarity, primal feasibility, multiplier signs and complementarity (casadi's
+    convention: positive at an upper bound, negative at a lower one)."""
+    ad = q["a"] @ d
+    out = {"stationarity": np.max(np.abs(q["h"] @ d + q["g"] + q["a"].T @ la + lx))}
+    out["feasibility"] = max(0.0, *(q["lba"] - ad), *(ad - q["uba"]), *(q["lbx"] - d),
+                             *(d - q["ubx"]))
+    sign, slack = 0.0, 0.0
+    for lam, v, lo, hi in ((lx, d, q["lbx"], q["ubx"]), (la, ad, q["lba"], q["uba"])):
+        for li, vi, loi, hii in zip(lam, v, lo, hi, strict=True):
+            if li > 0:
+                slack = max(slack, li * (hii - vi))
+            elif li < 0:
+                slack = max(slack, -li * (vi - loi))
+        sign = max(sign, *(np.abs(lam[(lam > 0) & ~np.isfinite(hi)])), 0.0)
+        sign = max(sign, *(np.abs(lam[(lam < 0) & ~np.isfinite(lo)])), 0.0)
+    out["sign"], out["complementarity"] = sign, slack
+    return out
+
+
+@needs_cc
+@pytest.mark.parametrize("dependent", [False, True])
+def test_qp_meets_kkt_and_agrees_with_qpoases(kernel: ck.Kernel, dependent: bool) -> None:
+    rng = np.random.default_rng(11 + dependent)
+    active = 0
+    for _ in range(25):
+        q = random_qp(rng, kernel.nw, kernel.ng, dependent)
+        status, d, lx, la, changes = kernel.qp(q["h"], q["g"], q["a"], q["lbx"], q["ubx"],
+                                               q["lba"], q["uba"])
+        assert status == 0
+        res = kkt_residuals(q, d, lx, la)
+        assert res["stationarity"] < 1e-9 and res["feasibility"] < 1e-9, res
+        assert res["sign"] == 0.0 and res["complementarity"] < 1e-9, res
+        assert np.max(np.abs(d - qpoases(q))) < 1e-7   # the primal optimum is unique
+        active += int(np.count_nonzero(lx) + np.count_nonzero(la))
+        assert changes >= np.count_nonzero(lx) + np.count_nonzero(la)
+    assert active > 25        # the tests reach constraints
+
+
+@needs_cc
+def test_qp_reports_infeasibility_and_an_indefinite_hessian(kernel: ck.Kernel) -> None:
+    q = random_qp(np.random.default_rng(5), kernel.nw, kernel.ng)
+    q["a"][1] = q["a"][0]
+    q["lba"][0], q["uba"][0] = 0.0, 1.0
+    q["lba"][1], q["uba"][1] = 2.0, 3.0        # the same row in two disjoint intervals
+    assert kernel.qp(q["h"], q["g"], q["a"], q["lbx"], q["ubx"], q["lba"], q["uba"])[0] == 1
+    q = random_qp(np.random.default_rng(6), kernel.nw, kernel.ng)
+    q["h"][0, 0] = -1.0
+    assert kernel.qp(q["h"], q["g"], q["a"], q["lbx"], q["ubx"], q["lba"], q["uba"])[0] == 3
+
+
+@needs_cc
+def test_lagrangian_gradient_by_adjoints_matches_the_jacobian(kernel: ck.Kernel) -> None:
+    """The stopping test's ∇L (one adjoint sweep through the GRU stages) is ∇f + Jᵀλ_g + λ_x
+    of the explicit derivatives."""
+    rng = np.random.default_rng(2)
+    jac = kernel.external("jac_fg")
+    fn = kernel._fn("grad_l")
+    for _ in range(5):
+        w = rng.uniform(-1, 1, kernel.nw)
+        p = rng.normal(scale=0.5, size=kernel.npar)
+        lx, lg = rng.normal(size=kernel.nw), rng.normal(size=kernel.ng)
+        out = np.zeros(kernel.nw)
+        fn(*(a.ctypes.data_as(ctypes.POINTER(ctypes.c_double)) for a in (w, p, lx, lg, out)))
+        _, gf, _, J = (np.array(v) for v in jac(w, p))
+        expected = gf.ravel() + J.T @ lg + lx
+        assert np.max(np.abs(out - expected)) < 1e-12 * max(1.0, np.max(np.abs(expected)))
+
+
+@needs_cc
+def test_kernel_loop_solves_as_casadi_sqpmethod(cert) -> None:
+    """From identical starts the two loops take the same steps as long as the QPs' multipliers
+    are unique: same status, the optimum to 1e-9; both check their answers the same way."""
+    a = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi"}).setup()
+    b = FHOCP.from_certificate(cert, sqp_options={"loop": "kernel"}).setup()
+    assert isinstance(b._solver, KernelSQP) and not isinstance(a._solver, KernelSQP)
+    x_hat, _ = equilibrium(cert.params, np.array([0.0, 0.0]))
+    solved = 0
+    for y in ([0.1, 0.1], [0.0, 0.05], [-0.1, -0.1], [0.1, 0.1]):
+        ref = cert.reference(np.array(y))
+        for _ in range(4):
+            warm = copy.deepcopy(a._warm)
+            ra = a.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
+            b._warm = warm
+            rb = b.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
+            assert ra.status == rb.status
+            if ra.success:
+                solved += 1
+                assert abs(ra.iterations - rb.iterations) <= 1
+                assert np.max(np.abs(ra.u - rb.u)) < 1e-7
+                assert abs(ra.cost - rb.cost) < 1e-9 * (1 + abs(ra.cost))
+            x_hat = a.rollout(x_hat, ra.u)[1]
+    assert solved >= 8     # the rest: capped solves after set-point changes, in both
+    st = b._buffer[0].stats()
+    assert st["t_wall_QP"] > 0 and st["iter_count"] >= 0 and st["return_status"]
+
+
+def test_kernel_loop_needs_the_kernel(cert) -> None:
+    """``kernel="numpy"`` keeps casadi's loop (the numpy callbacks have no C loop); an
+    unknown loop is a design error."""
+    fh = FHOCP.from_certificate(cert, kernel="numpy", sqp_options={"loop": "kernel"}).setup()
+    assert not isinstance(fh._solver, KernelSQP)
+    with pytest.raises(DesignError, match="loop must be"):
+        FHOCP.from_certificate(cert, sqp_options={"loop": "python"})
+
+
+@needs_cc
+def test_kernel_loop_rejects_sqpmethod_options_it_does_not_follow(cert) -> None:
+    fh = FHOCP.from_certificate(cert, sqp_options={"hessian_approximation": "limited-memory"})
+    with pytest.raises(DesignError, match="'hessian_approximation' is not supported"):
+        fh.setup()
+    fh = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi", "min_iter": 1}).setup()
+    assert not isinstance(fh._solver, KernelSQP)
