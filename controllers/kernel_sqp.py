@@ -7,7 +7,8 @@ design/compiled-kernel.md). The kernel therefore carries the whole SQP: the same
 as ``sqpmethod`` (exact eigenvalue-clipped Hessian, ℓ1-merit Armijo line search, the same
 stopping tests and return statuses) with a dense Goldfarb–Idnani dual active-set QP
 (``controllers/kernel/5_qp.c``) that factorises H once per QP and updates its factors per
-working-set change.
+working-set change; the stopping test's ∇L comes from one adjoint sweep, so the
+sensitivities and the Jacobian are computed only when another iteration follows.
 
 :class:`KernelSQP` stands where the casadi solver stood in :class:`controllers.fhocp.FHOCP`:
 the same named argument and result arrays (``x0, p, lbx, ubx, lbg, ubg, lam_x0, lam_g0`` →
