@@ -43,8 +43,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["GENERATOR_VERSION", "Kernel", "build", "default_cache_dir", "generate_source",
-           "last_error"]
+__all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "build", "default_cache_dir",
+           "for_fhocp", "generate_source", "last_error"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
 GENERATOR_VERSION = "gru-fhocp-kernel-3"
@@ -53,6 +53,10 @@ TEMPLATE_PARTS = tuple(Path(__file__).with_name("kernel") / name for name in (
     "1_rollout.c", "2_derivatives.c", "3_eigen_clip.c", "4_api.c", "5_qp.c", "6_sqp.c"))
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")
 PREFIX_PLACEHOLDER = "@PFX@"
+
+#: Largest relative difference between the compiled kernel and the numpy derivatives at the
+#: load-time self-test (they agree to ~1e-14).
+KERNEL_SELF_TEST_TOL = 1e-9
 
 #: Reason of the last failed :func:`build` (None after a success).
 last_error: str | None = None
@@ -425,3 +429,37 @@ def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray
     except OSError as exc:
         last_error = _FAILED[key] = f"cannot load {so}: {exc}"
         return None
+
+
+#: Kernel libraries checked against the numpy callbacks in this process, with the outcome.
+_SELF_TESTED: dict[str, float] = {}
+#: Reasons already warned about (one warning per reason and process).
+_WARNED: set[str] = set()
+
+
+def for_fhocp(fhocp: Any) -> tuple[Kernel | None, str | None]:
+    """The compiled kernel of a :class:`controllers.fhocp.FHOCP`'s problem, self-tested
+    against the numpy derivatives (once per library and process): ``(kernel, None)``, or
+    ``(None, reason)`` with a one-line warning (once per reason and process) when it cannot
+    be built or disagrees with them."""
+    import warnings
+
+    from controllers.nlp_single_shooting import SingleShootingNLP
+
+    clip = fhocp.sqp_options.get("hessian_eigen_clip")
+    k = build(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s, clip,
+              LUo=fhocp.LUo)
+    reason = last_error
+    if k is not None:
+        key = str(k.path)
+        if key not in _SELF_TESTED:
+            _SELF_TESTED[key] = SingleShootingNLP(fhocp, None).self_test(k, clip)
+        if _SELF_TESTED[key] > KERNEL_SELF_TEST_TOL:
+            reason = (f"self-test against the numpy derivatives failed (relative difference "
+                      f"{_SELF_TESTED[key]:.1e})")
+            k = None
+    if k is None and reason not in _WARNED:
+        _WARNED.add(str(reason))
+        warnings.warn(f"compiled FHOCP kernel unavailable ({reason}); using the numpy "
+                      "derivatives", RuntimeWarning, stacklevel=3)
+    return k, (None if k is not None else reason)

@@ -43,15 +43,13 @@ import numpy as np
 
 from controllers import gru
 from controllers.casadi_callbacks import quiet_stdout
+from controllers.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
 from controllers.errors import DesignError
 from controllers.fhocp_layout import FHOCPLayout
 from controllers.solver_settings import DEFECT_TOL, FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
 __all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPResult"]
 
-#: Largest relative difference between the compiled kernel and the numpy derivatives at the
-#: load-time self-test (they agree to ~1e-14).
-KERNEL_SELF_TEST_TOL = 1e-9
 
 
 @dataclass
@@ -254,7 +252,7 @@ class FHOCP:
             from controllers.nlp_single_shooting import SingleShootingNLP
 
             if self.solver == "sqp" and self.kernel_mode == "auto":
-                self.kernel = _load_kernel(self)
+                self.kernel, self.kernel_error = for_fhocp(self)
             self._nlp = SingleShootingNLP(self, self.kernel)
             self._shoot = self._nlp.shoot
             nlp, opts = self._nlp.ipopt_problem(self.ipopt_options, self.time_budget)
@@ -487,38 +485,3 @@ def _bind_buffers(solver: Any) -> tuple:
     for i, name in enumerate(solver.name_out()):
         buf.set_res(i, memoryview(outs[name]))
     return buf, trigger, ins, outs
-
-
-#: Kernel libraries checked against the numpy callbacks in this process, with the outcome.
-_SELF_TESTED: dict[str, float] = {}
-#: Reasons already warned about (one warning per reason and process).
-_WARNED: set[str] = set()
-
-
-def _load_kernel(fhocp: FHOCP) -> Any:
-    """The compiled kernel of ``fhocp``'s problem, self-tested; ``None`` (with a one-line
-    warning) when it cannot be built or disagrees with the numpy callbacks."""
-    import warnings
-
-    from controllers import compiled_kernel as ck
-
-    clip = fhocp.sqp_options.get("hessian_eigen_clip")
-    k = ck.build(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s, clip,
-                 LUo=fhocp.LUo)
-    reason = ck.last_error
-    if k is not None:
-        key = str(k.path)
-        if key not in _SELF_TESTED:
-            from controllers.nlp_single_shooting import SingleShootingNLP
-
-            _SELF_TESTED[key] = SingleShootingNLP(fhocp, None).self_test(k, clip)
-        if _SELF_TESTED[key] > KERNEL_SELF_TEST_TOL:
-            reason = (f"self-test against the numpy derivatives failed (relative difference "
-                      f"{_SELF_TESTED[key]:.1e})")
-            k = None
-    if k is None and reason not in _WARNED:
-        _WARNED.add(reason)
-        warnings.warn(f"compiled FHOCP kernel unavailable ({reason}); using the numpy "
-                      "derivatives", RuntimeWarning, stacklevel=3)
-    fhocp.kernel_error = None if k is not None else reason
-    return k
