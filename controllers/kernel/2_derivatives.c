@@ -108,6 +108,54 @@ __attribute__((always_inline)) static inline void hessian_finish(double *H, doub
   H[NUU * NW + NUU] = 2.0 * lf * SW;
 }
 
+/* ---------------------------------------------------------------- adjoints */
+/* the local part of the adjoint mu_i = dL/dx_i (1 <= i < N): 2 lf Q (x_i - x_bar) + D' lam_i
+ * (lam_i: the multipliers of stage i's output rows), into mu */
+__attribute__((always_inline)) static inline void adjoint_local(int i, const double *xb,
+                                                              double lf, const double *lam,
+                                                              double *mu) {
+  for (int k = 0; k < NX; k++) {
+    double s = 0.0;
+    for (int j = 0; j < NX; j++) s += (X[i * NX + j] - xb[j]) * QW[j * NX + k];
+    s *= 2.0 * lf;
+    for (int a = 0; a < NQ; a++) s += lam[a] * DUO[a * NX + k];
+    mu[k] = s;
+  }
+}
+
+/* v' [A_i B_i] of stage i without forming [A_i B_i] (a vector-Jacobian product of eq:gru,
+ * O(n^2)): gx += A_i' v and, when gu is not NULL, gu = B_i' v. With x+ = h + z (x - h):
+ * [A B]' v = J_z' (a v) + J_h' (b v) + [z v; 0], a = (x - h) z (1 - z), b = (1 - z)(1 - h^2),
+ * and J_h' y = J_r' (c1 q) + [r q; W_h' y], q = U_h' y, c1 = x r (1 - r). */
+__attribute__((always_inline)) static inline void stage_vjp(int i, const double *v, double *gx,
+                                                          double *gu) {
+  const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
+  double av[NX], bv[NX], q[NX], cq[NX];
+  for (int k = 0; k < NX; k++) {
+    const double zp = z[k] * (1.0 - z[k]), hp = 1.0 - h[k] * h[k];
+    av[k] = (x[k] - h[k]) * zp * v[k];
+    bv[k] = (1.0 - z[k]) * hp * v[k];
+    q[k] = 0.0;
+  }
+  for (int k = 0; k < NX; k++) {
+    const double bk = bv[k], *uh = UH + k * NX;
+    for (int j = 0; j < NX; j++) q[j] += bk * uh[j];
+  }
+  for (int k = 0; k < NX; k++) cq[k] = x[k] * (r[k] * (1.0 - r[k])) * q[k];
+  for (int k = 0; k < NX; k++) {
+    const double ak = av[k], ck = cq[k], *uz = UZ + k * NX, *ur = UR + k * NX;
+    for (int j = 0; j < NX; j++) gx[j] += ak * uz[j] + ck * ur[j];
+  }
+  for (int k = 0; k < NX; k++) gx[k] += r[k] * q[k] + z[k] * v[k];
+  if (gu)
+    for (int c = 0; c < NU; c++) {
+      double s = 0.0;
+      for (int k = 0; k < NX; k++)
+        s += WZ[k * NU + c] * av[k] + WR[k * NU + c] * cq[k] + WH[k * NU + c] * bv[k];
+      gu[c] = s;
+    }
+}
+
 /* ---------------------------------------------------------------- Hessian of the Lagrangian */
 #ifndef GK_CONTRACT
 /* W = grad^2_(x,u) mu^T f(x_i, u_i) of stage i (NV x NV, row-major, symmetric) */
@@ -177,14 +225,8 @@ __attribute__((always_inline)) static inline void adjoints(const double *p, doub
   for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
   for (int i = NH - 1; i >= 1; i--) {
     double *mu = MU + i * NX;
-    const double *mun = MU + (i + 1) * NX, *df = DF + i * NX * NV, *lam = lg + (i - 1) * NQ;
-    for (int k = 0; k < NX; k++) {
-      double s = 0.0;
-      for (int j = 0; j < NX; j++) s += (X[i * NX + j] - xb[j]) * QW[j * NX + k];
-      s *= 2.0 * lf;
-      for (int a = 0; a < NQ; a++) s += lam[a] * DUO[a * NX + k];
-      mu[k] = s;
-    }
+    const double *mun = MU + (i + 1) * NX, *df = DF + i * NX * NV;
+    adjoint_local(i, xb, lf, lg + (i - 1) * NQ, mu);
     for (int j = 0; j < NX; j++) {      /* + A_i^T mu_{i+1} */
       const double mj = mun[j], *dfj = df + j * NV;
       for (int k = 0; k < NX; k++) mu[k] += dfj[k] * mj;
@@ -289,33 +331,8 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
   for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
   for (int i = NH - 1; i >= 1; i--) {
     double *mu = MU + i * NX;
-    const double *v = MU + (i + 1) * NX, *lam = lg + (i - 1) * NQ;
-    const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
-    for (int k = 0; k < NX; k++) {
-      double s = 0.0;
-      for (int j = 0; j < NX; j++) s += (X[i * NX + j] - xb[j]) * QW[j * NX + k];
-      s *= 2.0 * lf;
-      for (int a = 0; a < NQ; a++) s += lam[a] * DUO[a * NX + k];
-      mu[k] = s;
-    }
-    /* + A_i^T v = U_z^T (a v) + U_r^T (c1 q) + r q + z v, q = U_h^T (b v) */
-    double av[NX], bv[NX], q[NX], cq[NX];
-    for (int k = 0; k < NX; k++) {
-      const double zp = z[k] * (1.0 - z[k]), hp = 1.0 - h[k] * h[k];
-      av[k] = (x[k] - h[k]) * zp * v[k];
-      bv[k] = (1.0 - z[k]) * hp * v[k];
-      q[k] = 0.0;
-    }
-    for (int k = 0; k < NX; k++) {
-      const double bk = bv[k], *uh = UH + k * NX;
-      for (int j = 0; j < NX; j++) q[j] += bk * uh[j];
-    }
-    for (int k = 0; k < NX; k++) cq[k] = x[k] * (r[k] * (1.0 - r[k])) * q[k];
-    for (int k = 0; k < NX; k++) {
-      const double ak = av[k], ck = cq[k], *uz = UZ + k * NX, *ur = UR + k * NX;
-      for (int j = 0; j < NX; j++) mu[j] += ak * uz[j] + ck * ur[j];
-    }
-    for (int k = 0; k < NX; k++) mu[k] += r[k] * q[k] + z[k] * v[k];
+    adjoint_local(i, xb, lf, lg + (i - 1) * NQ, mu);
+    stage_vjp(i, MU + (i + 1) * NX, mu, 0);   /* + A_i^T mu_{i+1} */
   }
   memset(H, 0, sizeof(double) * NW * NW);
   for (int i = 0; i < NH; i++) {

@@ -60,21 +60,8 @@ HOT static int qp_solve(const double *H, const double *g, const double *A, const
   int status = 0, q = 0, it = 0;
   *changes = 0;
   memset(qin, 0, sizeof qin);
-  /* H = L L' (row-major lower L) */
-  for (int j = 0; j < NW; j++) {
-    const double *Lj = qL + j * NW;
-    double s = H[j * NW + j];
-    for (int k = 0; k < j; k++) s -= Lj[k] * Lj[k];
-    if (!(s > 0.0)) { status = 3; goto done; }
-    const double ljj = sqrt(s);
-    qL[j * NW + j] = ljj;
-    for (int i = j + 1; i < NW; i++) {
-      double *Li = qL + i * NW;
-      double t = H[i * NW + j];
-      for (int k = 0; k < j; k++) t -= Li[k] * Lj[k];
-      Li[j] = t / ljj;
-    }
-  }
+  /* H = L L' (row-major lower L; 3_eigen_clip.c's Cholesky, unshifted) */
+  if (!pd_shifted(H, NW, 0.0, qL)) { status = 3; goto done; }
   /* M = L^-1 row by row; column j of J = L^-T is row j of M */
   for (int i = 0; i < NW; i++) {
     double *Mi = qJ + i * NW;

@@ -28,64 +28,31 @@ static double sq_lbx[NW], sq_ubx[NW], sq_lba[NG], sq_uba[NG], sq_dw[NW], sq_lx[N
 
 /* The gradient of the Lagrangian f + lam_g' g + lam_x' w at w (its rollout cached, level >= 0)
  * by one adjoint sweep: mu_N = dL/dx_N, mu_i = 2 Q (x_i - x_bar) + D'lam_i + A_i' mu_{i+1},
- * dL/du_i = B_i' mu_{i+1} + 2 R (u_i - u_bar) + lam_x, with [A_i B_i]' mu as a
- * vector-Jacobian product of the GRU stage (eq:gru) -- O(N n^2), no sensitivities: what the
+ * dL/du_i = B_i' mu_{i+1} + 2 R (u_i - u_bar) + lam_x (adjoint_local and stage_vjp, as the
+ * contracted Hessian's adjoints) -- O(N n^2), no sensitivities: what the
  * convergence test needs at an iterate whose Jacobian the SQP may never use. Same value as
  * grad f + J' lam_g + lam_x from jac_fg, up to rounding. */
 HOT static void lagrangian_gradient(const double *w, const double *p, const double *lam_x,
                                     const double *lg, double *gl) {
   const double *xb = p + NX, *ub = p + 2 * NX;
   const int r0 = (NH - 1) * NQ;
-  double mu[NX], gx[NX], av[NX], y[NX], e[NX], ce[NX], gu[NU];
+  double mu[NX], mun[NX], gu[NU];
   double tg = 2.0 * SW * w[NUU];
   for (int k = 0; k < NX; k++) {
-    mu[k] = lg[r0 + k] + lg[r0 + NX + k];
+    mun[k] = lg[r0 + k] + lg[r0 + NX + k];
     tg += lg[r0 + NX + k] - lg[r0 + k];
   }
   gl[NUU] = tg + lam_x[NUU];
-  for (int i = NH - 1; i >= 0; i--) {
-    const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
-    /* x+ = h + z (x - h): D_f' mu = J_z' (a mu) + J_h' (b mu) + [z mu; 0] with
-     * a = (x - h) z (1 - z), b = (1 - z)(1 - h^2); J_h' y = J_r' (c1 e) + [r e; W_h' y],
-     * e = U_h' y, c1 = x r (1 - r) */
-    for (int k = 0; k < NX; k++) {
-      av[k] = (x[k] - h[k]) * z[k] * (1.0 - z[k]) * mu[k];
-      y[k] = (1.0 - z[k]) * (1.0 - h[k] * h[k]) * mu[k];
-      e[k] = 0.0;
-      gx[k] = z[k] * mu[k];
-    }
-    for (int k = 0; k < NX; k++) {
-      const double yk = y[k], ak = av[k], *uh = UH + k * NX, *uz = UZ + k * NX;
-      for (int j = 0; j < NX; j++) {
-        e[j] += uh[j] * yk;
-        gx[j] += uz[j] * ak;
-      }
-    }
-    for (int k = 0; k < NX; k++) ce[k] = x[k] * r[k] * (1.0 - r[k]) * e[k];
-    for (int k = 0; k < NX; k++) {
-      const double c = ce[k], *ur = UR + k * NX;
-      gx[k] += r[k] * e[k];
-      for (int j = 0; j < NX; j++) gx[j] += ur[j] * c;
-    }
-    for (int c = 0; c < NU; c++) {
-      double s = 0.0;
-      for (int k = 0; k < NX; k++)
-        s += WZ[k * NU + c] * av[k] + WR[k * NU + c] * ce[k] + WH[k * NU + c] * y[k];
-      gu[c] = s;
-    }
+  for (int i = NH - 1; i >= 0; i--) {   /* mun = mu_{i+1} */
+    if (i >= 1) adjoint_local(i, xb, 1.0, lg + (i - 1) * NQ, mu);
+    else memset(mu, 0, sizeof mu);      /* x_0 = x_hat: its adjoint is not needed */
+    stage_vjp(i, mun, mu, gu);
     for (int c = 0; c < NU; c++) {
       double s = 0.0;
       for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * RW[j * NU + c]);
       gl[i * NU + c] = gu[c] + s + lam_x[i * NU + c];
     }
-    if (i == 0) break;
-    const double *lam = lg + (i - 1) * NQ;
-    for (int k = 0; k < NX; k++) {
-      double s = 0.0;
-      for (int j = 0; j < NX; j++) s += (x[j] - xb[j]) * (2.0 * QW[j * NX + k]);
-      for (int a = 0; a < NQ; a++) s += lam[a] * DUO[a * NX + k];
-      mu[k] = gx[k] + s;
-    }
+    memcpy(mun, mu, sizeof mu);
   }
 }
 

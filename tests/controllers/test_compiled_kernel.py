@@ -84,6 +84,20 @@ def test_the_variant_follows_the_flop_model(monkeypatch: pytest.MonkeyPatch) -> 
     assert ck.choose_mode(20, 2, 60) == "backward"
 
 
+def same_start_solves(a: FHOCP, b: FHOCP, cert, setpoints: list, repeats: int):
+    """``(a's result, b's result)`` of the same FHOCPs along ``a``'s closed loop through
+    ``setpoints`` (``repeats`` steps each), ``b`` warm-started exactly as ``a``."""
+    x_hat, _ = equilibrium(cert.params, np.array([0.0, 0.0]))
+    for y in setpoints:
+        ref = cert.reference(np.array(y))
+        for _ in range(repeats):
+            warm = copy.deepcopy(a._warm)
+            ra = a.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
+            b._warm = warm
+            yield ra, b.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
+            x_hat = a.rollout(x_hat, ra.u)[1]
+
+
 @needs_cc
 def test_same_solves_as_the_numpy_fhocp(cert) -> None:
     """Same status and iterations, the optimum to 1e-9, from identical warm starts (the
@@ -92,19 +106,11 @@ def test_same_solves_as_the_numpy_fhocp(cert) -> None:
     a = FHOCP.from_certificate(cert, kernel="numpy").setup()
     b = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi"}).setup()
     assert a.kernel is None and b.kernel is not None
-    x_hat, _ = equilibrium(cert.params, np.array([0.0, 0.0]))
-    for y in ([0.1, 0.1], [0.0, 0.05], [0.1, 0.1]):
-        ref = cert.reference(np.array(y))
-        for _ in range(3):
-            warm = copy.deepcopy(a._warm)
-            ra = a.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
-            b._warm = warm
-            rb = b.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
-            assert (ra.status, ra.iterations) == (rb.status, rb.iterations)
-            if ra.success:
-                assert np.max(np.abs(ra.u - rb.u)) < 1e-9
-                assert abs(ra.cost - rb.cost) < 1e-9 * (1 + abs(ra.cost))
-            x_hat = a.rollout(x_hat, ra.u)[1]
+    for ra, rb in same_start_solves(a, b, cert, [[0.1, 0.1], [0.0, 0.05], [0.1, 0.1]], 3):
+        assert (ra.status, ra.iterations) == (rb.status, rb.iterations)
+        if ra.success:
+            assert np.max(np.abs(ra.u - rb.u)) < 1e-9
+            assert abs(ra.cost - rb.cost) < 1e-9 * (1 + abs(ra.cost))
 
 
 @needs_cc

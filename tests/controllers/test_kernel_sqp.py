@@ -4,10 +4,7 @@ its FHOCP solves against casadi ``sqpmethod`` from the same starts."""
 
 from __future__ import annotations
 
-import copy
 import ctypes
-import os
-import shutil
 
 import casadi as ca
 import numpy as np
@@ -15,14 +12,10 @@ import pytest
 
 from controllers import compiled_kernel as ck
 from controllers.casadi_callbacks import quiet_stdout
-from controllers.equilibrium import equilibrium
 from controllers.errors import DesignError
 from controllers.fhocp import FHOCP
 from controllers.kernel_sqp import KernelSQP
-from tests.controllers.test_compiled_kernel import random_fhocp
-
-needs_cc = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,
-                              reason="no C compiler")
+from tests.controllers.test_compiled_kernel import needs_cc, random_fhocp, same_start_solves
 
 
 @pytest.fixture(scope="module")
@@ -144,22 +137,15 @@ def test_kernel_loop_solves_as_casadi_sqpmethod(cert) -> None:
     a = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi"}).setup()
     b = FHOCP.from_certificate(cert, sqp_options={"loop": "kernel"}).setup()
     assert isinstance(b._solver, KernelSQP) and not isinstance(a._solver, KernelSQP)
-    x_hat, _ = equilibrium(cert.params, np.array([0.0, 0.0]))
     solved = 0
-    for y in ([0.1, 0.1], [0.0, 0.05], [-0.1, -0.1], [0.1, 0.1]):
-        ref = cert.reference(np.array(y))
-        for _ in range(4):
-            warm = copy.deepcopy(a._warm)
-            ra = a.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
-            b._warm = warm
-            rb = b.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
-            assert ra.status == rb.status
-            if ra.success:
-                solved += 1
-                assert abs(ra.iterations - rb.iterations) <= 1
-                assert np.max(np.abs(ra.u - rb.u)) < 1e-7
-                assert abs(ra.cost - rb.cost) < 1e-9 * (1 + abs(ra.cost))
-            x_hat = a.rollout(x_hat, ra.u)[1]
+    for ra, rb in same_start_solves(a, b, cert, [[0.1, 0.1], [0.0, 0.05], [-0.1, -0.1],
+                                                 [0.1, 0.1]], 4):
+        assert ra.status == rb.status
+        if ra.success:
+            solved += 1
+            assert abs(ra.iterations - rb.iterations) <= 1
+            assert np.max(np.abs(ra.u - rb.u)) < 1e-7
+            assert abs(ra.cost - rb.cost) < 1e-9 * (1 + abs(ra.cost))
     assert solved >= 8     # the rest: capped solves after set-point changes, in both
     st = b._buffer[0].stats()
     assert st["t_wall_QP"] > 0 and st["iter_count"] >= 0 and st["return_status"]
