@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
+import threading
 from collections.abc import Callable, Iterator
 from typing import Any
 
@@ -21,7 +22,11 @@ import numpy as np
 __all__ = ["NumpyCallback", "quiet_stdout"]
 
 
-_DEVNULL: list[int] = []
+#: The redirection of file descriptor 1 shared by every thread inside :func:`quiet_stdout`:
+#: ``[devnull fd, saved fd, depth]`` (fd 1 is process-wide: the first thread in redirects it,
+#: the last one out restores it).
+_QUIET: list[int] = [-1, -1, 0]
+_QUIET_LOCK = threading.Lock()
 
 
 @contextlib.contextmanager
@@ -30,18 +35,27 @@ def quiet_stdout() -> Iterator[None]:
 
     qpOASES prints its licence banner when a solver is built or its memory allocated, and
     prints its errors (an infeasible QP inside an SQP iteration, which the SQP handles) to
-    standard output whatever its ``printLevel``: every solve runs in this block.
+    standard output whatever its ``printLevel``: every solve runs in this block. Safe from
+    several threads at once (a campaign worker with two threads): fd 1 is redirected while
+    any thread is inside a block and restored when the last one leaves.
     """
-    if not _DEVNULL:
-        _DEVNULL.append(os.open(os.devnull, os.O_WRONLY))
-    sys.stdout.flush()
-    saved = os.dup(1)
+    with _QUIET_LOCK:
+        if _QUIET[2] == 0:
+            if _QUIET[0] < 0:
+                _QUIET[0] = os.open(os.devnull, os.O_WRONLY)
+            sys.stdout.flush()
+            _QUIET[1] = os.dup(1)
+            os.dup2(_QUIET[0], 1)
+        _QUIET[2] += 1
     try:
-        os.dup2(_DEVNULL[0], 1)
         yield
     finally:
-        os.dup2(saved, 1)
-        os.close(saved)
+        with _QUIET_LOCK:
+            _QUIET[2] -= 1
+            if _QUIET[2] == 0:
+                os.dup2(_QUIET[1], 1)
+                os.close(_QUIET[1])
+                _QUIET[1] = -1
 
 
 class NumpyCallback(ca.Callback):

@@ -9,15 +9,19 @@ runs the whole SQP itself (``6_sqp.c`` with the dense dual active-set QP of ``5_
 agrees with the numpy callbacks to ~1e-14 (checked at load time, once per library and
 process: :meth:`controllers.nlp_single_shooting.SingleShootingNLP.self_test`).
 
-The C source is the fixed template (``kernel/1_rollout.c`` … ``6_sqp.c``) preceded by a
-generated header holding the
-problem's dimensions and constants (GRU weights, Q, R, s, the reduced constraint rows
-``D U_o``, the eigenvalue-clipping margin) as ``static const`` arrays, so that gcc sees every
-loop bound. The shared library is cached under a hash of the generated source, the
-compiler's identity and the flags, in ``~/.cache/gru-mpc/kernels`` (``GRU_MPC_KERNEL_CACHE``):
-a second controller for the same model and problem loads it in milliseconds; a changed model,
-horizon, weight or generator gives a new hash (a user's model gets its own kernel on first
-use, 2–4 s; ``make`` and ``cosim build-kernel`` build the shipped model's).
+The C source is the fixed template (``kernel/0_workspace.c`` … ``6_sqp.c``) preceded by a
+generated header holding the problem's dimensions and constants (GRU weights, Q, R, s, the
+reduced constraint rows ``D U_o``, the eigenvalue-clipping margin) as ``static const``
+arrays, so that gcc sees every loop bound, and the interface types shared with Python
+(:mod:`controllers.kernel_abi`). The library holds no mutable state: each FHOCP gets its own
+workspace (:class:`~controllers.kernel_lib.Workspace`, one C struct), so FHOCPs may solve
+concurrently from several threads. The shared library is cached under a hash of the
+generated source, the compiler's identity and the flags, in the user's cache folder
+(``~/.cache/gru-mpc/kernels`` on Linux; ``GRU_MPC_KERNEL_CACHE``): a second controller for
+the same model and problem loads it in milliseconds; a changed model, horizon, weight or
+generator gives a new hash (a user's model gets its own kernel on first use, 2–4 s; ``make``
+and ``cosim build-kernel`` build the shipped model's). Files are written under temporary
+names and renamed, so processes building one kernel at once agree.
 
 Nothing here is needed for correctness: :func:`build` returns ``None`` (with the reason in
 :data:`last_error`) when no C compiler is found, compilation fails or ``GRU_MPC_KERNEL=0`` is
@@ -29,7 +33,7 @@ Environment: ``GRU_MPC_KERNEL=0`` (off), ``GRU_MPC_KERNEL_CACHE`` (folder), ``CC
 
 from __future__ import annotations
 
-import ctypes
+import contextlib
 import functools
 import hashlib
 import json
@@ -37,20 +41,25 @@ import os
 import shutil
 import subprocess
 import tempfile
+import threading
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "build", "default_cache_dir",
-           "for_fhocp", "generate_source", "last_error"]
+from controllers.kernel_abi import c_declarations
+from controllers.kernel_lib import Kernel, Workspace
+
+__all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "Workspace", "build",
+           "default_cache_dir", "for_fhocp", "generate_source", "last_error"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-3"
+GENERATOR_VERSION = "gru-fhocp-kernel-4"
 #: The C template, concatenated in this order after the generated header.
 TEMPLATE_PARTS = tuple(Path(__file__).with_name("kernel") / name for name in (
-    "1_rollout.c", "2_derivatives.c", "3_eigen_clip.c", "4_api.c", "5_qp.c", "6_sqp.c"))
+    "0_workspace.c", "1_rollout.c", "2_derivatives.c", "3_eigen_clip.c", "4_api.c", "5_qp.c",
+    "6_sqp.c"))
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")
 PREFIX_PLACEHOLDER = "@PFX@"
 
@@ -63,17 +72,22 @@ last_error: str | None = None
 
 #: Kernels loaded in this process, by library path (a library is loaded once per process).
 _LOADED: dict[str, Kernel] = {}
+#: Serialises building, loading and self-testing (the dictionaries here) between threads.
+_LOCK = threading.RLock()
 #: Builds that failed in this process, by cache key: not retried (the reason is kept).
 _FAILED: dict[str, str] = {}
 
 
 def default_cache_dir() -> Path:
-    """``GRU_MPC_KERNEL_CACHE``, else ``$XDG_CACHE_HOME/gru-mpc/kernels`` (``~/.cache``)."""
+    """``GRU_MPC_KERNEL_CACHE``, else ``kernels`` in the user's cache folder
+    (:func:`platformdirs.user_cache_dir`: ``$XDG_CACHE_HOME/gru-mpc`` or ``~/.cache/gru-mpc``
+    on Linux)."""
     env = os.environ.get("GRU_MPC_KERNEL_CACHE")
     if env:
         return Path(env)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "gru-mpc" / "kernels"
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir("gru-mpc")) / "kernels"
 
 
 def _c_array(name: str, a: np.ndarray) -> str:
@@ -103,7 +117,7 @@ def generate_source(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: 
     hdr = [f"/* generated by controllers.compiled_kernel ({GENERATOR_VERSION}); do not edit */\n",
            f"#define NX {n}\n#define NU {m}\n#define NH {int(N)}\n#define NQ {q}\n"
            f"#define NY {P['U_o'].shape[0]}\n#define NL {LUo.shape[0]}\n",
-           f"#define PFX(name) {PREFIX_PLACEHOLDER}##name\n"]
+           f"#define PFX(name) {PREFIX_PLACEHOLDER}##name\n", c_declarations()]
     for key in ("W_z", "W_r", "W_h", "U_z", "U_r", "U_h", "b_z", "b_r", "b_h"):
         hdr.append(_c_array(key.replace("_", "").upper(), P[key]))
     for key in ("U_z", "U_r", "U_h"):   # transposed copies for column-oriented mat-vecs
@@ -183,183 +197,31 @@ def _compiler_id(cc: str) -> str:
         return cc
 
 
-class Kernel:
-    """A loaded kernel library: ctypes handle, dimensions and casadi external functions."""
-
-    def __init__(self, path: Path, prefix: str) -> None:
-        self.path = Path(path)
-        self.prefix = prefix
-        self.lib = ctypes.CDLL(str(self.path))
-        dims = (ctypes.c_long * 7)()
-        self._fn("dims")(dims)
-        self.n, self.m, self.N, self.q, self.nw, self.ng, self.npar = list(dims)
-        vp, cd, ci = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
-        self.nl = int(self._fn("n_assess_rows")())
-        self._externals: dict[str, Any] = {}
-        # persistent argument and result buffers, their addresses taken once (numpy's
-        # ``.ctypes.data`` costs microseconds per call)
-        n, m, N = self.n, self.m, self.N
-        self._buf = {name: np.zeros(shape) for name, shape in (
-            ("x0", n), ("u", (N, m)), ("w", self.nw), ("p", self.npar), ("xb", n),
-            ("ub", m), ("dz", n), ("dr", n), ("bnd", (N, max(self.nl, 1))), ("out", 7),
-            ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", m), ("xe", n), ("ue", m))}
-        self._addr = {name: int(a.ctypes.data) for name, a in self._buf.items()}
-        self._c: dict[str, Any] = {}
-        for name, args, rest in (
-                ("simulate", [vp] * 3, None), ("xtraj", [vp] * 3, None),
-                ("gru_step", [vp] * 5, None), ("assess", [vp] * 5 + [cd, vp, vp], None),
-                ("assess_w", [vp, vp, vp, cd, vp, vp, vp], None)):
-            f = self._fn(name)
-            f.argtypes, f.restype = args, rest
-            self._c[name] = f
-        f = self._fn("sqp")
-        f.argtypes, f.restype = [vp] * 12, ci
-        self._c["sqp"] = f
-        if hasattr(self.lib, prefix + "eq_newton"):
-            f = self._fn("eq_newton")
-            f.argtypes, f.restype = [vp, vp, vp, ci, cd, vp, vp], ci
-            self._c["eq_newton"] = f
-
-    def _fn(self, name: str) -> Any:
-        return getattr(self.lib, self.prefix + name)
-
-    def external(self, name: str) -> Any:
-        """casadi Function ``name`` in {"fg", "jac_fg", "hess_l", "hess_raw"} (loaded once)."""
-        if name not in self._externals:
-            import casadi as ca
-
-            self._externals[name] = ca.external(self.prefix + name, str(self.path))
-        return self._externals[name]
-
-    def simulate(self, x0: np.ndarray, u: np.ndarray) -> np.ndarray:
-        """States ``x_0 … x_N`` (N+1, n) from ``x0`` under ``u`` (N, m); no cache involved."""
-        b, a = self._buf, self._addr
-        b["x0"][:] = x0
-        b["u"][:] = u
-        self._c["simulate"](a["x0"], a["u"], a["x"])
-        return b["x"].copy()
-
-    def xtraj(self, w: np.ndarray, p: np.ndarray) -> np.ndarray:
-        """The kernel's trajectory at ``(w, p)`` (its cached rollout when it matches)."""
-        b, a = self._buf, self._addr
-        b["w"][:] = np.ravel(w)
-        b["p"][:] = np.ravel(p)
-        self._c["xtraj"](a["w"], a["p"], a["x"])
-        return b["x"].copy()
-
-    def gru_step(self, x: np.ndarray, u: np.ndarray, dz: np.ndarray, dr: np.ndarray
-                 ) -> np.ndarray:
-        """One step of ``eq:gru`` with extra gate inputs (``eq:observer``), as
-        :func:`controllers.gru.step`; a new array."""
-        b, a = self._buf, self._addr
-        b["x0"][:] = x
-        b["ub"][:] = u
-        b["dz"][:] = dz
-        b["dr"][:] = dr
-        self._c["gru_step"](a["x0"], a["ub"], a["dz"], a["dr"], a["xn"])
-        return b["xn"].copy()
-
-    def assess(self, x0: np.ndarray, u: np.ndarray, x_bar: np.ndarray, u_bar: np.ndarray,
-               bounds: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
-        """The check of an input sequence in one call: states ``x_0 … x_N`` from ``x0`` under
-        ``u`` (N, m) and ``[cost, max row violation at i = 0, max row violation at i ≥ 1,
-        max |u|, ‖x_N − x̄‖∞, active constraints]`` (as ``FHOCP.cost`` with ``t = ‖x_N −
-        x̄‖∞`` and ``FHOCP._residuals``; ``bounds``: the tightened bounds, N×q)."""
-        b, a = self._buf, self._addr
-        b["x0"][:] = x0
-        b["u"][:] = u
-        b["xb"][:] = x_bar
-        b["ub"][:] = u_bar
-        b["bnd"][:, :self.nl] = bounds
-        self._c["assess"](a["x0"], a["u"], a["xb"], a["ub"], a["bnd"], float(alpha), a["x"],
-                          a["out"])
-        return b["x"].copy(), b["out"][:6].copy()
-
-    def assess_w(self, w: np.ndarray, p: np.ndarray, bounds: np.ndarray, alpha: float
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`assess` of the solver's answer ``w`` at ``p = (x̂, x̄, ū)``: ``(u, x, out)``
-        with ``u = clip(w_u, −1, 1)`` and ``out[6]`` the defect ``max |x_solver − x|``
-        against the solver's trajectory at ``(w, p)``."""
-        b, a = self._buf, self._addr
-        b["w"][:] = w
-        b["p"][:] = p
-        b["bnd"][:, :self.nl] = bounds
-        self._c["assess_w"](a["w"], a["p"], a["bnd"], float(alpha), a["uc"], a["x"], a["out"])
-        return b["uc"].copy(), b["x"].copy(), b["out"].copy()
-
-    def eq_newton(self, y: np.ndarray, x0: np.ndarray, u0: np.ndarray, max_iter: int = 20,
-                  tol: float = 1e-11) -> tuple[np.ndarray, np.ndarray] | None:
-        """:func:`controllers.equilibrium.equilibrium_newton`, compiled: ``(x, u)`` or
-        ``None``."""
-        b, a = self._buf, self._addr
-        b["y"][:] = y
-        b["x0"][:] = x0
-        b["ub"][:] = u0
-        rc = self._c["eq_newton"](a["y"], a["x0"], a["ub"], int(max_iter), float(tol),
-                                  a["xe"], a["ue"])
-        uo = b["ue"]
-        if rc != 0 or max(abs(uo)) > 1.0:
-            return None
-        return b["xe"].copy(), uo.copy()
-
-    def sqp_call(self, arrays: Mapping[str, np.ndarray]) -> Any:
-        """A function running the kernel's SQP (``6_sqp.c``) on these persistent arrays:
-        ``p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, g, f, opt, info`` (float64, contiguous;
-        ``w``, ``lam_x``, ``lam_g`` hold the initial guess and receive the answer). Their
-        addresses are taken once: calling it costs ~1 µs besides the solve."""
-        names = ("p", "lbx", "ubx", "lbg", "ubg", "w", "lam_x", "lam_g", "g", "f", "opt",
-                 "info")
-        for name in names:
-            a = arrays[name]
-            if a.dtype != np.float64 or not a.flags.c_contiguous:
-                raise ValueError(f"sqp array {name!r} must be contiguous float64")
-        keep = {name: arrays[name] for name in names}   # alive as long as the function
-        addr = [int(keep[name].ctypes.data) for name in names]
-        fn = self._c["sqp"]
-        return lambda _keep=keep: fn(*addr)
-
-    def qp(self, H: np.ndarray, g: np.ndarray, A: np.ndarray, lbx: np.ndarray,
-           ubx: np.ndarray, lba: np.ndarray, uba: np.ndarray
-           ) -> tuple[int, np.ndarray, np.ndarray, np.ndarray, int]:
-        """The kernel's QP (``5_qp.c``) on one problem of its dimensions (H: nw×nw, A:
-        ng×nw; infinite bounds allowed): ``(status, d, lam_x, lam_a, working-set changes)``,
-        status 0 optimal, 1 infeasible, 2 change limit, 3 H not positive definite. A test
-        hook: the SQP calls the QP inside the kernel."""
-        def arr(a: np.ndarray, order: str = "C") -> np.ndarray:
-            return np.clip(np.array(a, dtype=float, order=order), -1e301, 1e301)
-        args = [arr(H), arr(g), arr(A, "F"), arr(lbx), arr(ubx), arr(lba), arr(uba)]
-        d, lx, la = np.zeros(self.nw), np.zeros(self.nw), np.zeros(self.ng)
-        changes = ctypes.c_int(0)
-        P = ctypes.POINTER(ctypes.c_double)
-        status = self._fn("qp")(*(a.ctypes.data_as(P) for a in (*args, d, lx, la)),
-                                ctypes.byref(changes))
-        return int(status), d, lx, la, int(changes.value)
-
-    def counters(self) -> dict[str, int]:
-        c = (ctypes.c_long * 4)()
-        self._fn("counters")(c)
-        return {"hess_calls": c[0], "eig": c[1], "clipped": c[2], "eigenvalues_clipped": c[3]}
-
-    def invalidate(self) -> None:
-        self._fn("invalidate")()
-
-
 def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
           DUo: np.ndarray, s: float, clip: float | None, *, LUo: np.ndarray | None = None,
           cache_dir: str | Path | None = None, cc: str | None = None,
           cflags: tuple[str, ...] | None = None, verbose: bool = False) -> Kernel | None:
     """Compiled kernel for this problem, from the cache or freshly built; ``None`` on failure
     (reason in :data:`last_error`). ``LUo``: the full output-constraint rows ``L U_o`` of
-    :meth:`Kernel.assess` (``FHOCP.LUo``)."""
+    :meth:`Workspace.assess` (``FHOCP.LUo``). Thread-safe; the library is shared by every
+    caller in the process (each takes its own :meth:`Kernel.workspace`)."""
     global last_error
-    last_error = None
+    with _LOCK:
+        k, last_error = _build(params, N, Q, R, DUo, s, clip, LUo, cache_dir, cc, cflags,
+                               verbose)
+        return k
+
+
+def _build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
+           DUo: np.ndarray, s: float, clip: float | None, LUo: np.ndarray | None,
+           cache_dir: str | Path | None, cc: str | None, cflags: tuple[str, ...] | None,
+           verbose: bool) -> tuple[Kernel | None, str | None]:
+    """:func:`build`: ``(kernel, None)`` or ``(None, reason)``; the caller holds ``_LOCK``."""
     if os.environ.get("GRU_MPC_KERNEL", "1") == "0":
-        last_error = "disabled by GRU_MPC_KERNEL=0"
-        return None
+        return None, "disabled by GRU_MPC_KERNEL=0"
     cc = cc or os.environ.get("CC") or "gcc"
     if shutil.which(cc) is None:
-        last_error = f"no C compiler {cc!r} on PATH"
-        return None
+        return None, f"no C compiler {cc!r} on PATH"
     flags = tuple(cflags) if cflags is not None else DEFAULT_CFLAGS
     libs: list[str] = []
     n_states = np.shape(params["W_z"])[0]
@@ -385,50 +247,80 @@ def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray
     try:
         src = generate_source(params, N, Q, R, DUo, s, clip, LUo)
     except ValueError as exc:
-        last_error = f"cannot generate the kernel: {exc}"
-        return None
+        return None, f"cannot generate the kernel: {exc}"
     key = hashlib.sha256("\0".join([GENERATOR_VERSION, _compiler_id(cc), " ".join(flags),
                                     " ".join(libs), src]).encode()).hexdigest()[:16]
     if key in _FAILED:
-        last_error = _FAILED[key]
-        return None
+        return None, _FAILED[key]
     prefix = f"gk{key}_"
     cdir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
     so = cdir / f"gk{key}.so"
     loaded = _LOADED.get(str(so))
     if loaded is not None and so.exists():
-        return loaded
+        return loaded, None
     if not so.exists():
-        try:
-            cdir.mkdir(parents=True, exist_ok=True)
-            csrc = cdir / f"gk{key}.c"
-            csrc.write_text(src.replace(PREFIX_PLACEHOLDER, prefix))
-            fd, tmp = tempfile.mkstemp(suffix=".so", dir=cdir)
-            os.close(fd)
-            cmd = [cc, *flags, "-o", tmp, str(csrc), *libs, "-lm"]
-            res = subprocess.run(cmd, capture_output=True, text=True, timeout=600)
-            if res.returncode != 0:
-                os.unlink(tmp)
-                first = (res.stderr.strip().splitlines() or ["no message"])[0]
-                last_error = _FAILED[key] = f"{cc} failed on {csrc}: {first[:300]}"
-                return None
-            os.replace(tmp, so)      # atomic: concurrent builders agree on the content
-            meta = {"flags": list(flags), "libs": libs, "compiler": _compiler_id(cc),
-                    "generator": GENERATOR_VERSION, "n": int(n_states), "N": int(N)}
-            (cdir / f"gk{key}.json").write_text(json.dumps(meta, indent=1))
-            if verbose:
-                print(f"compiled FHOCP kernel: built {so}")
-        except (OSError, subprocess.SubprocessError) as exc:
-            last_error = _FAILED[key] = f"kernel build failed: {exc}"
-            return None
+        reason = _compile(src.replace(PREFIX_PLACEHOLDER, prefix), cdir, key, cc, flags, libs)
+        if reason is not None:
+            _FAILED[key] = reason
+            return None, reason
+        meta = {"flags": list(flags), "libs": libs, "compiler": _compiler_id(cc),
+                "generator": GENERATOR_VERSION, "n": int(n_states), "N": int(N)}
+        with contextlib.suppress(OSError):   # informative only
+            _write_atomic(cdir / f"gk{key}.json", json.dumps(meta, indent=1).encode())
+        if verbose:
+            print(f"compiled FHOCP kernel: built {so}")
     try:
         k = Kernel(so, prefix)
-        k.flags = flags
-        _LOADED[str(so)] = k
-        return k
     except OSError as exc:
-        last_error = _FAILED[key] = f"cannot load {so}: {exc}"
-        return None
+        _FAILED[key] = f"cannot load {so}: {exc}"
+        return None, _FAILED[key]
+    k.flags = flags
+    _LOADED[str(so)] = k
+    return k, None
+
+
+def _write_atomic(path: Path, data: bytes) -> None:
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def _compile(csource: str, cdir: Path, key: str, cc: str, flags: tuple[str, ...],
+             libs: list[str]) -> str | None:
+    """Compile ``csource`` into ``cdir/gk<key>.so`` (and keep it as ``gk<key>.c``); the reason
+    when it fails. Every file is written under a temporary name and renamed into place, so
+    processes building the same kernel at once (the workers of a campaign) never compile or
+    load another's half-written file."""
+    try:
+        cdir.mkdir(parents=True, exist_ok=True)
+        fd, csrc = tempfile.mkstemp(prefix=f"gk{key}.", suffix=".c", dir=cdir)
+        with os.fdopen(fd, "w") as f:
+            f.write(csource)
+        fd, tmp = tempfile.mkstemp(prefix=f"gk{key}.", suffix=".so", dir=cdir)
+        os.close(fd)
+        try:
+            res = subprocess.run([cc, *flags, "-o", tmp, csrc, *libs, "-lm"],
+                                 capture_output=True, text=True, timeout=600)
+            if res.returncode != 0:
+                first = (res.stderr.strip().splitlines() or ["no message"])[0]
+                kept = cdir / f"gk{key}.failed.c"
+                os.replace(csrc, kept)
+                return f"{cc} failed on {kept}: {first[:300]}"
+            os.replace(tmp, cdir / f"gk{key}.so")
+            os.replace(csrc, cdir / f"gk{key}.c")
+        finally:
+            for leftover in (tmp, csrc):
+                with contextlib.suppress(OSError):
+                    os.unlink(leftover)
+    except (OSError, subprocess.SubprocessError) as exc:
+        return f"kernel build failed: {exc}"
+    return None
 
 
 #: Kernel libraries checked against the numpy callbacks in this process, with the outcome.
@@ -437,29 +329,33 @@ _SELF_TESTED: dict[str, float] = {}
 _WARNED: set[str] = set()
 
 
-def for_fhocp(fhocp: Any) -> tuple[Kernel | None, str | None]:
-    """The compiled kernel of a :class:`controllers.fhocp.FHOCP`'s problem, self-tested
-    against the numpy derivatives (once per library and process): ``(kernel, None)``, or
+def for_fhocp(fhocp: Any) -> tuple[Workspace | None, str | None]:
+    """A workspace of the compiled kernel of a :class:`controllers.fhocp.FHOCP`'s problem
+    (its own C state: FHOCPs may solve concurrently), the library self-tested against the
+    numpy derivatives once per library and process: ``(workspace, None)``, or
     ``(None, reason)`` with a one-line warning (once per reason and process) when it cannot
-    be built or disagrees with them."""
+    be built or disagrees with them. Thread-safe."""
     import warnings
 
     from controllers.nlp_single_shooting import SingleShootingNLP
 
     clip = fhocp.sqp_options.get("hessian_eigen_clip")
-    k = build(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s, clip,
-              LUo=fhocp.LUo)
-    reason = last_error
-    if k is not None:
-        key = str(k.path)
-        if key not in _SELF_TESTED:
-            _SELF_TESTED[key] = SingleShootingNLP(fhocp, None).self_test(k, clip)
-        if _SELF_TESTED[key] > KERNEL_SELF_TEST_TOL:
-            reason = (f"self-test against the numpy derivatives failed (relative difference "
-                      f"{_SELF_TESTED[key]:.1e})")
-            k = None
-    if k is None and reason not in _WARNED:
-        _WARNED.add(str(reason))
+    with _LOCK:
+        k, reason = _build(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s, clip,
+                           fhocp.LUo, None, None, None, False)
+        if k is not None:
+            key = str(k.path)
+            if key not in _SELF_TESTED:
+                _SELF_TESTED[key] = SingleShootingNLP(fhocp, None).self_test(k.workspace(),
+                                                                             clip)
+            if _SELF_TESTED[key] > KERNEL_SELF_TEST_TOL:
+                reason = (f"self-test against the numpy derivatives failed (relative "
+                          f"difference {_SELF_TESTED[key]:.1e})")
+                k = None
+        warn = k is None and reason not in _WARNED
+        if warn:
+            _WARNED.add(str(reason))
+    if warn:
         warnings.warn(f"compiled FHOCP kernel unavailable ({reason}); using the numpy "
                       "derivatives", RuntimeWarning, stacklevel=3)
-    return k, (None if k is not None else reason)
+    return (k.workspace(), None) if k is not None else (None, reason)

@@ -466,7 +466,7 @@ class FHOCP:
 
 def _set_residuals(res: FHOCPResult, out: np.ndarray, alpha: float) -> None:
     """:meth:`FHOCP._residuals` from the compiled check's ``out`` (:meth:`controllers.
-    compiled_kernel.Kernel.assess`)."""
+    kernel_lib.Workspace.assess`)."""
     res.constraint_violation = max(0.0, float(out[1]), float(out[2]), float(out[3]) - 1.0)
     res.terminal_violation = max(0.0, float(out[4]) - alpha)
     res.active = int(out[5])

@@ -25,15 +25,13 @@ from typing import Any
 import numpy as np
 
 from controllers.errors import DesignError
+from controllers.kernel_abi import SqpInfo, SqpOptions, SqpStatus
 
 __all__ = ["STATUS", "KernelSQP"]
 
-#: The kernel SQP's status codes, as casadi ``sqpmethod`` names them (3 and 4: the QP; 5: the
-#: time budget ran out, which :class:`controllers.fhocp.FHOCP` reports as
-#: ``"time_budget_exceeded"``, as for casadi's loop).
-STATUS = ("Solve_Succeeded", "Maximum_Iterations_Exceeded",
-          "Search_Direction_Becomes_Too_Small", "QP_Infeasible", "QP_Failed",
-          "User_Requested_Stop")
+#: The kernel SQP's statuses by value, as casadi ``sqpmethod`` names them
+#: (:class:`controllers.kernel_abi.SqpStatus`).
+STATUS = tuple(status.casadi_name for status in SqpStatus)
 
 #: casadi ``sqpmethod`` defaults of the line search and the step test (casadi 3.8).
 LINE_SEARCH_DEFAULTS = {"min_step_size": 1e-10, "c1": 1e-4, "beta": 0.8, "max_iter_ls": 3}
@@ -47,8 +45,9 @@ class KernelSQP:
 
     Parameters
     ----------
-    kernel : controllers.compiled_kernel.Kernel
-        The problem's kernel (its derivatives, eigenvalue clipping, QP and SQP loop).
+    workspace : controllers.kernel_lib.Workspace
+        The FHOCP's workspace of its problem's kernel (derivatives, eigenvalue clipping, QP
+        and SQP loop).
     options : mapping
         ``tol_pr``, ``tol_du``, ``max_iter`` and optionally ``min_step_size``, ``c1``,
         ``beta``, ``max_iter_ls`` (casadi ``sqpmethod``'s meanings and defaults).
@@ -57,7 +56,7 @@ class KernelSQP:
         before convergence); none by default.
     """
 
-    def __init__(self, kernel: Any, options: Mapping[str, Any],
+    def __init__(self, workspace: Any, options: Mapping[str, Any],
                  time_budget: float | None = None) -> None:
         known = {"tol_pr", "tol_du", "max_iter", *LINE_SEARCH_DEFAULTS, *IGNORED}
         unknown = sorted(set(options) - known)
@@ -66,25 +65,26 @@ class KernelSQP:
                               "SQP (loop=\"kernel\"); use loop=\"casadi\" for sqpmethod's "
                               "other options")
         opts = {**LINE_SEARCH_DEFAULTS, **options}
-        nw, ng, npar = kernel.nw, kernel.ng, kernel.npar
+        nw, ng, npar = workspace.nw, workspace.ng, workspace.npar
         self.ins = {name: np.zeros(size) for name, size in (
             ("x0", nw), ("p", npar), ("lbx", nw), ("ubx", nw), ("lbg", ng), ("ubg", ng),
             ("lam_x0", nw), ("lam_g0", ng))}
         self.outs = {name: np.zeros(size) for name, size in (
             ("x", nw), ("f", 1), ("g", ng), ("lam_x", nw), ("lam_g", ng), ("lam_p", npar))}
-        self._opt = np.array([float(opts["tol_pr"]), float(opts["tol_du"]),
-                              float(opts["max_iter"]), float(opts["min_step_size"]),
-                              float(opts["c1"]), float(opts["beta"]),
-                              float(opts["max_iter_ls"]),
-                              np.inf if time_budget is None else float(time_budget)])
-        self._info = np.zeros(8)
+        self.options = SqpOptions(
+            tol_pr=float(opts["tol_pr"]), tol_du=float(opts["tol_du"]),
+            max_iter=int(opts["max_iter"]), max_iter_ls=int(opts["max_iter_ls"]),
+            min_step_size=float(opts["min_step_size"]), c1=float(opts["c1"]),
+            beta=float(opts["beta"]),
+            time_budget=np.inf if time_budget is None else float(time_budget))
+        self.info = SqpInfo()
         self._timers = np.zeros(4)    # QP, Hessian, f/g/derivatives, line search [s]
         self._stats: dict[str, Any] | None = None
         i, o = self.ins, self.outs
-        self._call = kernel.sqp_call({
+        self._call = workspace.sqp_call({
             "p": i["p"], "lbx": i["lbx"], "ubx": i["ubx"], "lbg": i["lbg"], "ubg": i["ubg"],
-            "w": o["x"], "lam_x": o["lam_x"], "lam_g": o["lam_g"], "g": o["g"], "f": o["f"],
-            "opt": self._opt, "info": self._info})
+            "w": o["x"], "lam_x": o["lam_x"], "lam_g": o["lam_g"], "g": o["g"], "f": o["f"]},
+            self.options, self.info)
 
     def buffers(self) -> tuple[KernelSQP, Any, dict[str, np.ndarray], dict[str, np.ndarray]]:
         """``(self, trigger, ins, outs)``, as :func:`controllers.fhocp._bind_buffers` gives
@@ -98,14 +98,16 @@ class KernelSQP:
         o["x"][:] = i["x0"]
         o["lam_x"][:] = i["lam_x0"]
         o["lam_g"][:] = i["lam_g0"]
-        status = int(self._call())
-        info = self._info
-        self._timers += info[4:8]
+        status = self._call()
+        info = self.info
+        self._timers += (info.t_qp, info.t_hessian, info.t_derivatives, info.t_line_search)
         t = self._timers
         self._stats = {
-            "return_status": STATUS[status], "success": status == 0,
-            "iter_count": int(info[1]), "qp_working_set_changes": int(info[2]),
-            "line_search_failures": int(info[3]),
+            "return_status": status.casadi_name,
+            "success": status == SqpStatus.SOLVE_SUCCEEDED,
+            "iter_count": info.iterations,
+            "qp_working_set_changes": info.qp_working_set_changes,
+            "line_search_failures": info.line_search_failures,
             "t_wall_QP": t[0], "t_wall_nlp_hess_l": t[1], "t_wall_nlp_jac_fg": t[2],
             "t_wall_nlp_fg": t[3]}
 

@@ -43,9 +43,9 @@ class SingleShootingNLP:
     ----------
     fhocp : FHOCP
         The problem (dimensions, weights, constraint rows, layout of ``w``).
-    kernel : compiled_kernel.Kernel, optional
-        The compiled kernel of this problem: :meth:`sqp_problem` and :meth:`trajectory` use
-        it.
+    kernel : kernel_lib.Workspace, optional
+        A workspace of this problem's compiled kernel: :meth:`sqp_problem` (the library's
+        external functions) and :meth:`trajectory` use it.
 
     Attributes
     ----------

@@ -52,10 +52,10 @@ class GRUObserver:
         Current bound ``ê_o,k``.
     k : int
         Number of updates done.
-    kernel : compiled_kernel.Kernel or None
-        When set (by the controller: its FHOCP's kernel, built for the same model), the
-        state update runs as one compiled call (:meth:`~controllers.compiled_kernel.Kernel.
-        gru_step`); else numpy (:func:`controllers.gru.step`).
+    kernel : kernel_lib.Workspace or None
+        When set (by the controller: its FHOCP's kernel workspace, built for the same
+        model), the state update runs as one compiled call (:meth:`~controllers.kernel_lib.
+        Workspace.gru_step`); else numpy (:func:`controllers.gru.step`).
     """
 
     def __init__(self, params: Mapping[str, np.ndarray], L_z: np.ndarray, L_r: np.ndarray,

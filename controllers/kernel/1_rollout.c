@@ -1,84 +1,7 @@
-/* Compiled derivative kernel of the single-shooting FHOCP (controllers.fhocp, eq:optimization).
- *
- * The generated header above this line defines the dimensions (NX states, NU inputs, NY
- * outputs, NH horizon stages, NQ reduced output-constraint rows), the GRU weights (row-major,
- * eq:gru; U^T copies for column-oriented mat-vecs, J_z = [U_z W_z], J_r = [U_r W_r]), the cost
- * weights QW (NX x NX, QDIAG when diagonal), RW (NU x NU), SW (s), the reduced constraint rows
- * DUO (NQ x NX), the eigenvalue clipping margin CLIP (< 0: no clipping) and PFX(name), the
- * symbol prefix (a hash of the source: several kernels can live in one process).
- *
- * Decision variables w = (u_0 .. u_{N-1}, t) (NW = NH*NU + 1), parameters p = (x_hat, x_bar,
- * u_bar) (NP = 2 NX + NU). Same mathematics as controllers/shooting.py (GRUShooting.rollout,
- * stage_hessians) and controllers/nlp_single_shooting.py (SingleShootingNLP.objective,
- * constraints, gradient, jacobian, hessian, hessian_convex) -- see there for the formulas;
- * checked against them to ~1e-14 (tests/controllers/test_compiled_kernel.py).
- *
- * Build-time variants (macros, chosen by controllers/compiled_kernel.py):
- *   (default)        W-mode: explicit J_h, [A B] and stage Hessians W_i, then Z_i^T W_i Z_i
- *                    (as numpy); best for n <~ N m.
- *   GK_CONTRACT      contracted mode: J_z Z_i, J_r Z_i, J_h Z_i carried forward instead of
- *                    J_h and A_i; O(N^2 n^2 m) instead of O(N n^3); best for large n.
- *   GK_BLAS          the n x n x (n+m) / n x n x K products through dgemm (casadi's OpenBLAS).
- *   GK_LAPACK_EIG    eigenvalue clipping with LAPACK dsyevr (only the eigenpairs below the
- *                    margin) instead of tred2/tql2 (all of them).
- *   GK_TIMERS        in-kernel wall-clock accumulators (PFX(timers)).
- *   GK_NO_CLONES     no AVX2/FMA function clones (target_clones) on x86-64.
- *
- * One rollout (states, gates, stage Jacobians, sensitivities) is cached in static memory keyed
- * by (w, p): the f/g, Jacobian and Hessian evaluations at the same point share it. Not
- * thread safe; two FHOCPs of the same problem share one library and its cache, which is
- * correct because the cache is keyed by the full (w, p).
- *
- * Exported: casadi external functions (casadi's codegen calling convention) PFX(fg),
- * PFX(jac_fg), PFX(hess_l) (clipped), PFX(hess_raw) (unclipped), and plain C entry points for
- * ctypes: PFX(simulate), PFX(xtraj), PFX(gru_step), PFX(assess), PFX(assess_w),
- * PFX(eq_newton), PFX(clip), PFX(dims), PFX(counters), and the SQP of the FHOCP in one call,
- * PFX(sqp) (6_sqp.c, with the QP of 5_qp.c; PFX(qp) is its test hook). The answer check
- * (assess) also needs NL and LUO (NL x NX), the full output-constraint rows L U_o.
- */
-#include <math.h>
-#include <string.h>
-#ifdef GK_TIMERS
-#include <time.h>
-static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
-static double tk_acc[4];
-#define TK_START double tk0_ = tk_now();
-#define TK_STOP(i) tk_acc[i] += tk_now() - tk0_;
-#else
-#define TK_START
-#define TK_STOP(i)
-#endif
-
-#define NV (NX + NU)
-#define NUU (NH * NU)
-#define NW (NUU + 1)
-#define NG ((NH - 1) * NQ + 2 * NX)
-#define NP (2 * NX + NU)
-#define EXPORT __attribute__((visibility("default")))
-/* hot entry points get an AVX2/FMA clone selected at load time (ifunc), portable otherwise */
-#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 11 && \
-    !defined(GK_NO_CLONES)
-#define HOT __attribute__((target_clones("arch=x86-64-v3", "default")))
-#else
-#define HOT
-#endif
-
-typedef long long int casadi_int;
-
-/* ---------------------------------------------------------------- cache of one rollout */
-static int c_level = -1;                 /* -1 empty, 0 states, 1 states + derivatives */
-static double c_w[NW], c_p[NP];
-static double X[(NH + 1) * NX];          /* states x_0 .. x_N */
-static double ZG[NH * NX], RG[NH * NX], HG[NH * NX];   /* gates z, r, h per stage */
-#ifndef GK_CONTRACT
-static double JH[NH * NX * NV];          /* J_h per stage */
-static double DF[NH * NX * NV];          /* [A_i B_i] per stage */
-#else
-/* contracted mode: J_z Z_i, J_r Z_i, J_h Z_i per stage (NX x NUU, first (i+1) NU columns) */
-static double PZ[NH * NX * NUU], PR[NH * NX * NUU], PH[NH * NX * NUU];
-#endif
-static double S[(NH + 1) * NX * NUU];    /* S_i = dx_i/du, NX x NUU row-major; cols >= i NU are 0 */
-
+/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
+ * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): the GRU rollout,
+ * the stage Jacobians and sensitivities, cached in the workspace, and the small dense
+ * products they use. */
 static const double ZERO_W[NW];
 static const double ZERO_P[NP];
 static const double ZERO_G[NG];
@@ -188,17 +111,18 @@ __attribute__((target("arch=x86-64-v3"))) static void gk_gemm_v4(
     }
   }
 }
-static int gk_v4_ok = -1;   /* the CPU runs gk_gemm_v4 (checked once) */
+/* the CPU runs gk_gemm_v4: set once when the library is loaded, read-only afterwards */
+static int gk_v4_ok = 0;
+__attribute__((constructor)) static void gk_cpu_init(void) {
+  __builtin_cpu_init();
+  gk_v4_ok = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+}
 #endif
 
 static inline void gk_gemm(int ta, int m, int n, int k, const double *A, int lda,
                            const double *B, int ldb, double *C, int ldc, int acc) {
   if (m <= 0 || n <= 0) return;
 #ifdef GK_HAVE_V4
-  if (gk_v4_ok < 0) {
-    __builtin_cpu_init();
-    gk_v4_ok = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-  }
   if (gk_v4_ok) {
     gk_gemm_v4(ta, m, n, k, A, lda, B, ldb, C, ldc, acc);
     return;
@@ -220,11 +144,12 @@ extern void dsyevr_(const char *, const char *, const char *, const int *, doubl
                     const int *, const double *, const double *, const int *, const int *,
                     const double *, int *, double *, double *, const int *, int *, double *,
                     const int *, int *, const int *, int *);
+/* one BLAS thread: small products, and one kernel per campaign worker thread (set once when
+ * the library is loaded) */
+__attribute__((constructor)) static void gk_blas_init(void) { openblas_set_num_threads(1); }
 /* row-major C (m x n, ldc) = op(A) op(B) + beta C, op(X) = X^T when tX */
 static void rm_gemm(int ta, int tb, int m, int n, int k, const double *A, int lda,
                     const double *B, int ldb, double beta, double *C, int ldc) {
-  static int init = 0;
-  if (!init) { openblas_set_num_threads(1); init = 1; }
   const double one = 1.0;
   const char cA = ta ? 'T' : 'N', cB = tb ? 'T' : 'N';
   if (m <= 0 || n <= 0) return;
@@ -303,7 +228,7 @@ static inline void stage_jac(const double *x, const double *z, const double *r, 
   for (int j = 0; j < NX; j++) c1[j] = x[j] * (r[j] * (1.0 - r[j]));
   /* J_h = U_h (diag(x r') J_r + [diag(r) 0]) + [0 W_h] */
 #ifdef GK_BLAS
-  static double M[NX * NX];
+  double M[NX * NX];
   for (int k = 0; k < NX; k++)
     for (int j = 0; j < NX; j++) M[k * NX + j] = UH[k * NX + j] * c1[j];
   rm_gemm(0, 0, NX, NV, NX, M, NX, JR, NV, 0.0, jh, NV);
@@ -336,14 +261,15 @@ static inline void stage_jac(const double *x, const double *z, const double *r, 
 
 #ifndef GK_CONTRACT
 /* stage Jacobians D_f = [A B], J_h and sensitivities S of the cached states */
-HOT static void derivatives(void) {
+HOT static void derivatives(gk_ws *ws) {
   for (int i = 0; i < NH; i++) {
-    const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
-    double *jh = JH + i * NX * NV, *df = DF + i * NX * NV;
+    const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
+                 *h = ws->HG + i * NX;
+    double *jh = ws->JH + i * NX * NV, *df = ws->DF + i * NX * NV;
     stage_jac(x, z, r, h, jh, df);
     /* S_{i+1} = A_i S_i + B_i E_i (only the first i NU columns of S_i are nonzero) */
-    const double *Si = S + i * NX * NUU;
-    double *Sn = S + (i + 1) * NX * NUU;
+    const double *Si = ws->S + i * NX * NUU;
+    double *Sn = ws->S + (i + 1) * NX * NUU;
     const int K = i * NU;
 #ifdef GK_BLAS
     if (K > 0) rm_gemm(0, 0, NX, K, NX, df, NV, Si, NUU, 0.0, Sn, NUU);
@@ -364,13 +290,15 @@ HOT static void derivatives(void) {
  *   PH = J_h Z = U_h (diag(x r') PR + diag(r) S) + W_h E,
  *   S_{i+1} = diag((x - h) z') PZ + diag((1 - z) h') PH + diag(z) S.
  * 3 n^2 Kc per stage instead of n^2 (n + m) + n^2 K. */
-HOT static void derivatives(void) {
-  static double T[NX * NUU];
+HOT static void derivatives(gk_ws *ws) {
+  double *T = ws->T;
   for (int i = 0; i < NH; i++) {
-    const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
-    const double *Si = S + i * NX * NUU;
-    double *Sn = S + (i + 1) * NX * NUU;
-    double *pz = PZ + i * NX * NUU, *pr = PR + i * NX * NUU, *ph = PH + i * NX * NUU;
+    const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
+                 *h = ws->HG + i * NX;
+    const double *Si = ws->S + i * NX * NUU;
+    double *Sn = ws->S + (i + 1) * NX * NUU;
+    double *pz = ws->PZ + i * NX * NUU, *pr = ws->PR + i * NX * NUU,
+           *ph = ws->PH + i * NX * NUU;
     const int K = i * NU, Kc = K + NU;
     mm(NX, K, NX, UZ, NX, Si, NUU, pz, NUU);
     mm(NX, K, NX, UR, NX, Si, NUU, pr, NUU);
@@ -401,17 +329,18 @@ HOT static void derivatives(void) {
 }
 #endif
 
-/* make the cache valid at (w, p) up to `level` */
-HOT static void roll(const double *w, const double *p, int level) {
-  if (c_level < 0 || memcmp(w, c_w, sizeof c_w) != 0 || memcmp(p, c_p, sizeof c_p) != 0) {
-    memcpy(c_w, w, sizeof c_w);
-    memcpy(c_p, p, sizeof c_p);
-    simulate(p, w, X, ZG, RG, HG);
-    c_level = 0;
+/* make the workspace's cache valid at (w, p) up to `level` */
+HOT static void roll(gk_ws *ws, const double *w, const double *p, int level) {
+  if (ws->c_level < 0 || memcmp(w, ws->c_w, sizeof ws->c_w) != 0 ||
+      memcmp(p, ws->c_p, sizeof ws->c_p) != 0) {
+    memcpy(ws->c_w, w, sizeof ws->c_w);
+    memcpy(ws->c_p, p, sizeof ws->c_p);
+    simulate(p, w, ws->X, ws->ZG, ws->RG, ws->HG);
+    ws->c_level = 0;
   }
-  if (level >= 1 && c_level < 1) {
-    derivatives();
-    c_level = 1;
+  if (level >= 1 && ws->c_level < 1) {
+    derivatives(ws);
+    ws->c_level = 1;
   }
 }
 

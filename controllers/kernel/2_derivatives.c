@@ -1,5 +1,5 @@
 /* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 1_rollout.c ... 6_sqp.c into one translation unit): f, g, their derivatives and the Hessian of the Lagrangian. */
+ * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): f, g, their derivatives and the Hessian of the Lagrangian. */
 /* ---------------------------------------------------------------- f, g, grad f, jac g */
 /* acc + (v - ref)^T W (v - ref), n <= NX + NU, W row-major n x n (terms added one by one) */
 __attribute__((always_inline)) static inline double add_quad(
@@ -18,16 +18,16 @@ __attribute__((always_inline)) static inline double add_quad(
   return acc;
 }
 
-HOT static double cost(const double *w, const double *p) {
+HOT static double cost(const gk_ws *ws, const double *w, const double *p) {
   const double *xb = p + NX, *ub = p + 2 * NX, t = w[NUU];
   double acc = 0.0;
-  for (int i = 0; i < NH; i++) acc = add_quad(acc, X + i * NX, xb, QW, NX, QDIAG);
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, ws->X + i * NX, xb, QW, NX, QDIAG);
   for (int i = 0; i < NH; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU, 0);
   return acc + SW * t * t;
 }
 
-HOT static void constraints(const double *w, const double *p, double *g) {
-  const double *xb = p + NX, t = w[NUU];
+HOT static void constraints(const gk_ws *ws, const double *w, const double *p, double *g) {
+  const double *xb = p + NX, t = w[NUU], *X = ws->X;
   for (int i = 1; i < NH; i++)
     for (int a = 0; a < NQ; a++) {
       double s = 0.0;
@@ -42,8 +42,8 @@ HOT static void constraints(const double *w, const double *p, double *g) {
   }
 }
 
-HOT static void gradient(const double *w, const double *p, double *grad) {
-  const double *xb = p + NX, *ub = p + 2 * NX;
+HOT static void gradient(const gk_ws *ws, const double *w, const double *p, double *grad) {
+  const double *xb = p + NX, *ub = p + 2 * NX, *X = ws->X, *S = ws->S;
   for (int c = 0; c < NUU; c++) grad[c] = 0.0;
   for (int i = 1; i < NH; i++) {
     double dq[NX];
@@ -69,7 +69,8 @@ HOT static void gradient(const double *w, const double *p, double *grad) {
 }
 
 /* dense column-major NG x NW */
-HOT static void jacobian(double *J) {
+HOT static void jacobian(const gk_ws *ws, double *J) {
+  const double *S = ws->S;
   memset(J, 0, sizeof(double) * NG * NW);
   for (int i = 1; i < NH; i++) {
     const double *Si = S + i * NX * NUU;
@@ -111,9 +112,10 @@ __attribute__((always_inline)) static inline void hessian_finish(double *H, doub
 /* ---------------------------------------------------------------- adjoints */
 /* the local part of the adjoint mu_i = dL/dx_i (1 <= i < N): 2 lf Q (x_i - x_bar) + D' lam_i
  * (lam_i: the multipliers of stage i's output rows), into mu */
-__attribute__((always_inline)) static inline void adjoint_local(int i, const double *xb,
-                                                              double lf, const double *lam,
-                                                              double *mu) {
+__attribute__((always_inline)) static inline void adjoint_local(const gk_ws *ws, int i,
+                                                              const double *xb, double lf,
+                                                              const double *lam, double *mu) {
+  const double *X = ws->X;
   for (int k = 0; k < NX; k++) {
     double s = 0.0;
     for (int j = 0; j < NX; j++) s += (X[i * NX + j] - xb[j]) * QW[j * NX + k];
@@ -127,9 +129,11 @@ __attribute__((always_inline)) static inline void adjoint_local(int i, const dou
  * O(n^2)): gx += A_i' v and, when gu is not NULL, gu = B_i' v. With x+ = h + z (x - h):
  * [A B]' v = J_z' (a v) + J_h' (b v) + [z v; 0], a = (x - h) z (1 - z), b = (1 - z)(1 - h^2),
  * and J_h' y = J_r' (c1 q) + [r q; W_h' y], q = U_h' y, c1 = x r (1 - r). */
-__attribute__((always_inline)) static inline void stage_vjp(int i, const double *v, double *gx,
+__attribute__((always_inline)) static inline void stage_vjp(const gk_ws *ws, int i,
+                                                          const double *v, double *gx,
                                                           double *gu) {
-  const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
+  const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
+               *h = ws->HG + i * NX;
   double av[NX], bv[NX], q[NX], cq[NX];
   for (int k = 0; k < NX; k++) {
     const double zp = z[k] * (1.0 - z[k]), hp = 1.0 - h[k] * h[k];
@@ -159,11 +163,12 @@ __attribute__((always_inline)) static inline void stage_vjp(int i, const double 
 /* ---------------------------------------------------------------- Hessian of the Lagrangian */
 #ifndef GK_CONTRACT
 /* W = grad^2_(x,u) mu^T f(x_i, u_i) of stage i (NV x NV, row-major, symmetric) */
-HOT static void stage_hessian(int i, const double *mu, double *W) {
-  const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
-  const double *jh = JH + i * NX * NV;
+HOT static void stage_hessian(gk_ws *ws, int i, const double *mu, double *W) {
+  const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
+               *h = ws->HG + i * NX;
+  const double *jh = ws->JH + i * NX * NV;
   double v[NX], nu[NX], d1[NX], d2[NX], d3[NX], d4[NX], d5[NX], d6[NX];
-  static double Ph[NX * NV], Pz[NX * NV], Pr[NX * NV], G[NX * NV];
+  double *Ph = ws->Ph, *Pz = ws->Pz, *Pr = ws->Pr, *G = ws->G;
   for (int k = 0; k < NX; k++) {
     const double hp = 1.0 - h[k] * h[k];
     v[k] = mu[k] * (1.0 - z[k]) * hp;
@@ -218,15 +223,16 @@ HOT static void stage_hessian(int i, const double *mu, double *W) {
 }
 
 /* adjoints mu_i = d(Lagrangian)/dx_i, i = N .. 1, into MU */
-__attribute__((always_inline)) static inline void adjoints(const double *p, double lf,
-                                                         const double *lg, double *MU) {
+__attribute__((always_inline)) static inline void adjoints(const gk_ws *ws, const double *p,
+                                                         double lf, const double *lg,
+                                                         double *MU) {
   const double *xb = p + NX;
   const int r0 = (NH - 1) * NQ;
   for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
   for (int i = NH - 1; i >= 1; i--) {
     double *mu = MU + i * NX;
-    const double *mun = MU + (i + 1) * NX, *df = DF + i * NX * NV;
-    adjoint_local(i, xb, lf, lg + (i - 1) * NQ, mu);
+    const double *mun = MU + (i + 1) * NX, *df = ws->DF + i * NX * NV;
+    adjoint_local(ws, i, xb, lf, lg + (i - 1) * NQ, mu);
     for (int j = 0; j < NX; j++) {      /* + A_i^T mu_{i+1} */
       const double mj = mun[j], *dfj = df + j * NV;
       for (int k = 0; k < NX; k++) mu[k] += dfj[k] * mj;
@@ -241,15 +247,15 @@ __attribute__((always_inline)) static inline void adjoints(const double *p, doub
  * and P_i = T_i^xx (the Hessian-to-go of x_i):
  *   H[u_i, u_i] = T_i^uu + 2 R,   H[u_i, u_j] = T_i^ux S_i[:, j]  (j < i).
  * O(N n^3 + N^2 n m^2) instead of W-mode's O(N^2 n^2 m + N^3 n m^2). */
-HOT static void hessian(const double *w, const double *p, double lf, const double *lg, double *H) {
-  static double MU[(NH + 1) * NX];
-  static double T[NV * NV], P[NX * NX], Y[NX * NV];
+HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, const double *lg,
+                        double *H) {
+  double *MU = ws->MU, *T = ws->W, *P = ws->P, *Y = ws->YB;
   (void)w;
-  adjoints(p, lf, lg, MU);
+  adjoints(ws, p, lf, lg, MU);
   memset(H, 0, sizeof(double) * NW * NW);
   for (int i = NH - 1; i >= 0; i--) {
-    const double *df = DF + i * NX * NV;
-    stage_hessian(i, MU + (i + 1) * NX, T);
+    const double *df = ws->DF + i * NX * NV;
+    stage_hessian(ws, i, MU + (i + 1) * NX, T);
     if (i >= 1)
       for (int a = 0; a < NX; a++)
         for (int b = 0; b < NX; b++) T[a * NV + b] += 2.0 * lf * QW[a * NX + b];
@@ -258,7 +264,7 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
       gk_gemm(1, NV, NV, NX, df, NV, Y, NV, T, NV, 1);
     }
     const int K = i * NU;
-    const double *Si = S + i * NX * NUU;
+    const double *Si = ws->S + i * NX * NUU;
     /* (T^ux S_i)^T into the upper triangle: H[u_j, u_i], j < i */
     for (int j = 0; j < NU; j++) {
       const double *tj = T + (NX + j) * NV;
@@ -278,19 +284,19 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
 }
 #else
 /* full Hessian of the Lagrangian, row-major NW x NW (symmetric) */
-HOT static void hessian(const double *w, const double *p, double lf, const double *lg, double *H) {
-  static double MU[(NH + 1) * NX];
-  static double W[NV * NV], Y[NX * NUU];
+HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, const double *lg,
+                        double *H) {
+  double *MU = ws->MU, *W = ws->W, *Y = ws->Y;
   (void)w;
-  adjoints(p, lf, lg, MU);
+  adjoints(ws, p, lf, lg, MU);
   memset(H, 0, sizeof(double) * NW * NW);
   for (int i = 0; i < NH; i++) {
-    stage_hessian(i, MU + (i + 1) * NX, W);
+    stage_hessian(ws, i, MU + (i + 1) * NX, W);
     if (i >= 1)
       for (int a = 0; a < NX; a++)
         for (int b = 0; b < NX; b++) W[a * NV + b] += 2.0 * lf * QW[a * NX + b];
     const int K = i * NU;
-    const double *Si = S + i * NX * NUU;
+    const double *Si = ws->S + i * NX * NUU;
     if (K > 0) {
 #ifdef GK_BLAS_HESS
       rm_gemm(0, 0, NX, K, NX, W, NV, Si, NUU, 0.0, Y, NUU);
@@ -322,24 +328,26 @@ HOT static void hessian(const double *w, const double *p, double lf, const doubl
  *   Z^T W Z = L^T R,  L = [PH; PZ; PR; S; G],  R = [D1 PH - D4 PZ; D3 PZ - D4 PH; D2 PR; G; S]
  * with G = diag(d5) PZ + diag(d6) PR + lf Q S (the T + T^T terms of stage_hessian and the
  * state cost), i.e. the same sums as W-mode, regrouped; 5 n Kc^2 per stage. */
-HOT static void hessian(const double *w, const double *p, double lf, const double *lg, double *H) {
+HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, const double *lg,
+                        double *H) {
   const double *xb = p + NX;
-  static double MU[(NH + 1) * NX];
-  static double L[5 * NX * NUU], R[5 * NX * NUU], QS[NX * NUU];
+  double *MU = ws->MU, *L = ws->L, *R = ws->R, *QS = ws->QS;
   (void)w;
   const int r0 = (NH - 1) * NQ;
   for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
   for (int i = NH - 1; i >= 1; i--) {
     double *mu = MU + i * NX;
-    adjoint_local(i, xb, lf, lg + (i - 1) * NQ, mu);
-    stage_vjp(i, MU + (i + 1) * NX, mu, 0);   /* + A_i^T mu_{i+1} */
+    adjoint_local(ws, i, xb, lf, lg + (i - 1) * NQ, mu);
+    stage_vjp(ws, i, MU + (i + 1) * NX, mu, 0);   /* + A_i^T mu_{i+1} */
   }
   memset(H, 0, sizeof(double) * NW * NW);
   for (int i = 0; i < NH; i++) {
     const double *mu = MU + (i + 1) * NX;
-    const double *x = X + i * NX, *z = ZG + i * NX, *r = RG + i * NX, *h = HG + i * NX;
-    const double *Si = S + i * NX * NUU;
-    const double *pz = PZ + i * NX * NUU, *pr = PR + i * NX * NUU, *ph = PH + i * NX * NUU;
+    const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
+                 *h = ws->HG + i * NX;
+    const double *Si = ws->S + i * NX * NUU;
+    const double *pz = ws->PZ + i * NX * NUU, *pr = ws->PR + i * NX * NUU,
+                 *ph = ws->PH + i * NX * NUU;
     const int K = i * NU, Kc = K + NU;
     double vv[NX], nu[NX];
     for (int k = 0; k < NX; k++) {

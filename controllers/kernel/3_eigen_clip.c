@@ -1,5 +1,5 @@
 /* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 1_rollout.c ... 6_sqp.c into one translation unit): eigenvalue clipping of the Hessian (convex QPs for the SQP). */
+ * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): eigenvalue clipping of the Hessian (convex QPs for the SQP). */
 /* ---------------------------------------------------------------- eigenvalue clipping */
 /* Householder tridiagonalisation + implicit QL (JAMA / EISPACK tred2, tql2). V (n x n,
  * row-major) holds the symmetric matrix on entry, the eigenvectors as ROWS on exit (row j:
@@ -173,21 +173,19 @@ HOT static int pd_shifted(const double *H, int n, double clip, double *L) {
   return 1;
 }
 
-static long n_clipped = 0, n_eig = 0, n_calls = 0, n_evs = 0;
-
 /* eigenvalues of H below CLIP raised to CLIP: H += sum_j (CLIP - ev_j) v_j v_j^T.
  * H (NW x NW, row-major) is block diagonal: the u-block (NUU x NUU) and H[t, t] (the cost
  * s t^2 does not couple t with u, and no constraint is nonlinear in t), so the u-block is
  * decomposed alone; same result as the eigendecomposition of the whole matrix. */
-HOT static int clip_hessian(double *H) {
-  static double V[NUU * NUU], Hu[NUU * NUU], d[NUU], e[NUU];
-  n_calls++;
+HOT static int clip_hessian(gk_ws *ws, double *H) {
+  double *V = ws->V, *Hu = ws->Hu, *d = ws->d;
+  ws->n_calls++;
   if (CLIP < 0) return 0;
   if (H[NUU * NW + NUU] < CLIP) H[NUU * NW + NUU] = CLIP;
   for (int i = 0; i < NUU; i++)
     for (int j = 0; j < NUU; j++) Hu[i * NUU + j] = H[i * NW + j];
   if (pd_shifted(Hu, NUU, CLIP, V)) return 0;
-  n_eig++;
+  ws->n_eig++;
   /* symmetric copy from the lower triangle H[i][j], i >= j (what numpy's eigh reads) */
   for (int i = 0; i < NUU; i++)
     for (int j = 0; j < NUU; j++) V[i * NUU + j] = (j <= i) ? Hu[i * NUU + j] : Hu[j * NUU + i];
@@ -198,28 +196,24 @@ HOT static int clip_hessian(double *H) {
      * MRRR then finds the ~2 clipped pairs without the full QL). Row-major symmetric V =
      * column-major V; eigenvector j comes back as column j of the column-major Z = row j of
      * the row-major one. */
-    static double Z[NUU * NUU], work[26 * NUU];
-    static int iwork[10 * NUU], isuppz[2 * NUU];
     const int nn = NUU, lwork = 26 * NUU, liwork = 10 * NUU, il = 1, iu = NUU;
     const double vl = -1e300, vu = CLIP, abstol = 0.0;
-    static int init = 0;   /* one thread: small problems, and one kernel per campaign worker */
-    if (!init) { openblas_set_num_threads(1); init = 1; }
     int info = 0;
-    dsyevr_("V", "V", "U", &nn, V, &nn, &vl, &vu, &il, &iu, &abstol, &ne, d, Z, &nn, isuppz,
-            work, &lwork, iwork, &liwork, &info);
+    dsyevr_("V", "V", "U", &nn, V, &nn, &vl, &vu, &il, &iu, &abstol, &ne, d, ws->Z, &nn,
+            ws->isuppz, ws->work, &lwork, ws->iwork, &liwork, &info);
     if (info != 0) return -1;
-    memcpy(V, Z, sizeof(double) * NUU * ne);
+    memcpy(V, ws->Z, sizeof(double) * NUU * ne);
   }
 #else
   /* full decomposition (tred2 + tql2): eigenvectors as rows of V. Computing only the
    * eigenpairs below CLIP by hand (QL without vectors + inverse iteration) was measured no
    * faster in closed loop (~2.4 eigenvalues clipped per decomposition) and removed. */
-  if (symm_eig(NUU, V, d, e) != 0) return -1;
+  if (symm_eig(NUU, V, d, ws->e) != 0) return -1;
 #endif
   for (int j = 0; j < ne; j++) {
     if (d[j] >= CLIP) continue;
     any = 1;
-    n_evs++;
+    ws->n_evs++;
     const double a = CLIP - d[j], *vj = V + j * NUU;
     for (int r = 0; r < NUU; r++) {
       const double vr = a * vj[r];
@@ -227,7 +221,7 @@ HOT static int clip_hessian(double *H) {
       for (int c = 0; c < NUU; c++) hr[c] += vr * vj[c];
     }
   }
-  if (any) n_clipped++;
+  if (any) ws->n_clipped++;
   return 0;
 }
 

@@ -1,62 +1,63 @@
 /* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 1_rollout.c ... 6_sqp.c into one translation unit): exported entry points: casadi external functions and a plain C API. */
+ * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): exported entry points: casadi external functions and a plain C API. */
 /* ---------------------------------------------------------------- casadi external API */
 static const casadi_int SP_X[3] = {NW, 1, 1}, SP_P[3] = {NP, 1, 1}, SP_1[3] = {1, 1, 1},
                         SP_G[3] = {NG, 1, 1}, SP_J[3] = {NG, NW, 1}, SP_H[3] = {NW, NW, 1};
 
 #define ARG(i, zero) (arg[i] ? arg[i] : (zero))
 
-EXPORT int PFX(fg)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  TK_START
+static int fg_eval(gk_ws *ws, const double **arg, double **res) {
   const double *x = ARG(0, ZERO_W), *p = ARG(1, ZERO_P);
-  roll(x, p, 0);
-  if (res[0]) res[0][0] = cost(x, p);
-  if (res[1]) constraints(x, p, res[1]);
-  TK_STOP(0)
+  roll(ws, x, p, 0);
+  if (res[0]) res[0][0] = cost(ws, x, p);
+  if (res[1]) constraints(ws, x, p, res[1]);
   return 0;
 }
 
-EXPORT int PFX(jac_fg)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  TK_START
+static int jac_fg_eval(gk_ws *ws, const double **arg, double **res) {
   const double *x = ARG(0, ZERO_W), *p = ARG(1, ZERO_P);
-  roll(x, p, 1);
-  if (res[0]) res[0][0] = cost(x, p);
-  if (res[1]) gradient(x, p, res[1]);
-  if (res[2]) constraints(x, p, res[2]);
-  if (res[3]) jacobian(res[3]);
-  TK_STOP(1)
+  roll(ws, x, p, 1);
+  if (res[0]) res[0][0] = cost(ws, x, p);
+  if (res[1]) gradient(ws, x, p, res[1]);
+  if (res[2]) constraints(ws, x, p, res[2]);
+  if (res[3]) jacobian(ws, res[3]);
   return 0;
 }
 
-HOT static int hess_common(const double **arg, double **res, int clip) {
-  static double Hrm[NW * NW];
+HOT static int hess_eval(gk_ws *ws, const double **arg, double **res, int clip) {
+  double *Hrm = ws->Hrm;
   const double *x = ARG(0, ZERO_W), *p = ARG(1, ZERO_P), *lg = ARG(3, ZERO_G);
   const double lf = arg[2] ? arg[2][0] : 0.0;
   if (!res[0]) return 0;
-  roll(x, p, 1);
-  hessian(x, p, lf, lg, Hrm);
+  roll(ws, x, p, 1);
+  hessian(ws, x, p, lf, lg, Hrm);
   int flag = 0;
-  if (clip) flag = clip_hessian(Hrm);
+  if (clip) flag = clip_hessian(ws, Hrm);
   /* column-major output: H is symmetric up to rounding; write the transpose */
   for (int i = 0; i < NW; i++)
     for (int j = 0; j < NW; j++) res[0][j * NW + i] = Hrm[i * NW + j];
   return flag;
 }
 
-EXPORT int PFX(hess_l)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  TK_START
-  int rc = hess_common(arg, res, 1);
-  TK_STOP(2)
-  return rc;
-}
-
-EXPORT int PFX(hess_raw)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {
-  (void)iw; (void)w; (void)mem;
-  return hess_common(arg, res, 0);
-}
+/* the casadi functions: each call evaluates in a workspace of the pool (0_workspace.c),
+ * timer TIMER of that workspace (GK_TIMERS: fg, jac_fg, hess_l, hess_raw) accumulating its
+ * time */
+#define POOLED_EXTERNAL(F, EVAL, TIMER)                                                      \
+  EXPORT int PFX(F)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {   \
+    (void)iw; (void)w;                                                                        \
+    int slot = 0;                                                                             \
+    gk_ws *ws = pool_take(mem, &slot);                                                        \
+    if (!ws) return 1;                                                                        \
+    TK_START                                                                                  \
+    const int rc = EVAL;                                                                      \
+    TK_STOP(TIMER)                                                                            \
+    pool_give(slot);                                                                          \
+    return rc;                                                                                \
+  }
+POOLED_EXTERNAL(fg, fg_eval(ws, arg, res), 0)
+POOLED_EXTERNAL(jac_fg, jac_fg_eval(ws, arg, res), 1)
+POOLED_EXTERNAL(hess_l, hess_eval(ws, arg, res, 1), 2)
+POOLED_EXTERNAL(hess_raw, hess_eval(ws, arg, res, 0), 3)
 
 /* boilerplate of the casadi external interface for function F with given I/O */
 #define CASADI_BOILERPLATE(F, NIN, NOUT, NAMES_IN, NAMES_OUT, SP_IN, SP_OUT)                  \
@@ -86,7 +87,9 @@ EXPORT int PFX(hess_raw)(const double **arg, double **res, casadi_int *iw, doubl
     if (sz_w) *sz_w = 0;                                                                      \
     return 0;                                                                                 \
   }                                                                                           \
-  EXPORT int PFX(F##_checkout)(void) { return 0; }                                            \
+  EXPORT int PFX(F##_checkout)(void) { /* a pool slot hint per casadi memory */              \
+    return __atomic_fetch_add(&gk_next_mem, 1, __ATOMIC_RELAXED) % GK_POOL;                   \
+  }                                                                                           \
   EXPORT void PFX(F##_release)(int mem) { (void)mem; }                                        \
   EXPORT void PFX(F##_incref)(void) {}                                                        \
   EXPORT void PFX(F##_decref)(void) {}
@@ -102,15 +105,14 @@ CASADI_BOILERPLATE(hess_raw, 4, 1, LIST("x", "p", "lam_f", "lam_g"), LIST("hess_
 
 /* ---------------------------------------------------------------- plain C API (ctypes) */
 /* states x_0..x_N (NH+1 x NX) from x0 under u (NH x NU); does not touch the cache */
-EXPORT void PFX(simulate)(const double *x0, const double *u, double *x) {
-  static double z[NH * NX], r[NH * NX], h[NH * NX];
-  simulate(x0, u, x, z, r, h);
+EXPORT void PFX(simulate)(gk_ws *ws, const double *x0, const double *u, double *x) {
+  simulate(x0, u, x, ws->sz, ws->sr, ws->sh);
 }
 
 /* the solver's trajectory at (w, p): the cached one when (w, p) matches, else a rollout */
-EXPORT void PFX(xtraj)(const double *w, const double *p, double *x) {
-  roll(w, p, 0);
-  memcpy(x, X, sizeof X);
+EXPORT void PFX(xtraj)(gk_ws *ws, const double *w, const double *p, double *x) {
+  roll(ws, w, p, 0);
+  memcpy(x, ws->X, sizeof ws->X);
 }
 
 /* One GRU step x+ = f(x, u) with extra gate inputs dz, dr (the observer eq:observer, as
@@ -133,10 +135,10 @@ EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
  *          with |u| > 1 - 1e-6 (as FHOCP._residuals counts them).
  * bnd: the tightened bounds h - a_i e_o - b_i - w_L - L b_o (NH x NL); alpha the terminal
  * set's radius. */
-static void assess_core(const double *xh, const double *u, const double *xb, const double *ub,
-                        const double *bnd, double alpha, double *x, double *out) {
-  static double z[NH * NX], r[NH * NX], h[NH * NX];
-  simulate(xh, u, x, z, r, h);
+static void assess_core(gk_ws *ws, const double *xh, const double *u, const double *xb,
+                        const double *ub, const double *bnd, double alpha, double *x,
+                        double *out) {
+  simulate(xh, u, x, ws->sz, ws->sr, ws->sh);
   double acc = 0.0;
   for (int i = 0; i < NH; i++) acc = add_quad(acc, x + i * NX, xb, QW, NX, QDIAG);
   for (int i = 0; i < NH; i++) acc = add_quad(acc, u + i * NU, ub, RW, NU, 0);
@@ -173,22 +175,23 @@ static void assess_core(const double *xh, const double *u, const double *xb, con
   out[5] = act;
 }
 
-EXPORT void PFX(assess)(const double *xh, const double *u, const double *xb, const double *ub,
-                        const double *bnd, double alpha, double *x, double *out) {
-  assess_core(xh, u, xb, ub, bnd, alpha, x, out);
+EXPORT void PFX(assess)(gk_ws *ws, const double *xh, const double *u, const double *xb,
+                        const double *ub, const double *bnd, double alpha, double *x,
+                        double *out) {
+  assess_core(ws, xh, u, xb, ub, bnd, alpha, x, out);
 }
 
 /* The check of the solver's answer w at p = (x_hat, x_bar, u_bar): u = clip(w_u, -1, 1)
  * into uc, assess_core of uc into x and out[0..5], and out[6] the defect
  * max |x_solver - x| against the solver's own trajectory at (w, p) (the cached rollout). */
-EXPORT void PFX(assess_w)(const double *w, const double *p, const double *bnd, double alpha,
-                          double *uc, double *x, double *out) {
+EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const double *bnd,
+                          double alpha, double *uc, double *x, double *out) {
   for (int c = 0; c < NUU; c++) uc[c] = w[c] < -1.0 ? -1.0 : (w[c] > 1.0 ? 1.0 : w[c]);
-  assess_core(p, uc, p + NX, p + 2 * NX, bnd, alpha, x, out);
-  roll(w, p, 0);
+  assess_core(ws, p, uc, p + NX, p + 2 * NX, bnd, alpha, x, out);
+  roll(ws, w, p, 0);
   double d = 0.0;
   for (int c = 0; c < (NH + 1) * NX; c++) {
-    const double e = fabs(X[c] - x[c]);
+    const double e = fabs(ws->X[c] - x[c]);
     if (e > d || e != e) d = e;
   }
   out[6] = d;
@@ -272,21 +275,30 @@ EXPORT void PFX(dims)(long *out) {
 
 EXPORT int PFX(n_assess_rows)(void) { return NL; }
 
-EXPORT void PFX(counters)(long *out) {
-  out[0] = n_calls; out[1] = n_eig; out[2] = n_clipped; out[3] = n_evs;
+/* the interface types' layout (controllers/kernel_abi.py checks it at load time) */
+EXPORT void PFX(abi)(long *out) {
+  out[0] = (long)sizeof(gk_sqp_opts);
+  out[1] = (long)sizeof(gk_sqp_info);
+  out[2] = (long)sizeof(gk_ws);
 }
 
-EXPORT void PFX(invalidate)(void) { c_level = -1; }
+/* the workspace's clipping counters (the casadi functions' pool has its own workspaces) */
+EXPORT void PFX(counters)(const gk_ws *ws, long *out) {
+  out[0] = ws->n_calls; out[1] = ws->n_eig; out[2] = ws->n_clipped; out[3] = ws->n_evs;
+}
 
-EXPORT void PFX(timers)(double *out) {
+EXPORT void PFX(invalidate)(gk_ws *ws) { ws->c_level = -1; }
+
+EXPORT void PFX(timers)(const gk_ws *ws, double *out) {
 #ifdef GK_TIMERS
-  for (int i = 0; i < 4; i++) out[i] = tk_acc[i];
+  for (int i = 0; i < 4; i++) out[i] = ws->tk_acc[i];
 #else
+  (void)ws;
   for (int i = 0; i < 4; i++) out[i] = -1.0;
 #endif
 }
 
 /* test hook: clip a symmetric NW x NW row-major matrix in place (block structure assumed:
  * row/column NUU only on the diagonal) */
-EXPORT int PFX(clip)(double *H) { return clip_hessian(H); }
+EXPORT int PFX(clip)(gk_ws *ws, double *H) { return clip_hessian(ws, H); }
 

@@ -1,5 +1,5 @@
 /* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 1_rollout.c ... 6_sqp.c into one translation unit): the QP of one SQP
+ * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): the QP of one SQP
  * iteration, dense and strictly convex, by the dual active-set method of Goldfarb and Idnani
  * (Math. Programming 27, 1983):
  *
@@ -19,13 +19,7 @@
  * of A), k & 1 = 0 the lower side (n = +a, n'd >= lb), 1 the upper side (n = -a, n'd >= -ub).
  * Multipliers are returned in casadi's convention (H d + g + A' lam_a + lam_x = 0: positive
  * at an active upper bound, negative at an active lower one). */
-#define QP_NC (2 * (NW + NG))
 #define QP_INF 1e300
-
-static double qL[NW * NW], qJ[NW * NW], qR[NW * NW];
-static double qd[NW], qz[NW], qr[NW], qu[NW + 1], qn[NW], qax[NG];
-static int qact[NW + 1];
-static unsigned char qin[QP_NC];
 
 /* the normal n and right-hand side b of one-sided constraint k (A column-major NG x NW) */
 static void qp_normal(int k, const double *A, const double *lbx, const double *ubx,
@@ -51,17 +45,23 @@ static inline void qp_rotate(double *a, double *b, double c, double s) {
   }
 }
 
-/* Returns 0 optimal, 1 infeasible, 2 working-set change limit, 3 H not positive definite.
- * d, lam_x (NW), lam_a (NG) written; *changes: working-set changes made. */
-HOT static int qp_solve(const double *H, const double *g, const double *A, const double *lbx,
-                        const double *ubx, const double *lba, const double *uba, double *d,
-                        double *lam_x, double *lam_a, int *changes) {
+/* Returns a gk_qp_status (GK_QP_OPTIMAL, _INFEASIBLE, _CHANGE_LIMIT, _NOT_POSITIVE_DEFINITE).
+ * d, lam_x (NW), lam_a (NG) written; *changes: working-set changes made. The factors and the
+ * working set live in the workspace ws. */
+HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const double *A,
+                        const double *lbx, const double *ubx, const double *lba,
+                        const double *uba, double *d, double *lam_x, double *lam_a,
+                        int *changes) {
+  double *qL = ws->qL, *qJ = ws->qJ, *qR = ws->qR, *qd = ws->qd, *qz = ws->qz, *qr = ws->qr,
+         *qu = ws->qu, *qn = ws->qn, *qax = ws->qax;
+  int *qact = ws->qact;
+  unsigned char *qin = ws->qin;
   const int limit = 10 * (NW + NG);
-  int status = 0, q = 0, it = 0;
+  int status = GK_QP_OPTIMAL, q = 0, it = 0;
   *changes = 0;
-  memset(qin, 0, sizeof qin);
+  memset(qin, 0, sizeof ws->qin);
   /* H = L L' (row-major lower L; 3_eigen_clip.c's Cholesky, unshifted) */
-  if (!pd_shifted(H, NW, 0.0, qL)) { status = 3; goto done; }
+  if (!pd_shifted(H, NW, 0.0, qL)) { status = GK_QP_NOT_POSITIVE_DEFINITE; goto done; }
   /* M = L^-1 row by row; column j of J = L^-T is row j of M */
   for (int i = 0; i < NW; i++) {
     double *Mi = qJ + i * NW;
@@ -95,7 +95,7 @@ HOT static int qp_solve(const double *H, const double *g, const double *A, const
       if (!qin[2 * i] && lbx[i] > -QP_INF && d[i] - lbx[i] < smin) { smin = d[i] - lbx[i]; p = 2 * i; }
       if (!qin[2 * i + 1] && ubx[i] < QP_INF && ubx[i] - d[i] < smin) { smin = ubx[i] - d[i]; p = 2 * i + 1; }
     }
-    memset(qax, 0, sizeof qax);
+    memset(qax, 0, sizeof ws->qax);
     for (int j = 0; j < NW; j++) {
       const double *Aj = A + j * NG, c = d[j];
       for (int r = 0; r < NG; r++) qax[r] += Aj[r] * c;
@@ -110,7 +110,7 @@ HOT static int qp_solve(const double *H, const double *g, const double *A, const
     qp_normal(p, A, lbx, ubx, lba, uba, qn, &bp);
     qu[q] = 0.0;
     for (;;) {   /* add p, dropping active constraints on the way */
-      if (++it > limit) { status = 2; goto done; }
+      if (++it > limit) { status = GK_QP_CHANGE_LIMIT; goto done; }
       if ((p >> 1) < NW) {   /* a bound: J' n is a row of J */
         const int i = p >> 1;
         const double sg = (p & 1) ? -1.0 : 1.0;
@@ -129,7 +129,7 @@ HOT static int qp_solve(const double *H, const double *g, const double *A, const
       for (int j = q; j < NW; j++) zn += qd[j] * qd[j];   /* = z'n */
       const int dependent = !(zn > 1e-24 * dd);
       if (!dependent) {
-        memset(qz, 0, sizeof qz);
+        memset(qz, 0, sizeof ws->qz);
         for (int j = q; j < NW; j++) {
           const double *Jj = qJ + j * NW, c = qd[j];
           for (int i = 0; i < NW; i++) qz[i] += Jj[i] * c;
@@ -148,7 +148,7 @@ HOT static int qp_solve(const double *H, const double *g, const double *A, const
       for (int i = 0; i < NW; i++) s += qn[i] * d[i];
       const double t2 = dependent ? INFINITY : -s / zn;
       const double t = t1 < t2 ? t1 : t2;
-      if (!(t < INFINITY)) { status = 1; goto done; }
+      if (!(t < INFINITY)) { status = GK_QP_INFEASIBLE; goto done; }
       for (int k = 0; k < q; k++) qu[k] -= t * qr[k];
       qu[q] += t;
       if (!dependent) {
@@ -207,9 +207,9 @@ done:
 }
 
 /* test hook: one QP of this kernel's dimensions (H row-major NW x NW, A column-major NG x NW,
- * bounds +-1e300 or beyond for none); returns qp_solve's status */
-EXPORT int PFX(qp)(const double *H, const double *g, const double *A, const double *lbx,
-                   const double *ubx, const double *lba, const double *uba, double *d,
-                   double *lam_x, double *lam_a, int *changes) {
-  return qp_solve(H, g, A, lbx, ubx, lba, uba, d, lam_x, lam_a, changes);
+ * bounds +-1e300 or beyond for none) in workspace ws; returns qp_solve's status */
+EXPORT int PFX(qp)(gk_ws *ws, const double *H, const double *g, const double *A,
+                   const double *lbx, const double *ubx, const double *lba, const double *uba,
+                   double *d, double *lam_x, double *lam_a, int *changes) {
+  return qp_solve(ws, H, g, A, lbx, ubx, lba, uba, d, lam_x, lam_a, changes);
 }

@@ -73,7 +73,7 @@ def test_kernel_matches_the_numpy_derivatives(n: int, N: int, mode: str,
         assert rel(k.external("hess_l")(w, p, 1.0, lg),
                    nlp.hessian_convex(w, p, np.array([1.0]), lg)[0]) < 1e-12
         u = w[:-1].reshape(N, fh.m)
-        assert rel(k.simulate(p[:n], u), nlp.shoot.rollout(p[:n], u).x) < 1e-13
+        assert rel(k.workspace().simulate(p[:n], u), nlp.shoot.rollout(p[:n], u).x) < 1e-13
 
 
 def test_the_variant_follows_the_flop_model(monkeypatch: pytest.MonkeyPatch) -> None:
@@ -178,8 +178,9 @@ def test_answer_check_and_observer_step_match_numpy(n: int, N: int) -> None:
     from controllers.fhocp import FHOCPResult
 
     fh = random_fhocp(n, N, seed=3 * n + N, kernel="numpy")
-    k = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo)
-    assert k is not None and k.nl == fh.q, ck.last_error
+    lib = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo)
+    assert lib is not None and lib.nl == fh.q, ck.last_error
+    k = lib.workspace()
     rng = np.random.default_rng(7)
     seen = set()
     for _ in range(40):

@@ -4,8 +4,6 @@ its FHOCP solves against casadi ``sqpmethod`` from the same starts."""
 
 from __future__ import annotations
 
-import ctypes
-
 import casadi as ca
 import numpy as np
 import pytest
@@ -14,12 +12,13 @@ from controllers import compiled_kernel as ck
 from controllers.casadi_callbacks import quiet_stdout
 from controllers.errors import DesignError
 from controllers.fhocp import FHOCP
+from controllers.kernel_abi import QpStatus
 from controllers.kernel_sqp import KernelSQP
 from tests.controllers.test_compiled_kernel import needs_cc, random_fhocp, same_start_solves
 
 
 @pytest.fixture(scope="module")
-def kernel() -> ck.Kernel:
+def kernel() -> ck.Workspace:
     """A small kernel (n = 5, N = 6): the QP's dimensions nw = 13, ng = 20."""
     fh = random_fhocp(5, 6, seed=3)
     assert fh.kernel is not None, fh.kernel_error
@@ -83,14 +82,14 @@ def kkt_residuals(q: dict, d: np.ndarray, lx: np.ndarray, la: np.ndarray) -> dic
 
 @needs_cc
 @pytest.mark.parametrize("dependent", [False, True])
-def test_qp_meets_kkt_and_agrees_with_qpoases(kernel: ck.Kernel, dependent: bool) -> None:
+def test_qp_meets_kkt_and_agrees_with_qpoases(kernel: ck.Workspace, dependent: bool) -> None:
     rng = np.random.default_rng(11 + dependent)
     active = 0
     for _ in range(25):
         q = random_qp(rng, kernel.nw, kernel.ng, dependent)
         status, d, lx, la, changes = kernel.qp(q["h"], q["g"], q["a"], q["lbx"], q["ubx"],
                                                q["lba"], q["uba"])
-        assert status == 0
+        assert status == QpStatus.OPTIMAL
         res = kkt_residuals(q, d, lx, la)
         assert res["stationarity"] < 1e-9 and res["feasibility"] < 1e-9, res
         assert res["sign"] == 0.0 and res["complementarity"] < 1e-9, res
@@ -101,30 +100,30 @@ def test_qp_meets_kkt_and_agrees_with_qpoases(kernel: ck.Kernel, dependent: bool
 
 
 @needs_cc
-def test_qp_reports_infeasibility_and_an_indefinite_hessian(kernel: ck.Kernel) -> None:
+def test_qp_reports_infeasibility_and_an_indefinite_hessian(kernel: ck.Workspace) -> None:
     q = random_qp(np.random.default_rng(5), kernel.nw, kernel.ng)
     q["a"][1] = q["a"][0]
     q["lba"][0], q["uba"][0] = 0.0, 1.0
     q["lba"][1], q["uba"][1] = 2.0, 3.0        # the same row in two disjoint intervals
-    assert kernel.qp(q["h"], q["g"], q["a"], q["lbx"], q["ubx"], q["lba"], q["uba"])[0] == 1
+    assert kernel.qp(q["h"], q["g"], q["a"], q["lbx"], q["ubx"], q["lba"], q["uba"])[0] == \
+        QpStatus.INFEASIBLE
     q = random_qp(np.random.default_rng(6), kernel.nw, kernel.ng)
     q["h"][0, 0] = -1.0
-    assert kernel.qp(q["h"], q["g"], q["a"], q["lbx"], q["ubx"], q["lba"], q["uba"])[0] == 3
+    assert kernel.qp(q["h"], q["g"], q["a"], q["lbx"], q["ubx"], q["lba"], q["uba"])[0] == \
+        QpStatus.NOT_POSITIVE_DEFINITE
 
 
 @needs_cc
-def test_lagrangian_gradient_by_adjoints_matches_the_jacobian(kernel: ck.Kernel) -> None:
+def test_lagrangian_gradient_by_adjoints_matches_the_jacobian(kernel: ck.Workspace) -> None:
     """The stopping test's ∇L (one adjoint sweep through the GRU stages) is ∇f + Jᵀλ_g + λ_x
     of the explicit derivatives."""
     rng = np.random.default_rng(2)
     jac = kernel.external("jac_fg")
-    fn = kernel._fn("grad_l")
     for _ in range(5):
         w = rng.uniform(-1, 1, kernel.nw)
         p = rng.normal(scale=0.5, size=kernel.npar)
         lx, lg = rng.normal(size=kernel.nw), rng.normal(size=kernel.ng)
-        out = np.zeros(kernel.nw)
-        fn(*(a.ctypes.data_as(ctypes.POINTER(ctypes.c_double)) for a in (w, p, lx, lg, out)))
+        out = kernel.grad_l(w, p, lx, lg)
         _, gf, _, J = (np.array(v) for v in jac(w, p))
         expected = gf.ravel() + J.T @ lg + lx
         assert np.max(np.abs(out - expected)) < 1e-12 * max(1.0, np.max(np.abs(expected)))

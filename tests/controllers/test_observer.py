@@ -62,7 +62,7 @@ def test_observer_with_the_compiled_step_implements_eq_observer() -> None:
     Lz, Lr = rng.normal(0, 0.3, (6, 2)), rng.normal(0, 0.3, (6, 2))
     x0 = rng.uniform(-1, 1, 6)
     obs = GRUObserver(p, Lz, Lr, x0=x0)
-    obs.kernel = k
+    obs.kernel = k.workspace()
     xh = x0.copy()
     for _ in range(30):
         u, y = rng.uniform(-1, 1, 2), rng.uniform(-1, 1, 2)

@@ -1,0 +1,178 @@
+/* Compiled derivative kernel of the single-shooting FHOCP (controllers.fhocp, eq:optimization).
+ *
+ * The generated header above this line defines the dimensions (NX states, NU inputs, NY
+ * outputs, NH horizon stages, NQ reduced output-constraint rows), the GRU weights (row-major,
+ * eq:gru; U^T copies for column-oriented mat-vecs, J_z = [U_z W_z], J_r = [U_r W_r]), the cost
+ * weights QW (NX x NX, QDIAG when diagonal), RW (NU x NU), SW (s), the reduced constraint rows
+ * DUO (NQ x NX), the eigenvalue clipping margin CLIP (< 0: no clipping), PFX(name), the
+ * symbol prefix (a hash of the source: several kernels can live in one process), and the
+ * interface types shared with Python (controllers/kernel_abi.py: gk_sqp_opts, gk_sqp_info,
+ * the gk_sqp_status and gk_qp_status enums), generated from their one definition there.
+ *
+ * Decision variables w = (u_0 .. u_{N-1}, t) (NW = NH*NU + 1), parameters p = (x_hat, x_bar,
+ * u_bar) (NP = 2 NX + NU). Same mathematics as controllers/shooting.py (GRUShooting.rollout,
+ * stage_hessians) and controllers/nlp_single_shooting.py (SingleShootingNLP.objective,
+ * constraints, gradient, jacobian, hessian, hessian_convex) -- see there for the formulas;
+ * checked against them to ~1e-14 (tests/controllers/test_compiled_kernel.py).
+ *
+ * Build-time variants (macros, chosen by controllers/compiled_kernel.py):
+ *   (default)        W-mode: explicit J_h, [A B] and stage Hessians W_i, then Z_i^T W_i Z_i
+ *                    (as numpy); best for n <~ N m.
+ *   GK_CONTRACT      contracted mode: J_z Z_i, J_r Z_i, J_h Z_i carried forward instead of
+ *                    J_h and A_i; O(N^2 n^2 m) instead of O(N n^3); best for large n.
+ *   GK_BACKWARD      W-mode with the Hessian condensed backward (long horizons).
+ *   GK_BLAS          the n x n x (n+m) / n x n x K products through dgemm (casadi's OpenBLAS).
+ *   GK_LAPACK_EIG    eigenvalue clipping with LAPACK dsyevr (only the eigenpairs below the
+ *                    margin) instead of tred2/tql2 (all of them).
+ *   GK_TIMERS        in-kernel wall-clock accumulators (PFX(timers)).
+ *   GK_NO_CLONES     no AVX2/FMA function clones (target_clones) on x86-64.
+ *
+ * State: everything a call writes lives in one workspace, gk_ws (this file), as acados keeps
+ * one memory struct per solver and the Reference-FMUs one ModelInstance per instance: the
+ * rollout cache, the derivatives, the Hessian's, the eigenvalue clipping's, the QP's and the
+ * SQP's scratch, and the counters. There is no file-level mutable state (only constants and
+ * the CPU feature flags set once at load time), so two FHOCPs of one problem in one process,
+ * each with its own workspace (PFX(ws_new)), may solve concurrently from two threads and get
+ * the same answers as one after the other. The rollout cache of a workspace is keyed by the
+ * full (w, p): the f/g, Jacobian and Hessian evaluations at the same point share it.
+ *
+ * Exported: casadi external functions (casadi's codegen calling convention) PFX(fg),
+ * PFX(jac_fg), PFX(hess_l) (clipped), PFX(hess_raw) (unclipped), which take a workspace from
+ * a pool for the duration of each call (below); and plain C entry points for ctypes, each
+ * taking its workspace first: PFX(simulate), PFX(xtraj), PFX(assess), PFX(assess_w),
+ * PFX(clip), PFX(counters), PFX(invalidate), PFX(timers), PFX(grad_l), PFX(qp) (a test hook)
+ * and the SQP of the FHOCP in one call, PFX(sqp) (6_sqp.c, with the QP of 5_qp.c); the pure
+ * functions PFX(gru_step) and PFX(eq_newton) need none. PFX(ws_new), PFX(ws_free) create and
+ * free workspaces, PFX(dims) and PFX(abi) describe the library. The answer check (assess) also
+ * needs NL and LUO (NL x NX), the full output-constraint rows L U_o.
+ */
+#include <math.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sched.h>
+#ifdef GK_TIMERS
+#include <time.h>
+static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
+#define TK_START double tk0_ = tk_now();
+#define TK_STOP(i) ws->tk_acc[i] += tk_now() - tk0_;
+#else
+#define TK_START
+#define TK_STOP(i)
+#endif
+
+#define NV (NX + NU)
+#define NUU (NH * NU)
+#define NW (NUU + 1)
+#define NG ((NH - 1) * NQ + 2 * NX)
+#define NP (2 * NX + NU)
+#define QP_NC (2 * (NW + NG))   /* one-sided constraints of the QP (5_qp.c) */
+#define EXPORT __attribute__((visibility("default")))
+#define A32 __attribute__((aligned(32)))
+/* hot entry points get an AVX2/FMA clone selected at load time (ifunc), portable otherwise */
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 11 && \
+    !defined(GK_NO_CLONES)
+#define HOT __attribute__((target_clones("arch=x86-64-v3", "default")))
+#else
+#define HOT
+#endif
+
+typedef long long int casadi_int;
+
+/* ---------------------------------------------------------------- the workspace */
+typedef struct gk_ws {
+  /* the cached rollout at (c_w, c_p) (1_rollout.c: roll) */
+  int c_level;                           /* -1 empty, 0 states, 1 states + derivatives */
+  double c_w[NW], c_p[NP];
+  A32 double X[(NH + 1) * NX];           /* states x_0 .. x_N */
+  A32 double ZG[NH * NX], RG[NH * NX], HG[NH * NX];   /* gates z, r, h per stage */
+#ifndef GK_CONTRACT
+  A32 double JH[NH * NX * NV];           /* J_h per stage */
+  A32 double DF[NH * NX * NV];           /* [A_i B_i] per stage */
+#else
+  /* contracted mode: J_z Z_i, J_r Z_i, J_h Z_i per stage (NX x NUU, first (i+1) NU columns) */
+  A32 double PZ[NH * NX * NUU], PR[NH * NX * NUU], PH[NH * NX * NUU];
+  A32 double T[NX * NUU];                /* derivatives' scratch */
+#endif
+  A32 double S[(NH + 1) * NX * NUU];     /* S_i = dx_i/du, NX x NUU row-major; cols >= i NU 0 */
+  /* the Hessian of the Lagrangian (2_derivatives.c) */
+  A32 double MU[(NH + 1) * NX];          /* adjoints */
+#ifndef GK_CONTRACT
+  A32 double Ph[NX * NV], Pz[NX * NV], Pr[NX * NV], G[NX * NV];   /* stage_hessian */
+  A32 double W[NV * NV], Y[NX * NUU];    /* one stage's W_i and W_i,xx S_i */
+#ifdef GK_BACKWARD
+  A32 double P[NX * NX], YB[NX * NV];    /* the Hessian-to-go, P D_f */
+#endif
+#else
+  A32 double L[5 * NX * NUU], R[5 * NX * NUU], QS[NX * NUU];
+#endif
+  /* plain rollouts (PFX(simulate), assess): the gates, not kept */
+  A32 double sz[NH * NX], sr[NH * NX], sh[NH * NX];
+  A32 double Hrm[NW * NW];               /* the casadi Hessian's row-major copy */
+  /* eigenvalue clipping (3_eigen_clip.c) */
+  A32 double V[NUU * NUU], Hu[NUU * NUU];
+  double d[NUU], e[NUU];
+#ifdef GK_LAPACK_EIG
+  A32 double Z[NUU * NUU], work[26 * NUU];
+  int iwork[10 * NUU], isuppz[2 * NUU];
+#endif
+  long n_calls, n_eig, n_clipped, n_evs; /* clipping counters (PFX(counters)) */
+  /* the QP (5_qp.c) */
+  A32 double qL[NW * NW], qJ[NW * NW], qR[NW * NW];
+  double qd[NW], qz[NW], qr[NW], qu[NW + 1], qn[NW], qax[NG];
+  int qact[NW + 1];
+  unsigned char qin[QP_NC];
+  /* the SQP (6_sqp.c) */
+  A32 double sq_J[NG * NW], sq_H[NW * NW];
+  double sq_gf[NW], sq_gz[NG], sq_gl[NW], sq_lbx[NW], sq_ubx[NW], sq_lba[NG], sq_uba[NG],
+      sq_dw[NW], sq_lx[NW], sq_la[NG], sq_wc[NW], sq_gc[NG];
+#ifdef GK_TIMERS
+  double tk_acc[4];
+#endif
+} gk_ws;
+
+static void ws_reset(gk_ws *ws) {
+  memset(ws, 0, sizeof *ws);
+  ws->c_level = -1;
+}
+
+/* a new workspace (NULL when out of memory); free it with PFX(ws_free) */
+EXPORT gk_ws *PFX(ws_new)(void) {
+  void *mem = 0;
+  if (posix_memalign(&mem, 64, sizeof(gk_ws)) != 0) return 0;
+  ws_reset((gk_ws *)mem);
+  return (gk_ws *)mem;
+}
+
+EXPORT void PFX(ws_free)(gk_ws *ws) { free(ws); }
+
+/* ---------------------------------------------------------------- the casadi functions' pool
+ * casadi calls an external function with its own memory index (PFX(F_checkout)), which
+ * cannot carry a workspace of the caller's. Each call of PFX(fg), PFX(jac_fg), PFX(hess_l)
+ * therefore takes a free workspace from this pool for its duration, trying the slot of its
+ * memory index first (so that the evaluations of one solver land in one workspace and share
+ * its rollout cache), and gives it back on return. A cache keyed by the full (w, p) makes any
+ * workspace right for any call; two concurrent calls never share one. */
+#define GK_POOL 64
+static gk_ws *gk_pool[GK_POOL];
+static unsigned char gk_busy[GK_POOL];
+static int gk_next_mem = 0;
+
+static gk_ws *pool_take(int hint, int *slot) {
+  const int h = hint >= 0 ? hint % GK_POOL : 0;
+  for (;;) {
+    for (int t = 0; t < GK_POOL; t++) {
+      const int i = (h + t) % GK_POOL;
+      if (__atomic_test_and_set(&gk_busy[i], __ATOMIC_ACQUIRE)) continue;
+      if (!gk_pool[i]) gk_pool[i] = PFX(ws_new)();   /* slot i is ours: no race */
+      if (!gk_pool[i]) {
+        __atomic_clear(&gk_busy[i], __ATOMIC_RELEASE);
+        return 0;
+      }
+      *slot = i;
+      return gk_pool[i];
+    }
+    sched_yield();   /* more than GK_POOL concurrent calls: wait for one to end */
+  }
+}
+
+static void pool_give(int slot) { __atomic_clear(&gk_busy[slot], __ATOMIC_RELEASE); }

@@ -1,0 +1,130 @@
+"""The compiled kernel's interface types, defined once for C and Python.
+
+The kernel's SQP (``controllers/kernel/6_sqp.c``) takes its options and returns its counts
+and timers as named C structs, and reports its outcome, and its QP's, as named enums. Each is
+declared here once, as a :mod:`ctypes` structure or an :class:`~enum.IntEnum`, and
+:func:`c_declarations` writes the matching C ``typedef``/``enum`` into every generated kernel
+source (:func:`controllers.compiled_kernel.generate_source`), so that the two sides cannot
+disagree on a field's position or a status's value (acados shares its option and status
+names between C and Python in the same spirit). :func:`check_layout` compares the sizes the
+compiler chose with ctypes' when a library is loaded.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from enum import IntEnum
+from typing import Any
+
+__all__ = ["QpStatus", "SqpInfo", "SqpOptions", "SqpStatus", "c_declarations", "check_layout"]
+
+
+class SqpOptions(ctypes.Structure):
+    """The SQP's options (C ``gk_sqp_opts``): casadi ``sqpmethod``'s meanings.
+
+    Attributes
+    ----------
+    tol_pr, tol_du : float
+        Primal infeasibility and dual (∇L ∞-norm) tolerances of the stopping test.
+    max_iter : int
+        Iteration limit.
+    max_iter_ls : int
+        Line-search trials per iteration (0: full steps).
+    min_step_size : float
+        The step ‖Δw‖∞ at or below which the iteration stops (after the first).
+    c1, beta : float
+        Armijo constant and backtracking factor of the ℓ1-merit line search.
+    time_budget : float
+        Wall-time budget of one solve [s] (``inf``: none).
+    """
+
+    _fields_ = [("tol_pr", ctypes.c_double), ("tol_du", ctypes.c_double),
+                ("max_iter", ctypes.c_int), ("max_iter_ls", ctypes.c_int),
+                ("min_step_size", ctypes.c_double), ("c1", ctypes.c_double),
+                ("beta", ctypes.c_double), ("time_budget", ctypes.c_double)]
+
+
+class SqpInfo(ctypes.Structure):
+    """What one SQP solve reports (C ``gk_sqp_info``).
+
+    Attributes
+    ----------
+    status : int
+        A :class:`SqpStatus`.
+    iterations, qp_working_set_changes, line_search_failures : int
+    t_qp, t_hessian, t_derivatives, t_line_search : float
+        Seconds in the QPs, the Hessians (eigenvalue clipping included), f/∇f/g/∂g (the
+        stopping tests' and the iterations') and the line searches' f/g.
+    """
+
+    _fields_ = [("status", ctypes.c_int), ("iterations", ctypes.c_int),
+                ("qp_working_set_changes", ctypes.c_int),
+                ("line_search_failures", ctypes.c_int),
+                ("t_qp", ctypes.c_double), ("t_hessian", ctypes.c_double),
+                ("t_derivatives", ctypes.c_double), ("t_line_search", ctypes.c_double)]
+
+
+class SqpStatus(IntEnum):
+    """How an SQP solve ended (C ``enum gk_sqp_status``, ``GK_SQP_<NAME>``); casadi
+    ``sqpmethod``'s return statuses (:attr:`casadi_name`)."""
+
+    SOLVE_SUCCEEDED = 0
+    MAXIMUM_ITERATIONS_EXCEEDED = 1
+    SEARCH_DIRECTION_BECOMES_TOO_SMALL = 2
+    QP_INFEASIBLE = 3
+    #: the QP hit its working-set change limit or H was not positive definite
+    QP_FAILED = 4
+    #: the time budget ran out (:class:`controllers.fhocp.FHOCP` reports
+    #: ``"time_budget_exceeded"``, as for casadi's loop)
+    USER_REQUESTED_STOP = 5
+
+    @property
+    def casadi_name(self) -> str:
+        """The name casadi ``sqpmethod`` gives this outcome (``"Solve_Succeeded"``, …)."""
+        return _CASADI_NAMES[self]
+
+
+_CASADI_NAMES = {
+    SqpStatus.SOLVE_SUCCEEDED: "Solve_Succeeded",
+    SqpStatus.MAXIMUM_ITERATIONS_EXCEEDED: "Maximum_Iterations_Exceeded",
+    SqpStatus.SEARCH_DIRECTION_BECOMES_TOO_SMALL: "Search_Direction_Becomes_Too_Small",
+    SqpStatus.QP_INFEASIBLE: "QP_Infeasible",
+    SqpStatus.QP_FAILED: "QP_Failed",
+    SqpStatus.USER_REQUESTED_STOP: "User_Requested_Stop",
+}
+
+
+class QpStatus(IntEnum):
+    """How the kernel's QP ended (C ``enum gk_qp_status``, ``GK_QP_<NAME>``)."""
+
+    OPTIMAL = 0
+    INFEASIBLE = 1
+    #: the working-set change limit, 10 (nw + ng), was reached
+    CHANGE_LIMIT = 2
+    NOT_POSITIVE_DEFINITE = 3
+
+
+_C_TYPES = {ctypes.c_double: "double", ctypes.c_int: "int"}
+_STRUCTS: tuple[tuple[str, Any], ...] = (("gk_sqp_opts", SqpOptions), ("gk_sqp_info", SqpInfo))
+_ENUMS: tuple[tuple[str, str, Any], ...] = (("gk_sqp_status", "GK_SQP_", SqpStatus),
+                                            ("gk_qp_status", "GK_QP_", QpStatus))
+
+
+def c_declarations() -> str:
+    """The C declarations of every type above (part of each generated kernel source)."""
+    out = ["/* interface types, generated from controllers/kernel_abi.py */\n"]
+    for cname, struct in _STRUCTS:
+        fields = " ".join(f"{_C_TYPES[t]} {name};" for name, t in struct._fields_)
+        out.append(f"typedef struct {cname} {{ {fields} }} {cname};\n")
+    for cname, prefix, enum in _ENUMS:
+        members = ", ".join(f"{prefix}{m.name} = {int(m)}" for m in enum)
+        out.append(f"enum {cname} {{ {members} }};\n")
+    return "".join(out)
+
+
+def check_layout(sizes: tuple[int, int]) -> None:
+    """Raise :class:`OSError` when the library's ``sizeof(gk_sqp_opts)``,
+    ``sizeof(gk_sqp_info)`` differ from ctypes' (a compiler with another ABI)."""
+    ours = (ctypes.sizeof(SqpOptions), ctypes.sizeof(SqpInfo))
+    if tuple(sizes) != ours:
+        raise OSError(f"interface struct sizes {tuple(sizes)} differ from ctypes' {ours}")

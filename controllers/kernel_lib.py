@@ -1,0 +1,265 @@
+"""A loaded compiled kernel (:class:`Kernel`) and its per-instance workspaces (:class:`Workspace`).
+
+A kernel library (:func:`controllers.compiled_kernel.build`) holds only code and constants;
+everything a call writes lives in a C workspace (``gk_ws``, ``controllers/kernel/0_workspace.c``)
+that the caller passes first. One :class:`Kernel` per library and process, shared by every
+FHOCP of the same problem; one :class:`Workspace` per FHOCP instance, holding its C workspace
+and the argument buffers of its calls (numpy arrays whose addresses are taken once). Two
+FHOCPs with their own workspaces may therefore solve concurrently from two threads (ctypes
+releases the GIL during each call) and get the same answers as one after the other; one
+workspace must not be used by two threads at once (an FHOCP is not, either).
+
+The casadi ``external`` functions of a library (:meth:`Kernel.external`, the ``"casadi"``
+SQP loop) take a workspace from a pool inside the library for each call.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import weakref
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controllers.kernel_abi import QpStatus, SqpInfo, SqpOptions, SqpStatus, check_layout
+
+__all__ = ["Kernel", "Workspace"]
+
+_VP, _CD, _CI = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
+#: ctypes signatures of the entry points taking a workspace first: (arguments after it, result)
+_WS_CALLS: dict[str, tuple[list[Any], Any]] = {
+    "simulate": ([_VP] * 3, None), "xtraj": ([_VP] * 3, None),
+    "assess": ([_VP] * 5 + [_CD, _VP, _VP], None),
+    "assess_w": ([_VP, _VP, _VP, _CD, _VP, _VP, _VP], None),
+    "sqp": ([_VP] * 12, _CI), "qp": ([_VP] * 11, _CI), "grad_l": ([_VP] * 5, None),
+    "counters": ([_VP], None), "invalidate": ([], None), "clip": ([_VP], _CI)}
+
+
+class Kernel:
+    """A loaded kernel library: its dimensions, its entry points and casadi external
+    functions; :meth:`workspace` gives each user its own C state."""
+
+    def __init__(self, path: Path, prefix: str) -> None:
+        self.path = Path(path)
+        self.prefix = prefix
+        self.lib = ctypes.CDLL(str(self.path))
+        dims = (ctypes.c_long * 7)()
+        self._fn("dims")(dims)
+        self.n, self.m, self.N, self.q, self.nw, self.ng, self.npar = list(dims)
+        abi = (ctypes.c_long * 3)()
+        self._fn("abi")(abi)
+        check_layout((abi[0], abi[1]))
+        self.workspace_bytes = int(abi[2])
+        self.nl = int(self._fn("n_assess_rows")())
+        self.flags: tuple[str, ...] = ()
+        self._externals: dict[str, Any] = {}
+        self.c: dict[str, Any] = {}
+        for name, (args, rest) in _WS_CALLS.items():
+            f = self._fn(name)
+            f.argtypes, f.restype = [_VP, *args], rest
+            self.c[name] = f
+        f = self._fn("gru_step")
+        f.argtypes, f.restype = [_VP] * 5, None
+        self.c["gru_step"] = f
+        if hasattr(self.lib, prefix + "eq_newton"):
+            f = self._fn("eq_newton")
+            f.argtypes, f.restype = [_VP, _VP, _VP, _CI, _CD, _VP, _VP], _CI
+            self.c["eq_newton"] = f
+        self.c["ws_new"] = self._fn("ws_new")
+        self.c["ws_new"].argtypes, self.c["ws_new"].restype = [], _VP
+        self.c["ws_free"] = self._fn("ws_free")
+        self.c["ws_free"].argtypes, self.c["ws_free"].restype = [_VP], None
+
+    def _fn(self, name: str) -> Any:
+        return getattr(self.lib, self.prefix + name)
+
+    def external(self, name: str) -> Any:
+        """casadi Function ``name`` in {"fg", "jac_fg", "hess_l", "hess_raw"} (loaded once;
+        each call evaluates in a workspace of the library's pool)."""
+        if name not in self._externals:
+            import casadi as ca
+
+            self._externals[name] = ca.external(self.prefix + name, str(self.path))
+        return self._externals[name]
+
+    def workspace(self) -> Workspace:
+        """A new workspace: the C state and argument buffers of one user (one FHOCP)."""
+        return Workspace(self)
+
+
+class Workspace:
+    """One user's C workspace of a :class:`Kernel` and the argument buffers of its calls.
+
+    Every method writes only this workspace (and the arrays it returns), so workspaces of
+    one kernel may be used from several threads at once, one thread per workspace. The C
+    memory is freed when the object is collected.
+
+    Attributes
+    ----------
+    kernel : Kernel
+        The library.
+    n, m, N, q, nw, ng, npar, nl : int
+        Its dimensions (states, inputs, horizon, constraint rows, decision variables,
+        constraints, parameters, answer-check rows).
+    """
+
+    def __init__(self, kernel: Kernel) -> None:
+        self.kernel = kernel
+        ptr = kernel.c["ws_new"]()
+        if not ptr:
+            raise MemoryError(f"cannot allocate a kernel workspace ({kernel.workspace_bytes} "
+                              "bytes)")
+        self._ws = ptr
+        self._finalizer = weakref.finalize(self, kernel.c["ws_free"], ptr)
+        n, m, N = kernel.n, kernel.m, kernel.N
+        self._buf = {name: np.zeros(shape) for name, shape in (
+            ("x0", n), ("u", (N, m)), ("w", kernel.nw), ("p", kernel.npar), ("xb", n),
+            ("ub", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))), ("out", 7),
+            ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", m), ("xe", n), ("ue", m))}
+        self._addr = {name: int(a.ctypes.data) for name, a in self._buf.items()}
+        self._c = {name: kernel.c[name] for name in _WS_CALLS}
+        self.path = kernel.path
+        self.n, self.m, self.N, self.q = kernel.n, kernel.m, kernel.N, kernel.q
+        self.nw, self.ng, self.npar, self.nl = kernel.nw, kernel.ng, kernel.npar, kernel.nl
+
+    @property
+    def flags(self) -> tuple[str, ...]:
+        """The compiler flags of the library (its build-time variant)."""
+        return self.kernel.flags
+
+    def external(self, name: str) -> Any:
+        """The library's casadi external function ``name`` (:meth:`Kernel.external`)."""
+        return self.kernel.external(name)
+
+    def simulate(self, x0: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """States ``x_0 … x_N`` (N+1, n) from ``x0`` under ``u`` (N, m); no cache involved."""
+        b, a = self._buf, self._addr
+        b["x0"][:] = x0
+        b["u"][:] = u
+        self._c["simulate"](self._ws, a["x0"], a["u"], a["x"])
+        return b["x"].copy()
+
+    def xtraj(self, w: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """The kernel's trajectory at ``(w, p)`` (its cached rollout when it matches)."""
+        b, a = self._buf, self._addr
+        b["w"][:] = np.ravel(w)
+        b["p"][:] = np.ravel(p)
+        self._c["xtraj"](self._ws, a["w"], a["p"], a["x"])
+        return b["x"].copy()
+
+    def gru_step(self, x: np.ndarray, u: np.ndarray, dz: np.ndarray, dr: np.ndarray
+                 ) -> np.ndarray:
+        """One step of ``eq:gru`` with extra gate inputs (``eq:observer``), as
+        :func:`controllers.gru.step`; a new array."""
+        b, a = self._buf, self._addr
+        b["x0"][:] = x
+        b["ub"][:] = u
+        b["dz"][:] = dz
+        b["dr"][:] = dr
+        self.kernel.c["gru_step"](a["x0"], a["ub"], a["dz"], a["dr"], a["xn"])
+        return b["xn"].copy()
+
+    def assess(self, x0: np.ndarray, u: np.ndarray, x_bar: np.ndarray, u_bar: np.ndarray,
+               bounds: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+        """The check of an input sequence in one call: states ``x_0 … x_N`` from ``x0`` under
+        ``u`` (N, m) and ``[cost, max row violation at i = 0, max row violation at i ≥ 1,
+        max |u|, ‖x_N − x̄‖∞, active constraints]`` (as ``FHOCP.cost`` with ``t = ‖x_N −
+        x̄‖∞`` and ``FHOCP._residuals``; ``bounds``: the tightened bounds, N×q)."""
+        b, a = self._buf, self._addr
+        b["x0"][:] = x0
+        b["u"][:] = u
+        b["xb"][:] = x_bar
+        b["ub"][:] = u_bar
+        b["bnd"][:, :self.nl] = bounds
+        self._c["assess"](self._ws, a["x0"], a["u"], a["xb"], a["ub"], a["bnd"], float(alpha),
+                          a["x"], a["out"])
+        return b["x"].copy(), b["out"][:6].copy()
+
+    def assess_w(self, w: np.ndarray, p: np.ndarray, bounds: np.ndarray, alpha: float
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`assess` of the solver's answer ``w`` at ``p = (x̂, x̄, ū)``: ``(u, x, out)``
+        with ``u = clip(w_u, −1, 1)`` and ``out[6]`` the defect ``max |x_solver − x|``
+        against the solver's trajectory at ``(w, p)``."""
+        b, a = self._buf, self._addr
+        b["w"][:] = w
+        b["p"][:] = p
+        b["bnd"][:, :self.nl] = bounds
+        self._c["assess_w"](self._ws, a["w"], a["p"], a["bnd"], float(alpha), a["uc"], a["x"],
+                            a["out"])
+        return b["uc"].copy(), b["x"].copy(), b["out"].copy()
+
+    def eq_newton(self, y: np.ndarray, x0: np.ndarray, u0: np.ndarray, max_iter: int = 20,
+                  tol: float = 1e-11) -> tuple[np.ndarray, np.ndarray] | None:
+        """:func:`controllers.equilibrium.equilibrium_newton`, compiled: ``(x, u)`` or
+        ``None``."""
+        b, a = self._buf, self._addr
+        b["y"][:] = y
+        b["x0"][:] = x0
+        b["ub"][:] = u0
+        rc = self.kernel.c["eq_newton"](a["y"], a["x0"], a["ub"], int(max_iter), float(tol),
+                                        a["xe"], a["ue"])
+        uo = b["ue"]
+        if rc != 0 or max(abs(uo)) > 1.0:
+            return None
+        return b["xe"].copy(), uo.copy()
+
+    def sqp_call(self, arrays: Mapping[str, np.ndarray], options: SqpOptions,
+                 info: SqpInfo) -> Any:
+        """A function running the kernel's SQP (``6_sqp.c``) in this workspace on these
+        persistent arrays: ``p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, g, f`` (float64,
+        contiguous; ``w``, ``lam_x``, ``lam_g`` hold the initial guess and receive the answer),
+        with ``options`` and into ``info``; it returns the :class:`SqpStatus`. Addresses are
+        taken once: calling it costs ~1 µs besides the solve."""
+        names = ("p", "lbx", "ubx", "lbg", "ubg", "w", "lam_x", "lam_g", "g", "f")
+        for name in names:
+            a = arrays[name]
+            if a.dtype != np.float64 or not a.flags.c_contiguous:
+                raise ValueError(f"sqp array {name!r} must be contiguous float64")
+        keep = ({name: arrays[name] for name in names}, options, info)   # alive with the fn
+        addr = [self._ws, *(int(keep[0][name].ctypes.data) for name in names),
+                ctypes.addressof(options), ctypes.addressof(info)]
+        fn = self._c["sqp"]
+        return lambda _keep=keep: SqpStatus(fn(*addr))
+
+    def qp(self, H: np.ndarray, g: np.ndarray, A: np.ndarray, lbx: np.ndarray,
+           ubx: np.ndarray, lba: np.ndarray, uba: np.ndarray
+           ) -> tuple[QpStatus, np.ndarray, np.ndarray, np.ndarray, int]:
+        """The kernel's QP (``5_qp.c``) on one problem of its dimensions (H: nw×nw, A:
+        ng×nw; infinite bounds allowed): ``(status, d, lam_x, lam_a, working-set changes)``.
+        A test hook: the SQP calls the QP inside the kernel."""
+        def arr(a: np.ndarray, order: str = "C") -> np.ndarray:
+            return np.clip(np.array(a, dtype=float, order=order), -1e301, 1e301)
+        k = self.kernel
+        args = [arr(H), arr(g), arr(A, "F"), arr(lbx), arr(ubx), arr(lba), arr(uba)]
+        d, lx, la = np.zeros(k.nw), np.zeros(k.nw), np.zeros(k.ng)
+        changes = ctypes.c_int(0)
+        status = self._c["qp"](self._ws, *(a.ctypes.data for a in (*args, d, lx, la)),
+                               ctypes.addressof(changes))
+        return QpStatus(status), d, lx, la, int(changes.value)
+
+    def grad_l(self, w: np.ndarray, p: np.ndarray, lam_x: np.ndarray, lam_g: np.ndarray
+               ) -> np.ndarray:
+        """∇L = ∇f + Jᵀλ_g + λ_x at ``(w, p)`` by the SQP's adjoint sweep (a test hook)."""
+        arrs = [np.ascontiguousarray(a, dtype=float) for a in (w, p, lam_x, lam_g)]
+        out = np.zeros(self.kernel.nw)
+        self._c["grad_l"](self._ws, *(a.ctypes.data for a in (*arrs, out)))
+        return out
+
+    def clip(self, H: np.ndarray) -> np.ndarray:
+        """The eigenvalue-clipped copy of a symmetric nw×nw matrix (a test hook)."""
+        Hc = np.array(H, dtype=float, order="C")
+        if self._c["clip"](self._ws, Hc.ctypes.data) != 0:
+            raise ArithmeticError("eigenvalue decomposition did not converge")
+        return Hc
+
+    def counters(self) -> dict[str, int]:
+        """This workspace's eigenvalue-clipping counts."""
+        c = (ctypes.c_long * 4)()
+        self._c["counters"](self._ws, c)
+        return {"hess_calls": c[0], "eig": c[1], "clipped": c[2], "eigenvalues_clipped": c[3]}
+
+    def invalidate(self) -> None:
+        """Forget the cached rollout."""
+        self._c["invalidate"](self._ws)
