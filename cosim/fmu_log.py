@@ -5,11 +5,16 @@ logger per process, so messages are routed here by instance name: an
 :class:`~cosim.fmu.FmuComponent` registers a sink (a bounded deque) under its instance name
 with :func:`attach`, and its warnings and errors land there to explain a failure. A message
 from an instance without a sink is printed.
+
+Thread-safe: instance names are unique in the process, a sink is set and removed in one
+dictionary operation, and the process-wide callbacks are built once under a lock (a campaign
+worker runs two FMUs at once from two threads).
 """
 
 from __future__ import annotations
 
 import ctypes
+import threading
 from collections import deque
 from collections.abc import Callable
 from typing import Any
@@ -23,6 +28,7 @@ _SINKS: dict[str, deque[str]] = {}
 _FMI2_CALLBACKS: Any = None
 #: The native proxy keeps bare pointers to these: they live as long as the process.
 _CALLBACK_REFS: list[Any] = []
+_CALLBACKS_LOCK = threading.Lock()
 
 
 def attach(instance: str, sink: deque[str]) -> None:
@@ -49,29 +55,35 @@ def route(instance: bytes | None, status: int, category: bytes | None,
 
 
 def fmi2_callbacks() -> Any:
-    """The process-wide ``fmi2CallbackFunctions`` whose logger calls :func:`route`."""
+    """The process-wide ``fmi2CallbackFunctions`` whose logger calls :func:`route` (built
+    once, by whichever thread asks first)."""
+    global _FMI2_CALLBACKS
+    with _CALLBACKS_LOCK:
+        if _FMI2_CALLBACKS is None:
+            _FMI2_CALLBACKS = _make_fmi2_callbacks()
+    return _FMI2_CALLBACKS
+
+
+def _make_fmi2_callbacks() -> Any:
     from fmpy import fmi2
 
-    global _FMI2_CALLBACKS
-    if _FMI2_CALLBACKS is None:
-        def logger(env, instance, status, category, message):
-            route(instance, status, category, message)
+    def logger(env, instance, status, category, message):
+        route(instance, status, category, message)
 
-        cb = fmi2.fmi2CallbackFunctions()
-        # the native proxy keeps a bare pointer to the Python logger: hold every callback
-        # object for the life of the process
-        _CALLBACK_REFS.extend([fmi2.fmi2CallbackLoggerTYPE(logger),
-                               fmi2.fmi2CallbackAllocateMemoryTYPE(fmi2.calloc),
-                               fmi2.fmi2CallbackFreeMemoryTYPE(fmi2.free), logger])
-        cb.logger, cb.allocateMemory, cb.freeMemory = _CALLBACK_REFS[:3]
-        try:
-            from fmpy.logging import addLoggerProxy
+    cb = fmi2.fmi2CallbackFunctions()
+    # the native proxy keeps a bare pointer to the Python logger: hold every callback
+    # object for the life of the process
+    _CALLBACK_REFS.extend([fmi2.fmi2CallbackLoggerTYPE(logger),
+                           fmi2.fmi2CallbackAllocateMemoryTYPE(fmi2.calloc),
+                           fmi2.fmi2CallbackFreeMemoryTYPE(fmi2.free), logger])
+    cb.logger, cb.allocateMemory, cb.freeMemory = _CALLBACK_REFS[:3]
+    try:
+        from fmpy.logging import addLoggerProxy
 
-            addLoggerProxy(ctypes.byref(cb))
-        except Exception:  # pragma: no cover - proxy missing on this platform
-            pass
-        _FMI2_CALLBACKS = cb
-    return _FMI2_CALLBACKS
+        addLoggerProxy(ctypes.byref(cb))
+    except Exception:  # pragma: no cover - proxy missing on this platform
+        pass
+    return cb
 
 
 def fmi3_logger(instance: str) -> Callable[[Any, int, bytes | None, bytes | None], None]:

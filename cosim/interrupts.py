@@ -119,9 +119,19 @@ class SignalGuard:
 _CURRENT: list[SignalGuard] = []
 
 
+def _main_thread() -> bool:
+    return threading.current_thread() is threading.main_thread()
+
+
 def current() -> SignalGuard | None:
-    """The guard of the innermost active :func:`handling_signals` block, if any."""
-    return _CURRENT[-1] if _CURRENT else None
+    """The guard of the innermost active :func:`handling_signals` block, if any; always
+    ``None`` outside the main thread.
+
+    Signals are delivered to the main thread only, and a guard's counters belong to the code
+    that runs there: another thread (a run on a multi-threaded Dask worker, a campaign
+    started from a thread) never sees nor changes the main thread's guard.
+    """
+    return _CURRENT[-1] if _CURRENT and _main_thread() else None
 
 
 @contextlib.contextmanager
@@ -131,11 +141,11 @@ def handling_signals() -> Iterator[SignalGuard | None]:
     Nested use reuses the outer guard. A signal whose disposition is ``SIG_IGN`` (a
     process started with ``nohup``, or a worker told to ignore Ctrl-C) stays ignored.
     """
+    if not _main_thread():
+        yield None
+        return
     if _CURRENT:
         yield _CURRENT[-1]
-        return
-    if threading.current_thread() is not threading.main_thread():
-        yield None
         return
     guard = SignalGuard()
     previous = {}

@@ -221,7 +221,12 @@ class Run:
         except (CosimError, SimulationFailed) as exc:
             self._failed(exc)
         except Exception as exc:  # a bug or an unexpected library error: keep the rows
-            self._failed(SimulationFailed(f"at t={self.t!r}: {type(exc).__name__}: {exc}"))
+            # named with the step it happened in; the cause keeps its traceback (a campaign
+            # writes it to the run's traceback.txt)
+            what = " ".join(f"{type(exc).__name__}: {exc}".split())
+            failure = SimulationFailed(f"step {self.result.steps} (t = {self.t:.10g} s): {what}")
+            failure.__cause__ = exc
+            self._failed(failure)
         finally:
             result.wall_time_s = _time.perf_counter() - wall0
             if self.loop0 is not None:

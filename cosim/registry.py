@@ -90,5 +90,7 @@ def create(name: str, options: Mapping[str, Any] | None = None) -> Component:
         raise
     except Exception as exc:
         msg = " ".join(str(exc).split())  # one line (casadi's messages span several)
+        # chained: the message is the one line users see, the cause keeps the traceback of
+        # what is likely a bug (a campaign writes it to the run's traceback.txt)
         raise CosimError(f"controller '{name}': cannot create {cls.__name__}: "
-                         f"{type(exc).__name__}: {msg}") from None
+                         f"{type(exc).__name__}: {msg}") from exc

@@ -2,46 +2,73 @@
 
 The engine is Dask distributed: by default a ``LocalCluster`` on 127.0.0.1 (worker processes,
 one thread each, as many as asked, default the number of cores), or an existing cluster
-(``scheduler="tcp://host:port"``, started with ``dask scheduler`` and ``dask worker``). No
-filesystem is shared: the client sends the campaign's files once (:class:`~cosim.campaign.
-task.Assets`, scattered to every worker) and each task returns its results as data; this
-process writes every file under the output folder:
+(``scheduler="tcp://host:port"``, started with ``dask scheduler`` and ``dask worker``, any
+number of worker processes and threads each: :mod:`cosim.campaign.cluster`). No filesystem
+is shared: the client sends the campaign's files once (:class:`~cosim.campaign.task.Assets`)
+and each task returns its results as data; this process writes every file under the output
+folder:
 
 * ``campaign.json``: the spec, its fingerprint (spec text and input files), the plan;
-* ``runs/<run>-<variant>/results.csv`` and ``summary.json`` as ``cosim run`` writes them, as
-  soon as the run comes back (a campaign stopped by Ctrl-C or SIGTERM keeps them, and
-  ``resume=True`` runs only the runs that are missing);
+* ``runs/<run>-<variant>/results.csv`` and ``summary.json`` as ``cosim run`` writes them (and
+  ``traceback.txt`` when an internal error ended the run), as soon as the run comes back (a
+  campaign stopped by Ctrl-C or SIGTERM keeps them, and ``resume=True`` runs only the runs
+  that are missing);
 * ``runs.parquet``, ``summary.json`` and ``report.png`` (:mod:`cosim.campaign.report`).
 
-A run that fails, times out or kills its worker (a segfault in an FMU) is recorded as failed
-with its reason; the campaign goes on. With the local cluster a worker that dies is
-restarted and its run is not retried (``distributed.scheduler.allowed-failures = 0``).
+A run that fails (its FMU, its controller, a set-point it cannot reach, a timeout) is
+recorded as failed with its reason; the campaign goes on.
+
+**Lost workers and tries.** A run whose worker process dies under it (SIGKILL: preemption,
+the OOM killer; a segfault in native code; the watchdog ending a run stuck past its timeout)
+is *lost*, not failed: Dask reports its task as ``KilledWorker`` and the engine submits it
+again. Each run says on the scheduler that it starts, before anything of it can crash
+(:func:`~cosim.campaign.task.announce_start`), so the engine knows whether the run had
+started when its worker died:
+
+* lost after it started, the run used up a *try*: a run gets :data:`MAX_TRIES` tries, and
+  one lost in each is recorded as failed ("the run killed its worker process in each of its
+  3 tries ..."). On a worker with several threads the runs executing beside the culprit
+  are lost with it and use up a try too (they had started);
+* lost before it started (assigned to that worker, waiting for a thread or for the files),
+  the run is submitted again without using up a try (:data:`MAX_SUBMISSIONS` submissions
+  at most, whatever happened to them).
+
+The run's ``summary.json`` records its tries (``campaign.tries``; column ``tries`` of
+``runs.parquet``, 1 for a run that never lost a worker). The count is exact on the local
+cluster, whose scheduler has ``distributed.scheduler.allowed-failures = 0``. An existing
+cluster keeps its scheduler's ``allowed-failures`` (Dask's default 3): that scheduler
+reruns a task whose worker died up to that many times before it reports ``KilledWorker``,
+so there one try of the engine may cost up to ``allowed-failures + 1`` worker deaths (set it
+to 0 in the cluster's configuration to make the engine's count the only one). A retried run
+gives the same numbers: a run depends on its draws only, never on the worker or the try.
 """
 
 from __future__ import annotations
 
 import contextlib
 import hashlib
-import logging
 import math
 import os
-import signal
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from cosim import interrupts
-from cosim.campaign import report, store
+from cosim.campaign import cluster, report, store
 from cosim.campaign.draws import DrawContext, RunDraw, draw_run
 from cosim.campaign.spec import CampaignSpec, load
-from cosim.campaign.task import Assets, run_task
+from cosim.campaign.task import Assets
 from cosim.errors import CosimError
 
-__all__ = ["CampaignResult", "default_workers", "run_campaign"]
+__all__ = ["MAX_TRIES", "CampaignResult", "default_workers", "run_campaign"]
 
+#: Most tries of one run whose worker process dies while it runs (see the module docstring).
+MAX_TRIES = 3
+#: Most submissions of one run in all, tries and losses before it started together.
+MAX_SUBMISSIONS = 20
 #: Seconds a run may take by default: this much plus :data:`TIMEOUT_PER_STEP` per step.
 TIMEOUT_BASE = 60.0
 TIMEOUT_PER_STEP = 0.5
@@ -219,74 +246,6 @@ def prepare(spec: CampaignSpec) -> Plan:
 # Dask
 # ---------------------------------------------------------------------------------------------
 
-@contextlib.contextmanager
-def _signals_ignored() -> Iterator[None]:
-    """Worker processes started in the block ignore Ctrl-C, SIGTERM and SIGHUP: the client
-    handles them (and closes the cluster), so a signal to the process group does not kill
-    workers half-way."""
-    saved = {}
-    for sig in interrupts.HANDLED:
-        with contextlib.suppress(ValueError, OSError):
-            saved[sig] = signal.signal(sig, signal.SIG_IGN)
-    try:
-        yield
-    finally:
-        for sig, old in saved.items():
-            signal.signal(sig, old)
-
-
-@contextlib.contextmanager
-def _cluster(workers: int | None, scheduler: str | None) -> Iterator[Any]:
-    """A Dask client on a new local cluster, or on the cluster at ``scheduler``."""
-    import dask
-    from distributed import Client, LocalCluster
-
-    loggers = [logging.getLogger(n) for n in ("distributed", "tornado", "asyncio")]
-    levels = [lg.level for lg in loggers]
-    for lg in loggers:
-        lg.setLevel(logging.CRITICAL)
-    cluster = None
-    try:
-        if scheduler:
-            try:
-                client = Client(scheduler, timeout="10s")
-            except (OSError, TimeoutError) as exc:
-                raise CosimError(f"--scheduler {scheduler}: cannot connect: {exc}") from None
-        else:
-            config = {"distributed.scheduler.allowed-failures": 0,
-                      # a worker holds only the run it executes: when it dies, no other run
-                      # is lost with it
-                      "distributed.scheduler.worker-saturation": 1.0,
-                      # the isolated FMU worker is a child process of the Dask worker
-                      "distributed.worker.daemon": False,
-                      "distributed.admin.tick.limit": "1h"}
-            with dask.config.set(config), _signals_ignored():
-                # every server on 127.0.0.1, on free ports (no dashboard on 8787 for all)
-                cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
-                                       processes=True, host="127.0.0.1",
-                                       dashboard_address="127.0.0.1:0",
-                                       worker_dashboard_address="127.0.0.1:0",
-                                       silence_logs=logging.CRITICAL)
-                client = Client(cluster)
-        try:
-            yield client
-        finally:
-            guard = interrupts.current()
-            with guard.deferred() if guard is not None else contextlib.nullcontext():
-                with contextlib.suppress(Exception):
-                    client.close(timeout=10)
-                if cluster is not None:
-                    with contextlib.suppress(Exception):
-                        cluster.close(timeout=10)
-    finally:
-        for lg, level in zip(loggers, levels, strict=True):
-            lg.setLevel(level)
-
-
-def _identity(value: Any) -> Any:
-    return value
-
-
 @dataclass
 class ExecutionStats:
     """What :func:`_execute` measured: runs done, seconds spent writing them (client side),
@@ -300,40 +259,72 @@ class ExecutionStats:
     probe: Any = None
 
 
+@dataclass
+class _Attempts:
+    """A run's submissions so far and its counted tries (worker deaths after it started)."""
+
+    task: dict[str, Any]
+    submissions: int = 1
+    lost_tries: int = 0
+    lost_unstarted: int = 0
+
+
 def _execute(plan: Plan, pending: list[dict[str, Any]], out: Path, workers: int | None,
              scheduler: str | None, on_done: Callable[[str], None],
-             probe: Callable[[Any], Any] | None = None) -> ExecutionStats:
-    """Run ``pending`` on Dask, writing each run as it comes back.
+             probe: Callable[[Any], Any] | None = None, *,
+             client: Any = None) -> ExecutionStats:
+    """Run ``pending`` on Dask, writing each run as it comes back; a run whose worker dies
+    is submitted again (the rule: the module docstring).
 
-    ``probe(client)``, when given, is called after the last run, before the cluster closes
-    (the benchmark reads the workers' memory with it).
+    ``client``: a connected Dask client to use (else one is opened and closed here, on a
+    local cluster of ``workers`` or on ``scheduler``). ``probe(client)``, when given, is
+    called after the last run, before the cluster closes (the benchmark reads the workers'
+    memory with it).
     """
     from distributed import as_completed
 
     stats = ExecutionStats()
     t0 = time.perf_counter()
-    with _cluster(workers, scheduler) as client:
+    with contextlib.ExitStack() as stack:
+        if client is None:
+            client = stack.enter_context(cluster.connect(workers, scheduler))
         stats.startup_s = time.perf_counter() - t0
-        # a task returning the files, not scattered data: the scheduler keeps its definition,
-        # so the files are recomputed if every worker holding them dies (a crashing plant)
-        assets = client.submit(_identity, plan.assets, key=f"cosim-assets-{plan.assets.digest}",
-                               pure=False)
-        futures = {}
+        starts = cluster.Starts(client)
+        stack.callback(starts.close)
+        submitter = cluster.Submitter(client, plan)
+        futures: dict[Any, _Attempts] = {}
         for task in pending:
-            key = f"cosim-{plan.fingerprint[:10]}-{task['run']}-{task['variant']}"
-            futures[client.submit(run_task, task, assets, key=key, pure=False)] = task
+            futures[submitter.submit(task, 1)] = _Attempts(task)
+        done = as_completed(list(futures))
         try:
-            for future in as_completed(futures):
-                task = futures.pop(future)
+            for future in done:
+                at = futures.pop(future)
                 try:
                     # blocks when the result was lost with its worker and is being recomputed
                     outcome, error = future.result(), None
                 except Exception as exc:  # KilledWorker, CancelledError, a bug on the worker
                     outcome, error = None, exc
+                if cluster.lost_worker(error):
+                    if starts.started(str(future.key)):
+                        at.lost_tries += 1
+                    else:
+                        at.lost_unstarted += 1
+                    if at.lost_tries < MAX_TRIES and at.submissions < MAX_SUBMISSIONS:
+                        at.submissions += 1
+                        again = submitter.submit(at.task, at.submissions)
+                        futures[again] = at
+                        done.add(again)
+                        continue
+                # a run that came back (ok, failed, or a Dask error) ran once more than it
+                # was lost; one lost at its last try, as often as it was lost
+                tries = at.lost_tries + (0 if cluster.lost_worker(error) else 1)
                 guard = interrupts.current()
                 t1 = time.perf_counter()
                 with guard.deferred() if guard is not None else contextlib.nullcontext():
-                    status = store.write_run(out, plan.spec, task, outcome, error)
+                    status = store.write_run(
+                        out, plan.spec,
+                        dict(at.task, tries=tries, lost_unstarted=at.lost_unstarted),
+                        outcome, error)
                 stats.write_s += time.perf_counter() - t1
                 if outcome is not None:
                     stats.run_s += outcome["wall_time_s"]
@@ -399,38 +390,42 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
     plan = prepare(spec)
     workers = workers or default_workers()
     error: BaseException | None = None
-    with RunFolder(out, "--out") as folder:
-        pending = store.open_folder(plan, folder.path, resume, force)
-        bar = None
-        if progress and pending:
-            from tqdm import tqdm
+    with contextlib.ExitStack() as stack:
+        # an unreachable scheduler is bad input: found before the output folder is touched
+        client = stack.enter_context(cluster.connect(None, scheduler)) if scheduler else None
+        with RunFolder(out, "--out") as folder:
+            pending = store.open_folder(plan, folder.path, resume, force)
+            bar = None
+            if progress and pending:
+                from tqdm import tqdm
 
-            bar = tqdm(total=len(pending), unit="run", desc=spec.name, file=sys.stderr,
-                       dynamic_ncols=True)
-        failed_now = [0]
+                bar = tqdm(total=len(pending), unit="run", desc=spec.name, file=sys.stderr,
+                           dynamic_ncols=True)
+            failed_now = [0]
 
-        def on_done(status: str) -> None:
-            failed_now[0] += status != "ok"
-            if bar is not None:
-                bar.update(1)
-                bar.set_postfix(failed=failed_now[0], refresh=False)
+            def on_done(status: str) -> None:
+                failed_now[0] += status != "ok"
+                if bar is not None:
+                    bar.update(1)
+                    bar.set_postfix(failed=failed_now[0], refresh=False)
 
-        ran = 0
-        t0 = time.perf_counter()
-        try:
-            if pending:
-                ran = _execute(plan, pending, folder.path, workers, scheduler, on_done).done
-        except KeyboardInterrupt as exc:
-            error = exc
-        finally:
-            if bar is not None:
-                bar.close()
-        guard = interrupts.current()
-        with guard.deferred() if guard is not None else contextlib.nullcontext():
-            table, summary = store.build_report(spec, folder.path)
-            summary["wall_time_s"] = round(time.perf_counter() - t0, 3)
-            summary["workers"] = scheduler or workers
-            report.write_summary(summary, folder.path / "summary.json")
+            ran = 0
+            t0 = time.perf_counter()
+            try:
+                if pending:
+                    ran = _execute(plan, pending, folder.path, workers, scheduler,
+                                   on_done, client=client).done
+            except KeyboardInterrupt as exc:
+                error = exc
+            finally:
+                if bar is not None:
+                    bar.close()
+            guard = interrupts.current()
+            with guard.deferred() if guard is not None else contextlib.nullcontext():
+                table, summary = store.build_report(spec, folder.path)
+                summary["wall_time_s"] = round(time.perf_counter() - t0, 3)
+                summary["workers"] = scheduler or workers
+                report.write_summary(summary, folder.path / "summary.json")
     complete = summary.get("runs", 0) == spec.runs * len(spec.variants)
     status = ("interrupted" if error is not None or not complete
               else "failed" if summary.get("failed", 0) else "ok")

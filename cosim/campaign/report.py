@@ -4,11 +4,12 @@ Everything is computed from the run folders (``runs/<run>-<variant>/summary.json
 resumed or interrupted campaign reports exactly the runs that are on disk.
 
 ``runs.parquet``: one row per run and variant with ``run``, ``seed``, ``variant``,
-``status``, ``reason``, one column per ``[draw]`` key (named exactly as in the spec), and the
+``status``, ``reason``, ``tries`` (1, or more when the run's worker process died under it and
+the engine ran it again), one column per ``[draw]`` key (named exactly as in the spec), and the
 KPIs :data:`KPI_COLUMNS`; for a GRU-model plant under the robust MPC also the theorem's checks
 (:data:`THEOREM_COLUMNS`).
 
-``summary.json``: ``runs``, ``ok``, ``failed``, ``violating_runs`` and
+``summary.json``: ``runs``, ``ok``, ``failed``, ``retried_runs``, ``violating_runs`` and
 ``violation_probability_upper_95`` (one-sided Clopper-Pearson bound on the probability that
 a run violates a constraint), per variant the same plus KPI quantiles, and the failures
 grouped by reason.
@@ -84,6 +85,7 @@ def kpi_row(doc: dict, draw_keys: Iterable[str]) -> dict[str, Any]:
         "variant": str(_get(doc, "campaign", "variant", default="")),
         "status": doc.get("status", "failed"),
         "reason": doc.get("reason", ""),
+        "tries": int(_get(doc, "campaign", "tries", default=1)),
     }
     draws = _get(doc, "campaign", "draws", default={}) or {}
     for key in draw_keys:
@@ -155,6 +157,7 @@ def summarize(table: Any, name: str, planned: int) -> dict[str, Any]:
         violating = int((ran["violation_count"] > 0).sum())
         out: dict[str, Any] = {
             "runs": len(df), "ok": len(ok), "failed": int((df["status"] == "failed").sum()),
+            "retried_runs": int((df["tries"] > 1).sum()) if "tries" in df else 0,
             "violating_runs": violating,
             "violation_probability_upper_95": clopper_pearson_upper(violating, len(ran)),
             "quantiles": {},

@@ -11,6 +11,7 @@ from __future__ import annotations
 import contextlib
 import json
 import shutil
+import traceback
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -18,16 +19,20 @@ import numpy as np
 
 from cosim import atomicio
 from cosim.campaign import report
+from cosim.campaign.cluster import lost_worker
 from cosim.campaign.spec import CampaignSpec
 from cosim.errors import CosimError
 
 if TYPE_CHECKING:
     from cosim.campaign.engine import Plan
 
-__all__ = ["CAMPAIGN_FILES", "build_report", "finished", "open_folder", "write_run"]
+__all__ = ["CAMPAIGN_FILES", "TRACEBACK_FILE", "build_report", "finished", "open_folder",
+           "write_run"]
 
 #: Files of a campaign folder (besides ``runs/``).
 CAMPAIGN_FILES = ("campaign.json", "runs.parquet", "summary.json", "report.png")
+#: The traceback of an internal error that ended a run, in its folder (for a bug report).
+TRACEBACK_FILE = "traceback.txt"
 
 
 def finished(runs_dir: Path, task: dict[str, Any]) -> bool:
@@ -72,27 +77,39 @@ def open_folder(plan: Plan, out: Path, resume: bool, force: bool) -> list[dict[s
 
 
 def write_run(out: Path, spec: CampaignSpec, task: dict[str, Any],
-               outcome: dict[str, Any] | None, error: BaseException | None) -> str:
-    """Write one run's folder (as ``cosim run`` does); returns its status."""
+              outcome: dict[str, Any] | None, error: BaseException | None) -> str:
+    """Write one run's folder (as ``cosim run`` does); returns its status.
+
+    ``outcome`` is what :func:`~cosim.campaign.task.run_task` returned, or ``None`` when the
+    task ended with ``error`` on the cluster (its worker died in every try). ``task["tries"]``
+    (default 1): the tries it took (:mod:`cosim.campaign.engine`). The run's
+    ``summary.json`` records them under ``campaign.tries``; the
+    traceback of an internal error goes to ``traceback.txt`` beside it (removed when the run
+    has none).
+    """
     from cosim import results
     from cosim.master import RunResult
 
+    tries = int(task.get("tries", 1))
     if outcome is None:
         reason = _error_reason(error, task)
         result = RunResult(columns=["time"], rows=[], status="failed", reason=reason)
         theorem = None
+        trace = None if error is None or lost_worker(error) else "".join(
+            traceback.format_exception(error))
     else:
         result = outcome["result"]
         rows = np.asarray(result.rows, dtype=float)
         result.rows = rows.tolist()
         theorem = outcome.get("theorem")
+        trace = outcome.get("traceback")
     draw = task["draw"]
     meta: dict[str, Any] = {
         "scenario": task["scenario_name"], "plant": str(spec.plant or "project FMU"),
         "controller": task["controller"], "controller_options": task["options"],
         "seed": draw["seed"],
         "campaign": {"name": spec.name, "run": task["run"], "variant": task["variant"],
-                     "draws": draw["values"], "setpoints": draw["setpoints"],
+                     "tries": tries, "draws": draw["values"], "setpoints": draw["setpoints"],
                      "plant_start": draw["plant_start"]},
     }
     folder = out / "runs" / report.run_folder_name(task["run"], task["variant"])
@@ -105,17 +122,27 @@ def write_run(out: Path, spec: CampaignSpec, task: dict[str, Any],
             result.columns, np.asarray(result.rows, dtype=float).reshape(len(result.rows), -1),
             theorem, k)
     results.write(folder, result, meta, figure=spec.figures)
+    if trace:
+        atomicio.write_text(folder / TRACEBACK_FILE, trace)
+    else:
+        with contextlib.suppress(FileNotFoundError):
+            (folder / TRACEBACK_FILE).unlink()
     return result.status
 
 
 def _error_reason(error: BaseException | None, task: dict[str, Any]) -> str:
-    name = type(error).__name__ if error is not None else "unknown error"
-    if name == "KilledWorker":
-        return ("the run killed its worker process (a crash in native code, or stuck past "
-                f"its timeout of {task['timeout']:g} s); the worker was restarted")
-    return f"{name}: {error}"
-
-
+    """The reason of a run whose task ended with ``error`` on the cluster."""
+    if lost_worker(error):
+        tries = int(task.get("tries", 1))
+        if tries == 0:
+            return (f"lost with its worker process {task.get('lost_unstarted', 0)} times "
+                    "before it started (workers keep dying)")
+        each = f"in each of its {tries} tries" if tries > 1 else "in its only try"
+        return (f"the run killed its worker process {each} (a crash in native code, or "
+                f"stuck past its timeout of {task['timeout']:g} s)")
+    if error is None:
+        return "on the Dask cluster: no result and no error"
+    return "on the Dask cluster: " + " ".join(f"{type(error).__name__}: {error}".split())
 
 
 def build_report(spec: CampaignSpec, out: Path, write: bool = True) -> tuple[Any, dict]:
@@ -132,7 +159,8 @@ def build_report(spec: CampaignSpec, out: Path, write: bool = True) -> tuple[Any
             except (OSError, ValueError):
                 continue
             rows.append(report.kpi_row(doc, keys))
-    columns = ["run", "seed", "variant", "status", "reason", *keys, *report.KPI_COLUMNS]
+    columns = ["run", "seed", "variant", "status", "reason", "tries", *keys,
+               *report.KPI_COLUMNS]
     table = pd.DataFrame(rows, columns=None if rows else columns)
     summary = report.summarize(table, spec.name, spec.runs * len(spec.variants)) if rows \
         else {"campaign": spec.name, "planned": spec.runs * len(spec.variants), "runs": 0}

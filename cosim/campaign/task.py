@@ -7,44 +7,63 @@ and reuses them for every run. A run returns its :class:`~cosim.master.RunResult
 numpy array) and, for a GRU-model plant under the robust MPC, what the paper's theorem
 promises, measured (:func:`run_task`); the client writes the files.
 
-Controllers are built once per worker and configuration and reused: their ``setup()``
-restarts them exactly (the robust MPC rebuilds its solver), so a run gives the same numbers
-on a fresh worker or on one that ran a thousand others.
+A worker may run several runs at once (one per thread: ``dask worker --nthreads 2``), so
+nothing a run uses is shared with another run: each run takes a controller of its own from
+the worker's :class:`~cosim.campaign.pool.ControllerPool` (built once per configuration and
+reused by later runs: ``setup()`` restarts it exactly, so a run gives the same numbers on a
+fresh worker or on one that ran a thousand others) and builds its own plant, sensor and
+master. What is process-wide is guarded: the asset folders (a lock here), loading an FMU
+(fmpy changes the working folder: :mod:`cosim.fmu`), the FMU log routing
+(:mod:`cosim.fmu_log`); signal handling and ``SIGALRM`` step timeouts are the main thread's
+only (:mod:`cosim.interrupts`: a worker thread never installs or shares a signal guard).
 
 A run that outlives its timeout is stopped between steps (status ``failed``, "run timeout");
 one stuck inside a step (native code that never returns) is ended by a watchdog that exits
-the worker process 30 s later, which the client records as a killed worker.
+the worker process 30 s later: the only way to stop a thread stuck in native code. On a
+worker with several threads the runs beside it are lost with the process too; the engine
+submits every run of a dead worker again (:mod:`cosim.campaign.engine`, bounded tries).
+
+A run never raises for a fault of its own: its reason says why, in the words ``cosim run``
+uses (an unreachable first set-point, a failed certificate hypothesis, an FMU error); an
+internal error (a bug) is named with the phase it happened in ("building the controller:
+...", "step 37 (t = 925 s): ...") and its traceback comes back with the result, for the
+client to write beside the run's files (``traceback.txt``).
 """
 
 from __future__ import annotations
 
 import atexit
+import contextlib
 import hashlib
-import json
 import math
 import os
 import shutil
 import tempfile
 import threading
 import time
-from collections import OrderedDict
+import traceback
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Assets", "run_task"]
+from cosim.campaign.pool import ControllerPool
+
+__all__ = ["POOL", "START_TOPIC", "Assets", "announce_start", "internal_traceback",
+           "run_task"]
 
 #: Seconds a run may stay stuck past its timeout before the watchdog ends the worker.
 WATCHDOG_GRACE = 30.0
 #: Exit status of a worker ended by the watchdog.
 WATCHDOG_EXIT = 70
-#: Controllers kept per worker process.
-CACHE_SIZE = 8
+
+#: Topic of the event a run logs on the scheduler as it starts (:func:`announce_start`).
+START_TOPIC = "cosim-run-started"
+#: The idle controllers of this worker process (each run takes one of its own).
+POOL = ControllerPool()
 
 _FOLDERS: dict[str, Path] = {}
-_CONTROLLERS: OrderedDict[str, Any] = OrderedDict()
 _LOCK = threading.Lock()
 
 
@@ -95,22 +114,23 @@ def _remove_at_exit(folder: Path) -> None:
     util.Finalize(None, shutil.rmtree, args=(folder, True), exitpriority=0)
 
 
-def _controller(name: str, options: dict[str, Any]) -> Any:
-    """A controller from the per-worker cache (built on first use)."""
-    from cosim import registry
+def announce_start() -> None:
+    """On a Dask worker: log :data:`START_TOPIC` with this task's key on the scheduler, and
+    wait until it is logged (a synchronous call), before anything of the run can crash.
 
-    key = json.dumps([name, options], sort_keys=True, default=str)
-    with _LOCK:
-        ctrl = _CONTROLLERS.get(key)
-        if ctrl is not None:
-            _CONTROLLERS.move_to_end(key)
-            return ctrl
-    ctrl = registry.create(name, options)
-    with _LOCK:
-        _CONTROLLERS[key] = ctrl
-        while len(_CONTROLLERS) > CACHE_SIZE:
-            _CONTROLLERS.popitem(last=False)
-    return ctrl
+    A worker that dies after this point costs the run a try; one that dies before (the run
+    was assigned to it and waited) does not (:mod:`cosim.campaign.engine`). Never raises.
+    """
+    try:
+        from distributed import get_worker
+        from distributed.utils import sync
+
+        worker = get_worker()
+    except (ImportError, ValueError):
+        return
+    with contextlib.suppress(Exception):
+        sync(worker.loop, worker.scheduler.log_event, topic=START_TOPIC,
+             msg={"key": str(worker.get_current_task())}, callback_timeout=30)
 
 
 def _in_dask_worker() -> bool:
@@ -133,8 +153,15 @@ def _plant(task: dict[str, Any], folder: Path, seed: int) -> Any:
         return GRUPlant.from_file(str(folder / name), seed=seed)
     vmap = varmap.load(folder / task["map"]) if task.get("map") else None
     if task.get("isolate"):
+        import multiprocessing
+
+        from cosim.errors import CosimError
         from cosim.isolated import DEFAULT_STEP_TIMEOUT, IsolatedFmuComponent
 
+        if multiprocessing.current_process().daemon:
+            raise CosimError("isolate = true: this Dask worker is a daemon process, which may "
+                             "not start the FMU's worker process; start the workers with "
+                             "DASK_DISTRIBUTED__WORKER__DAEMON=False")
         return IsolatedFmuComponent(folder / name, interface=task["interface"], varmap=vmap,
                                     timeout=task.get("step_timeout") or DEFAULT_STEP_TIMEOUT)
     from cosim.fmu import FmuComponent
@@ -184,6 +211,61 @@ class _TheoremMonitor:
         return out
 
 
+def internal_traceback(exc: BaseException | None) -> str | None:
+    """The traceback of ``exc`` when it is, or was explicitly caused by (``raise ... from``),
+    an internal error: an exception that is neither a :class:`~cosim.errors.CosimError` nor
+    a :class:`~controllers.errors.ControllersError`; else ``None`` (a fault the reason
+    explains: an FMU error, an unreachable set-point)."""
+    from controllers.errors import ControllersError
+    from cosim.errors import CosimError
+
+    seen: set[int] = set()
+    cause = exc
+    while cause is not None and id(cause) not in seen:
+        seen.add(id(cause))
+        if not isinstance(cause, CosimError | ControllersError):
+            return "".join(traceback.format_exception(exc))
+        cause = cause.__cause__
+    return None
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(f"{type(exc).__name__}: {exc}".split())
+
+
+def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
+    """Everything before the first step (see :func:`run_task`); returns the master.
+
+    ``run`` receives ``phase`` (what is being done, for the reason of an internal error),
+    ``ctrl`` (with its pool ``key``) and ``plant`` as they are made.
+    """
+    from cosim import scenario
+    from cosim.master import Master
+
+    draw = task["draw"]
+    run["phase"] = "writing the campaign's files on the worker"
+    folder = materialize(assets)
+    run["phase"] = "reading the scenario"
+    sc = scenario.load(folder / task["scenario"])
+    sc.path = Path(task["scenario_name"])
+    at_start = dict(draw["values"])
+    at_start.update({f"plant.{k}": v for k, v in draw["plant_start"].items()})
+    sc = sc.with_changes(at_start, draw["setpoints"] or None, draw["stop_time"])
+    run["phase"] = "building the controller"
+    options = dict(task["options"])
+    if "model" in options:
+        options["model"] = str(folder / options["model"])
+    run["key"], ctrl = POOL.take(task["controller"], options)
+    run["ctrl"] = ctrl
+    if hasattr(ctrl, "initial_estimate"):
+        x0 = draw["initial_estimate"]
+        ctrl.initial_estimate = None if x0 is None else np.asarray(x0, dtype=float)
+    run["phase"] = "loading the plant"
+    run["plant"] = plant = _plant(task, folder, draw["seed"])
+    run["phase"] = "wiring plant, controller and scenario"
+    return Master(plant, ctrl, sc, seed=draw["seed"])
+
+
 def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
     """Run one (run, variant) of a campaign; never raises for a fault of the run.
 
@@ -200,33 +282,28 @@ def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
     -------
     dict
         ``result`` (a :class:`~cosim.master.RunResult` with its rows as an array and no
-        exception object), ``theorem`` (dict or ``None``), ``wall_time_s``, ``worker``.
+        exception object), ``theorem`` (dict or ``None``), ``traceback`` (the text of an
+        internal error's traceback, else ``None``), ``wall_time_s``, ``worker``.
+
+    Notes
+    -----
+    The controller comes from :data:`POOL` and goes back to it only when the run ended
+    ``ok``; after a failed run it is dropped (a new one is built for a later run).
     """
     from controllers.errors import ControllersError
-    from cosim import scenario
     from cosim.errors import CosimError
-    from cosim.master import Master, RunResult
+    from cosim.master import RunResult
 
+    announce_start()
     wall0 = time.perf_counter()
-    folder = materialize(assets)
     draw = task["draw"]
-    options = dict(task["options"])
-    if "model" in options:
-        options["model"] = str(folder / options["model"])
     theorem = None
     watchdog = None
+    run: dict[str, Any] = {"phase": "starting", "ctrl": None, "plant": None}
+    trace = None
     try:
-        sc = scenario.load(folder / task["scenario"])
-        sc.path = Path(task["scenario_name"])
-        at_start = dict(draw["values"])
-        at_start.update({f"plant.{k}": v for k, v in draw["plant_start"].items()})
-        sc = sc.with_changes(at_start, draw["setpoints"] or None, draw["stop_time"])
-        ctrl = _controller(task["controller"], options)
-        if hasattr(ctrl, "initial_estimate"):
-            x0 = draw["initial_estimate"]
-            ctrl.initial_estimate = None if x0 is None else np.asarray(x0, dtype=float)
-        plant = _plant(task, folder, draw["seed"])
-        master = Master(plant, ctrl, sc, seed=draw["seed"])
+        master = _start(task, assets, run)
+        plant, ctrl = run["plant"], run["ctrl"]
         monitor = None
         if task["plant"][0] == "model" and hasattr(ctrl, "observer"):
             monitor = _TheoremMonitor(plant, ctrl)
@@ -235,24 +312,37 @@ def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
                                        args=(WATCHDOG_EXIT,))
             watchdog.daemon = True
             watchdog.start()
+        run["phase"], run["ran"] = "running", True
         result = master.run(on_step=monitor, deadline=time.monotonic() + task["timeout"],
                             step_timeout=task.get("step_timeout"))
+        trace = internal_traceback(result.error)
         if monitor is not None:
+            run["phase"] = "checking the theorem"
             if draw["initial_estimate"] is not None:
                 # k = 0, before the first step: x_0 against x̂_0 (ê_o,0)
                 monitor.check(plant.x_start, np.asarray(draw["initial_estimate"]),
                               ctrl.cert.e_o0)
             theorem = monitor.summary()
     except (CosimError, ControllersError) as exc:
+        # the words cosim run uses (an unreachable set-point, a bad draw for this plant)
         result = RunResult(columns=["time"], rows=[], status="failed", reason=str(exc))
-    except Exception as exc:  # a bug: keep the campaign going, name it
+        trace = internal_traceback(exc)
+    except Exception as exc:  # a bug: keep the campaign going, name it and where it was
         result = RunResult(columns=["time"], rows=[], status="failed",
-                           reason=f"{type(exc).__name__}: {exc}")
+                           reason=f"{run['phase']}: {_one_line(exc)}")
+        trace = "".join(traceback.format_exception(exc))
     finally:
         if watchdog is not None:
             watchdog.cancel()
-    result.error = None  # exceptions do not travel; the reason does
-    rows = np.asarray(result.rows, dtype=float).reshape(len(result.rows), -1)
+        if run["plant"] is not None and not run.get("ran"):
+            with contextlib.suppress(Exception):   # the master did not terminate it
+                run["plant"].terminate()
+    if run["ctrl"] is not None and result.status == "ok":
+        POOL.give_back(run["key"], run["ctrl"])
+    result.error = None  # exceptions do not travel; the reason (and the traceback) do
+    width = len(result.columns)
+    rows = (np.asarray(result.rows, dtype=float).reshape(len(result.rows), -1) if result.rows
+            else np.zeros((0, width)))
     result.rows = rows  # type: ignore[assignment]
-    return {"result": result, "theorem": theorem,
+    return {"result": result, "theorem": theorem, "traceback": trace,
             "wall_time_s": time.perf_counter() - wall0, "worker": os.getpid()}

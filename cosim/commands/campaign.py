@@ -38,18 +38,21 @@ Writes into DIR (default results/campaigns/<name>):
   report.png             violations and KPI distributions per variant, the worst run
   campaign.json          the spec and its fingerprint (for --resume)
 
-A run that fails, exceeds its timeout or kills its worker is recorded as failed with its
-reason and the campaign goes on. Ctrl-C or SIGTERM keeps every finished run; --resume then
-runs only the missing ones. The spec format is in the docs (docs/guide/campaigns.md) and in
-scenarios/campaigns/*.toml."""
+A run that fails or exceeds its timeout is recorded as failed with its reason (an internal
+error also leaves runs/<run>-<variant>/traceback.txt) and the campaign goes on. A run whose
+worker process dies under it is run again, 3 tries at most (column tries); one that kills its
+worker every time is recorded as failed. Ctrl-C or SIGTERM keeps every finished run;
+--resume then runs only the missing ones. The spec format is in the docs
+(docs/guide/campaigns.md) and in scenarios/campaigns/*.toml."""
 
 EPILOG = """\
-an existing Dask cluster (every worker needs this project installed; 127.0.0.1 here):
+an existing Dask cluster (scheduler and workers need this project installed; any number
+of worker processes and threads; 127.0.0.1 here):
   dask scheduler --host 127.0.0.1 --port 8786 &
-  dask worker tcp://127.0.0.1:8786 --nworkers 4 --nthreads 1 &
+  dask worker tcp://127.0.0.1:8786 &
   cosim campaign spec.toml --scheduler tcp://127.0.0.1:8786
-  (set distributed.scheduler.allowed-failures: 0 and worker-saturation: 1.0 in the
-  cluster's Dask config so that a crashing run is not retried on other workers)
+  (a scheduler that cannot be reached within 10 s: exit 2; with the scheduler's
+  distributed.scheduler.allowed-failures at 0 the tries counted are the only ones)
 
 examples:
   cosim campaign scenarios/campaigns/theorem.toml
@@ -70,7 +73,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="local Dask worker processes, one thread each (default: the number "
                         "of cores)")
     p.add_argument("--scheduler", metavar="ADDRESS", default=None,
-                   help="use an existing Dask cluster, e.g. tcp://127.0.0.1:8786")
+                   help="use an existing Dask cluster, e.g. tcp://127.0.0.1:8786 (exit 2 when "
+                        "it cannot be reached within 10 s)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--resume", action="store_true",
                    help="run only the runs missing in DIR (the spec must be unchanged)")

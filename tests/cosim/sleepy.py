@@ -1,5 +1,6 @@
-"""Controllers for the fault tests of ``cosim run`` (``--controller tests.cosim.sleepy:<Class>``
-from the repository root): the PI baseline made slow, or hung from some time on."""
+"""Controllers for the fault tests of ``cosim run`` and campaigns (``--controller
+tests.cosim.sleepy:<Class>`` from the repository root): the PI baseline made slow, hung from
+some time on, or with a bug (an internal error where a run names the phase it failed in)."""
 
 from __future__ import annotations
 
@@ -34,3 +35,48 @@ class TimedPI(PIController):
 
     def diagnostics(self) -> dict[str, float]:
         return {**super().diagnostics(), "step_ms": self._step_ms}
+
+
+class BuggyPI(PIController):
+    """The PI baseline with a bug from ``fail_at`` seconds on: ``step`` indexes past the end
+    of a list (an internal error of the controller)."""
+
+    def __init__(self, fail_at: float = 0.0) -> None:
+        super().__init__()
+        self.fail_at = float(fail_at)
+
+    def step(self, t: float, dt: float) -> None:
+        if t >= self.fail_at:
+            gains: list[float] = []
+            gains[len(self.loops)] += 1.0
+        super().step(t, dt)
+
+
+class ForgetfulPI(PIController):
+    """The PI baseline that, from ``forget_at`` seconds on, returns no outputs (a bug the
+    master meets while it records the step, outside the controller's own step)."""
+
+    def __init__(self, forget_at: float = 0.0) -> None:
+        super().__init__()
+        self.forget_at = float(forget_at)
+        self._t = 0.0
+
+    def step(self, t: float, dt: float) -> None:
+        self._t = t
+        super().step(t, dt)
+
+    def get_outputs(self) -> dict[str, float]:
+        return {} if self._t >= self.forget_at else super().get_outputs()
+
+
+class ReadOnlyEstimatePI(PIController):
+    """The PI baseline with a read-only ``initial_estimate`` (campaigns set it on the
+    controllers that have one: an internal error before the run starts)."""
+
+    @property
+    def initial_estimate(self) -> None:
+        return None
+
+    @initial_estimate.setter
+    def initial_estimate(self, value: object) -> None:
+        raise RuntimeError("initial_estimate is read-only")

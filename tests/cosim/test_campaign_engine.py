@@ -160,7 +160,12 @@ pairing = "diagonal"
     crashed = table["plant.crash_at"] == 300.0
     assert 0 < crashed.sum() < 6
     assert list(table["status"]) == ["failed" if c else "ok" for c in crashed]
-    assert all("killed its worker process" in r for r in table[crashed]["reason"])
+    assert all("killed its worker process in each of its 3 tries" in r
+               for r in table[crashed]["reason"])
+    # each crashing run was tried 3 times; the others, once (waiting on a worker that died
+    # is no try)
+    assert list(table["tries"]) == [3 if c else 1 for c in crashed]
+    assert result.summary["retried_runs"] == crashed.sum()
     assert result.status == "failed"
     groups = result.summary["failures_by_reason"]
     assert len(groups) == 1 and next(iter(groups.values()))["count"] == crashed.sum()
