@@ -23,22 +23,26 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim.build import TARGETS
 from cosim.master import RunResult
 
 __all__ = ["DEFAULT_PLANT", "RunOutput", "plant_path", "run"]
 
-#: The project's plant FMU (built on first use), whatever the current folder.
-DEFAULT_PLANT = Path(__file__).resolve().parents[1] / "fmus" / "FourTank.fmu"
+#: The project's plant FMU (FMI 2.0): ``FourTank.fmu`` beside its sources in the ``fmus``
+#: package when that folder is writable (a source checkout: ``fmus/FourTank.fmu``), else in
+#: the user cache (``~/.cache/gru-mpc/fmus``); built on first use (:mod:`cosim.build`).
+DEFAULT_PLANT = TARGETS[0].fmu_path
 
 
 def plant_path(arg: str | Path | None) -> Path:
-    """The plant FMU: ``arg``, or the project's, built when missing.
+    """The plant FMU: ``arg``, or the project's, built when missing or stale.
 
     Raises
     ------
     CosimError
         ``arg`` is a folder or does not exist; the project's FMU cannot be built here.
     """
+    from cosim.build import default_plant
     from cosim.errors import CosimError
 
     if arg is not None:
@@ -48,16 +52,10 @@ def plant_path(arg: str | Path | None) -> Path:
         if not path.is_file():
             raise CosimError(f"{path}: plant FMU not found")
         return path
-    if not DEFAULT_PLANT.is_file():
-        try:
-            from cosim.build import build_fmus
-        except ImportError:
-            raise CosimError(f"{DEFAULT_PLANT}: plant FMU not found and cannot be built here; "
-                             "run 'cosim build-fmu' or give --plant") from None
-        build_fmus()
-        if not DEFAULT_PLANT.is_file():
-            raise CosimError(f"{DEFAULT_PLANT}: not produced by cosim build-fmu")
-    return DEFAULT_PLANT
+    path = default_plant()
+    if not path.is_file():
+        raise CosimError(f"{path}: not produced by cosim build-fmu")
+    return path
 
 
 @dataclass
@@ -139,7 +137,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     scenario : path
         Scenario CSV file.
     plant : path or str, optional
-        Plant FMU (FMI 2.0 or 3.0; default: the project's ``fmus/FourTank.fmu``, built if
+        Plant FMU (FMI 2.0 or 3.0; default: the project's :data:`DEFAULT_PLANT`, built if
         missing), or ``"model:FILE"``: the GRU model itself as the plant.
     controller : str
         ``"robust-mpc"``, ``"pi"`` or ``"module:Class"``.

@@ -1,17 +1,22 @@
 """Build the four-tank plant FMUs from their C sources.
 
-``build_fmus()`` compiles ``fmus/fourtank/*.c`` (``model.c``, ``instance.c`` and the FMI 2 or
-FMI 3 glue) with gcc against the FMI headers shipped with fmpy (``fmpy/c-code``) and zips two
-source-and-binary FMUs:
+``build_fmus()`` compiles the sources of the :mod:`fmus` package, ``fmus/fourtank/*.c``
+(``model.c``, ``instance.c`` and the FMI 2 or FMI 3 glue), with gcc against the FMI headers
+shipped with fmpy (``fmpy/c-code``) and zips two source-and-binary FMUs:
 
-* ``fmus/FourTank.fmu`` -- FMI 2.0, Co-Simulation and Model Exchange, binary under
+* ``FourTank.fmu`` -- FMI 2.0, Co-Simulation and Model Exchange, binary under
   ``binaries/linux64/``;
-* ``fmus/FourTank3.fmu`` -- FMI 3.0, Co-Simulation and Model Exchange, binary under
+* ``FourTank3.fmu`` -- FMI 3.0, Co-Simulation and Model Exchange, binary under
   ``binaries/x86_64-linux/``, with ``sources/buildDescription.xml``.
 
-Intermediate files go to ``fmus/build/``. An FMU is rebuilt only when its inputs change: the
-SHA-256 of the sources, the model description, the compiler command and the compiler version
-is stored in ``fmus/build/<name>.sha256`` and inside the FMU as ``sources/BUILD_HASH``.
+The sources are package data, found through the installed ``fmus`` package (never through
+a repository's layout). The FMUs go to :data:`FMU_DIR`: the ``fmus`` package folder itself
+when it is writable (in a source checkout: ``fmus/FourTank.fmu``), else the user cache
+folder ``platformdirs.user_cache_dir("gru-mpc")/fmus`` (``~/.cache/gru-mpc/fmus`` on Linux,
+``$XDG_CACHE_HOME`` respected). Intermediate files go to ``build/`` there. An FMU is rebuilt
+only when its inputs change: the SHA-256 of the sources, the model description, the compiler
+command and the compiler version is stored in ``build/<name>.sha256`` and inside the FMU as
+``sources/BUILD_HASH``.
 """
 
 from __future__ import annotations
@@ -20,24 +25,58 @@ import hashlib
 import os
 import platform
 import shutil
+import stat
 import subprocess
-import tempfile
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 
+import fmus
 from cosim.errors import CosimError
 
-__all__ = ["BUILD_DIR", "CFLAGS", "FMU_DIR", "LDFLAGS", "MODEL_IDENTIFIER", "ROOT", "SOURCE_DIR",
-           "TARGETS", "Target", "build_fmu", "build_fmus", "compiler", "display_path",
-           "fmi_headers_dir"]
+__all__ = ["BUILD_DIR", "CACHE_APP", "CFLAGS", "FMU_DIR", "LDFLAGS", "MODEL_IDENTIFIER",
+           "PACKAGE_DIR", "SOURCE_DIR", "TARGETS", "Target", "build_fmu", "build_fmus",
+           "cache_dir", "compiler", "default_plant", "display_path", "fmi_headers_dir",
+           "output_dir", "writable"]
 
-#: Repository root (the package is installed in editable mode).
-ROOT = Path(__file__).resolve().parents[1]
-SOURCE_DIR = ROOT / "fmus" / "fourtank"
-FMU_DIR = ROOT / "fmus"
-BUILD_DIR = FMU_DIR / "build"
+#: The ``fmus`` package folder: ``fmus/`` of a source checkout, or of site-packages.
+PACKAGE_DIR = Path(fmus.__file__).resolve().parent
+#: The four-tank plant's C sources and model descriptions (package data).
+SOURCE_DIR = PACKAGE_DIR / "fourtank"
+#: The application's name in the user cache folder (the compiled kernels share it).
+CACHE_APP = "gru-mpc"
 MODEL_IDENTIFIER = "FourTank"
+
+
+def writable(folder: Path) -> bool:
+    """Whether ``folder`` may be written into: it exists, we have write access, and its
+    permission bits allow writing (a folder made read-only with ``chmod a-w`` counts as
+    read-only even for root)."""
+    try:
+        mode = folder.stat().st_mode
+    except OSError:
+        return False
+    return (stat.S_ISDIR(mode) and bool(mode & (stat.S_IWUSR | stat.S_IWGRP | stat.S_IWOTH))
+            and os.access(folder, os.W_OK | os.X_OK))
+
+
+def cache_dir() -> Path:
+    """The user cache folder of the FMUs: ``platformdirs.user_cache_dir("gru-mpc")/fmus``."""
+    import platformdirs
+
+    return Path(platformdirs.user_cache_dir(CACHE_APP)) / "fmus"
+
+
+def output_dir() -> Path:
+    """Where the FMUs are built: beside their sources when that folder is writable (a source
+    checkout), else :func:`cache_dir` (an installed, read-only package)."""
+    return PACKAGE_DIR if writable(PACKAGE_DIR) else cache_dir()
+
+
+#: The folder of the built FMUs (:func:`output_dir`, chosen when this module is imported).
+FMU_DIR = output_dir()
+#: Intermediate files (compiled libraries, hash stamps).
+BUILD_DIR = FMU_DIR / "build"
 
 #: Compiler flags: strict C99, warnings are errors, only the FMI functions are exported.
 CFLAGS = (
@@ -107,10 +146,10 @@ def compiler() -> str:
 
 
 def display_path(path: Path) -> str:
-    """``path`` relative to the repository when inside it (for one-line messages)."""
+    """``path`` relative to the current folder when inside it, else absolute (messages)."""
     try:
-        return str(path.relative_to(ROOT))
-    except ValueError:
+        return str(path.relative_to(Path.cwd()))
+    except (ValueError, OSError):
         return str(path)
 
 
@@ -173,25 +212,17 @@ def _add(zf: zipfile.ZipFile, arcname: str, data: bytes, executable: bool = Fals
 
 
 def _zip_fmu(target: Target, binary: Path, digest: str) -> None:
-    """Write the FMU atomically (temporary file, then rename)."""
-    FMU_DIR.mkdir(parents=True, exist_ok=True)
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.fmu_name}.", dir=FMU_DIR)
-    os.close(fd)
-    tmp = Path(tmp_name)
-    try:
-        with zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
-            members = [(SOURCE_DIR / target.model_description, "modelDescription.xml"),
-                       (binary, f"binaries/{target.platform_dir}/{MODEL_IDENTIFIER}.so")]
-            members += [(SOURCE_DIR / name, f"sources/{name}") for name in target.sources]
-            for path, arcname in members:
-                _add(zf, arcname, path.read_bytes(), executable=arcname.endswith(".so"))
-            _add(zf, "sources/BUILD_HASH", (digest + "\n").encode())
-        umask = os.umask(0)
-        os.umask(umask)
-        tmp.chmod(0o666 & ~umask)  # mkstemp creates 0600; an FMU is an ordinary file
-        tmp.replace(target.fmu_path)
-    finally:
-        tmp.unlink(missing_ok=True)
+    """Write the FMU atomically (temporary file, then rename): a failure keeps the old one."""
+    from cosim.atomicio import replacing
+
+    with replacing(target.fmu_path) as tmp, \
+            zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
+        members = [(SOURCE_DIR / target.model_description, "modelDescription.xml"),
+                   (binary, f"binaries/{target.platform_dir}/{MODEL_IDENTIFIER}.so")]
+        members += [(SOURCE_DIR / name, f"sources/{name}") for name in target.sources]
+        for path, arcname in members:
+            _add(zf, arcname, path.read_bytes(), executable=arcname.endswith(".so"))
+        _add(zf, "sources/BUILD_HASH", (digest + "\n").encode())
 
 
 def _stored_hash(target: Target) -> str | None:
@@ -208,14 +239,27 @@ def _stored_hash(target: Target) -> str | None:
 
 
 def build_fmu(target: Target, force: bool = False) -> bool:
-    """Build one FMU if its inputs changed (or ``force``); return True when it was rebuilt."""
+    """Build one FMU if its inputs changed (or ``force``); return True when it was rebuilt.
+
+    Raises
+    ------
+    CosimError
+        gcc is missing, the platform is not x86_64 Linux, or compilation failed.
+    OutputError
+        :data:`FMU_DIR` cannot be written (the previous FMU, if any, is intact).
+    """
+    from cosim.atomicio import output_error, write_text
+
     cc = compiler()
     digest = _source_hash(target, cc)
     if not force and _stored_hash(target) == digest:
         return False
     _check_platform()
     out_dir = BUILD_DIR / f"fmi{target.fmi_version}"
-    out_dir.mkdir(parents=True, exist_ok=True)
+    try:
+        out_dir.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise output_error(out_dir, exc) from None
     # Compile to a private name first: concurrent builds (parallel test runs) never zip a
     # half-written library.
     binary = out_dir / f"{MODEL_IDENTIFIER}.{os.getpid()}.so"
@@ -225,12 +269,12 @@ def build_fmu(target: Target, force: bool = False) -> bool:
         _zip_fmu(target, binary, digest)
     finally:
         (out_dir / f"{MODEL_IDENTIFIER}.{os.getpid()}.so").unlink(missing_ok=True)
-    (BUILD_DIR / f"{target.fmu_name}.sha256").write_text(digest + "\n")
+    write_text(BUILD_DIR / f"{target.fmu_name}.sha256", digest + "\n")
     return True
 
 
 def build_fmus(force: bool = False) -> list[Path]:
-    """Build ``fmus/FourTank.fmu`` (FMI 2.0) and ``fmus/FourTank3.fmu`` (FMI 3.0).
+    """Build ``FourTank.fmu`` (FMI 2.0) and ``FourTank3.fmu`` (FMI 3.0) in :data:`FMU_DIR`.
 
     Parameters
     ----------
@@ -246,7 +290,34 @@ def build_fmus(force: bool = False) -> list[Path]:
     ------
     CosimError
         gcc is missing, the platform is not x86_64 Linux, or compilation failed.
+    OutputError
+        :data:`FMU_DIR` cannot be written (the previous FMUs, if any, are intact).
     """
     for target in TARGETS:
         build_fmu(target, force=force)
     return [target.fmu_path for target in TARGETS]
+
+
+def default_plant() -> Path:
+    """The project's plant FMU (FMI 2.0), built when missing and rebuilt when stale.
+
+    With a C compiler at hand, ``FourTank.fmu`` is brought up to date with its sources
+    (a no-op when it is: only the hash is computed), so that a cached FMU never outlives an
+    upgrade of the package; without one, an FMU already built is used as it is.
+
+    Raises
+    ------
+    CosimError
+        The FMU is missing and cannot be built here (no gcc, another platform, a compile
+        error).
+    OutputError
+        :data:`FMU_DIR` cannot be written.
+    """
+    target = TARGETS[0]
+    if target.fmu_path.is_file():
+        try:
+            compiler()
+        except CosimError:
+            return target.fmu_path
+    build_fmu(target)
+    return target.fmu_path

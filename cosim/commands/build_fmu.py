@@ -11,14 +11,18 @@ __all__ = ["DESCRIPTION", "HELP", "register", "run"]
 HELP = "compile the four-tank plant FMUs (fmus/FourTank.fmu, fmus/FourTank3.fmu)"
 
 DESCRIPTION = """\
-Compile the C sources in fmus/fourtank/ with gcc and zip two FMUs, each with the
-Co-Simulation and Model Exchange interfaces and its C sources inside (source FMU):
+Compile the C sources in fmus/fourtank/ (package data of the installed fmus package) with
+gcc and zip two FMUs, each with the Co-Simulation and Model Exchange interfaces and its C
+sources inside (source FMU):
 
   fmus/FourTank.fmu    FMI 2.0
   fmus/FourTank3.fmu   FMI 3.0
 
-An FMU is rebuilt only when its sources, model description or compiler changed.
-Intermediate files go to fmus/build/."""
+They are written beside their sources when that folder is writable (a source checkout:
+fmus/FourTank.fmu), else into the user cache folder, ~/.cache/gru-mpc/fmus on Linux
+($XDG_CACHE_HOME respected); the command prints where. An FMU is rebuilt only when its
+sources, model description or compiler changed. Intermediate files go to build/ beside the
+FMUs."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

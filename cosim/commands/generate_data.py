@@ -36,8 +36,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                    epilog=exit_codes_help(),
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--plant", default=None, metavar="FMU",
-                        help="plant FMU (default: the project's fmus/FourTank.fmu, built if "
-                             "missing; not relative to the current folder)")
+                        help="plant FMU (default: the project's FourTank.fmu, built if missing, "
+                             "see cosim build-fmu; not relative to the current folder)")
     parser.add_argument("--map", default=None, metavar="MAP",
                         help="variable map (TOML) for a third-party plant")
     parser.add_argument("--interface", choices=("cs", "me"), default="cs",

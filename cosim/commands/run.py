@@ -58,8 +58,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("scenario", metavar="SCENARIO", help="scenario CSV file")
     p.add_argument("--plant", metavar="FMU", default=None,
                    help="plant FMU, FMI 2.0 or 3.0 (default: the project's "
-                        "fmus/FourTank.fmu, built if missing), or model:FILE for the GRU "
-                        "model itself as the plant (the paper's eq:perturbed-model; its "
+                        "FourTank.fmu, built if missing, see cosim build-fmu), or "
+                        "model:FILE for the GRU model itself as the plant (the paper's "
+                        "eq:perturbed-model; its "
                         "h1_start, h2_start, w_y_max, dx_<i> are scenario plant.* columns)")
     p.add_argument("--map", metavar="MAP", default=None,
                    help="variable map TOML for a plant whose variable names or units differ "

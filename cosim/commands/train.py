@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import importlib.resources
 from pathlib import Path
 
 from cosim.errors import exit_codes_help
@@ -10,8 +11,9 @@ from cosim.errors import exit_codes_help
 __all__ = ["DESCRIPTION", "HELP", "MAX_EPOCHS", "MAX_STATES", "SHIPPED_MODEL", "register",
            "run"]
 
-#: The shipped model: never written unless named explicitly with --out.
-SHIPPED_MODEL = Path(__file__).resolve().parents[2] / "controllers" / "models" / "fourtank_gru.json"
+#: The shipped model (package data of ``controllers``, ``controllers.model.DEFAULT_MODEL``):
+#: never written unless named explicitly with --out.
+SHIPPED_MODEL = Path(str(importlib.resources.files("controllers"))) / "models" / "fourtank_gru.json"
 #: Largest --epochs accepted (the paper's recipe runs 2,000).
 MAX_EPOCHS = 100_000
 #: Largest --n accepted (the paper's GRU has 20 states; the MPC solves grow with n²).

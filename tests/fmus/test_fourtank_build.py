@@ -109,3 +109,45 @@ def test_cli_builds_and_is_quiet(sandbox, capsys):
     assert "FourTank.fmu: up to date" in out and "FourTank3.fmu: up to date" in out
     assert main(["build-fmu", "--force"]) == 0
     assert "FourTank.fmu: built" in capsys.readouterr().out
+
+
+def test_output_folder_is_the_package_folder_or_the_user_cache(tmp_path, monkeypatch):
+    package = tmp_path / "fmus"
+    package.mkdir()
+    monkeypatch.setattr(build, "PACKAGE_DIR", package)
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    assert build.output_dir() == package  # a source checkout: beside the sources
+    package.chmod(0o555)  # an installed, read-only package: the user cache (even as root)
+    try:
+        assert build.output_dir() == tmp_path / "cache" / "gru-mpc" / "fmus"
+    finally:
+        package.chmod(0o755)
+    assert build.writable(package) and not build.writable(tmp_path / "missing")
+
+
+def test_default_plant_is_built_and_kept_up_to_date(sandbox, monkeypatch):
+    from cosim.api import plant_path
+
+    fmu = plant_path(None)
+    assert fmu == sandbox / "FourTank.fmu" and fmu.is_file()
+    assert not (sandbox / "FourTank3.fmu").exists()  # only the plant that runs
+    stamp = fmu.stat().st_mtime_ns
+    assert plant_path(None) == fmu and fmu.stat().st_mtime_ns == stamp  # up to date
+    model = build.SOURCE_DIR / "model.c"
+    model.write_text(model.read_text() + "\n/* changed */\n")
+    assert plant_path(None) == fmu and fmu.stat().st_mtime_ns != stamp  # stale: rebuilt
+    monkeypatch.setenv("CC", "no-such-compiler-xyz")
+    assert plant_path(None) == fmu  # no compiler: the FMU as built
+    fmu.unlink()
+    with pytest.raises(CosimError, match="not found"):
+        plant_path(None)
+
+
+def test_unwritable_output_folder_is_a_one_line_error(sandbox, monkeypatch, capsys):
+    blocker = sandbox / "not-a-folder"
+    blocker.write_text("")
+    monkeypatch.setattr(build, "FMU_DIR", blocker / "fmus")
+    monkeypatch.setattr(build, "BUILD_DIR", blocker / "fmus" / "build")
+    assert main(["build-fmu"]) == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot write" in err and "not-a-folder" in err
