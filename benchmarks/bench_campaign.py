@@ -21,8 +21,17 @@ campaign: the same draws run in-process, one after the other, as two controller 
 (``[[variant]]``): the default controller and ``kernel = "numpy"`` (the numpy derivatives),
 alternating run by run; printed are the runs per minute of each and their ratio.
 
+``--threads`` measures what a worker's second thread gives (issue 18): the same runs on a
+local cluster of one worker process with one thread, of one worker with two threads (Dask's
+``dask worker --nthreads 2``: two controllers at once, their compiled kernels in their own
+workspaces, ctypes releasing the GIL during each solve) and of two one-thread workers, each
+``--repeats`` times on a fresh cluster, alternating; the fastest repeat of each counts.
+Printed: runs per minute of each layout, the 2-thread worker's speed-up over the 1-thread
+worker and against two processes, each worker's memory, and the largest KPI difference of
+every layout against the 1-thread worker (the answers must not depend on the threads: 0).
+
 Usage: ``python benchmarks/bench_campaign.py [--runs 12] [--repeats 2]
-[--scenario scenarios/paper_steps.csv] [--kernel-gain]``
+[--scenario scenarios/paper_steps.csv] [--kernel-gain | --threads]``
 """
 
 from __future__ import annotations
@@ -93,6 +102,73 @@ def kernel_gain(work: Path, runs: int, scenario: str) -> int:
     return 0
 
 
+#: ``--threads``: (worker processes, threads per worker) of each layout
+THREAD_LAYOUTS = ((1, 1), (1, 2), (2, 1))
+
+
+def _kpi_difference(spec_path: Path, a: Path, b: Path) -> tuple[float, int]:
+    """Largest absolute difference of any KPI between two campaign folders' runs, and the
+    number of KPIs compared per run."""
+    import numpy as np
+
+    spec = load(spec_path)
+    ta, _ = store.build_report(spec, a)
+    tb, _ = store.build_report(spec, b)
+    keys = ["run", "variant"]
+    ta, tb = ta.sort_values(keys).reset_index(drop=True), tb.sort_values(keys).reset_index(
+        drop=True)
+    if len(ta) != len(tb) or list(ta["status"]) != list(tb["status"]):
+        return float("inf"), 0
+    # every number of a run but its timings (wall time, solve and step times in ms)
+    cols = [c for c in ta.columns if ta[c].dtype.kind in "fiu" and c not in ("tries",)
+            and "wall" not in c and "_ms" not in c]
+    diff = np.abs(ta[cols].to_numpy(float) - tb[cols].to_numpy(float))
+    return (float(np.nanmax(diff)) if diff.size else 0.0), len(cols)
+
+
+def thread_gain(work: Path, runs: int, scenario: str, repeats: int) -> int:
+    """Runs per minute of one 1-thread worker, one 2-thread worker and two 1-thread
+    workers on the same runs (fresh local clusters, alternating)."""
+    import dask
+    from distributed import LocalCluster
+
+    from cosim.campaign import cluster
+
+    spec_path = work / "threads.toml"
+    spec_path.write_text(SPEC.format(runs=runs, scenario=scenario))
+    plan = engine.prepare(load(spec_path))
+    n = len(plan.tasks)
+    print(f"{n} robust-mpc runs of {Path(scenario).name}; layouts: worker processes x threads")
+    best: dict[tuple[int, int], tuple[float, engine.ExecutionStats, Path]] = {}
+    for r in range(repeats):
+        for workers, threads in THREAD_LAYOUTS:
+            out = work / f"p{workers}t{threads}-{r}"
+            with dask.config.set(cluster.LOCAL_CONFIG), cluster.signals_ignored(), \
+                    LocalCluster(n_workers=workers, threads_per_worker=threads,
+                                 processes=True, host="127.0.0.1",
+                                 dashboard_address="127.0.0.1:0",
+                                 worker_dashboard_address="127.0.0.1:0",
+                                 silence_logs=50) as lc:
+                t0 = time.perf_counter()
+                stats = engine._execute(plan, plan.tasks, out, None,  # type: ignore[attr-defined]
+                                        lc.scheduler_address, lambda status: None,
+                                        probe=_memory)
+                dt = time.perf_counter() - t0 - stats.startup_s
+            key = (workers, threads)
+            if key not in best or dt < best[key][0]:
+                best[key] = (dt, stats, out)
+    base = best[(1, 1)]
+    for (workers, threads), (dt, stats, out) in best.items():
+        mem = ", ".join(f"{v:.0f}" for v in (stats.probe or {}).values())
+        diff, compared = _kpi_difference(spec_path, base[2], out)
+        print(f"  {workers} x {threads}: {60.0 * n / dt:7.2f} runs/min, memory {mem} MiB per "
+              f"worker; {compared} KPIs of each run vs 1 x 1: max difference {diff:.1e}")
+    t11, t12, t21 = (best[k][0] for k in THREAD_LAYOUTS)
+    print(f"a 2-thread worker vs a 1-thread worker: {t11 / t12:.2f}x the runs per minute "
+          f"(2 worker processes: {t11 / t21:.2f}x)")
+    return 0
+
+
 def _memory(client: object) -> dict[str, float]:
     def rss() -> float:
         import psutil
@@ -117,13 +193,18 @@ def main() -> int:
     parser.add_argument("--repeats", type=int, default=2,
                         help="campaigns per layout; the fastest counts")
     parser.add_argument("--scenario", default=str(ROOT / "scenarios" / "paper_steps.csv"))
-    parser.add_argument("--kernel-gain", action="store_true",
-                        help="the compiled kernel's gain in runs per minute instead")
+    mode = parser.add_mutually_exclusive_group()
+    mode.add_argument("--kernel-gain", action="store_true",
+                      help="the compiled kernel's gain in runs per minute instead")
+    mode.add_argument("--threads", action="store_true",
+                      help="a worker's second thread against one thread and two processes")
     args = parser.parse_args()
     work = Path(tempfile.mkdtemp(prefix="bench-campaign-"))
     try:
         if args.kernel_gain:
             return kernel_gain(work, args.runs, args.scenario)
+        if args.threads:
+            return thread_gain(work, args.runs, args.scenario, args.repeats)
         spec_path = work / "bench.toml"
         spec_path.write_text(SPEC.format(runs=args.runs, scenario=args.scenario))
         plan = engine.prepare(load(spec_path))

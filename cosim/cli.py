@@ -9,7 +9,9 @@ prints with what a code also means for each command (the commands' ``EXIT_NOTES`
 from __future__ import annotations
 
 import argparse
+import atexit
 import importlib
+import os
 import signal
 import sys
 import warnings
@@ -26,7 +28,7 @@ from cosim.errors import (
     exit_codes_help,
 )
 
-__all__ = ["COMMANDS", "build_parser", "main"]
+__all__ = ["COMMANDS", "build_parser", "entry", "main"]
 
 #: Sub-command modules, in the order ``cosim --help`` lists them. Each defines
 #: ``register(subparsers)`` that adds its parser and sets ``func(args) -> int``, and may define
@@ -101,5 +103,29 @@ def main(argv: Sequence[str] | None = None) -> int:
         return EXIT_SIGNAL_BASE + signum
 
 
+def entry() -> None:
+    """The ``cosim`` console script and ``python -m cosim.cli``: :func:`main`, then exit
+    with its code.
+
+    FMU libraries are never unloaded (:meth:`cosim.fmu.FmuComponent.terminate`), so their
+    destructors run when the process exits, after Python's own shutdown, and they are native
+    code that may crash: pythonfmu's ``finalizePythonInterpreter`` reads memory its static
+    destructors have just freed (valgrind: an invalid read at ``_dl_fini``), which now and
+    then ends a finished ``cosim run`` with ``corrupted double-linked list`` and exit 134.
+    A command that loaded an FMU therefore runs Python's exit handlers (temporary folders,
+    finalizers, log flushing) and leaves with ``os._exit``, so that its exit code is its own.
+    """
+    code = main()
+    fmu = sys.modules.get("cosim.fmu")
+    if fmu is None or not fmu.libraries_loaded():
+        sys.exit(code)
+    for stream in (sys.stdout, sys.stderr):
+        stream.flush()
+    atexit._run_exitfuncs()
+    for stream in (sys.stdout, sys.stderr):
+        stream.flush()
+    os._exit(code)
+
+
 if __name__ == "__main__":
-    sys.exit(main())
+    entry()

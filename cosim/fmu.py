@@ -12,6 +12,11 @@ An FMU call that fails raises :class:`~cosim.errors.FmuError` (a
 :class:`~cosim.errors.SimulationFailed`) carrying the FMI status it returned. The archive
 and the modelDescription are read by :mod:`cosim.fmu_archive`; the FMU's log messages are
 routed by :mod:`cosim.fmu_log`.
+
+Several components may live in one process and be stepped from several threads at once (a
+campaign worker with two threads): each has its own instance, extracted folder and buffers;
+loading a library is serialised (:data:`_LOAD_LOCK`), since fmpy changes the process's
+working folder to do it.
 """
 
 from __future__ import annotations
@@ -23,6 +28,7 @@ import math
 import os
 import shutil
 import tempfile
+import threading
 from collections import deque
 from collections.abc import Mapping
 from pathlib import Path
@@ -34,13 +40,23 @@ from cosim.errors import CosimError, FmuError
 from cosim.fmu_archive import check_binary, read_model_description, safe_extract
 from cosim.varmap import VarMap, variable_unit
 
-__all__ = ["FmuComponent"]
+__all__ = ["FmuComponent", "libraries_loaded"]
 
 _REAL_TYPES = ("Real", "Float64")
 #: FMU objects whose libraries stay loaded until the process ends (never dlclose'd).
 _KEEP_LOADED: list[Any] = []
-#: Numbers the instances of this process (FMU log messages are routed by instance name).
+#: Numbers the instances of this process (FMU log messages are routed by instance name;
+#: ``next()`` on a count is atomic, so two threads never get the same number).
 _INSTANCE_NUMBERS = itertools.count(1)
+#: Held while fmpy loads an FMU's library (it changes the process's working folder).
+_LOAD_LOCK = threading.Lock()
+#: FMU libraries loaded by this process (under the lock).
+_LOADS = [0]
+
+
+def libraries_loaded() -> bool:
+    """Whether this process has loaded an FMU's library (they stay loaded until it exits)."""
+    return _LOADS[0] > 0
 
 
 class FmuComponent(Component):
@@ -184,19 +200,23 @@ class FmuComponent(Component):
                    ("3" if fmi3_ else "2", self.interface)]
         guid = self.md.instantiationToken if fmi3_ else self.md.guid
         check_binary(self.path, self._tmpdir, self.model_identifier, fmi3_)
-        cwd = os.getcwd()
-        try:
-            self._fmu = cls(guid=guid, unzipDirectory=str(self._tmpdir),
-                            modelIdentifier=self.model_identifier,
-                            instanceName=self._instance_name)
-        except Exception as exc:
-            # nothing has run yet: a binary that does not load is a bad FMU (exit 2)
-            msg = " ".join(str(exc).replace(str(self._tmpdir), "<fmu>").split())
-            raise CosimError(f"{self.path}: cannot load the FMU's binary: {msg}") from None
-        finally:
-            # fmpy changes into the binaries folder to load and does not change back when
-            # loading fails; that folder is deleted by terminate()
-            os.chdir(cwd)
+        # fmpy changes the process's working folder into the binaries folder to load the
+        # library (and does not change back when loading fails; that folder is deleted by
+        # terminate()): one load at a time in this process, so that a second thread (a
+        # campaign worker running two runs) neither saves nor restores the other's folder
+        with _LOAD_LOCK:
+            cwd = os.getcwd()
+            try:
+                self._fmu = cls(guid=guid, unzipDirectory=str(self._tmpdir),
+                                modelIdentifier=self.model_identifier,
+                                instanceName=self._instance_name)
+                _LOADS[0] += 1
+            except Exception as exc:
+                # nothing has run yet: a binary that does not load is a bad FMU (exit 2)
+                msg = " ".join(str(exc).replace(str(self._tmpdir), "<fmu>").split())
+                raise CosimError(f"{self.path}: cannot load the FMU's binary: {msg}") from None
+            finally:
+                os.chdir(cwd)
         self._fmi3 = fmi3_
         try:
             if fmi3_:
