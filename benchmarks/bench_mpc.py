@@ -50,8 +50,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from controllers.fhocp import FHOCP  # noqa: E402
-from controllers.mpc_controller import RobustMPCController  # noqa: E402
 from cosim.component import Component  # noqa: E402
+from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
 
 #: The plain baseline may take seconds to declare infeasibility; cap it so the run ends.
 PLAIN_OPTIONS = {"max_wall_time": 2.0}
@@ -121,7 +121,7 @@ def closed_loop(ctrl: RobustMPCController, scenario: Path, plant_kind: str, step
 
         plant = FmuComponent(ROOT / "fmus" / "FourTank.fmu")
     else:
-        from controllers.model_plant import GRUPlant
+        from cosim_adapters.gru_plant import GRUPlant
 
         plant = GRUPlant(ctrl.model, y0=np.array([0.65, 0.65]))
     timed = TimedController(ctrl, others)
@@ -289,9 +289,9 @@ def scaling(args: argparse.Namespace) -> None:
     20 % of the median) into the SQP's QP, Hessian, Jacobian and f, g time, and the rest
     (Python, the answer check, the observer): the QP is the same qpOASES call in both."""
     from controllers import gain_design
-    from controllers.model_plant import GRUPlant
     from cosim.master import Master
     from cosim.scenario import Column, Event, Scenario
+    from cosim_adapters.gru_plant import GRUPlant
     from tests.controllers.random_gru import random_gru_model
 
     rows = []

@@ -41,8 +41,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from controllers import nlp_single_shooting  # noqa: E402
-from controllers.mpc_controller import RobustMPCController  # noqa: E402
 from controllers.solver_settings import SQP_OPTIONS  # noqa: E402
+from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
 CAP = 15

@@ -1,10 +1,10 @@
 """The numerical core: GRU model, δISS certificates, observer, constraint tightening, MPC.
 
 This package knows nothing of FMUs or of co-simulation: it works on arrays in normalised units
-and raises its own errors (:mod:`controllers.errors`). Only the adapters that implement the
-co-simulation ``Component`` interface import ``cosim``: :mod:`controllers.mpc_controller`
-(the robust MPC), :mod:`controllers.pi` (the PI baseline) and :mod:`controllers.model_plant`
-(the GRU model as a plant). Only :mod:`controllers.training` needs torch.
+and raises its own errors (:mod:`controllers.errors`), and imports nothing of ``cosim`` (an
+import contract, ``tests/test_layering.py``). Its co-simulation adapters (the robust MPC,
+the PI baseline and the GRU model as a plant) live one layer up, in :mod:`cosim_adapters`.
+Only :mod:`controllers.training` needs torch.
 
 The main names, importable from here::
 
@@ -27,7 +27,6 @@ __all__ = [
     "GRUObserver",
     "ReferenceGovernor",
     "RobustMPC",
-    "RobustMPCController",
     "choose_gain_scale",
     "compute_certificate",
     "equilibrium",
@@ -40,14 +39,13 @@ _EXPORTS = {
     "Certificate": ("controllers.certificates", "Certificate"),
     "compute_certificate": ("controllers.certificates", "compute_certificate"),
     "choose_gain_scale": ("controllers.gain_design", "choose_gain_scale"),
-    "observer_gains_lp": ("controllers.gain_design", "observer_gains_lp"),
+    "observer_gains_lp": ("controllers.observer_gains", "observer_gains_lp"),
     "equilibrium": ("controllers.equilibrium", "equilibrium"),
     "FHOCP": ("controllers.fhocp", "FHOCP"),
     "FHOCPResult": ("controllers.fhocp", "FHOCPResult"),
     "RobustMPC": ("controllers.robust_mpc", "RobustMPC"),
     "GRUObserver": ("controllers.observer", "GRUObserver"),
     "ReferenceGovernor": ("controllers.governor", "ReferenceGovernor"),
-    "RobustMPCController": ("controllers.mpc_controller", "RobustMPCController"),
     "ControllersError": ("controllers.errors", "ControllersError"),
 }
 

@@ -319,7 +319,7 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
         ``ê_o,0`` (paper: 0.02), the assumed initial bound of ``‖x_0 − x̂_0‖∞``.
     L_z, L_r : (n, p) arrays, optional
         Observer gains. Default: ``gain_scale ×`` the LP gains
-        (:func:`controllers.gain_design.observer_gains_lp`)
+        (:func:`controllers.observer_gains.observer_gains_lp`)
         when ``gain_scale`` is given, else the gains saved in the model file, else the LP
         gains (``gain_scale = 1``).
     w_y_bar : float, optional
@@ -362,7 +362,7 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
             L_z, L_r = gain_scale * L_z, gain_scale * L_r
     elif gain_scale is not None or getattr(model, "L_z", None) is None:
         theta = 1.0 if gain_scale is None else float(gain_scale)
-        from controllers.gain_design import observer_gains_lp
+        from controllers.observer_gains import observer_gains_lp
 
         Lz_lp, Lr_lp = observer_gains_lp(params)
         L_z, L_r, gain_scale = theta * Lz_lp, theta * Lr_lp, theta

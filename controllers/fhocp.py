@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
-from dataclasses import dataclass, field
 from typing import Any
 
 import casadi as ca
@@ -46,62 +45,11 @@ from controllers.casadi_callbacks import quiet_stdout
 from controllers.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
 from controllers.errors import DesignError
 from controllers.fhocp_layout import FHOCPLayout
+from controllers.fhocp_result import FHOCPResult, set_residuals
 from controllers.solver_settings import DEFECT_TOL, FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
 __all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPResult"]
 
-
-
-@dataclass
-class FHOCPResult:
-    """One solve of ``eq:optimization``.
-
-    Attributes
-    ----------
-    u : (N, m) array
-        Optimal (or last) input sequence, normalised.
-    x : (N + 1, n) array
-        Its state trajectory, rolled out with numpy from ``x̂``.
-    cost : float
-        Cost ``eq:optimization-cost`` of ``(x, u)`` evaluated with numpy.
-    status : str
-        ``"optimal"``, ``"infeasible_x0"`` (the ``i = 0`` constraint fails at ``x̂``), or the
-        solver's return status when it failed.
-    success : bool
-        Solver success AND residual checks passed.
-    iterations : int
-    solve_time : float
-        Wall time of the solve [s].
-    constraint_violation : float
-        ``max(0, max_i,j (L(U_o x_i + b_o) + w_L − h + a_i ê_o + b_i)_j)`` over ``i = 0 … N−1``,
-        together with input-box violations.
-    terminal_violation : float
-        ``max(0, ‖x_N − x̄‖∞ − α)``.
-    defect : float
-        ``max ‖x_solver − x_numpy‖∞`` (dynamics defect for multiple shooting; casadi-vs-numpy
-        model check for single shooting).
-    active : int
-        Number of output / terminal / input constraints active (within 1e-6) at the answer.
-    feasible : bool
-        The answer satisfies every constraint (a solver that stopped early may still return
-        a feasible, suboptimal sequence).
-    """
-
-    u: np.ndarray
-    x: np.ndarray
-    cost: float
-    status: str
-    success: bool
-    iterations: int = 0
-    solve_time: float = 0.0
-    constraint_violation: float = 0.0
-    terminal_violation: float = 0.0
-    defect: float = 0.0
-    active: int = 0
-    t: float = 0.0
-    feasible: bool = False
-    lam_x: np.ndarray | None = field(default=None, repr=False)
-    lam_g: np.ndarray | None = field(default=None, repr=False)
 
 
 class FHOCP:
@@ -332,7 +280,7 @@ class FHOCP:
                                         self.tightened_bounds(e_o), alpha)
             res = FHOCPResult(u=u_seq, x=x, cost=float(out[0]), status="candidate",
                               success=False, t=float(out[4]))
-            _set_residuals(res, out, alpha)
+            set_residuals(res, out, alpha)
             return res
         x = self.simulate(np.asarray(x_hat, dtype=float), u_seq)
         tN = float(np.max(np.abs(x[-1] - x_bar)))
@@ -437,7 +385,7 @@ class FHOCP:
                           iterations=iters, solve_time=elapsed, t=t, defect=defect,
                           lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
         if out is not None:
-            _set_residuals(res, out, alpha)
+            set_residuals(res, out, alpha)
         else:
             self._residuals(res, x, e_o, x_bar, alpha)
         ok_status = bool(stats.get("success", False))
@@ -462,14 +410,6 @@ class FHOCP:
     def reset_warm_start(self) -> None:
         """Forget the previous solution (next solve starts cold)."""
         self._warm = None
-
-
-def _set_residuals(res: FHOCPResult, out: np.ndarray, alpha: float) -> None:
-    """:meth:`FHOCP._residuals` from the compiled check's ``out`` (:meth:`controllers.
-    kernel_lib.Workspace.assess`)."""
-    res.constraint_violation = max(0.0, float(out[1]), float(out[2]), float(out[3]) - 1.0)
-    res.terminal_violation = max(0.0, float(out[4]) - alpha)
-    res.active = int(out[5])
 
 
 def _bind_buffers(solver: Any) -> tuple:

@@ -264,7 +264,7 @@ class SingleShootingNLP:
         points: f, ∇f, g, ∂g/∂w, the clipped Hessian, the plain rollout, the observer's GRU
         step and the answer check (cost and residuals, :meth:`FHOCP.candidate`)."""
         from controllers import gru
-        from controllers.fhocp import FHOCPResult, _set_residuals
+        from controllers.fhocp_result import FHOCPResult, set_residuals
 
         p = self.p
         rng = np.random.default_rng(seed)
@@ -293,7 +293,7 @@ class SingleShootingNLP:
                 ref = FHOCPResult(u=u, x=x_np, cost=0.0, status="", success=False)
                 p._residuals(ref, x_np, e_o, pv[n:2 * n], alpha)
                 got = FHOCPResult(u=u, x=x_k, cost=0.0, status="", success=False)
-                _set_residuals(got, out, alpha)
+                set_residuals(got, out, alpha)
                 pairs.append((x_k, x_np))
                 pairs.append((np.array([out[0], got.constraint_violation,
                                         got.terminal_violation]),

@@ -102,11 +102,11 @@ class RunOutput:
 
 def _plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
            step_timeout: float | None, seed: int) -> tuple[Any, str]:
-    from controllers.model_plant import MODEL_PREFIX
     from cosim.errors import CosimError
+    from cosim_adapters.gru_plant import MODEL_PREFIX
 
     if plant is not None and str(plant).startswith(MODEL_PREFIX):
-        from controllers.model_plant import GRUPlant
+        from cosim_adapters.gru_plant import GRUPlant
 
         if varmap is not None or isolate or interface != "cs":
             raise CosimError(f"--plant {plant}: a GRU-model plant takes no --map, --isolate, "

@@ -19,12 +19,12 @@ from typing import TYPE_CHECKING
 
 from cosim import interrupts
 from cosim.errors import CosimError, SimulationFailed
-from cosim.master import PREFIX_CTRL, RunResult, communication_times
+from cosim.run_result import PREFIX_CTRL, RowSink, RunResult, communication_times
 from cosim.scenario import BIAS, PLANT, REF, UNIFORM
 from cosim.sensor import SensorModel
 
 if TYPE_CHECKING:
-    from cosim.master import Master, RowSink
+    from cosim.master import Master
 
 __all__ = ["RowSink", "Run"]
 

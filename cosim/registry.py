@@ -18,8 +18,8 @@ __all__ = ["CONTROLLERS", "DEFAULT", "create", "parse_options", "resolve"]
 
 #: Built-in controllers.
 CONTROLLERS: dict[str, str] = {
-    "pi": "controllers.pi:PIController",
-    "robust-mpc": "controllers.mpc_controller:RobustMPCController",
+    "pi": "cosim_adapters.pi:PIController",
+    "robust-mpc": "cosim_adapters.robust_mpc:RobustMPCController",
 }
 
 #: The controller ``cosim run`` uses when none is named.

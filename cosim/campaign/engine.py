@@ -152,7 +152,7 @@ def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, 
     from cosim.master import Master
 
     if spec.model_plant:
-        from controllers.model_plant import GRUPlant
+        from cosim_adapters.gru_plant import GRUPlant
 
         plant: Any = GRUPlant.from_file(spec.plant or "")
     else:

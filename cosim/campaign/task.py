@@ -148,7 +148,7 @@ def _plant(task: dict[str, Any], folder: Path, seed: int) -> Any:
 
     kind, name = task["plant"]
     if kind == "model":
-        from controllers.model_plant import GRUPlant
+        from cosim_adapters.gru_plant import GRUPlant
 
         return GRUPlant.from_file(str(folder / name), seed=seed)
     vmap = varmap.load(folder / task["map"]) if task.get("map") else None

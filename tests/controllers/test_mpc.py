@@ -7,10 +7,10 @@ import pytest
 from controllers.equilibrium import equilibrium
 from controllers.fhocp import FHOCP
 from controllers.gru import output, simulate, step
-from controllers.model_plant import GRUPlant
 from controllers.observer import GRUObserver
 from controllers.robust_mpc import RobustMPC
 from controllers.solver_settings import FEAS_TOL
+from cosim_adapters.gru_plant import GRUPlant
 from tests.controllers.random_gru import N
 
 

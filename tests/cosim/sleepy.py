@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import time
 
-from controllers.pi import PIController
+from cosim_adapters.pi import PIController
 
 
 class SleepyPI(PIController):

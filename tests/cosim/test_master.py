@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.pi import PIController
 from cosim.component import Component, Signal
 from cosim.errors import CosimError, SimulationFailed
 from cosim.fmu import FmuComponent
 from cosim.master import Master, communication_times
 from cosim.scenario import load
+from cosim_adapters.pi import PIController
 
 
 def scenario(tmp_path: Path, text: str) -> object:

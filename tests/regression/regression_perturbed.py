@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from controllers.model import DEFAULT_MODEL
-from controllers.mpc_controller import RobustMPCController
-from controllers.pi import PAIRINGS, PIController
+from cosim_adapters.pi import PAIRINGS, PIController
+from cosim_adapters.robust_mpc import RobustMPCController
 
 
 class PIGainUp(PIController):

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.pi import PAIRINGS, PIController, PILoop
 from controllers.problem import FOURTANK
 from cosim.fmu import FmuComponent
 from cosim.master import Master
 from cosim.scenario import load
+from cosim_adapters.pi import PAIRINGS, PIController, PILoop
 
 
 def step(pi: PIController, h1: float, h2: float, r1: float, r2: float) -> dict[str, float]:

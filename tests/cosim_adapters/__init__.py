@@ -1,0 +1,1 @@
+"""Tests, mirroring the packages (docs: guide/regression.md)."""
