@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from controllers import bounds, metrics, training  # noqa: E402
-from controllers.problem import FOURTANK  # noqa: E402
+from controllers.problem_file import load as load_problem  # noqa: E402
 from cosim import datagen  # noqa: E402
 from cosim.cli import main as cosim_main  # noqa: E402
 
@@ -94,9 +94,10 @@ def main() -> None:
         print(f"generating {data_path} ...", flush=True)
         cosim_main(["generate-data", "--out", str(data_path), "--quiet"])
     d = datagen.read_csv(data_path)
-    norm = training.normalization(FOURTANK)
+    FOURTANK = load_problem(ROOT / "fmus" / "fourtank" / "problem.toml")
+    norm = FOURTANK.normalization()
     u = (d.u - norm["u_offset"]) / norm["u_scale"]
-    y = (d.outputs(FOURTANK.outputs) - norm["y_offset"]) / norm["y_scale"]
+    y = (d.outputs(FOURTANK.output_names) - norm["y_offset"]) / norm["y_scale"]
     max_s = 60.0 * args.max_minutes
     base = dict(epochs=100000, lr=2e-2, lr_final=2e-2, seed=args.seed, nu_margin=0.02)
     print(f"data {data_path}: {len(u)} steps; paper test FIT {PAPER[0]}/{PAPER[1]} %; "

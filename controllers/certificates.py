@@ -52,12 +52,7 @@ from controllers.bounds import (
 )
 from controllers.design import MAX_HORIZON, gain, horizon, weight
 from controllers.errors import DataError, DesignError, SetpointError
-from controllers.problem import (
-    FOURTANK,
-    ControlProblem,
-    constraint_names,
-    output_constraints,
-)
+from controllers.problem import ControlProblem, constraint_names, output_constraints
 
 __all__ = ["JSON_KEYS", "MAX_HORIZON", "Certificate", "Reference", "admissible_ranges",
            "compute_certificate", "w_y_bar_from_data"]
@@ -304,7 +299,7 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
                         L_z: np.ndarray | None = None, L_r: np.ndarray | None = None,
                         w_y_bar: float | None = None, gain_scale: float | None = None,
                         L: np.ndarray | None = None, h: np.ndarray | None = None,
-                        problem: ControlProblem = FOURTANK) -> Certificate:
+                        problem: ControlProblem | None = None) -> Certificate:
     """Compute every certificate quantity for ``model`` (a :class:`GRUModel`).
 
     Parameters
@@ -329,6 +324,8 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
     L, h : arrays, optional
         Output constraints ``L y ≤ h`` (normalised); default from ``problem``
         (:func:`output_constraints`).
+    problem : ControlProblem, optional
+        The control problem (its output boxes); default the model file's.
 
     Raises
     ------

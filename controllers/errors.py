@@ -10,8 +10,8 @@ computation that failed (exit 1).
 from __future__ import annotations
 
 __all__ = ["CertificateError", "ControllersError", "DataError", "DesignError",
-           "ModelFileError", "SetpointError", "SolverError", "TrainingError",
-           "UnreachableSetpoint"]
+           "ModelFileError", "ProblemFileError", "SetpointError", "SolverError",
+           "TrainingError", "UnreachableSetpoint"]
 
 
 class ControllersError(Exception):
@@ -20,6 +20,11 @@ class ControllersError(Exception):
 
 class ModelFileError(ControllersError, ValueError):
     """A model file that cannot be read or is malformed (names the file and the key)."""
+
+
+class ProblemFileError(ControllersError, ValueError):
+    """A control-problem file (or a problem record) that is malformed or contradicts the
+    plant or the model (names the file and the line or key)."""
 
 
 class DesignError(ControllersError, ValueError):

@@ -19,12 +19,35 @@ from controllers.bounds import check_gates
 from controllers.certificates import Certificate, compute_certificate
 from controllers.observer_gains import observer_gains_lp
 
-__all__ = ["DEFAULT_SETPOINTS", "choose_gain_scale", "observer_gains_lp"]
+__all__ = ["choose_gain_scale", "default_setpoints", "observer_gains_lp"]
 
-#: Set-points (physical units, metres) at which the gain scale is chosen when none are
-#: given: the 3 × 3 grid {0.5, 1.0, 1.5}² (``cosim certify --auto-gain-scale``, and the
-#: robust MPC for a model file without gains).
-DEFAULT_SETPOINTS = [(a, b) for a in (0.5, 1.0, 1.5) for b in (0.5, 1.0, 1.5)]
+#: Where in each output's box the default set-points lie (fractions of its width).
+GRID_FRACTIONS = (0.25, 0.5, 0.75)
+#: Most default set-points: beyond, a star (the middle, ±25 % along each output) replaces
+#: the full grid.
+MAX_GRID_POINTS = 81
+
+
+def default_setpoints(problem: Any) -> list[tuple[float, ...]]:
+    """Set-points (physical units) at which the gain scale is chosen when none are given
+    (``cosim certify --auto-gain-scale``, and the robust MPC for a model file without
+    gains): the grid of :data:`GRID_FRACTIONS` of each output's box (3^p points; for the
+    four-tank's [0, 2] m boxes, {0.5, 1.0, 1.5}²), or a star of 2p + 1 points when the grid
+    would exceed :data:`MAX_GRID_POINTS`."""
+    import itertools
+
+    boxes = [(c.min, c.max) for c in problem.outputs]
+    levels = [[lo + f * (hi - lo) for f in GRID_FRACTIONS] for lo, hi in boxes]
+    if len(GRID_FRACTIONS) ** len(boxes) <= MAX_GRID_POINTS:
+        return [tuple(pt) for pt in itertools.product(*levels)]
+    mid = [lv[1] for lv in levels]
+    points = [tuple(mid)]
+    for j, lv in enumerate(levels):
+        for k in (0, 2):
+            pt = list(mid)
+            pt[j] = lv[k]
+            points.append(tuple(pt))
+    return points
 
 
 # --------------------------------------------------------------------------------------

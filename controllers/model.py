@@ -14,8 +14,15 @@ Format (JSON, no pickle anywhere)::
                         "y_offset": [...], "y_scale": [...]},    # normalised = (raw − offset)/scale
       "training": {...},                                          # free-form record
       "observer": {"L_z": [[...]], "L_r": [[...]]},               # optional, n×p each
-      "w_y_bar": 0.12                                             # optional, normalised units
+      "w_y_bar": 0.12,                                            # optional, normalised units
+      "problem": {...}                                            # the control problem
     }
+
+``problem`` is the control problem the model was trained for
+(:class:`controllers.problem.ControlProblem`, copied from the data set by ``cosim train``):
+its inputs and outputs must be the model's, in the same order, with the same units, sample
+time and normalisation. Model files written before problems existed have none; every stage
+that needs one then asks for it (``--problem``).
 
 Matrices are nested lists, row-major. Inputs are normalised so that the saturation box maps
 to ``‖u‖∞ ≤ 1`` (``eq:input-constraint``).
@@ -34,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.errors import ModelFileError
+from controllers.errors import ControllersError, ModelFileError
 from controllers.gru import PARAM_NAMES
 
 __all__ = ["DEFAULT_MODEL", "FORMAT_NAME", "FORMAT_VERSION", "NORMALIZATION_KEYS", "GRUModel",
@@ -68,6 +75,8 @@ class GRUModel:
         Observer gains of ``eq:observer`` (n×p), when designed.
     w_y_bar : float or None
         Bound of the output perturbation, normalised units (``W_y``).
+    problem : ControlProblem or None
+        The control problem (signals, boxes, sample time, normalisation, PI loops).
     source : str or None
         The file the model was loaded from (:meth:`load`), for error messages; not saved.
     """
@@ -86,6 +95,7 @@ class GRUModel:
     L_z: np.ndarray | None = None
     L_r: np.ndarray | None = None
     w_y_bar: float | None = None
+    problem: Any = None
     source: str | None = field(default=None, compare=False, repr=False)
 
     @property
@@ -141,6 +151,8 @@ class GRUModel:
             doc["observer"] = {"L_z": self.L_z.tolist(), "L_r": self.L_r.tolist()}
         if self.w_y_bar is not None:
             doc["w_y_bar"] = float(self.w_y_bar)
+        if self.problem is not None:
+            doc["problem"] = self.problem.to_dict()
         return doc
 
     def to_json(self) -> str:
@@ -278,12 +290,45 @@ class GRUModel:
         if not isinstance(training, dict):
             raise ModelFileError(f"{source}: 'training' must be an object")
 
-        return cls(params=params, u_offset=scales["u_offset"], u_scale=scales["u_scale"],
-                   y_offset=scales["y_offset"], y_scale=scales["y_scale"],
-                   input_names=input_names, input_units=input_units,
-                   output_names=output_names, output_units=output_units, Ts=float(Ts),
-                   training=training, L_z=L_z, L_r=L_r,
-                   w_y_bar=None if w_y_bar is None else float(w_y_bar))
+        model = cls(params=params, u_offset=scales["u_offset"], u_scale=scales["u_scale"],
+                    y_offset=scales["y_offset"], y_scale=scales["y_scale"],
+                    input_names=input_names, input_units=input_units,
+                    output_names=output_names, output_units=output_units, Ts=float(Ts),
+                    training=training, L_z=L_z, L_r=L_r,
+                    w_y_bar=None if w_y_bar is None else float(w_y_bar))
+        if doc.get("problem") is not None:
+            from controllers.problem_file import problem_from_dict
+
+            try:
+                problem = problem_from_dict(doc["problem"], source)
+            except ControllersError as exc:
+                raise ModelFileError(str(exc)) from None
+            model.problem = problem
+            bad = model.mismatch(problem)
+            if bad:
+                raise ModelFileError(f"{source}: its problem {problem.name!r} does not match "
+                                     f"the model: {bad}")
+        return model
+
+    def mismatch(self, problem: Any) -> str:
+        """How ``problem`` contradicts this model's signals, sample time or normalisation
+        (an empty string when it does not)."""
+        if list(problem.input_names) != list(self.input_names) or list(
+                problem.output_names) != list(self.output_names):
+            return (f"signals {list(problem.input_names)} -> {list(problem.output_names)} vs "
+                    f"the model's {self.input_names} -> {self.output_names}")
+        if list(problem.input_units) != list(self.input_units) or list(
+                problem.output_units) != list(self.output_units):
+            return (f"units {list(problem.input_units)} -> {list(problem.output_units)} vs the "
+                    f"model's {self.input_units} -> {self.output_units}")
+        if not math.isclose(problem.Ts, self.Ts, rel_tol=1e-12):
+            return f"Ts {problem.Ts:g} s vs the model's {self.Ts:g} s"
+        norm = problem.normalization()
+        for key in NORMALIZATION_KEYS:
+            if not np.allclose(norm[key], getattr(self, key), rtol=1e-12, atol=0.0):
+                return (f"normalization {key} {norm[key].tolist()} vs the model's "
+                        f"{np.asarray(getattr(self, key)).tolist()}")
+        return ""
 
 
 def _file_mode() -> int:

@@ -1,82 +1,257 @@
-"""The control problem: which signals a controller manipulates and measures, and their bounds.
+"""The control problem: the plant's manipulated inputs and controlled outputs, by name, in the
+plant's own units, with their boxes, the sample time and the normalisation.
 
-Shared by every controller of the four-tank benchmark (the PI baseline and the robust MPC),
-so that constraints are declared once. Bounds are in physical units.
+A problem is declared once, in a TOML file (:func:`controllers.problem_file.load`), and then
+travels: ``cosim generate-data`` records it in the data set's sidecar, ``cosim train`` copies
+it into the model file (:attr:`controllers.model.GRUModel.problem`), and every later stage
+(certificates, the robust MPC, the PI baseline, scenarios, KPIs, figures, campaigns) takes it
+from there. Nothing here is specific to one plant: the four-tank benchmark is one problem
+file among others (``fmus/fourtank/problem.toml``).
+
+Normalisation (``normalised = (physical − offset) / scale``) follows the box by default,
+``offset = (min + max) / 2``, ``scale = (max − min) / 2``: the input box maps to
+``‖u‖∞ ≤ 1`` (``eq:input-constraint``) and the output box to ``[−1, 1]``; a signal may declare
+its own (an output box much wider than its operating range).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-from controllers.errors import DesignError
+from controllers.errors import DesignError, ProblemFileError
 
-__all__ = ["FOURTANK", "ControlProblem", "constraint_names", "output_constraints"]
+__all__ = ["Channel", "ControlProblem", "PILoop", "constraint_names", "output_constraints"]
+
+
+@dataclass(frozen=True)
+class Channel:
+    """One manipulated input or controlled output of a :class:`ControlProblem`.
+
+    Attributes
+    ----------
+    name : str
+        The problem's name of the signal: scenario columns (``ref.<name>``), KPIs
+        (``iae.<name>``), figures and the model file use it.
+    unit : str
+        Its unit (the problem's; the plant FMU's may differ, :mod:`cosim.binding` converts).
+    min, max : float
+        The box: saturation of an input (``eq:input-constraint``), the output constraint
+        ``min ≤ y ≤ max`` (``eq:output-constraint``).
+    variable : str
+        The plant FMU's variable (default: ``name``).
+    offset, scale : float
+        Normalisation ``(value − offset) / scale`` (default: the box's middle and half-width).
+    description : str
+    hold : (int, int) or None
+        Inputs: shortest and longest hold time of the identification excitation [samples].
+    levels : (float, float) or None
+        Inputs: the range of the excitation's levels (default: the box).
+    """
+
+    name: str
+    unit: str
+    min: float
+    max: float
+    variable: str = ""
+    offset: float = math.nan
+    scale: float = math.nan
+    description: str = ""
+    hold: tuple[int, int] | None = None
+    levels: tuple[float, float] | None = None
+
+    def __post_init__(self) -> None:
+        if not self.variable:
+            object.__setattr__(self, "variable", self.name)
+        if math.isnan(self.offset):
+            object.__setattr__(self, "offset", 0.5 * (self.min + self.max))
+        if math.isnan(self.scale):
+            object.__setattr__(self, "scale", 0.5 * (self.max - self.min))
+
+    @property
+    def bounds(self) -> tuple[float, float]:
+        """``(min, max)``."""
+        return (self.min, self.max)
+
+    def to_dict(self) -> dict[str, Any]:
+        doc: dict[str, Any] = {"name": self.name, "unit": self.unit, "min": self.min,
+                               "max": self.max}
+        if self.variable != self.name:
+            doc["variable"] = self.variable
+        doc["normalization"] = {"offset": self.offset, "scale": self.scale}
+        if self.description:
+            doc["description"] = self.description
+        if self.hold is not None:
+            doc["hold"] = list(self.hold)
+        if self.levels is not None:
+            doc["levels"] = list(self.levels)
+        return doc
+
+
+@dataclass(frozen=True)
+class PILoop:
+    """One PI loop: output ``y`` controlled by input ``u``, gain ``K`` [u-unit per y-unit],
+    integral time ``Ti`` and anti-windup tracking time ``Tt`` [s]."""
+
+    y: str
+    u: str
+    K: float
+    Ti: float
+    Tt: float
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"output": self.y, "input": self.u, "K": self.K, "Ti": self.Ti, "Tt": self.Tt}
 
 
 @dataclass(frozen=True)
 class ControlProblem:
-    """Manipulated inputs and controlled outputs with their box constraints.
+    """Manipulated inputs and controlled outputs with their boxes, sample time and
+    normalisation (see the module docstring).
 
     Attributes
     ----------
-    inputs : tuple of str
-        Manipulated plant inputs (controller outputs), e.g. ``("qa", "qb")``.
-    input_bounds : tuple of (float, float)
-        ``(min, max)`` per input (``eq:input-constraint`` after normalisation).
-    input_units : tuple of str
-    outputs : tuple of str
-        Measured, controlled plant outputs (controller inputs), e.g. ``("h1", "h2")``.
-    output_bounds : tuple of (float, float)
-        ``(min, max)`` per output: the polytope ``L y ≤ h`` of ``eq:output-constraint``.
-    output_units : tuple of str
+    name : str
     Ts : float
         Controller sample time [s].
+    inputs, outputs : tuple of Channel
+    pairings : dict of str to tuple of PILoop
+        The PI baseline's loop sets by name (the problem file's ``[pi]``), empty when none.
+    pairing : str
+        The default of :attr:`pairings` ("" when there are none).
+    description : str
+    source : str
+        Where the problem was read from (messages only; not compared, not saved).
     """
 
-    inputs: tuple[str, ...]
-    input_bounds: tuple[tuple[float, float], ...]
-    input_units: tuple[str, ...]
-    outputs: tuple[str, ...]
-    output_bounds: tuple[tuple[float, float], ...]
-    output_units: tuple[str, ...]
+    name: str
     Ts: float
+    inputs: tuple[Channel, ...]
+    outputs: tuple[Channel, ...]
+    pairings: Mapping[str, tuple[PILoop, ...]] = field(default_factory=dict)
+    pairing: str = ""
+    description: str = ""
+    source: str = field(default="", compare=False)
+
+    # -- the signals by kind ---------------------------------------------------------------
+    @property
+    def m(self) -> int:
+        """Number of inputs."""
+        return len(self.inputs)
+
+    @property
+    def p(self) -> int:
+        """Number of outputs."""
+        return len(self.outputs)
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.inputs)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.outputs)
+
+    @property
+    def input_units(self) -> tuple[str, ...]:
+        return tuple(c.unit for c in self.inputs)
+
+    @property
+    def output_units(self) -> tuple[str, ...]:
+        return tuple(c.unit for c in self.outputs)
+
+    @property
+    def input_bounds(self) -> tuple[tuple[float, float], ...]:
+        return tuple(c.bounds for c in self.inputs)
+
+    @property
+    def output_bounds(self) -> tuple[tuple[float, float], ...]:
+        return tuple(c.bounds for c in self.outputs)
 
     def bounds(self) -> dict[str, tuple[float, float]]:
-        """All bounds by signal name (inputs and outputs)."""
-        return dict(zip(self.inputs + self.outputs, self.input_bounds + self.output_bounds,
-                        strict=True))
+        """All boxes by signal name (inputs and outputs)."""
+        return {c.name: c.bounds for c in (*self.inputs, *self.outputs)}
+
+    def units(self) -> dict[str, str]:
+        """All units by signal name (inputs and outputs)."""
+        return {c.name: c.unit for c in (*self.inputs, *self.outputs)}
+
+    def channel(self, name: str) -> Channel:
+        """The input or output ``name``."""
+        for c in (*self.inputs, *self.outputs):
+            if c.name == name:
+                return c
+        raise KeyError(name)
+
+    def normalization(self) -> dict[str, np.ndarray]:
+        """``u_offset, u_scale, y_offset, y_scale`` of the model file."""
+        return {"u_offset": np.array([c.offset for c in self.inputs], dtype=float),
+                "u_scale": np.array([c.scale for c in self.inputs], dtype=float),
+                "y_offset": np.array([c.offset for c in self.outputs], dtype=float),
+                "y_scale": np.array([c.scale for c in self.outputs], dtype=float)}
+
+    def describe(self) -> str:
+        """One line: ``name: F [L/min], Tc [K] -> CA [mol/L], T [K] at Ts = 15 s``."""
+        def sig(cs: tuple[Channel, ...]) -> str:
+            return ", ".join(f"{c.name} [{c.unit}]" for c in cs)
+        return f"{self.name}: {sig(self.inputs)} -> {sig(self.outputs)} at Ts = {self.Ts:g} s"
+
+    # -- (de)serialisation (the model file's and the data sidecar's "problem") --------------
+    def to_dict(self) -> dict[str, Any]:
+        """The JSON form (read back by :func:`controllers.problem_file.problem_from_dict`)."""
+        doc: dict[str, Any] = {"name": self.name, "Ts": self.Ts}
+        if self.description:
+            doc["description"] = self.description
+        doc["inputs"] = [c.to_dict() for c in self.inputs]
+        doc["outputs"] = [c.to_dict() for c in self.outputs]
+        if self.pairings:
+            doc["pi"] = {"pairing": self.pairing,
+                         "pairings": {k: [lp.to_dict() for lp in v]
+                                      for k, v in self.pairings.items()}}
+        return doc
+
+    def differences(self, other: ControlProblem) -> list[str]:
+        """What differs between two problems (empty when they are the same), one short
+        phrase each: used to refuse a ``--problem`` that contradicts a model file."""
+        out = []
+        if self.name != other.name:
+            out.append(f"name {self.name!r} vs {other.name!r}")
+        if not math.isclose(self.Ts, other.Ts, rel_tol=1e-12):
+            out.append(f"Ts {self.Ts:g} vs {other.Ts:g} s")
+        for kind, a, b in (("inputs", self.inputs, other.inputs),
+                           ("outputs", self.outputs, other.outputs)):
+            if [c.name for c in a] != [c.name for c in b]:
+                out.append(f"{kind} {[c.name for c in a]} vs {[c.name for c in b]}")
+                continue
+            for ca, cb in zip(a, b, strict=True):
+                for key in ("unit", "min", "max", "variable", "offset", "scale"):
+                    va, vb = getattr(ca, key), getattr(cb, key)
+                    same = (math.isclose(va, vb, rel_tol=1e-12, abs_tol=0.0)
+                            if isinstance(va, float) else va == vb)
+                    if not same:
+                        out.append(f"{ca.name}.{key} {va!r} vs {vb!r}")
+        return out
 
 
-#: The four-tank benchmark of the paper's section V (Alvarado et al. 2011).
-FOURTANK = ControlProblem(
-    inputs=("qa", "qb"),
-    input_bounds=((0.0, 9.05e-4), (0.0, 11.1e-4)),
-    input_units=("m3/s", "m3/s"),
-    outputs=("h1", "h2"),
-    output_bounds=((0.0, 2.0), (0.0, 2.0)),
-    output_units=("m", "m"),
-    Ts=25.0,
-)
-
-
-def output_constraints(model: Any, problem: ControlProblem = FOURTANK) -> tuple[np.ndarray,
-                                                                               np.ndarray]:
+def output_constraints(model: Any, problem: ControlProblem | None = None
+                       ) -> tuple[np.ndarray, np.ndarray]:
     """``(L, h)`` of ``eq:output-constraint`` (``L y ≤ h``) in the model's normalised units.
 
-    For each model output ``j`` (matched by name with ``problem.outputs``) two rows:
-    ``+y_j ≤ (max − offset)/scale`` and ``−y_j ≤ −(min − offset)/scale``; a negative scale
-    swaps the two bounds.
+    For each model output ``j`` (matched by name with the problem's outputs; default
+    ``model.problem``) two rows: ``+y_j ≤ (max − offset)/scale`` and
+    ``−y_j ≤ −(min − offset)/scale``; a negative scale swaps the two bounds.
     """
+    problem = _problem_of(model, problem)
     names = list(model.output_names)
     rows, rhs = [], []
-    bounds = dict(zip(problem.outputs, problem.output_bounds, strict=True))
+    bounds = {c.name: c.bounds for c in problem.outputs}
     for j, name in enumerate(names):
         if name not in bounds:
             raise DesignError(f"model output {name!r} has no bounds in the control problem "
-                             f"(outputs {', '.join(problem.outputs)})")
+                              f"(outputs {', '.join(problem.output_names)})")
         lo, hi = bounds[name]
         off, sc = float(model.y_offset[j]), float(model.y_scale[j])
         nlo, nhi = sorted(((lo - off) / sc, (hi - off) / sc))
@@ -87,14 +262,23 @@ def output_constraints(model: Any, problem: ControlProblem = FOURTANK) -> tuple[
     return np.array(rows), np.array(rhs)
 
 
-def constraint_names(model: Any, problem: ControlProblem = FOURTANK) -> list[str]:
+def constraint_names(model: Any, problem: ControlProblem | None = None) -> list[str]:
     """Readable names of the rows of :func:`output_constraints` (e.g. ``h1 <= 2 m``)."""
-    bounds = dict(zip(problem.outputs, problem.output_bounds, strict=True))
-    units = dict(zip(problem.outputs, problem.output_units, strict=True))
+    problem = _problem_of(model, problem)
     names = []
     for j, name in enumerate(model.output_names):
-        lo, hi = bounds[name]
+        c = problem.channel(name)
+        lo, hi = c.min, c.max
         if model.y_scale[j] < 0:
             lo, hi = hi, lo
-        names += [f"{name} <= {hi:g} {units[name]}", f"{name} >= {lo:g} {units[name]}"]
+        names += [f"{name} <= {hi:g} {c.unit}", f"{name} >= {lo:g} {c.unit}"]
     return names
+
+
+def _problem_of(model: Any, problem: ControlProblem | None) -> ControlProblem:
+    problem = problem if problem is not None else getattr(model, "problem", None)
+    if problem is None:
+        source = getattr(model, "source", None) or "the model"
+        raise ProblemFileError(f"{source}: the model file has no control problem (train it "
+                               "with 'cosim train --problem', or give the problem)")
+    return problem

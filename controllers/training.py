@@ -38,7 +38,7 @@ from controllers.bounds import nu as nu_numpy
 from controllers.errors import DataError, DesignError, TrainingError
 
 __all__ = ["CONSTRAINED", "TrainOptions", "TrainResult", "build_model", "constrain", "init_params",
-           "normalization", "nu_torch", "subsequences", "train"]
+           "nu_torch", "subsequences", "train"]
 
 
 @dataclass
@@ -354,26 +354,11 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
                        history=history, options=asdict(opt))
 
 
-def normalization(problem: Any, y_offset: float = 1.0, y_scale: float = 1.0
-                  ) -> dict[str, np.ndarray]:
-    """Normalisation of the model file (``normalised = (raw − offset) / scale``).
-
-    Inputs: offset = mid-range, scale = half-range of the saturation box, so that the box
-    maps to ‖u‖∞ ≤ 1 (``eq:input-constraint``, the set 𝒰 of ``th:stability-bonassi``).
-    Outputs: a fixed offset and scale (default 1 m and 1 m: the four-tank output box
-    [0, 2] m maps to [−1, 1]), independent of the data so that constraints and the bound
-    ``w̄_y`` read the same in every data set.
-    """
-    lo = np.array([b[0] for b in problem.input_bounds], dtype=float)
-    hi = np.array([b[1] for b in problem.input_bounds], dtype=float)
-    p = len(problem.outputs)
-    return {"u_offset": (lo + hi) / 2, "u_scale": (hi - lo) / 2,
-            "y_offset": np.full(p, float(y_offset)), "y_scale": np.full(p, float(y_scale))}
-
-
-def build_model(params: dict[str, np.ndarray], problem: Any, norm: dict[str, np.ndarray],
+def build_model(params: dict[str, np.ndarray], problem: Any,
                 training_record: dict[str, Any], w_y_bar: float | None = None) -> Any:
-    """A :class:`controllers.model.GRUModel` from trained weights; refuses ν ≥ 1.
+    """A :class:`controllers.model.GRUModel` from trained weights for the control problem
+    ``problem`` (its signals, sample time and normalisation, recorded in the model file);
+    refuses ν ≥ 1.
 
     Raises
     ------
@@ -383,6 +368,7 @@ def build_model(params: dict[str, np.ndarray], problem: Any, norm: dict[str, np.
     """
     from controllers.model import GRUModel
 
+    norm = problem.normalization()
     v = nu_numpy(params)
     if not v < 1.0:
         raise TrainingError(f"trained model has nu = {v:.4f} >= 1 (th:stability-bonassi fails); "
@@ -391,6 +377,8 @@ def build_model(params: dict[str, np.ndarray], problem: Any, norm: dict[str, np.
     return GRUModel(params={k: np.asarray(a, dtype=float) for k, a in params.items()},
                     u_offset=norm["u_offset"], u_scale=norm["u_scale"],
                     y_offset=norm["y_offset"], y_scale=norm["y_scale"],
-                    input_names=list(problem.inputs), input_units=list(problem.input_units),
-                    output_names=list(problem.outputs), output_units=list(problem.output_units),
-                    Ts=float(problem.Ts), training=training_record, w_y_bar=w_y_bar)
+                    input_names=list(problem.input_names),
+                    input_units=list(problem.input_units),
+                    output_names=list(problem.output_names),
+                    output_units=list(problem.output_units), Ts=float(problem.Ts),
+                    training=training_record, w_y_bar=w_y_bar, problem=problem)

@@ -34,15 +34,18 @@ from pathlib import Path
 import fmus
 from cosim.errors import CosimError
 
-__all__ = ["BUILD_DIR", "CACHE_APP", "CFLAGS", "FMU_DIR", "LDFLAGS", "MODEL_IDENTIFIER",
-           "PACKAGE_DIR", "SOURCE_DIR", "TARGETS", "Target", "build_fmu", "build_fmus",
-           "cache_dir", "compiler", "default_plant", "display_path", "fmi_headers_dir",
-           "output_dir", "writable"]
+__all__ = ["BUILD_DIR", "CACHE_APP", "CFLAGS", "DEFAULT_PROBLEM", "FMU_DIR", "LDFLAGS",
+           "MODEL_IDENTIFIER", "PACKAGE_DIR", "SOURCE_DIR", "TARGETS", "Target", "build_fmu",
+           "build_fmus", "cache_dir", "compiler", "default_plant", "display_path",
+           "fmi_headers_dir", "output_dir", "writable"]
 
 #: The ``fmus`` package folder: ``fmus/`` of a source checkout, or of site-packages.
 PACKAGE_DIR = Path(fmus.__file__).resolve().parent
 #: The four-tank plant's C sources and model descriptions (package data).
 SOURCE_DIR = PACKAGE_DIR / "fourtank"
+#: The four-tank's control problem (signals, boxes, Ts, PI loops): the default problem of the
+#: default plant (:mod:`cosim_adapters.problems`).
+DEFAULT_PROBLEM = SOURCE_DIR / "problem.toml"
 #: The application's name in the user cache folder (the compiled kernels share it).
 CACHE_APP = "gru-mpc"
 MODEL_IDENTIFIER = "FourTank"

@@ -82,23 +82,29 @@ def split_sizes(steps: int, fractions: tuple[float, float] = (0.75, 0.125)) -> t
 
 
 def multilevel_signal(steps: int, bounds: Sequence[tuple[float, float]],
-                      rng: np.random.Generator, hold: tuple[int, int] = (2, 80)) -> np.ndarray:
+                      rng: np.random.Generator,
+                      hold: tuple[int, int] | Sequence[tuple[int, int]] = (2, 80)
+                      ) -> np.ndarray:
     """Multilevel pseudo-random signal: piecewise constant, random levels and hold times.
 
     Each input channel is independent. Levels are uniform inside its ``(min, max)`` box; hold
-    times (in samples) are log-uniform on ``[hold[0], hold[1]]``, so that short holds excite
-    the fast dynamics and long ones let the tanks settle (the four-tank time constants are
-    about 7-17 samples of 25 s).
+    times (in samples) are log-uniform on ``[hold[0], hold[1]]`` (one pair for every channel,
+    or one per channel), so that short holds excite the fast dynamics and long ones let the
+    plant settle (the four-tank time constants are about 7-17 samples of 25 s).
 
     Returns
     -------
     (steps, m) array
     """
-    lo_hold, hi_hold = hold
-    if not 1 <= lo_hold <= hi_hold:
-        raise CosimError(f"hold times must satisfy 1 <= min <= max, got {hold}")
+    holds = [tuple(hold)] * len(bounds) if np.ndim(hold) == 1 else [tuple(h) for h in hold]
+    if len(holds) != len(bounds):
+        raise CosimError(f"{len(holds)} hold-time pairs for {len(bounds)} inputs")
+    for pair in holds:
+        if not 1 <= pair[0] <= pair[1]:
+            raise CosimError(f"hold times must satisfy 1 <= min <= max, got {pair}")
     u = np.empty((steps, len(bounds)))
     for j, (lo, hi) in enumerate(bounds):
+        lo_hold, hi_hold = holds[j]
         k = 0
         while k < steps:
             length = int(np.exp(rng.uniform(np.log(lo_hold), np.log(hi_hold + 1))))
@@ -137,7 +143,8 @@ def collect(plant: Component, u: np.ndarray, Ts: float, input_names: Sequence[st
 
 def generate(plant: Component, steps: int, seed: int, bounds: Sequence[tuple[float, float]],
              input_names: Sequence[str], output_names: Sequence[str], Ts: float,
-             hold: tuple[int, int] = (2, 80), progress: bool = True) -> Dataset:
+             hold: tuple[int, int] | Sequence[tuple[int, int]] = (2, 80),
+             progress: bool = True) -> Dataset:
     """Excite ``plant`` with :func:`multilevel_signal` and return the split data set."""
     rng = np.random.default_rng(seed)
     u = multilevel_signal(steps, bounds, rng, hold)

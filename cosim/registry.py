@@ -45,6 +45,10 @@ def resolve(name: str) -> type[Component]:
         hint = "; try --controller pi" if name != "pi" else ""
         raise CosimError(f"controller '{name}': cannot import module '{module_name}' "
                          f"({exc}){hint}") from None
+    except Exception as exc:  # the module itself fails to import: name it, keep the cause
+        why = " ".join(f"{type(exc).__name__}: {exc}".split())
+        raise CosimError(f"controller '{name}': importing module '{module_name}' failed: "
+                         f"{why}") from exc
     cls = getattr(module, cls_name, None)
     if not isinstance(cls, type) or not issubclass(cls, Component):
         raise CosimError(f"controller '{name}': '{spec}' is not a Component class")

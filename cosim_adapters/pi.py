@@ -1,55 +1,74 @@
-"""Decentralised PI baseline for the four-tank benchmark (the controller the MPC is compared to).
+"""Decentralised PI baseline: the controller the MPC is compared to, on any square plant.
 
-Two independent discrete PI loops sampled at ``Ts``, each with input saturation to the
-problem's bounds and back-calculation anti-windup (Åström & Hägglund)::
+One independent discrete PI loop per output, sampled at ``Ts``, each with input saturation to
+the problem's box and back-calculation anti-windup (Åström & Hägglund)::
 
     e_k   = r_k − y_k
     v_k   = I_k + K e_k                       (unsaturated)
     u_k   = sat(v_k)                          (held over [t_k, t_k + Ts))
     I_k+1 = I_k + K Ts / Ti · e_k + Ts / Tt · (u_k − v_k)
 
-Pairing. With the paper's parameters (γ_a = 0.3, γ_b = 0.4, γ_a + γ_b < 1) the plant is in
-the non-minimum-phase configuration: most of ``qa`` reaches tank 2 (through tank 4) and most
-of ``qb`` reaches tank 1. The steady-state relative gain of the diagonal pairing is
-``λ = γ_a γ_b / (γ_a + γ_b − 1) = −0.4 < 0``, so decentralised integral control with the
-pairing h1–qa, h2–qb is unstable unless one loop is given the "wrong" sign (Johansson 2000),
-and it tracks poorly. The default pairing is therefore the one with ``λ = 1.4``: h1 with qb,
-h2 with qa. ``pairing="diagonal"`` selects h1–qa, h2–qb (with the tuning found for it).
+Which input controls which output, and the gains, come from the control problem's ``[pi]``
+table (:class:`controllers.problem.ControlProblem`: named pairings, one the default), or
+are given as ``loops``. The four-tank's problem file explains its pairing (the negative
+relative gain of the diagonal one).
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
-from controllers.problem import FOURTANK, ControlProblem
+from controllers.problem import ControlProblem, PILoop
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
 
-__all__ = ["PAIRINGS", "PIController", "PILoop"]
+__all__ = ["PIController", "PILoop"]
 
 
-@dataclass(frozen=True)
-class PILoop:
-    """One loop: output ``y`` controlled by input ``u``; gain ``K`` [u-unit per y-unit]."""
+def _loops(problem: ControlProblem, pairing: str | None,
+           loops: Sequence[Any] | None) -> tuple[PILoop, ...]:
+    """The loops: given, or the problem's pairing ``pairing`` (default its own)."""
+    if loops is not None:
+        if pairing is not None:
+            raise CosimError("controller 'pi': give loops or pairing, not both")
+        return _given_loops(problem, loops)
+    if not problem.pairings:
+        raise CosimError(f"controller 'pi': the problem {problem.name!r} "
+                         f"({problem.source or 'no file'}) has no [pi] loops: add them to "
+                         "the problem file, or give --option loops=[...]")
+    name = problem.pairing if pairing is None else pairing
+    if name not in problem.pairings:
+        raise CosimError(f"controller 'pi': unknown pairing {name!r} (the problem's: "
+                         f"{', '.join(problem.pairings)})")
+    return tuple(problem.pairings[name])
 
-    y: str
-    u: str
-    K: float
-    Ti: float
-    Tt: float
 
-
-#: Tunings found by simulating the plant's ODE over a set-point sequence (IAE, smooth input).
-PAIRINGS: dict[str, tuple[PILoop, PILoop]] = {
-    "cross": (PILoop("h1", "qb", 1.0e-3, 400.0, 400.0),
-              PILoop("h2", "qa", 5.0e-4, 400.0, 400.0)),
-    # Negative-RGA pairing: needs a negative gain on one loop; kept for comparison only.
-    "diagonal": (PILoop("h1", "qa", -5.0e-4, 800.0, 800.0),
-                 PILoop("h2", "qb", 4.0e-3, 100.0, 100.0)),
-}
+def _given_loops(problem: ControlProblem, loops: Sequence[Any]) -> tuple[PILoop, ...]:
+    out = []
+    for lp in loops:
+        if isinstance(lp, PILoop):
+            out.append(lp)
+            continue
+        keys = {"output", "input", "K", "Ti", "Tt"}
+        if not isinstance(lp, Mapping) or not {"output", "input", "K", "Ti"} <= set(lp) \
+                or set(lp) - keys:
+            raise CosimError(f"controller 'pi': loops: each loop is {{output, input, K, Ti, "
+                             f"Tt}}, got {lp!r}")
+        vals = [lp["K"], lp["Ti"], lp.get("Tt", lp["Ti"])]
+        if not all(isinstance(v, int | float) and not isinstance(v, bool)
+                   and math.isfinite(v) for v in vals) or vals[0] == 0 or min(vals[1:]) <= 0:
+            raise CosimError(f"controller 'pi': loops: {lp!r} needs K != 0, Ti > 0, Tt > 0")
+        out.append(PILoop(str(lp["output"]), str(lp["input"]), *(float(v) for v in vals)))
+    ys, us = [lp.y for lp in out], [lp.u for lp in out]
+    if sorted(ys) != sorted(problem.output_names) or sorted(us) != sorted(problem.input_names):
+        pairs = ", ".join(f"{y}-{u}" for y, u in zip(ys, us, strict=True))
+        raise CosimError(f"controller 'pi': loops must pair each output "
+                         f"({', '.join(problem.output_names)}) with one input "
+                         f"({', '.join(problem.input_names)}), got {pairs}")
+    return tuple(out)
 
 
 def _initial_inputs(values: Any, problem: ControlProblem) -> dict[str, float]:
@@ -61,9 +80,9 @@ def _initial_inputs(values: Any, problem: ControlProblem) -> dict[str, float]:
                          f"got {values!r}")
     out = {}
     for name, value in values.items():
-        if name not in problem.inputs:
+        if name not in problem.input_names:
             raise CosimError(f"controller 'pi': initial_inputs: unknown input {name!r} "
-                             f"(inputs: {', '.join(problem.inputs)})")
+                             f"(inputs: {', '.join(problem.input_names)})")
         if (isinstance(value, bool) or not isinstance(value, int | float)
                 or not math.isfinite(value)):
             raise CosimError(f"controller 'pi': initial_inputs: {name} must be a finite "
@@ -77,39 +96,49 @@ class PIController(Component):
 
     Parameters
     ----------
-    problem : ControlProblem
-        Signals, bounds and sample time (default :data:`controllers.problem.FOURTANK`).
-    pairing : {"cross", "diagonal"} or tuple of PILoop
-        Which input controls which output, with the loop tunings.
+    problem : ControlProblem or path, optional
+        The control problem or its file (default: the model's, else the default plant's).
+    model : path, optional
+        A model file: its problem is the default.
+    pairing : str, optional
+        One of the problem's named pairings (default: its ``pairing``).
+    loops : list, optional
+        The loops themselves, each ``{"output", "input", "K", "Ti", "Tt"}`` (or
+        :class:`~controllers.problem.PILoop`); instead of a pairing.
     initial_inputs : dict, optional
         Inputs at the first step (integrator initial values); default mid-range.
     """
 
     direct_feedthrough = True
 
-    def __init__(self, problem: ControlProblem = FOURTANK,
-                 pairing: str | tuple[PILoop, ...] = "cross",
+    def __init__(self, problem: ControlProblem | str | Path | None = None,
+                 model: str | Path | None = None, pairing: str | None = None,
+                 loops: Sequence[Any] | None = None,
                  initial_inputs: Mapping[str, float] | None = None) -> None:
+        from cosim_adapters.problems import problem_for
+
         self.name = "pi"
-        self.problem = problem
-        if isinstance(pairing, str):
-            if pairing not in PAIRINGS:
-                raise CosimError(f"controller 'pi': unknown pairing {pairing!r} (known: "
-                                 f"{', '.join(PAIRINGS)})")
-            self.loops = PAIRINGS[pairing]
-        elif isinstance(pairing, tuple | list) and all(isinstance(p, PILoop) for p in pairing):
-            self.loops = tuple(pairing)
-        else:
-            raise CosimError(f"controller 'pi': pairing must be one of {', '.join(PAIRINGS)}, "
-                             f"got {pairing!r}")
+        gru = None
+        if model is not None:
+            from controllers.errors import ControllersError
+            from controllers.model import GRUModel
+
+            try:
+                gru = GRUModel.load(model)
+            except ControllersError as exc:
+                raise CosimError(str(exc)) from None
+        self.problem = problem = problem_for(gru, problem)
+        if problem.m != problem.p:
+            raise CosimError(f"controller 'pi': the problem {problem.name!r} has "
+                             f"{problem.m} inputs and {problem.p} outputs; a decentralised PI "
+                             "needs as many inputs as outputs (use the robust MPC)")
+        self.loops = _loops(problem, pairing, loops)
         self.sample_time = problem.Ts
         self.bounds = problem.bounds()
-        self.inputs = tuple(Signal(y, unit) for y, unit in
-                            zip(problem.outputs, problem.output_units, strict=True)) + tuple(
-            Signal(f"ref.{y}", unit) for y, unit in
-            zip(problem.outputs, problem.output_units, strict=True))
-        self.outputs = tuple(Signal(u, unit) for u, unit in
-                             zip(problem.inputs, problem.input_units, strict=True))
+        self.inputs = tuple(Signal(c.name, c.unit, c.description) for c in problem.outputs) + \
+            tuple(Signal(f"ref.{c.name}", c.unit, f"set-point of {c.name}")
+                  for c in problem.outputs)
+        self.outputs = tuple(Signal(c.name, c.unit, c.description) for c in problem.inputs)
         self.initial_inputs = _initial_inputs(initial_inputs, problem)
         self._values: dict[str, float] = {}
         self.setup(0.0)
@@ -143,7 +172,7 @@ class PIController(Component):
         self._steps += 1
 
     def get_outputs(self) -> dict[str, float]:
-        """Inputs to apply [m3/s]."""
+        """Inputs to apply (the problem's units)."""
         return dict(self._u)
 
     def diagnostics(self) -> dict[str, float]:

@@ -1,8 +1,10 @@
 """The robust GRU MPC of the paper (Fig. 1: observer + FHOCP) as a co-simulation component.
 
-``RobustMPCController`` reads the measured levels ``h1``, ``h2`` and the set-points
-``ref.h1``, ``ref.h2`` (metres) and writes the pump flows ``qa``, ``qb`` (m³/s). Internally it
-works in the model file's normalised units:
+``RobustMPCController`` reads the measured outputs of its control problem (the model file's,
+:class:`controllers.problem.ControlProblem`) and their set-points ``ref.<output>``, and writes
+its inputs, all in the problem's units (for the four-tank: levels ``h1``, ``h2`` in metres,
+pump flows ``qa``, ``qb`` in m³/s). Internally it works in the model file's normalised
+units:
 
 1. when ``ȳ`` changes: the equilibrium ``(x̄, ū)`` and ``α`` (``eq:def-alpha``) via
    :meth:`controllers.certificates.Certificate.reference`, which also checks Assumption 1
@@ -44,7 +46,6 @@ import numpy as np
 
 from controllers.errors import ControllersError, SetpointError
 from controllers.model import DEFAULT_MODEL
-from controllers.problem import FOURTANK
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
 
@@ -69,7 +70,7 @@ def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_
         raise CosimError(f"option offset_filter={offset_filter!r}: expected a number in (0, 1]")
     if setpoint_rate is not None and (not number(setpoint_rate) or setpoint_rate <= 0):
         raise CosimError(f"option setpoint_rate={setpoint_rate!r}: expected a positive number "
-                         "of metres per sample")
+                         "of output units per sample")
     if isinstance(max_iter, bool) or not isinstance(max_iter, int) or not 1 <= max_iter <= 10000:
         raise CosimError(f"option max_iter={max_iter!r}: expected an integer in [1, 10000]")
     if kernel not in ("auto", "numpy"):
@@ -89,6 +90,9 @@ class RobustMPCController(Component):
     ----------
     model : str or Path, optional
         Model file (default: the shipped ``controllers/models/fourtank_gru.json``).
+    problem : str or Path, optional
+        A problem file: must be the model's own (a check), or the problem of a model file
+        that has none (:mod:`cosim_adapters.problems`).
     N : int
         Prediction horizon (paper: 15).
     Q, R : arrays, optional
@@ -97,8 +101,8 @@ class RobustMPCController(Component):
         ``ê_o,0`` (paper: 0.02).
     gain_scale : float, optional
         Observer gains = ``gain_scale`` × the LP gains; default: the gains in the model file
-        (``cosim certify --save``), else the largest scale passing every hypothesis on
-        :data:`controllers.gain_design.DEFAULT_SETPOINTS`
+        (``cosim certify --save``), else the largest scale passing every hypothesis at
+        :func:`controllers.gain_design.default_setpoints` (a grid over the output box)
         (:func:`controllers.gain_design.choose_gain_scale`).
     offset_free : bool
         Offset-free set-point correction (outside the theorem, see the module docstring).
@@ -110,8 +114,9 @@ class RobustMPCController(Component):
         new ``(x̄, ū, α)`` at once.
     setpoint_rate : float, optional
         Outside the theorem: move the set-point given to the FHOCP towards the requested one
-        by at most this many metres per sample (a rate-limiting reference governor), so that
-        the terminal set stays reachable after large steps. Off by default.
+        by at most this much per sample, in the outputs' units (a rate-limiting reference
+        governor), so that the terminal set stays reachable after large steps. Off by
+        default.
     solver : {"sqp", "ipopt"}, optional
         NLP solver of the FHOCP (default: SQP with a dense QP, or IPOPT when
         ``ipopt_options`` are given; see :class:`controllers.fhocp.FHOCP`).
@@ -134,7 +139,8 @@ class RobustMPCController(Component):
     #: wall-clock diagnostics: written by the master to timings.csv, not results.csv
     timing_diagnostics = frozenset({"solve_ms"})
 
-    def __init__(self, model: str | Path | None = None, N: int = 15,
+    def __init__(self, model: str | Path | None = None, problem: str | Path | None = None,
+                 N: int = 15,
                  Q: np.ndarray | None = None, R: np.ndarray | None = None,
                  e_o0: float = 0.02, gain_scale: float | None = None,
                  offset_free: bool = False, offset_filter: float = 0.05,
@@ -159,17 +165,15 @@ class RobustMPCController(Component):
             self.model = GRUModel.load(self.model_path)
         except ControllersError as exc:
             raise CosimError(str(exc)) from None
-        problem = FOURTANK
-        if list(self.model.output_names) != list(problem.outputs) or list(
-                self.model.input_names) != list(problem.inputs):
-            raise CosimError(f"{self.model_path}: model signals {self.model.input_names} → "
-                             f"{self.model.output_names} do not match the control problem "
-                             f"{list(problem.inputs)} → {list(problem.outputs)}")
+        from cosim_adapters.problems import problem_for
+
+        self.problem = problem_for(self.model, problem)
+        self.model.problem = self.problem
         kwargs: dict[str, Any] = {"N": N, "Q": Q, "R": R, "e_o0": e_o0}
         try:
             if gain_scale is None and self.model.L_z is None:
                 targets = [self.model.normalize_y(np.array(y))
-                           for y in gain_design.DEFAULT_SETPOINTS]
+                           for y in gain_design.default_setpoints(self.problem)]
                 theta, cert = gain_design.choose_gain_scale(self.model, targets, **kwargs)
                 if theta is None:
                     cert = certs.compute_certificate(self.model, gain_scale=0.0, **kwargs)
@@ -192,15 +196,18 @@ class RobustMPCController(Component):
         self.offset_free = bool(offset_free)
         self.offset_filter = float(offset_filter)
         self.setpoint_rate = None if setpoint_rate is None else float(setpoint_rate)
-        self.inputs = (Signal("h1", "m", "measured level of tank 1"),
-                       Signal("h2", "m", "measured level of tank 2"),
-                       Signal("ref.h1", "m", "set-point of h1"),
-                       Signal("ref.h2", "m", "set-point of h2"))
-        self.outputs = (Signal("qa", "m3/s", "pump a flow"), Signal("qb", "m3/s", "pump b flow"))
+        pr = self.problem
+        self._y_names = list(pr.output_names)
+        self._r_names = [f"ref.{n}" for n in self._y_names]
+        self._u_names = list(pr.input_names)
+        self.inputs = tuple(Signal(c.name, c.unit, c.description or f"measured {c.name}")
+                            for c in pr.outputs) + tuple(
+            Signal(f"ref.{c.name}", c.unit, f"set-point of {c.name}") for c in pr.outputs)
+        self.outputs = tuple(Signal(c.name, c.unit, c.description) for c in pr.inputs)
         self.sample_time = float(self.model.Ts)
-        self.bounds = problem.bounds()
-        self._lo = np.array([b[0] for b in problem.input_bounds])
-        self._hi = np.array([b[1] for b in problem.input_bounds])
+        self.bounds = pr.bounds()
+        self._lo = np.array([c.min for c in pr.inputs])
+        self._hi = np.array([c.max for c in pr.inputs])
         self._values: dict[str, float] = {}
         #: The observer's initial state ``x̂_0`` (normalised), or ``None``: the equilibrium for
         #: the first measured output (paper section V). Read by :meth:`setup`.
@@ -241,16 +248,17 @@ class RobustMPCController(Component):
         self._values.update({k: float(v) for k, v in values.items()})
 
     def get_outputs(self) -> dict[str, float]:
-        return {"qa": float(self._u_phys[0]), "qb": float(self._u_phys[1])}
+        return {n: float(u) for n, u in zip(self._u_names, self._u_phys, strict=True)}
 
     def step(self, t: float, dt: float) -> None:
-        """Compute ``u_k`` from ``h1, h2`` and the set-points at ``t``; advance the observer."""
+        """Compute ``u_k`` from the measured outputs and the set-points at ``t``; advance the
+        observer."""
         try:
-            y_phys = np.array([self._values["h1"], self._values["h2"]])
-            r_phys = np.array([self._values["ref.h1"], self._values["ref.h2"]])
+            y_phys = np.array([self._values[n] for n in self._y_names])
+            r_phys = np.array([self._values[n] for n in self._r_names])
         except KeyError as exc:
             raise CosimError(f"controller {self.name!r}: input {exc.args[0]!r} was never set "
-                             "(wire h1, h2, ref.h1, ref.h2)") from None
+                             f"(wire {', '.join(self._y_names + self._r_names)})") from None
         if not (np.all(np.isfinite(y_phys)) and np.all(np.isfinite(r_phys))):
             raise CosimError(f"controller {self.name!r}: non-finite input at t={t:g} s "
                              f"(h={y_phys.tolist()}, ref={r_phys.tolist()})")
@@ -283,9 +291,10 @@ class RobustMPCController(Component):
             "suboptimal": float(rec.suboptimal),
             "setpoint_rejected": float(rejected),
             "governor_lambda": self._lam,
-            "y_model_h1": float(self.model.denormalize_y(self._y_model)[0]),
-            "y_model_h2": float(self.model.denormalize_y(self._y_model)[1]),
         }
+        y_model = self.model.denormalize_y(self._y_model)
+        for name, value in zip(self._y_names, y_model, strict=True):
+            self._diag[f"y_model_{name}"] = float(value)
 
     def diagnostics(self) -> dict[str, float]:
         return dict(self._diag)
@@ -295,6 +304,7 @@ class RobustMPCController(Component):
         out.update({
             "controller": "robust-mpc",
             "model": str(self.model_path),
+            "problem": self.problem.name,
             "N": self.fhocp.N,
             "formulation": self.fhocp.formulation,
             "kernel": "compiled" if self.fhocp.kernel is not None else "numpy",

@@ -29,12 +29,13 @@ pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
 #: What ``pip wheel`` reads: the project's metadata and its three packages.
-SOURCES = ("pyproject.toml", "README.md", "LICENSE", "cosim", "controllers", "fmus")
+SOURCES = ("pyproject.toml", "README.md", "LICENSE", "cosim", "controllers", "cosim_adapters",
+           "fmus")
 #: Build outputs and caches that a checkout may hold and a wheel must not carry.
 NOT_SOURCES = shutil.ignore_patterns("__pycache__", "*.pyc", "build", "*.egg-info", "*.fmu",
                                      ".*")
 #: The installed packages (made read-only while the commands run).
-PACKAGES = ("cosim", "controllers", "fmus")
+PACKAGES = ("cosim", "controllers", "cosim_adapters", "fmus")
 #: A short scenario (13 steps of 25 s): the written form of scenarios/*.csv.
 SCENARIO = "time,ref.h1,ref.h2\n0,0.65,0.65\n125,0.8,\n325,,\n"
 
@@ -52,12 +53,13 @@ def _package_data() -> set[str]:
     """Files the installed package reads at run time, as paths inside the wheel."""
     from controllers.compiled_kernel import TEMPLATE_PARTS
     from controllers.model import DEFAULT_MODEL
-    from cosim.build import TARGETS
+    from cosim.build import DEFAULT_PROBLEM, TARGETS
 
     names = {f"controllers/kernel/{p.name}" for p in TEMPLATE_PARTS}
     names |= {f"fmus/fourtank/{name}" for t in TARGETS
               for name in (*t.sources, t.model_description)}
-    return names | {f"controllers/models/{DEFAULT_MODEL.name}", "fmus/__init__.py"}
+    return names | {f"controllers/models/{DEFAULT_MODEL.name}", "fmus/__init__.py",
+                    f"fmus/fourtank/{DEFAULT_PROBLEM.name}"}
 
 
 @pytest.fixture(scope="module")
@@ -127,7 +129,8 @@ def test_the_wheel_carries_the_package_data(wheel: Path) -> None:
     names = set(zipfile.ZipFile(wheel).namelist())
     missing = sorted(_package_data() - names)
     assert not missing, f"{wheel.name} lacks {missing}"
-    modules = {p.relative_to(ROOT).as_posix() for package in ("cosim", "controllers")
+    modules = {p.relative_to(ROOT).as_posix() for package in ("cosim", "controllers",
+                                                              "cosim_adapters")
                for p in (ROOT / package).rglob("*.py") if "__pycache__" not in p.parts}
     assert not sorted(modules - names), sorted(modules - names)
     stray = sorted(n for n in names if n.startswith(("fmus/thirdparty/", "fmus/build/",

@@ -147,9 +147,8 @@ def _certificate(args: argparse.Namespace, model: Any, setpoints: list,
     from controllers import gain_design
 
     if args.auto_gain_scale:
-        from controllers.gain_design import DEFAULT_SETPOINTS
-
-        targets = setpoints or [model.normalize_y(np.array(s)) for s in DEFAULT_SETPOINTS]
+        targets = setpoints or [model.normalize_y(np.array(s))
+                                for s in gain_design.default_setpoints(model.problem)]
         theta, cert = gain_design.choose_gain_scale(model, targets, **kwargs)
         note = ("LP gains × θ = 0 (no θ in [0, 1] passes)" if theta is None
                 else f"LP gains × θ = {theta:.6g} (auto)")
@@ -185,6 +184,9 @@ def run(args: argparse.Namespace) -> int:
 
         figure_file(args.plot, "--plot")
     model = GRUModel.load(args.model)
+    from cosim_adapters.problems import problem_for
+
+    model.problem = problem_for(model, getattr(args, "problem", None))
     names = list(model.output_names)
     setpoints_phys = [_parse_setpoint(s, names) for s in args.setpoint]
     setpoints = [model.normalize_y(np.array(s)) for s in setpoints_phys]
@@ -309,7 +311,4 @@ def figure(path: str | Path, model: Any, cert: Any, setpoints: list) -> Path:
 
 
 def _bounds(model: Any) -> list[tuple[float, float]]:
-    from controllers.problem import FOURTANK
-
-    b = dict(zip(FOURTANK.outputs, FOURTANK.output_bounds, strict=True))
-    return [b.get(n, (0.0, 1.0)) for n in model.output_names]
+    return [model.problem.channel(n).bounds for n in model.output_names]

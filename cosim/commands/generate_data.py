@@ -8,20 +8,23 @@ from cosim.errors import exit_codes_help
 
 __all__ = ["DESCRIPTION", "HELP", "register", "run"]
 
-#: The plant used when --plant is not given: the project's FMU, whatever the current folder.
+#: Input hold times [samples] when neither the problem nor the command line gives them.
+DEFAULT_HOLD = (2, 80)
 
 HELP = "excite a plant FMU with a multilevel pseudo-random signal and record the data set"
 
 DESCRIPTION = """\
-Drive the plant FMU with piecewise-constant inputs (random levels inside the saturation
-box of controllers.problem.FOURTANK, log-uniform random hold times), sample every Ts = 25 s
-and write a CSV (time, inputs, all plant outputs, split) plus a JSON sidecar recording how
-it was made. The record is split train/validation/test in the proportions 75/12.5/12.5 %
-(15,000/2,500/2,500 for the default 20,000 steps). The same seed gives the same file.
+Drive the plant FMU with piecewise-constant inputs (random levels inside each input's box,
+or its 'levels', of the control problem; log-uniform random hold times, the input's 'hold'
+or --hold-min/--hold-max), sample every Ts of the problem and write a CSV (time, inputs, all
+plant outputs, split) plus a JSON sidecar recording how it was made, the problem included
+(cosim train takes it from there). The default problem is the four-tank's. The record is
+split train/validation/test in the proportions 75/12.5/12.5 % (15,000/2,500/2,500 for the
+default 20,000 steps). The same seed gives the same file.
 
 With --map, the plant may be a third-party FMU whose variables differ in name or unit
 (variable maps: docs/guide/own-plant.md); every map entry is checked against the FMU before
-the first step. The CSV is always in project names and SI units. The CSV and its sidecar
+the first step. The CSV is always in the problem's names and units. The CSV and its sidecar
 are written atomically: a failed write leaves the previous files unchanged (exit 1).
 
 examples:
@@ -45,10 +48,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--steps", type=int, default=20000,
                         help="number of samples, 10 to 1,000,000 (default: 20000)")
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
-    parser.add_argument("--hold-min", type=int, default=2,
-                        help="shortest input hold time in samples (default: 2)")
-    parser.add_argument("--hold-max", type=int, default=80,
-                        help="longest input hold time in samples (default: 80)")
+    parser.add_argument("--problem", default=None, metavar="PROBLEM.toml",
+                        help="the control problem (default: the four-tank's, "
+                             "fmus/fourtank/problem.toml)")
+    parser.add_argument("--hold-min", type=int, default=None,
+                        help="shortest input hold time in samples (default: each input's "
+                             "'hold' in the problem, else 2)")
+    parser.add_argument("--hold-max", type=int, default=None,
+                        help="longest input hold time in samples (default: each input's "
+                             "'hold' in the problem, else 80)")
     parser.add_argument("--out", default="data/fourtank.csv", metavar="CSV",
                         help="output CSV (default: data/fourtank.csv)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
@@ -61,10 +69,10 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from controllers.problem import FOURTANK
     from cosim import datagen, outpaths
     from cosim.errors import CosimError
     from cosim.master import MAX_STEPS
+    from cosim_adapters.problems import load_problem
 
     if args.steps < 10:
         raise CosimError(f"--steps must be at least 10, got {args.steps}")
@@ -72,11 +80,19 @@ def run(args: argparse.Namespace) -> int:
         raise CosimError(f"--steps must be at most {MAX_STEPS}, got {args.steps}")
     if args.seed < 0:
         raise CosimError(f"--seed must be a non-negative integer, got {args.seed}")
-    if args.hold_max > MAX_STEPS:
-        raise CosimError(f"--hold-max must be at most {MAX_STEPS} samples, got {args.hold_max}")
-    if not 1 <= args.hold_min <= args.hold_max:
-        raise CosimError(f"--hold-min and --hold-max must satisfy 1 <= --hold-min <= "
-                         f"--hold-max, got {args.hold_min} and {args.hold_max}")
+    for flag, value in (("--hold-min", args.hold_min), ("--hold-max", args.hold_max)):
+        if value is not None and not 1 <= value <= MAX_STEPS:
+            raise CosimError(f"{flag} must be in [1, {MAX_STEPS}] samples, got {value}")
+    problem = load_problem(args.problem)
+    holds = []
+    for c in problem.inputs:
+        lo, hi = c.hold if c.hold is not None else DEFAULT_HOLD
+        lo = args.hold_min if args.hold_min is not None else lo
+        hi = args.hold_max if args.hold_max is not None else hi
+        if not 1 <= lo <= hi:
+            raise CosimError(f"input {c.name}: hold times must satisfy 1 <= min <= max, got "
+                             f"{lo} and {hi} (--hold-min, --hold-max or the problem's 'hold')")
+        holds.append((lo, hi))
     out = outpaths.out_file(args.out, "--out")
     if out.suffix.lower() == ".json":
         raise CosimError(f"{out}: --out must not end in .json: that name is the data's JSON "
@@ -87,16 +103,15 @@ def run(args: argparse.Namespace) -> int:
     plant = datagen.fmu_plant(plant_path, args.map, args.interface)
     # every plant output is recorded (h1..h4 for the four tanks); inputs and the controlled
     # outputs are checked against the FMU (and the map): names, causality, units
-    outputs = list(dict.fromkeys([*FOURTANK.outputs, *(s.name for s in plant.outputs)]))
-    units = dict(zip(FOURTANK.inputs + FOURTANK.outputs,
-                     FOURTANK.input_units + FOURTANK.output_units, strict=True))
-    plant.check_signals(list(FOURTANK.inputs), outputs, units)
+    outputs = list(dict.fromkeys([*problem.output_names, *(s.name for s in plant.outputs)]))
+    plant.check_signals(list(problem.input_names), outputs, problem.units())
     progress = not args.quiet and sys.stderr.isatty()
-    data = datagen.generate(plant, args.steps, args.seed, FOURTANK.input_bounds,
-                            FOURTANK.inputs, outputs, FOURTANK.Ts,
-                            (args.hold_min, args.hold_max), progress)
+    levels = [c.levels if c.levels is not None else c.bounds for c in problem.inputs]
+    data = datagen.generate(plant, args.steps, args.seed, levels, problem.input_names,
+                            outputs, problem.Ts, holds, progress)
     meta = {"plant": str(plant_path), "map": args.map, "interface": args.interface,
-            "seed": args.seed, "Ts": FOURTANK.Ts, "hold": [args.hold_min, args.hold_max],
+            "seed": args.seed, "Ts": problem.Ts, "hold": [list(h) for h in holds],
+            "problem": problem.to_dict(),
             "command": "cosim generate-data " + " ".join(sys.argv[2:])}
     path = datagen.write_csv(data, args.out, meta)
     if not args.quiet:

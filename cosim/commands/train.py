@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import importlib.resources
 from pathlib import Path
+from typing import Any
 
 from cosim.errors import exit_codes_help
 
@@ -59,6 +60,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                                    epilog=exit_codes_help(),
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("data", metavar="DATA.csv", help="data set from 'cosim generate-data'")
+    parser.add_argument("--problem", default=None, metavar="PROBLEM.toml",
+                        help="the control problem (default: the one the data set's sidecar "
+                             "records, else the four-tank's); copied into the model file")
     parser.add_argument("--out", default=None, metavar="MODEL.json",
                         help="model file to write (default: models/<DATA stem>_gru.json in "
                         "the current folder; the shipped controllers/models/fourtank_gru.json "
@@ -112,6 +116,31 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(0 = off)")
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     parser.set_defaults(func=run)
+
+
+def _problem(args: argparse.Namespace) -> Any:
+    """The control problem: ``--problem``, else the data sidecar's, else the default."""
+    import json
+
+    from controllers.errors import ControllersError
+    from controllers.problem_file import problem_from_dict
+    from cosim.errors import CosimError
+    from cosim_adapters.problems import load_problem
+
+    if args.problem is not None:
+        return load_problem(args.problem)
+    side = Path(args.data).with_suffix(".json")
+    try:
+        doc = json.loads(side.read_text(encoding="utf-8"))
+    except (OSError, ValueError, RecursionError):
+        doc = {}
+    recorded = doc.get("problem") if isinstance(doc, dict) else None
+    if recorded is None:
+        return load_problem(None)
+    try:
+        return problem_from_dict(recorded, f"{side}")
+    except ControllersError as exc:
+        raise CosimError(str(exc)) from None
 
 
 def _command(argv: list[str]) -> str:
@@ -198,18 +227,19 @@ def run(args: argparse.Namespace) -> int:
 
     from controllers import bounds, metrics, training
     from controllers.model import GRUModel
-    from controllers.problem import FOURTANK
     from cosim import datagen, outpaths, plots
     from cosim.atomicio import output_error, replacing
     from cosim.errors import CosimError
 
-    data = datagen.read_csv(args.data)
+    problem = _problem(args)
+    data = datagen.read_csv(args.data, input_names=list(problem.input_names))
     for name in datagen.SPLITS:
         if not np.any(data.split == name):
             raise CosimError(f"{args.data}: no rows in split '{name}'")
-    missing = [s for s in FOURTANK.inputs if s not in data.input_names]
+    missing = [s for s in problem.output_names if s not in data.output_names]
     if missing:
-        raise CosimError(f"{args.data}: no input column '{missing[0]}'")
+        raise CosimError(f"{args.data}: no output column '{missing[0]}' (problem "
+                         f"{problem.name!r})")
     n_train = int(np.count_nonzero(data.split == "train"))
     if n_train < args.seq_len:
         raise CosimError(f"{args.data}: training data has {n_train} steps, fewer than "
@@ -235,15 +265,15 @@ def run(args: argparse.Namespace) -> int:
     if args.history:
         outpaths.out_file(args.history, "--history")
 
-    norm = training.normalization(FOURTANK)
-    u_all = (data.u[:, [data.input_names.index(s) for s in FOURTANK.inputs]]
+    norm = problem.normalization()
+    u_all = (data.u[:, [data.input_names.index(s) for s in problem.input_names]]
              - norm["u_offset"]) / norm["u_scale"]
-    y_all = (data.outputs(FOURTANK.outputs) - norm["y_offset"]) / norm["y_scale"]
+    y_all = (data.outputs(problem.output_names) - norm["y_offset"]) / norm["y_scale"]
     train_mask = data.split == "train"
     init = None
     if args.init:
         start = GRUModel.load(args.init)
-        if start.params["W_z"].shape != (opts.n, len(FOURTANK.inputs)):
+        if start.params["W_z"].shape != (opts.n, problem.m):
             raise CosimError(f"{args.init}: model has n={start.n}, but --n is {opts.n}")
         init = start.params
 
@@ -274,7 +304,7 @@ def run(args: argparse.Namespace) -> int:
                                 data.split, opts, progress=progress, init=init,
                                 callback=callback)
     scores = metrics.split_scores(result.params, u_all, y_all, data.split)
-    names = list(FOURTANK.outputs)
+    names = list(problem.output_names)
     sz, sr, ph = bounds.gate_bounds(result.params)
     meta_path = Path(args.data).with_suffix(".json")
     record = {
@@ -293,13 +323,13 @@ def run(args: argparse.Namespace) -> int:
         "nu": result.nu,
         "sigma_z_bar": sz, "sigma_r_bar": sr, "phi_h_bar": ph,
         "U_o_inf_norm": bounds.inf_norm(result.params["U_o"]),
-        "normalization_note": "u = (q - mid)/half-range of the saturation box; "
-                              "y = (h - 1 m)/1 m",
+        "normalization_note": "(value - offset) / scale, offset and scale per signal from "
+                              "the problem (default: middle and half-width of its box)",
         "wall_time_s": round(time.perf_counter() - t0, 1),
         "torch_version": __import__("torch").__version__,
     }
     w_y_bar = scores["test"]["max_abs_err"]
-    model = training.build_model(result.params, FOURTANK, norm, record, w_y_bar=w_y_bar)
+    model = training.build_model(result.params, problem, record, w_y_bar=w_y_bar)
     try:
         model.save(out)  # atomic: a failed write leaves the previous file unchanged
     except OSError as exc:
@@ -310,7 +340,7 @@ def run(args: argparse.Namespace) -> int:
     with replacing(figure) as tmp_figure:
         plots.prediction_figure(
             data.time[test], model.denormalize_y(y_all[test]), model.denormalize_y(xi[test]),
-            names, list(FOURTANK.output_units), scores["test"]["fit"], str(tmp_figure),
+            names, list(problem.output_units), scores["test"]["fit"], str(tmp_figure),
             f"GRU n={opts.n}, test split: open-loop prediction vs plant "
             f"(nu = {result.nu:.3f})")
     if not args.quiet:

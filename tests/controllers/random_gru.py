@@ -5,7 +5,16 @@ from __future__ import annotations
 import numpy as np
 
 from controllers.model import GRUModel
-from controllers.problem import FOURTANK
+from controllers.problem import Channel, ControlProblem
+from tests.fourtank_problem import FOURTANK
+
+
+def test_problem(m: int = 2, p: int = 2) -> ControlProblem:
+    """The four-tank's problem for m = p = 2; more or fewer signals of the same kind else."""
+    ins = [*FOURTANK.inputs, *(Channel(f"u{j + 1}", "m3/s", 0.0, 1e-3) for j in range(2, m))]
+    outs = [*FOURTANK.outputs, *(Channel(f"y{j + 1}", "m", 0.0, 2.0) for j in range(2, p))]
+    return ControlProblem(name=f"test{m}x{p}", Ts=FOURTANK.Ts, inputs=tuple(ins[:m]),
+                          outputs=tuple(outs[:p]))
 
 
 def random_gru_model(seed: int = 0, n: int = 20, m: int = 2, p: int = 2) -> GRUModel:
@@ -26,13 +35,14 @@ def random_gru_model(seed: int = 0, n: int = 20, m: int = 2, p: int = 2) -> GRUM
         "W_h": mat(n, m, 1.2), "U_h": mat(n, n, 0.6), "b_h": rng.uniform(-0.1, 0.1, n),
         "U_o": mat(p, n, 1.5), "b_o": np.zeros(p),
     }
-    lo = np.array([b[0] for b in FOURTANK.input_bounds])
-    hi = np.array([b[1] for b in FOURTANK.input_bounds])
-    return GRUModel(params=params, u_offset=(lo + hi) / 2, u_scale=(hi - lo) / 2,
-                    y_offset=np.ones(p), y_scale=np.ones(p),
-                    input_names=list(FOURTANK.inputs)[:m], input_units=["m3/s"] * m,
-                    output_names=list(FOURTANK.outputs)[:p], output_units=["m"] * p,
-                    Ts=FOURTANK.Ts, training={"source": f"random_gru_model(seed={seed})"})
+    problem = FOURTANK if (m, p) == (2, 2) else test_problem(m, p)
+    norm = problem.normalization()
+    return GRUModel(params=params, u_offset=norm["u_offset"], u_scale=norm["u_scale"],
+                    y_offset=norm["y_offset"], y_scale=norm["y_scale"],
+                    input_names=list(problem.input_names), input_units=list(problem.input_units),
+                    output_names=list(problem.output_names),
+                    output_units=list(problem.output_units), Ts=problem.Ts,
+                    training={"source": f"random_gru_model(seed={seed})"}, problem=problem)
 
 
 #: Horizon and output box |y| ≤ 0.25 (normalised) of the certified test problem: tight enough

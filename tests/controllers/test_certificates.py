@@ -18,6 +18,7 @@ from controllers import certificates as certs
 from controllers.errors import ControllersError, DataError
 from controllers.gru import output, step
 from controllers.model import GRUModel
+from controllers.problem import Channel, ControlProblem
 from tests.controllers.random_gru import random_gru_model
 
 
@@ -35,10 +36,13 @@ def hand_model(w_y_bar: float | None = 0.05) -> GRUModel:
         "b_h": np.array([0.0, 0.1]),
         "U_o": np.array([[1.0, 2.0]]), "b_o": np.array([0.0]),
     }
+    problem = ControlProblem(name="siso", Ts=25.0,
+                             inputs=(Channel("qa", "m3/s", 0.0, 9.05e-4),),
+                             outputs=(Channel("h1", "m", 0.0, 2.0),))
     return GRUModel(params=params, u_offset=np.array([4.525e-4]), u_scale=np.array([4.525e-4]),
                     y_offset=np.array([1.0]), y_scale=np.array([1.0]), input_names=["qa"],
                     input_units=["m3/s"], output_names=["h1"], output_units=["m"], Ts=25.0,
-                    w_y_bar=w_y_bar)
+                    w_y_bar=w_y_bar, problem=problem)
 
 
 # σ̄_z = σ(2.6), σ̄_r = σ(0.8), φ̄_h = tanh(1.3)

@@ -10,13 +10,12 @@ import pytest
 
 from controllers import training
 from controllers.model import GRUModel, ModelFileError
-from controllers.problem import FOURTANK
+from tests.fourtank_problem import FOURTANK
 
 
 def make_model(seed: int = 0) -> GRUModel:
     p = training.init_params(5, 2, 2, seed)
-    return training.build_model(p, FOURTANK, training.normalization(FOURTANK),
-                                {"seed": seed, "note": "test"}, w_y_bar=0.05)
+    return training.build_model(p, FOURTANK, {"seed": seed, "note": "test"}, w_y_bar=0.05)
 
 
 def write(tmp_path, doc, name="m.json"):

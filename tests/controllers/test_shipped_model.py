@@ -10,9 +10,9 @@ import pytest
 
 from controllers import bounds, metrics
 from controllers.model import GRUModel
-from controllers.problem import FOURTANK
 from cosim import datagen
 from cosim.cli import main
+from tests.fourtank_problem import FOURTANK
 
 ROOT = Path(__file__).resolve().parents[2]
 MODEL = ROOT / "controllers" / "models" / "fourtank_gru.json"
@@ -28,8 +28,9 @@ def model() -> GRUModel:
 
 def test_shipped_model_is_the_papers_structure(model):
     assert (model.n, model.m, model.p) == (20, 2, 2)
-    assert model.input_names == list(FOURTANK.inputs)
-    assert model.output_names == list(FOURTANK.outputs)
+    assert model.input_names == list(FOURTANK.input_names)
+    assert model.output_names == list(FOURTANK.output_names)
+    assert model.problem == FOURTANK   # the problem travels in the model file
     assert model.Ts == FOURTANK.Ts
     lo = np.array([b[0] for b in FOURTANK.input_bounds])
     hi = np.array([b[1] for b in FOURTANK.input_bounds])

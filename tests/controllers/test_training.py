@@ -12,9 +12,9 @@ torch = pytest.importorskip("torch")
 from controllers import bounds, training  # noqa: E402
 from controllers.errors import ControllersError  # noqa: E402
 from controllers.model import GRUModel  # noqa: E402
-from controllers.problem import FOURTANK  # noqa: E402
 from cosim import datagen  # noqa: E402
 from cosim.cli import main  # noqa: E402
+from tests.fourtank_problem import FOURTANK  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]
 FMU = ROOT / "fmus" / "FourTank.fmu"
@@ -34,7 +34,7 @@ def short_data(tmp_path_factory) -> Path:
 
 def normalised(path: Path):
     d = datagen.read_csv(path)
-    norm = training.normalization(FOURTANK)
+    norm = FOURTANK.normalization()
     u = (d.u - norm["u_offset"]) / norm["u_scale"]
     y = (d.outputs(["h1", "h2"]) - norm["y_offset"]) / norm["y_scale"]
     return u, y, d.split
@@ -77,7 +77,7 @@ def test_refuses_to_build_a_model_with_nu_at_least_one():
     p = random_params(5)
     assert bounds.nu(p) >= 1
     with pytest.raises(ControllersError, match=r"nu = .* >= 1"):
-        training.build_model(p, FOURTANK, training.normalization(FOURTANK), {})
+        training.build_model(p, FOURTANK, {})
 
 
 @pytest.mark.slow

@@ -174,7 +174,8 @@ def test_model_with_other_signal_names_names_the_file(tmp_path: Path, capsys) ->
     path.write_text(json.dumps(doc))
     assert main(["certify", str(path)]) == 2
     err = capsys.readouterr().err
-    assert err.startswith(f"cosim certify: error: {path}: model output 'H1'")
+    assert err.startswith(f"cosim certify: error: {path}: its problem 'fourtank' does not "
+                          "match the model: signals")
     assert err.count("\n") == 1
 
 

@@ -308,8 +308,8 @@ def test_plant_for_another_platform_exit_2(tmp_path: Path, fmu2_path: Path,
 
 
 @pytest.mark.parametrize("option, message", [
-    ('pairing="sideways"', "controller 'pi': unknown pairing 'sideways' (known: cross, "
-                           "diagonal)"),
+    ('pairing="sideways"', "controller 'pi': unknown pairing 'sideways' (the problem's: "
+                           "cross, diagonal)"),
     ('initial_inputs={"qa": "x"}', "controller 'pi': initial_inputs: qa must be a finite "
                                    "number, got 'x'"),
     ('initial_inputs={"qz": 1}', "controller 'pi': initial_inputs: unknown input 'qz'"),

@@ -8,10 +8,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.problem import FOURTANK
 from cosim import datagen
 from cosim.cli import main
 from cosim.errors import CosimError
+from tests.fourtank_problem import FOURTANK
 
 ROOT = Path(__file__).resolve().parents[2]
 FMU = ROOT / "fmus" / "FourTank.fmu"
@@ -195,9 +195,10 @@ def test_default_plant_does_not_depend_on_the_current_folder(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["--steps", "1000001"], "--steps must be at most 1000000, got 1000001"),
     (["--hold-max", "100000000000000000000"],
-     "--hold-max must be at most 1000000 samples, got 100000000000000000000"),
-    (["--hold-min", "0"], "--hold-min and --hold-max must satisfy 1 <= --hold-min <= "
-                          "--hold-max, got 0 and 80"),
+     "--hold-max must be in [1, 1000000] samples, got 100000000000000000000"),
+    (["--hold-min", "0"], "--hold-min must be in [1, 1000000] samples, got 0"),
+    (["--hold-min", "90"], "input qa: hold times must satisfy 1 <= min <= max, got 90 and 80 "
+                           "(--hold-min, --hold-max or the problem's 'hold')"),
     (["--out", "{tmp}/d.json"], "{tmp}/d.json: --out must not end in .json: that name is the "
                                 "data's JSON sidecar (use .csv)"),
 ])

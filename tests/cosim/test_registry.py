@@ -43,7 +43,7 @@ def test_create_passes_options_and_names_unknown_ones() -> None:
     assert [(loop.y, loop.u) for loop in ctrl.loops] == [("h1", "qa"), ("h2", "qb")]
     with pytest.raises(CosimError, match="controller 'pi' has no option 'gain'"):
         create("pi", {"gain": 2.0})
-    with pytest.raises(CosimError, match="cannot create PIController: AttributeError"):
+    with pytest.raises(CosimError, match="problem=1: expected the path of a problem file"):
         create("pi", {"problem": 1})
     with pytest.raises(CosimError, match="controller 'pi': unknown pairing 'sideways'"):
         create("pi", {"pairing": "sideways"})

@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from controllers.model import DEFAULT_MODEL
-from controllers.problem import FOURTANK
 from cosim import scenario
 from cosim.errors import CosimError
 from cosim.master import Master
 from cosim_adapters.gru_plant import GRUPlant
 from cosim_adapters.robust_mpc import RobustMPCController
+from tests.fourtank_problem import FOURTANK
 
 ROOT = Path(__file__).resolve().parents[2]
 

@@ -7,11 +7,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers.problem import FOURTANK
 from cosim.fmu import FmuComponent
 from cosim.master import Master
 from cosim.scenario import load
-from cosim_adapters.pi import PAIRINGS, PIController, PILoop
+from cosim_adapters.pi import PIController, PILoop
+from tests.fourtank_problem import FOURTANK
 
 
 def step(pi: PIController, h1: float, h2: float, r1: float, r2: float) -> dict[str, float]:
@@ -47,8 +47,8 @@ def test_saturation_and_anti_windup() -> None:
     assert u["qb"] < hi
     assert pi.summary()["saturated_steps"]["qb"] >= 1999
 
-    no_aw = PIController(pairing=tuple(PILoop(lp.y, lp.u, lp.K, lp.Ti, 1e12)
-                                       for lp in PAIRINGS["cross"]))
+    no_aw = PIController(loops=[PILoop(lp.y, lp.u, lp.K, lp.Ti, 1e12)
+                                for lp in FOURTANK.pairings["cross"]])
     for _ in range(2000):
         step(no_aw, 0.0, 1.0, 2.0, 1.0)
     assert step(no_aw, 2.1, 1.0, 2.0, 1.0)["qb"] == hi  # wound up: still saturated
@@ -71,8 +71,12 @@ def test_closed_loop_on_the_fmu(tmp_path: Path, fmu2_path: Path, pairing: str) -
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    ({"pairing": "sideways"}, "unknown pairing 'sideways' (known: cross, diagonal)"),
-    ({"pairing": 3}, "pairing must be one of cross, diagonal, got 3"),
+    ({"pairing": "sideways"}, "unknown pairing 'sideways' (the problem's: cross, diagonal)"),
+    ({"loops": [{"output": "h1", "input": "qa", "K": 1.0}]},
+     "loops: each loop is {output, input, K, Ti, Tt}"),
+    ({"loops": [{"output": "h1", "input": "qa", "K": 1.0, "Ti": 10.0}]},
+     "loops must pair each output (h1, h2) with one input (qa, qb), got h1-qa"),
+    ({"loops": [], "pairing": "cross"}, "give loops or pairing, not both"),
     ({"initial_inputs": [1, 2]}, "initial_inputs must map inputs to numbers"),
     ({"initial_inputs": {"qz": 1e-4}}, "initial_inputs: unknown input 'qz' (inputs: qa, qb)"),
     ({"initial_inputs": {"qa": "x"}}, "initial_inputs: qa must be a finite number, got 'x'"),
@@ -89,4 +93,6 @@ def test_bad_options_are_one_line_errors(kwargs, message) -> None:
 def test_initial_inputs_start_the_integrators() -> None:
     ctrl = PIController(initial_inputs={"qa": 4e-4})
     assert ctrl._u["qa"] == 4e-4 and ctrl.initial_inputs == {"qa": 4e-4}
-    assert PIController(pairing=PAIRINGS["diagonal"]).loops == PAIRINGS["diagonal"]
+    assert PIController(pairing="diagonal").loops == FOURTANK.pairings["diagonal"]
+    given = [lp.to_dict() for lp in FOURTANK.pairings["diagonal"]]
+    assert PIController(loops=given).loops == FOURTANK.pairings["diagonal"]

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 
 from controllers.model import DEFAULT_MODEL
-from cosim_adapters.pi import PAIRINGS, PIController
+from cosim_adapters.pi import PIController
 from cosim_adapters.robust_mpc import RobustMPCController
 
 
@@ -22,8 +22,8 @@ class PIGainUp(PIController):
     """The PI baseline with every loop gain ×1.1."""
 
     def __init__(self) -> None:
-        super().__init__(pairing=tuple(replace(loop, K=1.1 * loop.K)
-                                       for loop in PAIRINGS["cross"]))
+        base = PIController()
+        super().__init__(loops=[replace(loop, K=1.1 * loop.K) for loop in base.loops])
 
 
 class MPCInputWeight(RobustMPCController):

@@ -1,0 +1,361 @@
+"""Control-problem files (TOML): read and check them, one line naming the fault.
+
+A problem file declares the plant's signals in its own names and units::
+
+    [problem]
+    name = "cstr"
+    Ts = 15.0                      # controller sample time [s]
+    description = "..."            # optional
+
+    [inputs.F]                     # a manipulated input: the FMU input "F"
+    unit = "L/min"
+    min = 50.0
+    max = 150.0
+    variable = "F_in"              # optional: the FMU variable when it is named otherwise
+    description = "feed flow"      # optional
+    normalization = { offset = 100.0, scale = 50.0 }   # optional (default: the box)
+    hold = [2, 40]                 # optional: excitation hold times [samples]
+    levels = [60.0, 140.0]         # optional: excitation levels (default: the box)
+
+    [outputs.CA]                   # a measured, controlled output (eq:output-constraint)
+    unit = "mol/L"
+    min = 0.2
+    max = 1.0
+
+    [pi]                           # optional: the PI baseline's loops (square plants)
+    pairing = "main"
+    [pi.pairings]
+    main = [{ output = "CA", input = "F", K = -40.0, Ti = 300.0, Tt = 300.0 }]
+
+Every fault is a :class:`~controllers.errors.ProblemFileError` (exit 2) naming the file and
+line: invalid TOML, an unknown key, a missing ``unit``/``min``/``max``/``Ts``/``name``,
+``min ≥ max``, a non-finite number, a name used twice, no inputs or no outputs, a bad loop.
+Checks against a plant FMU (a signal it lacks, the wrong causality, a unit it contradicts)
+belong to the co-simulation side (:mod:`cosim.binding`).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+from controllers.errors import ProblemFileError
+from controllers.problem import Channel, ControlProblem, PILoop
+
+__all__ = ["load", "loads", "problem_from_dict"]
+
+_TOP = {"problem", "inputs", "outputs", "pi"}
+_PROBLEM = {"name", "Ts", "description"}
+_CHANNEL = {"unit", "min", "max", "variable", "description", "normalization"}
+_INPUT = _CHANNEL | {"hold", "levels"}
+_NORM = {"offset", "scale"}
+_PI = {"pairing", "pairings"}
+_LOOP = {"output", "input", "K", "Ti", "Tt"}
+#: Names a signal may have (they become column names: ``ref.<name>``, ``iae.<name>``).
+NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+
+#: ``where(table, key)`` → the message prefix locating ``key`` of ``table``.
+Where = Callable[[str, "str | None"], str]
+
+
+class _Locator:
+    """``file:line`` of keys in a TOML text (tomllib gives no positions)."""
+
+    def __init__(self, path: str, text: str) -> None:
+        self.path = path
+        self.lines = text.splitlines()
+
+    def line(self, table: str, key: str | None) -> int:
+        """Line of ``key`` in ``[table]`` (or of the header; of ``name = {...}`` in the
+        parent table for an inline table)."""
+        current, header = None, 0
+        for i, raw in enumerate(self.lines, start=1):
+            s = raw.strip()
+            m = re.match(r"^\[\s*([^\]]+?)\s*\]", s)
+            if m:
+                current = m.group(1).replace('"', "").replace(" ", "")
+                header = i if current == table else header
+                continue
+            if current == table and key is not None:
+                k = re.match(r'^("([^"]*)"|([A-Za-z0-9_-]+))\s*=', s)
+                if k and (k.group(2) if k.group(2) is not None else k.group(3)) == key:
+                    return i
+        if header:
+            return header
+        parent, _, last = table.rpartition(".")
+        if parent:
+            return self.line(parent, last)
+        return 1
+
+    def __call__(self, table: str, key: str | None = None) -> str:
+        return f"{self.path}:{self.line(table, key)}"
+
+
+def load(path: str | Path) -> ControlProblem:
+    """Read and check a problem file."""
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        raise ProblemFileError(f"{path}: cannot read the problem file "
+                               f"({exc.strerror or exc})") from None
+    except UnicodeDecodeError as exc:
+        raise ProblemFileError(f"{path}: not a TOML problem file (byte {exc.start} is not "
+                               "UTF-8)") from None
+    return loads(text, str(path))
+
+
+def loads(text: str, source: str = "<problem>") -> ControlProblem:
+    """Check the text of a problem file (``source`` names it in messages)."""
+    try:
+        doc = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
+        where = f"{source}:{m.group(1)}:{m.group(2)}" if m else source
+        raise ProblemFileError(f"{where}: invalid TOML ({re.sub(r' ?[(]at .*[)]', '', msg)})"
+                               ) from None
+    loc = _Locator(source, text)
+    _known(doc, _TOP, "the top level (tables: problem, inputs, outputs, pi)", loc, "")
+    channels = {}
+    for kind in ("inputs", "outputs"):
+        table = doc.get(kind, {})
+        if not isinstance(table, dict):
+            raise ProblemFileError(f"{loc(kind)}: '{kind}' must be tables [{kind}.NAME]")
+        channels[kind] = [dict(v, name=k) if isinstance(v, dict) else v
+                          for k, v in table.items()]
+    flat = {"problem": doc.get("problem"), **channels, "pi": doc.get("pi")}
+
+    def where(table: str, key: str | None = None) -> str:
+        return loc(table, key)
+    problem = _build(flat, where, toml=True)
+    return _with_source(problem, source)
+
+
+def problem_from_dict(doc: Any, source: str = "<problem>") -> ControlProblem:
+    """A problem from its JSON form (:meth:`ControlProblem.to_dict`: channel lists)."""
+    if not isinstance(doc, dict):
+        raise ProblemFileError(f"{source}: 'problem' must be an object")
+    flat = {"problem": {k: doc[k] for k in _PROBLEM if k in doc},
+            "inputs": doc.get("inputs", []), "outputs": doc.get("outputs", []),
+            "pi": doc.get("pi")}
+    unknown = sorted(set(doc) - {*_PROBLEM, "inputs", "outputs", "pi"})
+    if unknown:
+        raise ProblemFileError(f"{source}: problem: unknown key '{unknown[0]}'")
+
+    def where(table: str, key: str | None = None) -> str:
+        return f"{source}: problem.{table}" + (f".{key}" if key else "")
+    return _with_source(_build(flat, where, toml=False), source)
+
+
+def _with_source(problem: ControlProblem, source: str) -> ControlProblem:
+    object.__setattr__(problem, "source", source)
+    return problem
+
+
+# ---------------------------------------------------------------------------------------------
+# Checks shared by the TOML and the JSON form
+# ---------------------------------------------------------------------------------------------
+
+def _known(table: dict, allowed: set[str], what: str, where: Any, name: str) -> None:
+    unknown = [k for k in table if k not in allowed]
+    if unknown:
+        at = where(name, unknown[0]) if name else where(unknown[0], None)
+        raise ProblemFileError(f"{at}: unknown key '{unknown[0]}' in {what} (known: "
+                               f"{', '.join(sorted(allowed))})")
+
+
+def _number(value: Any, at: str, key: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise ProblemFileError(f"{at}: '{key}' must be a number, got {value!r}")
+    if not math.isfinite(value):
+        raise ProblemFileError(f"{at}: '{key}' must be finite, got {value!r}")
+    return float(value)
+
+
+def _pair(value: Any, at: str, key: str, integer: bool = False) -> tuple[float, float]:
+    if not isinstance(value, list) or len(value) != 2:
+        raise ProblemFileError(f"{at}: '{key}' must be a list of two numbers [low, high]")
+    if integer and not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
+        raise ProblemFileError(f"{at}: '{key}' must be two whole numbers of samples")
+    lo, hi = (_number(v, at, key) for v in value)
+    return lo, hi
+
+
+def _build(doc: dict[str, Any], where: Where, toml: bool) -> ControlProblem:
+    head = doc.get("problem")
+    if not isinstance(head, dict):
+        raise ProblemFileError(f"{where('problem')}: no [problem] table (name, Ts)")
+    if toml:
+        _known(head, _PROBLEM, "[problem]", where, "problem")
+    for key in ("name", "Ts"):
+        if key not in head:
+            raise ProblemFileError(f"{where('problem')}: [problem] has no '{key}'")
+    name = head["name"]
+    if not isinstance(name, str) or not name.strip():
+        raise ProblemFileError(f"{where('problem', 'name')}: 'name' must be a non-empty "
+                               "string")
+    Ts = _number(head["Ts"], where("problem", "Ts"), "Ts")
+    if Ts <= 0:
+        raise ProblemFileError(f"{where('problem', 'Ts')}: 'Ts' must be positive [s], "
+                               f"got {Ts:g}")
+    description = head.get("description", "")
+    if not isinstance(description, str):
+        raise ProblemFileError(f"{where('problem', 'description')}: 'description' must be "
+                               "a string")
+    seen: dict[str, str] = {}
+    kinds = {}
+    for kind in ("inputs", "outputs"):
+        entries = doc.get(kind) or []
+        if not isinstance(entries, list) or not entries:
+            raise ProblemFileError(f"{where(kind)}: the problem has no {kind} "
+                                   f"([{kind}.NAME] tables)")
+        chans = []
+        for i, entry in enumerate(entries):
+            chans.append(_channel(entry, kind, i, where, toml))
+            c = chans[-1]
+            for label, value in (("name", c.name), ("variable", c.variable)):
+                other = seen.get(f"{label}:{value}")
+                if other is not None:
+                    raise ProblemFileError(f"{where(_table(kind, c.name, i, toml))}: "
+                                           f"{label} '{value}' is used twice ({other} and "
+                                           f"{kind})")
+                seen[f"{label}:{value}"] = kind
+        kinds[kind] = tuple(chans)
+    pairings, pairing = _pi(doc.get("pi"), kinds["inputs"], kinds["outputs"], where, toml)
+    return ControlProblem(name=name.strip(), Ts=Ts, inputs=kinds["inputs"],
+                          outputs=kinds["outputs"], pairings=pairings, pairing=pairing,
+                          description=description)
+
+
+def _table(kind: str, name: Any, index: int, toml: bool) -> str:
+    return f"{kind}.{name}" if toml else f"{kind}[{index}]"
+
+
+def _channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Channel:
+    if not isinstance(entry, dict):
+        raise ProblemFileError(f"{where(kind)}: {kind} entry {index} must be a table")
+    name = entry.get("name")
+    table = _table(kind, name, index, toml)
+    if not isinstance(name, str) or not NAME.match(name):
+        raise ProblemFileError(f"{where(table)}: signal name {name!r} must start with a "
+                               "letter and hold only letters, digits and '_' (it names "
+                               "columns such as ref.<name>)")
+    allowed = (_INPUT if kind == "inputs" else _CHANNEL) | ({"name"} if not toml else set())
+    unknown = [k for k in entry if k not in allowed and k != "name"]
+    if unknown:
+        extra = " (hold and levels are for inputs)" if unknown[0] in ("hold", "levels") else ""
+        raise ProblemFileError(f"{where(table, unknown[0])}: unknown key '{unknown[0]}' in "
+                               f"[{kind}.{name}]{extra} (known: "
+                               f"{', '.join(sorted(allowed - {'name'}))})")
+    for key in ("unit", "min", "max"):
+        if key not in entry:
+            raise ProblemFileError(f"{where(table)}: [{kind}.{name}] has no '{key}'")
+    unit = entry["unit"]
+    if not isinstance(unit, str) or not unit.strip():
+        raise ProblemFileError(f"{where(table, 'unit')}: 'unit' must be a non-empty string "
+                               "(e.g. \"m3/s\", \"K\", \"1\" for none)")
+    lo = _number(entry["min"], where(table, "min"), "min")
+    hi = _number(entry["max"], where(table, "max"), "max")
+    if not lo < hi:
+        raise ProblemFileError(f"{where(table, 'max')}: [{kind}.{name}] needs min < max, got "
+                               f"min = {lo:g}, max = {hi:g}")
+    kw: dict[str, Any] = {}
+    variable = entry.get("variable", name)
+    if not isinstance(variable, str) or not variable:
+        raise ProblemFileError(f"{where(table, 'variable')}: 'variable' must be the FMU "
+                               "variable's name")
+    description = entry.get("description", "")
+    if not isinstance(description, str):
+        raise ProblemFileError(f"{where(table, 'description')}: 'description' must be a "
+                               "string")
+    norm = entry.get("normalization")
+    if norm is not None:
+        at = where(table, "normalization")
+        if not isinstance(norm, dict):
+            raise ProblemFileError(f"{at}: 'normalization' must be {{ offset = ..., scale = "
+                                   "... }}")
+        bad = [k for k in norm if k not in _NORM]
+        if bad or set(norm) != _NORM:
+            raise ProblemFileError(f"{at}: 'normalization' takes exactly 'offset' and "
+                                   "'scale'")
+        kw["offset"] = _number(norm["offset"], at, "normalization.offset")
+        kw["scale"] = _number(norm["scale"], at, "normalization.scale")
+        if kw["scale"] == 0:
+            raise ProblemFileError(f"{at}: 'normalization.scale' must not be 0")
+    if "hold" in entry:
+        at = where(table, "hold")
+        h0, h1 = _pair(entry["hold"], at, "hold", integer=True)
+        if not 1 <= h0 <= h1:
+            raise ProblemFileError(f"{at}: 'hold' must satisfy 1 <= low <= high samples, got "
+                                   f"[{h0:g}, {h1:g}]")
+        kw["hold"] = (int(h0), int(h1))
+    if "levels" in entry:
+        at = where(table, "levels")
+        l0, l1 = _pair(entry["levels"], at, "levels")
+        if not lo <= l0 < l1 <= hi:
+            raise ProblemFileError(f"{at}: 'levels' must satisfy min <= low < high <= max "
+                                   f"({lo:g}, {hi:g}), got [{l0:g}, {l1:g}]")
+        kw["levels"] = (l0, l1)
+    return Channel(name=name, unit=unit.strip(), min=lo, max=hi, variable=variable,
+                   description=description, **kw)
+
+
+def _pi(doc: Any, inputs: tuple[Channel, ...], outputs: tuple[Channel, ...], where: Where,
+        toml: bool) -> tuple[dict[str, tuple[PILoop, ...]], str]:
+    if doc is None:
+        return {}, ""
+    at = where("pi")
+    if not isinstance(doc, dict):
+        raise ProblemFileError(f"{at}: [pi] must be a table (pairing, pairings)")
+    bad = [k for k in doc if k not in _PI]
+    if bad:
+        raise ProblemFileError(f"{where('pi', bad[0])}: unknown key '{bad[0]}' in [pi] "
+                               f"(known: {', '.join(sorted(_PI))})")
+    sets = doc.get("pairings")
+    if not isinstance(sets, dict) or not sets:
+        raise ProblemFileError(f"{at}: [pi] needs 'pairings': named lists of loops "
+                               "{ output, input, K, Ti, Tt }")
+    pairings = {}
+    in_names = [c.name for c in inputs]
+    out_names = [c.name for c in outputs]
+    for set_name, loops in sets.items():
+        sat = where("pi.pairings", set_name)
+        if not isinstance(loops, list) or not loops:
+            raise ProblemFileError(f"{sat}: pairing '{set_name}' must be a list of loops")
+        parsed = []
+        for k, lp in enumerate(loops):
+            if not isinstance(lp, dict):
+                raise ProblemFileError(f"{sat}: loop {k} of '{set_name}' must be a table")
+            bad = [key for key in lp if key not in _LOOP]
+            missing = [key for key in ("output", "input", "K", "Ti") if key not in lp]
+            if bad or missing:
+                what = f"unknown key '{bad[0]}'" if bad else f"no '{missing[0]}'"
+                raise ProblemFileError(f"{sat}: loop {k} of '{set_name}' has {what} (keys: "
+                                       "output, input, K, Ti, Tt)")
+            if lp["output"] not in out_names or lp["input"] not in in_names:
+                raise ProblemFileError(f"{sat}: loop {k} of '{set_name}' pairs "
+                                       f"{lp['output']!r} with {lp['input']!r}: not an output "
+                                       f"({', '.join(out_names)}) and an input "
+                                       f"({', '.join(in_names)})")
+            K = _number(lp["K"], sat, "K")
+            Ti = _number(lp["Ti"], sat, "Ti")
+            Tt = _number(lp.get("Tt", Ti), sat, "Tt")
+            if K == 0 or Ti <= 0 or Tt <= 0:
+                raise ProblemFileError(f"{sat}: loop {k} of '{set_name}' needs K != 0, "
+                                       "Ti > 0 and Tt > 0 [s]")
+            parsed.append(PILoop(lp["output"], lp["input"], K, Ti, Tt))
+        for attr, label in (("y", "output"), ("u", "input")):
+            names = [getattr(lp, attr) for lp in parsed]
+            if len(set(names)) != len(names):
+                raise ProblemFileError(f"{sat}: pairing '{set_name}' uses an {label} twice")
+        pairings[set_name] = tuple(parsed)
+    pairing = doc.get("pairing", next(iter(pairings)))
+    if pairing not in pairings:
+        raise ProblemFileError(f"{where('pi', 'pairing')}: pairing {pairing!r} is not one of "
+                               f"{', '.join(pairings)}")
+    return pairings, pairing
