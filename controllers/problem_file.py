@@ -46,7 +46,7 @@ from typing import Any
 from controllers.errors import ProblemFileError
 from controllers.problem import Channel, ControlProblem, PILoop
 
-__all__ = ["load", "loads", "problem_from_dict"]
+__all__ = ["load", "loads", "locate", "problem_from_dict"]
 
 _TOP = {"problem", "inputs", "outputs", "pi"}
 _PROBLEM = {"name", "Ts", "description"}
@@ -150,6 +150,30 @@ def problem_from_dict(doc: Any, source: str = "<problem>") -> ControlProblem:
     def where(table: str, key: str | None = None) -> str:
         return f"{source}: problem.{table}" + (f".{key}" if key else "")
     return _with_source(_build(flat, where, toml=False), source)
+
+
+def locate(problem: ControlProblem, signal: str, key: str | None = None) -> str:
+    """Where ``signal`` (or its ``key``, e.g. ``"unit"``) of ``problem`` is declared, for
+    messages: ``file:line`` in a problem file (TOML), ``source: problem.inputs.F`` in a model
+    file or data sidecar (the JSON form), ``<problem>: ...`` for a problem built in code.
+
+    Raises
+    ------
+    KeyError
+        ``signal`` is not an input or output of ``problem``.
+    """
+    kind = "inputs" if signal in problem.input_names else "outputs"
+    if signal not in problem.input_names and signal not in problem.output_names:
+        raise KeyError(signal)
+    source = problem.source or "<problem>"
+    path = Path(source)
+    if path.suffix.lower() == ".toml":
+        try:
+            text = path.read_text(encoding="utf-8")
+        except (OSError, UnicodeDecodeError):
+            return source
+        return _Locator(source, text)(f"{kind}.{signal}", key)
+    return f"{source}: problem.{kind}.{signal}" + (f".{key}" if key else "")
 
 
 def _with_source(problem: ControlProblem, source: str) -> ControlProblem:

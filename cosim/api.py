@@ -101,7 +101,9 @@ class RunOutput:
 
 
 def _plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
-           step_timeout: float | None, seed: int) -> tuple[Any, str]:
+           step_timeout: float | None, seed: int, problem: Any = None) -> tuple[Any, str]:
+    """The plant component; an FMU's variable map binds ``problem`` to it (the user's
+    ``varmap`` first: :func:`cosim_adapters.problems.bind_plant`)."""
     from cosim.errors import CosimError
     from cosim_adapters.gru_plant import MODEL_PREFIX
 
@@ -113,6 +115,10 @@ def _plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
                              "--step-timeout or --interface")
         return GRUPlant.from_file(str(plant), seed=seed), str(plant)
     path = plant_path(plant)
+    if problem is not None:
+        from cosim_adapters.problems import bind_plant
+
+        varmap = bind_plant(problem, path, varmap)
     if isolate:
         from cosim.isolated import IsolatedFmuComponent
 
@@ -126,9 +132,9 @@ def _plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
 def run(scenario: str | Path, plant: str | Path | None = None,
         controller: str = "robust-mpc", map: str | Path | None = None,
         model: str | Path | None = None, options: Mapping[str, Any] | None = None, *,
-        out: str | Path | None = None, interface: str = "cs", step: float | None = None,
-        isolate: bool = False, step_timeout: float | None = None, seed: int = 0,
-        figure: bool = True, progress: bool = False,
+        problem: Any = None, out: str | Path | None = None, interface: str = "cs",
+        step: float | None = None, isolate: bool = False, step_timeout: float | None = None,
+        seed: int = 0, figure: bool = True, progress: bool = False,
         on_step: Callable[[int], None] | None = None) -> RunOutput:
     """Run a scenario in closed loop (the Python twin of ``cosim run``).
 
@@ -147,6 +153,11 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         Model file of the robust MPC (same as ``options={"model": ...}``).
     options : mapping, optional
         Controller constructor options (``{"offset_free": True}``).
+    problem : path or ControlProblem, optional
+        The control problem (a problem file, ``--problem``): the model's own, or the problem
+        of a model file that has none; the PI baseline's. Default: the controller's (the
+        model's, else the four-tank's). A plant FMU is bound to it (:mod:`cosim.binding`:
+        names through ``variable`` keys, units converted, checked before the first step).
     out : path, optional
         Folder to write the run's files into (streamed ``results.csv``, ``summary.json``,
         ``figure.png``, ``timings.csv``); nothing is written without it.
@@ -174,7 +185,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     Raises
     ------
     CosimError
-        Bad input (scenario, map, FMU, options, output folder): nothing was run.
+        Bad input (scenario, map, problem, FMU, options, output folder): nothing was run.
     OutputError
         ``out`` could not be written (the previous files there are intact).
     """
@@ -191,16 +202,20 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     opts = dict(options or {})
     if model is not None:
         opts["model"] = str(model)
+    opts = with_problem(controller, opts, problem)
     if out is not None:
         outpaths.out_dir(out, "--out")
     ctrl = registry.create(controller, opts)
-    plant_obj, plant_name = _plant(plant, vmap, interface, isolate, limit, seed)
+    bound = run_problem(ctrl, opts.get("problem", problem))
+    plant_obj, plant_name = _plant(plant, vmap, interface, isolate, limit, seed, bound)
     master = Master(plant_obj, ctrl, sc, step=step, seed=seed)
     meta = {"scenario": str(sc.path), "plant": plant_name,
             "fmi_version": plant_obj.fmi_version, "interface": interface,
             "isolated": isolate, "step_timeout": limit,
-            "map": str(map) if map is not None else None, "controller": controller,
-            "controller_options": opts, "seed": seed}
+            "map": str(map) if map is not None else None,
+            "problem": bound.name if bound is not None else None,
+            "problem_source": (bound.source or None) if bound is not None else None,
+            "controller": controller, "controller_options": opts, "seed": seed}
     bar = None
     if progress:
         import sys
@@ -224,6 +239,51 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     finally:
         if bar is not None:
             bar.close()
+
+
+def with_problem(controller: str, options: Mapping[str, Any], problem: Any) -> dict:
+    """``options`` with ``problem`` (``--problem``) for a controller that takes a ``problem``
+    option (the robust MPC and the PI baseline do); unchanged without one.
+
+    Raises
+    ------
+    CosimError
+        ``problem`` given twice, differently (``--problem`` and ``--option problem=``).
+    """
+    import inspect
+
+    from cosim import registry
+    from cosim.errors import CosimError
+
+    opts = dict(options)
+    if problem is None:
+        return opts
+    given = opts.get("problem")
+    if given is not None and given != problem and str(given) != str(problem):
+        raise CosimError(f"--problem {problem} and --option problem={given}: give the "
+                         "problem once")
+    params = inspect.signature(registry.resolve(controller)).parameters
+    if "problem" in params or any(p.kind is inspect.Parameter.VAR_KEYWORD
+                                  for p in params.values()):
+        opts["problem"] = problem if not isinstance(problem, Path) else str(problem)
+    return opts
+
+
+def run_problem(ctrl: Any, problem: Any) -> Any:
+    """The control problem a run binds its plant FMU to: the controller's own (the robust
+    MPC's and the PI baseline's, :func:`cosim_adapters.problems.problem_for`), else
+    ``problem`` (``--problem``) loaded, else ``None`` (a controller of its own signals: the
+    plant is bound through ``--map`` alone, as before problems existed)."""
+    from controllers.problem import ControlProblem
+
+    own = getattr(ctrl, "problem", None)
+    if isinstance(own, ControlProblem):
+        return own
+    if problem is None:
+        return None
+    from cosim_adapters.problems import load_problem
+
+    return load_problem(problem)
 
 
 def _execute(master: Any, meta: dict, out: str | Path | None, figure: bool,

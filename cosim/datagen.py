@@ -22,6 +22,7 @@ import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -269,10 +270,12 @@ def _input_names(path: Path, signals: list[str], n_inputs: int | None,
 
 
 def fmu_plant(path: str | Path, map_path: str | Path | None = None,
-              interface: str = "cs") -> Component:
-    """The plant FMU as a :class:`~cosim.fmu.FmuComponent` (with an optional variable map)."""
-    from cosim import varmap
+              interface: str = "cs", varmap: Any = None) -> Component:
+    """The plant FMU as a :class:`~cosim.fmu.FmuComponent`, with a variable map: ``varmap``
+    (a :class:`~cosim.varmap.VarMap`, e.g. a problem's binding, :mod:`cosim.binding`), or
+    the one read from ``map_path``."""
+    from cosim import varmap as varmaps
     from cosim.fmu import FmuComponent
 
-    vm = varmap.load(map_path) if map_path else None
+    vm = varmap if varmap is not None else (varmaps.load(map_path) if map_path else None)
     return FmuComponent(path, name="plant", interface=interface, varmap=vm)

@@ -123,6 +123,7 @@ class FmuComponent(Component):
         self.tunables = tuple(sig(v.name) for v in real
                               if v.causality == "parameter" and v.variability == "tunable")
         self.parameters = tuple(sig(v.name) for v in real if v.causality == "parameter")
+        self._tunable_set = frozenset(self.tunables)
         self.start_values = dict(start_values or {})
         self._out_names = [s.name for s in self.outputs]
         self._out_maps = [self.varmap.lookup(n) for n in self._out_names]
@@ -358,9 +359,19 @@ class FmuComponent(Component):
 
     # -- stepping -----------------------------------------------------------------------------
     def set_inputs(self, values: Mapping[str, float]) -> None:
-        """Set inputs by project name (converted through the variable map)."""
+        """Set inputs by project name (converted through the variable map).
+
+        An input may be a tunable parameter (a problem input bound to one,
+        :mod:`cosim.binding`): with Model Exchange it is set in Event Mode, as FMI asks.
+        """
         try:
-            self._set_many(values)
+            if self.interface == "me" and not self._tunable_set.isdisjoint(values):
+                self._fmu.enterEventMode()
+                self._set_many(values)
+                self._event_update()
+                self._fmu.enterContinuousTimeMode()
+            else:
+                self._set_many(values)
         except FmuError as exc:  # a status check (a CosimError, but raised by the FMU)
             raise self._fail(f"setting inputs at t={self._t!r}", exc) from None
         except CosimError:

@@ -10,7 +10,10 @@ A map is a TOML file with one table per project signal::
 
 Inputs are converted on the way into the FMU (``plant = scale * project + offset``) and
 outputs the inverse way out (``project = (plant - offset) / scale``). Signals that a map does
-not name are looked up in the FMU under their own name.
+not name are looked up in the FMU under their own name. A run binds its control problem to
+the FMU through :mod:`cosim.binding`, where a map takes precedence over the problem's own
+``variable`` keys (an entry without ``scale`` and ``offset`` only renames: the units then
+decide the conversion).
 
 Before the first step :meth:`VarMap.check` holds the map against the FMU's
 modelDescription: a missing variable, a wrong causality or a unit mismatch is a one-line
@@ -128,8 +131,11 @@ class VarMap:
                     hint = "" if signal in self.signals else " (map it with --map)"
                     raise CosimError(f"{where}: the FMU has no such variable{hint}")
                 actual = getattr(var, "causality", None)
-                if actual != causality:
-                    role = ("a controller output must drive an FMU input" if causality == "input"
+                tunable = (causality == "input" and actual == "parameter"
+                           and getattr(var, "variability", None) == "tunable")
+                if actual != causality and not tunable:
+                    role = ("a controller output must drive an FMU input (or a tunable "
+                            "parameter)" if causality == "input"
                             else "a measured signal must be an FMU output")
                     raise CosimError(f"{where}: causality is '{actual}', {role}")
                 fmu_unit = variable_unit(var)
@@ -140,6 +146,18 @@ class VarMap:
                     who = "the map" if m.unit else "the controller"
                     raise CosimError(f"{where}: unit mismatch: {who} expects '{expected}', "
                                      f"the FMU declares '{fmu_unit}'")
+        self.check_entries(model_variables)
+
+    def check_entries(self, model_variables: Mapping[str, object]) -> None:
+        """Check every entry of the map on its own (in file order): its variable must exist,
+        be a real-valued input, output or parameter of the FMU, and have the unit the entry
+        declares.
+
+        Raises
+        ------
+        CosimError
+            ``MAP: signal 'qa' -> variable 'Fa': ...`` on the first problem found.
+        """
         for m in self.signals.values():
             self._check_entry(m, model_variables)
 

@@ -12,6 +12,8 @@ that controllers are compared on the same draws. Example::
     controller = "robust-mpc"          # registry name or module:Class (as cosim run)
     # plant = "fmus/FourTank.fmu"      # or "model:controllers/models/fourtank_gru.json"
     # map = "...", model = "...", interface = "cs", timeout = 600, isolate = false
+    # problem = "cstr.toml"            # the control problem (as --problem): the model's own,
+                                       # or one for a model without; the plant is bound to it
 
     [controller.options]               # as cosim run --option
     offset_free = true
@@ -58,7 +60,7 @@ MAX_RUNS = 1_000_000
 #: Distributions a ``[draw]`` entry may name, with their parameter count.
 DISTRIBUTIONS = {"uniform": 2, "normal": 2, "choice": None}
 _CAMPAIGN_KEYS = {"name", "runs", "seed", "scenario", "controller", "plant", "map", "model",
-                  "interface", "timeout", "isolate", "step_timeout", "figures"}
+                  "problem", "interface", "timeout", "isolate", "step_timeout", "figures"}
 _TOP_KEYS = {"campaign", "controller", "draw", "setpoints", "initial_state", "variant"}
 _VARIANT_KEYS = {"name", "controller", "options", "model"}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
@@ -116,6 +118,7 @@ class CampaignSpec:
     plant: str | None = None
     map: Path | None = None
     model: Path | None = None
+    problem: Path | None = None
     interface: str = "cs"
     timeout: float | None = None
     isolate: bool = False
@@ -388,6 +391,8 @@ def load(path: str | Path) -> CampaignSpec:
     vmap = _file(camp["map"], loc, "campaign", "map", "variable map") if "map" in camp else None
     model = (_file(camp["model"], loc, "campaign", "model", "model file")
              if "model" in camp else None)
+    problem = (_file(camp["problem"], loc, "campaign", "problem", "problem file")
+               if "problem" in camp else None)
     interface = camp.get("interface", "cs")
     if interface not in ("cs", "me"):
         raise loc.error(f"interface = {interface!r}: expected \"cs\" or \"me\"", "campaign",
@@ -435,7 +440,8 @@ def load(path: str | Path) -> CampaignSpec:
                 else (Variant(controller, controller, dict(options)),))
     spec = CampaignSpec(
         path=path, name=name, runs=runs, seed=seed, scenario=scenario, controller=controller,
-        options=dict(options), plant=plant, map=vmap, model=model, interface=interface,
+        options=dict(options), plant=plant, map=vmap, model=model, problem=problem,
+        interface=interface,
         timeout=timeout, isolate=flags["isolate"] or step_timeout is not None,
         step_timeout=step_timeout, figures=flags["figures"], draws=tuple(draws),
         setpoints=setpoints, initial_state=initial, variants=variants, text=text)

@@ -151,7 +151,12 @@ def _plant(task: dict[str, Any], folder: Path, seed: int) -> Any:
         from cosim_adapters.gru_plant import GRUPlant
 
         return GRUPlant.from_file(str(folder / name), seed=seed)
-    vmap = varmap.load(folder / task["map"]) if task.get("map") else None
+    if task.get("binding") is not None:
+        # the plant bound to the control problem by the client (cosim.binding), map included
+        path, entries = task["binding"]
+        vmap = varmap.VarMap(Path(path), {m[0]: varmap.MappedSignal(*m) for m in entries})
+    else:
+        vmap = varmap.load(folder / task["map"]) if task.get("map") else None
     if task.get("isolate"):
         import multiprocessing
 
@@ -253,8 +258,9 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
     sc = sc.with_changes(at_start, draw["setpoints"] or None, draw["stop_time"])
     run["phase"] = "building the controller"
     options = dict(task["options"])
-    if "model" in options:
-        options["model"] = str(folder / options["model"])
+    for key in ("model", "problem"):
+        if key in options:
+            options[key] = str(folder / options[key])
     run["key"], ctrl = POOL.take(task["controller"], options)
     run["ctrl"] = ctrl
     if hasattr(ctrl, "initial_estimate"):
@@ -272,10 +278,11 @@ def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
     Parameters
     ----------
     task : dict
-        ``run``, ``variant``, ``controller``, ``options`` (asset file names for model
-        paths), ``draw`` (a :class:`~cosim.campaign.draws.RunDraw` as a dict), ``scenario``,
-        ``plant`` (``("fmu" | "model", asset name)``), ``map``, ``interface``, ``isolate``,
-        ``step_timeout``, ``timeout`` [s].
+        ``run``, ``variant``, ``controller``, ``options`` (asset file names for model and
+        problem paths), ``draw`` (a :class:`~cosim.campaign.draws.RunDraw` as a dict),
+        ``scenario``, ``plant`` (``("fmu" | "model", asset name)``), ``map``, ``binding``
+        (the plant's variable map bound to the control problem: its path and entries, or
+        ``None``), ``interface``, ``isolate``, ``step_timeout``, ``timeout`` [s].
     assets : Assets
 
     Returns

@@ -22,15 +22,20 @@ plant outputs, split) plus a JSON sidecar recording how it was made, the problem
 split train/validation/test in the proportions 75/12.5/12.5 % (15,000/2,500/2,500 for the
 default 20,000 steps). The same seed gives the same file.
 
-With --map, the plant may be a third-party FMU whose variables differ in name or unit
-(variable maps: docs/guide/own-plant.md); every map entry is checked against the FMU before
-the first step. The CSV is always in the problem's names and units. The CSV and its sidecar
-are written atomically: a failed write leaves the previous files unchanged (exit 1).
+The plant FMU is bound to the problem before the first step: each signal is the FMU
+variable of its name, or the one its 'variable' key names; units are converted where the
+problem's and the FMU's differ (the FMU's UnitDefinitions, else pint), and a variable the FMU
+lacks, of the wrong causality or type, or in a unit it contradicts is one line naming the
+problem file and line (exit 2). With --map, a third-party FMU whose variables differ in name
+or unit binds through a variable map (docs/guide/own-plant.md), which takes precedence; every
+map entry is checked too. The CSV is always in the problem's names and units. The CSV and its
+sidecar are written atomically: a failed write leaves the previous files unchanged (exit 1).
 
 examples:
   cosim generate-data                              # data/fourtank.csv, seed 0
   cosim generate-data --steps 2000 --seed 3 --out data/short.csv
-  cosim generate-data --plant other.fmu --map other.toml"""
+  cosim generate-data --plant other.fmu --map other.toml
+  cosim generate-data --plant cstr.fmu --problem cstr.toml --out data/cstr.csv"""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -50,7 +55,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=0, help="random seed (default: 0)")
     parser.add_argument("--problem", default=None, metavar="PROBLEM.toml",
                         help="the control problem (default: the four-tank's, "
-                             "fmus/fourtank/problem.toml)")
+                             "fmus/fourtank/problem.toml); the plant FMU is bound to it "
+                             "(variables, units) before the first step")
     parser.add_argument("--hold-min", type=int, default=None,
                         help="shortest input hold time in samples (default: each input's "
                              "'hold' in the problem, else 2)")
@@ -69,10 +75,10 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from cosim import datagen, outpaths
+    from cosim import datagen, outpaths, varmap
     from cosim.errors import CosimError
     from cosim.master import MAX_STEPS
-    from cosim_adapters.problems import load_problem
+    from cosim_adapters.problems import bind_plant, load_problem
 
     if args.steps < 10:
         raise CosimError(f"--steps must be at least 10, got {args.steps}")
@@ -100,7 +106,9 @@ def run(args: argparse.Namespace) -> int:
     from cosim.api import plant_path as find_plant
 
     plant_path = find_plant(args.plant)
-    plant = datagen.fmu_plant(plant_path, args.map, args.interface)
+    user_map = varmap.load(args.map) if args.map else None
+    plant = datagen.fmu_plant(plant_path, interface=args.interface,
+                              varmap=bind_plant(problem, plant_path, user_map))
     # every plant output is recorded (h1..h4 for the four tanks); inputs and the controlled
     # outputs are checked against the FMU (and the map): names, causality, units
     outputs = list(dict.fromkeys([*problem.output_names, *(s.name for s in plant.outputs)]))

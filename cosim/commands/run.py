@@ -45,6 +45,7 @@ examples:
   cosim run scenarios/leak_tank1.csv --controller pi --out results/leak --quiet
   cosim run scenarios/paper_steps.csv --plant other.fmu --map other.map.toml --isolate
   cosim run scenarios/paper_steps.csv --model my_gru.json --option offset_free=true
+  cosim run cstr_steps.csv --plant cstr.fmu --problem cstr.toml --controller pi
 
 """ + exit_codes_help()
 
@@ -65,6 +66,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--map", metavar="MAP", default=None,
                    help="variable map TOML for a plant whose variable names or units differ "
                         "(checked against its modelDescription before the first step)")
+    p.add_argument("--problem", metavar="PROBLEM.toml", default=None,
+                   help="the control problem (signals, units, boxes, Ts): must be the "
+                        "model's own when its file has one; default: the model's, else the "
+                        "four-tank's (fmus/fourtank/problem.toml). The plant FMU is bound to "
+                        "it: variables by name or the problem's 'variable' keys, units "
+                        "converted, checked before the first step")
     p.add_argument("--controller", metavar="NAME", default=None,
                    help="controller: 'robust-mpc' (default), 'pi', or module:Class")
     p.add_argument("--model", metavar="FILE", default=None,
@@ -116,7 +123,7 @@ def run(args: argparse.Namespace) -> int:
             out = Path("results") / scenario.load(args.scenario).path.stem
         output = api.run(args.scenario, plant=args.plant,
                          controller=args.controller or registry.DEFAULT, map=args.map,
-                         model=args.model, options=options, out=out,
+                         model=args.model, options=options, problem=args.problem, out=out,
                          interface=args.interface, step=args.step, isolate=args.isolate,
                          step_timeout=args.step_timeout, seed=args.seed,
                          figure=not args.no_figure,
@@ -136,8 +143,10 @@ def run(args: argparse.Namespace) -> int:
         guard.check()  # a signal that arrived while the results were written
     if not args.quiet:
         k = output.summary["kpis"]
-        iae = ", ".join(f"{o}={v:.4g}" for o, v in k["iae"].items())
+        units = {o: s.get("unit") or "1"
+                 for o, s in output.summary.get("signals", {}).get("outputs", {}).items()}
+        iae = ", ".join(f"{o}={v:.4g} {units.get(o, '1')}·s" for o, v in k["iae"].items())
         viol = sum(v["count"] for v in k["violations"].values())
-        print(f"cosim run: ok: {result.steps} steps in {result.wall_time_s:.2f} s; IAE {iae} "
-              f"m·s; {viol} constraint violations; results in {out}")
+        print(f"cosim run: ok: {result.steps} steps in {result.wall_time_s:.2f} s; IAE {iae}; "
+              f"{viol} constraint violations; results in {out}")
     return EXIT_OK

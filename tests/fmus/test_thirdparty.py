@@ -137,3 +137,31 @@ def test_map_unit_mismatch_is_a_one_line_error(fmu: Path, tmp_path: Path) -> Non
     assert proc.returncode == 2
     assert "signal 'h1' -> variable 'L1': unit mismatch" in proc.stderr
     assert "'mm'" in proc.stderr and "'cm'" in proc.stderr and "Traceback" not in proc.stderr
+
+
+@pytest.mark.slow
+def test_a_problem_with_variable_keys_binds_without_a_map(fmu: Path, tmp_path: Path) -> None:
+    """The four-tank problem naming the FMU's variables (Fa, Fb, L1, L2) in its own units
+    (m3/s, m; the FMU's l/min, cm): the same closed loop as through the variable map."""
+    text = (ROOT / "fmus" / "fourtank" / "problem.toml").read_text()
+    for signal, variable in (("qa", "Fa"), ("qb", "Fb"), ("h1", "L1"), ("h2", "L2")):
+        kind = "inputs" if signal.startswith("q") else "outputs"
+        text = text.replace(f"[{kind}.{signal}]\n", f'[{kind}.{signal}]\nvariable = "{variable}"\n')
+    problem = tmp_path / "problem.toml"
+    problem.write_text(text)
+    scenario = tmp_path / "s.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n500,0.8,\n1500,,\n")
+    tables = {}
+    for name, how in (("map", ["--map", str(MAP)]), ("problem", ["--problem", str(problem)])):
+        proc = subprocess.run([sys.executable, "-m", "cosim.cli", "run", str(scenario),
+                               "--plant", str(fmu), *how, "--controller", "pi", "--out",
+                               str(tmp_path / name), "--quiet", "--no-figure"],
+                              cwd=ROOT, capture_output=True, text=True, check=False)
+        assert proc.returncode == 0, proc.stderr
+        from cosim.compare import read_table
+
+        tables[name] = read_table(tmp_path / name / "results.csv")
+    for col in ("plant.h1", "plant.h2", "ctrl.qa", "ctrl.qb"):
+        a, b = tables["map"].column(col), tables["problem"].column(col)
+        assert np.allclose(a, b, rtol=1e-9, atol=0), col
+    assert tables["problem"].column("plant.h1")[0] == pytest.approx(0.65)   # cm -> m
