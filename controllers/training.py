@@ -19,6 +19,10 @@ cap on σ̄_z (``sigma_z_max``) bounds the contraction rates ρ_s, ρ_o used by 
 optional penalty on ‖U_o‖∞ keeps the output matrix moderate: it multiplies every
 constraint-tightening term of the MPC (``eq:constraint_tightening_parameters``).
 
+A record may hold several experiments (:mod:`controllers.sequences`): the subsequences are cut
+inside one experiment's training rows, and the validation simulations restart from ``x = 0``
+at each experiment.
+
 torch is imported inside the functions (it is an optional extra). Everything is float64 and
 deterministic for a given seed (one thread).
 """
@@ -33,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers import gru, metrics
+from controllers import gru, metrics, sequences
 from controllers.bounds import nu as nu_numpy
 from controllers.errors import DataError, DesignError, TrainingError
 
@@ -50,7 +54,9 @@ class TrainOptions:
     n : int
         GRU states.
     seq_len : int
-        Length of the truncated training subsequences (paper: 500).
+        Length of the truncated training subsequences (paper: 500; ``cosim train`` sets
+        ``seq_len``, ``washout`` and ``batch`` from the record's length where not given:
+        :func:`controllers.sequences.record_defaults`).
     stride : int or None
         Offset between subsequence starts (``None``: ``seq_len``, non-overlapping, as the
         paper; smaller values overlap them).
@@ -203,7 +209,8 @@ def init_params(n: int, m: int, p: int, seed: int, bz_init: float = 2.0,
 
 
 def subsequences(T: int, seq_len: int, stride: int | None) -> list[int]:
-    """Start indices of the truncated training subsequences of a record of length ``T``."""
+    """Start indices of the truncated training subsequences of a record of length ``T``
+    (one stretch: :func:`controllers.sequences.subsequence_starts` for several)."""
     if seq_len > T:
         raise DataError(f"training data has {T} steps, fewer than seq_len = {seq_len}")
     stride = stride or seq_len
@@ -227,17 +234,21 @@ def _rollout(p: dict[str, Any], u: Any, x0: Any) -> Any:
 def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np.ndarray,
           split_all: np.ndarray, options: TrainOptions | None = None, progress: bool = True,
           init: dict[str, np.ndarray] | None = None,
-          callback: Callable[[int, dict[str, Any], dict[str, np.ndarray]], None] | None = None
-          ) -> TrainResult:
+          callback: Callable[[int, dict[str, Any], dict[str, np.ndarray]], None] | None = None,
+          experiment: np.ndarray | None = None) -> TrainResult:
     """Train a GRU on normalised data; select the epoch with the best validation FIT.
 
     Parameters
     ----------
     u_train, y_train : (T, m), (T, p) arrays
-        Normalised training inputs and outputs.
+        Normalised training inputs and outputs: the rows of ``u_all``, ``y_all`` whose split
+        is ``train`` (checked). The subsequences are cut from ``u_all``, ``y_all`` inside each
+        training stretch (:func:`controllers.sequences.stretches`), never across two
+        experiments or over validation and test rows.
     u_all, y_all, split_all : arrays
         The whole normalised record with its split labels: validation FIT is computed by an
-        open-loop simulation over it (:func:`controllers.metrics.split_scores`).
+        open-loop simulation over it, restarted at each experiment
+        (:func:`controllers.sequences.eval_windows`).
     options : TrainOptions
     progress : bool
         Show a tqdm bar with loss, validation FIT and ν per epoch.
@@ -246,6 +257,14 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
     callback : callable, optional
         Called as ``callback(epoch, record, weights)`` after each epoch (``weights``: the
         constrained numpy weights of that epoch).
+    experiment : (T,) array, optional
+        The experiment of each row of the record (consecutive rows; default: one experiment).
+
+    Raises
+    ------
+    DataError
+        ``u_train`` is not the record's training rows, or no training stretch is as long as
+        ``options.seq_len``.
     """
     import torch
     from tqdm import tqdm
@@ -271,9 +290,15 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
             for k in CONSTRAINED:
                 params[k].copy_(q[k])
 
-    starts = subsequences(u_train.shape[0], opt.seq_len, opt.stride)
-    U = torch.tensor(np.stack([u_train[s:s + opt.seq_len] for s in starts], axis=2), dtype=dtype)
-    Y = torch.tensor(np.stack([y_train[s:s + opt.seq_len] for s in starts], axis=2), dtype=dtype)
+    split_all = np.asarray(split_all)
+    n_train = int(np.count_nonzero(split_all == "train"))
+    if u_train.shape[0] != n_train or y_train.shape[0] != n_train:
+        raise DataError(f"u_train has {u_train.shape[0]} rows and y_train {y_train.shape[0]}, "
+                        f"but the record has {n_train} training rows")
+    spans = sequences.stretches(split_all, experiment, "train")
+    starts = sequences.subsequence_starts(spans, opt.seq_len, opt.stride)
+    U = torch.tensor(np.stack([u_all[s:s + opt.seq_len] for s in starts], axis=2), dtype=dtype)
+    Y = torch.tensor(np.stack([y_all[s:s + opt.seq_len] for s in starts], axis=2), dtype=dtype)
     batch = opt.batch if 0 < opt.batch <= len(starts) else len(starts)
     n_batches = math.ceil(len(starts) / batch)
     optimiser = torch.optim.Adam([v for v in params.values() if v.requires_grad], lr=opt.lr)
@@ -290,13 +315,17 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
             q, _ = effective()
             return {k: v.detach().numpy().copy() for k, v in q.items()}
 
-    # Validation (model selection): open loop from x = 0, starting ``eval_washout`` steps
-    # before the validation split so that the initial transient has died out.
-    val_idx = np.flatnonzero(split_all == "val")
-    if val_idx.size == 0:
-        val_idx = np.flatnonzero(split_all == "train")
-    v_start, v1 = int(val_idx[0]), int(val_idx[-1]) + 1
-    v0 = max(0, v_start - opt.eval_washout)
+    # Validation (model selection): open loop from x = 0 in each experiment, starting
+    # ``eval_washout`` steps before its validation rows so that the initial transient has died
+    # out; the validation rows of every experiment are scored together.
+    scored = "val" if np.any(split_all == "val") else "train"
+    windows = sequences.eval_windows(split_all, experiment, scored, opt.eval_washout)
+    y_val = np.concatenate([y_all[a:b][split_all[a:b] == scored] for a, b in windows])
+
+    def validation_fit(pn: dict[str, np.ndarray]) -> np.ndarray:
+        xi = np.concatenate([metrics.open_loop(pn, u_all[a:b])[split_all[a:b] == scored]
+                             for a, b in windows])
+        return metrics.fit(y_val, xi)
 
     best: dict[str, np.ndarray] | None = None
     best_score, best_epoch, history = -np.inf, -1, []
@@ -329,8 +358,7 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
                         params[k].copy_(q[k])
         scheduler.step()
         pn = numpy_params()
-        xi = metrics.open_loop(pn, u_all[v0:v1])[v_start - v0:]
-        val = {"fit": metrics.fit(y_all[v_start:v1], xi)}
+        val = {"fit": validation_fit(pn)}
         nu_val = nu_numpy(pn)
         record = {"epoch": epoch, "loss": total / n_batches, "nu": nu_val,
                   "fit_val": [float(f) for f in val["fit"]],

@@ -20,12 +20,24 @@ MAX_EPOCHS = 100_000
 #: Largest --n accepted (the paper's GRU has 20 states; the MPC solves grow with n²).
 MAX_STATES = 1000
 
-HELP = "train a δISS GRU (paper's eq. 3) on a data set from 'cosim generate-data'"
+HELP = "train a δISS GRU (paper's eq. 3) on generated or logged data"
 
 DESCRIPTION = """\
-Train the GRU of the paper (eq:gru, n states, inputs qa qb, outputs h1 h2) with torch on the
-training split, select the epoch with the best validation FIT, and write the model file
-(JSON) with its training record, plus a figure of the test-split prediction beside it.
+Train the GRU of the paper (eq:gru, n states, the inputs and outputs of the control problem)
+with torch on the training split, select the epoch with the best validation FIT, and write
+the model file (JSON) with its training record, plus a figure of the test-split prediction
+beside it.
+
+The data: a data set from 'cosim generate-data' (its JSON sidecar names the problem) or a CSV
+logged on the plant, with --problem: a 'time' column [s] stepping by the problem's Ts, one
+column per input and output named as in the problem, optionally 'split' (train/val/test per
+row) and 'experiment' (a label per row: experiments are never joined; training subsequences
+stay inside one, the open-loop FIT restarts at each). Other columns are ignored. Without a
+'split' column (or with --split) each experiment is split in time order: the first TRAIN
+fraction trains, the next VAL validates, the rest tests (default 0.75,0.125). A gap, a
+non-uniform step, time going backwards or another sample time than Ts is an error (exit 2).
+The model file's training record names the file, its SHA-256, rows, experiments, split and
+the columns used.
 
 The model file goes to --out, by default models/<DATA stem>_gru.json in the CURRENT folder
 (data/fourtank.csv -> models/fourtank_gru.json). The shipped model
@@ -36,17 +48,20 @@ a failed write leaves the previous file byte-identical (exit 1). The --history l
 temporary file beside it, one per epoch, which replaces the --history file when training
 ends (an interrupted or failed training leaves the previous --history file unchanged).
 
-Defaults are the paper's: truncated subsequences of 500 steps, batch 5. The δISS condition
-of Theorem 1 (nu < 1) is enforced by rescaling the recurrent weights so that
-nu <= 1 - margin at every step (--constraint project, default) or by the paper's penalty
-(--constraint penalty). A model with nu >= 1 is never saved.
+Subsequence length, washout and batch follow the training rows T when not given:
+--seq-len min(500, max(20, T/10), longest training stretch), --washout seq-len/10, --batch
+(number of subsequences)/6 rounded (six steps per epoch): 15,000 training rows give the
+paper's 500, 50 and 5. The δISS condition of Theorem 1 (nu < 1) is enforced by rescaling the
+recurrent weights so that nu <= 1 - margin at every step (--constraint project, default) or
+by the paper's penalty (--constraint penalty). A model with nu >= 1 is never saved.
 
-Normalisation: u = (q - mid-range) / half-range, so the saturation box is |u| <= 1;
-y = (h - 1 m) / 1 m, so the output box [0, 2] m is |y| <= 1.
+Normalisation: (value - offset) / scale per signal, from the problem (default: middle and
+half-width of its box, so an input's box is |u| <= 1).
 
 examples:
   cosim train data/fourtank.csv                  # models/fourtank_gru.json + _test.png
   cosim train data/fourtank.csv --epochs 20 --out /tmp/m.json
+  cosim train log.csv --problem plant.toml --split 0.7,0.15 --epochs 300
   cosim train data/fourtank.csv --out controllers/models/fourtank_gru.json  # replace shipped
   cosim train data/fourtank.csv --init controllers/models/fourtank_gru.json --lr 1e-3"""
 
@@ -59,10 +74,15 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser = subparsers.add_parser("train", help=HELP, description=DESCRIPTION,
                                    epilog=exit_codes_help(),
                                    formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("data", metavar="DATA.csv", help="data set from 'cosim generate-data'")
+    parser.add_argument("data", metavar="DATA.csv",
+                        help="data set from 'cosim generate-data', or a CSV logged on the plant")
     parser.add_argument("--problem", default=None, metavar="PROBLEM.toml",
                         help="the control problem (default: the one the data set's sidecar "
                              "records, else the four-tank's); copied into the model file")
+    parser.add_argument("--split", default=None, metavar="TRAIN,VAL",
+                        help="split each experiment in time order by these fractions (the "
+                             "test part is the rest), even when the file has a 'split' "
+                             "column (default: the 'split' column, else 0.75,0.125)")
     parser.add_argument("--out", default=None, metavar="MODEL.json",
                         help="model file to write (default: models/<DATA stem>_gru.json in "
                         "the current folder; the shipped controllers/models/fourtank_gru.json "
@@ -76,15 +96,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help=f"maximum epochs, at most {MAX_EPOCHS} ({d.epochs})")
     parser.add_argument("--n", type=int, default=d.n,
                         help=f"GRU states, at most {MAX_STATES} ({d.n})")
-    parser.add_argument("--seq-len", type=int, default=d.seq_len,
-                        help=f"training subsequence length ({d.seq_len})")
+    parser.add_argument("--seq-len", type=int, default=None,
+                        help=f"training subsequence length (default: follows the record, "
+                        f"{d.seq_len} from 5,000 training rows on)")
     parser.add_argument("--stride", type=int, default=None,
                         help="offset between subsequence starts (default: --seq-len)")
-    parser.add_argument("--batch", type=int, default=d.batch,
-                        help=f"subsequences per step, 0 = all ({d.batch})")
-    parser.add_argument("--washout", type=int, default=d.washout,
-                        help=f"initial steps of each subsequence left out of the loss "
-                        f"({d.washout})")
+    parser.add_argument("--batch", type=int, default=None,
+                        help="subsequences per step, 0 = all (default: a sixth of them, "
+                        f"{d.batch} for the paper's 30)")
+    parser.add_argument("--washout", type=int, default=None,
+                        help="initial steps of each subsequence left out of the loss "
+                        f"(default: --seq-len / 10, {d.washout} for {d.seq_len})")
     parser.add_argument("--lr", type=float, default=d.lr, help=f"Adam learning rate ({d.lr})")
     parser.add_argument("--lr-final", type=float, default=d.lr_final,
                         help=f"learning rate reached at the last epoch ({d.lr_final})")
@@ -118,8 +140,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.set_defaults(func=run)
 
 
-def _problem(args: argparse.Namespace) -> Any:
-    """The control problem: ``--problem``, else the data sidecar's, else the default."""
+def _problem(args: argparse.Namespace) -> tuple[Any, bool]:
+    """The control problem: ``--problem``, else the data sidecar's, else the default; and
+    whether it was given (by the option or the sidecar) rather than the default."""
     import json
 
     from controllers.errors import ControllersError
@@ -128,7 +151,7 @@ def _problem(args: argparse.Namespace) -> Any:
     from cosim_adapters.problems import load_problem
 
     if args.problem is not None:
-        return load_problem(args.problem)
+        return load_problem(args.problem), True
     side = Path(args.data).with_suffix(".json")
     try:
         doc = json.loads(side.read_text(encoding="utf-8"))
@@ -136,9 +159,9 @@ def _problem(args: argparse.Namespace) -> Any:
         doc = {}
     recorded = doc.get("problem") if isinstance(doc, dict) else None
     if recorded is None:
-        return load_problem(None)
+        return load_problem(None), False
     try:
-        return problem_from_dict(recorded, f"{side}")
+        return problem_from_dict(recorded, f"{side}"), True
     except ControllersError as exc:
         raise CosimError(str(exc)) from None
 
@@ -189,12 +212,11 @@ def _check_options(args: argparse.Namespace) -> None:
     from cosim.errors import CosimError
 
     ints = {"--epochs": (args.epochs, 1), "--n": (args.n, 1), "--seq-len": (args.seq_len, 1),
-            "--batch": (args.batch, 0), "--patience": (args.patience, 0),
-            "--seed": (args.seed, 0)}
-    if args.stride is not None:
-        ints["--stride"] = (args.stride, 1)
+            "--batch": (args.batch, 0), "--washout": (args.washout, 0),
+            "--patience": (args.patience, 0), "--seed": (args.seed, 0),
+            "--stride": (args.stride, 1)}
     for option, (value, low) in ints.items():
-        if value < low:
+        if value is not None and value < low:
             raise CosimError(f"{option} must be an integer >= {low}, got {value}")
     highs = {"--epochs": (args.epochs, MAX_EPOCHS), "--n": (args.n, MAX_STATES),
              "--seed": (args.seed, 2**63 - 1)}
@@ -217,7 +239,7 @@ def _check_options(args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    """Train, check ν < 1, write the model file and the figure."""
+    """Read the data, train, check ν < 1, write the model file and the figure."""
     import contextlib
     import sys
     import time
@@ -225,40 +247,43 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from controllers import bounds, metrics, training
+    from controllers import bounds, metrics, sequences, training
     from controllers.model import GRUModel
-    from cosim import datagen, outpaths, plots
+    from cosim import datagen, logdata, outpaths, plots
     from cosim.atomicio import output_error, replacing
     from cosim.errors import CosimError
 
-    problem = _problem(args)
-    data = datagen.read_csv(args.data, input_names=list(problem.input_names))
+    _check_options(args)
+    if not 0 < args.nu_margin < 1:
+        raise CosimError(f"--nu-margin must be in (0, 1), got {args.nu_margin}")
+    fractions = logdata.parse_fractions(args.split) if args.split is not None else None
+    problem, given = _problem(args)
+    hint = "" if given else "; a logged CSV needs its problem: --problem PROBLEM.toml"
+    data = logdata.read_log(args.data, problem.input_names, problem.output_names, problem.Ts,
+                            problem.name, fractions, missing_hint=hint)
     for name in datagen.SPLITS:
         if not np.any(data.split == name):
             raise CosimError(f"{args.data}: no rows in split '{name}'")
-    missing = [s for s in problem.output_names if s not in data.output_names]
-    if missing:
-        raise CosimError(f"{args.data}: no output column '{missing[0]}' (problem "
-                         f"{problem.name!r})")
-    n_train = int(np.count_nonzero(data.split == "train"))
-    if n_train < args.seq_len:
-        raise CosimError(f"{args.data}: training data has {n_train} steps, fewer than "
-                         f"--seq-len {args.seq_len}")
+    spans = sequences.stretches(data.split, data.experiment, "train")
+    lengths = [b - a for a, b in spans]
+    auto = sequences.record_defaults(lengths, args.seq_len, args.washout, args.batch,
+                                     args.stride)
+    if auto.subsequences == 0:
+        raise CosimError(f"{args.data}: the longest training stretch has {max(lengths)} steps "
+                         f"(of {sum(lengths)} training rows), fewer than --seq-len "
+                         f"{auto.seq_len}")
+    if not 0 <= auto.washout < auto.seq_len:
+        raise CosimError(f"--washout must be in [0, --seq-len), got {auto.washout}")
     penalty = args.penalty_weight
     if penalty is None:
         penalty = 10.0 if args.constraint == "penalty" else 0.0
     opts = training.TrainOptions(
-        n=args.n, seq_len=args.seq_len, stride=args.stride, batch=args.batch,
-        epochs=args.epochs, lr=args.lr, lr_final=args.lr_final, washout=args.washout,
+        n=args.n, seq_len=auto.seq_len, stride=args.stride, batch=auto.batch,
+        epochs=args.epochs, lr=args.lr, lr_final=args.lr_final, washout=auto.washout,
         nu_margin=args.nu_margin, constraint=args.constraint, penalty_weight=penalty,
         uo_weight=args.uo_weight, uo_max=args.uo_max, bz_init=args.bz_init,
         patience=args.patience, sigma_z_max=args.sigma_z_max, train_uz=args.train_uz,
         seed=args.seed)
-    if not 0 <= opts.washout < opts.seq_len:
-        raise CosimError(f"--washout must be in [0, --seq-len), got {opts.washout}")
-    if not 0 < opts.nu_margin < 1:
-        raise CosimError(f"--nu-margin must be in (0, 1), got {opts.nu_margin}")
-    _check_options(args)
     out = outpaths.out_file(_out_path(args), "--out")
     figure = (outpaths.figure_file(args.figure, "--figure") if args.figure
               else out.with_name(out.stem + "_test.png"))
@@ -266,9 +291,8 @@ def run(args: argparse.Namespace) -> int:
         outpaths.out_file(args.history, "--history")
 
     norm = problem.normalization()
-    u_all = (data.u[:, [data.input_names.index(s) for s in problem.input_names]]
-             - norm["u_offset"]) / norm["u_scale"]
-    y_all = (data.outputs(problem.output_names) - norm["y_offset"]) / norm["y_scale"]
+    u_all = (data.u - norm["u_offset"]) / norm["u_scale"]
+    y_all = (data.y - norm["y_offset"]) / norm["y_scale"]
     train_mask = data.split == "train"
     init = None
     if args.init:
@@ -277,6 +301,7 @@ def run(args: argparse.Namespace) -> int:
             raise CosimError(f"{args.init}: model has n={start.n}, but --n is {opts.n}")
         init = start.params
 
+    names = list(problem.output_names)
     progress = not args.quiet and sys.stderr.isatty()
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
@@ -294,32 +319,39 @@ def run(args: argparse.Namespace) -> int:
                 except OSError as exc:
                     raise output_error(history, exc) from None
 
-            log("epoch,time_s,loss,nu,fit_val_h1,fit_val_h2,U_o_inf_norm\n")
+            log("epoch,time_s,loss,nu," + "".join(f"fit_val_{n}," for n in names)
+                + "U_o_inf_norm\n")
 
             def callback(epoch: int, rec: dict, _weights: dict) -> None:
                 log(f"{epoch},{rec['time']:.2f},{rec['loss']:.6e},{rec['nu']:.6f},"
-                    f"{rec['fit_val'][0]:.4f},{rec['fit_val'][1]:.4f},{rec['uo_norm']:.4f}\n")
+                    + "".join(f"{f:.4f}," for f in rec["fit_val"])
+                    + f"{rec['uo_norm']:.4f}\n")
 
         result = training.train(u_all[train_mask], y_all[train_mask], u_all, y_all,
                                 data.split, opts, progress=progress, init=init,
-                                callback=callback)
-    scores = metrics.split_scores(result.params, u_all, y_all, data.split)
-    names = list(problem.output_names)
+                                callback=callback, experiment=data.experiment)
+    scores = metrics.split_scores(result.params, u_all, y_all, data.split, data.experiment)
     sz, sr, ph = bounds.gate_bounds(result.params)
     meta_path = Path(args.data).with_suffix(".json")
     record = {
         "command": _command(sys.argv[2:]),
         "data": str(args.data),
         "data_meta": _sidecar(meta_path),
+        "data_file": data.provenance,
         "seed": opts.seed,
         "init": args.init,
         "epochs_run": result.epochs_run,
         "best_epoch": result.best_epoch,
         "options": result.options,
-        "fit": {s: dict(zip(names, scores[s]["fit"], strict=True)) for s in scores},
+        "subsequences": {"count": auto.subsequences, "training_stretches": len(spans),
+                         "from_record": [o for o, v in (("seq_len", args.seq_len),
+                                                        ("washout", args.washout),
+                                                        ("batch", args.batch)) if v is None]},
+        "fit": {s: _named(names, scores[s]["fit"]) for s in scores},
         "max_abs_err": {s: scores[s]["max_abs_err"] for s in scores},
-        "fit_protocol": "open-loop simulation of the whole record from x = 0, inputs only; "
-                        "FIT per split on its rows (normalised units)",
+        "fit_protocol": "open-loop simulation of each experiment from x = 0 (the whole record "
+                        "when it is one), inputs only; FIT per split on its rows of every "
+                        "experiment (normalised units)",
         "nu": result.nu,
         "sigma_z_bar": sz, "sigma_r_bar": sr, "phi_h_bar": ph,
         "U_o_inf_norm": bounds.inf_norm(result.params["U_o"]),
@@ -328,6 +360,12 @@ def run(args: argparse.Namespace) -> int:
         "wall_time_s": round(time.perf_counter() - t0, 1),
         "torch_version": __import__("torch").__version__,
     }
+    if data.n_experiments > 1:
+        per = metrics.experiment_scores(result.params, u_all, y_all, data.split,
+                                        data.experiment)
+        record["fit_per_experiment"] = [
+            {"experiment": label, "fit": {s: _named(names, sc[s]["fit"]) for s in sc}}
+            for label, sc in zip(data.experiment_names, per, strict=True)]
     w_y_bar = scores["test"]["max_abs_err"]
     model = training.build_model(result.params, problem, record, w_y_bar=w_y_bar)
     try:
@@ -336,10 +374,13 @@ def run(args: argparse.Namespace) -> int:
         raise output_error(out, exc) from None
 
     test = data.split == "test"
-    xi = metrics.open_loop(result.params, u_all)
+    xi = metrics.open_loop_experiments(result.params, u_all, data.experiment)
+    # several experiments: their test rows one after the other, on one time axis
+    t_test = (data.time[test] if data.n_experiments == 1
+              else np.arange(np.count_nonzero(test)) * problem.Ts)
     with replacing(figure) as tmp_figure:
         plots.prediction_figure(
-            data.time[test], model.denormalize_y(y_all[test]), model.denormalize_y(xi[test]),
+            t_test, model.denormalize_y(y_all[test]), model.denormalize_y(xi[test]),
             names, list(problem.output_units), scores["test"]["fit"], str(tmp_figure),
             f"GRU n={opts.n}, test split: open-loop prediction vs plant "
             f"(nu = {result.nu:.3f})")
@@ -353,3 +394,11 @@ def run(args: argparse.Namespace) -> int:
               f"{record['wall_time_s']:.0f} s")
         print(f"wrote {out} and {figure}")
     return 0
+
+
+def _named(names: list[str], values: list[float]) -> dict[str, float | None]:
+    """``{output: value}``, a FIT that is not a number (a constant output) as None."""
+    import math
+
+    return {n: (float(v) if math.isfinite(v) else None)
+            for n, v in zip(names, values, strict=True)}

@@ -9,7 +9,7 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from controllers import bounds, training  # noqa: E402
+from controllers import bounds, metrics, sequences, training  # noqa: E402
 from controllers.errors import ControllersError  # noqa: E402
 from controllers.model import GRUModel  # noqa: E402
 from cosim import datagen  # noqa: E402
@@ -121,5 +121,85 @@ def test_cosim_train_bad_data_is_a_one_line_error(tmp_path, capsys):
     bad.write_text("time,qa,qb,h1,h2,split\n0,1,2,3,oops,train\n")
     assert main(["train", str(bad), "--out", str(tmp_path / "m.json"), "--quiet"]) == 2
     err = capsys.readouterr().err
-    assert "bad.csv:2: non-numeric value" in err and err.count("\n") == 1
+    assert "bad.csv:2:5: 'oops' is not a number (column 'h2')" in err
+    assert err.count("\n") == 1
     assert not (tmp_path / "m.json").exists()
+
+
+# --------------------------------------------------------------------------------------------
+# Records of several experiments (controllers.sequences) and the defaults of short records
+# --------------------------------------------------------------------------------------------
+
+def test_training_stretches_and_subsequences_never_span_two_experiments():
+    split = np.array(["train"] * 7 + ["val"] * 2 + ["train"] * 3 + ["train"] * 9 + ["test"])
+    experiment = np.array([0] * 12 + [1] * 10)
+    assert sequences.stretches(split, experiment) == [(0, 7), (9, 12), (12, 21)]
+    assert sequences.stretches(split) == [(0, 7), (9, 21)]  # one experiment: joined
+    assert sequences.stretches(split, experiment, "val") == [(7, 9)]
+    starts = sequences.subsequence_starts(sequences.stretches(split, experiment), 3)
+    assert starts == [0, 3, 9, 12, 15, 18]
+    rng = np.random.default_rng(0)
+    for _ in range(50):  # random layouts: every subsequence inside one experiment's training
+        n = int(rng.integers(20, 200))
+        split = rng.choice(["train", "val", "test"], n, p=[0.8, 0.1, 0.1])
+        experiment = np.cumsum(rng.random(n) < 0.05)
+        length = int(rng.integers(1, 8))
+        spans = sequences.stretches(split, experiment)
+        try:
+            starts = sequences.subsequence_starts(spans, length, int(rng.integers(1, 4)))
+        except ControllersError:
+            assert max((b - a for a, b in spans), default=0) < length
+            continue
+        for s in starts:
+            assert np.all(split[s:s + length] == "train")
+            assert np.all(experiment[s:s + length] == experiment[s])
+            assert s + length <= n
+    with pytest.raises(ControllersError, match="longest training stretch has 3 steps, fewer "
+                                               "than seq_len = 4"):
+        sequences.subsequence_starts([(0, 3), (5, 8)], 4)
+
+
+def test_validation_windows_restart_at_each_experiment():
+    split = np.array(["train"] * 10 + ["val"] * 3 + ["train"] * 4 + ["val"] * 2)
+    experiment = np.array([0] * 13 + [1] * 6)
+    assert sequences.eval_windows(split, experiment, "val", 5) == [(5, 13), (13, 19)]
+    assert sequences.eval_windows(split, None, "val", 5) == [(5, 19)]
+
+
+@pytest.mark.parametrize("lengths, given, expected", [
+    ([15000], {}, (500, 50, 5, 30)),          # generate-data's default: the paper's settings
+    ([750], {}, (75, 7, 2, 10)),               # a record of 1,000 samples, 75 % training
+    ([110, 110], {"seq_len": 30}, (30, 3, 1, 6)),
+    ([110, 40], {}, (20, 2, 1, 7)),            # T // 10 = 15 < 20: 5 + 2 subsequences
+    ([12, 9], {}, (12, 1, 1, 1)),              # the longest stretch caps the length
+    ([3000], {"batch": 0, "washout": 0}, (300, 0, 0, 10)),
+    ([5000], {"stride": 250}, (500, 50, 3, 19)),
+])
+def test_record_defaults_follow_the_record(lengths, given, expected):
+    d = sequences.record_defaults(lengths, **given)
+    assert (d.seq_len, d.washout, d.batch, d.subsequences) == expected
+
+
+def test_open_loop_restarts_at_each_experiment():
+    p = training.init_params(4, 2, 2, 0)
+    u = np.random.default_rng(1).uniform(-1, 1, (30, 2))
+    experiment = np.repeat([0, 1], [12, 18])
+    xi = metrics.open_loop_experiments(p, u, experiment)
+    assert np.array_equal(xi[:12], metrics.open_loop(p, u[:12]))
+    assert np.array_equal(xi[12:], metrics.open_loop(p, u[12:]))
+    assert not np.allclose(xi[12:], metrics.open_loop(p, u)[12:])
+    assert np.array_equal(metrics.open_loop_experiments(p, u), metrics.open_loop(p, u))
+
+
+def test_train_cuts_no_subsequence_across_experiments():
+    """Two experiments of 40 training rows: subsequences of 50 would fit in the joined 80."""
+    rng = np.random.default_rng(0)
+    u, y = rng.uniform(-1, 1, (100, 2)), rng.uniform(-1, 1, (100, 2))
+    split = np.tile(np.repeat(["train", "val"], [40, 10]), 2)
+    experiment = np.repeat([0, 1], 50)
+    tr = split == "train"
+    opts = training.TrainOptions(n=3, seq_len=50, washout=5, epochs=1)
+    with pytest.raises(ControllersError, match="longest training stretch has 40 steps"):
+        training.train(u[tr], y[tr], u, y, split, opts, progress=False, experiment=experiment)
+    with pytest.raises(ControllersError, match="the record has 80 training rows"):
+        training.train(u[:10], y[:10], u, y, split, opts, progress=False)

@@ -1,0 +1,332 @@
+"""Identification data logged on a plant: a CSV with a time column, the inputs, the outputs,
+one record or several experiments, read for training.
+
+Format
+------
+A header row, then one row per sample (blank lines skipped; a byte-order mark dropped):
+
+* ``time`` [s]: within one experiment it increases by the problem's ``Ts`` at every row,
+  within :data:`TS_TOLERANCE` (relative). The record is not resampled: a log sampled at another
+  period, a gap, a non-uniform step or time going backwards is an error naming the file, line
+  and column.
+* one column per input and per output of the control problem, named as in the problem, in
+  its units; every cell a finite number (an empty cell, a non-number, NaN or inf is an error
+  naming file:line:column).
+* ``split`` (optional): ``train``, ``val`` or ``test`` per row, as ``cosim generate-data``
+  writes it. Without it, the split is given by fractions (:func:`fraction_split`).
+* ``experiment`` (optional): a label per row; the rows of one experiment are consecutive (a
+  label that comes back after another is an error). Each experiment is its own time series:
+  its time may restart, and it is never joined to the next one (training subsequences stay
+  inside it, the open-loop evaluation restarts at its first row).
+
+Any other column is ignored (its name is recorded), and its cells are not read. A data set
+written by :func:`cosim.datagen.write_csv` is such a file: one experiment with a ``split``
+column (the extra plant outputs are ignored columns).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cosim import csvio
+from cosim.datagen import SPLITS, split_sizes
+from cosim.errors import CosimError
+
+__all__ = ["EXPERIMENT_COLUMN", "LOG_WORDING", "SPLIT_COLUMN", "TIME_COLUMN",
+           "TS_TOLERANCE", "LogData", "fraction_split", "parse_fractions", "read_log"]
+
+TIME_COLUMN = "time"
+SPLIT_COLUMN = "split"
+EXPERIMENT_COLUMN = "experiment"
+#: Largest relative deviation of a time step from ``Ts`` (1 %: logger jitter).
+TS_TOLERANCE = 0.01
+
+#: How logged data files word the errors of :class:`~cosim.csvio.CsvReader`.
+LOG_WORDING = csvio.Wording(
+    not_found="{path}: cannot read data file ({strerror})",
+    is_folder="{path}: cannot read data file ({strerror})",
+    unreadable="{path}: cannot read data file ({strerror})",
+    not_text="{path}:{line}: not a text CSV file (byte {start} of a read block is not UTF-8)",
+    malformed="{path}:{line}: malformed CSV ({error})",
+    empty="{path}:1: empty file, expected a header row (time, inputs, outputs)",
+    cell_count="{path}:{line}:{col}: {cells} cells, the header has {expected}",
+    empty_value="{path}:{line}:{col}: empty value in column '{name}'",
+    not_a_number="{path}:{line}:{col}: '{cell}' is not a number (column '{name}')",
+    not_finite="{path}:{line}:{col}: {cell} is not a finite number (column '{name}')",
+)
+
+
+@dataclass
+class LogData:
+    """A logged record, the problem's signals only, with its split and experiments.
+
+    Attributes
+    ----------
+    time : (T,) array
+        [s], as logged.
+    u, y : (T, m), (T, p) arrays
+        Inputs and outputs in the problem's order and units.
+    input_names, output_names : list of str
+    split : (T,) array of str
+        ``train`` / ``val`` / ``test`` per row.
+    experiment : (T,) int array
+        Index of each row's experiment (0, 1, ... in file order).
+    experiment_names : list of str or None
+        The labels of the ``experiment`` column (``[None]`` without one).
+    lines : (T,) int array
+        File line of each row (messages).
+    provenance : dict
+        Where the data came from (the model file's ``training.data_file``): path, SHA-256,
+        rows, columns used and ignored, experiments, split.
+    """
+
+    time: np.ndarray
+    u: np.ndarray
+    y: np.ndarray
+    input_names: list[str]
+    output_names: list[str]
+    split: np.ndarray
+    experiment: np.ndarray
+    experiment_names: list[str | None]
+    lines: np.ndarray
+    provenance: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_experiments(self) -> int:
+        """Number of experiments."""
+        return len(self.experiment_names)
+
+
+def parse_fractions(text: str, option: str = "--split") -> tuple[float, float]:
+    """``"TRAIN,VAL"`` as two fractions (the test part is the rest).
+
+    Raises
+    ------
+    CosimError
+        Naming ``option``, unless both are in (0, 1) with ``TRAIN + VAL < 1``.
+    """
+    parts = text.split(",")
+    try:
+        a, b = (float(p) for p in parts)
+    except ValueError:
+        a = b = math.nan
+    if not (0 < a < 1 and 0 < b < 1 and a + b < 1):
+        raise CosimError(f"{option} must be two fractions TRAIN,VAL with TRAIN > 0, VAL > 0 "
+                         f"and TRAIN + VAL < 1 (the test part is the rest), got {text!r}")
+    return a, b
+
+
+def fraction_split(experiment: np.ndarray, fractions: tuple[float, float]) -> np.ndarray:
+    """Split labels by fractions, per experiment and in time order.
+
+    The first ``round(N · TRAIN)`` rows of each experiment of ``N`` rows are ``train``, the next
+    ``round(N · VAL)`` ``val``, the rest ``test`` (:func:`cosim.datagen.split_sizes`, so one
+    experiment is split as ``cosim generate-data`` splits its record).
+    """
+    split = np.empty(experiment.shape[0], dtype=object)
+    for e in np.unique(experiment):
+        idx = np.flatnonzero(experiment == e)
+        split[idx] = np.repeat(np.array(SPLITS), split_sizes(idx.size, fractions))
+    return split.astype(str)
+
+
+def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequence[str],
+             Ts: float, problem: str = "", fractions: tuple[float, float] | None = None,
+             default_fractions: tuple[float, float] = (0.75, 0.125),
+             missing_hint: str = "") -> LogData:
+    """Read and check a logged CSV (format: the module docstring) for a control problem.
+
+    Parameters
+    ----------
+    path : str or Path
+    input_names, output_names : sequence of str
+        The problem's signals: the columns read.
+    Ts : float
+        The problem's sample time [s].
+    problem : str
+        The problem's name (messages, provenance).
+    fractions : (float, float), optional
+        ``--split TRAIN,VAL``: split by fractions (:func:`fraction_split`) even when the file
+        has a ``split`` column.
+    default_fractions : (float, float)
+        The fractions used when the file has no ``split`` column and ``fractions`` is None.
+    missing_hint : str
+        Appended to the message of a missing column (e.g. how to name the problem).
+
+    Raises
+    ------
+    CosimError
+        One line naming the file and line (and column where there is one): unreadable file,
+        missing or duplicate column, bad cell, bad split label, an experiment whose rows are
+        not consecutive, time not on the ``Ts`` grid.
+    """
+    path = Path(path)
+    what = f"problem {problem!r}" if problem else "the problem"
+    with csvio.CsvReader(path, LOG_WORDING, encoding="utf-8-sig") as f:
+        header = [h.strip() for h in f.header()]
+        col = _columns(path, header, input_names, output_names, what, missing_hint)
+        numeric = [col[TIME_COLUMN], *(col[n] for n in (*input_names, *output_names))]
+        names = [header[j] for j in numeric]
+        # with --split fractions the split column is not read (an ignored column)
+        j_split = col.get(SPLIT_COLUMN) if fractions is None else None
+        j_exp = col.get(EXPERIMENT_COLUMN)
+        values, split, labels, lines = [], [], [], []
+        for line, row in f.rows(len(header)):
+            values.append([f.number(row[j], line, j + 1, name)
+                           for j, name in zip(numeric, names, strict=True)])
+            if j_split is not None:
+                label = row[j_split].strip()
+                if label not in SPLITS:
+                    raise CosimError(f"{path}:{line}:{j_split + 1}: split must be one of "
+                                     f"{', '.join(SPLITS)}, got {label!r}")
+                split.append(label)
+            if j_exp is not None:
+                label = row[j_exp].strip()
+                if not label:
+                    raise CosimError(f"{path}:{line}:{j_exp + 1}: empty value in column "
+                                     f"'{EXPERIMENT_COLUMN}'")
+                labels.append(label)
+            lines.append(line)
+    if not values:
+        raise CosimError(f"{path}:2: no data rows")
+    arr = np.array(values, dtype=float)
+    line_arr = np.array(lines)
+    experiment, exp_names = _experiments(path, labels, line_arr, j_exp)
+    time = arr[:, 0]
+    _check_time(path, time, experiment, line_arr, Ts, what, col[TIME_COLUMN] + 1,
+                j_exp is not None)
+    if j_split is None:
+        used = fractions if fractions is not None else default_fractions
+        split_arr = fraction_split(experiment, used)
+        source = (f"fractions {used[0]:g},{used[1]:g} of each experiment in time order"
+                  + (" (--split)" if fractions is not None else " (default, no split column)"))
+    else:
+        split_arr = np.array(split)
+        source = f"column '{SPLIT_COLUMN}'"
+    m = len(input_names)
+    data = LogData(time=time, u=arr[:, 1:1 + m], y=arr[:, 1 + m:],
+                   input_names=list(input_names), output_names=list(output_names),
+                   split=split_arr, experiment=experiment, experiment_names=exp_names,
+                   lines=line_arr)
+    used_cols = {TIME_COLUMN, *input_names, *output_names}
+    if j_split is not None:
+        used_cols.add(SPLIT_COLUMN)
+    if j_exp is not None:
+        used_cols.add(EXPERIMENT_COLUMN)
+    data.provenance = {
+        "path": str(path),
+        "sha256": _sha256(path),
+        "rows": int(time.shape[0]),
+        "problem": problem,
+        "Ts": Ts,
+        "columns": {"time": TIME_COLUMN, "inputs": list(input_names),
+                    "outputs": list(output_names),
+                    "split": SPLIT_COLUMN if j_split is not None else None,
+                    "experiment": EXPERIMENT_COLUMN if j_exp is not None else None},
+        "ignored_columns": [h for h in header if h not in used_cols],
+        "split": {"source": source,
+                  "rows": {s: int(np.count_nonzero(split_arr == s)) for s in SPLITS}},
+        "experiments": [_experiment_record(data, e) for e in range(len(exp_names))],
+    }
+    return data
+
+
+def _columns(path: Path, header: list[str], input_names: Sequence[str],
+             output_names: Sequence[str], what: str, hint: str) -> dict[str, int]:
+    """Column index of every name of the header; the needed ones must be there."""
+    col: dict[str, int] = {}
+    for j, name in enumerate(header):
+        if not name:
+            raise CosimError(f"{path}:1:{j + 1}: empty column name")
+        if name in col:
+            raise CosimError(f"{path}:1:{j + 1}: duplicate column '{name}' (also column "
+                             f"{col[name] + 1})")
+        col[name] = j
+    needed = [(TIME_COLUMN, "the time [s]"),
+              *((n, f"an input of {what}") for n in input_names),
+              *((n, f"an output of {what}") for n in output_names)]
+    for name, role in needed:
+        if name not in col:
+            raise CosimError(f"{path}:1: no column '{name}' ({role}); the header has "
+                             f"{', '.join(header)}{hint}")
+    return col
+
+
+def _experiments(path: Path, labels: list[str], lines: np.ndarray, j_exp: int | None
+                 ) -> tuple[np.ndarray, list[str | None]]:
+    """Experiment index per row and the labels; an experiment's rows must be consecutive."""
+    if j_exp is None:
+        return np.zeros(lines.shape[0], dtype=int), [None]
+    index: dict[str, int] = {}
+    out = np.empty(len(labels), dtype=int)
+    for i, label in enumerate(labels):
+        if label not in index:
+            index[label] = len(index)
+        elif i and labels[i - 1] != label:
+            raise CosimError(f"{path}:{lines[i]}:{j_exp + 1}: experiment {label!r} comes back "
+                             f"after experiment {labels[i - 1]!r} (line {lines[i - 1]}): the "
+                             "rows of one experiment must be consecutive")
+        out[i] = index[label]
+    return out, list(index)
+
+
+def _check_time(path: Path, time: np.ndarray, experiment: np.ndarray, lines: np.ndarray,
+                Ts: float, what: str, col: int, has_experiments: bool) -> None:
+    """Within each experiment, time steps of ``Ts`` (± :data:`TS_TOLERANCE`)."""
+    tol = TS_TOLERANCE * Ts
+    several = (f"each experiment's rows need their own label in an '{EXPERIMENT_COLUMN}' "
+               "column" if not has_experiments else "give each part its own experiment label")
+    for e in np.unique(experiment):
+        idx = np.flatnonzero(experiment == e)
+        if idx.size < 2:
+            continue
+        dt = np.diff(time[idx])
+        step = float(np.median(dt))
+        if abs(step - Ts) > tol:
+            k = idx[1]
+            raise CosimError(f"{path}:{lines[k]}:{col}: the data are sampled every {step:g} s "
+                             f"(median time step), but {what} has Ts = {Ts:g} s: resample the "
+                             "log at Ts, or give the problem of this sample time")
+        bad = np.flatnonzero(np.abs(dt - Ts) > tol)
+        if not bad.size:
+            continue
+        k, jump = idx[bad[0] + 1], float(dt[bad[0]])
+        at, before = f"{path}:{lines[k]}:{col}", f"{time[k - 1]:g} s (line {lines[k - 1]})"
+        if jump <= 0:
+            raise CosimError(f"{at}: time {time[k]:g} s does not follow {before}: time must "
+                             f"increase by Ts = {Ts:g} s; for several experiments, {several}")
+        if jump > 1.5 * Ts:
+            missing = round(jump / Ts) - 1
+            raise CosimError(f"{at}: gap in time: {before} to {time[k]:g} s, {missing} "
+                             f"sample{'s' if missing != 1 else ''} of Ts = {Ts:g} s missing; "
+                             f"the record is not joined over a gap: {several}")
+        raise CosimError(f"{at}: non-uniform time step of {jump:g} s after {before}, "
+                         f"expected Ts = {Ts:g} s within {100 * TS_TOLERANCE:g} %")
+
+
+def _experiment_record(data: LogData, e: int) -> dict[str, Any]:
+    """One experiment of the provenance record: label, rows, lines, times, split sizes."""
+    idx = np.flatnonzero(data.experiment == e)
+    return {"name": data.experiment_names[e], "rows": int(idx.size),
+            "lines": [int(data.lines[idx[0]]), int(data.lines[idx[-1]])],
+            "time": [float(data.time[idx[0]]), float(data.time[idx[-1]])],
+            "split": {s: int(np.count_nonzero(data.split[idx] == s)) for s in SPLITS}}
+
+
+def _sha256(path: Path) -> str:
+    """SHA-256 of the file's bytes (hex)."""
+    digest = hashlib.sha256()
+    try:
+        with path.open("rb") as fh:
+            for block in iter(lambda: fh.read(1 << 20), b""):
+                digest.update(block)
+    except OSError as exc:
+        raise CosimError(f"{path}: cannot read data file ({exc.strerror or exc})") from None
+    return digest.hexdigest()
