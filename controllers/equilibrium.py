@@ -11,6 +11,11 @@ The output equation ``U_o x(u) + b_o = ȳ`` is then solved for ``u`` in the box
 ``[−1, 1]^m`` by bounded least squares (scipy ``least_squares``, exact Jacobian from the
 implicit-function theorem ``dx/du = (I − f_x)^{-1} f_u``) from a fixed set of starting
 points. ``‖x̄‖∞ < 1`` holds automatically: ``x̄ = h(x̄, ū)`` with ``|h| < 1``.
+
+Any numbers of inputs ``m`` and outputs ``p``: with ``m > p`` many inputs hold one output
+(the least squares returns one of them, the same every time); with ``p > m`` the equilibrium
+outputs form an ``m``-dimensional surface in the ``p``-dimensional output space and a
+set-point off it is unreachable: :func:`equilibrium` names the closest reachable output.
 """
 
 from __future__ import annotations
@@ -23,8 +28,9 @@ import numpy as np
 from controllers.errors import UnreachableSetpoint
 from controllers.gru import NUMPY_OPS, gates, step
 
-__all__ = ["EQ_TOL", "REACH_TOL", "describe", "equilibrium", "equilibrium_for_output",
-           "equilibrium_newton", "jacobians", "reachable_boundary", "state_equilibrium"]
+__all__ = ["EQ_TOL", "REACH_TOL", "box_boundary", "describe", "equilibrium",
+           "equilibrium_for_output", "equilibrium_newton", "equilibrium_output", "jacobians",
+           "reachable_boundary", "state_equilibrium"]
 
 #: Residual (∞-norm, normalised units) below which a set-point counts as reached.
 REACH_TOL = 1e-8
@@ -181,9 +187,12 @@ def equilibrium(model_or_params: Any, y_bar_norm: Sequence[float]) -> tuple[np.n
     x, u, err = _solve(params, y)
     if err > REACH_TOL:
         reach = params["U_o"] @ x + params["b_o"]
+        m, p = params["W_z"].shape[1], params["U_o"].shape[0]
+        why = (f" ({p} outputs, {m} input{'s' if m > 1 else ''}: only the model's "
+               f"{m}-dimensional surface of equilibrium outputs is reachable)" if p > m else "")
         raise UnreachableSetpoint(
             f"set-point {describe(model_or_params, y)} is not reachable with inputs inside "
-            f"the saturation box (‖u‖∞ ≤ 1); the closest reachable equilibrium output is "
+            f"the saturation box (‖u‖∞ ≤ 1){why}; the closest reachable equilibrium output is "
             f"{describe(model_or_params, reach)}")
     return x, u
 
@@ -209,10 +218,18 @@ def equilibrium_newton(params: Mapping[str, np.ndarray], y: np.ndarray, x0: np.n
                        u0: np.ndarray, max_iter: int = 20,
                        ) -> tuple[np.ndarray, np.ndarray] | None:
     """Equilibrium ``x = f(x, u)``, ``U_o x + b_o = y`` (``eq:gru``) by Newton's method from
-    ``(x0, u0)``; ``None`` when it does not converge or leaves ``‖u‖∞ ≤ 1``."""
+    ``(x0, u0)``; ``None`` when it does not converge or leaves ``‖u‖∞ ≤ 1``.
+
+    The Newton matrix is ``(n + p) × (n + m)``: square when ``m = p`` (a linear solve, as the
+    compiled kernel's ``eq_newton``); otherwise each step is its least-squares solution
+    (``numpy.linalg.lstsq``): the minimum-norm step when ``m > p`` (the equilibrium closest
+    to ``(x0, u0)`` along the continuation), Gauss–Newton when ``p > m`` (it reaches a zero
+    residual only for a set-point on the surface of equilibrium outputs, else ``None``).
+    """
     n = x0.shape[0]
     m = u0.shape[0]
     Uo, bo = params["U_o"], params["b_o"]
+    square = Uo.shape[0] == m
     x, u = np.array(x0, dtype=float), np.array(u0, dtype=float)
     K = np.zeros((n + Uo.shape[0], n + m))
     eye = np.eye(n)
@@ -225,7 +242,8 @@ def equilibrium_newton(params: Mapping[str, np.ndarray], y: np.ndarray, x0: np.n
         K[:n, n:] = f_u
         K[n:, :n] = Uo
         try:
-            d = np.linalg.solve(K, -F)
+            d = (np.linalg.solve(K, -F) if square
+                 else np.linalg.lstsq(K, -F, rcond=None)[0])
         except np.linalg.LinAlgError:
             return None
         x = x + d[:n]
@@ -233,15 +251,74 @@ def equilibrium_newton(params: Mapping[str, np.ndarray], y: np.ndarray, x0: np.n
     return None
 
 
-def reachable_boundary(model: Any, points: int = 60) -> np.ndarray:
-    """Physical outputs of the model equilibria along the boundary of the input box
-    (``‖u‖∞ = 1``): the edge of the set of reachable set-points (``p = m = 2``)."""
+def equilibrium_output(params: Mapping[str, np.ndarray], u: np.ndarray,
+                       x0: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """``(x, y)``: the state equilibrium ``x = f(x, u)`` for a fixed input (``eq:gru``) and
+    its output ``y = U_o x + b_o`` (normalised), from ``x0``."""
+    p = _params(params)
+    x = state_equilibrium(p, np.asarray(u, dtype=float), x0)
+    return x, p["U_o"] @ x + p["b_o"]
+
+
+def box_boundary(m: int, points: int = 60) -> np.ndarray:
+    """Inputs on the edges of the box ``‖u‖∞ ≤ 1`` of ``m`` inputs, normalised:
+
+    - ``m = 1``: the segment ``u`` from −1 to 1 (``points`` values; its image is the whole
+      reachable set, a curve);
+    - ``m = 2``: the square's four sides as one closed path (``4 points`` values: bottom,
+      right, top, left);
+    - ``m ≥ 3``: the ``m 2^(m−1)`` edges of the cube (one coordinate free, the others ±1),
+      ``points`` values each, edge after edge (no closed path). For a map whose 2-faces map
+      with full rank, the edge of the image of the box in a plane is the image of these
+      edges.
+    """
+    import itertools
+
     s = np.linspace(-1.0, 1.0, points)
-    edges = [np.c_[s, -np.ones_like(s)], np.c_[np.ones_like(s), s],
-             np.c_[s[::-1], np.ones_like(s)], np.c_[-np.ones_like(s), s[::-1]]]
-    us = np.vstack(edges)
+    if m == 1:
+        return s[:, None]
+    if m == 2:
+        edges = [np.c_[s, -np.ones_like(s)], np.c_[np.ones_like(s), s],
+                 np.c_[s[::-1], np.ones_like(s)], np.c_[-np.ones_like(s), s[::-1]]]
+        return np.vstack(edges)
+    out = []
+    for i in range(m):
+        for corner in itertools.product((-1.0, 1.0), repeat=m - 1):
+            seg = np.tile(np.insert(np.array(corner), i, 0.0), (points, 1))
+            seg[:, i] = s
+            out.append(seg)
+    return np.vstack(out)
+
+
+def reachable_boundary(model: Any, points: int = 60) -> np.ndarray:
+    """Physical outputs ``(k, p)`` of the model equilibria for the inputs of
+    :func:`box_boundary` (``‖u‖∞ = 1``): the edge of the set of reachable set-points.
+
+    - ``m = 1``: the outputs along ``u ∈ [−1, 1]``, an open curve (with ``p ≥ 2`` it is the
+      whole reachable set; with ``p = 1`` its extremes bound the reachable interval);
+    - ``m = 2``: a closed path (the edge of a region when ``p = 2``);
+    - ``m ≥ 3``: with ``p = 2``, a closed path: the outline of the outputs along the cube's
+      edges seen from the equilibrium output at ``u = 0`` (the farthest point in each of
+      ``2 points`` angular sectors, in normalised units: the edge for a region star-shaped
+      about that point); with ``p ≠ 2`` the outputs along the edges, edge after edge.
+
+    The equilibria are continued from one input to the next (:func:`state_equilibrium`).
+    """
+    params = _params(model)
+    m, p = params["W_z"].shape[1], params["U_o"].shape[0]
     ys, x = [], None
-    for u in us:
-        x = state_equilibrium(model.params, u, x)
-        ys.append(model.denormalize_y(model.params["U_o"] @ x + model.params["b_o"]))
-    return np.array(ys)
+    for u in box_boundary(m, points):
+        x = state_equilibrium(params, u, x)
+        ys.append(params["U_o"] @ x + params["b_o"])
+    y = np.array(ys)
+    if m >= 3 and p == 2:
+        _, centre = equilibrium_output(params, np.zeros(m))
+        d = y - centre
+        sectors = 2 * points
+        k = np.minimum((np.arctan2(d[:, 1], d[:, 0]) + np.pi) / (2 * np.pi) * sectors,
+                       sectors - 1).astype(int)
+        r = np.hypot(d[:, 0], d[:, 1])
+        edge = [y[np.flatnonzero(k == b)[np.argmax(r[k == b])]] for b in range(sectors)
+                if np.any(k == b)]
+        y = np.array([*edge, edge[0]])
+    return np.array([model.denormalize_y(v) for v in y])

@@ -24,8 +24,18 @@ between two admissible set-points is admissible too. Once ``v = r`` the controll
 paper's.
 
 Equilibria along the segment come from a Newton continuation from ``(x̄(v), ū(v))``
-(:func:`controllers.equilibrium.equilibrium_newton`, a few 22×22 solves) instead of the
-multi-start least squares of :func:`controllers.equilibrium.equilibrium`.
+(:func:`controllers.equilibrium.equilibrium_newton`, a few (n + p)×(n + m) solves: 22×22 for
+the four tanks, in the compiled kernel when ``m = p``; a least-squares step in numpy
+otherwise) instead of the multi-start least squares of
+:func:`controllers.equilibrium.equilibrium`.
+
+More outputs than inputs (``p > m``): the equilibrium outputs form an ``m``-dimensional
+surface, and the points of the segment ``v → r`` between two reachable set-points are in
+general not on it. The governor then moves along the surface instead: the equilibrium input
+``ū(r)`` is found once per requested ``r``, and ``v⁺`` is the equilibrium output of
+``ū(v) + λ (ū(r) − ū(v))`` (``v⁺ = r`` at ``λ = 1``); each ``v⁺`` is checked for Assumption 1
+and ``eq:condition-recursive-feasibility`` as above (the polytope argument does not apply off
+the segment).
 
 The largest fraction tried, ``λ_max``, adapts to the solver (:meth:`ReferenceGovernor.
 govern`): it halves (down to :data:`LAM_MIN`) after a solve that did not converge and doubles
@@ -39,7 +49,8 @@ from typing import Any
 
 import numpy as np
 
-from controllers.equilibrium import equilibrium_newton
+from controllers.equilibrium import equilibrium_newton, equilibrium_output
+from controllers.errors import SetpointError
 
 __all__ = ["LAM_GROW", "LAM_MIN", "GovernorStep", "ReferenceGovernor"]
 
@@ -84,6 +95,8 @@ class ReferenceGovernor:
         self.cert = cert
         self.fhocp = fhocp
         self.params = cert.params
+        self.m = int(self.params["W_z"].shape[1])
+        self.p = int(self.params["U_o"].shape[0])
         self.levels = int(levels)
         self.reset()
 
@@ -91,15 +104,34 @@ class ReferenceGovernor:
         """Forget the adaptation (a new run): ``λ_max = 1``."""
         self.lam_max = 1.0
         self._moved = False
+        self._target: tuple[bytes, tuple[np.ndarray, np.ndarray] | None] | None = None
 
     def newton(self, y: np.ndarray, x0: np.ndarray,
                u0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """:func:`controllers.equilibrium.equilibrium_newton` from ``(x0, u0)``: the FHOCP's
-        compiled kernel when it has one (same iteration, ~25× faster), else numpy."""
+        compiled kernel when it has one (same iteration, ~25× faster; compiled for ``m = p``
+        only), else numpy."""
         kernel = getattr(self.fhocp, "kernel", None)
-        if kernel is not None:
+        if kernel is not None and "eq_newton" in kernel.kernel.c:
             return kernel.eq_newton(y, x0, u0)
         return equilibrium_newton(self.params, y, x0, u0)
+
+    def target(self, r: np.ndarray, x0: np.ndarray,
+               u0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+        """The equilibrium ``(x̄, ū)(r)`` (kept for the last ``r``): the Newton continuation
+        from ``(x0, u0)``, else the multi-start least squares; ``None`` when ``r`` is not
+        reachable."""
+        key = np.asarray(r, dtype=float).tobytes()
+        if self._target is None or self._target[0] != key:
+            eq = self.newton(r, x0, u0)
+            if eq is None:
+                try:
+                    ref = self.cert.reference(r, check=False)
+                    eq = (ref.x_bar, ref.u_bar)
+                except SetpointError:
+                    eq = None
+            self._target = (key, eq)
+        return self._target[1]
 
     def govern(self, x_hat: np.ndarray, e_o: float, v: np.ndarray, x_bar: np.ndarray,
                u_bar: np.ndarray, r: np.ndarray, plan: np.ndarray | None,
@@ -131,13 +163,26 @@ class ReferenceGovernor:
         hold = GovernorStep(0.0, v, x_bar, u_bar, float("nan"), None)
         if plan is None:
             return hold
+        along = None
+        if self.p > self.m:   # along the surface of equilibrium outputs (module docstring)
+            along = self.target(r, x_bar, u_bar)
+            if along is None:
+                return hold
         lam = float(lam_max)
         for _ in range(self.levels):
-            y = v + lam * (r - v)
+            if along is None:
+                y = v + lam * (r - v)
+            elif lam == 1.0:
+                y, eq = np.asarray(r, dtype=float), along
+            else:
+                ub = u_bar + lam * (along[1] - u_bar)
+                xb, y = equilibrium_output(self.params, ub, x_bar)
+                eq = (xb, ub)
             if not self.cert.ok(y):
                 lam *= 0.5
                 continue
-            eq = self.newton(y, x_bar, u_bar)
+            if along is None:
+                eq = self.newton(y, x_bar, u_bar)
             if eq is not None:
                 xb, ub = eq
                 alpha = self.cert.alpha(y)

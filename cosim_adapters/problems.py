@@ -10,6 +10,9 @@ every command and controller:
   default plant's, checked against the model's signals, sample time and normalisation;
 - no model (the PI baseline, ``generate-data``): the ``--problem`` given, or the default
   plant's: the four-tank's ``fmus/fourtank/problem.toml`` (:data:`cosim.build.DEFAULT_PROBLEM`).
+
+:func:`bind_plant` binds a problem to a plant FMU (:mod:`cosim.binding`: names, units,
+checks) and gives the variable map the FMU component converts through.
 """
 
 from __future__ import annotations
@@ -21,7 +24,8 @@ from controllers.errors import ControllersError
 from controllers.problem import ControlProblem
 from cosim.errors import CosimError
 
-__all__ = ["default_problem_path", "load_problem", "problem_for"]
+__all__ = ["bind_plant", "default_problem_path", "load_problem", "plant_signals",
+           "problem_for"]
 
 
 def default_problem_path() -> Path:
@@ -89,3 +93,35 @@ def _name(arg: Any, problem: ControlProblem) -> str:
     if isinstance(arg, ControlProblem):
         return f"problem {arg.name!r}"
     return f"--problem {arg}"
+
+
+def plant_signals(problem: ControlProblem) -> list[Any]:
+    """The problem's inputs and outputs as :class:`cosim.binding.Wanted` (plain data), each
+    with where it is declared (``problem.toml:12``, :func:`controllers.problem_file.locate`)."""
+    from controllers.problem_file import locate
+    from cosim.binding import Wanted
+
+    out = []
+    for role, channels in (("input", problem.inputs), ("output", problem.outputs)):
+        for c in channels:
+            key = "variable" if c.variable != c.name else None
+            out.append(Wanted(c.name, c.variable, c.unit, role, locate(problem, c.name, key),
+                              locate(problem, c.name, "unit")))
+    return out
+
+
+def bind_plant(problem: ControlProblem, fmu: str | Path, user_map: Any = None) -> Any:
+    """The :class:`~cosim.varmap.VarMap` binding ``problem`` to the plant FMU ``fmu`` (a
+    ``--map`` ``user_map`` first): :func:`cosim.binding.bind`.
+
+    Raises
+    ------
+    CosimError
+        The FMU cannot be read; a signal it lacks, of the wrong causality or type, or in a unit
+        it contradicts (one line naming the problem file and line, the signal, the variable).
+    """
+    from cosim.binding import bind
+    from cosim.fmu_archive import read_model_description
+
+    md = read_model_description(fmu)
+    return bind(plant_signals(problem), md, fmu, user_map, problem.source or problem.name)

@@ -15,10 +15,16 @@ units:
    ``ê_o`` by ``eq:eo-evolution`` (:class:`controllers.observer.GRUObserver`). ``x̂_0`` is the
    model equilibrium for the first measured output (paper section V).
 
+Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
+(``p > m``) only set-points on the model's ``m``-dimensional surface of equilibrium outputs
+are reachable; the others are refused like any unreachable set-point, naming the closest
+reachable equilibrium output.
+
 Set-points outside the theory (unreachable, or failing Assumption 1 / eq. 11): the controller
 keeps regulating to the last admissible set-point, counts the step in ``setpoint_rejected``
-(diagnostics and summary) and names the failed hypothesis in the summary. A first set-point
-that is already inadmissible is a configuration error (:class:`cosim.errors.CosimError`).
+(diagnostics and summary) and names the failed hypothesis (or, for an unreachable one, the
+closest reachable equilibrium output) in the summary. A first set-point that is already
+inadmissible is a configuration error (:class:`cosim.errors.CosimError`, the same reason).
 
 This module is the co-simulation adapter (a :class:`cosim.component.Component`) of the
 numerical core: the core modules know nothing of ``cosim``.
@@ -243,6 +249,7 @@ class RobustMPCController(Component):
         self.governor_holds = 0     # of which the governor could not move it at all
         self._lam = 1.0
         self._candidate: np.ndarray | None = None
+        self._unreachable: np.ndarray | None = None   # the last target refused as unreachable
 
     def set_inputs(self, values: Mapping[str, float]) -> None:
         self._values.update({k: float(v) for k, v in values.items()})
@@ -260,8 +267,10 @@ class RobustMPCController(Component):
             raise CosimError(f"controller {self.name!r}: input {exc.args[0]!r} was never set "
                              f"(wire {', '.join(self._y_names + self._r_names)})") from None
         if not (np.all(np.isfinite(y_phys)) and np.all(np.isfinite(r_phys))):
+            values = ", ".join(f"{n}={v:g}" for n, v in zip(
+                self._y_names + self._r_names, [*y_phys, *r_phys], strict=True))
             raise CosimError(f"controller {self.name!r}: non-finite input at t={t:g} s "
-                             f"(h={y_phys.tolist()}, ref={r_phys.tolist()})")
+                             f"({values})")
         y = self.model.normalize_y(y_phys)
         y_ref = self.model.normalize_y(r_phys)
         if self.observer.x_hat is None:
@@ -375,12 +384,17 @@ class RobustMPCController(Component):
             self._reject(SetpointError(f"set-point {describe(self.model, target)}: "
                                        + "; ".join(failed)), y_ref, requested_changed, t)
             return True
+        if (not requested_changed and self._unreachable is not None
+                and np.array_equal(target, self._unreachable)):
+            self.rejected += 1     # still the unreachable request: refused again, counted
+            return True
         if requested_changed and self.governor.newton(
                 target, self.mpc.x_bar, self.mpc.u_bar) is None:
             try:  # reachable with ‖ū‖∞ ≤ 1? (the multi-start solve decides)
                 self.cert.reference(target)
             except SetpointError as exc:
                 self._reject(exc, y_ref, requested_changed, t)
+                self._unreachable = np.array(target, dtype=float)
                 return True
         if requested_changed:
             self.setpoint_changes += 1

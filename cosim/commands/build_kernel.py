@@ -12,14 +12,14 @@ HELP = "compile the robust MPC's derivative kernel for a model (built on first u
 
 DESCRIPTION = """\
 Generate and compile (gcc) the C kernel of the robust MPC's FHOCP for a GRU model file and
-the controller's design (horizon, weights, constraints): the SQP's derivatives, the Hessian's
-eigenvalue clipping and the equilibrium Newton iteration, checked against the numpy
-implementation when loaded. The library is cached by a hash of the model, the design, the
-generator and the compiler, in ~/.cache/gru-mpc/kernels (GRU_MPC_KERNEL_CACHE): a controller
-that needs it builds it on first use (2-4 s); this command builds it ahead (make does, for
-the shipped model). Without a C compiler the controller uses the numpy derivatives (same
-answers, slower) and this command exits 1 naming the reason. GRU_MPC_KERNEL=0 turns the
-kernel off."""
+the controller's design (horizon, weights, constraints; any numbers of inputs and outputs):
+the SQP's derivatives, the Hessian's eigenvalue clipping and (as many inputs as outputs) the
+equilibrium Newton iteration, checked against the numpy implementation when loaded. The
+library is cached by a hash of the model, the design, the generator and the compiler, in
+~/.cache/gru-mpc/kernels (GRU_MPC_KERNEL_CACHE): a controller that needs it builds it on
+first use (2-4 s); this command builds it ahead (make does, for the shipped model). Without
+a C compiler the controller uses the numpy derivatives (same answers, slower) and this
+command exits 1 naming the reason. GRU_MPC_KERNEL=0 turns the kernel off."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -30,6 +30,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--model", metavar="FILE", default=None,
                    help="GRU model file (default: the shipped controllers/models/"
                         "fourtank_gru.json)")
+    p.add_argument("--problem", metavar="PROBLEM.toml", default=None,
+                   help="control problem file: must agree with the model's own (checked), or "
+                        "gives the problem of a model file without one")
     p.add_argument("--option", metavar="KEY=VALUE", action="append", default=[],
                    help="robust-mpc option that changes the problem (e.g. N=20), repeatable")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
@@ -47,6 +50,8 @@ def run(args: argparse.Namespace) -> int:
     options.pop("kernel", None)
     if args.model is not None:
         options["model"] = args.model
+    if args.problem is not None:
+        options["problem"] = args.problem
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # reported below, as an error
         ctrl = registry.create("robust-mpc", options)
@@ -54,6 +59,6 @@ def run(args: argparse.Namespace) -> int:
     if fhocp.kernel is None:
         raise SimulationFailed(f"no compiled kernel: {fhocp.kernel_error}")
     if not args.quiet:
-        print(f"{fhocp.kernel.path}: compiled kernel for {ctrl.model_path} "
-              f"(n={fhocp.n}, N={fhocp.N})")
+        print(f"{fhocp.kernel.path}: compiled kernel for {ctrl.model_path}, problem "
+              f"{ctrl.problem.name!r} (n={fhocp.n}, m={fhocp.m}, p={fhocp.p}, N={fhocp.N})")
     return 0

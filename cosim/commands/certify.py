@@ -35,17 +35,21 @@ theta), nu_o, rho_o, c_o, kappa, L_max (lem:Vo), w_y_bar, w_bar (eq:w-bar), w_L,
 tightening a_i, b_i (eq:constraint_tightening_parameters), e_o and e_inf (eq:eo-evolution), the
 terminal weight s (eq:definition_s) and, per set-point, alpha (eq:def-alpha), Assumption 1
 (ass:setpoint) and the recursive-feasibility inequality (eq:condition-recursive-feasibility).
-Values are in the model's normalised units; set-points are given in physical units (m)."""
+Values are in the model's normalised units; set-points are given in the control problem's
+units, by output name (--setpoint CA=0.6,T=330) or in the problem's output order."""
 
 EPILOG = """design levers:
   --gain-scale THETA     observer gains THETA x the LP gains (0 = open-loop observer)
   --auto-gain-scale      the largest THETA in [0, 1] for which every hypothesis holds at the
-                         set-points (default set-points: {0.5, 1.0, 1.5} m squared)
+                         set-points (default: the grid at 25, 50 and 75 % of each output's
+                         box, 3^p points; a star of 2p + 1 points beyond 81); exit 1 when
+                         no THETA passes
   --N, --e-o0            horizon and initial observer-error bound (paper: 15, 0.02)
   --data DATA.csv        estimate w_y_bar as the largest test-set output error (normalised)
 
---save writes only when every check passes (otherwise the model file is left unchanged),
-atomically: a failed write (full disk) leaves the previous file byte-identical.
+--save writes only when every check passes (otherwise the model file is left unchanged,
+and no THETA = 0 gains are saved when no THETA passes), atomically: a failed write (full
+disk) leaves the previous file byte-identical.
 
 """ + exit_codes_help({"certify": EXIT_NOTES})
 
@@ -58,8 +62,13 @@ def register(subparsers: Any) -> None:
     p.add_argument("model", nargs="?", default=None,
                    help="GRU model file (default: the shipped controllers/models/"
                         "fourtank_gru.json)")
-    p.add_argument("--setpoint", action="append", metavar="H1,H2", default=[],
-                   help="set-point in physical units (e.g. 1.0,0.8); repeat for several")
+    p.add_argument("--setpoint", action="append", metavar="NAME=VALUE,...", default=[],
+                   help="set-point in the problem's units, every output once by name "
+                        "(e.g. h1=1.0,h2=0.8), or the values in the problem's output order "
+                        "(1.0,0.8); repeat for several")
+    p.add_argument("--problem", metavar="PROBLEM.toml", default=None,
+                   help="control problem file: must agree with the model's own (checked), "
+                        "or gives the problem of a model file without one")
     p.add_argument("--json", action="store_true",
                    help="print JSON with the paper's names (a list when several set-points)")
     p.add_argument("--N", type=int, default=15, help="prediction horizon N (default 15)")
@@ -76,22 +85,51 @@ def register(subparsers: Any) -> None:
                    help="write L_z, L_r and w̄_y into the model file, only when every check "
                         "passes (atomic: a failed write leaves the file unchanged)")
     p.add_argument("--plot", metavar="PNG",
-                   help="also draw a figure: α over the set-point plane with the admissible "
-                        "and reachable regions, ê_o,k, and the tightened output bounds")
+                   help="also draw a figure: α over the set-points with the admissible and "
+                        "reachable ones (one or two outputs), ê_o,k, and the tightened "
+                        "output bounds")
     p.set_defaults(func=run)
 
 
 def _parse_setpoint(text: str, names: list[str]) -> list[float]:
-    parts = text.split(",")
-    try:
-        values = [float(v) for v in parts]
-    except ValueError:
-        raise CosimError(f"--setpoint {text!r}: expected {len(names)} numbers "
-                         f"({','.join(names)}) separated by commas") from None
-    if len(values) != len(names) or not all(math.isfinite(v) for v in values):
-        raise CosimError(f"--setpoint {text!r}: expected {len(names)} finite numbers "
-                         f"({','.join(names)})")
-    return values
+    """One ``--setpoint``: ``NAME=VALUE,...`` with every output once (any order), or the
+    values in the problem's output order; the values in the problem's units."""
+    parts = [part.strip() for part in text.split(",")]
+    form = ",".join(f"{n}=V" for n in names)
+    named = ["=" in part for part in parts]
+    if any(named) and not all(named):
+        raise CosimError(f"--setpoint {text!r}: give every output by name ({form}) or none")
+    if any(named):
+        values: dict[str, float] = {}
+        for part in parts:
+            key, _, val = (x.strip() for x in part.partition("="))
+            if key not in names:
+                raise CosimError(f"--setpoint {text!r}: no output {key!r} in the problem "
+                                 f"(outputs: {', '.join(names)})")
+            if key in values:
+                raise CosimError(f"--setpoint {text!r}: output {key!r} given twice")
+            try:
+                values[key] = float(val)
+            except ValueError:
+                raise CosimError(f"--setpoint {text!r}: {key}={val!r} is not a number") from None
+        missing = [n for n in names if n not in values]
+        if missing:
+            raise CosimError(f"--setpoint {text!r}: no value for {', '.join(missing)} "
+                             f"(expected {form})")
+        out = [values[n] for n in names]
+    else:
+        try:
+            out = [float(v) for v in parts]
+        except ValueError:
+            raise CosimError(f"--setpoint {text!r}: expected {len(names)} numbers "
+                             f"({','.join(names)}) separated by commas, or {form}") from None
+        if len(out) != len(names):
+            raise CosimError(f"--setpoint {text!r}: expected {len(names)} numbers "
+                             f"({','.join(names)}), or {form}")
+    bad = [f"{n}={v:g}" for n, v in zip(names, out, strict=True) if not math.isfinite(v)]
+    if bad:
+        raise CosimError(f"--setpoint {text!r}: not finite: {', '.join(bad)}")
+    return out
 
 
 def _fmt(v: Any) -> str:
@@ -139,8 +177,9 @@ def _w_y_bar_from_csv(model: Any, path: str) -> float:
 
 
 def _certificate(args: argparse.Namespace, model: Any, setpoints: list,
-                 kwargs: dict) -> tuple[Any, str]:
-    """The certificate for the options in ``args`` and a note on the observer gains."""
+                 kwargs: dict) -> tuple[Any, str, str | None]:
+    """The certificate for the options in ``args``, a note on the observer gains, and the
+    failure of ``--auto-gain-scale`` when no θ passes (else ``None``)."""
     import numpy as np
 
     from controllers import certificates as certs
@@ -152,13 +191,17 @@ def _certificate(args: argparse.Namespace, model: Any, setpoints: list,
         theta, cert = gain_design.choose_gain_scale(model, targets, **kwargs)
         note = ("LP gains × θ = 0 (no θ in [0, 1] passes)" if theta is None
                 else f"LP gains × θ = {theta:.6g} (auto)")
+        if theta is None:
+            where = "the given set-points" if setpoints else (
+                f"the {len(targets)} default set-points over the output box")
+            return cert, note, f"gain scale: no θ in [0, 1] passes every hypothesis at {where}"
     else:
         cert = certs.compute_certificate(model, gain_scale=args.gain_scale, **kwargs)
         if cert.gain_scale is not None:
             note = f"LP gains × θ = {cert.gain_scale:.6g}"
         else:
             note = "gains from the model file"
-    return cert, note
+    return cert, note, None
 
 
 def run(args: argparse.Namespace) -> int:
@@ -197,7 +240,7 @@ def run(args: argparse.Namespace) -> int:
                          "--data DATA.csv")
     kwargs = dict(N=args.N, e_o0=args.e_o0, w_y_bar=w_y_bar)
     try:
-        cert, note = _certificate(args, model, setpoints, kwargs)
+        cert, note, no_theta = _certificate(args, model, setpoints, kwargs)
     except (CosimError, ControllersError) as exc:
         if str(exc).startswith((f"{args.model}:", f"{Path(args.model)}:")):
             raise CosimError(str(exc)) from None
@@ -221,6 +264,8 @@ def run(args: argparse.Namespace) -> int:
     if empty:
         failures.append("admissible set-points (ass:setpoint and eq:condition-recursive-"
                         f"feasibility): none for {', '.join(empty)}")
+    if no_theta:
+        failures.append(no_theta)
 
     if args.json:
         docs = [cert.to_json(sp) for _, sp, _, _ in per_setpoint] or [cert.to_json()]
@@ -234,7 +279,10 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         path = figure(args.plot, model, cert, setpoints_phys)
         print(f"figure written to {path}", file=sys.stderr)
-    if args.save and failures:
+    if args.save and no_theta:
+        print(f"cosim certify: not saved: {args.model} is unchanged (no θ in [0, 1] passes: "
+              "the θ = 0 gains are not saved)", file=sys.stderr)
+    elif args.save and failures:
         print(f"cosim certify: not saved: {args.model} is unchanged (--save writes only when "
               "every check passes)", file=sys.stderr)
     elif args.save:
@@ -302,11 +350,13 @@ def _print_table(path: str, model: Any, cert: Any, note: str, per_setpoint: list
 
 def figure(path: str | Path, model: Any, cert: Any, setpoints: list) -> Path:
     """The ``--plot`` figure (:func:`cosim.plots.certificate_figure`), with the output bounds
-    and, for two outputs, the edge of the reachable set."""
+    and, for one or two outputs, the edge of the reachable set
+    (:func:`controllers.equilibrium.reachable_boundary`: physical outputs ``(k, p)``, an
+    open curve for one input, a closed path for two outputs and two or more inputs)."""
     from controllers.equilibrium import reachable_boundary
     from cosim import plots
 
-    reachable = reachable_boundary(model) if model.p == 2 else None
+    reachable = reachable_boundary(model) if model.p <= 2 else None
     return plots.certificate_figure(path, model, cert, setpoints, _bounds(model), reachable)
 
 

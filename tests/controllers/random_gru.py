@@ -17,12 +17,28 @@ def test_problem(m: int = 2, p: int = 2) -> ControlProblem:
                           outputs=tuple(outs[:p]))
 
 
-def random_gru_model(seed: int = 0, n: int = 20, m: int = 2, p: int = 2) -> GRUModel:
-    """A small-weight GRU with ``b_z ≈ 2`` (slow, δISS: ν < 1) and four-tank normalisation.
+def other_problem() -> ControlProblem:
+    """A 2×2 problem that is not the four-tank's: other names and units, boxes other than
+    [0, 2], Ts = 15 s (a CSTR's feed flow and coolant temperature to its concentration and
+    temperature)."""
+    return ControlProblem(
+        name="cstr", Ts=15.0,
+        inputs=(Channel("F", "L/min", 2.0, 12.0, description="feed flow"),
+                Channel("Tc", "K", 280.0, 320.0, description="coolant temperature")),
+        outputs=(Channel("CA", "mol/L", 0.1, 0.9, description="concentration of A"),
+                 Channel("T", "K", 300.0, 360.0, description="reactor temperature")))
 
-    Inputs are normalised so that the physical box maps to ``‖u‖∞ ≤ 1``; outputs use
-    ``y = (h − 1) / 1`` so that the output box [0, 2] m maps to ``[−1, 1]``.
+
+def random_gru_model(seed: int = 0, n: int = 20, m: int = 2, p: int = 2,
+                     problem: ControlProblem | None = None) -> GRUModel:
+    """A small-weight GRU with ``b_z ≈ 2`` (slow, δISS: ν < 1) for ``problem`` (default: the
+    four-tank's for m = p = 2, else :func:`test_problem`; a given problem sets m and p).
+
+    Inputs and outputs are normalised by the problem's boxes (``‖u‖∞ ≤ 1``; for the
+    four-tank ``y = (h − 1) / 1``, the output box [0, 2] m maps to ``[−1, 1]``).
     """
+    if problem is not None:
+        m, p = problem.m, problem.p
     rng = np.random.default_rng(seed)
 
     def mat(rows: int, cols: int, row_sum: float) -> np.ndarray:
@@ -35,7 +51,8 @@ def random_gru_model(seed: int = 0, n: int = 20, m: int = 2, p: int = 2) -> GRUM
         "W_h": mat(n, m, 1.2), "U_h": mat(n, n, 0.6), "b_h": rng.uniform(-0.1, 0.1, n),
         "U_o": mat(p, n, 1.5), "b_o": np.zeros(p),
     }
-    problem = FOURTANK if (m, p) == (2, 2) else test_problem(m, p)
+    if problem is None:
+        problem = FOURTANK if (m, p) == (2, 2) else test_problem(m, p)
     norm = problem.normalization()
     return GRUModel(params=params, u_offset=norm["u_offset"], u_scale=norm["u_scale"],
                     y_offset=norm["y_offset"], y_scale=norm["y_scale"],

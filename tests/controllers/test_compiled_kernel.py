@@ -16,7 +16,7 @@ from controllers import compiled_kernel as ck
 from controllers.equilibrium import equilibrium, equilibrium_newton
 from controllers.fhocp import FHOCP
 from controllers.nlp_single_shooting import SingleShootingNLP
-from tests.controllers.random_gru import H_BOX, L_BOX, random_gru_model
+from tests.controllers.random_gru import random_gru_model
 
 needs_cc = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,
                               reason="no C compiler")
@@ -28,32 +28,40 @@ def rel(a: object, b: object) -> float:
     return float(np.max(np.abs(a - b)) / max(1.0, np.max(np.abs(b))))
 
 
-def random_fhocp(n: int, N: int, seed: int, **kw: object) -> FHOCP:
-    """A random δISS GRU with a box problem (certificate-like data, hypotheses unchecked)."""
-    model = random_gru_model(seed, n=n)
-    q = L_BOX.shape[0]
+def random_fhocp(n: int, N: int, seed: int, m: int = 2, p: int = 2, **kw: object) -> FHOCP:
+    """A random δISS GRU of ``m`` inputs and ``p`` outputs with the box problem ``|y_j| ≤ 1``
+    (certificate-like data, hypotheses unchecked; for m = p = 2 the shared test problem's
+    rows ``L_BOX``, ``4 H_BOX``)."""
+    model = random_gru_model(seed, n=n, m=m, p=p)
+    L = np.vstack([np.eye(p), -np.eye(p)])
+    q = L.shape[0]
     a = np.linspace(0.0, 0.5, N + 1)[:, None] * np.ones((1, q))
     b = np.linspace(0.0, 0.02, N + 1)[:, None] * np.ones((1, q))
-    return FHOCP(model.params, N, np.eye(n), 0.01 * np.eye(2), L_BOX, 4 * H_BOX,
+    return FHOCP(model.params, N, np.eye(n), 0.01 * np.eye(m), L, np.full(q, 1.0),
                  np.full(q, 0.002), a, b, float(50 * n), **kw).setup()
 
 
 @needs_cc
-@pytest.mark.parametrize(("n", "N", "mode"), [(20, 15, "w"), (20, 15, "contract"),
-                                              (20, 15, "backward"), (9, 7, "w"),
-                                              (12, 30, "w"), (12, 30, "backward"),
-                                              (33, 6, "w+blas"), (33, 6, "contract+blas"),
-                                              (33, 6, "backward+blas")])
-def test_kernel_matches_the_numpy_derivatives(n: int, N: int, mode: str,
+@pytest.mark.parametrize(("n", "N", "mode", "m", "p"), [
+    (20, 15, "w", 2, 2), (20, 15, "contract", 2, 2), (20, 15, "backward", 2, 2),
+    (9, 7, "w", 2, 2), (12, 30, "w", 2, 2), (12, 30, "backward", 2, 2),
+    (33, 6, "w+blas", 2, 2), (33, 6, "contract+blas", 2, 2), (33, 6, "backward+blas", 2, 2),
+    # other numbers of inputs and outputs: SISO, more inputs than outputs (N m = 45 >= 40:
+    # LAPACK's eigenvalues when casadi ships OpenBLAS), more outputs than inputs
+    (9, 7, "w", 1, 1), (11, 15, "w", 3, 2), (10, 12, "backward", 1, 3),
+    (14, 6, "contract", 3, 1)])
+def test_kernel_matches_the_numpy_derivatives(n: int, N: int, mode: str, m: int, p: int,
                                               monkeypatch: pytest.MonkeyPatch) -> None:
-    """Every variant (``+blas``: the products through casadi's OpenBLAS, off by default)."""
+    """Every variant (``+blas``: the products through casadi's OpenBLAS, off by default), for
+    any numbers of inputs ``m`` and outputs ``p``."""
     mode, _, blas = mode.partition("+")
     monkeypatch.setenv("GRU_MPC_KERNEL_MODE", mode)
     if blas:
         if ck.casadi_openblas() is None:
             pytest.skip("casadi ships no OpenBLAS here")
         monkeypatch.setenv("GRU_MPC_KERNEL_BLAS", "on")
-    fh = random_fhocp(n, N, seed=n + N, kernel="numpy")
+    fh = random_fhocp(n, N, seed=n + N, m=m, p=p, kernel="numpy")
+    assert (fh.m, fh.p, fh.q) == (m, p, 2 * p)
     k = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2)
     assert k is not None, ck.last_error
     assert ("-DGK_BLAS" in k.flags) == bool(blas)
@@ -125,6 +133,42 @@ def test_compiled_equilibrium_newton_matches_numpy(cert) -> None:
             assert np.max(np.abs(a[0] - b[0])) < 1e-12 and np.max(np.abs(a[1] - b[1])) < 1e-12
 
 
+@needs_cc
+@pytest.mark.parametrize(("m", "p"), [(1, 1), (3, 3), (3, 2), (1, 2)])
+def test_compiled_equilibrium_newton_only_for_square_problems(m: int, p: int) -> None:
+    """eq_newton is compiled when m = p (then it is numpy's iteration to 1e-12); otherwise
+    the governor's continuation takes the numpy least-squares step
+    (controllers.equilibrium.equilibrium_newton), and reaches an equilibrium."""
+    from types import SimpleNamespace
+
+    from controllers.equilibrium import equilibrium_output
+    from controllers.governor import ReferenceGovernor
+    from controllers.gru import output, step
+
+    fh = random_fhocp(9, 6, seed=10 * m + p, m=m, p=p)
+    assert fh.kernel is not None, fh.kernel_error
+    assert ("eq_newton" in fh.kernel.kernel.c) == (m == p)
+    gov = ReferenceGovernor(SimpleNamespace(params=fh.params), fh)
+    x0, y0 = equilibrium_output(fh.params, np.zeros(m))
+    u0 = np.zeros(m)
+    rng = np.random.default_rng(m + p)
+    for _ in range(3):
+        _, y = equilibrium_output(fh.params, rng.uniform(-0.3, 0.3, m), x0)
+        a = equilibrium_newton(fh.params, y, x0, u0)
+        b = gov.newton(y, x0, u0)
+        assert a is not None and b is not None
+        if m == p:
+            assert np.max(np.abs(a[0] - b[0])) < 1e-12 and np.max(np.abs(a[1] - b[1])) < 1e-12
+        else:
+            assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+        x, u = b
+        assert np.max(np.abs(step(fh.params, x, u) - x)) < 1e-10
+        assert np.max(np.abs(output(fh.params, x) - y)) < 1e-10 and np.max(np.abs(u)) <= 1
+    if p > m:   # off the surface of equilibrium outputs: no equilibrium, numpy and governor
+        off = y0 + 0.05 * np.linalg.svd(np.vstack([np.ones(p), np.eye(p)[:m]]))[2][-1]
+        assert gov.newton(off, x0, u0) is None
+
+
 def test_without_a_compiler_the_numpy_derivatives_give_the_same_answer(
         cert, monkeypatch: pytest.MonkeyPatch, tmp_path: Path) -> None:
     monkeypatch.setenv("CC", "no-such-compiler-xyz")
@@ -169,15 +213,16 @@ def test_ipopt_and_multiple_shooting_keep_numpy(cert) -> None:
 
 
 @needs_cc
-@pytest.mark.parametrize(("n", "N"), [(20, 15), (9, 7)])
-def test_answer_check_and_observer_step_match_numpy(n: int, N: int) -> None:
+@pytest.mark.parametrize(("n", "N", "m", "p"), [(20, 15, 2, 2), (9, 7, 2, 2), (9, 7, 1, 1),
+                                                (11, 8, 3, 2), (8, 9, 1, 3)])
+def test_answer_check_and_observer_step_match_numpy(n: int, N: int, m: int, p: int) -> None:
     """assess / assess_w (cost, residuals, defect of an answer) and gru_step (eq:observer's
     update) against FHOCP.cost, FHOCP._residuals and controllers.gru.step, including answers
     outside the input box, violated output rows and terminal sets."""
     from controllers import gru
     from controllers.fhocp import FHOCPResult
 
-    fh = random_fhocp(n, N, seed=3 * n + N, kernel="numpy")
+    fh = random_fhocp(n, N, seed=3 * n + N, m=m, p=p, kernel="numpy")
     lib = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo)
     assert lib is not None and lib.nl == fh.q, ck.last_error
     k = lib.workspace()

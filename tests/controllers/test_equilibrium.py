@@ -87,3 +87,85 @@ def test_deterministic() -> None:
     a = equilibrium(m, y)
     b = equilibrium(m, y)
     assert np.array_equal(a[0], b[0]) and np.array_equal(a[1], b[1])
+
+
+# -- any numbers of inputs and outputs ---------------------------------------------------------
+@pytest.mark.parametrize(("m", "p"), [(1, 1), (3, 2), (2, 3), (1, 2)])
+def test_equilibria_of_non_square_models(m: int, p: int) -> None:
+    """A reachable output (from an input inside the box) is found by the least squares and
+    by the Newton continuation (least-squares steps when m ≠ p); equilibrium_for_output
+    (the GRU plant's and the observer's start) returns an equilibrium in every case."""
+    from controllers.equilibrium import EQ_TOL, equilibrium_newton, equilibrium_output
+
+    model = random_gru_model(5, n=8, m=m, p=p)
+    x0, _ = equilibrium_output(model.params, np.zeros(m))
+    for u_true in np.random.default_rng(m + 3 * p).uniform(-0.6, 0.6, (3, m)):
+        _, y = equilibrium_output(model.params, u_true, x0)
+        x, u = equilibrium(model, y)
+        assert np.max(np.abs(step(model.params, x, u) - x)) < 1e-12
+        assert np.max(np.abs(output(model.params, x) - y)) < 1e-9 and np.max(np.abs(u)) <= 1
+        if m <= p:   # injective: the input itself
+            assert u == pytest.approx(u_true, abs=1e-6)
+        eq = equilibrium_newton(model.params, y, x0, np.zeros(m))
+        assert eq is not None
+        assert np.max(np.abs(output(model.params, eq[0]) - y)) < EQ_TOL
+        assert np.max(np.abs(step(model.params, *eq) - eq[0])) < EQ_TOL
+        xs, us = equilibrium_for_output(model, y + 0.3)
+        assert np.max(np.abs(step(model.params, xs, us) - xs)) < 1e-12
+        assert np.max(np.abs(us)) <= 1
+
+
+def test_more_outputs_than_inputs_names_the_closest_reachable_output() -> None:
+    """p = 2 outputs, m = 1 input: the equilibrium outputs form a curve; a set-point off it is
+    unreachable (one line naming why and the closest reachable output), and the Newton
+    continuation gives no equilibrium for it either."""
+    from controllers.equilibrium import equilibrium_newton, equilibrium_output
+
+    model = random_gru_model(2, n=8, m=1, p=2)
+    x0, y0 = equilibrium_output(model.params, np.zeros(1))
+    _, y1 = equilibrium_output(model.params, np.array([0.4]), x0)
+    normal = np.array([-(y1 - y0)[1], (y1 - y0)[0]]) / np.linalg.norm(y1 - y0)
+    off = 0.5 * (y0 + y1) + 0.05 * normal
+    with pytest.raises(UnreachableSetpoint) as info:
+        equilibrium(model, off)
+    msg = str(info.value)
+    assert "\n" not in msg and "not reachable" in msg
+    assert "(2 outputs, 1 input: only the model's 1-dimensional surface of equilibrium " \
+           "outputs is reachable)" in msg
+    xb, _ = equilibrium_for_output(model, off)
+    reach = model.denormalize_y(output(model.params, xb))
+    assert msg.endswith(f"closest reachable equilibrium output is h1={reach[0]:.4g} m, "
+                        f"h2={reach[1]:.4g} m")
+    assert np.linalg.norm(output(model.params, xb) - off) <= 0.05 + 1e-9
+    assert equilibrium_newton(model.params, off, x0, np.zeros(1)) is None
+
+
+@pytest.mark.parametrize(("m", "p"), [(1, 1), (1, 2), (2, 2), (3, 2), (3, 1), (2, 3)])
+def test_reachable_boundary_of_an_m_dimensional_input_box(m: int, p: int) -> None:
+    """The edge of the reachable set-points: the outputs along u ∈ [−1, 1] (m = 1), the square's
+    edges as a closed path (m = 2), and for m ≥ 3 with two outputs the outline of the faces'
+    outputs, which holds the outputs of inputs drawn inside the box."""
+    from matplotlib.path import Path as Polygon
+
+    from controllers.equilibrium import box_boundary, equilibrium_output, reachable_boundary
+
+    model = random_gru_model(1, n=8, m=m, p=p)
+    edge = reachable_boundary(model, points=30)
+    assert edge.ndim == 2 and edge.shape[1] == p and np.all(np.isfinite(edge))
+    inputs = box_boundary(m, 30)
+    assert np.all(np.max(np.abs(inputs), axis=1) == 1.0) or m == 1
+    if m == 1:
+        expect = [model.denormalize_y(equilibrium_output(model.params, u)[1]) for u in inputs]
+        np.testing.assert_allclose(edge, expect, atol=1e-12)
+        assert edge.shape[0] == 30
+    if m == 2 or (m >= 3 and p == 2):
+        np.testing.assert_allclose(edge[0], edge[-1], atol=1e-10)   # closed
+    if m >= 3 and p != 2:
+        assert edge.shape[0] == inputs.shape[0] == m * 2 ** (m - 1) * 30   # the edges
+    inside = np.random.default_rng(0).uniform(-0.9, 0.9, (40, m))
+    ys = np.array([model.denormalize_y(equilibrium_output(model.params, u)[1])
+                   for u in inside])
+    if p == 2 and m >= 2:
+        assert Polygon(edge).contains_points(ys).all()
+    if p == 1:   # the reachable interval
+        assert np.all((ys >= edge.min() - 1e-12) & (ys <= edge.max() + 1e-12))

@@ -56,3 +56,56 @@ def test_governor_step_is_feasible_and_bounded(model, cert, fhocp):
         # the FHOCP at the governed set-point, started from the candidate, solves
         res = fhocp.solve(sol.x[1], 0.02, gs.x_bar, gs.u_bar, gs.alpha, u_init=gs.candidate)
         assert res.feasible
+
+
+@pytest.mark.parametrize(("m", "p"), [(1, 2), (3, 2)])
+def test_governor_for_non_square_problems(m: int, p: int) -> None:
+    """More outputs than inputs (1 × 2): a governed set-point is the equilibrium output of
+    ū(v) + λ (ū(r) − ū(v)), on the model's curve of them, not the (unreachable) point
+    v + λ (r − v) of the segment; more inputs than outputs (3 × 2): the point of the segment,
+    by the least-squares Newton continuation. Each step's sequence is feasible, and the
+    nominal closed loop reaches r exactly."""
+    from controllers import gain_design
+    from controllers.equilibrium import equilibrium_output
+    from controllers.gru import step
+    from tests.controllers.random_gru import random_gru_model
+
+    model = random_gru_model(7, n=8, m=m, p=p)
+    x0, v = equilibrium_output(model.params, np.full(m, -0.3))
+    _, r = equilibrium_output(model.params, np.full(m, 0.3), x0)
+    theta, cert = gain_design.choose_gain_scale(model, [v, r], N=10, w_y_bar=0.002)
+    assert theta is not None
+    fh = FHOCP.from_certificate(cert).setup()
+    gov = ReferenceGovernor(cert, fh)
+    ref = cert.reference(v)
+    x_bar, u_bar, alpha, x = ref.x_bar, ref.u_bar, ref.alpha, ref.x_bar
+    sol = fh.solve(x, 0.0, x_bar, u_bar, alpha, warm=False)
+    assert sol.success
+    gs = gov.step(x, 0.0, v, x_bar, u_bar, r, sol.u, 0.25)
+    assert 0 < gs.lam <= 0.25
+    on_segment = v + gs.lam * (r - v)
+    if p > m:   # ū(r) = 0.3: the map u → ȳ is injective
+        u_lam = u_bar + gs.lam * (np.full(m, 0.3) - u_bar)
+        np.testing.assert_allclose(gs.u_bar, u_lam, atol=1e-9)
+        np.testing.assert_allclose(gs.y, equilibrium_output(model.params, u_lam, x_bar)[1],
+                                   atol=1e-9)
+        assert np.max(np.abs(gs.y - on_segment)) > 1e-6
+    else:
+        np.testing.assert_allclose(gs.y, on_segment, atol=1e-15)
+    plan, last, lams = sol.u, True, []
+    for _ in range(60):
+        gs = gov.govern(x, 0.0, v, x_bar, u_bar, r, plan, last)
+        if gs.lam > 0:
+            lams.append(gs.lam)
+            v, x_bar, u_bar, alpha = gs.y, gs.x_bar, gs.u_bar, gs.alpha
+            assert cert.ok(v) and np.max(np.abs(gs.candidate)) <= 1.0
+            assert np.max(np.abs(output(model.params, x_bar) - v)) < 1e-10
+            assert np.max(np.abs(step(model.params, x_bar, u_bar) - x_bar)) < 1e-10
+            assert gov.feasible(x, 0.0, gs.candidate, x_bar, alpha)
+        res = fh.solve(x, 0.0, x_bar, u_bar, alpha, u_init=gs.candidate)
+        last = res.success
+        plan = res.u if res.success else (gs.candidate if gs.candidate is not None else plan)
+        x = step(model.params, x, plan[0])
+        if np.array_equal(v, r):
+            break
+    assert lams and np.array_equal(v, r)

@@ -292,3 +292,144 @@ def test_plot_replaces_the_figure_atomically(model_file: Path, tmp_path: Path,
     capsys.readouterr()
     assert png.read_bytes()[:4] == b"\x89PNG"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["cert.png", "model.json"]
+
+
+# -- set-points by name, --problem, any numbers of signals ----------------------------------------
+CSTR_TOML = """[problem]
+name = "cstr"
+Ts = 15.0
+
+[inputs.F]
+unit = "L/min"
+min = 2.0
+max = 12.0
+description = "feed flow"
+
+[inputs.Tc]
+unit = "K"
+min = 280.0
+max = 320.0
+description = "coolant temperature"
+
+[outputs.CA]
+unit = "mol/L"
+min = 0.1
+max = 0.9
+description = "concentration of A"
+
+[outputs.T]
+unit = "K"
+min = 300.0
+max = 360.0
+description = "reactor temperature"
+"""
+
+
+@pytest.fixture()
+def cstr_file(tmp_path: Path) -> Path:
+    """A 2 × 2 model of another problem (CA [mol/L], T [K], Ts = 15 s) with w̄_y."""
+    from tests.controllers.random_gru import other_problem
+
+    m = random_gru_model(3, n=10, problem=other_problem())
+    m.w_y_bar = 0.01
+    path = tmp_path / "cstr.json"
+    m.save(path)
+    return path
+
+
+def test_setpoints_by_name_in_the_problems_units(cstr_file: Path, capsys) -> None:
+    """--setpoint CA=…,T=… (any order) is the positional form in the problem's output order;
+    the set-point is labelled by name."""
+    from controllers.equilibrium import equilibrium_output
+
+    m = GRUModel.load(cstr_file)
+    ca, t = (float(v) for v in m.denormalize_y(
+        equilibrium_output(m.params, np.array([0.3, -0.2]))[1]))
+    outs = []
+    for form in (f"CA={ca!r},T={t!r}", f"T={t!r}, CA={ca!r}", f"{ca!r},{t!r}"):
+        assert main(["certify", str(cstr_file), "--setpoint", form]) == 0
+        outs.append(capsys.readouterr().out)
+    assert outs[0] == outs[1] == outs[2]
+    assert f"set-point CA={ca:g}, T={t:g}: alpha = " in outs[0]
+    assert "CA ∈ [" in outs[0] and "mol/L" in outs[0] and "ū: F=" in outs[0]
+
+
+@pytest.mark.parametrize(("form", "words"), [
+    ("CA=0.6", "no value for T (expected CA=V,T=V)"),
+    ("CA=0.6,T=330,CA=0.5", "output 'CA' given twice"),
+    ("CA=0.6,h1=1", "no output 'h1' in the problem (outputs: CA, T)"),
+    ("CA=0.6,330", "give every output by name (CA=V,T=V) or none"),
+    ("CA=x,T=330", "CA='x' is not a number"),
+    ("CA=nan,T=330", "not finite: CA=nan"),
+    ("0.6", "expected 2 numbers (CA,T), or CA=V,T=V"),
+])
+def test_bad_named_setpoints_exit_2_one_line(cstr_file: Path, form: str, words: str,
+                                             capsys) -> None:
+    assert main(["certify", str(cstr_file), "--setpoint", form]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1
+    assert f"--setpoint {form!r}: {words}" in captured.err
+
+
+def test_problem_option_agrees_or_exit_2_naming_both(cstr_file: Path, model_file: Path,
+                                                     tmp_path: Path, capsys) -> None:
+    toml = tmp_path / "cstr.toml"
+    toml.write_text(CSTR_TOML)
+    assert main(["certify", str(cstr_file), "--problem", str(toml), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["nu"] < 1
+    assert main(["certify", str(model_file), "--problem", str(toml)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--problem {toml} contradicts the problem of " in err
+    assert str(model_file) in err and "'fourtank'" in err and "'cstr'" in err
+    assert main(["certify", str(model_file), "--problem", str(tmp_path / "no.toml")]) == 2
+    assert "no.toml: problem file not found" in capsys.readouterr().err
+
+
+def test_auto_gain_scale_without_a_passing_theta_exits_1_and_saves_nothing(
+        tmp_path: Path, capsys) -> None:
+    """w̄_y = 0.6: ν, ν_o < 1 and the admissible range is not empty, but no θ passes at the 9
+    default set-points (the grid at 25/50/75 % of the [0, 2] m boxes): exit 1, and --save
+    leaves the file as it was instead of saving the θ = 0 gains."""
+    m = random_gru_model(0)
+    m.w_y_bar = 0.6
+    path = tmp_path / "noisy.json"
+    m.save(path)
+    before = path.read_bytes()
+    assert main(["certify", str(path), "--auto-gain-scale", "--save"]) == 1
+    captured = capsys.readouterr()
+    assert "LP gains × θ = 0 (no θ in [0, 1] passes)" in captured.out
+    assert ("FAILED: gain scale: no θ in [0, 1] passes every hypothesis at the 9 default "
+            "set-points over the output box") in captured.out
+    assert (f"cosim certify: not saved: {path} is unchanged (no θ in [0, 1] passes: the "
+            "θ = 0 gains are not saved)\n") in captured.err
+    assert "saved L_z" not in captured.err and path.read_bytes() == before
+    assert main(["certify", str(path), "--auto-gain-scale", "--json"]) == 1
+    captured = capsys.readouterr()
+    assert json.loads(captured.out)["kappa"] == 0
+    assert "FAILED: gain scale: no θ in [0, 1] passes" in captured.err
+
+
+@pytest.mark.parametrize(("m", "p", "grid"), [(1, 1, 3), (3, 2, 9), (2, 3, 27)])
+def test_auto_gain_scale_on_the_default_grid_of_any_problem(m: int, p: int, grid: int,
+                                                            tmp_path: Path, capsys) -> None:
+    """The default set-points are the 3^p grid over the output box; the chosen gains are
+    saved; --plot draws the figure for one, two and three outputs."""
+    model = random_gru_model(2, n=8, m=m, p=p)
+    model.w_y_bar = 0.3
+    path = tmp_path / "model.json"
+    model.save(path)
+    png = tmp_path / "cert.png"
+    code = main(["certify", str(path), "--auto-gain-scale", "--save", "--plot", str(png)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.out + captured.err
+    assert "(auto)" in captured.out and f"m={m}, p={p}" in captured.out
+    saved = GRUModel.load(path)
+    assert saved.L_z.shape == (8, p)
+    theta = float(captured.out.split("LP gains × θ = ")[1].split(" ")[0])
+    assert 0 < theta < 1   # w̄_y = 0.3: the LP gains fail at the grid's outer points
+    targets = [model.normalize_y(np.array(s))
+               for s in gain_design.default_setpoints(model.problem)]
+    assert len(targets) == grid
+    cert = certs.compute_certificate(saved)
+    assert all(cert.ok(y) for y in targets)
+    assert png.read_bytes()[:4] == b"\x89PNG"

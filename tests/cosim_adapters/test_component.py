@@ -222,3 +222,158 @@ def test_reused_controller_gives_the_results_of_a_new_one() -> None:
     first, again, fresh = rows(ctrl), rows(ctrl), rows(RobustMPCController())
     assert np.array_equal(first, again, equal_nan=True)
     assert np.array_equal(first, fresh, equal_nan=True)
+
+
+# -- problems other than the four tanks: any m inputs, p outputs, Ts ------------------------------
+def _certified_model_file(tmp_path: Path, model, inputs: list) -> tuple[Path, list]:
+    """Save ``model`` with w̄_y = 0.01 and the observer gains of the largest θ passing every
+    hypothesis at the equilibrium outputs of ``inputs`` (normalised), which it returns in
+    the problem's units."""
+    from controllers import gain_design
+    from controllers.equilibrium import equilibrium_output
+
+    model.w_y_bar = 0.01
+    ys = [equilibrium_output(model.params, np.asarray(u, dtype=float))[1] for u in inputs]
+    theta, cert = gain_design.choose_gain_scale(model, ys)
+    assert theta is not None, "test design: the hypotheses must hold"
+    model.L_z, model.L_r = cert.L_z, cert.L_r
+    path = tmp_path / f"{model.problem.name}.json"
+    model.save(path)
+    return path, [model.denormalize_y(y) for y in ys]
+
+
+def _steps_scenario(tmp_path: Path, model, setpoints: list, samples: int):
+    """Set-point steps every ``samples`` samples of the problem's Ts, one ``ref.<output>``
+    column each."""
+    Ts, names = model.Ts, model.output_names
+    rows = [f"{k * samples * Ts:g}," + ",".join(f"{float(v)!r}" for v in y)
+            for k, y in enumerate(setpoints)]
+    rows.append(f"{len(setpoints) * samples * Ts:g}" + "," * len(names))
+    path = tmp_path / "steps.csv"
+    path.write_text("time," + ",".join(f"ref.{n}" for n in names) + "\n"
+                    + "\n".join(rows) + "\n")
+    return scenario.load(path)
+
+
+CASES = {  # name: (m, p, other problem, seed, inputs of the set-points, normalised)
+    "siso": (1, 1, False, 1, [[0.0], [0.5], [-0.5]]),
+    "3-inputs-2-outputs": (3, 2, False, 2, [[0.0] * 3, [0.4, -0.3, 0.2], [-0.4, 0.2, -0.3]]),
+    "2x2-cstr-Ts-15": (2, 2, True, 3, [[0.0, 0.0], [0.5, -0.4], [-0.4, 0.3]]),
+}
+
+
+@pytest.mark.parametrize("case", list(CASES))
+def test_closed_loop_on_other_problems(case: str, tmp_path: Path) -> None:
+    """The GRU model as the plant, set-point steps of its own problem: each tracked to 1e-3
+    of its output's half-width (normalised) within 50 samples, every input inside its box,
+    every output inside its constraint, no set-point refused and no fallback; results and
+    summary named by the problem's signals and problem."""
+    from tests.controllers.random_gru import other_problem, random_gru_model
+
+    m, p, other, seed, inputs = CASES[case]
+    model = random_gru_model(seed, n=10, m=m, p=p,
+                             problem=other_problem() if other else None)
+    path, setpoints = _certified_model_file(tmp_path, model, inputs)
+    samples = 50
+    sc = _steps_scenario(tmp_path, model, setpoints, samples)
+    ctrl = RobustMPCController(model=path)
+    pr = ctrl.problem
+    assert (pr.m, pr.p) == (m, p) and ctrl.sample_time == pr.Ts == model.Ts
+    assert [s.name for s in ctrl.outputs] == list(pr.input_names)
+    res = Master(GRUPlant(model, y0=setpoints[0]), ctrl, sc).run()
+    assert res.status == "ok", res.reason
+    cols, rows = res.columns, np.array(res.rows)
+    for c in pr.inputs:
+        u = rows[:, cols.index(f"ctrl.{c.name}")]
+        assert np.all((u >= c.min) & (u <= c.max)), c.name
+    for c in pr.outputs:
+        y = rows[:, cols.index(f"plant.{c.name}")]
+        assert np.all((y >= c.min) & (y <= c.max)), c.name
+    for k, ybar in enumerate(setpoints):
+        end = (k + 1) * samples - 1     # the last sample of set-point k
+        for j, c in enumerate(pr.outputs):
+            err = abs(rows[end, cols.index(f"plant.{c.name}")] - ybar[j])
+            assert err <= 1e-3 * abs(model.y_scale[j]), (k, c.name, err)
+            assert rows[end, cols.index(f"ctrl.y_model_{c.name}")] == ybar[j]
+    s = ctrl.summary()
+    assert s["problem"] == pr.name and s["kernel"] in ("compiled", "numpy")
+    assert s["setpoint_rejected_steps"] == 0 and s["fallbacks"] == 0
+    assert s["setpoint_changes"] == len(setpoints)
+
+
+def test_more_outputs_than_inputs_refuses_setpoints_off_the_curve(tmp_path: Path) -> None:
+    """One input, two outputs: the reachable set-points are a curve. A first set-point off it
+    stops the run with one line naming the closest reachable output; a later one is refused
+    (the controller keeps the last set-point, counts and names it) and the next reachable one
+    is tracked."""
+    from controllers.equilibrium import equilibrium_for_output
+    from controllers.gru import output
+    from tests.controllers.random_gru import random_gru_model
+
+    model = random_gru_model(4, n=10, m=1, p=2)
+    path, (y0, y1) = _certified_model_file(tmp_path, model, [[0.0], [0.4]])
+    off = 0.5 * (y0 + y1) + np.array([0.05, -0.05])
+    xb, _ = equilibrium_for_output(model, model.normalize_y(off))
+    closest = model.denormalize_y(output(model.params, xb))
+    words = (f"not reachable with inputs inside the saturation box (‖u‖∞ ≤ 1) (2 outputs, 1 "
+             f"input: only the model's 1-dimensional surface of equilibrium outputs is "
+             f"reachable); the closest reachable equilibrium output is "
+             f"h1={closest[0]:.4g} m, h2={closest[1]:.4g} m")
+    ctrl = RobustMPCController(model=path)
+    res = Master(GRUPlant(model, y0=y0), ctrl,
+                 _steps_scenario(tmp_path, model, [off, y1], 5)).run()
+    assert res.status == "failed" and "t=0 s" in res.reason and words in res.reason
+    assert "\n" not in res.reason
+    res = Master(GRUPlant(model, y0=y0), ctrl,
+                 _steps_scenario(tmp_path, model, [y0, off, y1], 40)).run()
+    assert res.status == "ok", res.reason
+    s = ctrl.summary()
+    assert s["setpoint_rejected_steps"] == 40 and len(s["setpoint_rejections"]) == 1
+    assert s["setpoint_rejections"][0].startswith("t=1000 s: ")
+    assert words in s["setpoint_rejections"][0]
+    cols, rows = res.columns, np.array(res.rows)
+    held = rows[40:80, cols.index("ctrl.y_model_h1")]
+    assert np.all(held == y0[0]) and np.all(rows[40:80, cols.index("ctrl.setpoint_rejected")])
+    h = rows[-1, [cols.index("plant.h1"), cols.index("plant.h2")]]
+    assert np.max(np.abs(model.normalize_y(h) - model.normalize_y(y1))) < 1e-3
+
+
+def test_build_kernel_for_any_problem(tmp_path: Path, capsys) -> None:
+    """cosim build-kernel --model FILE [--problem P]: the model's own problem, named in the
+    output with its numbers of signals; a contradicting --problem is exit 2 naming both."""
+    from cosim.cli import main
+    from tests.controllers.random_gru import random_gru_model
+
+    model = random_gru_model(2, n=10, m=3, p=2)
+    path, _ = _certified_model_file(tmp_path, model, [[0.0] * 3])
+    assert main(["build-kernel", "--model", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert f"compiled kernel for {path}, problem 'test3x2' (n=10, m=3, p=2, N=15)" in out
+    from tests.fourtank_problem import PATH
+
+    assert main(["build-kernel", "--model", str(path), "--problem", str(PATH)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"--problem {PATH} contradicts the problem of {path}" in err
+    assert "'test3x2'" in err and "'fourtank'" in err
+
+
+def test_cosim_run_on_another_problem_names_it(tmp_path: Path) -> None:
+    """cosim run with the GRU model of the CSTR-like problem as plant and controller model:
+    results.csv names the problem's signals, summary.json the problem."""
+    from cosim.cli import main
+    from tests.controllers.random_gru import other_problem, random_gru_model
+
+    model = random_gru_model(3, n=10, problem=other_problem())
+    path, setpoints = _certified_model_file(tmp_path, model, [[0.0, 0.0], [0.5, -0.4]])
+    _steps_scenario(tmp_path, model, setpoints, 10)
+    out = tmp_path / "run"
+    assert main(["run", str(tmp_path / "steps.csv"), "--plant", f"model:{path}", "--model",
+                 str(path), "--out", str(out), "--quiet", "--no-figure"]) == 0
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "ok" and summary["step_size"] == 15.0
+    assert summary["controller_summary"]["problem"] == "cstr"
+    header = [c.strip('"') for c in
+              (out / "results.csv").read_text().splitlines()[0].split(",")]
+    for name in ("ref.CA", "ref.T", "plant.CA", "plant.T", "ctrl.F", "ctrl.Tc",
+                 "ctrl.y_model_CA", "ctrl.y_model_T"):
+        assert name in header, name
