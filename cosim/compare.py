@@ -61,7 +61,8 @@ __all__ = [
 
 #: Default relative tolerance: tight enough that a small change of tuning or model fails.
 DEFAULT_RTOL = 1e-4
-#: Default absolute tolerance (in each signal's own unit; SI in this project).
+#: Default absolute tolerance, in each signal's own unit (the control problem's; SI for the
+#: four tanks): signals are compared by column name, whatever the plant.
 DEFAULT_ATOL = 1e-9
 
 Tolerance = float | Mapping[str, float]

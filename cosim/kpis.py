@@ -1,4 +1,13 @@
-"""Key performance indicators of a closed-loop run (``summary.json``)."""
+"""Key performance indicators of a closed-loop run (``summary.json``), keyed by the control
+problem's signals.
+
+Every per-signal KPI is ``kpis.<kpi>.<signal>`` in a run's ``summary.json``
+(``kpis.iae.h1``, ``kpis.tv.qa``, ``kpis.violations.h1.max``) and the column
+``<kpi>.<signal>`` of a campaign's ``runs.parquet`` (``iae.h1``, ``tv.qa``,
+``violations.h1.max``): the column name is the path below ``kpis`` (:data:`PER_OUTPUT`,
+:data:`PER_INPUT`, :data:`VIOLATION_FIELDS`; :func:`flat`). Nothing here knows a plant: the
+outputs, inputs and boxes come from the run.
+"""
 
 from __future__ import annotations
 
@@ -6,10 +15,17 @@ import math
 
 import numpy as np
 
-__all__ = ["SETTLE_ROWS", "compute", "setpoint_errors"]
+__all__ = ["PER_INPUT", "PER_OUTPUT", "SETTLE_ROWS", "VIOLATION_FIELDS", "compute", "flat",
+           "setpoint_errors"]
 
 #: Rows at the end of a set-point interval over which the static offset is averaged.
 SETTLE_ROWS = 20
+#: Per-output KPIs: ``kpis.<kpi>.<output>`` (a number or ``None``).
+PER_OUTPUT = ("iae", "final_error", "worst_offset")
+#: Per-input KPIs: ``kpis.<kpi>.<input>``.
+PER_INPUT = ("tv",)
+#: The fields of ``kpis.violations.<signal>`` (per constrained output and input).
+VIOLATION_FIELDS = ("max", "count")
 
 
 def _col(columns: list[str], data: np.ndarray, name: str) -> np.ndarray | None:
@@ -41,14 +57,16 @@ def compute(columns: list[str], rows: list[list[float]], outputs: list[str],
     Returns
     -------
     dict
-        ``iae`` (∫|ref − y| dt per output, zero-order hold), ``final_error`` (ref − y at the
-        last row), ``violations`` per constrained output and input (``max``: largest amount
-        outside the bounds, ``count``: rows outside), ``control_effort`` per input
-        (``integral_square`` ∫u² dt, ``total_variation`` Σ|Δu|), ``setpoints``: one entry
-        per interval of constant set-points (see :func:`setpoint_errors`).
+        Per output with a set-point: ``iae`` (∫|ref − y| dt, zero-order hold), ``final_error``
+        (ref − y at the last row), ``worst_offset`` (the largest absolute static offset over the
+        set-point intervals, see :func:`setpoint_errors`). Per constrained output and input:
+        ``violations`` (``max``: largest amount outside the bounds, ``count``: rows outside).
+        Per input: ``tv`` (total variation Σ|Δu|), ``control_effort`` (``integral_square``
+        ∫u² dt, ``total_variation`` = ``tv``). ``setpoints``: one entry per interval of
+        constant set-points. Units: the signals' own (IAE: output unit × s).
     """
-    kpis: dict = {"iae": {}, "final_error": {}, "violations": {}, "control_effort": {},
-                  "setpoints": []}
+    kpis: dict = {"iae": {}, "final_error": {}, "worst_offset": {}, "violations": {},
+                  "tv": {}, "control_effort": {}, "setpoints": []}
     if not rows:
         return kpis
     data = np.asarray(rows, dtype=float)
@@ -77,9 +95,51 @@ def compute(columns: list[str], rows: list[list[float]], outputs: list[str],
             continue
         isq = float(np.sum(v[:-1] ** 2 * dt)) if len(t) > 1 else 0.0
         tv = float(np.sum(np.abs(np.diff(v))))
+        kpis["tv"][u] = tv
         kpis["control_effort"][u] = {"integral_square": isq, "total_variation": tv}
     kpis["setpoints"] = setpoint_errors(columns, data, references)
+    for o in kpis["iae"]:
+        offsets = [abs(seg["offset"][o]) for seg in kpis["setpoints"]
+                   if math.isfinite(seg["offset"].get(o, math.nan))]
+        kpis["worst_offset"][o] = max(offsets, default=math.nan)
     return _finite(kpis)
+
+
+def flat(kpis: dict) -> dict[str, float]:
+    """The per-signal KPIs of :func:`compute` as ``{"<kpi>.<signal>": value}``.
+
+    ``iae.<o>``, ``final_error.<o>``, ``worst_offset.<o>``, ``tv.<u>``,
+    ``violations.<s>.max`` and ``violations.<s>.count``, in the order of the signals
+    (outputs' KPIs first, then the inputs', then the violations); ``None`` becomes NaN. A
+    ``summary.json`` written before ``worst_offset`` and ``tv`` existed gives them from
+    ``setpoints`` and ``control_effort``.
+    """
+    out: dict[str, float] = {}
+    kpis = kpis or {}
+    worst = dict(kpis.get("worst_offset") or {})
+    for o in kpis.get("iae") or {}:
+        if o not in worst:  # an older summary.json
+            offsets = [abs(v) for seg in kpis.get("setpoints") or []
+                       if (v := (seg.get("offset") or {}).get(o)) is not None]
+            worst[o] = max(offsets, default=None)
+    per_output = {"iae": kpis.get("iae") or {}, "final_error": kpis.get("final_error") or {},
+                  "worst_offset": worst}
+    for name, values in per_output.items():
+        for o, v in values.items():
+            out[f"{name}.{o}"] = _number(v)
+    tv = kpis.get("tv")
+    if tv is None:  # an older summary.json
+        tv = {u: e.get("total_variation") for u, e in (kpis.get("control_effort") or {}).items()}
+    for u, v in tv.items():
+        out[f"tv.{u}"] = _number(v)
+    for s, v in (kpis.get("violations") or {}).items():
+        for field in VIOLATION_FIELDS:
+            out[f"violations.{s}.{field}"] = _number((v or {}).get(field))
+    return out
+
+
+def _number(value: object) -> float:
+    return math.nan if value is None else float(value)  # type: ignore[arg-type]
 
 
 def setpoint_errors(columns: list[str], data: np.ndarray, references: list[str],

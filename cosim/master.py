@@ -102,7 +102,8 @@ class Master:
     # -- wiring -------------------------------------------------------------------------------
     def _wire(self) -> None:
         plant, ctrl, sc = self.plant, self.controller, self.scenario
-        plant_in = {s.name for s in plant.inputs}
+        # a controller output drives an FMU input, or a tunable parameter (cosim.binding)
+        plant_in = {s.name for s in plant.inputs} | set(getattr(plant, "tunables", ()))
         plant_out = [s.name for s in plant.outputs]
         self.ctrl_outputs = [s.name for s in ctrl.outputs]
         self.refs = [s.name[4:] for s in ctrl.inputs if s.name.startswith("ref.")]

@@ -4,7 +4,11 @@
 * :func:`compare_figure`: a result against its reference (``cosim compare --plot``).
 * :func:`certificate_figure`: the certificates of a model (``cosim certify --plot``).
 * :func:`prediction_figure`: a trained model's test-split prediction (``cosim train``).
-* :func:`campaign_figure`: a campaign's violations and KPIs (``report.png``).
+
+A campaign's ``report.png`` is drawn by :func:`cosim.campaign.report.campaign_figure` with
+the helpers here (:func:`signal_panel`, :func:`label`, :func:`pyplot`, :func:`save`).
+Nothing here knows a plant: a figure has one panel per signal of the run's control problem,
+labelled with its name and unit, for any number of inputs and outputs.
 
 matplotlib is imported when a figure is drawn, not with this module, so that commands that
 draw nothing start fast. The numbers a figure shows are computed by its caller (or by the
@@ -27,17 +31,12 @@ if TYPE_CHECKING:
     from cosim.compare import Comparison
     from cosim.master import RunResult
 
-__all__ = [
-    "campaign_figure",
-    "certificate_figure",
-    "compare_figure",
-    "prediction_figure",
-    "run_figure",
-]
+__all__ = ["certificate_figure", "compare_figure", "label", "prediction_figure", "pyplot",
+           "run_figure", "run_panels", "save", "signal_panel", "times_s"]
 
 
-def _pyplot() -> Any:
-    """``matplotlib.pyplot`` on the Agg backend."""
+def pyplot() -> Any:
+    """``matplotlib.pyplot`` on the Agg backend (imported on the first figure)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -46,9 +45,9 @@ def _pyplot() -> Any:
     return plt
 
 
-def _save(fig: Any, path: str | Path, dpi: int, atomic: bool = False) -> None:
+def save(fig: Any, path: str | Path, dpi: int, atomic: bool = False) -> None:
     """Save ``fig`` to ``path`` (atomically if asked) and close it, also when saving fails."""
-    plt = _pyplot()
+    plt = pyplot()
     try:
         if atomic:
             with atomicio.replacing(path) as tmp:  # a failed write keeps the previous file
@@ -60,62 +59,113 @@ def _save(fig: Any, path: str | Path, dpi: int, atomic: bool = False) -> None:
 
 
 # --------------------------------------------------------------------------------------------
+# One panel per signal (cosim run, the worst run of a campaign)
+# --------------------------------------------------------------------------------------------
+
+def label(name: str, unit: str | None) -> str:
+    """``name [unit]``, or ``name`` alone when the unit is empty or unknown."""
+    return f"{name} [{unit}]" if unit else name
+
+
+def times_s(unit: str | None) -> str:
+    """The unit of a time integral of a signal in ``unit`` (``m`` → ``m·s``)."""
+    return f"{unit}·s" if unit else "s"
+
+
+def signal_panel(ax: Any, t: np.ndarray, column: Any, kind: str, name: str,
+                 unit: str | None, bounds: tuple[float | None, float | None] = (None, None),
+                 marks: Sequence[float] = ()) -> None:
+    """One signal over time in ``ax``, as in the paper's Fig. 3.
+
+    Parameters
+    ----------
+    ax : matplotlib Axes
+    t : array
+        Times [s].
+    column : callable
+        ``column(name)``: the recorded column of that name, or ``None``.
+    kind : str
+        ``"y"``: an output (``plant.<name>``, ``sensor.<name>`` if perturbed, the set-point
+        ``ref.<name>`` as a step line); ``"u"``: an input (``ctrl.<name>``, held).
+    name, unit : str
+        The signal and its unit (the y label).
+    bounds : (lo, hi)
+        Its box: drawn, and the region outside it shaded (``None``: none).
+    marks : sequence of float
+        Times marked by dotted vertical lines (perturbations).
+    """
+    if kind == "y":
+        m = column(f"sensor.{name}")
+        if m is not None:
+            ax.plot(t, m, color="C2", lw=0.6, alpha=0.7, label=f"{name} measured")
+        y = column(f"plant.{name}")
+        if y is not None:
+            ax.plot(t, y, color="C0", lw=1.2, label=name)
+        r = column(f"ref.{name}")
+        if r is not None:
+            ax.step(t, r, where="post", color="k", ls="--", lw=1.0, label=f"{name} set-point")
+    else:
+        u = column(f"ctrl.{name}")
+        if u is not None:
+            ax.step(t, u, where="post", color="C1", lw=1.0, label=name)
+    lo, hi = bounds
+    if lo is not None and hi is not None:
+        span = (hi - lo) or 1.0
+        ax.axhspan(hi, hi + 0.15 * span, color="red", alpha=0.12, lw=0)
+        ax.axhspan(lo - 0.15 * span, lo, color="red", alpha=0.12, lw=0)
+        ax.axhline(hi, color="red", lw=0.8)
+        ax.axhline(lo, color="red", lw=0.8)
+        ax.set_ylim(lo - 0.1 * span, hi + 0.1 * span)
+    for tp in marks:
+        ax.axvline(tp, color="0.4", ls=":", lw=0.9)
+    ax.set_ylabel(label(name, unit))
+    ax.grid(alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper right", fontsize=7)
+
+
+# --------------------------------------------------------------------------------------------
 # cosim run
 # --------------------------------------------------------------------------------------------
+
+def run_panels(result: RunResult) -> list[tuple[str, str]]:
+    """The panels of :func:`run_figure`: ``("y", output)`` for every controlled output
+    (with a set-point, then the other measured ones), then ``("u", input)`` for every
+    manipulated input; ``m + p`` panels for ``m`` inputs and ``p`` outputs."""
+    outputs = dict.fromkeys([*result.references, *result.outputs])
+    return [("y", o) for o in outputs] + [("u", u) for u in result.inputs]
+
 
 def run_figure(path: str | Path, result: RunResult, title: str = "") -> Path:
     """Draw a :class:`~cosim.master.RunResult` into ``path`` (PNG) and return the path.
 
-    In the style of the paper's Fig. 3: one panel per controlled output (plant value,
-    measured value if perturbed, set-point as a step line, the region outside the output
-    constraints shaded), one panel per manipulated input (with its bounds), and a dotted
-    vertical line at each perturbation time.
+    In the style of the paper's Fig. 3, one panel per signal (:func:`run_panels`), whatever
+    the plant: each controlled output (plant value, measured value if perturbed, set-point
+    as a step line, the region outside its box shaded), each manipulated input (with its
+    box), a dotted vertical line at each perturbation time. Names, units and boxes are the
+    run's (``result.units``, ``result.bounds``: the controller's signals).
     """
-    plt = _pyplot()
+    plt = pyplot()
     cols = result.columns
     data = np.asarray(result.rows, dtype=float) if result.rows else np.zeros((0, len(cols)))
     t = data[:, 0] if len(data) else np.zeros(0)
-    panels = [("y", o) for o in result.outputs] + [("u", u) for u in result.inputs]
+    panels = run_panels(result)
     n = max(1, len(panels))
     fig, axes = plt.subplots(n, 1, figsize=(10, 2.2 * n + 0.6), sharex=True, squeeze=False)
-    for ax, (kind, name) in zip(axes[:, 0], panels, strict=False):
-        def col(c: str) -> np.ndarray | None:
-            return data[:, cols.index(c)] if c in cols else None
+    index = {c: i for i, c in enumerate(cols)}
 
-        if kind == "y":
-            m = col(f"sensor.{name}")
-            if m is not None:
-                ax.plot(t, m, color="C2", lw=0.6, alpha=0.7, label=f"{name} measured")
-            y = col(f"plant.{name}")
-            if y is not None:
-                ax.plot(t, y, color="C0", lw=1.2, label=name)
-            r = col(f"ref.{name}")
-            if r is not None:
-                ax.step(t, r, where="post", color="k", ls="--", lw=1.0, label=f"{name} set-point")
-        else:
-            u = col(f"ctrl.{name}")
-            if u is not None:
-                ax.step(t, u, where="post", color="C1", lw=1.0, label=name)
-        lo, hi = result.bounds.get(name, (None, None))
-        if lo is not None and hi is not None:
-            span = hi - lo
-            ax.axhspan(hi, hi + 0.15 * span, color="red", alpha=0.12, lw=0)
-            ax.axhspan(lo - 0.15 * span, lo, color="red", alpha=0.12, lw=0)
-            ax.axhline(hi, color="red", lw=0.8)
-            ax.axhline(lo, color="red", lw=0.8)
-            ax.set_ylim(lo - 0.1 * span, hi + 0.1 * span)
-        for tp in result.perturbation_times:
-            ax.axvline(tp, color="0.4", ls=":", lw=0.9)
-        unit = result.units.get(name)
-        ax.set_ylabel(f"{name} [{unit}]" if unit else name)
-        ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize=7)
+    def column(name: str) -> np.ndarray | None:
+        return data[:, index[name]] if name in index else None
+
+    for ax, (kind, name) in zip(axes[:, 0], panels, strict=False):
+        signal_panel(ax, t, column, kind, name, result.units.get(name),
+                     result.bounds.get(name, (None, None)), result.perturbation_times)
     axes[-1, 0].set_xlabel("time [s]")
     status = "" if result.status == "ok" else f" — {result.status}: {result.reason[:80]}"
     fig.suptitle(f"{title}{status}", fontsize=9)
     fig.tight_layout()
     path = Path(path)
-    _save(fig, path, dpi=110)
+    save(fig, path, dpi=110)
     return path
 
 
@@ -131,7 +181,7 @@ def compare_figure(c: Comparison, path: str | Path, max_signals: int = 16) -> Pa
     atomically (:mod:`cosim.atomicio`): a failed write raises
     :class:`~cosim.errors.OutputError` and leaves the previous file unchanged.
     """
-    plt = _pyplot()
+    plt = pyplot()
     path = Path(path)
     ordered = c.failed + [s for s in c.signals if s.passed]
     shown = ordered[:max_signals]
@@ -158,7 +208,7 @@ def compare_figure(c: Comparison, path: str | Path, max_signals: int = 16) -> Pa
                                                    if more else "")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    _save(fig, path, dpi=100, atomic=True)
+    save(fig, path, dpi=100, atomic=True)
     return path
 
 
@@ -169,87 +219,141 @@ def compare_figure(c: Comparison, path: str | Path, max_signals: int = 16) -> Pa
 def certificate_figure(path: str | Path, model: Any, cert: Any, setpoints: list,
                        bounds: Sequence[tuple[float, float]],
                        reachable: np.ndarray | None = None) -> Path:
-    """Certificate figure: the α(ȳ) map with the admissible set (``ass:setpoint`` and
-    ``eq:condition-recursive-feasibility``) and the reachable set, the ``ê_o,k`` bound
-    (``eq:eo-evolution``) and the tightened output bounds along the horizon
-    (``eq:optimization-constraint``), in physical units.
+    """Certificate figure, for any number of outputs ``p``, in the problem's units: the
+    admissible set-points (``ass:setpoint`` and ``eq:condition-recursive-feasibility``), the
+    ``ê_o,k`` bound (``eq:eo-evolution``) and, one panel per output, its tightened bounds
+    along the horizon (``eq:optimization-constraint``).
+
+    The admissible set is the α(ȳ) map over the output box for ``p = 2`` (with the edge of
+    the reachable set when given), α along the box for ``p = 1`` (with the reachable
+    interval), and for ``p ≥ 3`` α along each output's box with the others at the middle of
+    theirs.
 
     Parameters
     ----------
     path : str or Path
         The PNG, replaced atomically.
     model, cert
-        The :class:`~controllers.model.GRUModel` and its certificate.
+        The :class:`~controllers.model.GRUModel` (names, units, normalisation) and its
+        certificate.
     setpoints : list
-        Set-points to mark, physical units.
+        Set-points to mark, physical units, one value per output.
     bounds : sequence of (lo, hi)
-        The output constraints, physical units, one per model output.
-    reachable : (k, 2) array, optional
-        Outputs along the edge of the reachable set (drawn when the model has two outputs).
+        The output boxes, physical units, one per model output.
+    reachable : (k, p) array, optional
+        Outputs along the edge of the reachable set, physical units: drawn when ``p = 2``;
+        when ``p = 1`` its extremes bound the reachable interval (shaded).
     """
-    plt = _pyplot()
+    plt = pyplot()
     path = Path(path)
-    fig, axes = plt.subplots(1, 3, figsize=(15, 4.6))
-    names, units = model.output_names, model.output_units
-    ax = axes[0]
-    if model.p == 2:
-        lo = [b[0] for b in bounds]
-        hi = [b[1] for b in bounds]
-        g1 = np.linspace(lo[0], hi[0], 121)
-        g2 = np.linspace(lo[1], hi[1], 121)
-        A = np.array([[cert.alpha(model.normalize_y(np.array([a, b]))) for a in g1]
-                      for b in g2])
-        top = max(float(np.nanmax(A)), 1e-9)
-        im = ax.pcolormesh(g1, g2, np.clip(A, 0, None), shading="auto", cmap="viridis",
-                           vmin=0, vmax=top)
-        fig.colorbar(im, ax=ax, label="α (eq:def-alpha, normalised)")
-        ax.contour(g1, g2, A, levels=[0.0], colors="red", linewidths=1.2)
-        amin = cert.alpha_min()
-        if np.isfinite(amin) and amin > 0:
-            ax.contour(g1, g2, A, levels=[amin], colors="white", linewidths=1.2,
-                       linestyles="--")
-        if reachable is not None:
-            ax.plot(reachable[:, 0], reachable[:, 1], color="orange", lw=1.5)
-        for sp in setpoints:
-            ax.plot(sp[0], sp[1], "k+", ms=10)
-        ax.set_xlabel(f"{names[0]} set-point [{units[0]}]")
-        ax.set_ylabel(f"{names[1]} set-point [{units[1]}]")
-        ax.set_title("α; red: α = 0 (ass:setpoint); white: α = α_min\n"
-                     "(eq:condition-recursive-feasibility); orange: reachable, ‖u‖∞ ≤ 1",
-                     fontsize=9)
-    else:
-        ax.set_axis_off()
-    ax = axes[1]
+    p = len(bounds)
+    fig = plt.figure(figsize=(15, max(4.6, 1.6 * p + 1.0)))
+    grid = fig.add_gridspec(1, 3)
+    _admissible_panel(fig, fig.add_subplot(grid[0, 0]), model, cert, setpoints, bounds,
+                      reachable)
+    ax = fig.add_subplot(grid[0, 1])
     steps = int(min(20000, max(50, 6.0 / max(1e-12, 1 - cert.rho_o))))
     e = cert.e_o(steps)
     ax.plot(np.arange(steps + 1), e, label="ê_o,k")
     if np.isfinite(cert.e_inf):
         ax.axhline(cert.e_inf, color="grey", ls="--", label="ē_∞")
     ax.set_xlabel("k [samples]")
+    ax.set_ylabel("‖x − x̂‖∞ bound (normalised)")
     ax.set_title("observer error bound (eq:eo-evolution)", fontsize=9)
     ax.legend()
-    ax = axes[2]
+    names, units = list(model.output_names), list(model.output_units)
+    axes = grid[0, 2].subgridspec(p, 1, hspace=0.15).subplots(sharex=True, squeeze=False)
     i = np.arange(cert.N + 1)
-    for e_val, style in ((cert.e_o0, "-"), (cert.e_tilde, "--")):
+    for e_val, style, what in ((cert.e_o0, "-", "ê_o,0"), (cert.e_tilde, "--", "ẽ_o")):
         tb = cert.tightened_bounds(e_val)
         for j in range(cert.q):
             row = cert.L[j]
             k = int(np.flatnonzero(row)[0]) if np.count_nonzero(row) == 1 else None
-            if k is None:
+            if k is None or k >= p:
                 continue
-            bound = tb[:, j] / row[k]
-            phys = bound * model.y_scale[k] + model.y_offset[k]
-            ax.plot(i, phys, style, color=f"C{k}",
-                    label=f"{names[k]} {'≤' if row[k] > 0 else '≥'} (ê_o = {e_val:.3g})")
-    for lo_b, hi_b in bounds:
+            phys = tb[:, j] / row[k] * model.y_scale[k] + model.y_offset[k]
+            axes[k, 0].plot(i, phys, style, color=f"C{k}",
+                            label=f"ê_o = {what} = {e_val:.3g}" if row[k] > 0 else None)
+    for k, (lo_b, hi_b) in enumerate(bounds):
+        ax = axes[k, 0]
         ax.axhline(lo_b, color="k", lw=0.8)
         ax.axhline(hi_b, color="k", lw=0.8)
-    ax.set_xlabel("prediction step i")
-    ax.set_title("tightened output bounds h − a_i ê_o − b_i − w_L (physical)", fontsize=9)
-    ax.legend(fontsize=7)
+        ax.set_ylabel(label(names[k], units[k]), fontsize=8)
+        ax.tick_params(labelsize=7)
+    if axes[0, 0].get_legend_handles_labels()[0]:
+        axes[0, 0].legend(fontsize=7, loc="best")
+    axes[0, 0].set_title("tightened output bounds h − a_i ê_o − b_i − w_L", fontsize=9)
+    axes[-1, 0].set_xlabel("prediction step i")
     fig.tight_layout()
-    _save(fig, path, dpi=110, atomic=True)
+    save(fig, path, dpi=110, atomic=True)
     return path
+
+
+def _admissible_panel(fig: Any, ax: Any, model: Any, cert: Any, setpoints: list,
+                      bounds: Sequence[tuple[float, float]],
+                      reachable: np.ndarray | None) -> None:
+    """The admissible set-points of :func:`certificate_figure` (see there)."""
+    names, units = list(model.output_names), list(model.output_units)
+    p = len(bounds)
+    lo = np.array([b[0] for b in bounds], dtype=float)
+    hi = np.array([b[1] for b in bounds], dtype=float)
+    amin = cert.alpha_min()
+    amin = amin if np.isfinite(amin) and amin > 0 else None
+
+    def alpha(y: np.ndarray) -> float:
+        return float(cert.alpha(model.normalize_y(y)))
+
+    if p == 2:
+        g1, g2 = np.linspace(lo[0], hi[0], 121), np.linspace(lo[1], hi[1], 121)
+        A = np.array([[alpha(np.array([a, b])) for a in g1] for b in g2])
+        top = max(float(np.nanmax(A)), 1e-9)
+        im = ax.pcolormesh(g1, g2, np.clip(A, 0, None), shading="auto", cmap="viridis",
+                           vmin=0, vmax=top)
+        fig.colorbar(im, ax=ax, label="α (eq:def-alpha, normalised)")
+        ax.contour(g1, g2, A, levels=[0.0], colors="red", linewidths=1.2)
+        if amin is not None:
+            ax.contour(g1, g2, A, levels=[amin], colors="white", linewidths=1.2,
+                       linestyles="--")
+        if reachable is not None:
+            ax.plot(reachable[:, 0], reachable[:, 1], color="orange", lw=1.5)
+        for sp in setpoints:
+            ax.plot(sp[0], sp[1], "k+", ms=10)
+        ax.set_xlabel(label(f"{names[0]} set-point", units[0]))
+        ax.set_ylabel(label(f"{names[1]} set-point", units[1]))
+        ax.set_title("α; red: α = 0 (ass:setpoint); white: α = α_min\n"
+                     "(eq:condition-recursive-feasibility)"
+                     + ("; orange: reachable, ‖u‖∞ ≤ 1" if reachable is not None else ""),
+                     fontsize=9)
+        return
+    s = np.linspace(0.0, 1.0, 121)
+    middle = 0.5 * (lo + hi)
+    for k in range(p):
+        ys = [middle.copy() for _ in s]
+        for y, f in zip(ys, s, strict=True):
+            y[k] = lo[k] + f * (hi[k] - lo[k])
+        a = [alpha(y) for y in ys]
+        x = lo[k] + s * (hi[k] - lo[k]) if p == 1 else s
+        ax.plot(x, a, color=f"C{k}",
+                label=f"{names[k]} ∈ [{lo[k]:g}, {hi[k]:g}]" + (f" {units[k]}" if units[k]
+                                                                 else ""))
+    ax.axhline(0.0, color="red", lw=1.0)
+    if amin is not None:
+        ax.axhline(amin, color="grey", ls="--", lw=1.0)
+    if p == 1:
+        if reachable is not None and len(reachable):
+            r = np.asarray(reachable, dtype=float)[:, 0]
+            ax.axvspan(float(r.min()), float(r.max()), color="orange", alpha=0.15, lw=0,
+                       label="reachable, ‖u‖∞ ≤ 1")
+        for sp in setpoints:
+            ax.axvline(float(np.ravel(sp)[0]), color="k", ls=":", lw=0.9)
+        ax.set_xlabel(label(f"{names[0]} set-point", units[0]))
+    else:
+        ax.set_xlabel("set-point: position in its box (0 = min, 1 = max); the others at "
+                      "the middle", fontsize=8)
+    ax.set_ylabel("α (eq:def-alpha, normalised)")
+    ax.set_title("admissible where α > 0 (red: α = 0, ass:setpoint) and α ≥ α_min\n"
+                 "(grey, eq:condition-recursive-feasibility)", fontsize=9)
+    ax.legend(fontsize=7)
 
 
 # --------------------------------------------------------------------------------------------
@@ -274,7 +378,7 @@ def prediction_figure(time: np.ndarray, y: np.ndarray, xi: np.ndarray, names: li
     path : str or Path
     title : str
     """
-    plt = _pyplot()
+    plt = pyplot()
     t = (time - time[0]) / 3600.0
     fig, axes = plt.subplots(len(names), 1, figsize=(10, 2.6 * len(names)), sharex=True,
                              squeeze=False)
@@ -288,92 +392,4 @@ def prediction_figure(time: np.ndarray, y: np.ndarray, xi: np.ndarray, names: li
     axes[-1, 0].set_xlabel("time from start of test split [h]")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    _save(fig, path, dpi=120)
-
-
-# --------------------------------------------------------------------------------------------
-# cosim campaign
-# --------------------------------------------------------------------------------------------
-
-#: The KPI panels of :func:`campaign_figure` after the violations panel: column, title.
-_CAMPAIGN_KPIS = (("iae_h1", "IAE h1 [m·s]"), ("iae_h2", "IAE h2 [m·s]"),
-                 ("worst_offset", "worst static offset [m]"),
-                 ("max_violation", "largest violation"), ("step_ms_p99", "step p99 [ms]"))
-
-
-def campaign_figure(path: str | Path, title: str, table: Any, violating: Sequence[float],
-                    upper_bounds: Sequence[float], worst: Any = None,
-                    worst_results: Path | None = None) -> None:
-    """A campaign's ``report.png``, replaced atomically.
-
-    Top rows: the share of violating runs per variant with its 95 % upper bound, and a box
-    plot per KPI (IAE h1 and h2, worst static offset, largest violation, step time p99) over
-    the runs that finished. Bottom row: the
-    outputs and inputs of the worst run.
-
-    Parameters
-    ----------
-    path : str or Path
-    title : str
-    table : pandas.DataFrame
-        One row per run and variant (``runs.parquet``).
-    violating, upper_bounds : sequence of float
-        Per variant (in order of first appearance in ``table``): the observed share of
-        violating runs and its one-sided 95 % upper bound, in percent.
-    worst : pandas row, optional
-        The worst run (``run``, ``variant``, ``violation_count``, ``iae_h1``).
-    worst_results : Path, optional
-        Its ``results.csv``; a file that cannot be read is noted in the figure.
-    """
-    from cosim.csvio import read_table
-
-    plt = _pyplot()
-    variants = list(dict.fromkeys(table["variant"]))
-    ok = table[table["status"] == "ok"]
-    fig = plt.figure(figsize=(13, 9))
-    grid = fig.add_gridspec(3, 3, hspace=0.55, wspace=0.3)
-    ax = fig.add_subplot(grid[0, 0])
-    x = np.arange(len(variants))
-    ax.bar(x, violating, color="C3", alpha=0.7, label="observed")
-    ax.scatter(x, upper_bounds, color="k", marker="_", s=400, label="95 % upper bound")
-    ax.set_xticks(x, variants, rotation=15, fontsize=8)
-    ax.set_title("violating runs [%]", fontsize=10)
-    ax.legend(fontsize=7)
-    for i, (kpi, label) in enumerate(_CAMPAIGN_KPIS, start=1):
-        ax = fig.add_subplot(grid[i // 3, i % 3])
-        data = [ok[ok["variant"] == v][kpi].to_numpy(dtype=float) for v in variants]
-        data = [d[np.isfinite(d)] for d in data]
-        if any(d.size for d in data):
-            ax.boxplot([d if d.size else [np.nan] for d in data], tick_labels=variants)
-            ax.tick_params(axis="x", labelrotation=15, labelsize=8)
-        ax.set_title(label, fontsize=10)
-    ax_y = fig.add_subplot(grid[2, :2])
-    ax_u = fig.add_subplot(grid[2, 2])
-    if worst is not None:
-        try:
-            res = read_table(worst_results)
-            t = res.time
-            for j, o in enumerate(("h1", "h2")):
-                if f"plant.{o}" in res.names:
-                    ax_y.plot(t, res.column(f"plant.{o}"), color=f"C{j}", lw=1, label=o)
-                if f"ref.{o}" in res.names:
-                    ax_y.step(t, res.column(f"ref.{o}"), where="post", color=f"C{j}", ls="--",
-                              lw=0.8)
-            for j, u in enumerate(("qa", "qb")):
-                if f"ctrl.{u}" in res.names:
-                    ax_u.step(t, res.column(f"ctrl.{u}"), where="post", color=f"C{j + 2}",
-                              lw=0.8, label=u)
-        except Exception as exc:  # the figure must not fail the campaign
-            ax_y.text(0.5, 0.5, f"worst run not readable: {exc}", transform=ax_y.transAxes,
-                      ha="center")
-        ax_y.set_title(f"worst run: {int(worst['run'])}-{worst['variant']} "
-                       f"({int(worst['violation_count'])} violations, IAE h1 "
-                       f"{worst['iae_h1']:.4g} m·s)", fontsize=10)
-        ax_y.set_xlabel("time [s]")
-        ax_y.set_ylabel("level [m]")
-        ax_y.legend(fontsize=8)
-        ax_u.set_xlabel("time [s]")
-        ax_u.set_ylabel("flow [m³/s]")
-        ax_u.legend(fontsize=8)
-    fig.suptitle(title)
-    _save(fig, path, dpi=90, atomic=True)
+    save(fig, path, dpi=120)

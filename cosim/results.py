@@ -35,7 +35,8 @@ from cosim.csvio import header_line, row_lines, write_csv
 from cosim.errors import OutputError
 from cosim.master import RunResult
 
-__all__ = ["PART_SUFFIX", "RUN_FILES", "ResultsStream", "jsonable", "summary", "write", "write_csv"]
+__all__ = ["PART_SUFFIX", "RUN_FILES", "ResultsStream", "jsonable", "signals", "summary", "write",
+           "write_csv"]
 
 #: Every file a run writes into its folder.
 RUN_FILES = ("results.csv", "timings.csv", "summary.json", "figure.png")
@@ -158,8 +159,9 @@ def summary(result: RunResult, meta: dict | None = None) -> dict:
 
     Keys: ``status`` (``ok``/``failed``/``interrupted``), ``reason``, ``steps``,
     ``steps_planned``, ``step_size``, ``start_time``, ``stop_time``, ``wall_time_s``,
-    ``kpis`` (see :func:`cosim.kpis.compute`), ``controller_summary`` (the controller's own
-    ``summary()``: solver statistics), plus ``meta`` (scenario, plant, controller, seed...).
+    ``signals`` (see :func:`signals`), ``kpis`` (see :func:`cosim.kpis.compute`),
+    ``controller_summary`` (the controller's own ``summary()``: solver statistics), plus
+    ``meta`` (scenario, plant, controller, seed...).
     """
     doc = {
         "status": result.status,
@@ -172,10 +174,28 @@ def summary(result: RunResult, meta: dict | None = None) -> dict:
         "wall_time_s": round(result.wall_time_s, 6),
     }
     doc.update(meta or {})
+    doc["signals"] = signals(result)
     doc["kpis"] = _kpis.compute(result.columns, result.rows, result.outputs, result.references,
                                 result.inputs, result.bounds)
     doc["controller_summary"] = result.controller_summary
     return jsonable(doc)
+
+
+def signals(result: RunResult) -> dict[str, dict[str, dict]]:
+    """The run's controlled outputs and manipulated inputs, with their units and boxes.
+
+    ``{"outputs": {name: {"unit", "min", "max"}}, "inputs": {...}}`` in the controller's
+    order (outputs with a set-point first, then the other measured ones); ``unit`` is ``""``
+    and ``min``/``max`` are ``None`` where the controller declares none. What the KPIs are
+    keyed by, and what a campaign's report labels its figures with.
+    """
+    def entry(name: str) -> dict:
+        lo, hi = result.bounds.get(name, (None, None))
+        return {"unit": result.units.get(name, ""), "min": lo, "max": hi}
+
+    outputs = dict.fromkeys([*result.references, *result.outputs])
+    return {"outputs": {o: entry(o) for o in outputs},
+            "inputs": {u: entry(u) for u in result.inputs}}
 
 
 def jsonable(obj: object) -> object:

@@ -92,9 +92,25 @@ class DrawContext:
 
     @classmethod
     def build(cls, spec: CampaignSpec, start_time: float) -> DrawContext:
-        """Load the model and certificate when the spec needs them."""
+        """Load the model and certificate when the spec needs them.
+
+        Raises
+        ------
+        CosimError
+            ``[setpoints]`` ranges that leave out an output the scenario sets a set-point
+            for, or certified set-points (no ranges) of a model whose outputs are not the
+            scenario's.
+        """
         needs_model = spec.initial_state is not None or (
             spec.setpoints is not None and not spec.setpoints.ranges)
+        scenario_refs = _scenario_refs(spec)
+        if spec.setpoints is not None and spec.setpoints.ranges:
+            missing = [o for o in scenario_refs if o not in spec.setpoints.ranges]
+            if missing:
+                raise CosimError(
+                    f"{spec.path}: [setpoints]: no range for {', '.join(missing)} (the scenario "
+                    f"sets ref.{missing[0]}; the drawn set-points replace all of its "
+                    f"set-points): give one per output, e.g. {missing[0]} = [low, high]")
         if not needs_model:
             outputs = list(spec.setpoints.ranges) if spec.setpoints else []
             return cls(start_time, outputs)
@@ -105,6 +121,13 @@ class DrawContext:
         if spec.model_plant and spec.model is None and "model" not in spec.options:
             model_path = spec.plant[len("model:"):]  # type: ignore[index]
         model = GRUModel.load(model_path)
+        if spec.setpoints is not None and not spec.setpoints.ranges and scenario_refs \
+                and sorted(scenario_refs) != sorted(model.output_names):
+            raise CosimError(
+                f"{spec.path}: [setpoints]: without ranges the set-points are the certified "
+                f"ones of the model {model_path} (outputs {', '.join(model.output_names)}), "
+                f"but the scenario sets {', '.join(scenario_refs)}: give a range per output, "
+                f"e.g. {scenario_refs[0]} = [low, high]")
         cert = certs.compute_certificate(model)
         ranges = {}
         for name, lo, hi in certs.admissible_ranges(cert, model):
@@ -115,6 +138,16 @@ class DrawContext:
         outputs = list(spec.setpoints.ranges or model.output_names) if spec.setpoints else \
             list(model.output_names)
         return cls(start_time, outputs, model, cert, ranges)
+
+
+def _scenario_refs(spec: CampaignSpec) -> list[str]:
+    """The outputs the campaign's scenario sets a set-point for (``ref.<output>``)."""
+    from cosim import scenario
+
+    try:
+        return [c.target for c in scenario.load(spec.scenario).columns_of(scenario.REF)]
+    except CosimError:
+        return []  # reported where the scenario is read
 
 
 def _sample(dist: Distribution, rng: np.random.Generator) -> float:

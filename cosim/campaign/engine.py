@@ -141,44 +141,45 @@ def _plant_file(spec: CampaignSpec) -> Path:
     return plant_path(None)
 
 
-def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, Any]) -> float:
-    """Wire run 0 of every variant (as a worker will) and return the controller sample time.
+def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, Any],
+              varmaps: dict[str, Any] | None = None) -> float:
+    """Wire run 0 of every variant (as a worker will: its plant bound through
+    ``varmaps[variant]``) and return the controller sample time.
 
     Raises :class:`CosimError` naming the spec's line for a draw key the plant or the
     scenario does not know.
     """
     from cosim import scenario as scenario_mod
-    from cosim import varmap
+    from cosim.campaign.spec import _Locator
     from cosim.master import Master
 
-    if spec.model_plant:
-        from cosim_adapters.gru_plant import GRUPlant
-
-        plant: Any = GRUPlant.from_file(spec.plant or "")
-    else:
-        from cosim.fmu import FmuComponent
-
-        vmap = varmap.load(spec.map) if spec.map else None
-        plant = FmuComponent(_plant_file(spec), interface=spec.interface, varmap=vmap)
+    varmaps = varmaps or {}
     sc = scenario_mod.load(spec.scenario)
     at_start = dict(draw.values)
     at_start.update({f"plant.{k}": v for k, v in draw.plant_start.items()})
-    from cosim.campaign.spec import _Locator
-
     loc = _Locator(spec.path, spec.text)
-    settable = plant.settable(True) if hasattr(plant, "settable") else set()
-    measured = {s.name for s in plant.outputs}
-    for key in draw.values:
-        parts = key.split(".")
-        if parts[0] == "plant" and key[len("plant."):] not in settable:
-            raise loc.error(f"draw '{key}': the plant has no input or parameter "
-                            f"'{key[len('plant.'):]}'", "draw", key)
-        if parts[0] == "sensor" and ".".join(parts[1:-1]) not in measured:
-            raise loc.error(f"draw '{key}': the plant has no output "
-                            f"'{'.'.join(parts[1:-1])}'", "draw", key)
     sc = sc.with_changes(at_start, list(draw.setpoints) or None, draw.stop_time)
     sample = None
     for name, ctrl in variant_controllers.items():
+        if spec.model_plant:
+            from cosim_adapters.gru_plant import GRUPlant
+
+            plant: Any = GRUPlant.from_file(spec.plant or "")
+        else:
+            from cosim.fmu import FmuComponent
+
+            plant = FmuComponent(_plant_file(spec), interface=spec.interface,
+                                 varmap=varmaps.get(name))
+        settable = plant.settable(True) if hasattr(plant, "settable") else set()
+        measured = {s.name for s in plant.outputs}
+        for key in draw.values:
+            parts = key.split(".")
+            if parts[0] == "plant" and key[len("plant."):] not in settable:
+                raise loc.error(f"draw '{key}': the plant has no input or parameter "
+                                f"'{key[len('plant.'):]}'", "draw", key)
+            if parts[0] == "sensor" and ".".join(parts[1:-1]) not in measured:
+                raise loc.error(f"draw '{key}': the plant has no output "
+                                f"'{'.'.join(parts[1:-1])}'", "draw", key)
         try:
             Master(plant, ctrl, sc, seed=draw.seed)
         except CosimError as exc:
@@ -187,12 +188,43 @@ def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, 
     return float(sample or 1.0)
 
 
+def _problem_line(spec: CampaignSpec) -> int:
+    """The line of the spec's ``problem`` key (1 without one): where a default variant's
+    faults of the problem are reported."""
+    if spec.problem is None:
+        return 1
+    from cosim.campaign.spec import _Locator
+
+    return _Locator(spec.path, spec.text).line("campaign", "problem")
+
+
+def _bind(spec: CampaignSpec, name: str, line: int, ctrl: Any, problem: Any,
+          user_map: Any) -> Any:
+    """The variable map binding the variant's control problem (its controller's, else
+    ``problem``) to the plant FMU (``user_map`` first); ``user_map`` for a GRU-model plant or
+    a controller without a problem."""
+    from cosim.api import run_problem
+
+    if spec.model_plant:
+        return user_map
+    bound = run_problem(ctrl, problem)
+    if bound is None:
+        return user_map
+    from cosim_adapters.problems import bind_plant
+
+    try:
+        return bind_plant(bound, _plant_file(spec), user_map)
+    except CosimError as exc:
+        raise CosimError(f"{spec.path}:{line}: variant '{name}': {exc}") from None
+
+
 def prepare(spec: CampaignSpec) -> Plan:
     """Check the spec against the real plant and controllers, draw every run, pack the
     files; raises :class:`CosimError` (exit 2) before anything runs."""
     from controllers.model import DEFAULT_MODEL
-    from cosim import registry
+    from cosim import registry, varmap
     from cosim import scenario as scenario_mod
+    from cosim.api import with_problem
 
     files: dict[str, bytes] = {"scenario.csv": _read(spec.scenario, "scenario")}
     if spec.model_plant:
@@ -202,28 +234,40 @@ def prepare(spec: CampaignSpec) -> Plan:
     else:
         plant = ("fmu", "plant.fmu")
         files["plant.fmu"] = _read(_plant_file(spec), "plant FMU")
+    user_map = None
     if spec.map is not None:
         files["plant.map.toml"] = _read(spec.map, "variable map")
+        user_map = varmap.load(spec.map)
     sc = scenario_mod.load(spec.scenario)
     ctx = DrawContext.build(spec, sc.start_time)
     draws = [draw_run(spec, i, ctx) for i in range(spec.runs)]
-    controllers, variant_options = {}, {}
+    controllers, variant_options, varmaps = {}, {}, {}
     for k, v in enumerate(spec.variants):
         options = dict(v.options)
         if "model" not in options and registry.CONTROLLERS.get(v.controller) == \
                 registry.CONTROLLERS["robust-mpc"]:
             options["model"] = str(DEFAULT_MODEL)
-        local = dict(options)
-        if "model" in options:
-            name = f"model_{k}.json"
-            files[name] = _read(Path(options["model"]), "model file")
-            options["model"] = name
+        line = v.line or _problem_line(spec)
         try:
-            controllers[v.name] = registry.create(v.controller, local)
+            options = with_problem(v.controller, options,
+                                   str(spec.problem) if spec.problem is not None else None)
         except CosimError as exc:
-            raise CosimError(f"{spec.path}:{v.line or 1}: variant '{v.name}': {exc}") from None
+            raise CosimError(f"{spec.path}:{line}: variant '{v.name}': {exc}") from None
+        local = dict(options)
+        for key, what, ext in (("model", "model file", "json"),
+                               ("problem", "problem file", "toml")):
+            if isinstance(options.get(key), str | Path):
+                name = f"{key}_{k}.{ext}"
+                files[name] = _read(Path(options[key]), what)
+                options[key] = name
+        try:
+            controllers[v.name] = ctrl = registry.create(v.controller, local)
+        except CosimError as exc:
+            raise CosimError(f"{spec.path}:{line}: variant '{v.name}': {exc}") from None
         variant_options[v.name] = options
-    sample = _validate(spec, draws[0], controllers)
+        varmaps[v.name] = _bind(spec, v.name, line, ctrl, local.get("problem", spec.problem),
+                                user_map)
+    sample = _validate(spec, draws[0], controllers, varmaps)
     duration = (draws[0].stop_time or sc.stop_time) - sc.start_time
     timeout = spec.timeout or TIMEOUT_BASE + TIMEOUT_PER_STEP * duration / sample
     assets = Assets.of(files)
@@ -236,10 +280,20 @@ def prepare(spec: CampaignSpec) -> Plan:
                 "options": variant_options[v.name], "draw": asdict(d),
                 "scenario": "scenario.csv", "scenario_name": str(spec.scenario),
                 "plant": plant, "map": "plant.map.toml" if spec.map else None,
-                "interface": spec.interface, "isolate": spec.isolate,
+                "binding": _entries(varmaps[v.name]), "interface": spec.interface,
+                "isolate": spec.isolate,
                 "step_timeout": spec.step_timeout, "timeout": timeout,
             })
     return Plan(spec, assets, tasks, fingerprint, timeout)
+
+
+def _entries(vmap: Any) -> tuple[str, tuple[tuple[Any, ...], ...]] | None:
+    """A variable map as plain data for the task (its path and its entries), ``None`` for
+    none: the worker rebuilds it without reading the FMU again (:mod:`cosim.campaign.task`)."""
+    if vmap is None:
+        return None
+    return (str(vmap.path), tuple((m.signal, m.variable, m.unit, m.scale, m.offset)
+                                  for m in vmap.signals.values()))
 
 
 # ---------------------------------------------------------------------------------------------

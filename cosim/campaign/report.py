@@ -1,18 +1,22 @@
 """A campaign's tables and figures: ``runs.parquet``, ``summary.json``, ``report.png``.
 
 Everything is computed from the run folders (``runs/<run>-<variant>/summary.json``), so a
-resumed or interrupted campaign reports exactly the runs that are on disk.
+resumed or interrupted campaign reports exactly the runs that are on disk, and keyed by the
+signals of the run's control problem (its outputs and inputs, whatever the plant).
 
 ``runs.parquet``: one row per run and variant with ``run``, ``seed``, ``variant``,
 ``status``, ``reason``, ``tries`` (1, or more when the run's worker process died under it and
-the engine ran it again), one column per ``[draw]`` key (named exactly as in the spec), and the
-KPIs :data:`KPI_COLUMNS`; for a GRU-model plant under the robust MPC also the theorem's checks
-(:data:`THEOREM_COLUMNS`).
+the engine ran it again), one column per ``[draw]`` key (named exactly as in the spec), the
+KPIs :data:`KPI_COLUMNS`, for a GRU-model plant under the robust MPC the theorem's checks
+(:data:`THEOREM_COLUMNS`), and last the per-signal KPIs, named as their path below ``kpis``
+in the run's ``summary.json`` (:func:`cosim.kpis.flat`): ``iae.<output>``,
+``final_error.<output>``, ``worst_offset.<output>``, ``tv.<input>``,
+``violations.<signal>.max`` and ``violations.<signal>.count``.
 
 ``summary.json``: ``runs``, ``ok``, ``failed``, ``retried_runs``, ``violating_runs`` and
 ``violation_probability_upper_95`` (one-sided Clopper-Pearson bound on the probability that
-a run violates a constraint), per variant the same plus KPI quantiles, and the failures
-grouped by reason.
+a run violates a constraint), per variant the same plus KPI quantiles (keyed by the column
+names: ``quantiles["iae.h1"]``), and the failures grouped by reason.
 """
 
 from __future__ import annotations
@@ -20,32 +24,38 @@ from __future__ import annotations
 import json
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cosim import atomicio
+from cosim import atomicio, plots
+from cosim import kpis as _kpis
+from cosim.csvio import read_table
 
-__all__ = ["KPI_COLUMNS", "THEOREM_COLUMNS", "clopper_pearson_upper", "kpi_row",
-           "run_folder_name", "summarize", "theorem_checks", "write_figure", "write_summary",
-           "write_table"]
+__all__ = ["KPI_COLUMNS", "THEOREM_COLUMNS", "campaign_figure", "campaign_kpi_panels",
+           "clopper_pearson_upper", "kpi_row", "quantile_kpis", "run_folder_name",
+           "run_signals", "signal_columns", "summarize", "theorem_checks", "worst_run",
+           "write_figure", "write_summary", "write_table"]
 
-#: KPI columns of ``runs.parquet`` (besides run, seed, variant, status, reason, draws).
-KPI_COLUMNS = ("violation_count", "max_violation", "iae_h1", "iae_h2", "worst_offset",
-               "fallbacks", "suboptimal_steps", "setpoint_rejected_steps", "step_ms_p99",
-               "steps", "wall_time_s")
+#: KPI columns of ``runs.parquet`` that every run has, whatever its signals (besides run,
+#: seed, variant, status, reason, tries, draws; the per-signal ones follow, see the module
+#: docstring). ``max_violation`` and ``worst_offset`` are the largest over the signals, each
+#: in its own unit.
+KPI_COLUMNS = ("violation_count", "max_violation", "worst_offset", "fallbacks",
+               "suboptimal_steps", "setpoint_rejected_steps", "step_ms_p99", "steps",
+               "wall_time_s")
 #: What the paper's theorem promises, measured per run (GRU-model plant, robust MPC).
 THEOREM_COLUMNS = ("initially_feasible", "infeasible_after_first", "fallbacks_after_first",
                    "observer_checks", "observer_bound_violations", "observer_error_max_ratio",
                    "final_offset", "final_state_error", "final_output_error")
-#: KPIs summarised by quantiles in ``summary.json``.
-QUANTILE_KPIS = ("iae_h1", "iae_h2", "worst_offset", "max_violation", "step_ms_p99",
-                 "wall_time_s")
+#: Quantiles of the KPIs (:func:`quantile_kpis`) in ``summary.json``.
 QUANTILES = (0.05, 0.5, 0.95, 1.0)
 #: Status codes of an infeasible FHOCP in the robust MPC's ``ctrl.status`` column.
 INFEASIBLE_CODES = (1.0, 2.0)
+#: Run folders read, at most, to find the signals' units and boxes (:func:`run_signals`).
+SIGNAL_PROBES = 20
 
 
 def clopper_pearson_upper(k: int, n: int, confidence: float = 0.95) -> float | None:
@@ -73,7 +83,8 @@ def _get(doc: dict, *path: str, default: Any = None) -> Any:
 
 
 def kpi_row(doc: dict, draw_keys: Iterable[str]) -> dict[str, Any]:
-    """One ``runs.parquet`` row from a run's ``summary.json`` document."""
+    """One ``runs.parquet`` row from a run's ``summary.json`` document (see the module
+    docstring for the columns)."""
     kpis = doc.get("kpis") or {}
     viol = kpis.get("violations") or {}
     cs = doc.get("controller_summary") or {}
@@ -93,8 +104,6 @@ def kpi_row(doc: dict, draw_keys: Iterable[str]) -> dict[str, Any]:
     row.update({
         "violation_count": int(sum(v.get("count", 0) for v in viol.values())),
         "max_violation": float(max((v.get("max") or 0.0 for v in viol.values()), default=0.0)),
-        "iae_h1": _float(_get(kpis, "iae", "h1")),
-        "iae_h2": _float(_get(kpis, "iae", "h2")),
         "worst_offset": float(max(offsets, default=math.nan)),
         "fallbacks": int(cs.get("fallbacks", 0) or 0),
         "suboptimal_steps": int(cs.get("suboptimal_steps", 0) or 0),
@@ -106,7 +115,23 @@ def kpi_row(doc: dict, draw_keys: Iterable[str]) -> dict[str, Any]:
     theorem = _get(doc, "campaign", "theorem")
     if theorem is not None:
         row.update({k: theorem.get(k) for k in THEOREM_COLUMNS})
+    row.update(_kpis.flat(kpis))  # last: a run that failed before its first step has none
     return row
+
+
+def signal_columns(table: Any, kpi: str) -> list[str]:
+    """The ``<kpi>.<signal>`` columns of ``table`` (``kpi = "iae"``: ``iae.h1``, ...), in
+    table order; ``violations`` columns are ``violations.<signal>.max`` / ``.count``."""
+    return [c for c in table.columns if c.startswith(kpi + ".")]
+
+
+def quantile_kpis(table: Any) -> list[str]:
+    """The columns summarised by quantiles in ``summary.json``: ``iae.<o>`` per output,
+    ``worst_offset`` and ``worst_offset.<o>``, ``max_violation``, ``tv.<u>`` per input,
+    ``step_ms_p99``, ``wall_time_s``."""
+    return [*signal_columns(table, "iae"), "worst_offset",
+            *signal_columns(table, "worst_offset"), "max_violation",
+            *signal_columns(table, "tv"), "step_ms_p99", "wall_time_s"]
 
 
 def _float(value: Any) -> float:
@@ -162,7 +187,7 @@ def summarize(table: Any, name: str, planned: int) -> dict[str, Any]:
             "violation_probability_upper_95": clopper_pearson_upper(violating, len(ran)),
             "quantiles": {},
         }
-        for kpi in QUANTILE_KPIS:
+        for kpi in quantile_kpis(df):
             values = ok[kpi].to_numpy(dtype=float)
             values = values[np.isfinite(values)]
             out["quantiles"][kpi] = ({f"q{int(q * 100)}": float(np.quantile(values, q))
@@ -212,28 +237,187 @@ def write_summary(doc: dict, path: Path) -> None:
     atomicio.write_text(path, json.dumps(doc, indent=2, allow_nan=False) + "\n")
 
 
+def worst_run(table: Any) -> Any:
+    """The worst run that ended ok (a row of ``table``), or ``None`` when none did.
+
+    The largest violation first; among equal ones the largest IAE summed over the outputs,
+    each output's IAE relative to its median over the runs that ended ok (so that outputs
+    in other units weigh alike); then the lowest run number, the variants in table order.
+    """
+    ok = table[table["status"] == "ok"]
+    if not len(ok):
+        return None
+    score = np.zeros(len(ok))
+    for col in signal_columns(ok, "iae"):
+        v = ok[col].to_numpy(dtype=float)
+        finite = v[np.isfinite(v)]
+        scale = float(np.median(np.abs(finite))) if finite.size else 0.0
+        if not scale > 0:
+            scale = float(np.max(np.abs(finite))) if finite.size else 0.0
+        score += np.nan_to_num(v / scale if scale > 0 else v * 0.0, nan=0.0)
+    ranked = ok.assign(_score=score, _order=np.arange(len(ok)))
+    ranked = ranked.sort_values(["max_violation", "_score", "run", "_order"],
+                                ascending=[False, False, True, True], kind="mergesort")
+    return ranked.drop(columns=["_score", "_order"]).iloc[0]
+
+
+def run_signals(runs_dir: Path, table: Any, first: Any = None) -> dict:
+    """The ``signals`` block (outputs and inputs with unit, min, max) of the runs'
+    ``summary.json``: ``first``'s run (a row of ``table``) if it has one, else the first run
+    of ``table`` that has one (ok runs first; at most :data:`SIGNAL_PROBES` folders read);
+    ``{}`` when none has."""
+    rows = [] if first is None else [first]
+    if len(table):
+        ok = table["status"] == "ok"
+        for part in (table[ok], table[~ok]):
+            rows += [r for _, r in part.head(SIGNAL_PROBES).iterrows()]
+    for row in rows[:SIGNAL_PROBES]:
+        path = runs_dir / run_folder_name(int(row["run"]), str(row["variant"])) / \
+            "summary.json"
+        try:
+            found = json.loads(path.read_text(encoding="utf-8")).get("signals")
+        except (OSError, ValueError, AttributeError):
+            continue
+        if isinstance(found, dict) and (found.get("outputs") or found.get("inputs")):
+            return found
+    return {}
+
+
 def write_figure(table: Any, runs_dir: Path, path: Path, title: str) -> None:
     """``report.png``: violations and KPI distributions per variant, the worst run.
 
-    The share of violating runs per variant (with its :func:`clopper_pearson_upper` bound)
-    and the worst run (largest violation, then largest IAE h1) are chosen here; the drawing
-    is :func:`cosim.plots.campaign_figure`.
+    The share of violating runs per variant (with its :func:`clopper_pearson_upper` bound),
+    the worst run (:func:`worst_run`) and the signals' units and boxes (:func:`run_signals`)
+    are found here; the drawing is :func:`campaign_figure`.
     """
-    from cosim import plots
-
     shares, uppers = [], []
     for v in dict.fromkeys(table["variant"]):
         df = table[(table["variant"] == v) & (table["status"] != "interrupted")]
         k = int((df["violation_count"] > 0).sum())
         shares.append(100.0 * k / max(len(df), 1))
         uppers.append(100.0 * (clopper_pearson_upper(k, len(df)) or 0.0))
+    worst = worst_run(table)
+    worst_results = None if worst is None else (
+        runs_dir / run_folder_name(int(worst["run"]), str(worst["variant"])) / "results.csv")
+    campaign_figure(path, title, table, shares, uppers, worst, worst_results,
+                    run_signals(runs_dir, table, worst))
+
+
+def campaign_kpi_panels(outputs: Sequence[str], units: dict[str, str]) -> list[tuple[str, str]]:
+    """The KPI panels of :func:`campaign_figure` after the violations panel: ``(column of
+    runs.parquet, title)``: ``iae.<o>`` and ``worst_offset.<o>`` per output (in its units),
+    the largest violation and the step time's p99."""
+    label, times_s = plots.label, plots.times_s
+    panels = [(f"iae.{o}", f"IAE {label(o, times_s(units.get(o)))}") for o in outputs]
+    panels += [(f"worst_offset.{o}", f"worst static offset {label(o, units.get(o))}")
+               for o in outputs]
+    return [*panels, ("max_violation", "largest violation (signal units)"),
+            ("step_ms_p99", "step p99 [ms]")]
+
+
+def campaign_figure(path: str | Path, title: str, table: Any, violating: Sequence[float],
+                    upper_bounds: Sequence[float], worst: Any = None,
+                    worst_results: Path | None = None, signals: dict | None = None) -> None:
+    """A campaign's ``report.png``, replaced atomically, for any number of inputs and outputs.
+
+    Top: the share of violating runs per variant with its 95 % upper bound, and a box plot
+    per KPI over the runs that finished (:func:`campaign_kpi_panels`). Below: the worst run,
+    one panel per output (with its set-point and box) and per input (with its box).
+
+    Parameters
+    ----------
+    path : str or Path
+    title : str
+    table : pandas.DataFrame
+        One row per run and variant (``runs.parquet``).
+    violating, upper_bounds : sequence of float
+        Per variant (in order of first appearance in ``table``): the observed share of
+        violating runs and its one-sided 95 % upper bound, in percent.
+    worst : pandas row, optional
+        The worst run (``run``, ``variant``, ``violation_count``, ``max_violation``,
+        ``iae.<o>``).
+    worst_results : Path, optional
+        Its ``results.csv``; a file that cannot be read is noted in the figure.
+    signals : dict, optional
+        A run's ``summary.json`` ``signals`` (outputs and inputs with unit, min, max); by
+        default the outputs are those of the ``iae.<o>`` columns and the inputs those of the
+        ``tv.<u>`` columns, without units or boxes.
+    """
+    plt = plots.pyplot()
+    signals = signals or {}
+    outputs = list(signals.get("outputs") or
+                   [c[len("iae."):] for c in table.columns if c.startswith("iae.")])
+    inputs = list(signals.get("inputs") or
+                  [c[len("tv."):] for c in table.columns if c.startswith("tv.")])
+    info = {**(signals.get("outputs") or {}), **(signals.get("inputs") or {})}
+    units = {k: (v or {}).get("unit") or "" for k, v in info.items()}
+    variants = list(dict.fromkeys(table["variant"]))
     ok = table[table["status"] == "ok"]
-    worst, worst_results = None, None
-    if len(ok):
-        worst = ok.sort_values(["max_violation", "iae_h1"], ascending=False).iloc[0]
-        worst_results = (runs_dir / run_folder_name(int(worst["run"]), str(worst["variant"]))
-                         / "results.csv")
-    plots.campaign_figure(path, title, table, shares, uppers, worst, worst_results)
+    kpis = [(k, t) for k, t in campaign_kpi_panels(outputs, units) if k in table.columns]
+    n_top = -(-(1 + len(kpis)) // 3)
+    n_signals = max(1, len(outputs) + len(inputs))
+    n_low = -(-n_signals // _worst_columns(n_signals)) if worst is not None else 0
+    fig = plt.figure(figsize=(13, 2.9 * (n_top + n_low) + 0.8), layout="constrained")
+    top, low = fig.subfigures(2, 1, height_ratios=[n_top, max(n_low, 1e-3)]) if n_low \
+        else (fig, None)
+    grid = top.add_gridspec(n_top, 3)
+    ax = top.add_subplot(grid[0, 0])
+    x = np.arange(len(variants))
+    ax.bar(x, violating, color="C3", alpha=0.7, label="observed")
+    ax.scatter(x, upper_bounds, color="k", marker="_", s=400, label="95 % upper bound")
+    ax.set_xticks(x, variants, rotation=15, fontsize=8)
+    ax.set_title("violating runs [%]", fontsize=10)
+    ax.legend(fontsize=7)
+    for i, (kpi, name) in enumerate(kpis, start=1):
+        ax = top.add_subplot(grid[i // 3, i % 3])
+        data = [ok[ok["variant"] == v][kpi].to_numpy(dtype=float) for v in variants]
+        data = [d[np.isfinite(d)] for d in data]
+        if any(d.size for d in data):
+            ax.boxplot([d if d.size else [np.nan] for d in data], tick_labels=variants)
+            ax.tick_params(axis="x", labelrotation=15, labelsize=8)
+        ax.set_title(name, fontsize=10)
+    if low is not None:
+        _worst_run(low, worst, worst_results, outputs, inputs, info, units)
+    fig.suptitle(title)
+    plots.save(fig, path, dpi=90, atomic=True)
+
+
+def _worst_columns(panels: int) -> int:
+    """Columns of the worst run's panels: 2 for 2 or 4 panels, else 3."""
+    return 2 if panels in (2, 4) else 3
+
+
+def _worst_run(fig: Any, worst: Any, results: Path | None, outputs: list[str],
+               inputs: list[str], info: dict, units: dict[str, str]) -> None:
+    """The worst run's panels of :func:`campaign_figure` in the sub-figure ``fig``."""
+    iae = ", ".join(f"{o} {worst[f'iae.{o}']:.4g} {plots.times_s(units.get(o))}"
+                    for o in outputs if f"iae.{o}" in worst.index)
+    fig.suptitle(f"worst run {int(worst['run']):06d}-{worst['variant']}: "
+                 f"{int(worst['violation_count'])} violations"
+                 + (f" (largest {worst['max_violation']:.3g})" if worst["violation_count"]
+                    else "") + (f"; IAE {iae}" if iae else ""), fontsize=10)
+    panels = [("y", o) for o in outputs] + [("u", u) for u in inputs]
+    cols = _worst_columns(len(panels))
+    grid = fig.add_gridspec(-(-max(1, len(panels)) // cols), cols)
+    try:
+        res = read_table(results)
+    except Exception as exc:  # the figure must not fail the campaign
+        ax = fig.add_subplot(grid[0, :])
+        ax.text(0.5, 0.5, f"worst run not readable: {exc}", transform=ax.transAxes,
+                ha="center")
+        ax.set_axis_off()
+        return
+    names = set(res.names)
+
+    def column(name: str) -> np.ndarray | None:
+        return res.column(name) if name in names else None
+
+    for i, (kind, name) in enumerate(panels):
+        ax = fig.add_subplot(grid[i // cols, i % cols])
+        entry = info.get(name) or {}
+        plots.signal_panel(ax, res.time, column, kind, name, units.get(name),
+                           (entry.get("min"), entry.get("max")))
+        ax.set_xlabel("time [s]")
 
 
 def run_folder_name(run: int, variant: str) -> str:

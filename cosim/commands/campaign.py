@@ -31,11 +31,13 @@ i's draws depend on (seed, i) only: one worker, many or a cluster give the same 
 
 Writes into DIR (default results/campaigns/<name>):
   runs/<run>-<variant>/  results.csv and summary.json of each run, as cosim run writes them
-  runs.parquet           one row per run and variant: draws, status, reason, KPIs
+  runs.parquet           one row per run and variant: draws, status, reason, KPIs, those
+                         of each signal named after it (iae.<output>, tv.<input>, ...)
   summary.json           runs, ok, failed, violating runs, the one-sided 95 % Clopper-Pearson
                          bound on the violation probability, KPI quantiles per variant,
                          failures grouped by reason
   report.png             violations and KPI distributions per variant, the worst run
+                         (a panel per output and input, in the problem's units)
   campaign.json          the spec and its fingerprint (for --resume)
 
 A run that fails or exceeds its timeout is recorded as failed with its reason (an internal
@@ -101,17 +103,28 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print_summary(result: object) -> None:
+    """Per variant: runs, failed, violating, the bound, and the median IAE of each output
+    (in its unit × s); then the most frequent failure reasons."""
+    from cosim.campaign import report
+    from cosim.plots import times_s
+
     s = result.summary  # type: ignore[attr-defined]
     print(f"cosim campaign: {s.get('campaign')}: {s.get('runs', 0)} of {s.get('planned')} runs "
           f"on disk, {s.get('failed', 0)} failed; results in {result.out}")  # type: ignore
+    table = getattr(result, "table", None)
+    signals = {} if table is None else report.run_signals(
+        result.out / "runs", table)  # type: ignore[attr-defined]
+    units = {o: (v or {}).get("unit") or "" for o, v in (signals.get("outputs") or {}).items()}
     for name, v in (s.get("variants") or {}).items():
-        q = (v.get("quantiles") or {}).get("iae_h1") or {}
         p = v.get("violation_probability_upper_95")
         line = (f"  {name}: {v['runs']} runs, {v['failed']} failed, {v['violating_runs']} "
                 f"violating (P(violation) <= {p:.3g} at 95 %)" if p is not None else
                 f"  {name}: {v['runs']} runs")
-        if q:
-            line += f"; IAE h1 median {q['q50']:.4g} m·s"
+        medians = [f"{o} {q['q50']:.4g} {times_s(units.get(o))}"
+                   for kpi, q in (v.get("quantiles") or {}).items()
+                   if kpi.startswith("iae.") and q and (o := kpi[len("iae."):])]
+        if medians:
+            line += "; median IAE " + ", ".join(medians)
         print(line)
     for group in list((s.get("failures_by_reason") or {}).values())[:5]:
         print(f"  failed ({group['count']}): {group['example']}")

@@ -121,8 +121,9 @@ def test_external_cluster_gives_the_local_engines_kpis(tmp_path: Path,
                                                 "summary.json", "report.png"}
     table = pd.read_parquet(out / "runs.parquet")
     for column in ("run", "seed", "variant", "status", "reason", "plant.gamma_b", "plant.a1",
-                   "sensor.h1.noise", "violation_count", "max_violation", "iae_h1", "iae_h2",
-                   "worst_offset", "fallbacks", "suboptimal_steps", "step_ms_p99",
+                   "sensor.h1.noise", "violation_count", "max_violation", "iae.h1", "iae.h2",
+                   "worst_offset", "worst_offset.h1", "tv.qa", "tv.qb", "violations.h2.max",
+                   "violations.qa.count", "fallbacks", "suboptimal_steps", "step_ms_p99",
                    "wall_time_s"):
         assert column in table.columns, column
     # both variants saw the same draws
@@ -133,7 +134,7 @@ def test_external_cluster_gives_the_local_engines_kpis(tmp_path: Path,
     assert summary["runs"] == 6 and summary["ok"] == 6 and summary["failed"] == 0
     assert summary["violation_probability_upper_95"] == pytest.approx(1 - 0.05 ** (1 / 6))
     assert set(summary["variants"]) == {"mpc", "pi"}
-    assert summary["variants"]["mpc"]["quantiles"]["iae_h1"]["q50"] > 0
+    assert summary["variants"]["mpc"]["quantiles"]["iae.h1"]["q50"] > 0
 
 
 @pytest.mark.slow

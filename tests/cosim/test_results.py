@@ -31,6 +31,8 @@ def test_kpis_by_hand() -> None:
     assert k["violations"]["qa"] == {"max": 1.0, "count": 2}
     assert k["control_effort"]["qa"]["integral_square"] == pytest.approx(10 * (1 + 9 + 1))
     assert k["control_effort"]["qa"]["total_variation"] == pytest.approx(2 + 4 + 1)
+    assert k["tv"] == {"qa": pytest.approx(2 + 4 + 1)}
+    assert k["worst_offset"] == {"h1": pytest.approx(0.2)}
     # two set-point intervals; the offset is averaged over each interval's second half
     assert k["setpoints"] == [
         {"start": 0.0, "end": 10.0, "ref": {"h1": 1.0}, "offset": {"h1": pytest.approx(-0.2)}},
@@ -62,7 +64,31 @@ def test_write_summary_and_figure(tmp_path: Path) -> None:
     assert doc["steps"] == 3 and doc["steps_planned"] == 9
     assert doc["controller"] == "pi"
     assert doc["controller_summary"] == {"solves": 4, "x": None}  # JSON has no inf
-    assert set(doc["kpis"]) == {"iae", "final_error", "violations", "control_effort",
-                                "setpoints"}
+    assert list(doc["kpis"]) == ["iae", "final_error", "worst_offset", "violations", "tv",
+                                 "control_effort", "setpoints"]
+    assert doc["signals"] == {"outputs": {"h1": {"unit": "", "min": 0.0, "max": 2.0}},
+                              "inputs": {"qa": {"unit": "", "min": 0.0, "max": 2.0}}}
     assert (tmp_path / "figure.png").stat().st_size > 10_000
     assert (tmp_path / "results.csv").read_text().count("\n") == 5
+
+
+def test_flat_kpis_are_named_by_their_path_below_kpis() -> None:
+    k = kpis.compute(COLUMNS, ROWS, ["h1"], ["h1"], ["qa"], {"h1": (0.0, 2.0), "qa": (0.0, 2.0)})
+    flat = kpis.flat(k)
+    assert list(flat) == ["iae.h1", "final_error.h1", "worst_offset.h1", "tv.qa",
+                          "violations.h1.max", "violations.h1.count", "violations.qa.max",
+                          "violations.qa.count"]
+    for name, value in flat.items():
+        doc: object = k
+        for part in name.split("."):
+            doc = doc[part]  # type: ignore[index]
+        assert value == doc, name
+
+
+def test_kpis_without_rows_or_set_points() -> None:
+    empty = kpis.compute(["time", "plant.y", "ctrl.u"], [], ["y"], [], ["u"], {})
+    assert kpis.flat(empty) == {}
+    k = kpis.compute(["time", "plant.y", "ctrl.u"], [[0.0, 1.0, 2.0], [1.0, 1.5, 3.0]], ["y"],
+                     [], ["u"], {"y": (0.0, 1.2)})
+    assert kpis.flat(k) == {"tv.u": 1.0, "violations.y.max": pytest.approx(0.3),
+                            "violations.y.count": 1.0}
