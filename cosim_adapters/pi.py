@@ -8,19 +8,34 @@ the problem's box and back-calculation anti-windup (Åström & Hägglund)::
     u_k   = sat(v_k)                          (held over [t_k, t_k + Ts))
     I_k+1 = I_k + K Ts / Ti · e_k + Ts / Tt · (u_k − v_k)
 
-Which input controls which output, and the gains, come from the control problem's ``[pi]``
-table (:class:`controllers.problem.ControlProblem`: named pairings, one the default), or
-are given as ``loops``. The four-tank's problem file explains its pairing (the negative
-relative gain of the diagonal one).
+Which input controls which output, and the gains, come from (first that applies):
+
+1. ``loops``: given explicitly;
+2. ``pairing``: one of the control problem's named ``[pi]`` pairings
+   (:class:`controllers.problem.ControlProblem`);
+3. the problem's default ``[pi]`` pairing, when it has one (the four-tank's problem file
+   explains its pairing: the negative relative gain of the diagonal one);
+4. tuned from the identified GRU model (``model``, or ``cosim run --model``) when the
+   problem has no ``[pi]`` table, or when ``tune=True``: pairing by the relative gain array,
+   SIMC rules on first-order-plus-dead-time fits of the model's step responses
+   (:mod:`controllers.pi_tuning`); ``summary.json`` records the operating point, the gain
+   matrix, the RGA and each loop's fit and gains.
+
+Without any of these the controller refuses to start, as it does on a plant with more
+inputs than outputs or the reverse (use the robust MPC there).
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from controllers import pi_tuning
+from controllers.model import GRUModel
+from controllers.pi_tuning import PITuning
 from controllers.problem import ControlProblem, PILoop
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
@@ -38,12 +53,47 @@ def _loops(problem: ControlProblem, pairing: str | None,
     if not problem.pairings:
         raise CosimError(f"controller 'pi': the problem {problem.name!r} "
                          f"({problem.source or 'no file'}) has no [pi] loops: add them to "
-                         "the problem file, or give --option loops=[...]")
+                         "the problem file, give --option loops=[...], or give a model "
+                         "(--model FILE) to tune them from")
     name = problem.pairing if pairing is None else pairing
     if name not in problem.pairings:
         raise CosimError(f"controller 'pi': unknown pairing {name!r} (the problem's: "
                          f"{', '.join(problem.pairings)})")
     return tuple(problem.pairings[name])
+
+
+def _tuned(gru: Any, problem: ControlProblem, setpoint: Any, tau_c: Any) -> PITuning:
+    """Loops tuned from the model ``gru`` (:func:`controllers.pi_tuning.tune`)."""
+    from controllers.errors import ControllersError, UnreachableSetpoint
+
+    if tau_c is not None and (isinstance(tau_c, bool) or not isinstance(tau_c, int | float)
+                              or not math.isfinite(tau_c) or tau_c <= 0):
+        raise CosimError(f"controller 'pi': tune_tau_c must be a positive number of seconds, "
+                         f"got {tau_c!r}")
+    target = None
+    if setpoint is not None:
+        if not isinstance(setpoint, Mapping):
+            raise CosimError(f"controller 'pi': tune_setpoint must map outputs to numbers, "
+                             f"got {setpoint!r}")
+        target = [0.5 * (c.min + c.max) for c in problem.outputs]
+        for name, value in setpoint.items():
+            if name not in problem.output_names:
+                raise CosimError(f"controller 'pi': tune_setpoint: unknown output {name!r} "
+                                 f"(outputs: {', '.join(problem.output_names)})")
+            if (isinstance(value, bool) or not isinstance(value, int | float)
+                    or not math.isfinite(value)):
+                raise CosimError(f"controller 'pi': tune_setpoint: {name} must be a finite "
+                                 f"number, got {value!r}")
+            target[problem.output_names.index(name)] = float(value)
+    if gru.problem is None:  # a model file without a problem: the one it was checked against
+        gru = replace(gru, problem=problem)
+    try:
+        return pi_tuning.tune(gru, setpoint=target, tau_c=tau_c)
+    except UnreachableSetpoint as exc:
+        raise CosimError(f"controller 'pi': tune_setpoint: {exc}") from None
+    except ControllersError as exc:
+        raise CosimError(f"controller 'pi': cannot tune the loops from "
+                         f"{gru.source or 'the model'}: {exc}") from None
 
 
 def _given_loops(problem: ControlProblem, loops: Sequence[Any]) -> tuple[PILoop, ...]:
@@ -98,8 +148,9 @@ class PIController(Component):
     ----------
     problem : ControlProblem or path, optional
         The control problem or its file (default: the model's, else the default plant's).
-    model : path, optional
-        A model file: its problem is the default.
+    model : GRUModel or path, optional
+        A model (file): its problem is the default; the loops are tuned from it when the
+        problem has no ``[pi]`` loops.
     pairing : str, optional
         One of the problem's named pairings (default: its ``pairing``).
     loops : list, optional
@@ -107,21 +158,38 @@ class PIController(Component):
         :class:`~controllers.problem.PILoop`); instead of a pairing.
     initial_inputs : dict, optional
         Inputs at the first step (integrator initial values); default mid-range.
+    tune : bool, optional
+        Tune the loops from ``model`` (:mod:`controllers.pi_tuning`) even when the problem
+        has ``[pi]`` loops; ``False``: never. Default: when the problem has none and a model
+        is given.
+    tune_setpoint : dict, optional
+        Outputs of the operating point the loops are tuned at (physical units; outputs not
+        named: the middle of their box, the default for all).
+    tune_tau_c : float, optional
+        SIMC closed-loop time constant of every tuned loop [s] (default: each loop's
+        delay ``θ``); larger is slower and more robust.
+
+    Attributes
+    ----------
+    loops : tuple of PILoop
+    tuning : PITuning or None
+        The auto-tuning's record, when the loops were tuned from the model.
     """
 
     direct_feedthrough = True
 
     def __init__(self, problem: ControlProblem | str | Path | None = None,
-                 model: str | Path | None = None, pairing: str | None = None,
+                 model: GRUModel | str | Path | None = None, pairing: str | None = None,
                  loops: Sequence[Any] | None = None,
-                 initial_inputs: Mapping[str, float] | None = None) -> None:
+                 initial_inputs: Mapping[str, float] | None = None,
+                 tune: bool | None = None, tune_setpoint: Mapping[str, float] | None = None,
+                 tune_tau_c: float | None = None) -> None:
         from cosim_adapters.problems import problem_for
 
         self.name = "pi"
-        gru = None
-        if model is not None:
+        gru = model if isinstance(model, GRUModel) else None
+        if model is not None and gru is None:
             from controllers.errors import ControllersError
-            from controllers.model import GRUModel
 
             try:
                 gru = GRUModel.load(model)
@@ -132,7 +200,24 @@ class PIController(Component):
             raise CosimError(f"controller 'pi': the problem {problem.name!r} has "
                              f"{problem.m} inputs and {problem.p} outputs; a decentralised PI "
                              "needs as many inputs as outputs (use the robust MPC)")
-        self.loops = _loops(problem, pairing, loops)
+        if tune is not None and not isinstance(tune, bool):
+            raise CosimError(f"controller 'pi': tune must be true or false, got {tune!r}")
+        if tune is None:
+            tune = loops is None and pairing is None and not problem.pairings and gru is not None
+        self.tuning: PITuning | None = None
+        if tune:
+            if loops is not None or pairing is not None:
+                raise CosimError("controller 'pi': give tune or loops/pairing, not both")
+            if gru is None:
+                raise CosimError("controller 'pi': tune=true needs a model to tune from "
+                                 "(--model FILE or --option model=FILE)")
+            self.tuning = _tuned(gru, problem, tune_setpoint, tune_tau_c)
+            self.loops = self.tuning.pi_loops()
+        else:
+            if tune_setpoint is not None or tune_tau_c is not None:
+                raise CosimError("controller 'pi': tune_setpoint and tune_tau_c apply only "
+                                 "to loops tuned from a model (tune=true)")
+            self.loops = _loops(problem, pairing, loops)
         self.sample_time = problem.Ts
         self.bounds = problem.bounds()
         self.inputs = tuple(Signal(c.name, c.unit, c.description) for c in problem.outputs) + \
@@ -180,6 +265,12 @@ class PIController(Component):
         return {f"int_{u}": i for u, i in self._I.items()}
 
     def summary(self) -> dict:
-        """Loop pairing and how often each input saturated."""
-        return {"pairing": {lp.y: lp.u for lp in self.loops}, "steps": self._steps,
-                "saturated_steps": dict(self._sat_steps)}
+        """Loop pairing, gains, whether they were tuned from the model (then the tuning's
+        record: operating point, gain matrix, RGA, each loop's fit) and how often each input
+        saturated."""
+        doc = {"pairing": {lp.y: lp.u for lp in self.loops},
+               "loops": [lp.to_dict() for lp in self.loops],
+               "auto_tuned": self.tuning is not None}
+        if self.tuning is not None:
+            doc["tuning"] = self.tuning.to_dict()
+        return {**doc, "steps": self._steps, "saturated_steps": dict(self._sat_steps)}
