@@ -49,12 +49,12 @@ def main() -> None:
     spec.write_text(SPEC)
     result = cosim.run_campaign(spec, out / "results", workers=args.workers, force=True)
     for name, v in result.summary["variants"].items():
-        iae = v["quantiles"]["iae_h1"]["q50"]
+        iae = v["quantiles"]["iae.h1"]["q50"]
         print(f"{name:10s} {v['runs']} runs, {v['failed']} failed, {v['violating_runs']} "
               f"violating: P(violation) <= {v['violation_probability_upper_95']:.2f} (95 %); "
               f"median IAE h1 {iae:.1f} m·s")
     table = result.table  # runs.parquet as a DataFrame
-    print(table[["run", "variant", "plant.gamma_b", "iae_h1"]].to_string(index=False))
+    print(table[["run", "variant", "plant.gamma_b", "iae.h1"]].to_string(index=False))
 
 
 if __name__ == "__main__":

@@ -1,0 +1,80 @@
+"""The whole pipeline on three plants that are not four tanks, as a user runs it.
+
+``examples/own_plant.py --quick`` on each example plant (``fmus/examples``: a SISO heated
+vessel, a 2 × 2 CSTR in L/min, K and mol/L at Ts = 15 s, a mixing tank with 3 inputs and 2
+outputs): build the FMU, ``generate-data --problem``, ``train`` (brief, seeded), ``certify
+--auto-gain-scale --save``, a set-point scenario inside the certified set with the robust MPC
+and, for the square plants, the PI tuned from the model, and a small campaign with the plant's
+parameters drawn per run. What a user checks, asserted on its ``walkthrough.json`` and files:
+the FIT of every output above a floor, every input inside its box, no output constraint
+violated by the MPC, each set-point tracked to a stated share of its output's box, no MPC run
+of the campaign violating a constraint, and the files and columns named as in the problem.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from controllers.problem_file import load
+
+ROOT = Path(__file__).resolve().parents[1]
+SCRIPT = ROOT / "examples" / "own_plant.py"
+PLANTS = ("heater", "cstr", "mixing_tank")
+#: Floors of the quick walk-through (the full one: docs/guide/own-plant.md).
+FIT_FLOOR = 80.0                # test FIT of each output [%]
+TRACKING = 0.05                 # error at the end of each set-point, share of the output's box
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("plant", PLANTS)
+def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(plant: str, tmp_path: Path
+                                                               ) -> None:
+    out = tmp_path / "walk"
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--plant", plant, "--quick", "--out",
+                           str(out)], cwd=tmp_path, capture_output=True, text=True,
+                          timeout=1500, check=False)
+    assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
+    assert "Traceback" not in proc.stderr
+    report = json.loads((out / "walkthrough.json").read_text())
+    problem = load(ROOT / "fmus" / "examples" / plant / "problem.toml")
+
+    # identification: every output of the problem, above the floor
+    assert set(report["fit_test"]) == set(problem.output_names)
+    assert min(report["fit_test"].values()) > FIT_FLOOR, report["fit_test"]
+    model = json.loads((out / "models" / "plant_gru.json").read_text())
+    assert model["problem"]["name"] == plant and "observer" in model   # certified, saved
+
+    # closed loop: the MPC tracks every set-point, inputs in their boxes, no violation
+    mpc = report["robust-mpc"]
+    assert mpc["status"] == "ok"
+    assert max(mpc["tracking_error"]) < TRACKING, mpc["tracking_error"]
+    assert max(mpc["box_violation"].values()) == 0.0, mpc["box_violation"]
+    assert set(mpc["iae"]) == set(problem.output_names)
+    assert set(mpc["tv"]) == set(problem.input_names)
+    if problem.m == problem.p:
+        assert report["pi"]["status"] == "ok"
+        assert max(report["pi"]["box_violation"][n] for n in problem.input_names) == 0.0
+    else:
+        assert "pi" not in report
+
+    # the files are named as in the problem
+    header = next(csv.reader((out / "runs" / "robust-mpc" / "results.csv").open()))
+    for name in problem.output_names:
+        assert {f"ref.{name}", f"plant.{name}"} <= set(header)
+    for name in problem.input_names:
+        assert f"ctrl.{name}" in header
+    summary = json.loads((out / "runs" / "robust-mpc" / "summary.json").read_text())
+    assert summary["problem"] == plant
+
+    # the campaign: both controllers on the same draws, the MPC never violating
+    camp = json.loads((out / "campaign" / "summary.json").read_text())
+    assert camp["failed"] == 0 and report["campaign"]["status"] == "ok"
+    assert camp["variants"]["robust-mpc"]["violating_runs"] == 0
+    table_columns = set(camp["variants"]["robust-mpc"]["quantiles"])
+    assert {f"iae.{n}" for n in problem.output_names} <= table_columns
