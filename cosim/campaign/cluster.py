@@ -10,6 +10,13 @@ thread frees). An existing cluster keeps its own configuration.
 runs started on a worker (each run says so before anything of it can crash), so that the
 engine tells a run lost with its worker after it started (a try) from one that only waited
 there.
+
+**No worker, no hang.** A cluster left without any worker (a local nanny whose restart
+failed under load; an existing cluster whose workers never came, or all went) would leave the
+runs waiting forever: :class:`Watchdog` restarts a local cluster's lost worker processes once
+after ``worker_timeout`` seconds without a worker, and otherwise cancels the runs still
+waiting and the campaign ends with :class:`NoWorkers` (exit 1); the runs already done stay on
+disk, ``--resume`` runs the rest.
 """
 
 from __future__ import annotations
@@ -18,15 +25,16 @@ import contextlib
 import logging
 import signal
 import threading
+import time
 from collections.abc import Iterator
 from typing import Any
 
 from cosim import interrupts
 from cosim.campaign.task import START_TOPIC
-from cosim.errors import CosimError
+from cosim.errors import CosimError, SimulationFailed
 
-__all__ = ["CONNECT_TIMEOUT", "LOCAL_CONFIG", "Starts", "Submitter", "connect", "lost_worker",
-           "signals_ignored"]
+__all__ = ["CONNECT_TIMEOUT", "LOCAL_CONFIG", "NoWorkers", "Starts", "Submitter", "Watchdog",
+           "connect", "lost_worker", "signals_ignored", "worker_timeout_default"]
 
 #: Seconds to reach an existing scheduler before giving up (exit 2).
 CONNECT_TIMEOUT = 10
@@ -187,3 +195,102 @@ class Submitter:
         from cosim.campaign.task import run_task
 
         return self.client.submit(run_task, task, self._files(), key=key, pure=False)
+
+
+#: Seconds without any worker before the runs still waiting fail: on a local cluster (its
+#: nannies restart a dead worker within seconds; one that could not is restarted once), on an
+#: existing cluster (its workers may wait in a batch queue).
+LOCAL_WORKER_TIMEOUT, CLUSTER_WORKER_TIMEOUT = 120.0, 600.0
+
+
+def worker_timeout_default(scheduler: str | None) -> float:
+    """Seconds a campaign waits without any worker: :data:`LOCAL_WORKER_TIMEOUT` on a local
+    cluster, :data:`CLUSTER_WORKER_TIMEOUT` on an existing one (``scheduler`` given)."""
+    return CLUSTER_WORKER_TIMEOUT if scheduler else LOCAL_WORKER_TIMEOUT
+
+
+class NoWorkers(SimulationFailed):
+    """The cluster had no worker for the campaign's whole worker timeout: the runs still
+    waiting were not run (``--resume`` runs them once workers are back); exit 1."""
+
+
+class Watchdog:
+    """Ends a campaign that has no worker to run on, instead of waiting forever.
+
+    A thread asks the scheduler every ``poll`` seconds how many workers it has. After
+    ``timeout`` seconds without any, on a local cluster it restarts the worker processes its
+    nannies lost (a nanny whose restart failed keeps no worker: Dask logs it and waits), and
+    if that brings none back within another ``timeout``, or at once on an existing cluster,
+    it records why in :attr:`reason` and cancels the runs still waiting (``cancel``).
+
+    Parameters
+    ----------
+    client : distributed.Client
+    timeout : float
+        Seconds without a worker before acting.
+    cancel : callable
+        Cancels the runs still waiting (called from the watchdog's thread).
+    poll : float
+        Seconds between two looks at the scheduler.
+    """
+
+    def __init__(self, client: Any, timeout: float, cancel: Any, poll: float = 2.0) -> None:
+        self.client, self.timeout, self.cancel, self.poll = client, timeout, cancel, poll
+        self.reason: str | None = None
+        self.revived = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._watch, name="cosim-watchdog",
+                                        daemon=True)
+        self._thread.start()
+
+    def _workers(self) -> int:
+        try:
+            return len(self.client.scheduler_info(n_workers=-1).get("workers", {}))
+        except TypeError:  # distributed without the n_workers argument
+            return len(self.client.scheduler_info().get("workers", {}))
+        except Exception:
+            return -1  # the scheduler did not answer: not evidence of no workers
+
+    def _revive(self) -> bool:
+        """Restart the worker process of each nanny of a local cluster that has none."""
+        local = getattr(self.client, "cluster", None)
+        nannies = getattr(local, "workers", None)
+        if not isinstance(nannies, dict):
+            return False
+        for nanny in list(nannies.values()):
+            process = getattr(nanny, "process", None)
+            alive = process is not None and getattr(process, "process", None) is not None \
+                and process.process.is_alive()
+            if not alive and hasattr(nanny, "instantiate"):
+                with contextlib.suppress(Exception):
+                    local.sync(nanny.instantiate)
+                    self.revived += 1
+        return self.revived > 0
+
+    def _watch(self) -> None:
+        since = time.monotonic()
+        tried_revive = False
+        while not self._stop.wait(self.poll):
+            if self._workers() != 0:
+                since = time.monotonic()
+                continue
+            if time.monotonic() - since < self.timeout:
+                continue
+            if not tried_revive:
+                tried_revive = True
+                if self._revive():
+                    since = time.monotonic()
+                    continue
+            self.reason = f"no Dask worker for {self.timeout:g} s"
+            for _ in range(3):  # the engine may be adding a resubmitted run meanwhile
+                try:
+                    self.cancel()
+                    break
+                except Exception:
+                    time.sleep(0.1)
+            return
+
+    def close(self) -> None:
+        """Stop watching."""
+        self._stop.set()
+        self._thread.join(timeout=self.poll + 5)

@@ -41,6 +41,8 @@ reruns a task whose worker died up to that many times before it reports ``Killed
 so there one try of the engine may cost up to ``allowed-failures + 1`` worker deaths (set it
 to 0 in the cluster's configuration to make the engine's count the only one). A retried run
 gives the same numbers: a run depends on its draws only, never on the worker or the try.
+A cluster left without any worker ends the campaign after ``worker_timeout`` seconds, the
+runs still waiting not run (:class:`~cosim.campaign.cluster.Watchdog`): it never hangs.
 """
 
 from __future__ import annotations
@@ -326,14 +328,15 @@ class _Attempts:
 def _execute(plan: Plan, pending: list[dict[str, Any]], out: Path, workers: int | None,
              scheduler: str | None, on_done: Callable[[str], None],
              probe: Callable[[Any], Any] | None = None, *,
-             client: Any = None) -> ExecutionStats:
+             client: Any = None, worker_timeout: float | None = None) -> ExecutionStats:
     """Run ``pending`` on Dask, writing each run as it comes back; a run whose worker dies
     is submitted again (the rule: the module docstring).
 
     ``client``: a connected Dask client to use (else one is opened and closed here, on a
     local cluster of ``workers`` or on ``scheduler``). ``probe(client)``, when given, is
     called after the last run, before the cluster closes (the benchmark reads the workers'
-    memory with it).
+    memory with it). ``worker_timeout``: seconds the cluster may have no worker before the
+    runs still waiting are cancelled and :class:`~cosim.campaign.cluster.NoWorkers` raised.
     """
     from distributed import as_completed
 
@@ -350,6 +353,11 @@ def _execute(plan: Plan, pending: list[dict[str, Any]], out: Path, workers: int 
         for task in pending:
             futures[submitter.submit(task, 1)] = _Attempts(task)
         done = as_completed(list(futures))
+        watchdog = cluster.Watchdog(
+            client, worker_timeout or cluster.worker_timeout_default(scheduler),
+            cancel=lambda: client.cancel(list(futures)))
+        stack.callback(watchdog.close)
+        not_run = 0
         try:
             for future in done:
                 at = futures.pop(future)
@@ -358,6 +366,9 @@ def _execute(plan: Plan, pending: list[dict[str, Any]], out: Path, workers: int 
                     outcome, error = future.result(), None
                 except Exception as exc:  # KilledWorker, CancelledError, a bug on the worker
                     outcome, error = None, exc
+                if watchdog.reason is not None and future.status == "cancelled":
+                    not_run += 1     # never ran: not written, --resume runs it
+                    continue
                 if cluster.lost_worker(error):
                     if starts.started(str(future.key)):
                         at.lost_tries += 1
@@ -386,6 +397,9 @@ def _execute(plan: Plan, pending: list[dict[str, Any]], out: Path, workers: int 
                 on_done(status)
                 if guard is not None:
                     guard.check()
+            if not_run:
+                raise cluster.NoWorkers(f"{watchdog.reason}: {not_run} runs not run (start "
+                                        "workers, then run the campaign again with --resume)")
             if probe is not None:
                 stats.probe = probe(client)
         finally:
@@ -402,7 +416,8 @@ def _execute(plan: Plan, pending: list[dict[str, Any]], out: Path, workers: int 
 def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None, *,
                  workers: int | None = None, scheduler: str | None = None,
                  resume: bool = False, force: bool = False,
-                 progress: bool = False) -> CampaignResult:
+                 progress: bool = False,
+                 worker_timeout: float | None = None) -> CampaignResult:
     """Run a campaign (the Python twin of ``cosim campaign``).
 
     Parameters
@@ -421,6 +436,11 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
         Start over in a folder that holds a campaign.
     progress : bool
         Show a progress bar over runs on standard error.
+    worker_timeout : float, optional
+        Seconds the cluster may have no worker at all before the campaign ends with the runs
+        still waiting not run (``error`` a :class:`~cosim.campaign.cluster.NoWorkers`; the
+        runs done are kept, ``resume`` runs the rest).
+        Default :func:`cosim.campaign.cluster.worker_timeout_default`.
 
     Returns
     -------
@@ -440,6 +460,11 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
     if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
                                 or workers < 1):
         raise CosimError(f"--workers {workers!r}: expected a positive integer")
+    if worker_timeout is not None and not (isinstance(worker_timeout, (int, float))
+                                           and math.isfinite(worker_timeout)
+                                           and worker_timeout > 0):
+        raise CosimError(f"--worker-timeout {worker_timeout!r}: expected a positive number "
+                         "of seconds")
     out = Path(out) if out is not None else Path("results") / "campaigns" / spec.name
     plan = prepare(spec)
     workers = workers or default_workers()
@@ -468,8 +493,9 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
             try:
                 if pending:
                     ran = _execute(plan, pending, folder.path, workers, scheduler,
-                                   on_done, client=client).done
-            except KeyboardInterrupt as exc:
+                                   on_done, client=client,
+                                   worker_timeout=worker_timeout).done
+            except (KeyboardInterrupt, cluster.NoWorkers) as exc:
                 error = exc
             finally:
                 if bar is not None:

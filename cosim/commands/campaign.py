@@ -77,6 +77,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--scheduler", metavar="ADDRESS", default=None,
                    help="use an existing Dask cluster, e.g. tcp://127.0.0.1:8786 (exit 2 when "
                         "it cannot be reached within 10 s)")
+    p.add_argument("--worker-timeout", metavar="SECONDS", type=float, default=None,
+                   help="seconds the cluster may have no worker before the campaign stops, the "
+                        "runs still waiting not run (exit 1; default 120 on the local "
+                        "cluster, 600 with --scheduler; --resume runs them later)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--resume", action="store_true",
                    help="run only the runs missing in DIR (the spec must be unchanged)")
@@ -93,7 +97,7 @@ def run(args: argparse.Namespace) -> int:
 
     result = engine.run_campaign(args.spec, args.out, workers=args.workers,
                                  scheduler=args.scheduler, resume=args.resume,
-                                 force=args.force,
+                                 force=args.force, worker_timeout=args.worker_timeout,
                                  progress=not args.quiet and sys.stderr.isatty())
     if not args.quiet:
         _print_summary(result)

@@ -378,3 +378,47 @@ pairing = "diagonal"
     assert result.status == "failed"
     groups = result.summary["failures_by_reason"]
     assert len(groups) == 1 and next(iter(groups.values()))["count"] == crashed.sum()
+
+
+def test_a_cluster_without_workers_stops_the_campaign_then_resume_runs_it(
+        cluster: Cluster, tmp_path: Path, pyfmu_dir: Path) -> None:
+    from cosim.campaign.cluster import NoWorkers
+
+    (tmp_path / "short.csv").write_text(SHORT)
+    spec = tmp_path / "spec.toml"
+    spec.write_text(SLOW_SPEC.format(plant=pyfmu_dir / "Crashy.fmu").replace(
+        '"long.csv"', '"short.csv"'))
+    t0 = time.monotonic()
+    result = run_campaign(spec, tmp_path / "out", scheduler=cluster.address,
+                          worker_timeout=3.0)
+    assert time.monotonic() - t0 < 60          # no hang: 3 s without a worker, then out
+    assert isinstance(result.error, NoWorkers) and result.status == "interrupted"
+    assert str(result.error) == ("no Dask worker for 3 s: 4 runs not run (start workers, then "
+                                 "run the campaign again with --resume)")
+    assert result.summary["runs"] == 0 and (tmp_path / "out" / "summary.json").exists()
+    # the same through the command: one line, exit 1
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "campaign", str(spec), "--out",
+                           str(tmp_path / "out2"), "--scheduler", cluster.address,
+                           "--worker-timeout", "2", "--quiet"], capture_output=True,
+                          text=True, timeout=WAIT, env=cluster.env)
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stderr.strip().splitlines()[-1].endswith(
+        "no Dask worker for 2 s: 4 runs not run (start workers, then run the campaign again "
+        "with --resume)"), proc.stderr
+    assert "Traceback" not in proc.stderr
+    # the workers come: --resume runs them
+    cluster.add_worker(nworkers=1, nthreads=1)
+    cluster.wait_for_workers(1)
+    again = run_campaign(spec, tmp_path / "out", scheduler=cluster.address, resume=True)
+    assert again.status == "ok" and again.summary["ok"] == 4
+
+
+def test_worker_timeout_must_be_a_positive_number(tmp_path: Path) -> None:
+    from cosim.errors import CosimError
+
+    spec = tmp_path / "spec.toml"
+    spec.write_text(MPC_SPEC)
+    (tmp_path / "short.csv").write_text(SHORT)
+    with pytest.raises(CosimError, match=r"--worker-timeout -1: expected a positive number"):
+        run_campaign(spec, tmp_path / "out", worker_timeout=-1)
+    assert not (tmp_path / "out").exists()
