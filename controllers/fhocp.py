@@ -1,6 +1,7 @@
 """The FHOCP of the robust MPC, ``eq:optimization`` (Definition 5): declare, set up, solve.
 
     min_u  Σ_{i=0}^{N-1} ‖x_i − x̄‖²_Q + ‖u_i − ū‖²_R  +  s ‖x_N − x̄‖²_∞
+           [ + Σ_{i=0}^{N-1} ‖u_i − u_{i−1}‖²_S,  S = diag(du_weight) ]
     s.t.   x_0 = x̂_k,  x_{i+1} = f(x_i, u_i)                          (eq:gru)
            L(U_o x_i + b_o) + w_L ≤ h − a_i ê_o,k − b_i,  i = 0 … N−1  (eq:optimization-constraint)
            ‖u_i‖∞ ≤ 1                                                   (eq:input-constraint)
@@ -11,6 +12,10 @@ written with an epigraph variable ``t``: ``−t ≤ x_N − x̄ ≤ t`` element-
 ``0 ≤ t ≤ α`` (so the terminal set is a bound on ``t``). Everything that depends on the
 set-point or on time (x̂, x̄, ū, α, ê_o and the tightened bounds) is a parameter or a bound, so
 the problem is built once (:meth:`FHOCP.setup`) and solved every step (:meth:`FHOCP.solve`).
+The bracketed input-rate term is outside the paper's cost and off by default (``du_weight``
+all zero: the term, and the parameter ``u_{−1}`` it needs, do not exist);
+``u_{−1}`` is the input applied at the previous step, a parameter of the solve
+(:mod:`controllers.input_rate`).
 
 Two formulations of the same problem: ``"single-shooting"`` (default, fast: the inputs and
 ``t`` are the variables, exact derivatives from numpy callbacks; :mod:`controllers.
@@ -46,6 +51,7 @@ from controllers.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
 from controllers.errors import DesignError
 from controllers.fhocp_layout import FHOCPLayout
 from controllers.fhocp_result import FHOCPResult, set_residuals
+from controllers.input_rate import du_cost, du_weights
 from controllers.solver_settings import DEFECT_TOL, FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
 __all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPResult"]
@@ -90,6 +96,17 @@ class FHOCP:
         Derivatives of the single-shooting SQP: ``"auto"`` the compiled kernel
         (:mod:`controllers.compiled_kernel`) when it can be built, ``"numpy"`` the numpy
         callbacks (the reference implementation, and the fallback).
+    du_weight : float or (m,) array
+        Diagonal of the input-rate weight ``S`` (normalised units; one number: every input).
+        0 (default): no input-rate term, the paper's cost.
+
+    Attributes
+    ----------
+    has_du : bool
+        The cost has the input-rate term (some ``du_weight`` > 0); then ``p`` ends with
+        ``u_{−1}``.
+    npar : int
+        Length of the parameter vector ``p = (x̂, x̄, ū[, u_{−1}])``.
     """
 
     def __init__(self, params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
@@ -98,7 +115,8 @@ class FHOCP:
                  ipopt_options: Mapping[str, Any] | None = None,
                  warm_duals: bool | None = None, time_budget: float | None = None,
                  solver: str | None = None,
-                 sqp_options: Mapping[str, Any] | None = None, kernel: str = "auto") -> None:
+                 sqp_options: Mapping[str, Any] | None = None, kernel: str = "auto",
+                 du_weight: float | np.ndarray = 0.0) -> None:
         if formulation not in ("single-shooting", "multiple-shooting"):
             raise DesignError(f"unknown formulation {formulation!r}")
         if kernel not in ("auto", "numpy"):
@@ -132,6 +150,9 @@ class FHOCP:
         self.a = self.a[: self.N].reshape(self.N, self.q)
         self.b = self.b[: self.N].reshape(self.N, self.q)
         self.s = float(s)
+        self.du_weight = du_weights(du_weight, self.m)
+        self.has_du = bool(np.any(self.du_weight > 0))
+        self.npar = 2 * self.n + self.m + (self.m if self.has_du else 0)
         self.formulation = formulation
         self.time_budget = None if time_budget is None else float(time_budget)
         self.warm_duals = (formulation == "single-shooting") if warm_duals is None else warm_duals
@@ -272,19 +293,22 @@ class FHOCP:
         return float(np.max(self.LUo @ x_hat - self.tightened_bounds(e_o)[0]))
 
     def candidate(self, x_hat: np.ndarray, u_seq: np.ndarray, x_bar: np.ndarray,
-                  u_bar: np.ndarray, e_o: float, alpha: float) -> FHOCPResult:
-        """Evaluate a given input sequence (cost, trajectory, residuals) without solving."""
+                  u_bar: np.ndarray, e_o: float, alpha: float,
+                  u_prev: np.ndarray | None = None) -> FHOCPResult:
+        """Evaluate a given input sequence (cost, trajectory, residuals) without solving;
+        ``u_prev``: ``u_{−1}`` of the input-rate term (see :meth:`cost`)."""
         u_seq = np.clip(np.asarray(u_seq, dtype=float), -1.0, 1.0)
         if self.kernel is not None:   # the same check in one compiled call
             x, out = self.kernel.assess(x_hat, u_seq, x_bar, u_bar,
-                                        self.tightened_bounds(e_o), alpha)
+                                        self.tightened_bounds(e_o), alpha,
+                                        self._u_prev(u_prev, u_bar))
             res = FHOCPResult(u=u_seq, x=x, cost=float(out[0]), status="candidate",
                               success=False, t=float(out[4]))
             set_residuals(res, out, alpha)
             return res
         x = self.simulate(np.asarray(x_hat, dtype=float), u_seq)
         tN = float(np.max(np.abs(x[-1] - x_bar)))
-        res = FHOCPResult(u=u_seq, x=x, cost=self.cost(x, u_seq, x_bar, u_bar, tN),
+        res = FHOCPResult(u=u_seq, x=x, cost=self.cost(x, u_seq, x_bar, u_bar, tN, u_prev),
                           status="candidate", success=False, t=tN)
         self._residuals(res, x, e_o, x_bar, alpha)
         return res
@@ -304,12 +328,21 @@ class FHOCP:
         return viol, float(np.max(np.abs(x[self.N] - x_bar)))
 
     def cost(self, x: np.ndarray, u: np.ndarray, x_bar: np.ndarray, u_bar: np.ndarray,
-             t: float | None = None) -> float:
-        """Cost ``eq:optimization-cost`` (``t`` defaults to ``‖x_N − x̄‖∞``)."""
+             t: float | None = None, u_prev: np.ndarray | None = None) -> float:
+        """Cost ``eq:optimization-cost`` (``t`` defaults to ``‖x_N − x̄‖∞``), plus the
+        input-rate term when :attr:`has_du` with ``u_{−1} = u_prev`` (``None``: ``ū``, the
+        first step's convention: the sequence ``ū`` repeated then pays nothing for it)."""
         dx = x[: self.N] - x_bar
         du = u - u_bar
         tN = float(np.max(np.abs(x[self.N] - x_bar))) if t is None else t
-        return float(np.vdot(dx @ self.Q, dx) + np.vdot(du @ self.R, du) + self.s * tN ** 2)
+        J = float(np.vdot(dx @ self.Q, dx) + np.vdot(du @ self.R, du) + self.s * tN ** 2)
+        if self.has_du:
+            J += du_cost(u, self._u_prev(u_prev, u_bar), self.du_weight)
+        return J
+
+    def _u_prev(self, u_prev: np.ndarray | None, u_bar: np.ndarray) -> np.ndarray:
+        """``u_{−1}`` (m,): ``u_prev``, else ``ū`` (before any input was applied)."""
+        return np.asarray(u_bar if u_prev is None else u_prev, dtype=float).reshape(self.m)
 
     def _residuals(self, res: FHOCPResult, x: np.ndarray, e_o: float, x_bar: np.ndarray,
                    alpha: float) -> None:
@@ -326,7 +359,7 @@ class FHOCP:
 
     def solve(self, x_hat: np.ndarray, e_o: float, x_bar: np.ndarray, u_bar: np.ndarray,
               alpha: float, u_init: np.ndarray | None = None, warm: bool = True,
-              ) -> FHOCPResult:
+              u_prev: np.ndarray | None = None) -> FHOCPResult:
         """Solve ``eq:optimization`` at ``x̂`` with ``ê_o``, set-point ``(x̄, ū)``, terminal α.
 
         Parameters
@@ -334,6 +367,9 @@ class FHOCP:
         u_init : (N, m) array, optional
             Initial guess of the inputs; default: the previous solution shifted by one stage
             with ``ū`` appended (and its multipliers, shifted too) when ``warm``, else ``ū``.
+        u_prev : (m,) array, optional
+            The input applied at the previous step, ``u_{−1}`` of the input-rate term
+            (ignored without one); ``None``: ``ū`` (the first step).
         """
         if self._solver is None:
             self.setup()
@@ -341,8 +377,10 @@ class FHOCP:
         x_bar = np.asarray(x_bar, dtype=float).reshape(self.n)
         u_bar = np.asarray(u_bar, dtype=float).reshape(self.m)
         t0 = time.perf_counter()
+        u_prev = self._u_prev(u_prev, u_bar)
         if self.formulation == "single-shooting" and self.check_x0(x_hat, e_o) > 0:
-            res = self.candidate(x_hat, np.tile(u_bar, (self.N, 1)), x_bar, u_bar, e_o, alpha)
+            res = self.candidate(x_hat, np.tile(u_bar, (self.N, 1)), x_bar, u_bar, e_o, alpha,
+                                 u_prev)
             res.status = "infeasible_x0"
             res.solve_time = time.perf_counter() - t0
             return res
@@ -350,7 +388,8 @@ class FHOCP:
         simulate = (self.simulate if self.kernel is not None or self._nlp is None
                     else lambda xh, u: self._shoot.rollout(xh, u, derivatives=False).x)
         self.layout.write(ins, self.tightened_bounds(e_o), x_hat, x_bar, u_bar, alpha, u_init,
-                          self._warm if warm else None, self.warm_duals, simulate)
+                          self._warm if warm else None, self.warm_duals, simulate,
+                          u_prev if self.has_du else None)
         if self._nlp is not None:
             self._nlp.deadline = t0 + (self.time_budget if self.time_budget is not None
                                        else np.inf)
@@ -379,7 +418,7 @@ class FHOCP:
         else:
             u = np.clip(wopt[self.iu], -1.0, 1.0)
             x = self.simulate(x_hat, u)
-            cost = self.cost(x, u, x_bar, u_bar)
+            cost = self.cost(x, u, x_bar, u_bar, u_prev=u_prev)
             defect = float(np.max(np.abs(self._xtraj(wopt, ins["p"]) - x)))
         res = FHOCPResult(u=u, x=x, cost=cost, status=status, success=False,
                           iterations=iters, solve_time=elapsed, t=t, defect=defect,

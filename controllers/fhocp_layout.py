@@ -1,10 +1,11 @@
 """Where the FHOCP's variables and constraints live in the solver's vectors, and warm starts.
 
 ``w`` holds the decision variables, ``g`` the constraints, ``p = (x̂, x̄, ū)`` the
-parameters. Single shooting: ``w = (u_0 … u_{N−1}, t)``, ``g`` = the paired output rows
-``D U_o x_i`` (``i = 1 … N−1``) then ``x_N − x̄ ∓ t``. Multiple shooting: ``w`` in stage order
-``(x_0, u_0, x_1, …, x_N, t)``, ``g`` = ``x_0 − x̂``, the dynamics defects, the output rows
-(``i = 0 … N−1``) then the terminal rows.
+parameters, followed by ``u_{−1}`` (the previously applied input) when the cost has an
+input-rate term (``FHOCP.has_du``). Single shooting: ``w = (u_0 … u_{N−1}, t)``, ``g`` = the
+paired output rows ``D U_o x_i`` (``i = 1 … N−1``) then ``x_N − x̄ ∓ t``. Multiple shooting:
+``w`` in stage order ``(x_0, u_0, x_1, …, x_N, t)``, ``g`` = ``x_0 − x̂``, the dynamics
+defects, the output rows (``i = 0 … N−1``) then the terminal rows.
 
 :meth:`FHOCPLayout.write` fills the solver's argument buffers for one solve: the bounds
 (tightened with ``ê_o``, the terminal set ``t ≤ α``), the parameters, and the warm start: the
@@ -121,7 +122,8 @@ class FHOCPLayout:
     def write(self, ins: dict[str, np.ndarray], bounds: np.ndarray, x_hat: np.ndarray,
               x_bar: np.ndarray, u_bar: np.ndarray, alpha: float, u_init: np.ndarray | None,
               prev: dict[str, np.ndarray] | None, warm_duals: bool,
-              simulate: Callable[[np.ndarray, np.ndarray], Any]) -> np.ndarray:
+              simulate: Callable[[np.ndarray, np.ndarray], Any],
+              u_prev: np.ndarray | None = None) -> np.ndarray:
         """Fill the solver's argument buffers for one solve; returns the initial inputs.
 
         Parameters
@@ -137,12 +139,16 @@ class FHOCPLayout:
             The previous solve's ``w``, ``lam_x``, ``lam_g`` (``None``: a cold start).
         simulate : callable
             ``(x̂, u) → x_0 … x_N``: the rollout for the initial ``t`` (and states).
+        u_prev : (m,) array, optional
+            ``u_{−1}``, written after ``ū`` (only for a problem with an input-rate term).
         """
         n, m = x_hat.shape[0], self._m
         p = ins["p"]
         p[:n] = x_hat
         p[n:2 * n] = x_bar
-        p[2 * n:] = u_bar
+        p[2 * n:2 * n + m] = u_bar
+        if u_prev is not None:
+            p[2 * n + m:] = u_prev
         ins["lbx"][:] = self.lbx
         ubx = ins["ubx"]
         ubx[:] = self.ubx

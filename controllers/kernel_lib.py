@@ -31,7 +31,7 @@ _VP, _CD, _CI = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
 #: ctypes signatures of the entry points taking a workspace first: (arguments after it, result)
 _WS_CALLS: dict[str, tuple[list[Any], Any]] = {
     "simulate": ([_VP] * 3, None), "xtraj": ([_VP] * 3, None),
-    "assess": ([_VP] * 5 + [_CD, _VP, _VP], None),
+    "assess": ([_VP] * 6 + [_CD, _VP, _VP], None),
     "assess_w": ([_VP, _VP, _VP, _CD, _VP, _VP, _VP], None),
     "sqp": ([_VP] * 12, _CI), "qp": ([_VP] * 11, _CI), "grad_l": ([_VP] * 5, None),
     "counters": ([_VP], None), "invalidate": ([], None), "clip": ([_VP], _CI)}
@@ -116,7 +116,7 @@ class Workspace:
         n, m, N = kernel.n, kernel.m, kernel.N
         self._buf = {name: np.zeros(shape) for name, shape in (
             ("x0", n), ("u", (N, m)), ("w", kernel.nw), ("p", kernel.npar), ("xb", n),
-            ("ub", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))), ("out", 7),
+            ("ub", m), ("up", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))), ("out", 7),
             ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", m), ("xe", n), ("ue", m))}
         self._addr = {name: int(a.ctypes.data) for name, a in self._buf.items()}
         self._c = {name: kernel.c[name] for name in _WS_CALLS}
@@ -162,26 +162,30 @@ class Workspace:
         return b["xn"].copy()
 
     def assess(self, x0: np.ndarray, u: np.ndarray, x_bar: np.ndarray, u_bar: np.ndarray,
-               bounds: np.ndarray, alpha: float) -> tuple[np.ndarray, np.ndarray]:
+               bounds: np.ndarray, alpha: float, u_prev: np.ndarray | None = None
+               ) -> tuple[np.ndarray, np.ndarray]:
         """The check of an input sequence in one call: states ``x_0 … x_N`` from ``x0`` under
         ``u`` (N, m) and ``[cost, max row violation at i = 0, max row violation at i ≥ 1,
         max |u|, ‖x_N − x̄‖∞, active constraints]`` (as ``FHOCP.cost`` with ``t = ‖x_N −
-        x̄‖∞`` and ``FHOCP._residuals``; ``bounds``: the tightened bounds, N×q)."""
+        x̄‖∞`` and ``u_{−1} = u_prev``, and ``FHOCP._residuals``; ``bounds``: the tightened
+        bounds, N×q). ``u_prev`` is read only by a kernel with an input-rate term (then
+        ``None`` means zeros)."""
         b, a = self._buf, self._addr
         b["x0"][:] = x0
         b["u"][:] = u
         b["xb"][:] = x_bar
         b["ub"][:] = u_bar
+        b["up"][:] = 0.0 if u_prev is None else u_prev
         b["bnd"][:, :self.nl] = bounds
-        self._c["assess"](self._ws, a["x0"], a["u"], a["xb"], a["ub"], a["bnd"], float(alpha),
-                          a["x"], a["out"])
+        self._c["assess"](self._ws, a["x0"], a["u"], a["xb"], a["ub"], a["up"], a["bnd"],
+                          float(alpha), a["x"], a["out"])
         return b["x"].copy(), b["out"][:6].copy()
 
     def assess_w(self, w: np.ndarray, p: np.ndarray, bounds: np.ndarray, alpha: float
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """:meth:`assess` of the solver's answer ``w`` at ``p = (x̂, x̄, ū)``: ``(u, x, out)``
-        with ``u = clip(w_u, −1, 1)`` and ``out[6]`` the defect ``max |x_solver − x|``
-        against the solver's trajectory at ``(w, p)``."""
+        """:meth:`assess` of the solver's answer ``w`` at ``p = (x̂, x̄, ū[, u_{−1}])``:
+        ``(u, x, out)`` with ``u = clip(w_u, −1, 1)`` and ``out[6]`` the defect
+        ``max |x_solver − x|`` against the solver's trajectory at ``(w, p)``."""
         b, a = self._buf, self._addr
         b["w"][:] = w
         b["p"][:] = p

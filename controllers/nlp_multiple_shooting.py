@@ -28,7 +28,8 @@ def multiple_shooting_problem(fhocp: FHOCP) -> tuple[dict, dict, Any, int]:
     Returns
     -------
     nlp : dict
-        ``{"x", "p", "f", "g"}`` for ``casadi.nlpsol``; ``p = (x̂, x̄, ū)``.
+        ``{"x", "p", "f", "g"}`` for ``casadi.nlpsol``; ``p = (x̂, x̄, ū)``, then ``u_{−1}``
+        when the cost has the input-rate term (its residuals ``√S (u_i − u_{i−1})``).
     options : dict
         ``nlpsol("ipopt")`` options (the FHOCP's IPOPT options).
     trajectory : casadi.Function
@@ -41,8 +42,8 @@ def multiple_shooting_problem(fhocp: FHOCP) -> tuple[dict, dict, Any, int]:
     ops = gru.casadi_ops()
     P = {k: ca.DM(v) for k, v in p.params.items()}
     w = ca.SX.sym("w", p.nw)
-    par = ca.SX.sym("p", 2 * n + m)  # x̂, x̄, ū
-    x_hat, x_bar, u_bar = par[:n], par[n:2 * n], par[2 * n:]
+    par = ca.SX.sym("p", p.npar)  # x̂, x̄, ū[, u_{−1}]
+    x_hat, x_bar, u_bar = par[:n], par[n:2 * n], par[2 * n:2 * n + m]
     Qh, Rh = np.linalg.cholesky(p.Q).T, np.linalg.cholesky(p.R).T
     t = w[p.it]
     us = [w[p.iu[i].tolist()] for i in range(N)]
@@ -53,6 +54,10 @@ def multiple_shooting_problem(fhocp: FHOCP) -> tuple[dict, dict, Any, int]:
     g += [xs[N] - x_bar - t, xs[N] - x_bar + t]
     res = [ca.mtimes(ca.DM(Qh), xs[i] - x_bar) for i in range(N)]
     res += [ca.mtimes(ca.DM(Rh), us[i] - u_bar) for i in range(N)]
+    if p.has_du:
+        Sh = ca.DM(np.sqrt(p.du_weight))
+        prev = [par[2 * n + m:], *us[:-1]]
+        res += [Sh * (us[i] - prev[i]) for i in range(N)]
     res.append(np.sqrt(p.s) * t)
     r = ca.vertcat(*res)
     gv = ca.vertcat(*g)

@@ -12,6 +12,10 @@ states, their sensitivities and the exact Hessian of the Lagrangian come from
 * ``x_N − x̄ − t ≤ 0`` and ``x_N − x̄ + t ≥ 0``: the epigraph of ``‖x_N − x̄‖∞`` (terminal cost
   ``s t²``, terminal set ``0 ≤ t ≤ α``).
 
+Parameters ``p = (x̂, x̄, ū)``, and ``u_{−1}`` after them when the cost has the input-rate
+term (:mod:`controllers.input_rate`: its gradient is added to ∇f, its constant Hessian to the
+input block).
+
 The rollout at one point is cached and shared by the cost, constraint, gradient, Jacobian
 and Hessian evaluations at that point (one rollout serves a whole SQP iteration).
 
@@ -29,6 +33,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.casadi_callbacks import NumpyCallback
+from controllers.input_rate import du_gradient, du_hessian
 
 if TYPE_CHECKING:
     from controllers.fhocp import FHOCP
@@ -76,6 +81,8 @@ class SingleShootingNLP:
         order = np.lexsort((triu_r, triu_c))  # casadi stores nonzeros column by column
         self._triu = (triu_r[order], triu_c[order])
         self.callbacks: list[NumpyCallback] = []
+        #: the input-rate term's constant Hessian (N m × N m), None without the term
+        self._du_hess = du_hessian(fhocp.N, fhocp.du_weight) if fhocp.has_du else None
 
     # -- one point ----------------------------------------------------------------------
     def rollout(self, wv: np.ndarray, pv: np.ndarray, deriv: bool) -> Any:
@@ -89,13 +96,18 @@ class SingleShootingNLP:
         return ro
 
     def _reference(self, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        n = self.p.n
-        return pv[n:2 * n], pv[2 * n:]
+        n, m = self.p.n, self.p.m
+        return pv[n:2 * n], pv[2 * n:2 * n + m]
+
+    def _u_prev(self, pv: np.ndarray) -> np.ndarray | None:
+        """``u_{−1}`` from ``p`` (``None`` without an input-rate term)."""
+        p = self.p
+        return pv[2 * p.n + p.m:] if p.has_du else None
 
     def objective(self, wv: np.ndarray, pv: np.ndarray, ro: Any) -> float:
         """``eq:optimization-cost`` at the rolled-out point."""
         x_bar, u_bar = self._reference(pv)
-        return self.p.cost(ro.x, ro.u, x_bar, u_bar, float(wv[self.p.it]))
+        return self.p.cost(ro.x, ro.u, x_bar, u_bar, float(wv[self.p.it]), self._u_prev(pv))
 
     def constraints(self, wv: np.ndarray, pv: np.ndarray, ro: Any) -> np.ndarray:
         """The constraint vector (see the module docstring)."""
@@ -123,6 +135,8 @@ class SingleShootingNLP:
         dx = (ro.x[1:N] - x_bar) @ (2 * p.Q)
         grad[self.iu] = dx.ravel() @ ro.S[1:N].reshape((N - 1) * n, N * m) + (
             (ro.u - u_bar) @ (2 * p.R)).ravel()
+        if p.has_du:
+            grad[self.iu] += du_gradient(ro.u, self._u_prev(pv), p.du_weight).ravel()
         grad[p.it] = 2 * p.s * wv[p.it]
         return [self.objective(wv, pv, ro), grad]
 
@@ -178,6 +192,8 @@ class SingleShootingNLP:
         Hv = Huu.reshape(N, m, N, m)
         stages = np.arange(N)
         Hv[stages, :, stages, :] += W[:, n:, n:] + 2 * lf * p.R
+        if self._du_hess is not None:
+            Huu += lf * self._du_hess
         H[np.ix_(iu, iu)] = Huu
         H[p.it, p.it] = 2 * lf * p.s
         return H
@@ -219,7 +235,7 @@ class SingleShootingNLP:
                       time_budget: float | None) -> tuple[dict, dict]:
         """The casadi NLP and the ``nlpsol("ipopt")`` options with every callback."""
         p = self.p
-        nw, npar, ng = p.nw, 2 * p.n + p.m, self.ng
+        nw, npar, ng = p.nw, p.npar, self.ng
         sp = ca.Sparsity.dense
         cb = [
             NumpyCallback("fhocp_f", self.f, [sp(nw), sp(npar)], [sp(1)], ["x", "p"], ["f"]),
@@ -262,7 +278,8 @@ class SingleShootingNLP:
                   seed: int = 12345) -> float:
         """Largest relative difference between ``kernel`` and these numpy functions at random
         points: f, ∇f, g, ∂g/∂w, the clipped Hessian, the plain rollout, the observer's GRU
-        step and the answer check (cost and residuals, :meth:`FHOCP.candidate`)."""
+        step and the answer check (cost and residuals, :meth:`FHOCP.candidate`); with the
+        input-rate term when the problem has one (``u_{−1}`` drawn at random too)."""
         from controllers import gru
         from controllers.fhocp_result import FHOCPResult, set_residuals
 
@@ -275,7 +292,8 @@ class SingleShootingNLP:
             jac_c, hess_c = kernel.external("jac_fg"), kernel.external("hess_l")
             for _ in range(trials):
                 wv = np.concatenate([rng.uniform(-1, 1, N * m), rng.uniform(0, 0.1, 1)])
-                pv = np.concatenate([rng.uniform(-0.5, 0.5, 2 * n), rng.uniform(-1, 1, m)])
+                pv = np.concatenate([rng.uniform(-0.5, 0.5, 2 * n),
+                                     rng.uniform(-1, 1, p.npar - 2 * n)])
                 lg = rng.normal(0, 1, self.ng)
                 pairs = list(zip(jac_c(wv, pv), self.jac_fg(wv, pv), strict=True))
                 pairs.append((hess_c(wv, pv, 1.0, lg),
@@ -288,8 +306,10 @@ class SingleShootingNLP:
                               gru.step(p.params, pv[:n], u[0], dz=dz, dr=dr)))
                 # the answer check: cost and residuals as FHOCP.cost / FHOCP._residuals
                 e_o, alpha = float(rng.uniform(0, 0.05)), float(rng.uniform(0, 0.5))
-                x_k, out = kernel.assess(pv[:n], u, pv[n:2 * n], pv[2 * n:],
-                                         p.tightened_bounds(e_o), alpha)
+                x_bar, u_bar = self._reference(pv)
+                u_prev = self._u_prev(pv)
+                x_k, out = kernel.assess(pv[:n], u, x_bar, u_bar, p.tightened_bounds(e_o),
+                                         alpha, u_prev)
                 ref = FHOCPResult(u=u, x=x_np, cost=0.0, status="", success=False)
                 p._residuals(ref, x_np, e_o, pv[n:2 * n], alpha)
                 got = FHOCPResult(u=u, x=x_k, cost=0.0, status="", success=False)
@@ -297,7 +317,7 @@ class SingleShootingNLP:
                 pairs.append((x_k, x_np))
                 pairs.append((np.array([out[0], got.constraint_violation,
                                         got.terminal_violation]),
-                              np.array([p.cost(x_np, u, pv[n:2 * n], pv[2 * n:]),
+                              np.array([p.cost(x_np, u, x_bar, u_bar, u_prev=u_prev),
                                         ref.constraint_violation, ref.terminal_violation])))
                 for a, b in pairs:
                     b = np.asarray(b, dtype=float)
@@ -312,7 +332,7 @@ class SingleShootingNLP:
         """``sqpmethod``'s ``jac_fg`` (f, ∇f, g, ∂g/∂w) and full ``hess_lag`` (convexified),
         as numpy callbacks."""
         p = self.p
-        nw, npar, ng = p.nw, 2 * p.n + p.m, self.ng
+        nw, npar, ng = p.nw, p.npar, self.ng
         sp = ca.Sparsity.dense
         cb = [
             NumpyCallback("nlp_jac_fg", self.jac_fg, [sp(nw), sp(npar)],

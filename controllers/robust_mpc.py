@@ -4,6 +4,11 @@
 the proof of ``th:feasibility-stability`` (the previous sequence shifted by one stage with
 ``ū`` appended) and applies that candidate when a solve fails; :class:`StepRecord` says what
 happened at each step and :func:`solver_summary` sums it up.
+
+With an input-rate term in the cost (``FHOCP(du_weight=…)``, :mod:`controllers.input_rate`)
+the controller hands the FHOCP the input it applied at the previous step as ``u_{−1}`` (``ū``
+before the first), and the candidate's cost, which a capped iterate must not exceed to be
+applied, includes the term with the same ``u_{−1}``.
 """
 
 from __future__ import annotations
@@ -88,6 +93,8 @@ class RobustMPC:
         self.alpha: float = float("nan")
         self.plan: np.ndarray | None = None
         self.records: list[StepRecord] = []
+        #: the input applied at the previous step (``u_{−1}`` of the input-rate term)
+        self.u_prev: np.ndarray | None = None
 
     def set_reference(self, x_bar: np.ndarray, u_bar: np.ndarray, alpha: float) -> None:
         """Set-point data ``(x̄, ū, α)`` (``eq:def-alpha``); call again when ``ȳ`` changes."""
@@ -118,9 +125,10 @@ class RobustMPC:
         t0 = time.perf_counter()
         try:
             res = self.fhocp.solve(x_hat, e_o, self.x_bar, self.u_bar, self.alpha,
-                                   u_init=candidate)
+                                   u_init=candidate, u_prev=self.u_prev)
         except Exception as exc:
-            res = self.fhocp.candidate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha)
+            res = self.fhocp.candidate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha,
+                                       self.u_prev)
             res.status = f"solver_error: {type(exc).__name__}: {exc}"[:200]
             res.solve_time = time.perf_counter() - t0
         if res.success:
@@ -128,8 +136,10 @@ class RobustMPC:
             rec = StepRecord(u=res.u[0].copy(), result=res, fallback=False)
             rec.x_hat, rec.e_o = np.array(x_hat, dtype=float), float(e_o)
             self.records.append(rec)
+            self.u_prev = rec.u
             return rec
-        chk = self.fhocp.candidate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha)
+        chk = self.fhocp.candidate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha,
+                                   self.u_prev)
         feasible = chk.constraint_violation <= FEAS_TOL and chk.terminal_violation <= FEAS_TOL
         if self.accept_suboptimal and res.feasible and (
                 not feasible or res.cost <= chk.cost):
@@ -144,6 +154,7 @@ class RobustMPC:
                              candidate_feasible=bool(feasible),
                              x_hat=np.array(x_hat, dtype=float), e_o=float(e_o))
         self.records.append(rec)
+        self.u_prev = rec.u
         return rec
 
     def summary(self) -> dict[str, Any]:

@@ -36,6 +36,10 @@ requested one only as far as a sequence known to be feasible exists, by at most 
 ``λ_max`` of the way that halves after a solve that did not converge and doubles after one
 that did; that sequence is the solver's initial guess and the fallback.
 
+Option outside the paper's cost (off by default): ``du_weight`` adds the input-rate penalty
+``Σ_i (u_i − u_{i−1})ᵀ S (u_i − u_{i−1})`` (normalised units, ``u_{−1}`` the input applied at
+the previous step; :mod:`controllers.input_rate`) to the FHOCP's cost, for smoother inputs.
+
 Option outside the theorem (off by default): ``offset_free=True`` shifts the model set-point
 by a filtered estimate ``d̂`` of the output mismatch ``y − ŷ`` (``ȳ_model = ȳ − d̂``), to remove
 the small static offset the paper reports; the shifted set-point must still pass the checks.
@@ -60,7 +64,7 @@ __all__ = ["RobustMPCController"]
 
 def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_rate: Any,
                    governor: Any, solver: Any, ipopt_options: Any, max_iter: Any,
-                   kernel: Any) -> None:
+                   kernel: Any, du_weight: Any) -> None:
     """Reject controller options of the wrong type or range with a one-line error."""
 
     def number(value: Any) -> bool:
@@ -87,6 +91,10 @@ def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_
             isinstance(k, str) for k in ipopt_options)):
         raise CosimError(f"option ipopt_options={ipopt_options!r}: expected an object of "
                          "IPOPT option names and values")
+    weights = list(du_weight.values()) if isinstance(du_weight, Mapping) else [du_weight]
+    if not all(number(w) and w >= 0 for w in weights):
+        raise CosimError(f"option du_weight={du_weight!r}: expected a non-negative number or "
+                         "an object of non-negative numbers by input name (normalised units)")
 
 
 class RobustMPCController(Component):
@@ -132,6 +140,12 @@ class RobustMPCController(Component):
         Where the SQP's derivatives come from: the compiled kernel (``"auto"``, built on
         first use; the numpy callbacks when no C compiler is found) or the numpy callbacks
         (``"numpy"``, the reference implementation). Same answers either way.
+    du_weight : float or mapping, optional
+        Outside the paper's cost: weight ``S`` of the input-rate penalty ``Σ_i (u_i −
+        u_{i−1})ᵀ S (u_i − u_{i−1})`` in normalised units (``u`` ∈ [−1, 1]; ``u_{−1}`` the
+        input applied at the previous step), one number for every input or an object by the
+        problem's input names (``{"qa": 5, "qb": 5}``; inputs not named: 0). Default 0: the
+        paper's cost.
     max_iter : int
         Iteration cap of one FHOCP solve (default 15, the real-time bound). A solve that
         reaches it applies its feasible iterate (suboptimal MPC) or the fallback; that iterate
@@ -153,7 +167,8 @@ class RobustMPCController(Component):
                  setpoint_rate: float | None = None, governor: bool = True,
                  solver: str | None = None,
                  ipopt_options: Mapping[str, Any] | None = None, max_iter: int = 15,
-                 kernel: str = "auto", name: str = "mpc") -> None:
+                 kernel: str = "auto", du_weight: float | Mapping[str, float] = 0.0,
+                 name: str = "mpc") -> None:
         from controllers import certificates as certs
         from controllers import gain_design
         from controllers.fhocp import FHOCP
@@ -164,7 +179,8 @@ class RobustMPCController(Component):
 
         _check_options(name=name, offset_free=offset_free, offset_filter=offset_filter,
                        setpoint_rate=setpoint_rate, governor=governor, solver=solver,
-                       ipopt_options=ipopt_options, max_iter=max_iter, kernel=kernel)
+                       ipopt_options=ipopt_options, max_iter=max_iter, kernel=kernel,
+                       du_weight=du_weight)
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
         try:
@@ -175,6 +191,13 @@ class RobustMPCController(Component):
 
         self.problem = problem_for(self.model, problem)
         self.model.problem = self.problem
+        from controllers.input_rate import du_weights
+
+        try:
+            self.du_weight = du_weights(du_weight, len(self.problem.input_names),
+                                        list(self.problem.input_names))
+        except ControllersError as exc:
+            raise CosimError(f"option {exc}") from None
         kwargs: dict[str, Any] = {"N": N, "Q": Q, "R": R, "e_o0": e_o0}
         try:
             if gain_scale is None and self.model.L_z is None:
@@ -190,6 +213,7 @@ class RobustMPCController(Component):
         self.cert = cert
         self.fhocp = FHOCP.from_certificate(
             cert, solver=solver, sqp_options={"max_iter": max_iter}, kernel=kernel,
+            du_weight=self.du_weight,
             ipopt_options={"max_iter": max_iter, **(ipopt_options or {})}
             if ipopt_options or solver == "ipopt" else None)
         # build the solver and load scipy.optimize (the observer's x̂_0 equilibrium) now, so
@@ -318,6 +342,8 @@ class RobustMPCController(Component):
             "formulation": self.fhocp.formulation,
             "kernel": "compiled" if self.fhocp.kernel is not None else "numpy",
             "offset_free": self.offset_free,
+            "du_weight": {n: float(w) for n, w in zip(self._u_names, self.du_weight,
+                                                      strict=True)},
             "setpoint_rate": self.setpoint_rate,
             "governor": self.governor is not None,
             "governor_steps": self.governed_steps,

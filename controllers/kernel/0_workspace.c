@@ -4,13 +4,16 @@
  * outputs, NH horizon stages, NQ reduced output-constraint rows), the GRU weights (row-major,
  * eq:gru; U^T copies for column-oriented mat-vecs, J_z = [U_z W_z], J_r = [U_r W_r]), the cost
  * weights QW (NX x NX, QDIAG when diagonal), RW (NU x NU), SW (s), the reduced constraint rows
- * DUO (NQ x NX), the eigenvalue clipping margin CLIP (< 0: no clipping), PFX(name), the
+ * DUO (NQ x NX), the eigenvalue clipping margin CLIP (< 0: no clipping), HAS_DU and DW (NU,
+ * when HAS_DU): the input-rate weights S = diag(DW) (controllers/input_rate.py), PFX(name), the
  * symbol prefix (a hash of the source: several kernels can live in one process), and the
  * interface types shared with Python (controllers/kernel_abi.py: gk_sqp_opts, gk_sqp_info,
  * the gk_sqp_status and gk_qp_status enums), generated from their one definition there.
  *
  * Decision variables w = (u_0 .. u_{N-1}, t) (NW = NH*NU + 1), parameters p = (x_hat, x_bar,
- * u_bar) (NP = 2 NX + NU). Same mathematics as controllers/shooting.py (GRUShooting.rollout,
+ * u_bar) (NP = 2 NX + NU), then u_prev = u_{-1} when HAS_DU (NP = 2 NX + 2 NU): the cost's
+ * input-rate term sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); without it (HAS_DU 0)
+ * none of its code is compiled. Same mathematics as controllers/shooting.py (GRUShooting.rollout,
  * stage_hessians) and controllers/nlp_single_shooting.py (SingleShootingNLP.objective,
  * constraints, gradient, jacobian, hessian, hessian_convex) -- see there for the formulas;
  * checked against them to ~1e-14 (tests/controllers/test_compiled_kernel.py).
@@ -64,7 +67,7 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 #define NUU (NH * NU)
 #define NW (NUU + 1)
 #define NG ((NH - 1) * NQ + 2 * NX)
-#define NP (2 * NX + NU)
+#define NP (2 * NX + NU + HAS_DU * NU)
 #define QP_NC (2 * (NW + NG))   /* one-sided constraints of the QP (5_qp.c) */
 #define EXPORT __attribute__((visibility("default")))
 #define A32 __attribute__((aligned(32)))

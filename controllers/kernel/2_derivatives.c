@@ -18,12 +18,55 @@ __attribute__((always_inline)) static inline double add_quad(
   return acc;
 }
 
+#if HAS_DU
+/* The input-rate term (controllers/input_rate.py) of inputs u (NH x NU) after up = u_{-1}:
+ * sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}) */
+static double du_cost(const double *u, const double *up) {
+  double acc = 0.0;
+  for (int i = 0; i < NH; i++) {
+    const double *prev = i ? u + (i - 1) * NU : up;
+    for (int j = 0; j < NU; j++) {
+      const double d = u[i * NU + j] - prev[j];
+      acc += (d * DW[j]) * d;
+    }
+  }
+  return acc;
+}
+
+/* its gradient 2 DW (d_i - d_{i+1}) (d_N = 0) added into g (NUU) */
+static void du_gradient(const double *u, const double *up, double *g) {
+  for (int i = 0; i < NH; i++)
+    for (int j = 0; j < NU; j++) {
+      const double *prev = i ? u + (i - 1) * NU : up;
+      double s = u[i * NU + j] - prev[j];
+      if (i + 1 < NH) s -= u[(i + 1) * NU + j] - u[i * NU + j];
+      g[i * NU + j] += 2.0 * DW[j] * s;
+    }
+}
+
+/* lf times its constant Hessian 2 D' diag(DW) D added into the upper triangle of H (row-major
+ * NW x NW): 4 DW on the diagonal blocks (2 DW on the last), -2 DW on the first superdiagonal
+ * block (before hessian_finish mirrors the triangle) */
+static void du_hessian(double lf, double *H) {
+  for (int i = 0; i < NH; i++)
+    for (int j = 0; j < NU; j++) {
+      const int r = i * NU + j;
+      H[r * NW + r] += 2.0 * lf * DW[j] * (i + 1 < NH ? 2.0 : 1.0);
+      if (i + 1 < NH) H[r * NW + r + NU] -= 2.0 * lf * DW[j];
+    }
+}
+#endif
+
 HOT static double cost(const gk_ws *ws, const double *w, const double *p) {
   const double *xb = p + NX, *ub = p + 2 * NX, t = w[NUU];
   double acc = 0.0;
   for (int i = 0; i < NH; i++) acc = add_quad(acc, ws->X + i * NX, xb, QW, NX, QDIAG);
   for (int i = 0; i < NH; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU, 0);
+#if HAS_DU
+  return acc + SW * t * t + du_cost(w, p + 2 * NX + NU);
+#else
   return acc + SW * t * t;
+#endif
 }
 
 HOT static void constraints(const gk_ws *ws, const double *w, const double *p, double *g) {
@@ -65,6 +108,9 @@ HOT static void gradient(const gk_ws *ws, const double *w, const double *p, doub
       for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * RW[j * NU + k]);
       grad[i * NU + k] += s;
     }
+#if HAS_DU
+  du_gradient(w, p + 2 * NX + NU, grad);
+#endif
   grad[NUU] = 2.0 * SW * w[NUU];
 }
 
@@ -101,9 +147,13 @@ HOT static void jacobian(const gk_ws *ws, double *J) {
   }
 }
 
-/* the last lines of every Hessian variant: the upper triangle of the input block mirrored
- * into the lower one, and the terminal slack's entry */
+/* the last lines of every Hessian variant: the input-rate term's constant Hessian (HAS_DU),
+ * the upper triangle of the input block mirrored into the lower one, and the terminal
+ * slack's entry */
 __attribute__((always_inline)) static inline void hessian_finish(double *H, double lf) {
+#if HAS_DU
+  du_hessian(lf, H);
+#endif
   for (int r = 0; r < NUU; r++)
     for (int c = 0; c < r; c++) H[r * NW + c] = H[c * NW + r];
   H[NUU * NW + NUU] = 2.0 * lf * SW;

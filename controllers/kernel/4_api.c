@@ -127,7 +127,8 @@ EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
 /* The independent check of an input sequence (controllers.fhocp: FHOCP.cost and
  * FHOCP._residuals on a plain rollout, in one call): states x (NH+1 x NX) from xh under u
  * (NH x NU, used as given), and
- *   out[0] cost of eq:optimization-cost with t = |x_N - x_bar|_inf,
+ *   out[0] cost of eq:optimization-cost with t = |x_N - x_bar|_inf (+ the input-rate term
+ *          after up = u_{-1} when HAS_DU; up is not read otherwise),
  *   out[1] max_j (L U_o x_0 - bnd_0)_j, the i = 0 output rows (-inf when NL = 0),
  *   out[2] max_{i>=1, j} (L U_o x_i - bnd_i)_j (-inf when none),
  *   out[3] max |u|, out[4] |x_N - x_bar|_inf,
@@ -136,8 +137,8 @@ EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
  * bnd: the tightened bounds h - a_i e_o - b_i - w_L - L b_o (NH x NL); alpha the terminal
  * set's radius. */
 static void assess_core(gk_ws *ws, const double *xh, const double *u, const double *xb,
-                        const double *ub, const double *bnd, double alpha, double *x,
-                        double *out) {
+                        const double *ub, const double *up, const double *bnd, double alpha,
+                        double *x, double *out) {
   simulate(xh, u, x, ws->sz, ws->sr, ws->sh);
   double acc = 0.0;
   for (int i = 0; i < NH; i++) acc = add_quad(acc, x + i * NX, xb, QW, NX, QDIAG);
@@ -167,7 +168,12 @@ static void assess_core(gk_ws *ws, const double *xh, const double *u, const doub
     if (a > 1.0 - 1e-6) act++;
   }
   if (dN - alpha > -1e-6) act++;
+#if HAS_DU
+  out[0] = acc + SW * dN * dN + du_cost(u, up);
+#else
+  (void)up;
   out[0] = acc + SW * dN * dN;
+#endif
   out[1] = v0;
   out[2] = v1;
   out[3] = umax;
@@ -176,18 +182,18 @@ static void assess_core(gk_ws *ws, const double *xh, const double *u, const doub
 }
 
 EXPORT void PFX(assess)(gk_ws *ws, const double *xh, const double *u, const double *xb,
-                        const double *ub, const double *bnd, double alpha, double *x,
-                        double *out) {
-  assess_core(ws, xh, u, xb, ub, bnd, alpha, x, out);
+                        const double *ub, const double *up, const double *bnd, double alpha,
+                        double *x, double *out) {
+  assess_core(ws, xh, u, xb, ub, up, bnd, alpha, x, out);
 }
 
-/* The check of the solver's answer w at p = (x_hat, x_bar, u_bar): u = clip(w_u, -1, 1)
+/* The check of the solver's answer w at p = (x_hat, x_bar, u_bar[, u_prev]): u = clip(w_u, -1, 1)
  * into uc, assess_core of uc into x and out[0..5], and out[6] the defect
  * max |x_solver - x| against the solver's own trajectory at (w, p) (the cached rollout). */
 EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const double *bnd,
                           double alpha, double *uc, double *x, double *out) {
   for (int c = 0; c < NUU; c++) uc[c] = w[c] < -1.0 ? -1.0 : (w[c] > 1.0 ? 1.0 : w[c]);
-  assess_core(ws, p, uc, p + NX, p + 2 * NX, bnd, alpha, x, out);
+  assess_core(ws, p, uc, p + NX, p + 2 * NX, p + 2 * NX + NU, bnd, alpha, x, out);
   roll(ws, w, p, 0);
   double d = 0.0;
   for (int c = 0; c < (NH + 1) * NX; c++) {

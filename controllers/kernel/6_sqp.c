@@ -24,7 +24,8 @@ static double sq_now(void) {
 
 /* The gradient of the Lagrangian f + lam_g' g + lam_x' w at w (its rollout cached, level >= 0)
  * by one adjoint sweep: mu_N = dL/dx_N, mu_i = 2 Q (x_i - x_bar) + D'lam_i + A_i' mu_{i+1},
- * dL/du_i = B_i' mu_{i+1} + 2 R (u_i - u_bar) + lam_x (adjoint_local and stage_vjp, as the
+ * dL/du_i = B_i' mu_{i+1} + 2 R (u_i - u_bar) + lam_x (+ the input-rate term's gradient when
+ * HAS_DU, du_gradient) (adjoint_local and stage_vjp, as the
  * contracted Hessian's adjoints) -- O(N n^2), no sensitivities: what the
  * convergence test needs at an iterate whose Jacobian the SQP may never use. Same value as
  * grad f + J' lam_g + lam_x from jac_fg, up to rounding. */
@@ -50,6 +51,9 @@ HOT static void lagrangian_gradient(const gk_ws *ws, const double *w, const doub
     }
     memcpy(mun, mu, sizeof mu);
   }
+#if HAS_DU
+  du_gradient(w, p + 2 * NX + NU, gl);
+#endif
 }
 
 /* test hook: lagrangian_gradient at (w, p) in workspace ws */

@@ -164,6 +164,11 @@ def test_governor_keeps_fhocp_feasible_after_large_step(tmp_path):
     ({"ipopt_options": 3}, "ipopt_options=3: expected an object"),
     ({"name": 3}, "name=3: expected a non-empty string"),
     ({"solver": "fatrop"}, "solver='fatrop': expected \"sqp\" or \"ipopt\""),
+    ({"du_weight": -1}, "du_weight=-1: expected a non-negative number or an object"),
+    ({"du_weight": "x"}, "du_weight='x'"),
+    ({"du_weight": True}, "du_weight=True"),
+    ({"du_weight": {"qa": -2}}, "du_weight={'qa': -2}"),
+    ({"du_weight": {"qc": 1}}, "option du_weight: unknown input 'qc' (inputs: qa, qb)"),
 ])
 def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
     with pytest.raises(CosimError) as info:
