@@ -294,12 +294,19 @@ def _executing(dask_worker: Any) -> tuple[int, list[str]]:
 
 
 def executing_run(client: Any) -> tuple[str, int]:
-    """A run's task key being executed (not only assigned) and its worker's process id."""
+    """A run's task key being executed (not only assigned) that has announced its start on
+    the scheduler (a run killed before that is not charged a try: on a loaded machine the
+    gap is long enough to hit), and its worker's process id."""
+    from cosim.campaign.task import START_TOPIC
+
     end = time.monotonic() + WAIT
     while time.monotonic() < end:
+        started = {str(m.get("key")) for _, m in client.get_events(START_TOPIC)
+                   if isinstance(m, dict)}
         for pid, keys in client.run(_executing).values():
-            if keys:
-                return keys[0], pid
+            for key in keys:
+                if key in started:
+                    return key, pid
         time.sleep(0.05)
     raise AssertionError("no run was executed")
 
