@@ -119,7 +119,8 @@ def write_run(out: Path, spec: CampaignSpec, task: dict[str, Any],
         k = kpis.compute(result.columns, result.rows, result.outputs, result.references,
                          result.inputs, result.bounds)
         meta["campaign"]["theorem"] = report.theorem_checks(
-            result.columns, np.asarray(result.rows, dtype=float).reshape(len(result.rows), -1),
+            result.columns,
+            np.asarray(result.rows, dtype=float).reshape(len(result.rows), len(result.columns)),
             theorem, k)
     results.write(folder, result, meta, figure=spec.figures)
     if trace:
