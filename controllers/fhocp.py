@@ -258,6 +258,14 @@ class FHOCP:
         self._warm: dict[str, np.ndarray] | None = None
         return self
 
+    def numpy_nlp(self) -> Any:
+        """The numpy twin of this problem's derivatives (what the compiled kernel is
+        self-tested against): a :class:`~controllers.nlp_single_shooting.SingleShootingNLP`
+        without a kernel."""
+        from controllers.nlp_single_shooting import SingleShootingNLP
+
+        return SingleShootingNLP(self, None)
+
     def simulate(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
         """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m): the compiled
         kernel's plain rollout when there is one, else numpy (:func:`controllers.gru.

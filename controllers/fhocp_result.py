@@ -62,6 +62,9 @@ class FHOCPResult:
     feasible: bool = False
     lam_x: np.ndarray | None = field(default=None, repr=False)
     lam_g: np.ndarray | None = field(default=None, repr=False)
+    #: the tracking FHOCP's artificial steady input and state (:mod:`controllers.fhocp_tracking`)
+    u_s: np.ndarray | None = None
+    x_s: np.ndarray | None = field(default=None, repr=False)
 
 
 def set_residuals(res: FHOCPResult, out: np.ndarray, alpha: float) -> None:

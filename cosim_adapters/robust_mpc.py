@@ -58,6 +58,7 @@ from controllers.errors import ControllersError, SetpointError
 from controllers.model import DEFAULT_MODEL
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
+from cosim_adapters.tracking import _check_law
 
 __all__ = ["RobustMPCController"]
 
@@ -160,15 +161,16 @@ class RobustMPCController(Component):
     timing_diagnostics = frozenset({"solve_ms"})
 
     def __init__(self, model: str | Path | None = None, problem: str | Path | None = None,
-                 N: int = 15,
+                 N: int | None = None,
                  Q: np.ndarray | None = None, R: np.ndarray | None = None,
                  e_o0: float = 0.02, gain_scale: float | None = None,
-                 offset_free: bool = False, offset_filter: float = 0.05,
-                 setpoint_rate: float | None = None, governor: bool = True,
+                 offset_free: bool = False, offset_filter: float | None = None,
+                 setpoint_rate: float | None = None, governor: bool | None = None,
                  solver: str | None = None,
                  ipopt_options: Mapping[str, Any] | None = None, max_iter: int = 15,
-                 kernel: str = "auto", du_weight: float | Mapping[str, float] = 0.0,
-                 name: str = "mpc") -> None:
+                 kernel: str = "auto", du_weight: float | Mapping[str, float] | None = None,
+                 law: str = "paper", offset_weight: float | Mapping[str, float] = 1e5,
+                 alpha_c: float | None = None, name: str = "mpc") -> None:
         from controllers import certificates as certs
         from controllers import gain_design
         from controllers.fhocp import FHOCP
@@ -177,10 +179,18 @@ class RobustMPCController(Component):
         from controllers.observer import GRUObserver
         from controllers.robust_mpc import RobustMPC
 
+        tracking = _check_law(law, governor=governor, offset_free=offset_free,
+                              setpoint_rate=setpoint_rate, offset_weight=offset_weight,
+                              alpha_c=alpha_c)
+        N = (40 if tracking else 15) if N is None else N
+        governor = (not tracking) if governor is None else governor
+        offset_filter = (0.2 if tracking else 0.05) if offset_filter is None else offset_filter
+        du_weight = (0.1 if tracking else 0.0) if du_weight is None else du_weight
         _check_options(name=name, offset_free=offset_free, offset_filter=offset_filter,
                        setpoint_rate=setpoint_rate, governor=governor, solver=solver,
                        ipopt_options=ipopt_options, max_iter=max_iter, kernel=kernel,
                        du_weight=du_weight)
+        self.law = law
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
         try:
@@ -210,12 +220,22 @@ class RobustMPCController(Component):
                 cert = certs.compute_certificate(self.model, gain_scale=gain_scale, **kwargs)
         except ControllersError as exc:  # a bad design or a model without certificate
             raise CosimError(str(exc)) from None
-        self.cert = cert
-        self.fhocp = FHOCP.from_certificate(
-            cert, solver=solver, sqp_options={"max_iter": max_iter}, kernel=kernel,
+        fhocp_options: dict[str, Any] = dict(
+            solver=solver, sqp_options={"max_iter": max_iter}, kernel=kernel,
             du_weight=self.du_weight,
             ipopt_options={"max_iter": max_iter, **(ipopt_options or {})}
             if ipopt_options or solver == "ipopt" else None)
+        self.tracker = None
+        if tracking:
+            from cosim_adapters.tracking import tracking_design
+
+            cert, self.tracker, self.disturbance = tracking_design(
+                self.model, self.problem, cert, kwargs, offset_weight, alpha_c,
+                offset_filter, fhocp_options)
+            self.fhocp = self.tracker.fhocp
+        else:
+            self.fhocp = FHOCP.from_certificate(cert, **fhocp_options)
+        self.cert = cert
         # build the solver and load scipy.optimize (the observer's x̂_0 equilibrium) now, so
         # that the first control step is a normal one (importing scipy.optimize: ~0.2 s)
         import scipy.optimize  # noqa: F401
@@ -259,6 +279,9 @@ class RobustMPCController(Component):
         self.fhocp.setup()
         self.observer.kernel = self.fhocp.kernel   # its compiled GRU step (same model)
         self.mpc.reset()
+        if self.tracker is not None:
+            self.tracker.reset()
+            self.disturbance.reset()
         if self.governor is not None:
             self.governor.reset()
         self._y_ref: np.ndarray | None = None      # requested set-point (normalised)
@@ -302,9 +325,19 @@ class RobustMPCController(Component):
         if self._d_hat is None:
             self._d_hat = np.zeros_like(y)
         self._candidate = None
-        rejected = self._update_reference(y_ref, y, t)
-        rec = self.mpc.make_step(self.observer.x_hat, self.observer.e_o,
-                                 candidate=self._candidate)
+        law_diag: dict[str, float] = {}
+        if self.tracker is not None:
+            from cosim_adapters.tracking import tracking_step
+
+            if self._y_ref is None or np.any(y_ref != self._y_ref):
+                self.setpoint_changes += 1
+                self._y_ref = y_ref
+            rejected = False
+            rec, law_diag = tracking_step(self, y, y_ref)
+        else:
+            rejected = self._update_reference(y_ref, y, t)
+            rec = self.mpc.make_step(self.observer.x_hat, self.observer.e_o,
+                                     candidate=self._candidate)
         e_o = self.observer.e_o
         self.observer.make_step(rec.u, y)
         self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
@@ -316,7 +349,7 @@ class RobustMPCController(Component):
             "iterations": float(res.iterations),
             "status": float(STATUS_CODES.get(res.status, OTHER_STATUS)),
             "cost": float(res.cost) if math.isfinite(res.cost) else float("nan"),
-            "alpha": self.mpc.alpha,
+            "alpha": self.fhocp.alpha_c if self.tracker is not None else self.mpc.alpha,
             "e_o": e_o,
             "x_hat_error_bound": e_o,
             "active_constraints": float(res.active),
@@ -325,6 +358,9 @@ class RobustMPCController(Component):
             "setpoint_rejected": float(rejected),
             "governor_lambda": self._lam,
         }
+        if self.tracker is not None:
+            self._diag.update(law_diag)
+            return
         y_model = self.model.denormalize_y(self._y_model)
         for name, value in zip(self._y_names, y_model, strict=True):
             self._diag[f"y_model_{name}"] = float(value)
@@ -333,9 +369,18 @@ class RobustMPCController(Component):
         return dict(self._diag)
 
     def summary(self) -> dict:
-        out = self.mpc.summary()
+        from controllers.robust_mpc import solver_summary
+
+        records = self.tracker.records if self.tracker is not None else self.mpc.records
+        out = solver_summary(records)
+        if self.tracker is not None:
+            out.update({"alpha_c": self.fhocp.alpha_c,
+                        "offset_weight": {n: float(w) for n, w in zip(
+                            self._y_names, self.fhocp.offset_weight, strict=True)},
+                        "offset_filter": self.disturbance.beta})
         out.update({
             "controller": "robust-mpc",
+            "law": self.law,
             "model": str(self.model_path),
             "problem": self.problem.name,
             "N": self.fhocp.N,

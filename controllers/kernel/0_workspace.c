@@ -13,7 +13,9 @@
  * Decision variables w = (u_0 .. u_{N-1}, t) (NW = NH*NU + 1), parameters p = (x_hat, x_bar,
  * u_bar) (NP = 2 NX + NU), then u_prev = u_{-1} when HAS_DU (NP = 2 NX + 2 NU): the cost's
  * input-rate term sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); without it (HAS_DU 0)
- * none of its code is compiled. Same mathematics as controllers/shooting.py (GRUShooting.rollout,
+ * none of its code is compiled. HAS_ASS 1: the tracking FHOCP (controllers/fhocp_tracking.py,
+ * 1b_steady_state.c), w = (u_0 .. u_{N-1}, u_s, t), p = (x_hat, x_s0, r[, u_prev]), the
+ * artificial steady state x_s(u_s) in place of x_bar and u_s in place of u_bar. Same mathematics as controllers/shooting.py (GRUShooting.rollout,
  * stage_hessians) and controllers/nlp_single_shooting.py (SingleShootingNLP.objective,
  * constraints, gradient, jacobian, hessian, hessian_convex) -- see there for the formulas;
  * checked against them to ~1e-14 (tests/controllers/test_compiled_kernel.py).
@@ -65,9 +67,23 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 
 #define NV (NX + NU)
 #define NUU (NH * NU)
-#define NW (NUU + 1)
-#define NG ((NH - 1) * NQ + 2 * NX)
+#define NUA (NUU + HAS_ASS * NU)   /* u_0 .. u_{N-1} (and u_s): the Hessian's coupled block */
+#define IT NUA                     /* the epigraph variable t: the last entry of w */
+#define NW (NUA + 1)
+#define NG ((NH - 1) * NQ + 2 * NX + HAS_ASS * NQ)
+#if HAS_ASS
+/* the tracking FHOCP (1b_steady_state.c): p = (x_hat, x_s0, r[, u_prev]), the set-point
+ * reference x_bar = x_s(u_s) and u_bar = u_s of the decision vector */
+#define NP (2 * NX + NY + HAS_DU * NU)
+#define XREF(ws, p) ((const double *)(ws)->xs)
+#define UREF(w, p) ((w) + NUU)
+#define UPREV(p) ((p) + 2 * NX + NY)
+#else
 #define NP (2 * NX + NU + HAS_DU * NU)
+#define XREF(ws, p) ((p) + NX)
+#define UREF(w, p) ((p) + 2 * NX)
+#define UPREV(p) ((p) + 2 * NX + NU)
+#endif
 #define QP_NC (2 * (NW + NG))   /* one-sided constraints of the QP (5_qp.c) */
 #define EXPORT __attribute__((visibility("default")))
 #define A32 __attribute__((aligned(32)))
@@ -97,6 +113,12 @@ typedef struct gk_ws {
   A32 double T[NX * NUU];                /* derivatives' scratch */
 #endif
   A32 double S[(NH + 1) * NX * NUU];     /* S_i = dx_i/du, NX x NUU row-major; cols >= i NU 0 */
+#if HAS_ASS
+  /* the artificial steady state of the cached point (1b_steady_state.c): x_s = f(x_s, u_s),
+   * X_s = dx_s/du_s = (I - A_s)^-1 B_s (NX x NU row-major), LU of I - A_s, Newton's status */
+  double xs[NX], XS[NX * NU], xs_lu[NX * NX];
+  int xs_piv[NX], xs_status;
+#endif
   /* the Hessian of the Lagrangian (2_derivatives.c) */
   A32 double MU[(NH + 1) * NX];          /* adjoints */
 #ifndef GK_CONTRACT
@@ -112,11 +134,11 @@ typedef struct gk_ws {
   A32 double sz[NH * NX], sr[NH * NX], sh[NH * NX];
   A32 double Hrm[NW * NW];               /* the casadi Hessian's row-major copy */
   /* eigenvalue clipping (3_eigen_clip.c) */
-  A32 double V[NUU * NUU], Hu[NUU * NUU];
-  double d[NUU], e[NUU];
+  A32 double V[NUA * NUA], Hu[NUA * NUA];
+  double d[NUA], e[NUA];
 #ifdef GK_LAPACK_EIG
-  A32 double Z[NUU * NUU], work[26 * NUU];
-  int iwork[10 * NUU], isuppz[2 * NUU];
+  A32 double Z[NUA * NUA], work[26 * NUA];
+  int iwork[10 * NUA], isuppz[2 * NUA];
 #endif
   long n_calls, n_eig, n_clipped, n_evs; /* clipping counters (PFX(counters)) */
   /* the QP (5_qp.c) */

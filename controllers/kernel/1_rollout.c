@@ -329,13 +329,21 @@ HOT static void derivatives(gk_ws *ws) {
 }
 #endif
 
-/* make the workspace's cache valid at (w, p) up to `level` */
+#if HAS_ASS
+static void steady_state(gk_ws *ws, const double *us, const double *x0);   /* 1b */
+#endif
+
+/* make the workspace's cache valid at (w, p) up to `level` (with HAS_ASS: the artificial
+ * steady state x_s(u_s) from Newton's start x_s0 = p + NX too, at level 0) */
 HOT static void roll(gk_ws *ws, const double *w, const double *p, int level) {
   if (ws->c_level < 0 || memcmp(w, ws->c_w, sizeof ws->c_w) != 0 ||
       memcmp(p, ws->c_p, sizeof ws->c_p) != 0) {
     memcpy(ws->c_w, w, sizeof ws->c_w);
     memcpy(ws->c_p, p, sizeof ws->c_p);
     simulate(p, w, ws->X, ws->ZG, ws->RG, ws->HG);
+#if HAS_ASS
+    steady_state(ws, w + NUU, p + NX);
+#endif
     ws->c_level = 0;
   }
   if (level >= 1 && ws->c_level < 1) {

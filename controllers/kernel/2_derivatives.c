@@ -58,19 +58,22 @@ static void du_hessian(double lf, double *H) {
 #endif
 
 HOT static double cost(const gk_ws *ws, const double *w, const double *p) {
-  const double *xb = p + NX, *ub = p + 2 * NX, t = w[NUU];
+  const double *xb = XREF(ws, p), *ub = UREF(w, p), t = w[IT];
   double acc = 0.0;
   for (int i = 0; i < NH; i++) acc = add_quad(acc, ws->X + i * NX, xb, QW, NX, QDIAG);
   for (int i = 0; i < NH; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU, 0);
+#if HAS_ASS
+  acc += ass_cost(ws, w, p);
+#endif
 #if HAS_DU
-  return acc + SW * t * t + du_cost(w, p + 2 * NX + NU);
+  return acc + SW * t * t + du_cost(w, UPREV(p));
 #else
   return acc + SW * t * t;
 #endif
 }
 
 HOT static void constraints(const gk_ws *ws, const double *w, const double *p, double *g) {
-  const double *xb = p + NX, t = w[NUU], *X = ws->X;
+  const double *xb = XREF(ws, p), t = w[IT], *X = ws->X;
   for (int i = 1; i < NH; i++)
     for (int a = 0; a < NQ; a++) {
       double s = 0.0;
@@ -83,10 +86,13 @@ HOT static void constraints(const gk_ws *ws, const double *w, const double *p, d
     g[(NH - 1) * NQ + k] = d - t;
     g[(NH - 1) * NQ + NX + k] = d + t;
   }
+#if HAS_ASS
+  ass_constraints(ws, g);
+#endif
 }
 
 HOT static void gradient(const gk_ws *ws, const double *w, const double *p, double *grad) {
-  const double *xb = p + NX, *ub = p + 2 * NX, *X = ws->X, *S = ws->S;
+  const double *xb = XREF(ws, p), *ub = UREF(w, p), *X = ws->X, *S = ws->S;
   for (int c = 0; c < NUU; c++) grad[c] = 0.0;
   for (int i = 1; i < NH; i++) {
     double dq[NX];
@@ -109,9 +115,12 @@ HOT static void gradient(const gk_ws *ws, const double *w, const double *p, doub
       grad[i * NU + k] += s;
     }
 #if HAS_DU
-  du_gradient(w, p + 2 * NX + NU, grad);
+  du_gradient(w, UPREV(p), grad);
 #endif
-  grad[NUU] = 2.0 * SW * w[NUU];
+#if HAS_ASS
+  ass_gradient(ws, w, p, grad);
+#endif
+  grad[IT] = 2.0 * SW * w[IT];
 }
 
 /* dense column-major NG x NW */
@@ -142,21 +151,30 @@ HOT static void jacobian(const gk_ws *ws, double *J) {
     }
   }
   for (int k = 0; k < NX; k++) {
-    J[NUU * NG + r0 + k] = -1.0;
-    J[NUU * NG + r0 + NX + k] = 1.0;
+    J[IT * NG + r0 + k] = -1.0;
+    J[IT * NG + r0 + NX + k] = 1.0;
   }
+#if HAS_ASS
+  ass_jacobian(ws, J);
+#endif
 }
 
 /* the last lines of every Hessian variant: the input-rate term's constant Hessian (HAS_DU),
- * the upper triangle of the input block mirrored into the lower one, and the terminal
- * slack's entry */
-__attribute__((always_inline)) static inline void hessian_finish(double *H, double lf) {
+ * the artificial steady input's rows (HAS_ASS), the upper triangle of the input block
+ * mirrored into the lower one, and the terminal slack's entry */
+__attribute__((always_inline)) static inline void hessian_finish(const gk_ws *ws, double *H,
+                                                               double lf) {
 #if HAS_DU
   du_hessian(lf, H);
 #endif
-  for (int r = 0; r < NUU; r++)
+#if HAS_ASS
+  ass_hessian(ws, lf, H);
+#else
+  (void)ws;
+#endif
+  for (int r = 0; r < NUA; r++)
     for (int c = 0; c < r; c++) H[r * NW + c] = H[c * NW + r];
-  H[NUU * NW + NUU] = 2.0 * lf * SW;
+  H[IT * NW + IT] = 2.0 * lf * SW;
 }
 
 /* ---------------------------------------------------------------- adjoints */
@@ -276,7 +294,7 @@ HOT static void stage_hessian(gk_ws *ws, int i, const double *mu, double *W) {
 __attribute__((always_inline)) static inline void adjoints(const gk_ws *ws, const double *p,
                                                          double lf, const double *lg,
                                                          double *MU) {
-  const double *xb = p + NX;
+  const double *xb = XREF(ws, p);
   const int r0 = (NH - 1) * NQ;
   for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
   for (int i = NH - 1; i >= 1; i--) {
@@ -330,7 +348,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
     for (int a = 0; a < NX; a++)
       for (int b = 0; b < NX; b++) P[a * NX + b] = T[a * NV + b];
   }
-  hessian_finish(H, lf);
+  hessian_finish(ws, H, lf);
 }
 #else
 /* full Hessian of the Lagrangian, row-major NW x NW (symmetric) */
@@ -369,7 +387,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
       for (int j2 = j1; j2 < NU; j2++)
         H[(K + j1) * NW + K + j2] += W[(NX + j1) * NV + NX + j2] + 2.0 * lf * RW[j1 * NU + j2];
   }
-  hessian_finish(H, lf);
+  hessian_finish(ws, H, lf);
 }
 #endif /* GK_BACKWARD */
 
@@ -380,7 +398,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
  * state cost), i.e. the same sums as W-mode, regrouped; 5 n Kc^2 per stage. */
 HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, const double *lg,
                         double *H) {
-  const double *xb = p + NX;
+  const double *xb = XREF(ws, p);
   double *MU = ws->MU, *L = ws->L, *R = ws->R, *QS = ws->QS;
   (void)w;
   const int r0 = (NH - 1) * NQ;
@@ -448,7 +466,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
     for (int j1 = 0; j1 < NU; j1++)
       for (int j2 = j1; j2 < NU; j2++) H[(K + j1) * NW + K + j2] += 2.0 * lf * RW[j1 * NU + j2];
   }
-  hessian_finish(H, lf);
+  hessian_finish(ws, H, lf);
 }
 #endif /* GK_CONTRACT */
 

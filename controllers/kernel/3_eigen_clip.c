@@ -174,51 +174,51 @@ HOT static int pd_shifted(const double *H, int n, double clip, double *L) {
 }
 
 /* eigenvalues of H below CLIP raised to CLIP: H += sum_j (CLIP - ev_j) v_j v_j^T.
- * H (NW x NW, row-major) is block diagonal: the u-block (NUU x NUU) and H[t, t] (the cost
+ * H (NW x NW, row-major) is block diagonal: the u-block (NUA x NUA) and H[t, t] (the cost
  * s t^2 does not couple t with u, and no constraint is nonlinear in t), so the u-block is
  * decomposed alone; same result as the eigendecomposition of the whole matrix. */
 HOT static int clip_hessian(gk_ws *ws, double *H) {
   double *V = ws->V, *Hu = ws->Hu, *d = ws->d;
   ws->n_calls++;
   if (CLIP < 0) return 0;
-  if (H[NUU * NW + NUU] < CLIP) H[NUU * NW + NUU] = CLIP;
-  for (int i = 0; i < NUU; i++)
-    for (int j = 0; j < NUU; j++) Hu[i * NUU + j] = H[i * NW + j];
-  if (pd_shifted(Hu, NUU, CLIP, V)) return 0;
+  if (H[IT * NW + IT] < CLIP) H[IT * NW + IT] = CLIP;
+  for (int i = 0; i < NUA; i++)
+    for (int j = 0; j < NUA; j++) Hu[i * NUA + j] = H[i * NW + j];
+  if (pd_shifted(Hu, NUA, CLIP, V)) return 0;
   ws->n_eig++;
   /* symmetric copy from the lower triangle H[i][j], i >= j (what numpy's eigh reads) */
-  for (int i = 0; i < NUU; i++)
-    for (int j = 0; j < NUU; j++) V[i * NUU + j] = (j <= i) ? Hu[i * NUU + j] : Hu[j * NUU + i];
-  int any = 0, ne = NUU;
+  for (int i = 0; i < NUA; i++)
+    for (int j = 0; j < NUA; j++) V[i * NUA + j] = (j <= i) ? Hu[i * NUA + j] : Hu[j * NUA + i];
+  int any = 0, ne = NUA;
 #ifdef GK_LAPACK_EIG
   {
     /* LAPACK dsyevr: only the eigenpairs below CLIP (the tridiagonal reduction is shared;
      * MRRR then finds the ~2 clipped pairs without the full QL). Row-major symmetric V =
      * column-major V; eigenvector j comes back as column j of the column-major Z = row j of
      * the row-major one. */
-    const int nn = NUU, lwork = 26 * NUU, liwork = 10 * NUU, il = 1, iu = NUU;
+    const int nn = NUA, lwork = 26 * NUA, liwork = 10 * NUA, il = 1, iu = NUA;
     const double vl = -1e300, vu = CLIP, abstol = 0.0;
     int info = 0;
     dsyevr_("V", "V", "U", &nn, V, &nn, &vl, &vu, &il, &iu, &abstol, &ne, d, ws->Z, &nn,
             ws->isuppz, ws->work, &lwork, ws->iwork, &liwork, &info);
     if (info != 0) return -1;
-    memcpy(V, ws->Z, sizeof(double) * NUU * ne);
+    memcpy(V, ws->Z, sizeof(double) * NUA * ne);
   }
 #else
   /* full decomposition (tred2 + tql2): eigenvectors as rows of V. Computing only the
    * eigenpairs below CLIP by hand (QL without vectors + inverse iteration) was measured no
    * faster in closed loop (~2.4 eigenvalues clipped per decomposition) and removed. */
-  if (symm_eig(NUU, V, d, ws->e) != 0) return -1;
+  if (symm_eig(NUA, V, d, ws->e) != 0) return -1;
 #endif
   for (int j = 0; j < ne; j++) {
     if (d[j] >= CLIP) continue;
     any = 1;
     ws->n_evs++;
-    const double a = CLIP - d[j], *vj = V + j * NUU;
-    for (int r = 0; r < NUU; r++) {
+    const double a = CLIP - d[j], *vj = V + j * NUA;
+    for (int r = 0; r < NUA; r++) {
       const double vr = a * vj[r];
       double *hr = H + r * NW;
-      for (int c = 0; c < NUU; c++) hr[c] += vr * vj[c];
+      for (int c = 0; c < NUA; c++) hr[c] += vr * vj[c];
     }
   }
   if (any) ws->n_clipped++;

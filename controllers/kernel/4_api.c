@@ -193,7 +193,12 @@ EXPORT void PFX(assess)(gk_ws *ws, const double *xh, const double *u, const doub
 EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const double *bnd,
                           double alpha, double *uc, double *x, double *out) {
   for (int c = 0; c < NUU; c++) uc[c] = w[c] < -1.0 ? -1.0 : (w[c] > 1.0 ? 1.0 : w[c]);
-  assess_core(ws, p, uc, p + NX, p + 2 * NX, p + 2 * NX + NU, bnd, alpha, x, out);
+#if HAS_ASS
+  roll(ws, w, p, 0);   /* x_s(u_s): the reference of the check */
+  assess_core(ws, p, uc, ws->xs, w + NUU, UPREV(p), bnd, alpha, x, out);
+#else
+  assess_core(ws, p, uc, XREF(ws, p), UREF(w, p), UPREV(p), bnd, alpha, x, out);
+#endif
   roll(ws, w, p, 0);
   double d = 0.0;
   for (int c = 0; c < (NH + 1) * NX; c++) {
@@ -305,6 +310,6 @@ EXPORT void PFX(timers)(const gk_ws *ws, double *out) {
 }
 
 /* test hook: clip a symmetric NW x NW row-major matrix in place (block structure assumed:
- * row/column NUU only on the diagonal) */
+ * row/column IT only on the diagonal) */
 EXPORT int PFX(clip)(gk_ws *ws, double *H) { return clip_hessian(ws, H); }
 

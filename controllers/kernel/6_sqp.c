@@ -31,15 +31,15 @@ static double sq_now(void) {
  * grad f + J' lam_g + lam_x from jac_fg, up to rounding. */
 HOT static void lagrangian_gradient(const gk_ws *ws, const double *w, const double *p,
                                     const double *lam_x, const double *lg, double *gl) {
-  const double *xb = p + NX, *ub = p + 2 * NX;
+  const double *xb = XREF(ws, p), *ub = UREF(w, p);
   const int r0 = (NH - 1) * NQ;
   double mu[NX], mun[NX], gu[NU];
-  double tg = 2.0 * SW * w[NUU];
+  double tg = 2.0 * SW * w[IT];
   for (int k = 0; k < NX; k++) {
     mun[k] = lg[r0 + k] + lg[r0 + NX + k];
     tg += lg[r0 + NX + k] - lg[r0 + k];
   }
-  gl[NUU] = tg + lam_x[NUU];
+  gl[IT] = tg + lam_x[IT];
   for (int i = NH - 1; i >= 0; i--) {   /* mun = mu_{i+1} */
     if (i >= 1) adjoint_local(ws, i, xb, 1.0, lg + (i - 1) * NQ, mu);
     else memset(mu, 0, sizeof mu);      /* x_0 = x_hat: its adjoint is not needed */
@@ -52,7 +52,10 @@ HOT static void lagrangian_gradient(const gk_ws *ws, const double *w, const doub
     memcpy(mun, mu, sizeof mu);
   }
 #if HAS_DU
-  du_gradient(w, p + 2 * NX + NU, gl);
+  du_gradient(w, UPREV(p), gl);
+#endif
+#if HAS_ASS
+  ass_lagrangian_gradient(ws, w, p, lam_x, lg, gl);
 #endif
 }
 

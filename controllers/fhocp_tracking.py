@@ -1,0 +1,317 @@
+"""The tracking FHOCP: ``eq:optimization`` with an artificial steady state and an offset cost.
+
+    min_{u, u_s}  Σ_{i<N} ‖x_i − x_s‖²_Q + ‖u_i − u_s‖²_R + s ‖x_N − x_s‖²_∞
+                  + ‖g(x_s) + d̂ − ȳ‖²_T  [+ Σ_{i<N} ‖u_i − u_{i−1}‖²_S + ‖u_{N−1} − u_s‖²_S]
+    s.t.  x_0 = x̂_k,  x_{i+1} = f(x_i, u_i)                                  (eq:gru)
+          L(U_o x_i + b_o) + w_L ≤ h − a_i ê_o,k − b_i,  i = 0 … N−1   (eq:optimization-constraint)
+          ‖u_i‖∞ ≤ 1,  ‖u_s‖∞ ≤ 1,  ‖x_N − x_s‖∞ ≤ α_c,  x_s = f(x_s, u_s)
+          L(U_o x_s + b_o) ≤ h − ẽ_o a_N − b_N − w_L − α_c c_s                (y_s ∈ Y_s)
+
+The paper's FHOCP (:class:`controllers.fhocp.FHOCP`) with the set-point ``(x̄, ū)`` replaced
+by a decision variable: the steady input ``u_s`` and its steady state ``x_s(u_s)``
+(:mod:`controllers.steady_state`), as in MPC for tracking (Limon et al., IEEE TAC 2018). The
+requested set-point ``ȳ`` and the output-disturbance estimate ``d̂`` enter the cost only,
+through ``r = ȳ − d̂``: any ``r`` gives a feasible problem (the shifted plan with ``u_s``
+appended is a candidate), an unreachable or inadmissible one is tracked to the closest
+admissible steady state, and with ``d̂`` the static offset goes to zero (offset-free MPC,
+Morari & Maeder 2012). One constant terminal radius ``α_c`` replaces ``α(ȳ)`` of
+``eq:def-alpha``; the steady outputs are restricted to ``Y_s = {y : α(y) ≥ α_c}``, so that the
+paper's recursive-feasibility argument holds with ``x̄ := x_s`` (docs: design/tracking.md).
+
+Single shooting only, solved by the SQP (the compiled kernel with ``HAS_ASS``, its numpy twin
+:class:`controllers.nlp_tracking.TrackingNLP` otherwise) or IPOPT. Every answer is checked
+independently: numpy rollout, the steady state recomputed, the output rows, the input box,
+the terminal set and ``Y_s``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from controllers.errors import DesignError
+from controllers.fhocp import FHOCP
+from controllers.fhocp_result import FHOCPResult
+from controllers.input_rate import du_cost
+from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
+from controllers.steady_state import steady_state
+
+__all__ = ["TrackingFHOCP", "steady_output_bounds"]
+
+
+def steady_output_bounds(cert: Any, alpha_c: float) -> np.ndarray:
+    """Right-hand side of ``Y_s``: ``L y ≤ h − ẽ_o a_N − b_N − w_L − α_c c_s`` (normalised
+    outputs ``y``; ``α(y) ≥ α_c`` row by row, ``eq:def-alpha``)."""
+    N = cert.N
+    return (cert.h - cert.e_tilde * cert.a[N] - cert.b[N] - cert.w_L
+            - float(alpha_c) * cert.c_s)
+
+
+class TrackingFHOCP(FHOCP):
+    """The tracking FHOCP (module docstring): declare, :meth:`setup`, :meth:`solve`.
+
+    Parameters
+    ----------
+    params, N, Q, R, L, h, w_L, a, b, s
+        As :class:`controllers.fhocp.FHOCP`.
+    offset_weight : float or (p,) array
+        Diagonal of ``T`` (normalised outputs).
+    alpha_c : float
+        The terminal set's radius (``α_c > 0``).
+    ys_bounds : (q,) array
+        Right-hand side of ``Y_s`` (:func:`steady_output_bounds`).
+    solver, sqp_options, kernel, du_weight, ipopt_options, time_budget
+        As :class:`controllers.fhocp.FHOCP` (single shooting only).
+
+    Attributes
+    ----------
+    nw, ng, npar : int
+        Sizes of ``w = (u, u_s, t)``, of the constraints and of ``p = (x̂, x_s0, r[, u_{−1}])``.
+    iu, ius, it
+        Indices of ``u_i``, ``u_s`` and ``t`` in ``w``.
+    """
+
+    def __init__(self, params: Mapping[str, np.ndarray], N: int, Q: np.ndarray,
+                 R: np.ndarray, L: np.ndarray, h: np.ndarray, w_L: np.ndarray, a: np.ndarray,
+                 b: np.ndarray, s: float, *, offset_weight: float | np.ndarray,
+                 alpha_c: float, ys_bounds: np.ndarray, **options: Any) -> None:
+        if options.get("formulation", "single-shooting") != "single-shooting":
+            raise DesignError("the tracking FHOCP is single shooting only")
+        super().__init__(params, N, Q, R, L, h, w_L, a, b, s, **options)
+        T = np.broadcast_to(np.asarray(offset_weight, dtype=float), (self.p,)).copy()
+        if not np.all(np.isfinite(T)) or np.any(T <= 0):
+            raise DesignError(f"offset weights must be positive, got {T.tolist()}")
+        self.offset_weight = T
+        self.alpha_c = float(alpha_c)
+        if not self.alpha_c > 0:
+            raise DesignError(f"alpha_c must be positive, got {alpha_c!r}")
+        self.ys_bounds = np.asarray(ys_bounds, dtype=float).reshape(self.q)
+        n, m, N, qr = self.n, self.m, self.N, self.qr
+        self.nw = N * m + m + 1
+        self.iu = np.arange(N * m).reshape(N, m)
+        self.ius = np.arange(N * m, N * m + m)
+        self.it = N * m + m
+        self.ng = (N - 1) * qr + 2 * n + qr
+        self.npar = 2 * n + self.p + (m if self.has_du else 0)
+        rhs = self.ys_bounds - self.Lbo
+        self._ys_ub = rhs[self.pair_up]
+        self._ys_lb = np.where(self.pair_lo >= 0, -rhs[np.maximum(self.pair_lo, 0)], -np.inf)
+        self.x_s0: np.ndarray | None = None
+
+    @classmethod
+    def from_certificate(cls, cert: Any, **options: Any) -> TrackingFHOCP:
+        """The tracking FHOCP of a certificate; ``options`` must hold ``offset_weight`` and
+        ``alpha_c`` (``ys_bounds`` defaults to :func:`steady_output_bounds`)."""
+        options.setdefault("ys_bounds", steady_output_bounds(cert, options["alpha_c"]))
+        return cls(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a,
+                   cert.b, cert.s, **options)
+
+    def numpy_nlp(self) -> Any:
+        from controllers.nlp_tracking import TrackingNLP
+
+        return TrackingNLP(self, None)
+
+    def setup(self) -> TrackingFHOCP:
+        """Build the solver (the compiled kernel's SQP, else casadi's with the numpy twin)."""
+        import casadi as ca
+
+        from controllers.casadi_callbacks import quiet_stdout
+        from controllers.compiled_kernel import for_fhocp
+        from controllers.fhocp import _bind_buffers
+        from controllers.nlp_tracking import TrackingNLP
+
+        self.kernel = None
+        if self.solver == "sqp" and self.kernel_mode == "auto":
+            self.kernel, self.kernel_error = for_fhocp(self)
+        self._nlp = TrackingNLP(self, self.kernel)
+        self._shoot = self._nlp.shoot
+        nlp, opts = self._nlp.ipopt_problem(self.ipopt_options, self.time_budget)
+        self._xtraj = self._nlp.trajectory
+        self._warm = None
+        if self.solver == "sqp":
+            opts = {k: v for k, v in opts.items()
+                    if k not in ("ipopt", "grad_f", "jac_g", "hess_lag")}
+            nlp, functions = self._nlp.sqp_problem(nlp)
+            opts.update(functions)
+            sqp = dict(self.sqp_options)
+            clip = sqp.pop("hessian_eigen_clip", None)
+            loop = sqp.pop("loop")
+            self._nlp.eigen_clip = None if clip is None else float(clip)
+            opts.update(sqp)
+            if loop == "kernel" and self.kernel is not None:
+                from controllers.kernel_sqp import KernelSQP
+
+                self._solver = KernelSQP(self.kernel, sqp, self.time_budget)
+                self._buffer = self._solver.buffers()
+                return self
+            with quiet_stdout():
+                self._solver = ca.nlpsol("fhocp_tracking", "sqpmethod", nlp, opts)
+        else:
+            self._solver = ca.nlpsol("fhocp_tracking", "ipopt", nlp, opts)
+        with quiet_stdout():
+            self._buffer = _bind_buffers(self._solver)
+        return self
+
+    # -- the answer check ----------------------------------------------------------------
+    def tracking_cost(self, x: np.ndarray, u: np.ndarray, u_s: np.ndarray, x_s: np.ndarray,
+                      r: np.ndarray, t: float | None = None,
+                      u_prev: np.ndarray | None = None) -> float:
+        """The cost (module docstring); ``t`` defaults to ``‖x_N − x_s‖∞``."""
+        dx = x[: self.N] - x_s
+        du = u - u_s
+        e = self.params["U_o"] @ x_s + self.params["b_o"] - r
+        tN = float(np.max(np.abs(x[self.N] - x_s))) if t is None else t
+        J = float(np.vdot(dx @ self.Q, dx) + np.vdot(du @ self.R, du) + self.s * tN ** 2
+                  + np.vdot(e * self.offset_weight, e))
+        if self.has_du:
+            up = u_s if u_prev is None else np.asarray(u_prev, dtype=float)
+            J += du_cost(u, up, self.du_weight)
+            J += float(np.vdot((u[-1] - u_s) * self.du_weight, u[-1] - u_s))
+        return J
+
+    def check(self, x_hat: np.ndarray, u: np.ndarray, u_s: np.ndarray, e_o: float,
+              r: np.ndarray, x_s0: np.ndarray, u_prev: np.ndarray | None = None,
+              status: str = "candidate") -> FHOCPResult:
+        """Evaluate ``(u, u_s)`` independently of the solver: rollout, ``x_s`` recomputed
+        (numpy Newton), cost and residuals (output rows, input box, terminal set, ``Y_s``)."""
+        u = np.clip(np.asarray(u, dtype=float), -1.0, 1.0)
+        u_s = np.clip(np.asarray(u_s, dtype=float), -1.0, 1.0)
+        x = self.simulate(np.asarray(x_hat, dtype=float), u)
+        x_s, _, ok = steady_state(self.params, u_s, x_s0)
+        res = FHOCPResult(u=u, x=x, cost=float("nan"), status=status, success=False)
+        res.u_s, res.x_s = u_s, x_s
+        if not ok:
+            res.constraint_violation = res.terminal_violation = float("inf")
+            return res
+        ub = self.tightened_bounds(e_o)
+        lhs = x[: self.N] @ self.LUo.T
+        ys = self.LUo @ x_s
+        res.constraint_violation = max(0.0, float(np.max(lhs - ub)),
+                                       float(np.max(ys - (self.ys_bounds - self.Lbo))),
+                                       float(np.max(np.abs(u))) - 1.0)
+        dN = float(np.max(np.abs(x[self.N] - x_s)))
+        res.t = dN
+        res.terminal_violation = max(0.0, dN - self.alpha_c)
+        res.active = (int(np.sum(lhs[1:] - ub[1:] > -1e-6)) + int(dN - self.alpha_c > -1e-6)
+                      + int(np.sum(np.abs(u) > 1 - 1e-6)))
+        res.cost = self.tracking_cost(x, u, u_s, x_s, r, u_prev=u_prev)
+        return res
+
+    # -- solving -------------------------------------------------------------------------
+    def solve_tracking(self, x_hat: np.ndarray, e_o: float, r: np.ndarray,
+                       u_init: np.ndarray, us_init: np.ndarray, x_s0: np.ndarray,
+                       u_prev: np.ndarray | None = None, warm: bool = True) -> FHOCPResult:
+        """Solve at ``x̂`` with ``ê_o`` for the target ``r = ȳ − d̂`` (normalised).
+
+        Parameters
+        ----------
+        u_init, us_init : arrays
+            Initial inputs (N, m) and steady input (m,): the candidate (the previous plan
+            shifted with ``u_s`` appended, and ``u_s``).
+        x_s0 : (n,) array
+            Newton's start for ``x_s(u_s)`` (the steady state of ``us_init``).
+        u_prev : (m,) array, optional
+            ``u_{−1}`` of the input-rate term (``None``: ``us_init``).
+        warm : bool
+            Warm start the multipliers from the previous solve, shifted by one stage.
+        """
+        if self._solver is None:
+            self.setup()
+        t0 = time.perf_counter()
+        x_hat = np.asarray(x_hat, dtype=float).reshape(self.n)
+        r = np.asarray(r, dtype=float).reshape(self.p)
+        us_init = np.clip(np.asarray(us_init, dtype=float).reshape(self.m), -1.0, 1.0)
+        u_init = np.clip(np.asarray(u_init, dtype=float).reshape(self.N, self.m), -1.0, 1.0)
+        x_s0 = np.asarray(x_s0, dtype=float).reshape(self.n)
+        up = us_init if u_prev is None else np.asarray(u_prev, dtype=float).reshape(self.m)
+        if self.check_x0(x_hat, e_o) > 0:
+            res = self.check(x_hat, u_init, us_init, e_o, r, x_s0, up, "infeasible_x0")
+            res.solve_time = time.perf_counter() - t0
+            return res
+        buf, trigger, ins, outs = self._buffer
+        pv = ins["p"]
+        n = self.n
+        pv[:n], pv[n:2 * n], pv[2 * n:2 * n + self.p] = x_hat, x_s0, r
+        if self.has_du:
+            pv[2 * n + self.p:] = up
+        self._write_bounds(ins, e_o)
+        x = self.simulate(x_hat, u_init)
+        w0 = ins["x0"]
+        w0[self.iu.ravel()] = u_init.ravel()
+        w0[self.ius] = us_init
+        w0[self.it] = min(max(float(np.max(np.abs(x[-1] - x_s0))), 1e-6), self.alpha_c)
+        if warm and self._warm is not None and self.warm_duals:
+            ins["lam_x0"][:] = self._warm["lam_x"][self._perm_x]
+            ins["lam_g0"][:] = self._warm["lam_g"][self._perm_g]
+        else:
+            ins["lam_x0"][:] = 0.0
+            ins["lam_g0"][:] = 0.0
+        from controllers.casadi_callbacks import quiet_stdout
+
+        with quiet_stdout():
+            trigger()
+        try:
+            stats = buf.stats()
+        except RuntimeError:
+            stats = {"return_status": "Solver_Stats_Unavailable", "success": False}
+        wopt = outs["x"].copy()
+        res = self.check(x_hat, wopt[self.iu], wopt[self.ius], e_o, r, x_s0, up,
+                         str(stats.get("return_status", "unknown")))
+        res.solve_time = time.perf_counter() - t0
+        res.iterations = int(stats.get("iter_count", 0))
+        res.lam_x, res.lam_g = outs["lam_x"].copy(), outs["lam_g"].copy()
+        res.defect = float(np.max(np.abs(self._xtraj(wopt, pv) - res.x)))
+        ok_status = bool(stats.get("success", False))
+        res.feasible = bool(np.all(np.isfinite(wopt)) and res.constraint_violation <= FEAS_TOL
+                            and res.terminal_violation <= FEAS_TOL
+                            and res.defect <= DEFECT_TOL)
+        res.success = ok_status and res.feasible
+        if ok_status and res.status == "Solve_Succeeded":
+            res.status = "optimal"
+        elif ok_status and not res.success:
+            res.status = "residual_check_failed"
+        if res.success or (np.all(np.isfinite(wopt)) and np.all(np.isfinite(res.lam_g))):
+            self._warm = {"w": wopt, "lam_x": res.lam_x, "lam_g": res.lam_g}
+        return res
+
+    def _write_bounds(self, ins: dict[str, np.ndarray], e_o: float) -> None:
+        """Variable and constraint bounds of one solve (the tightened rows for ``ê_o``)."""
+        if not hasattr(self, "_perm_x"):
+            self._static_layout()
+        ins["lbx"][:] = self._lbx
+        ins["ubx"][:] = self._ubx
+        bounds = self.tightened_bounds(e_o)
+        if getattr(self, "_g_for", None) is not bounds:
+            N, qr, n = self.N, self.qr, self.n
+            flat = bounds[1:]
+            lbg = np.full(self.ng, -np.inf)
+            ubg = np.full(self.ng, np.inf)
+            ubg[: (N - 1) * qr] = flat[:, self.pair_up].ravel()
+            lo = np.where(self.pair_lo >= 0, -flat[:, np.maximum(self.pair_lo, 0)], -np.inf)
+            lbg[: (N - 1) * qr] = lo.ravel()
+            r0 = (N - 1) * qr
+            ubg[r0:r0 + n] = 0.0
+            lbg[r0 + n:r0 + 2 * n] = 0.0
+            lbg[r0 + 2 * n:] = self._ys_lb
+            ubg[r0 + 2 * n:] = self._ys_ub
+            self._g_for, self._lbg, self._ubg = bounds, lbg, ubg
+        ins["lbg"][:] = self._lbg
+        ins["ubg"][:] = self._ubg
+
+    def _static_layout(self) -> None:
+        lbx = np.full(self.nw, -1.0)
+        ubx = np.full(self.nw, 1.0)
+        lbx[self.it], ubx[self.it] = 0.0, self.alpha_c
+        self._lbx, self._ubx = lbx, ubx
+        px = np.arange(self.nw)
+        px[self.iu[:-1].ravel()] = self.iu[1:].ravel()
+        self._perm_x = px
+        N, qr = self.N, self.qr
+        pg = np.arange(self.ng)
+        if N > 1:
+            blk = np.arange((N - 1) * qr).reshape(N - 1, qr)
+            pg[: (N - 1) * qr] = np.vstack([blk[1:], blk[-1:]]).ravel()
+        self._perm_g = pg

@@ -1,0 +1,277 @@
+"""The tracking FHOCP as a single-shooting NLP with exact numpy derivatives (the kernel's twin).
+
+Decision variables ``w = (u_0 … u_{N−1}, u_s, t)``: the inputs, the artificial steady input
+``u_s`` and the epigraph variable ``t``; ``x_s = x_s(u_s)`` is implicit
+(:func:`controllers.steady_state.steady_state`, Newton from the parameter ``x_s0``).
+Parameters ``p = (x̂, x_s0, r)``, then ``u_{−1}`` with an input-rate term; ``r = ȳ − d̂`` is
+the set-point the steady output should reach (the offset-free target). Cost::
+
+    Σ_{i<N} ‖x_i − x_s‖²_Q + ‖u_i − u_s‖²_R + s t² + ‖U_o x_s + b_o − r‖²_T
+      [+ Σ_{i<N} ‖u_i − u_{i−1}‖²_S + ‖u_{N−1} − u_s‖²_S]
+
+Constraints, in this order: the paired output rows ``D U_o x_i`` (``i = 1 … N−1``, tightened
+as in ``eq:optimization-constraint``), ``x_N − x_s ∓ t`` (the terminal set ``t ≤ α_c``) and
+``D U_o x_s`` (the steady output in ``Y_s``). The Hessian's ``u_s`` block leaves out the
+curvature of ``x_s(u_s)`` (``λᵀ ∂²x_s/∂u_s²``): the SQP converges to the same KKT point, the
+gradient being exact. The compiled kernel (``HAS_ASS``) computes the same; :meth:`self_test`
+compares them.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from controllers.input_rate import du_cost, du_gradient
+from controllers.nlp_single_shooting import SingleShootingNLP
+from controllers.steady_state import steady_state
+
+if TYPE_CHECKING:
+    from controllers.fhocp_tracking import TrackingFHOCP
+
+__all__ = ["TrackingNLP"]
+
+
+class TrackingNLP(SingleShootingNLP):
+    """Function and derivative evaluations of :class:`~controllers.fhocp_tracking.
+    TrackingFHOCP` (see the module docstring); a kernel workspace as for the parent."""
+
+    def __init__(self, fhocp: TrackingFHOCP, kernel: Any = None) -> None:
+        super().__init__(fhocp, kernel)
+        self.p: Any = fhocp
+        self.ng = fhocp.ng
+        self.ius = fhocp.ius
+        self._xs_key: bytes | None = None
+        self._xs: tuple[np.ndarray, np.ndarray, bool] = (np.zeros(0), np.zeros(0), False)
+
+    # -- one point ----------------------------------------------------------------------
+    def steady(self, wv: np.ndarray, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(x_s, X_s)`` at ``(w, p)`` (cached per ``(u_s, x_s0)``)."""
+        p = self.p
+        us, x0 = wv[self.ius], pv[p.n:2 * p.n]
+        key = us.tobytes() + x0.tobytes()
+        if key != self._xs_key:
+            self._xs = steady_state(p.params, us, x0)
+            self._xs_key = key
+        return self._xs[0], self._xs[1]
+
+    def _target(self, pv: np.ndarray) -> np.ndarray:
+        n = self.p.n
+        return pv[2 * n:2 * n + self.p.p]
+
+    def _u_prev(self, pv: np.ndarray) -> np.ndarray | None:
+        p = self.p
+        return pv[2 * p.n + p.p:] if p.has_du else None
+
+    def _offset(self, xs: np.ndarray, pv: np.ndarray) -> np.ndarray:
+        P = self.p.params
+        return P["U_o"] @ xs + P["b_o"] - self._target(pv)
+
+    def objective(self, wv: np.ndarray, pv: np.ndarray, ro: Any) -> float:
+        p = self.p
+        xs, _ = self.steady(wv, pv)
+        us = wv[self.ius]
+        dx = ro.x[: p.N] - xs
+        du = ro.u - us
+        e = self._offset(xs, pv)
+        J = float(np.vdot(dx @ p.Q, dx) + np.vdot(du @ p.R, du)
+                  + p.s * float(wv[p.it]) ** 2 + np.vdot(e * p.offset_weight, e))
+        if p.has_du:
+            J += du_cost(ro.u, self._u_prev(pv), p.du_weight)
+            J += float(np.vdot((ro.u[-1] - us) * p.du_weight, ro.u[-1] - us))
+        return J
+
+    def constraints(self, wv: np.ndarray, pv: np.ndarray, ro: Any) -> np.ndarray:
+        p = self.p
+        xs, _ = self.steady(wv, pv)
+        t = wv[p.it]
+        dN = ro.x[p.N] - xs
+        return np.concatenate([(ro.x[1:p.N] @ p.DUo.T).ravel(), dN - t, dN + t,
+                               p.DUo @ xs])
+
+    def _dcost_dxs(self, ro: Any, xs: np.ndarray, pv: np.ndarray) -> np.ndarray:
+        """The explicit ``∂J/∂x_s``."""
+        p = self.p
+        e = self._offset(xs, pv)
+        return (-2 * np.sum(ro.x[: p.N] - xs, axis=0) @ p.Q
+                + p.params["U_o"].T @ (2 * p.offset_weight * e))
+
+    def _grad_us(self, wv: np.ndarray, ro: Any, Xs: np.ndarray, lx: np.ndarray,
+                 grad: np.ndarray) -> None:
+        p = self.p
+        us = wv[self.ius]
+        grad[self.ius] = Xs.T @ lx - np.sum(ro.u - us, axis=0) @ (2 * p.R)
+        if p.has_du:
+            d = 2 * p.du_weight * (ro.u[-1] - us)
+            grad[self.p.iu[-1]] += d
+            grad[self.ius] -= d
+
+    def gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[f, ∇f]``."""
+        p = self.p
+        ro = self.rollout(wv, pv, True)
+        xs, Xs = self.steady(wv, pv)
+        us = wv[self.ius]
+        N, n, m = p.N, p.n, p.m
+        grad = np.zeros(p.nw)
+        dx = (ro.x[1:N] - xs) @ (2 * p.Q)
+        grad[self.iu] = dx.ravel() @ ro.S[1:N].reshape((N - 1) * n, N * m) + (
+            (ro.u - us) @ (2 * p.R)).ravel()
+        if p.has_du:
+            grad[self.iu] += du_gradient(ro.u, self._u_prev(pv), p.du_weight).ravel()
+        self._grad_us(wv, ro, Xs, self._dcost_dxs(ro, xs, pv), grad)
+        grad[p.it] = 2 * p.s * wv[p.it]
+        return [self.objective(wv, pv, ro), grad]
+
+    def jacobian(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[g, ∂g/∂w]``."""
+        p = self.p
+        ro = self.rollout(wv, pv, True)
+        _, Xs = self.steady(wv, pv)
+        N, n, q, iu = p.N, p.n, p.qr, self.iu
+        r0 = (N - 1) * q
+        J = np.zeros((self.ng, p.nw))
+        J[:r0, iu] = np.matmul(p.DUo[None], ro.S[1:N]).reshape(r0, N * p.m)
+        J[r0:r0 + n, iu] = ro.S[N]
+        J[r0 + n:r0 + 2 * n, iu] = ro.S[N]
+        J[r0:r0 + n, p.it] = -1.0
+        J[r0 + n:r0 + 2 * n, p.it] = 1.0
+        J[r0:r0 + n, self.ius] = -Xs
+        J[r0 + n:r0 + 2 * n, self.ius] = -Xs
+        J[r0 + 2 * n:, self.ius] = p.DUo @ Xs
+        return [self.constraints(wv, pv, ro), J]
+
+    def hessian(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
+                lg: np.ndarray) -> np.ndarray:
+        """The Hessian of the Lagrangian, without the curvature of ``x_s(u_s)``."""
+        p = self.p
+        ro = self.rollout(wv, pv, True)
+        xs, Xs = self.steady(wv, pv)
+        N, n, m, q, iu, ius = p.N, p.n, p.m, p.qr, self.iu, self.ius
+        lf0 = float(lf[0])
+        # the input block: the paper's FHOCP's with x̄ = x_s (its adjoints read p[n:2n])
+        pv_ref = pv.copy()
+        pv_ref[n:2 * n] = xs
+        lg_paper = lg[: (N - 1) * q + 2 * n]
+        H = np.zeros((p.nw, p.nw))
+        Hu = self._input_hessian(wv, pv_ref, lf0, lg_paper, ro)
+        H[np.ix_(iu, iu)] = Hu
+        S = ro.S[1:N]                                      # (N − 1, n, N m)
+        cross = -np.einsum("ikc,kj->cj", S, 2 * p.Q @ Xs)  # Σ S_iᵀ (−2Q) X_s
+        cross -= np.tile(2 * p.R, (N, 1))
+        if p.has_du:
+            cross[(N - 1) * m:] -= 2 * np.diag(p.du_weight)
+            H[np.ix_(iu[-m:], iu[-m:])] += lf0 * 2 * np.diag(p.du_weight)
+        M = 2 * N * p.Q + p.params["U_o"].T @ (2 * p.offset_weight[:, None]
+                                                * p.params["U_o"])
+        Hs = Xs.T @ M @ Xs + 2 * N * p.R
+        if p.has_du:
+            Hs += 2 * np.diag(p.du_weight)
+        H[np.ix_(iu, ius)] = lf0 * cross
+        H[np.ix_(ius, iu)] = lf0 * cross.T
+        H[np.ix_(ius, ius)] = lf0 * Hs
+        if getattr(self, "exact_curvature", False):
+            H[np.ix_(ius, ius)] += self._curvature(wv, pv, ro, xs, Xs, lf0, lg)
+        H[p.it, p.it] = 2 * lf0 * p.s
+        return H
+
+    def _curvature(self, wv: np.ndarray, pv: np.ndarray, ro: Any, xs: np.ndarray,
+                   Xs: np.ndarray, lf: float, lg: np.ndarray) -> np.ndarray:
+        """``λᵀ ∂²x_s/∂u_s²`` (λ = ∂L/∂x_s): ``Zᵀ ∇²(μᵀ f) Z``, ``Z = [X_s; I]``,
+        ``μ = (I − A_s)^{-T} λ``."""
+        from controllers.equilibrium import jacobians
+        from controllers.shooting import GRUShooting
+
+        p = self.p
+        N, n, q = p.N, p.n, p.qr
+        r0 = (N - 1) * q
+        lx = lf * self._dcost_dxs(ro, xs, pv) - lg[r0:r0 + n] - lg[r0 + n:r0 + 2 * n] + (
+            p.DUo.T @ lg[r0 + 2 * n:])
+        A, _ = jacobians(p.params, xs, wv[self.ius])
+        mu = np.linalg.solve((np.eye(n) - A).T, lx)
+        one = GRUShooting(p.params, 1).rollout(xs, wv[self.ius][None], derivatives=True)
+        W = GRUShooting(p.params, 1).stage_hessians(one, mu[None])[0]
+        Z = np.vstack([Xs, np.eye(p.m)])
+        return Z.T @ W @ Z
+
+    def _input_hessian(self, wv: np.ndarray, pv: np.ndarray, lf: float, lg: np.ndarray,
+                       ro: Any) -> np.ndarray:
+        """The input block as :meth:`SingleShootingNLP.hessian` computes it (``p`` holding
+        ``x̄ = x_s``)."""
+        p = self.p
+        nu = p.N * p.m
+        w_paper = np.concatenate([wv[self.iu], [wv[p.it]]])
+        view: Any = _PaperView(self, ro)
+        H = SingleShootingNLP.hessian(view, w_paper, pv, np.array([lf]), lg)
+        return H[:nu, :nu]
+
+    def self_test(self, kernel: Any, clip: float | None, trials: int = 3,
+                  seed: int = 12345) -> float:
+        """Largest relative difference between ``kernel`` (``HAS_ASS``) and these numpy
+        functions at random points: f, ∇f, g, ∂g/∂w, the clipped Hessian, the plain rollout
+        and the observer's GRU step."""
+        from controllers import gru
+
+        p = self.p
+        rng = np.random.default_rng(seed)
+        n, m, N = p.n, p.m, p.N
+        saved, self.eigen_clip = self.eigen_clip, None if clip is None else float(clip)
+        worst = 0.0
+        try:
+            jac_c, hess_c = kernel.external("jac_fg"), kernel.external("hess_l")
+            for _ in range(trials):
+                us = rng.uniform(-0.8, 0.8, m)
+                x0 = rng.uniform(-0.3, 0.3, n)
+                wv = np.concatenate([rng.uniform(-1, 1, N * m), us, rng.uniform(0, 0.1, 1)])
+                pv = np.concatenate([x0, x0 + rng.normal(0, 0.01, n),
+                                     rng.uniform(-1, 1, p.npar - 2 * n)])
+                lg = rng.normal(0, 1, self.ng)
+                pairs = list(zip(jac_c(wv, pv), self.jac_fg(wv, pv), strict=True))
+                pairs.append((hess_c(wv, pv, 1.0, lg),
+                              self.hessian_convex(wv, pv, np.array([1.0]), lg)[0]))
+                u = wv[: N * m].reshape(N, m)
+                pairs.append((kernel.simulate(pv[:n], u),
+                              self.shoot.rollout(pv[:n], u, derivatives=False).x))
+                dz, dr = rng.normal(0, 0.1, n), rng.normal(0, 0.1, n)
+                pairs.append((kernel.gru_step(pv[:n], u[0], dz, dr),
+                              gru.step(p.params, pv[:n], u[0], dz=dz, dr=dr)))
+                for a, b in pairs:
+                    b = np.asarray(b, dtype=float)
+                    a = np.asarray(a, dtype=float).reshape(b.shape)
+                    scale = max(1.0, float(np.max(np.abs(b))))
+                    worst = max(worst, float(np.max(np.abs(a - b))) / scale)
+        finally:
+            self.eigen_clip = saved
+        return worst
+
+
+class _PaperView:
+    """The tracking NLP seen as the paper's (``w = (u, t)``, ``p = (x̂, x̄, …)``) by
+    :meth:`SingleShootingNLP.hessian`: its rollout cache and the problem's paper-shaped
+    attributes."""
+
+    def __init__(self, nlp: TrackingNLP, ro: Any) -> None:
+        self._ro = ro
+        self.p = _PaperDims(nlp.p)
+        self.shoot = nlp.shoot
+        self.iu = nlp.iu
+        self._du_hess = nlp._du_hess
+
+    def rollout(self, wv: np.ndarray, pv: np.ndarray, deriv: bool) -> Any:
+        return self._ro
+
+    def _reference(self, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        n = self.p.n
+        return pv[n:2 * n], pv[:0]
+
+
+class _PaperDims:
+    """The paper FHOCP's dimensions and weights of a tracking FHOCP (``nw = N m + 1``, ``t``
+    last)."""
+
+    def __init__(self, fh: Any) -> None:
+        self.N, self.n, self.m, self.qr = fh.N, fh.n, fh.m, fh.qr
+        self.nw = fh.N * fh.m + 1
+        self.it = fh.N * fh.m
+        self.Q, self.R, self.s, self.DUo = fh.Q, fh.R, fh.s, fh.DUo

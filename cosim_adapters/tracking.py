@@ -1,0 +1,118 @@
+"""The tracking law of the ``robust-mpc`` component (``law = "tracking"``).
+
+:class:`cosim_adapters.robust_mpc.RobustMPCController` with ``law="tracking"`` runs
+:class:`controllers.tracking_mpc.TrackingMPC` (the tracking FHOCP of
+:mod:`controllers.fhocp_tracking`: artificial steady state, offset cost with the disturbance
+estimate ``d̂``, input-rate penalty) instead of the paper's law with its reference governor.
+This module builds it from the model and the problem (:func:`tracking_design`) and runs one
+step of it (:func:`tracking_step`); the design record is docs/design/tracking.md.
+
+Design (defaults):
+
+- observer gains zero (``L_z = L_r = 0``: the GRU observer runs the model; ν_o = ν, κ = 0,
+  w̄ = 0), so the steady state the observer settles in is the model's, which makes the
+  offset-free fixed point exact; ``ê_o`` and the tightening as the paper's;
+- the terminal radius ``α_c``: the certified design's ``α_min(N)`` (``eq:condition-recursive-
+  feasibility`` with the gains the paper's law would use), so that ``Y_s`` is that design's
+  admissible box; ``alpha_c`` sets it;
+- ``d̂`` by the filter of :class:`controllers.tracking_mpc.DisturbanceFilter` (``β`` =
+  ``offset_filter``, default 0.2), in the cost only.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from controllers.errors import ControllersError
+from cosim.errors import CosimError
+
+__all__ = ["LAWS", "tracking_design", "tracking_step"]
+
+#: The control laws of the ``robust-mpc`` component.
+LAWS = ("paper", "tracking")
+
+
+def _check_law(law: Any, *, governor: Any, offset_free: Any, setpoint_rate: Any,
+               offset_weight: Any, alpha_c: Any) -> bool:
+    """Check the law and its options (one-line errors); ``True`` for the tracking law."""
+    if law not in LAWS:
+        raise CosimError(f"option law={law!r}: expected one of {', '.join(map(repr, LAWS))}")
+    tracking = law == "tracking"
+    if tracking:
+        for key, value, off in (("governor", governor, (None, False)),
+                                ("offset_free", offset_free, (False,)),
+                                ("setpoint_rate", setpoint_rate, (None,))):
+            if value not in off:
+                raise CosimError(f"option {key}={value!r} belongs to law=\"paper\" (the "
+                                 "tracking law needs no governor and is offset-free)")
+    weights = (list(offset_weight.values()) if isinstance(offset_weight, Mapping)
+               else [offset_weight])
+    if not all(_positive(w) for w in weights):
+        raise CosimError(f"option offset_weight={offset_weight!r}: expected a positive "
+                         "number or an object of positive numbers by output name")
+    if alpha_c is not None and not _positive(alpha_c):
+        raise CosimError(f"option alpha_c={alpha_c!r}: expected a positive number")
+    return tracking
+
+
+def _positive(value: Any) -> bool:
+    return (isinstance(value, int | float) and not isinstance(value, bool)
+            and math.isfinite(value) and value > 0)
+
+
+def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[str, Any],
+                    offset_weight: float | Mapping[str, float], alpha_c: float | None,
+                    beta: float, fhocp_options: Mapping[str, Any]) -> tuple[Any, Any, Any]:
+    """``(certificate, TrackingMPC, DisturbanceFilter)`` of the tracking law (module
+    docstring). ``cert_gains``: the paper law's certificate (its ``α_min`` is the default
+    ``α_c``); ``kwargs``: ``N``, ``Q``, ``R``, ``e_o0``."""
+    from controllers import certificates as certs
+    from controllers.fhocp_tracking import TrackingFHOCP
+    from controllers.tracking_mpc import DisturbanceFilter, TrackingMPC
+
+    names = list(problem.output_names)
+    if isinstance(offset_weight, Mapping):
+        unknown = sorted(set(offset_weight) - set(names))
+        if unknown:
+            raise CosimError(f"option offset_weight: {unknown[0]!r} is not an output of "
+                             f"problem {problem.name!r} ({', '.join(names)})")
+        T = np.array([float(offset_weight.get(n, 1e5)) for n in names])
+    else:
+        T = np.full(len(names), float(offset_weight))
+    try:
+        cert = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
+        if alpha_c is None:
+            alpha_c = cert_gains.alpha_min()
+            if not (math.isfinite(alpha_c) and alpha_c > 0):
+                raise ControllersError("no default alpha_c (the certified design's alpha_min "
+                                       f"is {alpha_c:g}); set option alpha_c")
+        fhocp = TrackingFHOCP.from_certificate(cert, offset_weight=T, alpha_c=alpha_c,
+                                               **fhocp_options)
+    except ControllersError as exc:
+        raise CosimError(str(exc)) from None
+    return cert, TrackingMPC(fhocp), DisturbanceFilter(beta, len(names))
+
+
+def tracking_step(ctrl: Any, y: np.ndarray, y_ref: np.ndarray) -> tuple[Any, dict[str, float]]:
+    """One step of the tracking law for the controller ``ctrl`` (normalised ``y``, ``ȳ``):
+    ``d̂`` advanced with ``y − g(x̂)``, the FHOCP solved for ``r = ȳ − d̂``; returns the step
+    record and the law's diagnostics (``y_model_<output>``: the steady output ``y_s`` in the
+    problem's units, ``d_hat_<output>``: ``d̂`` in the problem's units)."""
+    from controllers.equilibrium import equilibrium_for_output
+
+    tracker, obs, model = ctrl.tracker, ctrl.observer, ctrl.model
+    if tracker.u_s is None:
+        x_s, u_s = equilibrium_for_output(model.params, obs.y_hat())
+        tracker.start(u_s, x_s)
+    d_hat = ctrl.disturbance.update(y, obs.y_hat())
+    rec = tracker.make_step(obs.x_hat, obs.e_o, y_ref - d_hat)
+    params = model.params
+    y_s = model.denormalize_y(params["U_o"] @ tracker.x_s + params["b_o"])
+    diag = {f"y_model_{n}": float(v) for n, v in zip(ctrl._y_names, y_s, strict=True)}
+    d_phys = d_hat * np.abs(model.y_scale)
+    diag.update({f"d_hat_{n}": float(v) for n, v in zip(ctrl._y_names, d_phys, strict=True)})
+    return rec, diag

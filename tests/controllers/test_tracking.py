@@ -1,0 +1,147 @@
+"""The tracking FHOCP (controllers.fhocp_tracking): its steady state, its exact derivatives,
+the compiled kernel's HAS_ASS variant against the numpy twin, and the tracking law in the
+GRU world (any set-point tracked to the closest admissible steady state, offset-free under a
+constant output disturbance)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from controllers import certificates as certs
+from controllers.equilibrium import equilibrium, jacobians
+from controllers.fhocp_tracking import TrackingFHOCP, steady_output_bounds
+from controllers.gru import output, step
+from controllers.model import DEFAULT_MODEL, GRUModel
+from controllers.steady_state import steady_state
+from controllers.tracking_mpc import DisturbanceFilter, TrackingMPC
+from tests.controllers.random_gru import random_gru_model
+
+
+def _fhocp(model: GRUModel, N: int = 6, du: float = 0.1, **options: object) -> TrackingFHOCP:
+    cert = certs.compute_certificate(model, N=N, gain_scale=0.0, w_y_bar=0.01)
+    return TrackingFHOCP.from_certificate(cert, offset_weight=1e3, alpha_c=0.05,
+                                          du_weight=du, **options)
+
+
+def _point(fh: TrackingFHOCP, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    rng = np.random.default_rng(seed)
+    n, m, N = fh.n, fh.m, fh.N
+    us = rng.uniform(-0.5, 0.5, m)
+    xs, _, ok = steady_state(fh.params, us, np.zeros(n))
+    assert ok
+    wv = np.concatenate([rng.uniform(-1, 1, N * m), us + 0.01, [0.03]])
+    pv = np.concatenate([xs + rng.normal(0, 0.05, n), xs + rng.normal(0, 1e-3, n),
+                         rng.uniform(-0.5, 0.5, fh.npar - 2 * n)])
+    return wv, pv
+
+
+def test_the_steady_state_is_the_fixed_point_and_its_derivative_the_implicit_one() -> None:
+    model = random_gru_model(3, n=8)
+    P = model.params
+    us = np.array([0.3, -0.2])
+    xs, Xs, ok = steady_state(P, us, np.zeros(8))
+    assert ok and np.max(np.abs(step(P, xs, us) - xs)) < 1e-13
+    eps = 1e-6
+    for j in range(2):
+        e = np.zeros(2)
+        e[j] = eps
+        fd = (steady_state(P, us + e, xs)[0] - steady_state(P, us - e, xs)[0]) / (2 * eps)
+        assert np.max(np.abs(fd - Xs[:, j])) < 1e-7
+    A, _ = jacobians(P, xs, us)
+    assert np.max(np.abs(np.linalg.eigvals(A))) < 1
+
+
+@pytest.mark.parametrize("du", [0.0, 0.1])
+def test_the_numpy_derivatives_are_exact(du: float) -> None:
+    fh = _fhocp(random_gru_model(4, n=8), du=du)
+    nlp = fh.numpy_nlp()
+    nlp.exact_curvature = True
+    wv, pv = _point(fh, 1)
+    lg = np.random.default_rng(2).normal(0, 1, fh.ng)
+    _, grad = nlp.gradient(wv, pv)
+    _, J = nlp.jacobian(wv, pv)
+    H = nlp.hessian(wv, pv, np.array([1.0]), lg)
+    eps = 1e-6
+    for i in range(fh.nw):
+        e = np.zeros(fh.nw)
+        e[i] = eps
+        fd = (nlp.f(wv + e, pv)[0] - nlp.f(wv - e, pv)[0]) / (2 * eps)
+        assert abs(fd - grad[i]) <= 1e-6 * max(1.0, abs(grad[i]))
+        Jfd = (nlp.g(wv + e, pv)[0] - nlp.g(wv - e, pv)[0]) / (2 * eps)
+        assert np.max(np.abs(Jfd - J[:, i])) < 1e-6
+
+        def grad_l(w: np.ndarray) -> np.ndarray:
+            return nlp.gradient(w, pv)[1] + nlp.jacobian(w, pv)[1].T @ lg
+
+        Hfd = (grad_l(wv + e) - grad_l(wv - e)) / (2 * eps)
+        assert np.max(np.abs(Hfd - H[:, i])) < 1e-5 * max(1.0, np.max(np.abs(H)))
+
+
+@pytest.mark.parametrize(("m", "p", "du"), [(2, 2, 0.1), (1, 1, 0.0), (3, 2, 0.1)])
+def test_the_compiled_kernel_agrees_with_the_numpy_twin(m: int, p: int, du: float) -> None:
+    fh = _fhocp(random_gru_model(5, n=6, m=m, p=p), du=du).setup()
+    assert fh.kernel is not None, fh.kernel_error
+    assert fh.numpy_nlp().self_test(fh.kernel, fh.sqp_options["hessian_eigen_clip"]) < 1e-9
+
+
+@pytest.fixture(scope="module")
+def fourtank() -> tuple[GRUModel, TrackingFHOCP]:
+    model = GRUModel.load(DEFAULT_MODEL)
+    cert = certs.compute_certificate(model, N=15, gain_scale=0.0)
+    fh = TrackingFHOCP.from_certificate(cert, offset_weight=1e5, alpha_c=0.0199,
+                                        du_weight=0.1, sqp_options={"max_iter": 100})
+    return model, fh.setup()
+
+
+def _closed_loop(model: GRUModel, fh: TrackingFHOCP, y0: np.ndarray, y_ref: np.ndarray,
+                 steps: int, bias: np.ndarray) -> tuple[TrackingMPC, np.ndarray, list[bool]]:
+    """The tracking law on the GRU model as the plant, its output offset by ``bias``; the
+    observer runs the model (zero gains), ``d̂`` from the filter (β = 0.2)."""
+    P = model.params
+    x, u = equilibrium(model, y0)[:2]
+    x_hat = x.copy()
+    law = TrackingMPC(fh)
+    law.start(u, x)
+    dist = DisturbanceFilter(0.2, fh.p)
+    fallbacks = []
+    y = output(P, x) + bias
+    for _ in range(steps):
+        y = output(P, x) + bias
+        d = dist.update(y, output(P, x_hat))
+        rec = law.make_step(x_hat, 0.02, y_ref - d)
+        fallbacks.append(rec.fallback)
+        x, x_hat = step(P, x, rec.u), step(P, x_hat, rec.u)
+    return law, y, fallbacks
+
+
+def test_the_law_removes_a_constant_output_offset(fourtank) -> None:
+    model, fh = fourtank
+    y0, y1 = model.normalize_y(np.array([0.8, 0.8])), model.normalize_y(np.array([1.0, 0.9]))
+    bias = np.array([0.03, -0.02])
+    law, y, fallbacks = _closed_loop(model, fh, y0, y1, 400, bias)
+    assert not any(fallbacks[1:])
+    assert np.max(np.abs(y - y1)) < 1e-4     # the measured output at the set-point
+
+
+def test_an_inadmissible_setpoint_is_tracked_to_the_closest_admissible_steady_state(
+        fourtank) -> None:
+    model, fh = fourtank
+    y0 = model.normalize_y(np.array([1.0, 1.0]))
+    y_ref = model.normalize_y(np.array([1.9, 1.0]))     # outside Y_s (h1 above ~1.5 m)
+    law, y, fallbacks = _closed_loop(model, fh, y0, y_ref, 300, np.zeros(2))
+    assert not any(fallbacks[1:])
+    ys = output(model.params, law.x_s)
+    rows = fh.LUo @ law.x_s - (fh.ys_bounds - fh.Lbo)
+    assert np.max(rows) < 1e-7                          # y_s in Y_s, on its boundary
+    assert np.max(rows) > -1e-4
+    assert abs(ys[1] - y_ref[1]) < 1e-3                 # the reachable coordinate is held
+    assert np.max(np.abs(y - ys)) < 1e-3                # and the plant settles at y_s
+
+
+def test_steady_output_bounds_are_the_alpha_c_level_set() -> None:
+    model = random_gru_model(4, n=8)
+    cert = certs.compute_certificate(model, N=6, gain_scale=0.0, w_y_bar=0.01)
+    rhs = steady_output_bounds(cert, 0.05)
+    y = np.zeros(cert.L.shape[1])
+    assert np.all(cert.L @ y <= rhs) == (cert.alpha(y) >= 0.05)

@@ -1,0 +1,67 @@
+"""The ``robust-mpc`` component's tracking law (``law = "tracking"``, cosim_adapters.tracking):
+its options, and in closed loop with the four-tank FMU on the paper scenario's first
+set-points: tighter tracking than the paper's law with smoother inputs, no violation, no
+static offset, nothing rejected."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from cosim.api import run
+from cosim.errors import CosimError
+from cosim_adapters.robust_mpc import RobustMPCController
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.parametrize(("options", "words"), [
+    ({"law": "fast"}, "option law='fast': expected one of 'paper', 'tracking'"),
+    ({"law": "tracking", "governor": True}, "option governor=True belongs to law=\"paper\""),
+    ({"law": "tracking", "offset_free": True}, "option offset_free=True belongs to"),
+    ({"law": "tracking", "offset_weight": -1}, "option offset_weight=-1: expected a positive"),
+    ({"law": "tracking", "offset_weight": {"h3": 1.0}}, "'h3' is not an output of problem"),
+    ({"law": "tracking", "alpha_c": 0}, "option alpha_c=0: expected a positive number"),
+])
+def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
+    with pytest.raises(CosimError) as err:
+        RobustMPCController(**options)
+    assert words in str(err.value) and "\n" not in str(err.value)
+
+
+def test_defaults_and_summary() -> None:
+    c = RobustMPCController(law="tracking", offset_weight={"h2": 10.0})
+    s = c.summary()
+    assert s["law"] == "tracking" and s["N"] == 40 and not s["governor"]
+    assert s["offset_weight"] == {"h1": 1e5, "h2": 10.0} and s["offset_filter"] == 0.2
+    assert s["du_weight"] == {"qa": 0.1, "qb": 0.1} and s["gain_scale"] == 0.0
+    assert s["alpha_c"] == pytest.approx(RobustMPCController(N=40).cert.alpha_min())
+    assert RobustMPCController().summary()["law"] == "paper"
+
+
+@pytest.fixture(scope="module")
+def paper_start(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The paper scenario's first six set-points (600 samples)."""
+    rows = (ROOT / "scenarios" / "paper_steps.csv").read_text().splitlines()
+    path = tmp_path_factory.mktemp("tracking") / "paper_start.csv"
+    path.write_text("\n".join([*rows[:7], "15000,,"]) + "\n")
+    return path
+
+
+@pytest.mark.slow
+def test_it_tracks_better_than_the_paper_law_without_moving_the_inputs_more(paper_start: Path) -> None:
+    paper = run(paper_start, figure=False).summary["kpis"]
+    out = run(paper_start, options={"law": "tracking"}, figure=False)
+    assert out.status == "ok", out.reason
+    k, c = out.summary["kpis"], out.summary["controller_summary"]
+    assert all(v["count"] == 0 for v in k["violations"].values())
+    assert c["setpoint_rejected_steps"] == 0 and c["fallbacks"] <= 3
+    for y in ("h1", "h2"):
+        assert k["iae"][y] < paper["iae"][y]
+    # inputs: no more motion than the paper's law overall (over the whole paper scenario
+    # 0.54x / 0.82x; on these first set-points 0.55x / 1.02x)
+    assert k["tv"]["qa"] + k["tv"]["qb"] < paper["tv"]["qa"] + paper["tv"]["qb"]
+    assert all(k["tv"][u] < 1.1 * paper["tv"][u] for u in ("qa", "qb")), (k["tv"], paper["tv"])
+    # no static offset: each set-point's last samples within 5 mm
+    assert all(abs(v) < 5e-3 for sp in k["setpoints"] for v in sp["offset"].values())
