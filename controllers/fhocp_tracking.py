@@ -63,8 +63,9 @@ class TrackingFHOCP(FHOCP):
         The terminal set's radius (``α_c > 0``).
     ys_bounds : (q,) array
         Right-hand side of ``Y_s`` (:func:`steady_output_bounds`).
-    solver, sqp_options, kernel, du_weight, ipopt_options, time_budget
-        As :class:`controllers.fhocp.FHOCP` (single shooting only).
+    **options
+        ``solver``, ``sqp_options``, ``kernel``, ``du_weight``, ``ipopt_options``,
+        ``time_budget``: as :class:`controllers.fhocp.FHOCP` (single shooting only).
 
     Attributes
     ----------

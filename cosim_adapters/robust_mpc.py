@@ -40,6 +40,10 @@ Option outside the paper's cost (off by default): ``du_weight`` adds the input-r
 ``Σ_i (u_i − u_{i−1})ᵀ S (u_i − u_{i−1})`` (normalised units, ``u_{−1}`` the input applied at
 the previous step; :mod:`controllers.input_rate`) to the FHOCP's cost, for smoother inputs.
 
+Option ``law="tracking"`` replaces the paper's law by the tracking law of
+:mod:`cosim_adapters.tracking` (artificial steady state, offset-free, no governor, no
+rejection; docs: design/tracking.md): the set-point handling below is then not used.
+
 Option outside the theorem (off by default): ``offset_free=True`` shifts the model set-point
 by a filtered estimate ``d̂`` of the output mismatch ``y − ŷ`` (``ȳ_model = ȳ − d̂``), to remove
 the small static offset the paper reports; the shifted set-point must still pass the checks.
@@ -108,8 +112,8 @@ class RobustMPCController(Component):
     problem : str or Path, optional
         A problem file: must be the model's own (a check), or the problem of a model file
         that has none (:mod:`cosim_adapters.problems`).
-    N : int
-        Prediction horizon (paper: 15).
+    N : int, optional
+        Prediction horizon (default: the paper's 15; 40 with ``law="tracking"``).
     Q, R : arrays, optional
         Cost weights (default ``I_n`` and ``0.01 I_m``, paper section V).
     e_o0 : float
@@ -121,12 +125,13 @@ class RobustMPCController(Component):
         (:func:`controllers.gain_design.choose_gain_scale`).
     offset_free : bool
         Offset-free set-point correction (outside the theorem, see the module docstring).
-    offset_filter : float
-        Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)``.
-    governor : bool
-        Admissible reference governor after set-point changes (default on; see the module
-        docstring and :mod:`controllers.governor`). ``False``: the paper's FHOCP with the
-        new ``(x̄, ū, α)`` at once.
+    offset_filter : float, optional
+        Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)`` (default 0.05; 0.2 with
+        ``law="tracking"``).
+    governor : bool, optional
+        Admissible reference governor after set-point changes (default on with the paper's
+        law; see the module docstring and :mod:`controllers.governor`). ``False``: the
+        paper's FHOCP with the new ``(x̄, ū, α)`` at once.
     setpoint_rate : float, optional
         Outside the theorem: move the set-point given to the FHOCP towards the requested one
         by at most this much per sample, in the outputs' units (a rate-limiting reference
@@ -146,7 +151,22 @@ class RobustMPCController(Component):
         u_{i−1})ᵀ S (u_i − u_{i−1})`` in normalised units (``u`` ∈ [−1, 1]; ``u_{−1}`` the
         input applied at the previous step), one number for every input or an object by the
         problem's input names (``{"qa": 5, "qb": 5}``; inputs not named: 0). Default 0: the
-        paper's cost.
+        paper's cost (0.1 with ``law="tracking"``, which adds the terminal term
+        ``‖u_{N−1} − u_s‖²_S``).
+    law : {"paper", "tracking"}
+        ``"paper"`` (default): the paper's FHOCP with the set-point's equilibrium, the
+        governor and set-point rejection. ``"tracking"``: the tracking FHOCP
+        (:mod:`cosim_adapters.tracking`, :mod:`controllers.fhocp_tracking`): an artificial
+        steady state as a decision variable, offset-free through ``d̂`` in the cost, no
+        governor, nothing rejected (an unreachable or inadmissible set-point is tracked to
+        the closest admissible steady state); zero observer gains.
+    offset_weight : float or mapping
+        ``law="tracking"``: diagonal of the offset weight ``T`` of ``‖g(x_s) + d̂ − ȳ‖²_T``
+        (normalised outputs; one number or an object by output name, outputs not named:
+        10⁵). Default 10⁵.
+    alpha_c : float, optional
+        ``law="tracking"``: the terminal set's radius (normalised state, ∞-norm); default the
+        certified design's ``α_min(N)``, which makes ``Y_s`` its admissible box.
     max_iter : int
         Iteration cap of one FHOCP solve (default 15, the real-time bound). A solve that
         reaches it applies its feasible iterate (suboptimal MPC) or the fallback; that iterate

@@ -117,6 +117,7 @@ typedef struct gk_ws {
   /* the artificial steady state of the cached point (1b_steady_state.c): x_s = f(x_s, u_s),
    * X_s = dx_s/du_s = (I - A_s)^-1 B_s (NX x NU row-major), LU of I - A_s, Newton's status */
   double xs[NX], XS[NX * NU], xs_lu[NX * NX];
+  double xs_z[NX], xs_r[NX], xs_h[NX], xs_jh[NX * NV], xs_P[4 * NX * NV];   /* the gates, J_h */
   int xs_piv[NX], xs_status;
 #endif
   /* the Hessian of the Lagrangian (2_derivatives.c) */

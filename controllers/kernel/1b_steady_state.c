@@ -10,8 +10,8 @@
  * (x_s, u_s). The cost adds the offset term ||U_o x_s + b_o - r||^2_T (r = y_bar - d_hat,
  * TW = diag T) and, with HAS_DU, the terminal input-rate term ||u_{N-1} - u_s||^2_S; the
  * constraints add the rows D U_o x_s (the steady output in Y_s, bounds set per solve). The
- * Hessian's u_s block leaves out the curvature of x_s(u_s) (lambda' d2x_s/du_s2), as the
- * numpy twin does: the SQP converges to the same KKT point, the gradient being exact. */
+ * Hessian's u_s block includes the curvature of x_s(u_s) (ass_curvature, 2_derivatives.c:
+ * one transposed solve and the point Hessian at (x_s, u_s)). */
 #if HAS_ASS
 #define XS_MAX_ITER 50
 #define XS_TOL 1e-13
@@ -54,10 +54,28 @@ static void lu_solve(const double *LU, const int *piv, double *b, int st) {
   }
 }
 
-/* I - A at (x, us) into M (LU-factorised), [A B] into df; returns f(x, us) - x into F */
+/* solve (LU)' y = b in place (the transposed system of lu_factor's matrix) */
+static void lu_solve_t(const double *LU, const int *piv, double *b) {
+  for (int c = 0; c < NX; c++) {      /* U' w = b */
+    double s = b[c];
+    for (int q = 0; q < c; q++) s -= LU[q * NX + c] * b[q];
+    b[c] = s / LU[c * NX + c];
+  }
+  for (int c = NX - 1; c >= 0; c--) { /* L' v = w (unit diagonal) */
+    double s = b[c];
+    for (int q = c + 1; q < NX; q++) s -= LU[q * NX + c] * b[q];
+    b[c] = s;
+  }
+  for (int c = NX - 1; c >= 0; c--) { /* y = P' v: the row swaps in reverse */
+    const int pr = piv[c];
+    if (pr != c) { const double t = b[c]; b[c] = b[pr]; b[pr] = t; }
+  }
+}
+
+/* I - A at (x, us) into M (LU-factorised), [A B] into df, the gates and J_h into z, r, h, jh;
+ * returns f(x, us) - x into F */
 static int xs_linearise(const double *x, const double *us, double *F, double *M, int *piv,
-                        double *df) {
-  double z[NX], r[NX], h[NX], jh[NX * NV];
+                        double *df, double *z, double *r, double *h, double *jh) {
   stage_gates(x, us, 0, 0, z, r, h);
   for (int k = 0; k < NX; k++) F[k] = h[k] + z[k] * (x[k] - h[k]) - x[k];
   stage_jac(x, z, r, h, jh, df);
@@ -71,12 +89,13 @@ static int xs_linearise(const double *x, const double *us, double *F, double *M,
  * (xs_status 1), which makes the cost NaN and the line search step back. */
 static void steady_state(gk_ws *ws, const double *us, const double *x0) {
   double F[NX], df[NX * NV];
-  double *x = ws->xs, *M = ws->xs_lu;
+  double *x = ws->xs, *M = ws->xs_lu, *z = ws->xs_z, *r = ws->xs_r, *h = ws->xs_h,
+         *jh = ws->xs_jh;
   int *piv = ws->xs_piv;
   memcpy(x, x0, sizeof ws->xs);
   ws->xs_status = 1;
   for (int it = 0; it < XS_MAX_ITER; it++) {
-    if (xs_linearise(x, us, F, M, piv, df)) break;
+    if (xs_linearise(x, us, F, M, piv, df, z, r, h, jh)) break;
     lu_solve(M, piv, F, 1);
     double dn = 0.0, xn = 1.0;
     for (int k = 0; k < NX; k++) {
@@ -87,7 +106,7 @@ static void steady_state(gk_ws *ws, const double *us, const double *x0) {
     if (!(dn == dn)) break;
     if (dn <= XS_TOL * xn) { ws->xs_status = 0; break; }
   }
-  if (ws->xs_status == 0 && xs_linearise(x, us, F, M, piv, df)) ws->xs_status = 1;
+  if (ws->xs_status == 0 && xs_linearise(x, us, F, M, piv, df, z, r, h, jh)) ws->xs_status = 1;
   if (ws->xs_status != 0) {
     for (int k = 0; k < NX; k++) x[k] = NAN;
     for (int k = 0; k < NX * NU; k++) ws->XS[k] = NAN;

@@ -162,15 +162,19 @@ HOT static void jacobian(const gk_ws *ws, double *J) {
 /* the last lines of every Hessian variant: the input-rate term's constant Hessian (HAS_DU),
  * the artificial steady input's rows (HAS_ASS), the upper triangle of the input block
  * mirrored into the lower one, and the terminal slack's entry */
-__attribute__((always_inline)) static inline void hessian_finish(const gk_ws *ws, double *H,
+static void ass_curvature(gk_ws *ws, const double *p, double lf, const double *lg, double *H);
+
+__attribute__((always_inline)) static inline void hessian_finish(gk_ws *ws, const double *p,
+                                                               const double *lg, double *H,
                                                                double lf) {
 #if HAS_DU
   du_hessian(lf, H);
 #endif
 #if HAS_ASS
   ass_hessian(ws, lf, H);
+  ass_curvature(ws, p, lf, lg, H);
 #else
-  (void)ws;
+  (void)ws; (void)p; (void)lg;
 #endif
   for (int r = 0; r < NUA; r++)
     for (int c = 0; c < r; c++) H[r * NW + c] = H[c * NW + r];
@@ -229,14 +233,12 @@ __attribute__((always_inline)) static inline void stage_vjp(const gk_ws *ws, int
 }
 
 /* ---------------------------------------------------------------- Hessian of the Lagrangian */
-#ifndef GK_CONTRACT
-/* W = grad^2_(x,u) mu^T f(x_i, u_i) of stage i (NV x NV, row-major, symmetric) */
-HOT static void stage_hessian(gk_ws *ws, int i, const double *mu, double *W) {
-  const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
-               *h = ws->HG + i * NX;
-  const double *jh = ws->JH + i * NX * NV;
+/* W = grad^2_(x,u) mu^T f(x, u) at a point with gates z, r, h and J_h = jh (NV x NV,
+ * row-major, symmetric); Ph, Pz, Pr, G: NX x NV scratch */
+HOT static void point_hessian(const double *x, const double *z, const double *r,
+                              const double *h, const double *jh, const double *mu, double *W,
+                              double *Ph, double *Pz, double *Pr, double *G) {
   double v[NX], nu[NX], d1[NX], d2[NX], d3[NX], d4[NX], d5[NX], d6[NX];
-  double *Ph = ws->Ph, *Pz = ws->Pz, *Pr = ws->Pr, *G = ws->G;
   for (int k = 0; k < NX; k++) {
     const double hp = 1.0 - h[k] * h[k];
     v[k] = mu[k] * (1.0 - z[k]) * hp;
@@ -288,6 +290,13 @@ HOT static void stage_hessian(gk_ws *ws, int i, const double *mu, double *W) {
     }
   for (int a = 0; a < NV; a++)
     for (int b = 0; b < a; b++) W[a * NV + b] = W[b * NV + a];
+}
+
+#ifndef GK_CONTRACT
+/* W = grad^2_(x,u) mu^T f(x_i, u_i) of stage i (NV x NV, row-major, symmetric) */
+HOT static void stage_hessian(gk_ws *ws, int i, const double *mu, double *W) {
+  point_hessian(ws->X + i * NX, ws->ZG + i * NX, ws->RG + i * NX, ws->HG + i * NX,
+                ws->JH + i * NX * NV, mu, W, ws->Ph, ws->Pz, ws->Pr, ws->G);
 }
 
 /* adjoints mu_i = d(Lagrangian)/dx_i, i = N .. 1, into MU */
@@ -348,7 +357,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
     for (int a = 0; a < NX; a++)
       for (int b = 0; b < NX; b++) P[a * NX + b] = T[a * NV + b];
   }
-  hessian_finish(ws, H, lf);
+  hessian_finish(ws, p, lg, H, lf);
 }
 #else
 /* full Hessian of the Lagrangian, row-major NW x NW (symmetric) */
@@ -387,7 +396,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
       for (int j2 = j1; j2 < NU; j2++)
         H[(K + j1) * NW + K + j2] += W[(NX + j1) * NV + NX + j2] + 2.0 * lf * RW[j1 * NU + j2];
   }
-  hessian_finish(ws, H, lf);
+  hessian_finish(ws, p, lg, H, lf);
 }
 #endif /* GK_BACKWARD */
 
@@ -466,7 +475,43 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
     for (int j1 = 0; j1 < NU; j1++)
       for (int j2 = j1; j2 < NU; j2++) H[(K + j1) * NW + K + j2] += 2.0 * lf * RW[j1 * NU + j2];
   }
-  hessian_finish(ws, H, lf);
+  hessian_finish(ws, p, lg, H, lf);
 }
 #endif /* GK_CONTRACT */
 
+
+/* lf-independent part of the u_s block: the curvature of x_s(u_s), lambda' d2x_s/du_s2 with
+ * lambda = dL/dx_s (the explicit partial: the cost's, the terminal rows' -I, the Y_s rows'
+ * D U_o): Z' grad^2_(x,u)(mu' f) Z at (x_s, u_s), Z = [X_s; I], mu = (I - A_s)^-T lambda */
+static void ass_curvature(gk_ws *ws, const double *p, double lf, const double *lg, double *H) {
+#if HAS_ASS
+  const int r0 = (NH - 1) * NQ, r1 = r0 + 2 * NX;
+  double lx[NX], W[NV * NV];
+  ass_dcost_dxs(ws, p, lx);
+  for (int k = 0; k < NX; k++) {
+    lx[k] *= lf;
+    lx[k] -= lg[r0 + k] + lg[r0 + NX + k];
+  }
+  for (int a = 0; a < NQ; a++)
+    for (int k = 0; k < NX; k++) lx[k] += DUO[a * NX + k] * lg[r1 + a];
+  lu_solve_t(ws->xs_lu, ws->xs_piv, lx);
+  point_hessian(ws->xs, ws->xs_z, ws->xs_r, ws->xs_h, ws->xs_jh, lx, W, ws->xs_P,
+                ws->xs_P + NX * NV, ws->xs_P + 2 * NX * NV, ws->xs_P + 3 * NX * NV);
+  const double *XS = ws->XS;
+  for (int a = 0; a < NU; a++) {
+    double za[NV];    /* W Z[:, a] */
+    for (int k = 0; k < NV; k++) {
+      double s = W[k * NV + NX + a];
+      for (int l = 0; l < NX; l++) s += W[k * NV + l] * XS[l * NU + a];
+      za[k] = s;
+    }
+    for (int b = 0; b < NU; b++) {
+      double s = za[NX + b];
+      for (int k = 0; k < NX; k++) s += XS[k * NU + b] * za[k];
+      H[(NUU + b) * NW + NUU + a] += s;
+    }
+  }
+#else
+  (void)ws; (void)p; (void)lf; (void)lg; (void)H;
+#endif
+}

@@ -56,7 +56,6 @@ def test_the_steady_state_is_the_fixed_point_and_its_derivative_the_implicit_one
 def test_the_numpy_derivatives_are_exact(du: float) -> None:
     fh = _fhocp(random_gru_model(4, n=8), du=du)
     nlp = fh.numpy_nlp()
-    nlp.exact_curvature = True
     wv, pv = _point(fh, 1)
     lg = np.random.default_rng(2).normal(0, 1, fh.ng)
     _, grad = nlp.gradient(wv, pv)
