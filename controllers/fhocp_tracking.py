@@ -39,7 +39,14 @@ from controllers.input_rate import du_cost
 from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
 from controllers.steady_state import steady_state
 
-__all__ = ["TrackingFHOCP", "steady_output_bounds"]
+__all__ = ["LINE_SEARCH", "TrackingFHOCP", "steady_output_bounds"]
+
+#: The SQP's line search for the tracking FHOCP (over ``sqpmethod``'s defaults, 3 trials with
+#: β = 0.8, the last accepted): a set-point step moves ``u_s`` far, and the short search let
+#: the iterates leave the feasible set until a linearisation had no feasible point
+#: ("QP_Infeasible", every later step falling back on the candidate: 2 of 40 runs of the
+#: plant-uncertainty campaign stuck for 200 steps).
+LINE_SEARCH = {"max_iter_ls": 10, "beta": 0.5}
 
 
 def steady_output_bounds(cert: Any, alpha_c: float) -> np.ndarray:
@@ -81,6 +88,7 @@ class TrackingFHOCP(FHOCP):
                  alpha_c: float, ys_bounds: np.ndarray, **options: Any) -> None:
         if options.get("formulation", "single-shooting") != "single-shooting":
             raise DesignError("the tracking FHOCP is single shooting only")
+        options["sqp_options"] = {**LINE_SEARCH, **(options.get("sqp_options") or {})}
         super().__init__(params, N, Q, R, L, h, w_L, a, b, s, **options)
         T = np.broadcast_to(np.asarray(offset_weight, dtype=float), (self.p,)).copy()
         if not np.all(np.isfinite(T)) or np.any(T <= 0):

@@ -102,7 +102,8 @@ class DrawContext:
             scenario's.
         """
         needs_model = spec.initial_state is not None or (
-            spec.setpoints is not None and not spec.setpoints.ranges)
+            spec.setpoints is not None and (not spec.setpoints.ranges
+                                            or spec.setpoints.first_certified))
         scenario_refs = _scenario_refs(spec)
         if spec.setpoints is not None and spec.setpoints.ranges:
             missing = [o for o in scenario_refs if o not in spec.setpoints.ranges]
@@ -121,7 +122,8 @@ class DrawContext:
         if spec.model_plant and spec.model is None and "model" not in spec.options:
             model_path = spec.plant[len("model:"):]  # type: ignore[index]
         model = GRUModel.load(model_path)
-        if spec.setpoints is not None and not spec.setpoints.ranges and scenario_refs \
+        if spec.setpoints is not None and (not spec.setpoints.ranges
+                                           or spec.setpoints.first_certified) and scenario_refs \
                 and sorted(scenario_refs) != sorted(model.output_names):
             raise CosimError(
                 f"{spec.path}: [setpoints]: without ranges the set-points are the certified "
@@ -160,10 +162,10 @@ def _sample(dist: Distribution, rng: np.random.Generator) -> float:
     return float(dist.params[int(rng.integers(len(dist.params)))])
 
 
-def _setpoint(spec: CampaignSpec, ctx: DrawContext, rng: np.random.Generator) -> dict[str,
-                                                                                       float]:
+def _setpoint(spec: CampaignSpec, ctx: DrawContext, rng: np.random.Generator,
+              certified: bool = False) -> dict[str, float]:
     ranges = spec.setpoints.ranges if spec.setpoints else {}  # type: ignore[union-attr]
-    if ranges:
+    if ranges and not certified:
         return {o: float(rng.uniform(lo, hi)) for o, (lo, hi) in ranges.items()}
     model, cert = ctx.model, ctx.cert
     for _ in range(MAX_TRIES):
@@ -188,7 +190,8 @@ def draw_run(spec: CampaignSpec, run: int, ctx: DrawContext) -> RunDraw:
     if spec.setpoints is not None:
         rng = _stream(spec.seed, run, "setpoints")
         sp = spec.setpoints
-        setpoints = [(ctx.start_time + j * sp.hold, _setpoint(spec, ctx, rng))
+        setpoints = [(ctx.start_time + j * sp.hold,
+                      _setpoint(spec, ctx, rng, certified=j == 0 and sp.first_certified))
                      for j in range(sp.count)]
         stop = ctx.start_time + sp.count * sp.hold
     plant_start: dict[str, float] = {}

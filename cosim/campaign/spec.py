@@ -78,11 +78,14 @@ class Distribution:
 @dataclass(frozen=True)
 class SetpointSpec:
     """``[setpoints]``: ``count`` set-points held ``hold`` seconds each; ``ranges`` per output
-    (physical units), empty for the certified admissible range."""
+    (physical units), empty for the certified admissible range; ``first_certified``: the
+    first set-point from the certified range even when ``ranges`` are given (``first =
+    "certified"``: a run that starts where the FHOCP is feasible, then set-points anywhere)."""
 
     count: int
     hold: float
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    first_certified: bool = False
 
 
 @dataclass(frozen=True)
@@ -260,9 +263,14 @@ def _setpoints(table: Any, loc: _Locator) -> SetpointSpec:
         raise loc.error("[setpoints]: 'hold' (seconds each set-point is held) is missing",
                         "setpoints")
     hold = float(_number(table["hold"], loc, "setpoints", "hold", positive=True))
+    first = table.get("first", "drawn")
+    if first not in ("drawn", "certified"):
+        raise loc.error(f"[setpoints] first = {first!r}: expected \"drawn\" (like the others) "
+                        "or \"certified\" (from the certified admissible range)", "setpoints",
+                        "first")
     ranges = {}
     for key, value in table.items():
-        if key in ("count", "hold"):
+        if key in ("count", "hold", "first"):
             continue
         if (not isinstance(value, list) or len(value) != 2 or not all(
                 isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
@@ -270,7 +278,7 @@ def _setpoints(table: Any, loc: _Locator) -> SetpointSpec:
             raise loc.error(f"[setpoints] {key} = {value!r}: expected a range [low, high] of "
                             "the output (physical units)", "setpoints", key)
         ranges[key] = (float(value[0]), float(value[1]))
-    return SetpointSpec(count, hold, ranges)
+    return SetpointSpec(count, hold, ranges, first == "certified")
 
 
 def _initial_state(table: Any, loc: _Locator) -> InitialState:

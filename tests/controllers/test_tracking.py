@@ -118,7 +118,7 @@ def test_the_law_removes_a_constant_output_offset(fourtank) -> None:
     model, fh = fourtank
     y0, y1 = model.normalize_y(np.array([0.8, 0.8])), model.normalize_y(np.array([1.0, 0.9]))
     bias = np.array([0.03, -0.02])
-    law, y, fallbacks = _closed_loop(model, fh, y0, y1, 400, bias)
+    _law, y, fallbacks = _closed_loop(model, fh, y0, y1, 400, bias)
     assert not any(fallbacks[1:])
     assert np.max(np.abs(y - y1)) < 1e-4     # the measured output at the set-point
 

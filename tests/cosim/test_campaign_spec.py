@@ -151,6 +151,29 @@ def test_setpoints_default_to_certified_reachable_set_points(tmp_path: Path) -> 
     assert ctx.ranges == ranges
 
 
+def test_a_certified_first_setpoint_then_the_ranges(tmp_path: Path) -> None:
+    """``first = "certified"``: the first set-point from the certified range (a run that starts
+    where the FHOCP is feasible), the others over the given ranges; the ranges' draws are
+    those of a spec without ``first``."""
+    ranges = "[setpoints]\ncount = 3\nhold = 1000\nh1 = [0.1, 1.9]\nh2 = [0.1, 1.9]\n"
+    s = spec.load(write(tmp_path, GOOD + "\n" + ranges + "first = \"certified\"\n"))
+    plain = spec.load(write(tmp_path, GOOD + "\n" + ranges, "plain.toml"))
+    assert s.setpoints.first_certified and not plain.setpoints.first_certified
+    ctx = draws.DrawContext.build(s, 0.0)
+    outside = 0
+    for i in range(10):
+        d = draws.draw_run(s, i, ctx)
+        y = ctx.model.normalize_y(np.array([d.setpoints[0][1][o] for o in ("h1", "h2")]))
+        assert ctx.cert.failures(y) == []
+        later = [sp for _, sp in d.setpoints[1:]]
+        assert all(0.1 <= v <= 1.9 for sp in later for v in sp.values())
+        outside += sum(bool(ctx.cert.failures(ctx.model.normalize_y(
+            np.array([sp["h1"], sp["h2"]])))) for sp in later)
+    assert outside > 0           # the ranges reach beyond the certified set
+    with pytest.raises(CosimError, match="first = 'last'"):
+        spec.load(write(tmp_path, GOOD + "\n" + ranges + "first = \"last\"\n", "bad.toml"))
+
+
 def test_initial_state_offsets_stay_within_the_observer_bound(tmp_path: Path) -> None:
     model = ROOT / "controllers" / "models" / "fourtank_gru.json"
     text = GOOD.replace("controller = \"robust-mpc\"\n",

@@ -17,7 +17,20 @@ CAMPAIGNS = sorted((ROOT / "scenarios" / "campaigns").glob("*.toml"))
 
 
 def test_campaigns_are_shipped() -> None:
-    assert {p.stem for p in CAMPAIGNS} >= {"theorem", "plant_uncertainty"}
+    assert {p.stem for p in CAMPAIGNS} >= {"theorem", "plant_uncertainty", "tracking_theorem"}
+
+
+def test_tracking_campaign_stays_in_the_certified_noise_bound() -> None:
+    """Output noise plus the constant disturbance within the model's w̄_y; the first
+    set-point certified, the others over the whole output box."""
+    spec = load(ROOT / "scenarios" / "campaigns" / "tracking_theorem.toml")
+    model = GRUModel.load(spec.plant.removeprefix("model:"))
+    draws = {d.key: d for d in spec.draws}
+    bias = max(max(abs(v) for v in draws[f"sensor.{o}.bias"].params)
+               for o in model.output_names)
+    assert draws["plant.w_y_max"].params[0] + bias <= model.w_y_bar
+    assert spec.options["law"] == "tracking" and spec.setpoints is not None
+    assert spec.setpoints.first_certified and spec.initial_state is not None
 
 
 @pytest.mark.parametrize("path", CAMPAIGNS, ids=lambda p: p.stem)
@@ -47,3 +60,10 @@ def test_two_runs_of_each_shipped_campaign(path: Path, tmp_path: Path) -> None:
         assert (table["observer_checks"] > 100).all()
         assert (table["observer_bound_violations"] == 0).all()
         assert (table["violation_count"] == 0).all()
+    if path.stem == "tracking_theorem":     # claims 1-2 of docs/design/tracking.md
+        table = result.table
+        assert (table["violation_count"] == 0).all()
+        assert (table["setpoint_rejected_steps"] == 0).all()
+        for run in (tmp_path / "out" / "runs").iterdir():
+            ctrl = json.loads((run / "summary.json").read_text())["controller_summary"]
+            assert ctrl["fallback_candidates_infeasible"] == 0

@@ -50,7 +50,8 @@ def paper_start(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 
 @pytest.mark.slow
-def test_it_tracks_better_than_the_paper_law_without_moving_the_inputs_more(paper_start: Path) -> None:
+def test_it_tracks_better_than_the_paper_law_without_moving_the_inputs_more(
+        paper_start: Path) -> None:
     paper = run(paper_start, figure=False).summary["kpis"]
     out = run(paper_start, options={"law": "tracking"}, figure=False)
     assert out.status == "ok", out.reason
