@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers import gru
 from controllers.errors import DesignError
 from controllers.fhocp import FHOCP
 from controllers.fhocp_result import FHOCPResult
@@ -47,6 +48,8 @@ __all__ = ["LINE_SEARCH", "TrackingFHOCP", "steady_output_bounds"]
 #: ("QP_Infeasible", every later step falling back on the candidate: 2 of 40 runs of the
 #: plant-uncertainty campaign stuck for 200 steps).
 LINE_SEARCH = {"max_iter_ls": 10, "beta": 0.5}
+#: Largest ``‖f(x_s, u_s) − x_s‖∞`` (numpy) of an accepted steady state (normalised).
+XS_CHECK_TOL = 1e-10
 
 
 def steady_output_bounds(cert: Any, alpha_c: float) -> np.ndarray:
@@ -185,11 +188,13 @@ class TrackingFHOCP(FHOCP):
               r: np.ndarray, x_s0: np.ndarray, u_prev: np.ndarray | None = None,
               status: str = "candidate") -> FHOCPResult:
         """Evaluate ``(u, u_s)`` independently of the solver: rollout, ``x_s`` recomputed
-        (numpy Newton), cost and residuals (output rows, input box, terminal set, ``Y_s``)."""
+        (the kernel's Newton, its fixed point verified by a numpy GRU step; numpy's Newton
+        without a kernel), cost and residuals (output rows, input box, terminal set,
+        ``Y_s``)."""
         u = np.clip(np.asarray(u, dtype=float), -1.0, 1.0)
         u_s = np.clip(np.asarray(u_s, dtype=float), -1.0, 1.0)
         x = self.simulate(np.asarray(x_hat, dtype=float), u)
-        x_s, _, ok = steady_state(self.params, u_s, x_s0)
+        x_s, ok = self.steady_state(u_s, x_s0)
         res = FHOCPResult(u=u, x=x, cost=float("nan"), status=status, success=False)
         res.u_s, res.x_s = u_s, x_s
         if not ok:
@@ -208,6 +213,18 @@ class TrackingFHOCP(FHOCP):
                       + int(np.sum(np.abs(u) > 1 - 1e-6)))
         res.cost = self.tracking_cost(x, u, u_s, x_s, r, u_prev=u_prev)
         return res
+
+    def steady_state(self, u_s: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, bool]:
+        """``(x_s(u_s), ok)``: the compiled kernel's Newton when there is one (its answer a
+        fixed point of numpy's ``eq:gru`` to ``XS_CHECK_TOL``), else numpy's."""
+        if self.kernel is not None:
+            x_s = self.kernel.steady_state(u_s, x0)
+            if x_s is not None and float(np.max(np.abs(
+                    gru.step(self.params, x_s, u_s) - x_s))) <= XS_CHECK_TOL:
+                return x_s, True
+            return np.full(self.n, np.nan), False
+        x_s, _, ok = steady_state(self.params, u_s, x0)
+        return x_s, ok
 
     # -- solving -------------------------------------------------------------------------
     def solve_tracking(self, x_hat: np.ndarray, e_o: float, r: np.ndarray,

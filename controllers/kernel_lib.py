@@ -63,6 +63,10 @@ class Kernel:
         f = self._fn("gru_step")
         f.argtypes, f.restype = [_VP] * 5, None
         self.c["gru_step"] = f
+        if hasattr(self.lib, prefix + "steady"):    # the tracking FHOCP's kernel (HAS_ASS)
+            f = self._fn("steady")
+            f.argtypes, f.restype = [_VP] * 4, _CI
+            self.c["steady"] = f
         if hasattr(self.lib, prefix + "eq_newton"):
             f = self._fn("eq_newton")
             f.argtypes, f.restype = [_VP, _VP, _VP, _CI, _CD, _VP, _VP], _CI
@@ -148,6 +152,15 @@ class Workspace:
         b["p"][:] = np.ravel(p)
         self._c["xtraj"](self._ws, a["w"], a["p"], a["x"])
         return b["x"].copy()
+
+    def steady_state(self, u_s: np.ndarray, x0: np.ndarray) -> np.ndarray | None:
+        """The steady state ``x_s(u_s)`` by Newton from ``x0`` (a tracking FHOCP's kernel:
+        :mod:`controllers.steady_state` in C); ``None`` when it did not converge."""
+        b, a = self._buf, self._addr
+        b["ue"][:] = u_s
+        b["xe"][:] = x0
+        rc = self.kernel.c["steady"](self._ws, a["ue"], a["xe"], a["xn"])
+        return b["xn"].copy() if rc == 0 else None
 
     def gru_step(self, x: np.ndarray, u: np.ndarray, dz: np.ndarray, dr: np.ndarray
                  ) -> np.ndarray:

@@ -56,6 +56,8 @@ class TrackingMPC:
     def __init__(self, fhocp: TrackingFHOCP, accept_suboptimal: bool = True) -> None:
         self.fhocp = fhocp
         self.accept_suboptimal = bool(accept_suboptimal)
+        #: the design's hypotheses (:func:`controllers.tracking_checks.tracking_hypotheses`)
+        self.hypotheses: dict | None = None
         self.reset()
 
     def reset(self) -> None:

@@ -397,7 +397,8 @@ class RobustMPCController(Component):
             out.update({"alpha_c": self.fhocp.alpha_c,
                         "offset_weight": {n: float(w) for n, w in zip(
                             self._y_names, self.fhocp.offset_weight, strict=True)},
-                        "offset_filter": self.disturbance.beta})
+                        "offset_filter": self.disturbance.beta,
+                        "tracking_hypotheses": self.tracker.hypotheses})
         out.update({
             "controller": "robust-mpc",
             "law": self.law,

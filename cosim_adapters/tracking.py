@@ -94,7 +94,15 @@ def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[s
                                                **fhocp_options)
     except ControllersError as exc:
         raise CosimError(str(exc)) from None
-    return cert, TrackingMPC(fhocp), DisturbanceFilter(beta, len(names))
+    from controllers.tracking_checks import failures, tracking_hypotheses
+
+    hypotheses = tracking_hypotheses(fhocp, cert, beta)
+    failed = failures(hypotheses)
+    if failed:
+        raise CosimError(f"law=\"tracking\": {'; '.join(failed)}")
+    law = TrackingMPC(fhocp)
+    law.hypotheses = hypotheses
+    return cert, law, DisturbanceFilter(beta, len(names))
 
 
 def tracking_step(ctrl: Any, y: np.ndarray, y_ref: np.ndarray) -> tuple[Any, dict[str, float]]:

@@ -280,6 +280,17 @@ HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u
 }
 #endif
 
+#if HAS_ASS
+/* the artificial steady state of u_s by Newton from x0 (1b_steady_state.c) into xs (NX);
+ * 0 when converged. Uses the workspace's steady-state scratch and invalidates its cache. */
+EXPORT int PFX(steady)(gk_ws *ws, const double *us, const double *x0, double *xs) {
+  ws->c_level = -1;
+  steady_state(ws, us, x0);
+  memcpy(xs, ws->xs, sizeof ws->xs);
+  return ws->xs_status;
+}
+#endif
+
 EXPORT void PFX(dims)(long *out) {
   out[0] = NX; out[1] = NU; out[2] = NH; out[3] = NQ; out[4] = NW; out[5] = NG; out[6] = NP;
 }

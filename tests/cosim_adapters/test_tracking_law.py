@@ -23,6 +23,8 @@ ROOT = Path(__file__).resolve().parents[2]
     ({"law": "tracking", "offset_weight": -1}, "option offset_weight=-1: expected a positive"),
     ({"law": "tracking", "offset_weight": {"h3": 1.0}}, "'h3' is not an output of problem"),
     ({"law": "tracking", "alpha_c": 0}, "option alpha_c=0: expected a positive number"),
+    ({"law": "tracking", "alpha_c": 1.0}, "no admissible steady output: Y_s is empty"),
+    ({"law": "tracking", "offset_filter": 1.5}, "offset_filter=1.5: expected a number in"),
 ])
 def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
     with pytest.raises(CosimError) as err:
@@ -38,6 +40,10 @@ def test_defaults_and_summary() -> None:
     assert s["du_weight"] == {"qa": 0.1, "qb": 0.1} and s["gain_scale"] == 0.0
     assert s["alpha_c"] == pytest.approx(RobustMPCController(N=40).cert.alpha_min())
     assert RobustMPCController().summary()["law"] == "paper"
+    h = s["tracking_hypotheses"]     # H3-H6 of docs/design/tracking.md, computed at run time
+    assert h["recursive_feasibility"] and h["Ys_nonempty"] and h["alpha_c"] == s["alpha_c"]
+    assert 0 < h["grid_points_admissible"] < h["grid_points"]
+    assert h["steady_gain_min_singular_value"] > 0
 
 
 @pytest.fixture(scope="module")
