@@ -102,6 +102,29 @@ def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_
                          "an object of non-negative numbers by input name (normalised units)")
 
 
+def _weight(key: str, value: Any, size: int, names: list[str] | None) -> np.ndarray | None:
+    """A cost weight option as a matrix: ``None`` (the default), a number (times the
+    identity), an object by signal name (diagonal; ``names`` given) or a matrix."""
+    if value is None:
+        return None
+    if isinstance(value, Mapping) and names is not None:
+        unknown = sorted(set(value) - set(names))
+        if unknown:
+            raise CosimError(f"option {key}: {unknown[0]!r} is not one of {', '.join(names)}")
+        value = np.diag([float(value.get(n, 0.01)) for n in names])
+    try:
+        w = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise CosimError(f"option {key}={value!r}: expected a number, a {size}x{size} matrix"
+                         + (" or an object by input name" if names else "")) from None
+    if w.ndim == 0:
+        w = float(w) * np.eye(size)
+    if w.shape != (size, size) or not np.all(np.isfinite(w)):
+        raise CosimError(f"option {key}: expected a number or a {size}x{size} matrix, got "
+                         f"shape {w.shape}")
+    return w
+
+
 class RobustMPCController(Component):
     """Robust MPC with GRU model and observer (Schimperna & Magni), normalised internally.
 
@@ -114,8 +137,10 @@ class RobustMPCController(Component):
         that has none (:mod:`cosim_adapters.problems`).
     N : int, optional
         Prediction horizon (default: the paper's 15; 40 with ``law="tracking"``).
-    Q, R : arrays, optional
-        Cost weights (default ``I_n`` and ``0.01 I_m``, paper section V).
+    Q, R : array, number or mapping, optional
+        Cost weights in normalised units (default ``I_n`` and ``0.01 I_m``, paper section V):
+        a matrix, one number (times the identity) or, for ``R``, an object of diagonal
+        weights by input name (inputs not named: 0.01).
     e_o0 : float
         ``ê_o,0`` (paper: 0.02).
     gain_scale : float, optional
@@ -182,7 +207,7 @@ class RobustMPCController(Component):
 
     def __init__(self, model: str | Path | None = None, problem: str | Path | None = None,
                  N: int | None = None,
-                 Q: np.ndarray | None = None, R: np.ndarray | None = None,
+                 Q: Any = None, R: Any = None,
                  e_o0: float = 0.02, gain_scale: float | None = None,
                  offset_free: bool = False, offset_filter: float | None = None,
                  setpoint_rate: float | None = None, governor: bool | None = None,
@@ -228,7 +253,10 @@ class RobustMPCController(Component):
                                         list(self.problem.input_names))
         except ControllersError as exc:
             raise CosimError(f"option {exc}") from None
-        kwargs: dict[str, Any] = {"N": N, "Q": Q, "R": R, "e_o0": e_o0}
+        kwargs: dict[str, Any] = {"N": N, "Q": _weight("Q", Q, self.model.n, None),
+                                  "R": _weight("R", R, len(self.problem.input_names),
+                                               list(self.problem.input_names)),
+                                  "e_o0": e_o0}
         try:
             if gain_scale is None and self.model.L_z is None:
                 targets = [self.model.normalize_y(np.array(y))

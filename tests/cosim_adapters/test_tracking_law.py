@@ -24,12 +24,20 @@ ROOT = Path(__file__).resolve().parents[2]
     ({"law": "tracking", "offset_weight": {"h3": 1.0}}, "'h3' is not an output of problem"),
     ({"law": "tracking", "alpha_c": 0}, "option alpha_c=0: expected a positive number"),
     ({"law": "tracking", "alpha_c": 1.0}, "no admissible steady output: Y_s is empty"),
+    ({"R": {"qc": 1.0}}, "option R: 'qc' is not one of qa, qb"),
+    ({"Q": [[1.0, 0.0]]}, "option Q: expected a number or a 20x20 matrix, got shape (1, 2)"),
     ({"law": "tracking", "offset_filter": 1.5}, "offset_filter=1.5: expected a number in"),
 ])
 def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
     with pytest.raises(CosimError) as err:
         RobustMPCController(**options)
     assert words in str(err.value) and "\n" not in str(err.value)
+
+
+def test_weights_by_number_or_signal_name() -> None:
+    c = RobustMPCController(law="tracking", Q=2.0, R={"qa": 0.001})
+    assert c.fhocp.Q[0, 0] == 2.0 and c.fhocp.Q[0, 1] == 0.0
+    assert c.fhocp.R.tolist() == [[0.001, 0.0], [0.0, 0.01]]
 
 
 def test_defaults_and_summary() -> None:
