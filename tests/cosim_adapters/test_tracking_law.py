@@ -1,7 +1,7 @@
 """The ``robust-mpc`` component's tracking law (``law = "tracking"``, cosim_adapters.tracking):
-its options, and in closed loop with the four-tank FMU on the paper scenario's first
-set-points: tighter tracking than the paper's law with smoother inputs, no violation, no
-static offset, nothing rejected."""
+its options and run-time hypotheses, and in closed loop with the four-tank FMU on the paper
+scenario: issue 20's nominal goals against the PI, smoother inputs than the paper's law, no
+violation, no static offset, nothing rejected."""
 
 from __future__ import annotations
 
@@ -54,29 +54,21 @@ def test_defaults_and_summary() -> None:
     assert h["steady_gain_min_singular_value"] > 0
 
 
-@pytest.fixture(scope="module")
-def paper_start(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """The paper scenario's first six set-points (600 samples)."""
-    rows = (ROOT / "scenarios" / "paper_steps.csv").read_text().splitlines()
-    path = tmp_path_factory.mktemp("tracking") / "paper_start.csv"
-    path.write_text("\n".join([*rows[:7], "15000,,"]) + "\n")
-    return path
-
-
 @pytest.mark.slow
-def test_it_tracks_better_than_the_paper_law_without_moving_the_inputs_more(
-        paper_start: Path) -> None:
-    paper = run(paper_start, figure=False).summary["kpis"]
-    out = run(paper_start, options={"law": "tracking"}, figure=False)
+def test_on_the_paper_scenario_it_beats_the_pi_with_less_input_motion_than_the_paper_law(
+        ) -> None:
+    """Issue 20's nominal goals on the paper scenario (four-tank FMU): each output's IAE below
+    the PI's, the summed IAE at most 0.72x the PI's (measured 0.705x), the inputs moving less
+    than under the paper's law; no violation, nothing rejected, no static offset."""
+    scenario = ROOT / "scenarios" / "paper_steps.csv"
+    pi = run(scenario, controller="pi", figure=False).summary["kpis"]
+    paper = run(scenario, figure=False).summary["kpis"]
+    out = run(scenario, options={"law": "tracking"}, figure=False)
     assert out.status == "ok", out.reason
     k, c = out.summary["kpis"], out.summary["controller_summary"]
     assert all(v["count"] == 0 for v in k["violations"].values())
-    assert c["setpoint_rejected_steps"] == 0 and c["fallbacks"] <= 3
-    for y in ("h1", "h2"):
-        assert k["iae"][y] < paper["iae"][y]
-    # inputs: no more motion than the paper's law overall (over the whole paper scenario
-    # 0.54x / 0.82x; on these first set-points 0.55x / 1.02x)
-    assert k["tv"]["qa"] + k["tv"]["qb"] < paper["tv"]["qa"] + paper["tv"]["qb"]
-    assert all(k["tv"][u] < 1.1 * paper["tv"][u] for u in ("qa", "qb")), (k["tv"], paper["tv"])
-    # no static offset: each set-point's last samples within 5 mm
+    assert c["setpoint_rejected_steps"] == 0 and c["fallbacks"] <= 10
+    assert all(k["iae"][y] < pi["iae"][y] for y in ("h1", "h2"))
+    assert sum(k["iae"].values()) <= 0.72 * sum(pi["iae"].values())
+    assert all(k["tv"][u] < paper["tv"][u] for u in ("qa", "qb")), (k["tv"], paper["tv"])
     assert all(abs(v) < 5e-3 for sp in k["setpoints"] for v in sp["offset"].values())
