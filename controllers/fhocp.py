@@ -54,7 +54,7 @@ from controllers.fhocp_result import FHOCPResult, set_residuals
 from controllers.input_rate import du_cost, du_weights
 from controllers.solver_settings import DEFECT_TOL, FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
-__all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPResult"]
+__all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPResult", "bind_buffers"]
 
 
 
@@ -254,7 +254,7 @@ class FHOCP:
         else:
             self._solver = ca.nlpsol("fhocp", "ipopt", nlp, opts)
         with quiet_stdout():  # … or when its memory is allocated
-            self._buffer = _bind_buffers(self._solver)
+            self._buffer = bind_buffers(self._solver)
         self._warm: dict[str, np.ndarray] | None = None
         return self
 
@@ -459,7 +459,7 @@ class FHOCP:
         self._warm = None
 
 
-def _bind_buffers(solver: Any) -> tuple:
+def bind_buffers(solver: Any) -> tuple:
     """Bind numpy arrays to the solver's zero-copy argument and result buffers (converting
     numpy arrays to and from ``DM`` costs tens of microseconds per vector)."""
     buf, trigger = solver.buffer()

@@ -111,7 +111,8 @@ class TrackingFHOCP(FHOCP):
         rhs = self.ys_bounds - self.Lbo
         self._ys_ub = rhs[self.pair_up]
         self._ys_lb = np.where(self.pair_lo >= 0, -rhs[np.maximum(self.pair_lo, 0)], -np.inf)
-        self.x_s0: np.ndarray | None = None
+        self._g_for: np.ndarray | None = None   # the bounds _lbg, _ubg were written for
+        self._static_layout()
 
     @classmethod
     def from_certificate(cls, cert: Any, **options: Any) -> TrackingFHOCP:
@@ -132,7 +133,7 @@ class TrackingFHOCP(FHOCP):
 
         from controllers.casadi_callbacks import quiet_stdout
         from controllers.compiled_kernel import for_fhocp
-        from controllers.fhocp import _bind_buffers
+        from controllers.fhocp import bind_buffers
         from controllers.nlp_tracking import TrackingNLP
 
         self.kernel = None
@@ -164,7 +165,7 @@ class TrackingFHOCP(FHOCP):
         else:
             self._solver = ca.nlpsol("fhocp_tracking", "ipopt", nlp, opts)
         with quiet_stdout():
-            self._buffer = _bind_buffers(self._solver)
+            self._buffer = bind_buffers(self._solver)
         return self
 
     # -- the answer check ----------------------------------------------------------------
@@ -305,12 +306,10 @@ class TrackingFHOCP(FHOCP):
 
     def _write_bounds(self, ins: dict[str, np.ndarray], e_o: float) -> None:
         """Variable and constraint bounds of one solve (the tightened rows for ``ê_o``)."""
-        if not hasattr(self, "_perm_x"):
-            self._static_layout()
         ins["lbx"][:] = self._lbx
         ins["ubx"][:] = self._ubx
         bounds = self.tightened_bounds(e_o)
-        if getattr(self, "_g_for", None) is not bounds:
+        if self._g_for is not bounds:
             N, qr, n = self.N, self.qr, self.n
             flat = bounds[1:]
             lbg = np.full(self.ng, -np.inf)
@@ -328,6 +327,8 @@ class TrackingFHOCP(FHOCP):
         ins["ubg"][:] = self._ubg
 
     def _static_layout(self) -> None:
+        """The variable bounds and the permutations that shift ``w`` and the multipliers by
+        one stage (the warm start)."""
         lbx = np.full(self.nw, -1.0)
         ubx = np.full(self.nw, 1.0)
         lbx[self.it], ubx[self.it] = 0.0, self.alpha_c

@@ -87,7 +87,7 @@ class KernelSQP:
             self.options, self.info)
 
     def buffers(self) -> tuple[KernelSQP, Any, dict[str, np.ndarray], dict[str, np.ndarray]]:
-        """``(self, trigger, ins, outs)``, as :func:`controllers.fhocp._bind_buffers` gives
+        """``(self, trigger, ins, outs)``, as :func:`controllers.fhocp.bind_buffers` gives
         for a casadi solver."""
         return self, self.solve, self.ins, self.outs
 

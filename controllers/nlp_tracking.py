@@ -42,6 +42,10 @@ class TrackingNLP(SingleShootingNLP):
         self.p: Any = fhocp
         self.ng = fhocp.ng
         self.ius = fhocp.ius
+        from controllers.shooting import GRUShooting
+
+        #: one stage at (x_s, u_s): the second derivatives of the curvature term
+        self._one_stage = GRUShooting(fhocp.params, 1)
         self._xs_key: bytes | None = None
         self._xs: tuple[np.ndarray, np.ndarray, bool] = (np.zeros(0), np.zeros(0), False)
 
@@ -179,7 +183,6 @@ class TrackingNLP(SingleShootingNLP):
         """``λᵀ ∂²x_s/∂u_s²`` (λ = ∂L/∂x_s): ``Zᵀ ∇²(μᵀ f) Z``, ``Z = [X_s; I]``,
         ``μ = (I − A_s)^{-T} λ``."""
         from controllers.equilibrium import jacobians
-        from controllers.shooting import GRUShooting
 
         p = self.p
         N, n, q = p.N, p.n, p.qr
@@ -188,8 +191,8 @@ class TrackingNLP(SingleShootingNLP):
             p.DUo.T @ lg[r0 + 2 * n:])
         A, _ = jacobians(p.params, xs, wv[self.ius])
         mu = np.linalg.solve((np.eye(n) - A).T, lx)
-        one = GRUShooting(p.params, 1).rollout(xs, wv[self.ius][None], derivatives=True)
-        W = GRUShooting(p.params, 1).stage_hessians(one, mu[None])[0]
+        one = self._one_stage.rollout(xs, wv[self.ius][None], derivatives=True)
+        W = self._one_stage.stage_hessians(one, mu[None])[0]
         Z = np.vstack([Xs, np.eye(p.m)])
         return Z.T @ W @ Z
 

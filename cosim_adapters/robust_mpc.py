@@ -62,7 +62,7 @@ from controllers.errors import ControllersError, SetpointError
 from controllers.model import DEFAULT_MODEL
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
-from cosim_adapters.tracking import _check_law
+from cosim_adapters.tracking import check_law
 
 __all__ = ["RobustMPCController"]
 
@@ -224,7 +224,7 @@ class RobustMPCController(Component):
         from controllers.observer import GRUObserver
         from controllers.robust_mpc import RobustMPC
 
-        tracking = _check_law(law, governor=governor, offset_free=offset_free,
+        tracking = check_law(law, governor=governor, offset_free=offset_free,
                               setpoint_rate=setpoint_rate, offset_weight=offset_weight,
                               alpha_c=alpha_c)
         N = (40 if tracking else 15) if N is None else N

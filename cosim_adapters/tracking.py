@@ -30,13 +30,13 @@ import numpy as np
 from controllers.errors import ControllersError
 from cosim.errors import CosimError
 
-__all__ = ["LAWS", "tracking_design", "tracking_step"]
+__all__ = ["LAWS", "check_law", "tracking_design", "tracking_step"]
 
 #: The control laws of the ``robust-mpc`` component.
 LAWS = ("paper", "tracking")
 
 
-def _check_law(law: Any, *, governor: Any, offset_free: Any, setpoint_rate: Any,
+def check_law(law: Any, *, governor: Any, offset_free: Any, setpoint_rate: Any,
                offset_weight: Any, alpha_c: Any) -> bool:
     """Check the law and its options (one-line errors); ``True`` for the tracking law."""
     if law not in LAWS:
