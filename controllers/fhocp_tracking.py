@@ -254,7 +254,9 @@ class TrackingFHOCP(FHOCP):
         u_init = np.clip(np.asarray(u_init, dtype=float).reshape(self.N, self.m), -1.0, 1.0)
         x_s0 = np.asarray(x_s0, dtype=float).reshape(self.n)
         up = us_init if u_prev is None else np.asarray(u_prev, dtype=float).reshape(self.m)
-        if self.check_x0(x_hat, e_o) > 0:
+        # the i = 0 row involves x̂ only; an accepted answer may exceed a row by up to
+        # FEAS_TOL, which the next x̂ (the model's x_1, zero observer gains) inherits
+        if self.check_x0(x_hat, e_o) > FEAS_TOL:
             res = self.check(x_hat, u_init, us_init, e_o, r, x_s0, up, "infeasible_x0")
             res.solve_time = time.perf_counter() - t0
             return res

@@ -144,3 +144,26 @@ def test_steady_output_bounds_are_the_alpha_c_level_set() -> None:
     rhs = steady_output_bounds(cert, 0.05)
     y = np.zeros(cert.L.shape[1])
     assert np.all(cert.L @ y <= rhs) == (cert.alpha(y) >= 0.05)
+
+
+@pytest.mark.parametrize(("m", "p"), [(1, 1), (3, 2)])
+def test_the_law_reaches_a_reachable_setpoint_on_any_plant_shape(m: int, p: int) -> None:
+    """SISO and 3 inputs × 2 outputs (random δISS GRUs as their own plants): a set-point that
+    is a steady output (of u = 0.3) is reached, with no fallback after the first step."""
+    model = random_gru_model(7, n=6, m=m, p=p)
+    P = model.params
+    fh = _fhocp(model, N=10, du=0.1).setup()
+    assert fh.kernel is not None, fh.kernel_error
+    target, _, _ = steady_state(P, np.full(m, 0.3), np.zeros(6))
+    y_ref = output(P, target)
+    assert np.all(fh.LUo @ target <= fh.ys_bounds - fh.Lbo)   # inside Y_s
+    x, _, _ = steady_state(P, np.zeros(m), np.zeros(6))
+    law = TrackingMPC(fh)
+    law.start(np.zeros(m), x)
+    fallbacks = []
+    for _ in range(150):
+        rec = law.make_step(x, 0.0, y_ref)
+        fallbacks.append(rec.fallback)
+        x = step(P, x, rec.u)
+    assert not any(fallbacks[1:])
+    assert np.max(np.abs(output(P, x) - y_ref)) < 1e-4
