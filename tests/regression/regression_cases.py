@@ -58,10 +58,11 @@ class Case:
     controller: str
     plant: str | None = None           # None: the project's FourTank.fmu
     options: tuple[str, ...] = field(default=())
+    label: str | None = None           # the controller's name in the id (default: its own)
 
     @property
     def id(self) -> str:
-        parts = [self.scenario.stem, self.controller]
+        parts = [self.scenario.stem, self.label or self.controller]
         if self.plant:
             parts.append(self.plant)
         return "__".join(parts)
@@ -76,13 +77,23 @@ def recording_options(controller: str, base: str | None = None) -> tuple[str, ..
     return RECORDING_OPTIONS.get(base or controller, ())
 
 
+#: Controller variants recorded on one scenario each: (scenario stem, label, controller,
+#: options). The robust MPC's tracking law (issue 20) on the paper scenario.
+VARIANT_CASES = (("paper_steps", "robust-mpc-tracking", "robust-mpc",
+                  ("--option", 'law="tracking"')),)
+
+
 def shipped_cases() -> list[Case]:
-    """Every scenario × :data:`CONTROLLERS`, plus every scenario on the third-party plant."""
+    """Every scenario × :data:`CONTROLLERS`, plus every scenario on the third-party plant,
+    plus :data:`VARIANT_CASES`."""
     cases = []
     for scenario in sorted(SCENARIOS.glob("*.csv")):
         cases += [Case(scenario, c, options=recording_options(c)) for c in CONTROLLERS]
         cases.append(Case(scenario, THIRDPARTY_CONTROLLER, THIRDPARTY_PLANT,
                           options=recording_options(THIRDPARTY_CONTROLLER)))
+    for stem, label, controller, options in VARIANT_CASES:
+        cases.append(Case(SCENARIOS / f"{stem}.csv", controller,
+                          options=(*recording_options(controller), *options), label=label))
     return cases
 
 
