@@ -40,7 +40,7 @@ from controllers.input_rate import du_cost
 from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
 from controllers.steady_state import steady_state
 
-__all__ = ["LINE_SEARCH", "TrackingFHOCP", "steady_output_bounds"]
+__all__ = ["LINE_SEARCH", "US_RATE", "TrackingFHOCP", "steady_output_bounds"]
 
 #: The SQP's line search for the tracking FHOCP (over ``sqpmethod``'s defaults, 3 trials with
 #: β = 0.8, the last accepted): a set-point step moves ``u_s`` far, and the short search let
@@ -48,6 +48,12 @@ __all__ = ["LINE_SEARCH", "TrackingFHOCP", "steady_output_bounds"]
 #: ("QP_Infeasible", every later step falling back on the candidate: 2 of 40 runs of the
 #: plant-uncertainty campaign stuck for 200 steps).
 LINE_SEARCH = {"max_iter_ls": 10, "beta": 0.5}
+#: The default largest move of ``u_s`` per step (normalised inputs, range 2): a set-point step
+#: otherwise sent the SQP's first iterates so far along the nonlinear ``x_s(u_s)`` that the
+#: next linearisation had no feasible point ("QP_Infeasible"), and the solve failed again at
+#: every later step from the same candidate (measured: 5 of 200 runs of the guarantee
+#: campaign stuck for 300 steps). The candidate keeps ``u_s``, so recursive feasibility holds.
+US_RATE = 0.2
 #: Largest ``‖f(x_s, u_s) − x_s‖∞`` (numpy) of an accepted steady state (normalised).
 XS_CHECK_TOL = 1e-10
 
@@ -111,6 +117,8 @@ class TrackingFHOCP(FHOCP):
         rhs = self.ys_bounds - self.Lbo
         self._ys_ub = rhs[self.pair_up]
         self._ys_lb = np.where(self.pair_lo >= 0, -rhs[np.maximum(self.pair_lo, 0)], -np.inf)
+        #: largest move of u_s per step (normalised; None: none), around the candidate's
+        self.us_rate: float | None = US_RATE
         self._g_for: np.ndarray | None = None   # the bounds _lbg, _ubg were written for
         self._static_layout()
 
@@ -267,6 +275,9 @@ class TrackingFHOCP(FHOCP):
         if self.has_du:
             pv[2 * n + self.p:] = up
         self._write_bounds(ins, e_o)
+        if self.us_rate is not None:   # the steady input moves at most us_rate per step
+            ins["lbx"][self.ius] = np.maximum(us_init - self.us_rate, -1.0)
+            ins["ubx"][self.ius] = np.minimum(us_init + self.us_rate, 1.0)
         x = self.simulate(x_hat, u_init)
         w0 = ins["x0"]
         w0[self.iu.ravel()] = u_init.ravel()
