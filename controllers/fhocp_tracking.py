@@ -40,7 +40,7 @@ from controllers.input_rate import du_cost
 from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
 from controllers.steady_state import steady_state
 
-__all__ = ["LINE_SEARCH", "US_RATE", "TrackingFHOCP", "steady_output_bounds"]
+__all__ = ["DEFAULTS", "LINE_SEARCH", "US_RATE", "TrackingFHOCP", "steady_output_bounds"]
 
 #: The SQP's line search for the tracking FHOCP (over ``sqpmethod``'s defaults, 3 trials with
 #: β = 0.8, the last accepted): a set-point step moves ``u_s`` far, and the short search let
@@ -48,6 +48,9 @@ __all__ = ["LINE_SEARCH", "US_RATE", "TrackingFHOCP", "steady_output_bounds"]
 #: ("QP_Infeasible", every later step falling back on the candidate: 2 of 40 runs of the
 #: plant-uncertainty campaign stuck for 200 steps).
 LINE_SEARCH = {"max_iter_ls": 10, "beta": 0.5}
+#: The tracking law's defaults (docs: design/tracking.md, "Recommendation"): horizon, offset
+#: weight T, Δu weight S, the disturbance filter's β (normalised units).
+DEFAULTS = {"N": 40, "offset_weight": 1e5, "du_weight": 0.1, "offset_filter": 0.2}
 #: The default largest move of ``u_s`` per step (normalised inputs, range 2): a set-point step
 #: otherwise sent the SQP's first iterates so far along the nonlinear ``x_s(u_s)`` that the
 #: next linearisation had no feasible point ("QP_Infeasible"), and the solve failed again at

@@ -214,7 +214,7 @@ class RobustMPCController(Component):
                  solver: str | None = None,
                  ipopt_options: Mapping[str, Any] | None = None, max_iter: int = 15,
                  kernel: str = "auto", du_weight: float | Mapping[str, float] | None = None,
-                 law: str = "paper", offset_weight: float | Mapping[str, float] = 1e5,
+                 law: str = "paper", offset_weight: float | Mapping[str, float] | None = None,
                  alpha_c: float | None = None, name: str = "mpc") -> None:
         from controllers import certificates as certs
         from controllers import gain_design
@@ -227,10 +227,14 @@ class RobustMPCController(Component):
         tracking = check_law(law, governor=governor, offset_free=offset_free,
                               setpoint_rate=setpoint_rate, offset_weight=offset_weight,
                               alpha_c=alpha_c)
-        N = (40 if tracking else 15) if N is None else N
+        from controllers.fhocp_tracking import DEFAULTS as TRACKING
+
+        N = (TRACKING["N"] if tracking else 15) if N is None else N
         governor = (not tracking) if governor is None else governor
-        offset_filter = (0.2 if tracking else 0.05) if offset_filter is None else offset_filter
-        du_weight = (0.1 if tracking else 0.0) if du_weight is None else du_weight
+        if offset_filter is None:
+            offset_filter = TRACKING["offset_filter"] if tracking else 0.05
+        if du_weight is None:
+            du_weight = TRACKING["du_weight"] if tracking else 0.0
         _check_options(name=name, offset_free=offset_free, offset_filter=offset_filter,
                        setpoint_rate=setpoint_rate, governor=governor, solver=solver,
                        ipopt_options=ipopt_options, max_iter=max_iter, kernel=kernel,

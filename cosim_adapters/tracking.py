@@ -50,7 +50,7 @@ def check_law(law: Any, *, governor: Any, offset_free: Any, setpoint_rate: Any,
                 raise CosimError(f"option {key}={value!r} belongs to law=\"paper\" (the "
                                  "tracking law needs no governor and is offset-free)")
     weights = (list(offset_weight.values()) if isinstance(offset_weight, Mapping)
-               else [offset_weight])
+               else [] if offset_weight is None else [offset_weight])
     if not all(_positive(w) for w in weights):
         raise CosimError(f"option offset_weight={offset_weight!r}: expected a positive "
                          "number or an object of positive numbers by output name")
@@ -71,16 +71,19 @@ def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[s
     docstring). ``cert_gains``: the paper law's certificate (its ``α_min`` is the default
     ``α_c``); ``kwargs``: ``N``, ``Q``, ``R``, ``e_o0``."""
     from controllers import certificates as certs
-    from controllers.fhocp_tracking import TrackingFHOCP
+    from controllers.fhocp_tracking import DEFAULTS, TrackingFHOCP
     from controllers.tracking_mpc import DisturbanceFilter, TrackingMPC
 
     names = list(problem.output_names)
+    default = float(DEFAULTS["offset_weight"])
+    if offset_weight is None:
+        offset_weight = default
     if isinstance(offset_weight, Mapping):
         unknown = sorted(set(offset_weight) - set(names))
         if unknown:
             raise CosimError(f"option offset_weight: {unknown[0]!r} is not an output of "
                              f"problem {problem.name!r} ({', '.join(names)})")
-        T = np.array([float(offset_weight.get(n, 1e5)) for n in names])
+        T = np.array([float(offset_weight.get(n, default)) for n in names])
     else:
         T = np.full(len(names), float(offset_weight))
     try:

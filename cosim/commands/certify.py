@@ -71,7 +71,12 @@ def register(subparsers: Any) -> None:
                         "or gives the problem of a model file without one")
     p.add_argument("--json", action="store_true",
                    help="print JSON with the paper's names (a list when several set-points)")
-    p.add_argument("--N", type=int, default=15, help="prediction horizon N (default 15)")
+    p.add_argument("--N", type=int, default=None,
+                   help="prediction horizon N (default 15; 40 with --law tracking)")
+    p.add_argument("--law", choices=("paper", "tracking"), default="paper",
+                   help="tracking: also compute and check the tracking law's hypotheses "
+                        "(robust-mpc law=\"tracking\", its defaults: zero observer gains, "
+                        "alpha_c = alpha_min(N) of the design above; docs: design/tracking.md)")
     p.add_argument("--e-o0", type=float, default=0.02, dest="e_o0",
                    help="initial observer-error bound ê_o,0 (default 0.02)")
     g = p.add_mutually_exclusive_group()
@@ -214,7 +219,8 @@ def run(args: argparse.Namespace) -> int:
 
     if args.model is None:
         args.model = str(DEFAULT_MODEL)
-
+    if args.N is None:
+        args.N = 40 if args.law == "tracking" else 15
     if args.N < 1:
         raise CosimError(f"--N must be >= 1, got {args.N}")
     if not (math.isfinite(args.e_o0) and args.e_o0 >= 0):
@@ -266,14 +272,22 @@ def run(args: argparse.Namespace) -> int:
                         f"feasibility): none for {', '.join(empty)}")
     if no_theta:
         failures.append(no_theta)
+    tracking = None
+    if args.law == "tracking":
+        tracking, failed = _tracking(model, cert, kwargs)
+        failures += failed
 
     if args.json:
         docs = [cert.to_json(sp) for _, sp, _, _ in per_setpoint] or [cert.to_json()]
+        if tracking is not None:
+            docs = [{**d, "tracking": tracking} for d in docs]
         print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1))
         for msg in failures:
             print(f"FAILED: {msg}", file=sys.stderr)
     else:
         _print_table(args.model, model, cert, note, per_setpoint)
+        if tracking is not None:
+            _print_tracking(tracking)
         for msg in failures:
             print(f"FAILED: {msg}")
     if args.plot:
@@ -298,6 +312,39 @@ def run(args: argparse.Namespace) -> int:
         print(f"cosim certify: {len(failures)} hypothesis check(s) failed", file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
+
+
+def _tracking(model: Any, cert: Any, kwargs: dict) -> tuple[dict, list[str]]:
+    """The tracking law's hypotheses (:mod:`controllers.tracking_checks`) with its defaults,
+    ``α_c`` the certificate's ``α_min(N)``; and the failed ones, in words."""
+    from controllers import certificates as certs
+    from controllers.errors import ControllersError
+    from controllers.fhocp_tracking import DEFAULTS, TrackingFHOCP
+    from controllers.tracking_checks import failures, tracking_hypotheses
+
+    alpha_c = cert.alpha_min()
+    if not (math.isfinite(alpha_c) and alpha_c > 0):
+        return {}, [f"tracking law: no default alpha_c (alpha_min(N) = {alpha_c:g})"]
+    try:
+        cert_t = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
+        fh = TrackingFHOCP.from_certificate(cert_t, offset_weight=DEFAULTS["offset_weight"],
+                                            alpha_c=alpha_c, du_weight=DEFAULTS["du_weight"])
+    except ControllersError as exc:
+        return {}, [f"tracking law: {exc}"]
+    h = tracking_hypotheses(fh, cert_t, DEFAULTS["offset_filter"])
+    return h, [f"tracking law: {msg}" for msg in failures(h)]
+
+
+def _print_tracking(h: dict) -> None:
+    if not h:
+        return
+    sv = h["steady_gain_min_singular_value"]
+    print(f"tracking law (zero observer gains): alpha_c = {h['alpha_c']:.6g}, alpha_min = "
+          f"{h['alpha_min']:.6g}, eq:condition-recursive-feasibility = "
+          f"{_fmt(h['recursive_feasibility'])}; Y_s not empty = {_fmt(h['Ys_nonempty'])}; "
+          f"admissible steady states on the input grid: {h['grid_points_admissible']} of "
+          f"{h['grid_points']}, smallest singular value of the steady-state gain there: "
+          + ("none" if sv is None else f"{sv:.4g}"))
 
 
 def _print_table(path: str, model: Any, cert: Any, note: str, per_setpoint: list) -> None:

@@ -433,3 +433,19 @@ def test_auto_gain_scale_on_the_default_grid_of_any_problem(m: int, p: int, grid
     cert = certs.compute_certificate(saved)
     assert all(cert.ok(y) for y in targets)
     assert png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_the_tracking_laws_hypotheses(model_file: Path, capsys) -> None:
+    """``--law tracking``: H3-H6 of docs/design/tracking.md at N = 40, in the table and the
+    JSON; a failing one (no admissible steady output) is exit 1 naming it."""
+    assert main(["certify", str(model_file), "--law", "tracking"]) == 0
+    out = capsys.readouterr().out
+    assert "N=40" in out and "tracking law (zero observer gains): alpha_c = " in out
+    assert "Y_s not empty = yes" in out
+    assert main(["certify", str(model_file), "--law", "tracking", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    h = doc["tracking"]
+    assert h["recursive_feasibility"] and h["Ys_nonempty"] and h["alpha_min"] == 0.0
+    assert h["alpha_c"] > 0 and h["grid_points_admissible"] > 0
+    assert main(["certify", str(model_file), "--law", "tracking", "--e-o0", "1"]) == 1
+    assert "FAILED: tracking law: no admissible steady output" in capsys.readouterr().out
