@@ -48,7 +48,11 @@ def steady_output_grid(model, points: int) -> np.ndarray:
     return np.array(out)
 
 
-def check(folder: Path, points: int, tol: float, noise_tol: float) -> int:
+def intervals(folder: Path, points: int = 81) -> pd.DataFrame:
+    """One row per run and set-point interval of the campaign in ``folder``: ``in_Ys``
+    (largest row of ``L y_s − rhs``), ``excess`` (how much farther ``y_s`` is from ``r`` than
+    the grid's closest admissible steady output), ``reached`` (``y_s`` within 1 mm of ``r``)
+    and ``offset`` (the measured output's mean over the last 50 samples against ``ȳ``)."""
     from cosim.campaign import load
     from cosim_adapters.robust_mpc import RobustMPCController
 
@@ -85,23 +89,31 @@ def check(folder: Path, points: int, tol: float, noise_tol: float) -> int:
                 "reached": bool(np.max(np.abs(y_s - r)) * np.max(scale) < 1e-3),
                 "offset": float(np.max(np.abs(meas - model.denormalize_y(y_ref)))),
             })
-    df = pd.DataFrame(rows)
-    bad = 0
-    n = len(df)
-    ok1 = df.in_Ys <= 1e-7
-    ok2 = df.excess <= tol
+    return pd.DataFrame(rows)
+
+
+def claims(df: pd.DataFrame, tol: float, noise_tol: float) -> list[tuple[str, int, int, float]]:
+    """``(claim, intervals holding it, intervals checked, worst value)`` per claim."""
     reached = df[df.reached]
-    ok3 = reached.offset <= noise_tol
+    out = []
     for label, ok, worst in (
-            ("y_s in Y_s", ok1, df.in_Ys.max()),
-            (f"y_s the closest admissible steady output (within {tol:g})", ok2,
+            ("y_s in Y_s", df.in_Ys <= 1e-7, df.in_Ys.max()),
+            (f"y_s the closest admissible steady output (within {tol:g})", df.excess <= tol,
              df.excess.max()),
-            (f"offset-free where r is admissible ({len(reached)} intervals; "
-             f"within {noise_tol:g})", ok3, reached.offset.max() if len(reached) else 0.0)):
-        total = len(ok)
-        print(f"{label}: {int(ok.sum())} / {total} intervals, worst {worst:.3g}")
-        bad += total - int(ok.sum())
-    print(f"{n} intervals in {df.run.nunique()} runs")
+            (f"offset-free where r is admissible (within {noise_tol:g})",
+             reached.offset <= noise_tol, reached.offset.max() if len(reached) else 0.0)):
+        out.append((label, int(ok.sum()), len(ok), float(worst)))
+    return out
+
+
+def check(folder: Path, points: int, tol: float, noise_tol: float) -> int:
+    """Print the claims' counts; 1 when an interval fails one."""
+    df = intervals(folder, points)
+    bad = 0
+    for label, held, total, worst in claims(df, tol, noise_tol):
+        print(f"{label}: {held} / {total} intervals, worst {worst:.3g}")
+        bad += total - held
+    print(f"{len(df)} intervals in {df.run.nunique()} runs")
     return 1 if bad else 0
 
 

@@ -4,6 +4,7 @@ run: two runs of each here (the full campaigns and their results: docs/guide/cam
 from __future__ import annotations
 
 import json
+import sys
 from dataclasses import replace
 from pathlib import Path
 
@@ -67,3 +68,12 @@ def test_two_runs_of_each_shipped_campaign(path: Path, tmp_path: Path) -> None:
         for run in (tmp_path / "out" / "runs").iterdir():
             ctrl = json.loads((run / "summary.json").read_text())["controller_summary"]
             assert ctrl["fallback_candidates_infeasible"] == 0
+        # claim 3 by examples/tracking_theorem.py: y_s in Y_s, the closest admissible one
+        sys.path.insert(0, str(ROOT / "examples"))
+        try:
+            import tracking_theorem
+        finally:
+            sys.path.pop(0)
+        held = tracking_theorem.claims(tracking_theorem.intervals(tmp_path / "out", 41),
+                                       2e-3, 0.02)
+        assert [h == n for _, h, n, _ in held[:2]] == [True, True], held
