@@ -121,6 +121,7 @@ class TrackingFHOCP(FHOCP):
         self._ys_ub = rhs[self.pair_up]
         self._ys_lb = np.where(self.pair_lo >= 0, -rhs[np.maximum(self.pair_lo, 0)], -np.inf)
         #: largest move of u_s per step (normalised; None: none), around the candidate's
+        #: (``us_centre`` of :meth:`solve_tracking`)
         self.us_rate: float | None = US_RATE
         self._g_for: np.ndarray | None = None   # the bounds _lbg, _ubg were written for
         self._static_layout()
@@ -241,7 +242,8 @@ class TrackingFHOCP(FHOCP):
     # -- solving -------------------------------------------------------------------------
     def solve_tracking(self, x_hat: np.ndarray, e_o: float, r: np.ndarray,
                        u_init: np.ndarray, us_init: np.ndarray, x_s0: np.ndarray,
-                       u_prev: np.ndarray | None = None, warm: bool = True) -> FHOCPResult:
+                       u_prev: np.ndarray | None = None, warm: bool = True,
+                       us_centre: np.ndarray | None = None) -> FHOCPResult:
         """Solve at ``x̂`` with ``ê_o`` for the target ``r = ȳ − d̂`` (normalised).
 
         Parameters
@@ -255,6 +257,9 @@ class TrackingFHOCP(FHOCP):
             ``u_{−1}`` of the input-rate term (``None``: ``us_init``).
         warm : bool
             Warm start the multipliers from the previous solve, shifted by one stage.
+        us_centre : (m,) array, optional
+            Centre of the move limit on ``u_s`` (:attr:`us_rate`): the candidate's ``u_s``,
+            so that the candidate stays feasible (default ``us_init``).
         """
         if self._solver is None:
             self.setup()
@@ -279,12 +284,13 @@ class TrackingFHOCP(FHOCP):
             pv[2 * n + self.p:] = up
         self._write_bounds(ins, e_o)
         if self.us_rate is not None:   # the steady input moves at most us_rate per step
-            ins["lbx"][self.ius] = np.maximum(us_init - self.us_rate, -1.0)
-            ins["ubx"][self.ius] = np.minimum(us_init + self.us_rate, 1.0)
+            c = us_init if us_centre is None else np.asarray(us_centre, dtype=float)
+            ins["lbx"][self.ius] = np.maximum(c - self.us_rate, -1.0)
+            ins["ubx"][self.ius] = np.minimum(c + self.us_rate, 1.0)
         x = self.simulate(x_hat, u_init)
         w0 = ins["x0"]
         w0[self.iu.ravel()] = u_init.ravel()
-        w0[self.ius] = us_init
+        w0[self.ius] = np.clip(us_init, ins["lbx"][self.ius], ins["ubx"][self.ius])
         w0[self.it] = min(max(float(np.max(np.abs(x[-1] - x_s0))), 1e-6), self.alpha_c)
         if warm and self._warm is not None and self.warm_duals:
             ins["lam_x0"][:] = self._warm["lam_x"][self._perm_x]

@@ -95,7 +95,7 @@ class TrackingMPC:
         g_u, g_us, g_xs = self._guess or (cand, self.u_s, self.x_s)
         t0 = time.perf_counter()
         try:
-            res = fh.solve_tracking(x_hat, e_o, r, g_u, g_us, g_xs, up)
+            res = fh.solve_tracking(x_hat, e_o, r, g_u, g_us, g_xs, up, us_centre=self.u_s)
         except Exception as exc:   # a solver crash: the candidate, as a failed solve
             res = fh.check(x_hat, cand, self.u_s, e_o, r, self.x_s, up)
             res.status = f"solver_error: {type(exc).__name__}: {exc}"[:200]
