@@ -331,8 +331,9 @@ def test_bad_pi_options_exit_2(option: str, message: str, tmp_path: Path, fmu2_p
     ("N=2.5", "horizon N must be an integer >= 1, got 2.5"),
     ("N=true", "horizon N must be an integer >= 1, got True"),
     ("N=100000", "horizon N must be >= 1 and <= 1000, got 100000"),
-    ('R="abc"', "cost weight R must be a 2x2 matrix of numbers, got 'abc'"),
-    ("R=-1", "cost weight R must be a 2x2 matrix, got shape ()"),
+    ('R="abc"', "option R='abc': expected a number, a 2x2 matrix or an object by input name"),
+    ("R=-1", "cost weight R must be symmetric positive definite"),     # -1 times I
+    ("R=[1,2,3]", "option R: expected a number or a 2x2 matrix, got shape (3,)"),
     ("R=[[0.01,0],[0,-0.01]]", "cost weight R must be symmetric positive definite"),
     ('gain_scale="x"', "gain scale must be a non-negative number, got 'x'"),
 ])
