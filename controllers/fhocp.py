@@ -232,6 +232,13 @@ class FHOCP:
             self._nlp = None
             nlp, opts, xtraj, _ = multiple_shooting_problem(self)
             self._xtraj = lambda w, p: np.asarray(xtraj(w, p))
+        self._build_solver(nlp, opts, "fhocp")
+        return self
+
+    def _build_solver(self, nlp: dict, opts: dict[str, Any], name: str) -> None:
+        """The solver of ``nlp`` (the compiled kernel's SQP, casadi ``sqpmethod`` or IPOPT)
+        and its argument buffers; forgets the warm start."""
+        self._warm: dict[str, np.ndarray] | None = None
         if self.solver == "sqp":
             opts = {k: v for k, v in opts.items()
                     if k not in ("ipopt", "grad_f", "jac_g", "hess_lag")}
@@ -247,16 +254,13 @@ class FHOCP:
 
                 self._solver = KernelSQP(self.kernel, sqp, self.time_budget)
                 self._buffer = self._solver.buffers()
-                self._warm = None
-                return self
+                return
             with quiet_stdout():  # qpOASES prints its licence banner on construction
-                self._solver = ca.nlpsol("fhocp", "sqpmethod", nlp, opts)
+                self._solver = ca.nlpsol(name, "sqpmethod", nlp, opts)
         else:
-            self._solver = ca.nlpsol("fhocp", "ipopt", nlp, opts)
+            self._solver = ca.nlpsol(name, "ipopt", nlp, opts)
         with quiet_stdout():  # … or when its memory is allocated
             self._buffer = bind_buffers(self._solver)
-        self._warm: dict[str, np.ndarray] | None = None
-        return self
 
     def numpy_nlp(self) -> Any:
         """The numpy twin of this problem's derivatives (what the compiled kernel is

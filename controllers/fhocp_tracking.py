@@ -141,11 +141,7 @@ class TrackingFHOCP(FHOCP):
 
     def setup(self) -> TrackingFHOCP:
         """Build the solver (the compiled kernel's SQP, else casadi's with the numpy twin)."""
-        import casadi as ca
-
-        from controllers.casadi_callbacks import quiet_stdout
         from controllers.compiled_kernel import for_fhocp
-        from controllers.fhocp import bind_buffers
         from controllers.nlp_tracking import TrackingNLP
 
         self.kernel = None
@@ -155,29 +151,7 @@ class TrackingFHOCP(FHOCP):
         self._shoot = self._nlp.shoot
         nlp, opts = self._nlp.ipopt_problem(self.ipopt_options, self.time_budget)
         self._xtraj = self._nlp.trajectory
-        self._warm = None
-        if self.solver == "sqp":
-            opts = {k: v for k, v in opts.items()
-                    if k not in ("ipopt", "grad_f", "jac_g", "hess_lag")}
-            nlp, functions = self._nlp.sqp_problem(nlp)
-            opts.update(functions)
-            sqp = dict(self.sqp_options)
-            clip = sqp.pop("hessian_eigen_clip", None)
-            loop = sqp.pop("loop")
-            self._nlp.eigen_clip = None if clip is None else float(clip)
-            opts.update(sqp)
-            if loop == "kernel" and self.kernel is not None:
-                from controllers.kernel_sqp import KernelSQP
-
-                self._solver = KernelSQP(self.kernel, sqp, self.time_budget)
-                self._buffer = self._solver.buffers()
-                return self
-            with quiet_stdout():
-                self._solver = ca.nlpsol("fhocp_tracking", "sqpmethod", nlp, opts)
-        else:
-            self._solver = ca.nlpsol("fhocp_tracking", "ipopt", nlp, opts)
-        with quiet_stdout():
-            self._buffer = bind_buffers(self._solver)
+        self._build_solver(nlp, opts, "fhocp_tracking")
         return self
 
     # -- the answer check ----------------------------------------------------------------
