@@ -277,11 +277,10 @@ class SingleShootingNLP:
     def self_test(self, kernel: Any, clip: float | None, trials: int = 3,
                   seed: int = 12345) -> float:
         """Largest relative difference between ``kernel`` and these numpy functions at random
-        points: f, ∇f, g, ∂g/∂w, the clipped Hessian, the plain rollout, the observer's GRU
-        step and the answer check (cost and residuals, :meth:`FHOCP.candidate`); with the
-        input-rate term when the problem has one (``u_{−1}`` drawn at random too)."""
+        points (:meth:`_self_test_point`): f, ∇f, g, ∂g/∂w, the clipped Hessian, the plain
+        rollout, the observer's GRU step and the answer check (:meth:`_answer_check_pairs`);
+        with the input-rate term when the problem has one (``u_{−1}`` drawn at random too)."""
         from controllers import gru
-        from controllers.fhocp_result import FHOCPResult, set_residuals
 
         p = self.p
         rng = np.random.default_rng(seed)
@@ -291,9 +290,7 @@ class SingleShootingNLP:
         try:
             jac_c, hess_c = kernel.external("jac_fg"), kernel.external("hess_l")
             for _ in range(trials):
-                wv = np.concatenate([rng.uniform(-1, 1, N * m), rng.uniform(0, 0.1, 1)])
-                pv = np.concatenate([rng.uniform(-0.5, 0.5, 2 * n),
-                                     rng.uniform(-1, 1, p.npar - 2 * n)])
+                wv, pv = self._self_test_point(rng)
                 lg = rng.normal(0, 1, self.ng)
                 pairs = list(zip(jac_c(wv, pv), self.jac_fg(wv, pv), strict=True))
                 pairs.append((hess_c(wv, pv, 1.0, lg),
@@ -304,21 +301,7 @@ class SingleShootingNLP:
                 dz, dr = rng.normal(0, 0.1, n), rng.normal(0, 0.1, n)
                 pairs.append((kernel.gru_step(pv[:n], u[0], dz, dr),
                               gru.step(p.params, pv[:n], u[0], dz=dz, dr=dr)))
-                # the answer check: cost and residuals as FHOCP.cost / FHOCP._residuals
-                e_o, alpha = float(rng.uniform(0, 0.05)), float(rng.uniform(0, 0.5))
-                x_bar, u_bar = self._reference(pv)
-                u_prev = self._u_prev(pv)
-                x_k, out = kernel.assess(pv[:n], u, x_bar, u_bar, p.tightened_bounds(e_o),
-                                         alpha, u_prev)
-                ref = FHOCPResult(u=u, x=x_np, cost=0.0, status="", success=False)
-                p._residuals(ref, x_np, e_o, pv[n:2 * n], alpha)
-                got = FHOCPResult(u=u, x=x_k, cost=0.0, status="", success=False)
-                set_residuals(got, out, alpha)
-                pairs.append((x_k, x_np))
-                pairs.append((np.array([out[0], got.constraint_violation,
-                                        got.terminal_violation]),
-                              np.array([p.cost(x_np, u, x_bar, u_bar, u_prev=u_prev),
-                                        ref.constraint_violation, ref.terminal_violation])))
+                pairs += self._answer_check_pairs(kernel, rng, u, pv, x_np)
                 for a, b in pairs:
                     b = np.asarray(b, dtype=float)
                     a = np.asarray(a, dtype=float).reshape(b.shape)
@@ -327,6 +310,36 @@ class SingleShootingNLP:
         finally:
             self.eigen_clip = saved
         return worst
+
+    def _self_test_point(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+        """A random ``(w, p)`` of :meth:`self_test`."""
+        p = self.p
+        wv = np.concatenate([rng.uniform(-1, 1, p.N * p.m), rng.uniform(0, 0.1, 1)])
+        pv = np.concatenate([rng.uniform(-0.5, 0.5, 2 * p.n),
+                             rng.uniform(-1, 1, p.npar - 2 * p.n)])
+        return wv, pv
+
+    def _answer_check_pairs(self, kernel: Any, rng: np.random.Generator, u: np.ndarray,
+                            pv: np.ndarray, x_np: np.ndarray) -> list[tuple[Any, Any]]:
+        """(kernel, numpy) pairs of the answer check at ``(u, p)``: the kernel's rollout, its
+        cost and residuals (:meth:`FHOCP.candidate`) against ``FHOCP.cost`` and
+        ``FHOCP._residuals``."""
+        from controllers.fhocp_result import FHOCPResult, set_residuals
+
+        p, n = self.p, self.p.n
+        e_o, alpha = float(rng.uniform(0, 0.05)), float(rng.uniform(0, 0.5))
+        x_bar, u_bar = self._reference(pv)
+        u_prev = self._u_prev(pv)
+        x_k, out = kernel.assess(pv[:n], u, x_bar, u_bar, p.tightened_bounds(e_o), alpha,
+                                 u_prev)
+        ref = FHOCPResult(u=u, x=x_np, cost=0.0, status="", success=False)
+        p._residuals(ref, x_np, e_o, pv[n:2 * n], alpha)
+        got = FHOCPResult(u=u, x=x_k, cost=0.0, status="", success=False)
+        set_residuals(got, out, alpha)
+        return [(x_k, x_np),
+                (np.array([out[0], got.constraint_violation, got.terminal_violation]),
+                 np.array([p.cost(x_np, u, x_bar, u_bar, u_prev=u_prev),
+                           ref.constraint_violation, ref.terminal_violation]))]
 
     def sqp_functions(self) -> dict[str, NumpyCallback]:
         """``sqpmethod``'s ``jac_fg`` (f, ∇f, g, ∂g/∂w) and full ``hess_lag`` (convexified),
