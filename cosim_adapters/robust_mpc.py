@@ -54,9 +54,12 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from controllers.robust_mpc import RobustMPC
 
 from controllers.errors import ControllersError, SetpointError
 from controllers.model import DEFAULT_MODEL
@@ -292,7 +295,8 @@ class RobustMPCController(Component):
         # that the first control step is a normal one (importing scipy.optimize: ~0.2 s)
         import scipy.optimize  # noqa: F401
 
-        self.mpc = RobustMPC(self.fhocp)
+        #: the paper's law (``None`` under ``law="tracking"``, whose law is :attr:`tracker`)
+        self.mpc: RobustMPC | None = None if tracking else RobustMPC(self.fhocp)
         self.governor = ReferenceGovernor(cert, self.fhocp) if governor else None
         self.observer = GRUObserver.from_certificate(cert)
         self.offset_free = bool(offset_free)
@@ -330,7 +334,8 @@ class RobustMPCController(Component):
         self.observer.reset(x0=x0, e_o0=self.cert.e_o0)
         self.fhocp.setup()
         self.observer.kernel = self.fhocp.kernel   # its compiled GRU step (same model)
-        self.mpc.reset()
+        if self.mpc is not None:
+            self.mpc.reset()
         if self.tracker is not None:
             self.tracker.reset()
             self.disturbance.reset()
@@ -388,8 +393,8 @@ class RobustMPCController(Component):
             rec, law_diag = tracking_step(self, y, y_ref)
         else:
             rejected = self._update_reference(y_ref, y, t)
-            rec = self.mpc.make_step(self.observer.x_hat, self.observer.e_o,
-                                     candidate=self._candidate)
+            rec = self._paper_law().make_step(self.observer.x_hat, self.observer.e_o,
+                                              candidate=self._candidate)
         e_o = self.observer.e_o
         self.observer.make_step(rec.u, y)
         self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
@@ -401,7 +406,7 @@ class RobustMPCController(Component):
             "iterations": float(res.iterations),
             "status": float(STATUS_CODES.get(res.status, OTHER_STATUS)),
             "cost": float(res.cost) if math.isfinite(res.cost) else float("nan"),
-            "alpha": self.fhocp.alpha_c if self.tracker is not None else self.mpc.alpha,
+            "alpha": self.fhocp.alpha_c if self.mpc is None else self.mpc.alpha,
             "e_o": e_o,
             "x_hat_error_bound": e_o,
             "active_constraints": float(res.active),
@@ -423,7 +428,7 @@ class RobustMPCController(Component):
     def summary(self) -> dict:
         from controllers.robust_mpc import solver_summary
 
-        records = self.tracker.records if self.tracker is not None else self.mpc.records
+        records = self.tracker.records if self.tracker is not None else self._paper_law().records
         out = solver_summary(records)
         if self.tracker is not None:
             out.update({"alpha_c": self.fhocp.alpha_c,
@@ -487,8 +492,13 @@ class RobustMPCController(Component):
             self.setpoint_changes += 1
         self._y_ref = y_ref
         self._y_model = target
-        self.mpc.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
+        self._paper_law().set_reference(ref.x_bar, ref.u_bar, ref.alpha)
         return False
+
+    def _paper_law(self) -> RobustMPC:
+        """The paper's law (its set-point handling runs under ``law="paper"`` only)."""
+        assert self.mpc is not None, "the paper law's set-point handling under law=tracking"
+        return self.mpc
 
     def _reject(self, exc: Exception, y_ref: np.ndarray, requested_changed: bool,
                 t: float) -> None:
@@ -512,8 +522,8 @@ class RobustMPCController(Component):
                 and np.array_equal(target, self._unreachable)):
             self.rejected += 1     # still the unreachable request: refused again, counted
             return True
-        if requested_changed and self.governor.newton(
-                target, self.mpc.x_bar, self.mpc.u_bar) is None:
+        mpc = self._paper_law()
+        if requested_changed and self.governor.newton(target, mpc.x_bar, mpc.u_bar) is None:
             try:  # reachable with ‖ū‖∞ ≤ 1? (the multi-start solve decides)
                 self.cert.reference(target)
             except SetpointError as exc:
@@ -524,7 +534,6 @@ class RobustMPCController(Component):
             self.setpoint_changes += 1
         self._y_ref = y_ref
         self.governed_steps += 1
-        mpc = self.mpc
         last = mpc.records[-1].result.success if mpc.records else None
         gs = self.governor.govern(self.observer.x_hat, self.observer.e_o, self._y_model,
                                   mpc.x_bar, mpc.u_bar, target, mpc.plan, last)

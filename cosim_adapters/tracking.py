@@ -123,7 +123,8 @@ def tracking_step(ctrl: Any, y: np.ndarray, y_ref: np.ndarray) -> tuple[Any, dic
     rec = tracker.make_step(obs.x_hat, obs.e_o, y_ref - d_hat)
     params = model.params
     y_s = model.denormalize_y(params["U_o"] @ tracker.x_s + params["b_o"])
-    diag = {f"y_model_{n}": float(v) for n, v in zip(ctrl._y_names, y_s, strict=True)}
+    names = ctrl.problem.output_names
+    diag = {f"y_model_{n}": float(v) for n, v in zip(names, y_s, strict=True)}
     d_phys = d_hat * np.abs(model.y_scale)
-    diag.update({f"d_hat_{n}": float(v) for n, v in zip(ctrl._y_names, d_phys, strict=True)})
+    diag.update({f"d_hat_{n}": float(v) for n, v in zip(names, d_phys, strict=True)})
     return rec, diag
