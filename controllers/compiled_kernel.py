@@ -56,7 +56,7 @@ __all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "Workspace", "
            "default_cache_dir", "for_fhocp", "generate_source", "last_error"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-6"
+GENERATOR_VERSION = "gru-fhocp-kernel-7"
 #: The C template, concatenated in this order after the generated header.
 TEMPLATE_PARTS = tuple(Path(__file__).with_name("kernel") / name for name in (
     "0_workspace.c", "1_rollout.c", "1b_steady_state.c", "2_derivatives.c", "3_eigen_clip.c",

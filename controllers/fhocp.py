@@ -88,7 +88,8 @@ class FHOCP:
         ``ipopt_options`` are given, and always for multiple shooting).
     sqp_options : dict, optional
         Overrides of :data:`~controllers.solver_settings.SQP_OPTIONS` (``loop``:
-        ``"kernel"``, the SQP in the compiled kernel, or ``"casadi"``, ``sqpmethod``).
+        ``"kernel"``, the SQP in the compiled kernel, or ``"casadi"``, ``sqpmethod``;
+        ``tol_du_relative``: the kernel's relative dual test, ignored by ``sqpmethod``).
     time_budget : float, optional
         Wall-time budget of one solve [s] (status ``"time_budget_exceeded"``). Off by
         default: a wall-clock limit makes closed-loop results depend on the machine.
@@ -248,13 +249,14 @@ class FHOCP:
             clip = sqp.pop("hessian_eigen_clip", None)
             loop = sqp.pop("loop")
             self._nlp.eigen_clip = None if clip is None else float(clip)
-            opts.update(sqp)
             if loop == "kernel" and self.kernel is not None:
                 from controllers.kernel_sqp import KernelSQP
 
                 self._solver = KernelSQP(self.kernel, sqp, self.time_budget)
                 self._buffer = self._solver.buffers()
                 return
+            sqp.pop("tol_du_relative", None)   # the kernel's own test: sqpmethod's is absolute
+            opts.update(sqp)
             with quiet_stdout():  # qpOASES prints its licence banner on construction
                 self._solver = ca.nlpsol(name, "sqpmethod", nlp, opts)
         else:

@@ -40,7 +40,8 @@ from controllers.input_rate import du_cost
 from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
 from controllers.steady_state import steady_state
 
-__all__ = ["DEFAULTS", "LINE_SEARCH", "US_RATE", "TrackingFHOCP", "steady_output_bounds"]
+__all__ = ["DEFAULTS", "LINE_SEARCH", "SQP_OVERRIDES", "US_RATE", "TrackingFHOCP",
+           "steady_output_bounds"]
 
 #: The SQP's line search for the tracking FHOCP (over ``sqpmethod``'s defaults, 3 trials with
 #: β = 0.8, the last accepted): a set-point step moves ``u_s`` far, and the short search let
@@ -48,6 +49,15 @@ __all__ = ["DEFAULTS", "LINE_SEARCH", "US_RATE", "TrackingFHOCP", "steady_output
 #: ("QP_Infeasible", every later step falling back on the candidate: 2 of 40 runs of the
 #: plant-uncertainty campaign stuck for 200 steps).
 LINE_SEARCH = {"max_iter_ls": 10, "beta": 0.5}
+#: The tracking FHOCP's SQP options over :data:`controllers.solver_settings.SQP_OPTIONS`: the
+#: line search above, and the dual test relative to the multipliers
+#: (:class:`controllers.kernel_abi.SqpOptions` ``tol_du_relative``; compiled kernel only).
+#: The terminal rows' multipliers reach 10⁵ (``s`` = 32,068 on the four-tank), and rounding
+#: then keeps ``‖∇L‖∞`` near 10⁻⁵ at a KKT point (``‖∇L‖∞ / ‖λ‖∞`` ≈ 10⁻¹⁰, infeasibility
+#: 10⁻¹⁶): such solves ended as ``Search_Direction_Becomes_Too_Small`` after 3–4 idle
+#: iterations (18 of 401 steps of a set-point step pair, 1.1 % of the steps of the
+#: plant-uncertainty campaign), reported as failures.
+SQP_OVERRIDES = {**LINE_SEARCH, "tol_du_relative": True}
 #: The tracking law's defaults (docs: design/tracking.md, "Recommendation"): horizon, offset
 #: weight T, Δu weight S, the disturbance filter's β (normalised units).
 DEFAULTS = {"N": 40, "offset_weight": 1e5, "du_weight": 0.1, "offset_filter": 0.2}
@@ -100,7 +110,7 @@ class TrackingFHOCP(FHOCP):
                  alpha_c: float, ys_bounds: np.ndarray, **options: Any) -> None:
         if options.get("formulation", "single-shooting") != "single-shooting":
             raise DesignError("the tracking FHOCP is single shooting only")
-        options["sqp_options"] = {**LINE_SEARCH, **(options.get("sqp_options") or {})}
+        options["sqp_options"] = {**SQP_OVERRIDES, **(options.get("sqp_options") or {})}
         super().__init__(params, N, Q, R, L, h, w_L, a, b, s, **options)
         T = np.broadcast_to(np.asarray(offset_weight, dtype=float), (self.p,)).copy()
         if not np.all(np.isfinite(T)) or np.any(T <= 0):

@@ -36,12 +36,17 @@ class SqpOptions(ctypes.Structure):
         Armijo constant and backtracking factor of the ℓ1-merit line search.
     time_budget : float
         Wall-time budget of one solve [s] (``inf``: none).
+    tol_du_relative : int
+        1: the dual test is ``‖∇L‖∞ < tol_du (1 + ‖(λ_g, λ_x)‖∞)``, relative to the
+        multipliers' size (ours: rounding in ``∇L`` keeps an absolute 10⁻⁶ out of reach when
+        the multipliers reach 10⁵); 0: ``sqpmethod``'s absolute test.
     """
 
     _fields_ = [("tol_pr", ctypes.c_double), ("tol_du", ctypes.c_double),
                 ("max_iter", ctypes.c_int), ("max_iter_ls", ctypes.c_int),
                 ("min_step_size", ctypes.c_double), ("c1", ctypes.c_double),
-                ("beta", ctypes.c_double), ("time_budget", ctypes.c_double)]
+                ("beta", ctypes.c_double), ("time_budget", ctypes.c_double),
+                ("tol_du_relative", ctypes.c_int)]
 
 
 class SqpInfo(ctypes.Structure):

@@ -50,7 +50,9 @@ class KernelSQP:
         and SQP loop).
     options : mapping
         ``tol_pr``, ``tol_du``, ``max_iter`` and optionally ``min_step_size``, ``c1``,
-        ``beta``, ``max_iter_ls`` (casadi ``sqpmethod``'s meanings and defaults).
+        ``beta``, ``max_iter_ls`` (casadi ``sqpmethod``'s meanings and defaults) and
+        ``tol_du_relative`` (ours, off by default:
+        :class:`controllers.kernel_abi.SqpOptions`).
     time_budget : float, optional
         Wall-time budget of one solve [s] (status ``"User_Requested_Stop"`` when it runs out
         before convergence); none by default.
@@ -58,7 +60,8 @@ class KernelSQP:
 
     def __init__(self, workspace: Any, options: Mapping[str, Any],
                  time_budget: float | None = None) -> None:
-        known = {"tol_pr", "tol_du", "max_iter", *LINE_SEARCH_DEFAULTS, *IGNORED}
+        known = {"tol_pr", "tol_du", "tol_du_relative", "max_iter", *LINE_SEARCH_DEFAULTS,
+                 *IGNORED}
         unknown = sorted(set(options) - known)
         if unknown:
             raise DesignError(f"sqp_options {unknown[0]!r} is not supported by the kernel's "
@@ -76,6 +79,7 @@ class KernelSQP:
             max_iter=int(opts["max_iter"]), max_iter_ls=int(opts["max_iter_ls"]),
             min_step_size=float(opts["min_step_size"]), c1=float(opts["c1"]),
             beta=float(opts["beta"]),
+            tol_du_relative=int(bool(opts.get("tol_du_relative", False))),
             time_budget=np.inf if time_budget is None else float(time_budget))
         self.info = SqpInfo()
         self._timers = np.zeros(4)    # QP, Hessian, f/g/derivatives, line search [s]

@@ -5,7 +5,8 @@
  * 5_qp.c in place of qpOASES:
  *
  *   loop: f, g and grad L = grad f + J' lam_g + lam_x at w (an adjoint sweep);
- *         stop when max violation < tol_pr and |grad L|inf < tol_du ("Solve_Succeeded"),
+ *         stop when max violation < tol_pr and |grad L|inf < tol_du ("Solve_Succeeded"; with
+ *         tol_du_relative, |grad L|inf < tol_du (1 + |(lam_g, lam_x)|inf), ours),
  *         at max_iter iterations, or when |dw|inf <= min_step_size after the first;
  *         grad f, jac g (sensitivities);
  *         H = clip(hess_l(w, lam_g)); QP for (dw, lam+) with the bounds shifted by w, g(w);
@@ -82,7 +83,7 @@ static double sq_viol(const double *w, const double *g, const double *lbx, const
 
 /* Solve the FHOCP from w (NW), lam_x (NW) and lam_g (NG) (in/out: the initial guess in, the
  * answer out) at parameters p in workspace ws; g (NG) and *f receive the constraints and cost
- * at the answer. opt: the options (gk_sqp_opts: tol_pr, tol_du, max_iter, min_step_size, c1,
+ * at the answer. opt: the options (gk_sqp_opts: tol_pr, tol_du, tol_du_relative, max_iter, min_step_size, c1,
  * beta, max_iter_ls, time_budget [s], inf: none, checked before each iteration's Hessian,
  * after the stopping tests); info (gk_sqp_info) receives the status, the iterations, the QP
  * working-set changes, the line-search failures and the seconds spent in the QP, the Hessian
@@ -99,7 +100,8 @@ EXPORT int PFX(sqp)(gk_ws *ws, const double *p, const double *lbx, const double 
          *sq_wc = ws->sq_wc, *sq_gc = ws->sq_gc;
   const double tol_pr = opt->tol_pr, tol_du = opt->tol_du, min_step = opt->min_step_size,
                c1 = opt->c1, beta = opt->beta;
-  const int max_iter = opt->max_iter, max_iter_ls = opt->max_iter_ls;
+  const int max_iter = opt->max_iter, max_iter_ls = opt->max_iter_ls,
+            du_relative = opt->tol_du_relative;
   const double start = sq_now(), budget = opt->time_budget;
   double sigma = 0.0, fk = 0.0;
   int iter = 0, status = GK_SQP_SOLVE_SUCCEEDED;
@@ -119,7 +121,14 @@ EXPORT int PFX(sqp)(gk_ws *ws, const double *p, const double *lbx, const double 
     }
     const double pr = sq_viol(w, sq_gz, lbx, ubx, lbg, ubg, 0);
     info->t_derivatives += sq_now() - t0;
-    if (pr < tol_pr && du < tol_du) { status = GK_SQP_SOLVE_SUCCEEDED; break; }
+    double du_scale = 1.0;   /* tol_du_relative: 1 + the multipliers' largest magnitude */
+    if (du_relative) {
+      double lm = 0.0;
+      for (int r = 0; r < NG; r++) lm = fmax(lm, fabs(lam_g[r]));
+      for (int j = 0; j < NW; j++) lm = fmax(lm, fabs(lam_x[j]));
+      du_scale += lm;
+    }
+    if (pr < tol_pr && du < tol_du * du_scale) { status = GK_SQP_SOLVE_SUCCEEDED; break; }
     if (iter >= max_iter) { status = GK_SQP_MAXIMUM_ITERATIONS_EXCEEDED; break; }
     if (iter >= 1 && dwn <= min_step) { status = GK_SQP_SEARCH_DIRECTION_BECOMES_TOO_SMALL; break; }
     if (sq_now() - start > budget) { status = GK_SQP_USER_REQUESTED_STOP; break; }

@@ -167,3 +167,52 @@ def test_the_law_reaches_a_reachable_setpoint_on_any_plant_shape(m: int, p: int)
         x = step(P, x, rec.u)
     assert not any(fallbacks[1:])
     assert np.max(np.abs(output(P, x) - y_ref)) < 1e-4
+
+
+def _set_point_step(fh: TrackingFHOCP, model: GRUModel, steps: int) -> tuple[np.ndarray,
+                                                                              list[str], int]:
+    """The law on the GRU model (no disturbance) from h = (0.78, 1.27) m towards
+    (0.97, 0.62) m: the applied inputs, the solve statuses and the SQP iterations."""
+    P = model.params
+    y0, y1 = model.normalize_y(np.array([0.78, 1.27])), model.normalize_y(np.array([0.97, 0.62]))
+    x, u = equilibrium(model, y0)[:2]
+    law = TrackingMPC(fh)
+    law.start(u, x)
+    inputs, statuses, iterations = [], [], 0
+    for _ in range(steps):
+        rec = law.make_step(x, 0.02, y1)
+        inputs.append(rec.u)
+        statuses.append(rec.result.status)
+        iterations += rec.result.iterations
+        x = step(P, x, rec.u)
+    return np.array(inputs), statuses, iterations
+
+
+def test_the_relative_dual_test_ends_converged_solves_as_converged() -> None:
+    """The terminal rows' multipliers reach 10⁵: with sqpmethod's absolute dual test the
+    solves of a set-point step end at KKT points as Search_Direction_Becomes_Too_Small, with
+    the relative one (SQP_OVERRIDES) as optimal, at the same inputs, in fewer iterations."""
+    model = GRUModel.load(DEFAULT_MODEL)
+    cert = certs.compute_certificate(model, N=15, gain_scale=0.0)
+    runs = {}
+    for relative in (False, True):
+        fh = TrackingFHOCP.from_certificate(cert, offset_weight=1e5, alpha_c=0.0199,
+                                            du_weight=0.1,
+                                            sqp_options={"tol_du_relative": relative})
+        runs[relative] = _set_point_step(fh.setup(), model, 60)
+    (u_abs, st_abs, it_abs), (u_rel, st_rel, it_rel) = runs[False], runs[True]
+    assert st_abs.count("Search_Direction_Becomes_Too_Small") >= 20
+    assert "Search_Direction_Becomes_Too_Small" not in st_rel
+    assert st_rel.count("optimal") >= 50
+    assert np.max(np.abs(u_rel - u_abs)) < 1e-3
+    assert it_rel < 0.8 * it_abs
+
+
+def test_sqpmethod_ignores_the_kernels_relative_dual_test() -> None:
+    fh = _fhocp(random_gru_model(4, n=6), N=4, sqp_options={"loop": "casadi"}).setup()
+    assert fh.sqp_options["tol_du_relative"] is True        # SQP_OVERRIDES
+    wv, pv = _point(fh, 3)
+    n = fh.n
+    res = fh.solve_tracking(pv[:n], 0.0, pv[2 * n:2 * n + fh.p], wv[fh.iu],
+                            wv[fh.ius], pv[n:2 * n])
+    assert np.all(np.isfinite(res.u)) and res.iterations >= 1
