@@ -191,7 +191,7 @@ class RobustMPCController(Component):
     offset_weight : float or mapping
         ``law="tracking"``: diagonal of the offset weight ``T`` of ``‖g(x_s) + d̂ − ȳ‖²_T``
         (normalised outputs; one number or an object by output name, outputs not named:
-        10⁵). Default 10⁵.
+        10⁴). Default 10⁴.
     alpha_c : float, optional
         ``law="tracking"``: the terminal set's radius (normalised state, ∞-norm); default the
         certified design's ``α_min(N)``, which makes ``Y_s`` its admissible box.

@@ -44,7 +44,7 @@ def test_defaults_and_summary() -> None:
     c = RobustMPCController(law="tracking", offset_weight={"h2": 10.0})
     s = c.summary()
     assert s["law"] == "tracking" and s["N"] == 40 and not s["governor"]
-    assert s["offset_weight"] == {"h1": 1e5, "h2": 10.0} and s["offset_filter"] == 0.2
+    assert s["offset_weight"] == {"h1": 1e4, "h2": 10.0} and s["offset_filter"] == 0.2
     assert s["du_weight"] == {"qa": 0.1, "qb": 0.1} and s["gain_scale"] == 0.0
     assert s["alpha_c"] == pytest.approx(RobustMPCController(N=40).cert.alpha_min())
     assert RobustMPCController().summary()["law"] == "paper"
