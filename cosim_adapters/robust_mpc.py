@@ -58,14 +58,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from controllers.robust_mpc import RobustMPC
-
 from controllers.errors import ControllersError, SetpointError
 from controllers.model import DEFAULT_MODEL
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
 from cosim_adapters.tracking import check_law
+
+if TYPE_CHECKING:
+    from controllers.robust_mpc import RobustMPC
 
 __all__ = ["RobustMPCController"]
 

@@ -83,13 +83,13 @@ static double sq_viol(const double *w, const double *g, const double *lbx, const
 
 /* Solve the FHOCP from w (NW), lam_x (NW) and lam_g (NG) (in/out: the initial guess in, the
  * answer out) at parameters p in workspace ws; g (NG) and *f receive the constraints and cost
- * at the answer. opt: the options (gk_sqp_opts: tol_pr, tol_du, tol_du_relative, max_iter, min_step_size, c1,
+ * at the answer. opt: the options (gk_sqp_opts: tol_pr, tol_du, max_iter, min_step_size, c1,
  * beta, max_iter_ls, time_budget [s], inf: none, checked before each iteration's Hessian,
- * after the stopping tests); info (gk_sqp_info) receives the status, the iterations, the QP
- * working-set changes, the line-search failures and the seconds spent in the QP, the Hessian
- * (clipping included), f/grad f/g/jac g and the line search's f/g. Returns the status, a
- * gk_sqp_status (casadi sqpmethod's return statuses; GK_SQP_USER_REQUESTED_STOP: the time
- * budget ran out). */
+ * after the stopping tests, tol_du_relative); info (gk_sqp_info) receives the status, the
+ * iterations, the QP working-set changes, the line-search failures and the seconds spent in
+ * the QP, the Hessian (clipping included), f/grad f/g/jac g and the line search's f/g.
+ * Returns the status, a gk_sqp_status (casadi sqpmethod's return statuses;
+ * GK_SQP_USER_REQUESTED_STOP: the time budget ran out). */
 EXPORT int PFX(sqp)(gk_ws *ws, const double *p, const double *lbx, const double *ubx,
                     const double *lbg, const double *ubg, double *w, double *lam_x,
                     double *lam_g, double *g, double *f, const gk_sqp_opts *opt,
