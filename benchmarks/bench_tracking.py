@@ -6,7 +6,7 @@ FMU (the default plant), four closed loops through :func:`cosim.run`:
 * ``robust-mpc``: the shipped robust MPC, default options (its controller step, observer +
   governor + FHOCP, timed in wall clock as ``bench_mpc.py`` does);
 * ``tracking``: the robust MPC with ``law="tracking"`` (the tracking FHOCP of issue 20:
-  artificial steady state, offset-free, Δu terms, N = 40), timed the same way;
+  artificial steady state, offset-free, Δu terms, N = 80), timed the same way;
 * ``pi``: the decentralised PI baseline;
 * ``oracle``: the oracle NMPC of ``benchmarks/oracle_nmpc.py``: the plant's exact equations,
   its true state, no noise, no tightening, ``Q = I``, ``R = 0.01 I`` normalised, horizon

@@ -154,7 +154,7 @@ class RobustMPCController(Component):
     offset_free : bool
         Offset-free set-point correction (outside the theorem, see the module docstring).
     offset_filter : float, optional
-        Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)`` (default 0.05; 0.2 with
+        Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)`` (default 0.05; 0.3 with
         ``law="tracking"``).
     governor : bool, optional
         Admissible reference governor after set-point changes (default on with the paper's
@@ -179,7 +179,7 @@ class RobustMPCController(Component):
         u_{i−1})ᵀ S (u_i − u_{i−1})`` in normalised units (``u`` ∈ [−1, 1]; ``u_{−1}`` the
         input applied at the previous step), one number for every input or an object by the
         problem's input names (``{"qa": 5, "qb": 5}``; inputs not named: 0). Default 0: the
-        paper's cost (0.1 with ``law="tracking"``, which adds the terminal term
+        paper's cost (0.05 with ``law="tracking"``, which adds the terminal term
         ``‖u_{N−1} − u_s‖²_S``).
     law : {"paper", "tracking"}
         ``"paper"`` (default): the paper's FHOCP with the set-point's equilibrium, the
@@ -195,11 +195,12 @@ class RobustMPCController(Component):
     alpha_c : float, optional
         ``law="tracking"``: the terminal set's radius (normalised state, ∞-norm); default the
         certified design's ``α_min(N)``, which makes ``Y_s`` its admissible box.
-    max_iter : int
-        Iteration cap of one FHOCP solve (default 15, the real-time bound). A solve that
-        reaches it applies its feasible iterate (suboptimal MPC) or the fallback; that iterate
-        depends on the last bits of the arithmetic, so the regression references are recorded
-        with a cap every solve converges within (``max_iter=200``).
+    max_iter : int, optional
+        Iteration cap of one FHOCP solve (default 15, the real-time bound; 40 with
+        ``law="tracking"``). A solve that reaches it applies its feasible iterate
+        (suboptimal MPC) or the fallback; that iterate depends on the last bits of the
+        arithmetic, so the regression references are recorded with a cap every solve
+        converges within (``max_iter=200``).
     name : str
         Component name.
     """
@@ -215,7 +216,7 @@ class RobustMPCController(Component):
                  offset_free: bool = False, offset_filter: float | None = None,
                  setpoint_rate: float | None = None, governor: bool | None = None,
                  solver: str | None = None,
-                 ipopt_options: Mapping[str, Any] | None = None, max_iter: int = 15,
+                 ipopt_options: Mapping[str, Any] | None = None, max_iter: int | None = None,
                  kernel: str = "auto", du_weight: float | Mapping[str, float] | None = None,
                  law: str = "paper", offset_weight: float | Mapping[str, float] | None = None,
                  alpha_c: float | None = None, name: str = "mpc") -> None:
@@ -233,6 +234,8 @@ class RobustMPCController(Component):
         from controllers.fhocp_tracking import DEFAULTS as TRACKING
 
         N = (TRACKING["N"] if tracking else 15) if N is None else N
+        if max_iter is None:
+            max_iter = TRACKING["max_iter"] if tracking else 15
         governor = (not tracking) if governor is None else governor
         if offset_filter is None:
             offset_filter = TRACKING["offset_filter"] if tracking else 0.05

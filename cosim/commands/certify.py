@@ -72,7 +72,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--json", action="store_true",
                    help="print JSON with the paper's names (a list when several set-points)")
     p.add_argument("--N", type=int, default=None,
-                   help="prediction horizon N (default 15; 40 with --law tracking)")
+                   help="prediction horizon N (default 15; 80 with --law tracking)")
     p.add_argument("--law", choices=("paper", "tracking"), default="paper",
                    help="tracking: also compute and check the tracking law's hypotheses "
                         "(robust-mpc law=\"tracking\", its defaults: zero observer gains, "
@@ -215,12 +215,13 @@ def run(args: argparse.Namespace) -> int:
 
     from controllers.equilibrium import equilibrium
     from controllers.errors import ControllersError, UnreachableSetpoint
+    from controllers.fhocp_tracking import DEFAULTS as TRACKING
     from controllers.model import DEFAULT_MODEL, GRUModel
 
     if args.model is None:
         args.model = str(DEFAULT_MODEL)
     if args.N is None:
-        args.N = 40 if args.law == "tracking" else 15
+        args.N = TRACKING["N"] if args.law == "tracking" else 15
     if args.N < 1:
         raise CosimError(f"--N must be >= 1, got {args.N}")
     if not (math.isfinite(args.e_o0) and args.e_o0 >= 0):
