@@ -139,7 +139,8 @@ class RobustMPCController(Component):
         A problem file: must be the model's own (a check), or the problem of a model file
         that has none (:mod:`cosim_adapters.problems`).
     N : int, optional
-        Prediction horizon (default: the paper's 15; 40 with ``law="tracking"``).
+        Prediction horizon (default: the paper's 15; 80 with ``law="tracking"``,
+        :data:`controllers.fhocp_tracking.DEFAULTS`).
     Q, R : array, number or mapping, optional
         Cost weights in normalised units (default ``I_n`` and ``0.01 I_m``, paper section V):
         a matrix, one number (times the identity) or, for ``R``, an object of diagonal

@@ -119,6 +119,7 @@ typedef struct gk_ws {
   double xs[NX], XS[NX * NU], xs_lu[NX * NX];
   double xs_z[NX], xs_r[NX], xs_h[NX], xs_jh[NX * NV], xs_P[4 * NX * NV];   /* the gates, J_h */
   int xs_piv[NX], xs_status;
+  A32 double ass_ssum[NX * NUU];        /* sum_{i>=1} S_i (ass_hessian) */
 #endif
   /* the Hessian of the Lagrangian (2_derivatives.c) */
   A32 double MU[(NH + 1) * NX];          /* adjoints */

@@ -30,6 +30,44 @@ static inline void gk_gemm_loops(int ta, int m, int n, int k, const double *A, i
   }
 }
 
+#define GK_CHUNK 16
+
+/* y[j] = y0[j] + sum_{k = k0}^{k1 - 1} a[k] X[k ldx + j], j < n, each entry summed in
+ * ascending k (the order of the scalar loop `for k: for j: y[j] += a[k] X[k][j]`, so the same
+ * result to the bit), GK_CHUNK entries at a time in registers: the rows of X are only read,
+ * y is written once (the scalar loop stores y at every k). y0 may be y. tri: row k of X is
+ * zero beyond column k (a triangular inverse), so a chunk from column j0 starts at k = j0. */
+static inline void gk_accumulate(double *y, const double *y0, int n, const double *a,
+                                 const double *X, int ldx, int k0, int k1, int tri) {
+  int j0 = 0;
+  for (; j0 + GK_CHUNK <= n; j0 += GK_CHUNK) {
+    double acc[GK_CHUNK];
+    for (int t = 0; t < GK_CHUNK; t++) acc[t] = y0[j0 + t];
+    for (int k = (tri && j0 > k0) ? j0 : k0; k < k1; k++) {
+      const double c = a[k], *x = X + k * ldx + j0;
+      for (int t = 0; t < GK_CHUNK; t++) acc[t] += c * x[t];
+    }
+    for (int t = 0; t < GK_CHUNK; t++) y[j0 + t] = acc[t];
+  }
+  for (int j = j0; j < n; j++) {
+    double acc = y0[j];
+    for (int k = (tri && j > k0) ? j : k0; k < k1; k++) acc += a[k] * X[k * ldx + j];
+    y[j] = acc;
+  }
+}
+
+/* a'b, n terms, in 8 interleaved partial sums (vectorisable: an in-order sum is not),
+ * combined pairwise */
+static inline double gk_dot(const double *a, const double *b, int n) {
+  double s[8] = {0.0};
+  int i = 0;
+  for (; i + 8 <= n; i += 8)
+    for (int t = 0; t < 8; t++) s[t] += a[i + t] * b[i + t];
+  double r = ((s[0] + s[4]) + (s[1] + s[5])) + ((s[2] + s[6]) + (s[3] + s[7]));
+  for (; i < n; i++) r += a[i] * b[i];
+  return r;
+}
+
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 11 && \
     !defined(GK_NO_CLONES)
 #define GK_HAVE_V4 1

@@ -230,7 +230,7 @@ static void ass_jacobian(const gk_ws *ws, double *J) {
  * hessian_finish mirrors it): the cross blocks -sum_{i>=1} S_i' 2Q X_s and -2R per stage
  * (-2S on u_{N-1}), the block X_s' (2N Q + 2 U_o' T U_o) X_s + 2N R (+ 2S), and the
  * terminal input-rate term's 2S on u_{N-1} */
-static void ass_hessian(const gk_ws *ws, double lf, double *H) {
+HOT static void ass_hessian(gk_ws *ws, double lf, double *H) {
   double QX[NX * NU], MX[NX * NU];
   const double *XS = ws->XS;
   for (int k = 0; k < NX; k++)
@@ -245,16 +245,25 @@ static void ass_hessian(const gk_ws *ws, double lf, double *H) {
       QX[k * NU + c] = s;
       MX[k * NU + c] = NH * s + t;
     }
+  /* sum_{i>=1} S_i' QX = (sum_{i>=1} S_i)' QX (S_i's columns from i NU on are zero: inputs
+   * after stage i do not move x_i), the sum by contiguous rows */
+  double *SS = ws->ass_ssum;
+  memset(SS, 0, sizeof ws->ass_ssum);
   for (int i = 1; i < NH; i++) {
     const double *Si = ws->S + i * NX * NUU;
     const int K = i * NU;
-    for (int cc = 0; cc < K; cc++)
-      for (int c = 0; c < NU; c++) {
-        double s = 0.0;
-        for (int k = 0; k < NX; k++) s += Si[k * NUU + cc] * QX[k * NU + c];
-        H[cc * NW + NUU + c] -= lf * s;
-      }
+    for (int k = 0; k < NX; k++) {
+      double *__restrict sk = SS + k * NUU;
+      const double *__restrict si = Si + k * NUU;
+      for (int cc = 0; cc < K; cc++) sk[cc] += si[cc];
+    }
   }
+  for (int cc = 0; cc < NUU; cc++)
+    for (int c = 0; c < NU; c++) {
+      double s = 0.0;
+      for (int k = 0; k < NX; k++) s += SS[k * NUU + cc] * QX[k * NU + c];
+      H[cc * NW + NUU + c] -= lf * s;
+    }
   for (int i = 0; i < NH; i++)
     for (int a = 0; a < NU; a++)
       for (int b = 0; b < NU; b++) H[(i * NU + a) * NW + NUU + b] -= 2.0 * lf * RW[a * NU + b];

@@ -64,29 +64,20 @@ HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const doubl
   if (!pd_shifted(H, NW, 0.0, qL)) { status = GK_QP_NOT_POSITIVE_DEFINITE; goto done; }
   /* M = L^-1 row by row; column j of J = L^-T is row j of M */
   for (int i = 0; i < NW; i++) {
-    double *Mi = qJ + i * NW;
+    /* row i: (e_i - sum_{k<i} L[i][k] M_k) / L[i][i], M_k zero beyond column k */
+    double *Mi = qJ + i * NW, *neg = qd;
     memset(Mi, 0, sizeof(double) * NW);
     Mi[i] = 1.0;
-    for (int k = 0; k < i; k++) {
-      const double c = qL[i * NW + k], *Mk = qJ + k * NW;
-      if (c != 0.0)
-        for (int j = 0; j <= k; j++) Mi[j] -= c * Mk[j];
-    }
+    for (int k = 0; k < i; k++) neg[k] = -qL[i * NW + k];
+    gk_accumulate(Mi, Mi, i + 1, neg, qJ, NW, 0, i, 1);
     const double inv = 1.0 / qL[i * NW + i];
     for (int j = 0; j <= i; j++) Mi[j] *= inv;
   }
   /* d = -J J' g */
-  for (int j = 0; j < NW; j++) {
-    const double *Jj = qJ + j * NW;
-    double t = 0.0;
-    for (int i = 0; i < NW; i++) t += Jj[i] * g[i];
-    qd[j] = t;
-  }
+  for (int j = 0; j < NW; j++) qd[j] = gk_dot(qJ + j * NW, g, NW);
   memset(d, 0, sizeof(double) * NW);
-  for (int j = 0; j < NW; j++) {
-    const double *Jj = qJ + j * NW, c = qd[j];
-    for (int i = 0; i < NW; i++) d[i] -= Jj[i] * c;
-  }
+  for (int j = 0; j < NW; j++) qd[j] = -qd[j];
+  gk_accumulate(d, d, NW, qd, qJ, NW, 0, NW, 0);
   for (;;) {
     /* the most violated constraint */
     int p = -1;
@@ -96,10 +87,7 @@ HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const doubl
       if (!qin[2 * i + 1] && ubx[i] < QP_INF && ubx[i] - d[i] < smin) { smin = ubx[i] - d[i]; p = 2 * i + 1; }
     }
     memset(qax, 0, sizeof ws->qax);
-    for (int j = 0; j < NW; j++) {
-      const double *Aj = A + j * NG, c = d[j];
-      for (int r = 0; r < NG; r++) qax[r] += Aj[r] * c;
-    }
+    gk_accumulate(qax, qax, NG, d, A, NG, 0, NW, 0);
     for (int r = 0; r < NG; r++) {
       const int k = 2 * (NW + r);
       if (!qin[k] && lba[r] > -QP_INF && qax[r] - lba[r] < smin) { smin = qax[r] - lba[r]; p = k; }
@@ -116,12 +104,7 @@ HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const doubl
         const double sg = (p & 1) ? -1.0 : 1.0;
         for (int j = 0; j < NW; j++) qd[j] = sg * qJ[j * NW + i];
       } else {
-        for (int j = 0; j < NW; j++) {
-          const double *Jj = qJ + j * NW;
-          double t = 0.0;
-          for (int i = 0; i < NW; i++) t += Jj[i] * qn[i];
-          qd[j] = t;
-        }
+        for (int j = 0; j < NW; j++) qd[j] = gk_dot(qJ + j * NW, qn, NW);
       }
       /* primal direction z = J2 d2, dual direction r = R^-1 d1 */
       double zn = 0.0, dd = 0.0;
@@ -130,10 +113,7 @@ HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const doubl
       const int dependent = !(zn > 1e-24 * dd);
       if (!dependent) {
         memset(qz, 0, sizeof ws->qz);
-        for (int j = q; j < NW; j++) {
-          const double *Jj = qJ + j * NW, c = qd[j];
-          for (int i = 0; i < NW; i++) qz[i] += Jj[i] * c;
-        }
+        gk_accumulate(qz, qz, NW, qd, qJ, NW, q, NW, 0);
       }
       for (int i = q - 1; i >= 0; i--) {
         double t = qd[i];
