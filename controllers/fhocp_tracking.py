@@ -26,6 +26,7 @@ the terminal set and ``Y_s``.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Mapping
 from typing import Any
@@ -40,8 +41,8 @@ from controllers.input_rate import du_cost
 from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
 from controllers.steady_state import steady_state
 
-__all__ = ["DEFAULTS", "LINE_SEARCH", "SQP_OVERRIDES", "US_RATE", "TrackingFHOCP",
-           "steady_output_bounds"]
+__all__ = ["CONTROL_HORIZON_FRACTION", "DEFAULTS", "LINE_SEARCH", "SQP_OVERRIDES", "US_RATE",
+           "TrackingFHOCP", "default_control_horizon", "steady_output_bounds"]
 
 #: The SQP's line search for the tracking FHOCP (over ``sqpmethod``'s defaults, 3 trials with
 #: β = 0.8, the last accepted): a set-point step moves ``u_s`` far, and the short search let
@@ -68,6 +69,16 @@ SQP_OVERRIDES = {**LINE_SEARCH, "tol_du_relative": True}
 #: samples without the large input moves that capped the SQP at N = 40.
 DEFAULTS = {"N": 80, "offset_weight": 1e4, "du_weight": 0.05, "offset_filter": 0.3,
             "max_iter": 40}
+#: The default control horizon as a fraction of N (:func:`default_control_horizon`; docs:
+#: design/tracking.md, "The control horizon"): on the plant-uncertainty draws M = 10, 20 and
+#: 40 of N = 80 track as every input free (median summed IAE ÷ PI 0.772–0.776 against 0.773
+#: on 40 draws) with 0–1 capped solves instead of 45, and the step takes half the time.
+CONTROL_HORIZON_FRACTION = 0.25
+
+
+def default_control_horizon(N: int) -> int:
+    """The default control horizon of horizon ``N``: ``⌈N / 4⌉`` (20 at N = 80)."""
+    return max(1, math.ceil(CONTROL_HORIZON_FRACTION * int(N)))
 #: The default largest move of ``u_s`` per step (normalised inputs, range 2): a set-point step
 #: otherwise sent the SQP's first iterates so far along the nonlinear ``x_s(u_s)`` that the
 #: next linearisation had no feasible point ("QP_Infeasible"), and the solve failed again at
@@ -99,6 +110,12 @@ class TrackingFHOCP(FHOCP):
         The terminal set's radius (``α_c > 0``).
     ys_bounds : (q,) array
         Right-hand side of ``Y_s`` (:func:`steady_output_bounds`).
+    control_horizon : int, optional
+        ``M`` (1 … N): the inputs ``u_0 … u_{M−1}`` are free and ``u_i = u_s`` for
+        ``i ≥ M`` (default ``N``: all free). The shifted plan with ``u_s`` appended keeps that
+        form, so the candidate, recursive feasibility and the cost decrease are unchanged;
+        the decision vector shrinks from ``N m + m + 1`` to ``M m + m + 1`` entries (docs:
+        design/tracking.md, "The control horizon").
     **options
         ``solver``, ``sqp_options``, ``kernel``, ``du_weight``, ``ipopt_options``,
         ``time_budget``: as :class:`controllers.fhocp.FHOCP` (single shooting only).
@@ -106,15 +123,20 @@ class TrackingFHOCP(FHOCP):
     Attributes
     ----------
     nw, ng, npar : int
-        Sizes of ``w = (u, u_s, t)``, of the constraints and of ``p = (x̂, x_s0, r[, u_{−1}])``.
+        Sizes of ``w = (u_0 … u_{M−1}, u_s, t)``, of the constraints and of
+        ``p = (x̂, x_s0, r[, u_{−1}])``.
     iu, ius, it
-        Indices of ``u_i``, ``u_s`` and ``t`` in ``w``.
+        Indices of ``u_i`` in ``w`` (N × m; ``u_s``'s for ``i ≥ M``), of ``u_s`` and of
+        ``t``.
+    control_horizon : int
+        ``M``.
     """
 
     def __init__(self, params: Mapping[str, np.ndarray], N: int, Q: np.ndarray,
                  R: np.ndarray, L: np.ndarray, h: np.ndarray, w_L: np.ndarray, a: np.ndarray,
                  b: np.ndarray, s: float, *, offset_weight: float | np.ndarray,
-                 alpha_c: float, ys_bounds: np.ndarray, **options: Any) -> None:
+                 alpha_c: float, ys_bounds: np.ndarray, control_horizon: int | None = None,
+                 **options: Any) -> None:
         if options.get("formulation", "single-shooting") != "single-shooting":
             raise DesignError("the tracking FHOCP is single shooting only")
         options["sqp_options"] = {**SQP_OVERRIDES, **(options.get("sqp_options") or {})}
@@ -128,10 +150,16 @@ class TrackingFHOCP(FHOCP):
             raise DesignError(f"alpha_c must be positive, got {alpha_c!r}")
         self.ys_bounds = np.asarray(ys_bounds, dtype=float).reshape(self.q)
         n, m, N, qr = self.n, self.m, self.N, self.qr
-        self.nw = N * m + m + 1
-        self.iu = np.arange(N * m).reshape(N, m)
-        self.ius = np.arange(N * m, N * m + m)
-        self.it = N * m + m
+        M = N if control_horizon is None else control_horizon
+        if isinstance(M, bool) or not isinstance(M, (int, np.integer)) or not 1 <= M <= N:
+            raise DesignError(f"control_horizon must be an integer in 1..N = {N}, got "
+                              f"{control_horizon!r}")
+        self.control_horizon = int(M)
+        self.nw = M * m + m + 1
+        self.ius = np.arange(M * m, M * m + m)
+        self.iu = np.vstack([np.arange(M * m).reshape(M, m),
+                             np.tile(self.ius, (N - M, 1))]).astype(int)
+        self.it = M * m + m
         self.ng = (N - 1) * qr + 2 * n + qr
         self.npar = 2 * n + self.p + (m if self.has_du else 0)
         rhs = self.ys_bounds - self.Lbo
@@ -347,7 +375,10 @@ class TrackingFHOCP(FHOCP):
         lbx[self.it], ubx[self.it] = 0.0, self.alpha_c
         self._lbx, self._ubx = lbx, ubx
         px = np.arange(self.nw)
-        px[self.iu[:-1].ravel()] = self.iu[1:].ravel()
+        free = self.iu[:self.control_horizon]
+        px[free[:-1].ravel()] = free[1:].ravel()
+        if self.control_horizon < self.N:   # the last free input takes u_s's value
+            px[free[-1]] = self.ius
         self._perm_x = px
         N, qr = self.N, self.qr
         pg = np.arange(self.ng)

@@ -45,9 +45,9 @@ class Kernel:
         self.path = Path(path)
         self.prefix = prefix
         self.lib = ctypes.CDLL(str(self.path))
-        dims = (ctypes.c_long * 7)()
+        dims = (ctypes.c_long * 8)()
         self._fn("dims")(dims)
-        self.n, self.m, self.N, self.q, self.nw, self.ng, self.npar = list(dims)
+        self.n, self.m, self.N, self.q, self.nw, self.ng, self.npar, self.M = list(dims)
         abi = (ctypes.c_long * 3)()
         self._fn("abi")(abi)
         check_layout((abi[0], abi[1]))

@@ -295,7 +295,7 @@ class SingleShootingNLP:
                 pairs = list(zip(jac_c(wv, pv), self.jac_fg(wv, pv), strict=True))
                 pairs.append((hess_c(wv, pv, 1.0, lg),
                               self.hessian_convex(wv, pv, np.array([1.0]), lg)[0]))
-                u = wv[: N * m].reshape(N, m)
+                u = wv[self.iu].reshape(N, m)
                 x_np = self.shoot.rollout(pv[:n], u, derivatives=False).x
                 pairs.append((kernel.simulate(pv[:n], u), x_np))
                 dz, dr = rng.normal(0, 0.1, n), rng.normal(0, 0.1, n)

@@ -1,7 +1,8 @@
 """The tracking FHOCP as a single-shooting NLP with exact numpy derivatives (the kernel's twin).
 
-Decision variables ``w = (u_0 … u_{N−1}, u_s, t)``: the inputs, the artificial steady input
-``u_s`` and the epigraph variable ``t``; ``x_s = x_s(u_s)`` is implicit
+Decision variables ``w = (u_0 … u_{M−1}, u_s, t)``: the free inputs (``u_i = u_s`` for
+``i ≥ M``, the control horizon ``M ≤ N``), the artificial steady input ``u_s`` and the
+epigraph variable ``t``; ``x_s = x_s(u_s)`` is implicit
 (:func:`controllers.steady_state.steady_state`, Newton from the parameter ``x_s0``).
 Parameters ``p = (x̂, x_s0, r)``, then ``u_{−1}`` with an input-rate term; ``r = ȳ − d̂`` is
 the set-point the steady output should reach (the offset-free target). Cost::
@@ -15,6 +16,11 @@ as in ``eq:optimization-constraint``), ``x_N − x_s ∓ t`` (the terminal set `
 the curvature of ``x_s(u_s)`` (``λᵀ ∂²x_s/∂u_s²``, :meth:`TrackingNLP._curvature`; without it
 the SQP converged linearly, 25 iterations instead of 10 on a set-point step). The compiled
 kernel (``HAS_ASS``) computes the same; :meth:`self_test` compares them.
+
+The derivatives are computed for the expanded vector ``w_N = (u_0 … u_{N−1}, u_s, t)``, every
+``u_i`` its own variable, and mapped back by the chain rule: ``w_N = E w`` with ``E`` the 0/1
+matrix that copies ``u_s`` into the tail, ``∇f = Eᵀ ∇_N f``, ``∂g/∂w = ∂g/∂w_N E``,
+``∇²L = Eᵀ ∇²_N L E`` (the kernel computes the reduced ones directly).
 """
 
 from __future__ import annotations
@@ -48,6 +54,17 @@ class TrackingNLP(SingleShootingNLP):
         self._one_stage = GRUShooting(fhocp.params, 1)
         self._xs_key: bytes | None = None
         self._xs: tuple[np.ndarray, np.ndarray, bool] = (np.zeros(0), np.zeros(0), False)
+        # the expanded vector w_N = E w (every u_i its own variable): its indices, and E
+        N, m = fhocp.N, fhocp.m
+        self._iuf = np.arange(N * m)
+        self._iusf = np.arange(N * m, N * m + m)
+        self._itf = N * m + m
+        self._nwf = N * m + m + 1
+        self._E: np.ndarray | None = None   # None: w_N = w (no control horizon)
+        if fhocp.control_horizon < N:
+            src = np.concatenate([fhocp.iu.ravel(), fhocp.ius, [fhocp.it]])
+            self._E = np.zeros((self._nwf, fhocp.nw))
+            self._E[np.arange(self._nwf), src] = 1.0
 
     # -- one point ----------------------------------------------------------------------
     def steady(self, wv: np.ndarray, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -103,13 +120,14 @@ class TrackingNLP(SingleShootingNLP):
 
     def _grad_us(self, wv: np.ndarray, ro: Any, Xs: np.ndarray, lx: np.ndarray,
                  grad: np.ndarray) -> None:
+        """The ``u_s`` entries of the expanded gradient (``grad``: ``w_N``'s)."""
         p = self.p
         us = wv[self.ius]
-        grad[self.ius] = Xs.T @ lx - np.sum(ro.u - us, axis=0) @ (2 * p.R)
+        grad[self._iusf] = Xs.T @ lx - np.sum(ro.u - us, axis=0) @ (2 * p.R)
         if p.has_du:
             d = 2 * p.du_weight * (ro.u[-1] - us)
-            grad[self.p.iu[-1]] += d
-            grad[self.ius] -= d
+            grad[self._iuf[-p.m:]] += d
+            grad[self._iusf] -= d
 
     def gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
         """``[f, ∇f]``."""
@@ -118,33 +136,33 @@ class TrackingNLP(SingleShootingNLP):
         xs, Xs = self.steady(wv, pv)
         us = wv[self.ius]
         N, n, m = p.N, p.n, p.m
-        grad = np.zeros(p.nw)
+        grad = np.zeros(self._nwf)
         dx = (ro.x[1:N] - xs) @ (2 * p.Q)
-        grad[self.iu] = dx.ravel() @ ro.S[1:N].reshape((N - 1) * n, N * m) + (
+        grad[self._iuf] = dx.ravel() @ ro.S[1:N].reshape((N - 1) * n, N * m) + (
             (ro.u - us) @ (2 * p.R)).ravel()
         if p.has_du:
-            grad[self.iu] += du_gradient(ro.u, self._u_prev(pv), p.du_weight).ravel()
+            grad[self._iuf] += du_gradient(ro.u, self._u_prev(pv), p.du_weight).ravel()
         self._grad_us(wv, ro, Xs, self._dcost_dxs(ro, xs, pv), grad)
-        grad[p.it] = 2 * p.s * wv[p.it]
-        return [self.objective(wv, pv, ro), grad]
+        grad[self._itf] = 2 * p.s * wv[p.it]
+        return [self.objective(wv, pv, ro), grad if self._E is None else grad @ self._E]
 
     def jacobian(self, wv: np.ndarray, pv: np.ndarray) -> list:
         """``[g, ∂g/∂w]``."""
         p = self.p
         ro = self.rollout(wv, pv, True)
         _, Xs = self.steady(wv, pv)
-        N, n, q, iu = p.N, p.n, p.qr, self.iu
+        N, n, q, iu, ius, it = p.N, p.n, p.qr, self._iuf, self._iusf, self._itf
         r0 = (N - 1) * q
-        J = np.zeros((self.ng, p.nw))
+        J = np.zeros((self.ng, self._nwf))
         J[:r0, iu] = np.matmul(p.DUo[None], ro.S[1:N]).reshape(r0, N * p.m)
         J[r0:r0 + n, iu] = ro.S[N]
         J[r0 + n:r0 + 2 * n, iu] = ro.S[N]
-        J[r0:r0 + n, p.it] = -1.0
-        J[r0 + n:r0 + 2 * n, p.it] = 1.0
-        J[r0:r0 + n, self.ius] = -Xs
-        J[r0 + n:r0 + 2 * n, self.ius] = -Xs
-        J[r0 + 2 * n:, self.ius] = p.DUo @ Xs
-        return [self.constraints(wv, pv, ro), J]
+        J[r0:r0 + n, it] = -1.0
+        J[r0 + n:r0 + 2 * n, it] = 1.0
+        J[r0:r0 + n, ius] = -Xs
+        J[r0 + n:r0 + 2 * n, ius] = -Xs
+        J[r0 + 2 * n:, ius] = p.DUo @ Xs
+        return [self.constraints(wv, pv, ro), J if self._E is None else J @ self._E]
 
     def hessian(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
                 lg: np.ndarray) -> np.ndarray:
@@ -152,13 +170,13 @@ class TrackingNLP(SingleShootingNLP):
         p = self.p
         ro = self.rollout(wv, pv, True)
         xs, Xs = self.steady(wv, pv)
-        N, n, m, q, iu, ius = p.N, p.n, p.m, p.qr, self.iu, self.ius
+        N, n, m, q, iu, ius = p.N, p.n, p.m, p.qr, self._iuf, self._iusf
         lf0 = float(lf[0])
         # the input block: the paper's FHOCP's with x̄ = x_s (its adjoints read p[n:2n])
         pv_ref = pv.copy()
         pv_ref[n:2 * n] = xs
         lg_paper = lg[: (N - 1) * q + 2 * n]
-        H = np.zeros((p.nw, p.nw))
+        H = np.zeros((self._nwf, self._nwf))
         Hu = self._input_hessian(wv, pv_ref, lf0, lg_paper, ro)
         H[np.ix_(iu, iu)] = Hu
         S = ro.S[1:N]                                      # (N − 1, n, N m)
@@ -175,8 +193,8 @@ class TrackingNLP(SingleShootingNLP):
         H[np.ix_(iu, ius)] = lf0 * cross
         H[np.ix_(ius, iu)] = lf0 * cross.T
         H[np.ix_(ius, ius)] = lf0 * Hs + self._curvature(wv, pv, ro, xs, Xs, lf0, lg)
-        H[p.it, p.it] = 2 * lf0 * p.s
-        return H
+        H[self._itf, self._itf] = 2 * lf0 * p.s
+        return H if self._E is None else self._E.T @ H @ self._E
 
     def _curvature(self, wv: np.ndarray, pv: np.ndarray, ro: Any, xs: np.ndarray,
                    Xs: np.ndarray, lf: float, lg: np.ndarray) -> np.ndarray:
@@ -211,10 +229,11 @@ class TrackingNLP(SingleShootingNLP):
         """A random ``(w, p)`` of :meth:`SingleShootingNLP.self_test` against the ``HAS_ASS``
         kernel: ``x_s0`` near ``x̂`` (Newton's start), ``u_s`` inside the input box."""
         p = self.p
-        n, m, N = p.n, p.m, p.N
+        n, m = p.n, p.m
         us = rng.uniform(-0.8, 0.8, m)
         x0 = rng.uniform(-0.3, 0.3, n)
-        wv = np.concatenate([rng.uniform(-1, 1, N * m), us, rng.uniform(0, 0.1, 1)])
+        wv = np.concatenate([rng.uniform(-1, 1, p.control_horizon * m), us,
+                             rng.uniform(0, 0.1, 1)])
         pv = np.concatenate([x0, x0 + rng.normal(0, 0.01, n),
                              rng.uniform(-1, 1, p.npar - 2 * n)])
         return wv, pv
@@ -237,7 +256,7 @@ class _PaperView:
         self._ro = ro
         self.p = _PaperDims(nlp.p)
         self.shoot = nlp.shoot
-        self.iu = nlp.iu
+        self.iu = nlp._iuf
         self._du_hess = nlp._du_hess
 
     def rollout(self, wv: np.ndarray, pv: np.ndarray, deriv: bool) -> Any:

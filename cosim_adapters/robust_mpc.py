@@ -196,6 +196,11 @@ class RobustMPCController(Component):
     alpha_c : float, optional
         ``law="tracking"``: the terminal set's radius (normalised state, ∞-norm); default the
         certified design's ``α_min(N)``, which makes ``Y_s`` its admissible box.
+    control_horizon : int, optional
+        ``law="tracking"``: the number ``M ≤ N`` of free inputs ``u_0 … u_{M−1}``; the
+        others are held at the artificial steady input ``u_s`` (the guarantees unchanged:
+        :class:`controllers.fhocp_tracking.TrackingFHOCP`). Default ``⌈N / 4⌉`` (20 at the
+        default N = 80).
     max_iter : int, optional
         Iteration cap of one FHOCP solve (default 15, the real-time bound; 40 with
         ``law="tracking"``). A solve that reaches it applies its feasible iterate
@@ -220,7 +225,8 @@ class RobustMPCController(Component):
                  ipopt_options: Mapping[str, Any] | None = None, max_iter: int | None = None,
                  kernel: str = "auto", du_weight: float | Mapping[str, float] | None = None,
                  law: str = "paper", offset_weight: float | Mapping[str, float] | None = None,
-                 alpha_c: float | None = None, name: str = "mpc") -> None:
+                 alpha_c: float | None = None, control_horizon: int | None = None,
+                 name: str = "mpc") -> None:
         from controllers import certificates as certs
         from controllers import gain_design
         from controllers.fhocp import FHOCP
@@ -231,7 +237,7 @@ class RobustMPCController(Component):
 
         tracking = check_law(law, governor=governor, offset_free=offset_free,
                               setpoint_rate=setpoint_rate, offset_weight=offset_weight,
-                              alpha_c=alpha_c)
+                              alpha_c=alpha_c, control_horizon=control_horizon)
         from controllers.fhocp_tracking import DEFAULTS as TRACKING
 
         N = (TRACKING["N"] if tracking else 15) if N is None else N
@@ -290,7 +296,7 @@ class RobustMPCController(Component):
 
             cert, self.tracker, self.disturbance = tracking_design(
                 self.model, self.problem, cert, kwargs, offset_weight, alpha_c,
-                offset_filter, fhocp_options)
+                offset_filter, fhocp_options, control_horizon)
             self.fhocp = self.tracker.fhocp
         else:
             self.fhocp = FHOCP.from_certificate(cert, **fhocp_options)
@@ -436,6 +442,7 @@ class RobustMPCController(Component):
         out = solver_summary(records)
         if self.tracker is not None:
             out.update({"alpha_c": self.fhocp.alpha_c,
+                        "control_horizon": self.fhocp.control_horizon,
                         "offset_weight": {n: float(w) for n, w in zip(
                             self._y_names, self.fhocp.offset_weight, strict=True)},
                         "offset_filter": self.disturbance.beta,

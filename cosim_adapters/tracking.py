@@ -37,7 +37,7 @@ LAWS = ("paper", "tracking")
 
 
 def check_law(law: Any, *, governor: Any, offset_free: Any, setpoint_rate: Any,
-               offset_weight: Any, alpha_c: Any) -> bool:
+               offset_weight: Any, alpha_c: Any, control_horizon: Any = None) -> bool:
     """Check the law and its options (one-line errors); ``True`` for the tracking law."""
     if law not in LAWS:
         raise CosimError(f"option law={law!r}: expected one of {', '.join(map(repr, LAWS))}")
@@ -49,6 +49,13 @@ def check_law(law: Any, *, governor: Any, offset_free: Any, setpoint_rate: Any,
             if value not in off:
                 raise CosimError(f"option {key}={value!r} belongs to law=\"paper\" (the "
                                  "tracking law needs no governor and is offset-free)")
+    elif control_horizon is not None:
+        raise CosimError(f"option control_horizon={control_horizon!r} belongs to "
+                         "law=\"tracking\" (its tail is held at the artificial steady input)")
+    if control_horizon is not None and (isinstance(control_horizon, bool) or not isinstance(
+            control_horizon, int) or control_horizon < 1):
+        raise CosimError(f"option control_horizon={control_horizon!r}: expected a positive "
+                         "integer (at most N)")
     weights = (list(offset_weight.values()) if isinstance(offset_weight, Mapping)
                else [] if offset_weight is None else [offset_weight])
     if not all(_positive(w) for w in weights):
@@ -66,12 +73,14 @@ def _positive(value: Any) -> bool:
 
 def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[str, Any],
                     offset_weight: float | Mapping[str, float], alpha_c: float | None,
-                    beta: float, fhocp_options: Mapping[str, Any]) -> tuple[Any, Any, Any]:
+                    beta: float, fhocp_options: Mapping[str, Any],
+                    control_horizon: int | None = None) -> tuple[Any, Any, Any]:
     """``(certificate, TrackingMPC, DisturbanceFilter)`` of the tracking law (module
     docstring). ``cert_gains``: the paper law's certificate (its ``α_min`` is the default
-    ``α_c``); ``kwargs``: ``N``, ``Q``, ``R``, ``e_o0``."""
+    ``α_c``); ``kwargs``: ``N``, ``Q``, ``R``, ``e_o0``; ``control_horizon``: ``M`` (default
+    :func:`controllers.fhocp_tracking.default_control_horizon`, at most N)."""
     from controllers import certificates as certs
-    from controllers.fhocp_tracking import DEFAULTS, TrackingFHOCP
+    from controllers.fhocp_tracking import DEFAULTS, TrackingFHOCP, default_control_horizon
     from controllers.tracking_mpc import DisturbanceFilter, TrackingMPC
 
     names = list(problem.output_names)
@@ -86,6 +95,10 @@ def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[s
         T = np.array([float(offset_weight.get(n, default)) for n in names])
     else:
         T = np.full(len(names), float(offset_weight))
+    N = int(kwargs["N"])
+    M = default_control_horizon(N) if control_horizon is None else control_horizon
+    if M > N:
+        raise CosimError(f"option control_horizon={M}: at most the horizon N = {N}")
     try:
         cert = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
         if alpha_c is None:
@@ -94,7 +107,7 @@ def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[s
                 raise ControllersError("no default alpha_c (the certified design's alpha_min "
                                        f"is {alpha_c:g}); set option alpha_c")
         fhocp = TrackingFHOCP.from_certificate(cert, offset_weight=T, alpha_c=alpha_c,
-                                               **fhocp_options)
+                                               control_horizon=M, **fhocp_options)
     except ControllersError as exc:
         raise CosimError(str(exc)) from None
     from controllers.tracking_checks import failures, tracking_hypotheses

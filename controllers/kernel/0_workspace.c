@@ -14,8 +14,10 @@
  * u_bar) (NP = 2 NX + NU), then u_prev = u_{-1} when HAS_DU (NP = 2 NX + 2 NU): the cost's
  * input-rate term sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); without it (HAS_DU 0)
  * none of its code is compiled. HAS_ASS 1: the tracking FHOCP (controllers/fhocp_tracking.py,
- * 1b_steady_state.c), w = (u_0 .. u_{N-1}, u_s, t), p = (x_hat, x_s0, r[, u_prev]), the
- * artificial steady state x_s(u_s) in place of x_bar and u_s in place of u_bar. Same mathematics as controllers/shooting.py (GRUShooting.rollout,
+ * 1b_steady_state.c), w = (u_0 .. u_{NM-1}, u_s, t), p = (x_hat, x_s0, r[, u_prev]), the
+ * artificial steady state x_s(u_s) in place of x_bar and u_s in place of u_bar; NM <= NH the
+ * control horizon: u_i = u_s for i >= NM (UC, KC, NSC below; NM = NH without one).
+ * Same mathematics as controllers/shooting.py (GRUShooting.rollout,
  * stage_hessians) and controllers/nlp_single_shooting.py (SingleShootingNLP.objective,
  * constraints, gradient, jacobian, hessian, hessian_convex) -- see there for the formulas;
  * checked against them to ~1e-14 (tests/controllers/test_compiled_kernel.py).
@@ -66,8 +68,24 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 #endif
 
 #define NV (NX + NU)
-#define NUU (NH * NU)
-#define NUA (NUU + HAS_ASS * NU)   /* u_0 .. u_{N-1} (and u_s): the Hessian's coupled block */
+#ifndef NM
+#define NM NH
+#endif
+#if NM < NH && !HAS_ASS
+#error "a control horizon NM < NH holds the tail at the artificial steady input (HAS_ASS)"
+#endif
+#if NM < NH && defined(GK_CONTRACT)
+#error "a control horizon NM < NH is not implemented in the contracted mode"
+#endif
+#define NUF (NH * NU)              /* the inputs u_0 .. u_{N-1} of a rollout */
+#define NUU (NM * NU)              /* the free inputs of w: u_0 .. u_{NM-1} */
+#define NUA (NUU + HAS_ASS * NU)   /* the free inputs (and u_s): the Hessian's coupled block */
+/* the control horizon (NM < NH): u_i = u_s for i >= NM, so u_i is read at w + UC(i), the
+ * sensitivities S_i = dx_i/dw have NSC columns (the free inputs, then u_s when the tail holds
+ * it) of which the first KC(i) can be nonzero; without one (NM = NH) UC(i) = KC(i) = i NU */
+#define UC(i) (((i) < NM ? (i) : NM) * NU)
+#define KC(i) (((i) <= NM ? (i) : NM + 1) * NU)
+#define NSC (NUU + (NM < NH ? NU : 0))
 #define IT NUA                     /* the epigraph variable t: the last entry of w */
 #define NW (NUA + 1)
 #define NG ((NH - 1) * NQ + 2 * NX + HAS_ASS * NQ)
@@ -112,20 +130,21 @@ typedef struct gk_ws {
   A32 double PZ[NH * NX * NUU], PR[NH * NX * NUU], PH[NH * NX * NUU];
   A32 double T[NX * NUU];                /* derivatives' scratch */
 #endif
-  A32 double S[(NH + 1) * NX * NUU];     /* S_i = dx_i/du, NX x NUU row-major; cols >= i NU 0 */
+  A32 double S[(NH + 1) * NX * NSC];     /* S_i = dx_i/dw_u, NX x NSC row-major; cols >= KC(i) 0 */
+  double uf[NUF];                        /* the inputs u_0 .. u_{N-1} of the cached point */
 #if HAS_ASS
   /* the artificial steady state of the cached point (1b_steady_state.c): x_s = f(x_s, u_s),
    * X_s = dx_s/du_s = (I - A_s)^-1 B_s (NX x NU row-major), LU of I - A_s, Newton's status */
   double xs[NX], XS[NX * NU], xs_lu[NX * NX];
   double xs_z[NX], xs_r[NX], xs_h[NX], xs_jh[NX * NV], xs_P[4 * NX * NV];   /* the gates, J_h */
   int xs_piv[NX], xs_status;
-  A32 double ass_ssum[NX * NUU];        /* sum_{i>=1} S_i (ass_hessian) */
+  A32 double ass_ssum[NX * NSC];        /* sum_{i>=1} S_i (ass_hessian) */
 #endif
   /* the Hessian of the Lagrangian (2_derivatives.c) */
   A32 double MU[(NH + 1) * NX];          /* adjoints */
 #ifndef GK_CONTRACT
   A32 double Ph[NX * NV], Pz[NX * NV], Pr[NX * NV], G[NX * NV];   /* stage_hessian */
-  A32 double W[NV * NV], Y[NX * NUU];    /* one stage's W_i and W_i,xx S_i */
+  A32 double W[NV * NV], Y[NX * NSC];    /* one stage's W_i and W_i,xx S_i */
 #ifdef GK_BACKWARD
   A32 double P[NX * NX], YB[NX * NV];    /* the Hessian-to-go, P D_f */
 #endif

@@ -305,19 +305,21 @@ HOT static void derivatives(gk_ws *ws) {
                  *h = ws->HG + i * NX;
     double *jh = ws->JH + i * NX * NV, *df = ws->DF + i * NX * NV;
     stage_jac(x, z, r, h, jh, df);
-    /* S_{i+1} = A_i S_i + B_i E_i (only the first i NU columns of S_i are nonzero) */
-    const double *Si = ws->S + i * NX * NUU;
-    double *Sn = ws->S + (i + 1) * NX * NUU;
-    const int K = i * NU;
+    /* S_{i+1} = A_i S_i + B_i E_i (the first KC(i) columns of S_i are nonzero; B_i goes to
+     * u_i's columns UC(i): new ones, or u_s's, already among them, in the tail) */
+    const double *Si = ws->S + i * NX * NSC;
+    double *Sn = ws->S + (i + 1) * NX * NSC;
+    const int K = KC(i), uc = UC(i);
 #ifdef GK_BLAS
-    if (K > 0) rm_gemm(0, 0, NX, K, NX, df, NV, Si, NUU, 0.0, Sn, NUU);
-    for (int k = 0; k < NX; k++)
-      for (int c = 0; c < NU; c++) Sn[k * NUU + K + c] = df[k * NV + NX + c];
+    if (K > 0) rm_gemm(0, 0, NX, K, NX, df, NV, Si, NSC, 0.0, Sn, NSC);
 #else
-    gk_gemm(0, NX, K, NX, df, NV, Si, NUU, Sn, NUU, 0);
-    for (int k = 0; k < NX; k++)
-      for (int c = 0; c < NU; c++) Sn[k * NUU + K + c] = df[k * NV + NX + c];
+    gk_gemm(0, NX, K, NX, df, NV, Si, NSC, Sn, NSC, 0);
 #endif
+    for (int k = 0; k < NX; k++)
+      for (int c = 0; c < NU; c++) {
+        const double b = df[k * NV + NX + c];
+        Sn[k * NSC + uc + c] = uc < K ? Sn[k * NSC + uc + c] + b : b;
+      }
   }
 }
 
@@ -378,7 +380,8 @@ HOT static void roll(gk_ws *ws, const double *w, const double *p, int level) {
       memcmp(p, ws->c_p, sizeof ws->c_p) != 0) {
     memcpy(ws->c_w, w, sizeof ws->c_w);
     memcpy(ws->c_p, p, sizeof ws->c_p);
-    simulate(p, w, ws->X, ws->ZG, ws->RG, ws->HG);
+    for (int i = 0; i < NH; i++) memcpy(ws->uf + i * NU, w + UC(i), NU * sizeof(double));
+    simulate(p, ws->uf, ws->X, ws->ZG, ws->RG, ws->HG);
 #if HAS_ASS
     steady_state(ws, w + NUU, p + NX);
 #endif

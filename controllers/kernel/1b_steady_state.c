@@ -117,7 +117,8 @@ static void steady_state(gk_ws *ws, const double *us, const double *x0) {
   for (int j = 0; j < NU; j++) lu_solve(M, piv, ws->XS + j, NU);
 }
 
-/* the tracking FHOCP's extra cost: ||U_o x_s + b_o - r||^2_T (+ ||u_{N-1} - u_s||^2_S) */
+/* the tracking FHOCP's extra cost: ||U_o x_s + b_o - r||^2_T (+ ||u_{NM-1} - u_s||^2_S: the
+ * last free input's step to u_s, u_{N-1}'s without a control horizon) */
 static double ass_cost(const gk_ws *ws, const double *w, const double *p) {
   const double *r = p + 2 * NX;
   double acc = 0.0;
@@ -128,7 +129,7 @@ static double ass_cost(const gk_ws *ws, const double *w, const double *p) {
   }
 #if HAS_DU
   for (int j = 0; j < NU; j++) {
-    const double d = w[(NH - 1) * NU + j] - w[NUU + j];
+    const double d = w[(NM - 1) * NU + j] - w[NUU + j];
     acc += (d * DW[j]) * d;
   }
 #else
@@ -168,22 +169,22 @@ static void ass_dcost_dxs(const gk_ws *ws, const double *p, double *gx) {
     for (int k = 0; k < NX; k++) gx[k] += UO[a * NX + k] * te[a];
 }
 
-/* the u_s entries of grad f (and the terminal input-rate term's gradient on u_{N-1}), given
- * lx = dL/dx_s (the explicit partial derivative): X_s' lx - 2 R sum_i (u_i - u_s)
- * (- 2 S (u_{N-1} - u_s)) */
+/* added into the u_s entries of grad f (and the terminal input-rate term's gradient on
+ * u_{NM-1}), given lx = dL/dx_s (the explicit partial derivative): X_s' lx - 2 R sum_{i<NM}
+ * (u_i - u_s) (- 2 S (u_{NM-1} - u_s)) */
 static void ass_grad_us(const gk_ws *ws, const double *w, const double *lx, double *grad) {
   const double *us = w + NUU;
   for (int c = 0; c < NU; c++) {
     double s = 0.0;
     for (int k = 0; k < NX; k++) s += ws->XS[k * NU + c] * lx[k];
-    for (int i = 0; i < NH; i++)
+    for (int i = 0; i < NM; i++)
       for (int j = 0; j < NU; j++) s -= (w[i * NU + j] - us[j]) * (2.0 * RW[j * NU + c]);
-    grad[NUU + c] = s;
+    grad[NUU + c] += s;
   }
 #if HAS_DU
   for (int j = 0; j < NU; j++) {
-    const double d = 2.0 * DW[j] * (w[(NH - 1) * NU + j] - us[j]);
-    grad[(NH - 1) * NU + j] += d;
+    const double d = 2.0 * DW[j] * (w[(NM - 1) * NU + j] - us[j]);
+    grad[(NM - 1) * NU + j] += d;
     grad[NUU + j] -= d;
   }
 #endif
@@ -209,14 +210,16 @@ static void ass_lagrangian_gradient(const gk_ws *ws, const double *w, const doub
   for (int c = 0; c < NU; c++) gl[NUU + c] += lam_x[NUU + c];
 }
 
-/* the u_s columns of the constraint Jacobian (column-major NG x NW) */
+/* the u_s columns of the constraint Jacobian (column-major NG x NW): -X_s added to the
+ * terminal rows (which hold S_N's u_s columns in the tail of a control horizon), the Y_s
+ * rows */
 static void ass_jacobian(const gk_ws *ws, double *J) {
   const int r0 = (NH - 1) * NQ, r1 = r0 + 2 * NX;
   for (int c = 0; c < NU; c++) {
     double *col = J + (NUU + c) * NG;
     for (int k = 0; k < NX; k++) {
-      col[r0 + k] = -ws->XS[k * NU + c];
-      col[r0 + NX + k] = -ws->XS[k * NU + c];
+      col[r0 + k] -= ws->XS[k * NU + c];
+      col[r0 + NX + k] -= ws->XS[k * NU + c];
     }
     for (int a = 0; a < NQ; a++) {
       double s = 0.0;
@@ -227,9 +230,10 @@ static void ass_jacobian(const gk_ws *ws, double *J) {
 }
 
 /* lf times the u_s rows of the Hessian's upper triangle (row-major NW x NW; before
- * hessian_finish mirrors it): the cross blocks -sum_{i>=1} S_i' 2Q X_s and -2R per stage
- * (-2S on u_{N-1}), the block X_s' (2N Q + 2 U_o' T U_o) X_s + 2N R (+ 2S), and the
- * terminal input-rate term's 2S on u_{N-1} */
+ * hessian_finish mirrors it): the cross blocks -sum_{i>=1} S_i' 2Q X_s (and its transpose:
+ * S_i's own u_s columns in the tail of a control horizon) and -2R per free stage (-2S on
+ * u_{NM-1}), the block X_s' (2N Q + 2 U_o' T U_o) X_s + 2 NM R (+ 2S), and the terminal
+ * input-rate term's 2S on u_{NM-1} */
 HOT static void ass_hessian(gk_ws *ws, double lf, double *H) {
   double QX[NX * NU], MX[NX * NU];
   const double *XS = ws->XS;
@@ -245,37 +249,42 @@ HOT static void ass_hessian(gk_ws *ws, double lf, double *H) {
       QX[k * NU + c] = s;
       MX[k * NU + c] = NH * s + t;
     }
-  /* sum_{i>=1} S_i' QX = (sum_{i>=1} S_i)' QX (S_i's columns from i NU on are zero: inputs
+  /* sum_{i>=1} S_i' QX = (sum_{i>=1} S_i)' QX (S_i's columns from KC(i) on are zero: inputs
    * after stage i do not move x_i), the sum by contiguous rows */
-  double *SS = ws->ass_ssum;
+  double *SS = ws->ass_ssum, V[NSC * NU];
   memset(SS, 0, sizeof ws->ass_ssum);
   for (int i = 1; i < NH; i++) {
-    const double *Si = ws->S + i * NX * NUU;
-    const int K = i * NU;
+    const double *Si = ws->S + i * NX * NSC;
+    const int K = KC(i);
     for (int k = 0; k < NX; k++) {
-      double *__restrict sk = SS + k * NUU;
-      const double *__restrict si = Si + k * NUU;
+      double *__restrict sk = SS + k * NSC;
+      const double *__restrict si = Si + k * NSC;
       for (int cc = 0; cc < K; cc++) sk[cc] += si[cc];
     }
   }
-  for (int cc = 0; cc < NUU; cc++)
+  for (int cc = 0; cc < NSC; cc++)
     for (int c = 0; c < NU; c++) {
       double s = 0.0;
-      for (int k = 0; k < NX; k++) s += SS[k * NUU + cc] * QX[k * NU + c];
-      H[cc * NW + NUU + c] -= lf * s;
+      for (int k = 0; k < NX; k++) s += SS[k * NSC + cc] * QX[k * NU + c];
+      V[cc * NU + c] = s;
     }
-  for (int i = 0; i < NH; i++)
+  for (int cc = 0; cc < NUU; cc++)
+    for (int c = 0; c < NU; c++) H[cc * NW + NUU + c] -= lf * V[cc * NU + c];
+  for (int a = 0; a < NSC - NUU; a++)   /* the tail's own u_s columns: V_us + V_us' */
+    for (int b = a; b < NU; b++)
+      H[(NUU + a) * NW + NUU + b] -= lf * (V[(NUU + a) * NU + b] + V[(NUU + b) * NU + a]);
+  for (int i = 0; i < NM; i++)
     for (int a = 0; a < NU; a++)
       for (int b = 0; b < NU; b++) H[(i * NU + a) * NW + NUU + b] -= 2.0 * lf * RW[a * NU + b];
   for (int a = 0; a < NU; a++)
     for (int b = 0; b < NU; b++) {
-      double s = 2.0 * NH * RW[a * NU + b];
+      double s = 2.0 * NM * RW[a * NU + b];
       for (int k = 0; k < NX; k++) s += XS[k * NU + a] * MX[k * NU + b];
       H[(NUU + a) * NW + NUU + b] += lf * s;
     }
 #if HAS_DU
   for (int j = 0; j < NU; j++) {
-    const int r = (NH - 1) * NU + j;
+    const int r = (NM - 1) * NU + j;
     H[r * NW + r] += 2.0 * lf * DW[j];
     H[r * NW + NUU + j] -= 2.0 * lf * DW[j];
     H[(NUU + j) * NW + NUU + j] += 2.0 * lf * DW[j];

@@ -19,11 +19,13 @@ __attribute__((always_inline)) static inline double add_quad(
 }
 
 #if HAS_DU
-/* The input-rate term (controllers/input_rate.py) of inputs u (NH x NU) after up = u_{-1}:
- * sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}) */
-static double du_cost(const double *u, const double *up) {
+/* The input-rate term (controllers/input_rate.py) of inputs u (nst x NU) after up = u_{-1}:
+ * sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); nst = NM on w (the free inputs: with a
+ * control horizon the step to u_s is the tracking FHOCP's last term, ass_cost), NH on a
+ * rollout's inputs */
+static double du_cost(const double *u, const double *up, int nst) {
   double acc = 0.0;
-  for (int i = 0; i < NH; i++) {
+  for (int i = 0; i < nst; i++) {
     const double *prev = i ? u + (i - 1) * NU : up;
     for (int j = 0; j < NU; j++) {
       const double d = u[i * NU + j] - prev[j];
@@ -33,13 +35,13 @@ static double du_cost(const double *u, const double *up) {
   return acc;
 }
 
-/* its gradient 2 DW (d_i - d_{i+1}) (d_N = 0) added into g (NUU) */
+/* its gradient on w's free inputs 2 DW (d_i - d_{i+1}) (d_NM = 0) added into g (NUU) */
 static void du_gradient(const double *u, const double *up, double *g) {
-  for (int i = 0; i < NH; i++)
+  for (int i = 0; i < NM; i++)
     for (int j = 0; j < NU; j++) {
       const double *prev = i ? u + (i - 1) * NU : up;
       double s = u[i * NU + j] - prev[j];
-      if (i + 1 < NH) s -= u[(i + 1) * NU + j] - u[i * NU + j];
+      if (i + 1 < NM) s -= u[(i + 1) * NU + j] - u[i * NU + j];
       g[i * NU + j] += 2.0 * DW[j] * s;
     }
 }
@@ -48,11 +50,11 @@ static void du_gradient(const double *u, const double *up, double *g) {
  * NW x NW): 4 DW on the diagonal blocks (2 DW on the last), -2 DW on the first superdiagonal
  * block (before hessian_finish mirrors the triangle) */
 static void du_hessian(double lf, double *H) {
-  for (int i = 0; i < NH; i++)
+  for (int i = 0; i < NM; i++)
     for (int j = 0; j < NU; j++) {
       const int r = i * NU + j;
-      H[r * NW + r] += 2.0 * lf * DW[j] * (i + 1 < NH ? 2.0 : 1.0);
-      if (i + 1 < NH) H[r * NW + r + NU] -= 2.0 * lf * DW[j];
+      H[r * NW + r] += 2.0 * lf * DW[j] * (i + 1 < NM ? 2.0 : 1.0);
+      if (i + 1 < NM) H[r * NW + r + NU] -= 2.0 * lf * DW[j];
     }
 }
 #endif
@@ -61,12 +63,12 @@ HOT static double cost(const gk_ws *ws, const double *w, const double *p) {
   const double *xb = XREF(ws, p), *ub = UREF(w, p), t = w[IT];
   double acc = 0.0;
   for (int i = 0; i < NH; i++) acc = add_quad(acc, ws->X + i * NX, xb, QW, NX, QDIAG);
-  for (int i = 0; i < NH; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU, 0);
+  for (int i = 0; i < NM; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU, 0);   /* tail: 0 */
 #if HAS_ASS
   acc += ass_cost(ws, w, p);
 #endif
 #if HAS_DU
-  return acc + SW * t * t + du_cost(w, UPREV(p));
+  return acc + SW * t * t + du_cost(w, UPREV(p), NM);
 #else
   return acc + SW * t * t;
 #endif
@@ -93,7 +95,7 @@ HOT static void constraints(const gk_ws *ws, const double *w, const double *p, d
 
 HOT static void gradient(const gk_ws *ws, const double *w, const double *p, double *grad) {
   const double *xb = XREF(ws, p), *ub = UREF(w, p), *X = ws->X, *S = ws->S;
-  for (int c = 0; c < NUU; c++) grad[c] = 0.0;
+  for (int c = 0; c < NUA; c++) grad[c] = 0.0;
   for (int i = 1; i < NH; i++) {
     double dq[NX];
     for (int k = 0; k < NX; k++) {
@@ -101,14 +103,14 @@ HOT static void gradient(const gk_ws *ws, const double *w, const double *p, doub
       for (int j = 0; j < NX; j++) s += (X[i * NX + j] - xb[j]) * (2.0 * QW[j * NX + k]);
       dq[k] = s;
     }
-    const double *Si = S + i * NX * NUU;
-    const int K = i * NU;
+    const double *Si = S + i * NX * NSC;
+    const int K = KC(i);
     for (int k = 0; k < NX; k++) {
-      const double a = dq[k], *sk = Si + k * NUU;
+      const double a = dq[k], *sk = Si + k * NSC;
       for (int c = 0; c < K; c++) grad[c] += a * sk[c];
     }
   }
-  for (int i = 0; i < NH; i++)
+  for (int i = 0; i < NM; i++)
     for (int k = 0; k < NU; k++) {
       double s = 0.0;
       for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * RW[j * NU + k]);
@@ -128,26 +130,26 @@ HOT static void jacobian(const gk_ws *ws, double *J) {
   const double *S = ws->S;
   memset(J, 0, sizeof(double) * NG * NW);
   for (int i = 1; i < NH; i++) {
-    const double *Si = S + i * NX * NUU;
-    const int K = i * NU;
+    const double *Si = S + i * NX * NSC;
+    const int K = KC(i);
     for (int a = 0; a < NQ; a++) {
-      double row[NUU];
+      double row[NSC];
       for (int c = 0; c < K; c++) row[c] = 0.0;
       for (int k = 0; k < NX; k++) {
-        const double d = DUO[a * NX + k], *sk = Si + k * NUU;
+        const double d = DUO[a * NX + k], *sk = Si + k * NSC;
         for (int c = 0; c < K; c++) row[c] += d * sk[c];
       }
       const int r = (i - 1) * NQ + a;
       for (int c = 0; c < K; c++) J[c * NG + r] = row[c];
     }
   }
-  const double *SN = S + NH * NX * NUU;
+  const double *SN = S + NH * NX * NSC;
   const int r0 = (NH - 1) * NQ;
-  for (int c = 0; c < NUU; c++) {
+  for (int c = 0; c < NSC; c++) {
     double *col = J + c * NG + r0;
     for (int k = 0; k < NX; k++) {
-      col[k] = SN[k * NUU + c];
-      col[NX + k] = SN[k * NUU + c];
+      col[k] = SN[k * NSC + c];
+      col[NX + k] = SN[k * NSC + c];
     }
   }
   for (int k = 0; k < NX; k++) {
@@ -293,6 +295,26 @@ HOT static void point_hessian(const double *x, const double *z, const double *r,
 }
 
 #ifndef GK_CONTRACT
+/* The blocks of stage i's Z_i' T Z_i (Z_i = [S_i; E_i], T: the stage's W_i, or its
+ * Hessian-to-go in backward mode) that involve u_i, added into the upper triangle of H
+ * (row-major NW x NW, mirrored by hessian_finish): C = (T^ux S_i)' (K x NU, C[c NU + j]) at
+ * (w_c, u_i,j) and T^uu (+ 2 lf R on a free input) at (u_i, u_i), u_i at column uc = UC(i).
+ * In the tail of a control horizon (uc < K: u_i = u_s is one of S_i's columns) the u_s
+ * block receives C + C' (both halves of S_us' T^xu + T^ux S_us). */
+__attribute__((always_inline)) static inline void add_stage_input(double *H, const double *C,
+                                                                int K, int uc, int free_u,
+                                                                const double *T, double lf) {
+  const int kf = K < uc ? K : uc;
+  for (int c = 0; c < kf; c++)
+    for (int j = 0; j < NU; j++) H[c * NW + uc + j] += C[c * NU + j];
+  for (int j1 = 0; j1 < NU; j1++)
+    for (int j2 = j1; j2 < NU; j2++) {
+      double v = T[(NX + j1) * NV + NX + j2] + (free_u ? 2.0 * lf * RW[j1 * NU + j2] : 0.0);
+      if (uc < K) v += C[(uc + j1) * NU + j2] + C[(uc + j2) * NU + j1];
+      H[(uc + j1) * NW + uc + j2] += v;
+    }
+}
+
 /* W = grad^2_(x,u) mu^T f(x_i, u_i) of stage i (NV x NV, row-major, symmetric) */
 HOT static void stage_hessian(gk_ws *ws, int i, const double *mu, double *W) {
   point_hessian(ws->X + i * NX, ws->ZG + i * NX, ws->RG + i * NX, ws->HG + i * NX,
@@ -322,7 +344,9 @@ __attribute__((always_inline)) static inline void adjoints(const gk_ws *ws, cons
  * (long horizons): the same sum sum_i Z_i^T W_i Z_i (+ costs) regrouped stage by stage from
  * the end. With T_i = W_i + [A_i B_i]^T P_{i+1} [A_i B_i] (+ 2 Q on x_i, i >= 1), P_N = 0
  * and P_i = T_i^xx (the Hessian-to-go of x_i):
- *   H[u_i, u_i] = T_i^uu + 2 R,   H[u_i, u_j] = T_i^ux S_i[:, j]  (j < i).
+ *   H[u_i, u_i] = T_i^uu + 2 R,   H[u_i, u_j] = T_i^ux S_i[:, j]  (j < i)
+ * (with a control horizon, u_i = u_s in the tail: those blocks summed into u_s's by
+ * add_stage_input, S_i's u_s columns already summing the earlier tail stages' inputs).
  * O(N n^3 + N^2 n m^2) instead of W-mode's O(N^2 n^2 m + N^3 n m^2). */
 HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, const double *lg,
                         double *H) {
@@ -340,20 +364,18 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
       gk_gemm(0, NX, NV, NX, P, NX, df, NV, Y, NV, 0);
       gk_gemm(1, NV, NV, NX, df, NV, Y, NV, T, NV, 1);
     }
-    const int K = i * NU;
-    const double *Si = ws->S + i * NX * NUU;
-    /* (T^ux S_i)^T into the upper triangle: H[u_j, u_i], j < i */
+    const int K = KC(i);
+    const double *Si = ws->S + i * NX * NSC;
+    double C[NSC * NU];   /* (T^ux S_i)': H[w_c, u_i] */
     for (int j = 0; j < NU; j++) {
       const double *tj = T + (NX + j) * NV;
       for (int c = 0; c < K; c++) {
         double s = 0.0;
-        for (int a = 0; a < NX; a++) s += tj[a] * Si[a * NUU + c];
-        H[c * NW + K + j] = s;
+        for (int a = 0; a < NX; a++) s += tj[a] * Si[a * NSC + c];
+        C[c * NU + j] = s;
       }
     }
-    for (int j1 = 0; j1 < NU; j1++)
-      for (int j2 = j1; j2 < NU; j2++)
-        H[(K + j1) * NW + K + j2] = T[(NX + j1) * NV + NX + j2] + 2.0 * lf * RW[j1 * NU + j2];
+    add_stage_input(H, C, K, UC(i), i < NM, T, lf);
     for (int a = 0; a < NX; a++)
       for (int b = 0; b < NX; b++) P[a * NX + b] = T[a * NV + b];
   }
@@ -372,29 +394,27 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
     if (i >= 1)
       for (int a = 0; a < NX; a++)
         for (int b = 0; b < NX; b++) W[a * NV + b] += 2.0 * lf * QW[a * NX + b];
-    const int K = i * NU;
-    const double *Si = ws->S + i * NX * NUU;
+    const int K = KC(i);
+    const double *Si = ws->S + i * NX * NSC;
+    double C[NSC * NU];   /* S_i' W_xu: H[w_c, u_i] */
     if (K > 0) {
 #ifdef GK_BLAS_HESS
-      rm_gemm(0, 0, NX, K, NX, W, NV, Si, NUU, 0.0, Y, NUU);
-      rm_gemm(1, 0, K, K, NX, Si, NUU, Y, NUU, 1.0, H, NW);
+      rm_gemm(0, 0, NX, K, NX, W, NV, Si, NSC, 0.0, Y, NSC);
+      rm_gemm(1, 0, K, K, NX, Si, NSC, Y, NSC, 1.0, H, NW);
 #else
       /* Y = W_xx S_i (NX x K); H[:K, :K] += S_i^T Y (all of it: the lower triangle is
        * overwritten by the mirror at the end) */
-      gk_gemm(0, NX, K, NX, W, NV, Si, NUU, Y, NUU, 0);
-      gk_gemm(1, K, K, NX, Si, NUU, Y, NUU, H, NW, 1);
+      gk_gemm(0, NX, K, NX, W, NV, Si, NSC, Y, NSC, 0);
+      gk_gemm(1, K, K, NX, Si, NSC, Y, NSC, H, NW, 1);
 #endif
-      /* C = S_i^T W_xu (K x NU) into H[:K, K:K+NU] and its transpose */
       for (int c = 0; c < K; c++)
         for (int j = 0; j < NU; j++) {
           double s = 0.0;
-          for (int a = 0; a < NX; a++) s += Si[a * NUU + c] * W[a * NV + NX + j];
-          H[c * NW + K + j] += s;
+          for (int a = 0; a < NX; a++) s += Si[a * NSC + c] * W[a * NV + NX + j];
+          C[c * NU + j] = s;
         }
     }
-    for (int j1 = 0; j1 < NU; j1++)
-      for (int j2 = j1; j2 < NU; j2++)
-        H[(K + j1) * NW + K + j2] += W[(NX + j1) * NV + NX + j2] + 2.0 * lf * RW[j1 * NU + j2];
+    add_stage_input(H, C, K, UC(i), i < NM, W, lf);
   }
   hessian_finish(ws, p, lg, H, lf);
 }

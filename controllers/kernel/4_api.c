@@ -162,14 +162,14 @@ static void assess_core(gk_ws *ws, const double *xh, const double *u, const doub
         if (d > -1e-6) act++;
       }
     }
-  for (int c = 0; c < NUU; c++) {
+  for (int c = 0; c < NUF; c++) {
     const double a = fabs(u[c]);
     if (a > umax) umax = a;
     if (a > 1.0 - 1e-6) act++;
   }
   if (dN - alpha > -1e-6) act++;
 #if HAS_DU
-  out[0] = acc + SW * dN * dN + du_cost(u, up);
+  out[0] = acc + SW * dN * dN + du_cost(u, up, NH);
 #else
   (void)up;
   out[0] = acc + SW * dN * dN;
@@ -188,11 +188,16 @@ EXPORT void PFX(assess)(gk_ws *ws, const double *xh, const double *u, const doub
 }
 
 /* The check of the solver's answer w at p = (x_hat, x_bar, u_bar[, u_prev]): u = clip(w_u, -1, 1)
- * into uc, assess_core of uc into x and out[0..5], and out[6] the defect
- * max |x_solver - x| against the solver's own trajectory at (w, p) (the cached rollout). */
+ * into uc (NH x NU: the tail of a control horizon at u_s), assess_core of uc into x and
+ * out[0..5], and out[6] the defect max |x_solver - x| against the solver's own trajectory at
+ * (w, p) (the cached rollout). */
 EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const double *bnd,
                           double alpha, double *uc, double *x, double *out) {
-  for (int c = 0; c < NUU; c++) uc[c] = w[c] < -1.0 ? -1.0 : (w[c] > 1.0 ? 1.0 : w[c]);
+  for (int i = 0; i < NH; i++)
+    for (int j = 0; j < NU; j++) {
+      const double v = w[UC(i) + j];
+      uc[i * NU + j] = v < -1.0 ? -1.0 : (v > 1.0 ? 1.0 : v);
+    }
 #if HAS_ASS
   roll(ws, w, p, 0);   /* x_s(u_s): the reference of the check */
   assess_core(ws, p, uc, ws->xs, w + NUU, UPREV(p), bnd, alpha, x, out);
@@ -293,6 +298,7 @@ EXPORT int PFX(steady)(gk_ws *ws, const double *us, const double *x0, double *xs
 
 EXPORT void PFX(dims)(long *out) {
   out[0] = NX; out[1] = NU; out[2] = NH; out[3] = NQ; out[4] = NW; out[5] = NG; out[6] = NP;
+  out[7] = NM;
 }
 
 EXPORT int PFX(n_assess_rows)(void) { return NL; }

@@ -25,7 +25,8 @@ static double sq_now(void) {
 
 /* The gradient of the Lagrangian f + lam_g' g + lam_x' w at w (its rollout cached, level >= 0)
  * by one adjoint sweep: mu_N = dL/dx_N, mu_i = 2 Q (x_i - x_bar) + D'lam_i + A_i' mu_{i+1},
- * dL/du_i = B_i' mu_{i+1} + 2 R (u_i - u_bar) + lam_x (+ the input-rate term's gradient when
+ * dL/du_i = B_i' mu_{i+1} + 2 R (u_i - u_bar) + lam_x (summed into u_s's over the tail of a
+ * control horizon; + the input-rate term's gradient when
  * HAS_DU, du_gradient) (adjoint_local and stage_vjp, as the
  * contracted Hessian's adjoints) -- O(N n^2), no sensitivities: what the
  * convergence test needs at an iterate whose Jacobian the SQP may never use. Same value as
@@ -41,15 +42,19 @@ HOT static void lagrangian_gradient(const gk_ws *ws, const double *w, const doub
     tg += lg[r0 + NX + k] - lg[r0 + k];
   }
   gl[IT] = tg + lam_x[IT];
+  for (int c = NUU; c < NUA; c++) gl[c] = 0.0;   /* u_s: the tail's B_i' mu_{i+1}, then 1b */
   for (int i = NH - 1; i >= 0; i--) {   /* mun = mu_{i+1} */
     if (i >= 1) adjoint_local(ws, i, xb, 1.0, lg + (i - 1) * NQ, mu);
     else memset(mu, 0, sizeof mu);      /* x_0 = x_hat: its adjoint is not needed */
     stage_vjp(ws, i, mun, mu, gu);
-    for (int c = 0; c < NU; c++) {
-      double s = 0.0;
-      for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * RW[j * NU + c]);
-      gl[i * NU + c] = gu[c] + s + lam_x[i * NU + c];
-    }
+    if (i < NM)
+      for (int c = 0; c < NU; c++) {
+        double s = 0.0;
+        for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * RW[j * NU + c]);
+        gl[i * NU + c] = gu[c] + s + lam_x[i * NU + c];
+      }
+    else   /* the tail of a control horizon: u_i = u_s */
+      for (int c = 0; c < NU; c++) gl[NUU + c] += gu[c];
     memcpy(mun, mu, sizeof mu);
   }
 #if HAS_DU

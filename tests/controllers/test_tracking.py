@@ -10,6 +10,7 @@ import pytest
 
 from controllers import certificates as certs
 from controllers.equilibrium import equilibrium, jacobians
+from controllers.errors import DesignError
 from controllers.fhocp_tracking import TrackingFHOCP, steady_output_bounds
 from controllers.gru import output, step
 from controllers.model import DEFAULT_MODEL, GRUModel
@@ -26,11 +27,11 @@ def _fhocp(model: GRUModel, N: int = 6, du: float = 0.1, **options: object) -> T
 
 def _point(fh: TrackingFHOCP, seed: int) -> tuple[np.ndarray, np.ndarray]:
     rng = np.random.default_rng(seed)
-    n, m, N = fh.n, fh.m, fh.N
+    n, m = fh.n, fh.m
     us = rng.uniform(-0.5, 0.5, m)
     xs, _, ok = steady_state(fh.params, us, np.zeros(n))
     assert ok
-    wv = np.concatenate([rng.uniform(-1, 1, N * m), us + 0.01, [0.03]])
+    wv = np.concatenate([rng.uniform(-1, 1, fh.control_horizon * m), us + 0.01, [0.03]])
     pv = np.concatenate([xs + rng.normal(0, 0.05, n), xs + rng.normal(0, 1e-3, n),
                          rng.uniform(-0.5, 0.5, fh.npar - 2 * n)])
     return wv, pv
@@ -52,9 +53,11 @@ def test_the_steady_state_is_the_fixed_point_and_its_derivative_the_implicit_one
     assert np.max(np.abs(np.linalg.eigvals(A))) < 1
 
 
-@pytest.mark.parametrize("du", [0.0, 0.1])
-def test_the_numpy_derivatives_are_exact(du: float) -> None:
-    fh = _fhocp(random_gru_model(4, n=8), du=du)
+@pytest.mark.parametrize(("du", "M"), [(0.0, None), (0.1, None), (0.1, 3), (0.0, 1)])
+def test_the_numpy_derivatives_are_exact(du: float, M: int | None) -> None:
+    """Against central differences, with every input free and with a control horizon M
+    (the tail held at u_s: the chain rule through the expanded vector)."""
+    fh = _fhocp(random_gru_model(4, n=8), du=du, control_horizon=M)
     nlp = fh.numpy_nlp()
     wv, pv = _point(fh, 1)
     lg = np.random.default_rng(2).normal(0, 1, fh.ng)
@@ -77,10 +80,19 @@ def test_the_numpy_derivatives_are_exact(du: float) -> None:
         assert np.max(np.abs(Hfd - H[:, i])) < 1e-5 * max(1.0, np.max(np.abs(H)))
 
 
-@pytest.mark.parametrize(("m", "p", "du"), [(2, 2, 0.1), (1, 1, 0.0), (3, 2, 0.1)])
-def test_the_compiled_kernel_agrees_with_the_numpy_twin(m: int, p: int, du: float) -> None:
-    fh = _fhocp(random_gru_model(5, n=6, m=m, p=p), du=du).setup()
+@pytest.mark.parametrize(("m", "p", "du", "M"), [(2, 2, 0.1, None), (1, 1, 0.0, None),
+                                                  (3, 2, 0.1, None), (2, 2, 0.1, 3),
+                                                  (1, 1, 0.0, 1), (3, 2, 0.1, 5)])
+@pytest.mark.parametrize("mode", ["w", "backward"])
+def test_the_compiled_kernel_agrees_with_the_numpy_twin(m: int, p: int, du: float,
+                                                         M: int | None, mode: str,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """f, ∇f, g, ∂g/∂w and the clipped Hessian, in both Hessian modes a control horizon
+    runs in (W-mode and backward condensing), the tail of u_s's included."""
+    monkeypatch.setenv("GRU_MPC_KERNEL_MODE", mode)
+    fh = _fhocp(random_gru_model(5, n=6, m=m, p=p), du=du, control_horizon=M).setup()
     assert fh.kernel is not None, fh.kernel_error
+    assert fh.control_horizon == fh.kernel.kernel.M
     assert fh.numpy_nlp().self_test(fh.kernel, fh.sqp_options["hessian_eigen_clip"]) < 1e-9
 
 
@@ -146,13 +158,16 @@ def test_steady_output_bounds_are_the_alpha_c_level_set() -> None:
     assert np.all(cert.L @ y <= rhs) == (cert.alpha(y) >= 0.05)
 
 
-@pytest.mark.parametrize(("m", "p"), [(1, 1), (3, 2)])
-def test_the_law_reaches_a_reachable_setpoint_on_any_plant_shape(m: int, p: int) -> None:
-    """SISO and 3 inputs × 2 outputs (random δISS GRUs as their own plants): a set-point that
-    is a steady output (of u = 0.3) is reached, with no fallback after the first step."""
+@pytest.mark.parametrize(("m", "p", "M"), [(1, 1, None), (3, 2, None), (2, 2, 4), (1, 1, 1)])
+def test_the_law_reaches_a_reachable_setpoint_on_any_plant_shape(m: int, p: int,
+                                                                  M: int | None) -> None:
+    """SISO, 2×2 and 3 inputs × 2 outputs (random δISS GRUs as their own plants), every
+    input free or a control horizon M: a set-point that is a steady output (of u = 0.3) is
+    reached, with no fallback after the first step; under a control horizon every plan
+    holds u_s from stage M on (the shifted plan stays a candidate of the same form)."""
     model = random_gru_model(7, n=6, m=m, p=p)
     P = model.params
-    fh = _fhocp(model, N=10, du=0.1).setup()
+    fh = _fhocp(model, N=10, du=0.1, control_horizon=M).setup()
     assert fh.kernel is not None, fh.kernel_error
     target, _, _ = steady_state(P, np.full(m, 0.3), np.zeros(6))
     y_ref = output(P, target)
@@ -165,8 +180,31 @@ def test_the_law_reaches_a_reachable_setpoint_on_any_plant_shape(m: int, p: int)
         rec = law.make_step(x, 0.0, y_ref)
         fallbacks.append(rec.fallback)
         x = step(P, x, rec.u)
+        assert law.plan is not None and law.u_s is not None
+        assert np.array_equal(law.plan[fh.control_horizon:],
+                              np.tile(law.u_s, (fh.N - fh.control_horizon, 1)))
     assert not any(fallbacks[1:])
     assert np.max(np.abs(output(P, x) - y_ref)) < 1e-4
+
+
+def test_a_control_horizon_is_the_full_problem_restricted_to_a_held_tail() -> None:
+    """The layout (u_i = u_s for i ≥ M), the warm start's shift (the last free input takes
+    u_s's value) and bad values."""
+    fh = _fhocp(random_gru_model(4, n=8), N=6, control_horizon=2)
+    m = fh.m
+    assert fh.nw == 2 * m + m + 1 and fh.it == 3 * m
+    assert fh.iu[:2].ravel().tolist() == list(range(2 * m))
+    assert all(row.tolist() == fh.ius.tolist() for row in fh.iu[2:])
+    w = np.arange(fh.nw, dtype=float)
+    shifted = w[fh._perm_x]
+    assert shifted[fh.iu[0]].tolist() == w[fh.iu[1]].tolist()   # u_0 <- u_1
+    assert shifted[fh.iu[1]].tolist() == w[fh.ius].tolist()     # u_1 <- u_2 = u_s
+    assert shifted[fh.ius].tolist() == w[fh.ius].tolist()
+    full = _fhocp(random_gru_model(4, n=8), N=6)
+    assert full.control_horizon == 6 and full.nw == 6 * m + m + 1
+    for bad in (0, 7, 2.0, True):
+        with pytest.raises(DesignError, match=r"control_horizon must be an integer in 1\.\.N"):
+            _fhocp(random_gru_model(4, n=8), N=6, control_horizon=bad)
 
 
 def test_the_relative_dual_test_ends_converged_solves_as_converged() -> None:

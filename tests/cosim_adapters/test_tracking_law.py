@@ -27,6 +27,11 @@ ROOT = Path(__file__).resolve().parents[2]
     ({"R": {"qc": 1.0}}, "option R: 'qc' is not one of qa, qb"),
     ({"Q": [[1.0, 0.0]]}, "option Q: expected a number or a 20x20 matrix, got shape (1, 2)"),
     ({"law": "tracking", "offset_filter": 1.5}, "offset_filter=1.5: expected a number in"),
+    ({"control_horizon": 10}, "option control_horizon=10 belongs to law=\"tracking\""),
+    ({"law": "tracking", "control_horizon": 0}, "control_horizon=0: expected a positive"),
+    ({"law": "tracking", "control_horizon": 2.5}, "control_horizon=2.5: expected a positive"),
+    ({"law": "tracking", "N": 20, "control_horizon": 30},
+     "option control_horizon=30: at most the horizon N = 20"),
 ])
 def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
     with pytest.raises(CosimError) as err:
@@ -48,6 +53,10 @@ def test_defaults_and_summary() -> None:
     assert s["du_weight"] == {"qa": 0.05, "qb": 0.05} and s["gain_scale"] == 0.0
     assert s["alpha_c"] == pytest.approx(RobustMPCController(N=80).cert.alpha_min())
     assert c.fhocp.sqp_options["max_iter"] == 40
+    assert s["control_horizon"] == c.fhocp.control_horizon == 20       # ⌈N / 4⌉
+    assert c.fhocp.nw == 20 * 2 + 2 + 1
+    assert RobustMPCController(law="tracking", N=10).fhocp.control_horizon == 3
+    assert RobustMPCController(law="tracking", control_horizon=80).fhocp.nw == 80 * 2 + 2 + 1
     assert RobustMPCController(law="tracking", max_iter=7).fhocp.sqp_options["max_iter"] == 7
     assert RobustMPCController().fhocp.sqp_options["max_iter"] == 15
     assert RobustMPCController().summary()["law"] == "paper"
