@@ -256,6 +256,7 @@ class FHOCP:
                 self._buffer = self._solver.buffers()
                 return
             sqp.pop("tol_du_relative", None)   # the kernel's own test: sqpmethod's is absolute
+            sqp.pop("reuse_step", None)        # the kernel's own: sqpmethod has no reuse
             opts.update(sqp)
             with quiet_stdout():  # qpOASES prints its licence banner on construction
                 self._solver = ca.nlpsol(name, "sqpmethod", nlp, opts)

@@ -36,8 +36,9 @@ import numpy as np
 from controllers import gru
 from controllers.errors import DesignError
 from controllers.fhocp import FHOCP
-from controllers.fhocp_result import FHOCPResult
+from controllers.fhocp_result import FHOCPResult, set_residuals
 from controllers.input_rate import du_cost
+from controllers.kernel_sqp import KernelSQP
 from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
 from controllers.steady_state import steady_state
 
@@ -58,7 +59,11 @@ LINE_SEARCH = {"max_iter_ls": 10, "beta": 0.5}
 #: 10⁻¹⁶): such solves ended as ``Search_Direction_Becomes_Too_Small`` after 3–4 idle
 #: iterations (18 of 401 steps of a set-point step pair, 1.1 % of the steps of the
 #: plant-uncertainty campaign), reported as failures.
-SQP_OVERRIDES = {**LINE_SEARCH, "tol_du_relative": True}
+#: ``reuse_step`` = 0.1 (the kernel's derivative reuse, :class:`controllers.kernel_abi.
+#: SqpOptions`; docs: design/tracking.md, "The step time"): the median solve's second
+#: iteration keeps the first's Jacobian and Hessian, the step 3.0 → 1.5 ms with the same
+#: answers to the stopping test's precision.
+SQP_OVERRIDES = {**LINE_SEARCH, "tol_du_relative": True, "reuse_step": 0.1}
 #: The tracking law's defaults (docs: design/tracking.md, "Recommendation", "The horizon and
 #: the iteration cap"): horizon, offset weight T, Δu weight S, the disturbance filter's β
 #: (normalised units) and the SQP's iteration cap. T = 10⁴ rather than the study's 10⁵
@@ -162,13 +167,14 @@ class TrackingFHOCP(FHOCP):
         self.it = M * m + m
         self.ng = (N - 1) * qr + 2 * n + qr
         self.npar = 2 * n + self.p + (m if self.has_du else 0)
-        rhs = self.ys_bounds - self.Lbo
+        rhs = self._ys_rhs = self.ys_bounds - self.Lbo   # Y_s: L U_o x_s <= rhs
         self._ys_ub = rhs[self.pair_up]
         self._ys_lb = np.where(self.pair_lo >= 0, -rhs[np.maximum(self.pair_lo, 0)], -np.inf)
         #: largest move of u_s per step (normalised; None: none), around the candidate's
         #: (``us_centre`` of :meth:`solve_tracking`)
         self.us_rate: float | None = US_RATE
         self._g_for: np.ndarray | None = None   # the bounds _lbg, _ubg were written for
+        self._g_rows: tuple[np.ndarray, ...] | None = None   # _constraint_rows
         self._static_layout()
 
     @classmethod
@@ -285,8 +291,11 @@ class TrackingFHOCP(FHOCP):
         t0 = time.perf_counter()
         x_hat = np.asarray(x_hat, dtype=float).reshape(self.n)
         r = np.asarray(r, dtype=float).reshape(self.p)
-        us_init = np.clip(np.asarray(us_init, dtype=float).reshape(self.m), -1.0, 1.0)
-        u_init = np.clip(np.asarray(u_init, dtype=float).reshape(self.N, self.m), -1.0, 1.0)
+        # np.minimum/maximum: np.clip's dispatch costs ~10 µs a call on this hot path
+        us_init = np.minimum(np.maximum(np.asarray(us_init, dtype=float).reshape(self.m),
+                                        -1.0), 1.0)
+        u_init = np.minimum(np.maximum(np.asarray(u_init, dtype=float).reshape(
+            self.N, self.m), -1.0), 1.0)
         x_s0 = np.asarray(x_s0, dtype=float).reshape(self.n)
         up = us_init if u_prev is None else np.asarray(u_prev, dtype=float).reshape(self.m)
         # the i = 0 row involves x̂ only; an accepted answer may exceed a row by up to
@@ -306,32 +315,41 @@ class TrackingFHOCP(FHOCP):
             c = us_init if us_centre is None else np.asarray(us_centre, dtype=float)
             ins["lbx"][self.ius] = np.maximum(c - self.us_rate, -1.0)
             ins["ubx"][self.ius] = np.minimum(c + self.us_rate, 1.0)
-        x = self.simulate(x_hat, u_init)
         w0 = ins["x0"]
         w0[self.iu.ravel()] = u_init.ravel()
-        w0[self.ius] = np.clip(us_init, ins["lbx"][self.ius], ins["ubx"][self.ius])
-        w0[self.it] = min(max(float(np.max(np.abs(x[-1] - x_s0))), 1e-6), self.alpha_c)
+        w0[self.ius] = np.minimum(np.maximum(us_init, ins["lbx"][self.ius]), ins["ubx"][self.ius])
+        if self.kernel is not None:   # the rollout stays cached for the solve
+            gap = self.kernel.terminal_gap(w0, pv)
+        else:
+            gap = float(np.max(np.abs(self.simulate(x_hat, u_init)[-1] - x_s0)))
+        w0[self.it] = min(max(gap, 1e-6), self.alpha_c)
         if warm and self._warm is not None and self.warm_duals:
             ins["lam_x0"][:] = self._warm["lam_x"][self._perm_x]
             ins["lam_g0"][:] = self._warm["lam_g"][self._perm_g]
         else:
             ins["lam_x0"][:] = 0.0
             ins["lam_g0"][:] = 0.0
-        from controllers.casadi_callbacks import quiet_stdout
+        if isinstance(buf, KernelSQP):
+            trigger()   # no casadi, nothing printed
+        else:
+            from controllers.casadi_callbacks import quiet_stdout
 
-        with quiet_stdout():
-            trigger()
+            with quiet_stdout():
+                trigger()
         try:
             stats = buf.stats()
         except RuntimeError:
             stats = {"return_status": "Solver_Stats_Unavailable", "success": False}
         wopt = outs["x"].copy()
-        res = self.check(x_hat, wopt[self.iu], wopt[self.ius], e_o, r, x_s0, up,
-                         str(stats.get("return_status", "unknown")))
+        status = str(stats.get("return_status", "unknown"))
+        if self.kernel is not None:
+            res = self._check_answer(wopt, pv, e_o, status)
+        else:
+            res = self.check(x_hat, wopt[self.iu], wopt[self.ius], e_o, r, x_s0, up, status)
+            res.defect = float(np.max(np.abs(self._xtraj(wopt, pv) - res.x)))
         res.solve_time = time.perf_counter() - t0
         res.iterations = int(stats.get("iter_count", 0))
         res.lam_x, res.lam_g = outs["lam_x"].copy(), outs["lam_g"].copy()
-        res.defect = float(np.max(np.abs(self._xtraj(wopt, pv) - res.x)))
         ok_status = bool(stats.get("success", False))
         res.feasible = bool(np.all(np.isfinite(wopt)) and res.constraint_violation <= FEAS_TOL
                             and res.terminal_violation <= FEAS_TOL
@@ -345,27 +363,62 @@ class TrackingFHOCP(FHOCP):
             self._warm = {"w": wopt, "lam_x": res.lam_x, "lam_g": res.lam_g}
         return res
 
+    def _check_answer(self, w: np.ndarray, p: np.ndarray, e_o: float, status: str
+                      ) -> FHOCPResult:
+        """:meth:`check` of the solver's answer ``w`` in one compiled call (the kernel's
+        plain rollout and a fixed-point test of its ``x_s``, apart from the solver's
+        derivatives: :meth:`controllers.kernel_lib.Workspace.assess_w`), plus the defect
+        against the solver's own trajectory."""
+        u, x, out = self.kernel.assess_w(w, p, self.tightened_bounds(e_o), self.alpha_c)
+        x_s = out[8:]
+        res = FHOCPResult(u=u, x=x, cost=float(out[0]), status=status, success=False,
+                          t=float(out[4]), defect=float(out[6]))
+        res.u_s, res.x_s = np.minimum(np.maximum(w[self.ius], -1.0), 1.0), x_s
+        if not float(out[7]) <= XS_CHECK_TOL:   # NaN: Newton did not converge
+            res.x_s = np.full(self.n, np.nan)
+            res.constraint_violation = res.terminal_violation = float("inf")
+            return res
+        set_residuals(res, out, self.alpha_c)
+        res.constraint_violation = max(res.constraint_violation,
+                                       float(np.max(self.LUo @ x_s - self._ys_rhs)))
+        return res
+
     def _write_bounds(self, ins: dict[str, np.ndarray], e_o: float) -> None:
         """Variable and constraint bounds of one solve (the tightened rows for ``ê_o``)."""
         ins["lbx"][:] = self._lbx
         ins["ubx"][:] = self._ubx
         bounds = self.tightened_bounds(e_o)
         if self._g_for is not bounds:
-            N, qr, n = self.N, self.qr, self.n
-            flat = bounds[1:]
-            lbg = np.full(self.ng, -np.inf)
-            ubg = np.full(self.ng, np.inf)
-            ubg[: (N - 1) * qr] = flat[:, self.pair_up].ravel()
-            lo = np.where(self.pair_lo >= 0, -flat[:, np.maximum(self.pair_lo, 0)], -np.inf)
-            lbg[: (N - 1) * qr] = lo.ravel()
-            r0 = (N - 1) * qr
-            ubg[r0:r0 + n] = 0.0
-            lbg[r0 + n:r0 + 2 * n] = 0.0
-            lbg[r0 + 2 * n:] = self._ys_lb
-            ubg[r0 + 2 * n:] = self._ys_ub
-            self._g_for, self._lbg, self._ubg = bounds, lbg, ubg
+            if self._g_rows is None:
+                self._g_rows = self._constraint_rows()
+            up_pos, up_idx, lo_pos, lo_idx = self._g_rows
+            flat = bounds.ravel()
+            self._ubg[up_pos] = flat[up_idx]
+            self._lbg[lo_pos] = -flat[lo_idx]
+            self._g_for = bounds
         ins["lbg"][:] = self._lbg
         ins["ubg"][:] = self._ubg
+
+    def _constraint_rows(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """The static constraint bounds (terminal and ``Y_s`` rows, into ``_lbg``/``_ubg``)
+        and where the tightened bounds (N×q, rows i ≥ 1) go: ``(up_pos, up_idx, lo_pos,
+        lo_idx)``, ``ubg[up_pos] = bounds.flat[up_idx]``, ``lbg[lo_pos] = −bounds.flat[
+        lo_idx]`` (the output rows' paired bounds; unpaired lower bounds stay −∞)."""
+        N, qr, n, q = self.N, self.qr, self.n, self.q
+        lbg = np.full(self.ng, -np.inf)
+        ubg = np.full(self.ng, np.inf)
+        r0 = (N - 1) * qr
+        ubg[r0:r0 + n] = 0.0
+        lbg[r0 + n:r0 + 2 * n] = 0.0
+        lbg[r0 + 2 * n:] = self._ys_lb
+        ubg[r0 + 2 * n:] = self._ys_ub
+        self._lbg, self._ubg = lbg, ubg
+        stage = np.arange(1, N)[:, None] * q
+        up_idx = (stage + self.pair_up[None, :]).ravel()
+        has_lo = np.broadcast_to(self.pair_lo >= 0, (N - 1, qr)).ravel()
+        lo_idx = (stage + np.maximum(self.pair_lo, 0)[None, :]).ravel()
+        pos = np.arange(r0)
+        return pos, up_idx, pos[has_lo], lo_idx[has_lo]
 
     def _static_layout(self) -> None:
         """The variable bounds and the permutations that shift ``w`` and the multipliers by

@@ -40,13 +40,18 @@ class SqpOptions(ctypes.Structure):
         1: the dual test is ``‖∇L‖∞ < tol_du (1 + ‖(λ_g, λ_x)‖∞)``, relative to the
         multipliers' size (ours: rounding in ``∇L`` keeps an absolute 10⁻⁶ out of reach when
         the multipliers reach 10⁵); 0: ``sqpmethod``'s absolute test.
+    reuse_step : float
+        Ours (0: off, ``sqpmethod``'s iteration): an iteration keeps the last Jacobian and
+        Hessian, with the adjoint-corrected gradient ``∇L − J_dᵀλ_g − λ_x`` for the QP, while
+        the iterates have moved at most this far (∞-norm, summed over the steps) since they
+        were evaluated (``controllers/kernel/6_sqp.c``, ``iterate``).
     """
 
     _fields_ = [("tol_pr", ctypes.c_double), ("tol_du", ctypes.c_double),
                 ("max_iter", ctypes.c_int), ("max_iter_ls", ctypes.c_int),
                 ("min_step_size", ctypes.c_double), ("c1", ctypes.c_double),
                 ("beta", ctypes.c_double), ("time_budget", ctypes.c_double),
-                ("tol_du_relative", ctypes.c_int)]
+                ("tol_du_relative", ctypes.c_int), ("reuse_step", ctypes.c_double)]
 
 
 class SqpInfo(ctypes.Structure):
@@ -60,13 +65,16 @@ class SqpInfo(ctypes.Structure):
     t_qp, t_hessian, t_derivatives, t_line_search : float
         Seconds in the QPs, the Hessians (eigenvalue clipping included), f/∇f/g/∂g (the
         stopping tests' and the iterations') and the line searches' f/g.
+    derivative_reuses : int
+        Iterations that kept the Jacobian and the Hessian (``reuse_step``).
     """
 
     _fields_ = [("status", ctypes.c_int), ("iterations", ctypes.c_int),
                 ("qp_working_set_changes", ctypes.c_int),
                 ("line_search_failures", ctypes.c_int),
                 ("t_qp", ctypes.c_double), ("t_hessian", ctypes.c_double),
-                ("t_derivatives", ctypes.c_double), ("t_line_search", ctypes.c_double)]
+                ("t_derivatives", ctypes.c_double), ("t_line_search", ctypes.c_double),
+                ("derivative_reuses", ctypes.c_int)]
 
 
 class SqpStatus(IntEnum):

@@ -32,7 +32,7 @@ _VP, _CD, _CI = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
 _WS_CALLS: dict[str, tuple[list[Any], Any]] = {
     "simulate": ([_VP] * 3, None), "xtraj": ([_VP] * 3, None),
     "assess": ([_VP] * 6 + [_CD, _VP, _VP], None),
-    "assess_w": ([_VP, _VP, _VP, _CD, _VP, _VP, _VP], None),
+    "assess_w": ([_VP, _VP, _VP, _CD, _VP, _VP, _VP], None), "terminal_gap": ([_VP] * 2, _CD),
     "sqp": ([_VP] * 12, _CI), "qp": ([_VP] * 11, _CI), "grad_l": ([_VP] * 5, None),
     "counters": ([_VP], None), "invalidate": ([], None), "clip": ([_VP], _CI)}
 
@@ -120,7 +120,8 @@ class Workspace:
         n, m, N = kernel.n, kernel.m, kernel.N
         self._buf = {name: np.zeros(shape) for name, shape in (
             ("x0", n), ("u", (N, m)), ("w", kernel.nw), ("p", kernel.npar), ("xb", n),
-            ("ub", m), ("up", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))), ("out", 7),
+            ("ub", m), ("up", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))),
+            ("out", 8 + n),
             ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", m), ("xe", n), ("ue", m))}
         self._addr = {name: int(a.ctypes.data) for name, a in self._buf.items()}
         self._c = {name: kernel.c[name] for name in _WS_CALLS}
@@ -198,7 +199,11 @@ class Workspace:
                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """:meth:`assess` of the solver's answer ``w`` at ``p = (x̂, x̄, ū[, u_{−1}])``:
         ``(u, x, out)`` with ``u = clip(w_u, −1, 1)`` and ``out[6]`` the defect
-        ``max |x_solver − x|`` against the solver's trajectory at ``(w, p)``."""
+        ``max |x_solver − x|`` against the solver's trajectory at ``(w, p)``. A tracking
+        FHOCP's kernel (``p = (x̂, x_s0, r[, u_{−1}])``) checks against ``x_s(u_s)`` of the
+        clipped ``u_s``: ``out[0]`` is :meth:`~controllers.fhocp_tracking.TrackingFHOCP.
+        tracking_cost`, ``out[7]`` the fixed-point residual ``‖f(x_s, u_s) − x_s‖∞`` (NaN
+        when Newton failed) and ``out[8:]`` is ``x_s``; ``out[7] = 0`` otherwise."""
         b, a = self._buf, self._addr
         b["w"][:] = w
         b["p"][:] = p
@@ -206,6 +211,15 @@ class Workspace:
         self._c["assess_w"](self._ws, a["w"], a["p"], a["bnd"], float(alpha), a["uc"], a["x"],
                             a["out"])
         return b["uc"].copy(), b["x"].copy(), b["out"].copy()
+
+    def terminal_gap(self, w: np.ndarray, p: np.ndarray) -> float:
+        """``‖x_N − x_ref‖∞`` of the rollout at ``(w, p)`` (``x_ref``: ``x̄``, or ``x_s(u_s)``
+        for a tracking FHOCP): the smallest feasible terminal slack. The rollout stays cached
+        for the next solve at the same inputs (the slack is not part of its key)."""
+        b, a = self._buf, self._addr
+        b["w"][:] = w
+        b["p"][:] = p
+        return float(self._c["terminal_gap"](self._ws, a["w"], a["p"]))
 
     def eq_newton(self, y: np.ndarray, x0: np.ndarray, u0: np.ndarray, max_iter: int = 20,
                   tol: float = 1e-11) -> tuple[np.ndarray, np.ndarray] | None:

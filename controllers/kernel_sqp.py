@@ -14,7 +14,8 @@ sensitivities and the Jacobian are computed only when another iteration follows.
 the same named argument and result arrays (``x0, p, lbx, ubx, lbg, ubg, lam_x0, lam_g0`` →
 ``x, f, g, lam_x, lam_g, lam_p``), a trigger, and ``stats()`` with casadi's keys
 (``return_status``, ``success``, ``iter_count`` and the cumulative ``t_wall_*`` timers of
-``sqpmethod``), so that the answer check and the warm start are unchanged.
+``sqpmethod``, plus ``derivative_reuses``), so that the answer check and the warm start are
+unchanged.
 """
 
 from __future__ import annotations
@@ -50,8 +51,8 @@ class KernelSQP:
         and SQP loop).
     options : mapping
         ``tol_pr``, ``tol_du``, ``max_iter`` and optionally ``min_step_size``, ``c1``,
-        ``beta``, ``max_iter_ls`` (casadi ``sqpmethod``'s meanings and defaults) and
-        ``tol_du_relative`` (ours, off by default:
+        ``beta``, ``max_iter_ls`` (casadi ``sqpmethod``'s meanings and defaults),
+        ``tol_du_relative`` and ``reuse_step`` (ours, off by default:
         :class:`controllers.kernel_abi.SqpOptions`).
     time_budget : float, optional
         Wall-time budget of one solve [s] (status ``"User_Requested_Stop"`` when it runs out
@@ -60,8 +61,8 @@ class KernelSQP:
 
     def __init__(self, workspace: Any, options: Mapping[str, Any],
                  time_budget: float | None = None) -> None:
-        known = {"tol_pr", "tol_du", "tol_du_relative", "max_iter", *LINE_SEARCH_DEFAULTS,
-                 *IGNORED}
+        known = {"tol_pr", "tol_du", "tol_du_relative", "reuse_step", "max_iter",
+                 *LINE_SEARCH_DEFAULTS, *IGNORED}
         unknown = sorted(set(options) - known)
         if unknown:
             raise DesignError(f"sqp_options {unknown[0]!r} is not supported by the kernel's "
@@ -80,6 +81,7 @@ class KernelSQP:
             min_step_size=float(opts["min_step_size"]), c1=float(opts["c1"]),
             beta=float(opts["beta"]),
             tol_du_relative=int(bool(opts.get("tol_du_relative", False))),
+            reuse_step=float(opts.get("reuse_step", 0.0)),
             time_budget=np.inf if time_budget is None else float(time_budget))
         self.info = SqpInfo()
         self._timers = np.zeros(4)    # QP, Hessian, f/g/derivatives, line search [s]
@@ -112,6 +114,7 @@ class KernelSQP:
             "iter_count": info.iterations,
             "qp_working_set_changes": info.qp_working_set_changes,
             "line_search_failures": info.line_search_failures,
+            "derivative_reuses": info.derivative_reuses,
             "t_wall_QP": t[0], "t_wall_nlp_hess_l": t[1], "t_wall_nlp_jac_fg": t[2],
             "t_wall_nlp_fg": t[3]}
 

@@ -42,7 +42,8 @@ the previous step; :mod:`controllers.input_rate`) to the FHOCP's cost, for smoot
 
 Option ``law="tracking"`` replaces the paper's law by the tracking law of
 :mod:`cosim_adapters.tracking` (artificial steady state, offset-free, no governor, no
-rejection; docs: design/tracking.md): the set-point handling below is then not used.
+rejection; docs: design/tracking.md): the paper law's set-point handling below
+(:mod:`cosim_adapters.paper_law`) is then not used.
 
 Option outside the theorem (off by default): ``offset_free=True`` shifts the model set-point
 by a filtered estimate ``d̂`` of the output mismatch ``y − ŷ`` (``ȳ_model = ȳ − d̂``), to remove
@@ -58,10 +59,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controllers.errors import ControllersError, SetpointError
+from controllers.errors import ControllersError
 from controllers.model import DEFAULT_MODEL
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
+from cosim_adapters.paper_law import update_reference
 from cosim_adapters.tracking import check_law
 
 if TYPE_CHECKING:
@@ -402,7 +404,7 @@ class RobustMPCController(Component):
             rejected = False
             rec, law_diag = tracking_step(self, y, y_ref)
         else:
-            rejected = self._update_reference(y_ref, y, t)
+            rejected = update_reference(self, y_ref, y, t)
             rec = self._paper_law().make_step(self.observer.x_hat, self.observer.e_o,
                                               candidate=self._candidate)
         e_o = self.observer.e_o
@@ -472,88 +474,8 @@ class RobustMPCController(Component):
     def terminate(self) -> None:
         """Nothing to release (the casadi solver is freed with the object)."""
 
-    # -- set-point handling ------------------------------------------------------------
-    def _update_reference(self, y_ref: np.ndarray, y: np.ndarray, t: float) -> bool:
-        """Recompute ``(x̄, ū, α)`` when the set-point changes; ``True`` when rejected."""
-        target = y_ref
-        if self.setpoint_rate is not None and self._y_model is not None:
-            step = self.setpoint_rate / np.abs(self.model.y_scale)
-            base = self._y_model + (self._d_hat if self.offset_free and self._d_hat is not None
-                                    else 0.0)
-            target = base + np.clip(y_ref - base, -step, step)
-        if self.offset_free and self._d_hat is not None:
-            self._d_hat = self._d_hat + self.offset_filter * (
-                y - self.observer.y_hat() - self._d_hat)
-            target = target - self._d_hat
-        tol = 1e-3 if self.offset_free else 1e-12
-        self._lam = 1.0
-        if self._y_model is not None and np.max(np.abs(target - self._y_model)) < tol:
-            return False
-        requested_changed = self._y_ref is None or np.any(y_ref != self._y_ref)
-        if self.governor is not None and self._y_model is not None:
-            return self._govern(target, y_ref, requested_changed, t)
-        try:
-            ref = self.cert.reference(target)
-        except SetpointError as exc:
-            if self._y_model is None:
-                raise CosimError(f"controller {self.name!r} at t={t:g} s: {exc}") from None
-            self._reject(exc, y_ref, requested_changed, t)
-            return True
-        if requested_changed:
-            self.setpoint_changes += 1
-        self._y_ref = y_ref
-        self._y_model = target
-        self._paper_law().set_reference(ref.x_bar, ref.u_bar, ref.alpha)
-        return False
-
+    # -- the paper's law (its set-point handling: cosim_adapters.paper_law) --------------
     def _paper_law(self) -> RobustMPC:
         """The paper's law (its set-point handling runs under ``law="paper"`` only)."""
         assert self.mpc is not None, "the paper law's set-point handling under law=tracking"
         return self.mpc
-
-    def _reject(self, exc: Exception, y_ref: np.ndarray, requested_changed: bool,
-                t: float) -> None:
-        if requested_changed:
-            self.rejections.append(f"t={t:g} s: {exc}")
-        self._y_ref = y_ref
-        self.rejected += 1
-
-    def _govern(self, target: np.ndarray, y_ref: np.ndarray, requested_changed: bool,
-                t: float) -> bool:
-        """Move the FHOCP set-point towards an admissible ``target`` with the governor."""
-        from controllers.equilibrium import describe
-
-        assert self.governor is not None and self._y_model is not None
-        failed = self.cert.failures(target)
-        if failed:
-            self._reject(SetpointError(f"set-point {describe(self.model, target)}: "
-                                       + "; ".join(failed)), y_ref, requested_changed, t)
-            return True
-        if (not requested_changed and self._unreachable is not None
-                and np.array_equal(target, self._unreachable)):
-            self.rejected += 1     # still the unreachable request: refused again, counted
-            return True
-        mpc = self._paper_law()
-        if requested_changed and self.governor.newton(target, mpc.x_bar, mpc.u_bar) is None:
-            try:  # reachable with ‖ū‖∞ ≤ 1? (the multi-start solve decides)
-                self.cert.reference(target)
-            except SetpointError as exc:
-                self._reject(exc, y_ref, requested_changed, t)
-                self._unreachable = np.array(target, dtype=float)
-                return True
-        if requested_changed:
-            self.setpoint_changes += 1
-        self._y_ref = y_ref
-        self.governed_steps += 1
-        last = mpc.records[-1].result.success if mpc.records else None
-        gs = self.governor.govern(self.observer.x_hat, self.observer.e_o, self._y_model,
-                                  mpc.x_bar, mpc.u_bar, target, mpc.plan, last)
-        if gs.lam == 0.0:
-            self._lam = 0.0
-            self.governor_holds += 1
-            return False
-        self._lam = gs.lam
-        self._y_model = gs.y
-        mpc.set_reference(gs.x_bar, gs.u_bar, gs.alpha)
-        self._candidate = gs.candidate
-        return False

@@ -17,15 +17,17 @@ static double sigm(double a) { return 1.0 / (1.0 + exp(-a)); }
  *    20 x 20 x K products. It is its own function with an AVX2 target (not a clone) so
  *    that its 256-bit vectors are never emulated by the portable clone. */
 static inline void gk_gemm_loops(int ta, int m, int n, int k, const double *A, int lda,
-                                 const double *B, int ldb, double *C, int ldc, int acc) {
+                                 const double *B, int ldb, double *C, int ldc, int acc,
+                                 int upper) {
   for (int i = 0; i < m; i++) {
     double *__restrict ci = C + i * ldc;
+    const int j0 = upper ? i : 0;
     if (!acc)
-      for (int j = 0; j < n; j++) ci[j] = 0.0;
+      for (int j = j0; j < n; j++) ci[j] = 0.0;
     for (int p = 0; p < k; p++) {
       const double a = ta ? A[p * lda + i] : A[i * lda + p], *bp = B + p * ldb;
 #pragma GCC ivdep
-      for (int j = 0; j < n; j++) ci[j] += a * bp[j];
+      for (int j = j0; j < n; j++) ci[j] += a * bp[j];
     }
   }
 }
@@ -95,11 +97,11 @@ typedef double gk_v2u __attribute__((vector_size(16), aligned(8)));
   }
 __attribute__((target("arch=x86-64-v3"))) static void gk_gemm_v4(
     int ta, int m, int n, int k, const double *A, int lda, const double *B, int ldb,
-    double *C, int ldc, int acc) {
+    double *C, int ldc, int acc, int upper) {
   int i = 0;
   for (; i + 4 <= m; i += 4) {
     double *C0 = C + i * ldc, *C1 = C0 + ldc, *C2 = C1 + ldc, *C3 = C2 + ldc;
-    int j = 0;
+    int j = upper ? i : 0;
     for (; j + 8 <= n; j += 8) {
       const gk_v4 z = {0, 0, 0, 0};
       gk_v4 c00 = acc ? GK_L4(C0 + j) : z, c01 = acc ? GK_L4(C0 + j + 4) : z;
@@ -131,7 +133,7 @@ __attribute__((target("arch=x86-64-v3"))) static void gk_gemm_v4(
   }
   for (; i < m; i++) {
     double *Ci = C + i * ldc;
-    int j = 0;
+    int j = upper ? i : 0;
     for (; j + 8 <= n; j += 8) {
       const gk_v4 z = {0, 0, 0, 0};
       gk_v4 c0 = acc ? GK_L4(Ci + j) : z, c1 = acc ? GK_L4(Ci + j + 4) : z;
@@ -157,16 +159,31 @@ __attribute__((constructor)) static void gk_cpu_init(void) {
 }
 #endif
 
-static inline void gk_gemm(int ta, int m, int n, int k, const double *A, int lda,
-                           const double *B, int ldb, double *C, int ldc, int acc) {
+static inline void gk_gemm_any(int ta, int m, int n, int k, const double *A, int lda,
+                               const double *B, int ldb, double *C, int ldc, int acc,
+                               int upper) {
   if (m <= 0 || n <= 0) return;
 #ifdef GK_HAVE_V4
   if (gk_v4_ok) {
-    gk_gemm_v4(ta, m, n, k, A, lda, B, ldb, C, ldc, acc);
+    gk_gemm_v4(ta, m, n, k, A, lda, B, ldb, C, ldc, acc, upper);
     return;
   }
 #endif
-  gk_gemm_loops(ta, m, n, k, A, lda, B, ldb, C, ldc, acc);
+  gk_gemm_loops(ta, m, n, k, A, lda, B, ldb, C, ldc, acc, upper);
+}
+
+static inline void gk_gemm(int ta, int m, int n, int k, const double *A, int lda,
+                           const double *B, int ldb, double *C, int ldc, int acc) {
+  gk_gemm_any(ta, m, n, k, A, lda, B, ldb, C, ldc, acc, 0);
+}
+
+/* gk_gemm where only the upper triangle of C (j >= i) is wanted (a symmetric product whose
+ * lower triangle the caller overwrites by mirroring): the entries at j >= i are computed as
+ * by gk_gemm, to the bit (the same sum per entry); of those below, only some within the row
+ * blocks, left unspecified. About half the work of a square product. */
+static inline void gk_gemm_upper(int ta, int m, int n, int k, const double *A, int lda,
+                                 const double *B, int ldb, double *C, int ldc, int acc) {
+  gk_gemm_any(ta, m, n, k, A, lda, B, ldb, C, ldc, acc, 1);
 }
 
 #if defined(GK_BLAS_HESS) && !defined(GK_BLAS)
@@ -376,12 +393,18 @@ static void steady_state(gk_ws *ws, const double *us, const double *x0);   /* 1b
 /* make the workspace's cache valid at (w, p) up to `level` (with HAS_ASS: the artificial
  * steady state x_s(u_s) from Newton's start x_s0 = p + NX too, at level 0) */
 HOT static void roll(gk_ws *ws, const double *w, const double *p, int level) {
-  if (ws->c_level < 0 || memcmp(w, ws->c_w, sizeof ws->c_w) != 0 ||
+  /* keyed by the inputs (u, and u_s with HAS_ASS) and p: the terminal slack t does not enter
+   * the rollout, so setting it (terminal_gap, then the SQP) keeps the cache */
+  if (ws->c_level < 0 || memcmp(w, ws->c_w, NUA * sizeof(double)) != 0 ||
       memcmp(p, ws->c_p, sizeof ws->c_p) != 0) {
     memcpy(ws->c_w, w, sizeof ws->c_w);
     memcpy(ws->c_p, p, sizeof ws->c_p);
+#if NM < NH   /* the tail of a control horizon: u_i = u_s, expanded into uf */
     for (int i = 0; i < NH; i++) memcpy(ws->uf + i * NU, w + UC(i), NU * sizeof(double));
     simulate(p, ws->uf, ws->X, ws->ZG, ws->RG, ws->HG);
+#else         /* u_0 .. u_{N-1} are w's first NUF entries */
+    simulate(p, w, ws->X, ws->ZG, ws->RG, ws->HG);
+#endif
 #if HAS_ASS
     steady_state(ws, w + NUU, p + NX);
 #endif

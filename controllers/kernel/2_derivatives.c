@@ -277,10 +277,10 @@ HOT static void point_hessian(const double *x, const double *z, const double *r,
   rm_gemm(1, 0, NV, NV, NX, JZ, NV, Pz, NV, 1.0, W, NV);
   rm_gemm(1, 0, NV, NV, NX, JR, NV, Pr, NV, 1.0, W, NV);
 #else
-  /* the full products (the lower triangle is overwritten by the mirror below) */
-  gk_gemm(1, NV, NV, NX, jh, NV, Ph, NV, W, NV, 0);
-  gk_gemm(1, NV, NV, NX, JZ, NV, Pz, NV, W, NV, 1);
-  gk_gemm(1, NV, NV, NX, JR, NV, Pr, NV, W, NV, 1);
+  /* the upper triangles (the lower one is overwritten by the mirror below) */
+  gk_gemm_upper(1, NV, NV, NX, jh, NV, Ph, NV, W, NV, 0);
+  gk_gemm_upper(1, NV, NV, NX, JZ, NV, Pz, NV, W, NV, 1);
+  gk_gemm_upper(1, NV, NV, NX, JR, NV, Pr, NV, W, NV, 1);
 #endif
   /* + T + T^T terms: W[a,b] += G[b,a] (b < NX) + G[a,b] (a < NX), upper triangle */
   for (int a = 0; a < NV; a++)
@@ -402,10 +402,10 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
       rm_gemm(0, 0, NX, K, NX, W, NV, Si, NSC, 0.0, Y, NSC);
       rm_gemm(1, 0, K, K, NX, Si, NSC, Y, NSC, 1.0, H, NW);
 #else
-      /* Y = W_xx S_i (NX x K); H[:K, :K] += S_i^T Y (all of it: the lower triangle is
+      /* Y = W_xx S_i (NX x K); H[:K, :K] += S_i^T Y (its upper triangle: the lower one is
        * overwritten by the mirror at the end) */
       gk_gemm(0, NX, K, NX, W, NV, Si, NSC, Y, NSC, 0);
-      gk_gemm(1, K, K, NX, Si, NSC, Y, NSC, H, NW, 1);
+      gk_gemm_upper(1, K, K, NX, Si, NSC, Y, NSC, H, NW, 1);
 #endif
       for (int c = 0; c < K; c++)
         for (int j = 0; j < NU; j++) {
@@ -489,8 +489,8 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
 #ifdef GK_BLAS
     rm_gemm(1, 0, Kc, Kc, 5 * NX, L, NUU, R, NUU, 1.0, H, NW);
 #else
-    /* all of L^T R (the lower triangle is overwritten by the mirror at the end) */
-    gk_gemm(1, Kc, Kc, 5 * NX, L, NUU, R, NUU, H, NW, 1);
+    /* the upper triangle of L^T R (the lower one is overwritten by the mirror at the end) */
+    gk_gemm_upper(1, Kc, Kc, 5 * NX, L, NUU, R, NUU, H, NW, 1);
 #endif
     for (int j1 = 0; j1 < NU; j1++)
       for (int j2 = j1; j2 < NU; j2++) H[(K + j1) * NW + K + j2] += 2.0 * lf * RW[j1 * NU + j2];

@@ -190,7 +190,11 @@ EXPORT void PFX(assess)(gk_ws *ws, const double *xh, const double *u, const doub
 /* The check of the solver's answer w at p = (x_hat, x_bar, u_bar[, u_prev]): u = clip(w_u, -1, 1)
  * into uc (NH x NU: the tail of a control horizon at u_s), assess_core of uc into x and
  * out[0..5], and out[6] the defect max |x_solver - x| against the solver's own trajectory at
- * (w, p) (the cached rollout). */
+ * (w, p) (the cached rollout). With HAS_ASS (the tracking FHOCP, p = (x_hat, x_s0, r[, u_prev]))
+ * the reference is x_s(u_s) of the clipped u_s (Newton from x_s0), out[0] adds the offset
+ * term and the last input's step to u_s (as TrackingFHOCP.tracking_cost), out[7] is the fixed
+ * point residual |f(x_s, u_s) - x_s|inf by a plain GRU step (NaN when Newton failed) and
+ * out[8 .. 8 + NX) is x_s; out[7] = 0 without HAS_ASS. */
 EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const double *bnd,
                           double alpha, double *uc, double *x, double *out) {
   for (int i = 0; i < NH; i++)
@@ -199,10 +203,35 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
       uc[i * NU + j] = v < -1.0 ? -1.0 : (v > 1.0 ? 1.0 : v);
     }
 #if HAS_ASS
-  roll(ws, w, p, 0);   /* x_s(u_s): the reference of the check */
-  assess_core(ws, p, uc, ws->xs, w + NUU, UPREV(p), bnd, alpha, x, out);
+  double wc[NW], xs[NX], z[NX], r[NX], h[NX];
+  for (int c = 0; c < NW; c++) wc[c] = c < NUA ? fmin(fmax(w[c], -1.0), 1.0) : w[c];
+  const double *us = wc + NUU;
+  roll(ws, wc, p, 0);   /* x_s(u_s): the reference of the check */
+  memcpy(xs, ws->xs, sizeof xs);
+  assess_core(ws, p, uc, xs, us, UPREV(p), bnd, alpha, x, out);
+  const double *ry = p + 2 * NX;
+  for (int a = 0; a < NY; a++) {
+    double e = BO[a] - ry[a];
+    for (int k = 0; k < NX; k++) e += UO[a * NX + k] * xs[k];
+    out[0] += (e * TW[a]) * e;
+  }
+#if HAS_DU
+  for (int j = 0; j < NU; j++) {   /* zero with a control horizon: u_{N-1} = u_s */
+    const double d = uc[(NH - 1) * NU + j] - us[j];
+    out[0] += (d * DW[j]) * d;
+  }
+#endif
+  stage_gates(xs, us, 0, 0, z, r, h);
+  double fp = 0.0;
+  for (int k = 0; k < NX; k++) {
+    const double e = fabs(z[k] * xs[k] + (1.0 - z[k]) * h[k] - xs[k]);
+    if (e > fp || e != e) fp = e;
+  }
+  out[7] = fp;
+  memcpy(out + 8, xs, sizeof xs);
 #else
   assess_core(ws, p, uc, XREF(ws, p), UREF(w, p), UPREV(p), bnd, alpha, x, out);
+  out[7] = 0.0;
 #endif
   roll(ws, w, p, 0);
   double d = 0.0;
@@ -211,6 +240,20 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
     if (e > d || e != e) d = e;
   }
   out[6] = d;
+}
+
+/* |x_N - x_ref|inf of the rollout at (w, p) (x_ref: x_bar, or x_s(u_s) with HAS_ASS), the
+ * smallest feasible terminal slack t; the rollout stays cached for the SQP (t is not part of
+ * its key) */
+EXPORT double PFX(terminal_gap)(gk_ws *ws, const double *w, const double *p) {
+  roll(ws, w, p, 0);
+  const double *xN = ws->X + NH * NX, *xb = XREF(ws, p);
+  double d = 0.0;
+  for (int k = 0; k < NX; k++) {
+    const double e = fabs(xN[k] - xb[k]);
+    if (e > d || e != e) d = e;
+  }
+  return d;
 }
 
 /* Equilibrium x = f(x, u), U_o x + b_o = y by Newton's method from (x0, u0), as

@@ -10,6 +10,8 @@
  *         at max_iter iterations, or when |dw|inf <= min_step_size after the first;
  *         grad f, jac g (sensitivities);
  *         H = clip(hess_l(w, lam_g)); QP for (dw, lam+) with the bounds shifted by w, g(w);
+ *         (ours, reuse_step > 0: near the last evaluation the last jac g and H are kept,
+ *         with the adjoint-corrected gradient; iterate() below);
  *         sigma = max(sigma, 1.01 |lam+|inf); Armijo on f + sigma * sum of violations with
  *         slope dw' grad f - sigma * violations, t = 1, beta t, at most max_iter_ls trials
  *         (the last one accepted); lam = (1 - t) lam + t lam+, w += t dw.
@@ -86,6 +88,106 @@ static double sq_viol(const double *w, const double *g, const double *lbx, const
   return r;
 }
 
+/* One SQP iteration at w (its rollout cached at level 0, f = fk, g in sq_gz and grad L in
+ * sq_gl from the stopping tests): the derivatives, the QP for (dw, lam+), the l1-merit line
+ * search, then w, lam_x, lam_g updated in place (and dw in sq_dw); a gk_sqp_status.
+ *
+ * Derivative reuse (opt->reuse_step > 0, ours): while the iterates have moved at most
+ * reuse_step (inf-norm, summed over the steps) since the Jacobian and the Hessian were
+ * evaluated, the iteration keeps them and takes the QP's gradient as
+ * grad L(w, lam) - J_d' lam_g - lam_x = grad f(w) + (J(w) - J_d)' lam_g (the adjoint-corrected
+ * gradient of inexact-Jacobian SQP, Bock et al. 2007): its fixed points are exactly the
+ * KKT points, so the answer meets the same stopping test; near a solution the step costs the
+ * QP and two adjoint sweeps instead of the sensitivities and the Hessian. A reused step must
+ * be taken whole (the line search's first trial); otherwise, or when its QP fails, the
+ * iteration starts again with fresh derivatives. *drift: the steps' sum since the
+ * derivatives (INFINITY: none yet). */
+static int iterate(gk_ws *ws, const double *p, const double *lbx, const double *ubx,
+                   const double *lbg, const double *ubg, double *w, double *lam_x,
+                   double *lam_g, double fk, const gk_sqp_opts *opt, double *sigma,
+                   double *drift, gk_sqp_info *info) {
+  double *sq_gf = ws->sq_gf, *sq_gz = ws->sq_gz, *sq_J = ws->sq_J, *sq_H = ws->sq_H,
+         *sq_lbx = ws->sq_lbx, *sq_ubx = ws->sq_ubx, *sq_lba = ws->sq_lba,
+         *sq_uba = ws->sq_uba, *sq_dw = ws->sq_dw, *sq_lx = ws->sq_lx, *sq_la = ws->sq_la,
+         *sq_wc = ws->sq_wc, *sq_gc = ws->sq_gc;
+  const double c1 = opt->c1, beta = opt->beta;
+  const int max_iter_ls = opt->max_iter_ls;
+  for (int j = 0; j < NW; j++) { sq_lbx[j] = lbx[j] - w[j]; sq_ubx[j] = ubx[j] - w[j]; }
+  for (int r = 0; r < NG; r++) { sq_lba[r] = lbg[r] - sq_gz[r]; sq_uba[r] = ubg[r] - sq_gz[r]; }
+  for (int reuse = opt->reuse_step > 0.0 && *drift <= opt->reuse_step;; reuse = 0) {
+    const double *qlin = sq_gf;
+    double t0 = sq_now();
+    if (reuse) {   /* grad f by an adjoint sweep; the QP's gradient adjoint-corrected */
+      lagrangian_gradient(ws, w, p, ws->sq_zx, ws->sq_zg, sq_gf);
+      for (int j = 0; j < NW; j++)
+        ws->sq_gq[j] = ws->sq_gl[j] - lam_x[j] - gk_dot(sq_J + (size_t)j * NG, lam_g, NG);
+      qlin = ws->sq_gq;
+      info->t_derivatives += sq_now() - t0;
+    } else {       /* grad f and jac g (the sensitivities), the Hessian */
+      roll(ws, w, p, 1);
+      gradient(ws, w, p, sq_gf);
+      jacobian(ws, sq_J);
+      info->t_derivatives += sq_now() - t0;
+      t0 = sq_now();
+      hessian(ws, w, p, 1.0, lam_g, sq_H);
+      clip_hessian(ws, sq_H);
+      info->t_hessian += sq_now() - t0;
+      *drift = 0.0;
+    }
+    t0 = sq_now();
+    int changes = 0;
+    const int qs = qp_solve(ws, sq_H, qlin, sq_J, sq_lbx, sq_ubx, sq_lba, sq_uba, sq_dw, sq_lx,
+                            sq_la, &changes);
+    info->t_qp += sq_now() - t0;
+    info->qp_working_set_changes += changes;
+    if (qs != GK_QP_OPTIMAL) {
+      if (reuse) continue;
+      return qs == GK_QP_INFEASIBLE ? GK_SQP_QP_INFEASIBLE : GK_SQP_QP_FAILED;
+    }
+    /* l1-merit line search (max_iter_ls > 0), then the multipliers and the step */
+    double lmax = 0.0;
+    for (int j = 0; j < NW; j++) lmax = fabs(sq_lx[j]) > lmax ? fabs(sq_lx[j]) : lmax;
+    for (int r = 0; r < NG; r++) lmax = fabs(sq_la[r]) > lmax ? fabs(sq_la[r]) : lmax;
+    *sigma = fmax(*sigma, 1.01 * lmax);
+    const double l1_infeas = sq_viol(w, sq_gz, lbx, ubx, lbg, ubg, 1);
+    double slope = 0.0;
+    for (int j = 0; j < NW; j++) slope += sq_dw[j] * sq_gf[j];
+    const double tl1 = slope - *sigma * l1_infeas, l1 = fk + *sigma * l1_infeas;
+    double t = 1.0;
+    if (max_iter_ls > 0) {
+      t0 = sq_now();
+      int rejected = 0;
+      for (int ls = 1;; ls++) {
+        for (int j = 0; j < NW; j++) sq_wc[j] = w[j] + t * sq_dw[j];
+        roll(ws, sq_wc, p, 0);
+        const double fc = cost(ws, sq_wc, p);
+        constraints(ws, sq_wc, p, sq_gc);
+        const double l1c = fc + *sigma * sq_viol(sq_wc, sq_gc, lbx, ubx, lbg, ubg, 1);
+        if (l1c <= l1 + t * c1 * tl1) break;
+        if (reuse) { rejected = 1; break; }
+        if (ls == max_iter_ls) { info->line_search_failures += 1; break; }
+        t *= beta;
+      }
+      info->t_line_search += sq_now() - t0;
+      if (rejected) continue;
+      for (int j = 0; j < NW; j++) lam_x[j] = (1.0 - t) * lam_x[j] + t * sq_lx[j];
+      for (int r = 0; r < NG; r++) lam_g[r] = (1.0 - t) * lam_g[r] + t * sq_la[r];
+      for (int j = 0; j < NW; j++) sq_dw[j] *= t;
+    } else {
+      memcpy(lam_x, sq_lx, sizeof ws->sq_lx);
+      memcpy(lam_g, sq_la, sizeof ws->sq_la);
+    }
+    double dwn = 0.0;
+    for (int j = 0; j < NW; j++) {
+      w[j] += sq_dw[j];
+      dwn = fmax(dwn, fabs(sq_dw[j]));
+    }
+    *drift += dwn;
+    info->derivative_reuses += reuse;
+    return GK_SQP_SOLVE_SUCCEEDED;
+  }
+}
+
 /* Solve the FHOCP from w (NW), lam_x (NW) and lam_g (NG) (in/out: the initial guess in, the
  * answer out) at parameters p in workspace ws; g (NG) and *f receive the constraints and cost
  * at the answer. opt: the options (gk_sqp_opts: tol_pr, tol_du, max_iter, min_step_size, c1,
@@ -99,16 +201,11 @@ EXPORT int PFX(sqp)(gk_ws *ws, const double *p, const double *lbx, const double 
                     const double *lbg, const double *ubg, double *w, double *lam_x,
                     double *lam_g, double *g, double *f, const gk_sqp_opts *opt,
                     gk_sqp_info *info) {
-  double *sq_gf = ws->sq_gf, *sq_gz = ws->sq_gz, *sq_J = ws->sq_J, *sq_H = ws->sq_H,
-         *sq_gl = ws->sq_gl, *sq_lbx = ws->sq_lbx, *sq_ubx = ws->sq_ubx, *sq_lba = ws->sq_lba,
-         *sq_uba = ws->sq_uba, *sq_dw = ws->sq_dw, *sq_lx = ws->sq_lx, *sq_la = ws->sq_la,
-         *sq_wc = ws->sq_wc, *sq_gc = ws->sq_gc;
-  const double tol_pr = opt->tol_pr, tol_du = opt->tol_du, min_step = opt->min_step_size,
-               c1 = opt->c1, beta = opt->beta;
-  const int max_iter = opt->max_iter, max_iter_ls = opt->max_iter_ls,
-            du_relative = opt->tol_du_relative;
+  double *sq_gz = ws->sq_gz, *sq_gl = ws->sq_gl, *sq_dw = ws->sq_dw;
+  const double tol_pr = opt->tol_pr, tol_du = opt->tol_du, min_step = opt->min_step_size;
+  const int max_iter = opt->max_iter, du_relative = opt->tol_du_relative;
   const double start = sq_now(), budget = opt->time_budget;
-  double sigma = 0.0, fk = 0.0;
+  double sigma = 0.0, fk = 0.0, drift = INFINITY;
   int iter = 0, status = GK_SQP_SOLVE_SUCCEEDED;
   memset(info, 0, sizeof *info);
   memset(sq_dw, 0, sizeof ws->sq_dw);
@@ -137,58 +234,11 @@ EXPORT int PFX(sqp)(gk_ws *ws, const double *p, const double *lbx, const double 
     if (iter >= max_iter) { status = GK_SQP_MAXIMUM_ITERATIONS_EXCEEDED; break; }
     if (iter >= 1 && dwn <= min_step) { status = GK_SQP_SEARCH_DIRECTION_BECOMES_TOO_SMALL; break; }
     if (sq_now() - start > budget) { status = GK_SQP_USER_REQUESTED_STOP; break; }
-    /* another iteration: grad f and jac g (the sensitivities), the Hessian, the QP */
-    t0 = sq_now();
-    roll(ws, w, p, 1);
-    gradient(ws, w, p, sq_gf);
-    jacobian(ws, sq_J);
-    info->t_derivatives += sq_now() - t0;
-    t0 = sq_now();
-    hessian(ws, w, p, 1.0, lam_g, sq_H);
-    clip_hessian(ws, sq_H);
-    info->t_hessian += sq_now() - t0;
-    for (int j = 0; j < NW; j++) { sq_lbx[j] = lbx[j] - w[j]; sq_ubx[j] = ubx[j] - w[j]; }
-    for (int r = 0; r < NG; r++) { sq_lba[r] = lbg[r] - sq_gz[r]; sq_uba[r] = ubg[r] - sq_gz[r]; }
+    /* another iteration: its derivatives, the QP, the line search (iterate) */
     iter++;
-    t0 = sq_now();
-    int changes = 0;
-    const int qs = qp_solve(ws, sq_H, sq_gf, sq_J, sq_lbx, sq_ubx, sq_lba, sq_uba, sq_dw, sq_lx,
-                            sq_la, &changes);
-    info->t_qp += sq_now() - t0;
-    info->qp_working_set_changes += changes;
-    if (qs == GK_QP_INFEASIBLE) { status = GK_SQP_QP_INFEASIBLE; break; }
-    if (qs != GK_QP_OPTIMAL) { status = GK_SQP_QP_FAILED; break; }
-    /* l1-merit line search (max_iter_ls > 0), then the multipliers and the step */
-    double lmax = 0.0;
-    for (int j = 0; j < NW; j++) lmax = fabs(sq_lx[j]) > lmax ? fabs(sq_lx[j]) : lmax;
-    for (int r = 0; r < NG; r++) lmax = fabs(sq_la[r]) > lmax ? fabs(sq_la[r]) : lmax;
-    sigma = fmax(sigma, 1.01 * lmax);
-    const double l1_infeas = sq_viol(w, sq_gz, lbx, ubx, lbg, ubg, 1);
-    double slope = 0.0;
-    for (int j = 0; j < NW; j++) slope += sq_dw[j] * sq_gf[j];
-    const double tl1 = slope - sigma * l1_infeas, l1 = fk + sigma * l1_infeas;
-    double t = 1.0;
-    if (max_iter_ls > 0) {
-      t0 = sq_now();
-      for (int ls = 1;; ls++) {
-        for (int j = 0; j < NW; j++) sq_wc[j] = w[j] + t * sq_dw[j];
-        roll(ws, sq_wc, p, 0);
-        const double fc = cost(ws, sq_wc, p);
-        constraints(ws, sq_wc, p, sq_gc);
-        const double l1c = fc + sigma * sq_viol(sq_wc, sq_gc, lbx, ubx, lbg, ubg, 1);
-        if (l1c <= l1 + t * c1 * tl1) break;
-        if (ls == max_iter_ls) { info->line_search_failures += 1; break; }
-        t *= beta;
-      }
-      info->t_line_search += sq_now() - t0;
-      for (int j = 0; j < NW; j++) lam_x[j] = (1.0 - t) * lam_x[j] + t * sq_lx[j];
-      for (int r = 0; r < NG; r++) lam_g[r] = (1.0 - t) * lam_g[r] + t * sq_la[r];
-      for (int j = 0; j < NW; j++) sq_dw[j] *= t;
-    } else {
-      memcpy(lam_x, sq_lx, sizeof ws->sq_lx);
-      memcpy(lam_g, sq_la, sizeof ws->sq_la);
-    }
-    for (int j = 0; j < NW; j++) w[j] += sq_dw[j];
+    const int st = iterate(ws, p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, fk, opt, &sigma,
+                           &drift, info);
+    if (st != GK_SQP_SOLVE_SUCCEEDED) { status = st; break; }
   }
   memcpy(g, sq_gz, sizeof ws->sq_gz);
   *f = fk;

@@ -166,3 +166,26 @@ def test_kernel_loop_rejects_sqpmethod_options_it_does_not_follow(cert) -> None:
         fh.setup()
     fh = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi", "min_iter": 1}).setup()
     assert not isinstance(fh._solver, KernelSQP)
+
+
+@needs_cc
+def test_derivative_reuse_reaches_the_same_optima(cert) -> None:
+    """``reuse_step`` (ours): iterations that keep the last Jacobian and Hessian and take the
+    adjoint-corrected gradient stop at the same KKT points (the same statuses, the optimum
+    to the stopping test's precision) from the same starts; sqpmethod ignores the option."""
+    a = FHOCP.from_certificate(cert).setup()
+    b = FHOCP.from_certificate(cert, sqp_options={"reuse_step": 0.1}).setup()
+    sqp = b._buffer[0]
+    solved = reused = 0
+    for ra, rb in same_start_solves(a, b, cert, [[0.1, 0.1], [0.0, 0.05], [-0.1, -0.1],
+                                                 [0.1, 0.1]], 4):
+        assert ra.status == rb.status
+        reused += sqp.stats()["derivative_reuses"]
+        if ra.success:
+            solved += 1
+            # the inputs to ~1e-5 where the cost is flat, the cost to its stopping precision
+            assert np.max(np.abs(ra.u - rb.u)) < 1e-4
+            assert abs(ra.cost - rb.cost) < 1e-7 * (1 + abs(ra.cost))
+    assert solved >= 8 and reused > 0
+    fh = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi", "reuse_step": 0.1})
+    assert not isinstance(fh.setup()._solver, KernelSQP)

@@ -240,3 +240,66 @@ def test_sqpmethod_ignores_the_kernels_relative_dual_test() -> None:
     res = fh.solve_tracking(pv[:n], 0.0, pv[2 * n:2 * n + fh.p], wv[fh.iu],
                             wv[fh.ius], pv[n:2 * n])
     assert np.all(np.isfinite(res.u)) and res.iterations >= 1
+
+
+@pytest.mark.parametrize(("m", "p", "du", "M"), [(2, 2, 0.1, None), (1, 1, 0.0, 1),
+                                                  (3, 2, 0.1, 3)])
+def test_the_compiled_answer_check_is_the_numpy_check(m: int, p: int, du: float,
+                                                      M: int | None) -> None:
+    """The kernel's check of an answer (one call: plain rollout, x_s(u_s) with its fixed
+    point tested, the tracking cost and every residual) against the numpy FHOCP's check,
+    and the terminal gap that initialises t."""
+    model = random_gru_model(6, n=6, m=m, p=p)
+    fh = _fhocp(model, du=du, control_horizon=M).setup()
+    ref = _fhocp(model, du=du, control_horizon=M, kernel="numpy")
+    assert fh.kernel is not None and ref.kernel is None
+    n = fh.n
+    for seed in range(4):
+        wv, pv = _point(fh, seed)
+        wv[fh.ius] += 0.5 * (seed == 3)              # u_s beyond the box: clipped by both
+        x_hat, xs0, r = pv[:n], pv[n:2 * n], pv[2 * n:2 * n + fh.p]
+        up = pv[2 * n + fh.p:] if fh.has_du else None
+        e_o = 0.01 * seed
+        got = fh._check_answer(wv, pv, e_o, "s")
+        want = ref.check(x_hat, wv[fh.iu], wv[fh.ius], e_o, r, xs0, up, "s")
+        assert np.max(np.abs(got.x - want.x)) < 1e-12
+        assert np.max(np.abs(got.x_s - want.x_s)) < 1e-12
+        assert np.array_equal(got.u, want.u) and np.array_equal(got.u_s, want.u_s)
+        assert abs(got.cost - want.cost) < 1e-12 * max(1.0, abs(want.cost))
+        for key in ("constraint_violation", "terminal_violation", "t"):
+            assert abs(getattr(got, key) - getattr(want, key)) < 1e-12, key
+        assert got.active == want.active and got.defect < 1e-14
+        gap = fh.kernel.terminal_gap(wv, pv)
+        x_s = want.x_s if seed < 3 else steady_state(fh.params, wv[fh.ius], xs0)[0]
+        assert abs(gap - np.max(np.abs(ref.simulate(x_hat, wv[fh.iu])[-1] - x_s))) < 1e-12
+
+
+def test_derivative_reuse_keeps_the_answers_with_fewer_derivatives() -> None:
+    """The kernel SQP's derivative reuse (``reuse_step``, on by default in SQP_OVERRIDES):
+    along a set-point step the same statuses and inputs to the stopping test's precision,
+    with fewer evaluations of the sensitivities and the Hessian."""
+    model = GRUModel.load(DEFAULT_MODEL)
+    cert = certs.compute_certificate(model, N=15, gain_scale=0.0)
+    y0, y1 = model.normalize_y(np.array([0.78, 1.27])), model.normalize_y(np.array([0.97, 0.62]))
+    runs = {}
+    for options in ({"reuse_step": 0.0}, {}):
+        fh = TrackingFHOCP.from_certificate(cert, offset_weight=1e4, alpha_c=0.0199,
+                                            du_weight=0.05, sqp_options=options).setup()
+        sqp, trigger, ins, outs = fh._buffer
+        reuses: list[int] = []
+
+        def counted(sqp=sqp, trigger=trigger, reuses=reuses) -> None:
+            trigger()
+            reuses.append(sqp.stats()["derivative_reuses"])
+
+        fh._buffer = (sqp, counted, ins, outs)
+        law = _closed_loop(model, fh, y0, y1, 60, np.zeros(2))[0]
+        iterations = sum(r.result.iterations for r in law.records)
+        runs[fh.sqp_options["reuse_step"]] = (np.array([r.u for r in law.records]),
+                                              [r.result.status for r in law.records],
+                                              iterations - sum(reuses), sum(reuses))
+    (u0, st0, fresh0, re0), (u1, st1, fresh1, re1) = runs[0.0], runs[0.1]
+    assert re0 == 0 and re1 > 0
+    assert st1 == st0 and st1.count("optimal") >= 55
+    assert np.max(np.abs(u1 - u0)) < 1e-4
+    assert fresh1 < 0.8 * fresh0
