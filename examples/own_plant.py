@@ -11,9 +11,10 @@ The walk-through of the user guide (docs/guide/own-plant.md), as one command run
 4. set-points the model can hold and the theory admits, from the model's equilibria (the
    Python API: :mod:`controllers.equilibrium`, :mod:`controllers.certificates`);
 5. ``cosim certify --auto-gain-scale --save --setpoint ...``: the observer gains for them;
-6. ``cosim run`` of a set-point scenario with the robust MPC and, for a square plant, with
-   the PI baseline tuned from the model (RGA pairing, SIMC);
-7. ``cosim campaign``: plant parameters drawn per run, both controllers on the same draws.
+6. ``cosim run`` of a set-point scenario with the robust MPC (the paper's law and
+   ``--option law='"tracking"'``) and, for a square plant, with the PI baseline tuned from
+   the model (RGA pairing, SIMC);
+7. ``cosim campaign``: plant parameters drawn per run, every controller on the same draws.
 
 It prints what a user would check: the FIT of each output, the gain scale, the tracking error
 at the end of each set-point, the inputs' and outputs' box violations, the IAE of each
@@ -37,6 +38,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLES = ROOT / "fmus" / "examples"
+#: The closed loops of step 6: report key -> (controller, its ``--option`` values).
+CONTROLLERS = {"robust-mpc": ("robust-mpc", ()),
+               "robust-mpc-tracking": ("robust-mpc", ('law="tracking"',)),
+               "pi": ("pi", ())}
 
 #: Settings per mode: data steps, GRU states, epochs, learning rate (first and last), runs
 #: of the campaign per controller.
@@ -128,13 +133,16 @@ def write_scenario(path: Path, problem: Any, setpoints: list[np.ndarray]) -> Pat
 
 
 def run(scenario: Path, fmu: Path, model: Path, controller: str, out: Path,
-        problem: Any, setpoints: list[np.ndarray]) -> dict[str, Any]:
-    """``cosim run`` and what a user checks: the tracking error at the end of each set-point
-    (relative to its output's box), the box violations of inputs and outputs, the KPIs."""
+        problem: Any, setpoints: list[np.ndarray], options: tuple[str, ...] = ()
+        ) -> dict[str, Any]:
+    """``cosim run`` (``options``: ``KEY=VALUE`` controller options) and what a user checks:
+    the tracking error at the end of each set-point (relative to its output's box), the box
+    violations of inputs and outputs, the KPIs."""
     import pandas as pd
 
+    extra = [arg for option in options for arg in ("--option", option)]
     cosim_command("run", scenario, "--plant", fmu, "--controller", controller, "--model",
-                  model, "--out", out, "--quiet")
+                  model, "--out", out, "--quiet", *extra)
     df = pd.read_csv(out / "results.csv")
     summary = json.loads((out / "summary.json").read_text())
     errors = []
@@ -175,6 +183,10 @@ problem = "{problem}"
 
 [[variant]]
 name = "robust-mpc"
+
+[[variant]]
+name = "robust-mpc-tracking"
+options = {{ law = "tracking" }}
 {pi}""")
     cosim_command("campaign", spec, "--out", work / "campaign", "--workers", 1, "--force",
                   "--quiet")
@@ -203,9 +215,11 @@ def walkthrough(name: str, out: Path, quick: bool, seed: int = 0) -> dict[str, A
         "fit_test": model.training["fit"]["test"],
         "admissible": _admissible(model), "setpoints": [y.tolist() for y in setpoints]}
     square = problem.m == problem.p
-    for controller in ("robust-mpc", "pi") if square else ("robust-mpc",):
-        report[controller] = run(scenario, fmu, model_path, controller,
-                                 out / "runs" / controller, problem, setpoints)
+    for key, (controller, options) in CONTROLLERS.items():
+        if controller == "pi" and not square:
+            continue
+        report[key] = run(scenario, fmu, model_path, controller, out / "runs" / key,
+                          problem, setpoints, options)
     report["campaign"] = campaign(name, fmu, model_path, problem_path, scenario, out,
                                   settings["runs"], square)
     (out / "walkthrough.json").write_text(json.dumps(report, indent=1) + "\n")
@@ -235,7 +249,7 @@ def main() -> None:
     print("admissible set-points: " + ", ".join(
         f"{k} in [{v[0]:.4g}, {v[1]:.4g}]" if v else f"{k}: none"
         for k, v in r["admissible"].items()))
-    for controller in ("robust-mpc", "pi"):
+    for controller in CONTROLLERS:
         if controller in r:
             c = r[controller]
             print(f"{controller}: status {c['status']}; tracking error at the end of each "
