@@ -59,8 +59,8 @@ __all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "Workspace", "
 GENERATOR_VERSION = "gru-fhocp-kernel-9"
 #: The C template, concatenated in this order after the generated header.
 TEMPLATE_PARTS = tuple(Path(__file__).with_name("kernel") / name for name in (
-    "0_workspace.c", "1_rollout.c", "1b_steady_state.c", "2_derivatives.c", "3_eigen_clip.c",
-    "4_api.c", "5_qp.c", "6_sqp.c"))
+    "0_workspace.c", "1_rollout.c", "1b_steady_state.c", "2_derivatives.c", "2b_hessian.c",
+    "3_eigen_clip.c", "4_api.c", "5_qp.c", "6_sqp.c"))
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")
 PREFIX_PLACEHOLDER = "@PFX@"
 

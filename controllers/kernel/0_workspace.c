@@ -140,7 +140,7 @@ typedef struct gk_ws {
   int xs_piv[NX], xs_status;
   A32 double ass_ssum[NX * NSC];        /* sum_{i>=1} S_i (ass_hessian) */
 #endif
-  /* the Hessian of the Lagrangian (2_derivatives.c) */
+  /* the Hessian of the Lagrangian (2b_hessian.c) */
   A32 double MU[(NH + 1) * NX];          /* adjoints */
 #ifndef GK_CONTRACT
   A32 double Ph[NX * NV], Pz[NX * NV], Pr[NX * NV], G[NX * NV];   /* stage_hessian */

@@ -10,7 +10,7 @@
  * (x_s, u_s). The cost adds the offset term ||U_o x_s + b_o - r||^2_T (r = y_bar - d_hat,
  * TW = diag T) and, with HAS_DU, the terminal input-rate term ||u_{N-1} - u_s||^2_S; the
  * constraints add the rows D U_o x_s (the steady output in Y_s, bounds set per solve). The
- * Hessian's u_s block includes the curvature of x_s(u_s) (ass_curvature, 2_derivatives.c:
+ * Hessian's u_s block includes the curvature of x_s(u_s) (ass_curvature, 2b_hessian.c:
  * one transposed solve and the point Hessian at (x_s, u_s)). */
 #if HAS_ASS
 #define XS_MAX_ITER 50
