@@ -174,7 +174,7 @@ class TrackingFHOCP(FHOCP):
         #: (``us_centre`` of :meth:`solve_tracking`)
         self.us_rate: float | None = US_RATE
         self._g_for: np.ndarray | None = None   # the bounds _lbg, _ubg were written for
-        self._g_rows: tuple[np.ndarray, ...] | None = None   # _constraint_rows
+        self._g_rows = self._constraint_rows()
         self._static_layout()
 
     @classmethod
@@ -242,7 +242,7 @@ class TrackingFHOCP(FHOCP):
         lhs = x[: self.N] @ self.LUo.T
         ys = self.LUo @ x_s
         res.constraint_violation = max(0.0, float(np.max(lhs - ub)),
-                                       float(np.max(ys - (self.ys_bounds - self.Lbo))),
+                                       float(np.max(ys - self._ys_rhs)),
                                        float(np.max(np.abs(u))) - 1.0)
         dN = float(np.max(np.abs(x[self.N] - x_s)))
         res.t = dN
@@ -389,8 +389,6 @@ class TrackingFHOCP(FHOCP):
         ins["ubx"][:] = self._ubx
         bounds = self.tightened_bounds(e_o)
         if self._g_for is not bounds:
-            if self._g_rows is None:
-                self._g_rows = self._constraint_rows()
             up_pos, up_idx, lo_pos, lo_idx = self._g_rows
             flat = bounds.ravel()
             self._ubg[up_pos] = flat[up_idx]

@@ -203,7 +203,7 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
       uc[i * NU + j] = v < -1.0 ? -1.0 : (v > 1.0 ? 1.0 : v);
     }
 #if HAS_ASS
-  double wc[NW], xs[NX], z[NX], r[NX], h[NX];
+  double wc[NW], xs[NX], xn[NX];
   for (int c = 0; c < NW; c++) wc[c] = c < NUA ? fmin(fmax(w[c], -1.0), 1.0) : w[c];
   const double *us = wc + NUU;
   roll(ws, wc, p, 0);   /* x_s(u_s): the reference of the check */
@@ -221,10 +221,10 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
     out[0] += (d * DW[j]) * d;
   }
 #endif
-  stage_gates(xs, us, 0, 0, z, r, h);
+  PFX(gru_step)(xs, us, 0, 0, xn);
   double fp = 0.0;
   for (int k = 0; k < NX; k++) {
-    const double e = fabs(z[k] * xs[k] + (1.0 - z[k]) * h[k] - xs[k]);
+    const double e = fabs(xn[k] - xs[k]);
     if (e > fp || e != e) fp = e;
   }
   out[7] = fp;
