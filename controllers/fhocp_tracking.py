@@ -62,7 +62,7 @@ LINE_SEARCH = {"max_iter_ls": 10, "beta": 0.5}
 #: ``reuse_step`` = 0.1 (the kernel's derivative reuse, :class:`controllers.kernel_abi.
 #: SqpOptions`; docs: design/tracking.md, "The step time"): the median solve's second
 #: iteration keeps the first's Jacobian and Hessian, the step 3.0 → 1.5 ms with the same
-#: answers to the stopping test's precision.
+#: answers to the stopping test's precision (``benchmarks/bench_derivative_reuse.py``).
 SQP_OVERRIDES = {**LINE_SEARCH, "tol_du_relative": True, "reuse_step": 0.1}
 #: The tracking law's defaults (docs: design/tracking.md, "Recommendation", "The horizon and
 #: the iteration cap"): horizon, offset weight T, Δu weight S, the disturbance filter's β
