@@ -18,11 +18,13 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # Rebuilds only when the C sources or model descriptions change (cosim build-fmu checks).
-# The robust MPC's compiled kernel for the shipped model is cached in ~/.cache/gru-mpc; without
-# a C compiler the controller falls back to numpy (hence the '-': not an error for make).
+# The robust MPC's compiled kernels for the shipped model (its default tracking law's and the
+# paper law's) are cached in ~/.cache/gru-mpc; without a C compiler the controller falls back
+# to numpy (hence the '-': not an error for make).
 fmus: $(STAMP)
 	$(BIN)/cosim build-fmu
 	-$(BIN)/cosim build-kernel --quiet
+	-$(BIN)/cosim build-kernel --quiet --option 'law="paper"'
 
 demo: fmus
 	$(BIN)/cosim run scenarios/paper_steps.csv --out results/demo

@@ -1,12 +1,14 @@
 """Speed of the robust MPC controller step: the compiled kernel against the numpy baseline.
 
-The controller step (observer + reference governor + FHOCP: what ``ctrl.step`` does, as in
-``timings.csv``) on the paper scenario (``scenarios/paper_steps.csv``, 1,600 steps) in closed
-loop with the plant FMU (the GRU model itself when no FMU is built), two ways in the same
-process, alternating run by run so that the machine's load hits both alike:
+The paper's law (``law="paper"``: the problem the kernel and the do-mpc comparison of issue 5
+were measured on; the default tracking law's step: ``bench_tracking.py``). The controller step
+(observer + reference governor + FHOCP: what ``ctrl.step`` does, as in ``timings.csv``) on
+the paper scenario (``scenarios/paper_steps.csv``, 1,600 steps) in closed loop with the plant
+FMU (the GRU model itself when no FMU is built), two ways in the same process, alternating
+run by run so that the machine's load hits both alike:
 
-* ``compiled``: the default controller: the whole SQP (derivatives, eigenvalue clipping,
-  QP, line search) and the governor's equilibria in the compiled kernel
+* ``compiled``: the controller with its default kernel: the whole SQP (derivatives,
+  eigenvalue clipping, QP, line search) and the governor's equilibria in the compiled kernel
   (:mod:`controllers.compiled_kernel`, :mod:`controllers.kernel_sqp`);
 * ``numpy``: the same controller with ``kernel="numpy"``, the implementation before the
   kernel (numpy callbacks in casadi ``sqpmethod`` with qpOASES), kept as the baseline.
@@ -53,6 +55,8 @@ from controllers.fhocp import FHOCP  # noqa: E402
 from cosim.component import Component  # noqa: E402
 from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
 
+#: The robust MPC's law this benchmark times (see the module docstring).
+LAW = "paper"
 #: The plain baseline may take seconds to declare infeasibility; cap it so the run ends.
 PLAIN_OPTIONS = {"max_wall_time": 2.0}
 
@@ -138,7 +142,8 @@ def _p(a: list[float], q: float) -> float:
 def compare_kernel(args: argparse.Namespace) -> None:
     """The compiled controller against the numpy baseline on the scenario."""
     plant = args.plant or ("fmu" if (ROOT / "fmus" / "FourTank.fmu").exists() else "model")
-    variants = {"compiled": RobustMPCController(), "numpy": RobustMPCController(kernel="numpy")}
+    variants = {"compiled": RobustMPCController(law=LAW),
+                "numpy": RobustMPCController(law=LAW, kernel="numpy")}
     if variants["compiled"].fhocp.kernel is None:
         reason = variants["compiled"].fhocp.kernel_error
         raise SystemExit(f"bench_mpc: no compiled kernel ({reason})")
@@ -187,7 +192,7 @@ def compare_kernel(args: argparse.Namespace) -> None:
     if args.plain:
         plain = FHOCP.from_certificate(variants["numpy"].cert, formulation="multiple-shooting",
                                        ipopt_options=PLAIN_OPTIONS).setup()
-        t = closed_loop(RobustMPCController(), Path(args.scenario), plant, args.steps,
+        t = closed_loop(RobustMPCController(law=LAW), Path(args.scenario), plant, args.steps,
                         {"plain": plain})
         ms = [s[0] for s in t.solves["plain"]]
         print(f"plain      do-mpc-style multiple shooting (IPOPT): median {np.median(ms):.2f}, "
@@ -317,7 +322,7 @@ def scaling(args: argparse.Namespace) -> None:
             path = folder / f"gru_{n}_{N}.json"
             model.L_z, model.L_r = cert.L_z, cert.L_r
             model.save(path)
-            ctrls = {k: RobustMPCController(model=path, N=N, kernel=k)
+            ctrls = {k: RobustMPCController(model=path, N=N, kernel=k, law=LAW)
                      for k in ("auto", "numpy")}
             cases.append({"n": n, "N": N, "y0": setpoints[0], "scenario": sc, "ctrls": ctrls,
                           "meds": {k: [] for k in ctrls}, "p99s": {k: [] for k in ctrls},

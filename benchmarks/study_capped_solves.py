@@ -1,7 +1,9 @@
 """Why some FHOCP solves need many SQP iterations: the study behind the p99 of the controller
 step (docs/design/compiled-kernel.md, "Why the capped solves are slow to converge").
 
-The paper scenario in closed loop with the plant FMU and the default robust MPC. Printed:
+The paper scenario in closed loop with the plant FMU and the robust MPC's paper law
+(``law="paper"``, the law this study was made on; the tracking law's iterations:
+``bench_tracking.py``). Printed:
 
 1. the solves that stop at the 15-iteration cap, and how many iterations the same run's
    solves need without the cap (``max_iter=200``);
@@ -97,7 +99,7 @@ def closed_loop(kernel: str = "auto", max_iter: int = CAP,
     from cosim.master import Master
 
     with sqp_settings(sqp or {}):
-        ctrl = RobustMPCController(kernel=kernel, max_iter=max_iter)
+        ctrl = RobustMPCController(law="paper", kernel=kernel, max_iter=max_iter)
     fh, solves, before = ctrl.fhocp, [], dict.fromkeys(TIMERS, 0.0)
     solve = fh.solve
 

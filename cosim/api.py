@@ -152,7 +152,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     model : path, optional
         Model file of the robust MPC (same as ``options={"model": ...}``).
     options : mapping, optional
-        Controller constructor options (``{"offset_free": True}``).
+        Controller constructor options (``{"law": "paper"}``, ``{"N": 40}``).
     problem : path or ControlProblem, optional
         The control problem (a problem file, ``--problem``): the model's own, or the problem
         of a model file that has none; the PI baseline's. Default: the controller's (the

@@ -4,50 +4,48 @@
 :class:`controllers.problem.ControlProblem`) and their set-points ``ref.<output>``, and writes
 its inputs, all in the problem's units (for the four-tank: levels ``h1``, ``h2`` in metres,
 pump flows ``qa``, ``qb`` in m³/s). Internally it works in the model file's normalised
-units:
+units. Each step the observer ``eq:observer`` (:class:`controllers.observer.GRUObserver`)
+advances ``x̂`` with the last input and the measured output, and ``ê_o`` by
+``eq:eo-evolution``; ``x̂_0`` is the model equilibrium for the first measured output (paper
+section V). Then one of two control laws (option ``law``) gives ``u_k``:
 
-1. when ``ȳ`` changes: the equilibrium ``(x̄, ū)`` and ``α`` (``eq:def-alpha``) via
-   :meth:`controllers.certificates.Certificate.reference`, which also checks Assumption 1
-   (``ass:setpoint``) and ``eq:condition-recursive-feasibility``;
-2. ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.robust_mpc.RobustMPC`: the FHOCP
-   ``eq:optimization`` with the shifted-candidate fallback);
-3. the observer ``eq:observer`` advances to ``x̂_{k+1}`` with ``u_k`` and ``y_k``, and
-   ``ê_o`` by ``eq:eo-evolution`` (:class:`controllers.observer.GRUObserver`). ``x̂_0`` is the
-   model equilibrium for the first measured output (paper section V).
+- ``"tracking"`` (the default): the tracking law of :mod:`cosim_adapters.tracking`, the
+  tracking FHOCP of :mod:`controllers.fhocp_tracking` (an artificial steady state as a
+  decision variable, offset-free through the disturbance estimate ``d̂`` in the cost, the
+  input-rate terms of ``du_weight``); every set-point is accepted, and an unreachable or
+  inadmissible one is tracked to the closest admissible steady state (docs:
+  design/tracking.md).
+- ``"paper"``: the paper's law, with its set-point handling in :mod:`cosim_adapters.paper_law`:
+  when ``ȳ`` changes, the equilibrium ``(x̄, ū)`` and ``α`` (``eq:def-alpha``) via
+  :meth:`controllers.certificates.Certificate.reference`, which also checks Assumption 1
+  (``ass:setpoint``) and ``eq:condition-recursive-feasibility``; then ``u_k =
+  k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.robust_mpc.RobustMPC`: the FHOCP
+  ``eq:optimization`` with the shifted-candidate fallback).
 
 Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
 (``p > m``) only set-points on the model's ``m``-dimensional surface of equilibrium outputs
-are reachable; the others are refused like any unreachable set-point, naming the closest
-reachable equilibrium output.
+are reachable: the tracking law steers to the closest one, the paper's law refuses the
+others like any unreachable set-point, naming the closest reachable equilibrium output.
 
-Set-points outside the theory (unreachable, or failing Assumption 1 / eq. 11): the controller
-keeps regulating to the last admissible set-point, counts the step in ``setpoint_rejected``
-(diagnostics and summary) and names the failed hypothesis (or, for an unreachable one, the
-closest reachable equilibrium output) in the summary. A first set-point that is already
-inadmissible is a configuration error (:class:`cosim.errors.CosimError`, the same reason).
-
-This module is the co-simulation adapter (a :class:`cosim.component.Component`) of the
-numerical core: the core modules know nothing of ``cosim``.
-
-Set-point changes go through the admissible reference governor of
+The paper's law and set-points outside its theory (unreachable, or failing Assumption 1 /
+eq. 11): the controller keeps regulating to the last admissible set-point, counts the step in
+``setpoint_rejected`` (diagnostics and summary) and names the failed hypothesis (or, for an
+unreachable one, the closest reachable equilibrium output) in the summary. A first set-point
+that is already inadmissible is a configuration error (:class:`cosim.errors.CosimError`, the
+same reason). Its set-point changes go through the admissible reference governor of
 :mod:`controllers.governor` (on by default, ``governor=False`` gives the paper's controller,
 which switches ``(x̄, ū, α)`` at once): the set-point handed to the FHOCP moves towards the
 requested one only as far as a sequence known to be feasible exists, by at most a fraction
 ``λ_max`` of the way that halves after a solve that did not converge and doubles after one
-that did; that sequence is the solver's initial guess and the fallback.
+that did; that sequence is the solver's initial guess and the fallback. Under the paper's
+law ``du_weight`` (off by default) adds the input-rate penalty ``Σ_i (u_i − u_{i−1})ᵀ S (u_i
+− u_{i−1})`` (normalised units, ``u_{−1}`` the input applied at the previous step;
+:mod:`controllers.input_rate`), outside the paper's cost, and ``offset_free=True`` (outside
+the theorem) shifts the model set-point by a filtered estimate ``d̂`` of the output mismatch
+``y − ŷ`` (``ȳ_model = ȳ − d̂``); the shifted set-point must still pass the checks.
 
-Option outside the paper's cost (off by default): ``du_weight`` adds the input-rate penalty
-``Σ_i (u_i − u_{i−1})ᵀ S (u_i − u_{i−1})`` (normalised units, ``u_{−1}`` the input applied at
-the previous step; :mod:`controllers.input_rate`) to the FHOCP's cost, for smoother inputs.
-
-Option ``law="tracking"`` replaces the paper's law by the tracking law of
-:mod:`cosim_adapters.tracking` (artificial steady state, offset-free, no governor, no
-rejection; docs: design/tracking.md): the paper law's set-point handling below
-(:mod:`cosim_adapters.paper_law`) is then not used.
-
-Option outside the theorem (off by default): ``offset_free=True`` shifts the model set-point
-by a filtered estimate ``d̂`` of the output mismatch ``y − ŷ`` (``ȳ_model = ȳ − d̂``), to remove
-the small static offset the paper reports; the shifted set-point must still pass the checks.
+This module is the co-simulation adapter (a :class:`cosim.component.Component`) of the
+numerical core: the core modules know nothing of ``cosim``.
 """
 
 from __future__ import annotations
@@ -141,8 +139,8 @@ class RobustMPCController(Component):
         A problem file: must be the model's own (a check), or the problem of a model file
         that has none (:mod:`cosim_adapters.problems`).
     N : int, optional
-        Prediction horizon (default: the paper's 15; 80 with ``law="tracking"``,
-        :data:`controllers.fhocp_tracking.DEFAULTS`).
+        Prediction horizon (default 80, :data:`controllers.fhocp_tracking.DEFAULTS`; the
+        paper's 15 with ``law="paper"``).
     Q, R : array, number or mapping, optional
         Cost weights in normalised units (default ``I_n`` and ``0.01 I_m``, paper section V):
         a matrix, one number (times the identity) or, for ``R``, an object of diagonal
@@ -155,19 +153,20 @@ class RobustMPCController(Component):
         :func:`controllers.gain_design.default_setpoints` (a grid over the output box)
         (:func:`controllers.gain_design.choose_gain_scale`).
     offset_free : bool
-        Offset-free set-point correction (outside the theorem, see the module docstring).
+        ``law="paper"``: offset-free set-point correction (outside the theorem, see the
+        module docstring).
     offset_filter : float, optional
-        Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)`` (default 0.05; 0.3 with
-        ``law="tracking"``).
+        Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)`` (default 0.3; 0.05 with
+        ``law="paper"``).
     governor : bool, optional
-        Admissible reference governor after set-point changes (default on with the paper's
-        law; see the module docstring and :mod:`controllers.governor`). ``False``: the
+        ``law="paper"``: admissible reference governor after set-point changes (default
+        on; see the module docstring and :mod:`controllers.governor`). ``False``: the
         paper's FHOCP with the new ``(x̄, ū, α)`` at once.
     setpoint_rate : float, optional
-        Outside the theorem: move the set-point given to the FHOCP towards the requested one
-        by at most this much per sample, in the outputs' units (a rate-limiting reference
-        governor), so that the terminal set stays reachable after large steps. Off by
-        default.
+        ``law="paper"``, outside the theorem: move the set-point given to the FHOCP towards
+        the requested one by at most this much per sample, in the outputs' units (a
+        rate-limiting reference governor), so that the terminal set stays reachable after
+        large steps. Off by default.
     solver : {"sqp", "ipopt"}, optional
         NLP solver of the FHOCP (default: SQP with a dense QP, or IPOPT when
         ``ipopt_options`` are given; see :class:`controllers.fhocp.FHOCP`).
@@ -178,19 +177,19 @@ class RobustMPCController(Component):
         first use; the numpy callbacks when no C compiler is found) or the numpy callbacks
         (``"numpy"``, the reference implementation). Same answers either way.
     du_weight : float or mapping, optional
-        Outside the paper's cost: weight ``S`` of the input-rate penalty ``Σ_i (u_i −
-        u_{i−1})ᵀ S (u_i − u_{i−1})`` in normalised units (``u`` ∈ [−1, 1]; ``u_{−1}`` the
-        input applied at the previous step), one number for every input or an object by the
-        problem's input names (``{"qa": 5, "qb": 5}``; inputs not named: 0). Default 0: the
-        paper's cost (0.05 with ``law="tracking"``, which adds the terminal term
-        ``‖u_{N−1} − u_s‖²_S``).
-    law : {"paper", "tracking"}
-        ``"paper"`` (default): the paper's FHOCP with the set-point's equilibrium, the
-        governor and set-point rejection. ``"tracking"``: the tracking FHOCP
-        (:mod:`cosim_adapters.tracking`, :mod:`controllers.fhocp_tracking`): an artificial
-        steady state as a decision variable, offset-free through ``d̂`` in the cost, no
-        governor, nothing rejected (an unreachable or inadmissible set-point is tracked to
-        the closest admissible steady state); zero observer gains.
+        Weight ``S`` of the input-rate penalty ``Σ_i (u_i − u_{i−1})ᵀ S (u_i − u_{i−1})`` in
+        normalised units (``u`` ∈ [−1, 1]; ``u_{−1}`` the input applied at the previous
+        step), one number for every input or an object by the problem's input names
+        (``{"qa": 5, "qb": 5}``; inputs not named: 0). Default 0.05 (the tracking law,
+        which adds the terminal term ``‖u_{N−1} − u_s‖²_S``); 0 with ``law="paper"``: the
+        paper's cost, which the term leaves.
+    law : {"tracking", "paper"}
+        ``"tracking"`` (default): the tracking FHOCP (:mod:`cosim_adapters.tracking`,
+        :mod:`controllers.fhocp_tracking`): an artificial steady state as a decision
+        variable, offset-free through ``d̂`` in the cost, no governor, nothing rejected (an
+        unreachable or inadmissible set-point is tracked to the closest admissible steady
+        state); zero observer gains. ``"paper"``: the paper's FHOCP with the set-point's
+        equilibrium, the governor and set-point rejection.
     offset_weight : float or mapping
         ``law="tracking"``: diagonal of the offset weight ``T`` of ``‖g(x_s) + d̂ − ȳ‖²_T``
         (normalised outputs; one number or an object by output name, outputs not named:
@@ -204,8 +203,8 @@ class RobustMPCController(Component):
         :class:`controllers.fhocp_tracking.TrackingFHOCP`). Default ``⌈N / 4⌉`` (20 at the
         default N = 80).
     max_iter : int, optional
-        Iteration cap of one FHOCP solve (default 15, the real-time bound; 40 with
-        ``law="tracking"``). A solve that reaches it applies its feasible iterate
+        Iteration cap of one FHOCP solve, the real-time bound (default 40; 15 with
+        ``law="paper"``). A solve that reaches it applies its feasible iterate
         (suboptimal MPC) or the fallback; that iterate depends on the last bits of the
         arithmetic, so the regression references are recorded with a cap every solve
         converges within (``max_iter=200``).
@@ -226,7 +225,7 @@ class RobustMPCController(Component):
                  solver: str | None = None,
                  ipopt_options: Mapping[str, Any] | None = None, max_iter: int | None = None,
                  kernel: str = "auto", du_weight: float | Mapping[str, float] | None = None,
-                 law: str = "paper", offset_weight: float | Mapping[str, float] | None = None,
+                 law: str = "tracking", offset_weight: float | Mapping[str, float] | None = None,
                  alpha_c: float | None = None, control_horizon: int | None = None,
                  name: str = "mpc") -> None:
         from controllers import certificates as certs

@@ -48,7 +48,7 @@ def check_law(law: Any, *, governor: Any, offset_free: Any, setpoint_rate: Any,
                                 ("setpoint_rate", setpoint_rate, (None,))):
             if value not in off:
                 raise CosimError(f"option {key}={value!r} belongs to law=\"paper\" (the "
-                                 "tracking law needs no governor and is offset-free)")
+                                 "default tracking law needs no governor and is offset-free)")
     elif control_horizon is not None:
         raise CosimError(f"option control_horizon={control_horizon!r} belongs to "
                          "law=\"tracking\" (its tail is held at the artificial steady input)")

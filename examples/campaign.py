@@ -29,8 +29,7 @@ scenario = "{ROOT / 'scenarios' / 'leak_tank1.csv'}"
 "plant.a2" = {{ uniform = [1.45e-4, 1.57e-4] }}
 
 [[variant]]
-name = "robust-mpc"
-options = {{ offset_free = true }}
+name = "robust-mpc"                    # its default: the tracking law
 
 [[variant]]
 name = "pi"

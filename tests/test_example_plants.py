@@ -4,7 +4,7 @@
 vessel, a 2 × 2 CSTR in L/min, K and mol/L at Ts = 15 s, a mixing tank with 3 inputs and 2
 outputs): build the FMU, ``generate-data --problem``, ``train`` (brief, seeded), ``certify
 --auto-gain-scale --save``, a set-point scenario inside the certified set with the robust MPC
-(the paper's law and the tracking law) and, for the square plants, the PI tuned from the
+(its default tracking law and the paper's law) and, for the square plants, the PI tuned from the
 model, and a small campaign with the plant's parameters drawn per run. What a user checks,
 asserted on its ``walkthrough.json`` and files: the FIT of every output above a floor, every
 input inside its box, no output constraint violated by either MPC law, each set-point tracked
@@ -52,15 +52,16 @@ def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(plant: str, tmp_pat
     assert model["problem"]["name"] == plant and "observer" in model   # certified, saved
 
     # closed loop: both MPC laws track every set-point, inputs in their boxes, no violation
-    for law in ("robust-mpc", "robust-mpc-tracking"):
+    for law in ("robust-mpc", "robust-mpc-paper"):
         mpc = report[law]
         assert mpc["status"] == "ok", law
         assert max(mpc["tracking_error"]) < TRACKING, (law, mpc["tracking_error"])
         assert max(mpc["box_violation"].values()) == 0.0, (law, mpc["box_violation"])
         assert set(mpc["iae"]) == set(problem.output_names)
         assert set(mpc["tv"]) == set(problem.input_names)
-    tracking = json.loads((out / "runs" / "robust-mpc-tracking" / "summary.json").read_text())
-    assert tracking["controller_summary"]["law"] == "tracking"
+    for key, law in (("robust-mpc", "tracking"), ("robust-mpc-paper", "paper")):
+        summary = json.loads((out / "runs" / key / "summary.json").read_text())
+        assert summary["controller_summary"]["law"] == law, key
 
     if problem.m == problem.p:
         assert report["pi"]["status"] == "ok"
@@ -81,6 +82,6 @@ def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(plant: str, tmp_pat
     camp = json.loads((out / "campaign" / "summary.json").read_text())
     assert camp["failed"] == 0 and report["campaign"]["status"] == "ok"
     assert camp["variants"]["robust-mpc"]["violating_runs"] == 0
-    assert camp["variants"]["robust-mpc-tracking"]["violating_runs"] == 0
+    assert camp["variants"]["robust-mpc-paper"]["violating_runs"] == 0
     table_columns = set(camp["variants"]["robust-mpc"]["quantiles"])
     assert {f"iae.{n}" for n in problem.output_names} <= table_columns

@@ -36,7 +36,9 @@ tightening a_i, b_i (eq:constraint_tightening_parameters), e_o and e_inf (eq:eo-
 terminal weight s (eq:definition_s) and, per set-point, alpha (eq:def-alpha), Assumption 1
 (ass:setpoint) and the recursive-feasibility inequality (eq:condition-recursive-feasibility).
 Values are in the model's normalised units; set-points are given in the control problem's
-units, by output name (--setpoint CA=0.6,T=330) or in the problem's output order."""
+units, by output name (--setpoint CA=0.6,T=330) or in the problem's output order. By default
+(--law tracking, the robust MPC's default law) at its horizon N = 80 and with the tracking
+law's own hypotheses; --law paper: the paper's law at N = 15."""
 
 EPILOG = """design levers:
   --gain-scale THETA     observer gains THETA x the LP gains (0 = open-loop observer)
@@ -44,7 +46,8 @@ EPILOG = """design levers:
                          set-points (default: the grid at 25, 50 and 75 % of each output's
                          box, 3^p points; a star of 2p + 1 points beyond 81); exit 1 when
                          no THETA passes
-  --N, --e-o0            horizon and initial observer-error bound (paper: 15, 0.02)
+  --N, --e-o0            horizon and initial observer-error bound (defaults 80 with the
+                         tracking law, 15 with --law paper; 0.02)
   --data DATA.csv        estimate w_y_bar as the largest test-set output error (normalised)
 
 --save writes only when every check passes (otherwise the model file is left unchanged,
@@ -72,11 +75,13 @@ def register(subparsers: Any) -> None:
     p.add_argument("--json", action="store_true",
                    help="print JSON with the paper's names (a list when several set-points)")
     p.add_argument("--N", type=int, default=None,
-                   help="prediction horizon N (default 15; 80 with --law tracking)")
-    p.add_argument("--law", choices=("paper", "tracking"), default="paper",
-                   help="tracking: also compute and check the tracking law's hypotheses "
-                        "(robust-mpc law=\"tracking\", its defaults: zero observer gains, "
-                        "alpha_c = alpha_min(N) of the design above; docs: design/tracking.md)")
+                   help="prediction horizon N (default 80, the tracking law's; 15 with --law "
+                        "paper)")
+    p.add_argument("--law", choices=("paper", "tracking"), default="tracking",
+                   help="the robust MPC's law to certify for (default tracking, as robust-mpc's "
+                        "law): tracking also computes and checks the tracking law's hypotheses "
+                        "(its defaults: zero observer gains, alpha_c = alpha_min(N) of the "
+                        "design above; docs: design/tracking.md); paper: the certificate alone")
     p.add_argument("--e-o0", type=float, default=0.02, dest="e_o0",
                    help="initial observer-error bound ê_o,0 (default 0.02)")
     g = p.add_mutually_exclusive_group()

@@ -44,7 +44,7 @@ examples:
   cosim run scenarios/paper_steps.csv
   cosim run scenarios/leak_tank1.csv --controller pi --out results/leak --quiet
   cosim run scenarios/paper_steps.csv --plant other.fmu --map other.map.toml --isolate
-  cosim run scenarios/paper_steps.csv --model my_gru.json --option offset_free=true
+  cosim run scenarios/paper_steps.csv --model my_gru.json --option 'law="paper"'
   cosim run cstr_steps.csv --plant cstr.fmu --problem cstr.toml --controller pi
 
 """ + exit_codes_help()
@@ -79,8 +79,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "controllers/models/fourtank_gru.json); same as --option model=FILE")
     p.add_argument("--option", metavar="KEY=VALUE", action="append", default=[],
                    help="controller constructor option, repeatable; VALUE is read as JSON "
-                        "when it parses (e.g. --option setpoint_rate=0.02 --option "
-                        "offset_free=true --option N=20)")
+                        "when it parses (e.g. --option du_weight=0.5 --option N=40 "
+                        "--option 'law=\"paper\"')")
     p.add_argument("--out", metavar="DIR", default=None,
                    help="output folder (default: results/<scenario name>)")
     p.add_argument("--interface", choices=("cs", "me"), default="cs",

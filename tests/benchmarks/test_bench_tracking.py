@@ -44,8 +44,8 @@ def test_oracle_model_holds_the_fmu_equilibrium(fmu2_path: Path) -> None:
 @pytest.mark.slow
 def test_quick_benchmark_oracle_tracks(tmp_path: Path) -> None:
     """``--quick``: all four run; the oracle solves every step, predicts the FMU to 1e-6 m,
-    and its summed IAE is below the PI's (on the first 5000 s: 0.79×); the tracking law's is
-    below the paper law's."""
+    and its summed IAE is below the PI's (on the first 5000 s: 0.79×); the default robust
+    MPC's (the tracking law) is below the paper law's."""
     proc = subprocess.run([sys.executable, str(BENCH / "bench_tracking.py"), "--quick",
                            "--out", str(tmp_path)], cwd=tmp_path, capture_output=True,
                           text=True, timeout=600, check=False)
@@ -53,9 +53,9 @@ def test_quick_benchmark_oracle_tracks(tmp_path: Path) -> None:
     assert "MPC/oracle" in proc.stdout
     doc = json.loads((tmp_path / "tracking.json").read_text())
     kpis = doc["kpis"]
-    assert set(kpis) == {"robust-mpc", "tracking", "pi", "oracle"}
-    assert "tracking/PI" in proc.stdout
-    assert kpis["tracking"]["iae.sum"] < kpis["robust-mpc"]["iae.sum"]
+    assert set(kpis) == {"robust-mpc", "paper", "pi", "oracle"}
+    assert "paper/PI" in proc.stdout
+    assert kpis["robust-mpc"]["iae.sum"] < kpis["paper"]["iae.sum"]
     for row in kpis.values():
         assert all(math.isfinite(v) and v >= 0 for v in row.values()), row
     assert kpis["oracle"]["iae.sum"] < kpis["pi"]["iae.sum"]

@@ -51,6 +51,9 @@ seed = 4242
 scenario = "short.csv"
 controller = "robust-mpc"
 
+[controller.options]
+law = "paper"                   # the tracking law refuses no set-point
+
 [setpoints]
 count = 4
 hold = 2500
@@ -68,7 +71,7 @@ h2 = [0.6, 1.4]
     scenario = tmp_path / "first.csv"
     scenario.write_text(f"time,ref.h1,ref.h2\n0,{first['h1']!r},{first['h2']!r}\n2500,,\n")
     with pytest.raises(CosimError) as cosim_run:
-        cosim.run(scenario, controller="robust-mpc")
+        cosim.run(scenario, controller="robust-mpc", options={"law": "paper"})
     assert reason == str(cosim_run.value)
     assert "is not reachable" in reason and "closest reachable equilibrium" in reason
     assert doc["steps"] == 0 and doc["campaign"]["tries"] == 1
@@ -85,6 +88,9 @@ runs = 1
 scenario = "short.csv"
 controller = "robust-mpc"
 
+[controller.options]
+law = "paper"
+
 [draw]
 "ref.h1" = 0.4
 "ref.h2" = 0.4
@@ -92,7 +98,7 @@ controller = "robust-mpc"
     scenario = tmp_path / "low.csv"
     scenario.write_text("time,ref.h1,ref.h2\n0,0.4,0.4\n1000,,\n")
     with pytest.raises(CosimError) as cosim_run:
-        cosim.run(scenario, controller="robust-mpc")
+        cosim.run(scenario, controller="robust-mpc", options={"law": "paper"})
     assert table["status"].iloc[0] == "failed"
     assert table["reason"].iloc[0] == str(cosim_run.value)
     assert "recursive feasibility (eq:condition-recursive-feasibility) fails" in str(

@@ -40,7 +40,8 @@ def test_table_passes_with_exit_0(model_file: Path, capsys) -> None:
 
 
 def test_json_keys_and_values(model_file: Path, capsys) -> None:
-    assert main(["certify", str(model_file), "--setpoint", "1.0,1.0", "--json"]) == 0
+    assert main(["certify", str(model_file), "--setpoint", "1.0,1.0", "--json", "--law",
+                 "paper"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert list(doc) == KEYS
     m = GRUModel.load(model_file)
@@ -53,7 +54,7 @@ def test_json_keys_and_values(model_file: Path, capsys) -> None:
 
 def test_json_several_setpoints_is_a_list(model_file: Path, capsys) -> None:
     main(["certify", str(model_file), "--setpoint", "1,1", "--setpoint", "0.8,1.2", "--json",
-          "--N", "5"])
+          "--N", "5", "--law", "paper"])
     docs = json.loads(capsys.readouterr().out)
     assert isinstance(docs, list) and len(docs) == 2 and all(list(d) == KEYS for d in docs)
     assert len(docs[0]["b"]) == 6
@@ -121,7 +122,8 @@ def test_auto_gain_scale_and_save(tmp_path: Path, capsys) -> None:
 
 
 def test_explicit_gain_scale(model_file: Path, capsys) -> None:
-    assert main(["certify", str(model_file), "--gain-scale", "0", "--json"]) == 0
+    assert main(["certify", str(model_file), "--gain-scale", "0", "--json", "--law",
+                 "paper"]) == 0
     doc = json.loads(capsys.readouterr().out)
     assert doc["kappa"] == 0 and doc["nu_o"] == pytest.approx(doc["nu"])
     assert main(["certify", str(model_file), "--gain-scale", "-1"]) == 2
@@ -210,14 +212,14 @@ def no_admissible_setpoint(tmp_path: Path) -> Path:
 
 def test_empty_admissible_range_exits_1(no_admissible_setpoint: Path, capsys) -> None:
     path = str(no_admissible_setpoint)
-    assert main(["certify", path, "--gain-scale", "0"]) == 1
+    assert main(["certify", path, "--gain-scale", "0", "--law", "paper"]) == 1
     captured = capsys.readouterr()
     assert ("admissible set-points (ass:setpoint and eq:condition-recursive-feasibility): "
             "h1: none; h2: none") in captured.out
     assert ("FAILED: admissible set-points (ass:setpoint and eq:condition-recursive-"
             "feasibility): none for h1, h2") in captured.out
     assert captured.err == "cosim certify: 1 hypothesis check(s) failed\n"
-    assert main(["certify", path, "--gain-scale", "0", "--json"]) == 1
+    assert main(["certify", path, "--gain-scale", "0", "--json", "--law", "paper"]) == 1
     captured = capsys.readouterr()
     assert json.loads(captured.out)["nu"] < 1
     assert "none for h1, h2" in captured.err
@@ -436,12 +438,17 @@ def test_auto_gain_scale_on_the_default_grid_of_any_problem(m: int, p: int, grid
 
 
 def test_the_tracking_laws_hypotheses(model_file: Path, capsys) -> None:
-    """``--law tracking``: H3-H6 of docs/design/tracking.md at N = 80, in the table and the
-    JSON; a failing one (no admissible steady output) is exit 1 naming it."""
-    assert main(["certify", str(model_file), "--law", "tracking"]) == 0
+    """``--law tracking`` (the default, as robust-mpc's): H3-H6 of docs/design/tracking.md at
+    N = 80, in the table and the JSON; a failing one (no admissible steady output) is exit 1
+    naming it. With a gain scale of 0 the default alpha_c (the certified design's alpha_min)
+    is 0: exit 1 naming it."""
+    assert main(["certify", str(model_file)]) == 0
     out = capsys.readouterr().out
     assert "N=80" in out and "tracking law (zero observer gains): alpha_c = " in out
     assert "Y_s not empty = yes" in out
+    assert main(["certify", str(model_file), "--gain-scale", "0"]) == 1
+    assert "FAILED: tracking law: no default alpha_c (alpha_min(N) = 0)" in \
+        capsys.readouterr().out
     assert main(["certify", str(model_file), "--law", "tracking", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     h = doc["tracking"]

@@ -45,7 +45,8 @@ def test_theorem_campaign_uses_the_models_own_noise_bound() -> None:
     model = GRUModel.load(spec.plant.removeprefix("model:"))
     (noise,) = [d for d in spec.draws if d.key == "plant.w_y_max"]
     assert noise.kind == "constant" and noise.params[0] == model.w_y_bar
-    assert spec.options["governor"] is False and spec.initial_state is not None
+    assert spec.options["law"] == "paper" and spec.options["governor"] is False
+    assert spec.initial_state is not None
 
 
 @pytest.mark.slow

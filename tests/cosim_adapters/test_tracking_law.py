@@ -27,7 +27,10 @@ ROOT = Path(__file__).resolve().parents[2]
     ({"R": {"qc": 1.0}}, "option R: 'qc' is not one of qa, qb"),
     ({"Q": [[1.0, 0.0]]}, "option Q: expected a number or a 20x20 matrix, got shape (1, 2)"),
     ({"law": "tracking", "offset_filter": 1.5}, "offset_filter=1.5: expected a number in"),
-    ({"control_horizon": 10}, "option control_horizon=10 belongs to law=\"tracking\""),
+    ({"law": "paper", "control_horizon": 10},
+     "option control_horizon=10 belongs to law=\"tracking\""),
+    ({"governor": True},
+     "option governor=True belongs to law=\"paper\" (the default tracking law"),
     ({"law": "tracking", "control_horizon": 0}, "control_horizon=0: expected a positive"),
     ({"law": "tracking", "control_horizon": 2.5}, "control_horizon=2.5: expected a positive"),
     ({"law": "tracking", "N": 20, "control_horizon": 30},
@@ -51,15 +54,17 @@ def test_defaults_and_summary() -> None:
     assert s["law"] == "tracking" and s["N"] == 80 and not s["governor"]
     assert s["offset_weight"] == {"h1": 1e4, "h2": 10.0} and s["offset_filter"] == 0.3
     assert s["du_weight"] == {"qa": 0.05, "qb": 0.05} and s["gain_scale"] == 0.0
-    assert s["alpha_c"] == pytest.approx(RobustMPCController(N=80).cert.alpha_min())
+    assert s["alpha_c"] == pytest.approx(RobustMPCController(N=80, law="paper").cert.alpha_min())
     assert c.fhocp.sqp_options["max_iter"] == 40
     assert s["control_horizon"] == c.fhocp.control_horizon == 20       # ⌈N / 4⌉
     assert c.fhocp.nw == 20 * 2 + 2 + 1
     assert RobustMPCController(law="tracking", N=10).fhocp.control_horizon == 3
     assert RobustMPCController(law="tracking", control_horizon=80).fhocp.nw == 80 * 2 + 2 + 1
     assert RobustMPCController(law="tracking", max_iter=7).fhocp.sqp_options["max_iter"] == 7
-    assert RobustMPCController().fhocp.sqp_options["max_iter"] == 15
-    assert RobustMPCController().summary()["law"] == "paper"
+    assert RobustMPCController(law="paper").fhocp.sqp_options["max_iter"] == 15
+    default = RobustMPCController()                # the tracking law is the default
+    assert default.summary()["law"] == "tracking" and default.fhocp.N == 80
+    assert default.fhocp.sqp_options["max_iter"] == 40
     h = s["tracking_hypotheses"]     # H3-H6 of docs/design/tracking.md, computed at run time
     assert h["recursive_feasibility"] and h["Ys_nonempty"] and h["alpha_c"] == s["alpha_c"]
     assert 0 < h["grid_points_admissible"] < h["grid_points"]

@@ -25,11 +25,14 @@ ROOT = Path(__file__).resolve().parents[2]
 SCENARIOS = ROOT / "scenarios"
 REFERENCES = SCENARIOS / "references"
 THIRDPARTY = ROOT / "fmus" / "thirdparty"
-#: Controllers every scenario is run with.
+#: Controllers every scenario is run with (the robust MPC with its default, the tracking law).
 CONTROLLERS = ("pi", "robust-mpc")
 #: Name of the third-party plant in reference file names; it runs with this controller.
 THIRDPARTY_PLANT = "quadruple_tank"
 THIRDPARTY_CONTROLLER = "robust-mpc"
+#: The robust MPC's other law, recorded wherever the robust MPC is: (label, options). The
+#: paper's law keeps the references it had while it was the default (renamed, not re-recorded).
+OTHER_LAWS = (("robust-mpc-paper", ("--option", 'law="paper"')),)
 #: Column-name endings that are recorded but never compared (nor stored in references):
 #: solver bookkeeping that may differ between machines without any change of the closed
 #: loop (iteration counts, status codes, and the count of constraints within 1e-6 of their
@@ -77,23 +80,19 @@ def recording_options(controller: str, base: str | None = None) -> tuple[str, ..
     return RECORDING_OPTIONS.get(base or controller, ())
 
 
-#: Controller variants recorded on one scenario each: (scenario stem, label, controller,
-#: options). The robust MPC's tracking law (issue 20) on the paper scenario.
-VARIANT_CASES = (("paper_steps", "robust-mpc-tracking", "robust-mpc",
-                  ("--option", 'law="tracking"')),)
-
-
 def shipped_cases() -> list[Case]:
-    """Every scenario × :data:`CONTROLLERS`, plus every scenario on the third-party plant,
-    plus :data:`VARIANT_CASES`."""
+    """Every scenario × :data:`CONTROLLERS`, plus every scenario on the third-party plant;
+    each robust-MPC case also with each of :data:`OTHER_LAWS`."""
     cases = []
     for scenario in sorted(SCENARIOS.glob("*.csv")):
-        cases += [Case(scenario, c, options=recording_options(c)) for c in CONTROLLERS]
-        cases.append(Case(scenario, THIRDPARTY_CONTROLLER, THIRDPARTY_PLANT,
-                          options=recording_options(THIRDPARTY_CONTROLLER)))
-    for stem, label, controller, options in VARIANT_CASES:
-        cases.append(Case(SCENARIOS / f"{stem}.csv", controller,
-                          options=(*recording_options(controller), *options), label=label))
+        runs = [Case(scenario, c, options=recording_options(c)) for c in CONTROLLERS]
+        runs.append(Case(scenario, THIRDPARTY_CONTROLLER, THIRDPARTY_PLANT,
+                         options=recording_options(THIRDPARTY_CONTROLLER)))
+        for case in runs:
+            cases.append(case)
+            if case.controller == "robust-mpc":
+                cases += [Case(scenario, case.controller, case.plant, (*case.options, *options),
+                               label) for label, options in OTHER_LAWS]
     return cases
 
 

@@ -16,6 +16,15 @@ def test_scenarios_are_shipped() -> None:
     assert CASES, "no scenarios/*.csv found"
 
 
+def test_every_reference_belongs_to_a_case() -> None:
+    """No stale reference is left behind (a renamed case, a law that changed its name)."""
+    stale = {p.name for p in rc.REFERENCES.glob("*.csv")} - {c.reference.name for c in CASES}
+    assert not stale, f"scenarios/references: no regression case for {sorted(stale)}"
+    # the robust MPC's default law and the paper's law on every scenario and both plants
+    assert {c.label for c in CASES if c.controller == "robust-mpc"} == {None,
+                                                                         "robust-mpc-paper"}
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
 def test_matches_reference(case: rc.Case, regression_runs: dict[str, rc.Run],
