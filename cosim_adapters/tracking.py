@@ -1,6 +1,6 @@
-"""The tracking law of the ``robust-mpc`` component (``law = "tracking"``).
+"""The tracking law of the ``robust-mpc`` component (``law = "tracking"``, its default).
 
-:class:`cosim_adapters.robust_mpc.RobustMPCController` with ``law="tracking"`` runs
+:class:`cosim_adapters.robust_mpc.RobustMPCController` with ``law="tracking"`` (the default) runs
 :class:`controllers.tracking_mpc.TrackingMPC` (the tracking FHOCP of
 :mod:`controllers.fhocp_tracking`: artificial steady state, offset cost with the disturbance
 estimate ``d̂``, input-rate penalty) instead of the paper's law with its reference governor.
@@ -16,7 +16,7 @@ Design (defaults):
   feasibility`` with the gains the paper's law would use), so that ``Y_s`` is that design's
   admissible box; ``alpha_c`` sets it;
 - ``d̂`` by the filter of :class:`controllers.tracking_mpc.DisturbanceFilter` (``β`` =
-  ``offset_filter``, default 0.2), in the cost only.
+  ``offset_filter``, default 0.3), in the cost only.
 """
 
 from __future__ import annotations
@@ -49,9 +49,12 @@ def check_law(law: Any, *, governor: Any, offset_free: Any, setpoint_rate: Any,
             if value not in off:
                 raise CosimError(f"option {key}={value!r} belongs to law=\"paper\" (the "
                                  "default tracking law needs no governor and is offset-free)")
-    elif control_horizon is not None:
-        raise CosimError(f"option control_horizon={control_horizon!r} belongs to "
-                         "law=\"tracking\" (its tail is held at the artificial steady input)")
+    else:
+        for key, value in (("control_horizon", control_horizon),
+                           ("offset_weight", offset_weight), ("alpha_c", alpha_c)):
+            if value is not None:
+                raise CosimError(f"option {key}={value!r} belongs to law=\"tracking\" (the "
+                                 "default; the paper's law has no artificial steady state)")
     if control_horizon is not None and (isinstance(control_horizon, bool) or not isinstance(
             control_horizon, int) or control_horizon < 1):
         raise CosimError(f"option control_horizon={control_horizon!r}: expected a positive "

@@ -29,6 +29,8 @@ ROOT = Path(__file__).resolve().parents[2]
     ({"law": "tracking", "offset_filter": 1.5}, "offset_filter=1.5: expected a number in"),
     ({"law": "paper", "control_horizon": 10},
      "option control_horizon=10 belongs to law=\"tracking\""),
+    ({"law": "paper", "offset_weight": 10.0}, "option offset_weight=10.0 belongs to law="),
+    ({"law": "paper", "alpha_c": 0.02}, "option alpha_c=0.02 belongs to law=\"tracking\""),
     ({"governor": True},
      "option governor=True belongs to law=\"paper\" (the default tracking law"),
     ({"law": "tracking", "control_horizon": 0}, "control_horizon=0: expected a positive"),
