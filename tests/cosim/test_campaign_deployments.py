@@ -65,8 +65,8 @@ controller = "robust-mpc"
 name = "mpc"
 
 [[variant]]
-name = "mpc-offset-free"
-options = { offset_free = true }
+name = "mpc-paper"                   # the paper's law: its own kernel and workspace
+options = { law = "paper" }
 """
 
 

@@ -24,7 +24,7 @@ scenario = "{SCENARIO}"
 controller = "robust-mpc"
 
 [controller.options]
-offset_free = true
+du_weight = 0.1
 
 [draw]
 "plant.gamma_b" = {{ uniform = [0.37, 0.43] }}
@@ -54,7 +54,7 @@ def test_a_good_spec_parses(tmp_path: Path) -> None:
                                         "plant.S"]
     assert s.draws[3] == spec.Distribution("plant.S", "constant", (0.06,))
     mpc, pi = s.variants
-    assert mpc.controller == "robust-mpc" and mpc.options == {"offset_free": True}
+    assert mpc.controller == "robust-mpc" and mpc.options == {"du_weight": 0.1}
     assert pi.controller == "pi" and pi.options == {}
 
 

@@ -84,8 +84,8 @@ def test_on_the_paper_scenario_it_beats_the_pi_with_less_input_motion_than_the_p
     benchmarks/bench_tracking.py; no test asserts it.)"""
     scenario = ROOT / "scenarios" / "paper_steps.csv"
     pi = run(scenario, controller="pi", figure=False).summary["kpis"]
-    paper = run(scenario, figure=False).summary["kpis"]
-    out = run(scenario, options={"law": "tracking"}, figure=False)
+    paper = run(scenario, options={"law": "paper"}, figure=False).summary["kpis"]
+    out = run(scenario, figure=False)                     # the default: the tracking law
     assert out.status == "ok", out.reason
     k, c = out.summary["kpis"], out.summary["controller_summary"]
     assert all(v["count"] == 0 for v in k["violations"].values())
