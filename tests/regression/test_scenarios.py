@@ -21,8 +21,11 @@ def test_every_reference_belongs_to_a_case() -> None:
     stale = {p.name for p in rc.REFERENCES.glob("*.csv")} - {c.reference.name for c in CASES}
     assert not stale, f"scenarios/references: no regression case for {sorted(stale)}"
     # the robust MPC's default law and the paper's law on every scenario and both plants
-    assert {c.label for c in CASES if c.controller == "robust-mpc"} == {None,
-                                                                         "robust-mpc-paper"}
+    mpc = [(c.scenario.stem, c.plant, c.label) for c in CASES if c.controller == "robust-mpc"]
+    stems = {c.scenario.stem for c in CASES}
+    assert sorted(mpc, key=str) == sorted(
+        ((s, plant, label) for s in stems for plant in (None, rc.THIRDPARTY_PLANT)
+         for label in (None, "robust-mpc-paper")), key=str)
 
 
 @pytest.mark.slow
