@@ -97,20 +97,24 @@ def certify(model: Path, problem: Any, setpoints: list[np.ndarray]) -> None:
 def admissible_setpoints(model_path: Path, count: int) -> list[np.ndarray]:
     """``count`` set-points (physical units) the model can hold and that pass every
     hypothesis of the theorem with the open-loop observer (gain scale 0, so that
-    ``certify --auto-gain-scale`` finds a scale for them): equilibria of inputs spread over
+    ``certify --auto-gain-scale`` finds a scale for them), at the horizons of both laws the
+    walk-through runs (the paper's N = 15, which its law checks at run time, and the
+    tracking law's, which ``certify`` checks by default): equilibria of inputs spread over
     the inner part of the box, kept when admissible."""
     from controllers.certificates import compute_certificate
     from controllers.equilibrium import equilibrium_output
+    from controllers.fhocp_tracking import DEFAULTS
     from controllers.model import GRUModel
 
     model = GRUModel.load(model_path)
-    cert = compute_certificate(model, gain_scale=0.0)
+    certs = [compute_certificate(model, gain_scale=0.0, N=N) for N in (15, DEFAULTS["N"])]
     found: list[np.ndarray] = []
     rng = np.random.default_rng(0)
     for _ in range(400):
         u = rng.uniform(-0.6, 0.6, model.m)
         _, y = equilibrium_output(model.params, u)
-        if cert.failures(y) or any(np.max(np.abs(y - f)) < 0.1 for f in found):
+        if (any(cert.failures(y) for cert in certs)
+                or any(np.max(np.abs(y - f)) < 0.1 for f in found)):
             continue
         found.append(y)
         if len(found) == count:
