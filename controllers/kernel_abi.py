@@ -66,7 +66,14 @@ class SqpInfo(ctypes.Structure):
         Seconds in the QPs, the Hessians (eigenvalue clipping included), f/∇f/g/∂g (the
         stopping tests' and the iterations') and the line searches' f/g.
     derivative_reuses : int
-        Iterations that kept the Jacobian and the Hessian (``reuse_step``).
+        Iterations that kept the Jacobian and the Hessian (``reuse_step``), a discarded
+        loop's included.
+    fresh_restarts : int
+        1 when a loop that reused derivatives ended short of success and the solve started
+        again from its initial guess with fresh derivatives (so that reuse never costs
+        convergence: the answer is then the fresh-derivative solve's), else 0.
+    discarded_iterations : int
+        The iterations of that discarded loop (``iterations`` counts the answer's loop).
     """
 
     _fields_ = [("status", ctypes.c_int), ("iterations", ctypes.c_int),
@@ -74,7 +81,8 @@ class SqpInfo(ctypes.Structure):
                 ("line_search_failures", ctypes.c_int),
                 ("t_qp", ctypes.c_double), ("t_hessian", ctypes.c_double),
                 ("t_derivatives", ctypes.c_double), ("t_line_search", ctypes.c_double),
-                ("derivative_reuses", ctypes.c_int)]
+                ("derivative_reuses", ctypes.c_int), ("fresh_restarts", ctypes.c_int),
+                ("discarded_iterations", ctypes.c_int)]
 
 
 class SqpStatus(IntEnum):

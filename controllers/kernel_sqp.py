@@ -14,7 +14,8 @@ sensitivities and the Jacobian are computed only when another iteration follows.
 the same named argument and result arrays (``x0, p, lbx, ubx, lbg, ubg, lam_x0, lam_g0`` →
 ``x, f, g, lam_x, lam_g, lam_p``), a trigger, and ``stats()`` with casadi's keys
 (``return_status``, ``success``, ``iter_count`` and the cumulative ``t_wall_*`` timers of
-``sqpmethod``, plus ``derivative_reuses``), so that the answer check and the warm start are
+``sqpmethod``, plus ``derivative_reuses``, ``fresh_restarts`` and
+``discarded_iterations``), so that the answer check and the warm start are
 unchanged.
 """
 
@@ -111,10 +112,13 @@ class KernelSQP:
         self._stats = {
             "return_status": status.casadi_name,
             "success": status == SqpStatus.SOLVE_SUCCEEDED,
-            "iter_count": info.iterations,
+            # every iteration of the solve: a discarded reuse loop's too (fresh_restarts)
+            "iter_count": info.iterations + info.discarded_iterations,
             "qp_working_set_changes": info.qp_working_set_changes,
             "line_search_failures": info.line_search_failures,
             "derivative_reuses": info.derivative_reuses,
+            "fresh_restarts": info.fresh_restarts,
+            "discarded_iterations": info.discarded_iterations,
             "t_wall_QP": t[0], "t_wall_nlp_hess_l": t[1], "t_wall_nlp_jac_fg": t[2],
             "t_wall_nlp_fg": t[3]}
 

@@ -170,7 +170,8 @@ typedef struct gk_ws {
   /* the SQP (6_sqp.c) */
   A32 double sq_J[NG * NW], sq_H[NW * NW];
   double sq_gf[NW], sq_gz[NG], sq_gl[NW], sq_lbx[NW], sq_ubx[NW], sq_lba[NG], sq_uba[NG],
-      sq_dw[NW], sq_lx[NW], sq_la[NG], sq_wc[NW], sq_gc[NG], sq_gq[NW], sq_zx[NW], sq_zg[NG];
+      sq_dw[NW], sq_lx[NW], sq_la[NG], sq_wc[NW], sq_gc[NG], sq_gq[NW], sq_zx[NW], sq_zg[NG],
+      sq_w0[NW], sq_lx0[NW], sq_lg0[NG];   /* the initial guess, for a fresh restart */
 #ifdef GK_TIMERS
   double tk_acc[4];
 #endif

@@ -92,7 +92,7 @@ static double sq_viol(const double *w, const double *g, const double *lbx, const
  * sq_gl from the stopping tests): the derivatives, the QP for (dw, lam+), the l1-merit line
  * search, then w, lam_x, lam_g updated in place (and dw in sq_dw); a gk_sqp_status.
  *
- * Derivative reuse (opt->reuse_step > 0, ours): while the iterates have moved at most
+ * Derivative reuse (reuse_step > 0, ours): while the iterates have moved at most
  * reuse_step (inf-norm, summed over the steps) since the Jacobian and the Hessian were
  * evaluated, the iteration keeps them and takes the QP's gradient as
  * grad L(w, lam) - J_d' lam_g - lam_x = grad f(w) + (J(w) - J_d)' lam_g (the adjoint-corrected
@@ -104,8 +104,8 @@ static double sq_viol(const double *w, const double *g, const double *lbx, const
  * derivatives (INFINITY: none yet). */
 static int iterate(gk_ws *ws, const double *p, const double *lbx, const double *ubx,
                    const double *lbg, const double *ubg, double *w, double *lam_x,
-                   double *lam_g, double fk, const gk_sqp_opts *opt, double *sigma,
-                   double *drift, gk_sqp_info *info) {
+                   double *lam_g, double fk, const gk_sqp_opts *opt, double reuse_step,
+                   double *sigma, double *drift, gk_sqp_info *info) {
   double *sq_gf = ws->sq_gf, *sq_gz = ws->sq_gz, *sq_J = ws->sq_J, *sq_H = ws->sq_H,
          *sq_lbx = ws->sq_lbx, *sq_ubx = ws->sq_ubx, *sq_lba = ws->sq_lba,
          *sq_uba = ws->sq_uba, *sq_dw = ws->sq_dw, *sq_lx = ws->sq_lx, *sq_la = ws->sq_la,
@@ -114,7 +114,7 @@ static int iterate(gk_ws *ws, const double *p, const double *lbx, const double *
   const int max_iter_ls = opt->max_iter_ls;
   for (int j = 0; j < NW; j++) { sq_lbx[j] = lbx[j] - w[j]; sq_ubx[j] = ubx[j] - w[j]; }
   for (int r = 0; r < NG; r++) { sq_lba[r] = lbg[r] - sq_gz[r]; sq_uba[r] = ubg[r] - sq_gz[r]; }
-  for (int reuse = opt->reuse_step > 0.0 && *drift <= opt->reuse_step;; reuse = 0) {
+  for (int reuse = reuse_step > 0.0 && *drift <= reuse_step;; reuse = 0) {
     const double *qlin = sq_gf;
     double t0 = sq_now();
     if (reuse) {   /* grad f by an adjoint sweep; the QP's gradient adjoint-corrected */
@@ -188,26 +188,19 @@ static int iterate(gk_ws *ws, const double *p, const double *lbx, const double *
   }
 }
 
-/* Solve the FHOCP from w (NW), lam_x (NW) and lam_g (NG) (in/out: the initial guess in, the
- * answer out) at parameters p in workspace ws; g (NG) and *f receive the constraints and cost
- * at the answer. opt: the options (gk_sqp_opts: tol_pr, tol_du, max_iter, min_step_size, c1,
- * beta, max_iter_ls, time_budget [s], inf: none, checked before each iteration's Hessian,
- * after the stopping tests, tol_du_relative); info (gk_sqp_info) receives the status, the
- * iterations, the QP working-set changes, the line-search failures and the seconds spent in
- * the QP, the Hessian (clipping included), f/grad f/g/jac g and the line search's f/g.
- * Returns the status, a gk_sqp_status (casadi sqpmethod's return statuses;
- * GK_SQP_USER_REQUESTED_STOP: the time budget ran out). */
-EXPORT int PFX(sqp)(gk_ws *ws, const double *p, const double *lbx, const double *ubx,
+/* The SQP loop from (w, lam_x, lam_g) (in/out), reusing derivatives when reuse_step > 0: the
+ * stopping tests, then iterate(), until a test ends it; its status. The iterations are counted
+ * in info->iterations, the counters and timers added to info's. start: the solve's start
+ * (sq_now), for the time budget. */
+static int sqp_loop(gk_ws *ws, const double *p, const double *lbx, const double *ubx,
                     const double *lbg, const double *ubg, double *w, double *lam_x,
-                    double *lam_g, double *g, double *f, const gk_sqp_opts *opt,
-                    gk_sqp_info *info) {
+                    double *lam_g, double *f, const gk_sqp_opts *opt, double reuse_step,
+                    double start, gk_sqp_info *info) {
   double *sq_gz = ws->sq_gz, *sq_gl = ws->sq_gl, *sq_dw = ws->sq_dw;
   const double tol_pr = opt->tol_pr, tol_du = opt->tol_du, min_step = opt->min_step_size;
   const int max_iter = opt->max_iter, du_relative = opt->tol_du_relative;
-  const double start = sq_now(), budget = opt->time_budget;
   double sigma = 0.0, fk = 0.0, drift = INFINITY;
   int iter = 0, status = GK_SQP_SOLVE_SUCCEEDED;
-  memset(info, 0, sizeof *info);
   memset(sq_dw, 0, sizeof ws->sq_dw);
   for (;;) {
     /* the stopping tests first: f, g and the Lagrangian's gradient need no sensitivities */
@@ -233,16 +226,58 @@ EXPORT int PFX(sqp)(gk_ws *ws, const double *p, const double *lbx, const double 
     if (pr < tol_pr && du < tol_du * du_scale) { status = GK_SQP_SOLVE_SUCCEEDED; break; }
     if (iter >= max_iter) { status = GK_SQP_MAXIMUM_ITERATIONS_EXCEEDED; break; }
     if (iter >= 1 && dwn <= min_step) { status = GK_SQP_SEARCH_DIRECTION_BECOMES_TOO_SMALL; break; }
-    if (sq_now() - start > budget) { status = GK_SQP_USER_REQUESTED_STOP; break; }
+    if (sq_now() - start > opt->time_budget) { status = GK_SQP_USER_REQUESTED_STOP; break; }
     /* another iteration: its derivatives, the QP, the line search (iterate) */
     iter++;
-    const int st = iterate(ws, p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, fk, opt, &sigma,
-                           &drift, info);
+    const int st = iterate(ws, p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, fk, opt, reuse_step,
+                           &sigma, &drift, info);
     if (st != GK_SQP_SOLVE_SUCCEEDED) { status = st; break; }
   }
-  memcpy(g, sq_gz, sizeof ws->sq_gz);
   *f = fk;
-  info->status = status;
   info->iterations = iter;
+  return status;
+}
+
+/* Solve the FHOCP from w (NW), lam_x (NW) and lam_g (NG) (in/out: the initial guess in, the
+ * answer out) at parameters p in workspace ws; g (NG) and *f receive the constraints and cost
+ * at the answer. opt: the options (gk_sqp_opts: tol_pr, tol_du, max_iter, min_step_size, c1,
+ * beta, max_iter_ls, time_budget [s], inf: none, checked before each iteration's Hessian,
+ * after the stopping tests, tol_du_relative, reuse_step); info (gk_sqp_info) receives the
+ * status, the iterations, the QP working-set changes, the line-search failures and the
+ * seconds spent in the QP, the Hessian (clipping included), f/grad f/g/jac g and the line
+ * search's f/g.
+ *
+ * Derivative reuse never costs convergence: a loop that reused derivatives and ended short of
+ * "Solve_Succeeded" (at the iteration cap, a step too small, a failed or infeasible QP; not
+ * the time budget) is discarded and the solve starts again from the same initial guess with
+ * fresh derivatives in every iteration (info->fresh_restarts = 1, its iterations in
+ * info->discarded_iterations): the answer and status are then those of the fresh-derivative
+ * solve, to the bit. Returns the status, a gk_sqp_status (casadi sqpmethod's return statuses;
+ * GK_SQP_USER_REQUESTED_STOP: the time budget ran out). */
+EXPORT int PFX(sqp)(gk_ws *ws, const double *p, const double *lbx, const double *ubx,
+                    const double *lbg, const double *ubg, double *w, double *lam_x,
+                    double *lam_g, double *g, double *f, const gk_sqp_opts *opt,
+                    gk_sqp_info *info) {
+  const double start = sq_now();
+  const int may_reuse = opt->reuse_step > 0.0;
+  memset(info, 0, sizeof *info);
+  if (may_reuse) {   /* the initial guess, for a fresh restart */
+    memcpy(ws->sq_w0, w, sizeof ws->sq_w0);
+    memcpy(ws->sq_lx0, lam_x, sizeof ws->sq_lx0);
+    memcpy(ws->sq_lg0, lam_g, sizeof ws->sq_lg0);
+  }
+  int status = sqp_loop(ws, p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, f, opt,
+                        may_reuse ? opt->reuse_step : 0.0, start, info);
+  if (may_reuse && info->derivative_reuses > 0 && status != GK_SQP_SOLVE_SUCCEEDED &&
+      status != GK_SQP_USER_REQUESTED_STOP) {
+    memcpy(w, ws->sq_w0, sizeof ws->sq_w0);
+    memcpy(lam_x, ws->sq_lx0, sizeof ws->sq_lx0);
+    memcpy(lam_g, ws->sq_lg0, sizeof ws->sq_lg0);
+    info->fresh_restarts = 1;
+    info->discarded_iterations = info->iterations;
+    status = sqp_loop(ws, p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, f, opt, 0.0, start, info);
+  }
+  memcpy(g, ws->sq_gz, sizeof ws->sq_gz);
+  info->status = status;
   return status;
 }

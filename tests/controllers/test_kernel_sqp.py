@@ -133,8 +133,11 @@ def test_lagrangian_gradient_by_adjoints_matches_the_jacobian(kernel: ck.Workspa
 def test_kernel_loop_solves_as_casadi_sqpmethod(cert) -> None:
     """From identical starts the two loops take the same steps as long as the QPs' multipliers
     are unique: same status, the optimum to 1e-9; both check their answers the same way."""
-    a = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi"}).setup()
-    b = FHOCP.from_certificate(cert, sqp_options={"loop": "kernel"}).setup()
+    # 50 iterations: at the default 15 the solves after a set-point change cap, and which of
+    # the others do depends on the BLAS kernels the random test problem was certified with
+    opts = {"max_iter": 50}
+    a = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi", **opts}).setup()
+    b = FHOCP.from_certificate(cert, sqp_options={"loop": "kernel", **opts}).setup()
     assert isinstance(b._solver, KernelSQP) and not isinstance(a._solver, KernelSQP)
     solved = 0
     for ra, rb in same_start_solves(a, b, cert, [[0.1, 0.1], [0.0, 0.05], [-0.1, -0.1],
@@ -145,7 +148,7 @@ def test_kernel_loop_solves_as_casadi_sqpmethod(cert) -> None:
             assert abs(ra.iterations - rb.iterations) <= 1
             assert np.max(np.abs(ra.u - rb.u)) < 1e-7
             assert abs(ra.cost - rb.cost) < 1e-9 * (1 + abs(ra.cost))
-    assert solved >= 8     # the rest: capped solves after set-point changes, in both
+    assert solved >= 10    # 12 of 16 under every OpenBLAS core type; the rest cap in both
     st = b._buffer[0].stats()
     assert st["t_wall_QP"] > 0 and st["iter_count"] >= 0 and st["return_status"]
 
@@ -173,8 +176,9 @@ def test_derivative_reuse_reaches_the_same_optima(cert) -> None:
     """``reuse_step`` (ours): iterations that keep the last Jacobian and Hessian and take the
     adjoint-corrected gradient stop at the same KKT points (the same statuses, the optimum
     to the stopping test's precision) from the same starts; sqpmethod ignores the option."""
-    a = FHOCP.from_certificate(cert).setup()
-    b = FHOCP.from_certificate(cert, sqp_options={"reuse_step": 0.1}).setup()
+    opts = {"max_iter": 50}    # as above: which solves cap at 15 depends on the BLAS
+    a = FHOCP.from_certificate(cert, sqp_options=opts).setup()
+    b = FHOCP.from_certificate(cert, sqp_options={"reuse_step": 0.1, **opts}).setup()
     sqp = b._buffer[0]
     solved = reused = 0
     for ra, rb in same_start_solves(a, b, cert, [[0.1, 0.1], [0.0, 0.05], [-0.1, -0.1],
@@ -186,6 +190,34 @@ def test_derivative_reuse_reaches_the_same_optima(cert) -> None:
             # the inputs to ~1e-5 where the cost is flat, the cost to its stopping precision
             assert np.max(np.abs(ra.u - rb.u)) < 1e-4
             assert abs(ra.cost - rb.cost) < 1e-7 * (1 + abs(ra.cost))
-    assert solved >= 8 and reused > 0
+    assert solved >= 10 and reused > 0
     fh = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi", "reuse_step": 0.1})
     assert not isinstance(fh.setup()._solver, KernelSQP)
+
+
+@needs_cc
+@pytest.mark.parametrize("max_iter", [4, 6, 15])
+def test_derivative_reuse_never_costs_convergence(cert, max_iter: int) -> None:
+    """A loop that reused derivatives and ended short of success is discarded, and the solve
+    restarts from its initial guess with fresh derivatives: its status is never worse than
+    the fresh-derivative solve's, and a restarted answer is that solve's to the bit. Tight
+    iteration caps make the reuse loop (more, cheaper iterations) stall where fresh
+    derivatives converge, on every BLAS (the fresh solves' counts differ between them)."""
+    a = FHOCP.from_certificate(cert, sqp_options={"max_iter": max_iter}).setup()
+    b = FHOCP.from_certificate(cert, sqp_options={"reuse_step": 0.1,
+                                                  "max_iter": max_iter}).setup()
+    sqp = b._buffer[0]
+    restarts = 0
+    for ra, rb in same_start_solves(a, b, cert, [[0.1, 0.1], [0.0, 0.05], [-0.1, -0.1],
+                                                 [0.1, 0.1]], 4):
+        st = sqp.stats()
+        assert ra.status == rb.status
+        if st["fresh_restarts"]:
+            restarts += 1
+            assert st["discarded_iterations"] > 0
+            # iterations count the discarded loop's too
+            assert rb.iterations == ra.iterations + st["discarded_iterations"]
+            assert ra.cost == rb.cost
+            assert np.array_equal(ra.u, rb.u)
+    if max_iter < 15:
+        assert restarts > 0
