@@ -55,7 +55,7 @@ from controllers.errors import DataError, DesignError, SetpointError
 from controllers.problem import ControlProblem, constraint_names, output_constraints
 
 __all__ = ["JSON_KEYS", "MAX_HORIZON", "Certificate", "Reference", "admissible_ranges",
-           "compute_certificate", "w_y_bar_from_data"]
+           "compute_certificate", "uncertified_certificate", "w_y_bar_from_data"]
 
 JSON_KEYS = ("sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r", "nu_o",
              "rho_o", "c_o", "kappa", "L_max", "w_y_bar", "w_bar", "w_L", "a", "b", "e_o0",
@@ -115,6 +115,9 @@ class Certificate:
     gain_scale: float | None = None
     model: Any = field(default=None, repr=False)
     row_names: list[str] | None = None
+    #: ``"theorem"``: the bounds of ``th:feasibility-stability``; ``"measured"``: the
+    #: uncertified design of :func:`uncertified_certificate` (no guarantee).
+    tightening: str = "theorem"
 
     # -- dimensions and derived scalars ----------------------------------------------------
     @property
@@ -397,9 +400,26 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
         row_names=row_names)
 
 
-# --------------------------------------------------------------------------------------
-# Design lever: the observer-gain scale
-# --------------------------------------------------------------------------------------
+def uncertified_certificate(cert: Certificate, margins: np.ndarray) -> Certificate:
+    """The design of the uncertified mode: ``cert``'s model, weights and terminal weight, with
+    the theorem's tightening ``a_i ê_o + b_i + w_L`` replaced by measured ``margins``
+    (``(N + 1, q)``, :func:`controllers.prediction_error.margins`) and zero observer gains
+    (the observer runs the model). Every row is tightened by ``margins[i]`` at step ``i``:
+    ``a = 0``, ``b = margins``, ``w_L = 0``, ``ê_o = 0``; ``α`` (``eq:def-alpha``) and
+    Assumption 1 use the same margins; no guarantee follows from them
+    (``tightening = "measured"``). The ``i = 0`` rows, on the estimate ``x̂`` alone (no input
+    changes them; the theorem's recursive feasibility, which keeps them satisfied, is what
+    this design lacks), are not enforced: their margin is ``−∞``."""
+    from dataclasses import replace
+
+    margins = np.array(margins, dtype=float)
+    if margins.shape != cert.a.shape:
+        raise DesignError(f"margins have shape {margins.shape}, expected {cert.a.shape}")
+    margins[0] = -np.inf
+    zero = np.zeros_like(cert.L_z)
+    return replace(cert, L_z=zero, L_r=zero.copy(), nu_o=cert.nu, rho_o=cert.rho_s, kappa=0.0,
+                   L_max=0.0, w_bar=0.0, w_L=np.zeros_like(cert.w_L), a=np.zeros_like(cert.a),
+                   b=margins, e_o0=0.0, e_inf=0.0, gain_scale=0.0, tightening="measured")
 
 
 # --------------------------------------------------------------------------------------

@@ -35,13 +35,10 @@ Environment: ``GRU_MPC_KERNEL=0`` (off), ``GRU_MPC_KERNEL_CACHE`` (folder), ``CC
 from __future__ import annotations
 
 import contextlib
-import functools
 import hashlib
 import json
 import os
 import shutil
-import subprocess
-import tempfile
 import threading
 from collections.abc import Mapping
 from pathlib import Path
@@ -49,6 +46,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.cbuild import compile_library, compiler_id, default_cache_dir, write_atomic
 from controllers.kernel_abi import c_declarations
 from controllers.kernel_lib import Kernel, Workspace
 
@@ -77,18 +75,6 @@ _LOADED: dict[str, Kernel] = {}
 _LOCK = threading.RLock()
 #: Builds that failed in this process, by cache key: not retried (the reason is kept).
 _FAILED: dict[str, str] = {}
-
-
-def default_cache_dir() -> Path:
-    """``GRU_MPC_KERNEL_CACHE``, else ``kernels`` in the user's cache folder
-    (:func:`platformdirs.user_cache_dir`: ``$XDG_CACHE_HOME/gru-mpc`` or ``~/.cache/gru-mpc``
-    on Linux)."""
-    env = os.environ.get("GRU_MPC_KERNEL_CACHE")
-    if env:
-        return Path(env)
-    import platformdirs
-
-    return Path(platformdirs.user_cache_dir("gru-mpc")) / "kernels"
 
 
 def _c_array(name: str, a: np.ndarray) -> str:
@@ -216,15 +202,6 @@ def choose_mode(n: int, m: int, N: int, M: int | None = None) -> str:
     return "contract" if cc < 0.8 * cw else "w"
 
 
-@functools.cache
-def _compiler_id(cc: str) -> str:
-    try:
-        out = subprocess.run([cc, "--version"], capture_output=True, text=True, timeout=30)
-        return out.stdout.splitlines()[0] if out.stdout else cc
-    except (OSError, subprocess.SubprocessError):
-        return cc
-
-
 def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
           DUo: np.ndarray, s: float, clip: float | None, *, LUo: np.ndarray | None = None,
           du_weight: np.ndarray | None = None, offset_weight: np.ndarray | None = None,
@@ -285,7 +262,7 @@ def _build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarra
                               control_horizon)
     except ValueError as exc:
         return None, f"cannot generate the kernel: {exc}"
-    key = hashlib.sha256("\0".join([GENERATOR_VERSION, _compiler_id(cc), " ".join(flags),
+    key = hashlib.sha256("\0".join([GENERATOR_VERSION, compiler_id(cc), " ".join(flags),
                                     " ".join(libs), src]).encode()).hexdigest()[:16]
     if key in _FAILED:
         return None, _FAILED[key]
@@ -300,10 +277,10 @@ def _build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarra
         if reason is not None:
             _FAILED[key] = reason
             return None, reason
-        meta = {"flags": list(flags), "libs": libs, "compiler": _compiler_id(cc),
+        meta = {"flags": list(flags), "libs": libs, "compiler": compiler_id(cc),
                 "generator": GENERATOR_VERSION, "n": int(n_states), "N": int(N)}
         with contextlib.suppress(OSError):   # informative only
-            _write_atomic(cdir / f"gk{key}.json", json.dumps(meta, indent=1).encode())
+            write_atomic(cdir / f"gk{key}.json", json.dumps(meta, indent=1).encode())
         if verbose:
             print(f"compiled FHOCP kernel: built {so}")
     try:
@@ -316,48 +293,12 @@ def _build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarra
     return k, None
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
 def _compile(csource: str, cdir: Path, key: str, cc: str, flags: tuple[str, ...],
              libs: list[str]) -> str | None:
-    """Compile ``csource`` into ``cdir/gk<key>.so`` (and keep it as ``gk<key>.c``); the reason
-    when it fails. Every file is written under a temporary name and renamed into place, so
-    processes building the same kernel at once (the workers of a campaign) never compile or
-    load another's half-written file."""
-    try:
-        cdir.mkdir(parents=True, exist_ok=True)
-        fd, csrc = tempfile.mkstemp(prefix=f"gk{key}.", suffix=".c", dir=cdir)
-        with os.fdopen(fd, "w") as f:
-            f.write(csource)
-        fd, tmp = tempfile.mkstemp(prefix=f"gk{key}.", suffix=".so", dir=cdir)
-        os.close(fd)
-        try:
-            res = subprocess.run([cc, *flags, "-o", tmp, csrc, *libs, "-lm"],
-                                 capture_output=True, text=True, timeout=600)
-            if res.returncode != 0:
-                first = (res.stderr.strip().splitlines() or ["no message"])[0]
-                kept = cdir / f"gk{key}.failed.c"
-                os.replace(csrc, kept)
-                return f"{cc} failed on {kept}: {first[:300]}"
-            os.replace(tmp, cdir / f"gk{key}.so")
-            os.replace(csrc, cdir / f"gk{key}.c")
-        finally:
-            for leftover in (tmp, csrc):
-                with contextlib.suppress(OSError):
-                    os.unlink(leftover)
-    except (OSError, subprocess.SubprocessError) as exc:
-        return f"kernel build failed: {exc}"
-    return None
+    """Compile ``csource`` into ``cdir/gk<key>.so`` (:func:`controllers.cbuild.
+    compile_library`); the reason when it fails."""
+    reason = compile_library(csource, cdir, f"gk{key}", cc, flags, libs)
+    return None if reason is None else reason.replace("build failed:", "kernel build failed:")
 
 
 #: Kernel libraries checked against the numpy callbacks in this process, with the outcome.

@@ -167,15 +167,34 @@ class TrackingFHOCP(FHOCP):
         self.it = M * m + m
         self.ng = (N - 1) * qr + 2 * n + qr
         self.npar = 2 * n + self.p + (m if self.has_du else 0)
-        rhs = self._ys_rhs = self.ys_bounds - self.Lbo   # Y_s: L U_o x_s <= rhs
-        self._ys_ub = rhs[self.pair_up]
-        self._ys_lb = np.where(self.pair_lo >= 0, -rhs[np.maximum(self.pair_lo, 0)], -np.inf)
+        self._ys_base = self.ys_bounds - self.Lbo          # Y_s: L U_o x_s <= rhs
+        #: ``L d`` of :meth:`set_output_shift` (``None``: the rows as declared)
+        self._shift: np.ndarray | None = None
         #: largest move of u_s per step (normalised; None: none), around the candidate's
         #: (``us_centre`` of :meth:`solve_tracking`)
         self.us_rate: float | None = US_RATE
         self._g_for: np.ndarray | None = None   # the bounds _lbg, _ubg were written for
         self._g_rows = self._constraint_rows()
         self._static_layout()
+
+    @property
+    def _ys_rhs(self) -> np.ndarray:
+        """Right-hand side of ``Y_s`` on ``L U_o x_s`` (shifted by :meth:`set_output_shift`)."""
+        return self._ys_base if self._shift is None else self._ys_base - self._shift
+
+    def set_output_shift(self, d: np.ndarray | None) -> None:
+        """Constrain ``y + d`` instead of the model's ``y``: every output row
+        ``L (U_o x_i + b_o + d) ≤ …`` and ``Y_s`` (the uncertified mode's ``d = d̂``, the
+        filtered output mismatch, so that the measured tightening is around the output the
+        plant will show); ``None`` restores the rows as declared."""
+        self._shift = None if d is None else self.L @ np.asarray(d, dtype=float).reshape(self.p)
+        self._g_for = None
+
+    def tightened_bounds(self, e_o: float) -> np.ndarray:
+        """:meth:`controllers.fhocp.FHOCP.tightened_bounds`, minus ``L d`` of
+        :meth:`set_output_shift`."""
+        bounds = super().tightened_bounds(e_o)
+        return bounds if self._shift is None else bounds - self._shift
 
     @classmethod
     def from_certificate(cls, cert: Any, **options: Any) -> TrackingFHOCP:
@@ -393,6 +412,11 @@ class TrackingFHOCP(FHOCP):
             flat = bounds.ravel()
             self._ubg[up_pos] = flat[up_idx]
             self._lbg[lo_pos] = -flat[lo_idx]
+            r0 = (self.N - 1) * self.qr + 2 * self.n      # the Y_s rows
+            rhs = self._ys_rhs
+            self._ubg[r0:] = rhs[self.pair_up]
+            self._lbg[r0:] = np.where(self.pair_lo >= 0, -rhs[np.maximum(self.pair_lo, 0)],
+                                      -np.inf)
             self._g_for = bounds
         ins["lbg"][:] = self._lbg
         ins["ubg"][:] = self._ubg
@@ -407,9 +431,7 @@ class TrackingFHOCP(FHOCP):
         ubg = np.full(self.ng, np.inf)
         r0 = (N - 1) * qr
         ubg[r0:r0 + n] = 0.0
-        lbg[r0 + n:r0 + 2 * n] = 0.0
-        lbg[r0 + 2 * n:] = self._ys_lb
-        ubg[r0 + 2 * n:] = self._ys_ub
+        lbg[r0 + n:r0 + 2 * n] = 0.0                  # the Y_s rows: _write_bounds
         self._lbg, self._ubg = lbg, ubg
         stage = np.arange(1, N)[:, None] * q
         up_idx = (stage + self.pair_up[None, :]).ravel()

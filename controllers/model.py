@@ -15,6 +15,8 @@ Format (JSON, no pickle anywhere)::
       "training": {...},                                          # free-form record
       "observer": {"L_z": [[...]], "L_r": [[...]]},               # optional, n×p each
       "w_y_bar": 0.12,                                            # optional, normalised units
+      "prediction_error": [[...]],                                # optional, (H+1)×p, normalised
+      "certificate": {...},                                       # optional, cosim certify --save
       "problem": {...}                                            # the control problem
     }
 
@@ -75,6 +77,12 @@ class GRUModel:
         Observer gains of ``eq:observer`` (n×p), when designed.
     w_y_bar : float or None
         Bound of the output perturbation, normalised units (``W_y``).
+    prediction_error : ndarray or None
+        ``(H + 1, p)``: the measured error of the tracking law's prediction ``i`` steps ahead
+        on held-back data, normalised (:mod:`controllers.prediction_error`; written by
+        ``cosim train``): the tightening of the robust MPC's uncertified mode.
+    certificate : dict or None
+        What ``cosim certify --save`` found (``certified``, the law, the reasons, …).
     problem : ControlProblem or None
         The control problem (signals, boxes, sample time, normalisation, PI loops).
     source : str or None
@@ -95,6 +103,8 @@ class GRUModel:
     L_z: np.ndarray | None = None
     L_r: np.ndarray | None = None
     w_y_bar: float | None = None
+    prediction_error: np.ndarray | None = None
+    certificate: dict[str, Any] | None = None
     problem: Any = None
     source: str | None = field(default=None, compare=False, repr=False)
 
@@ -151,6 +161,10 @@ class GRUModel:
             doc["observer"] = {"L_z": self.L_z.tolist(), "L_r": self.L_r.tolist()}
         if self.w_y_bar is not None:
             doc["w_y_bar"] = float(self.w_y_bar)
+        if self.prediction_error is not None:
+            doc["prediction_error"] = np.asarray(self.prediction_error, dtype=float).tolist()
+        if self.certificate is not None:
+            doc["certificate"] = self.certificate
         if self.problem is not None:
             doc["problem"] = self.problem.to_dict()
         return doc
@@ -289,13 +303,24 @@ class GRUModel:
         training = doc.get("training", {})
         if not isinstance(training, dict):
             raise ModelFileError(f"{source}: 'training' must be an object")
+        profile = None
+        if doc.get("prediction_error") is not None:
+            profile = array(doc["prediction_error"], "prediction_error", 2)
+            if profile.shape[1] != p or profile.shape[0] < 1 or np.any(profile < 0):
+                raise ModelFileError(f"{source}: 'prediction_error' must be a non-negative "
+                                     f"array of rows of {p} entries, got shape "
+                                     f"{profile.shape}")
+        certificate = doc.get("certificate")
+        if certificate is not None and not isinstance(certificate, dict):
+            raise ModelFileError(f"{source}: 'certificate' must be an object")
 
         model = cls(params=params, u_offset=scales["u_offset"], u_scale=scales["u_scale"],
                     y_offset=scales["y_offset"], y_scale=scales["y_scale"],
                     input_names=input_names, input_units=input_units,
                     output_names=output_names, output_units=output_units, Ts=float(Ts),
                     training=training, L_z=L_z, L_r=L_r,
-                    w_y_bar=None if w_y_bar is None else float(w_y_bar))
+                    w_y_bar=None if w_y_bar is None else float(w_y_bar),
+                    prediction_error=profile, certificate=certificate)
         if doc.get("problem") is not None:
             from controllers.problem_file import problem_from_dict
 

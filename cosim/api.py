@@ -135,7 +135,8 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         problem: Any = None, out: str | Path | None = None, interface: str = "cs",
         step: float | None = None, isolate: bool = False, step_timeout: float | None = None,
         seed: int = 0, figure: bool = True, progress: bool = False,
-        on_step: Callable[[int], None] | None = None) -> RunOutput:
+        on_step: Callable[[int], None] | None = None,
+        on_notice: Callable[[str], None] | None = None) -> RunOutput:
     """Run a scenario in closed loop (the Python twin of ``cosim run``).
 
     Parameters
@@ -177,6 +178,9 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         Show a progress bar over the steps on standard error.
     on_step : callable, optional
         Called with the number of completed steps (progress bars).
+    on_notice : callable, optional
+        Called, before the run, with the controller's one-line notice when it has one (the
+        robust MPC's: why it runs uncertified, :mod:`cosim_adapters.certification`).
 
     Returns
     -------
@@ -206,6 +210,10 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     if out is not None:
         outpaths.out_dir(out, "--out")
     ctrl = registry.create(controller, opts)
+    ctrl.expect_setpoints(sc.setpoints())   # a controller that refuses them: nothing runs
+    notice = getattr(ctrl, "notice", None)
+    if notice and on_notice is not None:
+        on_notice(notice)
     bound = run_problem(ctrl, opts.get("problem", problem))
     plant_obj, plant_name = _plant(plant, vmap, interface, isolate, limit, seed, bound)
     master = Master(plant_obj, ctrl, sc, step=step, seed=seed)

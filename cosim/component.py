@@ -1,8 +1,9 @@
 """The one interface for everything the master steps: plants, controllers, sensors.
 
 Components are systems wired by signal name (python-control style). The master calls, in
-order: :meth:`Component.setup`, then per communication step ``set_inputs`` / ``step`` /
-``get_outputs``, and finally :meth:`Component.terminate`.
+order: :meth:`Component.expect_setpoints` (controllers), :meth:`Component.setup`, then per
+communication step ``set_inputs`` / ``step`` / ``get_outputs``, and finally
+:meth:`Component.terminate`.
 
 Timing convention (zero-order hold, Gauss-Seidel within a step):
 
@@ -63,6 +64,12 @@ class Component(ABC):
 
     def setup(self, t0: float) -> None:  # noqa: B027 - optional hook
         """Prepare for a run starting at ``t0`` (instantiate, initialise)."""
+
+    def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:  # noqa: B027
+        """Before :meth:`setup`: the set-points the run will request, in order (each by
+        output name; :meth:`cosim.scenario.Scenario.setpoints`), so that a controller can
+        design for them (the robust MPC decides there whether it runs certified). Optional;
+        ignored by default."""
 
     @abstractmethod
     def set_inputs(self, values: Mapping[str, float]) -> None:

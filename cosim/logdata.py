@@ -7,11 +7,13 @@ A header row, then one row per sample (blank lines skipped; a byte-order mark dr
 
 * ``time`` [s]: within one experiment it increases by the problem's ``Ts`` at every row,
   within :data:`TS_TOLERANCE` (relative). The record is not resampled: a log sampled at another
-  period, a gap, a non-uniform step or time going backwards is an error naming the file, line
-  and column.
+  period, a non-uniform step or time going backwards is an error naming the file, line and
+  column. A gap (whole samples missing) ends the experiment: the rows after it are the next
+  part of it, an experiment of their own (never joined over the gap).
 * one column per input and per output of the control problem, named as in the problem, in
-  its units; every cell a finite number (an empty cell, a non-number, NaN or inf is an error
-  naming file:line:column).
+  its units; every cell a finite number, or a missing sample: an empty cell, ``nan``, ``NA``
+  or ``null`` drops its row, which ends the experiment there as a gap does (a non-number or
+  inf is an error naming file:line:column; so is a missing time).
 * ``split`` (optional): ``train``, ``val`` or ``test`` per row, as ``cosim generate-data``
   writes it. Without it, the split is given by fractions (:func:`fraction_split`).
 * ``experiment`` (optional): a label per row; the rows of one experiment are consecutive (a
@@ -21,7 +23,8 @@ A header row, then one row per sample (blank lines skipped; a byte-order mark dr
 
 Any other column is ignored (its name is recorded), and its cells are not read. A data set
 written by :func:`cosim.datagen.write_csv` is such a file: one experiment with a ``split``
-column (the extra plant outputs are ignored columns).
+column (the extra plant outputs are ignored columns). Several files are read into one record
+by :func:`read_logs`: each file's experiments stay apart from the other files'.
 """
 
 from __future__ import annotations
@@ -39,14 +42,17 @@ from cosim import csvio
 from cosim.datagen import SPLITS, split_sizes
 from cosim.errors import CosimError
 
-__all__ = ["EXPERIMENT_COLUMN", "LOG_WORDING", "SPLIT_COLUMN", "TIME_COLUMN",
-           "TS_TOLERANCE", "LogData", "fraction_split", "parse_fractions", "read_log"]
+__all__ = ["EXPERIMENT_COLUMN", "LOG_WORDING", "MISSING", "SPLIT_COLUMN", "TIME_COLUMN",
+           "TS_TOLERANCE", "LogData", "fraction_split", "parse_fractions", "read_log",
+           "read_logs"]
 
 TIME_COLUMN = "time"
 SPLIT_COLUMN = "split"
 EXPERIMENT_COLUMN = "experiment"
 #: Largest relative deviation of a time step from ``Ts`` (1 %: logger jitter).
 TS_TOLERANCE = 0.01
+#: Cells of an input or output that mark a missing sample (case-insensitive, stripped).
+MISSING = frozenset({"", "nan", "na", "n/a", "null"})
 
 #: How logged data files word the errors of :class:`~cosim.csvio.CsvReader`.
 LOG_WORDING = csvio.Wording(
@@ -140,7 +146,7 @@ def fraction_split(experiment: np.ndarray, fractions: tuple[float, float]) -> np
 def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequence[str],
              Ts: float, problem: str = "", fractions: tuple[float, float] | None = None,
              default_fractions: tuple[float, float] = (0.75, 0.125),
-             missing_hint: str = "") -> LogData:
+             missing_hint: str = "", whole_split: str | None = None) -> LogData:
     """Read and check a logged CSV (format: the module docstring) for a control problem.
 
     Parameters
@@ -159,6 +165,9 @@ def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequenc
         The fractions used when the file has no ``split`` column and ``fractions`` is None.
     missing_hint : str
         Appended to the message of a missing column (e.g. how to name the problem).
+    whole_split : str, optional
+        Every row is in this split (a file given as ``--val FILE``): its ``split`` column and
+        the fractions are not used.
 
     Raises
     ------
@@ -172,15 +181,23 @@ def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequenc
     with csvio.CsvReader(path, LOG_WORDING, encoding="utf-8-sig") as f:
         header = [h.strip() for h in f.header()]
         col = _columns(path, header, input_names, output_names, what, missing_hint)
-        numeric = [col[TIME_COLUMN], *(col[n] for n in (*input_names, *output_names))]
-        names = [header[j] for j in numeric]
-        # with --split fractions the split column is not read (an ignored column)
-        j_split = col.get(SPLIT_COLUMN) if fractions is None else None
+        j_time = col[TIME_COLUMN]
+        signals = [col[n] for n in (*input_names, *output_names)]
+        # with --split fractions (or a whole-file split) the split column is not read
+        j_split = col.get(SPLIT_COLUMN) if fractions is None and whole_split is None else None
         j_exp = col.get(EXPERIMENT_COLUMN)
-        values, split, labels, lines = [], [], [], []
+        values, split, labels, lines, absent = [], [], [], [], []
         for line, row in f.rows(len(header)):
-            values.append([f.number(row[j], line, j + 1, name)
-                           for j, name in zip(numeric, names, strict=True)])
+            cells = [f.number(row[j_time], line, j_time + 1, TIME_COLUMN)]
+            gone = False
+            for j in signals:
+                if row[j].strip().lower() in MISSING:
+                    gone = True
+                    cells.append(math.nan)
+                else:
+                    cells.append(f.number(row[j], line, j + 1, header[j]))
+            values.append(cells)
+            absent.append(gone)
             if j_split is not None:
                 label = row[j_split].strip()
                 if label not in SPLITS:
@@ -199,19 +216,27 @@ def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequenc
     arr = np.array(values, dtype=float)
     line_arr = np.array(lines)
     experiment, exp_names = _experiments(path, labels, line_arr, j_exp)
-    time = arr[:, 0]
-    _check_time(path, time, experiment, line_arr, Ts, what, col[TIME_COLUMN] + 1,
-                j_exp is not None)
-    if j_split is None:
+    gaps = _check_time(path, arr[:, 0], experiment, line_arr, Ts, what, j_time + 1,
+                       j_exp is not None)
+    missing = np.array(absent, dtype=bool)
+    if np.all(missing):
+        raise CosimError(f"{path}:2: every row misses a sample of an input or output")
+    experiment, exp_names = _parts(experiment, exp_names, gaps, missing, path.stem)
+    keep = ~missing
+    arr, line_arr, experiment = arr[keep], line_arr[keep], experiment[keep]
+    if j_split is not None:
+        split_arr = np.array(split)[keep]
+        source = f"column '{SPLIT_COLUMN}'"
+    elif whole_split is not None:
+        split_arr = np.full(len(arr), whole_split)
+        source = f"every row ({whole_split})"
+    else:
         used = fractions if fractions is not None else default_fractions
         split_arr = fraction_split(experiment, used)
         source = (f"fractions {used[0]:g},{used[1]:g} of each experiment in time order"
                   + (" (--split)" if fractions is not None else " (default, no split column)"))
-    else:
-        split_arr = np.array(split)
-        source = f"column '{SPLIT_COLUMN}'"
     m = len(input_names)
-    data = LogData(time=time, u=arr[:, 1:1 + m], y=arr[:, 1 + m:],
+    data = LogData(time=arr[:, 0], u=arr[:, 1:1 + m], y=arr[:, 1 + m:],
                    input_names=list(input_names), output_names=list(output_names),
                    split=split_arr, experiment=experiment, experiment_names=exp_names,
                    lines=line_arr)
@@ -223,7 +248,7 @@ def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequenc
     data.provenance = {
         "path": str(path),
         "sha256": _sha256(path),
-        "rows": int(time.shape[0]),
+        "rows": len(arr),
         "problem": problem,
         "Ts": Ts,
         "columns": {"time": TIME_COLUMN, "inputs": list(input_names),
@@ -233,7 +258,46 @@ def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequenc
         "ignored_columns": [h for h in header if h not in used_cols],
         "split": {"source": source,
                   "rows": {s: int(np.count_nonzero(split_arr == s)) for s in SPLITS}},
+        "gaps": [{"line": int(lines[k]), "missing_samples": n} for k, n in gaps],
+        "missing_sample_lines": [int(v) for v in np.array(lines)[missing]],
         "experiments": [_experiment_record(data, e) for e in range(len(exp_names))],
+    }
+    return data
+
+
+def read_logs(files: Sequence[tuple[str | Path, str | None]], input_names: Sequence[str],
+              output_names: Sequence[str], Ts: float, problem: str = "",
+              fractions: tuple[float, float] | None = None,
+              default_fractions: tuple[float, float] = (0.75, 0.125),
+              missing_hint: str = "") -> LogData:
+    """Several logged CSVs as one record: ``files`` holds ``(path, whole_split)`` pairs
+    (:func:`read_log`; ``whole_split`` ``None`` for a file split by its column or by
+    fractions). Each file's experiments stay apart from the others' (named
+    ``<file stem>`` or ``<file stem>:<experiment>``); one file gives :func:`read_log`'s record
+    unchanged."""
+    parts = [read_log(path, input_names, output_names, Ts, problem, fractions,
+                      default_fractions, missing_hint, role) for path, role in files]
+    if len(parts) == 1:
+        return parts[0]
+    names: list[str | None] = []
+    experiment = []
+    for d in parts:
+        stem = Path(d.provenance["path"]).stem
+        experiment.append(d.experiment + len(names))
+        names += [stem if n is None else f"{stem}:{n}" for n in d.experiment_names]
+    data = LogData(time=np.concatenate([d.time for d in parts]),
+                   u=np.concatenate([d.u for d in parts]),
+                   y=np.concatenate([d.y for d in parts]),
+                   input_names=list(input_names), output_names=list(output_names),
+                   split=np.concatenate([d.split for d in parts]),
+                   experiment=np.concatenate(experiment), experiment_names=names,
+                   lines=np.concatenate([d.lines for d in parts]))
+    data.provenance = {
+        "files": [d.provenance for d in parts],
+        "rows": len(data.time),
+        "problem": problem,
+        "Ts": Ts,
+        "split": {"rows": {s: int(np.count_nonzero(data.split == s)) for s in SPLITS}},
     }
     return data
 
@@ -278,11 +342,14 @@ def _experiments(path: Path, labels: list[str], lines: np.ndarray, j_exp: int | 
 
 
 def _check_time(path: Path, time: np.ndarray, experiment: np.ndarray, lines: np.ndarray,
-                Ts: float, what: str, col: int, has_experiments: bool) -> None:
-    """Within each experiment, time steps of ``Ts`` (± :data:`TS_TOLERANCE`)."""
+                Ts: float, what: str, col: int, has_experiments: bool
+                ) -> list[tuple[int, int]]:
+    """Within each experiment, time steps of ``Ts`` (± :data:`TS_TOLERANCE`); the gaps, as
+    ``(row after the gap, samples missing)``."""
     tol = TS_TOLERANCE * Ts
     several = (f"each experiment's rows need their own label in an '{EXPERIMENT_COLUMN}' "
                "column" if not has_experiments else "give each part its own experiment label")
+    gaps: list[tuple[int, int]] = []
     for e in np.unique(experiment):
         idx = np.flatnonzero(experiment == e)
         if idx.size < 2:
@@ -294,21 +361,48 @@ def _check_time(path: Path, time: np.ndarray, experiment: np.ndarray, lines: np.
             raise CosimError(f"{path}:{lines[k]}:{col}: the data are sampled every {step:g} s "
                              f"(median time step), but {what} has Ts = {Ts:g} s: resample the "
                              "log at Ts, or give the problem of this sample time")
-        bad = np.flatnonzero(np.abs(dt - Ts) > tol)
-        if not bad.size:
-            continue
-        k, jump = idx[bad[0] + 1], float(dt[bad[0]])
-        at, before = f"{path}:{lines[k]}:{col}", f"{time[k - 1]:g} s (line {lines[k - 1]})"
-        if jump <= 0:
-            raise CosimError(f"{at}: time {time[k]:g} s does not follow {before}: time must "
-                             f"increase by Ts = {Ts:g} s; for several experiments, {several}")
-        if jump > 1.5 * Ts:
+        for b in np.flatnonzero(np.abs(dt - Ts) > tol):
+            k, jump = idx[b + 1], float(dt[b])
+            at, before = f"{path}:{lines[k]}:{col}", f"{time[k - 1]:g} s (line {lines[k - 1]})"
+            if jump <= 0:
+                raise CosimError(f"{at}: time {time[k]:g} s does not follow {before}: time "
+                                 f"must increase by Ts = {Ts:g} s; for several experiments, "
+                                 f"{several}")
             missing = round(jump / Ts) - 1
-            raise CosimError(f"{at}: gap in time: {before} to {time[k]:g} s, {missing} "
-                             f"sample{'s' if missing != 1 else ''} of Ts = {Ts:g} s missing; "
-                             f"the record is not joined over a gap: {several}")
-        raise CosimError(f"{at}: non-uniform time step of {jump:g} s after {before}, "
-                         f"expected Ts = {Ts:g} s within {100 * TS_TOLERANCE:g} %")
+            if missing >= 1 and abs(jump - (missing + 1) * Ts) <= tol:
+                gaps.append((int(k), int(missing)))
+                continue
+            raise CosimError(f"{at}: non-uniform time step of {jump:g} s after {before}, "
+                             f"expected Ts = {Ts:g} s (or a whole number of samples missing) "
+                             f"within {100 * TS_TOLERANCE:g} %")
+    return gaps
+
+
+def _parts(experiment: np.ndarray, names: list[str | None], gaps: list[tuple[int, int]],
+           missing: np.ndarray, stem: str) -> tuple[np.ndarray, list[str | None]]:
+    """The experiments cut at the gaps and at the rows with a missing sample (those rows
+    belong to none: the caller drops them): an index per row and the names (a part after a
+    cut is ``<name>#2``, ``#3``, …; ``<name>`` is the label, or the file's stem)."""
+    cut = np.zeros(len(experiment), dtype=bool)
+    for k, _ in gaps:
+        cut[k] = True
+    out = np.full(len(experiment), -1)
+    new_names: list[str | None] = []
+    counts: dict[int, int] = {}
+    prev = None
+    for k in range(len(experiment)):
+        if missing[k]:
+            continue
+        e = int(experiment[k])
+        if prev is None or e != prev[0] or cut[k] or prev[1] != k - 1:
+            counts[e] = counts.get(e, 0) + 1
+            base = names[e]
+            new_names.append(base if counts[e] == 1 else f"{base or stem}#{counts[e]}")
+        out[k] = len(new_names) - 1
+        prev = (e, k)
+    if len(new_names) > 1 and new_names[0] is None:
+        new_names[0] = stem
+    return out, new_names
 
 
 def _experiment_record(data: LogData, e: int) -> dict[str, Any]:

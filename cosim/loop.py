@@ -101,6 +101,7 @@ class Run:
             m.plant.setup(t)
             if self.set_param is None:
                 m.plant.set_inputs({p: v for p, v in self.held.items() if not math.isnan(v)})
+            m.controller.expect_setpoints(m.scenario.setpoints())
             m.controller.setup(t)
         except (CosimError, SimulationFailed):
             raise

@@ -3,7 +3,7 @@
 * :func:`run_figure`: a closed-loop run (``cosim run``'s ``figure.png``).
 * :func:`compare_figure`: a result against its reference (``cosim compare --plot``).
 * :func:`certificate_figure`: the certificates of a model (``cosim certify --plot``).
-* :func:`prediction_figure`: a trained model's test-split prediction (``cosim train``).
+* :func:`identification_figure`: a trained model's free run over its record (``cosim train``).
 
 A campaign's ``report.png`` is drawn by :func:`cosim.campaign.report.campaign_figure` with
 the helpers here (:func:`signal_panel`, :func:`label`, :func:`pyplot`, :func:`save`).
@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     from cosim.compare import Comparison
     from cosim.master import RunResult
 
-__all__ = ["certificate_figure", "compare_figure", "label", "prediction_figure", "pyplot",
+__all__ = ["certificate_figure", "compare_figure", "identification_figure", "label", "pyplot",
            "run_figure", "run_panels", "save", "signal_panel", "times_s"]
 
 
@@ -360,36 +360,51 @@ def _admissible_panel(fig: Any, ax: Any, model: Any, cert: Any, setpoints: list,
 # cosim train
 # --------------------------------------------------------------------------------------------
 
-def prediction_figure(time: np.ndarray, y: np.ndarray, xi: np.ndarray, names: list[str],
-                      units: list[str], fits: list[float], path: str | Path,
-                      title: str) -> None:
-    """Measured vs predicted outputs (one panel per output) into ``path`` (PNG).
+def identification_figure(path: str | Path, y: np.ndarray, xi: np.ndarray,
+                          baseline: np.ndarray | None, split: np.ndarray,
+                          experiment: np.ndarray, names: list[str], units: list[str],
+                          Ts: float, measured: str, title: str) -> None:
+    """A trained model against the record (one panel per output) into ``path`` (PNG).
 
     Parameters
     ----------
-    time : (T,) array
-        Sample times [s]; the axis shows hours from the first.
     y, xi : (T, p) arrays
-        Measured and open-loop predicted outputs, physical units.
-    names, units : list of str
-        Per output.
-    fits : list of float
-        FIT per output [%] (:func:`controllers.metrics.fit`), shown in each panel's title.
-    path : str or Path
-    title : str
+        Measured outputs and the model's free run, physical units.
+    baseline : (T, p) array or None
+        The linear baseline's free run.
+    split, experiment : (T,) arrays
+        Each row's split (shaded: validation blue, test orange) and experiment (a vertical
+        line where one ends); the experiments are drawn one after the other.
+    Ts : float
+        Sample time [s]: the axis is hours of record.
+    measured : str
+        The legend of ``y``: ``"measured (log)"`` or ``"measured (plant FMU)"``.
     """
     plt = pyplot()
-    t = (time - time[0]) / 3600.0
-    fig, axes = plt.subplots(len(names), 1, figsize=(10, 2.6 * len(names)), sharex=True,
+    t = np.arange(len(y)) * Ts / 3600.0
+    shade = {"val": ("tab:blue", "validation"), "test": ("tab:orange", "test")}
+    fig, axes = plt.subplots(len(names), 1, figsize=(11, 2.7 * len(names)), sharex=True,
                              squeeze=False)
+    cuts = np.flatnonzero(np.asarray(experiment)[1:] != np.asarray(experiment)[:-1]) + 1
     for j, ax in enumerate(axes[:, 0]):
-        ax.plot(t, y[:, j], color="tab:blue", lw=1.0, label="measured (plant FMU)")
-        ax.plot(t, xi[:, j], color="tab:red", lw=1.0, ls="--", label="GRU, open loop")
-        ax.set_ylabel(f"{names[j]} [{units[j]}]")
-        ax.set_title(f"{names[j]}: FIT {fits[j]:.1f} %", fontsize=9, loc="left")
+        for name, (color, text) in shade.items():
+            rows = np.flatnonzero(np.asarray(split) == name)
+            runs = np.split(rows, np.flatnonzero(np.diff(rows) > 1) + 1) if rows.size else []
+            for k, run in enumerate(runs):
+                ax.axvspan(t[run[0]], t[run[-1]] + Ts / 3600.0, color=color, alpha=0.08,
+                           lw=0, label=f"{text} rows" if j == 0 and k == 0 else None)
+        for c in cuts:
+            ax.axvline(t[c], color="0.4", lw=0.8, ls=":")
+        ax.plot(t, y[:, j], color="black", lw=0.9, label=measured)
+        ax.plot(t, xi[:, j], color="tab:red", lw=1.0, ls="--", label="GRU, free run")
+        if baseline is not None:
+            ax.plot(t, baseline[:, j], color="tab:green", lw=0.9, ls=":",
+                    label="ARX baseline, free run")
+        ax.set_ylabel(label(names[j], units[j]))
         ax.grid(alpha=0.3)
-    axes[0, 0].legend(loc="upper right", fontsize=8)
-    axes[-1, 0].set_xlabel("time from start of test split [h]")
+    axes[0, 0].legend(loc="upper right", fontsize=7, ncol=3)
+    axes[-1, 0].set_xlabel("hours of record (experiments one after the other, dotted lines "
+                           "between them)" if cuts.size else "hours of record")
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    save(fig, path, dpi=120)
+    save(fig, path, dpi=110)

@@ -274,8 +274,7 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
                 result.timing_rows)
     doc = summary(result, meta)
     if figure:
-        attempt("figure.png", _figure, out / "figure.png", result, doc,
-                str((meta or {}).get("scenario", "")))
+        attempt("figure.png", _figure, out / "figure.png", result, doc, _title(meta, doc))
     if errors:
         doc["write_error"] = str(errors[0])  # the figure's
     text = json.dumps(doc, indent=2, allow_nan=False) + "\n"
@@ -288,6 +287,17 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
     if errors:
         raise errors[0]
     return doc
+
+
+def _title(meta: dict | None, doc: dict) -> str:
+    """The figure's title: the scenario, and when the controller ran uncertified, why."""
+    title = str((meta or {}).get("scenario", ""))
+    ctrl = doc.get("controller_summary") or {}
+    if ctrl.get("certified") is False:
+        reason = str(ctrl.get("certificate_reason") or "")
+        reason = reason if len(reason) <= 110 else reason[:107] + "..."
+        title += f"\nuncertified (measured tightening, no guarantee): {reason}"
+    return title
 
 
 def _figure(path: Path, result: RunResult, doc: dict, title: str) -> None:

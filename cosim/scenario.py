@@ -101,6 +101,22 @@ class Scenario:
         """The columns of one kind, in file order."""
         return tuple(c for c in self.columns if c.kind == kind)
 
+    def setpoints(self) -> list[dict[str, float]]:
+        """The set-points the scenario requests, in the order they come: after each row that
+        sets a ``ref.<output>``, every output's set-point then in force (an output not set yet
+        is left out; a repeated set-point is listed once)."""
+        held: dict[str, float] = {}
+        out: list[dict[str, float]] = []
+        for event in self.events:
+            changed = False
+            for col, value in event.values:
+                if col.kind == REF and held.get(col.target) != value:
+                    held[col.target] = value
+                    changed = True
+            if changed and held not in out:
+                out.append(dict(held))
+        return out
+
     def perturbation_times(self) -> list[float]:
         """Times (after the start) at which a ``plant.*`` or ``sensor.*`` value changes."""
         times = []

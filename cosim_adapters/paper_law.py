@@ -15,7 +15,7 @@ import numpy as np
 from controllers.errors import SetpointError
 from cosim.errors import CosimError
 
-__all__ = ["govern", "reject", "update_reference"]
+__all__ = ["closest_admissible", "govern", "reject", "update_reference"]
 
 
 def update_reference(ctrl: Any, y_ref: np.ndarray, y: np.ndarray, t: float) -> bool:
@@ -40,16 +40,63 @@ def update_reference(ctrl: Any, y_ref: np.ndarray, y: np.ndarray, t: float) -> b
     try:
         ref = ctrl.cert.reference(target)
     except SetpointError as exc:
-        if ctrl._y_model is None:
+        if ctrl._y_model is not None:
+            reject(ctrl, exc, y_ref, requested_changed, t)
+            return True
+        if ctrl.certification.certified:
+            raise CosimError(f"controller {ctrl.name!r} at t={t:g} s: {exc}") from None
+        # uncertified, a first set-point outside: the closest admissible one, else the
+        # closest admissible to the model's equilibrium for the measured output
+        ref = _first_admissible(ctrl, target, y)
+        if ref is None:
             raise CosimError(f"controller {ctrl.name!r} at t={t:g} s: {exc}") from None
         reject(ctrl, exc, y_ref, requested_changed, t)
-        return True
+        target = ref.y_bar
     if requested_changed:
         ctrl.setpoint_changes += 1
     ctrl._y_ref = y_ref
     ctrl._y_model = target
     ctrl._paper_law().set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     return False
+
+
+#: How far inside the admissible box :func:`closest_admissible` puts a set-point
+#: (normalised; Assumption 1 is a strict inequality).
+INSIDE = 1e-3
+
+
+def closest_admissible(cert: Any, y: np.ndarray) -> np.ndarray | None:
+    """``y`` moved into the admissible box of ``cert`` (box rows ``±y_j ≤ rhs``:
+    :meth:`controllers.certificates.Certificate.admissible_box`), :data:`INSIDE` within it;
+    ``None`` when the box is empty for some output."""
+    rhs = cert.admissible_box()
+    out = np.array(y, dtype=float)
+    for j in range(out.size):
+        hi = min((r / row[j] for row, r in zip(cert.L, rhs, strict=True)
+                  if row[j] > 0 and np.count_nonzero(row) == 1), default=np.inf)
+        lo = max((r / row[j] for row, r in zip(cert.L, rhs, strict=True)
+                  if row[j] < 0 and np.count_nonzero(row) == 1), default=-np.inf)
+        if not lo + 2 * INSIDE <= hi:
+            return None
+        out[j] = min(max(out[j], lo + INSIDE), hi - INSIDE)
+    return out
+
+
+def _first_admissible(ctrl: Any, target: np.ndarray, y: np.ndarray) -> Any:
+    """The reference of the admissible set-point closest to ``target`` (normalised), else
+    to the model's equilibrium output for the measured ``y``; ``None`` when neither is."""
+    from controllers.equilibrium import equilibrium_for_output
+
+    x_eq, _ = equilibrium_for_output(ctrl.model.params, y)
+    for start in (target, ctrl.model.params["U_o"] @ x_eq + ctrl.model.params["b_o"]):
+        inside = closest_admissible(ctrl.cert, start)
+        if inside is None:
+            continue
+        try:
+            return ctrl.cert.reference(inside)
+        except SetpointError:
+            continue
+    return None
 
 
 def reject(ctrl: Any, exc: Exception, y_ref: np.ndarray, requested_changed: bool,

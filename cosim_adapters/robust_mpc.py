@@ -61,6 +61,12 @@ from controllers.errors import ControllersError
 from controllers.model import DEFAULT_MODEL
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
+from cosim_adapters.certification import (
+    CERTIFICATE_MODES,
+    Certification,
+    check_setpoints,
+    go_uncertified,
+)
 from cosim_adapters.paper_law import update_reference
 from cosim_adapters.tracking import check_law
 
@@ -202,6 +208,14 @@ class RobustMPCController(Component):
         others are held at the artificial steady input ``u_s`` (the guarantees unchanged:
         :class:`controllers.fhocp_tracking.TrackingFHOCP`). Default ``⌈N / 4⌉`` (20 at the
         default N = 80).
+    certificate : {"auto", "require", "keep"}
+        Where the certificate does not cover the run (a hypothesis fails, or a set-point of
+        the run lies outside the certified set): ``"auto"`` runs uncertified, with the
+        model's measured prediction error as the tightening; ``"require"`` refuses
+        (:class:`cosim.errors.CosimError`, exit 2); ``"keep"`` keeps the certified design
+        (the tracking law tracks such a set-point to the closest admissible steady output,
+        the paper's law refuses it; a design whose hypotheses fail is an error), as before
+        graded guarantees (:mod:`cosim_adapters.certification`).
     max_iter : int, optional
         Iteration cap of one FHOCP solve, the real-time bound (default 40; 15 with
         ``law="paper"``). A solve that reaches it applies its feasible iterate
@@ -227,7 +241,7 @@ class RobustMPCController(Component):
                  kernel: str = "auto", du_weight: float | Mapping[str, float] | None = None,
                  law: str = "tracking", offset_weight: float | Mapping[str, float] | None = None,
                  alpha_c: float | None = None, control_horizon: int | None = None,
-                 name: str = "mpc") -> None:
+                 certificate: str = "auto", name: str = "mpc") -> None:
         from controllers import certificates as certs
         from controllers import gain_design
         from controllers.fhocp import FHOCP
@@ -275,12 +289,18 @@ class RobustMPCController(Component):
                                   "R": _weight("R", R, len(self.problem.input_names),
                                                list(self.problem.input_names)),
                                   "e_o0": e_o0}
+        if certificate not in CERTIFICATE_MODES:
+            raise CosimError(f"option certificate={certificate!r}: expected one of "
+                             f"{', '.join(map(repr, CERTIFICATE_MODES))}")
+        self.certificate_mode = certificate
+        gains_certified = True
         try:
             if gain_scale is None and self.model.L_z is None:
                 targets = [self.model.normalize_y(np.array(y))
                            for y in gain_design.default_setpoints(self.problem)]
                 theta, cert = gain_design.choose_gain_scale(self.model, targets, **kwargs)
                 if theta is None:
+                    gains_certified = False
                     cert = certs.compute_certificate(self.model, gain_scale=0.0, **kwargs)
             else:
                 cert = certs.compute_certificate(self.model, gain_scale=gain_scale, **kwargs)
@@ -292,14 +312,19 @@ class RobustMPCController(Component):
             ipopt_options={"max_iter": max_iter, **(ipopt_options or {})}
             if ipopt_options or solver == "ipopt" else None)
         self.tracker = None
+        #: what the uncertified mode rebuilds the law from
+        self.design = {"kwargs": kwargs, "fhocp_options": fhocp_options,
+                       "offset_weight": offset_weight, "alpha_c": alpha_c,
+                       "control_horizon": control_horizon}
         if tracking:
             from cosim_adapters.tracking import tracking_design
 
-            cert, self.tracker, self.disturbance = tracking_design(
+            cert, self.tracker, self.disturbance, failed = tracking_design(
                 self.model, self.problem, cert, kwargs, offset_weight, alpha_c,
-                offset_filter, fhocp_options, control_horizon)
+                offset_filter, fhocp_options, control_horizon, gains_certified)
             self.fhocp = self.tracker.fhocp
         else:
+            failed = cert.failures()
             self.fhocp = FHOCP.from_certificate(cert, **fhocp_options)
         self.cert = cert
         # build the solver and load scipy.optimize (the observer's x̂_0 equilibrium) now, so
@@ -329,7 +354,29 @@ class RobustMPCController(Component):
         #: The observer's initial state ``x̂_0`` (normalised), or ``None``: the equilibrium for
         #: the first measured output (paper section V). Read by :meth:`setup`.
         self.initial_estimate: np.ndarray | None = None
+        #: certified, or uncertified with the reason (:mod:`cosim_adapters.certification`)
+        self.certification = Certification()
+        self._expected: list[dict[str, float]] | None = None
+        if failed:
+            go_uncertified(self, "; ".join(failed))
         self.setup(0.0)
+
+    @property
+    def notice(self) -> str | None:
+        """The one line to show before a run (why it runs uncertified), else ``None``."""
+        return self.certification.notice
+
+    def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:
+        """Check the run's set-points against the certified design; the first outside it
+        makes the run uncertified (refused with ``certificate="require"``, ignored with
+        ``"keep"``)."""
+        if setpoints == self._expected:
+            return
+        self._expected = [dict(sp) for sp in setpoints]
+        if self.certification.certified and self.certificate_mode != "keep":
+            reason = check_setpoints(self, setpoints)
+            if reason:
+                go_uncertified(self, reason)
 
     # -- Component interface -----------------------------------------------------------
     def setup(self, t0: float) -> None:
@@ -448,6 +495,7 @@ class RobustMPCController(Component):
                             self._y_names, self.fhocp.offset_weight, strict=True)},
                         "offset_filter": self.disturbance.beta,
                         "tracking_hypotheses": self.tracker.hypotheses})
+        out.update(self.certification.summary())
         out.update({
             "controller": "robust-mpc",
             "law": self.law,

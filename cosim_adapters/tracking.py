@@ -14,7 +14,10 @@ Design (defaults):
   offset-free fixed point exact; ``ê_o`` and the tightening as the paper's;
 - the terminal radius ``α_c``: the certified design's ``α_min(N)`` (``eq:condition-recursive-
   feasibility`` with the gains the paper's law would use), so that ``Y_s`` is that design's
-  admissible box; ``alpha_c`` sets it;
+  admissible box; when no observer-gain scale passes (that ``α_min`` is not a certificate's),
+  the radius whose terminal set spans :data:`ALPHA_C_SPAN` of each normalised output; with
+  zero gains every ``α_c > 0`` meets ``eq:condition-recursive-feasibility``; ``alpha_c`` sets
+  it;
 - ``d̂`` by the filter of :class:`controllers.tracking_mpc.DisturbanceFilter` (``β`` =
   ``offset_filter``, default 0.3), in the cost only.
 """
@@ -30,7 +33,8 @@ import numpy as np
 from controllers.errors import ControllersError
 from cosim.errors import CosimError
 
-__all__ = ["LAWS", "check_law", "tracking_design", "tracking_step"]
+__all__ = ["ALPHA_C_SPAN", "LAWS", "check_law", "fallback_alpha_c", "tracking_design",
+           "tracking_step"]
 
 #: The control laws of the ``robust-mpc`` component.
 LAWS = ("paper", "tracking")
@@ -74,16 +78,34 @@ def _positive(value: Any) -> bool:
             and math.isfinite(value) and value > 0)
 
 
+#: The terminal radius of a design without a certified ``α_min`` (no observer-gain scale
+#: passes, or the uncertified mode): the one whose terminal set spans this much of every
+#: normalised output (``α_c max_j c_s(j)``; the normalised box is 2 wide).
+ALPHA_C_SPAN = 0.05
+
+
+def fallback_alpha_c(cert: Any) -> float:
+    """:data:`ALPHA_C_SPAN` ``/ max_j c_s(j)``: depends on the model's output map only."""
+    top = float(np.max(cert.c_s)) if np.size(cert.c_s) else 0.0
+    return ALPHA_C_SPAN / top if top > 0 else ALPHA_C_SPAN
+
+
 def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[str, Any],
-                    offset_weight: float | Mapping[str, float], alpha_c: float | None,
+                    offset_weight: float | Mapping[str, float] | None, alpha_c: float | None,
                     beta: float, fhocp_options: Mapping[str, Any],
-                    control_horizon: int | None = None) -> tuple[Any, Any, Any]:
-    """``(certificate, TrackingMPC, DisturbanceFilter)`` of the tracking law (module
-    docstring). ``cert_gains``: the paper law's certificate (its ``α_min`` is the default
-    ``α_c``); ``kwargs``: ``N``, ``Q``, ``R``, ``e_o0``; ``control_horizon``: ``M`` (default
-    :func:`controllers.fhocp_tracking.default_control_horizon`, at most N)."""
+                    control_horizon: int | None = None, gains_certified: bool = True,
+                    cert: Any = None) -> tuple[Any, Any, Any, list[str]]:
+    """``(certificate, TrackingMPC, DisturbanceFilter, failures)`` of the tracking law
+    (module docstring); ``failures``: its hypotheses that fail, in words (empty: certified).
+    ``cert_gains``: the paper law's certificate, whose ``α_min`` is the default ``α_c`` when
+    ``gains_certified`` (its observer-gain scale passed), else :func:`fallback_alpha_c`;
+    ``kwargs``: ``N``, ``Q``, ``R``, ``e_o0``; ``control_horizon``: ``M`` (default
+    :func:`controllers.fhocp_tracking.default_control_horizon`, at most N); ``cert``: the
+    design's certificate (default: ``gain_scale=0`` of ``kwargs``; the uncertified mode
+    passes :func:`controllers.certificates.uncertified_certificate`'s)."""
     from controllers import certificates as certs
     from controllers.fhocp_tracking import DEFAULTS, TrackingFHOCP, default_control_horizon
+    from controllers.tracking_checks import failures, tracking_hypotheses
     from controllers.tracking_mpc import DisturbanceFilter, TrackingMPC
 
     names = list(problem.output_names)
@@ -103,25 +125,20 @@ def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[s
     if M > N:
         raise CosimError(f"option control_horizon={M}: at most the horizon N = {N}")
     try:
-        cert = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
+        if cert is None:
+            cert = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
         if alpha_c is None:
-            alpha_c = cert_gains.alpha_min()
+            alpha_c = cert_gains.alpha_min() if gains_certified else math.nan
             if not (math.isfinite(alpha_c) and alpha_c > 0):
-                raise ControllersError("no default alpha_c (the certified design's alpha_min "
-                                       f"is {alpha_c:g}); set option alpha_c")
+                alpha_c = fallback_alpha_c(cert)
         fhocp = TrackingFHOCP.from_certificate(cert, offset_weight=T, alpha_c=alpha_c,
                                                control_horizon=M, **fhocp_options)
     except ControllersError as exc:
         raise CosimError(str(exc)) from None
-    from controllers.tracking_checks import failures, tracking_hypotheses
-
     hypotheses = tracking_hypotheses(fhocp, cert, beta)
-    failed = failures(hypotheses)
-    if failed:
-        raise CosimError(f"law=\"tracking\": {'; '.join(failed)}")
     law = TrackingMPC(fhocp)
     law.hypotheses = hypotheses
-    return cert, law, DisturbanceFilter(beta, len(names))
+    return cert, law, DisturbanceFilter(beta, len(names)), failures(hypotheses)
 
 
 def tracking_step(ctrl: Any, y: np.ndarray, y_ref: np.ndarray) -> tuple[Any, dict[str, float]]:
@@ -136,6 +153,8 @@ def tracking_step(ctrl: Any, y: np.ndarray, y_ref: np.ndarray) -> tuple[Any, dic
         x_s, u_s = equilibrium_for_output(model.params, obs.y_hat())
         tracker.start(u_s, x_s)
     d_hat = ctrl.disturbance.update(y, obs.y_hat())
+    if not ctrl.certification.certified:   # the measured tightening is around y + d̂
+        tracker.fhocp.set_output_shift(d_hat)
     rec = tracker.make_step(obs.x_hat, obs.e_o, y_ref - d_hat)
     params = model.params
     y_s = model.denormalize_y(params["U_o"] @ tracker.x_s + params["b_o"])

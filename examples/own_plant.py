@@ -1,26 +1,28 @@
 """Your own plant, from its FMU to a campaign: the exothermic CSTR (or another example plant).
 
-    python examples/own_plant.py [--plant cstr|heater|mixing_tank] [--quick] [--out DIR]
+    python examples/own_plant.py [--plant cstr|heater|mixing_tank] [--epochs E] [--out DIR]
 
 The walk-through of the user guide (docs/guide/own-plant.md), as one command running the
 ``cosim`` commands a user types:
 
 1. build the plant's FMU (``fmus/examples``: a pythonfmu model with its ``problem.toml``);
 2. ``cosim generate-data --problem``: excite every input inside its box, sample every Ts;
-3. ``cosim train``: a δISS GRU of the plant (the problem goes into the model file);
-4. set-points the model can hold and the theory admits, from the model's equilibria (the
-   Python API: :mod:`controllers.equilibrium`, :mod:`controllers.certificates`);
-5. ``cosim certify --auto-gain-scale --save --setpoint ...``: the observer gains for them;
+3. ``cosim train --epochs E``: a δISS GRU of the plant (the problem goes into the model file);
+4. the set-points a user would pick: steady outputs of the plant itself (inputs held at
+   points inside their boxes until it settles), whatever the model makes of them;
+5. ``cosim certify --auto-gain-scale --save --setpoint ...``: certified, or not and why;
 6. ``cosim run`` of a set-point scenario with the robust MPC (its default, the tracking law,
-   and the paper's law: ``--option law='"paper"'``) and, for a square plant, with the PI
-   baseline tuned from the model (RGA pairing, SIMC);
+   and the paper's law: ``--option law='"paper"'``), certified or uncertified, and, for a
+   square plant, with the PI baseline tuned from the model (RGA pairing, SIMC);
 7. ``cosim campaign``: plant parameters drawn per run, every controller on the same draws.
 
-It prints what a user would check: the FIT of each output, the gain scale, the tracking error
-at the end of each set-point, the inputs' and outputs' box violations, the IAE of each
-controller, and the campaign's violations; ``walkthrough.json`` holds the same numbers.
-``--quick`` trains briefly (the tests run it so); the full settings give the numbers quoted
-in the guide.
+It prints what a user would check: the FIT of each output, the certify verdict, the tracking
+error at the end of each set-point, the inputs' and outputs' box violations, the IAE of each
+controller and its ratio to the PI's (summed over the outputs, each IAE divided by its
+output's box width), the same for the inputs' total variation, and the campaign's
+violations and median IAE ratio; ``walkthrough.json`` holds the same numbers.
+``--epochs 150`` trains briefly (the tests run it so); the default epochs of ``cosim train``
+give the numbers quoted in the guide.
 """
 
 from __future__ import annotations
@@ -31,6 +33,7 @@ import json
 import subprocess
 import sys
 import tempfile
+import time
 from pathlib import Path
 from typing import Any
 
@@ -42,19 +45,19 @@ EXAMPLES = ROOT / "fmus" / "examples"
 CONTROLLERS = {"robust-mpc": ("robust-mpc", ()),
                "robust-mpc-paper": ("robust-mpc", ('law="paper"',)),
                "pi": ("pi", ())}
-
-#: Settings per mode: data steps, GRU states, epochs, learning rate (first and last), runs
-#: of the campaign per controller.
-SETTINGS = {"quick": {"steps": 3000, "n": 8, "epochs": 300, "lr": 0.02, "lr_final": 0.002,
-                      "runs": 3},
-            "full": {"steps": 6000, "n": 12, "epochs": 800, "lr": 0.01, "lr_final": 0.0005,
-                     "runs": 20}}
-#: Plant parameters drawn per campaign run (name -> uniform range) and sensor noise.
+#: Data steps of step 2 and campaign runs per controller.
+STEPS, RUNS = 20000, 20
+#: Plant parameters drawn per campaign run (name -> uniform range).
 UNCERTAIN = {"cstr": {"k0_factor": (0.9, 1.1), "UA_factor": (0.9, 1.1)},
              "heater": {"C_factor": (0.9, 1.1), "T_amb": (15.0, 25.0)},
              "mixing_tank": {"Cv_factor": (0.9, 1.1), "T_hot": (65.0, 75.0)}}
-#: Set-points per run and how long each is held [samples].
-SETPOINTS, HOLD = 3, 60
+#: Where the inputs are held to find the set-points (fractions of each input's box), by the
+#: number of inputs.
+SETPOINT_INPUTS = {1: [(0.3,), (0.75,), (0.5,), (0.15,)],
+                   2: [(0.3, 0.3), (0.7, 0.35), (0.65, 0.75), (0.25, 0.7)],
+                   3: [(0.3, 0.3, 0.3), (0.7, 0.4, 0.5), (0.45, 0.75, 0.3), (0.3, 0.5, 0.75)]}
+#: How long each set-point is held [samples].
+HOLD = 60
 
 
 def build_plant(name: str, folder: Path) -> Path:
@@ -74,54 +77,56 @@ def cosim_command(*args: Any) -> None:
         raise SystemExit(f"cosim {args[0]} failed (exit {proc.returncode})")
 
 
-def identify(fmu: Path, problem: Path, work: Path, settings: dict[str, Any],
-             seed: int) -> Path:
-    """generate-data and train; the model file."""
+def identify(fmu: Path, problem: Path, work: Path, epochs: int | None,
+             seed: int) -> tuple[Path, float]:
+    """generate-data and train; the model file and the training's wall time [s]."""
     data, model = work / "data" / "plant.csv", work / "models" / "plant_gru.json"
-    cosim_command("generate-data", "--plant", fmu, "--problem", problem, "--steps",
-                  settings["steps"], "--seed", seed, "--out", data, "--quiet")
-    cosim_command("train", data, "--n", settings["n"], "--epochs", settings["epochs"],
-                  "--lr", settings["lr"], "--lr-final", settings["lr_final"], "--seed", seed,
-                  "--out", model, "--quiet")
-    return model
+    cosim_command("generate-data", "--plant", fmu, "--problem", problem, "--steps", STEPS,
+                  "--seed", seed, "--out", data, "--quiet")
+    extra = [] if epochs is None else ["--epochs", epochs]
+    t0 = time.perf_counter()
+    cosim_command("train", data, *extra, "--seed", seed, "--out", model, "--quiet")
+    return model, time.perf_counter() - t0
 
 
-def certify(model: Path, problem: Any, setpoints: list[np.ndarray]) -> None:
-    """``cosim certify --auto-gain-scale --save`` at the set-points the runs will use."""
+def certify(model: Path, problem: Any, setpoints: list[np.ndarray]) -> dict[str, Any]:
+    """``cosim certify --auto-gain-scale --save`` at the set-points the runs will use: its
+    exit code (0 certified, 1 not) and the verdict it saved."""
     named = [",".join(f"{n}={v:.6g}" for n, v in zip(problem.output_names, y, strict=True))
              for y in setpoints]
-    cosim_command("certify", model, "--auto-gain-scale", "--save",
-                  *(a for sp in named for a in ("--setpoint", sp)))
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "certify", str(model),
+                           "--auto-gain-scale", "--save",
+                           *(a for sp in named for a in ("--setpoint", sp))],
+                          capture_output=True, text=True, check=False)
+    if proc.returncode not in (0, 1):
+        raise SystemExit(f"cosim certify failed (exit {proc.returncode}): {proc.stderr}")
+    verdict = json.loads(model.read_text())["certificate"]
+    return {"exit": proc.returncode, "certified": verdict["certified"],
+            "reasons": [f["detail"] for f in verdict["findings"] if not f["holds"]],
+            "admissible": verdict["admissible_setpoints"]}
 
 
-def admissible_setpoints(model_path: Path, count: int) -> list[np.ndarray]:
-    """``count`` set-points (physical units) the model can hold and that pass every
-    hypothesis of the theorem with the open-loop observer (gain scale 0, so that
-    ``certify --auto-gain-scale`` finds a scale for them), at the horizons of both laws the
-    walk-through runs (the paper's N = 15, which its law checks at run time, and the
-    tracking law's, which ``certify`` checks by default): equilibria of inputs spread over
-    the inner part of the box, kept when admissible."""
-    from controllers.certificates import compute_certificate
-    from controllers.equilibrium import equilibrium_output
-    from controllers.fhocp_tracking import DEFAULTS
-    from controllers.model import GRUModel
+def plant_setpoints(fmu: Path, problem: Any) -> list[np.ndarray]:
+    """Steady outputs of the plant itself (physical units) with its inputs held at the
+    points of :data:`SETPOINT_INPUTS` until it settles (300 samples): the set-points a user
+    who knows the plant would ask for."""
+    from cosim.fmu import FmuComponent
+    from cosim_adapters.problems import bind_plant
 
-    model = GRUModel.load(model_path)
-    certs = [compute_certificate(model, gain_scale=0.0, N=N) for N in (15, DEFAULTS["N"])]
-    found: list[np.ndarray] = []
-    rng = np.random.default_rng(0)
-    for _ in range(400):
-        u = rng.uniform(-0.6, 0.6, model.m)
-        _, y = equilibrium_output(model.params, u)
-        if (any(cert.failures(y) for cert in certs)
-                or any(np.max(np.abs(y - f)) < 0.1 for f in found)):
-            continue
-        found.append(y)
-        if len(found) == count:
-            break
-    if len(found) < count:
-        raise SystemExit(f"{model_path}: fewer than {count} admissible set-points found")
-    return [model.denormalize_y(y) for y in found]
+    out = []
+    for fractions in SETPOINT_INPUTS[problem.m]:
+        plant = FmuComponent(fmu, varmap=bind_plant(problem, fmu))
+        try:
+            plant.setup(0.0)
+            plant.set_inputs({c.name: c.min + f * (c.max - c.min)
+                              for c, f in zip(problem.inputs, fractions, strict=True)})
+            for k in range(300):
+                plant.step(k * problem.Ts, problem.Ts)
+            y = plant.get_outputs()
+        finally:
+            plant.terminate()
+        out.append(np.array([y[n] for n in problem.output_names]))
+    return out
 
 
 def write_scenario(path: Path, problem: Any, setpoints: list[np.ndarray]) -> Path:
@@ -141,7 +146,8 @@ def run(scenario: Path, fmu: Path, model: Path, controller: str, out: Path,
         ) -> dict[str, Any]:
     """``cosim run`` (``options``: ``KEY=VALUE`` controller options) and what a user checks:
     the tracking error at the end of each set-point (relative to its output's box), the box
-    violations of inputs and outputs, the KPIs."""
+    violations of inputs and outputs, the KPIs, and the IAE and total variation summed over
+    the signals, each divided by its box width."""
     import pandas as pd
 
     extra = [arg for option in options for arg in ("--option", option)]
@@ -160,13 +166,28 @@ def run(scenario: Path, fmu: Path, model: Path, controller: str, out: Path,
         col = df[f"ctrl.{c.name}"] if c in problem.inputs else df[f"plant.{c.name}"]
         box[c.name] = float(max(0.0, c.min - col.min(), col.max() - c.max))
     kpis = summary["kpis"]
+    ctrl = summary.get("controller_summary", {})
     return {"status": summary["status"], "tracking_error": [float(e) for e in errors],
-            "box_violation": box, "iae": kpis["iae"], "tv": kpis.get("tv", {})}
+            "box_violation": box, "iae": kpis["iae"], "tv": kpis.get("tv", {}),
+            "iae_sum": summed(kpis["iae"], problem.outputs),
+            "tv_sum": summed(kpis.get("tv", {}), problem.inputs),
+            "certified": ctrl.get("certified")}
+
+
+def summed(values: dict[str, float], channels: Any) -> float:
+    """``Σ value / (max − min)`` over the channels (each signal in units of its box)."""
+    return float(sum(values[c.name] / (c.max - c.min) for c in channels))
 
 
 def campaign(name: str, fmu: Path, model: Path, problem: Path, scenario: Path, work: Path,
              runs: int, square: bool) -> dict[str, Any]:
-    """A small campaign with the plant's parameters drawn per run."""
+    """A campaign with the plant's parameters drawn per run, every controller on the same
+    draws: failed and violating runs per variant and, for a square plant, the median over the
+    draws of the robust MPC's summed IAE and total variation divided by the PI's."""
+    import pandas as pd
+
+    from controllers.problem_file import load
+
     draws = "\n".join(f'"plant.{k}" = {{ uniform = [{lo}, {hi}] }}'
                       for k, (lo, hi) in UNCERTAIN[name].items())
     spec = work / "campaign.toml"
@@ -192,77 +213,106 @@ name = "robust-mpc"
 name = "robust-mpc-paper"
 options = {{ law = "paper" }}
 {pi}""")
-    cosim_command("campaign", spec, "--out", work / "campaign", "--workers", 1, "--force",
-                  "--quiet")
+    cosim_command("campaign", spec, "--out", work / "campaign", "--force", "--quiet")
     summary = json.loads((work / "campaign" / "summary.json").read_text())
-    return {"status": "ok" if summary.get("failed") == 0 else "failed",
-            "runs": summary.get("runs"), "violating_runs": summary.get("violating_runs"),
-            "failed": summary.get("failed")}
+    table = pd.read_parquet(work / "campaign" / "runs.parquet")
+    prob = load(problem)
+    out: dict[str, Any] = {"status": "ok" if summary.get("failed") == 0 else "failed",
+                           "runs": summary.get("runs"),
+                           "violating_runs": summary.get("violating_runs"),
+                           "failed": summary.get("failed"), "variants": {}}
+    for variant, df in table.groupby("variant"):
+        df = df.sort_values("run")
+        out["variants"][variant] = {
+            "failed": int((df["status"] != "ok").sum()),
+            "violating": int((df["violation_count"] > 0).sum()),
+            "iae_sum": [float(sum(r[f"iae.{c.name}"] / (c.max - c.min) for c in prob.outputs))
+                        for _, r in df.iterrows()],
+            "tv_sum": [float(sum(r[f"tv.{c.name}"] / (c.max - c.min) for c in prob.inputs))
+                       for _, r in df.iterrows()]}
+    if square:
+        mpc, base = out["variants"]["robust-mpc"], out["variants"]["pi"]
+        iae = np.array(mpc["iae_sum"]) / np.array(base["iae_sum"])
+        tv = np.array(mpc["tv_sum"]) / np.array(base["tv_sum"])
+        out.update(iae_ratio_median=float(np.median(iae)), tv_ratio_median=float(np.median(tv)),
+                   mpc_better=int(np.sum(iae < 1.0)))
+    return out
 
 
-def walkthrough(name: str, out: Path, quick: bool, seed: int = 0) -> dict[str, Any]:
+def walkthrough(name: str, out: Path, epochs: int | None, runs: int = RUNS,
+                seed: int = 0) -> dict[str, Any]:
     """The whole walk-through for example plant ``name``; the numbers it prints."""
     from controllers.model import GRUModel
     from controllers.problem_file import load
 
-    settings = SETTINGS["quick" if quick else "full"]
     problem_path = EXAMPLES / name / "problem.toml"
     problem = load(problem_path)
     fmu = build_plant(name, out / "fmu")
-    model_path = identify(fmu, problem_path, out, settings, seed)
-    setpoints = admissible_setpoints(model_path, SETPOINTS)
-    certify(model_path, problem, setpoints)
+    model_path, train_s = identify(fmu, problem_path, out, epochs, seed)
+    setpoints = plant_setpoints(fmu, problem)
+    verdict = certify(model_path, problem, setpoints)
     model = GRUModel.load(model_path)
     scenario = write_scenario(out / "scenario.csv", problem, setpoints)
     report: dict[str, Any] = {
-        "plant": name, "problem": problem.describe(), "settings": settings,
-        "fit_test": model.training["fit"]["test"],
-        "admissible": _admissible(model), "setpoints": [y.tolist() for y in setpoints]}
+        "plant": name, "problem": problem.describe(), "epochs": epochs,
+        "train_s": round(train_s, 1), "fit_test": model.training["fit"]["test"],
+        "certify": verdict, "setpoints": [y.tolist() for y in setpoints]}
     square = problem.m == problem.p
     for key, (controller, options) in CONTROLLERS.items():
         if controller == "pi" and not square:
             continue
         report[key] = run(scenario, fmu, model_path, controller, out / "runs" / key,
                           problem, setpoints, options)
-    report["campaign"] = campaign(name, fmu, model_path, problem_path, scenario, out,
-                                  settings["runs"], square)
+    if square:
+        mpc, pi = report["robust-mpc"], report["pi"]
+        report["iae_ratio"] = mpc["iae_sum"] / pi["iae_sum"]
+        report["tv_ratio"] = mpc["tv_sum"] / pi["tv_sum"]
+    if runs:
+        report["campaign"] = campaign(name, fmu, model_path, problem_path, scenario, out, runs,
+                                      square)
     (out / "walkthrough.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
-
-
-def _admissible(model: Any) -> dict[str, list[float] | None]:
-    """The certified admissible set-point interval of each output (physical units)."""
-    from controllers.certificates import admissible_ranges, compute_certificate
-
-    cert = compute_certificate(model)
-    return {name: None if lo is None else [lo, hi]
-            for name, lo, hi in admissible_ranges(cert, model)}
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--plant", choices=sorted(UNCERTAIN), default="cstr")
-    parser.add_argument("--quick", action="store_true", help="brief training (the tests)")
+    parser.add_argument("--epochs", type=int, default=None,
+                        help="cosim train --epochs (default: cosim train's)")
+    parser.add_argument("--runs", type=int, default=RUNS,
+                        help=f"campaign runs per controller (default {RUNS}; 0: none)")
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
     out = args.out or Path(tempfile.mkdtemp(prefix=f"own-plant-{args.plant}-"))
-    r = walkthrough(args.plant, out, args.quick, args.seed)
+    r = walkthrough(args.plant, out, args.epochs, args.runs, args.seed)
     print(r["problem"])
-    print("test FIT: " + ", ".join(f"{k} {v:.1f} %" for k, v in r["fit_test"].items()))
-    print("admissible set-points: " + ", ".join(
-        f"{k} in [{v[0]:.4g}, {v[1]:.4g}]" if v else f"{k}: none"
-        for k, v in r["admissible"].items()))
+    print(f"training {r['train_s']:.0f} s; test FIT: "
+          + ", ".join(f"{k} {v:.1f} %" for k, v in r["fit_test"].items()))
+    v = r["certify"]
+    print(f"certify: {'certified' if v['certified'] else 'not certified'} (exit {v['exit']})"
+          + "".join(f"; {reason}" for reason in v["reasons"][:2]))
     for controller in CONTROLLERS:
         if controller in r:
             c = r[controller]
-            print(f"{controller}: status {c['status']}; tracking error at the end of each "
-                  f"set-point {', '.join(f'{e:.2%}' for e in c['tracking_error'])} of the "
-                  f"box; box violations {max(c['box_violation'].values()):.3g}; IAE "
+            print(f"{controller}: status {c['status']}, certified {c['certified']}; tracking "
+                  f"error at the end of each set-point "
+                  f"{', '.join(f'{e:.2%}' for e in c['tracking_error'])} of the box; box "
+                  f"violations {max(c['box_violation'].values()):.3g}; IAE "
                   + ", ".join(f"{k} {v:.4g}" for k, v in c["iae"].items()))
-    camp = r["campaign"]
-    print(f"campaign: status {camp['status']}, {camp['runs']} runs, {camp['failed']} failed, "
-          f"{camp['violating_runs']} violating; files in {out}")
+    if "iae_ratio" in r:
+        print(f"robust-mpc / pi: summed IAE {r['iae_ratio']:.3f}x, total variation "
+              f"{r['tv_ratio']:.3f}x")
+    camp = r.get("campaign")
+    if camp:
+        line = (f"campaign: status {camp['status']}, {camp['runs']} runs, {camp['failed']} "
+                f"failed, {camp['violating_runs']} violating")
+        if "iae_ratio_median" in camp:
+            line += (f"; robust-mpc / pi median summed IAE {camp['iae_ratio_median']:.3f}x, "
+                     f"TV {camp['tv_ratio_median']:.3f}x, better in {camp['mpc_better']} of "
+                     f"{len(camp['variants']['pi']['iae_sum'])} draws")
+        print(line)
+    print(f"files in {out}")
 
 
 if __name__ == "__main__":

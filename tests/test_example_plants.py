@@ -1,15 +1,17 @@
 """The whole pipeline on three plants that are not four tanks, as a user runs it.
 
-``examples/own_plant.py --quick`` on each example plant (``fmus/examples``: a SISO heated
-vessel, a 2 × 2 CSTR in L/min, K and mol/L at Ts = 15 s, a mixing tank with 3 inputs and 2
-outputs): build the FMU, ``generate-data --problem``, ``train`` (brief, seeded), ``certify
---auto-gain-scale --save``, a set-point scenario inside the certified set with the robust MPC
-(its default tracking law and the paper's law) and, for the square plants, the PI tuned from the
-model, and a small campaign with the plant's parameters drawn per run. What a user checks,
+``examples/own_plant.py --epochs 150 --runs 3`` on each example plant (``fmus/examples``: a
+SISO heated vessel, a 2 × 2 CSTR in L/min, K and mol/L at Ts = 15 s, a mixing tank with 3
+inputs and 2 outputs): build the FMU, ``generate-data --problem``, ``train`` briefly,
+``certify --auto-gain-scale --save`` at set-points taken from the plant itself (certified or
+not: the verdict is saved), a set-point scenario with the robust MPC (its default tracking law,
+certified or uncertified, and the paper's law) and, for the square plants, the PI tuned from
+the model, and a campaign with the plant's parameters drawn per run. What a user checks,
 asserted on its ``walkthrough.json`` and files: the FIT of every output above a floor, every
 input inside its box, no output constraint violated by either MPC law, each set-point tracked
-to a stated share of its output's box, no MPC run of the campaign violating a constraint, and
-the files and columns named as in the problem.
+to a stated share of its output's box, the MPC's IAE against the PI's on the square plants,
+no MPC run of the campaign violating a constraint, and the files and columns named as in the
+problem.
 """
 
 from __future__ import annotations
@@ -29,7 +31,12 @@ SCRIPT = ROOT / "examples" / "own_plant.py"
 PLANTS = ("heater", "cstr", "mixing_tank")
 #: Floors of the quick walk-through (the full one: docs/guide/own-plant.md).
 FIT_FLOOR = 80.0                # test FIT of each output [%]
-TRACKING = 0.05                 # error at the end of each set-point, share of the output's box
+TRACKING = 0.02                 # error at the end of each set-point, share of the output's box
+#: The robust MPC's summed IAE over the PI's at most (docs/guide/own-plant.md: measured 0.73
+#: on the CSTR; on the heater, whose steps saturate its input, the PI's IAE is within 0.3 % of
+#: the time-optimal one and the MPC's 1.12x).
+IAE_RATIO = {"cstr": 0.8, "heater": 1.2}
+TV_RATIO = 1.2                  # the MPC's summed input total variation over the PI's
 
 
 @pytest.mark.slow
@@ -37,9 +44,9 @@ TRACKING = 0.05                 # error at the end of each set-point, share of t
 def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(plant: str, tmp_path: Path
                                                                ) -> None:
     out = tmp_path / "walk"
-    proc = subprocess.run([sys.executable, str(SCRIPT), "--plant", plant, "--quick", "--out",
-                           str(out)], cwd=tmp_path, capture_output=True, text=True,
-                          timeout=1500, check=False)
+    proc = subprocess.run([sys.executable, str(SCRIPT), "--plant", plant, "--epochs", "150",
+                           "--runs", "3", "--out", str(out)], cwd=tmp_path,
+                          capture_output=True, text=True, timeout=1500, check=False)
     assert proc.returncode == 0, (proc.stdout + proc.stderr)[-3000:]
     assert "Traceback" not in proc.stderr
     report = json.loads((out / "walkthrough.json").read_text())
@@ -49,16 +56,21 @@ def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(plant: str, tmp_pat
     assert set(report["fit_test"]) == set(problem.output_names)
     assert min(report["fit_test"].values()) > FIT_FLOOR, report["fit_test"]
     model = json.loads((out / "models" / "plant_gru.json").read_text())
-    assert model["problem"]["name"] == plant and "observer" in model   # certified, saved
+    assert model["problem"]["name"] == plant and "observer" in model   # the verdict, saved
+    verdict = report["certify"]
+    assert verdict["exit"] == (0 if verdict["certified"] else 1)
+    assert model["certificate"]["certified"] is verdict["certified"]
+    assert verdict["certified"] or verdict["reasons"]
 
     # closed loop: both MPC laws track every set-point, inputs in their boxes, no violation
     for law in ("robust-mpc", "robust-mpc-paper"):
         mpc = report[law]
         assert mpc["status"] == "ok", law
-        assert max(mpc["tracking_error"]) < TRACKING, (law, mpc["tracking_error"])
+        assert mpc["certified"] is verdict["certified"], law   # uncertified where certify says
         assert max(mpc["box_violation"].values()) == 0.0, (law, mpc["box_violation"])
         assert set(mpc["iae"]) == set(problem.output_names)
         assert set(mpc["tv"]) == set(problem.input_names)
+    assert max(report["robust-mpc"]["tracking_error"]) < TRACKING, report["robust-mpc"]
     for key, law in (("robust-mpc", "tracking"), ("robust-mpc-paper", "paper")):
         summary = json.loads((out / "runs" / key / "summary.json").read_text())
         assert summary["controller_summary"]["law"] == law, key
@@ -66,6 +78,7 @@ def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(plant: str, tmp_pat
     if problem.m == problem.p:
         assert report["pi"]["status"] == "ok"
         assert max(report["pi"]["box_violation"][n] for n in problem.input_names) == 0.0
+        assert report["iae_ratio"] < IAE_RATIO[plant] and report["tv_ratio"] <= TV_RATIO
     else:
         assert "pi" not in report
 

@@ -23,8 +23,9 @@ __all__ = ["EPILOG", "EXIT_NOTES", "HELP", "figure", "register", "run"]
 
 #: What the exit codes also mean for ``cosim certify`` (:func:`cosim.errors.exit_codes_help`).
 EXIT_NOTES = {
-    EXIT_OK: "every hypothesis holds",
-    EXIT_FAILED: "a hypothesis fails (named), or the admissible set-point range is empty",
+    EXIT_OK: "certified: every hypothesis holds",
+    EXIT_FAILED: "usable but not certified: a hypothesis fails (named, with what would fix "
+                 "it); the robust MPC runs uncertified with this model",
 }
 
 
@@ -50,9 +51,13 @@ EPILOG = """design levers:
                          tracking law, 15 with --law paper; 0.02)
   --data DATA.csv        estimate w_y_bar as the largest test-set output error (normalised)
 
---save writes only when every check passes (otherwise the model file is left unchanged,
-and no THETA = 0 gains are saved when no THETA passes), atomically: a failed write (full
-disk) leaves the previous file byte-identical.
+The verdict comes last, in the problem's signals and units: which hypothesis holds and which
+fails, by how much, what would fix it (the largest test error a model could have for the
+set-points to pass), and the set-points that pass.
+
+--save writes what was computed, certified or not: the observer gains, w_y_bar and the
+verdict (the model file's 'certificate'), atomically: a failed write (full disk) leaves the
+previous file byte-identical.
 
 """ + exit_codes_help({"certify": EXIT_NOTES})
 
@@ -92,8 +97,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--data", metavar="DATA.csv",
                    help="estimate w̄_y from this data set's test split (cosim generate-data)")
     p.add_argument("--save", action="store_true",
-                   help="write L_z, L_r and w̄_y into the model file, only when every check "
-                        "passes (atomic: a failed write leaves the file unchanged)")
+                   help="write L_z, L_r, w̄_y and the verdict into the model file, certified "
+                        "or not (atomic: a failed write leaves the file unchanged)")
     p.add_argument("--plot", metavar="PNG",
                    help="also draw a figure: α over the set-points with the admissible and "
                         "reachable ones (one or two outputs), ê_o,k, and the tightened "
@@ -280,65 +285,109 @@ def run(args: argparse.Namespace) -> int:
         failures.append(no_theta)
     tracking = None
     if args.law == "tracking":
-        tracking, failed = _tracking(model, cert, kwargs)
-        failures += failed
+        tracking, verdict = _tracking(model, cert, kwargs, setpoints, no_theta is None)
+    else:
+        design = [m for m in failures[:n_design] if not m.startswith("δISS")]
+        verdict = _paper_verdict(model, cert, kwargs, setpoints,
+                                 design + ([no_theta] if no_theta else []))
 
     if args.json:
         docs = [cert.to_json(sp) for _, sp, _, _ in per_setpoint] or [cert.to_json()]
         if tracking is not None:
             docs = [{**d, "tracking": tracking} for d in docs]
+        docs = [{**d, "verdict": verdict.to_json()} for d in docs]
         print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1))
-        for msg in failures:
-            print(f"FAILED: {msg}", file=sys.stderr)
     else:
         _print_table(args.model, model, cert, note, per_setpoint)
         if tracking is not None:
             _print_tracking(tracking)
-        for msg in failures:
-            print(f"FAILED: {msg}")
+        if args.law == "paper":
+            for msg in failures:
+                print(f"FAILED: {msg}")
+        _print_verdict(verdict)
     if args.plot:
         path = figure(args.plot, model, cert, setpoints_phys)
         print(f"figure written to {path}", file=sys.stderr)
-    if args.save and no_theta:
-        print(f"cosim certify: not saved: {args.model} is unchanged (no θ in [0, 1] passes: "
-              "the θ = 0 gains are not saved)", file=sys.stderr)
-    elif args.save and failures:
-        print(f"cosim certify: not saved: {args.model} is unchanged (--save writes only when "
-              "every check passes)", file=sys.stderr)
-    elif args.save:
+    if args.save:
         from cosim.atomicio import output_error
 
         model.L_z, model.L_r, model.w_y_bar = cert.L_z, cert.L_r, cert.w_y_bar
+        model.certificate = {**verdict.to_json(), "N": cert.N, "e_o0": cert.e_o0,
+                             "gain_scale": cert.gain_scale,
+                             "setpoints": [dict(zip(names, map(float, sp), strict=True))
+                                           for sp in setpoints_phys]}
         try:
             model.save(args.model)
         except OSError as exc:
             raise output_error(args.model, exc) from None
-        print(f"saved L_z, L_r and w_y_bar to {args.model}", file=sys.stderr)
-    if failures:
-        print(f"cosim certify: {len(failures)} hypothesis check(s) failed", file=sys.stderr)
+        print(f"saved L_z, L_r, w_y_bar and the verdict (certified: "
+              f"{str(verdict.certified).lower()}) to {args.model}", file=sys.stderr)
+    if not verdict.certified:
+        print(f"cosim certify: not certified ({len(verdict.reasons())} hypothesis check(s) "
+              "failed); the robust MPC runs this model uncertified, or refuses with "
+              "--require-certificate", file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
 
 
-def _tracking(model: Any, cert: Any, kwargs: dict) -> tuple[dict, list[str]]:
-    """The tracking law's hypotheses (:mod:`controllers.tracking_checks`) with its defaults,
-    ``α_c`` the certificate's ``α_min(N)``; and the failed ones, in words."""
+def _paper_verdict(model: Any, cert: Any, kwargs: dict, setpoints: list,
+                   design: list[str]) -> Any:
+    """The paper law's :class:`controllers.diagnosis.Diagnosis`."""
     from controllers import certificates as certs
-    from controllers.errors import ControllersError
-    from controllers.fhocp_tracking import DEFAULTS, TrackingFHOCP
-    from controllers.tracking_checks import failures, tracking_hypotheses
+    from controllers.diagnosis import diagnose
 
-    alpha_c = cert.alpha_min()
-    if not (math.isfinite(alpha_c) and alpha_c > 0):
-        return {}, [f"tracking law: no default alpha_c (alpha_min(N) = {alpha_c:g})"]
+    def rhs_at(w: float) -> Any:
+        return certs.compute_certificate(model, L_z=cert.L_z, L_r=cert.L_r, **{
+            **kwargs, "w_y_bar": w}).admissible_box()
+
+    return diagnose(model, cert, "paper", setpoints, cert.admissible_box(), design, rhs_at)
+
+
+def _print_verdict(verdict: Any) -> None:
+    word = ("CERTIFIED" if verdict.certified else
+            "NOT CERTIFIED (usable: the robust MPC runs uncertified, with the model's measured "
+            "error as its tightening)")
+    print(f"verdict ({verdict.law} law): {word}")
+    for f in verdict.findings:
+        print(f"  {'holds' if f.holds else 'FAILS'}: {f.hypothesis}: {f.detail}")
+        if f.fix:
+            print(f"    fix: {f.fix}")
+
+
+def _tracking(model: Any, cert: Any, kwargs: dict, setpoints: list,
+              gains_certified: bool) -> tuple[dict, Any]:
+    """The tracking law's hypotheses (:mod:`controllers.tracking_checks`) with the robust
+    MPC's defaults (``α_c``: the certificate's ``α_min(N)`` when its observer-gain design
+    passes, else :func:`cosim_adapters.tracking.fallback_alpha_c`), and its verdict."""
+    import numpy as np
+
+    from controllers import certificates as certs
+    from controllers.diagnosis import diagnose
+    from controllers.errors import ControllersError
+    from controllers.fhocp_tracking import DEFAULTS, TrackingFHOCP, steady_output_bounds
+    from controllers.tracking_checks import failures, tracking_hypotheses
+    from cosim_adapters.tracking import fallback_alpha_c
+
     try:
         cert_t = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
+        if not cert_t.nu < 1:     # no δISS: no tracking design to check
+            return {}, diagnose(model, cert_t, "tracking", setpoints,
+                                np.full(cert_t.h.shape, -np.inf), [], None)
+        alpha_c = cert.alpha_min() if gains_certified and not cert.failures() else math.nan
+        if not (math.isfinite(alpha_c) and alpha_c > 0):
+            alpha_c = fallback_alpha_c(cert_t)
         fh = TrackingFHOCP.from_certificate(cert_t, offset_weight=DEFAULTS["offset_weight"],
                                             alpha_c=alpha_c, du_weight=DEFAULTS["du_weight"])
     except ControllersError as exc:
-        return {}, [f"tracking law: {exc}"]
+        raise CosimError(f"{model.source}: tracking law: {exc}") from None
     h = tracking_hypotheses(fh, cert_t, DEFAULTS["offset_filter"])
-    return h, [f"tracking law: {msg}" for msg in failures(h)]
+
+    def rhs_at(w: float) -> Any:
+        return steady_output_bounds(certs.compute_certificate(
+            model, gain_scale=0.0, **{**kwargs, "w_y_bar": w}), alpha_c)
+
+    design = [msg for msg in failures(h) if not msg.startswith("no admissible steady")]
+    return h, diagnose(model, cert_t, "tracking", setpoints, fh.ys_bounds, design, rhs_at)
 
 
 def _print_tracking(h: dict) -> None:

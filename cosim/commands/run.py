@@ -97,6 +97,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="fail the run when one plant step or one controller step takes "
                         "longer than this (wall clock); implies --isolate, and the hung "
                         "worker is killed")
+    p.add_argument("--require-certificate", action="store_true",
+                   help="robust-mpc: refuse to run (exit 2) when the model is not certified "
+                        "for this scenario's set-points, instead of running uncertified "
+                        "(same as --option 'certificate=\"require\"')")
     p.add_argument("--seed", metavar="N", type=int, default=0,
                    help="seed of the measurement noise (default 0)")
     p.add_argument("--no-figure", action="store_true", help="do not draw figure.png")
@@ -115,6 +119,8 @@ def run(args: argparse.Namespace) -> int:
     from cosim.errors import EXIT_OK, CosimError, ParameterError, SimulationFailed
 
     options = registry.parse_options(args.option)
+    if args.require_certificate:
+        options["certificate"] = "require"
     out = Path(args.out) if args.out else None
     try:
         if out is None:
@@ -127,7 +133,9 @@ def run(args: argparse.Namespace) -> int:
                          interface=args.interface, step=args.step, isolate=args.isolate,
                          step_timeout=args.step_timeout, seed=args.seed,
                          figure=not args.no_figure,
-                         progress=not args.quiet and sys.stderr.isatty())
+                         progress=not args.quiet and sys.stderr.isatty(),
+                         on_notice=lambda text: print(f"cosim run: {text}", file=sys.stderr,
+                                                      flush=True))
     except ParameterError as exc:
         raise (exc.as_option() if exc.parameter in FLAGS else CosimError(str(exc))) from None
     result = output.result

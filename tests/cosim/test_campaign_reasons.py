@@ -82,6 +82,9 @@ h2 = [0.6, 1.4]
 
 def test_a_failed_certificate_hypothesis_is_named_as_cosim_run_names_it(
         tmp_path: Path) -> None:
+    """A set-point that fails the theorem's hypotheses: with certificate = "require" the run is
+    refused, in the campaign as by cosim.run, with the same reason; without it the run is
+    uncertified and says why."""
     table, _ = run_in_process("""\
 [campaign]
 runs = 1
@@ -90,6 +93,7 @@ controller = "robust-mpc"
 
 [controller.options]
 law = "paper"
+certificate = "require"
 
 [draw]
 "ref.h1" = 0.4
@@ -98,11 +102,20 @@ law = "paper"
     scenario = tmp_path / "low.csv"
     scenario.write_text("time,ref.h1,ref.h2\n0,0.4,0.4\n1000,,\n")
     with pytest.raises(CosimError) as cosim_run:
-        cosim.run(scenario, controller="robust-mpc", options={"law": "paper"})
+        cosim.run(scenario, controller="robust-mpc",
+                  options={"law": "paper", "certificate": "require"})
     assert table["status"].iloc[0] == "failed"
     assert table["reason"].iloc[0] == str(cosim_run.value)
     assert "recursive feasibility (eq:condition-recursive-feasibility) fails" in str(
         cosim_run.value)
+    notices: list[str] = []
+    out = cosim.run(scenario, controller="robust-mpc", options={"law": "paper"},
+                    on_notice=notices.append)
+    ctrl = out.summary["controller_summary"]
+    assert out.status == "ok" and ctrl["certified"] is False
+    assert ctrl["tightening"] == "measured"
+    assert "recursive feasibility" in ctrl["certificate_reason"]
+    assert len(notices) == 1 and notices[0].startswith("uncertified: set-point h1=0.4 m")
 
 
 def test_a_bug_met_by_the_master_names_the_step_and_keeps_the_traceback(

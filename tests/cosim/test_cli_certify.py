@@ -43,7 +43,8 @@ def test_json_keys_and_values(model_file: Path, capsys) -> None:
     assert main(["certify", str(model_file), "--setpoint", "1.0,1.0", "--json", "--law",
                  "paper"]) == 0
     doc = json.loads(capsys.readouterr().out)
-    assert list(doc) == KEYS
+    assert list(doc) == [*KEYS, "verdict"]
+    assert doc["verdict"]["certified"] is True and doc["verdict"]["law"] == "paper"
     m = GRUModel.load(model_file)
     cert = certs.compute_certificate(m)
     y = m.normalize_y(np.array([1.0, 1.0]))
@@ -56,16 +57,26 @@ def test_json_several_setpoints_is_a_list(model_file: Path, capsys) -> None:
     main(["certify", str(model_file), "--setpoint", "1,1", "--setpoint", "0.8,1.2", "--json",
           "--N", "5", "--law", "paper"])
     docs = json.loads(capsys.readouterr().out)
-    assert isinstance(docs, list) and len(docs) == 2 and all(list(d) == KEYS for d in docs)
+    assert isinstance(docs, list) and len(docs) == 2
+    assert all(list(d) == [*KEYS, "verdict"] for d in docs)
     assert len(docs[0]["b"]) == 6
 
 
 def test_failing_setpoint_exit_1_names_the_hypothesis(model_file: Path, capsys) -> None:
-    # 1.99 m is next to the 2 m constraint: Assumption 1 fails
+    """1.99 m is next to the 2 m constraint: outside the tracking law's admissible steady
+    outputs, in the user's units, with what would fix it; under the paper's law Assumption 1
+    fails."""
     assert main(["certify", str(model_file), "--setpoint", "1.99,1.0"]) == 1
     captured = capsys.readouterr()
+    assert "verdict (tracking law): NOT CERTIFIED (usable" in captured.out
+    assert ("FAILS: set-point: h1=1.99 m, h2=1 m is outside the set-points that pass "
+            "(h1 in [") in captured.out
+    assert "    fix: " in captured.out and "h1 in [" in captured.out
+    assert "not certified (1 hypothesis check(s) failed)" in captured.err
+    assert main(["certify", str(model_file), "--setpoint", "1.99,1.0", "--law", "paper"]) == 1
+    captured = capsys.readouterr()
     assert "Assumption 1 (ass:setpoint) fails" in captured.out
-    assert "hypothesis check(s) failed" in captured.err
+    assert "FAILS: set-point: h1=1.99 m" in captured.out
 
 
 def test_non_delta_iss_model_exit_1(tmp_path: Path, capsys) -> None:
@@ -75,7 +86,9 @@ def test_non_delta_iss_model_exit_1(tmp_path: Path, capsys) -> None:
     path = tmp_path / "bad.json"
     m.save(path)
     assert main(["certify", str(path)]) == 1
-    assert "th:stability-bonassi" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "th:stability-bonassi" in out
+    assert "FAILS: stability (δISS, th:stability-bonassi): stability index nu = " in out
 
 
 def test_bad_model_file_exit_2_one_line(tmp_path: Path, capsys) -> None:
@@ -104,10 +117,10 @@ def test_auto_gain_scale_and_save(tmp_path: Path, capsys) -> None:
     m.w_y_bar = 0.15  # large enough that the LP gains fail and must be scaled
     path = tmp_path / "model.json"
     m.save(path)
-    assert main(["certify", str(path), "--setpoint", "0.8,0.8", "--setpoint", "1.2,1.2"]) == 1
+    points = ["--setpoint", "0.8,0.8", "--setpoint", "1.2,1.2", "--law", "paper"]
+    assert main(["certify", str(path), *points]) == 1
     capsys.readouterr()
-    assert main(["certify", str(path), "--setpoint", "0.8,0.8", "--setpoint", "1.2,1.2",
-                 "--auto-gain-scale", "--save"]) == 0
+    assert main(["certify", str(path), *points, "--auto-gain-scale", "--save"]) == 0
     out = capsys.readouterr().out
     assert "(auto)" in out
     saved = GRUModel.load(path)
@@ -116,8 +129,9 @@ def test_auto_gain_scale_and_save(tmp_path: Path, capsys) -> None:
     assert 0 < theta < 1
     assert saved.L_z == pytest.approx(theta * Lz) and saved.L_r == pytest.approx(theta * Lr)
     assert saved.w_y_bar == 0.15
+    assert saved.certificate["certified"] is True and saved.certificate["law"] == "paper"
     # the saved gains are the default next time, and they pass
-    assert main(["certify", str(path), "--setpoint", "0.8,0.8", "--setpoint", "1.2,1.2"]) == 0
+    assert main(["certify", str(path), *points]) == 0
     assert "gains from the model file" in capsys.readouterr().out
 
 
@@ -218,17 +232,22 @@ def test_empty_admissible_range_exits_1(no_admissible_setpoint: Path, capsys) ->
             "h1: none; h2: none") in captured.out
     assert ("FAILED: admissible set-points (ass:setpoint and eq:condition-recursive-"
             "feasibility): none for h1, h2") in captured.out
-    assert captured.err == "cosim certify: 1 hypothesis check(s) failed\n"
+    assert "FAILS: room for set-points: " in captured.out
+    assert "set-points that pass: h1: none; h2: none" in captured.out
+    assert captured.err.startswith("cosim certify: not certified (1 hypothesis check(s)")
     assert main(["certify", path, "--gain-scale", "0", "--json", "--law", "paper"]) == 1
     captured = capsys.readouterr()
-    assert json.loads(captured.out)["nu"] < 1
-    assert "none for h1, h2" in captured.err
+    doc = json.loads(captured.out)
+    assert doc["nu"] < 1 and doc["verdict"]["certified"] is False
+    assert doc["verdict"]["admissible_setpoints"] == {"h1": None, "h2": None}
 
 
 @pytest.mark.parametrize("case", ["nu", "admissible"])
-def test_save_writes_only_when_every_hypothesis_holds(case: str, tmp_path: Path,
-                                                      no_admissible_setpoint: Path,
-                                                      capsys) -> None:
+def test_save_writes_the_verdict_certified_or_not(case: str, tmp_path: Path,
+                                                  no_admissible_setpoint: Path,
+                                                  capsys) -> None:
+    """--save always writes what was computed: the gains, w̄_y and the verdict, whose
+    ``certified`` is false with the reasons (exit 1)."""
     if case == "nu":  # ν ≥ 1 (th:stability-bonassi fails)
         m = random_gru_model(0)
         m.params["U_z"] *= 40
@@ -238,12 +257,15 @@ def test_save_writes_only_when_every_hypothesis_holds(case: str, tmp_path: Path,
         extra: list[str] = []
     else:
         path, extra = no_admissible_setpoint, ["--gain-scale", "0"]
-    before = path.read_bytes()
     assert main(["certify", str(path), "--save", *extra]) == 1
     err = capsys.readouterr().err
-    assert f"cosim certify: not saved: {path} is unchanged" in err
-    assert "saved L_z" not in err
-    assert path.read_bytes() == before
+    assert f"verdict (certified: false) to {path}" in err
+    saved = GRUModel.load(path)
+    assert saved.certificate["certified"] is False and saved.L_z is not None
+    failing = [f for f in saved.certificate["findings"] if not f["holds"]]
+    assert failing and failing[0]["hypothesis"] == (
+        "stability (δISS, th:stability-bonassi)" if case == "nu" else "room for set-points")
+    assert saved.certificate["usable"] is (case != "nu")
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp file
 
 
@@ -387,28 +409,35 @@ def test_problem_option_agrees_or_exit_2_naming_both(cstr_file: Path, model_file
     assert "no.toml: problem file not found" in capsys.readouterr().err
 
 
-def test_auto_gain_scale_without_a_passing_theta_exits_1_and_saves_nothing(
-        tmp_path: Path, capsys) -> None:
+def test_auto_gain_scale_without_a_passing_theta(tmp_path: Path, capsys) -> None:
     """w̄_y = 0.6: ν, ν_o < 1 and the admissible range is not empty, but no θ passes at the 9
-    default set-points (the grid at 25/50/75 % of the [0, 2] m boxes): exit 1, and --save
-    leaves the file as it was instead of saving the θ = 0 gains."""
+    default set-points (the grid at 25/50/75 % of the [0, 2] m boxes). The paper's law: not
+    certified (exit 1), the θ = 0 gains and the verdict saved. The tracking law, whose
+    observer has zero gains anyway: its terminal radius falls back to the one of the model's
+    output map (no default depends on the failed gain design), and it is certified for the
+    set-points inside its admissible steady outputs."""
     m = random_gru_model(0)
     m.w_y_bar = 0.6
     path = tmp_path / "noisy.json"
     m.save(path)
-    before = path.read_bytes()
-    assert main(["certify", str(path), "--auto-gain-scale", "--save"]) == 1
+    assert main(["certify", str(path), "--auto-gain-scale", "--save", "--law", "paper"]) == 1
     captured = capsys.readouterr()
     assert "LP gains × θ = 0 (no θ in [0, 1] passes)" in captured.out
     assert ("FAILED: gain scale: no θ in [0, 1] passes every hypothesis at the 9 default "
             "set-points over the output box") in captured.out
-    assert (f"cosim certify: not saved: {path} is unchanged (no θ in [0, 1] passes: the "
-            "θ = 0 gains are not saved)\n") in captured.err
-    assert "saved L_z" not in captured.err and path.read_bytes() == before
-    assert main(["certify", str(path), "--auto-gain-scale", "--json"]) == 1
-    captured = capsys.readouterr()
-    assert json.loads(captured.out)["kappa"] == 0
-    assert "FAILED: gain scale: no θ in [0, 1] passes" in captured.err
+    assert "FAILS: paper law design: gain scale: no θ in [0, 1] passes" in captured.out
+    saved = GRUModel.load(path)
+    assert saved.certificate["certified"] is False and not np.any(saved.L_z)
+    assert main(["certify", str(path), "--auto-gain-scale", "--json", "--law", "paper"]) == 1
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["kappa"] == 0 and doc["verdict"]["certified"] is False
+    from cosim_adapters.tracking import fallback_alpha_c
+
+    assert main(["certify", str(path), "--auto-gain-scale", "--json"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    cert0 = certs.compute_certificate(GRUModel.load(path), N=80, gain_scale=0.0)
+    assert doc["tracking"]["alpha_c"] == pytest.approx(fallback_alpha_c(cert0))
+    assert doc["verdict"]["certified"] is True
 
 
 @pytest.mark.parametrize(("m", "p", "grid"), [(1, 1, 3), (3, 2, 9), (2, 3, 27)])
@@ -441,14 +470,13 @@ def test_the_tracking_laws_hypotheses(model_file: Path, capsys) -> None:
     """``--law tracking`` (the default, as robust-mpc's): H3-H6 of docs/design/tracking.md at
     N = 80, in the table and the JSON; a failing one (no admissible steady output) is exit 1
     naming it. With a gain scale of 0 the default alpha_c (the certified design's alpha_min)
-    is 0: exit 1 naming it."""
+    is 0: the fallback radius of the model's output map instead (certified)."""
     assert main(["certify", str(model_file)]) == 0
     out = capsys.readouterr().out
     assert "N=80" in out and "tracking law (zero observer gains): alpha_c = " in out
     assert "Y_s not empty = yes" in out
-    assert main(["certify", str(model_file), "--gain-scale", "0"]) == 1
-    assert "FAILED: tracking law: no default alpha_c (alpha_min(N) = 0)" in \
-        capsys.readouterr().out
+    assert main(["certify", str(model_file), "--gain-scale", "0"]) == 0
+    assert "verdict (tracking law): CERTIFIED" in capsys.readouterr().out
     assert main(["certify", str(model_file), "--law", "tracking", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
     h = doc["tracking"]
@@ -458,4 +486,6 @@ def test_the_tracking_laws_hypotheses(model_file: Path, capsys) -> None:
     # α_c enough that it does not)
     assert main(["certify", str(model_file), "--law", "tracking", "--e-o0", "1",
                  "--N", "40"]) == 1
-    assert "FAILED: tracking law: no admissible steady output" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "FAILS: room for set-points: " in out and "set-points that pass: h1: none" in out
+    assert "even an exact model would not pass" in out

@@ -30,8 +30,8 @@ def test_commands_add_their_own_meanings(capsys: pytest.CaptureFixture) -> None:
     assert "       compare: at least one signal outside the band" in compare
     assert "certify:" not in compare
     top = help_text(capsys)
-    for note in ("compare: at least one signal outside the band", "certify: a hypothesis fails",
-                 "campaign: some runs failed"):
+    for note in ("compare: at least one signal outside the band",
+                 "certify: usable but not certified", "campaign: some runs failed"):
         assert note in top
 
 

@@ -30,18 +30,26 @@ def data(tmp_path: Path) -> Path:
     return _write_data(tmp_path / "data.csv")
 
 
-FAST = ["--epochs", "1", "--seq-len", "20", "--washout", "5", "--quiet"]
+FAST = ["--epochs", "1", "--n", "3", "--quiet"]
+#: The paper's recipe (--method truncated), as briefly.
+TRUNCATED = ["--method", "truncated", "--epochs", "1", "--seq-len", "20", "--washout", "5",
+             "--quiet"]
 
 
 @pytest.mark.parametrize("args, message", [
     (["--epochs", "0"], "--epochs must be an integer >= 1, got 0"),
     (["--epochs", "100001"], "--epochs must be an integer <= 100000, got 100001"),
     (["--n", "1001"], "--n must be an integer <= 1000, got 1001"),
-    (["--seed", str(2**64)], f"--seed must be an integer <= {2**63 - 1}, got {2**64}"),
     (["--n", "0"], "--n must be an integer >= 1, got 0"),
+    (["--seed", str(2**64)], f"--seed must be an integer <= {2**63 - 1}, got {2**64}"),
     (["--seed", "-1"], "--seed must be an integer >= 0, got -1"),
-    (["--stride", "0"], "--stride must be an integer >= 1, got 0"),
-    (["--batch", "-1"], "--batch must be an integer >= 0, got -1"),
+    (["--method", "truncated", "--stride", "0"], "--stride must be an integer >= 1, got 0"),
+    (["--method", "truncated", "--batch", "-1"], "--batch must be an integer >= 0, got -1"),
+    (["--seq-len", "30"], "--seq-len belongs to --method truncated (the default simulation "
+                          "method fits whole windows from fitted initial states)"),
+    (["--seeds", "0"], "--seeds must be an integer >= 1, got 0"),
+    (["--x0-samples", "0"], "--x0-samples must be an integer >= 1, got 0"),
+    (["--sizes", "4,x"], "give --n (one size) or --sizes (several), not both"),
     (["--patience", "-2"], "--patience must be an integer >= 0, got -2"),
     (["--lr", "nan"], "--lr must be a positive number, got nan"),
     (["--lr-final", "0"], "--lr-final must be a positive number, got 0.0"),
@@ -82,10 +90,10 @@ def test_broken_sidecar_does_not_fail_after_training(data: Path, tmp_path: Path,
     data.with_suffix(".json").write_text("{not json")
     out = tmp_path / "new" / "m.json"
     assert main(["train", str(data), "--out", str(out), *FAST]) == 0
-    assert out.is_file() and (tmp_path / "new" / "m_test.png").is_file()
+    assert out.is_file() and (tmp_path / "new" / "m_fit.png").is_file()
 
 
-FAST_SMALL = [*FAST, "--n", "3"]
+FAST_SMALL = FAST
 
 
 def test_default_out_is_in_the_current_folder_never_the_shipped_model(
@@ -101,8 +109,8 @@ def test_default_out_is_in_the_current_folder_never_the_shipped_model(
     monkeypatch.chdir(work)
     assert main(["train", str(data), *FAST_SMALL]) == 0
     assert GRUModel.load(work / "models" / "data_gru.json").n == 3
-    assert (work / "models" / "data_gru_test.png").read_bytes()[:4] == b"\x89PNG"
-    assert sorted(p.name for p in work.rglob("*")) == ["data_gru.json", "data_gru_test.png",
+    assert (work / "models" / "data_gru_fit.png").read_bytes()[:4] == b"\x89PNG"
+    assert sorted(p.name for p in work.rglob("*")) == ["data_gru.json", "data_gru_fit.png",
                                                        "models"]
     assert train.SHIPPED_MODEL.read_bytes() == shipped
     with pytest.raises(SystemExit):
@@ -141,16 +149,22 @@ def test_history_is_replaced_only_when_training_ends(data: Path, tmp_path: Path,
     history.write_text("previous\n")
     out = tmp_path / "m.json"
     # training fails at its start (subsequences longer than the data): history unchanged
-    assert main(["train", str(data), *FAST_SMALL, "--seq-len", "5000", "--out", str(out),
-                 "--history", str(history)]) == 2
+    assert main(["train", str(data), *TRUNCATED, "--n", "3", "--seq-len", "5000", "--out",
+                 str(out), "--history", str(history)]) == 2
     assert "fewer than --seq-len 5000" in capsys.readouterr().err
     assert history.read_text() == "previous\n" and not out.exists()
     assert [p.name for p in history.parent.iterdir()] == ["history.csv"]  # no temp file
-    assert main(["train", str(data), *FAST_SMALL, "--epochs", "3", "--out", str(out),
-                 "--history", str(history)]) == 0
+    assert main(["train", str(data), *TRUNCATED, "--n", "3", "--epochs", "3", "--out",
+                 str(out), "--history", str(history)]) == 0
     lines = history.read_text().splitlines()
     assert lines[0].startswith("epoch,time_s,loss,nu") and len(lines) == 4
     assert [p.name for p in history.parent.iterdir()] == ["history.csv"]
+    # the simulation method: each candidate's evaluations, written when training ends
+    assert main(["train", str(data), *FAST_SMALL, "--epochs", "10", "--out", str(out),
+                 "--history", str(history)]) == 0
+    lines = history.read_text().splitlines()
+    assert lines[0] == "n,seed,step,time_s,score_rms"
+    assert [line.split(",")[2] for line in lines[1:]] == ["0", "25", "50", "60"]
 
 
 def test_deeply_nested_sidecar_and_init_model(data: Path, tmp_path: Path,
@@ -160,6 +174,7 @@ def test_deeply_nested_sidecar_and_init_model(data: Path, tmp_path: Path,
     out = tmp_path / "m.json"
     assert main(["train", str(data), *FAST_SMALL, "--out", str(out)]) == 0
     assert GRUModel.load(out).training["data_meta"] is None
+    capsys.readouterr()
     init = tmp_path / "init.json"
     init.write_text(deep)
     assert main(["train", str(data), *FAST_SMALL, "--out", str(out), "--init",

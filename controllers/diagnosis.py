@@ -1,0 +1,208 @@
+"""Which hypotheses of the theorem hold for a model, in the user's signals and units, and
+what would fix the ones that fail.
+
+A :class:`~controllers.certificates.Certificate` speaks the paper's symbols (ν, w̄_y, a_N,
+α…). A user needs: does my model give a certified controller for the set-points I want; if
+not, which hypothesis fails, by how much, in my units, and what to do. :func:`diagnose`
+answers that for either law of the robust MPC:
+
+- **stability** (``th:stability-bonassi``): ν < 1; a model without it has no certificate and
+  cannot be used (``cosim train`` never writes one);
+- **design**: the paper's law, the observer condition ν_o < 1
+  (``eq:condition-observer-convergence``); the tracking law, its hypotheses H3–H6
+  (:mod:`controllers.tracking_checks`);
+- **room in the box**: the output constraints are tightened, at the end of the horizon, by
+  the model's output-error bound ``w̄_y`` and by the estimation-error and terminal-set terms;
+  what is left is the set of set-points that pass (``Y_s`` for the tracking law, the box of
+  Assumption 1 and ``eq:condition-recursive-feasibility`` for the paper's), per output in its
+  units;
+- **each set-point** asked for: inside that set, or by how much it is outside; and the
+  largest ``w̄_y`` (in each output's units) with which every one of them would pass
+  (:func:`required_error`), when there is one.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Diagnosis", "Finding", "box_ranges", "diagnose", "required_error"]
+
+
+@dataclass
+class Finding:
+    """One hypothesis: whether it holds, the numbers, and what would fix it."""
+
+    hypothesis: str
+    holds: bool
+    detail: str
+    fix: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        return {"hypothesis": self.hypothesis, "holds": self.holds, "detail": self.detail,
+                "fix": self.fix or None}
+
+
+@dataclass
+class Diagnosis:
+    """The verdict of :func:`diagnose`.
+
+    Attributes
+    ----------
+    law : str
+    certified : bool
+        Every finding holds.
+    usable : bool
+        The robust MPC runs with this model (certified, or uncertified with a measured
+        tightening): ν < 1.
+    findings : list of Finding
+    admissible : list of (name, lo, hi)
+        The set-points that pass, per output, physical units (``None``: none).
+    required_w_y_bar : float or None
+        The largest ``w̄_y`` (normalised) with which the set-points asked for would pass.
+    """
+
+    law: str
+    certified: bool
+    usable: bool
+    findings: list[Finding] = field(default_factory=list)
+    admissible: list[tuple[str, float | None, float | None]] = field(default_factory=list)
+    required_w_y_bar: float | None = None
+
+    def reasons(self) -> list[str]:
+        """The failing hypotheses, one line each."""
+        return [f"{f.hypothesis}: {f.detail}" for f in self.findings if not f.holds]
+
+    def to_json(self) -> dict[str, Any]:
+        return {"law": self.law, "certified": self.certified, "usable": self.usable,
+                "findings": [f.to_json() for f in self.findings],
+                "admissible_setpoints": {n: None if lo is None else [lo, hi]
+                                         for n, lo, hi in self.admissible},
+                "required_w_y_bar": self.required_w_y_bar}
+
+
+def box_ranges(model: Any, L: np.ndarray, rhs: np.ndarray
+               ) -> list[tuple[str, float | None, float | None]]:
+    """``{y : L y ≤ rhs}`` (normalised) of box rows as an interval per output, physical
+    units; ``(name, None, None)`` where it is empty."""
+    out: list[tuple[str, float | None, float | None]] = []
+    for j, name in enumerate(model.output_names):
+        lo, hi = -math.inf, math.inf
+        for row, r in zip(L, rhs, strict=True):
+            if row[j] == 0 or np.count_nonzero(row) != 1:
+                continue
+            bound = float(r / row[j])
+            if row[j] > 0:
+                hi = min(hi, bound)
+            else:
+                lo = max(lo, bound)
+        a, b = (lo * model.y_scale[j] + model.y_offset[j],
+                hi * model.y_scale[j] + model.y_offset[j])
+        a, b = sorted((float(a), float(b)))
+        out.append((name, a, b) if lo <= hi else (name, None, None))
+    return out
+
+
+def required_error(passes: Callable[[float], bool], current: float,
+                   iterations: int = 40) -> float | None:
+    """The largest ``w̄_y`` in ``[0, current]`` for which ``passes(w̄_y)`` holds (bisection;
+    ``passes`` is monotone: a smaller error never tightens more); ``None`` when even
+    ``w̄_y = 0`` fails."""
+    if not passes(0.0):
+        return None
+    if passes(current):
+        return current
+    lo, hi = 0.0, current
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if passes(mid) else (lo, mid)
+    return lo
+
+
+def _units(model: Any, value: float) -> str:
+    """A normalised output error as each output's physical size."""
+    return ", ".join(f"{value * abs(float(s)):.3g} {u} on {n}".replace("  ", " ")
+                     for n, s, u in zip(model.output_names, model.y_scale,
+                                        model.output_units, strict=True))
+
+
+def _interval_text(ranges: Sequence[tuple[str, float | None, float | None]],
+                   units: Sequence[str]) -> str:
+    return "; ".join(f"{n} in [{lo:.4g}, {hi:.4g}] {u}".rstrip() if lo is not None
+                     else f"{n}: none" for (n, lo, hi), u in zip(ranges, units, strict=True))
+
+
+def _setpoint_text(model: Any, y: np.ndarray) -> str:
+    return ", ".join(f"{n}={v:.4g} {u}".rstrip() for n, v, u in zip(
+        model.output_names, model.denormalize_y(y), model.output_units, strict=True))
+
+
+def diagnose(model: Any, cert: Any, law: str, setpoints: Sequence[np.ndarray],
+             admissible_rhs: np.ndarray, design_failures: Sequence[str],
+             rhs_at: Callable[[float], np.ndarray] | None = None) -> Diagnosis:
+    """The findings for ``model`` and its certificate ``cert`` under ``law``.
+
+    Parameters
+    ----------
+    setpoints : sequence of (p,) arrays
+        The set-points asked for (normalised; may be empty).
+    admissible_rhs : (q,) array
+        The right-hand side of the set-points that pass, ``{y : L y ≤ rhs}`` (the tracking
+        law's ``Y_s``; the paper law's :meth:`Certificate.admissible_box`).
+    design_failures : sequence of str
+        The law's design hypotheses that fail (the paper's ν_o, the tracking law's H3–H6).
+    rhs_at : callable, optional
+        ``admissible_rhs`` as a function of ``w̄_y`` (normalised; for :func:`required_error`).
+    """
+    units = list(model.output_units)
+    findings = [Finding("stability (δISS, th:stability-bonassi)", cert.nu < 1,
+                        f"stability index nu = {cert.nu:.4g} " + ("< 1" if cert.nu < 1
+                                                                    else ">= 1"),
+                        "" if cert.nu < 1 else "train the model with the nu constraint "
+                        "(cosim train keeps nu <= 0.98)")]
+    findings += [Finding(f"{law} law design", False, msg, "see the docs' certificates "
+                         "guide") for msg in design_failures]
+    ranges = box_ranges(model, cert.L, admissible_rhs)
+    box = box_ranges(model, cert.L, cert.h)
+    tightening = cert.h - admissible_rhs
+    room = Finding(
+        "room for set-points", all(lo is not None for _, lo, _ in ranges),
+        f"the constraints are tightened by the model's largest test error "
+        f"({_units(model, cert.w_y_bar)}) and the estimation-error and terminal-set terms "
+        f"(in all, {_units(model, float(np.max(tightening)))} at most): set-points that "
+        f"pass: {_interval_text(ranges, units)}, of the box {_interval_text(box, units)}")
+    findings.append(room)
+    outside = [y for y in setpoints if np.any(cert.L @ y > admissible_rhs + 1e-12)]
+    required = None
+    if outside or not room.holds:
+        targets = list(setpoints) or []
+        if rhs_at is not None:
+            def passes(w: float) -> bool:
+                rhs = rhs_at(w)
+                if not targets:
+                    return all(lo is not None for _, lo, _ in box_ranges(model, cert.L, rhs))
+                return all(np.all(cert.L @ y <= rhs + 1e-12) for y in targets)
+
+            required = required_error(passes, float(cert.w_y_bar))
+        fix = ("train longer (--epochs) or on more data, or widen the output box if the "
+               "plant allows it")
+        if required is not None and required < cert.w_y_bar:
+            fix = (f"a model whose largest test error is below {_units(model, required)} "
+                   f"would pass: {fix}")
+        elif required is None and rhs_at is not None:
+            fix = ("even an exact model would not pass (the estimation-error and terminal-set "
+                   "terms alone fill the box): a shorter horizon N, a smaller e_o0, or "
+                   "set-points further inside the box")
+        room.fix = fix if not room.holds else ""
+        for y in outside:
+            findings.append(Finding(
+                "set-point", False,
+                f"{_setpoint_text(model, y)} is outside the set-points that pass "
+                f"({_interval_text(ranges, units)})", fix))
+    certified = all(f.holds for f in findings)
+    return Diagnosis(law=law, certified=certified, usable=bool(cert.nu < 1),
+                     findings=findings, admissible=ranges, required_w_y_bar=required)

@@ -1,0 +1,258 @@
+"""Identification of a δISS GRU (``eq:gru``) by simulation error, with estimated initial states.
+
+One candidate model (one size, one seed) is fitted by :func:`fit_candidate`:
+
+* **Windows with free initial states.** The training rows are cut into windows (each training
+  stretch whole up to :data:`MAX_WINDOW` rows, else in pieces of :data:`LONG_WINDOW`), and
+  each window's initial state ``x_0`` is a decision variable beside the weights (bounded to
+  the GRU's state box [−1, 1]). The loss is the squared simulation error over every sample of
+  every window: the model is never asked to reproduce a transient from ``x = 0`` that the
+  plant did not have, which on a short record (the transient of a slow plant is a large share
+  of a thousand samples) is what a washout of a tenth of a subsequence cannot prevent.
+* **δISS at every step.** The weights are those of :func:`controllers.training.constrain`:
+  ν ≤ 1 − margin exactly (``th:stability-bonassi``), by projection, as the paper's training.
+* **The gradient in C.** Loss and gradient come from :mod:`controllers.identification.
+  sim_loss` (backpropagation through time, some hundred times torch's autograd); torch maps
+  them through the projection and runs Adam.
+* **Selection on simulation.** Every :attr:`SimOptions.eval_every` steps the model is run
+  free over the whole record, each experiment from an initial state estimated from its first
+  samples (:mod:`controllers.identification.initial_state`), read through the sensor limits;
+  the step with the lowest validation RMS (normalised, averaged over the outputs) is kept.
+
+Sensor limits (:mod:`controllers.identification.saturation`) enter the loss as one-sided
+errors. Everything is float64 and deterministic for a seed.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from controllers.bounds import nu as nu_numpy
+from controllers.identification.initial_state import (
+    DEFAULT_SAMPLES,
+    estimate_initial_state,
+    free_run,
+)
+from controllers.identification.record import SPLITS, Record
+from controllers.identification.sim_loss import SimLoss, unpack
+
+__all__ = ["LONG_WINDOW", "MAX_WINDOW", "STEPS_PER_EPOCH", "Candidate", "SimOptions",
+           "fit_candidate", "rms", "simulate", "training_windows"]
+
+#: A training stretch up to this many rows is one window...
+MAX_WINDOW = 2000
+#: ... a longer one is cut into windows of this many rows (the last one longer).
+LONG_WINDOW = 1000
+#: Adam steps per epoch (the paper's recipe: 30 subsequences in batches of 5).
+STEPS_PER_EPOCH = 6
+
+
+@dataclass
+class SimOptions:
+    """Settings of :func:`fit_candidate` (recorded in the model file's ``training`` block).
+
+    Attributes
+    ----------
+    n : int
+        GRU states.
+    epochs : int
+        Passes over the training windows, each of :data:`STEPS_PER_EPOCH` Adam steps on a
+        batch of the windows (a sixth of them; all of them, when there are fewer than six).
+    lr, lr_final : float
+        Adam's learning rate, decayed geometrically to ``lr_final`` over the steps.
+    window : int
+        Training window length (0: :data:`MAX_WINDOW` / :data:`LONG_WINDOW`).
+    nu_margin, sigma_z_max, train_uz, bz_init
+        As :class:`controllers.training.TrainOptions`.
+    x0_samples : int
+        Samples of each experiment that estimate its initial state in the evaluations.
+    eval_every : int
+        Steps between two evaluations of the validation RMS.
+    patience : int
+        Stop after this many epochs without a better validation RMS (0: off).
+    seed : int
+    """
+
+    n: int = 8
+    epochs: int = 1000
+    lr: float = 0.03
+    lr_final: float = 0.003
+    window: int = 0
+    nu_margin: float = 0.02
+    sigma_z_max: float = 0.0
+    train_uz: bool = False
+    bz_init: float = 2.0
+    x0_samples: int = DEFAULT_SAMPLES
+    eval_every: int = 25
+    patience: int = 0
+    seed: int = 0
+
+    @property
+    def steps(self) -> int:
+        """Adam steps: ``epochs`` × :data:`STEPS_PER_EPOCH`."""
+        return self.epochs * STEPS_PER_EPOCH
+
+
+@dataclass
+class Candidate:
+    """One fitted candidate: its best weights on validation and how it got there."""
+
+    params: dict[str, np.ndarray]
+    nu: float
+    score: float
+    best_step: int
+    steps_run: int
+    wall_time: float
+    options: dict[str, Any]
+    history: list[dict[str, float]] = field(default_factory=list)
+
+
+def training_windows(record: Record, window: int = 0) -> list[tuple[int, int]]:
+    """``(start, end)`` rows of the training windows: each training stretch whole when it
+    has at most ``window`` rows (0: :data:`MAX_WINDOW`), else cut into pieces of ``window``
+    (0: :data:`LONG_WINDOW`) rows, the remainder joined to the last."""
+    whole = window or MAX_WINDOW
+    piece = window or LONG_WINDOW
+    out = []
+    for a, b in record.stretches("train"):
+        if b - a <= whole:
+            out.append((a, b))
+            continue
+        k = (b - a) // piece
+        cuts = [a + i * piece for i in range(k)] + [b]
+        out.extend(itertools.pairwise(cuts))
+    return out
+
+
+def simulate(params: dict[str, np.ndarray], record: Record,
+             samples: int = DEFAULT_SAMPLES) -> np.ndarray:
+    """The model's free run over the record (T, p), each experiment from the initial state
+    estimated from its first ``samples`` rows, read through the sensor limits."""
+    xi = np.empty_like(record.y)
+    for a, b in record.experiments():
+        x0 = estimate_initial_state(params, record.u[a:b], record.y[a:b], record.sat[a:b],
+                                    samples)
+        xi[a:b] = free_run(params, record.u[a:b], x0)
+    return record.limits.clip(xi)
+
+
+def rms(record: Record, xi: np.ndarray, rows: np.ndarray | None = None
+        ) -> dict[str, np.ndarray]:
+    """RMS of ``y − ξ`` per output (normalised) for each split with rows (among ``rows``)."""
+    keep = np.ones(len(record.y), dtype=bool) if rows is None else np.asarray(rows, bool)
+    out = {}
+    for name in SPLITS:
+        mask = keep & (record.split == name)
+        if np.any(mask):
+            out[name] = np.sqrt(np.mean((record.y[mask] - xi[mask]) ** 2, axis=0))
+    return out
+
+
+def _scored(record: Record) -> str:
+    return "val" if record.has("val") else "train"
+
+
+def fit_candidate(record: Record, options: SimOptions | None = None,
+                  progress: Callable[[int], None] | None = None,
+                  init: dict[str, np.ndarray] | None = None) -> Candidate:
+    """Fit one candidate (module docstring); ``progress`` is called with the number of Adam
+    steps done after each evaluation; ``init``: initial weights (default
+    :func:`controllers.training.init_params`)."""
+    import torch
+
+    from controllers.training import CONSTRAINED, constrain, init_params
+
+    opt = options or SimOptions()
+    torch.set_num_threads(1)
+    torch.manual_seed(opt.seed)
+    dtype = torch.float64
+    target = 1.0 - opt.nu_margin
+    m, p, n = record.m, record.p, opt.n
+    spans = training_windows(record, opt.window)
+    if not spans:
+        raise ValueError("the record has no training rows")
+    T = max(b - a for a, b in spans)
+    B = len(spans)
+    U = np.zeros((B, T, m))
+    Y = np.zeros((B, T, p))
+    W = np.zeros((B, T, p))
+    S = np.zeros((B, T, p), dtype=np.int8)
+    for i, (a, b) in enumerate(spans):      # windows shorter than T padded with weight 0
+        U[i, :b - a], Y[i, :b - a], S[i, :b - a] = record.u[a:b], record.y[a:b], \
+            record.sat[a:b]
+        W[i, :b - a] = 1.0
+    rng = np.random.default_rng(opt.seed)
+    n_batches = min(STEPS_PER_EPOCH, B)
+
+    p0 = init or init_params(n, m, p, opt.seed, opt.bz_init)
+    params = {k: torch.tensor(np.asarray(v, dtype=float), dtype=dtype, requires_grad=True)
+              for k, v in p0.items()}
+    if not opt.train_uz:
+        params["U_z"] = torch.zeros_like(params["U_z"])
+    with torch.no_grad():
+        q, _ = constrain(params, target, opt.sigma_z_max)
+        for k in CONSTRAINED:
+            params[k].copy_(q[k])
+    x0 = torch.zeros(B, n, dtype=dtype, requires_grad=True)
+    trainable = [v for v in params.values() if v.requires_grad] + [x0]
+    adam = torch.optim.Adam(trainable, lr=opt.lr)
+    steps = opt.steps
+    gamma = (opt.lr_final / opt.lr) ** (1.0 / max(1, steps - 1))
+    scheduler = torch.optim.lr_scheduler.ExponentialLR(adam, gamma)
+    scored = _scored(record)
+
+    def weights() -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+        q, _ = constrain(params, target, opt.sigma_z_max)
+        return q, {k: v.detach().numpy().copy() for k, v in q.items()}
+
+    best: dict[str, np.ndarray] | None = None
+    best_score, best_step, history = math.inf, -1, []
+    patience = opt.patience * STEPS_PER_EPOCH
+    batches: list[np.ndarray] = []
+    t0 = time.perf_counter()
+    for step in range(steps + 1):
+        q, qn = weights()
+        if step % opt.eval_every == 0 or step == steps:
+            xi = simulate(qn, record, opt.x0_samples)
+            score = float(np.mean(rms(record, xi)[scored]))
+            history.append({"step": step, "score": score, "time": time.perf_counter() - t0})
+            if math.isfinite(score) and score < best_score and nu_numpy(qn) < 1.0:
+                best, best_score, best_step = qn, score, step
+            if progress is not None:
+                progress(step)
+            if patience and step - best_step >= patience:
+                break
+        if step == steps:
+            break
+        if not batches:       # a new epoch: the windows in a new order, cut into batches
+            batches = np.array_split(rng.permutation(B), n_batches)
+        idx = batches.pop()
+        w = W[idx]
+        loss = SimLoss(U[idx], Y[idx], w / w.sum(), S[idx])
+        r = loss(qn, x0.detach().numpy()[idx])
+        grads = unpack(r["grad"], n, m, p)
+        adam.zero_grad()
+        keys = [k for k in q if q[k].requires_grad]
+        torch.autograd.backward([q[k] for k in keys], [torch.from_numpy(grads[k]) for k in keys])
+        g = np.zeros((B, n))
+        g[idx] = r["grad_x0"]
+        x0.grad = torch.from_numpy(g)
+        adam.step()
+        scheduler.step()
+        with torch.no_grad():
+            q, _ = constrain(params, target, opt.sigma_z_max)
+            for k in CONSTRAINED:
+                params[k].copy_(q[k])
+            x0.clamp_(-1.0, 1.0)
+    if best is None:
+        best = weights()[1]
+    return Candidate(params=best, nu=nu_numpy(best), score=best_score,
+                     best_step=best_step, steps_run=history[-1]["step"],
+                     wall_time=time.perf_counter() - t0, options=asdict(opt), history=history)

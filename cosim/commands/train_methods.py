@@ -1,0 +1,251 @@
+"""The two training methods of ``cosim train`` and what follows them (scores, model file,
+figure, report): :func:`simulation` (the default), :func:`truncated` (the paper's recipe),
+:func:`finish`."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Trained", "finish", "simulation", "truncated"]
+
+
+@dataclass
+class Trained:
+    """A training's outcome: the weights, ν, what goes into the model file's ``training``
+    block, and the ``--history`` lines (``None``: written as training went)."""
+
+    params: dict[str, np.ndarray]
+    nu: float
+    record: dict[str, Any]
+    history: list[str] | None = None
+    label: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def _bar(total: int, progress: bool, unit: str) -> Any:
+    import sys
+
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc="train", unit=unit, disable=not progress, file=sys.stderr,
+                dynamic_ncols=True)
+
+
+def _init(args: argparse.Namespace, problem: Any) -> dict[str, np.ndarray] | None:
+    """``--init``'s weights, checked against the problem (and ``--n``)."""
+    from controllers.model import GRUModel
+    from cosim.errors import CosimError
+
+    if not args.init:
+        return None
+    start = GRUModel.load(args.init)
+    if start.m != problem.m or start.p != problem.p:
+        raise CosimError(f"{args.init}: model has m={start.m}, p={start.p}, but the problem "
+                         f"has {problem.m} inputs and {problem.p} outputs")
+    if args.n is not None and start.n != args.n:
+        raise CosimError(f"{args.init}: model has n={start.n}, but --n is {args.n}")
+    return start.params
+
+
+def simulation(args: argparse.Namespace, data: Any, record: Any, problem: Any,
+               progress: bool) -> Trained:
+    """Candidates of sizes and seeds fitted on simulation error, the best on validation
+    (:func:`controllers.identification.search.search`)."""
+    from controllers.identification.search import DEFAULT_SEEDS, candidates, search
+    from controllers.identification.simulation import SimOptions
+
+    init = _init(args, problem)
+    sizes = [int(init["W_z"].shape[0])] if init is not None else args.size_list
+    seeds = args.seeds or (1 if init is not None or args.n is not None else DEFAULT_SEEDS)
+    base = SimOptions(epochs=args.epochs, lr=args.lr, lr_final=args.lr_final,
+                      window=args.window, nu_margin=args.nu_margin,
+                      sigma_z_max=args.sigma_z_max, train_uz=args.train_uz,
+                      bz_init=args.bz_init, x0_samples=args.x0_samples,
+                      patience=args.patience, seed=args.seed)
+    todo = candidates(base, sizes, seeds)
+    bar = _bar(len(todo) * base.steps, progress, "step")
+    try:
+        res = search(record, base, sizes, seeds, args.workers,
+                     progress=lambda done: bar.update(done - bar.n), init=init)
+    finally:
+        bar.close()
+    best = res.best
+    history = ["n,seed,step,time_s,score_rms\n"] + [
+        f"{t['n']},{t['seed']},{h['step']},{h['time']:.2f},{h['score']:.6e}\n"
+        for t in res.tried for h in t["history"]]
+    tried = [{k: v for k, v in t.items() if k != "history"} for t in res.tried]
+    rec = {"method": "simulation", "options": best.options, "best_step": best.best_step,
+           "steps_run": best.steps_run, "epochs_run": best.steps_run // 6,
+           "best_epoch": best.best_step // 6, "candidates": tried,
+           "selection": ("lowest validation RMS of the free run (normalised, averaged over "
+                         "the outputs)" if record.has("val") else
+                         "lowest training RMS of the free run (no validation rows)")}
+    label = f"GRU n={best.options['n']} (best of {len(todo)} candidates)"
+    return Trained(best.params, best.nu, rec, history, label)
+
+
+def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
+              progress: bool) -> Trained:
+    """The paper's recipe (:func:`controllers.training.train`): truncated subsequences from
+    ``x = 0``, the epoch with the best validation FIT; ``--history`` written as it goes."""
+    import contextlib
+
+    from controllers import sequences, training
+    from cosim.atomicio import output_error, replacing
+    from cosim.errors import CosimError
+
+    spans = sequences.stretches(data.split, data.experiment, "train")
+    lengths = [b - a for a, b in spans]
+    auto = sequences.record_defaults(lengths, args.seq_len, args.washout, args.batch,
+                                     args.stride)
+    if auto.subsequences == 0:
+        raise CosimError(f"{args.data[0]}: the longest training stretch has {max(lengths)} "
+                         f"steps (of {sum(lengths)} training rows), fewer than --seq-len "
+                         f"{auto.seq_len}")
+    if not 0 <= auto.washout < auto.seq_len:
+        raise CosimError(f"--washout must be in [0, --seq-len), got {auto.washout}")
+    penalty = args.penalty_weight
+    if penalty is None:
+        penalty = 10.0 if args.constraint == "penalty" else 0.0
+    n = args.n if args.n is not None else training.TrainOptions().n
+    opts = training.TrainOptions(
+        n=n, seq_len=auto.seq_len, stride=args.stride, batch=auto.batch,
+        epochs=args.epochs, lr=args.lr, lr_final=args.lr_final, washout=auto.washout,
+        nu_margin=args.nu_margin, constraint=args.constraint, penalty_weight=penalty,
+        uo_weight=args.uo_weight, uo_max=args.uo_max, bz_init=args.bz_init,
+        patience=args.patience, sigma_z_max=args.sigma_z_max, train_uz=args.train_uz,
+        seed=args.seed)
+    init = _init(args, problem)
+    if init is not None and init["W_z"].shape[0] != opts.n:
+        raise CosimError(f"{args.init}: model has n={init['W_z'].shape[0]}, but --n is "
+                         f"{opts.n}")
+    names = list(problem.output_names)
+    train_mask = data.split == "train"
+    with contextlib.ExitStack() as stack:
+        callback = None
+        if args.history:
+            history = Path(args.history)
+            tmp = stack.enter_context(replacing(history))
+            fh = stack.enter_context(open(tmp, "w", encoding="utf-8", newline=""))
+
+            def log(line: str) -> None:
+                try:
+                    fh.write(line)
+                    fh.flush()
+                except OSError as exc:
+                    raise output_error(history, exc) from None
+
+            log("epoch,time_s,loss,nu," + "".join(f"fit_val_{n}," for n in names)
+                + "U_o_inf_norm\n")
+
+            def callback(epoch: int, rec: dict, _weights: dict) -> None:
+                log(f"{epoch},{rec['time']:.2f},{rec['loss']:.6e},{rec['nu']:.6f},"
+                    + "".join(f"{f:.4f}," for f in rec["fit_val"])
+                    + f"{rec['uo_norm']:.4f}\n")
+
+        result = training.train(record.u[train_mask], record.y[train_mask], record.u,
+                                record.y, data.split, opts, progress=progress, init=init,
+                                callback=callback, experiment=data.experiment)
+    rec = {"method": "truncated", "epochs_run": result.epochs_run,
+           "best_epoch": result.best_epoch, "options": result.options,
+           "subsequences": {"count": auto.subsequences, "training_stretches": len(spans),
+                            "from_record": [o for o, v in (("seq_len", args.seq_len),
+                                                           ("washout", args.washout),
+                                                           ("batch", args.batch))
+                                            if v is None]}}
+    return Trained(result.params, result.nu, rec, None, f"GRU n={opts.n}")
+
+
+def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, trained: Trained,
+           out: Path, figure: Path, wall: float, command: str, sidecar: dict | None) -> int:
+    """Score the model against its baseline, write the model file, the figure and the
+    ``--history``; print the report."""
+    from controllers import bounds, training
+    from controllers.fhocp_tracking import DEFAULTS as TRACKING
+    from controllers.prediction_error import error_profile
+    from cosim.atomicio import output_error, replacing
+    from cosim.commands import train_report
+
+    names, units = list(problem.output_names), list(problem.output_units)
+    ev = train_report.evaluate(trained.params, record, problem, data.experiment_names,
+                               args.x0_samples)
+    scored = next(s for s in ("test", "val", "train") if np.any(record.split == s))
+    err = np.abs(record.y - ev.xi)[record.split == scored]
+    w_y_bar = float(np.max(err))
+    sz, sr, ph = bounds.gate_bounds(trained.params)
+    doc = {
+        "command": command,
+        "data": [str(p) for p in (*args.data, *args.val, *args.test)],
+        "data_meta": sidecar,
+        "data_file": data.provenance,
+        "seed": args.seed,
+        "init": args.init,
+        **trained.record,
+        "scores": ev.scores,
+        "baseline": None if ev.baseline is None else {"model": "ARX", **ev.baseline_orders,
+                                                      "scores": ev.baseline},
+        "comparison": ev.comparison,
+        "worse_than_baseline": ev.warning is not None,
+        "sensor_limits": ev.limits,
+        "fit": {s: d["fit"] for s, d in ev.scores["splits"].items()},
+        "max_abs_err": {s: float(np.max(np.abs(record.y - ev.xi)[record.split == s]))
+                        for s in ev.scores["splits"]},
+        "w_y_bar_split": scored,
+        "fit_protocol": ("free-run simulation of each experiment from the initial state "
+                         f"estimated from its first {args.x0_samples} samples, read through "
+                         "the sensor limits; RMS in the outputs' units, FIT per split on its "
+                         "rows of every experiment"),
+        "nu": trained.nu,
+        "sigma_z_bar": sz, "sigma_r_bar": sr, "phi_h_bar": ph,
+        "U_o_inf_norm": bounds.inf_norm(trained.params["U_o"]),
+        "normalization_note": "(value - offset) / scale, offset and scale per signal from "
+                              "the problem (default: middle and half-width of its box)",
+        "wall_time_s": round(wall, 1),
+        "torch_version": __import__("torch").__version__,
+    }
+    held = np.isin(record.split, ("val", "test"))
+    profile = error_profile(record.y, ev.xi, held if np.any(held) else record.split == "train",
+                            record.experiments(), TRACKING["offset_filter"])
+    doc["prediction_error"] = {
+        "rows": "val+test" if np.any(held) else "train",
+        "offset_filter": TRACKING["offset_filter"],
+        "steps": None if profile is None else int(profile.shape[0]),
+        "at_1_step": None if profile is None else {
+            n: float(v * abs(s)) for n, v, s in zip(names, profile[min(1, len(profile) - 1)],
+                                                   problem.normalization()["y_scale"],
+                                                   strict=True)},
+        "at_last_step": None if profile is None else {
+            n: float(v * abs(s)) for n, v, s in zip(names, profile[-1],
+                                                   problem.normalization()["y_scale"],
+                                                   strict=True)}}
+    model = training.build_model(trained.params, problem, doc, w_y_bar=w_y_bar)
+    model.prediction_error = profile
+    try:
+        model.save(out)   # atomic: a failed write leaves the previous file unchanged
+    except OSError as exc:
+        raise output_error(out, exc) from None
+    if trained.history is not None and args.history:
+        try:
+            with replacing(args.history) as tmp:
+                Path(tmp).write_text("".join(trained.history), encoding="utf-8")
+        except OSError as exc:
+            raise output_error(args.history, exc) from None
+    logged = sidecar is None or len(args.data) > 1 or bool(args.val or args.test)
+    with replacing(figure) as tmp_figure:
+        train_report.figure(tmp_figure, ev, record, model, logged,
+                            f"{trained.label}, nu = {trained.nu:.3f}: free runs over the data")
+    if not args.quiet:
+        train_report.print_report(ev, names, units)
+        print(f"nu = {trained.nu:.4f}, ||U_o||_inf = {doc['U_o_inf_norm']:.2f}, "
+              f"{trained.label}, {doc['wall_time_s']:.0f} s")
+        print(f"wrote {out} and {figure}")
+    elif ev.warning:
+        import sys
+
+        print(f"cosim train: warning: {ev.warning}", file=sys.stderr)
+    return 0

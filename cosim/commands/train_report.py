@@ -1,0 +1,103 @@
+"""What ``cosim train`` tells about the model it trained: scores, the linear baseline, the
+figure, the model file's ``training`` block (:mod:`cosim.commands.train` runs the training).
+
+Every score is a free-run simulation (:mod:`controllers.identification.simulation`), in the
+outputs' units, per split and per experiment, beside the ARX baseline fitted on the same
+training rows (:mod:`controllers.identification.linear`); a model worse than its baseline on
+validation says so in one line.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["Evaluation", "evaluate", "figure", "print_report"]
+
+
+@dataclass
+class Evaluation:
+    """The trained model and its baseline, scored on the record."""
+
+    xi: np.ndarray                       # the model's free run (normalised)
+    scores: dict[str, Any]
+    baseline: dict[str, Any] | None      # the ARX model's scores (None: too few rows)
+    baseline_xi: np.ndarray | None
+    baseline_orders: dict[str, int] | None
+    comparison: dict[str, Any]
+    warning: str | None
+    limits: dict[str, Any] = field(default_factory=dict)
+
+
+def evaluate(params: dict[str, np.ndarray], record: Any, problem: Any,
+             experiment_names: list[str | None], x0_samples: int) -> Evaluation:
+    """Score the model and fit and score its ARX baseline on ``record``
+    (:class:`controllers.identification.record.Record`, normalised by ``problem``)."""
+    from controllers.identification import linear, report
+    from controllers.identification.simulation import simulate
+
+    norm = problem.normalization()
+    scale, names = np.asarray(norm["y_scale"]), list(problem.output_names)
+    xi = simulate(params, record, x0_samples)
+    ours = report.scores(record, xi, scale, names, experiment_names)
+    arx = linear.fit_arx(record)
+    theirs = bxi = orders = None
+    if arx is not None:
+        bxi = linear.simulate(arx, record)
+        theirs = report.scores(record, bxi, scale, names, experiment_names)
+        orders = {"na": arx.na, "nb": arx.nb, "nk": arx.nk}
+    comparison = report.compare(ours, theirs, scale, names)
+    return Evaluation(xi=xi, scores=ours, baseline=theirs, baseline_xi=bxi,
+                      baseline_orders=orders, comparison=comparison,
+                      warning=report.verdict(comparison),
+                      limits=record.limits.to_dict(names, scale, np.asarray(norm["y_offset"])))
+
+
+def _cells(doc: dict[str, Any], names: list[str], units: list[str]) -> str:
+    return ", ".join(
+        f"{n} {_num(doc['rms'][n])} {u}".rstrip() + f" (FIT {_num(doc['fit'][n], '.1f')} %)"
+        for n, u in zip(names, units, strict=True))
+
+
+def _num(v: float | None, fmt: str = ".4g") -> str:
+    return "n/a" if v is None else format(v, fmt)
+
+
+def print_report(ev: Evaluation, names: list[str], units: list[str]) -> None:
+    """The scores, split by split (and experiment by experiment), GRU beside ARX."""
+    print("free-run simulation, RMS in the outputs' units (FIT): each experiment from the "
+          "state estimated from its first samples")
+    for split, doc in ev.scores["splits"].items():
+        print(f"  {split:5s} GRU  {_cells(doc, names, units)}")
+        if ev.baseline is not None:
+            print(f"  {'':5s} ARX  {_cells(ev.baseline['splits'][split], names, units)}")
+    for k, exp in enumerate(ev.scores.get("experiments", [])):
+        label = exp["name"] if exp["name"] is not None else f"#{k + 1}"
+        for split, doc in exp["splits"].items():
+            line = f"  experiment {label}, {split}: GRU {_cells(doc, names, units)}"
+            if ev.baseline is not None:
+                base = ev.baseline["experiments"][k]["splits"][split]
+                line += f"; ARX {_cells(base, names, units)}"
+            print(line)
+    if ev.limits:
+        print("  sensor limits found (read as 'at or beyond'): " + "; ".join(
+            f"{n} {k} {v:.6g}" for n, lim in ev.limits.items() for k, v in lim.items()))
+    if ev.warning:
+        print(f"warning: {ev.warning}")
+
+
+def figure(path: str | Path, ev: Evaluation, record: Any, model: Any, logged: bool,
+           title: str) -> None:
+    """Every row of the record: measured, the GRU's and the ARX's free runs, the splits
+    shaded (:func:`cosim.plots.identification_figure`)."""
+    from cosim import plots
+
+    plots.identification_figure(
+        path, model.denormalize_y(record.y), model.denormalize_y(ev.xi),
+        None if ev.baseline_xi is None else model.denormalize_y(ev.baseline_xi),
+        record.split, record.experiment, list(model.output_names),
+        list(model.output_units), float(model.Ts),
+        "measured (log)" if logged else "measured (plant FMU)", title)

@@ -1,0 +1,73 @@
+"""Identification by simulation error (``controllers.identification.simulation``) and the
+search over sizes and seeds (``controllers.identification.search``): the fit improves the
+free run, stays δISS, is deterministic, and the search's answer does not depend on how many
+worker processes fit the candidates."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("torch")
+
+from controllers.bounds import nu
+from controllers.identification.initial_state import free_run
+from controllers.identification.record import Record
+from controllers.identification.search import candidates, search
+from controllers.identification.simulation import (
+    SimOptions,
+    fit_candidate,
+    rms,
+    simulate,
+    training_windows,
+)
+from controllers.training import init_params
+
+
+@pytest.fixture(scope="module")
+def record() -> Record:
+    """A GRU plant (4 states) driven by steps, 600 rows, one output saturating at its top:
+    450 train / 75 val / 75 test, two experiments."""
+    rng = np.random.default_rng(0)
+    plant = init_params(4, 1, 1, 11, bz_init=1.0)
+    plant["U_h"] *= 3.0
+    u = np.repeat(rng.uniform(-1, 1, (60, 1)), 10, axis=0)
+    y = np.concatenate([free_run(plant, u[:300], rng.uniform(-0.5, 0.5, 4)),
+                        free_run(plant, u[300:], rng.uniform(-0.5, 0.5, 4))])
+    y = 2.0 * (y - y.mean()) / (y.max() - y.min())
+    y = np.minimum(y, np.quantile(y, 0.95))          # 5 % of the samples at a sensor limit
+    one = np.repeat(["train", "val", "test"], [225, 38, 37])
+    return Record(u, y, np.concatenate([one, one]), np.repeat([0, 1], 300))
+
+
+def test_windows_follow_the_training_stretches(record: Record) -> None:
+    assert training_windows(record) == [(0, 225), (300, 525)]
+    assert training_windows(record, window=100) == [(0, 100), (100, 225), (300, 400),
+                                                    (400, 525)]
+    assert record.limits.upper[0] is not None       # the plateau was found
+
+
+def test_the_fit_improves_the_free_run_stays_delta_iss_and_repeats(record: Record) -> None:
+    opt = SimOptions(n=6, epochs=60, seed=3)
+    start = init_params(6, 1, 1, 3)
+    before = rms(record, simulate(start, record))["val"][0]
+    cand = fit_candidate(record, opt)
+    after = rms(record, simulate(cand.params, record))["val"][0]
+    assert after < 0.5 * before and cand.score == pytest.approx(after, rel=1e-12)
+    assert nu(cand.params) <= 1 - opt.nu_margin + 1e-12 and cand.nu < 1
+    assert 0 <= cand.best_step <= opt.steps and cand.steps_run == opt.steps
+    again = fit_candidate(record, opt)
+    assert all(np.array_equal(cand.params[k], again.params[k]) for k in cand.params)
+
+
+def test_the_search_answer_does_not_depend_on_the_workers(record: Record) -> None:
+    base = SimOptions(epochs=4, seed=5)
+    todo = candidates(base, (3, 2), 2)
+    assert [(o.n, o.seed) for o in todo] == [(2, 5), (2, 6), (3, 5), (3, 6)]
+    steps: list[int] = []
+    one = search(record, base, (3, 2), 2, workers=1, progress=steps.append)
+    two = search(record, base, (3, 2), 2, workers=2)
+    assert [t["score"] for t in one.tried] == [t["score"] for t in two.tried]
+    assert one.best.score == min(t["score"] for t in one.tried)
+    assert all(np.array_equal(one.best.params[k], two.best.params[k]) for k in one.best.params)
+    assert steps[-1] == 4 * base.steps
