@@ -155,10 +155,13 @@ def go_uncertified(ctrl: Any, reason: str) -> None:
             design["alpha_c"], ctrl.disturbance.beta, design["fhocp_options"],
             design["control_horizon"], gains_certified=False, cert=cert_u)
         if not tracker.hypotheses["Ys_nonempty"]:
-            raise CosimError(f"controller {ctrl.name!r}: {reason}, and even the model's "
-                             f"measured prediction error ({_margin_text(ctrl, cert_u)}) leaves "
-                             "no admissible output in the box: the model is too far from the "
-                             "plant to control it; train it longer or on more data")
+            given = design["alpha_c"]
+            raise CosimError(
+                f"controller {ctrl.name!r}: {reason}, and even the model's measured "
+                f"prediction error ({_margin_text(ctrl, cert_u)}) leaves no admissible output "
+                "in the box" + (f" with alpha_c = {given:g}: a smaller alpha_c" if given
+                                is not None else ": the model is too far from the plant to "
+                                "control it; train it longer or on more data"))
         ctrl.tracker, ctrl.disturbance, ctrl.fhocp = tracker, disturbance, tracker.fhocp
     else:
         ctrl.fhocp = FHOCP.from_certificate(cert_u, **design["fhocp_options"])

@@ -50,14 +50,17 @@ STEPS, RUNS = 20000, 20
 #: Plant parameters drawn per campaign run (name -> uniform range).
 UNCERTAIN = {"cstr": {"k0_factor": (0.9, 1.1), "UA_factor": (0.9, 1.1)},
              "heater": {"C_factor": (0.9, 1.1), "T_amb": (15.0, 25.0)},
-             "mixing_tank": {"Cv_factor": (0.9, 1.1), "T_hot": (65.0, 75.0)}}
+             "mixing_tank": {"Cv_factor": (0.9, 1.1), "T_hot": (65.0, 75.0)},
+             "furnace": {"K_factor": (0.8, 1.2), "T_amb": (10.0, 30.0)}}
 #: Where the inputs are held to find the set-points (fractions of each input's box), by the
 #: number of inputs.
 SETPOINT_INPUTS = {1: [(0.3,), (0.75,), (0.5,), (0.15,)],
                    2: [(0.3, 0.3), (0.7, 0.35), (0.65, 0.75), (0.25, 0.7)],
                    3: [(0.3, 0.3, 0.3), (0.7, 0.4, 0.5), (0.45, 0.75, 0.3), (0.3, 0.5, 0.75)]}
-#: How long each set-point is held [samples].
+#: How long each set-point is held [samples]: by default, and per plant (the furnace's slow
+#: mode takes 50 samples).
 HOLD = 60
+HOLDS = {"furnace": 120}
 
 
 def build_plant(name: str, folder: Path) -> Path:
@@ -129,13 +132,19 @@ def plant_setpoints(fmu: Path, problem: Any) -> list[np.ndarray]:
     return out
 
 
+def hold(problem: Any) -> int:
+    """How long the plant of ``problem`` holds each set-point [samples]."""
+    return HOLDS.get(problem.name, HOLD)
+
+
 def write_scenario(path: Path, problem: Any, setpoints: list[np.ndarray]) -> Path:
-    """Set-point steps, each held :data:`HOLD` samples."""
+    """Set-point steps, each held :func:`hold` samples."""
+    held = hold(problem)
     names = [f"ref.{n}" for n in problem.output_names]
     lines = [",".join(["time", *names])]
     for k, y in enumerate(setpoints):
-        lines.append(",".join([f"{k * HOLD * problem.Ts:g}", *(f"{v:.6g}" for v in y)]))
-    lines.append(",".join([f"{len(setpoints) * HOLD * problem.Ts:g}", *[""] * len(names)]))
+        lines.append(",".join([f"{k * held * problem.Ts:g}", *(f"{v:.6g}" for v in y)]))
+    lines.append(",".join([f"{len(setpoints) * held * problem.Ts:g}", *[""] * len(names)]))
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text("\n".join(lines) + "\n")
     return path
@@ -157,7 +166,7 @@ def run(scenario: Path, fmu: Path, model: Path, controller: str, out: Path,
     summary = json.loads((out / "summary.json").read_text())
     errors = []
     for k, y in enumerate(setpoints):
-        row = df.iloc[min((k + 1) * HOLD, len(df) - 1) - 1]
+        row = df.iloc[min((k + 1) * hold(problem), len(df) - 1) - 1]
         rel = [abs(row[f"plant.{c.name}"] - v) / (c.max - c.min)
                for c, v in zip(problem.outputs, y, strict=True)]
         errors.append(max(rel))

@@ -48,9 +48,12 @@ def steady_state_guess(params: Mapping[str, np.ndarray], u0: np.ndarray,
 
 def estimate_initial_state(params: Mapping[str, np.ndarray], u: np.ndarray, y: np.ndarray,
                            sat: np.ndarray | None = None, samples: int = DEFAULT_SAMPLES,
-                           prior: np.ndarray | None = None) -> np.ndarray:
+                           prior: np.ndarray | None = None,
+                           start: np.ndarray | None = None) -> np.ndarray:
     """``x̂_0`` (module docstring) from the first ``samples`` rows of ``u`` (T, m), ``y``
-    (T, p) (normalised) and their sensor-limit flags ``sat``."""
+    (T, p) (normalised) and their sensor-limit flags ``sat``; ``start``: where L-BFGS-B
+    starts (default the prior ``x_c``; the last estimate, when the weights have changed
+    little since)."""
     from scipy.optimize import minimize
 
     K = max(1, min(int(samples), len(u)))
@@ -64,7 +67,7 @@ def estimate_initial_state(params: Mapping[str, np.ndarray], u: np.ndarray, y: n
         return (r["loss"] + PRIOR_WEIGHT * float(d @ d),
                 r["grad_x0"][0] + 2.0 * PRIOR_WEIGHT * d)
 
-    start = np.clip(x_c, -1.0, 1.0)
+    start = np.clip(x_c if start is None else np.asarray(start, dtype=float), -1.0, 1.0)
     res = minimize(fun, start, jac=True, method="L-BFGS-B", bounds=[(-1.0, 1.0)] * n,
                    options={"maxiter": 200})
     return np.asarray(res.x if np.all(np.isfinite(res.x)) else start, dtype=float)

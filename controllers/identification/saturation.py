@@ -21,8 +21,9 @@ __all__ = ["MIN_SAMPLES", "MIN_SHARE", "SensorLimits", "detect", "flags"]
 #: by at least this many samples and this share of the rows...
 MIN_SAMPLES = 10
 MIN_SHARE = 0.005
-#: ... within this tolerance, relative to ``1 + |limit|``.
-TOLERANCE = 1e-9
+#: ... within this share of the output's range in the rows (a sensor at its rail may still
+#: read a few LSBs apart; a peak of the plant's own is taken by a handful of samples).
+TOLERANCE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,8 @@ class SensorLimits:
 
     lower: tuple[float | None, ...]
     upper: tuple[float | None, ...]
+    #: per output, the width of the band read as "at the limit" (normalised)
+    band: tuple[float, ...] = ()
 
     @property
     def any(self) -> bool:
@@ -62,25 +65,27 @@ class SensorLimits:
 def detect(y: np.ndarray, rows: np.ndarray | None = None) -> SensorLimits:
     """The sensor limits of each output of ``y`` (T, p) (normalised), from the rows ``rows``
     (a boolean mask; default all): an output's largest value is an upper limit when at least
-    :data:`MIN_SAMPLES` samples and :data:`MIN_SHARE` of the rows take it (the smallest
-    likewise)."""
+    :data:`MIN_SAMPLES` samples and :data:`MIN_SHARE` of the rows lie within
+    :data:`TOLERANCE` of its range from it (the smallest likewise)."""
     y = np.asarray(y, dtype=float)
     sel = y if rows is None else y[np.asarray(rows, dtype=bool)]
     count = max(MIN_SAMPLES, int(np.ceil(MIN_SHARE * len(sel))))
     lower: list[float | None] = []
     upper: list[float | None] = []
+    band: list[float] = []
     for j in range(y.shape[1]):
         col = sel[:, j]
         if col.size == 0 or np.max(col) == np.min(col):
             lower.append(None)
             upper.append(None)
+            band.append(0.0)
             continue
         hi, lo = float(np.max(col)), float(np.min(col))
-        at_hi = np.count_nonzero(col >= hi - TOLERANCE * (1.0 + abs(hi)))
-        at_lo = np.count_nonzero(col <= lo + TOLERANCE * (1.0 + abs(lo)))
-        upper.append(hi if at_hi >= count else None)
-        lower.append(lo if at_lo >= count else None)
-    return SensorLimits(tuple(lower), tuple(upper))
+        tol = TOLERANCE * (hi - lo)
+        upper.append(hi if np.count_nonzero(col >= hi - tol) >= count else None)
+        lower.append(lo if np.count_nonzero(col <= lo + tol) >= count else None)
+        band.append(tol)
+    return SensorLimits(tuple(lower), tuple(upper), tuple(band))
 
 
 def flags(y: np.ndarray, limits: SensorLimits) -> np.ndarray:
@@ -88,8 +93,9 @@ def flags(y: np.ndarray, limits: SensorLimits) -> np.ndarray:
     y = np.asarray(y, dtype=float)
     out = np.zeros(y.shape, dtype=np.int8)
     for j, (lo, hi) in enumerate(zip(limits.lower, limits.upper, strict=True)):
+        tol = limits.band[j] if j < len(limits.band) else 0.0
         if hi is not None:
-            out[..., j][y[..., j] >= hi - TOLERANCE * (1.0 + abs(hi))] = 1
+            out[..., j][y[..., j] >= hi - tol] = 1
         if lo is not None:
-            out[..., j][y[..., j] <= lo + TOLERANCE * (1.0 + abs(lo))] = -1
+            out[..., j][y[..., j] <= lo + tol] = -1
     return out

@@ -49,14 +49,62 @@ def candidates(base: SimOptions, sizes: Sequence[int], seeds: int) -> list[SimOp
             for k in range(seeds)]
 
 
-def _fit(args: tuple[Record, SimOptions, int, Any, Any]) -> tuple[int, Candidate]:
-    record, opt, index, ticks, init = args
+#: The progress queue of a worker process (:func:`_start_worker`).
+_TICKS: Any = None
+
+
+def _start_worker(ticks: Any) -> None:
+    global _TICKS
+    _TICKS = ticks
+
+
+def _fit(args: tuple[Record, SimOptions, int, Any]) -> tuple[int, Candidate]:
+    record, opt, index, init = args
 
     def progress(it: int) -> None:
-        if ticks is not None:
-            ticks.put((index, it))
+        if _TICKS is not None:
+            _TICKS.put((index, it))
 
     return index, fit_candidate(record, opt, progress, init)
+
+
+def _in_workers(todo: list[SimOptions], record: Record, workers: int, init: Any,
+                tick: Callable[[int, int], None]) -> dict[int, Candidate]:
+    """The candidates fitted in ``workers`` spawned processes; on any exception (an
+    interrupt) the workers are terminated before it propagates."""
+    ctx = multiprocessing.get_context("spawn")
+    ticks = ctx.Queue()
+    stop = threading.Event()
+
+    def pump() -> None:
+        while not stop.is_set():
+            try:
+                tick(*ticks.get(timeout=0.2))
+            except queue.Empty:
+                continue
+            except (EOFError, OSError, ValueError):   # the queue closed under us
+                return
+
+    reader = threading.Thread(target=pump, daemon=True)
+    reader.start()
+    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_start_worker,
+                               initargs=(ticks,))
+    results: dict[int, Candidate] = {}
+    try:
+        for i, cand in pool.map(_fit, [(record, o, i, init) for i, o in enumerate(todo)]):
+            results[i] = cand
+    except BaseException:
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    else:
+        pool.shutdown(wait=True)
+    finally:
+        stop.set()
+        reader.join()
+        ticks.close()
+    return results
 
 
 def search(record: Record, base: SimOptions, sizes: Sequence[int] = DEFAULT_SIZES,
@@ -83,33 +131,11 @@ def search(record: Record, base: SimOptions, sizes: Sequence[int] = DEFAULT_SIZE
         if progress is not None:
             progress(sum(done_steps))
 
-    results: dict[int, Candidate] = {}
     if workers <= 1:
-        for i, opt in enumerate(todo):
-            results[i] = fit_candidate(record, opt, lambda it, i=i: tick(i, it), init)
+        results = {i: fit_candidate(record, opt, lambda it, i=i: tick(i, it), init)
+                   for i, opt in enumerate(todo)}
     else:
-        ctx = multiprocessing.get_context("spawn")
-        with ctx.Manager() as manager:
-            ticks = manager.Queue()
-            stop = threading.Event()
-
-            def pump() -> None:
-                while not stop.is_set():
-                    try:
-                        tick(*ticks.get(timeout=0.2))
-                    except queue.Empty:
-                        continue
-
-            reader = threading.Thread(target=pump, daemon=True)
-            reader.start()
-            try:
-                with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
-                    for i, cand in pool.map(_fit, [(record, o, i, ticks, init)
-                                                   for i, o in enumerate(todo)]):
-                        results[i] = cand
-            finally:
-                stop.set()
-                reader.join()
+        results = _in_workers(todo, record, workers, init, tick)
     tried = [{"n": o.n, "seed": o.seed, "score": results[i].score,
               "best_step": results[i].best_step, "nu": results[i].nu,
               "wall_time_s": round(results[i].wall_time, 2), "history": results[i].history}

@@ -19,8 +19,9 @@ SHIPPED_MODEL = Path(str(importlib.resources.files("controllers"))) / "models" /
 MAX_EPOCHS = 100_000
 #: Largest --n accepted (the paper's GRU has 20 states; the MPC solves grow with n²).
 MAX_STATES = 1000
-#: Default epochs of each method.
-EPOCHS = {"simulation": 1000, "truncated": 2000}
+#: Default epochs of the paper's recipe (the simulation method's follow the record:
+#: :func:`controllers.identification.simulation.default_epochs`).
+EPOCHS = {"truncated": 2000}
 #: Default learning rates (first, last) of each method.
 LEARNING_RATES = {"simulation": (0.03, 0.003), "truncated": (0.02, 0.0005)}
 #: Options of ``--method truncated`` only.
@@ -116,8 +117,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=d.seed,
                         help=f"random seed, the first of --seeds ({d.seed})")
     parser.add_argument("--epochs", type=int, default=None,
-                        help=f"maximum epochs, at most {MAX_EPOCHS} (simulation "
-                             f"{EPOCHS['simulation']}, truncated {EPOCHS['truncated']})")
+                        help=f"maximum epochs, at most {MAX_EPOCHS} (simulation: 3000 for "
+                             "at most 5,000 training rows, else 1000; truncated "
+                             f"{EPOCHS['truncated']})")
     parser.add_argument("--n", type=int, default=None,
                         help=f"GRU states, at most {MAX_STATES}: one size (default: --sizes; "
                              f"{d.n} with --method truncated)")
@@ -257,7 +259,8 @@ def _check_options(args: argparse.Namespace) -> None:
             flag = "--" + given[0].replace("_", "-")
             raise CosimError(f"{flag} belongs to --method truncated (the default simulation "
                              "method fits whole windows from fitted initial states)")
-    args.epochs = EPOCHS[args.method] if args.epochs is None else args.epochs
+    if args.epochs is None and args.method == "truncated":
+        args.epochs = EPOCHS["truncated"]     # the simulation method's follow the record
     lr, lr_final = LEARNING_RATES[args.method]
     args.lr = lr if args.lr is None else args.lr
     args.lr_final = lr_final if args.lr_final is None else args.lr_final

@@ -57,12 +57,13 @@ def simulation(args: argparse.Namespace, data: Any, record: Any, problem: Any,
     """Candidates of sizes and seeds fitted on simulation error, the best on validation
     (:func:`controllers.identification.search.search`)."""
     from controllers.identification.search import DEFAULT_SEEDS, candidates, search
-    from controllers.identification.simulation import SimOptions
+    from controllers.identification.simulation import SimOptions, default_epochs
 
     init = _init(args, problem)
+    epochs = args.epochs if args.epochs is not None else default_epochs(record)
     sizes = [int(init["W_z"].shape[0])] if init is not None else args.size_list
     seeds = args.seeds or (1 if init is not None or args.n is not None else DEFAULT_SEEDS)
-    base = SimOptions(epochs=args.epochs, lr=args.lr, lr_final=args.lr_final,
+    base = SimOptions(epochs=epochs, lr=args.lr, lr_final=args.lr_final,
                       window=args.window, nu_margin=args.nu_margin,
                       sigma_z_max=args.sigma_z_max, train_uz=args.train_uz,
                       bz_init=args.bz_init, x0_samples=args.x0_samples,

@@ -1,9 +1,9 @@
 """Build the example plants' FMUs with pythonfmu: ``CSTR.fmu``, ``Heater.fmu``,
-``MixingTank.fmu``.
+``MixingTank.fmu``, ``Furnace.fmu``.
 
 Usage::
 
-    python fmus/examples/build.py --out DIR [cstr heater mixing_tank]
+    python fmus/examples/build.py --out DIR [cstr heater mixing_tank furnace]
 
 Each FMU (FMI 2.0 Co-Simulation) holds its plant's Python class and the shared
 ``plant_base.py``; it runs in a Python host with pythonfmu installed (the project's venv).
@@ -20,9 +20,11 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 #: Plant name -> its script (the FMU is named after the class inside).
 PLANTS = {"cstr": HERE / "cstr" / "cstr.py", "heater": HERE / "heater" / "heater.py",
-          "mixing_tank": HERE / "mixing_tank" / "mixing_tank.py"}
+          "mixing_tank": HERE / "mixing_tank" / "mixing_tank.py",
+          "furnace": HERE / "furnace" / "furnace.py"}
 #: Plant name -> FMU file name.
-FMU_NAMES = {"cstr": "CSTR.fmu", "heater": "Heater.fmu", "mixing_tank": "MixingTank.fmu"}
+FMU_NAMES = {"cstr": "CSTR.fmu", "heater": "Heater.fmu", "mixing_tank": "MixingTank.fmu",
+             "furnace": "Furnace.fmu"}
 
 
 def problem_file(name: str) -> Path:

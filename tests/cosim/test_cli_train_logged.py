@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import signal
 from pathlib import Path
 
 import numpy as np
@@ -369,3 +370,52 @@ def test_a_short_record_trains_well_with_the_defaults(tmp_path: Path, problem: P
     assert main(["train", str(log), "--out", str(old), *common, "--method", "truncated"]) == 0
     old_rec = GRUModel.load(old).training
     assert old_rec["scores"]["splits"]["test"]["rms"]["temp"] > 2 * test["rms"]["temp"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+def test_an_interrupted_training_stops_its_workers_and_writes_nothing(
+        sig: signal.Signals, tmp_path: Path, problem: Path) -> None:
+    """``cosim train`` fitting its candidates in worker processes, stopped by a signal: exit
+    128 + N with one line, within seconds, no worker process left, no model file."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    log = write_log(tmp_path / "log.csv", steps=400)
+    out = tmp_path / "m.json"
+    proc = subprocess.Popen([sys.executable, "-m", "cosim.cli", "train", str(log),
+                             "--problem", str(problem), "--out", str(out), "--workers", "2",
+                             "--quiet"], cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True)
+    time.sleep(8)                       # the workers are fitting (a full training: minutes)
+    children = _children(proc.pid)
+    assert proc.poll() is None and len(children) >= 2
+    proc.send_signal(sig)
+    start = time.monotonic()
+    _, err = proc.communicate(timeout=60)
+    assert time.monotonic() - start < 15
+    assert proc.returncode == 128 + sig, err
+    assert err.strip().splitlines()[-1] == f"cosim train: interrupted ({sig.name})"
+    assert "Traceback" not in err and not out.exists()
+    end = time.monotonic() + 10
+    while [p for p in children if os.path.exists(f"/proc/{p}")] and time.monotonic() < end:
+        time.sleep(0.2)
+    left = {p: Path(f"/proc/{p}/cmdline").read_bytes() for p in children
+            if os.path.exists(f"/proc/{p}")}
+    assert not left
+
+
+def _children(pid: int) -> list[int]:
+    """The process ids whose parent is ``pid`` (Linux /proc)."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(entry.name))
+    return out

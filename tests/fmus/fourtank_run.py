@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable
 from pathlib import Path
 
@@ -106,6 +107,7 @@ class Plant:
                 self.fmu.terminate()
         finally:
             self.fmu.freeInstance()
+            shutil.rmtree(self.unzipdir, ignore_errors=True)   # fmpy's extract: ours to remove
 
 
 def run_cs(path: Path, u: np.ndarray, ts: float = 25.0, **start_values: float) -> np.ndarray:

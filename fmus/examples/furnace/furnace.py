@@ -1,0 +1,57 @@
+"""A two-zone electric furnace (pythonfmu, FMI 2.0 CS): 2 x 2, strongly coupled.
+
+Two heated zones of one furnace exchange heat through the wall between them, lose it to the
+room by convection and, hot, by radiation::
+
+    C dT1/dt = P1 - UA (T1 - T_amb) - K (T1 - T2) - E ((T1 + 273.15)^4 - (T_amb + 273.15)^4)
+    C dT2/dt = P2 - UA (T2 - T_amb) + K (T1 - T2) - E ((T2 + 273.15)^4 - (T_amb + 273.15)^4)
+
+Inputs: the heater powers ``P1``, ``P2`` [W] in [0, 3000]; outputs: the zone temperatures
+``T1``, ``T2`` [degC]. With C = 1e4 J/K, UA = 5 W/K, K = 12 W/K (the zones are coupled more
+strongly than they lose heat: a decentralised loop on one zone is disturbed by the other's),
+E = 1.2e-8 W/K^4: the zones span 20-330 degC, the fast (difference) mode settles in
+about 10 min, the slow (common) mode in 20-30 min, and the radiation makes the gain fall by
+half from cold to hot. Tunable parameters: ``T_amb`` [degC], ``K_factor`` (multiplies K),
+``C_factor`` (multiplies C). The control problem: ``problem.toml`` beside this file.
+"""
+
+from __future__ import annotations
+
+from plant_base import ExamplePlant
+
+C, UA, K, E = 1.0e4, 5.0, 12.0, 1.2e-8
+
+
+class Furnace(ExamplePlant):
+    """Two-zone furnace: heater powers -> zone temperatures."""
+
+    author = "gru-mpc-cosim examples"
+    description = "Two-zone furnace, P1, P2 [W] -> T1, T2 [degC] (pythonfmu)"
+    INPUTS = (("P1", "W", 1000.0, "heater power of zone 1"),
+              ("P2", "W", 1000.0, "heater power of zone 2"))
+    OUTPUTS = (("T1", "degC", 150.0, "temperature of zone 1"),
+               ("T2", "degC", 150.0, "temperature of zone 2"))
+    PARAMETERS = (("T_amb", "degC", 20.0, "room temperature"),
+                  ("K_factor", "1", 1.0, "multiplies the heat exchange between the zones"),
+                  ("C_factor", "1", 1.0, "multiplies the zones' heat capacity"))
+    STATES = 2
+    MAX_SUBSTEP = 2.0
+    SETTLE = 20000.0
+
+    def x_guess(self) -> list[float]:
+        return [150.0, 150.0]
+
+    def rhs(self, x: list[float]) -> list[float]:
+        t1, t2 = x
+        amb = self.T_amb + 273.15
+        k = self.K_factor * K
+        q12 = k * (t1 - t2)
+        d1 = (self.P1 - UA * (t1 - self.T_amb) - q12
+              - E * ((t1 + 273.15) ** 4 - amb ** 4))
+        d2 = (self.P2 - UA * (t2 - self.T_amb) + q12
+              - E * ((t2 + 273.15) ** 4 - amb ** 4))
+        c = self.C_factor * C
+        return [d1 / c, d2 / c]
+
+    def out(self, x: list[float]) -> dict[str, float]:
+        return {"T1": x[0], "T2": x[1]}
