@@ -25,15 +25,17 @@ with its own dense QP (:mod:`controllers.kernel_sqp`), else casadi ``sqpmethod``
 qpOASES QPs -- or by IPOPT (``solver="ipopt"``), warm started with the primal and
 dual solution shifted by one stage; and ``"multiple-shooting"`` (the plain baseline, what
 do-mpc builds; :mod:`controllers.nlp_multiple_shooting`). The ``i = 0`` constraint involves
-only ``x̂``: it is checked before the solve, and a violated one is reported as
-``"infeasible_x0"`` without calling the solver. The design record (docs: design/solver.md)
-lists the alternatives measured and why they won or lost.
+only ``x̂``: it is checked before the solve (:meth:`FHOCP.x0_infeasible`), and a violated one
+is reported as ``"infeasible_x0"`` without calling the solver. The design record (docs:
+design/solver.md) lists the alternatives measured and why they won or lost.
 
 Every answer is checked independently of the solver's status: the inputs are rolled out with
 numpy (:func:`controllers.gru.simulate`) and the constraint violations, the terminal-set
 violation and the defect between the solver's and numpy's trajectories are measured (see
 :class:`FHOCPResult`). An answer is accepted only when the solver reports success AND these
-residuals are within tolerance.
+residuals are within tolerance: :func:`controllers.fhocp_result.judge`, the one check of this
+problem and of the tracking law's (:mod:`controllers.fhocp_tracking`), whose statuses are
+:class:`controllers.solve_status.SolveStatus`.
 """
 
 from __future__ import annotations
@@ -50,9 +52,16 @@ from controllers.casadi_callbacks import quiet_stdout
 from controllers.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
 from controllers.errors import DesignError
 from controllers.fhocp_layout import FHOCPLayout
-from controllers.fhocp_result import FHOCPResult, set_residuals
+from controllers.fhocp_result import (
+    FHOCPResult,
+    judge,
+    keeps_warm_start,
+    set_residuals,
+    solver_stats,
+)
 from controllers.input_rate import du_cost, du_weights
-from controllers.solver_settings import DEFECT_TOL, FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
+from controllers.solve_status import SolveStatus
+from controllers.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
 __all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPResult", "bind_buffers"]
 
@@ -307,6 +316,14 @@ class FHOCP:
         """Violation of the ``i = 0`` constraint at ``x̂`` (≤ 0 when satisfied)."""
         return float(np.max(self.LUo @ x_hat - self.tightened_bounds(e_o)[0]))
 
+    def x0_infeasible(self, x_hat: np.ndarray, e_o: float) -> bool:
+        """The ``i = 0`` row, which involves ``x̂`` only, fails: the problem is infeasible
+        and no solver is called. The test allows :data:`~controllers.solver_settings.
+        FEAS_TOL`, as the answer check does: an accepted answer may exceed a row by that
+        much, and the next ``x̂`` (the model's ``x_1`` under zero observer gains) inherits
+        it."""
+        return self.check_x0(x_hat, e_o) > FEAS_TOL
+
     def candidate(self, x_hat: np.ndarray, u_seq: np.ndarray, x_bar: np.ndarray,
                   u_bar: np.ndarray, e_o: float, alpha: float,
                   u_prev: np.ndarray | None = None) -> FHOCPResult:
@@ -317,14 +334,14 @@ class FHOCP:
             x, out = self.kernel.assess(x_hat, u_seq, x_bar, u_bar,
                                         self.tightened_bounds(e_o), alpha,
                                         self._u_prev(u_prev, u_bar))
-            res = FHOCPResult(u=u_seq, x=x, cost=float(out[0]), status="candidate",
+            res = FHOCPResult(u=u_seq, x=x, cost=float(out[0]), status=SolveStatus.CANDIDATE,
                               success=False, t=float(out[4]))
             set_residuals(res, out, alpha)
             return res
         x = self.simulate(np.asarray(x_hat, dtype=float), u_seq)
         tN = float(np.max(np.abs(x[-1] - x_bar)))
         res = FHOCPResult(u=u_seq, x=x, cost=self.cost(x, u_seq, x_bar, u_bar, tN, u_prev),
-                          status="candidate", success=False, t=tN)
+                          status=SolveStatus.CANDIDATE, success=False, t=tN)
         self._residuals(res, x, e_o, x_bar, alpha)
         return res
 
@@ -393,10 +410,10 @@ class FHOCP:
         u_bar = np.asarray(u_bar, dtype=float).reshape(self.m)
         t0 = time.perf_counter()
         u_prev = self._u_prev(u_prev, u_bar)
-        if self.formulation == "single-shooting" and self.check_x0(x_hat, e_o) > 0:
+        if self.formulation == "single-shooting" and self.x0_infeasible(x_hat, e_o):
             res = self.candidate(x_hat, np.tile(u_bar, (self.N, 1)), x_bar, u_bar, e_o, alpha,
                                  u_prev)
-            res.status = "infeasible_x0"
+            res.status = SolveStatus.INFEASIBLE_X0
             res.solve_time = time.perf_counter() - t0
             return res
         buf, trigger, ins, outs = self._buffer
@@ -405,23 +422,13 @@ class FHOCP:
         self.layout.write(ins, self.tightened_bounds(e_o), x_hat, x_bar, u_bar, alpha, u_init,
                           self._warm if warm else None, self.warm_duals, simulate,
                           u_prev if self.has_du else None)
-        if self._nlp is not None:
-            self._nlp.deadline = t0 + (self.time_budget if self.time_budget is not None
-                                       else np.inf)
+        self._arm_deadline(t0)
         with quiet_stdout():  # qpOASES prints the errors its SQP handles
             trigger()
-        try:
-            stats = buf.stats()
-        except RuntimeError:
-            # casadi 3.8 sqpmethod: no return status after a failed line search
-            stats = {"return_status": "Solver_Stats_Unavailable", "success": False}
-        if stats.get("return_status") == "User_Requested_Stop":
-            stats = {**stats, "return_status": "time_budget_exceeded", "success": False}
+        stats = solver_stats(buf)
         elapsed = time.perf_counter() - t0
         wopt = outs["x"].copy()
         t = float(wopt[self.it])
-        status = str(stats.get("return_status", "unknown"))
-        iters = int(stats.get("iter_count", 0))
         # the independent check: a rollout apart from the solver's (the kernel's plain one,
         # cross-checked against numpy when loaded, in one call; or numpy's). IPOPT may
         # overshoot a bound by ~1e-9: u is clipped
@@ -435,31 +442,29 @@ class FHOCP:
             x = self.simulate(x_hat, u)
             cost = self.cost(x, u, x_bar, u_bar, u_prev=u_prev)
             defect = float(np.max(np.abs(self._xtraj(wopt, ins["p"]) - x)))
-        res = FHOCPResult(u=u, x=x, cost=cost, status=status, success=False,
-                          iterations=iters, solve_time=elapsed, t=t, defect=defect,
+        res = FHOCPResult(u=u, x=x, cost=cost, status=str(stats.get("return_status", "unknown")),
+                          success=False, solve_time=elapsed, t=t, defect=defect,
                           lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
         if out is not None:
             set_residuals(res, out, alpha)
         else:
             self._residuals(res, x, e_o, x_bar, alpha)
-        ok_status = bool(stats.get("success", False))
-        res.feasible = bool(np.all(np.isfinite(wopt)) and res.constraint_violation <= FEAS_TOL
-                            and res.terminal_violation <= FEAS_TOL
-                            and res.defect <= DEFECT_TOL)
-        res.success = ok_status and res.feasible
-        if ok_status and res.status == "Solve_Succeeded":
-            res.status = "optimal"
-        elif ok_status and not res.success:
-            res.status = "residual_check_failed"
-        elif res.status == "Solve_Succeeded":
-            # sqpmethod aborted (e.g. a failed QP) and left the previous solve's status
-            res.status = "solver_aborted"
-        if res.success or (np.all(np.isfinite(wopt)) and np.all(np.isfinite(res.lam_g))
-                           and np.all(np.isfinite(res.lam_x))):
-            # after a failure (time budget, infeasibility) the last primal-dual iterate is
-            # the best start for the next step: the optimisation continues across steps
-            self._warm = {"w": wopt, "lam_x": res.lam_x, "lam_g": res.lam_g}
+        judge(res, stats, wopt)
+        self._keep_warm(res, wopt)
         return res
+
+    def _arm_deadline(self, t0: float) -> None:
+        """Start the optional wall-time budget of the solve that began at ``t0`` (checked by
+        the numpy callbacks of casadi's loops; the kernel's loop has its own)."""
+        if self._nlp is not None:
+            self._nlp.deadline = t0 + (self.time_budget if self.time_budget is not None
+                                       else np.inf)
+
+    def _keep_warm(self, res: FHOCPResult, w: np.ndarray) -> None:
+        """Keep ``w`` and its multipliers as the next solve's warm start
+        (:func:`controllers.fhocp_result.keeps_warm_start`)."""
+        if keeps_warm_start(res, w):
+            self._warm = {"w": w, "lam_x": res.lam_x, "lam_g": res.lam_g}
 
     def reset_warm_start(self) -> None:
         """Forget the previous solution (next solve starts cold)."""

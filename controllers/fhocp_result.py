@@ -1,15 +1,21 @@
-"""One solve of ``eq:optimization`` (:class:`FHOCPResult`) and its residuals from the compiled
-answer check (:func:`set_residuals`): what :mod:`controllers.fhocp` returns and what the
-kernel's self-test (:mod:`controllers.nlp_single_shooting`) compares, in a module of its own
-so that neither imports the other."""
+"""One solve of ``eq:optimization`` (:class:`FHOCPResult`) and the one answer check every FHOCP
+applies to it (:func:`judge`, with the solver's statistics read by :func:`solver_stats`, the
+residuals of the compiled check by :func:`set_residuals`): what :mod:`controllers.fhocp` and
+:mod:`controllers.fhocp_tracking` return and what the kernel's self-test
+(:mod:`controllers.nlp_single_shooting`) compares, in a module of its own so that none of
+them imports another."""
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-__all__ = ["FHOCPResult", "set_residuals"]
+from controllers.solve_status import SOLVER_SUCCEEDED, SolveStatus
+from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
+
+__all__ = ["FHOCPResult", "judge", "keeps_warm_start", "set_residuals", "solver_stats"]
 
 
 @dataclass
@@ -25,8 +31,8 @@ class FHOCPResult:
     cost : float
         Cost ``eq:optimization-cost`` of ``(x, u)`` evaluated with numpy.
     status : str
-        ``"optimal"``, ``"infeasible_x0"`` (the ``i = 0`` constraint fails at ``x̂``), or the
-        solver's return status when it failed.
+        A :class:`~controllers.solve_status.SolveStatus` (``"optimal"``, ``"infeasible_x0"``,
+        ``"residual_check_failed"``, …) or the solver's own return status when it failed.
     success : bool
         Solver success AND residual checks passed.
     iterations : int
@@ -73,3 +79,48 @@ def set_residuals(res: FHOCPResult, out: np.ndarray, alpha: float) -> None:
     res.constraint_violation = max(0.0, float(out[1]), float(out[2]), float(out[3]) - 1.0)
     res.terminal_violation = max(0.0, float(out[4]) - alpha)
     res.active = int(out[5])
+
+
+def solver_stats(buffer: Any) -> dict[str, Any]:
+    """The statistics of the solve just run (``return_status``, ``success``, ``iter_count``),
+    with the time budget's stop named :attr:`~SolveStatus.TIME_BUDGET_EXCEEDED` and casadi
+    3.8 ``sqpmethod``'s missing statistics after a failed line search
+    :attr:`~SolveStatus.STATS_UNAVAILABLE`."""
+    try:
+        stats = buffer.stats()
+    except RuntimeError:
+        return {"return_status": SolveStatus.STATS_UNAVAILABLE, "success": False}
+    if stats.get("return_status") == "User_Requested_Stop":
+        stats = {**stats, "return_status": SolveStatus.TIME_BUDGET_EXCEEDED, "success": False}
+    return stats
+
+
+def judge(res: FHOCPResult, stats: dict[str, Any], w: np.ndarray) -> None:
+    """The answer check of every FHOCP: accept the solver's answer ``w`` only when the solver
+    succeeded AND the residuals measured apart from it (``res``: rollout, constraints,
+    terminal set, defect) are within :data:`~controllers.solver_settings.FEAS_TOL` and
+    :data:`~controllers.solver_settings.DEFECT_TOL`; sets ``feasible``, ``success``,
+    ``iterations`` and the :class:`~controllers.solve_status.SolveStatus` (``res.status``
+    holds the solver's status on entry)."""
+    ok_status = bool(stats.get("success", False))
+    res.iterations = int(stats.get("iter_count", 0))
+    res.feasible = bool(np.all(np.isfinite(w)) and res.constraint_violation <= FEAS_TOL
+                        and res.terminal_violation <= FEAS_TOL and res.defect <= DEFECT_TOL)
+    res.success = ok_status and res.feasible
+    if res.success and res.status == SOLVER_SUCCEEDED:
+        res.status = SolveStatus.OPTIMAL
+    elif ok_status and not res.success:
+        # (the two copies before this function called such an answer "optimal")
+        res.status = SolveStatus.RESIDUAL_CHECK_FAILED
+    elif res.status == SOLVER_SUCCEEDED:
+        # sqpmethod aborted (e.g. a failed QP) and left the previous solve's status
+        res.status = SolveStatus.SOLVER_ABORTED
+
+
+def keeps_warm_start(res: FHOCPResult, w: np.ndarray) -> bool:
+    """Whether the next solve starts from this one's primal-dual answer: after a success, and
+    after a failure (time budget, iteration cap) whose last iterate is finite: the
+    optimisation then continues across steps."""
+    return res.success or bool(
+        np.all(np.isfinite(w)) and res.lam_g is not None and np.all(np.isfinite(res.lam_g))
+        and res.lam_x is not None and np.all(np.isfinite(res.lam_x)))

@@ -36,10 +36,10 @@ import numpy as np
 from controllers import gru
 from controllers.errors import DesignError
 from controllers.fhocp import FHOCP
-from controllers.fhocp_result import FHOCPResult, set_residuals
+from controllers.fhocp_result import FHOCPResult, judge, set_residuals, solver_stats
 from controllers.input_rate import du_cost
 from controllers.kernel_sqp import KernelSQP
-from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
+from controllers.solve_status import SolveStatus
 from controllers.steady_state import steady_state
 
 __all__ = ["CONTROL_HORIZON_FRACTION", "DEFAULTS", "LINE_SEARCH", "SQP_OVERRIDES", "US_RATE",
@@ -196,6 +196,12 @@ class TrackingFHOCP(FHOCP):
         bounds = super().tightened_bounds(e_o)
         return bounds if self._shift is None else bounds - self._shift
 
+    def solve(self, *args: Any, **kwargs: Any) -> FHOCPResult:
+        """Not this problem's entry point: the set-point is a decision variable here, solve
+        with :meth:`solve_tracking` (the target ``r`` and the candidate's ``u_s``)."""
+        raise DesignError("TrackingFHOCP has no set-point (x̄, ū) to solve for: call "
+                          "solve_tracking(x_hat, e_o, r, u_init, us_init, x_s0)")
+
     @classmethod
     def from_certificate(cls, cert: Any, **options: Any) -> TrackingFHOCP:
         """The tracking FHOCP of a certificate; ``options`` must hold ``offset_weight`` and
@@ -243,7 +249,7 @@ class TrackingFHOCP(FHOCP):
 
     def check(self, x_hat: np.ndarray, u: np.ndarray, u_s: np.ndarray, e_o: float,
               r: np.ndarray, x_s0: np.ndarray, u_prev: np.ndarray | None = None,
-              status: str = "candidate") -> FHOCPResult:
+              status: str = SolveStatus.CANDIDATE) -> FHOCPResult:
         """Evaluate ``(u, u_s)`` independently of the solver: rollout, ``x_s`` recomputed
         (the kernel's Newton, its fixed point verified by a numpy GRU step; numpy's Newton
         without a kernel), cost and residuals (output rows, input box, terminal set,
@@ -317,10 +323,9 @@ class TrackingFHOCP(FHOCP):
             self.N, self.m), -1.0), 1.0)
         x_s0 = np.asarray(x_s0, dtype=float).reshape(self.n)
         up = us_init if u_prev is None else np.asarray(u_prev, dtype=float).reshape(self.m)
-        # the i = 0 row involves x̂ only; an accepted answer may exceed a row by up to
-        # FEAS_TOL, which the next x̂ (the model's x_1, zero observer gains) inherits
-        if self.check_x0(x_hat, e_o) > FEAS_TOL:
-            res = self.check(x_hat, u_init, us_init, e_o, r, x_s0, up, "infeasible_x0")
+        if self.x0_infeasible(x_hat, e_o):
+            res = self.check(x_hat, u_init, us_init, e_o, r, x_s0, up,
+                             SolveStatus.INFEASIBLE_X0)
             res.solve_time = time.perf_counter() - t0
             return res
         buf, trigger, ins, outs = self._buffer
@@ -348,6 +353,7 @@ class TrackingFHOCP(FHOCP):
         else:
             ins["lam_x0"][:] = 0.0
             ins["lam_g0"][:] = 0.0
+        self._arm_deadline(t0)
         if isinstance(buf, KernelSQP):
             trigger()   # no casadi, nothing printed
         else:
@@ -355,10 +361,7 @@ class TrackingFHOCP(FHOCP):
 
             with quiet_stdout():
                 trigger()
-        try:
-            stats = buf.stats()
-        except RuntimeError:
-            stats = {"return_status": "Solver_Stats_Unavailable", "success": False}
+        stats = solver_stats(buf)
         wopt = outs["x"].copy()
         status = str(stats.get("return_status", "unknown"))
         if self.kernel is not None:
@@ -367,19 +370,9 @@ class TrackingFHOCP(FHOCP):
             res = self.check(x_hat, wopt[self.iu], wopt[self.ius], e_o, r, x_s0, up, status)
             res.defect = float(np.max(np.abs(self._xtraj(wopt, pv) - res.x)))
         res.solve_time = time.perf_counter() - t0
-        res.iterations = int(stats.get("iter_count", 0))
         res.lam_x, res.lam_g = outs["lam_x"].copy(), outs["lam_g"].copy()
-        ok_status = bool(stats.get("success", False))
-        res.feasible = bool(np.all(np.isfinite(wopt)) and res.constraint_violation <= FEAS_TOL
-                            and res.terminal_violation <= FEAS_TOL
-                            and res.defect <= DEFECT_TOL)
-        res.success = ok_status and res.feasible
-        if ok_status and res.status == "Solve_Succeeded":
-            res.status = "optimal"
-        elif ok_status and not res.success:
-            res.status = "residual_check_failed"
-        if res.success or (np.all(np.isfinite(wopt)) and np.all(np.isfinite(res.lam_g))):
-            self._warm = {"w": wopt, "lam_x": res.lam_x, "lam_g": res.lam_g}
+        judge(res, stats, wopt)
+        self._keep_warm(res, wopt)
         return res
 
     def _check_answer(self, w: np.ndarray, p: np.ndarray, e_o: float, status: str

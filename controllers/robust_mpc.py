@@ -21,15 +21,7 @@ import numpy as np
 
 from controllers.fhocp import FEAS_TOL, FHOCP, FHOCPResult
 
-__all__ = ["OTHER_STATUS", "STATUS_CODES", "RobustMPC", "StepRecord", "solver_summary"]
-
-
-#: Integer codes of the step status recorded in the diagnostics.
-STATUS_CODES = {"optimal": 0, "infeasible_x0": 1, "Infeasible_Problem_Detected": 2,
-                "Maximum_Iterations_Exceeded": 3, "Maximum_WallTime_Exceeded": 3,
-                "Maximum_CpuTime_Exceeded": 3, "time_budget_exceeded": 3,
-                "residual_check_failed": 4}
-OTHER_STATUS = 5
+__all__ = ["RobustMPC", "StepRecord", "solver_summary"]
 
 
 @dataclass

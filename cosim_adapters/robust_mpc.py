@@ -59,6 +59,7 @@ import numpy as np
 
 from controllers.errors import ControllersError
 from controllers.model import DEFAULT_MODEL
+from controllers.solve_status import status_code
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
 from cosim_adapters.certification import (
@@ -457,12 +458,10 @@ class RobustMPCController(Component):
         self.observer.make_step(rec.u, y)
         self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
         res = rec.result
-        from controllers.robust_mpc import OTHER_STATUS, STATUS_CODES
-
         self._diag = {
             "solve_ms": res.solve_time * 1e3,
             "iterations": float(res.iterations),
-            "status": float(STATUS_CODES.get(res.status, OTHER_STATUS)),
+            "status": float(status_code(res.status)),
             "cost": float(res.cost) if math.isfinite(res.cost) else float("nan"),
             "alpha": self.fhocp.alpha_c if self.mpc is None else self.mpc.alpha,
             "e_o": e_o,
