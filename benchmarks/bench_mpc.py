@@ -98,7 +98,7 @@ class TimedController(Component):
         self.ctrl.step(t, dt)
         self.wall_ms.append((time.perf_counter() - w0) * 1e3)
         self.cpu_ms.append((time.thread_time() - c0) * 1e3)
-        mpc = self.ctrl.mpc
+        mpc = self.ctrl.law.mpc
         rec = mpc.records[-1]
         self.u.append(rec.u.copy())
         if self.others:
@@ -161,7 +161,7 @@ def compare_kernel(args: argparse.Namespace) -> None:
                 others["ipopt"].setup()
             t = closed_loop(ctrl, Path(args.scenario), plant, args.steps, others)
             if others:
-                reference = (t, list(ctrl.mpc.records))
+                reference = (t, list(ctrl.law.mpc.records))
             wall[name] += t.wall_ms
             cpu[name] += t.cpu_ms
             last[name] = t
@@ -177,7 +177,8 @@ def compare_kernel(args: argparse.Namespace) -> None:
         print(f"{metric:10s} compiled median {np.median(c):7.2f}  p99 {_p(c, 99):7.2f} ms")
         print(f"{metric:10s} speed-up median {np.median(b) / np.median(c):5.2f}x  p99 "
               f"{_p(b, 99) / _p(c, 99):5.2f}x   (targets >= 4x, >= 5x)")
-    solve = {k: [r.result.solve_time * 1e3 for r in v.mpc.records] for k, v in variants.items()}
+    solve = {k: [r.result.solve_time * 1e3 for r in v.law.mpc.records]
+             for k, v in variants.items()}
     c, b = solve["compiled"], solve["numpy"]
     print(f"FHOCP solve only (timings.csv solve_ms, last round): numpy median {np.median(b):.2f}"
           f" p99 {_p(b, 99):.2f} ms; compiled median {np.median(c):.2f} p99 {_p(c, 99):.2f} "

@@ -1,10 +1,13 @@
-"""The paper's law's set-point handling for :class:`cosim_adapters.robust_mpc.
-RobustMPCController` (``law="paper"``; functions of the controller, as
-:mod:`cosim_adapters.tracking` for the tracking law): on a set-point change the rate limit
-(``setpoint_rate``), the offset-free shift by ``d̂`` (``offset_free``), the reference
-``(x̄, ū, α)`` of :meth:`controllers.certificates.Certificate.reference` (Assumption 1,
-``eq:condition-recursive-feasibility``), the admissible reference governor
-(:mod:`controllers.governor`) and the rejection of set-points outside the theory."""
+"""The paper's law of the ``robust-mpc`` component (``law="paper"``): :class:`PaperLaw`.
+
+``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.robust_mpc.RobustMPC`: the FHOCP
+``eq:optimization`` with the shifted-candidate fallback) for the reference ``(x̄, ū, α)`` of
+:meth:`controllers.certificates.Certificate.reference` (Assumption 1, ``eq:condition-
+recursive-feasibility``), and its set-point handling: on a set-point change the rate limit
+(``setpoint_rate``), the offset-free shift by ``d̂`` (``offset_free``), the admissible
+reference governor (:mod:`controllers.governor`) and the rejection of set-points outside the
+theory. It implements :class:`cosim_adapters.law.ControlLaw`.
+"""
 
 from __future__ import annotations
 
@@ -14,50 +17,215 @@ import numpy as np
 
 from controllers.errors import SetpointError
 from cosim.errors import CosimError
+from cosim_adapters.law import LawStep, setpoint_text
 
-__all__ = ["closest_admissible", "govern", "reject", "update_reference"]
+__all__ = ["PaperLaw", "closest_admissible"]
 
 
-def update_reference(ctrl: Any, y_ref: np.ndarray, y: np.ndarray, t: float) -> bool:
-    """Recompute ``(x̄, ū, α)`` when the set-point changes; ``True`` when rejected."""
-    target = y_ref
-    if ctrl.setpoint_rate is not None and ctrl._y_model is not None:
-        step = ctrl.setpoint_rate / np.abs(ctrl.model.y_scale)
-        base = ctrl._y_model + (ctrl._d_hat if ctrl.offset_free and ctrl._d_hat is not None
-                                else 0.0)
-        target = base + np.clip(y_ref - base, -step, step)
-    if ctrl.offset_free and ctrl._d_hat is not None:
-        ctrl._d_hat = ctrl._d_hat + ctrl.offset_filter * (
-            y - ctrl.observer.y_hat() - ctrl._d_hat)
-        target = target - ctrl._d_hat
-    tol = 1e-3 if ctrl.offset_free else 1e-12
-    ctrl._lam = 1.0
-    if ctrl._y_model is not None and np.max(np.abs(target - ctrl._y_model)) < tol:
+class PaperLaw:
+    """The paper's law with its set-point handling (module docstring).
+
+    Parameters
+    ----------
+    model : GRUModel
+    cert : Certificate
+        Its certificate (the tightening, ``(x̄, ū, α)`` of each set-point).
+    fhocp_options : mapping
+        :class:`controllers.fhocp.FHOCP` keyword arguments (solver, kernel, ``du_weight``).
+    governor : bool
+        The admissible reference governor after set-point changes.
+    offset_free : bool
+        Shift the set-point by ``d̂`` (outside the theorem).
+    offset_filter : float
+        ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)``.
+    setpoint_rate : float or None
+        Largest move of the FHOCP's set-point per sample, in the outputs' units.
+    name : str
+        The component's name (in error messages).
+    certified : bool
+        Whether the certificate covers the run: an uncertified law takes the closest
+        admissible set-point where the first one is outside, instead of refusing it.
+    """
+
+    name = "paper"
+
+    def __init__(self, model: Any, cert: Any, fhocp_options: dict[str, Any], *,
+                 governor: bool, offset_free: bool, offset_filter: float,
+                 setpoint_rate: float | None, name: str, certified: bool = True) -> None:
+        from controllers.fhocp import FHOCP
+        from controllers.governor import ReferenceGovernor
+        from controllers.robust_mpc import RobustMPC
+
+        self.model, self.cert, self.fhocp_options = model, cert, dict(fhocp_options)
+        self.fhocp = FHOCP.from_certificate(cert, **self.fhocp_options)
+        self.mpc = RobustMPC(self.fhocp)
+        self.governor = ReferenceGovernor(cert, self.fhocp) if governor else None
+        self.offset_free = bool(offset_free)
+        self.offset_filter = float(offset_filter)
+        self.setpoint_rate = None if setpoint_rate is None else float(setpoint_rate)
+        self.component = name
+        self.certified = certified
+        self.reset()
+
+    # -- ControlLaw ------------------------------------------------------------------------
+    @property
+    def records(self) -> list[Any]:
+        return self.mpc.records
+
+    @property
+    def alpha(self) -> float:
+        return self.mpc.alpha
+
+    def reset(self) -> None:
+        self.mpc.reset()
+        if self.governor is not None:
+            self.governor.reset()
+        self.y_ref: np.ndarray | None = None      # requested set-point (normalised)
+        self.y_model: np.ndarray | None = None    # set-point given to the FHOCP
+        self.d_hat: np.ndarray | None = None
+        self.lam = 1.0
+        self.candidate: np.ndarray | None = None
+        self.unreachable: np.ndarray | None = None   # the last target refused as unreachable
+        self.rejected = 0
+        self.rejections: list[str] = []
+        self.setpoint_changes = 0
+        self.governed_steps = 0     # steps with the FHOCP set-point short of the requested
+        self.governor_holds = 0     # of which the governor could not move it at all
+
+    def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float) -> LawStep:
+        if self.d_hat is None:
+            self.d_hat = np.zeros_like(y)
+        self.candidate = None
+        rejected = self._update_reference(observer, y_ref, y, t)
+        rec = self.mpc.make_step(observer.x_hat, observer.e_o, candidate=self.candidate)
+        y_model = self.model.denormalize_y(self.y_model)
+        names = self.model.problem.output_names
+        return LawStep(rec, rejected, {f"y_model_{n}": float(v)
+                                       for n, v in zip(names, y_model, strict=True)}, self.lam)
+
+    def setpoint_reason(self, y: np.ndarray) -> str:
+        failed = self.cert.failures(y)
+        return f"{setpoint_text(self.model, y)}: {failed[0]}" if failed else ""
+
+    def uncertified(self, cert: Any, reason: str) -> PaperLaw:
+        return PaperLaw(self.model, cert, self.fhocp_options, governor=self.governor
+                        is not None, offset_free=self.offset_free,
+                        offset_filter=self.offset_filter, setpoint_rate=self.setpoint_rate,
+                        name=self.component, certified=False)
+
+    def summary(self) -> dict[str, Any]:
+        return {"offset_free": self.offset_free, "setpoint_rate": self.setpoint_rate,
+                "governor": self.governor is not None,
+                "governor_steps": self.governed_steps, "governor_holds": self.governor_holds,
+                "setpoint_changes": self.setpoint_changes,
+                "setpoint_rejected_steps": self.rejected,
+                "setpoint_rejections": self.rejections[:20]}
+
+    # -- the set-point handling -------------------------------------------------------------
+    def _update_reference(self, observer: Any, y_ref: np.ndarray, y: np.ndarray,
+                          t: float) -> bool:
+        """Recompute ``(x̄, ū, α)`` when the set-point changes; ``True`` when rejected."""
+        target = y_ref
+        if self.setpoint_rate is not None and self.y_model is not None:
+            step = self.setpoint_rate / np.abs(self.model.y_scale)
+            base = self.y_model + (self.d_hat if self.offset_free else 0.0)
+            target = base + np.clip(y_ref - base, -step, step)
+        if self.offset_free:
+            self.d_hat = self.d_hat + self.offset_filter * (y - observer.y_hat() - self.d_hat)
+            target = target - self.d_hat
+        tol = 1e-3 if self.offset_free else 1e-12
+        self.lam = 1.0
+        if self.y_model is not None and np.max(np.abs(target - self.y_model)) < tol:
+            return False
+        requested_changed = self.y_ref is None or np.any(y_ref != self.y_ref)
+        if self.governor is not None and self.y_model is not None:
+            return self._govern(observer, target, y_ref, requested_changed, t)
+        try:
+            ref = self.cert.reference(target)
+        except SetpointError as exc:
+            if self.y_model is not None:
+                self._reject(exc, y_ref, requested_changed, t)
+                return True
+            if self.certified:
+                raise CosimError(f"controller {self.component!r} at t={t:g} s: {exc}") from None
+            # uncertified, a first set-point outside: the closest admissible one, else the
+            # closest admissible to the model's equilibrium for the measured output
+            ref = self._first_admissible(target, y)
+            if ref is None:
+                raise CosimError(f"controller {self.component!r} at t={t:g} s: {exc}") from None
+            self._reject(exc, y_ref, requested_changed, t)
+            target = ref.y_bar
+        if requested_changed:
+            self.setpoint_changes += 1
+        self.y_ref = y_ref
+        self.y_model = target
+        self.mpc.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
         return False
-    requested_changed = ctrl._y_ref is None or np.any(y_ref != ctrl._y_ref)
-    if ctrl.governor is not None and ctrl._y_model is not None:
-        return govern(ctrl, target, y_ref, requested_changed, t)
-    try:
-        ref = ctrl.cert.reference(target)
-    except SetpointError as exc:
-        if ctrl._y_model is not None:
-            reject(ctrl, exc, y_ref, requested_changed, t)
+
+    def _first_admissible(self, target: np.ndarray, y: np.ndarray) -> Any:
+        """The reference of the admissible set-point closest to ``target`` (normalised), else
+        to the model's equilibrium output for the measured ``y``; ``None`` when neither is."""
+        from controllers.equilibrium import equilibrium_for_output
+
+        x_eq, _ = equilibrium_for_output(self.model.params, y)
+        for start in (target, self.model.params["U_o"] @ x_eq + self.model.params["b_o"]):
+            inside = closest_admissible(self.cert, start)
+            if inside is None:
+                continue
+            try:
+                return self.cert.reference(inside)
+            except SetpointError:
+                continue
+        return None
+
+    def _reject(self, exc: Exception, y_ref: np.ndarray, requested_changed: bool,
+                t: float) -> None:
+        """Keep the last admissible set-point: count the step, name the reason once per
+        requested set-point (the summary's ``setpoint_rejections``)."""
+        if requested_changed:
+            self.rejections.append(f"t={t:g} s: {exc}")
+        self.y_ref = y_ref
+        self.rejected += 1
+
+    def _govern(self, observer: Any, target: np.ndarray, y_ref: np.ndarray,
+                requested_changed: bool, t: float) -> bool:
+        """Move the FHOCP set-point towards an admissible ``target`` with the governor."""
+        from controllers.equilibrium import describe
+
+        assert self.governor is not None and self.y_model is not None
+        failed = self.cert.failures(target)
+        if failed:
+            self._reject(SetpointError(f"set-point {describe(self.model, target)}: "
+                                       + "; ".join(failed)), y_ref, requested_changed, t)
             return True
-        if ctrl.certification.certified:
-            raise CosimError(f"controller {ctrl.name!r} at t={t:g} s: {exc}") from None
-        # uncertified, a first set-point outside: the closest admissible one, else the
-        # closest admissible to the model's equilibrium for the measured output
-        ref = _first_admissible(ctrl, target, y)
-        if ref is None:
-            raise CosimError(f"controller {ctrl.name!r} at t={t:g} s: {exc}") from None
-        reject(ctrl, exc, y_ref, requested_changed, t)
-        target = ref.y_bar
-    if requested_changed:
-        ctrl.setpoint_changes += 1
-    ctrl._y_ref = y_ref
-    ctrl._y_model = target
-    ctrl._paper_law().set_reference(ref.x_bar, ref.u_bar, ref.alpha)
-    return False
+        if (not requested_changed and self.unreachable is not None
+                and np.array_equal(target, self.unreachable)):
+            self.rejected += 1     # still the unreachable request: refused again, counted
+            return True
+        mpc = self.mpc
+        if requested_changed and self.governor.newton(target, mpc.x_bar, mpc.u_bar) is None:
+            try:  # reachable with ‖ū‖∞ ≤ 1? (the multi-start solve decides)
+                self.cert.reference(target)
+            except SetpointError as exc:
+                self._reject(exc, y_ref, requested_changed, t)
+                self.unreachable = np.array(target, dtype=float)
+                return True
+        if requested_changed:
+            self.setpoint_changes += 1
+        self.y_ref = y_ref
+        self.governed_steps += 1
+        last = mpc.records[-1].result.success if mpc.records else None
+        gs = self.governor.govern(observer.x_hat, observer.e_o, self.y_model,
+                                  mpc.x_bar, mpc.u_bar, target, mpc.plan, last)
+        if gs.lam == 0.0:
+            self.lam = 0.0
+            self.governor_holds += 1
+            return False
+        self.lam = gs.lam
+        self.y_model = gs.y
+        mpc.set_reference(gs.x_bar, gs.u_bar, gs.alpha)
+        self.candidate = gs.candidate
+        return False
 
 
 #: How far inside the admissible box :func:`closest_admissible` puts a set-point
@@ -80,71 +248,3 @@ def closest_admissible(cert: Any, y: np.ndarray) -> np.ndarray | None:
             return None
         out[j] = min(max(out[j], lo + INSIDE), hi - INSIDE)
     return out
-
-
-def _first_admissible(ctrl: Any, target: np.ndarray, y: np.ndarray) -> Any:
-    """The reference of the admissible set-point closest to ``target`` (normalised), else
-    to the model's equilibrium output for the measured ``y``; ``None`` when neither is."""
-    from controllers.equilibrium import equilibrium_for_output
-
-    x_eq, _ = equilibrium_for_output(ctrl.model.params, y)
-    for start in (target, ctrl.model.params["U_o"] @ x_eq + ctrl.model.params["b_o"]):
-        inside = closest_admissible(ctrl.cert, start)
-        if inside is None:
-            continue
-        try:
-            return ctrl.cert.reference(inside)
-        except SetpointError:
-            continue
-    return None
-
-
-def reject(ctrl: Any, exc: Exception, y_ref: np.ndarray, requested_changed: bool,
-           t: float) -> None:
-    """Keep the last admissible set-point: count the step, name the reason once per
-    requested set-point (the summary's ``setpoint_rejections``)."""
-    if requested_changed:
-        ctrl.rejections.append(f"t={t:g} s: {exc}")
-    ctrl._y_ref = y_ref
-    ctrl.rejected += 1
-
-
-def govern(ctrl: Any, target: np.ndarray, y_ref: np.ndarray, requested_changed: bool,
-           t: float) -> bool:
-    """Move the FHOCP set-point towards an admissible ``target`` with the governor."""
-    from controllers.equilibrium import describe
-
-    assert ctrl.governor is not None and ctrl._y_model is not None
-    failed = ctrl.cert.failures(target)
-    if failed:
-        reject(ctrl, SetpointError(f"set-point {describe(ctrl.model, target)}: "
-                                   + "; ".join(failed)), y_ref, requested_changed, t)
-        return True
-    if (not requested_changed and ctrl._unreachable is not None
-            and np.array_equal(target, ctrl._unreachable)):
-        ctrl.rejected += 1     # still the unreachable request: refused again, counted
-        return True
-    mpc = ctrl._paper_law()
-    if requested_changed and ctrl.governor.newton(target, mpc.x_bar, mpc.u_bar) is None:
-        try:  # reachable with ‖ū‖∞ ≤ 1? (the multi-start solve decides)
-            ctrl.cert.reference(target)
-        except SetpointError as exc:
-            reject(ctrl, exc, y_ref, requested_changed, t)
-            ctrl._unreachable = np.array(target, dtype=float)
-            return True
-    if requested_changed:
-        ctrl.setpoint_changes += 1
-    ctrl._y_ref = y_ref
-    ctrl.governed_steps += 1
-    last = mpc.records[-1].result.success if mpc.records else None
-    gs = ctrl.governor.govern(ctrl.observer.x_hat, ctrl.observer.e_o, ctrl._y_model,
-                              mpc.x_bar, mpc.u_bar, target, mpc.plan, last)
-    if gs.lam == 0.0:
-        ctrl._lam = 0.0
-        ctrl.governor_holds += 1
-        return False
-    ctrl._lam = gs.lam
-    ctrl._y_model = gs.y
-    mpc.set_reference(gs.x_bar, gs.u_bar, gs.alpha)
-    ctrl._candidate = gs.candidate
-    return False

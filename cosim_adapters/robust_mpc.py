@@ -53,7 +53,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
@@ -68,11 +68,9 @@ from cosim_adapters.certification import (
     check_setpoints,
     go_uncertified,
 )
-from cosim_adapters.paper_law import update_reference
-from cosim_adapters.tracking import check_law
-
-if TYPE_CHECKING:
-    from controllers.robust_mpc import RobustMPC
+from cosim_adapters.law import ControlLaw
+from cosim_adapters.paper_law import PaperLaw
+from cosim_adapters.tracking import TrackingLaw, check_law
 
 __all__ = ["RobustMPCController"]
 
@@ -245,11 +243,8 @@ class RobustMPCController(Component):
                  certificate: str = "auto", name: str = "mpc") -> None:
         from controllers import certificates as certs
         from controllers import gain_design
-        from controllers.fhocp import FHOCP
-        from controllers.governor import ReferenceGovernor
         from controllers.model import GRUModel
         from controllers.observer import GRUObserver
-        from controllers.robust_mpc import RobustMPC
 
         tracking = check_law(law, governor=governor, offset_free=offset_free,
                               setpoint_rate=setpoint_rate, offset_weight=offset_weight,
@@ -268,7 +263,6 @@ class RobustMPCController(Component):
                        setpoint_rate=setpoint_rate, governor=governor, solver=solver,
                        ipopt_options=ipopt_options, max_iter=max_iter, kernel=kernel,
                        du_weight=du_weight)
-        self.law = law
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
         try:
@@ -312,33 +306,26 @@ class RobustMPCController(Component):
             du_weight=self.du_weight,
             ipopt_options={"max_iter": max_iter, **(ipopt_options or {})}
             if ipopt_options or solver == "ipopt" else None)
-        self.tracker = None
-        #: what the uncertified mode rebuilds the law from
-        self.design = {"kwargs": kwargs, "fhocp_options": fhocp_options,
-                       "offset_weight": offset_weight, "alpha_c": alpha_c,
-                       "control_horizon": control_horizon}
+        #: the control law (:class:`cosim_adapters.law.ControlLaw`): everything that differs
+        #: between ``law="tracking"`` and ``law="paper"``
+        self.law: ControlLaw
         if tracking:
-            from cosim_adapters.tracking import tracking_design
-
-            cert, self.tracker, self.disturbance, failed = tracking_design(
-                self.model, self.problem, cert, kwargs, offset_weight, alpha_c,
-                offset_filter, fhocp_options, control_horizon, gains_certified)
-            self.fhocp = self.tracker.fhocp
+            design = {"kwargs": kwargs, "fhocp_options": fhocp_options,
+                      "offset_weight": offset_weight, "alpha_c": alpha_c,
+                      "offset_filter": offset_filter, "control_horizon": control_horizon}
+            self.law, failed = TrackingLaw.build(self.model, cert, design, name,
+                                                 gains_certified)
         else:
             failed = cert.failures()
-            self.fhocp = FHOCP.from_certificate(cert, **fhocp_options)
-        self.cert = cert
-        # build the solver and load scipy.optimize (the observer's x̂_0 equilibrium) now, so
-        # that the first control step is a normal one (importing scipy.optimize: ~0.2 s)
+            self.law = PaperLaw(self.model, cert, fhocp_options, governor=governor,
+                                offset_free=offset_free, offset_filter=offset_filter,
+                                setpoint_rate=setpoint_rate, name=name)
+        self.fhocp, self.cert = self.law.fhocp, self.law.cert
+        # load scipy.optimize (the observer's x̂_0 equilibrium) now, so that the first
+        # control step is a normal one (importing scipy.optimize: ~0.2 s)
         import scipy.optimize  # noqa: F401
 
-        #: the paper's law (``None`` under ``law="tracking"``, whose law is :attr:`tracker`)
-        self.mpc: RobustMPC | None = None if tracking else RobustMPC(self.fhocp)
-        self.governor = ReferenceGovernor(cert, self.fhocp) if governor else None
-        self.observer = GRUObserver.from_certificate(cert)
-        self.offset_free = bool(offset_free)
-        self.offset_filter = float(offset_filter)
-        self.setpoint_rate = None if setpoint_rate is None else float(setpoint_rate)
+        self.observer = GRUObserver.from_certificate(self.cert)
         pr = self.problem
         self._y_names = list(pr.output_names)
         self._r_names = [f"ref.{n}" for n in self._y_names]
@@ -393,26 +380,9 @@ class RobustMPCController(Component):
         self.observer.reset(x0=x0, e_o0=self.cert.e_o0)
         self.fhocp.setup()
         self.observer.kernel = self.fhocp.kernel   # its compiled GRU step (same model)
-        if self.mpc is not None:
-            self.mpc.reset()
-        if self.tracker is not None:
-            self.tracker.reset()
-            self.disturbance.reset()
-        if self.governor is not None:
-            self.governor.reset()
-        self._y_ref: np.ndarray | None = None      # requested set-point (normalised)
-        self._y_model: np.ndarray | None = None    # set-point given to the FHOCP
-        self._d_hat: np.ndarray | None = None
+        self.law.reset()
         self._u_phys = 0.5 * (self._lo + self._hi)
         self._diag: dict[str, float] = {}
-        self.rejected = 0
-        self.rejections: list[str] = []
-        self.setpoint_changes = 0
-        self.governed_steps = 0     # steps with the FHOCP set-point short of the requested
-        self.governor_holds = 0     # of which the governor could not move it at all
-        self._lam = 1.0
-        self._candidate: np.ndarray | None = None
-        self._unreachable: np.ndarray | None = None   # the last target refused as unreachable
 
     def set_inputs(self, values: Mapping[str, float]) -> None:
         self._values.update({k: float(v) for k, v in values.items()})
@@ -438,46 +408,26 @@ class RobustMPCController(Component):
         y_ref = self.model.normalize_y(r_phys)
         if self.observer.x_hat is None:
             self.observer.init_from_output(y)
-        if self._d_hat is None:
-            self._d_hat = np.zeros_like(y)
-        self._candidate = None
-        law_diag: dict[str, float] = {}
-        if self.tracker is not None:
-            from cosim_adapters.tracking import tracking_step
-
-            if self._y_ref is None or np.any(y_ref != self._y_ref):
-                self.setpoint_changes += 1
-                self._y_ref = y_ref
-            rejected = False
-            rec, law_diag = tracking_step(self, y, y_ref)
-        else:
-            rejected = update_reference(self, y_ref, y, t)
-            rec = self._paper_law().make_step(self.observer.x_hat, self.observer.e_o,
-                                              candidate=self._candidate)
         e_o = self.observer.e_o
+        step = self.law.step(self.observer, y, y_ref, t)
+        rec, res = step.record, step.record.result
         self.observer.make_step(rec.u, y)
         self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
-        res = rec.result
         self._diag = {
             "solve_ms": res.solve_time * 1e3,
             "iterations": float(res.iterations),
             "status": float(status_code(res.status)),
             "cost": float(res.cost) if math.isfinite(res.cost) else float("nan"),
-            "alpha": self.fhocp.alpha_c if self.mpc is None else self.mpc.alpha,
+            "alpha": self.law.alpha,
             "e_o": e_o,
             "x_hat_error_bound": e_o,
             "active_constraints": float(res.active),
             "fallback": float(rec.fallback),
             "suboptimal": float(rec.suboptimal),
-            "setpoint_rejected": float(rejected),
-            "governor_lambda": self._lam,
+            "setpoint_rejected": float(step.rejected),
+            "governor_lambda": step.governor_lambda,
+            **step.diagnostics,
         }
-        if self.tracker is not None:
-            self._diag.update(law_diag)
-            return
-        y_model = self.model.denormalize_y(self._y_model)
-        for name, value in zip(self._y_names, y_model, strict=True):
-            self._diag[f"y_model_{name}"] = float(value)
 
     def diagnostics(self) -> dict[str, float]:
         return dict(self._diag)
@@ -485,43 +435,26 @@ class RobustMPCController(Component):
     def summary(self) -> dict:
         from controllers.robust_mpc import solver_summary
 
-        records = self.tracker.records if self.tracker is not None else self._paper_law().records
-        out = solver_summary(records)
-        if self.tracker is not None:
-            out.update({"alpha_c": self.fhocp.alpha_c,
-                        "control_horizon": self.fhocp.control_horizon,
-                        "offset_weight": {n: float(w) for n, w in zip(
-                            self._y_names, self.fhocp.offset_weight, strict=True)},
-                        "offset_filter": self.disturbance.beta,
-                        "tracking_hypotheses": self.tracker.hypotheses})
+        out = solver_summary(self.law.records)
+        law = self.law.summary()
+        out.update({k: law.pop(k) for k in ("alpha_c", "control_horizon", "offset_weight",
+                                            "offset_filter", "tracking_hypotheses")
+                    if k in law})
         out.update(self.certification.summary())
         out.update({
             "controller": "robust-mpc",
-            "law": self.law,
+            "law": self.law.name,
             "model": str(self.model_path),
             "problem": self.problem.name,
             "N": self.fhocp.N,
             "formulation": self.fhocp.formulation,
             "kernel": "compiled" if self.fhocp.kernel is not None else "numpy",
-            "offset_free": self.offset_free,
             "du_weight": {n: float(w) for n, w in zip(self._u_names, self.du_weight,
                                                       strict=True)},
-            "setpoint_rate": self.setpoint_rate,
-            "governor": self.governor is not None,
-            "governor_steps": self.governed_steps,
-            "governor_holds": self.governor_holds,
             "gain_scale": self.cert.gain_scale,
-            "setpoint_changes": self.setpoint_changes,
-            "setpoint_rejected_steps": self.rejected,
-            "setpoint_rejections": self.rejections[:20],
+            **law,
         })
         return out
 
     def terminate(self) -> None:
         """Nothing to release (the casadi solver is freed with the object)."""
-
-    # -- the paper's law (its set-point handling: cosim_adapters.paper_law) --------------
-    def _paper_law(self) -> RobustMPC:
-        """The paper's law (its set-point handling runs under ``law="paper"`` only)."""
-        assert self.mpc is not None, "the paper law's set-point handling under law=tracking"
-        return self.mpc

@@ -4,8 +4,9 @@
 :class:`controllers.tracking_mpc.TrackingMPC` (the tracking FHOCP of
 :mod:`controllers.fhocp_tracking`: artificial steady state, offset cost with the disturbance
 estimate ``d̂``, input-rate penalty) instead of the paper's law with its reference governor.
-This module builds it from the model and the problem (:func:`tracking_design`) and runs one
-step of it (:func:`tracking_step`); the design record is docs/design/tracking.md.
+This module builds it from the model and the problem (:func:`tracking_design`) and runs it
+(:class:`TrackingLaw`, a :class:`cosim_adapters.law.ControlLaw`); the design record is
+docs/design/tracking.md.
 
 Design (defaults):
 
@@ -32,9 +33,10 @@ import numpy as np
 
 from controllers.errors import ControllersError
 from cosim.errors import CosimError
+from cosim_adapters.law import LawStep, setpoint_text
 
-__all__ = ["ALPHA_C_SPAN", "LAWS", "check_law", "fallback_alpha_c", "tracking_design",
-           "tracking_step"]
+__all__ = ["ALPHA_C_SPAN", "LAWS", "TrackingLaw", "check_law", "fallback_alpha_c",
+           "steady_outputs_text", "tracking_design"]
 
 #: The control laws of the ``robust-mpc`` component.
 LAWS = ("paper", "tracking")
@@ -141,25 +143,142 @@ def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[s
     return cert, law, DisturbanceFilter(beta, len(names)), failures(hypotheses)
 
 
-def tracking_step(ctrl: Any, y: np.ndarray, y_ref: np.ndarray) -> tuple[Any, dict[str, float]]:
-    """One step of the tracking law for the controller ``ctrl`` (normalised ``y``, ``ȳ``):
-    ``d̂`` advanced with ``y − g(x̂)``, the FHOCP solved for ``r = ȳ − d̂``; returns the step
-    record and the law's diagnostics (``y_model_<output>``: the steady output ``y_s`` in the
-    problem's units, ``d_hat_<output>``: ``d̂`` in the problem's units)."""
-    from controllers.equilibrium import equilibrium_for_output
+class TrackingLaw:
+    """The tracking law (module docstring), a :class:`cosim_adapters.law.ControlLaw`.
 
-    tracker, obs, model = ctrl.tracker, ctrl.observer, ctrl.model
-    if tracker.u_s is None:
-        x_s, u_s = equilibrium_for_output(model.params, obs.y_hat())
-        tracker.start(u_s, x_s)
-    d_hat = ctrl.disturbance.update(y, obs.y_hat())
-    if not ctrl.certification.certified:   # the measured tightening is around y + d̂
-        tracker.fhocp.set_output_shift(d_hat)
-    rec = tracker.make_step(obs.x_hat, obs.e_o, y_ref - d_hat)
-    params = model.params
-    y_s = model.denormalize_y(params["U_o"] @ tracker.x_s + params["b_o"])
-    names = ctrl.problem.output_names
-    diag = {f"y_model_{n}": float(v) for n, v in zip(names, y_s, strict=True)}
-    d_phys = d_hat * np.abs(model.y_scale)
-    diag.update({f"d_hat_{n}": float(v) for n, v in zip(names, d_phys, strict=True)})
-    return rec, diag
+    Parameters
+    ----------
+    model : GRUModel
+    cert : Certificate
+        The design's certificate (``gain_scale = 0``, or the uncertified one).
+    tracker : TrackingMPC
+    disturbance : DisturbanceFilter
+    design : dict
+        What :func:`tracking_design` was given (``kwargs``, ``offset_weight``, ``alpha_c``,
+        ``offset_filter``, ``fhocp_options``, ``control_horizon``): the uncertified mode
+        builds the law again from it.
+    name : str
+        The component's name (in error messages).
+    certified : bool
+        Uncertified: the output rows are tightened around ``y + d̂``.
+    """
+
+    name = "tracking"
+
+    def __init__(self, model: Any, cert: Any, tracker: Any, disturbance: Any,
+                 design: Mapping[str, Any], name: str, certified: bool = True) -> None:
+        self.model, self.cert, self.tracker, self.disturbance = model, cert, tracker, disturbance
+        self.fhocp = tracker.fhocp
+        self.design = dict(design)
+        self.component = name
+        self.certified = certified
+        self.reset()
+
+    @classmethod
+    def build(cls, model: Any, cert_gains: Any, design: Mapping[str, Any], name: str,
+              gains_certified: bool) -> tuple[TrackingLaw, list[str]]:
+        """The law of ``design`` (:func:`tracking_design`) and its failing hypotheses."""
+        cert, tracker, disturbance, failed = tracking_design(
+            model, model.problem, cert_gains, design["kwargs"], design["offset_weight"],
+            design["alpha_c"], design["offset_filter"], design["fhocp_options"],
+            design["control_horizon"], gains_certified)
+        return cls(model, cert, tracker, disturbance, design, name), failed
+
+    # -- ControlLaw ------------------------------------------------------------------------
+    @property
+    def records(self) -> list[Any]:
+        return self.tracker.records
+
+    @property
+    def alpha(self) -> float:
+        return self.fhocp.alpha_c
+
+    def reset(self) -> None:
+        self.tracker.reset()
+        self.disturbance.reset()
+        self.y_ref: np.ndarray | None = None
+        self.setpoint_changes = 0
+
+    def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float) -> LawStep:
+        """``d̂`` advanced with ``y − g(x̂)``, the FHOCP solved for ``r = ȳ − d̂``; the
+        diagnostics ``y_model_<output>`` (the steady output ``y_s``) and ``d_hat_<output>``
+        (``d̂``), in the problem's units."""
+        from controllers.equilibrium import equilibrium_for_output
+
+        if self.y_ref is None or np.any(y_ref != self.y_ref):
+            self.setpoint_changes += 1
+            self.y_ref = y_ref
+        tracker, model = self.tracker, self.model
+        if tracker.u_s is None:
+            x_s, u_s = equilibrium_for_output(model.params, observer.y_hat())
+            tracker.start(u_s, x_s)
+        d_hat = self.disturbance.update(y, observer.y_hat())
+        if not self.certified:   # the measured tightening is around y + d̂
+            self.fhocp.set_output_shift(d_hat)
+        rec = tracker.make_step(observer.x_hat, observer.e_o, y_ref - d_hat)
+        params = model.params
+        y_s = model.denormalize_y(params["U_o"] @ tracker.x_s + params["b_o"])
+        names = model.problem.output_names
+        diag = {f"y_model_{n}": float(v) for n, v in zip(names, y_s, strict=True)}
+        d_phys = d_hat * np.abs(model.y_scale)
+        diag.update({f"d_hat_{n}": float(v) for n, v in zip(names, d_phys, strict=True)})
+        return LawStep(rec, False, diag)
+
+    def setpoint_reason(self, y: np.ndarray) -> str:
+        fh = self.fhocp
+        if np.any(fh.L @ y > fh.ys_bounds + 1e-12):
+            return (f"{setpoint_text(self.model, y)} is outside the certified steady outputs "
+                    f"({steady_outputs_text(self.model, fh) or 'none'})")
+        return ""
+
+    def uncertified(self, cert: Any, reason: str) -> TrackingLaw:
+        from cosim_adapters.certification import margin_text
+
+        design = self.design
+        cert_u, tracker, disturbance, _ = tracking_design(
+            self.model, self.model.problem, cert, design["kwargs"], design["offset_weight"],
+            design["alpha_c"], design["offset_filter"], design["fhocp_options"],
+            design["control_horizon"], gains_certified=False, cert=cert)
+        if not tracker.hypotheses["Ys_nonempty"]:
+            given = design["alpha_c"]
+            raise CosimError(
+                f"controller {self.component!r}: {reason}, and even the model's measured "
+                f"prediction error ({margin_text(self.model, cert_u)}) leaves no admissible "
+                "output in the box" + (f" with alpha_c = {given:g}: a smaller alpha_c"
+                                       if given is not None else ": the model is too far "
+                                       "from the plant to control it; train it longer or on "
+                                       "more data"))
+        return TrackingLaw(self.model, cert_u, tracker, disturbance, design, self.component,
+                           certified=False)
+
+    def summary(self) -> dict[str, Any]:
+        fh = self.fhocp
+        return {"alpha_c": fh.alpha_c, "control_horizon": fh.control_horizon,
+                "offset_weight": {n: float(w) for n, w in zip(
+                    self.model.problem.output_names, fh.offset_weight, strict=True)},
+                "offset_filter": self.disturbance.beta,
+                "tracking_hypotheses": self.tracker.hypotheses,
+                "offset_free": False, "setpoint_rate": None, "governor": False,
+                "governor_steps": 0, "governor_holds": 0,
+                "setpoint_changes": self.setpoint_changes, "setpoint_rejected_steps": 0,
+                "setpoint_rejections": []}
+
+
+def steady_outputs_text(model: Any, fhocp: Any) -> str:
+    """The admissible steady outputs ``Y_s`` of a box problem, per output, in its units."""
+    problem = model.problem
+    parts = []
+    for j, name in enumerate(problem.output_names):
+        hi = lo = None
+        for row, rhs in zip(fhocp.L, fhocp.ys_bounds, strict=True):
+            if row[j] > 0 and np.count_nonzero(row) == 1:
+                hi = rhs / row[j]
+            elif row[j] < 0 and np.count_nonzero(row) == 1:
+                lo = rhs / row[j]
+        if lo is None or hi is None:
+            continue
+        a, b = sorted(model.denormalize_y(np.full(model.p, v))[j] for v in (lo, hi))
+        unit = problem.output_units[j]
+        parts.append(f"{name} in [{a:.4g}, {b:.4g}] {unit}".rstrip() if a <= b
+                     else f"{name}: none")
+    return "; ".join(parts)
