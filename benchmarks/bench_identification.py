@@ -280,6 +280,10 @@ def subnet(folder: Path, quick: bool, seed: int = 0) -> dict[str, Any]:
         return Input_output_data(u=d.u[rows], y=d.y[rows], sampling_time=pr.Ts)
 
     train = part(est, "train")
+    need = 20 + 1                          # its encoder's past window (na = nb = 20) and more
+    if int(np.sum(est.split == "val")) < need:
+        return {"_note": f"SUBNET not run: its selection needs more than {need - 1} "
+                         f"validation rows, this record has {int(np.sum(est.split == 'val'))}"}
     nu, ny, norm = deepSI.get_nu_ny_and_auto_norm(train)
     model = deepSI.SUBNET(nu, ny, norm)
     t0 = time.perf_counter()
@@ -317,8 +321,10 @@ def main() -> None:
         from controllers.problem_file import load
 
         unit = load(folder / "problem.toml").outputs[0].unit
-        rows = {**ours(folder, work, args.quick), **subnet(folder, args.quick)}
-        note = rows.pop("_note", "")
+        rows = ours(folder, work, args.quick)
+        peer = subnet(folder, args.quick)
+        note = "; ".join(n for n in (rows.pop("_note", ""), peer.pop("_note", "")) if n)
+        rows.update(peer)
         for method, (value, wall) in rows.items():
             when = "" if wall is None else f"{wall:.0f} s"
             print(f"{name:<12} {method:<32} {value:>12.4g} {unit:<3} {when:>10}")

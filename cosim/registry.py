@@ -82,12 +82,14 @@ def create(name: str, options: Mapping[str, Any] | None = None) -> Component:
     cls = resolve(name)
     options = dict(options or {})
     params = inspect.signature(cls).parameters
-    if not any(p.kind is inspect.Parameter.VAR_KEYWORD for p in params.values()):
+    declared = getattr(cls, "OPTIONS", None)   # a component taking **options names them
+    if declared is not None or not any(p.kind is inspect.Parameter.VAR_KEYWORD
+                                       for p in params.values()):
+        names = list(declared) if declared is not None else [k for k in params if k != "self"]
         for key in options:
-            if key not in params:
-                known = ", ".join(k for k in params if k != "self") or "none"
+            if key not in names:
                 raise CosimError(f"controller '{name}' has no option '{key}' (options: "
-                                 f"{known})")
+                                 f"{', '.join(names) or 'none'})")
     try:
         return cls(**options)
     except CosimError:

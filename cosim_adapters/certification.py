@@ -33,11 +33,9 @@ import numpy as np
 
 from cosim.errors import CosimError
 
-__all__ = ["CERTIFICATE_MODES", "Certification", "check_setpoints", "go_uncertified",
+__all__ = ["Certification", "check_setpoints", "go_uncertified",
            "margin_text"]
 
-#: The ``certificate`` option of the robust MPC (module docstring).
-CERTIFICATE_MODES = ("auto", "require", "keep")
 
 
 @dataclass

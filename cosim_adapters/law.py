@@ -7,7 +7,7 @@ object implementing :class:`ControlLaw`: :class:`cosim_adapters.paper_law.PaperL
 paper's regulation law, ``eq:mpc``, with its governor) and :class:`cosim_adapters.tracking.
 TrackingLaw` (the artificial steady state of MPC for tracking). A third law (say,
 offset-free with a disturbance model) is one new class with these methods, registered in
-:data:`cosim_adapters.tracking.LAWS`.
+:data:`cosim_adapters.mpc_options.LAWS`.
 """
 
 from __future__ import annotations

@@ -62,52 +62,22 @@ from controllers.model import DEFAULT_MODEL
 from controllers.solve_status import status_code
 from cosim.component import Component, Signal
 from cosim.errors import CosimError
-from cosim_adapters.certification import (
-    CERTIFICATE_MODES,
-    Certification,
-    check_setpoints,
-    go_uncertified,
-)
+from cosim_adapters.certification import Certification, check_setpoints, go_uncertified
 from cosim_adapters.law import ControlLaw
+from cosim_adapters.mpc_options import MPCOptions
 from cosim_adapters.paper_law import PaperLaw
-from cosim_adapters.tracking import TrackingLaw, check_law
+from cosim_adapters.tracking import TrackingLaw
 
 __all__ = ["RobustMPCController"]
 
 
-def _check_options(*, name: Any, offset_free: Any, offset_filter: Any, setpoint_rate: Any,
-                   governor: Any, solver: Any, ipopt_options: Any, max_iter: Any,
-                   kernel: Any, du_weight: Any) -> None:
-    """Reject controller options of the wrong type or range with a one-line error."""
-
-    def number(value: Any) -> bool:
-        return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(
-            value)
-
-    if not isinstance(name, str) or not name:
-        raise CosimError(f"option name={name!r}: expected a non-empty string")
-    for key, value in (("offset_free", offset_free), ("governor", governor)):
-        if not isinstance(value, bool):
-            raise CosimError(f"option {key}={value!r}: expected true or false")
-    if not number(offset_filter) or not 0 < offset_filter <= 1:
-        raise CosimError(f"option offset_filter={offset_filter!r}: expected a number in (0, 1]")
-    if setpoint_rate is not None and (not number(setpoint_rate) or setpoint_rate <= 0):
-        raise CosimError(f"option setpoint_rate={setpoint_rate!r}: expected a positive number "
-                         "of output units per sample")
-    if isinstance(max_iter, bool) or not isinstance(max_iter, int) or not 1 <= max_iter <= 10000:
-        raise CosimError(f"option max_iter={max_iter!r}: expected an integer in [1, 10000]")
-    if kernel not in ("auto", "numpy"):
-        raise CosimError(f"option kernel={kernel!r}: expected \"auto\" or \"numpy\"")
-    if solver is not None and solver not in ("sqp", "ipopt"):
-        raise CosimError(f"option solver={solver!r}: expected \"sqp\" or \"ipopt\"")
-    if ipopt_options is not None and (not isinstance(ipopt_options, Mapping) or not all(
-            isinstance(k, str) for k in ipopt_options)):
-        raise CosimError(f"option ipopt_options={ipopt_options!r}: expected an object of "
-                         "IPOPT option names and values")
-    weights = list(du_weight.values()) if isinstance(du_weight, Mapping) else [du_weight]
-    if not all(number(w) and w >= 0 for w in weights):
-        raise CosimError(f"option du_weight={du_weight!r}: expected a non-negative number or "
-                         "an object of non-negative numbers by input name (normalised units)")
+def _plain(value: Any) -> Any:
+    """``value`` as JSON data (arrays as nested lists, mappings as objects)."""
+    if isinstance(value, Mapping):
+        return {str(k): _plain(v) for k, v in value.items()}
+    if isinstance(value, np.ndarray | list | tuple):
+        return [_plain(v) for v in value]
+    return value.item() if isinstance(value, np.generic) else value
 
 
 def _weight(key: str, value: Any, size: int, names: list[str] | None) -> np.ndarray | None:
@@ -143,154 +113,85 @@ class RobustMPCController(Component):
     problem : str or Path, optional
         A problem file: must be the model's own (a check), or the problem of a model file
         that has none (:mod:`cosim_adapters.problems`).
-    N : int, optional
-        Prediction horizon (default 80, :data:`controllers.fhocp_tracking.DEFAULTS`; the
-        paper's 15 with ``law="paper"``).
-    Q, R : array, number or mapping, optional
-        Cost weights in normalised units (default ``I_n`` and ``0.01 I_m``, paper section V):
-        a matrix, one number (times the identity) or, for ``R``, an object of diagonal
-        weights by input name (inputs not named: 0.01).
-    e_o0 : float
-        ``ê_o,0`` (paper: 0.02).
-    gain_scale : float, optional
-        Observer gains = ``gain_scale`` × the LP gains; default: the gains in the model file
-        (``cosim certify --save``), else the largest scale passing every hypothesis at
-        :func:`controllers.gain_design.default_setpoints` (a grid over the output box)
-        (:func:`controllers.gain_design.choose_gain_scale`).
-    offset_free : bool
-        ``law="paper"``: offset-free set-point correction (outside the theorem, see the
-        module docstring).
-    offset_filter : float, optional
-        Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)`` (default 0.3; 0.05 with
-        ``law="paper"``).
-    governor : bool, optional
-        ``law="paper"``: admissible reference governor after set-point changes (default
-        on; see the module docstring and :mod:`controllers.governor`). ``False``: the
-        paper's FHOCP with the new ``(x̄, ū, α)`` at once.
-    setpoint_rate : float, optional
-        ``law="paper"``, outside the theorem: move the set-point given to the FHOCP towards
-        the requested one by at most this much per sample, in the outputs' units (a
-        rate-limiting reference governor), so that the terminal set stays reachable after
-        large steps. Off by default.
-    solver : {"sqp", "ipopt"}, optional
-        NLP solver of the FHOCP (default: SQP with a dense QP, or IPOPT when
-        ``ipopt_options`` are given; see :class:`controllers.fhocp.FHOCP`).
-    ipopt_options : dict, optional
-        Overrides of :data:`controllers.solver_settings.FAST_IPOPT_OPTIONS`.
-    kernel : {"auto", "numpy"}
-        Where the SQP's derivatives come from: the compiled kernel (``"auto"``, built on
-        first use; the numpy callbacks when no C compiler is found) or the numpy callbacks
-        (``"numpy"``, the reference implementation). Same answers either way.
-    du_weight : float or mapping, optional
-        Weight ``S`` of the input-rate penalty ``Σ_i (u_i − u_{i−1})ᵀ S (u_i − u_{i−1})`` in
-        normalised units (``u`` ∈ [−1, 1]; ``u_{−1}`` the input applied at the previous
-        step), one number for every input or an object by the problem's input names
-        (``{"qa": 5, "qb": 5}``; inputs not named: 0). Default 0.05 (the tracking law,
-        which adds the terminal term ``‖u_{N−1} − u_s‖²_S``); 0 with ``law="paper"``: the
-        paper's cost, which the term leaves.
-    law : {"tracking", "paper"}
-        ``"tracking"`` (default): the tracking FHOCP (:mod:`cosim_adapters.tracking`,
-        :mod:`controllers.fhocp_tracking`): an artificial steady state as a decision
-        variable, offset-free through ``d̂`` in the cost, no governor, nothing rejected (an
-        unreachable or inadmissible set-point is tracked to the closest admissible steady
-        state); zero observer gains. ``"paper"``: the paper's FHOCP with the set-point's
-        equilibrium, the governor and set-point rejection.
-    offset_weight : float or mapping
-        ``law="tracking"``: diagonal of the offset weight ``T`` of ``‖g(x_s) + d̂ − ȳ‖²_T``
-        (normalised outputs; one number or an object by output name, outputs not named:
-        10⁴). Default 10⁴.
-    alpha_c : float, optional
-        ``law="tracking"``: the terminal set's radius (normalised state, ∞-norm); default the
-        certified design's ``α_min(N)``, which makes ``Y_s`` its admissible box.
-    control_horizon : int, optional
-        ``law="tracking"``: the number ``M ≤ N`` of free inputs ``u_0 … u_{M−1}``; the
-        others are held at the artificial steady input ``u_s`` (the guarantees unchanged:
-        :class:`controllers.fhocp_tracking.TrackingFHOCP`). Default ``⌈N / 4⌉`` (20 at the
-        default N = 80).
-    certificate : {"auto", "require", "keep"}
-        Where the certificate does not cover the run (a hypothesis fails, or a set-point of
-        the run lies outside the certified set): ``"auto"`` runs uncertified, with the
-        model's measured prediction error as the tightening; ``"require"`` refuses
-        (:class:`cosim.errors.CosimError`, exit 2); ``"keep"`` keeps the certified design
-        (the tracking law tracks such a set-point to the closest admissible steady output,
-        the paper's law refuses it; a design whose hypotheses fail is an error), as before
-        graded guarantees (:mod:`cosim_adapters.certification`).
-    max_iter : int, optional
-        Iteration cap of one FHOCP solve, the real-time bound (default 40; 15 with
-        ``law="paper"``). A solve that reaches it applies its feasible iterate
-        (suboptimal MPC) or the fallback; that iterate depends on the last bits of the
-        arithmetic, so the regression references are recorded with a cap every solve
-        converges within (``max_iter=200``).
+    options : MPCOptions or mapping, optional
+        The design (:class:`cosim_adapters.mpc_options.MPCOptions`), as an object or by key.
     name : str
         Component name.
+    **option_values
+        Options by name (the attributes of :class:`~cosim_adapters.mpc_options.MPCOptions`,
+        which say what each one does), over ``options``.
     """
 
     direct_feedthrough = True
+    #: the options :func:`cosim.registry.create` accepts (``--option KEY=VALUE``)
+    OPTIONS = ("model", "problem", "options", "name", *MPCOptions.names())
     #: wall-clock diagnostics: written by the master to timings.csv, not results.csv
     timing_diagnostics = frozenset({"solve_ms"})
 
     def __init__(self, model: str | Path | None = None, problem: str | Path | None = None,
-                 N: int | None = None,
-                 Q: Any = None, R: Any = None,
-                 e_o0: float = 0.02, gain_scale: float | None = None,
-                 offset_free: bool = False, offset_filter: float | None = None,
-                 setpoint_rate: float | None = None, governor: bool | None = None,
-                 solver: str | None = None,
-                 ipopt_options: Mapping[str, Any] | None = None, max_iter: int | None = None,
-                 kernel: str = "auto", du_weight: float | Mapping[str, float] | None = None,
-                 law: str = "tracking", offset_weight: float | Mapping[str, float] | None = None,
-                 alpha_c: float | None = None, control_horizon: int | None = None,
-                 certificate: str = "auto", name: str = "mpc") -> None:
-        from controllers import certificates as certs
-        from controllers import gain_design
+                 options: MPCOptions | Mapping[str, Any] | None = None, *,
+                 name: str = "mpc", **option_values: Any) -> None:
         from controllers.model import GRUModel
         from controllers.observer import GRUObserver
+        from cosim_adapters.problems import problem_for
 
-        tracking = check_law(law, governor=governor, offset_free=offset_free,
-                              setpoint_rate=setpoint_rate, offset_weight=offset_weight,
-                              alpha_c=alpha_c, control_horizon=control_horizon)
-        from controllers.fhocp_tracking import DEFAULTS as TRACKING
-
-        N = (TRACKING["N"] if tracking else 15) if N is None else N
-        if max_iter is None:
-            max_iter = TRACKING["max_iter"] if tracking else 15
-        governor = (not tracking) if governor is None else governor
-        if offset_filter is None:
-            offset_filter = TRACKING["offset_filter"] if tracking else 0.05
-        if du_weight is None:
-            du_weight = TRACKING["du_weight"] if tracking else 0.0
-        _check_options(name=name, offset_free=offset_free, offset_filter=offset_filter,
-                       setpoint_rate=setpoint_rate, governor=governor, solver=solver,
-                       ipopt_options=ipopt_options, max_iter=max_iter, kernel=kernel,
-                       du_weight=du_weight)
+        if not isinstance(name, str) or not name:
+            raise CosimError(f"option name={name!r}: expected a non-empty string")
+        if not isinstance(options, MPCOptions):
+            options = MPCOptions.from_mapping({**(options or {}), **option_values})
+        elif option_values:
+            options = MPCOptions.from_mapping({**options.to_dict(), **option_values})
+        #: the design (:class:`cosim_adapters.mpc_options.MPCOptions`, defaults filled in)
+        self.options = options
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
         try:
             self.model = GRUModel.load(self.model_path)
         except ControllersError as exc:
             raise CosimError(str(exc)) from None
-        from cosim_adapters.problems import problem_for
-
         self.problem = problem_for(self.model, problem)
         self.model.problem = self.problem
+        self.certificate_mode = options.certificate
+        #: the control law (:class:`cosim_adapters.law.ControlLaw`): everything that differs
+        #: between ``law="tracking"`` and ``law="paper"``
+        self.law: ControlLaw
+        self.law, failed = self._design(options)
+        self.fhocp, self.cert = self.law.fhocp, self.law.cert
+        # load scipy.optimize (the observer's x̂_0 equilibrium) now, so that the first
+        # control step is a normal one (importing scipy.optimize: ~0.2 s)
+        import scipy.optimize  # noqa: F401
+
+        self.observer = GRUObserver.from_certificate(self.cert)
+        self._signals()
+        #: The observer's initial state ``x̂_0`` (normalised), or ``None``: the equilibrium for
+        #: the first measured output (paper section V). Read by :meth:`setup`.
+        self.initial_estimate: np.ndarray | None = None
+        #: certified, or uncertified with the reason (:mod:`cosim_adapters.certification`)
+        self.certification = Certification()
+        self._expected: list[dict[str, float]] | None = None
+        if failed:
+            go_uncertified(self, "; ".join(failed))
+        self.setup(0.0)
+
+    def _design(self, o: MPCOptions) -> tuple[ControlLaw, list[str]]:
+        """The law of the options ``o`` on this model, and the hypotheses that fail: the
+        observer gains (the model file's, ``gain_scale``, else the largest scale that passes
+        at :func:`controllers.gain_design.default_setpoints`) and the law's design."""
+        from controllers import certificates as certs
+        from controllers import gain_design
         from controllers.input_rate import du_weights
 
+        inputs = list(self.problem.input_names)
         try:
-            self.du_weight = du_weights(du_weight, len(self.problem.input_names),
-                                        list(self.problem.input_names))
+            self.du_weight = du_weights(o.du_weight, len(inputs), inputs)
         except ControllersError as exc:
             raise CosimError(f"option {exc}") from None
-        kwargs: dict[str, Any] = {"N": N, "Q": _weight("Q", Q, self.model.n, None),
-                                  "R": _weight("R", R, len(self.problem.input_names),
-                                               list(self.problem.input_names)),
-                                  "e_o0": e_o0}
-        if certificate not in CERTIFICATE_MODES:
-            raise CosimError(f"option certificate={certificate!r}: expected one of "
-                             f"{', '.join(map(repr, CERTIFICATE_MODES))}")
-        self.certificate_mode = certificate
+        kwargs: dict[str, Any] = {"N": o.N, "Q": _weight("Q", o.Q, self.model.n, None),
+                                  "R": _weight("R", o.R, len(inputs), inputs),
+                                  "e_o0": o.e_o0}
         gains_certified = True
         try:
-            if gain_scale is None and self.model.L_z is None:
+            if o.gain_scale is None and self.model.L_z is None:
                 targets = [self.model.normalize_y(np.array(y))
                            for y in gain_design.default_setpoints(self.problem)]
                 theta, cert = gain_design.choose_gain_scale(self.model, targets, **kwargs)
@@ -298,34 +199,26 @@ class RobustMPCController(Component):
                     gains_certified = False
                     cert = certs.compute_certificate(self.model, gain_scale=0.0, **kwargs)
             else:
-                cert = certs.compute_certificate(self.model, gain_scale=gain_scale, **kwargs)
+                cert = certs.compute_certificate(self.model, gain_scale=o.gain_scale, **kwargs)
         except ControllersError as exc:  # a bad design or a model without certificate
             raise CosimError(str(exc)) from None
         fhocp_options: dict[str, Any] = dict(
-            solver=solver, sqp_options={"max_iter": max_iter}, kernel=kernel,
+            solver=o.solver, sqp_options={"max_iter": o.max_iter}, kernel=o.kernel,
             du_weight=self.du_weight,
-            ipopt_options={"max_iter": max_iter, **(ipopt_options or {})}
-            if ipopt_options or solver == "ipopt" else None)
-        #: the control law (:class:`cosim_adapters.law.ControlLaw`): everything that differs
-        #: between ``law="tracking"`` and ``law="paper"``
-        self.law: ControlLaw
-        if tracking:
+            ipopt_options={"max_iter": o.max_iter, **(o.ipopt_options or {})}
+            if o.ipopt_options or o.solver == "ipopt" else None)
+        if o.tracking:
             design = {"kwargs": kwargs, "fhocp_options": fhocp_options,
-                      "offset_weight": offset_weight, "alpha_c": alpha_c,
-                      "offset_filter": offset_filter, "control_horizon": control_horizon}
-            self.law, failed = TrackingLaw.build(self.model, cert, design, name,
-                                                 gains_certified)
-        else:
-            failed = cert.failures()
-            self.law = PaperLaw(self.model, cert, fhocp_options, governor=governor,
-                                offset_free=offset_free, offset_filter=offset_filter,
-                                setpoint_rate=setpoint_rate, name=name)
-        self.fhocp, self.cert = self.law.fhocp, self.law.cert
-        # load scipy.optimize (the observer's x̂_0 equilibrium) now, so that the first
-        # control step is a normal one (importing scipy.optimize: ~0.2 s)
-        import scipy.optimize  # noqa: F401
+                      "offset_weight": o.offset_weight, "alpha_c": o.alpha_c,
+                      "offset_filter": o.offset_filter, "control_horizon": o.control_horizon}
+            return TrackingLaw.build(self.model, cert, design, self.name, gains_certified)
+        law = PaperLaw(self.model, cert, fhocp_options, governor=bool(o.governor),
+                       offset_free=o.offset_free, offset_filter=float(o.offset_filter),
+                       setpoint_rate=o.setpoint_rate, name=self.name)
+        return law, cert.failures()
 
-        self.observer = GRUObserver.from_certificate(self.cert)
+    def _signals(self) -> None:
+        """The component's signals, sample time and boxes, from the control problem."""
         pr = self.problem
         self._y_names = list(pr.output_names)
         self._r_names = [f"ref.{n}" for n in self._y_names]
@@ -339,15 +232,6 @@ class RobustMPCController(Component):
         self._lo = np.array([c.min for c in pr.inputs])
         self._hi = np.array([c.max for c in pr.inputs])
         self._values: dict[str, float] = {}
-        #: The observer's initial state ``x̂_0`` (normalised), or ``None``: the equilibrium for
-        #: the first measured output (paper section V). Read by :meth:`setup`.
-        self.initial_estimate: np.ndarray | None = None
-        #: certified, or uncertified with the reason (:mod:`cosim_adapters.certification`)
-        self.certification = Certification()
-        self._expected: list[dict[str, float]] | None = None
-        if failed:
-            go_uncertified(self, "; ".join(failed))
-        self.setup(0.0)
 
     @property
     def notice(self) -> str | None:
@@ -453,6 +337,7 @@ class RobustMPCController(Component):
                                                       strict=True)},
             "gain_scale": self.cert.gain_scale,
             **law,
+            "options": _plain(self.options.to_dict()),
         })
         return out
 

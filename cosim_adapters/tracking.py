@@ -35,50 +35,8 @@ from controllers.errors import ControllersError
 from cosim.errors import CosimError
 from cosim_adapters.law import LawStep, setpoint_text
 
-__all__ = ["ALPHA_C_SPAN", "LAWS", "TrackingLaw", "check_law", "fallback_alpha_c",
-           "steady_outputs_text", "tracking_design"]
-
-#: The control laws of the ``robust-mpc`` component.
-LAWS = ("paper", "tracking")
-
-
-def check_law(law: Any, *, governor: Any, offset_free: Any, setpoint_rate: Any,
-               offset_weight: Any, alpha_c: Any, control_horizon: Any = None) -> bool:
-    """Check the law and its options (one-line errors); ``True`` for the tracking law."""
-    if law not in LAWS:
-        raise CosimError(f"option law={law!r}: expected one of {', '.join(map(repr, LAWS))}")
-    tracking = law == "tracking"
-    if tracking:
-        for key, value, off in (("governor", governor, (None, False)),
-                                ("offset_free", offset_free, (False,)),
-                                ("setpoint_rate", setpoint_rate, (None,))):
-            if value not in off:
-                raise CosimError(f"option {key}={value!r} belongs to law=\"paper\" (the "
-                                 "default tracking law needs no governor and is offset-free)")
-    else:
-        for key, value in (("control_horizon", control_horizon),
-                           ("offset_weight", offset_weight), ("alpha_c", alpha_c)):
-            if value is not None:
-                raise CosimError(f"option {key}={value!r} belongs to law=\"tracking\" (the "
-                                 "default; the paper's law has no artificial steady state)")
-    if control_horizon is not None and (isinstance(control_horizon, bool) or not isinstance(
-            control_horizon, int) or control_horizon < 1):
-        raise CosimError(f"option control_horizon={control_horizon!r}: expected a positive "
-                         "integer (at most N)")
-    weights = (list(offset_weight.values()) if isinstance(offset_weight, Mapping)
-               else [] if offset_weight is None else [offset_weight])
-    if not all(_positive(w) for w in weights):
-        raise CosimError(f"option offset_weight={offset_weight!r}: expected a positive "
-                         "number or an object of positive numbers by output name")
-    if alpha_c is not None and not _positive(alpha_c):
-        raise CosimError(f"option alpha_c={alpha_c!r}: expected a positive number")
-    return tracking
-
-
-def _positive(value: Any) -> bool:
-    return (isinstance(value, int | float) and not isinstance(value, bool)
-            and math.isfinite(value) and value > 0)
-
+__all__ = ["ALPHA_C_SPAN", "TrackingLaw", "fallback_alpha_c", "steady_outputs_text",
+           "tracking_design"]
 
 #: The terminal radius of a design without a certified ``α_min`` (no observer-gain scale
 #: passes, or the uncertified mode): the one whose terminal set spans this much of every
