@@ -42,6 +42,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Mapping
+from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
@@ -63,14 +64,17 @@ from controllers.input_rate import du_cost, du_weights
 from controllers.solve_status import SolveStatus
 from controllers.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
-__all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPResult", "bind_buffers"]
+__all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPData", "FHOCPResult", "bind_buffers"]
 
 
 
-class FHOCP:
-    """The FHOCP ``eq:optimization``: declare, :meth:`setup` once, :meth:`solve` each step.
+@dataclass(frozen=True)
+class FHOCPData:
+    """What ``eq:optimization`` is made of: the model, the weights, the constraints and their
+    tightening (the quantities of a :class:`~controllers.certificates.Certificate` of that
+    name, for a problem built without one).
 
-    Parameters
+    Attributes
     ----------
     params : mapping of arrays
         GRU weights (``eq:gru``).
@@ -86,6 +90,28 @@ class FHOCP:
         Tightening coefficients ``eq:constraint_tightening_parameters``.
     s : float
         Terminal weight ``eq:definition_s``.
+    """
+
+    params: Mapping[str, np.ndarray]
+    N: int
+    Q: np.ndarray
+    R: np.ndarray
+    L: np.ndarray
+    h: np.ndarray
+    w_L: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    s: float
+
+
+class FHOCP:
+    """The FHOCP ``eq:optimization``: declare, :meth:`setup` once, :meth:`solve` each step.
+
+    Parameters
+    ----------
+    data : FHOCPData or Certificate
+        What the problem is made of (:class:`FHOCPData`'s attributes; a
+        :class:`~controllers.certificates.Certificate` has them all).
     formulation : {"single-shooting", "multiple-shooting"}
     ipopt_options : dict, optional
         Overrides of the IPOPT options (``FAST_IPOPT_OPTIONS`` for single shooting, IPOPT
@@ -119,9 +145,7 @@ class FHOCP:
         Length of the parameter vector ``p = (x̂, x̄, ū[, u_{−1}])``.
     """
 
-    def __init__(self, params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
-                 L: np.ndarray, h: np.ndarray, w_L: np.ndarray, a: np.ndarray, b: np.ndarray,
-                 s: float, *, formulation: str = "single-shooting",
+    def __init__(self, data: FHOCPData | Any, *, formulation: str = "single-shooting",
                  ipopt_options: Mapping[str, Any] | None = None,
                  warm_duals: bool | None = None, time_budget: float | None = None,
                  solver: str | None = None,
@@ -144,22 +168,22 @@ class FHOCP:
         if self.sqp_options["loop"] not in ("kernel", "casadi"):
             raise DesignError(f"sqp_options loop must be \"kernel\" or \"casadi\", got "
                               f"{self.sqp_options['loop']!r}")
-        self.params = {k: np.asarray(v, dtype=float) for k, v in params.items()}
+        self.params = {k: np.asarray(v, dtype=float) for k, v in data.params.items()}
         self.n, self.m, self.p = gru.dimensions(self.params)
-        self.N = int(N)
-        self.Q = np.asarray(Q, dtype=float)
-        self.R = np.asarray(R, dtype=float)
-        self.L = np.atleast_2d(np.asarray(L, dtype=float))
+        self.N = int(data.N)
+        self.Q = np.asarray(data.Q, dtype=float)
+        self.R = np.asarray(data.R, dtype=float)
+        self.L = np.atleast_2d(np.asarray(data.L, dtype=float))
         self.q = self.L.shape[0]
-        self.h = np.asarray(h, dtype=float).reshape(self.q)
-        self.w_L = np.asarray(w_L, dtype=float).reshape(self.q)
-        self.a = np.asarray(a, dtype=float)
-        self.b = np.asarray(b, dtype=float)
+        self.h = np.asarray(data.h, dtype=float).reshape(self.q)
+        self.w_L = np.asarray(data.w_L, dtype=float).reshape(self.q)
+        self.a = np.asarray(data.a, dtype=float)
+        self.b = np.asarray(data.b, dtype=float)
         if self.a.shape[0] < self.N or self.b.shape[0] < self.N:
             raise DesignError(f"a and b need at least N = {self.N} rows (i = 0 … N−1)")
         self.a = self.a[: self.N].reshape(self.N, self.q)
         self.b = self.b[: self.N].reshape(self.N, self.q)
-        self.s = float(s)
+        self.s = float(data.s)
         self.du_weight = du_weights(du_weight, self.m)
         self.has_du = bool(np.any(self.du_weight > 0))
         self.npar = 2 * self.n + self.m + (self.m if self.has_du else 0)
@@ -211,8 +235,7 @@ class FHOCP:
         """The FHOCP of a :class:`~controllers.certificates.Certificate` (its weights,
         constraints, tightening and terminal weight); ``options`` as the constructor's
         keyword arguments (``formulation``, ``solver``, ``sqp_options``, ...)."""
-        return cls(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a,
-                   cert.b, cert.s, **options)
+        return cls(cert, **options)
 
     def setup(self) -> FHOCP:
         """Build the solver (a few ms; again after :meth:`setup` to restart it exactly).

@@ -28,7 +28,6 @@ from __future__ import annotations
 
 import math
 import time
-from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -107,7 +106,7 @@ class TrackingFHOCP(FHOCP):
 
     Parameters
     ----------
-    params, N, Q, R, L, h, w_L, a, b, s
+    data : FHOCPData or Certificate
         As :class:`controllers.fhocp.FHOCP`.
     offset_weight : float or (p,) array
         Diagonal of ``T`` (normalised outputs).
@@ -137,15 +136,13 @@ class TrackingFHOCP(FHOCP):
         ``M``.
     """
 
-    def __init__(self, params: Mapping[str, np.ndarray], N: int, Q: np.ndarray,
-                 R: np.ndarray, L: np.ndarray, h: np.ndarray, w_L: np.ndarray, a: np.ndarray,
-                 b: np.ndarray, s: float, *, offset_weight: float | np.ndarray,
-                 alpha_c: float, ys_bounds: np.ndarray, control_horizon: int | None = None,
+    def __init__(self, data: Any, *, offset_weight: float | np.ndarray, alpha_c: float,
+                 ys_bounds: np.ndarray, control_horizon: int | None = None,
                  **options: Any) -> None:
         if options.get("formulation", "single-shooting") != "single-shooting":
             raise DesignError("the tracking FHOCP is single shooting only")
         options["sqp_options"] = {**SQP_OVERRIDES, **(options.get("sqp_options") or {})}
-        super().__init__(params, N, Q, R, L, h, w_L, a, b, s, **options)
+        super().__init__(data, **options)
         T = np.broadcast_to(np.asarray(offset_weight, dtype=float), (self.p,)).copy()
         if not np.all(np.isfinite(T)) or np.any(T <= 0):
             raise DesignError(f"offset weights must be positive, got {T.tolist()}")
@@ -207,8 +204,7 @@ class TrackingFHOCP(FHOCP):
         """The tracking FHOCP of a certificate; ``options`` must hold ``offset_weight`` and
         ``alpha_c`` (``ys_bounds`` defaults to :func:`steady_output_bounds`)."""
         options.setdefault("ys_bounds", steady_output_bounds(cert, options["alpha_c"]))
-        return cls(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a,
-                   cert.b, cert.s, **options)
+        return cls(cert, **options)
 
     def numpy_nlp(self) -> Any:
         from controllers.nlp_tracking import TrackingNLP

@@ -1,17 +1,17 @@
-"""The whole pipeline on three plants that are not four tanks, as a user runs it.
+"""The whole pipeline on four plants that are not four tanks, as a user runs it.
 
-``examples/own_plant.py --epochs 150 --runs 3`` on each example plant (``fmus/examples``: a
-SISO heated vessel, a 2 × 2 CSTR in L/min, K and mol/L at Ts = 15 s, a mixing tank with 3
-inputs and 2 outputs): build the FMU, ``generate-data --problem``, ``train`` briefly,
-``certify --auto-gain-scale --save`` at set-points taken from the plant itself (certified or
-not: the verdict is saved), a set-point scenario with the robust MPC (its default tracking law,
-certified or uncertified, and the paper's law) and, for the square plants, the PI tuned from
-the model, and a campaign with the plant's parameters drawn per run. What a user checks,
-asserted on its ``walkthrough.json`` and files: the FIT of every output above a floor, every
-input inside its box, no output constraint violated by either MPC law, each set-point tracked
-to a stated share of its output's box, the MPC's IAE against the PI's on the square plants,
-no MPC run of the campaign violating a constraint, and the files and columns named as in the
-problem.
+``examples/own_plant.py --epochs 150 --runs 3`` on each example plant (``fmus/examples``: a SISO
+heated vessel, a 2 × 2 CSTR in L/min, K and mol/L at Ts = 15 s, a mixing tank with 3 inputs and
+2 outputs, a 2 × 2 furnace whose zones are strongly coupled): build the FMU, ``generate-data
+--problem``, ``train`` briefly, ``certify --auto-gain-scale --save`` at set-points taken from
+the plant itself (certified or not: the verdict is saved), a set-point scenario with the robust
+MPC (its default tracking law, certified or uncertified, and the paper's law) and, for the
+square plants, the PI tuned from the model, and a campaign with the plant's parameters drawn per
+run. What a user checks, asserted on its ``walkthrough.json`` and files: the FIT of every output
+above a floor, every input inside its box, no output constraint violated by either MPC law, each
+set-point tracked to a stated share of its output's box, the MPC's IAE against the PI's on the
+square plants, no MPC run of the campaign violating a constraint, and the files and columns
+named as in the problem.
 """
 
 from __future__ import annotations
@@ -28,14 +28,16 @@ from controllers.problem_file import load
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "examples" / "own_plant.py"
-PLANTS = ("heater", "cstr", "mixing_tank")
+PLANTS = ("heater", "cstr", "mixing_tank", "furnace")
 #: Floors of the quick walk-through (the full one: docs/guide/own-plant.md).
 FIT_FLOOR = 80.0                # test FIT of each output [%]
 TRACKING = 0.02                 # error at the end of each set-point, share of the output's box
 #: The robust MPC's summed IAE over the PI's at most (docs/guide/own-plant.md: measured 0.73
 #: on the CSTR; on the heater, whose steps saturate its input, the PI's IAE is within 0.3 % of
-#: the time-optimal one and the MPC's 1.12x).
-IAE_RATIO = {"cstr": 0.8, "heater": 1.2}
+#: the time-optimal one and the MPC's 1.12x; on the furnace 1.39x, the open case of the
+#: tracking law's cost: docs/design/tracking.md, "Other plants"): a guard against regressions,
+#: not the goal.
+IAE_RATIO = {"cstr": 0.8, "heater": 1.2, "furnace": 1.5}
 TV_RATIO = 1.2                  # the MPC's summed input total variation over the PI's
 
 

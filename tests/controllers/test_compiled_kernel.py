@@ -14,7 +14,7 @@ import pytest
 
 from controllers import compiled_kernel as ck
 from controllers.equilibrium import equilibrium, equilibrium_newton
-from controllers.fhocp import FHOCP
+from controllers.fhocp import FHOCP, FHOCPData
 from controllers.nlp_single_shooting import SingleShootingNLP
 from tests.controllers.random_gru import random_gru_model
 
@@ -37,8 +37,8 @@ def random_fhocp(n: int, N: int, seed: int, m: int = 2, p: int = 2, **kw: object
     q = L.shape[0]
     a = np.linspace(0.0, 0.5, N + 1)[:, None] * np.ones((1, q))
     b = np.linspace(0.0, 0.02, N + 1)[:, None] * np.ones((1, q))
-    return FHOCP(model.params, N, np.eye(n), 0.01 * np.eye(m), L, np.full(q, 1.0),
-                 np.full(q, 0.002), a, b, float(50 * n), **kw).setup()
+    return FHOCP(FHOCPData(model.params, N, np.eye(n), 0.01 * np.eye(m), L, np.full(q, 1.0),
+                           np.full(q, 0.002), a, b, float(50 * n)), **kw).setup()
 
 
 @needs_cc

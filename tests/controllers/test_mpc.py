@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from controllers.equilibrium import equilibrium
-from controllers.fhocp import FHOCP
+from controllers.fhocp import FHOCP, FHOCPData
 from controllers.gru import output, simulate, step
 from controllers.observer import GRUObserver
 from controllers.robust_mpc import RobustMPC
@@ -260,11 +260,12 @@ def test_sqp_time_budget_stops_the_solve(model, cert, loop):
 
 
 def test_default_solver_is_sqp_unless_ipopt_options_given(cert):
-    args = (cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a, cert.b,
-            cert.s)
-    assert FHOCP(*args).solver == "sqp"
-    assert FHOCP(*args, ipopt_options={"max_iter": 100}).solver == "ipopt"
-    assert FHOCP(*args, formulation="multiple-shooting").solver == "ipopt"
+    data = FHOCPData(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a,
+                     cert.b, cert.s)
+    assert FHOCP(data).solver == "sqp"
+    assert FHOCP(data, ipopt_options={"max_iter": 100}).solver == "ipopt"
+    assert FHOCP(data, formulation="multiple-shooting").solver == "ipopt"
+    assert FHOCP(cert).N == FHOCP(data).N == cert.N      # a certificate is such data
 
 
 def test_sqp_solver_rejected_for_multiple_shooting(cert):
