@@ -357,8 +357,8 @@ class FHOCP:
             x, out = self.kernel.assess(x_hat, u_seq, x_bar, u_bar,
                                         self.tightened_bounds(e_o), alpha,
                                         self._u_prev(u_prev, u_bar))
-            res = FHOCPResult(u=u_seq, x=x, cost=float(out[0]), status=SolveStatus.CANDIDATE,
-                              success=False, t=float(out[4]))
+            res = FHOCPResult(u=u_seq, x=x, cost=out.cost, status=SolveStatus.CANDIDATE,
+                              success=False, t=out.terminal_distance)
             set_residuals(res, out, alpha)
             return res
         x = self.simulate(np.asarray(x_hat, dtype=float), u_seq)
@@ -376,7 +376,7 @@ class FHOCP:
         bounds = self.tightened_bounds(e_o)
         if self.kernel is not None:
             _, out = self.kernel.assess(x_hat, u_seq, x_bar, np.zeros(self.m), bounds, alpha)
-            return float(out[2]), float(out[4])
+            return out.violation_rows, out.terminal_distance
         x = self.rollout(x_hat, u_seq)
         viol = float(np.max(x[1: self.N] @ self.LUo.T - bounds[1:])) if self.N > 1 else (
             -np.inf)
@@ -457,9 +457,9 @@ class FHOCP:
         # overshoot a bound by ~1e-9: u is clipped
         out = None
         if self.kernel is not None:
-            u, x, out = self.kernel.assess_w(wopt, ins["p"], self.tightened_bounds(e_o),
-                                             alpha)
-            cost, defect = float(out[0]), float(out[6])
+            u, x, out, _ = self.kernel.assess_w(wopt, ins["p"], self.tightened_bounds(e_o),
+                                                alpha)
+            cost, defect = out.cost, out.defect
         else:
             u = np.clip(wopt[self.iu], -1.0, 1.0)
             x = self.simulate(x_hat, u)

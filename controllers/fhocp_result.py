@@ -73,12 +73,14 @@ class FHOCPResult:
     x_s: np.ndarray | None = field(default=None, repr=False)
 
 
-def set_residuals(res: FHOCPResult, out: np.ndarray, alpha: float) -> None:
-    """:meth:`FHOCP._residuals` from the compiled check's ``out`` (:meth:`controllers.
-    kernel_lib.Workspace.assess`)."""
-    res.constraint_violation = max(0.0, float(out[1]), float(out[2]), float(out[3]) - 1.0)
-    res.terminal_violation = max(0.0, float(out[4]) - alpha)
-    res.active = int(out[5])
+def set_residuals(res: FHOCPResult, out: Any, alpha: float) -> None:
+    """:meth:`FHOCP._residuals` from the compiled check's
+    :class:`~controllers.kernel_abi.Assessment` (:meth:`controllers.kernel_lib.Workspace.
+    assess`)."""
+    res.constraint_violation = max(0.0, out.violation_first, out.violation_rows,
+                                   out.u_max - 1.0)
+    res.terminal_violation = max(0.0, out.terminal_distance - alpha)
+    res.active = int(out.active)
 
 
 def solver_stats(buffer: Any) -> dict[str, Any]:

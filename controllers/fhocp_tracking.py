@@ -377,12 +377,11 @@ class TrackingFHOCP(FHOCP):
         plain rollout and a fixed-point test of its ``x_s``, apart from the solver's
         derivatives: :meth:`controllers.kernel_lib.Workspace.assess_w`), plus the defect
         against the solver's own trajectory."""
-        u, x, out = self.kernel.assess_w(w, p, self.tightened_bounds(e_o), self.alpha_c)
-        x_s = out[8:]
-        res = FHOCPResult(u=u, x=x, cost=float(out[0]), status=status, success=False,
-                          t=float(out[4]), defect=float(out[6]))
+        u, x, out, x_s = self.kernel.assess_w(w, p, self.tightened_bounds(e_o), self.alpha_c)
+        res = FHOCPResult(u=u, x=x, cost=out.cost, status=status, success=False,
+                          t=out.terminal_distance, defect=out.defect)
         res.u_s, res.x_s = np.minimum(np.maximum(w[self.ius], -1.0), 1.0), x_s
-        if not float(out[7]) <= XS_CHECK_TOL:   # NaN: Newton did not converge
+        if not out.steady_residual <= XS_CHECK_TOL:   # NaN: Newton did not converge
             res.x_s = np.full(self.n, np.nan)
             res.constraint_violation = res.terminal_violation = float("inf")
             return res

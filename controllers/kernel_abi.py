@@ -1,13 +1,14 @@
 """The compiled kernel's interface types, defined once for C and Python.
 
-The kernel's SQP (``controllers/kernel/6_sqp.c``) takes its options and returns its counts
-and timers as named C structs, and reports its outcome, and its QP's, as named enums. Each is
-declared here once, as a :mod:`ctypes` structure or an :class:`~enum.IntEnum`, and
-:func:`c_declarations` writes the matching C ``typedef``/``enum`` into every generated kernel
-source (:func:`controllers.compiled_kernel.generate_source`), so that the two sides cannot
-disagree on a field's position or a status's value (acados shares its option and status
-names between C and Python in the same spirit). :func:`check_layout` compares the sizes the
-compiler chose with ctypes' when a library is loaded.
+The kernel's SQP (``controllers/kernel/6_sqp.c``) takes its options and returns its counts and
+timers as named C structs, its answer check returns an :class:`Assessment`, and reports its
+outcome, and its QP's, as named enums. Each is declared here once, as a :mod:`ctypes` structure
+or an :class:`~enum.IntEnum`, and :func:`c_declarations` writes the matching C
+``typedef``/``enum`` into every generated kernel source
+(:func:`controllers.compiled_kernel.generate_source`), so that the two sides cannot disagree on
+a field's position or a status's value (acados shares its option and status names between C and
+Python in the same spirit). :func:`check_layout` compares the sizes the compiler chose with
+ctypes' when a library is loaded.
 """
 
 from __future__ import annotations
@@ -16,7 +17,8 @@ import ctypes
 from enum import IntEnum
 from typing import Any
 
-__all__ = ["QpStatus", "SqpInfo", "SqpOptions", "SqpStatus", "c_declarations", "check_layout"]
+__all__ = ["Assessment", "QpStatus", "SqpInfo", "SqpOptions", "SqpStatus", "c_declarations",
+           "check_layout"]
 
 
 class SqpOptions(ctypes.Structure):
@@ -115,6 +117,39 @@ _CASADI_NAMES = {
 }
 
 
+class Assessment(ctypes.Structure):
+    """The independent check of one input sequence (C ``gk_assessment``; the kernel's
+    ``assess`` and ``assess_w``, :class:`controllers.kernel_lib.Workspace`): what
+    :func:`controllers.fhocp_result.set_residuals` and the answer check read.
+
+    Attributes
+    ----------
+    cost : float
+        The cost ``eq:optimization-cost`` with ``t = ‖x_N − x_ref‖∞`` (the tracking FHOCP's
+        with its offset and last input-rate terms, for ``assess_w`` of a tracking kernel).
+    violation_first, violation_rows : float
+        ``max_j (L U_o x_i − bnd_i)_j`` over the ``i = 0`` rows, and over ``i ≥ 1`` (``−inf``
+        when there are none).
+    u_max : float
+        ``max |u|``.
+    terminal_distance : float
+        ``‖x_N − x_ref‖∞``.
+    active : int
+        Active constraints: output rows ``i ≥ 1`` and the terminal set within 10⁻⁶, inputs
+        with ``|u| > 1 − 10⁻⁶``.
+    defect : float
+        ``assess_w``: ``max |x_solver − x|`` against the solver's own trajectory.
+    steady_residual : float
+        ``assess_w`` of a tracking kernel: ``‖f(x_s, u_s) − x_s‖∞`` of its steady state by a
+        plain GRU step (NaN when Newton failed); 0 otherwise.
+    """
+
+    _fields_ = [("cost", ctypes.c_double), ("violation_first", ctypes.c_double),
+                ("violation_rows", ctypes.c_double), ("u_max", ctypes.c_double),
+                ("terminal_distance", ctypes.c_double), ("active", ctypes.c_int),
+                ("defect", ctypes.c_double), ("steady_residual", ctypes.c_double)]
+
+
 class QpStatus(IntEnum):
     """How the kernel's QP ended (C ``enum gk_qp_status``, ``GK_QP_<NAME>``)."""
 
@@ -126,7 +161,8 @@ class QpStatus(IntEnum):
 
 
 _C_TYPES = {ctypes.c_double: "double", ctypes.c_int: "int"}
-_STRUCTS: tuple[tuple[str, Any], ...] = (("gk_sqp_opts", SqpOptions), ("gk_sqp_info", SqpInfo))
+_STRUCTS: tuple[tuple[str, Any], ...] = (("gk_sqp_opts", SqpOptions), ("gk_sqp_info", SqpInfo),
+                                         ("gk_assessment", Assessment))
 _ENUMS: tuple[tuple[str, str, Any], ...] = (("gk_sqp_status", "GK_SQP_", SqpStatus),
                                             ("gk_qp_status", "GK_QP_", QpStatus))
 
@@ -143,9 +179,10 @@ def c_declarations() -> str:
     return "".join(out)
 
 
-def check_layout(sizes: tuple[int, int]) -> None:
-    """Raise :class:`OSError` when the library's ``sizeof(gk_sqp_opts)``,
-    ``sizeof(gk_sqp_info)`` differ from ctypes' (a compiler with another ABI)."""
-    ours = (ctypes.sizeof(SqpOptions), ctypes.sizeof(SqpInfo))
+def check_layout(sizes: tuple[int, ...]) -> None:
+    """Raise :class:`OSError` when the library's ``sizeof`` of each struct above
+    (``gk_sqp_opts``, ``gk_sqp_info``, ``gk_assessment``) differs from ctypes' (a compiler
+    with another ABI)."""
+    ours = tuple(ctypes.sizeof(struct) for _, struct in _STRUCTS)
     if tuple(sizes) != ours:
         raise OSError(f"interface struct sizes {tuple(sizes)} differ from ctypes' {ours}")

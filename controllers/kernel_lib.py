@@ -23,7 +23,14 @@ from typing import Any
 
 import numpy as np
 
-from controllers.kernel_abi import QpStatus, SqpInfo, SqpOptions, SqpStatus, check_layout
+from controllers.kernel_abi import (
+    Assessment,
+    QpStatus,
+    SqpInfo,
+    SqpOptions,
+    SqpStatus,
+    check_layout,
+)
 
 __all__ = ["Kernel", "Workspace"]
 
@@ -32,7 +39,8 @@ _VP, _CD, _CI = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
 _WS_CALLS: dict[str, tuple[list[Any], Any]] = {
     "simulate": ([_VP] * 3, None), "xtraj": ([_VP] * 3, None),
     "assess": ([_VP] * 6 + [_CD, _VP, _VP], None),
-    "assess_w": ([_VP, _VP, _VP, _CD, _VP, _VP, _VP], None), "terminal_gap": ([_VP] * 2, _CD),
+    "assess_w": ([_VP, _VP, _VP, _CD, _VP, _VP, _VP, _VP], None),
+    "terminal_gap": ([_VP] * 2, _CD),
     "sqp": ([_VP] * 12, _CI), "qp": ([_VP] * 11, _CI), "grad_l": ([_VP] * 5, None),
     "counters": ([_VP], None), "invalidate": ([], None), "clip": ([_VP], _CI)}
 
@@ -48,10 +56,10 @@ class Kernel:
         dims = (ctypes.c_long * 8)()
         self._fn("dims")(dims)
         self.n, self.m, self.N, self.q, self.nw, self.ng, self.npar, self.M = list(dims)
-        abi = (ctypes.c_long * 3)()
+        abi = (ctypes.c_long * 4)()
         self._fn("abi")(abi)
-        check_layout((abi[0], abi[1]))
-        self.workspace_bytes = int(abi[2])
+        check_layout((abi[0], abi[1], abi[2]))
+        self.workspace_bytes = int(abi[3])
         self.nl = int(self._fn("n_assess_rows")())
         self.flags: tuple[str, ...] = ()
         self._externals: dict[str, Any] = {}
@@ -121,9 +129,11 @@ class Workspace:
         self._buf = {name: np.zeros(shape) for name, shape in (
             ("x0", n), ("u", (N, m)), ("w", kernel.nw), ("p", kernel.npar), ("xb", n),
             ("ub", m), ("up", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))),
-            ("out", 8 + n),
+            ("xs", n),
             ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", m), ("xe", n), ("ue", m))}
         self._addr = {name: int(a.ctypes.data) for name, a in self._buf.items()}
+        self._out = Assessment()
+        self._addr["out"] = ctypes.addressof(self._out)
         self._c = {name: kernel.c[name] for name in _WS_CALLS}
         self.path = kernel.path
         self.n, self.m, self.N, self.q = kernel.n, kernel.m, kernel.N, kernel.q
@@ -177,13 +187,13 @@ class Workspace:
 
     def assess(self, x0: np.ndarray, u: np.ndarray, x_bar: np.ndarray, u_bar: np.ndarray,
                bounds: np.ndarray, alpha: float, u_prev: np.ndarray | None = None
-               ) -> tuple[np.ndarray, np.ndarray]:
+               ) -> tuple[np.ndarray, Assessment]:
         """The check of an input sequence in one call: states ``x_0 … x_N`` from ``x0`` under
-        ``u`` (N, m) and ``[cost, max row violation at i = 0, max row violation at i ≥ 1,
-        max |u|, ‖x_N − x̄‖∞, active constraints]`` (as ``FHOCP.cost`` with ``t = ‖x_N −
-        x̄‖∞`` and ``u_{−1} = u_prev``, and ``FHOCP._residuals``; ``bounds``: the tightened
-        bounds, N×q). ``u_prev`` is read only by a kernel with an input-rate term (then
-        ``None`` means zeros)."""
+        ``u`` (N, m) and their :class:`~controllers.kernel_abi.Assessment` (cost, worst
+        output rows at ``i = 0`` and ``i ≥ 1``, ``max |u|``, ``‖x_N − x̄‖∞``, active
+        constraints: as ``FHOCP.cost`` with ``t = ‖x_N − x̄‖∞`` and ``u_{−1} = u_prev``, and
+        ``FHOCP._residuals``; ``bounds``: the tightened bounds, N×q). ``u_prev`` is read only
+        by a kernel with an input-rate term (then ``None`` means zeros)."""
         b, a = self._buf, self._addr
         b["x0"][:] = x0
         b["u"][:] = u
@@ -193,24 +203,26 @@ class Workspace:
         b["bnd"][:, :self.nl] = bounds
         self._c["assess"](self._ws, a["x0"], a["u"], a["xb"], a["ub"], a["up"], a["bnd"],
                           float(alpha), a["x"], a["out"])
-        return b["x"].copy(), b["out"][:6].copy()
+        return b["x"].copy(), Assessment.from_buffer_copy(self._out)
 
     def assess_w(self, w: np.ndarray, p: np.ndarray, bounds: np.ndarray, alpha: float
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                 ) -> tuple[np.ndarray, np.ndarray, Assessment, np.ndarray]:
         """:meth:`assess` of the solver's answer ``w`` at ``p = (x̂, x̄, ū[, u_{−1}])``:
-        ``(u, x, out)`` with ``u = clip(w_u, −1, 1)`` and ``out[6]`` the defect
+        ``(u, x, out, x_s)`` with ``u = clip(w_u, −1, 1)`` and ``out.defect`` the defect
         ``max |x_solver − x|`` against the solver's trajectory at ``(w, p)``. A tracking
         FHOCP's kernel (``p = (x̂, x_s0, r[, u_{−1}])``) checks against ``x_s(u_s)`` of the
-        clipped ``u_s``: ``out[0]`` is :meth:`~controllers.fhocp_tracking.TrackingFHOCP.
-        tracking_cost`, ``out[7]`` the fixed-point residual ``‖f(x_s, u_s) − x_s‖∞`` (NaN
-        when Newton failed) and ``out[8:]`` is ``x_s``; ``out[7] = 0`` otherwise."""
+        clipped ``u_s``, returned as ``x_s``: ``out.cost`` is :meth:`~controllers.
+        fhocp_tracking.TrackingFHOCP.tracking_cost`, ``out.steady_residual`` the fixed-point
+        residual ``‖f(x_s, u_s) − x_s‖∞`` (NaN when Newton failed); otherwise ``x_s`` is
+        zeros and the residual 0."""
         b, a = self._buf, self._addr
         b["w"][:] = w
         b["p"][:] = p
         b["bnd"][:, :self.nl] = bounds
         self._c["assess_w"](self._ws, a["w"], a["p"], a["bnd"], float(alpha), a["uc"], a["x"],
-                            a["out"])
-        return b["uc"].copy(), b["x"].copy(), b["out"].copy()
+                            a["out"], a["xs"])
+        return (b["uc"].copy(), b["x"].copy(), Assessment.from_buffer_copy(self._out),
+                b["xs"].copy())
 
     def terminal_gap(self, w: np.ndarray, p: np.ndarray) -> float:
         """``‖x_N − x_ref‖∞`` of the rollout at ``(w, p)`` (``x_ref``: ``x̄``, or ``x_s(u_s)``

@@ -337,7 +337,7 @@ class SingleShootingNLP:
         got = FHOCPResult(u=u, x=x_k, cost=0.0, status="", success=False)
         set_residuals(got, out, alpha)
         return [(x_k, x_np),
-                (np.array([out[0], got.constraint_violation, got.terminal_violation]),
+                (np.array([out.cost, got.constraint_violation, got.terminal_violation]),
                  np.array([p.cost(x_np, u, x_bar, u_bar, u_prev=u_prev),
                            ref.constraint_violation, ref.terminal_violation]))]
 

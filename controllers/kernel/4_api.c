@@ -126,19 +126,16 @@ EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
 
 /* The independent check of an input sequence (controllers.fhocp: FHOCP.cost and
  * FHOCP._residuals on a plain rollout, in one call): states x (NH+1 x NX) from xh under u
- * (NH x NU, used as given), and
- *   out[0] cost of eq:optimization-cost with t = |x_N - x_bar|_inf (+ the input-rate term
- *          after up = u_{-1} when HAS_DU; up is not read otherwise),
- *   out[1] max_j (L U_o x_0 - bnd_0)_j, the i = 0 output rows (-inf when NL = 0),
- *   out[2] max_{i>=1, j} (L U_o x_i - bnd_i)_j (-inf when none),
- *   out[3] max |u|, out[4] |x_N - x_bar|_inf,
- *   out[5] active constraints: output rows i >= 1 and the terminal set within 1e-6, inputs
- *          with |u| > 1 - 1e-6 (as FHOCP._residuals counts them).
- * bnd: the tightened bounds h - a_i e_o - b_i - w_L - L b_o (NH x NL); alpha the terminal
- * set's radius. */
+ * (NH x NU, used as given), and in out (gk_assessment, controllers/kernel_abi.py) the cost of
+ * eq:optimization-cost with t = |x_N - x_bar|_inf (+ the input-rate term after up = u_{-1}
+ * when HAS_DU; up is not read otherwise), the worst i = 0 output row and the worst of the
+ * rows i >= 1 (-inf when none), max |u|, |x_N - x_bar|_inf and the active constraints (output
+ * rows i >= 1 and the terminal set within 1e-6, inputs with |u| > 1 - 1e-6, as
+ * FHOCP._residuals counts them). bnd: the tightened bounds h - a_i e_o - b_i - w_L - L b_o
+ * (NH x NL); alpha the terminal set's radius. */
 static void assess_core(gk_ws *ws, const double *xh, const double *u, const double *xb,
                         const double *ub, const double *up, const double *bnd, double alpha,
-                        double *x, double *out) {
+                        double *x, gk_assessment *out) {
   simulate(xh, u, x, ws->sz, ws->sr, ws->sh);
   double acc = 0.0;
   for (int i = 0; i < NH; i++) acc = add_quad(acc, x + i * NX, xb, QW, NX, QDIAG);
@@ -169,34 +166,37 @@ static void assess_core(gk_ws *ws, const double *xh, const double *u, const doub
   }
   if (dN - alpha > -1e-6) act++;
 #if HAS_DU
-  out[0] = acc + SW * dN * dN + du_cost(u, up, NH);
+  out->cost = acc + SW * dN * dN + du_cost(u, up, NH);
 #else
   (void)up;
-  out[0] = acc + SW * dN * dN;
+  out->cost = acc + SW * dN * dN;
 #endif
-  out[1] = v0;
-  out[2] = v1;
-  out[3] = umax;
-  out[4] = dN;
-  out[5] = act;
+  out->violation_first = v0;
+  out->violation_rows = v1;
+  out->u_max = umax;
+  out->terminal_distance = dN;
+  out->active = act;
+  out->defect = 0.0;
+  out->steady_residual = 0.0;
 }
 
 EXPORT void PFX(assess)(gk_ws *ws, const double *xh, const double *u, const double *xb,
                         const double *ub, const double *up, const double *bnd, double alpha,
-                        double *x, double *out) {
+                        double *x, gk_assessment *out) {
   assess_core(ws, xh, u, xb, ub, up, bnd, alpha, x, out);
 }
 
 /* The check of the solver's answer w at p = (x_hat, x_bar, u_bar[, u_prev]): u = clip(w_u, -1, 1)
- * into uc (NH x NU: the tail of a control horizon at u_s), assess_core of uc into x and
- * out[0..5], and out[6] the defect max |x_solver - x| against the solver's own trajectory at
- * (w, p) (the cached rollout). With HAS_ASS (the tracking FHOCP, p = (x_hat, x_s0, r[, u_prev]))
- * the reference is x_s(u_s) of the clipped u_s (Newton from x_s0), out[0] adds the offset
- * term and the last input's step to u_s (as TrackingFHOCP.tracking_cost), out[7] is the fixed
- * point residual |f(x_s, u_s) - x_s|inf by a plain GRU step (NaN when Newton failed) and
- * out[8 .. 8 + NX) is x_s; out[7] = 0 without HAS_ASS. */
+ * into uc (NH x NU: the tail of a control horizon at u_s), assess_core of uc into x and out,
+ * and out->defect the defect max |x_solver - x| against the solver's own trajectory at (w, p)
+ * (the cached rollout). With HAS_ASS (the tracking FHOCP, p = (x_hat, x_s0, r[, u_prev])) the
+ * reference is x_s(u_s) of the clipped u_s (Newton from x_s0), written to xs (NX), out->cost
+ * adds the offset term and the last input's step to u_s (as TrackingFHOCP.tracking_cost), and
+ * out->steady_residual is the fixed point residual |f(x_s, u_s) - x_s|inf by a plain GRU step
+ * (NaN when Newton failed); without HAS_ASS xs is not written and the residual is 0. */
 EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const double *bnd,
-                          double alpha, double *uc, double *x, double *out) {
+                          double alpha, double *uc, double *x, gk_assessment *out,
+                          double *xs_out) {
   for (int i = 0; i < NH; i++)
     for (int j = 0; j < NU; j++) {
       const double v = w[UC(i) + j];
@@ -213,12 +213,12 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
   for (int a = 0; a < NY; a++) {
     double e = BO[a] - ry[a];
     for (int k = 0; k < NX; k++) e += UO[a * NX + k] * xs[k];
-    out[0] += (e * TW[a]) * e;
+    out->cost += (e * TW[a]) * e;
   }
 #if HAS_DU
   for (int j = 0; j < NU; j++) {   /* zero with a control horizon: u_{N-1} = u_s */
     const double d = uc[(NH - 1) * NU + j] - us[j];
-    out[0] += (d * DW[j]) * d;
+    out->cost += (d * DW[j]) * d;
   }
 #endif
   PFX(gru_step)(xs, us, 0, 0, xn);
@@ -227,11 +227,11 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
     const double e = fabs(xn[k] - xs[k]);
     if (e > fp || e != e) fp = e;
   }
-  out[7] = fp;
-  memcpy(out + 8, xs, sizeof xs);
+  out->steady_residual = fp;
+  memcpy(xs_out, xs, sizeof xs);
 #else
+  (void)xs_out;
   assess_core(ws, p, uc, XREF(ws, p), UREF(w, p), UPREV(p), bnd, alpha, x, out);
-  out[7] = 0.0;
 #endif
   roll(ws, w, p, 0);
   double d = 0.0;
@@ -239,7 +239,7 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
     const double e = fabs(ws->X[c] - x[c]);
     if (e > d || e != e) d = e;
   }
-  out[6] = d;
+  out->defect = d;
 }
 
 /* |x_N - x_ref|inf of the rollout at (w, p) (x_ref: x_bar, or x_s(u_s) with HAS_ASS), the
@@ -350,7 +350,8 @@ EXPORT int PFX(n_assess_rows)(void) { return NL; }
 EXPORT void PFX(abi)(long *out) {
   out[0] = (long)sizeof(gk_sqp_opts);
   out[1] = (long)sizeof(gk_sqp_info);
-  out[2] = (long)sizeof(gk_ws);
+  out[2] = (long)sizeof(gk_assessment);
+  out[3] = (long)sizeof(gk_ws);
 }
 
 /* the workspace's clipping counters (the casadi functions' pool has its own workspaces) */

@@ -238,16 +238,16 @@ def test_answer_check_and_observer_step_match_numpy(n: int, N: int, m: int, p: i
         x = gru.simulate(fh.params, x0, u)[0]
         ref = FHOCPResult(u=u, x=x, cost=0.0, status="", success=False)
         _residuals_with(fh, ref, x, bounds, x_bar, alpha)
-        uc, xk, out = k.assess_w(w, np.concatenate([x0, x_bar, u_bar]), bounds, alpha)
+        uc, xk, out, _ = k.assess_w(w, np.concatenate([x0, x_bar, u_bar]), bounds, alpha)
         # the defect: the solver's trajectory (unclipped inputs) against the check's
         xs = gru.simulate(fh.params, x0, w[:-1].reshape(N, fh.m))[0]
         assert np.array_equal(uc, u) and rel(xk, x) < 1e-13
-        assert abs(out[6] - np.max(np.abs(xs - x))) < 1e-13
-        assert rel(out[0], fh.cost(x, u, x_bar, u_bar)) < 1e-12
-        viol = max(0.0, out[1], out[2], out[3] - 1.0)
+        assert abs(out.defect - np.max(np.abs(xs - x))) < 1e-13
+        assert rel(out.cost, fh.cost(x, u, x_bar, u_bar)) < 1e-12
+        viol = max(0.0, out.violation_first, out.violation_rows, out.u_max - 1.0)
         assert abs(viol - ref.constraint_violation) < 1e-12
-        assert abs(max(0.0, out[4] - alpha) - ref.terminal_violation) < 1e-12
-        assert int(out[5]) == ref.active
+        assert abs(max(0.0, out.terminal_distance - alpha) - ref.terminal_violation) < 1e-12
+        assert out.active == ref.active and out.steady_residual == 0.0
         seen.add((ref.constraint_violation > 0, ref.terminal_violation > 0))
         dz, dr = rng.normal(0, 0.2, n), rng.normal(0, 0.2, n)
         assert rel(k.gru_step(x0, u[0], dz, dr),
