@@ -224,95 +224,17 @@ class GRUModel:
             raise ModelFileError(f"{source}: 'version' is {version!r}, this cosim reads "
                                  f"version {FORMAT_VERSION}")
 
-        def array(value: Any, key: str, ndim: int) -> np.ndarray:
-            try:
-                arr = np.array(value, dtype=float)
-            except (TypeError, ValueError):
-                raise ModelFileError(f"{source}: '{key}' is not a numeric array") from None
-            if arr.ndim != ndim:
-                raise ModelFileError(f"{source}: '{key}' must be a {ndim}-D array, "
-                                     f"got shape {arr.shape}")
-            if not np.all(np.isfinite(arr)):
-                raise ModelFileError(f"{source}: '{key}' has a non-finite value")
-            return arr
-
-        params: dict[str, np.ndarray] = {}
-        for name in PARAM_NAMES:
-            if name not in doc:
-                raise ModelFileError(f"{source}: missing array '{name}'")
-            params[name] = array(doc[name], name, 1 if name.startswith("b") else 2)
+        params = _params(doc, source)
         n, m = params["W_z"].shape
         p = params["U_o"].shape[0]
-        expected = {"W_z": (n, m), "U_z": (n, n), "b_z": (n,), "W_r": (n, m), "U_r": (n, n),
-                    "b_r": (n,), "W_h": (n, m), "U_h": (n, n), "b_h": (n,), "U_o": (p, n),
-                    "b_o": (p,)}
-        for name, shape in expected.items():
-            if params[name].shape != shape:
-                raise ModelFileError(f"{source}: '{name}' has shape {params[name].shape}, "
-                                     f"expected {shape} (n={n}, m={m}, p={p})")
-
-        norm = doc.get("normalization")
-        if not isinstance(norm, dict):
-            raise ModelFileError(f"{source}: missing object 'normalization'")
-        scales: dict[str, np.ndarray] = {}
-        for key in NORMALIZATION_KEYS:
-            if key not in norm:
-                raise ModelFileError(f"{source}: missing 'normalization.{key}'")
-            scales[key] = array(norm[key], f"normalization.{key}", 1)
-            size = m if key.startswith("u") else p
-            if scales[key].shape != (size,):
-                raise ModelFileError(f"{source}: 'normalization.{key}' must have {size} "
-                                     f"entries, got {scales[key].shape[0]}")
-            if key.endswith("scale") and np.any(scales[key] == 0):
-                raise ModelFileError(f"{source}: 'normalization.{key}' has a zero entry")
-
-        def signals(key: str, count: int) -> tuple[list[str], list[str]]:
-            entries = doc.get(key)
-            if not isinstance(entries, list) or len(entries) != count:
-                raise ModelFileError(f"{source}: '{key}' must list {count} signals")
-            names, units = [], []
-            for i, entry in enumerate(entries):
-                if not isinstance(entry, dict) or not isinstance(entry.get("name"), str):
-                    raise ModelFileError(f"{source}: '{key}[{i}]' needs a string 'name'")
-                names.append(entry["name"])
-                units.append(str(entry.get("unit", "")))
-            return names, units
-
-        input_names, input_units = signals("inputs", m)
-        output_names, output_units = signals("outputs", p)
+        scales = _normalization(doc, source, m, p)
+        input_names, input_units = _signals(doc, "inputs", m, source)
+        output_names, output_units = _signals(doc, "outputs", p, source)
         Ts = doc.get("Ts")
         if (not isinstance(Ts, int | float) or isinstance(Ts, bool) or not math.isfinite(Ts)
                 or Ts <= 0):
             raise ModelFileError(f"{source}: 'Ts' must be a positive number, got {Ts!r}")
-
-        L_z = L_r = None
-        observer = doc.get("observer")
-        if observer is not None:
-            if not isinstance(observer, dict) or not {"L_z", "L_r"} <= observer.keys():
-                raise ModelFileError(f"{source}: 'observer' must hold 'L_z' and 'L_r'")
-            L_z = array(observer["L_z"], "observer.L_z", 2)
-            L_r = array(observer["L_r"], "observer.L_r", 2)
-            for key, gain in (("L_z", L_z), ("L_r", L_r)):
-                if gain.shape != (n, p):
-                    raise ModelFileError(f"{source}: 'observer.{key}' has shape {gain.shape}, "
-                                         f"expected {(n, p)}")
-        w_y_bar = doc.get("w_y_bar")
-        if w_y_bar is not None and (not isinstance(w_y_bar, int | float) or w_y_bar < 0
-                                    or not math.isfinite(w_y_bar)):
-            raise ModelFileError(f"{source}: 'w_y_bar' must be a non-negative number")
-        training = doc.get("training", {})
-        if not isinstance(training, dict):
-            raise ModelFileError(f"{source}: 'training' must be an object")
-        profile = None
-        if doc.get("prediction_error") is not None:
-            profile = array(doc["prediction_error"], "prediction_error", 2)
-            if profile.shape[1] != p or profile.shape[0] < 1 or np.any(profile < 0):
-                raise ModelFileError(f"{source}: 'prediction_error' must be a non-negative "
-                                     f"array of rows of {p} entries, got shape "
-                                     f"{profile.shape}")
-        certificate = doc.get("certificate")
-        if certificate is not None and not isinstance(certificate, dict):
-            raise ModelFileError(f"{source}: 'certificate' must be an object")
+        L_z, L_r, w_y_bar, training, profile, certificate = _design_entries(doc, source, n, p)
 
         model = cls(params=params, u_offset=scales["u_offset"], u_scale=scales["u_scale"],
                     y_offset=scales["y_offset"], y_scale=scales["y_scale"],
@@ -396,3 +318,102 @@ def write_atomic(path: str | Path, text: str) -> None:
             os.fsync(dir_fd)
         finally:
             os.close(dir_fd)
+
+
+def _array(value: Any, key: str, ndim: int, source: str) -> np.ndarray:
+    """``value`` as a finite ``ndim``-D float array (one-line errors naming ``key``)."""
+    try:
+        arr = np.array(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ModelFileError(f"{source}: '{key}' is not a numeric array") from None
+    if arr.ndim != ndim:
+        raise ModelFileError(f"{source}: '{key}' must be a {ndim}-D array, got shape "
+                             f"{arr.shape}")
+    if not np.all(np.isfinite(arr)):
+        raise ModelFileError(f"{source}: '{key}' has a non-finite value")
+    return arr
+
+
+def _params(doc: dict, source: str) -> dict[str, np.ndarray]:
+    """The GRU weights of ``eq:gru``, their shapes checked against each other."""
+    params: dict[str, np.ndarray] = {}
+    for name in PARAM_NAMES:
+        if name not in doc:
+            raise ModelFileError(f"{source}: missing array '{name}'")
+        params[name] = _array(doc[name], name, 1 if name.startswith("b") else 2, source)
+    n, m = params["W_z"].shape
+    p = params["U_o"].shape[0]
+    expected = {"W_z": (n, m), "U_z": (n, n), "b_z": (n,), "W_r": (n, m), "U_r": (n, n),
+                "b_r": (n,), "W_h": (n, m), "U_h": (n, n), "b_h": (n,), "U_o": (p, n),
+                "b_o": (p,)}
+    for name, shape in expected.items():
+        if params[name].shape != shape:
+            raise ModelFileError(f"{source}: '{name}' has shape {params[name].shape}, "
+                                 f"expected {shape} (n={n}, m={m}, p={p})")
+    return params
+
+
+def _normalization(doc: dict, source: str, m: int, p: int) -> dict[str, np.ndarray]:
+    """The ``normalization`` object: offsets and non-zero scales, one entry per signal."""
+    norm = doc.get("normalization")
+    if not isinstance(norm, dict):
+        raise ModelFileError(f"{source}: missing object 'normalization'")
+    scales: dict[str, np.ndarray] = {}
+    for key in NORMALIZATION_KEYS:
+        if key not in norm:
+            raise ModelFileError(f"{source}: missing 'normalization.{key}'")
+        scales[key] = _array(norm[key], f"normalization.{key}", 1, source)
+        size = m if key.startswith("u") else p
+        if scales[key].shape != (size,):
+            raise ModelFileError(f"{source}: 'normalization.{key}' must have {size} "
+                                 f"entries, got {scales[key].shape[0]}")
+        if key.endswith("scale") and np.any(scales[key] == 0):
+            raise ModelFileError(f"{source}: 'normalization.{key}' has a zero entry")
+    return scales
+
+
+def _signals(doc: dict, key: str, count: int, source: str) -> tuple[list[str], list[str]]:
+    """The names and units of the ``inputs`` or ``outputs`` list."""
+    entries = doc.get(key)
+    if not isinstance(entries, list) or len(entries) != count:
+        raise ModelFileError(f"{source}: '{key}' must list {count} signals")
+    names, units = [], []
+    for i, entry in enumerate(entries):
+        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str):
+            raise ModelFileError(f"{source}: '{key}[{i}]' needs a string 'name'")
+        names.append(entry["name"])
+        units.append(str(entry.get("unit", "")))
+    return names, units
+
+
+def _design_entries(doc: dict, source: str, n: int, p: int) -> tuple[Any, ...]:
+    """The optional entries: observer gains, ``w_y_bar``, ``training``, the measured
+    ``prediction_error`` and the ``certificate`` verdict."""
+    L_z = L_r = None
+    observer = doc.get("observer")
+    if observer is not None:
+        if not isinstance(observer, dict) or not {"L_z", "L_r"} <= observer.keys():
+            raise ModelFileError(f"{source}: 'observer' must hold 'L_z' and 'L_r'")
+        L_z = _array(observer["L_z"], "observer.L_z", 2, source)
+        L_r = _array(observer["L_r"], "observer.L_r", 2, source)
+        for key, gain in (("L_z", L_z), ("L_r", L_r)):
+            if gain.shape != (n, p):
+                raise ModelFileError(f"{source}: 'observer.{key}' has shape {gain.shape}, "
+                                     f"expected {(n, p)}")
+    w_y_bar = doc.get("w_y_bar")
+    if w_y_bar is not None and (not isinstance(w_y_bar, int | float) or w_y_bar < 0
+                                or not math.isfinite(w_y_bar)):
+        raise ModelFileError(f"{source}: 'w_y_bar' must be a non-negative number")
+    training = doc.get("training", {})
+    if not isinstance(training, dict):
+        raise ModelFileError(f"{source}: 'training' must be an object")
+    profile = None
+    if doc.get("prediction_error") is not None:
+        profile = _array(doc["prediction_error"], "prediction_error", 2, source)
+        if profile.shape[1] != p or profile.shape[0] < 1 or np.any(profile < 0):
+            raise ModelFileError(f"{source}: 'prediction_error' must be a non-negative "
+                                 f"array of rows of {p} entries, got shape {profile.shape}")
+    certificate = doc.get("certificate")
+    if certificate is not None and not isinstance(certificate, dict):
+        raise ModelFileError(f"{source}: 'certificate' must be an object")
+    return L_z, L_r, w_y_bar, training, profile, certificate

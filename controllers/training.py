@@ -231,6 +231,45 @@ def _rollout(p: dict[str, Any], u: Any, x0: Any) -> Any:
     return torch.stack(outs)
 
 
+def _subsequences(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray,
+                  y_all: np.ndarray, split_all: np.ndarray, experiment: np.ndarray | None,
+                  opt: TrainOptions) -> tuple[Any, Any]:
+    """The training subsequences as ``(seq_len, m | p, count)`` float64 tensors, cut inside
+    each training stretch (:func:`controllers.sequences.stretches`); ``u_train``,
+    ``y_train`` must be the record's training rows."""
+    import torch
+
+    n_train = int(np.count_nonzero(split_all == "train"))
+    if u_train.shape[0] != n_train or y_train.shape[0] != n_train:
+        raise DataError(f"u_train has {u_train.shape[0]} rows and y_train {y_train.shape[0]}, "
+                        f"but the record has {n_train} training rows")
+    spans = sequences.stretches(split_all, experiment, "train")
+    starts = sequences.subsequence_starts(spans, opt.seq_len, opt.stride)
+    U = torch.tensor(np.stack([u_all[s:s + opt.seq_len] for s in starts], axis=2),
+                     dtype=torch.float64)
+    Y = torch.tensor(np.stack([y_all[s:s + opt.seq_len] for s in starts], axis=2),
+                     dtype=torch.float64)
+    return U, Y
+
+
+def _batch_loss(q: dict[str, Any], U: Any, Y: Any, opt: TrainOptions, target: float
+                ) -> tuple[Any, Any]:
+    """``(loss, regulariser)`` of one batch: the mean squared error of the rollouts from
+    ``x = 0`` after the washout, and the ν and ``‖U_o‖∞`` penalties of the options."""
+    import torch
+
+    x0 = torch.zeros(opt.n, U.shape[2], dtype=torch.float64)
+    err = (_rollout(q, U, x0) - Y)[opt.washout:]
+    loss = (err ** 2).mean()
+    reg: Any = 0.0
+    if opt.constraint == "penalty" or opt.penalty_weight > 0:
+        reg = reg + opt.penalty_weight * torch.relu(nu_torch(q) - target)
+    if opt.uo_weight > 0:
+        uo = q["U_o"].abs().sum(dim=1).max()
+        reg = reg + opt.uo_weight * torch.relu(uo - opt.uo_max)
+    return loss, reg
+
+
 def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np.ndarray,
           split_all: np.ndarray, options: TrainOptions | None = None, progress: bool = True,
           init: dict[str, np.ndarray] | None = None,
@@ -291,14 +330,8 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
                 params[k].copy_(q[k])
 
     split_all = np.asarray(split_all)
-    n_train = int(np.count_nonzero(split_all == "train"))
-    if u_train.shape[0] != n_train or y_train.shape[0] != n_train:
-        raise DataError(f"u_train has {u_train.shape[0]} rows and y_train {y_train.shape[0]}, "
-                        f"but the record has {n_train} training rows")
-    spans = sequences.stretches(split_all, experiment, "train")
-    starts = sequences.subsequence_starts(spans, opt.seq_len, opt.stride)
-    U = torch.tensor(np.stack([u_all[s:s + opt.seq_len] for s in starts], axis=2), dtype=dtype)
-    Y = torch.tensor(np.stack([y_all[s:s + opt.seq_len] for s in starts], axis=2), dtype=dtype)
+    U, Y = _subsequences(u_train, y_train, u_all, y_all, split_all, experiment, opt)
+    starts = range(U.shape[2])
     batch = opt.batch if 0 < opt.batch <= len(starts) else len(starts)
     n_batches = math.ceil(len(starts) / batch)
     optimiser = torch.optim.Adam([v for v in params.values() if v.requires_grad], lr=opt.lr)
@@ -337,17 +370,8 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
         for b in range(n_batches):
             idx = torch.as_tensor(order[b * batch:(b + 1) * batch])
             q, _ = effective()
-            x0 = torch.zeros(opt.n, len(idx), dtype=dtype)
-            xi = _rollout(q, U[:, :, idx], x0)
-            err = (xi - Y[:, :, idx])[opt.washout:]
-            loss = (err ** 2).mean()
+            loss, reg = _batch_loss(q, U[:, :, idx], Y[:, :, idx], opt, target)
             total += loss.item()
-            reg = 0.0
-            if opt.constraint == "penalty" or opt.penalty_weight > 0:
-                reg = reg + opt.penalty_weight * torch.relu(nu_torch(q) - target)
-            if opt.uo_weight > 0:
-                uo = q["U_o"].abs().sum(dim=1).max()
-                reg = reg + opt.uo_weight * torch.relu(uo - opt.uo_max)
             optimiser.zero_grad()
             (loss + reg).backward()
             optimiser.step()

@@ -181,6 +181,45 @@ def _scored(record: Record) -> str:
     return "val" if record.has("val") else "train"
 
 
+def window_arrays(record: Record, window: int | None
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The training windows (:func:`training_windows`) as ``(U, Y, W, S)`` arrays of shape
+    ``(windows, longest, ·)``: inputs, outputs, loss weights (0 on the padding of shorter
+    windows) and the outputs' saturation flags."""
+    spans = training_windows(record, window)
+    if not spans:
+        raise ValueError("the record has no training rows")
+    T = max(b - a for a, b in spans)
+    B = len(spans)
+    U = np.zeros((B, T, record.m))
+    Y = np.zeros((B, T, record.p))
+    W = np.zeros((B, T, record.p))
+    S = np.zeros((B, T, record.p), dtype=np.int8)
+    for i, (a, b) in enumerate(spans):
+        U[i, :b - a], Y[i, :b - a], S[i, :b - a] = record.u[a:b], record.y[a:b], \
+            record.sat[a:b]
+        W[i, :b - a] = 1.0
+    return U, Y, W, S
+
+
+def _descend(r: dict[str, Any], q: dict[str, Any], x0: Any, idx: np.ndarray,
+             dims: tuple[int, int, int], adam: Any) -> None:
+    """One Adam step from the simulation loss's gradients ``r`` (the C BPTT's, with respect
+    to the constrained weights ``q``, chained to the free ones by torch, and to the batch's
+    initial states ``x0[idx]``)."""
+    import torch
+
+    n, m, p = dims
+    grads = unpack(r["grad"], n, m, p)
+    adam.zero_grad()
+    keys = [k for k in q if q[k].requires_grad]
+    torch.autograd.backward([q[k] for k in keys], [torch.from_numpy(grads[k]) for k in keys])
+    g = np.zeros((x0.shape[0], n))
+    g[idx] = r["grad_x0"]
+    x0.grad = torch.from_numpy(g)
+    adam.step()
+
+
 def fit_candidate(record: Record, options: SimOptions | None = None,
                   progress: Callable[[int], None] | None = None,
                   init: dict[str, np.ndarray] | None = None) -> Candidate:
@@ -197,19 +236,8 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
     dtype = torch.float64
     target = 1.0 - opt.nu_margin
     m, p, n = record.m, record.p, opt.n
-    spans = training_windows(record, opt.window)
-    if not spans:
-        raise ValueError("the record has no training rows")
-    T = max(b - a for a, b in spans)
-    B = len(spans)
-    U = np.zeros((B, T, m))
-    Y = np.zeros((B, T, p))
-    W = np.zeros((B, T, p))
-    S = np.zeros((B, T, p), dtype=np.int8)
-    for i, (a, b) in enumerate(spans):      # windows shorter than T padded with weight 0
-        U[i, :b - a], Y[i, :b - a], S[i, :b - a] = record.u[a:b], record.y[a:b], \
-            record.sat[a:b]
-        W[i, :b - a] = 1.0
+    U, Y, W, S = window_arrays(record, opt.window)
+    B = U.shape[0]
     rng = np.random.default_rng(opt.seed)
     n_batches = min(STEPS_PER_EPOCH, B)
 
@@ -260,15 +288,7 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
         idx = batches.pop()
         w = W[idx]
         loss = SimLoss(U[idx], Y[idx], w / w.sum(), S[idx])
-        r = loss(qn, x0.detach().numpy()[idx])
-        grads = unpack(r["grad"], n, m, p)
-        adam.zero_grad()
-        keys = [k for k in q if q[k].requires_grad]
-        torch.autograd.backward([q[k] for k in keys], [torch.from_numpy(grads[k]) for k in keys])
-        g = np.zeros((B, n))
-        g[idx] = r["grad_x0"]
-        x0.grad = torch.from_numpy(g)
-        adam.step()
+        _descend(loss(qn, x0.detach().numpy()[idx]), q, x0, idx, (n, m, p), adam)
         scheduler.step()
         with torch.no_grad():
             q, _ = constrain(params, target, opt.sigma_z_max)

@@ -333,6 +333,86 @@ def _variants(items: Any, loc: _Locator, controller: str,
     return tuple(out)
 
 
+def _read(path: Path) -> tuple[str, dict]:
+    """The spec's text and its TOML document (``file:line`` errors)."""
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise CosimError(f"{path}: campaign spec not found") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise CosimError(f"{path}: cannot read the campaign spec: {exc}") from None
+    try:
+        return text, tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        raise CosimError(f"{path}:{m.group(1) if m else 1}: invalid TOML: {exc}") from None
+    except RecursionError:
+        raise CosimError(f"{path}:1: invalid TOML: nested too deeply") from None
+
+
+def _campaign_table(doc: dict, loc: _Locator) -> dict:
+    """The ``[campaign]`` table, with no unknown table or key and its required keys."""
+    unknown = set(doc) - _TOP_KEYS
+    if unknown:
+        key = sorted(unknown)[0]
+        raise loc.error(f"unknown table or key '{key}' (known: "
+                        f"{', '.join(sorted(_TOP_KEYS))})", None, key)
+    camp = doc.get("campaign")
+    if not isinstance(camp, dict):
+        raise CosimError(f"{loc.path}:1: no [campaign] table")
+    unknown = set(camp) - _CAMPAIGN_KEYS
+    if unknown:
+        key = sorted(unknown)[0]
+        raise loc.error(f"[campaign]: unknown key '{key}' (known: "
+                        f"{', '.join(sorted(_CAMPAIGN_KEYS))})", "campaign", key)
+    for required in ("runs", "scenario"):
+        if required not in camp:
+            raise loc.error(f"[campaign]: '{required}' is missing", "campaign")
+    return camp
+
+
+def _plant(plant: Any, loc: _Locator) -> str | None:
+    """``plant``: an FMU path or ``model:FILE``, the file checked to exist."""
+    if plant is None:
+        return None
+    if not isinstance(plant, str) or not plant:
+        raise loc.error("plant: expected an FMU path or model:<model file>", "campaign",
+                        "plant")
+    if plant.startswith("model:"):
+        return "model:" + str(_file(plant[len("model:"):], loc, "campaign", "plant",
+                                    "model file"))
+    return str(_file(plant, loc, "campaign", "plant", "plant FMU"))
+
+
+def _controller_options(doc: dict, loc: _Locator, model: Path | None) -> dict:
+    """``[controller.options]`` (with the campaign's ``model``)."""
+    ctrl_table = doc.get("controller", {})
+    if not isinstance(ctrl_table, dict) or set(ctrl_table) - {"options"}:
+        raise loc.error("[controller]: only [controller.options] is allowed", "controller")
+    options = ctrl_table.get("options", {})
+    if not isinstance(options, dict):
+        raise loc.error("[controller.options] must be a table", "controller.options")
+    return {**options, "model": str(model)} if model is not None else options
+
+
+def _draws(doc: dict, loc: _Locator) -> list:
+    """The ``[draw]`` table's distributions, by column."""
+    draws_table = doc.get("draw", {})
+    if not isinstance(draws_table, dict):
+        raise loc.error("[draw] must be a table", "draw")
+    draws = []
+    for key, value in draws_table.items():
+        if "." not in key and isinstance(value, dict) and not (
+                len(value) == 1 and next(iter(value)) in DISTRIBUTIONS):
+            # a dotted key without quotes ("plant.a2" written as plant.a2) nests tables
+            dotted = f"{key}.{next(iter(value), '')}"
+            raise loc.error(f"draw '{dotted}': quote dotted column names: \"{dotted}\" = …",
+                            "draw", dotted)
+        _draw_key(key, loc)
+        draws.append(_distribution(key, value, loc))
+    return draws
+
+
 def load(path: str | Path) -> CampaignSpec:
     """Read and check a campaign specification.
 
@@ -343,36 +423,9 @@ def load(path: str | Path) -> CampaignSpec:
         value, a file that does not exist, an unknown distribution.
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise CosimError(f"{path}: campaign spec not found") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise CosimError(f"{path}: cannot read the campaign spec: {exc}") from None
-    try:
-        doc = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        m = re.search(r"line (\d+)", str(exc))
-        raise CosimError(f"{path}:{m.group(1) if m else 1}: invalid TOML: {exc}") from None
-    except RecursionError:
-        raise CosimError(f"{path}:1: invalid TOML: nested too deeply") from None
+    text, doc = _read(path)
     loc = _Locator(path, text)
-    unknown = set(doc) - _TOP_KEYS
-    if unknown:
-        key = sorted(unknown)[0]
-        raise loc.error(f"unknown table or key '{key}' (known: "
-                        f"{', '.join(sorted(_TOP_KEYS))})", None, key)
-    camp = doc.get("campaign")
-    if not isinstance(camp, dict):
-        raise CosimError(f"{path}:1: no [campaign] table")
-    unknown = set(camp) - _CAMPAIGN_KEYS
-    if unknown:
-        key = sorted(unknown)[0]
-        raise loc.error(f"[campaign]: unknown key '{key}' (known: "
-                        f"{', '.join(sorted(_CAMPAIGN_KEYS))})", "campaign", key)
-    for required in ("runs", "scenario"):
-        if required not in camp:
-            raise loc.error(f"[campaign]: '{required}' is missing", "campaign")
+    camp = _campaign_table(doc, loc)
     name = camp.get("name", path.stem)
     if not isinstance(name, str) or not _NAME.match(name):
         raise loc.error(f"name = {name!r}: expected a name of letters, digits and _ . + -",
@@ -386,16 +439,7 @@ def load(path: str | Path) -> CampaignSpec:
     if not isinstance(controller, str) or not controller:
         raise loc.error(f"controller = {controller!r}: expected a controller name",
                         "campaign", "controller")
-    plant = camp.get("plant")
-    if plant is not None:
-        if not isinstance(plant, str) or not plant:
-            raise loc.error("plant: expected an FMU path or model:<model file>", "campaign",
-                            "plant")
-        if plant.startswith("model:"):
-            plant = "model:" + str(_file(plant[len("model:"):], loc, "campaign", "plant",
-                                         "model file"))
-        else:
-            plant = str(_file(plant, loc, "campaign", "plant", "plant FMU"))
+    plant = _plant(camp.get("plant"), loc)
     vmap = _file(camp["map"], loc, "campaign", "map", "variable map") if "map" in camp else None
     model = (_file(camp["model"], loc, "campaign", "model", "model file")
              if "model" in camp else None)
@@ -418,27 +462,8 @@ def load(path: str | Path) -> CampaignSpec:
         if not isinstance(value, bool):
             raise loc.error(f"{key} = {value!r}: expected true or false", "campaign", key)
         flags[key] = value
-    ctrl_table = doc.get("controller", {})
-    if not isinstance(ctrl_table, dict) or set(ctrl_table) - {"options"}:
-        raise loc.error("[controller]: only [controller.options] is allowed", "controller")
-    options = ctrl_table.get("options", {})
-    if not isinstance(options, dict):
-        raise loc.error("[controller.options] must be a table", "controller.options")
-    if model is not None:
-        options = {**options, "model": str(model)}
-    draws_table = doc.get("draw", {})
-    if not isinstance(draws_table, dict):
-        raise loc.error("[draw] must be a table", "draw")
-    draws = []
-    for key, value in draws_table.items():
-        if "." not in key and isinstance(value, dict) and not (
-                len(value) == 1 and next(iter(value)) in DISTRIBUTIONS):
-            # a dotted key without quotes ("plant.a2" written as plant.a2) nests tables
-            dotted = f"{key}.{next(iter(value), '')}"
-            raise loc.error(f"draw '{dotted}': quote dotted column names: \"{dotted}\" = …",
-                            "draw", dotted)
-        _draw_key(key, loc)
-        draws.append(_distribution(key, value, loc))
+    options = _controller_options(doc, loc, model)
+    draws = _draws(doc, loc)
     setpoints = _setpoints(doc["setpoints"], loc) if "setpoints" in doc else None
     initial = _initial_state(doc["initial_state"], loc) if "initial_state" in doc else None
     if initial is not None and not (isinstance(plant, str) and plant.startswith("model:")):

@@ -223,29 +223,12 @@ def run(args: argparse.Namespace) -> int:
     """Compute the certificate, print it, check it; returns the exit code."""
     import numpy as np
 
-    from controllers.equilibrium import equilibrium
-    from controllers.errors import ControllersError, UnreachableSetpoint
-    from controllers.fhocp_tracking import DEFAULTS as TRACKING
-    from controllers.model import DEFAULT_MODEL, GRUModel
-
-    if args.model is None:
-        args.model = str(DEFAULT_MODEL)
-    if args.N is None:
-        args.N = TRACKING["N"] if args.law == "tracking" else 15
-    if args.N < 1:
-        raise CosimError(f"--N must be >= 1, got {args.N}")
-    if not (math.isfinite(args.e_o0) and args.e_o0 >= 0):
-        raise CosimError(f"--e-o0 must be a non-negative number, got {args.e_o0}")
-    if args.gain_scale is not None and not (math.isfinite(args.gain_scale)
-                                            and args.gain_scale >= 0):
-        raise CosimError(f"--gain-scale must be a non-negative number, got {args.gain_scale}")
-    if args.plot:
-        from cosim.outpaths import figure_file
-
-        figure_file(args.plot, "--plot")
-    model = GRUModel.load(args.model)
+    from controllers.errors import ControllersError
+    from controllers.model import GRUModel
     from cosim_adapters.problems import problem_for
 
+    _check_args(args)
+    model = GRUModel.load(args.model)
     model.problem = problem_for(model, getattr(args, "problem", None))
     names = list(model.output_names)
     setpoints_phys = [_parse_setpoint(s, names) for s in args.setpoint]
@@ -263,24 +246,8 @@ def run(args: argparse.Namespace) -> int:
             raise CosimError(str(exc)) from None
         raise CosimError(f"{args.model}: {exc}") from None
 
-    failures = cert.failures()
-    n_design = len(failures)
-    empty = [name for name, lo, _ in _admissible(cert, model) if lo is None]
-    per_setpoint = []
-    for sp_phys, sp in zip(setpoints_phys, setpoints, strict=True):
-        label = ", ".join(f"{n}={v:g}" for n, v in zip(names, sp_phys, strict=True))
-        f = cert.failures(sp)[n_design:]
-        u_bar = None
-        try:
-            _, u = equilibrium(model, sp)
-            u_bar = model.denormalize_u(u)
-        except UnreachableSetpoint as exc:
-            f.append(f"equilibrium: {exc}")
-        per_setpoint.append((label, sp, u_bar, f))
-        failures += [f"set-point {label}: {msg}" for msg in f]
-    if empty:
-        failures.append("admissible set-points (ass:setpoint and eq:condition-recursive-"
-                        f"feasibility): none for {', '.join(empty)}")
+    n_design = len(cert.failures())
+    per_setpoint, failures = _setpoint_checks(model, cert, setpoints_phys, setpoints)
     if no_theta:
         failures.append(no_theta)
     tracking = None
@@ -290,7 +257,6 @@ def run(args: argparse.Namespace) -> int:
         design = [m for m in failures[:n_design] if not m.startswith("δISS")]
         verdict = _paper_verdict(model, cert, kwargs, setpoints,
                                  design + ([no_theta] if no_theta else []))
-
     if args.json:
         docs = [cert.to_json(sp) for _, sp, _, _ in per_setpoint] or [cert.to_json()]
         if tracking is not None:
@@ -309,25 +275,83 @@ def run(args: argparse.Namespace) -> int:
         path = figure(args.plot, model, cert, setpoints_phys)
         print(f"figure written to {path}", file=sys.stderr)
     if args.save:
-        from cosim.atomicio import output_error
-
-        model.L_z, model.L_r, model.w_y_bar = cert.L_z, cert.L_r, cert.w_y_bar
-        model.certificate = {**verdict.to_json(), "N": cert.N, "e_o0": cert.e_o0,
-                             "gain_scale": cert.gain_scale,
-                             "setpoints": [dict(zip(names, map(float, sp), strict=True))
-                                           for sp in setpoints_phys]}
-        try:
-            model.save(args.model)
-        except OSError as exc:
-            raise output_error(args.model, exc) from None
-        print(f"saved L_z, L_r, w_y_bar and the verdict (certified: "
-              f"{str(verdict.certified).lower()}) to {args.model}", file=sys.stderr)
+        _save(args.model, model, cert, verdict, setpoints_phys)
     if not verdict.certified:
         print(f"cosim certify: not certified ({len(verdict.reasons())} hypothesis check(s) "
               "failed); the robust MPC runs this model uncertified, or refuses with "
               "--require-certificate", file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
+
+
+def _check_args(args: argparse.Namespace) -> None:
+    """Default ``--model`` and ``--N`` (the law's), and reject bad numbers in one line."""
+    from controllers.fhocp_tracking import DEFAULTS as TRACKING
+    from controllers.model import DEFAULT_MODEL
+
+    if args.model is None:
+        args.model = str(DEFAULT_MODEL)
+    if args.N is None:
+        args.N = TRACKING["N"] if args.law == "tracking" else 15
+    if args.N < 1:
+        raise CosimError(f"--N must be >= 1, got {args.N}")
+    if not (math.isfinite(args.e_o0) and args.e_o0 >= 0):
+        raise CosimError(f"--e-o0 must be a non-negative number, got {args.e_o0}")
+    if args.gain_scale is not None and not (math.isfinite(args.gain_scale)
+                                            and args.gain_scale >= 0):
+        raise CosimError(f"--gain-scale must be a non-negative number, got {args.gain_scale}")
+    if args.plot:
+        from cosim.outpaths import figure_file
+
+        figure_file(args.plot, "--plot")
+
+
+def _setpoint_checks(model: Any, cert: Any, setpoints_phys: list, setpoints: list
+                     ) -> tuple[list, list[str]]:
+    """Each set-point's label, normalised value, equilibrium input and failed hypotheses,
+    and every failure in words (the design's first, then each set-point's, then an empty
+    admissible set)."""
+    from controllers.equilibrium import equilibrium
+    from controllers.errors import UnreachableSetpoint
+
+    names = list(model.output_names)
+    failures = cert.failures()
+    n_design = len(failures)
+    per_setpoint = []
+    for sp_phys, sp in zip(setpoints_phys, setpoints, strict=True):
+        label = ", ".join(f"{n}={v:g}" for n, v in zip(names, sp_phys, strict=True))
+        f = cert.failures(sp)[n_design:]
+        u_bar = None
+        try:
+            _, u = equilibrium(model, sp)
+            u_bar = model.denormalize_u(u)
+        except UnreachableSetpoint as exc:
+            f.append(f"equilibrium: {exc}")
+        per_setpoint.append((label, sp, u_bar, f))
+        failures += [f"set-point {label}: {msg}" for msg in f]
+    empty = [name for name, lo, _ in _admissible(cert, model) if lo is None]
+    if empty:
+        failures.append("admissible set-points (ass:setpoint and eq:condition-recursive-"
+                        f"feasibility): none for {', '.join(empty)}")
+    return per_setpoint, failures
+
+
+def _save(path: str, model: Any, cert: Any, verdict: Any, setpoints_phys: list) -> None:
+    """``--save``: the observer gains, ``w̄_y`` and the verdict into the model file (atomic)."""
+    from cosim.atomicio import output_error
+
+    names = list(model.output_names)
+    model.L_z, model.L_r, model.w_y_bar = cert.L_z, cert.L_r, cert.w_y_bar
+    model.certificate = {**verdict.to_json(), "N": cert.N, "e_o0": cert.e_o0,
+                         "gain_scale": cert.gain_scale,
+                         "setpoints": [dict(zip(names, map(float, sp), strict=True))
+                                       for sp in setpoints_phys]}
+    try:
+        model.save(path)
+    except OSError as exc:
+        raise output_error(path, exc) from None
+    print(f"saved L_z, L_r, w_y_bar and the verdict (certified: "
+          f"{str(verdict.certified).lower()}) to {path}", file=sys.stderr)
 
 
 def _paper_verdict(model: Any, cert: Any, kwargs: dict, setpoints: list,

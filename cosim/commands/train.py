@@ -136,6 +136,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--window", type=int, default=0,
                         help="training window length (default: a stretch whole up to 2,000 "
                              "rows, else 1,000-row windows)")
+    _training_arguments(parser)
+    parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    parser.set_defaults(func=run)
+
+
+def _training_arguments(parser: argparse.ArgumentParser) -> None:
+    """The optimiser's and the model's options (sequences, learning rate, the δISS
+    constraint, the weights' start, early stopping)."""
+    from controllers.training import TrainOptions
+
+    d = TrainOptions()
     parser.add_argument("--seq-len", type=int, default=None,
                         help=f"truncated: subsequence length (default: follows the record, "
                         f"{d.seq_len} from 5,000 training rows on)")
@@ -181,8 +192,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--patience", type=int, default=d.patience,
                         help="stop after this many epochs without a better validation score "
                         "(0 = off)")
-    parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    parser.set_defaults(func=run)
 
 
 def _problem(args: argparse.Namespace) -> tuple[Any, bool]:

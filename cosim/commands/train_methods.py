@@ -162,13 +162,36 @@ def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
     return Trained(result.params, result.nu, rec, None, f"GRU n={opts.n}")
 
 
+def _prediction_error(record: Any, ev: Any, problem: Any) -> tuple[Any, dict[str, Any]]:
+    """The model's measured prediction error on held-back rows (val and test, else train;
+    :func:`controllers.prediction_error.error_profile`: what the uncertified mode tightens
+    by) and its summary for the model file, in the outputs' units."""
+    from controllers.fhocp_tracking import DEFAULTS as TRACKING
+    from controllers.prediction_error import error_profile
+
+    held = np.isin(record.split, ("val", "test"))
+    profile = error_profile(record.y, ev.xi, held if np.any(held) else record.split == "train",
+                            record.experiments(), TRACKING["offset_filter"])
+    scale = problem.normalization()["y_scale"]
+
+    def at(row: int) -> dict[str, float] | None:
+        if profile is None:
+            return None
+        return {n: float(v * abs(s)) for n, v, s in zip(problem.output_names, profile[row],
+                                                        scale, strict=True)}
+
+    return profile, {"rows": "val+test" if np.any(held) else "train",
+                     "offset_filter": TRACKING["offset_filter"],
+                     "steps": None if profile is None else int(profile.shape[0]),
+                     "at_1_step": None if profile is None else at(min(1, len(profile) - 1)),
+                     "at_last_step": None if profile is None else at(-1)}
+
+
 def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, trained: Trained,
            out: Path, figure: Path, wall: float, command: str, sidecar: dict | None) -> int:
     """Score the model against its baseline, write the model file, the figure and the
     ``--history``; print the report."""
     from controllers import bounds, training
-    from controllers.fhocp_tracking import DEFAULTS as TRACKING
-    from controllers.prediction_error import error_profile
     from cosim.atomicio import output_error, replacing
     from cosim.commands import train_report
 
@@ -209,21 +232,7 @@ def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, train
         "wall_time_s": round(wall, 1),
         "torch_version": __import__("torch").__version__,
     }
-    held = np.isin(record.split, ("val", "test"))
-    profile = error_profile(record.y, ev.xi, held if np.any(held) else record.split == "train",
-                            record.experiments(), TRACKING["offset_filter"])
-    doc["prediction_error"] = {
-        "rows": "val+test" if np.any(held) else "train",
-        "offset_filter": TRACKING["offset_filter"],
-        "steps": None if profile is None else int(profile.shape[0]),
-        "at_1_step": None if profile is None else {
-            n: float(v * abs(s)) for n, v, s in zip(names, profile[min(1, len(profile) - 1)],
-                                                   problem.normalization()["y_scale"],
-                                                   strict=True)},
-        "at_last_step": None if profile is None else {
-            n: float(v * abs(s)) for n, v, s in zip(names, profile[-1],
-                                                   problem.normalization()["y_scale"],
-                                                   strict=True)}}
+    profile, doc["prediction_error"] = _prediction_error(record, ev, problem)
     model = training.build_model(trained.params, problem, doc, w_y_bar=w_y_bar)
     model.prediction_error = profile
     try:
