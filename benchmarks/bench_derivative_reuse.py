@@ -37,7 +37,7 @@ from bench_tracking import scenario_file  # noqa: E402
 
 import cosim  # noqa: E402
 from controllers import kernel_sqp  # noqa: E402
-from cosim import registry  # noqa: E402
+from cosim.core import registry  # noqa: E402
 
 OPTIONS = {"law": "tracking"}
 

@@ -34,7 +34,7 @@ sys.path.insert(0, str(ROOT / "tests" / "fmus"))
 from fourtank_reference import QA_MAX, QB_MAX, rhs  # noqa: E402
 from fourtank_run import LEVELS, Plant  # noqa: E402
 
-from cosim.build import build_fmus  # noqa: E402
+from cosim.core.build import build_fmus  # noqa: E402
 
 TS = 25.0
 

@@ -219,7 +219,7 @@ def ours(folder: Path, work: Path, quick: bool) -> dict[str, Any]:
     from controllers.identification.record import Record
     from controllers.identification.simulation import simulate
     from controllers.model import GRUModel
-    from cosim import logdata
+    from cosim.core import logdata
 
     model_path = work / f"{folder.name}_gru.json"
     extra = ["--epochs", "30", "--sizes", "4,8", "--seeds", "1"] if quick else []
@@ -265,7 +265,7 @@ def subnet(folder: Path, quick: bool, seed: int = 0) -> dict[str, Any]:
     except ImportError:
         return {}
     from controllers.problem_file import load
-    from cosim import logdata
+    from cosim.core import logdata
 
     pr = load(folder / "problem.toml")
     est = logdata.read_log(folder / "est.csv", pr.input_names, pr.output_names, pr.Ts, pr.name,

@@ -4,7 +4,7 @@ Both loops run the same FMU (Co-Simulation) for the same number of 25 s steps:
 
 * baseline: fmpy ``FMU2Slave`` with ``setReal(qa, qb)``, ``doStep``, ``getReal(h1..h4)``,
   and the same PI controller called directly (plain Python, no master);
-* master: :class:`cosim.master.Master` with :class:`cosim.fmu.FmuComponent` and the PI
+* master: :class:`cosim.core.master.Master` with :class:`cosim.core.fmu.FmuComponent` and the PI
   controller, recording every signal (results are not written to disk).
 
 Both are timed from the first step to the last (FMU extraction and loading excluded).
@@ -27,9 +27,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from cosim.fmu import FmuComponent  # noqa: E402
-from cosim.master import Master  # noqa: E402
-from cosim.scenario import load  # noqa: E402
+from cosim.core.fmu import FmuComponent  # noqa: E402
+from cosim.core.master import Master  # noqa: E402
+from cosim.core.scenario import load  # noqa: E402
 from cosim_adapters.pi import PIController  # noqa: E402
 
 
@@ -89,7 +89,7 @@ def main() -> int:
     parser.add_argument("--fmu", type=Path, default=ROOT / "fmus" / "FourTank.fmu")
     args = parser.parse_args()
     if not args.fmu.is_file():
-        from cosim.build import build_fmus
+        from cosim.core.build import build_fmus
 
         build_fmus()
     dt = 25.0

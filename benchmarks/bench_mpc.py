@@ -52,7 +52,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from controllers.fhocp import FHOCP  # noqa: E402
-from cosim.component import Component  # noqa: E402
+from cosim.core.component import Component  # noqa: E402
 from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
 
 #: The robust MPC's law this benchmark times (see the module docstring).
@@ -114,14 +114,14 @@ class TimedController(Component):
 def closed_loop(ctrl: RobustMPCController, scenario: Path, plant_kind: str, steps: int | None,
                 others: dict[str, FHOCP] | None = None) -> TimedController:
     """One closed-loop run; returns the timed wrapper."""
-    from cosim import scenario as scenario_mod
-    from cosim.master import Master
+    from cosim.core import scenario as scenario_mod
+    from cosim.core.master import Master
 
     sc = scenario_mod.load(scenario)
     if steps:
         sc = sc.with_changes(stop_time=sc.start_time + steps * ctrl.sample_time)
     if plant_kind == "fmu":
-        from cosim.fmu import FmuComponent
+        from cosim.core.fmu import FmuComponent
 
         plant = FmuComponent(ROOT / "fmus" / "FourTank.fmu")
     else:
@@ -295,8 +295,8 @@ def scaling(args: argparse.Namespace) -> None:
     20 % of the median) into the SQP's QP, Hessian, Jacobian and f, g time, and the rest
     (Python, the answer check, the observer): the QP is the same qpOASES call in both."""
     from controllers import gain_design
-    from cosim.master import Master
-    from cosim.scenario import Column, Event, Scenario
+    from cosim.core.master import Master
+    from cosim.core.scenario import Column, Event, Scenario
     from cosim_adapters.gru_plant import GRUPlant
     from tests.controllers.random_gru import random_gru_model
 

@@ -14,7 +14,7 @@ FMU (the default plant), four closed loops through :func:`cosim.run`:
   ``--horizon`` samples, no terminal cost, the input box. A reference for this benchmark only.
 
 Printed: per controller the IAE of each output, the summed IAE and the total variation of
-each input (the project's KPIs, :mod:`cosim.kpis`: ``iae.<output>``, ``tv.<input>``), the
+each input (the project's KPIs, :mod:`cosim.core.kpis`: ``iae.<output>``, ``tv.<input>``), the
 ratios of each MPC to the PI and to the oracle (issue 20 asks summed IAE MPC/PI ≤ 0.72 and TV
 MPC/oracle ≤ 1.1 per input), each robust MPC's controller step median / p99, and the oracle's
 solver health (failures, cold restarts, its model's one-sample prediction error against the
@@ -51,7 +51,7 @@ ROOT = HERE.parent
 sys.path[:0] = [str(ROOT), str(HERE)]
 
 import cosim  # noqa: E402
-from cosim import kpis, results  # noqa: E402
+from cosim.core import kpis, results  # noqa: E402
 from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
@@ -117,7 +117,7 @@ def run_one(name: str, scenario: Path, horizon: int, out: Path | None) -> cosim.
 
 
 def kpi_row(run: cosim.api.RunOutput) -> dict[str, float]:
-    """``iae.<output>``, ``iae.sum``, ``tv.<input>`` (:func:`cosim.kpis.flat`)."""
+    """``iae.<output>``, ``iae.sum``, ``tv.<input>`` (:func:`cosim.core.kpis.flat`)."""
     flat = kpis.flat(run.summary["kpis"])
     signals = run.summary["signals"]
     row = {f"iae.{o}": flat[f"iae.{o}"] for o in signals["outputs"] if f"iae.{o}" in flat}
@@ -170,7 +170,7 @@ def health_lines(runs: dict[str, cosim.api.RunOutput]) -> list[str]:
 
 def comparison_figure(runs: dict[str, cosim.api.RunOutput], path: Path) -> None:
     """Outputs with their set-points, then inputs, one panel per signal, every controller."""
-    from cosim import plots
+    from cosim.core import plots
 
     signals = next(iter(runs.values())).summary["signals"]
     names = [("plant", o, u["unit"]) for o, u in signals["outputs"].items()] + \

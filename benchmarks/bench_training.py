@@ -35,8 +35,8 @@ sys.path.insert(0, str(ROOT))
 
 from controllers import bounds, metrics, training  # noqa: E402
 from controllers.problem_file import load as load_problem  # noqa: E402
-from cosim import datagen  # noqa: E402
 from cosim.cli import main as cosim_main  # noqa: E402
+from cosim.core import datagen  # noqa: E402
 
 PAPER = (92.7, 89.7)
 

@@ -35,7 +35,7 @@ import casadi as ca
 import numpy as np
 
 from controllers.problem import ControlProblem
-from cosim.component import Component, Signal
+from cosim.core.component import Component, Signal
 
 __all__ = ["FourTankParameters", "OracleNMPC"]
 
@@ -77,7 +77,7 @@ class FourTankParameters:
     @classmethod
     def from_fmu(cls, fmu: str | Path) -> FourTankParameters:
         """The start values of the parameters in the FMU's modelDescription."""
-        from cosim.fmu_archive import read_model_description
+        from cosim.core.fmu_archive import read_model_description
 
         md = read_model_description(fmu)
         start = {v.name: float(v.start) for v in md.modelVariables if v.start is not None}

@@ -94,9 +94,9 @@ def closed_loop(kernel: str = "auto", max_iter: int = CAP,
                 sqp: dict[str, Any] | None = None) -> tuple[Any, list[dict[str, Any]]]:
     """One run of the paper scenario; per solve: the result, its iterations, its timers
     [s], the FHOCP's data and parameter vector, and the solver's last iterate."""
-    from cosim import scenario
-    from cosim.fmu import FmuComponent
-    from cosim.master import Master
+    from cosim.core import scenario
+    from cosim.core.fmu import FmuComponent
+    from cosim.core.master import Master
 
     with sqp_settings(sqp or {}):
         ctrl = RobustMPCController(law="paper", kernel=kernel, max_iter=max_iter)

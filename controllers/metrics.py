@@ -1,6 +1,6 @@
 """Accuracy of a model: open-loop simulation and the FIT index of the paper's section V.
 
-The figure of a trained model is :func:`cosim.plots.identification_figure` (this numerical core
+The figure of a trained model is :func:`cosim.core.plots.identification_figure` (this numerical core
 draws nothing).
 """
 

@@ -38,7 +38,7 @@ class Channel:
         The problem's name of the signal: scenario columns (``ref.<name>``), KPIs
         (``iae.<name>``), figures and the model file use it.
     unit : str
-        Its unit (the problem's; the plant FMU's may differ, :mod:`cosim.binding` converts).
+        Its unit (the problem's; the plant FMU's may differ, :mod:`cosim.core.binding` converts).
     min, max : float
         The box: saturation of an input (``eq:input-constraint``), the output constraint
         ``min ≤ y ≤ max`` (``eq:output-constraint``).

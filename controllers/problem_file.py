@@ -31,7 +31,7 @@ Every fault is a :class:`~controllers.errors.ProblemFileError` (exit 2) naming t
 line: invalid TOML, an unknown key, a missing ``unit``/``min``/``max``/``Ts``/``name``,
 ``min ≥ max``, a non-finite number, a name used twice, no inputs or no outputs, a bad loop.
 Checks against a plant FMU (a signal it lacks, the wrong causality, a unit it contradicts)
-belong to the co-simulation side (:mod:`cosim.binding`).
+belong to the co-simulation side (:mod:`cosim.core.binding`).
 """
 
 from __future__ import annotations

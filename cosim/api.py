@@ -10,7 +10,7 @@
 :func:`run` does what ``cosim run`` does (the command calls it): it loads the scenario, the
 plant (an FMU, or a GRU model with ``"model:FILE"``) and the controller, runs the closed loop
 and, when ``out`` is given, writes ``results.csv`` (streamed), ``summary.json``,
-``figure.png`` and ``timings.csv`` there. Bad input raises :class:`~cosim.errors.CosimError`
+``figure.png`` and ``timings.csv`` there. Bad input raises :class:`~cosim.core.errors.CosimError`
 (or a :class:`ValueError` of the numerical core) before anything runs; a run that fails or is
 interrupted returns with ``status`` ``"failed"`` or ``"interrupted"``, its rows kept.
 """
@@ -23,14 +23,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim.build import TARGETS
-from cosim.master import RunResult
+from cosim.core.build import TARGETS
+from cosim.core.master import RunResult
 
 __all__ = ["DEFAULT_PLANT", "RunOutput", "plant_path", "run"]
 
 #: The project's plant FMU (FMI 2.0): ``FourTank.fmu`` beside its sources in the ``fmus``
 #: package when that folder is writable (a source checkout: ``fmus/FourTank.fmu``), else in
-#: the user cache (``~/.cache/gru-mpc/fmus``); built on first use (:mod:`cosim.build`).
+#: the user cache (``~/.cache/gru-mpc/fmus``); built on first use (:mod:`cosim.core.build`).
 DEFAULT_PLANT = TARGETS[0].fmu_path
 
 
@@ -42,8 +42,8 @@ def plant_path(arg: str | Path | None) -> Path:
     CosimError
         ``arg`` is a folder or does not exist; the project's FMU cannot be built here.
     """
-    from cosim.build import default_plant
-    from cosim.errors import CosimError
+    from cosim.core.build import default_plant
+    from cosim.core.errors import CosimError
 
     if arg is not None:
         path = Path(arg)
@@ -104,7 +104,7 @@ def _plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
            step_timeout: float | None, seed: int, problem: Any = None) -> tuple[Any, str]:
     """The plant component; an FMU's variable map binds ``problem`` to it (the user's
     ``varmap`` first: :func:`cosim_adapters.problems.bind_plant`)."""
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
     from cosim_adapters.gru_plant import MODEL_PREFIX
 
     if plant is not None and str(plant).startswith(MODEL_PREFIX):
@@ -120,11 +120,11 @@ def _plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
 
         varmap = bind_plant(problem, path, varmap)
     if isolate:
-        from cosim.isolated import IsolatedFmuComponent
+        from cosim.core.isolated import IsolatedFmuComponent
 
         return IsolatedFmuComponent(path, name="plant", interface=interface, varmap=varmap,
                                     timeout=step_timeout), str(path)
-    from cosim.fmu import FmuComponent
+    from cosim.core.fmu import FmuComponent
 
     return FmuComponent(path, name="plant", interface=interface, varmap=varmap), str(path)
 
@@ -157,7 +157,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     problem : path or ControlProblem, optional
         The control problem (a problem file, ``--problem``): the model's own, or the problem
         of a model file that has none; the PI baseline's. Default: the controller's (the
-        model's, else the four-tank's). A plant FMU is bound to it (:mod:`cosim.binding`:
+        model's, else the four-tank's). A plant FMU is bound to it (:mod:`cosim.core.binding`:
         names through ``variable`` keys, units converted, checked before the first step).
     out : path, optional
         Folder to write the run's files into (streamed ``results.csv``, ``summary.json``,
@@ -193,10 +193,10 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     OutputError
         ``out`` could not be written (the previous files there are intact).
     """
-    from cosim import outpaths, registry, varmap
-    from cosim import scenario as scenario_mod
-    from cosim.isolated import DEFAULT_STEP_TIMEOUT
-    from cosim.master import Master
+    from cosim.core import outpaths, registry, varmap
+    from cosim.core import scenario as scenario_mod
+    from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
+    from cosim.core.master import Master
 
     sc = scenario_mod.load(scenario)
     vmap = varmap.load(map) if map is not None else None
@@ -230,7 +230,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
 
         from tqdm import tqdm
 
-        from cosim.master import communication_times
+        from cosim.core.master import communication_times
 
         total = len(communication_times(sc.start_time, sc.stop_time, master.dt)) - 1
         bar = tqdm(total=total, unit="step", desc=sc.path.stem, file=sys.stderr,
@@ -260,8 +260,8 @@ def with_problem(controller: str, options: Mapping[str, Any], problem: Any) -> d
     """
     import inspect
 
-    from cosim import registry
-    from cosim.errors import CosimError
+    from cosim.core import registry
+    from cosim.core.errors import CosimError
 
     opts = dict(options)
     if problem is None:
@@ -297,15 +297,15 @@ def run_problem(ctrl: Any, problem: Any) -> Any:
 def _execute(master: Any, meta: dict, out: str | Path | None, figure: bool,
              on_step: Callable[[int], None] | None, limit: float | None) -> RunOutput:
     """Run ``master`` (writing into ``out`` when given) and wrap the result."""
-    from cosim import interrupts, results
-    from cosim.errors import CosimError, SimulationFailed
+    from cosim.core import interrupts, results
+    from cosim.core.errors import CosimError, SimulationFailed
 
     if out is None:
         result = master.run(on_step=on_step, step_timeout=limit)
         _raise_load_error(result, CosimError, SimulationFailed)
         return RunOutput(result, results.summary(result, meta), None, meta)
 
-    from cosim.runfolder import RunFolder
+    from cosim.core.runfolder import RunFolder
 
     guard = interrupts.current()
     with RunFolder(out, "--out") as folder, \

@@ -1,9 +1,9 @@
 """The ``cosim`` command line: one sub-command per module in :mod:`cosim.commands`.
 
-Exit codes: :data:`cosim.errors.EXIT_CODES` (docs: guide/running.md), which ``cosim --help``
+Exit codes: :data:`cosim.core.errors.EXIT_CODES` (docs: guide/running.md), which ``cosim --help``
 prints with what a code also means for each command (the commands' ``EXIT_NOTES``):
-:class:`~cosim.errors.SimulationFailed` exits 1, any other
-:class:`~cosim.errors.CosimError` 2, a signal N ``128 + N``.
+:class:`~cosim.core.errors.SimulationFailed` exits 1, any other
+:class:`~cosim.core.errors.CosimError` 2, a signal N ``128 + N``.
 """
 
 from __future__ import annotations
@@ -18,8 +18,9 @@ import warnings
 from collections.abc import Sequence
 
 from controllers.errors import ControllersError
-from cosim import __version__, interrupts
-from cosim.errors import (
+from cosim import __version__
+from cosim.core import interrupts
+from cosim.core.errors import (
     EXIT_FAILED,
     EXIT_INPUT_ERROR,
     EXIT_SIGNAL_BASE,
@@ -33,7 +34,7 @@ __all__ = ["COMMANDS", "build_parser", "entry", "main"]
 #: Sub-command modules, in the order ``cosim --help`` lists them. Each defines
 #: ``register(subparsers)`` that adds its parser and sets ``func(args) -> int``, and may define
 #: ``EXIT_NOTES`` (exit code → what it also means for the command, shown by
-#: :func:`~cosim.errors.exit_codes_help`); heavy imports (casadi, torch, fmpy) happen inside
+#: :func:`~cosim.core.errors.exit_codes_help`); heavy imports (casadi, torch, fmpy) happen inside
 #: ``func`` so that ``--help`` stays fast.
 COMMANDS = (
     "cosim.commands.run",
@@ -107,7 +108,7 @@ def entry() -> None:
     """The ``cosim`` console script and ``python -m cosim.cli``: :func:`main`, then exit
     with its code.
 
-    FMU libraries are never unloaded (:meth:`cosim.fmu.FmuComponent.terminate`), so their
+    FMU libraries are never unloaded (:meth:`cosim.core.fmu.FmuComponent.terminate`), so their
     destructors run when the process exits, after Python's own shutdown, and they are native
     code that may crash: pythonfmu's ``finalizePythonInterpreter`` reads memory its static
     destructors have just freed (valgrind: an invalid read at ``_dl_fini``), which now and
@@ -116,7 +117,7 @@ def entry() -> None:
     finalizers, log flushing) and leaves with ``os._exit``, so that its exit code is its own.
     """
     code = main()
-    fmu = sys.modules.get("cosim.fmu")
+    fmu = sys.modules.get("cosim.core.fmu")
     if fmu is None or not fmu.libraries_loaded():
         sys.exit(code)
     for stream in (sys.stdout, sys.stderr):

@@ -3,7 +3,7 @@
 :mod:`controllers` is the numerical core (GRU, certificates, observer, FHOCP, MPC law): it
 works on arrays in normalised units and knows nothing of co-simulation. :mod:`cosim` is the
 co-simulation core (master, FMUs, scenarios, results); it knows controllers only as
-:class:`~cosim.component.Component` classes named in its registry (:mod:`cosim.registry`).
+:class:`~cosim.core.component.Component` classes named in its registry (:mod:`cosim.core.registry`).
 This package turns the one into the other:
 
 - :mod:`cosim_adapters.robust_mpc`: the robust GRU MPC (observer + governor + FHOCP) as the

@@ -4,14 +4,14 @@ tightening.
 The robust MPC (:class:`cosim_adapters.robust_mpc.RobustMPCController`) runs **certified**
 when every hypothesis of its law holds: the design's (``th:feasibility-stability`` for the
 paper's law, the tracking law's H3–H6 of :mod:`controllers.tracking_checks`) and, at each
-set-point the run will request (:meth:`cosim.component.Component.expect_setpoints`), the
+set-point the run will request (:meth:`cosim.core.component.Component.expect_setpoints`), the
 set-point's (Assumption 1 and ``eq:condition-recursive-feasibility`` for the paper's law; the
 set-point inside the admissible steady outputs ``Y_s`` for the tracking law). Its constraint
 tightening is then the theorem's.
 
 Otherwise (option ``certificate = "auto"``, the default) it runs **uncertified**; with
 ``certificate = "require"`` (``cosim run --require-certificate``) it refuses instead
-(:class:`cosim.errors.CosimError`, exit 2); with ``certificate = "keep"`` it keeps the
+(:class:`cosim.core.errors.CosimError`, exit 2); with ``certificate = "keep"`` it keeps the
 certified design whatever the set-points (the tracking law tracks one outside ``Y_s`` to the
 closest admissible steady output, the paper's law refuses it; a failing design is an error).
 Uncertified is the same law and cost, with the theorem's
@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 __all__ = ["Certification", "check_setpoints", "go_uncertified",
            "margin_text"]

@@ -28,8 +28,8 @@ import numpy as np
 
 from controllers import gru
 from controllers.model import GRUModel
-from cosim.component import Component, Signal
-from cosim.errors import CosimError
+from cosim.core.component import Component, Signal
+from cosim.core.errors import CosimError
 
 __all__ = ["MODEL_PREFIX", "GRUPlant"]
 

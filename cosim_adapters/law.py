@@ -77,7 +77,7 @@ class ControlLaw(Protocol):
 
     def uncertified(self, cert: Any, reason: str) -> ControlLaw:
         """The same law on the uncertified certificate ``cert`` (its measured tightening);
-        raises :class:`cosim.errors.CosimError` when even that leaves nothing to control
+        raises :class:`cosim.core.errors.CosimError` when even that leaves nothing to control
         (``reason``: why the run is uncertified)."""
         ...
 

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 __all__ = ["CERTIFICATE_MODES", "LAWS", "LAW_DEFAULTS", "MPCOptions"]
 
@@ -114,7 +114,7 @@ class MPCOptions:
         Where the certificate does not cover the run (a hypothesis fails, or a set-point of
         the run lies outside the certified set): ``"auto"`` runs uncertified, with the
         model's measured prediction error as the tightening; ``"require"`` refuses
-        (:class:`cosim.errors.CosimError`, exit 2); ``"keep"`` keeps the certified design
+        (:class:`cosim.core.errors.CosimError`, exit 2); ``"keep"`` keeps the certified design
         (the tracking law tracks such a set-point to the closest admissible steady output,
         the paper's law refuses it; a design whose hypotheses fail is an error), as before
         graded guarantees (:mod:`cosim_adapters.certification`).

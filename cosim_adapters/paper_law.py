@@ -16,7 +16,7 @@ from typing import Any
 import numpy as np
 
 from controllers.errors import SetpointError
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 from cosim_adapters.law import LawStep, setpoint_text
 
 __all__ = ["PaperLaw", "closest_admissible"]

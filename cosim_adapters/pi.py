@@ -37,8 +37,8 @@ from controllers import pi_tuning
 from controllers.model import GRUModel
 from controllers.pi_tuning import PITuning
 from controllers.problem import ControlProblem, PILoop
-from cosim.component import Component, Signal
-from cosim.errors import CosimError
+from cosim.core.component import Component, Signal
+from cosim.core.errors import CosimError
 
 __all__ = ["PIController", "PILoop"]
 

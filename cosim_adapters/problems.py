@@ -9,9 +9,10 @@ every command and controller:
 - a model without one (written before problems existed): the ``--problem`` given, or the
   default plant's, checked against the model's signals, sample time and normalisation;
 - no model (the PI baseline, ``generate-data``): the ``--problem`` given, or the default
-  plant's: the four-tank's ``fmus/fourtank/problem.toml`` (:data:`cosim.build.DEFAULT_PROBLEM`).
+  plant's: the four-tank's ``fmus/fourtank/problem.toml``
+  (:data:`cosim.core.build.DEFAULT_PROBLEM`).
 
-:func:`bind_plant` binds a problem to a plant FMU (:mod:`cosim.binding`: names, units,
+:func:`bind_plant` binds a problem to a plant FMU (:mod:`cosim.core.binding`: names, units,
 checks) and gives the variable map the FMU component converts through.
 """
 
@@ -22,7 +23,7 @@ from typing import Any
 
 from controllers.errors import ControllersError
 from controllers.problem import ControlProblem
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 __all__ = ["bind_plant", "default_problem_path", "load_problem", "plant_signals",
            "problem_for"]
@@ -30,7 +31,7 @@ __all__ = ["bind_plant", "default_problem_path", "load_problem", "plant_signals"
 
 def default_problem_path() -> Path:
     """The default plant's problem file (the four-tank's)."""
-    from cosim.build import DEFAULT_PROBLEM
+    from cosim.core.build import DEFAULT_PROBLEM
 
     return DEFAULT_PROBLEM
 
@@ -96,10 +97,10 @@ def _name(arg: Any, problem: ControlProblem) -> str:
 
 
 def plant_signals(problem: ControlProblem) -> list[Any]:
-    """The problem's inputs and outputs as :class:`cosim.binding.Wanted` (plain data), each
+    """The problem's inputs and outputs as :class:`cosim.core.binding.Wanted` (plain data), each
     with where it is declared (``problem.toml:12``, :func:`controllers.problem_file.locate`)."""
     from controllers.problem_file import locate
-    from cosim.binding import Wanted
+    from cosim.core.binding import Wanted
 
     out = []
     for role, channels in (("input", problem.inputs), ("output", problem.outputs)):
@@ -111,8 +112,8 @@ def plant_signals(problem: ControlProblem) -> list[Any]:
 
 
 def bind_plant(problem: ControlProblem, fmu: str | Path, user_map: Any = None) -> Any:
-    """The :class:`~cosim.varmap.VarMap` binding ``problem`` to the plant FMU ``fmu`` (a
-    ``--map`` ``user_map`` first): :func:`cosim.binding.bind`.
+    """The :class:`~cosim.core.varmap.VarMap` binding ``problem`` to the plant FMU ``fmu`` (a
+    ``--map`` ``user_map`` first): :func:`cosim.core.binding.bind`.
 
     Raises
     ------
@@ -120,8 +121,8 @@ def bind_plant(problem: ControlProblem, fmu: str | Path, user_map: Any = None) -
         The FMU cannot be read; a signal it lacks, of the wrong causality or type, or in a unit
         it contradicts (one line naming the problem file and line, the signal, the variable).
     """
-    from cosim.binding import bind
-    from cosim.fmu_archive import read_model_description
+    from cosim.core.binding import bind
+    from cosim.core.fmu_archive import read_model_description
 
     md = read_model_description(fmu)
     return bind(plant_signals(problem), md, fmu, user_map, problem.source or problem.name)

@@ -31,7 +31,7 @@ The paper's law and set-points outside its theory (unreachable, or failing Assum
 eq. 11): the controller keeps regulating to the last admissible set-point, counts the step in
 ``setpoint_rejected`` (diagnostics and summary) and names the failed hypothesis (or, for an
 unreachable one, the closest reachable equilibrium output) in the summary. A first set-point
-that is already inadmissible is a configuration error (:class:`cosim.errors.CosimError`, the
+that is already inadmissible is a configuration error (:class:`cosim.core.errors.CosimError`, the
 same reason). Its set-point changes go through the admissible reference governor of
 :mod:`controllers.governor` (on by default, ``governor=False`` gives the paper's controller,
 which switches ``(x̄, ū, α)`` at once): the set-point handed to the FHOCP moves towards the
@@ -44,7 +44,7 @@ law ``du_weight`` (off by default) adds the input-rate penalty ``Σ_i (u_i − u
 the theorem) shifts the model set-point by a filtered estimate ``d̂`` of the output mismatch
 ``y − ŷ`` (``ȳ_model = ȳ − d̂``); the shifted set-point must still pass the checks.
 
-This module is the co-simulation adapter (a :class:`cosim.component.Component`) of the
+This module is the co-simulation adapter (a :class:`cosim.core.component.Component`) of the
 numerical core: the core modules know nothing of ``cosim``.
 """
 
@@ -60,8 +60,8 @@ import numpy as np
 from controllers.errors import ControllersError
 from controllers.model import DEFAULT_MODEL
 from controllers.solve_status import status_code
-from cosim.component import Component, Signal
-from cosim.errors import CosimError
+from cosim.core.component import Component, Signal
+from cosim.core.errors import CosimError
 from cosim_adapters.certification import Certification, check_setpoints, go_uncertified
 from cosim_adapters.law import ControlLaw
 from cosim_adapters.mpc_options import MPCOptions
@@ -123,7 +123,7 @@ class RobustMPCController(Component):
     """
 
     direct_feedthrough = True
-    #: the options :func:`cosim.registry.create` accepts (``--option KEY=VALUE``)
+    #: the options :func:`cosim.core.registry.create` accepts (``--option KEY=VALUE``)
     OPTIONS = ("model", "problem", "options", "name", *MPCOptions.names())
     #: wall-clock diagnostics: written by the master to timings.csv, not results.csv
     timing_diagnostics = frozenset({"solve_ms"})

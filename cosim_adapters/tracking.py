@@ -32,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from controllers.errors import ControllersError
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 from cosim_adapters.law import LawStep, setpoint_text
 
 __all__ = ["ALPHA_C_SPAN", "TrackingLaw", "fallback_alpha_c", "steady_outputs_text",

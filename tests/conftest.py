@@ -1,7 +1,7 @@
 """Shared pytest fixtures: the built four-tank plant FMUs.
 
 Tests that need a real FMU take ``fmu2_path`` (FMI 2.0) or ``fmu3_path`` (FMI 3.0). The FMUs
-are built once per session by :func:`cosim.build.build_fmus`, which only recompiles when the
+are built once per session by :func:`cosim.core.build.build_fmus`, which only recompiles when the
 C sources changed.
 """
 
@@ -15,7 +15,7 @@ import pytest
 @pytest.fixture(scope="session")
 def fmu_paths() -> list[Path]:
     """Both plant FMUs, built if needed: ``[FourTank.fmu, FourTank3.fmu]``."""
-    from cosim.build import build_fmus
+    from cosim.core.build import build_fmus
 
     return build_fmus()
 

@@ -120,11 +120,11 @@ def test_the_quoted_exit_codes_are_those_of_cosim_help() -> None:
     text = (DOCS / "guide" / "running.md").read_text(encoding="utf-8")
     assert build_parser().epilog in text, (
         "docs/guide/running.md quotes an outdated exit-code table: paste the 'exit codes:' "
-        "paragraph of `cosim --help` (cosim.errors.exit_codes_help)")
+        "paragraph of `cosim --help` (cosim.core.errors.exit_codes_help)")
 
 
 def test_the_readme_lists_every_exit_code() -> None:
-    from cosim.errors import EXIT_CODES, EXIT_SIGNAL_BASE
+    from cosim.core.errors import EXIT_CODES, EXIT_SIGNAL_BASE
 
     text = (ROOT / "README.md").read_text(encoding="utf-8")
     table = text[text.index("## Exit codes"):text.index("## Results at a glance")]

@@ -53,7 +53,7 @@ def _package_data() -> set[str]:
     """Files the installed package reads at run time, as paths inside the wheel."""
     from controllers.compiled_kernel import TEMPLATE_PARTS
     from controllers.model import DEFAULT_MODEL
-    from cosim.build import DEFAULT_PROBLEM, TARGETS
+    from cosim.core.build import DEFAULT_PROBLEM, TARGETS
 
     names = {f"controllers/kernel/{p.name}" for p in TEMPLATE_PARTS}
     names |= {f"fmus/fourtank/{name}" for t in TARGETS

@@ -29,9 +29,9 @@ import time
 from collections.abc import Iterator
 from typing import Any
 
-from cosim import interrupts
 from cosim.campaign.task import START_TOPIC
-from cosim.errors import CosimError, SimulationFailed
+from cosim.core import interrupts
+from cosim.core.errors import CosimError, SimulationFailed
 
 __all__ = ["CONNECT_TIMEOUT", "LOCAL_CONFIG", "NoWorkers", "Starts", "Submitter", "Watchdog",
            "connect", "lost_worker", "signals_ignored", "worker_timeout_default"]

@@ -18,7 +18,7 @@ import numpy as np
 
 from controllers.errors import SetpointError
 from cosim.campaign.spec import CampaignSpec, Distribution
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 __all__ = ["DrawContext", "RunDraw", "draw_run", "run_seed"]
 
@@ -144,7 +144,7 @@ class DrawContext:
 
 def _scenario_refs(spec: CampaignSpec) -> list[str]:
     """The outputs the campaign's scenario sets a set-point for (``ref.<output>``)."""
-    from cosim import scenario
+    from cosim.core import scenario
 
     try:
         return [c.target for c in scenario.load(spec.scenario).columns_of(scenario.REF)]

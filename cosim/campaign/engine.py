@@ -58,12 +58,12 @@ from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
-from cosim import interrupts
 from cosim.campaign import cluster, report, store
 from cosim.campaign.draws import DrawContext, RunDraw, draw_run
 from cosim.campaign.spec import CampaignSpec, load
 from cosim.campaign.task import Assets
-from cosim.errors import CosimError
+from cosim.core import interrupts
+from cosim.core.errors import CosimError
 
 __all__ = ["MAX_TRIES", "CampaignResult", "default_workers", "run_campaign"]
 
@@ -151,9 +151,9 @@ def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, 
     Raises :class:`CosimError` naming the spec's line for a draw key the plant or the
     scenario does not know.
     """
-    from cosim import scenario as scenario_mod
     from cosim.campaign.spec import _Locator
-    from cosim.master import Master
+    from cosim.core import scenario as scenario_mod
+    from cosim.core.master import Master
 
     varmaps = varmaps or {}
     sc = scenario_mod.load(spec.scenario)
@@ -168,7 +168,7 @@ def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, 
 
             plant: Any = GRUPlant.from_file(spec.plant or "")
         else:
-            from cosim.fmu import FmuComponent
+            from cosim.core.fmu import FmuComponent
 
             plant = FmuComponent(_plant_file(spec), interface=spec.interface,
                                  varmap=varmaps.get(name))
@@ -224,9 +224,9 @@ def prepare(spec: CampaignSpec) -> Plan:
     """Check the spec against the real plant and controllers, draw every run, pack the
     files; raises :class:`CosimError` (exit 2) before anything runs."""
     from controllers.model import DEFAULT_MODEL
-    from cosim import registry, varmap
-    from cosim import scenario as scenario_mod
     from cosim.api import with_problem
+    from cosim.core import registry, varmap
+    from cosim.core import scenario as scenario_mod
 
     files: dict[str, bytes] = {"scenario.csv": _read(spec.scenario, "scenario")}
     if spec.model_plant:
@@ -446,14 +446,14 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
     -------
     CampaignResult
         Also when interrupted (``status="interrupted"``, ``error`` the
-        :class:`~cosim.interrupts.Interrupted`).
+        :class:`~cosim.core.interrupts.Interrupted`).
 
     Raises
     ------
     CosimError
         A bad spec or configuration, before any run.
     """
-    from cosim.runfolder import RunFolder
+    from cosim.core.runfolder import RunFolder
 
     if not isinstance(spec, CampaignSpec):
         spec = load(spec)

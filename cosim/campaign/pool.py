@@ -43,7 +43,7 @@ class ControllerPool:
         Most idle instances kept, over every configuration.
     factory : callable, optional
         ``factory(name, options)`` builds a controller (default
-        :func:`cosim.registry.create`).
+        :func:`cosim.core.registry.create`).
     """
 
     def __init__(self, size: int = POOL_SIZE,
@@ -62,7 +62,7 @@ class ControllerPool:
 
         The caller owns the controller until it gives it back (:meth:`give_back`) or drops
         it (does nothing). Building it may raise (a bad option: a
-        :class:`~cosim.errors.CosimError`).
+        :class:`~cosim.core.errors.CosimError`).
         """
         key = controller_key(name, options)
         with self._lock:
@@ -74,7 +74,7 @@ class ControllerPool:
                 return key, ctrl
         factory = self._factory
         if factory is None:
-            from cosim import registry
+            from cosim.core import registry
 
             factory = registry.create
         ctrl = factory(name, dict(options))   # outside the lock: building takes seconds

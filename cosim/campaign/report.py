@@ -9,7 +9,7 @@ signals of the run's control problem (its outputs and inputs, whatever the plant
 the engine ran it again), one column per ``[draw]`` key (named exactly as in the spec), the
 KPIs :data:`KPI_COLUMNS`, for a GRU-model plant under the robust MPC the theorem's checks
 (:data:`THEOREM_COLUMNS`), and last the per-signal KPIs, named as their path below ``kpis``
-in the run's ``summary.json`` (:func:`cosim.kpis.flat`): ``iae.<output>``,
+in the run's ``summary.json`` (:func:`cosim.core.kpis.flat`): ``iae.<output>``,
 ``final_error.<output>``, ``worst_offset.<output>``, ``tv.<input>``,
 ``violations.<signal>.max`` and ``violations.<signal>.count``.
 
@@ -30,9 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from cosim import atomicio, plots
-from cosim import kpis as _kpis
-from cosim.csvio import read_table
+from cosim.core import atomicio, plots
+from cosim.core import kpis as _kpis
+from cosim.core.csvio import read_table
 
 __all__ = ["KPI_COLUMNS", "THEOREM_COLUMNS", "campaign_figure", "campaign_kpi_panels",
            "clopper_pearson_upper", "kpi_row", "quantile_kpis", "run_folder_name",
@@ -221,7 +221,7 @@ def summarize(table: Any, name: str, planned: int) -> dict[str, Any]:
         if len(group["runs"]) < 20:
             group["runs"].append(f"{int(row['run'])}-{row['variant']}")
     doc["failures_by_reason"] = dict(sorted(failures.items(), key=lambda kv: -kv[1]["count"]))
-    from cosim.results import jsonable
+    from cosim.core.results import jsonable
 
     return jsonable(doc)
 

@@ -39,7 +39,7 @@ that controllers are compared on the same draws. Example::
     options = { offset_free = true }
 
 Relative paths are looked up beside the spec file first, then in the current folder. Every
-error is a :class:`~cosim.errors.CosimError` ``file:line: message`` (exit 2).
+error is a :class:`~cosim.core.errors.CosimError` ``file:line: message`` (exit 2).
 """
 
 from __future__ import annotations
@@ -51,7 +51,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 __all__ = ["CampaignSpec", "Distribution", "InitialState", "SetpointSpec", "Variant", "load"]
 

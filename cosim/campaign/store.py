@@ -17,11 +17,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cosim import atomicio
 from cosim.campaign import report
 from cosim.campaign.cluster import lost_worker
 from cosim.campaign.spec import CampaignSpec
-from cosim.errors import CosimError
+from cosim.core import atomicio
+from cosim.core.errors import CosimError
 
 if TYPE_CHECKING:
     from cosim.campaign.engine import Plan
@@ -87,8 +87,8 @@ def write_run(out: Path, spec: CampaignSpec, task: dict[str, Any],
     traceback of an internal error goes to ``traceback.txt`` beside it (removed when the run
     has none).
     """
-    from cosim import results
-    from cosim.master import RunResult
+    from cosim.core import results
+    from cosim.core.master import RunResult
 
     tries = int(task.get("tries", 1))
     if outcome is None:
@@ -114,7 +114,7 @@ def write_run(out: Path, spec: CampaignSpec, task: dict[str, Any],
     }
     folder = out / "runs" / report.run_folder_name(task["run"], task["variant"])
     if theorem is not None:
-        from cosim import kpis
+        from cosim.core import kpis
 
         k = kpis.compute(result.columns, result.rows, result.outputs, result.references,
                          result.inputs, result.bounds)

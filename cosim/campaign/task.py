@@ -3,7 +3,7 @@
 Nothing here assumes a filesystem shared with the client. The client sends the campaign's
 files (scenario, plant FMU, variable map, model files) once as :class:`Assets` (bytes, keyed
 by a content hash); each worker process writes them once into a temporary folder of its own
-and reuses them for every run. A run returns its :class:`~cosim.master.RunResult` (rows as a
+and reuses them for every run. A run returns its :class:`~cosim.core.master.RunResult` (rows as a
 numpy array) and, for a GRU-model plant under the robust MPC, what the paper's theorem
 promises, measured (:func:`run_task`); the client writes the files.
 
@@ -13,9 +13,9 @@ the worker's :class:`~cosim.campaign.pool.ControllerPool` (built once per config
 reused by later runs: ``setup()`` restarts it exactly, so a run gives the same numbers on a
 fresh worker or on one that ran a thousand others) and builds its own plant, sensor and
 master. What is process-wide is guarded: the asset folders (a lock here), loading an FMU
-(fmpy changes the working folder: :mod:`cosim.fmu`), the FMU log routing
-(:mod:`cosim.fmu_log`); signal handling and ``SIGALRM`` step timeouts are the main thread's
-only (:mod:`cosim.interrupts`: a worker thread never installs or shares a signal guard).
+(fmpy changes the working folder: :mod:`cosim.core.fmu`), the FMU log routing
+(:mod:`cosim.core.fmu_log`); signal handling and ``SIGALRM`` step timeouts are the main thread's
+only (:mod:`cosim.core.interrupts`: a worker thread never installs or shares a signal guard).
 
 A run that outlives its timeout is stopped between steps (status ``failed``, "run timeout");
 one stuck inside a step (native code that never returns) is ended by a watchdog that exits
@@ -144,7 +144,7 @@ def _in_dask_worker() -> bool:
 
 
 def _plant(task: dict[str, Any], folder: Path, seed: int) -> Any:
-    from cosim import varmap
+    from cosim.core import varmap
 
     kind, name = task["plant"]
     if kind == "model":
@@ -152,7 +152,7 @@ def _plant(task: dict[str, Any], folder: Path, seed: int) -> Any:
 
         return GRUPlant.from_file(str(folder / name), seed=seed)
     if task.get("binding") is not None:
-        # the plant bound to the control problem by the client (cosim.binding), map included
+        # the plant bound to the control problem by the client (cosim.core.binding), map included
         path, entries = task["binding"]
         vmap = varmap.VarMap(Path(path), {m[0]: varmap.MappedSignal(*m) for m in entries})
     else:
@@ -160,8 +160,8 @@ def _plant(task: dict[str, Any], folder: Path, seed: int) -> Any:
     if task.get("isolate"):
         import multiprocessing
 
-        from cosim.errors import CosimError
-        from cosim.isolated import DEFAULT_STEP_TIMEOUT, IsolatedFmuComponent
+        from cosim.core.errors import CosimError
+        from cosim.core.isolated import DEFAULT_STEP_TIMEOUT, IsolatedFmuComponent
 
         if multiprocessing.current_process().daemon:
             raise CosimError("isolate = true: this Dask worker is a daemon process, which may "
@@ -169,7 +169,7 @@ def _plant(task: dict[str, Any], folder: Path, seed: int) -> Any:
                              "DASK_DISTRIBUTED__WORKER__DAEMON=False")
         return IsolatedFmuComponent(folder / name, interface=task["interface"], varmap=vmap,
                                     timeout=task.get("step_timeout") or DEFAULT_STEP_TIMEOUT)
-    from cosim.fmu import FmuComponent
+    from cosim.core.fmu import FmuComponent
 
     return FmuComponent(folder / name, interface=task["interface"], varmap=vmap)
 
@@ -218,11 +218,11 @@ class _TheoremMonitor:
 
 def internal_traceback(exc: BaseException | None) -> str | None:
     """The traceback of ``exc`` when it is, or was explicitly caused by (``raise ... from``),
-    an internal error: an exception that is neither a :class:`~cosim.errors.CosimError` nor
+    an internal error: an exception that is neither a :class:`~cosim.core.errors.CosimError` nor
     a :class:`~controllers.errors.ControllersError`; else ``None`` (a fault the reason
     explains: an FMU error, an unreachable set-point)."""
     from controllers.errors import ControllersError
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
 
     seen: set[int] = set()
     cause = exc
@@ -244,8 +244,8 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
     ``run`` receives ``phase`` (what is being done, for the reason of an internal error),
     ``ctrl`` (with its pool ``key``) and ``plant`` as they are made.
     """
-    from cosim import scenario
-    from cosim.master import Master
+    from cosim.core import scenario
+    from cosim.core.master import Master
 
     draw = task["draw"]
     run["phase"] = "writing the campaign's files on the worker"
@@ -288,7 +288,7 @@ def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
     Returns
     -------
     dict
-        ``result`` (a :class:`~cosim.master.RunResult` with its rows as an array and no
+        ``result`` (a :class:`~cosim.core.master.RunResult` with its rows as an array and no
         exception object), ``theorem`` (dict or ``None``), ``traceback`` (the text of an
         internal error's traceback, else ``None``), ``wall_time_s``, ``worker``.
 
@@ -298,8 +298,8 @@ def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
     ``ok``; after a failed run it is dropped (a new one is built for a later run).
     """
     from controllers.errors import ControllersError
-    from cosim.errors import CosimError
-    from cosim.master import RunResult
+    from cosim.core.errors import CosimError
+    from cosim.core.master import RunResult
 
     announce_start()
     wall0 = time.perf_counter()

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from cosim.errors import exit_codes_help
+from cosim.core.errors import exit_codes_help
 
 __all__ = ["DESCRIPTION", "HELP", "register", "run"]
 
@@ -43,7 +43,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Build the FMUs; print one line per FMU unless ``--quiet``."""
-    from cosim.build import TARGETS, build_fmu, compiler, display_path
+    from cosim.core.build import TARGETS, build_fmu, compiler, display_path
 
     compiler()  # fail early with a one-line error if gcc is missing
     for target in TARGETS:

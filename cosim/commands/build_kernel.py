@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from cosim.errors import exit_codes_help
+from cosim.core.errors import exit_codes_help
 
 __all__ = ["DESCRIPTION", "HELP", "register", "run"]
 
@@ -43,8 +43,8 @@ def run(args: argparse.Namespace) -> int:
     """Build (or find in the cache) the kernel; print its path unless ``--quiet``."""
     import warnings
 
-    from cosim import registry
-    from cosim.errors import SimulationFailed
+    from cosim.core import registry
+    from cosim.core.errors import SimulationFailed
 
     options = registry.parse_options(args.option)
     options.pop("kernel", None)

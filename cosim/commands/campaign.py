@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from cosim.errors import (
+from cosim.core.errors import (
     EXIT_FAILED,
     EXIT_INPUT_ERROR,
     EXIT_INTERRUPTED,
@@ -13,7 +13,7 @@ from cosim.errors import (
     exit_codes_help,
 )
 
-#: What the exit codes also mean for ``cosim campaign`` (:func:`cosim.errors.exit_codes_help`).
+#: What the exit codes also mean for ``cosim campaign`` (:func:`cosim.core.errors.exit_codes_help`).
 EXIT_NOTES = {
     EXIT_OK: "every run ran (violations are results, not errors)",
     EXIT_FAILED: "some runs failed (the campaign went on; they are in runs.parquet)",
@@ -93,7 +93,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def run(args: argparse.Namespace) -> int:
     """Execute ``cosim campaign``; returns the exit code."""
     from cosim.campaign import engine
-    from cosim.errors import EXIT_FAILED, EXIT_OK
+    from cosim.core.errors import EXIT_FAILED, EXIT_OK
 
     result = engine.run_campaign(args.spec, args.out, workers=args.workers,
                                  scheduler=args.scheduler, resume=args.resume,
@@ -110,7 +110,7 @@ def _print_summary(result: object) -> None:
     """Per variant: runs, failed, violating, the bound, and the median IAE of each output
     (in its unit × s); then the most frequent failure reasons."""
     from cosim.campaign import report
-    from cosim.plots import times_s
+    from cosim.core.plots import times_s
 
     s = result.summary  # type: ignore[attr-defined]
     print(f"cosim campaign: {s.get('campaign')}: {s.get('runs', 0)} of {s.get('planned')} runs "

@@ -3,7 +3,7 @@
 Prints every quantity of the theory (δISS, observer, tightening, terminal ingredients) with its
 paper reference, or JSON with the paper's names; checks the hypotheses of
 ``th:feasibility-stability`` at the requested set-points; the exit codes are
-:data:`cosim.errors.EXIT_CODES` with this command's :data:`EXIT_NOTES`. ``--save`` writes
+:data:`cosim.core.errors.EXIT_CODES` with this command's :data:`EXIT_NOTES`. ``--save`` writes
 the observer gains into the model file only when every check passes, atomically (a failed
 write leaves the file unchanged).
 """
@@ -17,11 +17,11 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import EXIT_FAILED, EXIT_OK, CosimError, exit_codes_help
+from cosim.core.errors import EXIT_FAILED, EXIT_OK, CosimError, exit_codes_help
 
 __all__ = ["EPILOG", "EXIT_NOTES", "HELP", "figure", "register", "run"]
 
-#: What the exit codes also mean for ``cosim certify`` (:func:`cosim.errors.exit_codes_help`).
+#: What the exit codes also mean for ``cosim certify`` (:func:`cosim.core.errors.exit_codes_help`).
 EXIT_NOTES = {
     EXIT_OK: "certified: every hypothesis holds",
     EXIT_FAILED: "usable but not certified: a hypothesis fails (named, with what would fix "
@@ -181,7 +181,7 @@ def _w_y_bar_from_csv(model: Any, path: str) -> float:
     """``w̄_y`` from a ``cosim generate-data`` record (``--data``)."""
     from controllers.certificates import w_y_bar_from_data
     from controllers.errors import DataError
-    from cosim.datagen import read_csv
+    from cosim.core.datagen import read_csv
 
     data = read_csv(path, input_names=list(model.input_names))
     u = data.u[:, [data.input_names.index(n) for n in model.input_names]]
@@ -301,7 +301,7 @@ def _check_args(args: argparse.Namespace) -> None:
                                             and args.gain_scale >= 0):
         raise CosimError(f"--gain-scale must be a non-negative number, got {args.gain_scale}")
     if args.plot:
-        from cosim.outpaths import figure_file
+        from cosim.core.outpaths import figure_file
 
         figure_file(args.plot, "--plot")
 
@@ -338,7 +338,7 @@ def _setpoint_checks(model: Any, cert: Any, setpoints_phys: list, setpoints: lis
 
 def _save(path: str, model: Any, cert: Any, verdict: Any, setpoints_phys: list) -> None:
     """``--save``: the observer gains, ``w̄_y`` and the verdict into the model file (atomic)."""
-    from cosim.atomicio import output_error
+    from cosim.core.atomicio import output_error
 
     names = list(model.output_names)
     model.L_z, model.L_r, model.w_y_bar = cert.L_z, cert.L_r, cert.w_y_bar
@@ -475,12 +475,12 @@ def _print_table(path: str, model: Any, cert: Any, note: str, per_setpoint: list
 
 
 def figure(path: str | Path, model: Any, cert: Any, setpoints: list) -> Path:
-    """The ``--plot`` figure (:func:`cosim.plots.certificate_figure`), with the output bounds
+    """The ``--plot`` figure (:func:`cosim.core.plots.certificate_figure`), with the output bounds
     and, for one or two outputs, the edge of the reachable set
     (:func:`controllers.equilibrium.reachable_boundary`: physical outputs ``(k, p)``, an
     open curve for one input, a closed path for two outputs and two or more inputs)."""
     from controllers.equilibrium import reachable_boundary
-    from cosim import plots
+    from cosim.core import plots
 
     reachable = reachable_boundary(model) if model.p <= 2 else None
     return plots.certificate_figure(path, model, cert, setpoints, _bounds(model), reachable)

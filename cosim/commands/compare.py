@@ -5,11 +5,11 @@ from __future__ import annotations
 import argparse
 import math
 
-from cosim.errors import EXIT_FAILED, EXIT_INPUT_ERROR, EXIT_OK, CosimError, exit_codes_help
+from cosim.core.errors import EXIT_FAILED, EXIT_INPUT_ERROR, EXIT_OK, CosimError, exit_codes_help
 
 __all__ = ["DESCRIPTION", "EPILOG", "EXIT_NOTES", "register", "run"]
 
-#: What the exit codes also mean for ``cosim compare`` (:func:`cosim.errors.exit_codes_help`).
+#: What the exit codes also mean for ``cosim compare`` (:func:`cosim.core.errors.exit_codes_help`).
 EXIT_NOTES = {
     EXIT_OK: "every compared signal within the tolerance band",
     EXIT_FAILED: "at least one signal outside the band",
@@ -117,13 +117,13 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``cosim compare``; returns 0 (pass) or 1 (fail), raises CosimError (exit 2)."""
-    from cosim.compare import DEFAULT_ATOL, DEFAULT_RTOL, compare
-    from cosim.plots import compare_figure
+    from cosim.core.compare import DEFAULT_ATOL, DEFAULT_RTOL, compare
+    from cosim.core.plots import compare_figure
 
     if args.window is not None and not args.band:
         raise CosimError("--window applies only with --band")
     if args.plot:
-        from cosim.outpaths import figure_file
+        from cosim.core.outpaths import figure_file
 
         figure_file(args.plot, "--plot")
     signals = args.signals.split(",") if args.signals is not None else None

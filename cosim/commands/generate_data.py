@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from cosim.errors import exit_codes_help
+from cosim.core.errors import exit_codes_help
 
 __all__ = ["DESCRIPTION", "HELP", "register", "run"]
 
@@ -75,9 +75,9 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
-    from cosim import datagen, outpaths, varmap
-    from cosim.errors import CosimError
-    from cosim.master import MAX_STEPS
+    from cosim.core import datagen, outpaths, varmap
+    from cosim.core.errors import CosimError
+    from cosim.core.master import MAX_STEPS
     from cosim_adapters.problems import bind_plant, load_problem
 
     if args.steps < 10:

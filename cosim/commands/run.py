@@ -6,8 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from cosim.errors import exit_codes_help
-from cosim.isolated import DEFAULT_STEP_TIMEOUT
+from cosim.core.errors import exit_codes_help
+from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
 
 DESCRIPTION = """\
 Run a scenario in closed loop: the plant FMU and the controller are stepped in lockstep at a
@@ -115,8 +115,9 @@ FLAGS = ("seed", "step", "step_timeout")
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``cosim run`` through :func:`cosim.api.run`; returns the exit code."""
-    from cosim import api, registry
-    from cosim.errors import EXIT_OK, CosimError, ParameterError, SimulationFailed
+    from cosim import api
+    from cosim.core import registry
+    from cosim.core.errors import EXIT_OK, CosimError, ParameterError, SimulationFailed
 
     options = registry.parse_options(args.option)
     if args.require_certificate:
@@ -124,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
     out = Path(args.out) if args.out else None
     try:
         if out is None:
-            from cosim import scenario
+            from cosim.core import scenario
 
             out = Path("results") / scenario.load(args.scenario).path.stem
         output = api.run(args.scenario, plant=args.plant,
@@ -144,7 +145,7 @@ def run(args: argparse.Namespace) -> int:
             raise result.error
         raise SimulationFailed(f"{result.reason} (partial results: {result.steps} of "
                                f"{result.steps_planned} steps in {out})")
-    from cosim import interrupts
+    from cosim.core import interrupts
 
     guard = interrupts.current()
     if guard is not None:

@@ -7,7 +7,7 @@ import importlib.resources
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import exit_codes_help
+from cosim.core.errors import exit_codes_help
 
 __all__ = ["DESCRIPTION", "HELP", "MAX_EPOCHS", "MAX_STATES", "SHIPPED_MODEL", "register",
            "run"]
@@ -200,7 +200,7 @@ def _problem(args: argparse.Namespace) -> tuple[Any, bool]:
     default."""
     from controllers.errors import ControllersError
     from controllers.problem_file import problem_from_dict
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
     from cosim_adapters.problems import load_problem
 
     if args.problem is not None:
@@ -244,7 +244,7 @@ def _sidecar(path: Path) -> dict | None:
 
 def _out_path(args: argparse.Namespace) -> Path:
     """--out, or models/<first data stem>_gru.json; never the shipped model unless named."""
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
 
     if args.out is not None:
         return Path(args.out)
@@ -260,7 +260,7 @@ def _check_options(args: argparse.Namespace) -> None:
     CosimError naming the option)."""
     import math
 
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
 
     if args.method == "simulation":
         given = [o for o in TRUNCATED_ONLY if getattr(args, o) is not None]
@@ -309,7 +309,7 @@ def _check_options(args: argparse.Namespace) -> None:
 def _sizes(args: argparse.Namespace) -> list[int]:
     """The GRU sizes to try: ``--n`` alone, else ``--sizes``, else the default."""
     from controllers.identification.search import DEFAULT_SIZES
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
 
     if args.n is not None:
         if args.sizes is not None:
@@ -328,8 +328,8 @@ def _sizes(args: argparse.Namespace) -> list[int]:
 
 
 def _read(args: argparse.Namespace, problem: Any, given: bool) -> Any:
-    """The data of every file, one record (:func:`cosim.logdata.read_logs`)."""
-    from cosim import logdata
+    """The data of every file, one record (:func:`cosim.core.logdata.read_logs`)."""
+    from cosim.core import logdata
 
     fractions = logdata.parse_fractions(args.split) if args.split is not None else None
     hint = "" if given else "; a logged CSV needs its problem: --problem PROBLEM.toml"
@@ -343,9 +343,9 @@ def _read(args: argparse.Namespace, problem: Any, given: bool) -> Any:
 
 def _has_split_column(path: str) -> bool:
     """Whether the file's header names a ``split`` column (a file that cannot be read has
-    none: :func:`cosim.logdata.read_log` then reports its fault)."""
-    from cosim import csvio, logdata
-    from cosim.errors import CosimError
+    none: :func:`cosim.core.logdata.read_log` then reports its fault)."""
+    from cosim.core import csvio, logdata
+    from cosim.core.errors import CosimError
 
     try:
         with csvio.CsvReader(Path(path), logdata.LOG_WORDING, encoding="utf-8-sig") as f:
@@ -362,9 +362,9 @@ def run(args: argparse.Namespace) -> int:
     import numpy as np
 
     from controllers.identification.record import Record
-    from cosim import outpaths
     from cosim.commands import train_methods
-    from cosim.errors import CosimError
+    from cosim.core import outpaths
+    from cosim.core.errors import CosimError
 
     _check_options(args)
     problem, given = _problem(args)

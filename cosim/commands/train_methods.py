@@ -39,7 +39,7 @@ def _bar(total: int, progress: bool, unit: str) -> Any:
 def _init(args: argparse.Namespace, problem: Any) -> dict[str, np.ndarray] | None:
     """``--init``'s weights, checked against the problem (and ``--n``)."""
     from controllers.model import GRUModel
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
 
     if not args.init:
         return None
@@ -97,8 +97,8 @@ def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
     import contextlib
 
     from controllers import sequences, training
-    from cosim.atomicio import output_error, replacing
-    from cosim.errors import CosimError
+    from cosim.core.atomicio import output_error, replacing
+    from cosim.core.errors import CosimError
 
     spans = sequences.stretches(data.split, data.experiment, "train")
     lengths = [b - a for a, b in spans]
@@ -192,8 +192,8 @@ def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, train
     """Score the model against its baseline, write the model file, the figure and the
     ``--history``; print the report."""
     from controllers import bounds, training
-    from cosim.atomicio import output_error, replacing
     from cosim.commands import train_report
+    from cosim.core.atomicio import output_error, replacing
 
     names, units = list(problem.output_names), list(problem.output_units)
     ev = train_report.evaluate(trained.params, record, problem, data.experiment_names,

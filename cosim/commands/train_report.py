@@ -92,8 +92,8 @@ def print_report(ev: Evaluation, names: list[str], units: list[str]) -> None:
 def figure(path: str | Path, ev: Evaluation, record: Any, model: Any, logged: bool,
            title: str) -> None:
     """Every row of the record: measured, the GRU's and the ARX's free runs, the splits
-    shaded (:func:`cosim.plots.identification_figure`)."""
-    from cosim import plots
+    shaded (:func:`cosim.core.plots.identification_figure`)."""
+    from cosim.core import plots
 
     plots.identification_figure(
         path, model.denormalize_y(record.y), model.denormalize_y(ev.xi),

@@ -10,8 +10,8 @@ import pytest
 
 from controllers import bounds, metrics
 from controllers.model import GRUModel
-from cosim import datagen
 from cosim.cli import main
+from cosim.core import datagen
 from tests.fourtank_problem import FOURTANK
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -12,8 +12,8 @@ torch = pytest.importorskip("torch")
 from controllers import bounds, metrics, sequences, training  # noqa: E402
 from controllers.errors import ControllersError  # noqa: E402
 from controllers.model import GRUModel  # noqa: E402
-from cosim import datagen  # noqa: E402
 from cosim.cli import main  # noqa: E402
+from cosim.core import datagen  # noqa: E402
 from tests.fourtank_problem import FOURTANK  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -6,7 +6,7 @@ control problems (other names, units, numbers of inputs and outputs).
   :class:`HeaterController` (m = 1, p = 1), :class:`MixerController` (m = 3, p = 2) and
   :class:`TripleController` (m = 2, p = 3) are constructible without arguments
   (``--controller tests.cosim.other_plants:HeaterController``, from the repository root).
-* :class:`FirstOrderPlant`: a plain :class:`~cosim.component.Component` plant,
+* :class:`FirstOrderPlant`: a plain :class:`~cosim.core.component.Component` plant,
   ``τ y' = y0 + B u + D d − y`` with disturbance inputs ``d`` a scenario may set.
 * :data:`MIXER_FMU`: the mixer as a pythonfmu FMU (FMI 2.0) with a tunable parameter
   ``loss`` (:func:`build_mixer_fmu`), for campaigns, whose plant is a file.
@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cosim import plots
-from cosim.component import Component, Signal
+from cosim.core import plots
+from cosim.core.component import Component, Signal
 
 
 @dataclass(frozen=True)

@@ -10,10 +10,10 @@ from typing import Any
 import numpy as np
 import pytest
 
-from cosim import plots, results
-from cosim.errors import CosimError
-from cosim.master import Master
-from cosim.scenario import load
+from cosim.core import plots, results
+from cosim.core.errors import CosimError
+from cosim.core.master import Master
+from cosim.core.scenario import load
 from tests.cosim.other_plants import (
     HEATER,
     MIXER,

@@ -1,4 +1,4 @@
-"""Binding a control problem to a plant FMU (:mod:`cosim.binding`): unit conversion through
+"""Binding a control problem to a plant FMU (:mod:`cosim.core.binding`): unit conversion through
 the FMU's UnitDefinitions and through pint, and the checks, on real FMUs (``Reactor.fmu`` of
 :mod:`tests.cosim.units_fmu`, the four-tank)."""
 
@@ -8,11 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from cosim.binding import Wanted, bind, unit_conversion, unit_definitions
-from cosim.errors import CosimError
-from cosim.fmu import FmuComponent
-from cosim.fmu_archive import read_model_description
-from cosim.varmap import VarMap, load
+from cosim.core.binding import Wanted, bind, unit_conversion, unit_definitions
+from cosim.core.errors import CosimError
+from cosim.core.fmu import FmuComponent
+from cosim.core.fmu_archive import read_model_description
+from cosim.core.varmap import VarMap, load
 from tests.cosim import units_fmu
 
 

@@ -14,11 +14,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from cosim import plots, results
 from cosim.campaign import report, run_campaign
 from cosim.commands.campaign import _print_summary
-from cosim.master import Master, RunResult
-from cosim.scenario import load
+from cosim.core import plots, results
+from cosim.core.master import Master, RunResult
+from cosim.core.scenario import load
 from tests.cosim.other_plants import (
     HEATER,
     TRIPLE,
@@ -231,7 +231,7 @@ conc = [0.2, 0.8]
 def test_drawn_setpoints_for_every_output_the_scenario_sets(tmp_path: Path, ranges: str,
                                                            message: str) -> None:
     from cosim.campaign import draws, spec
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
 
     (tmp_path / "mix.csv").write_text("time,ref.T,ref.conc\n0,40,0.3\n600,,\n")
     path = tmp_path / "mixer.toml"

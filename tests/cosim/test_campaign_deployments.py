@@ -421,7 +421,7 @@ def test_a_cluster_without_workers_stops_the_campaign_then_resume_runs_it(
 
 
 def test_worker_timeout_must_be_a_positive_number(tmp_path: Path) -> None:
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
 
     spec = tmp_path / "spec.toml"
     spec.write_text(MPC_SPEC)

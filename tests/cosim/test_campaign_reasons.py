@@ -21,7 +21,7 @@ from cosim.campaign import engine, store
 from cosim.campaign.pool import ControllerPool, controller_key
 from cosim.campaign.spec import load
 from cosim.campaign.task import POOL, run_task
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 SHORT = "time,ref.h1,ref.h2\n0,0.6,0.6\n500,0.7,\n1000,,\n"
 

@@ -11,7 +11,7 @@ import pytest
 from cosim.campaign import draws, spec
 from cosim.campaign.report import clopper_pearson_upper
 from cosim.cli import main
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "scenarios" / "leak_tank1.csv"

@@ -1,11 +1,11 @@
-"""``--help``: the exit codes of every command come from one table (cosim.errors)."""
+"""``--help``: the exit codes of every command come from one table (cosim.core.errors)."""
 
 from __future__ import annotations
 
 import pytest
 
 from cosim.cli import COMMANDS, main
-from cosim.errors import EXIT_CODES, exit_codes_help
+from cosim.core.errors import EXIT_CODES, exit_codes_help
 
 
 def help_text(capsys: pytest.CaptureFixture, *args: str) -> str:

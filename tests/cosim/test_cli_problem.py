@@ -11,8 +11,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim import datagen
 from cosim.cli import main
+from cosim.core import datagen
 from tests.cosim import units_fmu
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -1,4 +1,4 @@
-"""``cosim train LOG.csv --problem P.toml`` on data logged on a plant (``cosim.logdata``): the
+"""``cosim train LOG.csv --problem P.toml`` on data logged on a plant (``cosim.core.logdata``): the
 split by a column, by ``--split`` or by whole files (``--val``), several experiments and files
 kept apart, a gap or a missing sample ending an experiment, one-line errors for a bad time
 column or a bad cell (exit 2), the data's provenance in the model file, and a short record
@@ -18,7 +18,7 @@ pytest.importorskip("torch")
 
 from controllers.model import GRUModel
 from cosim.cli import main
-from cosim.datagen import multilevel_signal
+from cosim.core.datagen import multilevel_signal
 
 #: A plant that is not the four tanks: one heater, power [kW] -> temperature [degC], Ts = 5 s.
 PROBLEM = """\

@@ -1,4 +1,4 @@
-"""``cosim compare`` and :mod:`cosim.compare`: verdicts, band semantics, resampling, errors."""
+"""``cosim compare`` and :mod:`cosim.core.compare`: verdicts, band semantics, resampling, errors."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from cosim.cli import main
-from cosim.compare import compare, read_table, resample, window_extrema
-from cosim.errors import CosimError
+from cosim.core.compare import compare, read_table, resample, window_extrema
+from cosim.core.errors import CosimError
 
 T = np.arange(0.0, 500.0, 25.0)
 

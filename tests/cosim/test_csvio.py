@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim import csvio
-from cosim.errors import CosimError
+from cosim.core import csvio
+from cosim.core.errors import CosimError
 
 PLAIN = csvio.Wording(not_found="{path}: gone",
                       cell_count="{path}:{line}:{col}: {cells}/{expected}",

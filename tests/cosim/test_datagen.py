@@ -8,9 +8,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim import datagen
 from cosim.cli import main
-from cosim.errors import CosimError
+from cosim.core import datagen
+from cosim.core.errors import CosimError
 from tests.fourtank_problem import FOURTANK
 
 ROOT = Path(__file__).resolve().parents[2]

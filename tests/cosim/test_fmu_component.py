@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
-from cosim.errors import CosimError, FmuError, SimulationFailed
-from cosim.fmu import FmuComponent
-from cosim.fmu_archive import safe_extract
-from cosim.isolated import IsolatedFmuComponent
-from cosim.varmap import load as load_map
+from cosim.core.errors import CosimError, FmuError, SimulationFailed
+from cosim.core.fmu import FmuComponent
+from cosim.core.fmu_archive import safe_extract
+from cosim.core.isolated import IsolatedFmuComponent
+from cosim.core.varmap import load as load_map
 
 U = {"qa": 6.0e-4, "qb": 4.0e-4}
 

@@ -9,11 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.component import Component, Signal
-from cosim.errors import CosimError, SimulationFailed
-from cosim.fmu import FmuComponent
-from cosim.master import Master, communication_times
-from cosim.scenario import load
+from cosim.core.component import Component, Signal
+from cosim.core.errors import CosimError, SimulationFailed
+from cosim.core.fmu import FmuComponent
+from cosim.core.master import Master, communication_times
+from cosim.core.scenario import load
 from cosim_adapters.pi import PIController
 
 
@@ -204,7 +204,7 @@ class TimedRecorder(Recorder):
 
 
 def test_timing_diagnostics_are_kept_out_of_results(tmp_path: Path, fmu2_path: Path) -> None:
-    from cosim import results
+    from cosim.core import results
 
     sc = scenario(tmp_path, "time,ref.h1\n0,0.7\n100,\n")
     result = Master(FmuComponent(fmu2_path), TimedRecorder(), sc).run()
@@ -297,7 +297,7 @@ def test_a_signal_inside_the_stream_write_neither_cuts_nor_repeats_rows(
     import os
     import signal
 
-    from cosim.results import ResultsStream
+    from cosim.core.results import ResultsStream
 
     class SteadyRecorder(Recorder):  # the same columns throughout: the stream is kept
         def diagnostics(self) -> dict[str, float]:

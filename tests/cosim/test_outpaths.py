@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from cosim.errors import CosimError
-from cosim.outpaths import figure_file, out_dir, out_file
+from cosim.core.errors import CosimError
+from cosim.core.outpaths import figure_file, out_dir, out_file
 
 
 def test_good_targets_pass_and_create_nothing(tmp_path: Path) -> None:

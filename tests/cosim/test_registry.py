@@ -6,8 +6,8 @@ import sys
 
 import pytest
 
-from cosim.errors import CosimError
-from cosim.registry import CONTROLLERS, DEFAULT, create, resolve
+from cosim.core.errors import CosimError
+from cosim.core.registry import CONTROLLERS, DEFAULT, create, resolve
 from cosim_adapters.pi import PIController
 
 
@@ -30,7 +30,7 @@ def test_errors(name: str, words: str) -> None:
 
 
 def test_options_are_parsed_as_json_or_text() -> None:
-    from cosim.registry import parse_options
+    from cosim.core.registry import parse_options
 
     assert parse_options(["a=0.02", "b=true", "c=[1, 2]", "model=my.json", "e="]) == {
         "a": 0.02, "b": True, "c": [1, 2], "model": "my.json", "e": ""}

@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from cosim import kpis
-from cosim.master import RunResult
-from cosim.results import write, write_csv
+from cosim.core import kpis
+from cosim.core.master import RunResult
+from cosim.core.results import write, write_csv
 
 COLUMNS = ["time", "ref.h1", "plant.h1", "ctrl.qa", "ctrl.cost"]
 ROWS = [

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.compare import read_table
+from cosim.core.compare import read_table
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from cosim.errors import CosimError
-from cosim.scenario import BIAS, NOISE, PLANT, REF, load
+from cosim.core.errors import CosimError
+from cosim.core.scenario import BIAS, NOISE, PLANT, REF, load
 
 ROOT = Path(__file__).resolve().parents[2]
 

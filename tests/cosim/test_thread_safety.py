@@ -11,11 +11,11 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim import fmu_log, interrupts
 from cosim.campaign import engine
 from cosim.campaign.spec import load
 from cosim.campaign.task import run_task
-from cosim.fmu import FmuComponent
+from cosim.core import fmu_log, interrupts
+from cosim.core.fmu import FmuComponent
 
 U = {"qa": 6.0e-4, "qb": 4.0e-4}
 

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from cosim.errors import CosimError
-from cosim.fmu import FmuComponent
-from cosim.varmap import MappedSignal, VarMap, load
+from cosim.core.errors import CosimError
+from cosim.core.fmu import FmuComponent
+from cosim.core.varmap import MappedSignal, VarMap, load
 
 
 def write(tmp_path: Path, text: str) -> Path:

@@ -1,4 +1,5 @@
-"""A small plant FMU that declares units, for the problem binding's tests (:mod:`cosim.binding`).
+"""A small plant FMU that declares units, for the problem binding's tests
+(:mod:`cosim.core.binding`).
 
 ``Reactor.fmu`` (pythonfmu, FMI 2.0 Co-Simulation) is a CSTR-like stirred tank with its
 variables in the units a third party might choose: feed flow ``F_in`` [m3/s], coolant

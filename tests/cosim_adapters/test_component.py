@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 
 from controllers.model import DEFAULT_MODEL
-from cosim import scenario
-from cosim.errors import CosimError
-from cosim.master import Master
+from cosim.core import scenario
+from cosim.core.errors import CosimError
+from cosim.core.master import Master
 from cosim_adapters.gru_plant import GRUPlant
 from cosim_adapters.robust_mpc import RobustMPCController
 from tests.fourtank_problem import FOURTANK
@@ -223,7 +223,7 @@ def test_gru_plant_start_parameters() -> None:
 
 def test_reused_controller_gives_the_results_of_a_new_one() -> None:
     """A campaign worker reuses one controller for many runs: setup() restarts it exactly."""
-    from cosim.scenario import load
+    from cosim.core.scenario import load
 
     ctrl = RobustMPCController()
     sc = load(ROOT / "scenarios" / "paper_steps.csv").with_changes(stop_time=5000.0)

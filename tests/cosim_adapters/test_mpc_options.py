@@ -6,7 +6,7 @@ import json
 
 import pytest
 
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 from cosim_adapters.mpc_options import LAW_DEFAULTS, MPCOptions
 from cosim_adapters.robust_mpc import RobustMPCController
 

@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cosim.fmu import FmuComponent
-from cosim.master import Master
-from cosim.scenario import load
+from cosim.core.fmu import FmuComponent
+from cosim.core.master import Master
+from cosim.core.scenario import load
 from cosim_adapters.pi import PIController, PILoop
 from tests.fourtank_problem import FOURTANK
 
@@ -83,7 +83,7 @@ def test_closed_loop_on_the_fmu(tmp_path: Path, fmu2_path: Path, pairing: str) -
     ({"initial_inputs": {"qa": float("nan")}}, "initial_inputs: qa must be a finite number"),
 ])
 def test_bad_options_are_one_line_errors(kwargs, message) -> None:
-    from cosim.errors import CosimError
+    from cosim.core.errors import CosimError
 
     with pytest.raises(CosimError) as info:
         PIController(**kwargs)

@@ -13,12 +13,12 @@ import pytest
 from controllers import gru
 from controllers.equilibrium import state_equilibrium
 from controllers.model import DEFAULT_MODEL, GRUModel
-from cosim import kpis
 from cosim.cli import main
-from cosim.errors import CosimError
-from cosim.fmu import FmuComponent
-from cosim.master import Master
-from cosim.scenario import load
+from cosim.core import kpis
+from cosim.core.errors import CosimError
+from cosim.core.fmu import FmuComponent
+from cosim.core.master import Master
+from cosim.core.scenario import load
 from cosim_adapters.gru_plant import GRUPlant
 from cosim_adapters.pi import PIController
 from tests.controllers.random_gru import other_problem, random_gru_model

@@ -10,7 +10,7 @@ from pathlib import Path
 import pytest
 
 from cosim.api import run
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 from cosim_adapters.robust_mpc import RobustMPCController
 
 ROOT = Path(__file__).resolve().parents[2]

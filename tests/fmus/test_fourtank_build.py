@@ -1,4 +1,4 @@
-"""``cosim build-fmu`` / :func:`cosim.build.build_fmus`: contents, rebuild logic, errors."""
+"""``cosim build-fmu`` / :func:`cosim.core.build.build_fmus`: contents, rebuild logic, errors."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import zipfile
 
 import pytest
 
-from cosim import build
 from cosim.cli import main
-from cosim.errors import CosimError
+from cosim.core import build
+from cosim.core.errors import CosimError
 
 
 @pytest.fixture

@@ -131,7 +131,7 @@ def test_default_parameters_are_the_papers(fmu2_path):
 @pytest.mark.parametrize("which", ["fmu2_path", "fmu3_path"])
 def test_source_fmu_compiles_from_its_own_sources(which, request, tmp_path):
     """The sources inside the FMU build a working binary (source FMU)."""
-    from cosim.build import fmi_headers_dir
+    from cosim.core.build import fmi_headers_dir
     from tests.fmus.fourtank_run import LEVELS, Plant
 
     fmu = request.getfixturevalue(which)
@@ -169,7 +169,7 @@ def test_fmi2_and_fmi3_descriptions_and_c_sources_agree(fmu2_path, fmu3_path):
     the value-reference enum and name table in the C sources match them."""
     import re
 
-    from cosim.build import SOURCE_DIR
+    from cosim.core.build import SOURCE_DIR
 
     def table(path):
         md = read_model_description(path)

@@ -115,7 +115,7 @@ def test_cosim_run_with_the_map_and_pi(fmu: Path, tmp_path: Path) -> None:
                            str(tmp_path / "out"), "--quiet", "--no-figure"],
                           cwd=ROOT, capture_output=True, text=True, check=False)
     assert proc.returncode == 0, proc.stderr
-    from cosim.compare import read_table
+    from cosim.core.compare import read_table
 
     table = read_table(tmp_path / "out" / "results.csv")
     h1 = table.column("plant.h1")
@@ -158,7 +158,7 @@ def test_a_problem_with_variable_keys_binds_without_a_map(fmu: Path, tmp_path: P
                                str(tmp_path / name), "--quiet", "--no-figure"],
                               cwd=ROOT, capture_output=True, text=True, check=False)
         assert proc.returncode == 0, proc.stderr
-        from cosim.compare import read_table
+        from cosim.core.compare import read_table
 
         tables[name] = read_table(tmp_path / name / "results.csv")
     for col in ("plant.h1", "plant.h2", "ctrl.qa", "ctrl.qb"):

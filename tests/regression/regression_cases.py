@@ -1,7 +1,7 @@
 """The regression cases: every shipped scenario × controller (× third-party plant).
 
 Each case runs through the ``cosim run`` command line in its own process (exactly what a user
-runs), and its ``results.csv`` is compared by :mod:`cosim.compare` with
+runs), and its ``results.csv`` is compared by :mod:`cosim.core.compare` with
 ``scenarios/references/<scenario>__<controller>[__<plant>].csv``.
 
 References hold every column of ``results.csv`` except :data:`NOT_COMPARED` (wall-clock
@@ -114,8 +114,8 @@ def perturbed_scenario(case: Case, fmu: Path, dest: Path, dh: float = 1e-12) -> 
     set in the first row as ``plant.h1_start`` … columns. The copy keeps the scenario's file
     name, so the case id and its reference are unchanged.
     """
-    from cosim import varmap
-    from cosim.fmu import FmuComponent
+    from cosim.core import varmap
+    from cosim.core.fmu import FmuComponent
 
     vmap = map_of(case)
     plant = FmuComponent(fmu, varmap=varmap.load(vmap) if vmap else None)
@@ -143,8 +143,8 @@ def perturbed_scenario(case: Case, fmu: Path, dest: Path, dh: float = 1e-12) -> 
 
 def controller_available(name: str) -> str | None:
     """``None`` when the controller can be imported, else the reason it cannot."""
-    from cosim import registry
-    from cosim.errors import CosimError
+    from cosim.core import registry
+    from cosim.core.errors import CosimError
 
     try:
         registry.resolve(name)
@@ -207,7 +207,7 @@ def write_reference(results: Path, reference: Path) -> None:
     with results.open(newline="", encoding="utf-8") as fh:
         rows = list(csv.reader(fh))
     keep = [0] + [j for j, n in enumerate(rows[0]) if j and n in compared_columns([n])]
-    from cosim import atomicio
+    from cosim.core import atomicio
 
     # a temporary file renamed into place: an interrupted update never truncates a reference
     with atomicio.open_replacing(reference, "w", newline="") as fh:

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.compare import compare, read_table
+from cosim.core.compare import compare, read_table
 from tests.regression import regression_cases as rc
 
 CASES = rc.shipped_cases()

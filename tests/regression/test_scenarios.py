@@ -1,12 +1,12 @@
 """Every shipped scenario, with the MPC and the PI baseline (and on the third-party plant),
 must reproduce its reference in ``scenarios/references/`` within the default tolerances of
-:mod:`cosim.compare`."""
+:mod:`cosim.core.compare`."""
 
 from __future__ import annotations
 
 import pytest
 
-from cosim.compare import compare, read_table
+from cosim.core.compare import compare, read_table
 from tests.regression import regression_cases as rc
 
 CASES = rc.shipped_cases()

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import pytest
 
-from cosim.compare import compare, read_table
+from cosim.core.compare import compare, read_table
 from tests.regression import regression_cases as rc
 
 HERE = Path(__file__).parent

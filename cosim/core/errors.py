@@ -94,7 +94,7 @@ class OutputError(SimulationFailed):
     """An output file could not be written (full disk, unwritable target).
 
     The message names the file; the previous content of that file, if any, is intact
-    (see :mod:`cosim.atomicio`). The CLI maps it to exit code 1 (:data:`EXIT_FAILED`).
+    (see :mod:`cosim.core.atomicio`). The CLI maps it to exit code 1 (:data:`EXIT_FAILED`).
     """
 
 

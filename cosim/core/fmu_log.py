@@ -2,7 +2,7 @@
 
 fmpy formats FMI 2 variadic log messages in a small native proxy that keeps ONE Python
 logger per process, so messages are routed here by instance name: an
-:class:`~cosim.fmu.FmuComponent` registers a sink (a bounded deque) under its instance name
+:class:`~cosim.core.fmu.FmuComponent` registers a sink (a bounded deque) under its instance name
 with :func:`attach`, and its warnings and errors land there to explain a failure. A message
 from an instance without a sink is printed.
 

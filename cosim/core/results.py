@@ -5,13 +5,14 @@ output folder, flushed to disk at least once a second of wall time: a run killed
 (SIGKILL, the OOM killer, a power loss) leaves every row but the last second's there, in the
 same CSV format. When the run ends, however it ends (ok, failed, interrupted), :func:`write`
 renames that file to ``results.csv`` and writes ``timings.csv``, ``summary.json`` and
-``figure.png``, each to a temporary file renamed into place (:mod:`cosim.atomicio`): a failed
+``figure.png``, each to a temporary file renamed into place (:mod:`cosim.core.atomicio`): a failed
 write leaves the previous file intact. Files of an earlier run in the same folder that this
 run does not write (a ``figure.png`` when ``--no-figure`` is given) are removed, so a folder
 never mixes two runs.
 
-``results.csv`` follows the FMI cross-check CSV rules (written by :func:`cosim.csvio.write_csv`,
-re-exported here): comma separated, the header row holds the column names in double quotes,
+``results.csv`` follows the FMI cross-check CSV rules (written by
+:func:`cosim.core.csvio.write_csv`, re-exported here): comma separated, the header row holds
+the column names in double quotes,
 ``time`` first, numbers unquoted in full precision (Python ``repr``, which round-trips
 exactly), one row per communication point, no comments.
 Column names are ``<source>.<signal>``: ``ref.h1`` (set-point), ``plant.h1`` (true plant
@@ -29,11 +30,11 @@ import os
 import time
 from pathlib import Path
 
-from cosim import atomicio
-from cosim import kpis as _kpis
-from cosim.csvio import header_line, row_lines, write_csv
-from cosim.errors import OutputError
-from cosim.master import RunResult
+from cosim.core import atomicio
+from cosim.core import kpis as _kpis
+from cosim.core.csvio import header_line, row_lines, write_csv
+from cosim.core.errors import OutputError
+from cosim.core.master import RunResult
 
 __all__ = ["PART_SUFFIX", "RUN_FILES", "ResultsStream", "jsonable", "signals", "summary", "write",
            "write_csv"]
@@ -159,7 +160,7 @@ def summary(result: RunResult, meta: dict | None = None) -> dict:
 
     Keys: ``status`` (``ok``/``failed``/``interrupted``), ``reason``, ``steps``,
     ``steps_planned``, ``step_size``, ``start_time``, ``stop_time``, ``wall_time_s``,
-    ``signals`` (see :func:`signals`), ``kpis`` (see :func:`cosim.kpis.compute`),
+    ``signals`` (see :func:`signals`), ``kpis`` (see :func:`cosim.core.kpis.compute`),
     ``controller_summary`` (the controller's own ``summary()``: solver statistics), plus
     ``meta`` (scenario, plant, controller, seed...).
     """
@@ -302,7 +303,7 @@ def _title(meta: dict | None, doc: dict) -> str:
 
 def _figure(path: Path, result: RunResult, doc: dict, title: str) -> None:
     """Draw the figure atomically; a plotting error goes to ``doc["figure_error"]``."""
-    from cosim import plots
+    from cosim.core import plots
 
     with atomicio.replacing(path) as tmp:
         try:

@@ -12,7 +12,7 @@ Row ``k`` of the data set holds ``u_k`` (applied over ``[t_k, t_k + Ts)``) and `
 CSV format: a header ``time,<inputs...>,<outputs...>,split`` then one row per sample, with
 ``split`` one of ``train``, ``val``, ``test``. A sidecar ``<name>.json`` records how the data
 were made (seed, plant, hold times, splits) so that they can be regenerated exactly. Both
-files are written atomically (:mod:`cosim.atomicio`): a failed write leaves the previous pair
+files are written atomically (:mod:`cosim.core.atomicio`): a failed write leaves the previous pair
 unchanged.
 """
 
@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 
-from cosim import csvio
-from cosim.component import Component
-from cosim.errors import CosimError
+from cosim.core import csvio
+from cosim.core.component import Component
+from cosim.core.errors import CosimError
 
 __all__ = ["DATA_WORDING", "SPLITS", "Dataset", "collect", "fmu_plant",
            "generate", "multilevel_signal", "read_csv", "split_sizes", "write_csv"]
@@ -160,7 +160,7 @@ def write_csv(data: Dataset, path: str | Path, meta: dict | None = None) -> Path
     """Write the CSV and its ``.json`` sidecar (``meta`` plus split sizes); return the CSV.
 
     Both files are written to temporary files first and renamed onto their targets only when
-    both are complete (:func:`cosim.atomicio.replacing`), so a failed write leaves the
+    both are complete (:func:`cosim.core.atomicio.replacing`), so a failed write leaves the
     previous CSV and sidecar unchanged.
 
     Raises
@@ -170,7 +170,7 @@ def write_csv(data: Dataset, path: str | Path, meta: dict | None = None) -> Path
     CosimError
         When ``path`` ends in ``.json`` (the sidecar would overwrite the data).
     """
-    from cosim.atomicio import output_error, replacing
+    from cosim.core.atomicio import output_error, replacing
 
     path = Path(path)
     side = path.with_suffix(".json")
@@ -196,7 +196,7 @@ def write_csv(data: Dataset, path: str | Path, meta: dict | None = None) -> Path
     return path
 
 
-#: How data sets word the errors of :class:`~cosim.csvio.CsvReader`.
+#: How data sets word the errors of :class:`~cosim.core.csvio.CsvReader`.
 DATA_WORDING = csvio.Wording(
     not_found="{path}: cannot read data file ({strerror})",
     is_folder="{path}: cannot read data file ({strerror})",
@@ -271,11 +271,11 @@ def _input_names(path: Path, signals: list[str], n_inputs: int | None,
 
 def fmu_plant(path: str | Path, map_path: str | Path | None = None,
               interface: str = "cs", varmap: Any = None) -> Component:
-    """The plant FMU as a :class:`~cosim.fmu.FmuComponent`, with a variable map: ``varmap``
-    (a :class:`~cosim.varmap.VarMap`, e.g. a problem's binding, :mod:`cosim.binding`), or
+    """The plant FMU as a :class:`~cosim.core.fmu.FmuComponent`, with a variable map: ``varmap``
+    (a :class:`~cosim.core.varmap.VarMap`, e.g. a problem's binding, :mod:`cosim.core.binding`), or
     the one read from ``map_path``."""
-    from cosim import varmap as varmaps
-    from cosim.fmu import FmuComponent
+    from cosim.core import varmap as varmaps
+    from cosim.core.fmu import FmuComponent
 
     vm = varmap if varmap is not None else (varmaps.load(map_path) if map_path else None)
     return FmuComponent(path, name="plant", interface=interface, varmap=vm)

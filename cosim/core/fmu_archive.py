@@ -3,7 +3,7 @@
 An ``.fmu`` is a zip archive; :func:`safe_extract` unpacks it after checking every member
 name and the unpacked size, :func:`read_model_description` reads its ``modelDescription.xml``
 (through fmpy) and :func:`check_binary` checks that it has a binary for this platform. Each
-fault is a one-line :class:`~cosim.errors.CosimError` naming the FMU.
+fault is a one-line :class:`~cosim.core.errors.CosimError` naming the FMU.
 """
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import zipfile
 from pathlib import Path, PurePosixPath
 from typing import Any
 
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 __all__ = ["MAX_UNPACKED_BYTES", "check_binary", "read_model_description", "safe_extract"]
 

@@ -1,7 +1,7 @@
 """The co-simulation master: plant, sensor and controller in lockstep, driven by a scenario.
 
 One communication step ``[t_k, t_k+1)`` (Gauss-Seidel, zero-order hold; see
-:mod:`cosim.component` for the timing convention):
+:mod:`cosim.core.component` for the timing convention):
 
 1. apply the scenario events due at ``t_k`` (set-points, plant inputs and tunable parameters,
    sensor bias and noise);
@@ -28,11 +28,11 @@ import math
 import signal
 from collections.abc import Callable
 
-from cosim import interrupts
-from cosim.component import Component
-from cosim.errors import CosimError, ParameterError
-from cosim.loop import Run
-from cosim.run_result import (
+from cosim.core import interrupts
+from cosim.core.component import Component
+from cosim.core.errors import CosimError, ParameterError
+from cosim.core.loop import Run
+from cosim.core.run_result import (
     MAX_STEPS,
     PREFIX_CTRL,
     PREFIX_PLANT,
@@ -42,7 +42,7 @@ from cosim.run_result import (
     RunResult,
     communication_times,
 )
-from cosim.scenario import BIAS, NOISE, PLANT, REF, UNIFORM, Scenario
+from cosim.core.scenario import BIAS, NOISE, PLANT, REF, UNIFORM, Scenario
 
 __all__ = ["MAX_STEPS", "Master", "RowSink", "RunResult", "communication_times"]
 
@@ -102,7 +102,7 @@ class Master:
     # -- wiring -------------------------------------------------------------------------------
     def _wire(self) -> None:
         plant, ctrl, sc = self.plant, self.controller, self.scenario
-        # a controller output drives an FMU input, or a tunable parameter (cosim.binding)
+        # a controller output drives an FMU input, or a tunable parameter (cosim.core.binding)
         plant_in = {s.name for s in plant.inputs} | set(getattr(plant, "tunables", ()))
         plant_out = [s.name for s in plant.outputs]
         self.ctrl_outputs = [s.name for s in ctrl.outputs]
@@ -166,13 +166,13 @@ class Master:
             Called with the number of completed plant steps after each step (progress bars).
         record : RowSink, optional
             Receives every row as it is recorded (``record.append(row, columns)``), e.g. a
-            :class:`cosim.results.ResultsStream` that streams ``results.csv`` to disk. An
+            :class:`cosim.core.results.ResultsStream` that streams ``results.csv`` to disk. An
             exception it raises ends the run (status ``failed``).
         step_timeout : float, optional
             Wall-clock limit [s] of one controller step (``SIGALRM`` in the main thread, so a
             controller hung in Python code is stopped; elsewhere the step is measured after
             it returns). Plant steps are bounded by the plant itself (see
-            :class:`cosim.isolated.IsolatedFmuComponent`).
+            :class:`cosim.core.isolated.IsolatedFmuComponent`).
         deadline : float, optional
             ``time.monotonic()`` value past which the run stops with status ``failed``
             (checked between steps: the whole-run timeout of campaigns).

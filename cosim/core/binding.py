@@ -2,12 +2,12 @@
 
 A control problem names its signals in its own units (a problem file: ``[inputs.F]``,
 ``unit = "L/min"``); a plant FMU has variables with their own names and units. :func:`bind`
-matches the two before anything runs and returns the :class:`~cosim.varmap.VarMap` through
-which :class:`~cosim.fmu.FmuComponent` renames and converts (``value_fmu = scale *
+matches the two before anything runs and returns the :class:`~cosim.core.varmap.VarMap` through
+which :class:`~cosim.core.fmu.FmuComponent` renames and converts (``value_fmu = scale *
 value_problem + offset`` on the way in, the inverse on the way out):
 
 - **Names.** A signal is the FMU variable of its own name, or the one its problem entry names
-  (``variable = "F_in"``). A variable map (``--map``, :mod:`cosim.varmap`) takes precedence:
+  (``variable = "F_in"``). A variable map (``--map``, :mod:`cosim.core.varmap`) takes precedence:
   an entry with a ``scale`` or an ``offset`` is taken as it is; an entry without either only
   renames, and the units decide the conversion as for any other signal.
 - **Units.** The problem's unit is related to the unit the FMU declares for the variable (its
@@ -39,8 +39,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import CosimError
-from cosim.varmap import MappedSignal, VarMap, variable_unit
+from cosim.core.errors import CosimError
+from cosim.core.varmap import MappedSignal, VarMap, variable_unit
 
 __all__ = ["Conversion", "UnitError", "Wanted", "bind", "pint_units", "unit_conversion",
            "unit_definitions"]

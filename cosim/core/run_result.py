@@ -1,6 +1,6 @@
 """What a run records (:class:`RunResult`), where its rows go (:class:`RowSink`), and its
-communication times: shared by the master (:mod:`cosim.master`) and its loop
-(:mod:`cosim.loop`), which import this module and not each other's."""
+communication times: shared by the master (:mod:`cosim.core.master`) and its loop
+(:mod:`cosim.core.loop`), which import this module and not each other's."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""One execution of a :class:`~cosim.master.Master`: the loop state and the step phases.
+"""One execution of a :class:`~cosim.core.master.Master`: the loop state and the step phases.
 
 One communication step ``[t_k, t_k+1)`` is :meth:`Run._apply_events` (scenario events due at
 ``t_k``), :meth:`Run._measure` (plant outputs, the non-finite guard, the sensor),
@@ -17,20 +17,20 @@ import time as _time
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from cosim import interrupts
-from cosim.errors import CosimError, SimulationFailed
-from cosim.run_result import PREFIX_CTRL, RowSink, RunResult, communication_times
-from cosim.scenario import BIAS, PLANT, REF, UNIFORM
-from cosim.sensor import SensorModel
+from cosim.core import interrupts
+from cosim.core.errors import CosimError, SimulationFailed
+from cosim.core.run_result import PREFIX_CTRL, RowSink, RunResult, communication_times
+from cosim.core.scenario import BIAS, PLANT, REF, UNIFORM
+from cosim.core.sensor import SensorModel
 
 if TYPE_CHECKING:
-    from cosim.master import Master
+    from cosim.core.master import Master
 
 __all__ = ["RowSink", "Run"]
 
 
 class Run:
-    """One execution of a :class:`~cosim.master.Master` (see the module docstring)."""
+    """One execution of a :class:`~cosim.core.master.Master` (see the module docstring)."""
 
     def __init__(self, master: Master, record: RowSink | None, step_timeout: float | None,
                  deadline: float | None) -> None:

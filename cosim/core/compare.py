@@ -27,9 +27,9 @@ Tolerance band
 
 Two NaNs (or two equal infinities) at the same point agree; a NaN against a number does not.
 
-The files are read by :func:`cosim.csvio.read_table` (re-exported here with
-:class:`~cosim.csvio.Table`); the figure of ``cosim compare --plot`` is
-:func:`cosim.plots.compare_figure`.
+The files are read by :func:`cosim.core.csvio.read_table` (re-exported here with
+:class:`~cosim.core.csvio.Table`); the figure of ``cosim compare --plot`` is
+:func:`cosim.core.plots.compare_figure`.
 """
 
 from __future__ import annotations
@@ -41,8 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cosim.csvio import Table, read_table
-from cosim.errors import CosimError
+from cosim.core.csvio import Table, read_table
+from cosim.core.errors import CosimError
 
 __all__ = [
     "DEFAULT_ATOL",

@@ -5,7 +5,7 @@ temporary file in the target's own folder (``.<name>.<random>.tmp<suffix>``), fl
 and renamed onto the target in one step (``os.replace``, atomic on POSIX). A full disk, an
 unwritable folder or an exception while the content is produced leaves the previous file
 byte-identical and no temporary file behind; the error is an
-:class:`~cosim.errors.OutputError` naming the target (exit code 1).
+:class:`~cosim.core.errors.OutputError` naming the target (exit code 1).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-from cosim.errors import OutputError
+from cosim.core.errors import OutputError
 
 __all__ = [
     "fsync_folder",

@@ -11,13 +11,13 @@ A map is a TOML file with one table per project signal::
 Inputs are converted on the way into the FMU (``plant = scale * project + offset``) and
 outputs the inverse way out (``project = (plant - offset) / scale``). Signals that a map does
 not name are looked up in the FMU under their own name. A run binds its control problem to
-the FMU through :mod:`cosim.binding`, where a map takes precedence over the problem's own
+the FMU through :mod:`cosim.core.binding`, where a map takes precedence over the problem's own
 ``variable`` keys (an entry without ``scale`` and ``offset`` only renames: the units then
 decide the conversion).
 
 Before the first step :meth:`VarMap.check` holds the map against the FMU's
 modelDescription: a missing variable, a wrong causality or a unit mismatch is a one-line
-:class:`~cosim.errors.CosimError` naming the map file, the signal and the variable. Every
+:class:`~cosim.core.errors.CosimError` naming the map file, the signal and the variable. Every
 entry is checked, including those the run does not use.
 """
 
@@ -29,7 +29,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 __all__ = ["MappedSignal", "VarMap", "load", "variable_unit"]
 

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import fmus
-from cosim.errors import CosimError
+from cosim.core.errors import CosimError
 
 __all__ = ["BUILD_DIR", "CACHE_APP", "CFLAGS", "DEFAULT_PROBLEM", "FMU_DIR", "LDFLAGS",
            "MODEL_IDENTIFIER", "PACKAGE_DIR", "SOURCE_DIR", "TARGETS", "Target", "build_fmu",
@@ -216,7 +216,7 @@ def _add(zf: zipfile.ZipFile, arcname: str, data: bytes, executable: bool = Fals
 
 def _zip_fmu(target: Target, binary: Path, digest: str) -> None:
     """Write the FMU atomically (temporary file, then rename): a failure keeps the old one."""
-    from cosim.atomicio import replacing
+    from cosim.core.atomicio import replacing
 
     with replacing(target.fmu_path) as tmp, \
             zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
@@ -251,7 +251,7 @@ def build_fmu(target: Target, force: bool = False) -> bool:
     OutputError
         :data:`FMU_DIR` cannot be written (the previous FMU, if any, is intact).
     """
-    from cosim.atomicio import output_error, write_text
+    from cosim.core.atomicio import output_error, write_text
 
     cc = compiler()
     digest = _source_hash(target, cc)

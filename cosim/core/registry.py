@@ -1,6 +1,6 @@
 """Controller registry: short names → ``"module:Class"``; a ``module:Class`` string also works.
 
-Controllers are :class:`~cosim.component.Component` classes constructible without arguments.
+Controllers are :class:`~cosim.core.component.Component` classes constructible without arguments.
 """
 
 from __future__ import annotations
@@ -11,8 +11,8 @@ import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from cosim.component import Component
-from cosim.errors import CosimError
+from cosim.core.component import Component
+from cosim.core.errors import CosimError
 
 __all__ = ["CONTROLLERS", "DEFAULT", "create", "parse_options", "resolve"]
 

@@ -7,7 +7,7 @@ from collections.abc import Iterable, Mapping
 
 import numpy as np
 
-from cosim.component import Component, Signal
+from cosim.core.component import Component, Signal
 
 __all__ = ["SensorModel"]
 

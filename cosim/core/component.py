@@ -67,7 +67,7 @@ class Component(ABC):
 
     def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:  # noqa: B027
         """Before :meth:`setup`: the set-points the run will request, in order (each by
-        output name; :meth:`cosim.scenario.Scenario.setpoints`), so that a controller can
+        output name; :meth:`cosim.core.scenario.Scenario.setpoints`), so that a controller can
         design for them (the robust MPC decides there whether it runs certified). Optional;
         ignored by default."""
 

@@ -1,8 +1,8 @@
 """Checks of output paths (``--out``, ``--plot``, ``--figure``) before any work is done.
 
 A command that would compute for minutes and then fail to write its result checks the
-target first: each helper raises a one-line :class:`~cosim.errors.CosimError` naming the
-path and the option (an :class:`~cosim.errors.OutputError`, exit 1, when the folder is not
+target first: each helper raises a one-line :class:`~cosim.core.errors.CosimError` naming the
+path and the option (an :class:`~cosim.core.errors.OutputError`, exit 1, when the folder is not
 writable). Nothing is created here (a failed command leaves no empty folder);
 the writer creates missing folders.
 """
@@ -12,7 +12,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from cosim.errors import CosimError, OutputError
+from cosim.core.errors import CosimError, OutputError
 
 __all__ = ["FIGURE_SUFFIXES", "figure_file", "out_dir", "out_file"]
 

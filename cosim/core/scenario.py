@@ -20,7 +20,7 @@ Format (one file per scenario)::
   ``[−a, a]`` (a bounded perturbation, as ``w_y`` in the paper).
 * Comma separated, header names may be quoted (FMI cross-check CSV conventions).
 
-Every error is a :class:`~cosim.errors.CosimError` that starts with ``file:line:column``
+Every error is a :class:`~cosim.core.errors.CosimError` that starts with ``file:line:column``
 (1-based; the header is line 1) and names the column.
 """
 
@@ -30,8 +30,8 @@ from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from cosim import csvio
-from cosim.errors import CosimError
+from cosim.core import csvio
+from cosim.core.errors import CosimError
 
 __all__ = ["BIAS", "NOISE", "PLANT", "REF", "SCENARIO_WORDING", "SENSOR_KINDS", "UNIFORM",
            "Column", "Event", "Scenario", "load"]
@@ -278,7 +278,7 @@ def _parse_header(path: Path, header: list[str]) -> tuple[Column, ...]:
     return tuple(columns)
 
 
-#: How scenario files word the errors of :class:`~cosim.csvio.CsvReader`.
+#: How scenario files word the errors of :class:`~cosim.core.csvio.CsvReader`.
 SCENARIO_WORDING = csvio.Wording(
     not_found="{path}: scenario file not found",
     is_folder="{path}: cannot read scenario: {error}",

@@ -1,4 +1,4 @@
-"""An :class:`~cosim.fmu.FmuComponent` whose native code runs in a worker process.
+"""An :class:`~cosim.core.fmu.FmuComponent` whose native code runs in a worker process.
 
 An FMU is native code: a segmentation fault inside ``doStep`` would take the whole runner
 down with it, results and all, and a ``doStep`` stuck in a loop would hang it for ever.
@@ -7,7 +7,7 @@ process and loads the FMU in a ``spawn``-ed worker; the two talk over a pipe in 
 of strings and floats (one round trip per step).
 
 * When the worker dies (segfault, ``os._exit``, killed), the step raises
-  :class:`~cosim.errors.SimulationFailed` ``"... worker died (signal 11, SIGSEGV)"`` and the
+  :class:`~cosim.core.errors.SimulationFailed` ``"... worker died (signal 11, SIGSEGV)"`` and the
   master keeps every row recorded so far.
 * With a ``timeout``, a request the worker has not answered within that many seconds kills
   the worker (SIGKILL) and fails the step: ``"doStep at t=500.0 took longer than the step
@@ -33,9 +33,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from cosim.errors import CosimError, ParameterError, SimulationFailed
-from cosim.fmu import FmuComponent
-from cosim.varmap import MappedSignal, VarMap
+from cosim.core.errors import CosimError, ParameterError, SimulationFailed
+from cosim.core.fmu import FmuComponent
+from cosim.core.varmap import MappedSignal, VarMap
 
 __all__ = ["DEFAULT_STEP_TIMEOUT", "IsolatedFmuComponent"]
 

@@ -3,7 +3,7 @@
 Two runs writing into the same folder at once would interleave their files. A
 :class:`RunFolder` takes an exclusive ``flock`` on the folder itself (no lock file is left
 behind) for as long as the run goes; a second run into the same folder is refused at once with
-a one-line :class:`~cosim.errors.CosimError` (exit 2) naming the folder. The lock dies with
+a one-line :class:`~cosim.core.errors.CosimError` (exit 2) naming the folder. The lock dies with
 the process, however it ends.
 
 A folder the run created and left empty (the run was refused or failed before writing) is
@@ -18,8 +18,8 @@ import os
 from pathlib import Path
 from types import TracebackType
 
-from cosim import atomicio
-from cosim.errors import CosimError
+from cosim.core import atomicio
+from cosim.core.errors import CosimError
 
 __all__ = ["RunFolder"]
 

@@ -43,7 +43,7 @@ def compute(columns: list[str], rows: list[list[float]], outputs: list[str],
     Parameters
     ----------
     columns, rows
-        As recorded by :class:`cosim.master.Master` (``time``, ``ref.<o>``, ``plant.<o>``,
+        As recorded by :class:`cosim.core.master.Master` (``time``, ``ref.<o>``, ``plant.<o>``,
         ``ctrl.<u>``, ...).
     outputs : list of str
         Controlled/measured outputs (``plant.<o>`` is the true plant value).

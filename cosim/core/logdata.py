@@ -22,7 +22,7 @@ A header row, then one row per sample (blank lines skipped; a byte-order mark dr
   inside it, the open-loop evaluation restarts at its first row).
 
 Any other column is ignored (its name is recorded), and its cells are not read. A data set
-written by :func:`cosim.datagen.write_csv` is such a file: one experiment with a ``split``
+written by :func:`cosim.core.datagen.write_csv` is such a file: one experiment with a ``split``
 column (the extra plant outputs are ignored columns). Several files are read into one record
 by :func:`read_logs`: each file's experiments stay apart from the other files'.
 """
@@ -38,9 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from cosim import csvio
-from cosim.datagen import SPLITS, split_sizes
-from cosim.errors import CosimError
+from cosim.core import csvio
+from cosim.core.datagen import SPLITS, split_sizes
+from cosim.core.errors import CosimError
 
 __all__ = ["EXPERIMENT_COLUMN", "LOG_WORDING", "MISSING", "SPLIT_COLUMN", "TIME_COLUMN",
            "TS_TOLERANCE", "LogData", "fraction_split", "parse_fractions", "read_log",
@@ -54,7 +54,7 @@ TS_TOLERANCE = 0.01
 #: Cells of an input or output that mark a missing sample (case-insensitive, stripped).
 MISSING = frozenset({"", "nan", "na", "n/a", "null"})
 
-#: How logged data files word the errors of :class:`~cosim.csvio.CsvReader`.
+#: How logged data files word the errors of :class:`~cosim.core.csvio.CsvReader`.
 LOG_WORDING = csvio.Wording(
     not_found="{path}: cannot read data file ({strerror})",
     is_folder="{path}: cannot read data file ({strerror})",
@@ -133,7 +133,7 @@ def fraction_split(experiment: np.ndarray, fractions: tuple[float, float]) -> np
     """Split labels by fractions, per experiment and in time order.
 
     The first ``round(N · TRAIN)`` rows of each experiment of ``N`` rows are ``train``, the next
-    ``round(N · VAL)`` ``val``, the rest ``test`` (:func:`cosim.datagen.split_sizes`, so one
+    ``round(N · VAL)`` ``val``, the rest ``test`` (:func:`cosim.core.datagen.split_sizes`, so one
     experiment is split as ``cosim generate-data`` splits its record).
     """
     split = np.empty(experiment.shape[0], dtype=object)

@@ -1,17 +1,17 @@
 """Run any FMI 2.0 or 3.0 FMU (Co-Simulation or Model Exchange) as a :class:`Component`.
 
 fmpy loads the FMU's native library into this process; an FMU is native code that may
-crash, so :mod:`cosim.isolated` offers the same component in a worker process.
+crash, so :mod:`cosim.core.isolated` offers the same component in a worker process.
 
 Signals are the FMU's real-valued inputs and outputs under their project names (a
-:class:`~cosim.varmap.VarMap` renames and converts them; without one, the FMU's names are
+:class:`~cosim.core.varmap.VarMap` renames and converts them; without one, the FMU's names are
 used as they are). Value references are looked up once; per-step calls reuse preallocated
 ctypes buffers.
 
-An FMU call that fails raises :class:`~cosim.errors.FmuError` (a
-:class:`~cosim.errors.SimulationFailed`) carrying the FMI status it returned. The archive
-and the modelDescription are read by :mod:`cosim.fmu_archive`; the FMU's log messages are
-routed by :mod:`cosim.fmu_log`.
+An FMU call that fails raises :class:`~cosim.core.errors.FmuError` (a
+:class:`~cosim.core.errors.SimulationFailed`) carrying the FMI status it returned. The archive
+and the modelDescription are read by :mod:`cosim.core.fmu_archive`; the FMU's log messages are
+routed by :mod:`cosim.core.fmu_log`.
 
 Several components may live in one process and be stepped from several threads at once (a
 campaign worker with two threads): each has its own instance, extracted folder and buffers;
@@ -34,11 +34,11 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from cosim import fmu_log
-from cosim.component import Component, Signal
-from cosim.errors import CosimError, FmuError
-from cosim.fmu_archive import check_binary, read_model_description, safe_extract
-from cosim.varmap import VarMap, variable_unit
+from cosim.core import fmu_log
+from cosim.core.component import Component, Signal
+from cosim.core.errors import CosimError, FmuError
+from cosim.core.fmu_archive import check_binary, read_model_description, safe_extract
+from cosim.core.varmap import VarMap, variable_unit
 
 __all__ = ["FmuComponent", "libraries_loaded"]
 
@@ -73,7 +73,7 @@ class FmuComponent(Component):
     start_values : dict, optional
         FMU variable (or map signal) → value, applied before initialisation.
     varmap : VarMap, optional
-        Renames/converts signals (see :mod:`cosim.varmap`).
+        Renames/converts signals (see :mod:`cosim.core.varmap`).
     rtol : float
         CVode relative tolerance for Model Exchange.
     unpack_dir : str or Path, optional
@@ -362,7 +362,7 @@ class FmuComponent(Component):
         """Set inputs by project name (converted through the variable map).
 
         An input may be a tunable parameter (a problem input bound to one,
-        :mod:`cosim.binding`): with Model Exchange it is set in Event Mode, as FMI asks.
+        :mod:`cosim.core.binding`): with Model Exchange it is set in Event Mode, as FMI asks.
         """
         try:
             if self.interface == "me" and not self._tunable_set.isdisjoint(values):

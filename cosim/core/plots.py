@@ -13,7 +13,7 @@ labelled with its name and unit, for any number of inputs and outputs.
 matplotlib is imported when a figure is drawn, not with this module, so that commands that
 draw nothing start fast. The numbers a figure shows are computed by its caller (or by the
 objects it is given); these functions only draw. Where a function writes its file atomically
-(:mod:`cosim.atomicio`) its docstring says so; the others are given a temporary path by their
+(:mod:`cosim.core.atomicio`) its docstring says so; the others are given a temporary path by their
 caller, which renames it into place.
 """
 
@@ -25,11 +25,11 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cosim import atomicio
+from cosim.core import atomicio
 
 if TYPE_CHECKING:
-    from cosim.compare import Comparison
-    from cosim.master import RunResult
+    from cosim.core.compare import Comparison
+    from cosim.core.master import RunResult
 
 __all__ = ["certificate_figure", "compare_figure", "identification_figure", "label", "pyplot",
            "run_figure", "run_panels", "save", "signal_panel", "times_s"]
@@ -137,7 +137,7 @@ def run_panels(result: RunResult) -> list[tuple[str, str]]:
 
 
 def run_figure(path: str | Path, result: RunResult, title: str = "") -> Path:
-    """Draw a :class:`~cosim.master.RunResult` into ``path`` (PNG) and return the path.
+    """Draw a :class:`~cosim.core.master.RunResult` into ``path`` (PNG) and return the path.
 
     In the style of the paper's Fig. 3, one panel per signal (:func:`run_panels`), whatever
     the plant: each controlled output (plant value, measured value if perturbed, set-point
@@ -174,12 +174,12 @@ def run_figure(path: str | Path, result: RunResult, title: str = "") -> Path:
 # --------------------------------------------------------------------------------------------
 
 def compare_figure(c: Comparison, path: str | Path, max_signals: int = 16) -> Path:
-    """Draw a :class:`~cosim.compare.Comparison`: per signal the reference, the result, the
+    """Draw a :class:`~cosim.core.compare.Comparison`: per signal the reference, the result, the
     band and the failing points.
 
     Failing signals are drawn first; at most ``max_signals`` panels. The file is replaced
-    atomically (:mod:`cosim.atomicio`): a failed write raises
-    :class:`~cosim.errors.OutputError` and leaves the previous file unchanged.
+    atomically (:mod:`cosim.core.atomicio`): a failed write raises
+    :class:`~cosim.core.errors.OutputError` and leaves the previous file unchanged.
     """
     plt = pyplot()
     path = Path(path)

@@ -4,10 +4,10 @@ Reading
 -------
 :class:`CsvReader` reads every CSV file of this project (scenarios, result files, data sets)
 row by row and turns each fault of the file itself into a one-line
-:class:`~cosim.errors.CosimError`: missing, a folder, unreadable, not text, malformed CSV,
+:class:`~cosim.core.errors.CosimError`: missing, a folder, unreadable, not text, malformed CSV,
 empty, a row with the wrong number of cells, a cell that is not a number. What a file
 *means* (what a blank cell is, time order, column names) stays with its user
-(:mod:`cosim.scenario`, :mod:`cosim.datagen`, :func:`read_table`). Each kind of file words
+(:mod:`cosim.core.scenario`, :mod:`cosim.core.datagen`, :func:`read_table`). Each kind of file words
 these errors its own way (a :class:`Wording`), so the messages users know are kept.
 
 :func:`read_table` reads a result CSV (``results.csv``, a regression reference) into a
@@ -18,9 +18,9 @@ Writing
 * :func:`write_csv` (with :func:`header_line` and :func:`row_lines` for streaming): the FMI
   cross-check format of ``results.csv`` and ``timings.csv``: comma separated, the header's
   names in double quotes, numbers unquoted in full precision (``repr``), ``\\n`` line ends;
-  written atomically (:mod:`cosim.atomicio`).
+  written atomically (:mod:`cosim.core.atomicio`).
 * :func:`write_table`: the :mod:`csv` module's default (``excel``) dialect, used by the data
-  sets of :mod:`cosim.datagen`: cells quoted only when needed, ``\\r\\n`` line ends, floats in
+  sets of :mod:`cosim.core.datagen`: cells quoted only when needed, ``\\r\\n`` line ends, floats in
   full precision (``repr``), other cells as text.
 """
 
@@ -35,8 +35,8 @@ from typing import IO, Any
 
 import numpy as np
 
-from cosim import atomicio
-from cosim.errors import CosimError
+from cosim.core import atomicio
+from cosim.core.errors import CosimError
 
 __all__ = [
     "RESULT_WORDING",
