@@ -36,7 +36,7 @@ sys.path[:0] = [str(HERE.parent), str(HERE)]
 from bench_tracking import scenario_file  # noqa: E402
 
 import cosim  # noqa: E402
-from controllers import kernel_sqp  # noqa: E402
+from controllers.kernel import kernel_sqp  # noqa: E402
 from cosim.core import registry  # noqa: E402
 
 OPTIONS = {"law": "tracking"}

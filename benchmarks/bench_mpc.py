@@ -9,7 +9,7 @@ run by run so that the machine's load hits both alike:
 
 * ``compiled``: the controller with its default kernel: the whole SQP (derivatives,
   eigenvalue clipping, QP, line search) and the governor's equilibria in the compiled kernel
-  (:mod:`controllers.compiled_kernel`, :mod:`controllers.kernel_sqp`);
+  (:mod:`controllers.kernel.compiled_kernel`, :mod:`controllers.kernel.kernel_sqp`);
 * ``numpy``: the same controller with ``kernel="numpy"``, the implementation before the
   kernel (numpy callbacks in casadi ``sqpmethod`` with qpOASES), kept as the baseline.
 
@@ -51,7 +51,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from controllers.fhocp import FHOCP  # noqa: E402
+from controllers.ocp.fhocp import FHOCP  # noqa: E402
 from cosim.core.component import Component  # noqa: E402
 from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
 
@@ -294,7 +294,7 @@ def scaling(args: argparse.Namespace) -> None:
     the rounds' medians. For both variants, the split of the median steps (the steps within
     20 % of the median) into the SQP's QP, Hessian, Jacobian and f, g time, and the rest
     (Python, the answer check, the observer): the QP is the same qpOASES call in both."""
-    from controllers import gain_design
+    from controllers.certification import gain_design
     from cosim.core.master import Master
     from cosim.core.scenario import Column, Event, Scenario
     from cosim_adapters.gru_plant import GRUPlant
@@ -406,7 +406,7 @@ def clip_variants(args: argparse.Namespace) -> None:
     """The Hessian's eigenvalue clipping: own tred2/tql2 against LAPACK dsyevr (the eigenpairs
     below the margin only), on Hessian-like matrices (eigenvalues 0.05 … 6e4, three below the
     margin, as the paper scenario's ~2.4 per decomposition), for N m = 30 … 120."""
-    from controllers import compiled_kernel as ck
+    from controllers.kernel import compiled_kernel as ck
     from tests.controllers.test_compiled_kernel import random_fhocp
 
     saved = ck.LAPACK_EIG_MIN_NU

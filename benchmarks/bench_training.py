@@ -9,7 +9,7 @@ the file is missing) from the same initial weights, with the paper's subsequence
 steps and batch 5, Adam, float64, one thread:
 
 * project (this project's default): ``U_z = 0``, the weights rescaled after every step so
-  that ν ≤ 0.98 exactly (``controllers.training.constrain``);
+  that ν ≤ 0.98 exactly (``controllers.identification.training.constrain``);
 * baseline (the paper's recipe): all weights trained, loss + 10·relu(ν − 0.98).
 
 After every epoch the test FIT of the current weights is computed (open loop from x = 0,
@@ -33,7 +33,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from controllers import bounds, metrics, training  # noqa: E402
+from controllers.certification import bounds  # noqa: E402
+from controllers.identification import metrics, training  # noqa: E402
 from controllers.problem_file import load as load_problem  # noqa: E402
 from cosim.cli import main as cosim_main  # noqa: E402
 from cosim.core import datagen  # noqa: E402

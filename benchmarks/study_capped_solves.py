@@ -42,8 +42,8 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from controllers import nlp_single_shooting  # noqa: E402
-from controllers.solver_settings import SQP_OPTIONS  # noqa: E402
+from controllers.ocp import nlp_single_shooting  # noqa: E402
+from controllers.ocp.solver_settings import SQP_OPTIONS  # noqa: E402
 from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper_steps.csv"

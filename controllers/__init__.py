@@ -4,7 +4,7 @@ This package knows nothing of FMUs or of co-simulation: it works on arrays in no
 and raises its own errors (:mod:`controllers.errors`), and imports nothing of ``cosim`` (an
 import contract, ``tests/test_layering.py``). Its co-simulation adapters (the robust MPC,
 the PI baseline and the GRU model as a plant) live one layer up, in :mod:`cosim_adapters`.
-Only :mod:`controllers.training` needs torch.
+Only :mod:`controllers.identification.training` needs torch.
 
 The main names, importable from here::
 
@@ -36,16 +36,16 @@ __all__ = [
 _EXPORTS = {
     "GRUModel": ("controllers.model", "GRUModel"),
     "DEFAULT_MODEL": ("controllers.model", "DEFAULT_MODEL"),
-    "Certificate": ("controllers.certificates", "Certificate"),
-    "compute_certificate": ("controllers.certificates", "compute_certificate"),
-    "choose_gain_scale": ("controllers.gain_design", "choose_gain_scale"),
-    "observer_gains_lp": ("controllers.observer_gains", "observer_gains_lp"),
+    "Certificate": ("controllers.certification.certificates", "Certificate"),
+    "compute_certificate": ("controllers.certification.certificates", "compute_certificate"),
+    "choose_gain_scale": ("controllers.certification.gain_design", "choose_gain_scale"),
+    "observer_gains_lp": ("controllers.certification.observer_gains", "observer_gains_lp"),
     "equilibrium": ("controllers.equilibrium", "equilibrium"),
-    "FHOCP": ("controllers.fhocp", "FHOCP"),
-    "FHOCPResult": ("controllers.fhocp", "FHOCPResult"),
-    "RobustMPC": ("controllers.robust_mpc", "RobustMPC"),
+    "FHOCP": ("controllers.ocp.fhocp", "FHOCP"),
+    "FHOCPResult": ("controllers.ocp.fhocp", "FHOCPResult"),
+    "RobustMPC": ("controllers.ocp.robust_mpc", "RobustMPC"),
     "GRUObserver": ("controllers.observer", "GRUObserver"),
-    "ReferenceGovernor": ("controllers.governor", "ReferenceGovernor"),
+    "ReferenceGovernor": ("controllers.ocp.governor", "ReferenceGovernor"),
     "ControllersError": ("controllers.errors", "ControllersError"),
 }
 

@@ -79,7 +79,7 @@ class GRUModel:
         Bound of the output perturbation, normalised units (``W_y``).
     prediction_error : ndarray or None
         ``(H + 1, p)``: the measured error of the tracking law's prediction ``i`` steps ahead
-        on held-back data, normalised (:mod:`controllers.prediction_error`; written by
+        on held-back data, normalised (:mod:`controllers.certification.prediction_error`; written by
         ``cosim train``): the tightening of the robust MPC's uncertified mode.
     certificate : dict or None
         What ``cosim certify --save`` found (``certified``, the law, the reasons, …).

@@ -54,7 +54,7 @@ class GRUObserver:
         Number of updates done.
     kernel : kernel_lib.Workspace or None
         When set (by the controller: its FHOCP's kernel workspace, built for the same
-        model), the state update runs as one compiled call (:meth:`~controllers.kernel_lib.
+        model), the state update runs as one compiled call (:meth:`~controllers.kernel.kernel_lib.
         Workspace.gru_step`); else numpy (:func:`controllers.gru.step`).
     """
 
@@ -75,7 +75,7 @@ class GRUObserver:
     @classmethod
     def from_certificate(cls, cert: Any, x0: np.ndarray | None = None) -> GRUObserver:
         """An observer with the gains, ``ρ_o``, ``w̄`` and ``ê_o,0`` of a
-        :class:`~controllers.certificates.Certificate`."""
+        :class:`~controllers.certification.certificates.Certificate`."""
         return cls(cert.params, cert.L_z, cert.L_r, rho_o=cert.rho_o, w_bar=cert.w_bar,
                    e_o0=cert.e_o0, x0=x0)
 

@@ -3,7 +3,8 @@ tightening.
 
 The robust MPC (:class:`cosim_adapters.robust_mpc.RobustMPCController`) runs **certified**
 when every hypothesis of its law holds: the design's (``th:feasibility-stability`` for the
-paper's law, the tracking law's H3–H6 of :mod:`controllers.tracking_checks`) and, at each
+paper's law, the tracking law's H3–H6 of :mod:`controllers.certification.tracking_checks`) and, at
+each
 set-point the run will request (:meth:`cosim.core.component.Component.expect_setpoints`), the
 set-point's (Assumption 1 and ``eq:condition-recursive-feasibility`` for the paper's law; the
 set-point inside the admissible steady outputs ``Y_s`` for the tracking law). Its constraint
@@ -17,7 +18,8 @@ closest admissible steady output, the paper's law refuses it; a failing design i
 Uncertified is the same law and cost, with the theorem's
 tightening (which a model that fails the hypotheses makes vacuous: it swallows the output
 box) replaced by the model's measured prediction error on held-back data
-(:mod:`controllers.prediction_error`, written into the model file by ``cosim train``; a model
+(:mod:`controllers.certification.prediction_error`, written into the model file by ``cosim train``;
+a model
 file without it is tightened by its ``w̄_y`` at every step), zero observer gains, and, for the
 tracking law, the output rows tightened around ``y + d̂`` (the filtered output mismatch, the
 output the plant will show). No guarantee follows; the summary says ``certified: false`` with
@@ -78,7 +80,7 @@ def check_setpoints(ctrl: Any, setpoints: list[dict[str, float]]) -> str:
 def measured_margins(ctrl: Any, cert: Any) -> tuple[np.ndarray, str]:
     """The uncertified tightening of ``cert``'s rows over its horizon, and where it came from:
     the model file's ``prediction_error``, else its ``w̄_y`` at every step."""
-    from controllers.prediction_error import margins
+    from controllers.certification.prediction_error import margins
 
     profile = ctrl.model.prediction_error
     if profile is not None:
@@ -104,7 +106,7 @@ def go_uncertified(ctrl: Any, reason: str) -> None:
     (:meth:`cosim_adapters.law.ControlLaw.uncertified`) on the certificate tightened by the
     measured prediction error, zero observer gains; or refuse when it requires a
     certificate."""
-    from controllers.certificates import uncertified_certificate
+    from controllers.certification.certificates import uncertified_certificate
     from controllers.observer import GRUObserver
 
     if ctrl.certificate_mode != "auto":

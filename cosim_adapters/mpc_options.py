@@ -48,13 +48,13 @@ class MPCOptions:
     ----------
     law : {"tracking", "paper"}
         ``"tracking"`` (default): the tracking FHOCP (:mod:`cosim_adapters.tracking`,
-        :mod:`controllers.fhocp_tracking`): an artificial steady state as a decision
+        :mod:`controllers.ocp.fhocp_tracking`): an artificial steady state as a decision
         variable, offset-free through ``d̂`` in the cost, no governor, nothing rejected (an
         unreachable or inadmissible set-point is tracked to the closest admissible steady
         state); zero observer gains. ``"paper"``: the paper's FHOCP with the set-point's
         equilibrium, the governor and set-point rejection.
     N : int, optional
-        Prediction horizon (default 80, :data:`controllers.fhocp_tracking.DEFAULTS`; the
+        Prediction horizon (default 80, :data:`controllers.ocp.fhocp_tracking.DEFAULTS`; the
         paper's 15 with ``law="paper"``).
     Q, R : array, number or mapping, optional
         Cost weights in normalised units (default ``I_n`` and ``0.01 I_m``, paper section V):
@@ -65,8 +65,8 @@ class MPCOptions:
     gain_scale : float, optional
         Observer gains = ``gain_scale`` × the LP gains; default: the gains in the model file
         (``cosim certify --save``), else the largest scale passing every hypothesis at
-        :func:`controllers.gain_design.default_setpoints` (a grid over the output box)
-        (:func:`controllers.gain_design.choose_gain_scale`).
+        :func:`controllers.certification.gain_design.default_setpoints` (a grid over the output box)
+        (:func:`controllers.certification.gain_design.choose_gain_scale`).
     offset_free : bool
         ``law="paper"``: offset-free set-point correction (outside the theorem, see
         :mod:`cosim_adapters.robust_mpc`).
@@ -75,7 +75,8 @@ class MPCOptions:
         ``law="paper"``).
     governor : bool, optional
         ``law="paper"``: admissible reference governor after set-point changes (default
-        on; see :mod:`cosim_adapters.robust_mpc` and :mod:`controllers.governor`). ``False``: the
+        on; see :mod:`cosim_adapters.robust_mpc` and :mod:`controllers.ocp.governor`). ``False``:
+        the
         paper's FHOCP with the new ``(x̄, ū, α)`` at once.
     setpoint_rate : float, optional
         ``law="paper"``, outside the theorem: move the set-point given to the FHOCP towards
@@ -84,9 +85,9 @@ class MPCOptions:
         large steps. Off by default.
     solver : {"sqp", "ipopt"}, optional
         NLP solver of the FHOCP (default: SQP with a dense QP, or IPOPT when
-        ``ipopt_options`` are given; see :class:`controllers.fhocp.FHOCP`).
+        ``ipopt_options`` are given; see :class:`controllers.ocp.fhocp.FHOCP`).
     ipopt_options : dict, optional
-        Overrides of :data:`controllers.solver_settings.FAST_IPOPT_OPTIONS`.
+        Overrides of :data:`controllers.ocp.solver_settings.FAST_IPOPT_OPTIONS`.
     kernel : {"auto", "numpy"}
         Where the SQP's derivatives come from: the compiled kernel (``"auto"``, built on
         first use; the numpy callbacks when no C compiler is found) or the numpy callbacks
@@ -108,7 +109,7 @@ class MPCOptions:
     control_horizon : int, optional
         ``law="tracking"``: the number ``M ≤ N`` of free inputs ``u_0 … u_{M−1}``; the
         others are held at the artificial steady input ``u_s`` (the guarantees unchanged:
-        :class:`controllers.fhocp_tracking.TrackingFHOCP`). Default ``⌈N / 4⌉`` (20 at the
+        :class:`controllers.ocp.fhocp_tracking.TrackingFHOCP`). Default ``⌈N / 4⌉`` (20 at the
         default N = 80).
     certificate : {"auto", "require", "keep"}
         Where the certificate does not cover the run (a hypothesis fails, or a set-point of

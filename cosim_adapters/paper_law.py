@@ -1,11 +1,11 @@
 """The paper's law of the ``robust-mpc`` component (``law="paper"``): :class:`PaperLaw`.
 
-``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.robust_mpc.RobustMPC`: the FHOCP
+``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.robust_mpc.RobustMPC`: the FHOCP
 ``eq:optimization`` with the shifted-candidate fallback) for the reference ``(x̄, ū, α)`` of
-:meth:`controllers.certificates.Certificate.reference` (Assumption 1, ``eq:condition-
+:meth:`controllers.certification.certificates.Certificate.reference` (Assumption 1, ``eq:condition-
 recursive-feasibility``), and its set-point handling: on a set-point change the rate limit
 (``setpoint_rate``), the offset-free shift by ``d̂`` (``offset_free``), the admissible
-reference governor (:mod:`controllers.governor`) and the rejection of set-points outside the
+reference governor (:mod:`controllers.ocp.governor`) and the rejection of set-points outside the
 theory. It implements :class:`cosim_adapters.law.ControlLaw`.
 """
 
@@ -31,7 +31,7 @@ class PaperLaw:
     cert : Certificate
         Its certificate (the tightening, ``(x̄, ū, α)`` of each set-point).
     fhocp_options : mapping
-        :class:`controllers.fhocp.FHOCP` keyword arguments (solver, kernel, ``du_weight``).
+        :class:`controllers.ocp.fhocp.FHOCP` keyword arguments (solver, kernel, ``du_weight``).
     governor : bool
         The admissible reference governor after set-point changes.
     offset_free : bool
@@ -52,9 +52,9 @@ class PaperLaw:
     def __init__(self, model: Any, cert: Any, fhocp_options: dict[str, Any], *,
                  governor: bool, offset_free: bool, offset_filter: float,
                  setpoint_rate: float | None, name: str, certified: bool = True) -> None:
-        from controllers.fhocp import FHOCP
-        from controllers.governor import ReferenceGovernor
-        from controllers.robust_mpc import RobustMPC
+        from controllers.ocp.fhocp import FHOCP
+        from controllers.ocp.governor import ReferenceGovernor
+        from controllers.ocp.robust_mpc import RobustMPC
 
         self.model, self.cert, self.fhocp_options = model, cert, dict(fhocp_options)
         self.fhocp = FHOCP.from_certificate(cert, **self.fhocp_options)
@@ -235,7 +235,8 @@ INSIDE = 1e-3
 
 def closest_admissible(cert: Any, y: np.ndarray) -> np.ndarray | None:
     """``y`` moved into the admissible box of ``cert`` (box rows ``±y_j ≤ rhs``:
-    :meth:`controllers.certificates.Certificate.admissible_box`), :data:`INSIDE` within it;
+    :meth:`controllers.certification.certificates.Certificate.admissible_box`), :data:`INSIDE`
+    within it;
     ``None`` when the box is empty for some output."""
     rhs = cert.admissible_box()
     out = np.array(y, dtype=float)

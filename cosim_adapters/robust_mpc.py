@@ -10,16 +10,17 @@ advances ``x̂`` with the last input and the measured output, and ``ê_o`` by
 section V). Then one of two control laws (option ``law``) gives ``u_k``:
 
 - ``"tracking"`` (the default): the tracking law of :mod:`cosim_adapters.tracking`, the
-  tracking FHOCP of :mod:`controllers.fhocp_tracking` (an artificial steady state as a
+  tracking FHOCP of :mod:`controllers.ocp.fhocp_tracking` (an artificial steady state as a
   decision variable, offset-free through the disturbance estimate ``d̂`` in the cost, the
   input-rate terms of ``du_weight``); every set-point is accepted, and an unreachable or
   inadmissible one is tracked to the closest admissible steady state (docs:
   design/tracking.md).
 - ``"paper"``: the paper's law, with its set-point handling in :mod:`cosim_adapters.paper_law`:
   when ``ȳ`` changes, the equilibrium ``(x̄, ū)`` and ``α`` (``eq:def-alpha``) via
-  :meth:`controllers.certificates.Certificate.reference`, which also checks Assumption 1
+  :meth:`controllers.certification.certificates.Certificate.reference`, which also checks
+  Assumption 1
   (``ass:setpoint``) and ``eq:condition-recursive-feasibility``; then ``u_k =
-  k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.robust_mpc.RobustMPC`: the FHOCP
+  k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.robust_mpc.RobustMPC`: the FHOCP
   ``eq:optimization`` with the shifted-candidate fallback).
 
 Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
@@ -33,14 +34,14 @@ eq. 11): the controller keeps regulating to the last admissible set-point, count
 unreachable one, the closest reachable equilibrium output) in the summary. A first set-point
 that is already inadmissible is a configuration error (:class:`cosim.core.errors.CosimError`, the
 same reason). Its set-point changes go through the admissible reference governor of
-:mod:`controllers.governor` (on by default, ``governor=False`` gives the paper's controller,
+:mod:`controllers.ocp.governor` (on by default, ``governor=False`` gives the paper's controller,
 which switches ``(x̄, ū, α)`` at once): the set-point handed to the FHOCP moves towards the
 requested one only as far as a sequence known to be feasible exists, by at most a fraction
 ``λ_max`` of the way that halves after a solve that did not converge and doubles after one
 that did; that sequence is the solver's initial guess and the fallback. Under the paper's
 law ``du_weight`` (off by default) adds the input-rate penalty ``Σ_i (u_i − u_{i−1})ᵀ S (u_i
 − u_{i−1})`` (normalised units, ``u_{−1}`` the input applied at the previous step;
-:mod:`controllers.input_rate`), outside the paper's cost, and ``offset_free=True`` (outside
+:mod:`controllers.ocp.input_rate`), outside the paper's cost, and ``offset_free=True`` (outside
 the theorem) shifts the model set-point by a filtered estimate ``d̂`` of the output mismatch
 ``y − ŷ`` (``ȳ_model = ȳ − d̂``); the shifted set-point must still pass the checks.
 
@@ -59,7 +60,7 @@ import numpy as np
 
 from controllers.errors import ControllersError
 from controllers.model import DEFAULT_MODEL
-from controllers.solve_status import status_code
+from controllers.ocp.solve_status import status_code
 from cosim.core.component import Component, Signal
 from cosim.core.errors import CosimError
 from cosim_adapters.certification import Certification, check_setpoints, go_uncertified
@@ -176,10 +177,10 @@ class RobustMPCController(Component):
     def _design(self, o: MPCOptions) -> tuple[ControlLaw, list[str]]:
         """The law of the options ``o`` on this model, and the hypotheses that fail: the
         observer gains (the model file's, ``gain_scale``, else the largest scale that passes
-        at :func:`controllers.gain_design.default_setpoints`) and the law's design."""
-        from controllers import certificates as certs
-        from controllers import gain_design
-        from controllers.input_rate import du_weights
+        at :func:`controllers.certification.gain_design.default_setpoints`) and the law's design."""
+        from controllers.certification import certificates as certs
+        from controllers.certification import gain_design
+        from controllers.ocp.input_rate import du_weights
 
         inputs = list(self.problem.input_names)
         try:
@@ -317,7 +318,7 @@ class RobustMPCController(Component):
         return dict(self._diag)
 
     def summary(self) -> dict:
-        from controllers.robust_mpc import solver_summary
+        from controllers.ocp.robust_mpc import solver_summary
 
         out = solver_summary(self.law.records)
         law = self.law.summary()

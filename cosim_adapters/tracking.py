@@ -1,8 +1,8 @@
 """The tracking law of the ``robust-mpc`` component (``law = "tracking"``, its default).
 
 :class:`cosim_adapters.robust_mpc.RobustMPCController` with ``law="tracking"`` (the default) runs
-:class:`controllers.tracking_mpc.TrackingMPC` (the tracking FHOCP of
-:mod:`controllers.fhocp_tracking`: artificial steady state, offset cost with the disturbance
+:class:`controllers.ocp.tracking_mpc.TrackingMPC` (the tracking FHOCP of
+:mod:`controllers.ocp.fhocp_tracking`: artificial steady state, offset cost with the disturbance
 estimate ``d̂``, input-rate penalty) instead of the paper's law with its reference governor.
 This module builds it from the model and the problem (:func:`tracking_design`) and runs it
 (:class:`TrackingLaw`, a :class:`cosim_adapters.law.ControlLaw`); the design record is
@@ -19,7 +19,7 @@ Design (defaults):
   the radius whose terminal set spans :data:`ALPHA_C_SPAN` of each normalised output; with
   zero gains every ``α_c > 0`` meets ``eq:condition-recursive-feasibility``; ``alpha_c`` sets
   it;
-- ``d̂`` by the filter of :class:`controllers.tracking_mpc.DisturbanceFilter` (``β`` =
+- ``d̂`` by the filter of :class:`controllers.ocp.tracking_mpc.DisturbanceFilter` (``β`` =
   ``offset_filter``, default 0.3), in the cost only.
 """
 
@@ -60,13 +60,13 @@ def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[s
     ``cert_gains``: the paper law's certificate, whose ``α_min`` is the default ``α_c`` when
     ``gains_certified`` (its observer-gain scale passed), else :func:`fallback_alpha_c`;
     ``kwargs``: ``N``, ``Q``, ``R``, ``e_o0``; ``control_horizon``: ``M`` (default
-    :func:`controllers.fhocp_tracking.default_control_horizon`, at most N); ``cert``: the
+    :func:`controllers.ocp.fhocp_tracking.default_control_horizon`, at most N); ``cert``: the
     design's certificate (default: ``gain_scale=0`` of ``kwargs``; the uncertified mode
-    passes :func:`controllers.certificates.uncertified_certificate`'s)."""
-    from controllers import certificates as certs
-    from controllers.fhocp_tracking import DEFAULTS, TrackingFHOCP, default_control_horizon
-    from controllers.tracking_checks import failures, tracking_hypotheses
-    from controllers.tracking_mpc import DisturbanceFilter, TrackingMPC
+    passes :func:`controllers.certification.certificates.uncertified_certificate`'s)."""
+    from controllers.certification import certificates as certs
+    from controllers.certification.tracking_checks import failures, tracking_hypotheses
+    from controllers.ocp.fhocp_tracking import DEFAULTS, TrackingFHOCP, default_control_horizon
+    from controllers.ocp.tracking_mpc import DisturbanceFilter, TrackingMPC
 
     names = list(problem.output_names)
     default = float(DEFAULTS["offset_weight"])

@@ -33,7 +33,7 @@ import pandas as pd
 def steady_output_grid(model, points: int) -> np.ndarray:
     """Steady outputs ``g(x_s(u))`` on a ``points^m`` grid over ``‖u‖∞ ≤ 1`` (normalised)."""
     from controllers.gru import output
-    from controllers.steady_state import steady_state
+    from controllers.ocp.steady_state import steady_state
 
     m = model.m
     axes = [np.linspace(-1.0, 1.0, points)] * m

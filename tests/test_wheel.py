@@ -51,7 +51,7 @@ def _run(cmd: list[str], timeout: float = 600, **kwargs: object) -> subprocess.C
 
 def _package_data() -> set[str]:
     """Files the installed package reads at run time, as paths inside the wheel."""
-    from controllers.compiled_kernel import TEMPLATE_PARTS
+    from controllers.kernel.compiled_kernel import TEMPLATE_PARTS
     from controllers.model import DEFAULT_MODEL
     from cosim.core.build import DEFAULT_PROBLEM, TARGETS
 

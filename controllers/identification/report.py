@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from controllers.identification.metrics import fit
 from controllers.identification.record import SPLITS, Record
-from controllers.metrics import fit
 
 __all__ = ["compare", "scores", "verdict"]
 

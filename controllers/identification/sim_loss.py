@@ -66,7 +66,7 @@ def library() -> Any | None:
     cc = os.environ.get("CC") or "gcc"
     if shutil.which(cc) is None:
         return None
-    from controllers.cbuild import compile_library, compiler_id, default_cache_dir
+    from controllers.kernel.cbuild import compile_library, compiler_id, default_cache_dir
 
     with _LOCK:
         if cc in _LIB:

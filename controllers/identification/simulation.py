@@ -9,7 +9,8 @@ One candidate model (one size, one seed) is fitted by :func:`fit_candidate`:
   every window: the model is never asked to reproduce a transient from ``x = 0`` that the
   plant did not have, which on a short record (the transient of a slow plant is a large share
   of a thousand samples) is what a washout of a tenth of a subsequence cannot prevent.
-* **δISS at every step.** The weights are those of :func:`controllers.training.constrain`:
+* **δISS at every step.** The weights are those of
+:func:`controllers.identification.training.constrain`:
   ν ≤ 1 − margin exactly (``th:stability-bonassi``), by projection, as the paper's training.
 * **The gradient in C.** Loss and gradient come from :mod:`controllers.identification.
   sim_loss` (backpropagation through time, some hundred times torch's autograd); torch maps
@@ -34,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.bounds import nu as nu_numpy
+from controllers.certification.bounds import nu as nu_numpy
 from controllers.identification.initial_state import (
     DEFAULT_SAMPLES,
     estimate_initial_state,
@@ -80,7 +81,7 @@ class SimOptions:
     window : int
         Training window length (0: :data:`MAX_WINDOW` / :data:`LONG_WINDOW`).
     nu_margin, sigma_z_max, train_uz, bz_init
-        As :class:`controllers.training.TrainOptions`.
+        As :class:`controllers.identification.training.TrainOptions`.
     x0_samples : int
         Samples of each experiment that estimate its initial state in the evaluations.
     eval_every : int
@@ -225,10 +226,10 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
                   init: dict[str, np.ndarray] | None = None) -> Candidate:
     """Fit one candidate (module docstring); ``progress`` is called with the number of Adam
     steps done after each evaluation; ``init``: initial weights (default
-    :func:`controllers.training.init_params`)."""
+    :func:`controllers.identification.training.init_params`)."""
     import torch
 
-    from controllers.training import CONSTRAINED, constrain, init_params
+    from controllers.identification.training import CONSTRAINED, constrain, init_params
 
     opt = options or SimOptions()
     torch.set_num_threads(1)

@@ -115,7 +115,7 @@ class DrawContext:
         if not needs_model:
             outputs = list(spec.setpoints.ranges) if spec.setpoints else []
             return cls(start_time, outputs)
-        from controllers import certificates as certs
+        from controllers.certification import certificates as certs
         from controllers.model import DEFAULT_MODEL, GRUModel
 
         model_path = spec.options.get("model") or spec.model or DEFAULT_MODEL

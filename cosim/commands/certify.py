@@ -1,4 +1,5 @@
-"""``cosim certify``: the paper's certificates for a GRU model file (``controllers.certificates``).
+"""``cosim certify``: the paper's certificates for a GRU model file
+(``controllers.certification.certificates``).
 
 Prints every quantity of the theory (δISS, observer, tightening, terminal ingredients) with its
 paper reference, or JSON with the paper's names; checks the hypotheses of
@@ -159,9 +160,9 @@ def _fmt(v: Any) -> str:
 
 
 def _admissible(cert: Any, model: Any) -> list[tuple[str, float | None, float | None]]:
-    """Per-output admissible set-point interval (:func:`controllers.certificates.
+    """Per-output admissible set-point interval (:func:`controllers.certification.certificates.
     admissible_ranges`)."""
-    from controllers.certificates import admissible_ranges
+    from controllers.certification.certificates import admissible_ranges
 
     return admissible_ranges(cert, model)
 
@@ -179,7 +180,7 @@ def _admissible_ranges(cert: Any, model: Any) -> list[str]:
 
 def _w_y_bar_from_csv(model: Any, path: str) -> float:
     """``w̄_y`` from a ``cosim generate-data`` record (``--data``)."""
-    from controllers.certificates import w_y_bar_from_data
+    from controllers.certification.certificates import w_y_bar_from_data
     from controllers.errors import DataError
     from cosim.core.datagen import read_csv
 
@@ -197,8 +198,8 @@ def _certificate(args: argparse.Namespace, model: Any, setpoints: list,
     failure of ``--auto-gain-scale`` when no θ passes (else ``None``)."""
     import numpy as np
 
-    from controllers import certificates as certs
-    from controllers import gain_design
+    from controllers.certification import certificates as certs
+    from controllers.certification import gain_design
 
     if args.auto_gain_scale:
         targets = setpoints or [model.normalize_y(np.array(s))
@@ -286,8 +287,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _check_args(args: argparse.Namespace) -> None:
     """Default ``--model`` and ``--N`` (the law's), and reject bad numbers in one line."""
-    from controllers.fhocp_tracking import DEFAULTS as TRACKING
     from controllers.model import DEFAULT_MODEL
+    from controllers.ocp.fhocp_tracking import DEFAULTS as TRACKING
 
     if args.model is None:
         args.model = str(DEFAULT_MODEL)
@@ -356,9 +357,9 @@ def _save(path: str, model: Any, cert: Any, verdict: Any, setpoints_phys: list) 
 
 def _paper_verdict(model: Any, cert: Any, kwargs: dict, setpoints: list,
                    design: list[str]) -> Any:
-    """The paper law's :class:`controllers.diagnosis.Diagnosis`."""
-    from controllers import certificates as certs
-    from controllers.diagnosis import diagnose
+    """The paper law's :class:`controllers.certification.diagnosis.Diagnosis`."""
+    from controllers.certification import certificates as certs
+    from controllers.certification.diagnosis import diagnose
 
     def rhs_at(w: float) -> Any:
         return certs.compute_certificate(model, L_z=cert.L_z, L_r=cert.L_r, **{
@@ -380,16 +381,17 @@ def _print_verdict(verdict: Any) -> None:
 
 def _tracking(model: Any, cert: Any, kwargs: dict, setpoints: list,
               gains_certified: bool) -> tuple[dict, Any]:
-    """The tracking law's hypotheses (:mod:`controllers.tracking_checks`) with the robust
+    """The tracking law's hypotheses (:mod:`controllers.certification.tracking_checks`) with the
+    robust
     MPC's defaults (``α_c``: the certificate's ``α_min(N)`` when its observer-gain design
     passes, else :func:`cosim_adapters.tracking.fallback_alpha_c`), and its verdict."""
     import numpy as np
 
-    from controllers import certificates as certs
-    from controllers.diagnosis import diagnose
+    from controllers.certification import certificates as certs
+    from controllers.certification.diagnosis import diagnose
+    from controllers.certification.tracking_checks import failures, tracking_hypotheses
     from controllers.errors import ControllersError
-    from controllers.fhocp_tracking import DEFAULTS, TrackingFHOCP, steady_output_bounds
-    from controllers.tracking_checks import failures, tracking_hypotheses
+    from controllers.ocp.fhocp_tracking import DEFAULTS, TrackingFHOCP, steady_output_bounds
     from cosim_adapters.tracking import fallback_alpha_c
 
     try:
@@ -427,7 +429,7 @@ def _print_tracking(h: dict) -> None:
 
 
 def _print_table(path: str, model: Any, cert: Any, note: str, per_setpoint: list) -> None:
-    from controllers.bounds import inf_norm
+    from controllers.certification.bounds import inf_norm
 
     N = cert.N
     rows = [

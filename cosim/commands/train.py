@@ -84,7 +84,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     """Add the ``train`` sub-command."""
     from controllers.identification.initial_state import DEFAULT_SAMPLES
     from controllers.identification.search import DEFAULT_SEEDS, DEFAULT_SIZES
-    from controllers.training import TrainOptions
+    from controllers.identification.training import TrainOptions
 
     d = TrainOptions()
     parser = subparsers.add_parser("train", help=HELP, description=DESCRIPTION,
@@ -144,7 +144,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 def _training_arguments(parser: argparse.ArgumentParser) -> None:
     """The optimiser's and the model's options (sequences, learning rate, the δISS
     constraint, the weights' start, early stopping)."""
-    from controllers.training import TrainOptions
+    from controllers.identification.training import TrainOptions
 
     d = TrainOptions()
     parser.add_argument("--seq-len", type=int, default=None,

@@ -92,11 +92,12 @@ def simulation(args: argparse.Namespace, data: Any, record: Any, problem: Any,
 
 def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
               progress: bool) -> Trained:
-    """The paper's recipe (:func:`controllers.training.train`): truncated subsequences from
+    """The paper's recipe (:func:`controllers.identification.training.train`): truncated
+    subsequences from
     ``x = 0``, the epoch with the best validation FIT; ``--history`` written as it goes."""
     import contextlib
 
-    from controllers import sequences, training
+    from controllers.identification import sequences, training
     from cosim.core.atomicio import output_error, replacing
     from cosim.core.errors import CosimError
 
@@ -164,10 +165,11 @@ def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
 
 def _prediction_error(record: Any, ev: Any, problem: Any) -> tuple[Any, dict[str, Any]]:
     """The model's measured prediction error on held-back rows (val and test, else train;
-    :func:`controllers.prediction_error.error_profile`: what the uncertified mode tightens
+    :func:`controllers.certification.prediction_error.error_profile`: what the uncertified mode
+    tightens
     by) and its summary for the model file, in the outputs' units."""
-    from controllers.fhocp_tracking import DEFAULTS as TRACKING
-    from controllers.prediction_error import error_profile
+    from controllers.certification.prediction_error import error_profile
+    from controllers.ocp.fhocp_tracking import DEFAULTS as TRACKING
 
     held = np.isin(record.split, ("val", "test"))
     profile = error_profile(record.y, ev.xi, held if np.any(held) else record.split == "train",
@@ -191,7 +193,8 @@ def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, train
            out: Path, figure: Path, wall: float, command: str, sidecar: dict | None) -> int:
     """Score the model against its baseline, write the model file, the figure and the
     ``--history``; print the report."""
-    from controllers import bounds, training
+    from controllers.certification import bounds
+    from controllers.identification import training
     from cosim.commands import train_report
     from cosim.core.atomicio import output_error, replacing
 

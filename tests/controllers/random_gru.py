@@ -75,7 +75,7 @@ def certified_random_problem(setpoints: list[np.ndarray], seed: int = 0):
     A small w̄_y (0.002) and the largest observer-gain scale for which every hypothesis of
     ``th:feasibility-stability`` holds at ``setpoints`` (normalised).
     """
-    from controllers import gain_design
+    from controllers.certification import gain_design
 
     model = random_gru_model(seed)
     theta, cert = gain_design.choose_gain_scale(model, setpoints, N=N, w_y_bar=0.002, L=L_BOX,

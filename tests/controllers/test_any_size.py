@@ -1,5 +1,6 @@
 """Certificates, admissible ranges and default set-points for any numbers of inputs m and
-outputs p (controllers.certificates, controllers.gain_design): one, two, three, five outputs;
+outputs p (controllers.certification.certificates, controllers.certification.gain_design): one,
+two, three, five outputs;
 fewer and more inputs than outputs."""
 
 from __future__ import annotations
@@ -7,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers import certificates as certs
-from controllers import gain_design
+from controllers.certification import certificates as certs
+from controllers.certification import gain_design
 from controllers.errors import ControllersError
 from controllers.gru import output, step
 from controllers.problem import Channel, ControlProblem

@@ -1,4 +1,4 @@
-"""Certificates of the paper (controllers.certificates) against hand-computed values.
+"""Certificates of the paper (controllers.certification.certificates) against hand-computed values.
 
 The hand model below has n = 2, m = 1, p = 1 and weights chosen so that every norm can be
 read off by eye; the expected values were computed by hand (the arithmetic is written next to
@@ -13,8 +13,9 @@ import numpy as np
 import pytest
 from scipy.optimize import linprog, minimize
 
-from controllers import bounds, gain_design, problem
-from controllers import certificates as certs
+from controllers import problem
+from controllers.certification import bounds, gain_design
+from controllers.certification import certificates as certs
 from controllers.errors import ControllersError, DataError
 from controllers.gru import output, step
 from controllers.model import GRUModel

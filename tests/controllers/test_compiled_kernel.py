@@ -1,4 +1,5 @@
-"""The compiled FHOCP kernel (controllers.compiled_kernel): the numpy derivatives' numbers, the
+"""The compiled FHOCP kernel (controllers.kernel.compiled_kernel): the numpy derivatives' numbers,
+the
 same solves, the same equilibria; and the fallback to numpy without a compiler."""
 
 from __future__ import annotations
@@ -12,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers import compiled_kernel as ck
 from controllers.equilibrium import equilibrium, equilibrium_newton
-from controllers.fhocp import FHOCP, FHOCPData
-from controllers.nlp_single_shooting import SingleShootingNLP
+from controllers.kernel import compiled_kernel as ck
+from controllers.ocp.fhocp import FHOCP, FHOCPData
+from controllers.ocp.nlp_single_shooting import SingleShootingNLP
 from tests.controllers.random_gru import random_gru_model
 
 needs_cc = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,
@@ -142,8 +143,8 @@ def test_compiled_equilibrium_newton_only_for_square_problems(m: int, p: int) ->
     from types import SimpleNamespace
 
     from controllers.equilibrium import equilibrium_output
-    from controllers.governor import ReferenceGovernor
     from controllers.gru import output, step
+    from controllers.ocp.governor import ReferenceGovernor
 
     fh = random_fhocp(9, 6, seed=10 * m + p, m=m, p=p)
     assert fh.kernel is not None, fh.kernel_error
@@ -220,7 +221,7 @@ def test_answer_check_and_observer_step_match_numpy(n: int, N: int, m: int, p: i
     update) against FHOCP.cost, FHOCP._residuals and controllers.gru.step, including answers
     outside the input box, violated output rows and terminal sets."""
     from controllers import gru
-    from controllers.fhocp import FHOCPResult
+    from controllers.ocp.fhocp import FHOCPResult
 
     fh = random_fhocp(n, N, seed=3 * n + N, m=m, p=p, kernel="numpy")
     lib = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo)

@@ -1,13 +1,13 @@
-"""The admissible reference governor (controllers.governor): equilibria by continuation, and
+"""The admissible reference governor (controllers.ocp.governor): equilibria by continuation, and
 every step it takes comes with a sequence that is feasible for the new set-point."""
 
 import numpy as np
 import pytest
 
 from controllers.equilibrium import equilibrium
-from controllers.fhocp import FHOCP
-from controllers.governor import ReferenceGovernor, equilibrium_newton
 from controllers.gru import output, simulate
+from controllers.ocp.fhocp import FHOCP
+from controllers.ocp.governor import ReferenceGovernor, equilibrium_newton
 from tests.controllers.random_gru import N
 
 
@@ -65,7 +65,7 @@ def test_governor_for_non_square_problems(m: int, p: int) -> None:
     v + λ (r − v) of the segment; more inputs than outputs (3 × 2): the point of the segment,
     by the least-squares Newton continuation. Each step's sequence is feasible, and the
     nominal closed loop reaches r exactly."""
-    from controllers import gain_design
+    from controllers.certification import gain_design
     from controllers.equilibrium import equilibrium_output
     from controllers.gru import step
     from tests.controllers.random_gru import random_gru_model

@@ -1,4 +1,4 @@
-"""The input-rate (Δu) penalty of the FHOCP (controllers.input_rate): its numpy derivatives
+"""The input-rate (Δu) penalty of the FHOCP (controllers.ocp.input_rate): its numpy derivatives
 against casadi's AD and finite differences, the compiled kernel against numpy in every
 variant, the solvers against each other, and du_weight = 0 as the paper's cost, bit for bit."""
 
@@ -11,13 +11,13 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from controllers import compiled_kernel as ck
 from controllers.equilibrium import equilibrium
 from controllers.errors import DesignError
-from controllers.fhocp import FHOCP
-from controllers.input_rate import du_cost, du_gradient, du_hessian, du_weights
-from controllers.nlp_single_shooting import SingleShootingNLP
-from controllers.robust_mpc import RobustMPC
+from controllers.kernel import compiled_kernel as ck
+from controllers.ocp.fhocp import FHOCP
+from controllers.ocp.input_rate import du_cost, du_gradient, du_hessian, du_weights
+from controllers.ocp.nlp_single_shooting import SingleShootingNLP
+from controllers.ocp.robust_mpc import RobustMPC
 from tests.controllers.test_compiled_kernel import random_fhocp, rel
 
 needs_cc = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,

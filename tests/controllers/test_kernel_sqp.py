@@ -1,4 +1,5 @@
-"""The SQP inside the compiled kernel (controllers.kernel_sqp, kernel/5_qp.c and 6_sqp.c): its
+"""The SQP inside the compiled kernel (controllers.kernel.kernel_sqp, kernel/5_qp.c and 6_sqp.c):
+its
 dual active-set QP against the KKT conditions and qpOASES, degenerate and infeasible QPs, and
 its FHOCP solves against casadi ``sqpmethod`` from the same starts."""
 
@@ -8,12 +9,12 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from controllers import compiled_kernel as ck
-from controllers.casadi_callbacks import quiet_stdout
 from controllers.errors import DesignError
-from controllers.fhocp import FHOCP
-from controllers.kernel_abi import QpStatus
-from controllers.kernel_sqp import KernelSQP
+from controllers.kernel import compiled_kernel as ck
+from controllers.kernel.kernel_abi import QpStatus
+from controllers.kernel.kernel_sqp import KernelSQP
+from controllers.ocp.casadi_callbacks import quiet_stdout
+from controllers.ocp.fhocp import FHOCP
 from tests.controllers.test_compiled_kernel import needs_cc, random_fhocp, same_start_solves
 
 

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from controllers.equilibrium import equilibrium
-from controllers.fhocp import FHOCP
+from controllers.ocp.fhocp import FHOCP
 from tests.controllers.test_compiled_kernel import needs_cc
 
 #: Two closed loops through different set-points (normalised outputs), so that two threads

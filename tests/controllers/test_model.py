@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from controllers import training
+from controllers.identification import training
 from controllers.model import GRUModel, ModelFileError
 from tests.fourtank_problem import FOURTANK
 

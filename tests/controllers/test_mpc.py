@@ -5,11 +5,11 @@ import numpy as np
 import pytest
 
 from controllers.equilibrium import equilibrium
-from controllers.fhocp import FHOCP, FHOCPData
 from controllers.gru import output, simulate, step
 from controllers.observer import GRUObserver
-from controllers.robust_mpc import RobustMPC
-from controllers.solver_settings import FEAS_TOL
+from controllers.ocp.fhocp import FHOCP, FHOCPData
+from controllers.ocp.robust_mpc import RobustMPC
+from controllers.ocp.solver_settings import FEAS_TOL
 from cosim_adapters.gru_plant import GRUPlant
 from tests.controllers.random_gru import N
 

@@ -12,8 +12,8 @@ import shutil
 import numpy as np
 import pytest
 
-from controllers import certificates as certs
-from controllers import gain_design
+from controllers.certification import certificates as certs
+from controllers.certification import gain_design
 from controllers.gru import output, step
 from controllers.observer import GRUObserver
 from tests.controllers.random_gru import random_gru_model
@@ -52,7 +52,7 @@ def test_observer_implements_eq_observer() -> None:
                     reason="no C compiler")
 def test_observer_with_the_compiled_step_implements_eq_observer() -> None:
     """With a compiled kernel attached (what RobustMPCController does), the same update."""
-    from controllers import compiled_kernel as ck
+    from controllers.kernel import compiled_kernel as ck
 
     m = random_gru_model(0, n=6)
     p = m.params

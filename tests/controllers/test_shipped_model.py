@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers import bounds, metrics
+from controllers.certification import bounds
+from controllers.identification import metrics
 from controllers.model import GRUModel
 from cosim.cli import main
 from cosim.core import datagen

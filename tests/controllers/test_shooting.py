@@ -1,11 +1,11 @@
-"""The hand-written derivatives of :mod:`controllers.shooting` against casadi AD of gru.step."""
+"""The hand-written derivatives of :mod:`controllers.ocp.shooting` against casadi AD of gru.step."""
 
 import casadi as ca
 import numpy as np
 import pytest
 
 from controllers import gru
-from controllers.shooting import GRUShooting
+from controllers.ocp.shooting import GRUShooting
 from tests.controllers.random_gru import random_gru_model
 
 

@@ -1,5 +1,5 @@
-"""One status and one answer check for both FHOCPs (controllers.solve_status,
-controllers.fhocp_result.judge): the paper's and the tracking law's problems report the same
+"""One status and one answer check for both FHOCPs (controllers.ocp.solve_status,
+controllers.ocp.fhocp_result.judge): the paper's and the tracking law's problems report the same
 outcomes the same way."""
 
 from __future__ import annotations
@@ -7,13 +7,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers import certificates as certs
+from controllers.certification import certificates as certs
 from controllers.errors import DesignError
-from controllers.fhocp import FHOCP
-from controllers.fhocp_result import FHOCPResult, judge
-from controllers.fhocp_tracking import TrackingFHOCP
-from controllers.solve_status import OTHER_STATUS, SolveStatus, status_code
-from controllers.steady_state import steady_state
+from controllers.ocp.fhocp import FHOCP
+from controllers.ocp.fhocp_result import FHOCPResult, judge
+from controllers.ocp.fhocp_tracking import TrackingFHOCP
+from controllers.ocp.solve_status import OTHER_STATUS, SolveStatus, status_code
+from controllers.ocp.steady_state import steady_state
 from tests.controllers.random_gru import random_gru_model
 
 

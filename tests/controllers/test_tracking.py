@@ -1,4 +1,4 @@
-"""The tracking FHOCP (controllers.fhocp_tracking): its steady state, its exact derivatives,
+"""The tracking FHOCP (controllers.ocp.fhocp_tracking): its steady state, its exact derivatives,
 the compiled kernel's HAS_ASS variant against the numpy twin, and the tracking law in the
 GRU world (any set-point tracked to the closest admissible steady state, offset-free under a
 constant output disturbance)."""
@@ -8,14 +8,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers import certificates as certs
+from controllers.certification import certificates as certs
 from controllers.equilibrium import equilibrium, jacobians
 from controllers.errors import DesignError
-from controllers.fhocp_tracking import TrackingFHOCP, steady_output_bounds
 from controllers.gru import output, step
 from controllers.model import DEFAULT_MODEL, GRUModel
-from controllers.steady_state import steady_state
-from controllers.tracking_mpc import DisturbanceFilter, TrackingMPC
+from controllers.ocp.fhocp_tracking import TrackingFHOCP, steady_output_bounds
+from controllers.ocp.steady_state import steady_state
+from controllers.ocp.tracking_mpc import DisturbanceFilter, TrackingMPC
 from tests.controllers.random_gru import random_gru_model
 
 

@@ -1,4 +1,5 @@
-"""Training of a δISS GRU (``controllers.training``, ``cosim train``) on real plant data."""
+"""Training of a δISS GRU (``controllers.identification.training``, ``cosim train``) on real plant
+data."""
 
 from __future__ import annotations
 
@@ -9,8 +10,9 @@ import pytest
 
 torch = pytest.importorskip("torch")
 
-from controllers import bounds, metrics, sequences, training  # noqa: E402
+from controllers.certification import bounds  # noqa: E402
 from controllers.errors import ControllersError  # noqa: E402
+from controllers.identification import metrics, sequences, training  # noqa: E402
 from controllers.model import GRUModel  # noqa: E402
 from cosim.cli import main  # noqa: E402
 from cosim.core import datagen  # noqa: E402
@@ -128,7 +130,8 @@ def test_cosim_train_bad_data_is_a_one_line_error(tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------------------------
-# Records of several experiments (controllers.sequences) and the defaults of short records
+# Records of several experiments (controllers.identification.sequences) and the defaults of short
+# records
 # --------------------------------------------------------------------------------------------
 
 def test_training_stretches_and_subsequences_never_span_two_experiments():

@@ -121,7 +121,7 @@ def test_scenario_columns_are_checked_against_the_problems_signals(
 @pytest.mark.parametrize(("m", "p"), [(1, 1), (2, 2), (2, 3)])
 def test_the_certificate_figure_has_a_panel_per_output_in_its_units(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, m: int, p: int) -> None:
-    from controllers import certificates as certs
+    from controllers.certification import certificates as certs
     from controllers.problem import Channel, ControlProblem
     from tests.controllers.random_gru import random_gru_model
 

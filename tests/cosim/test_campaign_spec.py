@@ -134,7 +134,7 @@ def test_draws_depend_on_seed_and_run_only(tmp_path: Path) -> None:
 
 
 def test_setpoints_default_to_certified_reachable_set_points(tmp_path: Path) -> None:
-    from controllers import certificates as certs
+    from controllers.certification import certificates as certs
 
     path = write(tmp_path, GOOD + "\n[setpoints]\ncount = 3\nhold = 1000\n")
     s = spec.load(path)

@@ -9,8 +9,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controllers import bounds, gain_design
-from controllers import certificates as certs
+from controllers.certification import bounds, gain_design
+from controllers.certification import certificates as certs
 from controllers.errors import CertificateError
 from controllers.model import GRUModel
 from cosim.cli import main

@@ -241,7 +241,7 @@ def _certified_model_file(tmp_path: Path, model, inputs: list) -> tuple[Path, li
     """Save ``model`` with w̄_y = 0.01 and the observer gains of the largest θ passing every
     hypothesis at the equilibrium outputs of ``inputs`` (normalised), which it returns in
     the problem's units."""
-    from controllers import gain_design
+    from controllers.certification import gain_design
     from controllers.equilibrium import equilibrium_output
 
     model.w_y_bar = 0.01

@@ -1,4 +1,4 @@
-"""The robust MPC's ``du_weight`` option (the input-rate penalty, controllers.input_rate): per
+"""The robust MPC's ``du_weight`` option (the input-rate penalty, controllers.ocp.input_rate): per
 input by name, reported in the summary, and smoother inputs in closed loop on the paper
 scenario with the four-tank FMU."""
 

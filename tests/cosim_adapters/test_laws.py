@@ -86,7 +86,7 @@ def test_a_third_law_is_one_object(ctrl: RobustMPCController) -> None:
 
 
 def test_the_uncertified_variant_is_the_same_law(ctrl: RobustMPCController) -> None:
-    from controllers.certificates import uncertified_certificate
+    from controllers.certification.certificates import uncertified_certificate
     from cosim_adapters.certification import measured_margins
 
     cert_u = uncertified_certificate(ctrl.cert, measured_margins(ctrl, ctrl.cert)[0])

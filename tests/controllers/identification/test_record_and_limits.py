@@ -10,7 +10,7 @@ from controllers.identification.initial_state import estimate_initial_state, fre
 from controllers.identification.linear import ARXModel, fit_arx, simulate
 from controllers.identification.record import Record
 from controllers.identification.saturation import detect, flags
-from controllers.training import init_params
+from controllers.identification.training import init_params
 
 
 def test_experiments_and_stretches() -> None:

@@ -10,7 +10,7 @@ import pytest
 pytest.importorskip("torch")
 
 from controllers.identification.sim_loss import SimLoss, library, pack, torch_loss, unpack
-from controllers.training import init_params
+from controllers.identification.training import init_params
 
 needs_cc = pytest.mark.skipif(library() is None, reason="no C compiler for sim_loss.c")
 

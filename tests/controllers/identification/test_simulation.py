@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("torch")
 
-from controllers.bounds import nu
+from controllers.certification.bounds import nu
 from controllers.identification.initial_state import free_run
 from controllers.identification.record import Record
 from controllers.identification.search import candidates, search
@@ -21,7 +21,7 @@ from controllers.identification.simulation import (
     simulate,
     training_windows,
 )
-from controllers.training import init_params
+from controllers.identification.training import init_params
 
 
 @pytest.fixture(scope="module")

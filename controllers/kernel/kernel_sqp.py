@@ -10,7 +10,7 @@ stopping tests and return statuses) with a dense Goldfarb–Idnani dual active-s
 working-set change; the stopping test's ∇L comes from one adjoint sweep, so the
 sensitivities and the Jacobian are computed only when another iteration follows.
 
-:class:`KernelSQP` stands where the casadi solver stood in :class:`controllers.fhocp.FHOCP`:
+:class:`KernelSQP` stands where the casadi solver stood in :class:`controllers.ocp.fhocp.FHOCP`:
 the same named argument and result arrays (``x0, p, lbx, ubx, lbg, ubg, lam_x0, lam_g0`` →
 ``x, f, g, lam_x, lam_g, lam_p``), a trigger, and ``stats()`` with casadi's keys
 (``return_status``, ``success``, ``iter_count`` and the cumulative ``t_wall_*`` timers of
@@ -27,12 +27,12 @@ from typing import Any
 import numpy as np
 
 from controllers.errors import DesignError
-from controllers.kernel_abi import SqpInfo, SqpOptions, SqpStatus
+from controllers.kernel.kernel_abi import SqpInfo, SqpOptions, SqpStatus
 
 __all__ = ["STATUS", "KernelSQP"]
 
 #: The kernel SQP's statuses by value, as casadi ``sqpmethod`` names them
-#: (:class:`controllers.kernel_abi.SqpStatus`).
+#: (:class:`controllers.kernel.kernel_abi.SqpStatus`).
 STATUS = tuple(status.casadi_name for status in SqpStatus)
 
 #: casadi ``sqpmethod`` defaults of the line search and the step test (casadi 3.8).
@@ -47,14 +47,14 @@ class KernelSQP:
 
     Parameters
     ----------
-    workspace : controllers.kernel_lib.Workspace
+    workspace : controllers.kernel.kernel_lib.Workspace
         The FHOCP's workspace of its problem's kernel (derivatives, eigenvalue clipping, QP
         and SQP loop).
     options : mapping
         ``tol_pr``, ``tol_du``, ``max_iter`` and optionally ``min_step_size``, ``c1``,
         ``beta``, ``max_iter_ls`` (casadi ``sqpmethod``'s meanings and defaults),
         ``tol_du_relative`` and ``reuse_step`` (ours, off by default:
-        :class:`controllers.kernel_abi.SqpOptions`).
+        :class:`controllers.kernel.kernel_abi.SqpOptions`).
     time_budget : float, optional
         Wall-time budget of one solve [s] (status ``"User_Requested_Stop"`` when it runs out
         before convergence); none by default.
@@ -94,7 +94,7 @@ class KernelSQP:
             self.options, self.info)
 
     def buffers(self) -> tuple[KernelSQP, Any, dict[str, np.ndarray], dict[str, np.ndarray]]:
-        """``(self, trigger, ins, outs)``, as :func:`controllers.fhocp.bind_buffers` gives
+        """``(self, trigger, ins, outs)``, as :func:`controllers.ocp.fhocp.bind_buffers` gives
         for a casadi solver."""
         return self, self.solve, self.ins, self.outs
 

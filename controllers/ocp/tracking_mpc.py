@@ -1,10 +1,10 @@
 """The tracking MPC law: the tracking FHOCP each step, with the candidate as fallback.
 
-:class:`TrackingMPC` solves :class:`~controllers.fhocp_tracking.TrackingFHOCP` every step for
+:class:`TrackingMPC` solves :class:`~controllers.ocp.fhocp_tracking.TrackingFHOCP` every step for
 the target ``r = ȳ − d̂`` from the candidate of the recursive-feasibility argument (the
 previous plan shifted by one stage with the artificial steady input ``u_s`` appended, and the
 same ``u_s``), and applies that candidate when a solve fails. Unlike the paper's law
-(:class:`controllers.robust_mpc.RobustMPC`) no set-point is ever refused: ``r`` enters the
+(:class:`controllers.ocp.robust_mpc.RobustMPC`) no set-point is ever refused: ``r`` enters the
 cost only, so the candidate stays feasible whatever ``r`` does (docs: design/tracking.md,
 claim 1). :class:`DisturbanceFilter` is the offset-free estimate ``d̂``.
 """
@@ -15,10 +15,10 @@ import time
 
 import numpy as np
 
-from controllers.fhocp_result import FHOCPResult
-from controllers.fhocp_tracking import TrackingFHOCP
-from controllers.robust_mpc import StepRecord
-from controllers.solver_settings import FEAS_TOL
+from controllers.ocp.fhocp_result import FHOCPResult
+from controllers.ocp.fhocp_tracking import TrackingFHOCP
+from controllers.ocp.robust_mpc import StepRecord
+from controllers.ocp.solver_settings import FEAS_TOL
 
 __all__ = ["DisturbanceFilter", "TrackingMPC"]
 
@@ -50,13 +50,14 @@ class TrackingMPC:
     fhocp : TrackingFHOCP
     accept_suboptimal : bool
         Apply a feasible iterate of a capped solve that costs no more than the candidate
-        (suboptimal MPC, as :class:`controllers.robust_mpc.RobustMPC`).
+        (suboptimal MPC, as :class:`controllers.ocp.robust_mpc.RobustMPC`).
     """
 
     def __init__(self, fhocp: TrackingFHOCP, accept_suboptimal: bool = True) -> None:
         self.fhocp = fhocp
         self.accept_suboptimal = bool(accept_suboptimal)
-        #: the design's hypotheses (:func:`controllers.tracking_checks.tracking_hypotheses`)
+        #: the design's hypotheses
+        #: (:func:`controllers.certification.tracking_checks.tracking_hypotheses`)
         self.hypotheses: dict | None = None
         self.reset()
 

@@ -3,7 +3,7 @@
 Decision variables ``w = (u_0 … u_{M−1}, u_s, t)``: the free inputs (``u_i = u_s`` for
 ``i ≥ M``, the control horizon ``M ≤ N``), the artificial steady input ``u_s`` and the
 epigraph variable ``t``; ``x_s = x_s(u_s)`` is implicit
-(:func:`controllers.steady_state.steady_state`, Newton from the parameter ``x_s0``).
+(:func:`controllers.ocp.steady_state.steady_state`, Newton from the parameter ``x_s0``).
 Parameters ``p = (x̂, x_s0, r)``, then ``u_{−1}`` with an input-rate term; ``r = ȳ − d̂`` is
 the set-point the steady output should reach (the offset-free target). Cost::
 
@@ -29,18 +29,18 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controllers.input_rate import du_cost, du_gradient
-from controllers.nlp_single_shooting import SingleShootingNLP
-from controllers.steady_state import steady_state
+from controllers.ocp.input_rate import du_cost, du_gradient
+from controllers.ocp.nlp_single_shooting import SingleShootingNLP
+from controllers.ocp.steady_state import steady_state
 
 if TYPE_CHECKING:
-    from controllers.fhocp_tracking import TrackingFHOCP
+    from controllers.ocp.fhocp_tracking import TrackingFHOCP
 
 __all__ = ["TrackingNLP"]
 
 
 class TrackingNLP(SingleShootingNLP):
-    """Function and derivative evaluations of :class:`~controllers.fhocp_tracking.
+    """Function and derivative evaluations of :class:`~controllers.ocp.fhocp_tracking.
     TrackingFHOCP` (see the module docstring); a kernel workspace as for the parent."""
 
     def __init__(self, fhocp: TrackingFHOCP, kernel: Any = None) -> None:
@@ -48,7 +48,7 @@ class TrackingNLP(SingleShootingNLP):
         self.p: Any = fhocp
         self.ng = fhocp.ng
         self.ius = fhocp.ius
-        from controllers.shooting import GRUShooting
+        from controllers.ocp.shooting import GRUShooting
 
         #: one stage at (x_s, u_s): the second derivatives of the curvature term
         self._one_stage = GRUShooting(fhocp.params, 1)
@@ -241,7 +241,7 @@ class TrackingNLP(SingleShootingNLP):
     def _answer_check_pairs(self, kernel: Any, rng: np.random.Generator, u: np.ndarray,
                             pv: np.ndarray, x_np: np.ndarray) -> list[tuple[Any, Any]]:
         """None: the tracking FHOCP's answer check
-        (:meth:`~controllers.fhocp_tracking.TrackingFHOCP.check`) is its own (the plain
+        (:meth:`~controllers.ocp.fhocp_tracking.TrackingFHOCP.check`) is its own (the plain
         rollout, compared above, and ``x_s`` verified by a numpy GRU step), not the kernel's
         ``assess``."""
         return []

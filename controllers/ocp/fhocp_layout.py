@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from controllers.fhocp import FHOCP
+    from controllers.ocp.fhocp import FHOCP
 
 __all__ = ["FHOCPLayout"]
 
@@ -132,7 +132,7 @@ class FHOCPLayout:
             The solver's argument buffers (``x0``, ``p``, ``lbx``, ``ubx``, ``lbg``,
             ``ubg``, ``lam_x0``, ``lam_g0``), written in place.
         bounds : (N, q) array
-            The tightened output bounds (:meth:`controllers.fhocp.FHOCP.tightened_bounds`).
+            The tightened output bounds (:meth:`controllers.ocp.fhocp.FHOCP.tightened_bounds`).
         u_init : (N, m) array, optional
             Initial inputs; default the previous solution shifted (``ū`` appended), else ``ū``.
         prev : dict, optional

@@ -2,7 +2,7 @@
 
 The tolerances an answer must meet to be applied, the IPOPT options of the fast
 formulation, and the options of the default solver, an SQP on the exact, eigenvalue-clipped
-Hessian (:class:`controllers.fhocp.FHOCP`): inside the compiled kernel with its own dense
+Hessian (:class:`controllers.ocp.fhocp.FHOCP`): inside the compiled kernel with its own dense
 QP, or casadi ``sqpmethod`` with dense qpOASES QPs.
 """
 
@@ -41,7 +41,7 @@ FAST_IPOPT_OPTIONS: dict[str, Any] = {
 
 #: Options of the default solver (``solver="sqp"``), chosen by measurement (docs:
 #: design/solver.md, design/compiled-kernel.md). ``loop`` (our key): ``"kernel"`` runs the whole
-#: SQP inside the compiled kernel (:mod:`controllers.kernel_sqp`: casadi ``sqpmethod``'s
+#: SQP inside the compiled kernel (:mod:`controllers.kernel.kernel_sqp`: casadi ``sqpmethod``'s
 #: iteration with a dense dual active-set QP; 6–9× faster than qpOASES per QP, the gap growing
 #: with N), ``"casadi"`` casadi ``sqpmethod`` with the QP below; without a kernel
 #: (``kernel="numpy"``, no compiler) it is always casadi's. The exact Hessian from the same

@@ -4,7 +4,7 @@ inputs"): its weights, value and exact derivatives in numpy.
     J_Δu(u; u_{−1}) = Σ_{i=0}^{N−1} (u_i − u_{i−1})ᵀ S (u_i − u_{i−1}),   S = diag(s_1 … s_m) ⪰ 0
 
 in normalised units, with ``u_{−1}`` the input applied at the previous step (a parameter of
-the solve: :class:`controllers.fhocp.FHOCP` puts it at the end of ``p``). Stacking
+the solve: :class:`controllers.ocp.fhocp.FHOCP` puts it at the end of ``p``). Stacking
 ``u = (u_0 … u_{N−1})`` and ``Δ = D u − E u_{−1}`` (``D`` the block difference operator, ``E``
 the first block of the identity), ``J_Δu = Δᵀ (I ⊗ S) Δ``: the gradient is
 ``2 Dᵀ (I ⊗ S) Δ``, i.e. ``2 S (Δ_i − Δ_{i+1})`` for stage ``i`` (``Δ_N = 0``), and the Hessian

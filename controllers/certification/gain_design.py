@@ -15,9 +15,9 @@ from typing import Any
 
 import numpy as np
 
-from controllers.bounds import check_gates
-from controllers.certificates import Certificate, compute_certificate
-from controllers.observer_gains import observer_gains_lp
+from controllers.certification.bounds import check_gates
+from controllers.certification.certificates import Certificate, compute_certificate
+from controllers.certification.observer_gains import observer_gains_lp
 
 __all__ = ["choose_gain_scale", "default_setpoints", "observer_gains_lp"]
 

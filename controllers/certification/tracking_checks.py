@@ -1,7 +1,8 @@
 """The tracking law's hypotheses, computed at run time (docs: design/tracking.md, H3-H6).
 
-What the paper's certificate (:mod:`controllers.certificates`) checks stays; the tracking
-FHOCP (:mod:`controllers.fhocp_tracking`) adds, once per model and design:
+What the paper's certificate (:mod:`controllers.certification.certificates`) checks stays; the
+tracking
+FHOCP (:mod:`controllers.ocp.fhocp_tracking`) adds, once per model and design:
 
 - (H3) the weights: ``Q ≻ 0``, ``R ≻ 0``, ``S ⪰ 0`` (the Δu weights), ``T ≻ 0`` (the offset
   weights), and the terminal weight ``s`` of ``eq:definition_s`` (the certificate's);
@@ -27,7 +28,7 @@ from typing import Any
 import numpy as np
 
 from controllers.gru import output
-from controllers.steady_state import steady_state
+from controllers.ocp.steady_state import steady_state
 
 __all__ = ["failures", "tracking_hypotheses"]
 
@@ -49,7 +50,7 @@ def _ys_nonempty(L: np.ndarray, rhs: np.ndarray) -> tuple[bool, np.ndarray | Non
 def tracking_hypotheses(fhocp: Any, cert: Any, beta: float,
                         grid_points: int = 11) -> dict[str, Any]:
     """The hypotheses of the tracking FHOCP ``fhocp`` (a
-    :class:`~controllers.fhocp_tracking.TrackingFHOCP`) designed from ``cert``, with the
+    :class:`~controllers.ocp.fhocp_tracking.TrackingFHOCP`) designed from ``cert``, with the
     disturbance filter's ``beta`` (module docstring)."""
     eig = np.linalg.eigvalsh
     a_min = float(cert.alpha_min())

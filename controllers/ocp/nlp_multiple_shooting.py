@@ -17,7 +17,7 @@ import numpy as np
 from controllers import gru
 
 if TYPE_CHECKING:
-    from controllers.fhocp import FHOCP
+    from controllers.ocp.fhocp import FHOCP
 
 __all__ = ["multiple_shooting_problem"]
 

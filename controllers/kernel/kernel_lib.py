@@ -1,6 +1,6 @@
 """A loaded compiled kernel (:class:`Kernel`) and its per-instance workspaces (:class:`Workspace`).
 
-A kernel library (:func:`controllers.compiled_kernel.build`) holds only code and constants;
+A kernel library (:func:`controllers.kernel.compiled_kernel.build`) holds only code and constants;
 everything a call writes lives in a C workspace (``gk_ws``, ``controllers/kernel/0_workspace.c``)
 that the caller passes first. One :class:`Kernel` per library and process, shared by every
 FHOCP of the same problem; one :class:`Workspace` per FHOCP instance, holding its C workspace
@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.kernel_abi import (
+from controllers.kernel.kernel_abi import (
     Assessment,
     QpStatus,
     SqpInfo,
@@ -166,7 +166,7 @@ class Workspace:
 
     def steady_state(self, u_s: np.ndarray, x0: np.ndarray) -> np.ndarray | None:
         """The steady state ``x_s(u_s)`` by Newton from ``x0`` (a tracking FHOCP's kernel:
-        :mod:`controllers.steady_state` in C); ``None`` when it did not converge."""
+        :mod:`controllers.ocp.steady_state` in C); ``None`` when it did not converge."""
         b, a = self._buf, self._addr
         b["ue"][:] = u_s
         b["xe"][:] = x0
@@ -189,7 +189,7 @@ class Workspace:
                bounds: np.ndarray, alpha: float, u_prev: np.ndarray | None = None
                ) -> tuple[np.ndarray, Assessment]:
         """The check of an input sequence in one call: states ``x_0 … x_N`` from ``x0`` under
-        ``u`` (N, m) and their :class:`~controllers.kernel_abi.Assessment` (cost, worst
+        ``u`` (N, m) and their :class:`~controllers.kernel.kernel_abi.Assessment` (cost, worst
         output rows at ``i = 0`` and ``i ≥ 1``, ``max |u|``, ``‖x_N − x̄‖∞``, active
         constraints: as ``FHOCP.cost`` with ``t = ‖x_N − x̄‖∞`` and ``u_{−1} = u_prev``, and
         ``FHOCP._residuals``; ``bounds``: the tightened bounds, N×q). ``u_prev`` is read only

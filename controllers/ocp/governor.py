@@ -78,9 +78,9 @@ class ReferenceGovernor:
 
     Parameters
     ----------
-    cert : controllers.certificates.Certificate
+    cert : controllers.certification.certificates.Certificate
         Gives ``α(ȳ)`` (``eq:def-alpha``) and the admissibility checks.
-    fhocp : controllers.fhocp.FHOCP
+    fhocp : controllers.ocp.fhocp.FHOCP
         Gives the tightened bounds and the rollout.
     levels : int
         Number of step fractions tried: ``1, 1/2, …, 2^{1−levels}``.

@@ -7,7 +7,7 @@ A record is a sequence of rows (one per sample), each with a split label (``trai
 split and one experiment. Training subsequences (paper, section V) are cut inside training
 stretches only, so that none spans two experiments, or jumps over validation or test rows.
 The open-loop evaluation restarts from ``x = 0`` at each experiment
-(:func:`controllers.metrics.open_loop_experiments`).
+(:func:`controllers.identification.metrics.open_loop_experiments`).
 """
 
 from __future__ import annotations

@@ -7,9 +7,9 @@
           ‖u_i‖∞ ≤ 1,  ‖u_s‖∞ ≤ 1,  ‖x_N − x_s‖∞ ≤ α_c,  x_s = f(x_s, u_s)
           L(U_o x_s + b_o) ≤ h − ẽ_o a_N − b_N − w_L − α_c c_s                (y_s ∈ Y_s)
 
-The paper's FHOCP (:class:`controllers.fhocp.FHOCP`) with the set-point ``(x̄, ū)`` replaced
+The paper's FHOCP (:class:`controllers.ocp.fhocp.FHOCP`) with the set-point ``(x̄, ū)`` replaced
 by a decision variable: the steady input ``u_s`` and its steady state ``x_s(u_s)``
-(:mod:`controllers.steady_state`), as in MPC for tracking (Limon et al., IEEE TAC 2018). The
+(:mod:`controllers.ocp.steady_state`), as in MPC for tracking (Limon et al., IEEE TAC 2018). The
 requested set-point ``ȳ`` and the output-disturbance estimate ``d̂`` enter the cost only,
 through ``r = ȳ − d̂``: any ``r`` gives a feasible problem (the shifted plan with ``u_s``
 appended is a candidate), an unreachable or inadmissible one is tracked to the closest
@@ -19,7 +19,7 @@ Morari & Maeder 2012). One constant terminal radius ``α_c`` replaces ``α(ȳ)``
 paper's recursive-feasibility argument holds with ``x̄ := x_s`` (docs: design/tracking.md).
 
 Single shooting only, solved by the SQP (the compiled kernel with ``HAS_ASS``, its numpy twin
-:class:`controllers.nlp_tracking.TrackingNLP` otherwise) or IPOPT. Every answer is checked
+:class:`controllers.ocp.nlp_tracking.TrackingNLP` otherwise) or IPOPT. Every answer is checked
 independently: numpy rollout, the steady state recomputed, the output rows, the input box,
 the terminal set and ``Y_s``.
 """
@@ -34,12 +34,12 @@ import numpy as np
 
 from controllers import gru
 from controllers.errors import DesignError
-from controllers.fhocp import FHOCP
-from controllers.fhocp_result import FHOCPResult, judge, set_residuals, solver_stats
-from controllers.input_rate import du_cost
-from controllers.kernel_sqp import KernelSQP
-from controllers.solve_status import SolveStatus
-from controllers.steady_state import steady_state
+from controllers.kernel.kernel_sqp import KernelSQP
+from controllers.ocp.fhocp import FHOCP
+from controllers.ocp.fhocp_result import FHOCPResult, judge, set_residuals, solver_stats
+from controllers.ocp.input_rate import du_cost
+from controllers.ocp.solve_status import SolveStatus
+from controllers.ocp.steady_state import steady_state
 
 __all__ = ["CONTROL_HORIZON_FRACTION", "DEFAULTS", "LINE_SEARCH", "SQP_OVERRIDES", "US_RATE",
            "TrackingFHOCP", "default_control_horizon", "steady_output_bounds"]
@@ -50,15 +50,15 @@ __all__ = ["CONTROL_HORIZON_FRACTION", "DEFAULTS", "LINE_SEARCH", "SQP_OVERRIDES
 #: ("QP_Infeasible", every later step falling back on the candidate: 2 of 40 runs of the
 #: plant-uncertainty campaign stuck for 200 steps).
 LINE_SEARCH = {"max_iter_ls": 10, "beta": 0.5}
-#: The tracking FHOCP's SQP options over :data:`controllers.solver_settings.SQP_OPTIONS`: the
+#: The tracking FHOCP's SQP options over :data:`controllers.ocp.solver_settings.SQP_OPTIONS`: the
 #: line search above, and the dual test relative to the multipliers
-#: (:class:`controllers.kernel_abi.SqpOptions` ``tol_du_relative``; compiled kernel only).
+#: (:class:`controllers.kernel.kernel_abi.SqpOptions` ``tol_du_relative``; compiled kernel only).
 #: The terminal rows' multipliers reach 10⁵ (``s`` = 32,068 on the four-tank), and rounding
 #: then keeps ``‖∇L‖∞`` near 10⁻⁵ at a KKT point (``‖∇L‖∞ / ‖λ‖∞`` ≈ 10⁻¹⁰, infeasibility
 #: 10⁻¹⁶): such solves ended as ``Search_Direction_Becomes_Too_Small`` after 3–4 idle
 #: iterations (18 of 401 steps of a set-point step pair, 1.1 % of the steps of the
 #: plant-uncertainty campaign), reported as failures.
-#: ``reuse_step`` = 0.1 (the kernel's derivative reuse, :class:`controllers.kernel_abi.
+#: ``reuse_step`` = 0.1 (the kernel's derivative reuse, :class:`controllers.kernel.kernel_abi.
 #: SqpOptions`; docs: design/tracking.md, "The step time"): the median solve's second
 #: iteration keeps the first's Jacobian and Hessian, the step 3.0 → 1.5 ms with the same
 #: answers to the stopping test's precision (``benchmarks/bench_derivative_reuse.py``).
@@ -107,7 +107,7 @@ class TrackingFHOCP(FHOCP):
     Parameters
     ----------
     data : FHOCPData or Certificate
-        As :class:`controllers.fhocp.FHOCP`.
+        As :class:`controllers.ocp.fhocp.FHOCP`.
     offset_weight : float or (p,) array
         Diagonal of ``T`` (normalised outputs).
     alpha_c : float
@@ -122,7 +122,7 @@ class TrackingFHOCP(FHOCP):
         design/tracking.md, "The control horizon").
     **options
         ``solver``, ``sqp_options``, ``kernel``, ``du_weight``, ``ipopt_options``,
-        ``time_budget``: as :class:`controllers.fhocp.FHOCP` (single shooting only).
+        ``time_budget``: as :class:`controllers.ocp.fhocp.FHOCP` (single shooting only).
 
     Attributes
     ----------
@@ -188,7 +188,7 @@ class TrackingFHOCP(FHOCP):
         self._g_for = None
 
     def tightened_bounds(self, e_o: float) -> np.ndarray:
-        """:meth:`controllers.fhocp.FHOCP.tightened_bounds`, minus ``L d`` of
+        """:meth:`controllers.ocp.fhocp.FHOCP.tightened_bounds`, minus ``L d`` of
         :meth:`set_output_shift`."""
         bounds = super().tightened_bounds(e_o)
         return bounds if self._shift is None else bounds - self._shift
@@ -207,14 +207,14 @@ class TrackingFHOCP(FHOCP):
         return cls(cert, **options)
 
     def numpy_nlp(self) -> Any:
-        from controllers.nlp_tracking import TrackingNLP
+        from controllers.ocp.nlp_tracking import TrackingNLP
 
         return TrackingNLP(self, None)
 
     def setup(self) -> TrackingFHOCP:
         """Build the solver (the compiled kernel's SQP, else casadi's with the numpy twin)."""
-        from controllers.compiled_kernel import for_fhocp
-        from controllers.nlp_tracking import TrackingNLP
+        from controllers.kernel.compiled_kernel import for_fhocp
+        from controllers.ocp.nlp_tracking import TrackingNLP
 
         self.kernel = None
         if self.solver == "sqp" and self.kernel_mode == "auto":
@@ -353,7 +353,7 @@ class TrackingFHOCP(FHOCP):
         if isinstance(buf, KernelSQP):
             trigger()   # no casadi, nothing printed
         else:
-            from controllers.casadi_callbacks import quiet_stdout
+            from controllers.ocp.casadi_callbacks import quiet_stdout
 
             with quiet_stdout():
                 trigger()
@@ -375,7 +375,7 @@ class TrackingFHOCP(FHOCP):
                       ) -> FHOCPResult:
         """:meth:`check` of the solver's answer ``w`` in one compiled call (the kernel's
         plain rollout and a fixed-point test of its ``x_s``, apart from the solver's
-        derivatives: :meth:`controllers.kernel_lib.Workspace.assess_w`), plus the defect
+        derivatives: :meth:`controllers.kernel.kernel_lib.Workspace.assess_w`), plus the defect
         against the solver's own trajectory."""
         u, x, out, x_s = self.kernel.assess_w(w, p, self.tightened_bounds(e_o), self.alpha_c)
         res = FHOCPResult(u=u, x=x, cost=out.cost, status=status, success=False,

@@ -6,7 +6,8 @@ units, under the paper's names: the gate bounds σ̄_z, σ̄_r, φ̄_h and the �
 observer's ν_o, ρ_o, c_o, κ, L_max (``lem:Vo``), w_L (``eq:optimization``), the tightening
 coefficients a_i, b_i (``eq:constraint_tightening_parameters``), ê_o,k and ē_∞
 (``eq:eo-evolution``) and the terminal weight s (``eq:definition_s``).
-:mod:`controllers.certificates` assembles them into a :class:`~controllers.certificates.
+:mod:`controllers.certification.certificates` assembles them into a
+:class:`~controllers.certification.certificates.
 Certificate`.
 
 Norms. ``‖M‖∞`` of a matrix is the induced ∞-norm, the largest row sum of absolute values.

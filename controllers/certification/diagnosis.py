@@ -1,7 +1,8 @@
 """Which hypotheses of the theorem hold for a model, in the user's signals and units, and
 what would fix the ones that fail.
 
-A :class:`~controllers.certificates.Certificate` speaks the paper's symbols (ν, w̄_y, a_N,
+A :class:`~controllers.certification.certificates.Certificate` speaks the paper's symbols (ν, w̄_y,
+a_N,
 α…). A user needs: does my model give a certified controller for the set-points I want; if
 not, which hypothesis fails, by how much, in my units, and what to do. :func:`diagnose`
 answers that for either law of the robust MPC:
@@ -10,7 +11,7 @@ answers that for either law of the robust MPC:
   cannot be used (``cosim train`` never writes one);
 - **design**: the paper's law, the observer condition ν_o < 1
   (``eq:condition-observer-convergence``); the tracking law, its hypotheses H3–H6
-  (:mod:`controllers.tracking_checks`);
+  (:mod:`controllers.certification.tracking_checks`);
 - **room in the box**: the output constraints are tightened, at the end of the horizon, by
   the model's output-error bound ``w̄_y`` and by the estimation-error and terminal-set terms;
   what is left is the set of set-points that pass (``Y_s`` for the tracking law, the box of

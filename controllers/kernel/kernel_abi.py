@@ -5,7 +5,8 @@ timers as named C structs, its answer check returns an :class:`Assessment`, and 
 outcome, and its QP's, as named enums. Each is declared here once, as a :mod:`ctypes` structure
 or an :class:`~enum.IntEnum`, and :func:`c_declarations` writes the matching C
 ``typedef``/``enum`` into every generated kernel source
-(:func:`controllers.compiled_kernel.generate_source`), so that the two sides cannot disagree on
+(:func:`controllers.kernel.compiled_kernel.generate_source`), so that the two sides cannot disagree
+on
 a field's position or a status's value (acados shares its option and status names between C and
 Python in the same spirit). :func:`check_layout` compares the sizes the compiler chose with
 ctypes' when a library is loaded.
@@ -97,7 +98,7 @@ class SqpStatus(IntEnum):
     QP_INFEASIBLE = 3
     #: the QP hit its working-set change limit or H was not positive definite
     QP_FAILED = 4
-    #: the time budget ran out (:class:`controllers.fhocp.FHOCP` reports
+    #: the time budget ran out (:class:`controllers.ocp.fhocp.FHOCP` reports
     #: ``"time_budget_exceeded"``, as for casadi's loop)
     USER_REQUESTED_STOP = 5
 
@@ -119,8 +120,8 @@ _CASADI_NAMES = {
 
 class Assessment(ctypes.Structure):
     """The independent check of one input sequence (C ``gk_assessment``; the kernel's
-    ``assess`` and ``assess_w``, :class:`controllers.kernel_lib.Workspace`): what
-    :func:`controllers.fhocp_result.set_residuals` and the answer check read.
+    ``assess`` and ``assess_w``, :class:`controllers.kernel.kernel_lib.Workspace`): what
+    :func:`controllers.ocp.fhocp_result.set_residuals` and the answer check read.
 
     Attributes
     ----------
@@ -169,7 +170,7 @@ _ENUMS: tuple[tuple[str, str, Any], ...] = (("gk_sqp_status", "GK_SQP_", SqpStat
 
 def c_declarations() -> str:
     """The C declarations of every type above (part of each generated kernel source)."""
-    out = ["/* interface types, generated from controllers/kernel_abi.py */\n"]
+    out = ["/* interface types, generated from controllers/kernel/kernel_abi.py */\n"]
     for cname, struct in _STRUCTS:
         fields = " ".join(f"{_C_TYPES[t]} {name};" for name, t in struct._fields_)
         out.append(f"typedef struct {cname} {{ {fields} }} {cname};\n")

@@ -15,16 +15,16 @@ the problem is built once (:meth:`FHOCP.setup`) and solved every step (:meth:`FH
 The bracketed input-rate term is outside the paper's cost and off by default (``du_weight``
 all zero: the term, and the parameter ``u_{−1}`` it needs, do not exist);
 ``u_{−1}`` is the input applied at the previous step, a parameter of the solve
-(:mod:`controllers.input_rate`).
+(:mod:`controllers.ocp.input_rate`).
 
 Two formulations of the same problem: ``"single-shooting"`` (default, fast: the inputs and
 ``t`` are the variables, exact derivatives from numpy callbacks; :mod:`controllers.
-nlp_single_shooting`), solved by an SQP (:data:`~controllers.solver_settings.SQP_OPTIONS`,
+nlp_single_shooting`), solved by an SQP (:data:`~controllers.ocp.solver_settings.SQP_OPTIONS`,
 at most 15 iterations, no wall-clock limit: deterministic) -- inside the compiled kernel
-with its own dense QP (:mod:`controllers.kernel_sqp`), else casadi ``sqpmethod`` with dense
+with its own dense QP (:mod:`controllers.kernel.kernel_sqp`), else casadi ``sqpmethod`` with dense
 qpOASES QPs -- or by IPOPT (``solver="ipopt"``), warm started with the primal and
 dual solution shifted by one stage; and ``"multiple-shooting"`` (the plain baseline, what
-do-mpc builds; :mod:`controllers.nlp_multiple_shooting`). The ``i = 0`` constraint involves
+do-mpc builds; :mod:`controllers.ocp.nlp_multiple_shooting`). The ``i = 0`` constraint involves
 only ``x̂``: it is checked before the solve (:meth:`FHOCP.x0_infeasible`), and a violated one
 is reported as ``"infeasible_x0"`` without calling the solver. The design record (docs:
 design/solver.md) lists the alternatives measured and why they won or lost.
@@ -33,9 +33,9 @@ Every answer is checked independently of the solver's status: the inputs are rol
 numpy (:func:`controllers.gru.simulate`) and the constraint violations, the terminal-set
 violation and the defect between the solver's and numpy's trajectories are measured (see
 :class:`FHOCPResult`). An answer is accepted only when the solver reports success AND these
-residuals are within tolerance: :func:`controllers.fhocp_result.judge`, the one check of this
-problem and of the tracking law's (:mod:`controllers.fhocp_tracking`), whose statuses are
-:class:`controllers.solve_status.SolveStatus`.
+residuals are within tolerance: :func:`controllers.ocp.fhocp_result.judge`, the one check of this
+problem and of the tracking law's (:mod:`controllers.ocp.fhocp_tracking`), whose statuses are
+:class:`controllers.ocp.solve_status.SolveStatus`.
 """
 
 from __future__ import annotations
@@ -49,20 +49,20 @@ import casadi as ca
 import numpy as np
 
 from controllers import gru
-from controllers.casadi_callbacks import quiet_stdout
-from controllers.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
 from controllers.errors import DesignError
-from controllers.fhocp_layout import FHOCPLayout
-from controllers.fhocp_result import (
+from controllers.kernel.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
+from controllers.ocp.casadi_callbacks import quiet_stdout
+from controllers.ocp.fhocp_layout import FHOCPLayout
+from controllers.ocp.fhocp_result import (
     FHOCPResult,
     judge,
     keeps_warm_start,
     set_residuals,
     solver_stats,
 )
-from controllers.input_rate import du_cost, du_weights
-from controllers.solve_status import SolveStatus
-from controllers.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
+from controllers.ocp.input_rate import du_cost, du_weights
+from controllers.ocp.solve_status import SolveStatus
+from controllers.ocp.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
 __all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPData", "FHOCPResult", "bind_buffers"]
 
@@ -71,7 +71,8 @@ __all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPData", "FHOCPResult", "bind_bu
 @dataclass(frozen=True)
 class FHOCPData:
     """What ``eq:optimization`` is made of: the model, the weights, the constraints and their
-    tightening (the quantities of a :class:`~controllers.certificates.Certificate` of that
+    tightening (the quantities of a :class:`~controllers.certification.certificates.Certificate` of
+    that
     name, for a problem built without one).
 
     Attributes
@@ -111,7 +112,7 @@ class FHOCP:
     ----------
     data : FHOCPData or Certificate
         What the problem is made of (:class:`FHOCPData`'s attributes; a
-        :class:`~controllers.certificates.Certificate` has them all).
+        :class:`~controllers.certification.certificates.Certificate` has them all).
     formulation : {"single-shooting", "multiple-shooting"}
     ipopt_options : dict, optional
         Overrides of the IPOPT options (``FAST_IPOPT_OPTIONS`` for single shooting, IPOPT
@@ -122,7 +123,7 @@ class FHOCP:
         Solver of the single-shooting formulation (default ``"sqp"``; ``"ipopt"`` when
         ``ipopt_options`` are given, and always for multiple shooting).
     sqp_options : dict, optional
-        Overrides of :data:`~controllers.solver_settings.SQP_OPTIONS` (``loop``:
+        Overrides of :data:`~controllers.ocp.solver_settings.SQP_OPTIONS` (``loop``:
         ``"kernel"``, the SQP in the compiled kernel, or ``"casadi"``, ``sqpmethod``;
         ``tol_du_relative``: the kernel's relative dual test, ignored by ``sqpmethod``).
     time_budget : float, optional
@@ -130,7 +131,7 @@ class FHOCP:
         default: a wall-clock limit makes closed-loop results depend on the machine.
     kernel : {"auto", "numpy"}
         Derivatives of the single-shooting SQP: ``"auto"`` the compiled kernel
-        (:mod:`controllers.compiled_kernel`) when it can be built, ``"numpy"`` the numpy
+        (:mod:`controllers.kernel.compiled_kernel`) when it can be built, ``"numpy"`` the numpy
         callbacks (the reference implementation, and the fallback).
     du_weight : float or (m,) array
         Diagonal of the input-rate weight ``S`` (normalised units; one number: every input).
@@ -232,7 +233,7 @@ class FHOCP:
 
     @classmethod
     def from_certificate(cls, cert: Any, **options: Any) -> FHOCP:
-        """The FHOCP of a :class:`~controllers.certificates.Certificate` (its weights,
+        """The FHOCP of a :class:`~controllers.certification.certificates.Certificate` (its weights,
         constraints, tightening and terminal weight); ``options`` as the constructor's
         keyword arguments (``formulation``, ``solver``, ``sqp_options``, ...)."""
         return cls(cert, **options)
@@ -241,7 +242,7 @@ class FHOCP:
         """Build the solver (a few ms; again after :meth:`setup` to restart it exactly).
 
         The single-shooting SQP takes its derivatives from the compiled kernel
-        (:mod:`controllers.compiled_kernel`) unless ``kernel="numpy"``, or when it cannot be
+        (:mod:`controllers.kernel.compiled_kernel`) unless ``kernel="numpy"``, or when it cannot be
         built or fails its self-test (then the numpy callbacks, with a one-line warning).
         Returns ``self``.
         """
@@ -251,7 +252,7 @@ class FHOCP:
         lay = self.layout
         self.nw, self.iu, self.it, self.ix, self.ng = lay.nw, lay.iu, lay.it, lay.ix, lay.ng
         if single:
-            from controllers.nlp_single_shooting import SingleShootingNLP
+            from controllers.ocp.nlp_single_shooting import SingleShootingNLP
 
             if self.solver == "sqp" and self.kernel_mode == "auto":
                 self.kernel, self.kernel_error = for_fhocp(self)
@@ -260,7 +261,7 @@ class FHOCP:
             nlp, opts = self._nlp.ipopt_problem(self.ipopt_options, self.time_budget)
             self._xtraj = self._nlp.trajectory
         else:
-            from controllers.nlp_multiple_shooting import multiple_shooting_problem
+            from controllers.ocp.nlp_multiple_shooting import multiple_shooting_problem
 
             self._nlp = None
             nlp, opts, xtraj, _ = multiple_shooting_problem(self)
@@ -282,7 +283,7 @@ class FHOCP:
             loop = sqp.pop("loop")
             self._nlp.eigen_clip = None if clip is None else float(clip)
             if loop == "kernel" and self.kernel is not None:
-                from controllers.kernel_sqp import KernelSQP
+                from controllers.kernel.kernel_sqp import KernelSQP
 
                 self._solver = KernelSQP(self.kernel, sqp, self.time_budget)
                 self._buffer = self._solver.buffers()
@@ -299,9 +300,9 @@ class FHOCP:
 
     def numpy_nlp(self) -> Any:
         """The numpy twin of this problem's derivatives (what the compiled kernel is
-        self-tested against): a :class:`~controllers.nlp_single_shooting.SingleShootingNLP`
+        self-tested against): a :class:`~controllers.ocp.nlp_single_shooting.SingleShootingNLP`
         without a kernel."""
-        from controllers.nlp_single_shooting import SingleShootingNLP
+        from controllers.ocp.nlp_single_shooting import SingleShootingNLP
 
         return SingleShootingNLP(self, None)
 
@@ -341,7 +342,7 @@ class FHOCP:
 
     def x0_infeasible(self, x_hat: np.ndarray, e_o: float) -> bool:
         """The ``i = 0`` row, which involves ``x̂`` only, fails: the problem is infeasible
-        and no solver is called. The test allows :data:`~controllers.solver_settings.
+        and no solver is called. The test allows :data:`~controllers.ocp.solver_settings.
         FEAS_TOL`, as the answer check does: an accepted answer may exceed a row by that
         much, and the next ``x̂`` (the model's ``x_1`` under zero observer gains) inherits
         it."""
@@ -485,7 +486,7 @@ class FHOCP:
 
     def _keep_warm(self, res: FHOCPResult, w: np.ndarray) -> None:
         """Keep ``w`` and its multipliers as the next solve's warm start
-        (:func:`controllers.fhocp_result.keeps_warm_start`)."""
+        (:func:`controllers.ocp.fhocp_result.keeps_warm_start`)."""
         if keeps_warm_start(res, w):
             self._warm = {"w": w, "lam_x": res.lam_x, "lam_g": res.lam_g}
 

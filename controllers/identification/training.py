@@ -19,7 +19,8 @@ cap on σ̄_z (``sigma_z_max``) bounds the contraction rates ρ_s, ρ_o used by 
 optional penalty on ‖U_o‖∞ keeps the output matrix moderate: it multiplies every
 constraint-tightening term of the MPC (``eq:constraint_tightening_parameters``).
 
-A record may hold several experiments (:mod:`controllers.sequences`): the subsequences are cut
+A record may hold several experiments (:mod:`controllers.identification.sequences`): the
+subsequences are cut
 inside one experiment's training rows, and the validation simulations restart from ``x = 0``
 at each experiment.
 
@@ -37,9 +38,10 @@ from typing import Any
 
 import numpy as np
 
-from controllers import gru, metrics, sequences
-from controllers.bounds import nu as nu_numpy
+from controllers import gru
+from controllers.certification.bounds import nu as nu_numpy
 from controllers.errors import DataError, DesignError, TrainingError
+from controllers.identification import metrics, sequences
 
 __all__ = ["CONSTRAINED", "TrainOptions", "TrainResult", "build_model", "constrain", "init_params",
            "nu_torch", "subsequences", "train"]
@@ -56,7 +58,7 @@ class TrainOptions:
     seq_len : int
         Length of the truncated training subsequences (paper: 500; ``cosim train`` sets
         ``seq_len``, ``washout`` and ``batch`` from the record's length where not given:
-        :func:`controllers.sequences.record_defaults`).
+        :func:`controllers.identification.sequences.record_defaults`).
     stride : int or None
         Offset between subsequence starts (``None``: ``seq_len``, non-overlapping, as the
         paper; smaller values overlap them).
@@ -132,7 +134,7 @@ class TrainResult:
 def nu_torch(p: dict[str, Any]) -> Any:
     """ν of ``th:stability-bonassi`` on torch tensors, differentiable (subgradients).
 
-    Same expression as :func:`controllers.bounds.nu`; ∞-norms are max row sums of
+    Same expression as :func:`controllers.certification.bounds.nu`; ∞-norms are max row sums of
     absolute values.
     """
     import torch
@@ -210,7 +212,7 @@ def init_params(n: int, m: int, p: int, seed: int, bz_init: float = 2.0,
 
 def subsequences(T: int, seq_len: int, stride: int | None) -> list[int]:
     """Start indices of the truncated training subsequences of a record of length ``T``
-    (one stretch: :func:`controllers.sequences.subsequence_starts` for several)."""
+    (one stretch: :func:`controllers.identification.sequences.subsequence_starts` for several)."""
     if seq_len > T:
         raise DataError(f"training data has {T} steps, fewer than seq_len = {seq_len}")
     stride = stride or seq_len
@@ -235,7 +237,7 @@ def _subsequences(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray,
                   y_all: np.ndarray, split_all: np.ndarray, experiment: np.ndarray | None,
                   opt: TrainOptions) -> tuple[Any, Any]:
     """The training subsequences as ``(seq_len, m | p, count)`` float64 tensors, cut inside
-    each training stretch (:func:`controllers.sequences.stretches`); ``u_train``,
+    each training stretch (:func:`controllers.identification.sequences.stretches`); ``u_train``,
     ``y_train`` must be the record's training rows."""
     import torch
 
@@ -282,12 +284,12 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
     u_train, y_train : (T, m), (T, p) arrays
         Normalised training inputs and outputs: the rows of ``u_all``, ``y_all`` whose split
         is ``train`` (checked). The subsequences are cut from ``u_all``, ``y_all`` inside each
-        training stretch (:func:`controllers.sequences.stretches`), never across two
+        training stretch (:func:`controllers.identification.sequences.stretches`), never across two
         experiments or over validation and test rows.
     u_all, y_all, split_all : arrays
         The whole normalised record with its split labels: validation FIT is computed by an
         open-loop simulation over it, restarted at each experiment
-        (:func:`controllers.sequences.eval_windows`).
+        (:func:`controllers.identification.sequences.eval_windows`).
     options : TrainOptions
     progress : bool
         Show a tqdm bar with loss, validation FIT and ν per epoch.

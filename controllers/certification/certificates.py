@@ -22,8 +22,8 @@ Typos of the paper handled here: the terminal cost is ``s ‖x_N − x̄‖∞²
 ``+``), and the proof of ``th:feasibility-stability`` writes ``(1 + ρ_s²)`` where
 ``eq:definition_s`` (used here) needs ``(1 − ρ_s²)``.
 
-Pure bounds live in :mod:`controllers.bounds`, the observer-gain design in
-:mod:`controllers.gain_design`.
+Pure bounds live in :mod:`controllers.certification.bounds`, the observer-gain design in
+:mod:`controllers.certification.gain_design`.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.bounds import (
+from controllers.certification.bounds import (
     L_max,
     c_s,
     check_gates,
@@ -50,7 +50,7 @@ from controllers.bounds import (
     tightening_parameters,
     w_L,
 )
-from controllers.design import MAX_HORIZON, gain, horizon, weight
+from controllers.certification.design import MAX_HORIZON, gain, horizon, weight
 from controllers.errors import DataError, DesignError, SetpointError
 from controllers.problem import ControlProblem, constraint_names, output_constraints
 
@@ -317,13 +317,14 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
         ``ê_o,0`` (paper: 0.02), the assumed initial bound of ``‖x_0 − x̂_0‖∞``.
     L_z, L_r : (n, p) arrays, optional
         Observer gains. Default: ``gain_scale ×`` the LP gains
-        (:func:`controllers.observer_gains.observer_gains_lp`)
+        (:func:`controllers.certification.observer_gains.observer_gains_lp`)
         when ``gain_scale`` is given, else the gains saved in the model file, else the LP
         gains (``gain_scale = 1``).
     w_y_bar : float, optional
         ``w̄_y`` (normalised); default the model file's ``w_y_bar``.
     gain_scale : float, optional
-        ``θ`` in ``L = θ·L_LP`` (see :func:`controllers.gain_design.choose_gain_scale`).
+        ``θ`` in ``L = θ·L_LP`` (see
+        :func:`controllers.certification.gain_design.choose_gain_scale`).
     L, h : arrays, optional
         Output constraints ``L y ≤ h`` (normalised); default from ``problem``
         (:func:`output_constraints`).
@@ -334,7 +335,7 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
     ------
     DesignError
         A bad design argument, or a model without certificate: the update gate saturates
-        (σ̄_z rounds to 1, :func:`~controllers.bounds.check_gates`, a
+        (σ̄_z rounds to 1, :func:`~controllers.certification.bounds.check_gates`, a
         :class:`~controllers.errors.CertificateError`; the message names the model file when the
         model has a ``source``).
     """
@@ -362,7 +363,7 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
             L_z, L_r = gain_scale * L_z, gain_scale * L_r
     elif gain_scale is not None or getattr(model, "L_z", None) is None:
         theta = 1.0 if gain_scale is None else float(gain_scale)
-        from controllers.observer_gains import observer_gains_lp
+        from controllers.certification.observer_gains import observer_gains_lp
 
         Lz_lp, Lr_lp = observer_gains_lp(params)
         L_z, L_r, gain_scale = theta * Lz_lp, theta * Lr_lp, theta
@@ -403,7 +404,8 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
 def uncertified_certificate(cert: Certificate, margins: np.ndarray) -> Certificate:
     """The design of the uncertified mode: ``cert``'s model, weights and terminal weight, with
     the theorem's tightening ``a_i ê_o + b_i + w_L`` replaced by measured ``margins``
-    (``(N + 1, q)``, :func:`controllers.prediction_error.margins`) and zero observer gains
+    (``(N + 1, q)``, :func:`controllers.certification.prediction_error.margins`) and zero observer
+    gains
     (the observer runs the model). Every row is tightened by ``margins[i]`` at step ``i``:
     ``a = 0``, ``b = margins``, ``w_L = 0``, ``ê_o = 0``; ``α`` (``eq:def-alpha``) and
     Assumption 1 use the same margins; no guarantee follows from them

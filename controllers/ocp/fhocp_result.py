@@ -1,8 +1,8 @@
 """One solve of ``eq:optimization`` (:class:`FHOCPResult`) and the one answer check every FHOCP
 applies to it (:func:`judge`, with the solver's statistics read by :func:`solver_stats`, the
-residuals of the compiled check by :func:`set_residuals`): what :mod:`controllers.fhocp` and
-:mod:`controllers.fhocp_tracking` return and what the kernel's self-test
-(:mod:`controllers.nlp_single_shooting`) compares, in a module of its own so that none of
+residuals of the compiled check by :func:`set_residuals`): what :mod:`controllers.ocp.fhocp` and
+:mod:`controllers.ocp.fhocp_tracking` return and what the kernel's self-test
+(:mod:`controllers.ocp.nlp_single_shooting`) compares, in a module of its own so that none of
 them imports another."""
 
 from __future__ import annotations
@@ -12,8 +12,8 @@ from typing import Any
 
 import numpy as np
 
-from controllers.solve_status import SOLVER_SUCCEEDED, SolveStatus
-from controllers.solver_settings import DEFECT_TOL, FEAS_TOL
+from controllers.ocp.solve_status import SOLVER_SUCCEEDED, SolveStatus
+from controllers.ocp.solver_settings import DEFECT_TOL, FEAS_TOL
 
 __all__ = ["FHOCPResult", "judge", "keeps_warm_start", "set_residuals", "solver_stats"]
 
@@ -31,7 +31,7 @@ class FHOCPResult:
     cost : float
         Cost ``eq:optimization-cost`` of ``(x, u)`` evaluated with numpy.
     status : str
-        A :class:`~controllers.solve_status.SolveStatus` (``"optimal"``, ``"infeasible_x0"``,
+        A :class:`~controllers.ocp.solve_status.SolveStatus` (``"optimal"``, ``"infeasible_x0"``,
         ``"residual_check_failed"``, …) or the solver's own return status when it failed.
     success : bool
         Solver success AND residual checks passed.
@@ -68,14 +68,16 @@ class FHOCPResult:
     feasible: bool = False
     lam_x: np.ndarray | None = field(default=None, repr=False)
     lam_g: np.ndarray | None = field(default=None, repr=False)
-    #: the tracking FHOCP's artificial steady input and state (:mod:`controllers.fhocp_tracking`)
+    #: the tracking FHOCP's artificial steady input and state
+    #: (:mod:`controllers.ocp.fhocp_tracking`)
     u_s: np.ndarray | None = None
     x_s: np.ndarray | None = field(default=None, repr=False)
 
 
 def set_residuals(res: FHOCPResult, out: Any, alpha: float) -> None:
     """:meth:`FHOCP._residuals` from the compiled check's
-    :class:`~controllers.kernel_abi.Assessment` (:meth:`controllers.kernel_lib.Workspace.
+    :class:`~controllers.kernel.kernel_abi.Assessment`
+    (:meth:`controllers.kernel.kernel_lib.Workspace.
     assess`)."""
     res.constraint_violation = max(0.0, out.violation_first, out.violation_rows,
                                    out.u_max - 1.0)
@@ -100,9 +102,9 @@ def solver_stats(buffer: Any) -> dict[str, Any]:
 def judge(res: FHOCPResult, stats: dict[str, Any], w: np.ndarray) -> None:
     """The answer check of every FHOCP: accept the solver's answer ``w`` only when the solver
     succeeded AND the residuals measured apart from it (``res``: rollout, constraints,
-    terminal set, defect) are within :data:`~controllers.solver_settings.FEAS_TOL` and
-    :data:`~controllers.solver_settings.DEFECT_TOL`; sets ``feasible``, ``success``,
-    ``iterations`` and the :class:`~controllers.solve_status.SolveStatus` (``res.status``
+    terminal set, defect) are within :data:`~controllers.ocp.solver_settings.FEAS_TOL` and
+    :data:`~controllers.ocp.solver_settings.DEFECT_TOL`; sets ``feasible``, ``success``,
+    ``iterations`` and the :class:`~controllers.ocp.solve_status.SolveStatus` (``res.status``
     holds the solver's status on entry)."""
     ok_status = bool(stats.get("success", False))
     res.iterations = int(stats.get("iter_count", 0))

@@ -1,5 +1,5 @@
 """Compile a C source into a shared library, cached by its content: shared by the FHOCP kernel
-(:mod:`controllers.compiled_kernel`) and the simulation-error library of identification
+(:mod:`controllers.kernel.compiled_kernel`) and the simulation-error library of identification
 (:mod:`controllers.identification.sim_loss`).
 
 Libraries go to the user's cache folder (:func:`default_cache_dir`), named by a hash of the

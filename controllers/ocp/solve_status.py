@@ -1,10 +1,10 @@
 """How one solve of ``eq:optimization`` ended: the status every FHOCP reports, and its code.
 
 :class:`SolveStatus` names the outcomes the project itself decides (the answer check of
-:func:`controllers.fhocp_result.judge`, the ``i = 0`` test before a solve) and the solver
+:func:`controllers.ocp.fhocp_result.judge`, the ``i = 0`` test before a solve) and the solver
 outcomes the diagnostics count; any other solver return status (``"QP_Infeasible"``,
 ``"Search_Direction_Becomes_Too_Small"``, …) is kept as the solver's own string. The kernel's
-SQP reports casadi ``sqpmethod``'s names (:attr:`controllers.kernel_abi.SqpStatus.
+SQP reports casadi ``sqpmethod``'s names (:attr:`controllers.kernel.kernel_abi.SqpStatus.
 casadi_name`), so that one mapping serves the compiled loop, ``sqpmethod`` and IPOPT.
 :func:`status_code` is the number the controller writes to its ``status`` output each step.
 """

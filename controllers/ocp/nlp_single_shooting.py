@@ -2,9 +2,9 @@
 
 Decision variables ``w = (u_0 … u_{N−1}, t)`` (``N m + 1``: 31 for N = 15, m = 2); the
 states, their sensitivities and the exact Hessian of the Lagrangian come from
-:class:`controllers.shooting.GRUShooting` (dense numpy products, checked against casadi AD of
+:class:`controllers.ocp.shooting.GRUShooting` (dense numpy products, checked against casadi AD of
 :func:`controllers.gru.step`) and reach the solver through zero-copy casadi callbacks
-(:class:`controllers.casadi_callbacks.NumpyCallback`). Constraints, in this order:
+(:class:`controllers.ocp.casadi_callbacks.NumpyCallback`). Constraints, in this order:
 
 * ``D U_o x_i`` for ``i = 1 … N−1``, one row per pair of opposite rows of ``L`` (a box),
   bounded by the tightened bounds (``eq:optimization-constraint``; ``i = 0`` involves only
@@ -13,13 +13,14 @@ states, their sensitivities and the exact Hessian of the Lagrangian come from
   ``s t²``, terminal set ``0 ≤ t ≤ α``).
 
 Parameters ``p = (x̂, x̄, ū)``, and ``u_{−1}`` after them when the cost has the input-rate
-term (:mod:`controllers.input_rate`: its gradient is added to ∇f, its constant Hessian to the
+term (:mod:`controllers.ocp.input_rate`: its gradient is added to ∇f, its constant Hessian to the
 input block).
 
 The rollout at one point is cached and shared by the cost, constraint, gradient, Jacobian
 and Hessian evaluations at that point (one rollout serves a whole SQP iteration).
 
-With a compiled kernel (:mod:`controllers.compiled_kernel`: the same mathematics in C, checked
+With a compiled kernel (:mod:`controllers.kernel.compiled_kernel`: the same mathematics in C,
+checked
 against these numpy functions by :meth:`SingleShootingNLP.self_test`), the SQP's functions
 are the kernel's casadi ``external`` functions instead: no Python runs inside the solver.
 """
@@ -32,11 +33,11 @@ from typing import TYPE_CHECKING, Any
 import casadi as ca
 import numpy as np
 
-from controllers.casadi_callbacks import NumpyCallback
-from controllers.input_rate import du_gradient, du_hessian
+from controllers.ocp.casadi_callbacks import NumpyCallback
+from controllers.ocp.input_rate import du_gradient, du_hessian
 
 if TYPE_CHECKING:
-    from controllers.fhocp import FHOCP
+    from controllers.ocp.fhocp import FHOCP
 
 __all__ = ["SingleShootingNLP"]
 
@@ -64,7 +65,7 @@ class SingleShootingNLP:
     """
 
     def __init__(self, fhocp: FHOCP, kernel: Any = None) -> None:
-        from controllers.shooting import GRUShooting
+        from controllers.ocp.shooting import GRUShooting
 
         self.p = fhocp
         self.kernel = kernel
@@ -324,7 +325,7 @@ class SingleShootingNLP:
         """(kernel, numpy) pairs of the answer check at ``(u, p)``: the kernel's rollout, its
         cost and residuals (:meth:`FHOCP.candidate`) against ``FHOCP.cost`` and
         ``FHOCP._residuals``."""
-        from controllers.fhocp_result import FHOCPResult, set_residuals
+        from controllers.ocp.fhocp_result import FHOCPResult, set_residuals
 
         p, n = self.p, self.p.n
         e_o, alpha = float(rng.uniform(0, 0.05)), float(rng.uniform(0, 0.5))

@@ -1,7 +1,7 @@
 """The bridge between numpy code and casadi solvers: callbacks on zero-copy buffers.
 
 A solver asks for ``f``, ``∇f``, ``g``, ``∂g/∂w`` and the Hessian of the Lagrangian; the
-project computes them with numpy (:mod:`controllers.nlp_single_shooting`). A
+project computes them with numpy (:mod:`controllers.ocp.nlp_single_shooting`). A
 :class:`NumpyCallback` is a casadi ``Function`` whose evaluation calls a Python function on
 numpy views of casadi's own argument and result buffers (converting numpy arrays to and from
 ``DM`` costs about 0.2 ms per 76×31 matrix).

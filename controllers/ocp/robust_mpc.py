@@ -1,11 +1,11 @@
 """The robust MPC law ``eq:mpc``: the FHOCP each step, with the fallback of the proof.
 
-:class:`RobustMPC` solves :class:`~controllers.fhocp.FHOCP` every step from the candidate of
+:class:`RobustMPC` solves :class:`~controllers.ocp.fhocp.FHOCP` every step from the candidate of
 the proof of ``th:feasibility-stability`` (the previous sequence shifted by one stage with
 ``ū`` appended) and applies that candidate when a solve fails; :class:`StepRecord` says what
 happened at each step and :func:`solver_summary` sums it up.
 
-With an input-rate term in the cost (``FHOCP(du_weight=…)``, :mod:`controllers.input_rate`)
+With an input-rate term in the cost (``FHOCP(du_weight=…)``, :mod:`controllers.ocp.input_rate`)
 the controller hands the FHOCP the input it applied at the previous step as ``u_{−1}`` (``ū``
 before the first), and the candidate's cost, which a capped iterate must not exceed to be
 applied, includes the term with the same ``u_{−1}``.
@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.fhocp import FEAS_TOL, FHOCP, FHOCPResult
+from controllers.ocp.fhocp import FEAS_TOL, FHOCP, FHOCPResult
 
 __all__ = ["RobustMPC", "StepRecord", "solver_summary"]
 
@@ -106,7 +106,7 @@ class RobustMPC:
         """Compute ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``), with the fallback.
 
         ``candidate`` (N, m), optional: a sequence known to be feasible (the reference
-        governor's, :mod:`controllers.governor`); it is the initial guess of the solve and
+        governor's, :mod:`controllers.ocp.governor`); it is the initial guess of the solve and
         the fallback, in place of the shifted previous plan.
         """
         if self.x_bar is None or self.u_bar is None:
