@@ -1,10 +1,9 @@
 """Graded guarantees of the ``robust-mpc`` component: certified, or uncertified with a measured
 tightening.
 
-The robust MPC (:class:`cosim_adapters.robust_mpc.RobustMPCController`) runs **certified**
-when every hypothesis of its law holds: the design's (``th:feasibility-stability`` for the
-paper's law, the tracking law's H3–H6 of :mod:`controllers.certification.tracking_checks`) and, at
-each
+The robust MPC (:class:`cosim_adapters.robust_mpc.RobustMPCController`) runs **certified** when
+every hypothesis of its law holds: the design's (``th:feasibility-stability`` for the paper's
+law, the tracking law's H3–H6 of :mod:`controllers.certification.tracking_checks`) and, at each
 set-point the run will request (:meth:`cosim.core.component.Component.expect_setpoints`), the
 set-point's (Assumption 1 and ``eq:condition-recursive-feasibility`` for the paper's law; the
 set-point inside the admissible steady outputs ``Y_s`` for the tracking law). Its constraint
@@ -15,15 +14,14 @@ Otherwise (option ``certificate = "auto"``, the default) it runs **uncertified**
 (:class:`cosim.core.errors.CosimError`, exit 2); with ``certificate = "keep"`` it keeps the
 certified design whatever the set-points (the tracking law tracks one outside ``Y_s`` to the
 closest admissible steady output, the paper's law refuses it; a failing design is an error).
-Uncertified is the same law and cost, with the theorem's
-tightening (which a model that fails the hypotheses makes vacuous: it swallows the output
-box) replaced by the model's measured prediction error on held-back data
-(:mod:`controllers.certification.prediction_error`, written into the model file by ``cosim train``;
-a model
-file without it is tightened by its ``w̄_y`` at every step), zero observer gains, and, for the
-tracking law, the output rows tightened around ``y + d̂`` (the filtered output mismatch, the
-output the plant will show). No guarantee follows; the summary says ``certified: false`` with
-the reason, and the run prints it once (:attr:`Certification.notice`).
+Uncertified is the same law and cost, with the theorem's tightening (which a model that fails
+the hypotheses makes vacuous: it swallows the output box) replaced by the model's measured
+prediction error on held-back data (:mod:`controllers.certification.prediction_error`, written
+into the model file by ``cosim train``; a model file without it is tightened by its ``w̄_y`` at
+every step), zero observer gains, and, for the tracking law, the output rows tightened around
+``y + d̂`` (the filtered output mismatch, the output the plant will show). No guarantee follows;
+the summary says ``certified: false`` with the reason, and the run prints it once
+(:attr:`Certification.notice`).
 """
 
 from __future__ import annotations

@@ -74,9 +74,8 @@ class MPCOptions:
         Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)`` (default 0.3; 0.05 with
         ``law="paper"``).
     governor : bool, optional
-        ``law="paper"``: admissible reference governor after set-point changes (default
-        on; see :mod:`cosim_adapters.robust_mpc` and :mod:`controllers.ocp.governor`). ``False``:
-        the
+        ``law="paper"``: admissible reference governor after set-point changes (default on; see
+        :mod:`cosim_adapters.robust_mpc` and :mod:`controllers.ocp.governor`). ``False``: the
         paper's FHOCP with the new ``(x̄, ū, α)`` at once.
     setpoint_rate : float, optional
         ``law="paper"``, outside the theorem: move the set-point given to the FHOCP towards

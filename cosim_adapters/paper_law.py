@@ -236,8 +236,7 @@ INSIDE = 1e-3
 def closest_admissible(cert: Any, y: np.ndarray) -> np.ndarray | None:
     """``y`` moved into the admissible box of ``cert`` (box rows ``±y_j ≤ rhs``:
     :meth:`controllers.certification.certificates.Certificate.admissible_box`), :data:`INSIDE`
-    within it;
-    ``None`` when the box is empty for some output."""
+    within it; ``None`` when the box is empty for some output."""
     rhs = cert.admissible_box()
     out = np.array(y, dtype=float)
     for j in range(out.size):

@@ -18,10 +18,9 @@ section V). Then one of two control laws (option ``law``) gives ``u_k``:
 - ``"paper"``: the paper's law, with its set-point handling in :mod:`cosim_adapters.paper_law`:
   when ``ȳ`` changes, the equilibrium ``(x̄, ū)`` and ``α`` (``eq:def-alpha``) via
   :meth:`controllers.certification.certificates.Certificate.reference`, which also checks
-  Assumption 1
-  (``ass:setpoint``) and ``eq:condition-recursive-feasibility``; then ``u_k =
-  k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.robust_mpc.RobustMPC`: the FHOCP
-  ``eq:optimization`` with the shifted-candidate fallback).
+  Assumption 1 (``ass:setpoint``) and ``eq:condition-recursive-feasibility``; then
+  ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.robust_mpc.RobustMPC`: the
+  FHOCP ``eq:optimization`` with the shifted-candidate fallback).
 
 Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
 (``p > m``) only set-points on the model's ``m``-dimensional surface of equilibrium outputs

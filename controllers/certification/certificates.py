@@ -404,14 +404,13 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
 def uncertified_certificate(cert: Certificate, margins: np.ndarray) -> Certificate:
     """The design of the uncertified mode: ``cert``'s model, weights and terminal weight, with
     the theorem's tightening ``a_i ê_o + b_i + w_L`` replaced by measured ``margins``
-    (``(N + 1, q)``, :func:`controllers.certification.prediction_error.margins`) and zero observer
-    gains
-    (the observer runs the model). Every row is tightened by ``margins[i]`` at step ``i``:
-    ``a = 0``, ``b = margins``, ``w_L = 0``, ``ê_o = 0``; ``α`` (``eq:def-alpha``) and
-    Assumption 1 use the same margins; no guarantee follows from them
+    (``(N + 1, q)``, :func:`controllers.certification.prediction_error.margins`) and zero
+    observer gains (the observer runs the model). Every row is tightened by ``margins[i]`` at
+    step ``i``: ``a = 0``, ``b = margins``, ``w_L = 0``, ``ê_o = 0``; ``α`` (``eq:def-alpha``)
+    and Assumption 1 use the same margins; no guarantee follows from them
     (``tightening = "measured"``). The ``i = 0`` rows, on the estimate ``x̂`` alone (no input
-    changes them; the theorem's recursive feasibility, which keeps them satisfied, is what
-    this design lacks), are not enforced: their margin is ``−∞``."""
+    changes them; the theorem's recursive feasibility, which keeps them satisfied, is what this
+    design lacks), are not enforced: their margin is ``−∞``."""
     from dataclasses import replace
 
     margins = np.array(margins, dtype=float)

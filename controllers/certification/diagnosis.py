@@ -1,10 +1,9 @@
 """Which hypotheses of the theorem hold for a model, in the user's signals and units, and
 what would fix the ones that fail.
 
-A :class:`~controllers.certification.certificates.Certificate` speaks the paper's symbols (ν, w̄_y,
-a_N,
-α…). A user needs: does my model give a certified controller for the set-points I want; if
-not, which hypothesis fails, by how much, in my units, and what to do. :func:`diagnose`
+A :class:`~controllers.certification.certificates.Certificate` speaks the paper's symbols (ν,
+w̄_y, a_N, α…). A user needs: does my model give a certified controller for the set-points I
+want; if not, which hypothesis fails, by how much, in my units, and what to do. :func:`diagnose`
 answers that for either law of the robust MPC:
 
 - **stability** (``th:stability-bonassi``): ν < 1; a model without it has no certificate and

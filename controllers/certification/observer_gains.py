@@ -2,10 +2,10 @@
 
 The gains of ``eq:observer`` enter ``ν_o`` through ``‖U_r − L_r U_o‖∞`` and
 ``‖U_z − L_z U_o‖∞``; the ∞-norm is the largest row sum of absolute values, and each row of
-``U − L U_o`` depends on one row of ``L`` only, so the minimising gains are one ℓ1 fit per
-row (paper section V). :mod:`controllers.certification.certificates` uses them as the reference
-gains of
-the gain scale ``θ`` (``L = θ·L_LP``); :mod:`controllers.certification.gain_design` chooses ``θ``.
+``U − L U_o`` depends on one row of ``L`` only, so the minimising gains are one ℓ1 fit per row
+(paper section V). :mod:`controllers.certification.certificates` uses them as the reference
+gains of the gain scale ``θ`` (``L = θ·L_LP``); :mod:`controllers.certification.gain_design`
+chooses ``θ``.
 """
 
 from __future__ import annotations

@@ -1,8 +1,7 @@
 """The tracking law's hypotheses, computed at run time (docs: design/tracking.md, H3-H6).
 
 What the paper's certificate (:mod:`controllers.certification.certificates`) checks stays; the
-tracking
-FHOCP (:mod:`controllers.ocp.fhocp_tracking`) adds, once per model and design:
+tracking FHOCP (:mod:`controllers.ocp.fhocp_tracking`) adds, once per model and design:
 
 - (H3) the weights: ``Q ≻ 0``, ``R ≻ 0``, ``S ⪰ 0`` (the Δu weights), ``T ≻ 0`` (the offset
   weights), and the terminal weight ``s`` of ``eq:definition_s`` (the certificate's);

@@ -20,9 +20,8 @@ optional penalty on ‖U_o‖∞ keeps the output matrix moderate: it multiplies
 constraint-tightening term of the MPC (``eq:constraint_tightening_parameters``).
 
 A record may hold several experiments (:mod:`controllers.identification.sequences`): the
-subsequences are cut
-inside one experiment's training rows, and the validation simulations restart from ``x = 0``
-at each experiment.
+subsequences are cut inside one experiment's training rows, and the validation simulations
+restart from ``x = 0`` at each experiment.
 
 torch is imported inside the functions (it is an optional extra). Everything is float64 and
 deterministic for a given seed (one thread).

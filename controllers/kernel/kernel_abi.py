@@ -5,11 +5,10 @@ timers as named C structs, its answer check returns an :class:`Assessment`, and 
 outcome, and its QP's, as named enums. Each is declared here once, as a :mod:`ctypes` structure
 or an :class:`~enum.IntEnum`, and :func:`c_declarations` writes the matching C
 ``typedef``/``enum`` into every generated kernel source
-(:func:`controllers.kernel.compiled_kernel.generate_source`), so that the two sides cannot disagree
-on
-a field's position or a status's value (acados shares its option and status names between C and
-Python in the same spirit). :func:`check_layout` compares the sizes the compiler chose with
-ctypes' when a library is loaded.
+(:func:`controllers.kernel.compiled_kernel.generate_source`), so that the two sides cannot
+disagree on a field's position or a status's value (acados shares its option and status names
+between C and Python in the same spirit). :func:`check_layout` compares the sizes the compiler
+chose with ctypes' when a library is loaded.
 """
 
 from __future__ import annotations

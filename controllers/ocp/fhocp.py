@@ -71,9 +71,8 @@ __all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPData", "FHOCPResult", "bind_bu
 @dataclass(frozen=True)
 class FHOCPData:
     """What ``eq:optimization`` is made of: the model, the weights, the constraints and their
-    tightening (the quantities of a :class:`~controllers.certification.certificates.Certificate` of
-    that
-    name, for a problem built without one).
+    tightening (the quantities of a :class:`~controllers.certification.certificates.Certificate`
+    of that name, for a problem built without one).
 
     Attributes
     ----------

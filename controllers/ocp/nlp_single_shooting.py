@@ -20,9 +20,9 @@ The rollout at one point is cached and shared by the cost, constraint, gradient,
 and Hessian evaluations at that point (one rollout serves a whole SQP iteration).
 
 With a compiled kernel (:mod:`controllers.kernel.compiled_kernel`: the same mathematics in C,
-checked
-against these numpy functions by :meth:`SingleShootingNLP.self_test`), the SQP's functions
-are the kernel's casadi ``external`` functions instead: no Python runs inside the solver.
+checked against these numpy functions by :meth:`SingleShootingNLP.self_test`), the SQP's
+functions are the kernel's casadi ``external`` functions instead: no Python runs inside the
+solver.
 """
 
 from __future__ import annotations

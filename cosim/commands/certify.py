@@ -382,8 +382,7 @@ def _print_verdict(verdict: Any) -> None:
 def _tracking(model: Any, cert: Any, kwargs: dict, setpoints: list,
               gains_certified: bool) -> tuple[dict, Any]:
     """The tracking law's hypotheses (:mod:`controllers.certification.tracking_checks`) with the
-    robust
-    MPC's defaults (``α_c``: the certificate's ``α_min(N)`` when its observer-gain design
+    robust MPC's defaults (``α_c``: the certificate's ``α_min(N)`` when its observer-gain design
     passes, else :func:`cosim_adapters.tracking.fallback_alpha_c`), and its verdict."""
     import numpy as np
 

@@ -93,8 +93,8 @@ def simulation(args: argparse.Namespace, data: Any, record: Any, problem: Any,
 def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
               progress: bool) -> Trained:
     """The paper's recipe (:func:`controllers.identification.training.train`): truncated
-    subsequences from
-    ``x = 0``, the epoch with the best validation FIT; ``--history`` written as it goes."""
+    subsequences from ``x = 0``, the epoch with the best validation FIT; ``--history`` written
+    as it goes."""
     import contextlib
 
     from controllers.identification import sequences, training
@@ -166,8 +166,7 @@ def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
 def _prediction_error(record: Any, ev: Any, problem: Any) -> tuple[Any, dict[str, Any]]:
     """The model's measured prediction error on held-back rows (val and test, else train;
     :func:`controllers.certification.prediction_error.error_profile`: what the uncertified mode
-    tightens
-    by) and its summary for the model file, in the outputs' units."""
+    tightens by) and its summary for the model file, in the outputs' units."""
     from controllers.certification.prediction_error import error_profile
     from controllers.ocp.fhocp_tracking import DEFAULTS as TRACKING
 

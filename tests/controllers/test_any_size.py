@@ -1,7 +1,6 @@
 """Certificates, admissible ranges and default set-points for any numbers of inputs m and
 outputs p (controllers.certification.certificates, controllers.certification.gain_design): one,
-two, three, five outputs;
-fewer and more inputs than outputs."""
+two, three, five outputs; fewer and more inputs than outputs."""
 
 from __future__ import annotations
 

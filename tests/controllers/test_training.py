@@ -1,5 +1,5 @@
-"""Training of a δISS GRU (``controllers.identification.training``, ``cosim train``) on real plant
-data."""
+"""Training of a δISS GRU (``controllers.identification.training``, ``cosim train``) on real
+plant data."""
 
 from __future__ import annotations
 
@@ -130,8 +130,8 @@ def test_cosim_train_bad_data_is_a_one_line_error(tmp_path, capsys):
 
 
 # --------------------------------------------------------------------------------------------
-# Records of several experiments (controllers.identification.sequences) and the defaults of short
-# records
+# Records of several experiments (controllers.identification.sequences) and the defaults of
+# short records
 # --------------------------------------------------------------------------------------------
 
 def test_training_stretches_and_subsequences_never_span_two_experiments():
