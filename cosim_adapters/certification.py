@@ -113,6 +113,5 @@ def go_uncertified(ctrl: Any, reason: str) -> None:
                          "--require-certificate) it runs uncertified")
     cert_u = uncertified_certificate(ctrl.cert, measured_margins(ctrl, ctrl.cert)[0])
     ctrl.law = ctrl.law.uncertified(cert_u, reason)
-    ctrl.fhocp, ctrl.cert = ctrl.law.fhocp, ctrl.law.cert
     ctrl.observer = GRUObserver.from_certificate(ctrl.cert)
     ctrl.certification = Certification(False, reason, "measured")

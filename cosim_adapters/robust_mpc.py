@@ -151,12 +151,10 @@ class RobustMPCController(Component):
             raise CosimError(str(exc)) from None
         self.problem = problem_for(self.model, problem)
         self.model.problem = self.problem
-        self.certificate_mode = options.certificate
         #: the control law (:class:`cosim_adapters.law.ControlLaw`): everything that differs
         #: between ``law="tracking"`` and ``law="paper"``
         self.law: ControlLaw
         self.law, failed = self._design(options)
-        self.fhocp, self.cert = self.law.fhocp, self.law.cert
         # load scipy.optimize (the observer's x̂_0 equilibrium) now, so that the first
         # control step is a normal one (importing scipy.optimize: ~0.2 s)
         import scipy.optimize  # noqa: F401
@@ -232,6 +230,21 @@ class RobustMPCController(Component):
         self._lo = np.array([c.min for c in pr.inputs])
         self._hi = np.array([c.max for c in pr.inputs])
         self._values: dict[str, float] = {}
+
+    @property
+    def fhocp(self) -> Any:
+        """The law's optimal-control problem."""
+        return self.law.fhocp
+
+    @property
+    def cert(self) -> Any:
+        """The certificate the law's tightening comes from."""
+        return self.law.cert
+
+    @property
+    def certificate_mode(self) -> str:
+        """The option ``certificate``: ``"auto"``, ``"require"`` or ``"keep"``."""
+        return self.options.certificate
 
     @property
     def notice(self) -> str | None:
@@ -320,10 +333,6 @@ class RobustMPCController(Component):
         from controllers.ocp.robust_mpc import solver_summary
 
         out = solver_summary(self.law.records)
-        law = self.law.summary()
-        out.update({k: law.pop(k) for k in ("alpha_c", "control_horizon", "offset_weight",
-                                            "offset_filter", "tracking_hypotheses")
-                    if k in law})
         out.update(self.certification.summary())
         out.update({
             "controller": "robust-mpc",
@@ -336,7 +345,7 @@ class RobustMPCController(Component):
             "du_weight": {n: float(w) for n, w in zip(self._u_names, self.du_weight,
                                                       strict=True)},
             "gain_scale": self.cert.gain_scale,
-            **law,
+            **self.law.summary(),
             "options": _plain(self.options.to_dict()),
         })
         return out

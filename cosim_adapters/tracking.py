@@ -50,24 +50,27 @@ def fallback_alpha_c(cert: Any) -> float:
     return ALPHA_C_SPAN / top if top > 0 else ALPHA_C_SPAN
 
 
-def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[str, Any],
-                    offset_weight: float | Mapping[str, float] | None, alpha_c: float | None,
-                    beta: float, fhocp_options: Mapping[str, Any],
-                    control_horizon: int | None = None, gains_certified: bool = True,
-                    cert: Any = None) -> tuple[Any, Any, Any, list[str]]:
+def tracking_design(model: Any, cert_gains: Any, design: Mapping[str, Any],
+                    gains_certified: bool = True, cert: Any = None
+                    ) -> tuple[Any, Any, Any, list[str]]:
     """``(certificate, TrackingMPC, DisturbanceFilter, failures)`` of the tracking law
-    (module docstring); ``failures``: its hypotheses that fail, in words (empty: certified).
-    ``cert_gains``: the paper law's certificate, whose ``α_min`` is the default ``α_c`` when
-    ``gains_certified`` (its observer-gain scale passed), else :func:`fallback_alpha_c`;
-    ``kwargs``: ``N``, ``Q``, ``R``, ``e_o0``; ``control_horizon``: ``M`` (default
-    :func:`controllers.ocp.fhocp_tracking.default_control_horizon`, at most N); ``cert``: the
-    design's certificate (default: ``gain_scale=0`` of ``kwargs``; the uncertified mode
-    passes :func:`controllers.certification.certificates.uncertified_certificate`'s)."""
+    (module docstring) on ``model`` (and its ``problem``); ``failures``: its hypotheses that
+    fail, in words (empty: certified). ``design``: ``kwargs`` (``N``, ``Q``, ``R``,
+    ``e_o0``), ``offset_weight``, ``alpha_c``, ``offset_filter`` (``β``), ``fhocp_options``
+    and ``control_horizon`` (``M``; default :func:`controllers.ocp.fhocp_tracking.
+    default_control_horizon`, at most N). ``cert_gains``: the paper law's certificate, whose
+    ``α_min`` is the default ``α_c`` when ``gains_certified`` (its observer-gain scale
+    passed), else :func:`fallback_alpha_c`; ``cert``: the design's certificate (default:
+    ``gain_scale=0`` of ``kwargs``; the uncertified mode passes
+    :func:`controllers.certification.certificates.uncertified_certificate`'s)."""
     from controllers.certification import certificates as certs
     from controllers.certification.tracking_checks import failures, tracking_hypotheses
     from controllers.ocp.fhocp_tracking import DEFAULTS, TrackingFHOCP, default_control_horizon
     from controllers.ocp.tracking_mpc import DisturbanceFilter, TrackingMPC
 
+    problem, kwargs = model.problem, design["kwargs"]
+    offset_weight, alpha_c = design["offset_weight"], design["alpha_c"]
+    beta, control_horizon = design["offset_filter"], design["control_horizon"]
     names = list(problem.output_names)
     default = float(DEFAULTS["offset_weight"])
     if offset_weight is None:
@@ -92,7 +95,7 @@ def tracking_design(model: Any, problem: Any, cert_gains: Any, kwargs: Mapping[s
             if not (math.isfinite(alpha_c) and alpha_c > 0):
                 alpha_c = fallback_alpha_c(cert)
         fhocp = TrackingFHOCP.from_certificate(cert, offset_weight=T, alpha_c=alpha_c,
-                                               control_horizon=M, **fhocp_options)
+                                               control_horizon=M, **design["fhocp_options"])
     except ControllersError as exc:
         raise CosimError(str(exc)) from None
     hypotheses = tracking_hypotheses(fhocp, cert, beta)
@@ -136,10 +139,8 @@ class TrackingLaw:
     def build(cls, model: Any, cert_gains: Any, design: Mapping[str, Any], name: str,
               gains_certified: bool) -> tuple[TrackingLaw, list[str]]:
         """The law of ``design`` (:func:`tracking_design`) and its failing hypotheses."""
-        cert, tracker, disturbance, failed = tracking_design(
-            model, model.problem, cert_gains, design["kwargs"], design["offset_weight"],
-            design["alpha_c"], design["offset_filter"], design["fhocp_options"],
-            design["control_horizon"], gains_certified)
+        cert, tracker, disturbance, failed = tracking_design(model, cert_gains, design,
+                                                             gains_certified)
         return cls(model, cert, tracker, disturbance, design, name), failed
 
     # -- ControlLaw ------------------------------------------------------------------------
@@ -193,10 +194,8 @@ class TrackingLaw:
         from cosim_adapters.certification import margin_text
 
         design = self.design
-        cert_u, tracker, disturbance, _ = tracking_design(
-            self.model, self.model.problem, cert, design["kwargs"], design["offset_weight"],
-            design["alpha_c"], design["offset_filter"], design["fhocp_options"],
-            design["control_horizon"], gains_certified=False, cert=cert)
+        cert_u, tracker, disturbance, _ = tracking_design(self.model, cert, design,
+                                                          gains_certified=False, cert=cert)
         if not tracker.hypotheses["Ys_nonempty"]:
             given = design["alpha_c"]
             raise CosimError(
