@@ -3,16 +3,16 @@
 The single-shooting FHOCP (:mod:`controllers.ocp.nlp_single_shooting`) spends most of its time in
 its derivatives: rollout, sensitivities, the Hessian of the Lagrangian and its eigenvalue
 clipping. The kernel does the same mathematics in C (``controllers/kernel/*.c``) and either
-runs the whole SQP itself (``6_sqp.c`` with the dense dual active-set QP of ``5_qp.c``;
+runs the whole SQP itself (``sqp.c`` with the dense dual active-set QP of ``qp.c``;
 :mod:`controllers.kernel.kernel_sqp`, the default) or is handed to casadi ``sqpmethod`` as
 ``external`` functions (``loop="casadi"``); either way the SQP runs without Python. It
 agrees with the numpy callbacks to ~1e-14 (checked at load time, once per library and
 process: :meth:`controllers.ocp.nlp_single_shooting.SingleShootingNLP.self_test`).
 
-The C source is the fixed template (``kernel/0_workspace.c`` … ``6_sqp.c``) preceded by a
-generated header holding the problem's dimensions and constants (GRU weights, Q, R, s, the
-reduced constraint rows ``D U_o``, the eigenvalue-clipping margin, the input-rate weights
-when there are any: ``HAS_DU``, ``DW``) as ``static const``
+The C source is the fixed template (the interface ``kernel/gru_fhocp.h``, then ``memory.c``
+… ``sqp.c``) preceded by a generated header holding the problem's dimensions and constants
+(GRU weights, Q, R, s, the reduced constraint rows ``D U_o``, the eigenvalue-clipping
+margin, the input-rate weights when there are any: ``HAS_DU``, ``DW``) as ``static const``
 arrays, so that gcc sees every loop bound, and the interface types shared with Python
 (:mod:`controllers.kernel.kernel_abi`). The library holds no mutable state: each FHOCP gets its own
 workspace (:class:`~controllers.kernel.kernel_lib.Workspace`, one C struct), so FHOCPs may solve
@@ -54,11 +54,13 @@ __all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "Workspace", "
            "default_cache_dir", "for_fhocp", "generate_source", "last_error"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-9"
-#: The C template, concatenated in this order after the generated header.
+GENERATOR_VERSION = "gru-fhocp-kernel-10"
+#: The C template, joined in this order after the generated header: the interface
+#: (``gru_fhocp.h``), the solver instance's memory, the mathematics bottom-up, the exported
+#: API, the QP and the SQP.
 TEMPLATE_PARTS = tuple(Path(__file__).with_name(name) for name in (
-    "0_workspace.c", "1_rollout.c", "1b_steady_state.c", "2_derivatives.c", "2b_hessian.c",
-    "3_eigen_clip.c", "4_api.c", "5_qp.c", "6_sqp.c"))
+    "gru_fhocp.h", "memory.c", "rollout.c", "steady_state.c", "derivatives.c", "hessian.c",
+    "eigen_clip.c", "api.c", "qp.c", "sqp.c"))
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")
 PREFIX_PLACEHOLDER = "@PFX@"
 

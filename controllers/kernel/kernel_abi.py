@@ -1,6 +1,6 @@
 """The compiled kernel's interface types, defined once for C and Python.
 
-The kernel's SQP (``controllers/kernel/6_sqp.c``) takes its options and returns its counts and
+The kernel's SQP (``controllers/kernel/sqp.c``) takes its options and returns its counts and
 timers as named C structs, its answer check returns an :class:`Assessment`, and reports its
 outcome, and its QP's, as named enums. Each is declared here once, as a :mod:`ctypes` structure
 or an :class:`~enum.IntEnum`, and :func:`c_declarations` writes the matching C
@@ -17,8 +17,8 @@ import ctypes
 from enum import IntEnum
 from typing import Any
 
-__all__ = ["Assessment", "QpStatus", "SqpInfo", "SqpOptions", "SqpStatus", "c_declarations",
-           "check_layout"]
+__all__ = ["ABI_COUNT", "Assessment", "Counters", "Dims", "QpStatus", "SqpInfo", "SqpOptions",
+           "SqpStatus", "c_declarations", "check_layout"]
 
 
 class SqpOptions(ctypes.Structure):
@@ -46,7 +46,7 @@ class SqpOptions(ctypes.Structure):
         Ours (0: off, ``sqpmethod``'s iteration): an iteration keeps the last Jacobian and
         Hessian, with the adjoint-corrected gradient ``∇L − J_dᵀλ_g − λ_x`` for the QP, while
         the iterates have moved at most this far (∞-norm, summed over the steps) since they
-        were evaluated (``controllers/kernel/6_sqp.c``, ``iterate``).
+        were evaluated (``controllers/kernel/sqp.c``, ``iterate``).
     """
 
     _fields_ = [("tol_pr", ctypes.c_double), ("tol_du", ctypes.c_double),
@@ -150,6 +150,37 @@ class Assessment(ctypes.Structure):
                 ("defect", ctypes.c_double), ("steady_residual", ctypes.c_double)]
 
 
+class Dims(ctypes.Structure):
+    """A kernel library's dimensions (C ``gk_dims``, ``PFX(dims)``).
+
+    Attributes
+    ----------
+    n_states, n_inputs, horizon : int
+        n, m and N of the FHOCP.
+    n_reduced_rows : int
+        The reduced output-constraint rows ``D U_o`` of the NLP's constraints (q).
+    n_decision, n_constraints, n_parameters : int
+        The NLP's sizes: ``w``, ``g(w, p)`` and ``p``.
+    control_horizon : int
+        M ≤ N: the free inputs (the tail held at ``u_s`` below N).
+    n_assess_rows : int
+        The full output-constraint rows ``L U_o`` of the answer check.
+    """
+
+    _fields_ = [(name, ctypes.c_long) for name in (
+        "n_states", "n_inputs", "horizon", "n_reduced_rows", "n_decision", "n_constraints",
+        "n_parameters", "control_horizon", "n_assess_rows")]
+
+
+class Counters(ctypes.Structure):
+    """A solver instance's eigenvalue-clipping counts (C ``gk_counters``, ``PFX(counters)``):
+    Hessians clipped (``hess_calls``), eigen-decompositions (``eig``), decompositions that
+    clipped (``clipped``) and eigenvalues clipped (``eigenvalues_clipped``)."""
+
+    _fields_ = [(name, ctypes.c_long) for name in (
+        "hess_calls", "eig", "clipped", "eigenvalues_clipped")]
+
+
 class QpStatus(IntEnum):
     """How the kernel's QP ended (C ``enum gk_qp_status``, ``GK_QP_<NAME>``)."""
 
@@ -160,9 +191,12 @@ class QpStatus(IntEnum):
     NOT_POSITIVE_DEFINITE = 3
 
 
-_C_TYPES = {ctypes.c_double: "double", ctypes.c_int: "int"}
+_C_TYPES = {ctypes.c_double: "double", ctypes.c_int: "int", ctypes.c_long: "long"}
 _STRUCTS: tuple[tuple[str, Any], ...] = (("gk_sqp_opts", SqpOptions), ("gk_sqp_info", SqpInfo),
-                                         ("gk_assessment", Assessment))
+                                         ("gk_assessment", Assessment), ("gk_dims", Dims),
+                                         ("gk_counters", Counters))
+#: Entries of ``PFX(abi)``: the size of each struct above, then of the solver instance.
+ABI_COUNT = len(_STRUCTS) + 1
 _ENUMS: tuple[tuple[str, str, Any], ...] = (("gk_sqp_status", "GK_SQP_", SqpStatus),
                                             ("gk_qp_status", "GK_QP_", QpStatus))
 
@@ -176,13 +210,16 @@ def c_declarations() -> str:
     for cname, prefix, enum in _ENUMS:
         members = ", ".join(f"{prefix}{m.name} = {int(m)}" for m in enum)
         out.append(f"enum {cname} {{ {members} }};\n")
+    sizes = ", ".join(f"(long)sizeof({cname})" for cname, _ in _STRUCTS)
+    out.append(f"#define GK_ABI_COUNT {ABI_COUNT}\n"
+               f"#define GK_ABI_SIZES {{{sizes}, (long)sizeof(gk_ws)}}\n")
     return "".join(out)
 
 
 def check_layout(sizes: tuple[int, ...]) -> None:
     """Raise :class:`OSError` when the library's ``sizeof`` of each struct above
-    (``gk_sqp_opts``, ``gk_sqp_info``, ``gk_assessment``) differs from ctypes' (a compiler
-    with another ABI)."""
+    (``gk_sqp_opts``, ``gk_sqp_info``, ``gk_assessment``, ``gk_dims``, ``gk_counters``: the
+    first entries of ``PFX(abi)``) differs from ctypes' (a compiler with another ABI)."""
     ours = tuple(ctypes.sizeof(struct) for _, struct in _STRUCTS)
-    if tuple(sizes) != ours:
+    if tuple(sizes[:len(ours)]) != ours:
         raise OSError(f"interface struct sizes {tuple(sizes)} differ from ctypes' {ours}")

@@ -1,16 +1,18 @@
 """A loaded compiled kernel (:class:`Kernel`) and its per-instance workspaces (:class:`Workspace`).
 
-A kernel library (:func:`controllers.kernel.compiled_kernel.build`) holds only code and constants;
-everything a call writes lives in a C workspace (``gk_ws``, ``controllers/kernel/0_workspace.c``)
-that the caller passes first. One :class:`Kernel` per library and process, shared by every
-FHOCP of the same problem; one :class:`Workspace` per FHOCP instance, holding its C workspace
-and the argument buffers of its calls (numpy arrays whose addresses are taken once). Two
-FHOCPs with their own workspaces may therefore solve concurrently from two threads (ctypes
-releases the GIL during each call) and get the same answers as one after the other; one
+A kernel library (:func:`controllers.kernel.compiled_kernel.build`; its interface:
+``controllers/kernel/gru_fhocp.h``) holds only code and constants; everything a call writes
+lives in a C solver instance (``gk_ws``: the memory kept between calls and the per-call
+workspace, ``controllers/kernel/memory.c``) that the caller passes first. One
+:class:`Kernel` per library and process, shared by every FHOCP of the same problem; one
+:class:`Workspace` per FHOCP instance, holding its C workspace and the argument buffers of
+its calls (numpy arrays whose addresses are taken once). Two FHOCPs with their own
+workspaces may therefore solve concurrently from two threads (ctypes releases the GIL during
+each call) and get the same answers as one after the other; one
 workspace must not be used by two threads at once (an FHOCP is not, either).
 
 The casadi ``external`` functions of a library (:meth:`Kernel.external`, the ``"casadi"``
-SQP loop) take a workspace from a pool inside the library for each call.
+SQP loop) evaluate in the work vector casadi gives each call.
 """
 
 from __future__ import annotations
@@ -24,7 +26,10 @@ from typing import Any
 import numpy as np
 
 from controllers.kernel.kernel_abi import (
+    ABI_COUNT,
     Assessment,
+    Counters,
+    Dims,
     QpStatus,
     SqpInfo,
     SqpOptions,
@@ -53,14 +58,16 @@ class Kernel:
         self.path = Path(path)
         self.prefix = prefix
         self.lib = ctypes.CDLL(str(self.path))
-        dims = (ctypes.c_long * 8)()
-        self._fn("dims")(dims)
-        self.n, self.m, self.N, self.q, self.nw, self.ng, self.npar, self.M = list(dims)
-        abi = (ctypes.c_long * 4)()
+        abi = (ctypes.c_long * ABI_COUNT)()
         self._fn("abi")(abi)
-        check_layout((abi[0], abi[1], abi[2]))
-        self.workspace_bytes = int(abi[3])
-        self.nl = int(self._fn("n_assess_rows")())
+        check_layout(tuple(abi))
+        self.workspace_bytes = int(abi[ABI_COUNT - 1])
+        dims = Dims()
+        self._fn("dims")(ctypes.byref(dims))
+        self.dims = dims
+        self.n, self.m, self.N = dims.n_states, dims.n_inputs, dims.horizon
+        self.q, self.nw, self.ng = dims.n_reduced_rows, dims.n_decision, dims.n_constraints
+        self.npar, self.M, self.nl = dims.n_parameters, dims.control_horizon, dims.n_assess_rows
         self.flags: tuple[str, ...] = ()
         self._externals: dict[str, Any] = {}
         self.c: dict[str, Any] = {}
@@ -89,7 +96,7 @@ class Kernel:
 
     def external(self, name: str) -> Any:
         """casadi Function ``name`` in {"fg", "jac_fg", "hess_l", "hess_raw"} (loaded once;
-        each call evaluates in a workspace of the library's pool)."""
+        each call evaluates in casadi's work vector)."""
         if name not in self._externals:
             import casadi as ca
 
@@ -250,7 +257,7 @@ class Workspace:
 
     def sqp_call(self, arrays: Mapping[str, np.ndarray], options: SqpOptions,
                  info: SqpInfo) -> Any:
-        """A function running the kernel's SQP (``6_sqp.c``) in this workspace on these
+        """A function running the kernel's SQP (``sqp.c``) in this workspace on these
         persistent arrays: ``p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, g, f`` (float64,
         contiguous; ``w``, ``lam_x``, ``lam_g`` hold the initial guess and receive the answer),
         with ``options`` and into ``info``; it returns the :class:`SqpStatus`. Addresses are
@@ -269,7 +276,7 @@ class Workspace:
     def qp(self, H: np.ndarray, g: np.ndarray, A: np.ndarray, lbx: np.ndarray,
            ubx: np.ndarray, lba: np.ndarray, uba: np.ndarray
            ) -> tuple[QpStatus, np.ndarray, np.ndarray, np.ndarray, int]:
-        """The kernel's QP (``5_qp.c``) on one problem of its dimensions (H: nw×nw, A:
+        """The kernel's QP (``qp.c``) on one problem of its dimensions (H: nw×nw, A:
         ng×nw; infinite bounds allowed): ``(status, d, lam_x, lam_a, working-set changes)``.
         A test hook: the SQP calls the QP inside the kernel."""
         def arr(a: np.ndarray, order: str = "C") -> np.ndarray:
@@ -299,9 +306,9 @@ class Workspace:
 
     def counters(self) -> dict[str, int]:
         """This workspace's eigenvalue-clipping counts."""
-        c = (ctypes.c_long * 4)()
-        self._c["counters"](self._ws, c)
-        return {"hess_calls": c[0], "eig": c[1], "clipped": c[2], "eigenvalues_clipped": c[3]}
+        c = Counters()
+        self._c["counters"](self._ws, ctypes.byref(c))
+        return {name: int(getattr(c, name)) for name, _ in Counters._fields_}
 
     def invalidate(self) -> None:
         """Forget the cached rollout."""

@@ -1,4 +1,4 @@
-"""The FHOCP's SQP run inside the compiled kernel (``controllers/kernel/6_sqp.c``).
+"""The FHOCP's SQP run inside the compiled kernel (``controllers/kernel/sqp.c``).
 
 casadi ``sqpmethod`` calls its QP through a conic plugin, and its only dense active-set
 plugin, qpOASES, rebuilds the projected Hessian ``Zᵀ H Z`` at every call because H changes:
@@ -6,7 +6,7 @@ O((N m)³) per QP, 3 ms of a 5.7 ms step at N = 60 and 27 of 35 ms at N = 120 (d
 design/compiled-kernel.md). The kernel therefore carries the whole SQP: the same iteration
 as ``sqpmethod`` (exact eigenvalue-clipped Hessian, ℓ1-merit Armijo line search, the same
 stopping tests and return statuses) with a dense Goldfarb–Idnani dual active-set QP
-(``controllers/kernel/5_qp.c``) that factorises H once per QP and updates its factors per
+(``controllers/kernel/qp.c``) that factorises H once per QP and updates its factors per
 working-set change; the stopping test's ∇L comes from one adjoint sweep, so the
 sensitivities and the Jacobian are computed only when another iteration follows.
 

@@ -10,7 +10,7 @@ the first block of the identity), ``J_Δu = Δᵀ (I ⊗ S) Δ``: the gradient i
 ``2 Dᵀ (I ⊗ S) Δ``, i.e. ``2 S (Δ_i − Δ_{i+1})`` for stage ``i`` (``Δ_N = 0``), and the Hessian
 ``2 Dᵀ (I ⊗ S) D`` is constant and block tridiagonal: ``4 S`` on the diagonal blocks (``2 S``
 on the last one) and ``−2 S`` next to them. The compiled kernel
-(``controllers/kernel/2_derivatives.c``: ``du_cost``, ``du_gradient``, ``du_hessian``) does the
+(``controllers/kernel/derivatives.c``: ``du_cost``, ``du_gradient``, ``du_hessian``) does the
 same sums; its self-test compares them with these.
 
 With all weights zero (the default) the term does not exist: no parameter, no code path,

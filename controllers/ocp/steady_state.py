@@ -5,7 +5,7 @@ For a δISS GRU (``th:stability-bonassi``, ν < 1) the map ``f(·, u_s)`` contra
 function theorem ``X_s = ∂x_s/∂u_s = (I − A_s)^{-1} B_s`` with ``[A_s B_s]`` the Jacobian of
 ``eq:gru`` at ``(x_s, u_s)``. Newton's method from a start ``x_0`` (the previous step's
 ``x_s``) finds it in a few iterations. The compiled kernel runs the same iteration
-(``controllers/kernel/1b_steady_state.c``), with the same stopping rule, so both agree to
+(``controllers/kernel/steady_state.c``), with the same stopping rule, so both agree to
 rounding.
 """
 

@@ -7,6 +7,7 @@ from __future__ import annotations
 import copy
 import os
 import shutil
+import subprocess
 import warnings
 from pathlib import Path
 
@@ -323,3 +324,27 @@ def test_portable_build_gives_the_same_derivatives(tmp_path: Path,
                 assert rel(a, b) < 1e-12
             assert rel(k.external("hess_l")(w, p, 1.0, lg),
                        nlp.hessian_convex(w, p, np.array([1.0]), lg)[0]) < 1e-12
+
+
+@needs_cc
+@pytest.mark.parametrize("tracking", [False, True])
+def test_every_variant_compiles_without_a_warning(tracking: bool, tmp_path: Path) -> None:
+    """The template and its interface header (``gru_fhocp.h``) under ``-Wall -Wextra
+    -Werror``, in every build-time variant, for the paper's FHOCP and the tracking one (with
+    an input-rate term and a control horizon)."""
+    fh = random_fhocp(6, 5, seed=3, kernel="numpy")
+    extra = ({"offset_weight": np.ones(2), "du_weight": np.full(2, 0.1), "control_horizon": 3}
+             if tracking else {})
+    src = ck.generate_source(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo,
+                             **extra).replace(ck.PREFIX_PLACEHOLDER, "gk_test_")
+    c_file = tmp_path / "kernel.c"
+    c_file.write_text(src)
+    variants = [[], ["-DGK_BACKWARD"], ["-DGK_LAPACK_EIG"], ["-DGK_TIMERS"], ["-DGK_NO_CLONES"]]
+    if not tracking:
+        variants.append(["-DGK_CONTRACT"])
+    cc = os.environ.get("CC", "gcc")
+    for flags in variants:
+        out = subprocess.run([cc, "-O1", "-fPIC", "-shared", "-std=gnu99", "-Wall", "-Wextra",
+                              "-Werror", *flags, str(c_file), "-o", str(tmp_path / "k.so")],
+                             capture_output=True, text=True, timeout=120)
+        assert out.returncode == 0, (flags, out.stderr[-2000:])

@@ -1,5 +1,5 @@
-"""The SQP inside the compiled kernel (controllers.kernel.kernel_sqp, kernel/5_qp.c and
-6_sqp.c): its dual active-set QP against the KKT conditions and qpOASES, degenerate and
+"""The SQP inside the compiled kernel (controllers.kernel.kernel_sqp, kernel/qp.c and
+sqp.c): its dual active-set QP against the KKT conditions and qpOASES, degenerate and
 infeasible QPs, and its FHOCP solves against casadi ``sqpmethod`` from the same starts."""
 
 from __future__ import annotations

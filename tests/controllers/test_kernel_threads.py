@@ -1,5 +1,5 @@
 """FHOCPs of one problem solving concurrently from two threads: the compiled kernel keeps its
-state in one workspace per FHOCP (controllers/kernel/0_workspace.c), so the answers are
+state in one workspace per FHOCP (controllers/kernel/memory.c), so the answers are
 bit-identical to solving one after the other (a campaign worker with two threads runs two
 controllers at once)."""
 

@@ -1,5 +1,5 @@
-/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): the QP of one SQP
+/* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
+ * generated header, gru_fhocp.h and the parts into one translation unit): the QP of one SQP
  * iteration, dense and strictly convex, by the dual active-set method of Goldfarb and Idnani
  * (Math. Programming 27, 1983):
  *
@@ -52,15 +52,15 @@ HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const doubl
                         const double *lbx, const double *ubx, const double *lba,
                         const double *uba, double *d, double *lam_x, double *lam_a,
                         int *changes) {
-  double *qL = ws->qL, *qJ = ws->qJ, *qR = ws->qR, *qd = ws->qd, *qz = ws->qz, *qr = ws->qr,
-         *qu = ws->qu, *qn = ws->qn, *qax = ws->qax;
-  int *qact = ws->qact;
-  unsigned char *qin = ws->qin;
+  double *qL = ws->work.qL, *qJ = ws->work.qJ, *qR = ws->work.qR, *qd = ws->work.qd, *qz = ws->work.qz, *qr = ws->work.qr,
+         *qu = ws->work.qu, *qn = ws->work.qn, *qax = ws->work.qax;
+  int *qact = ws->work.qact;
+  unsigned char *qin = ws->work.qin;
   const int limit = 10 * (NW + NG);
   int status = GK_QP_OPTIMAL, q = 0, it = 0;
   *changes = 0;
-  memset(qin, 0, sizeof ws->qin);
-  /* H = L L' (row-major lower L; 3_eigen_clip.c's Cholesky, unshifted) */
+  memset(qin, 0, sizeof ws->work.qin);
+  /* H = L L' (row-major lower L; eigen_clip.c's Cholesky, unshifted) */
   if (!pd_shifted(H, NW, 0.0, qL)) { status = GK_QP_NOT_POSITIVE_DEFINITE; goto done; }
   /* M = L^-1 row by row; column j of J = L^-T is row j of M */
   for (int i = 0; i < NW; i++) {
@@ -86,7 +86,7 @@ HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const doubl
       if (!qin[2 * i] && lbx[i] > -QP_INF && d[i] - lbx[i] < smin) { smin = d[i] - lbx[i]; p = 2 * i; }
       if (!qin[2 * i + 1] && ubx[i] < QP_INF && ubx[i] - d[i] < smin) { smin = ubx[i] - d[i]; p = 2 * i + 1; }
     }
-    memset(qax, 0, sizeof ws->qax);
+    memset(qax, 0, sizeof ws->work.qax);
     gk_accumulate(qax, qax, NG, d, A, NG, 0, NW, 0);
     for (int r = 0; r < NG; r++) {
       const int k = 2 * (NW + r);
@@ -112,7 +112,7 @@ HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const doubl
       for (int j = q; j < NW; j++) zn += qd[j] * qd[j];   /* = z'n */
       const int dependent = !(zn > 1e-24 * dd);
       if (!dependent) {
-        memset(qz, 0, sizeof ws->qz);
+        memset(qz, 0, sizeof ws->work.qz);
         gk_accumulate(qz, qz, NW, qd, qJ, NW, q, NW, 0);
       }
       for (int i = q - 1; i >= 0; i--) {

@@ -1,13 +1,14 @@
-/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): the Hessian of
+/* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
+ * generated header, gru_fhocp.h and the parts into one translation unit): the Hessian of
  * the Lagrangian, in its three variants (W-mode, backward condensing, contracted; chosen at
- * build time by controllers.compiled_kernel.choose_mode), and the curvature of x_s(u_s). */
+ * build time by controllers.kernel.compiled_kernel.choose_mode), and the curvature of x_s(u_s). */
 /* ---------------------------------------------------------------- Hessian of the Lagrangian */
 /* W = grad^2_(x,u) mu^T f(x, u) at a point with gates z, r, h and J_h = jh (NV x NV,
  * row-major, symmetric); Ph, Pz, Pr, G: NX x NV scratch */
-HOT static void point_hessian(const double *x, const double *z, const double *r,
-                              const double *h, const double *jh, const double *mu, double *W,
-                              double *Ph, double *Pz, double *Pr, double *G) {
+VARIANT_ONLY HOT static void point_hessian(const double *x, const double *z, const double *r,
+                                           const double *h, const double *jh, const double *mu,
+                                           double *W, double *Ph, double *Pz, double *Pr,
+                                           double *G) {
   double v[NX], nu[NX], d1[NX], d2[NX], d3[NX], d4[NX], d5[NX], d6[NX];
   for (int k = 0; k < NX; k++) {
     const double hp = 1.0 - h[k] * h[k];
@@ -85,8 +86,8 @@ __attribute__((always_inline)) static inline void add_stage_input(double *H, con
 
 /* W = grad^2_(x,u) mu^T f(x_i, u_i) of stage i (NV x NV, row-major, symmetric) */
 HOT static void stage_hessian(gk_ws *ws, int i, const double *mu, double *W) {
-  point_hessian(ws->X + i * NX, ws->ZG + i * NX, ws->RG + i * NX, ws->HG + i * NX,
-                ws->JH + i * NX * NV, mu, W, ws->Ph, ws->Pz, ws->Pr, ws->G);
+  point_hessian(ws->mem.X + i * NX, ws->mem.ZG + i * NX, ws->mem.RG + i * NX, ws->mem.HG + i * NX,
+                ws->mem.JH + i * NX * NV, mu, W, ws->work.Ph, ws->work.Pz, ws->work.Pr, ws->work.G);
 }
 
 /* adjoints mu_i = d(Lagrangian)/dx_i, i = N .. 1, into MU */
@@ -98,7 +99,7 @@ __attribute__((always_inline)) static inline void adjoints(const gk_ws *ws, cons
   for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
   for (int i = NH - 1; i >= 1; i--) {
     double *mu = MU + i * NX;
-    const double *mun = MU + (i + 1) * NX, *df = ws->DF + i * NX * NV;
+    const double *mun = MU + (i + 1) * NX, *df = ws->mem.DF + i * NX * NV;
     adjoint_local(ws, i, xb, lf, lg + (i - 1) * NQ, mu);
     for (int j = 0; j < NX; j++) {      /* + A_i^T mu_{i+1} */
       const double mj = mun[j], *dfj = df + j * NV;
@@ -118,12 +119,12 @@ __attribute__((always_inline)) static inline void adjoints(const gk_ws *ws, cons
  * O(N n^3 + N^2 n m^2) instead of W-mode's O(N^2 n^2 m + N^3 n m^2). */
 HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, const double *lg,
                         double *H) {
-  double *MU = ws->MU, *T = ws->W, *P = ws->P, *Y = ws->YB;
+  double *MU = ws->work.MU, *T = ws->work.W, *P = ws->work.P, *Y = ws->work.YB;
   (void)w;
   adjoints(ws, p, lf, lg, MU);
   memset(H, 0, sizeof(double) * NW * NW);
   for (int i = NH - 1; i >= 0; i--) {
-    const double *df = ws->DF + i * NX * NV;
+    const double *df = ws->mem.DF + i * NX * NV;
     stage_hessian(ws, i, MU + (i + 1) * NX, T);
     if (i >= 1)
       for (int a = 0; a < NX; a++)
@@ -133,7 +134,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
       gk_gemm(1, NV, NV, NX, df, NV, Y, NV, T, NV, 1);
     }
     const int K = KC(i);
-    const double *Si = ws->S + i * NX * NSC;
+    const double *Si = ws->mem.S + i * NX * NSC;
     double C[NSC * NU];   /* (T^ux S_i)': H[w_c, u_i] */
     for (int j = 0; j < NU; j++) {
       const double *tj = T + (NX + j) * NV;
@@ -153,7 +154,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
 /* full Hessian of the Lagrangian, row-major NW x NW (symmetric) */
 HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, const double *lg,
                         double *H) {
-  double *MU = ws->MU, *W = ws->W, *Y = ws->Y;
+  double *MU = ws->work.MU, *W = ws->work.W, *Y = ws->work.Y;
   (void)w;
   adjoints(ws, p, lf, lg, MU);
   memset(H, 0, sizeof(double) * NW * NW);
@@ -163,7 +164,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
       for (int a = 0; a < NX; a++)
         for (int b = 0; b < NX; b++) W[a * NV + b] += 2.0 * lf * QW[a * NX + b];
     const int K = KC(i);
-    const double *Si = ws->S + i * NX * NSC;
+    const double *Si = ws->mem.S + i * NX * NSC;
     double C[NSC * NU];   /* S_i' W_xu: H[w_c, u_i] */
     if (K > 0) {
 #ifdef GK_BLAS_HESS
@@ -196,7 +197,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
 HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, const double *lg,
                         double *H) {
   const double *xb = XREF(ws, p);
-  double *MU = ws->MU, *L = ws->L, *R = ws->R, *QS = ws->QS;
+  double *MU = ws->work.MU, *L = ws->work.L, *R = ws->work.R, *QS = ws->work.QS;
   (void)w;
   const int r0 = (NH - 1) * NQ;
   for (int k = 0; k < NX; k++) MU[NH * NX + k] = lg[r0 + k] + lg[r0 + NX + k];
@@ -208,11 +209,11 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
   memset(H, 0, sizeof(double) * NW * NW);
   for (int i = 0; i < NH; i++) {
     const double *mu = MU + (i + 1) * NX;
-    const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
-                 *h = ws->HG + i * NX;
-    const double *Si = ws->S + i * NX * NUU;
-    const double *pz = ws->PZ + i * NX * NUU, *pr = ws->PR + i * NX * NUU,
-                 *ph = ws->PH + i * NX * NUU;
+    const double *x = ws->mem.X + i * NX, *z = ws->mem.ZG + i * NX, *r = ws->mem.RG + i * NX,
+                 *h = ws->mem.HG + i * NX;
+    const double *Si = ws->mem.S + i * NX * NUU;
+    const double *pz = ws->mem.PZ + i * NX * NUU, *pr = ws->mem.PR + i * NX * NUU,
+                 *ph = ws->mem.PH + i * NX * NUU;
     const int K = i * NU, Kc = K + NU;
     double vv[NX], nu[NX];
     for (int k = 0; k < NX; k++) {
@@ -271,7 +272,8 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
 /* lf-independent part of the u_s block: the curvature of x_s(u_s), lambda' d2x_s/du_s2 with
  * lambda = dL/dx_s (the explicit partial: the cost's, the terminal rows' -I, the Y_s rows'
  * D U_o): Z' grad^2_(x,u)(mu' f) Z at (x_s, u_s), Z = [X_s; I], mu = (I - A_s)^-T lambda */
-static void ass_curvature(gk_ws *ws, const double *p, double lf, const double *lg, double *H) {
+VARIANT_ONLY static void ass_curvature(gk_ws *ws, const double *p, double lf,
+                                       const double *lg, double *H) {
 #if HAS_ASS
   const int r0 = (NH - 1) * NQ, r1 = r0 + 2 * NX;
   double lx[NX], W[NV * NV];
@@ -282,10 +284,10 @@ static void ass_curvature(gk_ws *ws, const double *p, double lf, const double *l
   }
   for (int a = 0; a < NQ; a++)
     for (int k = 0; k < NX; k++) lx[k] += DUO[a * NX + k] * lg[r1 + a];
-  lu_solve_t(ws->xs_lu, ws->xs_piv, lx);
-  point_hessian(ws->xs, ws->xs_z, ws->xs_r, ws->xs_h, ws->xs_jh, lx, W, ws->xs_P,
-                ws->xs_P + NX * NV, ws->xs_P + 2 * NX * NV, ws->xs_P + 3 * NX * NV);
-  const double *XS = ws->XS;
+  lu_solve_t(ws->mem.xs_lu, ws->mem.xs_piv, lx);
+  point_hessian(ws->mem.xs, ws->mem.xs_z, ws->mem.xs_r, ws->mem.xs_h, ws->mem.xs_jh, lx, W, ws->work.xs_P,
+                ws->work.xs_P + NX * NV, ws->work.xs_P + 2 * NX * NV, ws->work.xs_P + 3 * NX * NV);
+  const double *XS = ws->mem.XS;
   for (int a = 0; a < NU; a++) {
     double za[NV];    /* W Z[:, a] */
     for (int k = 0; k < NV; k++) {

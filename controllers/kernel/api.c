@@ -1,5 +1,5 @@
-/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): exported entry points: casadi external functions and a plain C API. */
+/* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
+ * generated header, gru_fhocp.h and the parts into one translation unit): exported entry points: casadi external functions and a plain C API. */
 /* ---------------------------------------------------------------- casadi external API */
 static const casadi_int SP_X[3] = {NW, 1, 1}, SP_P[3] = {NP, 1, 1}, SP_1[3] = {1, 1, 1},
                         SP_G[3] = {NG, 1, 1}, SP_J[3] = {NG, NW, 1}, SP_H[3] = {NW, NW, 1};
@@ -25,7 +25,7 @@ static int jac_fg_eval(gk_ws *ws, const double **arg, double **res) {
 }
 
 HOT static int hess_eval(gk_ws *ws, const double **arg, double **res, int clip) {
-  double *Hrm = ws->Hrm;
+  double *Hrm = ws->work.Hrm;
   const double *x = ARG(0, ZERO_W), *p = ARG(1, ZERO_P), *lg = ARG(3, ZERO_G);
   const double lf = arg[2] ? arg[2][0] : 0.0;
   if (!res[0]) return 0;
@@ -39,25 +39,23 @@ HOT static int hess_eval(gk_ws *ws, const double **arg, double **res, int clip) 
   return flag;
 }
 
-/* the casadi functions: each call evaluates in a workspace of the pool (0_workspace.c),
- * timer TIMER of that workspace (GK_TIMERS: fg, jac_fg, hess_l, hess_raw) accumulating its
- * time */
-#define POOLED_EXTERNAL(F, EVAL, TIMER)                                                      \
+/* the casadi functions: each call evaluates in a solver instance laid out in casadi's work
+ * vector w (memory.c: casadi_ws), timer TIMER of that instance (GK_TIMERS: fg, jac_fg,
+ * hess_l, hess_raw) accumulating its time */
+#define CASADI_EXTERNAL(F, EVAL, TIMER)                                                      \
   EXPORT int PFX(F)(const double **arg, double **res, casadi_int *iw, double *w, int mem) {   \
-    (void)iw; (void)w;                                                                        \
-    int slot = 0;                                                                             \
-    gk_ws *ws = pool_take(mem, &slot);                                                        \
-    if (!ws) return 1;                                                                        \
+    (void)iw; (void)mem;                                                                      \
+    if (!w) return 1;                                                                         \
+    gk_ws *ws = casadi_ws(w);                                                                 \
     TK_START                                                                                  \
     const int rc = EVAL;                                                                      \
     TK_STOP(TIMER)                                                                            \
-    pool_give(slot);                                                                          \
     return rc;                                                                                \
   }
-POOLED_EXTERNAL(fg, fg_eval(ws, arg, res), 0)
-POOLED_EXTERNAL(jac_fg, jac_fg_eval(ws, arg, res), 1)
-POOLED_EXTERNAL(hess_l, hess_eval(ws, arg, res, 1), 2)
-POOLED_EXTERNAL(hess_raw, hess_eval(ws, arg, res, 0), 3)
+CASADI_EXTERNAL(fg, fg_eval(ws, arg, res), 0)
+CASADI_EXTERNAL(jac_fg, jac_fg_eval(ws, arg, res), 1)
+CASADI_EXTERNAL(hess_l, hess_eval(ws, arg, res, 1), 2)
+CASADI_EXTERNAL(hess_raw, hess_eval(ws, arg, res, 0), 3)
 
 /* boilerplate of the casadi external interface for function F with given I/O */
 #define CASADI_BOILERPLATE(F, NIN, NOUT, NAMES_IN, NAMES_OUT, SP_IN, SP_OUT)                  \
@@ -84,12 +82,10 @@ POOLED_EXTERNAL(hess_raw, hess_eval(ws, arg, res, 0), 3)
     if (sz_arg) *sz_arg = NIN;                                                                \
     if (sz_res) *sz_res = NOUT;                                                               \
     if (sz_iw) *sz_iw = 0;                                                                    \
-    if (sz_w) *sz_w = 0;                                                                      \
+    if (sz_w) *sz_w = GK_CASADI_W;                                                            \
     return 0;                                                                                 \
   }                                                                                           \
-  EXPORT int PFX(F##_checkout)(void) { /* a pool slot hint per casadi memory */              \
-    return __atomic_fetch_add(&gk_next_mem, 1, __ATOMIC_RELAXED) % GK_POOL;                   \
-  }                                                                                           \
+  EXPORT int PFX(F##_checkout)(void) { return 0; } /* the memory is casadi's work vector */  \
   EXPORT void PFX(F##_release)(int mem) { (void)mem; }                                        \
   EXPORT void PFX(F##_incref)(void) {}                                                        \
   EXPORT void PFX(F##_decref)(void) {}
@@ -106,13 +102,13 @@ CASADI_BOILERPLATE(hess_raw, 4, 1, LIST("x", "p", "lam_f", "lam_g"), LIST("hess_
 /* ---------------------------------------------------------------- plain C API (ctypes) */
 /* states x_0..x_N (NH+1 x NX) from x0 under u (NH x NU); does not touch the cache */
 EXPORT void PFX(simulate)(gk_ws *ws, const double *x0, const double *u, double *x) {
-  simulate(x0, u, x, ws->sz, ws->sr, ws->sh);
+  simulate(x0, u, x, ws->work.sz, ws->work.sr, ws->work.sh);
 }
 
 /* the solver's trajectory at (w, p): the cached one when (w, p) matches, else a rollout */
 EXPORT void PFX(xtraj)(gk_ws *ws, const double *w, const double *p, double *x) {
   roll(ws, w, p, 0);
-  memcpy(x, ws->X, sizeof ws->X);
+  memcpy(x, ws->mem.X, sizeof ws->mem.X);
 }
 
 /* One GRU step x+ = f(x, u) with extra gate inputs dz, dr (the observer eq:observer, as
@@ -124,9 +120,9 @@ EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
   for (int k = 0; k < NX; k++) xn[k] = z[k] * x[k] + (1.0 - z[k]) * h[k];   /* as numpy */
 }
 
-/* The independent check of an input sequence (controllers.fhocp: FHOCP.cost and
+/* The independent check of an input sequence (controllers.ocp.fhocp: FHOCP.cost and
  * FHOCP._residuals on a plain rollout, in one call): states x (NH+1 x NX) from xh under u
- * (NH x NU, used as given), and in out (gk_assessment, controllers/kernel_abi.py) the cost of
+ * (NH x NU, used as given), and in out (gk_assessment, controllers/kernel/kernel_abi.py) the cost of
  * eq:optimization-cost with t = |x_N - x_bar|_inf (+ the input-rate term after up = u_{-1}
  * when HAS_DU; up is not read otherwise), the worst i = 0 output row and the worst of the
  * rows i >= 1 (-inf when none), max |u|, |x_N - x_bar|_inf and the active constraints (output
@@ -136,7 +132,7 @@ EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
 static void assess_core(gk_ws *ws, const double *xh, const double *u, const double *xb,
                         const double *ub, const double *up, const double *bnd, double alpha,
                         double *x, gk_assessment *out) {
-  simulate(xh, u, x, ws->sz, ws->sr, ws->sh);
+  simulate(xh, u, x, ws->work.sz, ws->work.sr, ws->work.sh);
   double acc = 0.0;
   for (int i = 0; i < NH; i++) acc = add_quad(acc, x + i * NX, xb, QW, NX, QDIAG);
   for (int i = 0; i < NH; i++) acc = add_quad(acc, u + i * NU, ub, RW, NU, 0);
@@ -207,7 +203,7 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
   for (int c = 0; c < NW; c++) wc[c] = c < NUA ? fmin(fmax(w[c], -1.0), 1.0) : w[c];
   const double *us = wc + NUU;
   roll(ws, wc, p, 0);   /* x_s(u_s): the reference of the check */
-  memcpy(xs, ws->xs, sizeof xs);
+  memcpy(xs, ws->mem.xs, sizeof xs);
   assess_core(ws, p, uc, xs, us, UPREV(p), bnd, alpha, x, out);
   const double *ry = p + 2 * NX;
   for (int a = 0; a < NY; a++) {
@@ -236,7 +232,7 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
   roll(ws, w, p, 0);
   double d = 0.0;
   for (int c = 0; c < (NH + 1) * NX; c++) {
-    const double e = fabs(ws->X[c] - x[c]);
+    const double e = fabs(ws->mem.X[c] - x[c]);
     if (e > d || e != e) d = e;
   }
   out->defect = d;
@@ -247,7 +243,7 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
  * its key) */
 EXPORT double PFX(terminal_gap)(gk_ws *ws, const double *w, const double *p) {
   roll(ws, w, p, 0);
-  const double *xN = ws->X + NH * NX, *xb = XREF(ws, p);
+  const double *xN = ws->mem.X + NH * NX, *xb = XREF(ws, p);
   double d = 0.0;
   for (int k = 0; k < NX; k++) {
     const double e = fabs(xN[k] - xb[k]);
@@ -257,7 +253,7 @@ EXPORT double PFX(terminal_gap)(gk_ws *ws, const double *w, const double *p) {
 }
 
 /* Equilibrium x = f(x, u), U_o x + b_o = y by Newton's method from (x0, u0), as
- * controllers.governor.equilibrium_newton (square system: NU == NY). Returns 0 when
+ * controllers.ocp.governor.equilibrium_newton (square system: NU == NY). Returns 0 when
  * max|F| < tol was reached (x, u written; the caller checks |u| <= 1), 1 when not converged
  * in max_iter iterations, 2 on a singular Newton matrix. */
 #if NU == NY
@@ -329,41 +325,41 @@ HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u
 #endif
 
 #if HAS_ASS
-/* the artificial steady state of u_s by Newton from x0 (1b_steady_state.c) into xs (NX);
+/* the artificial steady state of u_s by Newton from x0 (steady_state.c) into xs (NX);
  * 0 when converged. Uses the workspace's steady-state scratch and invalidates its cache. */
 EXPORT int PFX(steady)(gk_ws *ws, const double *us, const double *x0, double *xs) {
-  ws->c_level = -1;
+  ws->mem.c_level = -1;
   steady_state(ws, us, x0);
-  memcpy(xs, ws->xs, sizeof ws->xs);
-  return ws->xs_status;
+  memcpy(xs, ws->mem.xs, sizeof ws->mem.xs);
+  return ws->mem.xs_status;
 }
 #endif
 
-EXPORT void PFX(dims)(long *out) {
-  out[0] = NX; out[1] = NU; out[2] = NH; out[3] = NQ; out[4] = NW; out[5] = NG; out[6] = NP;
-  out[7] = NM;
+EXPORT void PFX(dims)(gk_dims *out) {
+  out->n_states = NX; out->n_inputs = NU; out->horizon = NH; out->n_reduced_rows = NQ;
+  out->n_decision = NW; out->n_constraints = NG; out->n_parameters = NP;
+  out->control_horizon = NM; out->n_assess_rows = NL;
 }
 
-EXPORT int PFX(n_assess_rows)(void) { return NL; }
-
-/* the interface types' layout (controllers/kernel_abi.py checks it at load time) */
+/* the interface types' layout, then the instance's size (kernel_abi.check_layout) */
 EXPORT void PFX(abi)(long *out) {
-  out[0] = (long)sizeof(gk_sqp_opts);
-  out[1] = (long)sizeof(gk_sqp_info);
-  out[2] = (long)sizeof(gk_assessment);
-  out[3] = (long)sizeof(gk_ws);
+  static const long sizes[GK_ABI_COUNT] = GK_ABI_SIZES;
+  for (int i = 0; i < GK_ABI_COUNT; i++) out[i] = sizes[i];
 }
 
-/* the workspace's clipping counters (the casadi functions' pool has its own workspaces) */
-EXPORT void PFX(counters)(const gk_ws *ws, long *out) {
-  out[0] = ws->n_calls; out[1] = ws->n_eig; out[2] = ws->n_clipped; out[3] = ws->n_evs;
+/* the instance's clipping counters (a casadi function's evaluations keep none) */
+EXPORT void PFX(counters)(const gk_ws *ws, gk_counters *out) {
+  out->hess_calls = ws->mem.n_calls;
+  out->eig = ws->mem.n_eig;
+  out->clipped = ws->mem.n_clipped;
+  out->eigenvalues_clipped = ws->mem.n_evs;
 }
 
-EXPORT void PFX(invalidate)(gk_ws *ws) { ws->c_level = -1; }
+EXPORT void PFX(invalidate)(gk_ws *ws) { ws->mem.c_level = -1; }
 
 EXPORT void PFX(timers)(const gk_ws *ws, double *out) {
 #ifdef GK_TIMERS
-  for (int i = 0; i < 4; i++) out[i] = ws->tk_acc[i];
+  for (int i = 0; i < 4; i++) out[i] = ws->mem.tk_acc[i];
 #else
   (void)ws;
   for (int i = 0; i < 4; i++) out[i] = -1.0;

@@ -1,28 +1,29 @@
-/* Compiled derivative kernel of the single-shooting FHOCP (controllers.fhocp, eq:optimization).
+/* The compiled kernel of the single-shooting FHOCP (controllers.ocp.fhocp, eq:optimization):
+ * its dimensions, variants and the solver instance's memory (gk_mem, gk_work).
  *
  * The generated header above this line defines the dimensions (NX states, NU inputs, NY
  * outputs, NH horizon stages, NQ reduced output-constraint rows), the GRU weights (row-major,
  * eq:gru; U^T copies for column-oriented mat-vecs, J_z = [U_z W_z], J_r = [U_r W_r]), the cost
  * weights QW (NX x NX, QDIAG when diagonal), RW (NU x NU), SW (s), the reduced constraint rows
  * DUO (NQ x NX), the eigenvalue clipping margin CLIP (< 0: no clipping), HAS_DU and DW (NU,
- * when HAS_DU): the input-rate weights S = diag(DW) (controllers/input_rate.py), PFX(name), the
+ * when HAS_DU): the input-rate weights S = diag(DW) (controllers/ocp/input_rate.py), PFX(name), the
  * symbol prefix (a hash of the source: several kernels can live in one process), and the
- * interface types shared with Python (controllers/kernel_abi.py: gk_sqp_opts, gk_sqp_info,
+ * interface types shared with Python (controllers/kernel/kernel_abi.py: gk_sqp_opts, gk_sqp_info,
  * the gk_sqp_status and gk_qp_status enums), generated from their one definition there.
  *
  * Decision variables w = (u_0 .. u_{N-1}, t) (NW = NH*NU + 1), parameters p = (x_hat, x_bar,
  * u_bar) (NP = 2 NX + NU), then u_prev = u_{-1} when HAS_DU (NP = 2 NX + 2 NU): the cost's
  * input-rate term sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); without it (HAS_DU 0)
- * none of its code is compiled. HAS_ASS 1: the tracking FHOCP (controllers/fhocp_tracking.py,
- * 1b_steady_state.c), w = (u_0 .. u_{NM-1}, u_s, t), p = (x_hat, x_s0, r[, u_prev]), the
+ * none of its code is compiled. HAS_ASS 1: the tracking FHOCP (controllers/ocp/fhocp_tracking.py,
+ * steady_state.c), w = (u_0 .. u_{NM-1}, u_s, t), p = (x_hat, x_s0, r[, u_prev]), the
  * artificial steady state x_s(u_s) in place of x_bar and u_s in place of u_bar; NM <= NH the
  * control horizon: u_i = u_s for i >= NM (UC, KC, NSC below; NM = NH without one).
- * Same mathematics as controllers/shooting.py (GRUShooting.rollout,
- * stage_hessians) and controllers/nlp_single_shooting.py (SingleShootingNLP.objective,
+ * Same mathematics as controllers/ocp/shooting.py (GRUShooting.rollout,
+ * stage_hessians) and controllers/ocp/nlp_single_shooting.py (SingleShootingNLP.objective,
  * constraints, gradient, jacobian, hessian, hessian_convex) -- see there for the formulas;
  * checked against them to ~1e-14 (tests/controllers/test_compiled_kernel.py).
  *
- * Build-time variants (macros, chosen by controllers/compiled_kernel.py):
+ * Build-time variants (macros, chosen by controllers/kernel/compiled_kernel.py):
  *   (default)        W-mode: explicit J_h, [A B] and stage Hessians W_i, then Z_i^T W_i Z_i
  *                    (as numpy); best for n <~ N m.
  *   GK_CONTRACT      contracted mode: J_z Z_i, J_r Z_i, J_h Z_i carried forward instead of
@@ -34,34 +35,16 @@
  *   GK_TIMERS        in-kernel wall-clock accumulators (PFX(timers)).
  *   GK_NO_CLONES     no AVX2/FMA function clones (target_clones) on x86-64.
  *
- * State: everything a call writes lives in one workspace, gk_ws (this file), as acados keeps
- * one memory struct per solver and the Reference-FMUs one ModelInstance per instance: the
- * rollout cache, the derivatives, the Hessian's, the eigenvalue clipping's, the QP's and the
- * SQP's scratch, and the counters. There is no file-level mutable state (only constants and
- * the CPU feature flags set once at load time), so two FHOCPs of one problem in one process,
- * each with its own workspace (PFX(ws_new)), may solve concurrently from two threads and get
- * the same answers as one after the other. The rollout cache of a workspace is keyed by the
- * full (w, p): the f/g, Jacobian and Hessian evaluations at the same point share it.
- *
- * Exported: casadi external functions (casadi's codegen calling convention) PFX(fg),
- * PFX(jac_fg), PFX(hess_l) (clipped), PFX(hess_raw) (unclipped), which take a workspace from
- * a pool for the duration of each call (below); and plain C entry points for ctypes, each
- * taking its workspace first: PFX(simulate), PFX(xtraj), PFX(assess), PFX(assess_w),
- * PFX(clip), PFX(counters), PFX(invalidate), PFX(timers), PFX(grad_l), PFX(qp) (a test hook)
- * and the SQP of the FHOCP in one call, PFX(sqp) (6_sqp.c, with the QP of 5_qp.c); the pure
- * functions PFX(gru_step) and PFX(eq_newton) need none. PFX(ws_new), PFX(ws_free) create and
- * free workspaces, PFX(dims) and PFX(abi) describe the library. The answer check (assess) also
- * needs NL and LUO (NL x NX), the full output-constraint rows L U_o.
+ * The interface (exported entry points, instances, types): gru_fhocp.h.
  */
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sched.h>
 #ifdef GK_TIMERS
 #include <time.h>
 static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &t); return t.tv_sec + 1e-9 * t.tv_nsec; }
 #define TK_START double tk0_ = tk_now();
-#define TK_STOP(i) ws->tk_acc[i] += tk_now() - tk0_;
+#define TK_STOP(i) ws->mem.tk_acc[i] += tk_now() - tk0_;
 #else
 #define TK_START
 #define TK_STOP(i)
@@ -90,10 +73,10 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 #define NW (NUA + 1)
 #define NG ((NH - 1) * NQ + 2 * NX + HAS_ASS * NQ)
 #if HAS_ASS
-/* the tracking FHOCP (1b_steady_state.c): p = (x_hat, x_s0, r[, u_prev]), the set-point
+/* the tracking FHOCP (steady_state.c): p = (x_hat, x_s0, r[, u_prev]), the set-point
  * reference x_bar = x_s(u_s) and u_bar = u_s of the decision vector */
 #define NP (2 * NX + NY + HAS_DU * NU)
-#define XREF(ws, p) ((const double *)(ws)->xs)
+#define XREF(ws, p) ((void)(p), (const double *)(ws)->mem.xs)
 #define UREF(w, p) ((w) + NUU)
 #define UPREV(p) ((p) + 2 * NX + NY)
 #else
@@ -102,7 +85,7 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 #define UREF(w, p) ((p) + 2 * NX)
 #define UPREV(p) ((p) + 2 * NX + NU)
 #endif
-#define QP_NC (2 * (NW + NG))   /* one-sided constraints of the QP (5_qp.c) */
+#define QP_NC (2 * (NW + NG))   /* one-sided constraints of the QP (qp.c) */
 #define EXPORT __attribute__((visibility("default")))
 #define A32 __attribute__((aligned(32)))
 /* hot entry points get an AVX2/FMA clone selected at load time (ifunc), portable otherwise */
@@ -112,12 +95,17 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 #else
 #define HOT
 #endif
+/* helpers that some build-time variants do not call */
+#define VARIANT_ONLY __attribute__((unused))
 
-typedef long long int casadi_int;
-
-/* ---------------------------------------------------------------- the workspace */
-typedef struct gk_ws {
-  /* the cached rollout at (c_w, c_p) (1_rollout.c: roll) */
+/* ---------------------------------------------------------------- the solver's memory
+ * As acados splits a solver's state into mem and work: gk_mem is what persists from one call
+ * to the next (the cached rollout, keyed by (w, p), with the derivatives and the steady state
+ * of that point, and the counters and timers a caller reads afterwards); gk_work is the
+ * scratch one call overwrites (the Hessian's, the eigenvalue clipping's, the QP's and the
+ * SQP's). A solver instance, gk_ws, holds one of each, in one allocation. */
+typedef struct gk_mem {
+  /* the cached rollout at (c_w, c_p) (rollout.c: roll) */
   int c_level;                           /* -1 empty, 0 states, 1 states + derivatives */
   double c_w[NW], c_p[NP];
   A32 double X[(NH + 1) * NX];           /* states x_0 .. x_N */
@@ -128,19 +116,31 @@ typedef struct gk_ws {
 #else
   /* contracted mode: J_z Z_i, J_r Z_i, J_h Z_i per stage (NX x NUU, first (i+1) NU columns) */
   A32 double PZ[NH * NX * NUU], PR[NH * NX * NUU], PH[NH * NX * NUU];
-  A32 double T[NX * NUU];                /* derivatives' scratch */
 #endif
   A32 double S[(NH + 1) * NX * NSC];     /* S_i = dx_i/dw_u, NX x NSC row-major; cols >= KC(i) 0 */
   double uf[NUF];                        /* the inputs u_0 .. u_{N-1} of the cached point */
 #if HAS_ASS
-  /* the artificial steady state of the cached point (1b_steady_state.c): x_s = f(x_s, u_s),
+  /* the artificial steady state of the cached point (steady_state.c): x_s = f(x_s, u_s),
    * X_s = dx_s/du_s = (I - A_s)^-1 B_s (NX x NU row-major), LU of I - A_s, Newton's status */
   double xs[NX], XS[NX * NU], xs_lu[NX * NX];
-  double xs_z[NX], xs_r[NX], xs_h[NX], xs_jh[NX * NV], xs_P[4 * NX * NV];   /* the gates, J_h */
+  double xs_z[NX], xs_r[NX], xs_h[NX], xs_jh[NX * NV];   /* its gates and J_h */
   int xs_piv[NX], xs_status;
+#endif
+  long n_calls, n_eig, n_clipped, n_evs; /* clipping counters (PFX(counters)) */
+#ifdef GK_TIMERS
+  double tk_acc[4];
+#endif
+} gk_mem;
+
+typedef struct gk_work {
+#ifdef GK_CONTRACT
+  A32 double T[NX * NUU];                /* the contracted derivatives' scratch */
+#endif
+#if HAS_ASS
+  A32 double xs_P[4 * NX * NV];          /* the steady state's gate derivatives */
   A32 double ass_ssum[NX * NSC];        /* sum_{i>=1} S_i (ass_hessian) */
 #endif
-  /* the Hessian of the Lagrangian (2b_hessian.c) */
+  /* the Hessian of the Lagrangian (hessian.c) */
   A32 double MU[(NH + 1) * NX];          /* adjoints */
 #ifndef GK_CONTRACT
   A32 double Ph[NX * NV], Pz[NX * NV], Pr[NX * NV], G[NX * NV];   /* stage_hessian */
@@ -154,32 +154,34 @@ typedef struct gk_ws {
   /* plain rollouts (PFX(simulate), assess): the gates, not kept */
   A32 double sz[NH * NX], sr[NH * NX], sh[NH * NX];
   A32 double Hrm[NW * NW];               /* the casadi Hessian's row-major copy */
-  /* eigenvalue clipping (3_eigen_clip.c) */
+  /* eigenvalue clipping (eigen_clip.c) */
   A32 double V[NUA * NUA], Hu[NUA * NUA];
   double d[NUA], e[NUA];
 #ifdef GK_LAPACK_EIG
-  A32 double Z[NUA * NUA], work[26 * NUA];
+  A32 double Z[NUA * NUA], lapack_work[26 * NUA];
   int iwork[10 * NUA], isuppz[2 * NUA];
 #endif
-  long n_calls, n_eig, n_clipped, n_evs; /* clipping counters (PFX(counters)) */
-  /* the QP (5_qp.c) */
+  /* the QP (qp.c) */
   A32 double qL[NW * NW], qJ[NW * NW], qR[NW * NW];
   double qd[NW], qz[NW], qr[NW], qu[NW + 1], qn[NW], qax[NG];
   int qact[NW + 1];
   unsigned char qin[QP_NC];
-  /* the SQP (6_sqp.c) */
+  /* the SQP (sqp.c) */
   A32 double sq_J[NG * NW], sq_H[NW * NW];
   double sq_gf[NW], sq_gz[NG], sq_gl[NW], sq_lbx[NW], sq_ubx[NW], sq_lba[NG], sq_uba[NG],
       sq_dw[NW], sq_lx[NW], sq_la[NG], sq_wc[NW], sq_gc[NG], sq_gq[NW], sq_zx[NW], sq_zg[NG],
       sq_w0[NW], sq_lx0[NW], sq_lg0[NG];   /* the initial guess, for a fresh restart */
-#ifdef GK_TIMERS
-  double tk_acc[4];
-#endif
-} gk_ws;
+} gk_work;
+
+/* one solver instance: what every entry point taking a workspace reads and writes */
+struct gk_ws {
+  gk_mem mem;
+  gk_work work;
+};
 
 static void ws_reset(gk_ws *ws) {
   memset(ws, 0, sizeof *ws);
-  ws->c_level = -1;
+  ws->mem.c_level = -1;
 }
 
 /* a new workspace (NULL when out of memory); free it with PFX(ws_free) */
@@ -192,34 +194,17 @@ EXPORT gk_ws *PFX(ws_new)(void) {
 
 EXPORT void PFX(ws_free)(gk_ws *ws) { free(ws); }
 
-/* ---------------------------------------------------------------- the casadi functions' pool
- * casadi calls an external function with its own memory index (PFX(F_checkout)), which
- * cannot carry a workspace of the caller's. Each call of PFX(fg), PFX(jac_fg), PFX(hess_l)
- * therefore takes a free workspace from this pool for its duration, trying the slot of its
- * memory index first (so that the evaluations of one solver land in one workspace and share
- * its rollout cache), and gives it back on return. A cache keyed by the full (w, p) makes any
- * workspace right for any call; two concurrent calls never share one. */
-#define GK_POOL 64
-static gk_ws *gk_pool[GK_POOL];
-static unsigned char gk_busy[GK_POOL];
-static int gk_next_mem = 0;
+/* ---------------------------------------------------------------- the casadi functions' memory
+ * casadi calls an external function with its own work vector w of the size the function asks
+ * for (PFX(F_work)), one per casadi memory object, never shared by two concurrent calls.
+ * The casadi functions PFX(fg), PFX(jac_fg), PFX(hess_l) evaluate in a solver instance laid
+ * out in that vector (aligned to 64 bytes, hence the slack), reset at each call: casadi may
+ * use the vector for other work between two calls, so nothing is kept from one to the next
+ * and there is no file-level state. */
+#define GK_CASADI_W ((casadi_int)((sizeof(gk_ws) + 63) / sizeof(double)) + 8)
 
-static gk_ws *pool_take(int hint, int *slot) {
-  const int h = hint >= 0 ? hint % GK_POOL : 0;
-  for (;;) {
-    for (int t = 0; t < GK_POOL; t++) {
-      const int i = (h + t) % GK_POOL;
-      if (__atomic_test_and_set(&gk_busy[i], __ATOMIC_ACQUIRE)) continue;
-      if (!gk_pool[i]) gk_pool[i] = PFX(ws_new)();   /* slot i is ours: no race */
-      if (!gk_pool[i]) {
-        __atomic_clear(&gk_busy[i], __ATOMIC_RELEASE);
-        return 0;
-      }
-      *slot = i;
-      return gk_pool[i];
-    }
-    sched_yield();   /* more than GK_POOL concurrent calls: wait for one to end */
-  }
+static gk_ws *casadi_ws(double *w) {
+  gk_ws *ws = (gk_ws *)(((unsigned long)w + 63) & ~(unsigned long)63);
+  ws_reset(ws);
+  return ws;
 }
-
-static void pool_give(int slot) { __atomic_clear(&gk_busy[slot], __ATOMIC_RELEASE); }

@@ -1,5 +1,5 @@
-/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): the GRU rollout,
+/* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
+ * generated header, gru_fhocp.h and the parts into one translation unit): the GRU rollout,
  * the stage Jacobians and sensitivities, cached in the workspace, and the small dense
  * products they use. */
 static const double ZERO_W[NW];
@@ -203,7 +203,7 @@ extern void dsyevr_(const char *, const char *, const char *, const int *, doubl
  * the library is loaded) */
 __attribute__((constructor)) static void gk_blas_init(void) { openblas_set_num_threads(1); }
 /* row-major C (m x n, ldc) = op(A) op(B) + beta C, op(X) = X^T when tX */
-static void rm_gemm(int ta, int tb, int m, int n, int k, const double *A, int lda,
+VARIANT_ONLY static void rm_gemm(int ta, int tb, int m, int n, int k, const double *A, int lda,
                     const double *B, int ldb, double beta, double *C, int ldc) {
   const double one = 1.0;
   const char cA = ta ? 'T' : 'N', cB = tb ? 'T' : 'N';
@@ -318,14 +318,14 @@ static inline void stage_jac(const double *x, const double *z, const double *r, 
 /* stage Jacobians D_f = [A B], J_h and sensitivities S of the cached states */
 HOT static void derivatives(gk_ws *ws) {
   for (int i = 0; i < NH; i++) {
-    const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
-                 *h = ws->HG + i * NX;
-    double *jh = ws->JH + i * NX * NV, *df = ws->DF + i * NX * NV;
+    const double *x = ws->mem.X + i * NX, *z = ws->mem.ZG + i * NX, *r = ws->mem.RG + i * NX,
+                 *h = ws->mem.HG + i * NX;
+    double *jh = ws->mem.JH + i * NX * NV, *df = ws->mem.DF + i * NX * NV;
     stage_jac(x, z, r, h, jh, df);
     /* S_{i+1} = A_i S_i + B_i E_i (the first KC(i) columns of S_i are nonzero; B_i goes to
      * u_i's columns UC(i): new ones, or u_s's, already among them, in the tail) */
-    const double *Si = ws->S + i * NX * NSC;
-    double *Sn = ws->S + (i + 1) * NX * NSC;
+    const double *Si = ws->mem.S + i * NX * NSC;
+    double *Sn = ws->mem.S + (i + 1) * NX * NSC;
     const int K = KC(i), uc = UC(i);
 #ifdef GK_BLAS
     if (K > 0) rm_gemm(0, 0, NX, K, NX, df, NV, Si, NSC, 0.0, Sn, NSC);
@@ -348,14 +348,14 @@ HOT static void derivatives(gk_ws *ws) {
  *   S_{i+1} = diag((x - h) z') PZ + diag((1 - z) h') PH + diag(z) S.
  * 3 n^2 Kc per stage instead of n^2 (n + m) + n^2 K. */
 HOT static void derivatives(gk_ws *ws) {
-  double *T = ws->T;
+  double *T = ws->work.T;
   for (int i = 0; i < NH; i++) {
-    const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
-                 *h = ws->HG + i * NX;
-    const double *Si = ws->S + i * NX * NUU;
-    double *Sn = ws->S + (i + 1) * NX * NUU;
-    double *pz = ws->PZ + i * NX * NUU, *pr = ws->PR + i * NX * NUU,
-           *ph = ws->PH + i * NX * NUU;
+    const double *x = ws->mem.X + i * NX, *z = ws->mem.ZG + i * NX, *r = ws->mem.RG + i * NX,
+                 *h = ws->mem.HG + i * NX;
+    const double *Si = ws->mem.S + i * NX * NUU;
+    double *Sn = ws->mem.S + (i + 1) * NX * NUU;
+    double *pz = ws->mem.PZ + i * NX * NUU, *pr = ws->mem.PR + i * NX * NUU,
+           *ph = ws->mem.PH + i * NX * NUU;
     const int K = i * NU, Kc = K + NU;
     mm(NX, K, NX, UZ, NX, Si, NUU, pz, NUU);
     mm(NX, K, NX, UR, NX, Si, NUU, pr, NUU);
@@ -395,24 +395,24 @@ static void steady_state(gk_ws *ws, const double *us, const double *x0);   /* 1b
 HOT static void roll(gk_ws *ws, const double *w, const double *p, int level) {
   /* keyed by the inputs (u, and u_s with HAS_ASS) and p: the terminal slack t does not enter
    * the rollout, so setting it (terminal_gap, then the SQP) keeps the cache */
-  if (ws->c_level < 0 || memcmp(w, ws->c_w, NUA * sizeof(double)) != 0 ||
-      memcmp(p, ws->c_p, sizeof ws->c_p) != 0) {
-    memcpy(ws->c_w, w, sizeof ws->c_w);
-    memcpy(ws->c_p, p, sizeof ws->c_p);
+  if (ws->mem.c_level < 0 || memcmp(w, ws->mem.c_w, NUA * sizeof(double)) != 0 ||
+      memcmp(p, ws->mem.c_p, sizeof ws->mem.c_p) != 0) {
+    memcpy(ws->mem.c_w, w, sizeof ws->mem.c_w);
+    memcpy(ws->mem.c_p, p, sizeof ws->mem.c_p);
 #if NM < NH   /* the tail of a control horizon: u_i = u_s, expanded into uf */
-    for (int i = 0; i < NH; i++) memcpy(ws->uf + i * NU, w + UC(i), NU * sizeof(double));
-    simulate(p, ws->uf, ws->X, ws->ZG, ws->RG, ws->HG);
+    for (int i = 0; i < NH; i++) memcpy(ws->mem.uf + i * NU, w + UC(i), NU * sizeof(double));
+    simulate(p, ws->mem.uf, ws->mem.X, ws->mem.ZG, ws->mem.RG, ws->mem.HG);
 #else         /* u_0 .. u_{N-1} are w's first NUF entries */
-    simulate(p, w, ws->X, ws->ZG, ws->RG, ws->HG);
+    simulate(p, w, ws->mem.X, ws->mem.ZG, ws->mem.RG, ws->mem.HG);
 #endif
 #if HAS_ASS
     steady_state(ws, w + NUU, p + NX);
 #endif
-    ws->c_level = 0;
+    ws->mem.c_level = 0;
   }
-  if (level >= 1 && ws->c_level < 1) {
+  if (level >= 1 && ws->mem.c_level < 1) {
     derivatives(ws);
-    ws->c_level = 1;
+    ws->mem.c_level = 1;
   }
 }
 

@@ -1,5 +1,5 @@
-/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): eigenvalue clipping of the Hessian (convex QPs for the SQP). */
+/* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
+ * generated header, gru_fhocp.h and the parts into one translation unit): eigenvalue clipping of the Hessian (convex QPs for the SQP). */
 /* ---------------------------------------------------------------- eigenvalue clipping */
 /* Householder tridiagonalisation + implicit QL (JAMA / EISPACK tred2, tql2). V (n x n,
  * row-major) holds the symmetric matrix on entry, the eigenvectors as ROWS on exit (row j:
@@ -150,7 +150,7 @@ HOT static int tql2(int n, double *V, double *d, double *e) {
 #undef VV
 }
 
-static int symm_eig(int n, double *V, double *d, double *e) {
+VARIANT_ONLY static int symm_eig(int n, double *V, double *d, double *e) {
   tred2(n, V, d, e);
   return tql2(n, V, d, e);
 }
@@ -191,14 +191,14 @@ HOT static int pd_shifted(const double *H, int n, double clip, double *L) {
  * s t^2 does not couple t with u, and no constraint is nonlinear in t), so the u-block is
  * decomposed alone; same result as the eigendecomposition of the whole matrix. */
 HOT static int clip_hessian(gk_ws *ws, double *H) {
-  double *V = ws->V, *Hu = ws->Hu, *d = ws->d;
-  ws->n_calls++;
+  double *V = ws->work.V, *Hu = ws->work.Hu, *d = ws->work.d;
+  ws->mem.n_calls++;
   if (CLIP < 0) return 0;
   if (H[IT * NW + IT] < CLIP) H[IT * NW + IT] = CLIP;
   for (int i = 0; i < NUA; i++)
     for (int j = 0; j < NUA; j++) Hu[i * NUA + j] = H[i * NW + j];
   if (pd_shifted(Hu, NUA, CLIP, V)) return 0;
-  ws->n_eig++;
+  ws->mem.n_eig++;
   /* symmetric copy from the lower triangle H[i][j], i >= j (what numpy's eigh reads) */
   for (int i = 0; i < NUA; i++)
     for (int j = 0; j < NUA; j++) V[i * NUA + j] = (j <= i) ? Hu[i * NUA + j] : Hu[j * NUA + i];
@@ -212,21 +212,21 @@ HOT static int clip_hessian(gk_ws *ws, double *H) {
     const int nn = NUA, lwork = 26 * NUA, liwork = 10 * NUA, il = 1, iu = NUA;
     const double vl = -1e300, vu = CLIP, abstol = 0.0;
     int info = 0;
-    dsyevr_("V", "V", "U", &nn, V, &nn, &vl, &vu, &il, &iu, &abstol, &ne, d, ws->Z, &nn,
-            ws->isuppz, ws->work, &lwork, ws->iwork, &liwork, &info);
+    dsyevr_("V", "V", "U", &nn, V, &nn, &vl, &vu, &il, &iu, &abstol, &ne, d, ws->work.Z, &nn,
+            ws->work.isuppz, ws->work.lapack_work, &lwork, ws->work.iwork, &liwork, &info);
     if (info != 0) return -1;
-    memcpy(V, ws->Z, sizeof(double) * NUA * ne);
+    memcpy(V, ws->work.Z, sizeof(double) * NUA * ne);
   }
 #else
   /* full decomposition (tred2 + tql2): eigenvectors as rows of V. Computing only the
    * eigenpairs below CLIP by hand (QL without vectors + inverse iteration) was measured no
    * faster in closed loop (~2.4 eigenvalues clipped per decomposition) and removed. */
-  if (symm_eig(NUA, V, d, ws->e) != 0) return -1;
+  if (symm_eig(NUA, V, d, ws->work.e) != 0) return -1;
 #endif
   for (int j = 0; j < ne; j++) {
     if (d[j] >= CLIP) continue;
     any = 1;
-    ws->n_evs++;
+    ws->mem.n_evs++;
     const double a = CLIP - d[j], *vj = V + j * NUA;
     for (int r = 0; r < NUA; r++) {
       const double vr = a * vj[r];
@@ -234,7 +234,7 @@ HOT static int clip_hessian(gk_ws *ws, double *H) {
       for (int c = 0; c < NUA; c++) hr[c] += vr * vj[c];
     }
   }
-  if (any) ws->n_clipped++;
+  if (any) ws->mem.n_clipped++;
   return 0;
 }
 

@@ -1,8 +1,8 @@
-/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): the SQP loop of
+/* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
+ * generated header, gru_fhocp.h and the parts into one translation unit): the SQP loop of
  * the FHOCP in C, the same iteration as casadi 3.8 sqpmethod with the exact Hessian (its
  * eigenvalue-clipped version, as hess_l) and an l1-merit Armijo line search, with the QP of
- * 5_qp.c in place of qpOASES:
+ * qp.c in place of qpOASES:
  *
  *   loop: f, g and grad L = grad f + J' lam_g + lam_x at w (an adjoint sweep);
  *         stop when max violation < tol_pr and |grad L|inf < tol_du ("Solve_Succeeded"; with
@@ -106,10 +106,10 @@ static int iterate(gk_ws *ws, const double *p, const double *lbx, const double *
                    const double *lbg, const double *ubg, double *w, double *lam_x,
                    double *lam_g, double fk, const gk_sqp_opts *opt, double reuse_step,
                    double *sigma, double *drift, gk_sqp_info *info) {
-  double *sq_gf = ws->sq_gf, *sq_gz = ws->sq_gz, *sq_J = ws->sq_J, *sq_H = ws->sq_H,
-         *sq_lbx = ws->sq_lbx, *sq_ubx = ws->sq_ubx, *sq_lba = ws->sq_lba,
-         *sq_uba = ws->sq_uba, *sq_dw = ws->sq_dw, *sq_lx = ws->sq_lx, *sq_la = ws->sq_la,
-         *sq_wc = ws->sq_wc, *sq_gc = ws->sq_gc;
+  double *sq_gf = ws->work.sq_gf, *sq_gz = ws->work.sq_gz, *sq_J = ws->work.sq_J, *sq_H = ws->work.sq_H,
+         *sq_lbx = ws->work.sq_lbx, *sq_ubx = ws->work.sq_ubx, *sq_lba = ws->work.sq_lba,
+         *sq_uba = ws->work.sq_uba, *sq_dw = ws->work.sq_dw, *sq_lx = ws->work.sq_lx, *sq_la = ws->work.sq_la,
+         *sq_wc = ws->work.sq_wc, *sq_gc = ws->work.sq_gc;
   const double c1 = opt->c1, beta = opt->beta;
   const int max_iter_ls = opt->max_iter_ls;
   for (int j = 0; j < NW; j++) { sq_lbx[j] = lbx[j] - w[j]; sq_ubx[j] = ubx[j] - w[j]; }
@@ -118,10 +118,10 @@ static int iterate(gk_ws *ws, const double *p, const double *lbx, const double *
     const double *qlin = sq_gf;
     double t0 = sq_now();
     if (reuse) {   /* grad f by an adjoint sweep; the QP's gradient adjoint-corrected */
-      lagrangian_gradient(ws, w, p, ws->sq_zx, ws->sq_zg, sq_gf);
+      lagrangian_gradient(ws, w, p, ws->work.sq_zx, ws->work.sq_zg, sq_gf);
       for (int j = 0; j < NW; j++)
-        ws->sq_gq[j] = ws->sq_gl[j] - lam_x[j] - gk_dot(sq_J + (size_t)j * NG, lam_g, NG);
-      qlin = ws->sq_gq;
+        ws->work.sq_gq[j] = ws->work.sq_gl[j] - lam_x[j] - gk_dot(sq_J + (size_t)j * NG, lam_g, NG);
+      qlin = ws->work.sq_gq;
       info->t_derivatives += sq_now() - t0;
     } else {       /* grad f and jac g (the sensitivities), the Hessian */
       roll(ws, w, p, 1);
@@ -174,8 +174,8 @@ static int iterate(gk_ws *ws, const double *p, const double *lbx, const double *
       for (int r = 0; r < NG; r++) lam_g[r] = (1.0 - t) * lam_g[r] + t * sq_la[r];
       for (int j = 0; j < NW; j++) sq_dw[j] *= t;
     } else {
-      memcpy(lam_x, sq_lx, sizeof ws->sq_lx);
-      memcpy(lam_g, sq_la, sizeof ws->sq_la);
+      memcpy(lam_x, sq_lx, sizeof ws->work.sq_lx);
+      memcpy(lam_g, sq_la, sizeof ws->work.sq_la);
     }
     double dwn = 0.0;
     for (int j = 0; j < NW; j++) {
@@ -196,12 +196,12 @@ static int sqp_loop(gk_ws *ws, const double *p, const double *lbx, const double 
                     const double *lbg, const double *ubg, double *w, double *lam_x,
                     double *lam_g, double *f, const gk_sqp_opts *opt, double reuse_step,
                     double start, gk_sqp_info *info) {
-  double *sq_gz = ws->sq_gz, *sq_gl = ws->sq_gl, *sq_dw = ws->sq_dw;
+  double *sq_gz = ws->work.sq_gz, *sq_gl = ws->work.sq_gl, *sq_dw = ws->work.sq_dw;
   const double tol_pr = opt->tol_pr, tol_du = opt->tol_du, min_step = opt->min_step_size;
   const int max_iter = opt->max_iter, du_relative = opt->tol_du_relative;
   double sigma = 0.0, fk = 0.0, drift = INFINITY;
   int iter = 0, status = GK_SQP_SOLVE_SUCCEEDED;
-  memset(sq_dw, 0, sizeof ws->sq_dw);
+  memset(sq_dw, 0, sizeof ws->work.sq_dw);
   for (;;) {
     /* the stopping tests first: f, g and the Lagrangian's gradient need no sensitivities */
     double t0 = sq_now();
@@ -262,22 +262,22 @@ EXPORT int PFX(sqp)(gk_ws *ws, const double *p, const double *lbx, const double 
   const int may_reuse = opt->reuse_step > 0.0;
   memset(info, 0, sizeof *info);
   if (may_reuse) {   /* the initial guess, for a fresh restart */
-    memcpy(ws->sq_w0, w, sizeof ws->sq_w0);
-    memcpy(ws->sq_lx0, lam_x, sizeof ws->sq_lx0);
-    memcpy(ws->sq_lg0, lam_g, sizeof ws->sq_lg0);
+    memcpy(ws->work.sq_w0, w, sizeof ws->work.sq_w0);
+    memcpy(ws->work.sq_lx0, lam_x, sizeof ws->work.sq_lx0);
+    memcpy(ws->work.sq_lg0, lam_g, sizeof ws->work.sq_lg0);
   }
   int status = sqp_loop(ws, p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, f, opt,
                         may_reuse ? opt->reuse_step : 0.0, start, info);
   if (may_reuse && info->derivative_reuses > 0 && status != GK_SQP_SOLVE_SUCCEEDED &&
       status != GK_SQP_USER_REQUESTED_STOP) {
-    memcpy(w, ws->sq_w0, sizeof ws->sq_w0);
-    memcpy(lam_x, ws->sq_lx0, sizeof ws->sq_lx0);
-    memcpy(lam_g, ws->sq_lg0, sizeof ws->sq_lg0);
+    memcpy(w, ws->work.sq_w0, sizeof ws->work.sq_w0);
+    memcpy(lam_x, ws->work.sq_lx0, sizeof ws->work.sq_lx0);
+    memcpy(lam_g, ws->work.sq_lg0, sizeof ws->work.sq_lg0);
     info->fresh_restarts = 1;
     info->discarded_iterations = info->iterations;
     status = sqp_loop(ws, p, lbx, ubx, lbg, ubg, w, lam_x, lam_g, f, opt, 0.0, start, info);
   }
-  memcpy(g, ws->sq_gz, sizeof ws->sq_gz);
+  memcpy(g, ws->work.sq_gz, sizeof ws->work.sq_gz);
   info->status = status;
   return status;
 }

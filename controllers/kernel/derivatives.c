@@ -1,6 +1,6 @@
-/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and 0_workspace.c ... 6_sqp.c into one translation unit): f, g, their
- * derivatives and the adjoints (the Hessian of the Lagrangian: 2b_hessian.c). */
+/* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
+ * generated header, gru_fhocp.h and the parts into one translation unit): f, g, their
+ * derivatives and the adjoints (the Hessian of the Lagrangian: hessian.c). */
 /* ---------------------------------------------------------------- f, g, grad f, jac g */
 /* acc + (v - ref)^T W (v - ref), n <= NX + NU, W row-major n x n (terms added one by one) */
 __attribute__((always_inline)) static inline double add_quad(
@@ -20,7 +20,7 @@ __attribute__((always_inline)) static inline double add_quad(
 }
 
 #if HAS_DU
-/* The input-rate term (controllers/input_rate.py) of inputs u (nst x NU) after up = u_{-1}:
+/* The input-rate term (controllers/ocp/input_rate.py) of inputs u (nst x NU) after up = u_{-1}:
  * sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); nst = NM on w (the free inputs: with a
  * control horizon the step to u_s is the tracking FHOCP's last term, ass_cost), NH on a
  * rollout's inputs */
@@ -63,7 +63,7 @@ static void du_hessian(double lf, double *H) {
 HOT static double cost(const gk_ws *ws, const double *w, const double *p) {
   const double *xb = XREF(ws, p), *ub = UREF(w, p), t = w[IT];
   double acc = 0.0;
-  for (int i = 0; i < NH; i++) acc = add_quad(acc, ws->X + i * NX, xb, QW, NX, QDIAG);
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, ws->mem.X + i * NX, xb, QW, NX, QDIAG);
   for (int i = 0; i < NM; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU, 0);   /* tail: 0 */
 #if HAS_ASS
   acc += ass_cost(ws, w, p);
@@ -76,7 +76,7 @@ HOT static double cost(const gk_ws *ws, const double *w, const double *p) {
 }
 
 HOT static void constraints(const gk_ws *ws, const double *w, const double *p, double *g) {
-  const double *xb = XREF(ws, p), t = w[IT], *X = ws->X;
+  const double *xb = XREF(ws, p), t = w[IT], *X = ws->mem.X;
   for (int i = 1; i < NH; i++)
     for (int a = 0; a < NQ; a++) {
       double s = 0.0;
@@ -95,7 +95,7 @@ HOT static void constraints(const gk_ws *ws, const double *w, const double *p, d
 }
 
 HOT static void gradient(const gk_ws *ws, const double *w, const double *p, double *grad) {
-  const double *xb = XREF(ws, p), *ub = UREF(w, p), *X = ws->X, *S = ws->S;
+  const double *xb = XREF(ws, p), *ub = UREF(w, p), *X = ws->mem.X, *S = ws->mem.S;
   for (int c = 0; c < NUA; c++) grad[c] = 0.0;
   for (int i = 1; i < NH; i++) {
     double dq[NX];
@@ -128,7 +128,7 @@ HOT static void gradient(const gk_ws *ws, const double *w, const double *p, doub
 
 /* dense column-major NG x NW */
 HOT static void jacobian(const gk_ws *ws, double *J) {
-  const double *S = ws->S;
+  const double *S = ws->mem.S;
   memset(J, 0, sizeof(double) * NG * NW);
   for (int i = 1; i < NH; i++) {
     const double *Si = S + i * NX * NSC;
@@ -165,7 +165,8 @@ HOT static void jacobian(const gk_ws *ws, double *J) {
 /* the last lines of every Hessian variant: the input-rate term's constant Hessian (HAS_DU),
  * the artificial steady input's rows (HAS_ASS), the upper triangle of the input block
  * mirrored into the lower one, and the terminal slack's entry */
-static void ass_curvature(gk_ws *ws, const double *p, double lf, const double *lg, double *H);
+VARIANT_ONLY static void ass_curvature(gk_ws *ws, const double *p, double lf,
+                                       const double *lg, double *H);
 
 __attribute__((always_inline)) static inline void hessian_finish(gk_ws *ws, const double *p,
                                                                const double *lg, double *H,
@@ -190,7 +191,7 @@ __attribute__((always_inline)) static inline void hessian_finish(gk_ws *ws, cons
 __attribute__((always_inline)) static inline void adjoint_local(const gk_ws *ws, int i,
                                                               const double *xb, double lf,
                                                               const double *lam, double *mu) {
-  const double *X = ws->X;
+  const double *X = ws->mem.X;
   for (int k = 0; k < NX; k++) {
     double s = 0.0;
     for (int j = 0; j < NX; j++) s += (X[i * NX + j] - xb[j]) * QW[j * NX + k];
@@ -207,8 +208,8 @@ __attribute__((always_inline)) static inline void adjoint_local(const gk_ws *ws,
 __attribute__((always_inline)) static inline void stage_vjp(const gk_ws *ws, int i,
                                                           const double *v, double *gx,
                                                           double *gu) {
-  const double *x = ws->X + i * NX, *z = ws->ZG + i * NX, *r = ws->RG + i * NX,
-               *h = ws->HG + i * NX;
+  const double *x = ws->mem.X + i * NX, *z = ws->mem.ZG + i * NX, *r = ws->mem.RG + i * NX,
+               *h = ws->mem.HG + i * NX;
   double av[NX], bv[NX], q[NX], cq[NX];
   for (int k = 0; k < NX; k++) {
     const double zp = z[k] * (1.0 - z[k]), hp = 1.0 - h[k] * h[k];

@@ -1,7 +1,7 @@
-/* Part of the compiled FHOCP kernel (controllers/compiled_kernel.py concatenates the
- * generated header and the parts into one translation unit): the artificial steady state of
- * the tracking FHOCP (HAS_ASS 1; controllers/fhocp_tracking.py, the same mathematics as
- * controllers/steady_state.py and controllers/nlp_tracking.py).
+/* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
+ * generated header, gru_fhocp.h and the parts into one translation unit): the artificial steady state of
+ * the tracking FHOCP (HAS_ASS 1; controllers/ocp/fhocp_tracking.py, the same mathematics as
+ * controllers/ocp/steady_state.py and controllers/ocp/nlp_tracking.py).
  *
  * The decision vector ends with u_s (then t); x_s = x_s(u_s) is the GRU's fixed point
  * x_s = f(x_s, u_s) (unique: f(., u_s) contracts, th:stability-bonassi), found by Newton's
@@ -10,7 +10,7 @@
  * (x_s, u_s). The cost adds the offset term ||U_o x_s + b_o - r||^2_T (r = y_bar - d_hat,
  * TW = diag T) and, with HAS_DU, the terminal input-rate term ||u_{N-1} - u_s||^2_S; the
  * constraints add the rows D U_o x_s (the steady output in Y_s, bounds set per solve). The
- * Hessian's u_s block includes the curvature of x_s(u_s) (ass_curvature, 2b_hessian.c:
+ * Hessian's u_s block includes the curvature of x_s(u_s) (ass_curvature, hessian.c:
  * one transposed solve and the point Hessian at (x_s, u_s)). */
 #if HAS_ASS
 #define XS_MAX_ITER 50
@@ -89,11 +89,11 @@ static int xs_linearise(const double *x, const double *us, double *F, double *M,
  * (xs_status 1), which makes the cost NaN and the line search step back. */
 static void steady_state(gk_ws *ws, const double *us, const double *x0) {
   double F[NX], df[NX * NV];
-  double *x = ws->xs, *M = ws->xs_lu, *z = ws->xs_z, *r = ws->xs_r, *h = ws->xs_h,
-         *jh = ws->xs_jh;
-  int *piv = ws->xs_piv;
-  memcpy(x, x0, sizeof ws->xs);
-  ws->xs_status = 1;
+  double *x = ws->mem.xs, *M = ws->mem.xs_lu, *z = ws->mem.xs_z, *r = ws->mem.xs_r, *h = ws->mem.xs_h,
+         *jh = ws->mem.xs_jh;
+  int *piv = ws->mem.xs_piv;
+  memcpy(x, x0, sizeof ws->mem.xs);
+  ws->mem.xs_status = 1;
   for (int it = 0; it < XS_MAX_ITER; it++) {
     if (xs_linearise(x, us, F, M, piv, df, z, r, h, jh)) break;
     lu_solve(M, piv, F, 1);
@@ -104,17 +104,17 @@ static void steady_state(gk_ws *ws, const double *us, const double *x0) {
       if (fabs(x[k]) > xn) xn = fabs(x[k]);
     }
     if (!(dn == dn)) break;
-    if (dn <= XS_TOL * xn) { ws->xs_status = 0; break; }
+    if (dn <= XS_TOL * xn) { ws->mem.xs_status = 0; break; }
   }
-  if (ws->xs_status == 0 && xs_linearise(x, us, F, M, piv, df, z, r, h, jh)) ws->xs_status = 1;
-  if (ws->xs_status != 0) {
+  if (ws->mem.xs_status == 0 && xs_linearise(x, us, F, M, piv, df, z, r, h, jh)) ws->mem.xs_status = 1;
+  if (ws->mem.xs_status != 0) {
     for (int k = 0; k < NX; k++) x[k] = NAN;
-    for (int k = 0; k < NX * NU; k++) ws->XS[k] = NAN;
+    for (int k = 0; k < NX * NU; k++) ws->mem.XS[k] = NAN;
     return;
   }
   for (int k = 0; k < NX; k++)
-    for (int j = 0; j < NU; j++) ws->XS[k * NU + j] = df[k * NV + NX + j];
-  for (int j = 0; j < NU; j++) lu_solve(M, piv, ws->XS + j, NU);
+    for (int j = 0; j < NU; j++) ws->mem.XS[k * NU + j] = df[k * NV + NX + j];
+  for (int j = 0; j < NU; j++) lu_solve(M, piv, ws->mem.XS + j, NU);
 }
 
 /* the tracking FHOCP's extra cost: ||U_o x_s + b_o - r||^2_T (+ ||u_{NM-1} - u_s||^2_S: the
@@ -124,7 +124,7 @@ static double ass_cost(const gk_ws *ws, const double *w, const double *p) {
   double acc = 0.0;
   for (int a = 0; a < NY; a++) {
     double e = BO[a] - r[a];
-    for (int k = 0; k < NX; k++) e += UO[a * NX + k] * ws->xs[k];
+    for (int k = 0; k < NX; k++) e += UO[a * NX + k] * ws->mem.xs[k];
     acc += (e * TW[a]) * e;
   }
 #if HAS_DU
@@ -143,18 +143,18 @@ static void ass_constraints(const gk_ws *ws, double *g) {
   double *gs = g + (NH - 1) * NQ + 2 * NX;
   for (int a = 0; a < NQ; a++) {
     double s = 0.0;
-    for (int k = 0; k < NX; k++) s += DUO[a * NX + k] * ws->xs[k];
+    for (int k = 0; k < NX; k++) s += DUO[a * NX + k] * ws->mem.xs[k];
     gs[a] = s;
   }
 }
 
 /* dJ/dx_s with lf = 1: -2 Q sum_{i<N} (x_i - x_s) + 2 U_o' T (U_o x_s + b_o - r), into gx */
 static void ass_dcost_dxs(const gk_ws *ws, const double *p, double *gx) {
-  const double *r = p + 2 * NX, *xs = ws->xs;
+  const double *r = p + 2 * NX, *xs = ws->mem.xs;
   double dx[NX], te[NY];
   for (int k = 0; k < NX; k++) dx[k] = 0.0;
   for (int i = 0; i < NH; i++)
-    for (int k = 0; k < NX; k++) dx[k] += ws->X[i * NX + k] - xs[k];
+    for (int k = 0; k < NX; k++) dx[k] += ws->mem.X[i * NX + k] - xs[k];
   for (int k = 0; k < NX; k++) {
     double s = 0.0;
     for (int j = 0; j < NX; j++) s += dx[j] * (2.0 * QW[j * NX + k]);
@@ -176,7 +176,7 @@ static void ass_grad_us(const gk_ws *ws, const double *w, const double *lx, doub
   const double *us = w + NUU;
   for (int c = 0; c < NU; c++) {
     double s = 0.0;
-    for (int k = 0; k < NX; k++) s += ws->XS[k * NU + c] * lx[k];
+    for (int k = 0; k < NX; k++) s += ws->mem.XS[k * NU + c] * lx[k];
     for (int i = 0; i < NM; i++)
       for (int j = 0; j < NU; j++) s -= (w[i * NU + j] - us[j]) * (2.0 * RW[j * NU + c]);
     grad[NUU + c] += s;
@@ -218,12 +218,12 @@ static void ass_jacobian(const gk_ws *ws, double *J) {
   for (int c = 0; c < NU; c++) {
     double *col = J + (NUU + c) * NG;
     for (int k = 0; k < NX; k++) {
-      col[r0 + k] -= ws->XS[k * NU + c];
-      col[r0 + NX + k] -= ws->XS[k * NU + c];
+      col[r0 + k] -= ws->mem.XS[k * NU + c];
+      col[r0 + NX + k] -= ws->mem.XS[k * NU + c];
     }
     for (int a = 0; a < NQ; a++) {
       double s = 0.0;
-      for (int k = 0; k < NX; k++) s += DUO[a * NX + k] * ws->XS[k * NU + c];
+      for (int k = 0; k < NX; k++) s += DUO[a * NX + k] * ws->mem.XS[k * NU + c];
       col[r1 + a] = s;
     }
   }
@@ -236,7 +236,7 @@ static void ass_jacobian(const gk_ws *ws, double *J) {
  * input-rate term's 2S on u_{NM-1} */
 HOT static void ass_hessian(gk_ws *ws, double lf, double *H) {
   double QX[NX * NU], MX[NX * NU];
-  const double *XS = ws->XS;
+  const double *XS = ws->mem.XS;
   for (int k = 0; k < NX; k++)
     for (int c = 0; c < NU; c++) {
       double s = 0.0, t = 0.0;
@@ -251,10 +251,10 @@ HOT static void ass_hessian(gk_ws *ws, double lf, double *H) {
     }
   /* sum_{i>=1} S_i' QX = (sum_{i>=1} S_i)' QX (S_i's columns from KC(i) on are zero: inputs
    * after stage i do not move x_i), the sum by contiguous rows */
-  double *SS = ws->ass_ssum, V[NSC * NU];
-  memset(SS, 0, sizeof ws->ass_ssum);
+  double *SS = ws->work.ass_ssum, V[NSC * NU];
+  memset(SS, 0, sizeof ws->work.ass_ssum);
   for (int i = 1; i < NH; i++) {
-    const double *Si = ws->S + i * NX * NSC;
+    const double *Si = ws->mem.S + i * NX * NSC;
     const int K = KC(i);
     for (int k = 0; k < NX; k++) {
       double *__restrict sk = SS + k * NSC;
