@@ -1,8 +1,9 @@
 """Build the four-tank plant FMUs from their C sources.
 
-``build_fmus()`` compiles the sources of the :mod:`fmus` package, ``fmus/fourtank/*.c``
-(``model.c``, ``instance.c`` and the FMI 2 or FMI 3 glue), with gcc against the FMI headers
-shipped with fmpy (``fmpy/c-code``) and zips two source-and-binary FMUs:
+``build_fmus()`` compiles the sources of the :mod:`fmus` package, the model
+``fmus/fourtank/model.c`` with the FMI glue every C model shares (``fmus/glue/instance.c``
+and ``fmi2.c`` or ``fmi3.c``, as the Modelica Reference-FMUs share theirs), with gcc against
+the FMI headers shipped with fmpy (``fmpy/c-code``) and zips two source-and-binary FMUs:
 
 * ``FourTank.fmu`` -- FMI 2.0, Co-Simulation and Model Exchange, binary under
   ``binaries/linux64/``;
@@ -34,15 +35,20 @@ from pathlib import Path
 import fmus
 from cosim.core.errors import CosimError
 
-__all__ = ["BUILD_DIR", "CACHE_APP", "CFLAGS", "DEFAULT_PROBLEM", "FMU_DIR", "LDFLAGS",
-           "MODEL_IDENTIFIER", "PACKAGE_DIR", "SOURCE_DIR", "TARGETS", "Target", "build_fmu",
-           "build_fmus", "cache_dir", "compiler", "default_plant", "display_path",
-           "fmi_headers_dir", "output_dir", "writable"]
+__all__ = ["BUILD_DIR", "CACHE_APP", "CFLAGS", "DEFAULT_PROBLEM", "FMU_DIR", "GLUE_DIR",
+           "GLUE_FILES", "LDFLAGS", "MODEL_IDENTIFIER", "PACKAGE_DIR", "SOURCE_DIR", "TARGETS",
+           "Target", "build_fmu", "build_fmus", "cache_dir", "compiler", "default_plant",
+           "display_path", "fmi_headers_dir", "output_dir", "source_path", "writable"]
 
 #: The ``fmus`` package folder: ``fmus/`` of a source checkout, or of site-packages.
 PACKAGE_DIR = Path(fmus.__file__).resolve().parent
 #: The four-tank plant's C sources and model descriptions (package data).
 SOURCE_DIR = PACKAGE_DIR / "fourtank"
+#: The FMI glue every C plant model shares (package data).
+GLUE_DIR = PACKAGE_DIR / "glue"
+#: The shared glue's files (found in :data:`GLUE_DIR`; every other source in the model's
+#: folder).
+GLUE_FILES = ("instance.h", "instance.c", "fmi2.c", "fmi3.c")
 #: The four-tank's control problem (signals, boxes, Ts, PI loops): the default problem of the
 #: default plant (:mod:`cosim_adapters.problems`).
 DEFAULT_PROBLEM = SOURCE_DIR / "problem.toml"
@@ -101,7 +107,8 @@ class Target:
     """One FMU to build: its FMI version, file name, glue source and binary folder.
 
     Both FMUs share ``model.c`` (equations) and ``instance.c`` (the FMI-version-independent
-    layer); ``glue`` is the thin FMI 2.0 or 3.0 adapter.
+    layer); ``glue`` is the thin FMI 2.0 or 3.0 adapter. Inside the FMU every source lies
+    flat under ``sources/``.
     """
 
     fmi_version: int
@@ -119,6 +126,12 @@ class Target:
         """Files shipped under ``sources/`` (FMI 3 adds its buildDescription.xml)."""
         extra = ("buildDescription.xml",) if self.fmi_version == 3 else ()
         return ("model.h", "model.c", "instance.h", "instance.c", self.glue, *extra)
+
+
+def source_path(name: str) -> Path:
+    """Where source ``name`` of a :class:`Target` lies: the shared glue's folder or the
+    model's."""
+    return (GLUE_DIR if name in GLUE_FILES else SOURCE_DIR) / name
 
 
 TARGETS = (
@@ -167,7 +180,7 @@ def _compiler_version(cc: str) -> str:
 def _source_hash(target: Target, cc: str) -> str:
     digest = hashlib.sha256()
     for name in (*target.sources, target.model_description):
-        path = SOURCE_DIR / name
+        path = source_path(name)
         if not path.is_file():
             raise CosimError(f"missing FMU source {display_path(path)}")
         digest.update(name.encode() + b"\0" + path.read_bytes() + b"\0")
@@ -187,8 +200,9 @@ def _check_platform() -> None:
 
 def _compile(target: Target, cc: str, out: Path) -> None:
     include = fmi_headers_dir()
-    sources = [str(SOURCE_DIR / name) for name in target.sources if name.endswith(".c")]
-    cmd = [cc, *CFLAGS, f"-I{include}", f"-I{SOURCE_DIR}", "-o", str(out), *sources, *LDFLAGS]
+    sources = [str(source_path(name)) for name in target.sources if name.endswith(".c")]
+    cmd = [cc, *CFLAGS, f"-I{include}", f"-I{SOURCE_DIR}", f"-I{GLUE_DIR}", "-o", str(out),
+           *sources, *LDFLAGS]
     try:
         result = subprocess.run(cmd, capture_output=True, text=True, check=False)
     except OSError as exc:
@@ -222,7 +236,7 @@ def _zip_fmu(target: Target, binary: Path, digest: str) -> None:
             zipfile.ZipFile(tmp, "w", compression=zipfile.ZIP_DEFLATED) as zf:
         members = [(SOURCE_DIR / target.model_description, "modelDescription.xml"),
                    (binary, f"binaries/{target.platform_dir}/{MODEL_IDENTIFIER}.so")]
-        members += [(SOURCE_DIR / name, f"sources/{name}") for name in target.sources]
+        members += [(source_path(name), f"sources/{name}") for name in target.sources]
         for path, arcname in members:
             _add(zf, arcname, path.read_bytes(), executable=arcname.endswith(".so"))
         _add(zf, "sources/BUILD_HASH", (digest + "\n").encode())

@@ -174,6 +174,18 @@ void model_set_states(ModelData *m, const double x[N_STATES]) {
     for (int i = 0; i < N_STATES; i++) m->h[i] = x[i] > 0.0 ? x[i] : 0.0;
 }
 
+void model_get_states(const ModelData *m, double x[N_STATES]) {
+    for (int i = 0; i < N_STATES; i++) x[i] = m->h[i];
+}
+
+void model_get_derivatives(const ModelData *m, double dx[N_STATES]) {
+    model_derivatives(m, m->h, dx);
+}
+
+const char *model_state_name(size_t i) {
+    return i < N_STATES ? NAMES[VR_H1 + i] : "(no such state)";
+}
+
 /* Butcher tableau of the Dormand-Prince 5(4) pair (Dormand & Prince 1980). The nodes
  * c = (0, 1/5, 3/10, 4/5, 8/9, 1, 1) are not needed: the plant is autonomous (inputs are
  * held constant over a communication step). */

@@ -4,9 +4,10 @@
  * The equations are those of section V of Schimperna & Magni, "Robust constrained nonlinear
  * MPC with a GRU model" (parameters from Alvarado et al. 2011); see model.c.
  *
- * This header is used by the FMI-version-independent layer (instance.c), on which the thin
- * FMI 2.0 (fmi2.c) and FMI 3.0 (fmi3.c) glue sits: the model knows nothing about FMI, the
- * FMI layers know nothing about the equations.
+ * This header is the model's side of the contract with the FMI glue every C plant model
+ * shares (fmus/glue/instance.h: the FMI-version-independent layer, under the thin FMI 2.0
+ * and 3.0 adapters fmi2.c and fmi3.c): the model knows nothing about FMI, the glue knows
+ * nothing about the equations.
  */
 #ifndef FOURTANK_MODEL_H
 #define FOURTANK_MODEL_H
@@ -88,6 +89,13 @@ void model_derivatives(const ModelData *m, const double h[N_STATES], double dh[N
 
 /* Clamp a state vector to the physical domain (levels >= 0) and store it. */
 void model_set_states(ModelData *m, const double x[N_STATES]);
+
+/* The levels, and their derivatives at the current state (Model Exchange). */
+void model_get_states(const ModelData *m, double x[N_STATES]);
+void model_get_derivatives(const ModelData *m, double dx[N_STATES]);
+
+/* Name of continuous state i ("h1" .. "h4"), for the glue's messages. */
+const char *model_state_name(size_t i);
 
 /*
  * Advance the levels from m->time to m->time + step with the embedded Dormand-Prince 5(4)

@@ -14,10 +14,13 @@ from cosim.core.errors import CosimError
 
 @pytest.fixture
 def sandbox(tmp_path, monkeypatch):
-    """A private copy of the FMU sources, building into tmp_path (the repo is untouched)."""
+    """A private copy of the FMU sources (the model's and the shared glue), building into
+    tmp_path (the repo is untouched)."""
     src = tmp_path / "fourtank"
     shutil.copytree(build.SOURCE_DIR, src, ignore=shutil.ignore_patterns("reference"))
+    shutil.copytree(build.GLUE_DIR, tmp_path / "glue")
     monkeypatch.setattr(build, "SOURCE_DIR", src)
+    monkeypatch.setattr(build, "GLUE_DIR", tmp_path / "glue")
     monkeypatch.setattr(build, "FMU_DIR", tmp_path)
     monkeypatch.setattr(build, "BUILD_DIR", tmp_path / "build")
     return tmp_path
@@ -64,7 +67,7 @@ def test_rebuilds_only_when_sources_change(sandbox):
     assert build.build_fmu(fmi2) is False and build.build_fmu(fmi3) is False
     assert [p.stat().st_mtime_ns for p in paths] == stamps
 
-    glue = build.SOURCE_DIR / "fmi3.c"
+    glue = build.GLUE_DIR / "fmi3.c"
     glue.write_text(glue.read_text() + "\n/* changed */\n")
     assert build.build_fmu(fmi2) is False  # FMI 2 does not use fmi3.c
     assert build.build_fmu(fmi3) is True

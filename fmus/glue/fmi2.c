@@ -1,5 +1,5 @@
 /*
- * FMI 2.0 glue for the four-tank plant: Co-Simulation and Model Exchange.
+ * FMI 2.0 glue of every C plant model: Co-Simulation and Model Exchange.
  *
  * Every entry point of the FMI 2.0 C API is defined here, as a thin adapter onto the
  * version-independent layer of instance.c (state machine, argument checks, variables, FMU

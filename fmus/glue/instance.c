@@ -1,5 +1,5 @@
 /*
- * Four-tank plant -- FMI-version-independent instance layer (see instance.h).
+ * The FMI-version-independent instance layer of every C plant model (see instance.h).
  *
  * Everything FMI 2.0 and FMI 3.0 have in common lives here: the state machine, argument
  * checks, checked get/set of Float64 variables by value reference, FMU-state save/restore/
@@ -363,7 +363,7 @@ Status instance_set_continuous_states(Instance *inst, const char *function, cons
         return STATUS_ERROR;
     for (size_t i = 0; i < nx; i++) {
         if (!isfinite(x[i])) {
-            LOG_ERROR(inst, "%s: h%zu must be finite", function, i + 1);
+            LOG_ERROR(inst, "%s: %s must be finite", function, model_state_name(i));
             return STATUS_ERROR;
         }
     }
@@ -374,7 +374,7 @@ Status instance_set_continuous_states(Instance *inst, const char *function, cons
 Status instance_get_continuous_states(Instance *inst, const char *function, double x[],
                                       const char *x_name, size_t nx, const char *nx_label) {
     if (!check_vector(inst, function, ANY_STATE, x, x_name, nx, nx_label)) return STATUS_ERROR;
-    memcpy(x, inst->model.h, sizeof(inst->model.h));
+    model_get_states(&inst->model, x);
     return STATUS_OK;
 }
 
@@ -382,7 +382,7 @@ Status instance_get_derivatives(Instance *inst, const char *function, double dx[
                                 const char *dx_name, size_t nx, const char *nx_label) {
     if (!check_vector(inst, function, ANY_STATE, dx, dx_name, nx, nx_label))
         return STATUS_ERROR;
-    model_derivatives(&inst->model, inst->model.h, dx);
+    model_get_derivatives(&inst->model, dx);
     return STATUS_OK;
 }
 

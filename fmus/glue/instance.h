@@ -1,5 +1,29 @@
 /*
- * Four-tank plant -- the FMI-version-independent layer shared by fmi2.c and fmi3.c.
+ * The FMI-version-independent layer shared by fmi2.c and fmi3.c, for every C plant model.
+ *
+ * Laid out as the Modelica Reference-FMUs are: this folder (fmus/glue/) is the FMI glue every
+ * model shares; a model's folder (fmus/fourtank/) holds its model.h and model.c, its model
+ * descriptions and nothing about FMI. The build compiles model.c with instance.c and fmi2.c or
+ * fmi3.c, the model's folder first on the include path.
+ *
+ * The model contract: a model's model.h defines MODEL_IDENTIFIER, INSTANTIATION_TOKEN,
+ * N_STATES, N_EVENT_INDICATORS, N_VARIABLES (the value references are 0 .. N_VARIABLES - 1)
+ * and the struct ModelData, which holds a `double time` (the model's time, written by the
+ * glue) and everything else the model stores per instance (copied as plain memory for FMU
+ * states); and declares the functions below, which the glue calls and the model defines:
+ *
+ *   void model_set_defaults(ModelData *m);              start values
+ *   void model_initialize(ModelData *m);                end of initialisation
+ *   const char *model_variable_name(unsigned vr);       NULL for an unknown reference
+ *   double model_get(const ModelData *m, unsigned vr);
+ *   const char *model_set(ModelData *m, unsigned vr, double value, bool initialized);
+ *                                                       NULL or the reason of a refusal
+ *   const char *model_state_name(size_t i);             name of continuous state i
+ *   void model_get_states(const ModelData *m, double x[N_STATES]);
+ *   void model_set_states(ModelData *m, const double x[N_STATES]);
+ *   void model_get_derivatives(const ModelData *m, double dx[N_STATES]);
+ *   const char *model_do_step(ModelData *m, double step, char *msg, size_t n);
+ *                                                       NULL or a message (state unchanged)
  *
  * An Instance holds the model (model.h) plus the FMI bookkeeping common to FMI 2.0 and 3.0:
  * interface type, state machine, debug logging, saved FMU states. Each instance_* function
@@ -7,8 +31,8 @@
  * FMI function on failure, and returns a Status whose values equal fmi2Status / fmi3Status.
  * The glue files only adapt the C signatures and provide the environment's callbacks (Host).
  */
-#ifndef FOURTANK_INSTANCE_H
-#define FOURTANK_INSTANCE_H
+#ifndef FMU_GLUE_INSTANCE_H
+#define FMU_GLUE_INSTANCE_H
 
 #include <stdbool.h>
 #include <stddef.h>
@@ -167,4 +191,4 @@ Status instance_get_event_indicators(Instance *inst, const char *function, size_
 Status instance_do_step(Instance *inst, const char *function, double currentCommunicationPoint,
                         double communicationStepSize);
 
-#endif /* FOURTANK_INSTANCE_H */
+#endif /* FMU_GLUE_INSTANCE_H */
