@@ -294,78 +294,96 @@ def scaling(args: argparse.Namespace) -> None:
     the rounds' medians. For both variants, the split of the median steps (the steps within
     20 % of the median) into the SQP's QP, Hessian, Jacobian and f, g time, and the rest
     (Python, the answer check, the observer): the QP is the same qpOASES call in both."""
-    from controllers.certification import gain_design
-    from cosim.core.master import Master
-    from cosim.core.scenario import Column, Event, Scenario
-    from cosim_adapters.gru_plant import GRUPlant
-    from tests.controllers.random_gru import random_gru_model
-
-    rows = []
-    cols = (Column(2, "ref.h1", "ref", "h1"), Column(3, "ref.h2", "ref", "h2"))
     folder = Path(tempfile.mkdtemp(prefix="bench-scaling-"))
     try:
-        cases = []
-        for n, N in [(20, N) for N in args.horizons] + [(n, 15) for n in args.states
-                                                         if n != 20]:
-            model = random_gru_model(0, n=n)
-            model.w_y_bar = 0.002
-            # five set-points the model reaches: its equilibria for inputs inside the box
-            setpoints = [_equilibrium_output(model, 0.5 * np.array([np.cos(a), np.sin(a)]))
-                         for a in np.linspace(0.3, 2.8, 5)]
-            events = [Event(1500.0 * j, 0, tuple(zip(cols, sp, strict=True)))
-                      for j, sp in enumerate(setpoints)]
-            sc = Scenario(Path("scaling.csv"), cols, (*events, Event(7500.0, 0, ())))
-            targets = [model.normalize_y(sp) for sp in setpoints]
-            theta, cert = gain_design.choose_gain_scale(model, targets, N=N)
-            if theta is None:
-                print(f"n={n}, N={N}: no certified design; skipped")
-                continue
-            path = folder / f"gru_{n}_{N}.json"
-            model.L_z, model.L_r = cert.L_z, cert.L_r
-            model.save(path)
-            ctrls = {k: RobustMPCController(model=path, N=N, kernel=k, law=LAW)
-                     for k in ("auto", "numpy")}
-            cases.append({"n": n, "N": N, "y0": setpoints[0], "scenario": sc, "ctrls": ctrls,
-                          "meds": {k: [] for k in ctrls}, "p99s": {k: [] for k in ctrls},
-                          "split": {k: [] for k in ctrls}})
-        # round by round over every size and variant: the machine's drift over minutes hits
-        # all sizes alike instead of biasing the exponents
-        for _ in range(max(1, args.rounds)):
-            for case in cases:
-                for kernel, ctrl in case["ctrls"].items():
-                    timed = SplitController(ctrl)
-                    result = Master(GRUPlant(ctrl.model, y0=case["y0"]), timed,
-                                    case["scenario"]).run()
-                    if result.status != "ok" or not timed.wall_ms:
-                        raise SystemExit(f"bench_mpc: n={case['n']}, N={case['N']} "
-                                         f"({kernel}): {result.reason}")
-                    case["meds"][kernel].append(float(np.median(timed.wall_ms)))
-                    case["p99s"][kernel].append(_p(timed.wall_ms, 99))
-                    case["split"][kernel] += timed.split
-        for case in cases:
-            n, N, ctrls, meds = case["n"], case["N"], case["ctrls"], case["meds"]
-            med = {k: (float(np.median(meds[k])), float(np.median(case["p99s"][k])))
-                   for k in ctrls}
-            fh = ctrls["auto"].fhocp
-            variant = "numpy" if fh.kernel is None else next(
-                (name for flag, name in (("-DGK_CONTRACT", "contract"),
-                                         ("-DGK_BACKWARD", "backward"))
-                 if flag in fh.kernel.flags), "w")
-            parts = {k: _median_split(case["split"][k], med[k][0]) for k in ctrls}
-            rows.append((n, N, *med["numpy"], *med["auto"], parts["numpy"][0],
-                         parts["auto"][0], meds["auto"]))
-            print(f"n={n:3d} N={N:3d}: numpy median {med['numpy'][0]:7.2f} ms p99 "
-                  f"{med['numpy'][1]:7.2f}; compiled ({variant}) median {med['auto'][0]:6.2f}"
-                  f" ms p99 {med['auto'][1]:6.2f}; speed-up "
-                  f"{med['numpy'][0] / med['auto'][0]:.1f}x; rounds' medians "
-                  f"{' '.join(f'{v:.2f}' for v in meds['auto'])} ms", flush=True)
-            for kernel, label in (("auto", "compiled"), ("numpy", "numpy")):
-                print(f"    {label} median step: " + ", ".join(
-                    f"{name} {v:.2f}" for (name, _), v in zip(SPLIT, parts[kernel][:-1],
-                                                              strict=True))
-                      + f", rest {parts[kernel][-1]:.2f} ms", flush=True)
+        cases = _scaling_cases(args, folder)
+        _scaling_rounds(cases, args.rounds)
+        rows = [_scaling_report(case) for case in cases]
     finally:
         shutil.rmtree(folder, ignore_errors=True)
+    _scaling_fits(rows)
+
+
+def _scaling_cases(args: argparse.Namespace, folder: Path) -> list[dict[str, Any]]:
+    """One case per size: a certified random GRU (saved in ``folder``), five set-points it
+    reaches, and its compiled and numpy controllers."""
+    from controllers.certification import gain_design
+    from cosim.core.scenario import Column, Event, Scenario
+    from tests.controllers.random_gru import random_gru_model
+
+    cols = (Column(2, "ref.h1", "ref", "h1"), Column(3, "ref.h2", "ref", "h2"))
+    cases = []
+    for n, N in [(20, N) for N in args.horizons] + [(n, 15) for n in args.states if n != 20]:
+        model = random_gru_model(0, n=n)
+        model.w_y_bar = 0.002
+        # five set-points the model reaches: its equilibria for inputs inside the box
+        setpoints = [_equilibrium_output(model, 0.5 * np.array([np.cos(a), np.sin(a)]))
+                     for a in np.linspace(0.3, 2.8, 5)]
+        events = [Event(1500.0 * j, 0, tuple(zip(cols, sp, strict=True)))
+                  for j, sp in enumerate(setpoints)]
+        sc = Scenario(Path("scaling.csv"), cols, (*events, Event(7500.0, 0, ())))
+        targets = [model.normalize_y(sp) for sp in setpoints]
+        theta, cert = gain_design.choose_gain_scale(model, targets, N=N)
+        if theta is None:
+            print(f"n={n}, N={N}: no certified design; skipped")
+            continue
+        path = folder / f"gru_{n}_{N}.json"
+        model.L_z, model.L_r = cert.L_z, cert.L_r
+        model.save(path)
+        ctrls = {k: RobustMPCController(model=path, N=N, kernel=k, law=LAW)
+                 for k in ("auto", "numpy")}
+        cases.append({"n": n, "N": N, "y0": setpoints[0], "scenario": sc, "ctrls": ctrls,
+                      "meds": {k: [] for k in ctrls}, "p99s": {k: [] for k in ctrls},
+                      "split": {k: [] for k in ctrls}})
+    return cases
+
+
+def _scaling_rounds(cases: list[dict[str, Any]], rounds: int) -> None:
+    """Round by round over every size and variant (the machine's drift over minutes hits
+    all sizes alike instead of biasing the exponents): each round's median, p99 and split
+    appended to its case."""
+    from cosim.core.master import Master
+    from cosim_adapters.gru_plant import GRUPlant
+
+    for _ in range(max(1, rounds)):
+        for case in cases:
+            for kernel, ctrl in case["ctrls"].items():
+                timed = SplitController(ctrl)
+                result = Master(GRUPlant(ctrl.model, y0=case["y0"]), timed,
+                                case["scenario"]).run()
+                if result.status != "ok" or not timed.wall_ms:
+                    raise SystemExit(f"bench_mpc: n={case['n']}, N={case['N']} "
+                                     f"({kernel}): {result.reason}")
+                case["meds"][kernel].append(float(np.median(timed.wall_ms)))
+                case["p99s"][kernel].append(_p(timed.wall_ms, 99))
+                case["split"][kernel] += timed.split
+
+
+def _scaling_report(case: dict[str, Any]) -> tuple[Any, ...]:
+    """Print one size's medians, p99s and splits; its row for the fits."""
+    n, N, ctrls, meds = case["n"], case["N"], case["ctrls"], case["meds"]
+    med = {k: (float(np.median(meds[k])), float(np.median(case["p99s"][k]))) for k in ctrls}
+    fh = ctrls["auto"].fhocp
+    variant = "numpy" if fh.kernel is None else next(
+        (name for flag, name in (("-DGK_CONTRACT", "contract"), ("-DGK_BACKWARD", "backward"))
+         if flag in fh.kernel.flags), "w")
+    parts = {k: _median_split(case["split"][k], med[k][0]) for k in ctrls}
+    print(f"n={n:3d} N={N:3d}: numpy median {med['numpy'][0]:7.2f} ms p99 "
+          f"{med['numpy'][1]:7.2f}; compiled ({variant}) median {med['auto'][0]:6.2f}"
+          f" ms p99 {med['auto'][1]:6.2f}; speed-up "
+          f"{med['numpy'][0] / med['auto'][0]:.1f}x; rounds' medians "
+          f"{' '.join(f'{v:.2f}' for v in meds['auto'])} ms", flush=True)
+    for kernel, label in (("auto", "compiled"), ("numpy", "numpy")):
+        print(f"    {label} median step: " + ", ".join(
+            f"{name} {v:.2f}" for (name, _), v in zip(SPLIT, parts[kernel][:-1], strict=True))
+              + f", rest {parts[kernel][-1]:.2f} ms", flush=True)
+    return (n, N, *med["numpy"], *med["auto"], parts["numpy"][0], parts["auto"][0],
+            meds["auto"])
+
+
+def _scaling_fits(rows: list[tuple[Any, ...]]) -> None:
+    """The growth exponents of the step and of its QP in N and in n, and the time one more
+    stage (state) adds."""
     for label, sel, col in (("N (n = 20)", [r for r in rows if r[0] == 20], 1),
                             ("n (N = 15)", [r for r in rows if r[1] == 15], 0)):
         if len(sel) >= 2:

@@ -288,7 +288,6 @@ def _channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Cha
     if not lo < hi:
         raise ProblemFileError(f"{where(table, 'max')}: [{kind}.{name}] needs min < max, got "
                                f"min = {lo:g}, max = {hi:g}")
-    kw: dict[str, Any] = {}
     variable = entry.get("variable", name)
     if not isinstance(variable, str) or not variable:
         raise ProblemFileError(f"{where(table, 'variable')}: 'variable' must be the FMU "
@@ -297,20 +296,35 @@ def _channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Cha
     if not isinstance(description, str):
         raise ProblemFileError(f"{where(table, 'description')}: 'description' must be a "
                                "string")
+    kw = {**_normalization(entry, where, table), **_excitation(entry, where, table, lo, hi)}
+    return Channel(name=name, unit=unit.strip(), min=lo, max=hi, variable=variable,
+                   description=description, **kw)
+
+
+def _normalization(entry: dict[str, Any], where: Where, table: str) -> dict[str, float]:
+    """A signal's ``normalization = { offset, scale }`` as keyword arguments (none when
+    absent)."""
     norm = entry.get("normalization")
-    if norm is not None:
-        at = where(table, "normalization")
-        if not isinstance(norm, dict):
-            raise ProblemFileError(f"{at}: 'normalization' must be {{ offset = ..., scale = "
-                                   "... }}")
-        bad = [k for k in norm if k not in _NORM]
-        if bad or set(norm) != _NORM:
-            raise ProblemFileError(f"{at}: 'normalization' takes exactly 'offset' and "
-                                   "'scale'")
-        kw["offset"] = _number(norm["offset"], at, "normalization.offset")
-        kw["scale"] = _number(norm["scale"], at, "normalization.scale")
-        if kw["scale"] == 0:
-            raise ProblemFileError(f"{at}: 'normalization.scale' must not be 0")
+    if norm is None:
+        return {}
+    at = where(table, "normalization")
+    if not isinstance(norm, dict):
+        raise ProblemFileError(f"{at}: 'normalization' must be {{ offset = ..., scale = ... }}")
+    bad = [k for k in norm if k not in _NORM]
+    if bad or set(norm) != _NORM:
+        raise ProblemFileError(f"{at}: 'normalization' takes exactly 'offset' and 'scale'")
+    offset = _number(norm["offset"], at, "normalization.offset")
+    scale = _number(norm["scale"], at, "normalization.scale")
+    if scale == 0:
+        raise ProblemFileError(f"{at}: 'normalization.scale' must not be 0")
+    return {"offset": offset, "scale": scale}
+
+
+def _excitation(entry: dict[str, Any], where: Where, table: str, lo: float, hi: float
+                ) -> dict[str, tuple[Any, Any]]:
+    """An input's data-generation ``hold`` (samples) and ``levels`` as keyword arguments
+    (those given)."""
+    kw: dict[str, tuple[Any, Any]] = {}
     if "hold" in entry:
         at = where(table, "hold")
         h0, h1 = _pair(entry["hold"], at, "hold", integer=True)
@@ -325,8 +339,7 @@ def _channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Cha
             raise ProblemFileError(f"{at}: 'levels' must satisfy min <= low < high <= max "
                                    f"({lo:g}, {hi:g}), got [{l0:g}, {l1:g}]")
         kw["levels"] = (l0, l1)
-    return Channel(name=name, unit=unit.strip(), min=lo, max=hi, variable=variable,
-                   description=description, **kw)
+    return kw
 
 
 def _pi(doc: Any, inputs: tuple[Channel, ...], outputs: tuple[Channel, ...], where: Where,

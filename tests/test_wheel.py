@@ -53,10 +53,10 @@ def _package_data() -> set[str]:
     """Files the installed package reads at run time, as paths inside the wheel."""
     from controllers.kernel.compiled_kernel import TEMPLATE_PARTS
     from controllers.model import DEFAULT_MODEL
-    from cosim.core.build import DEFAULT_PROBLEM, TARGETS
+    from cosim.core.build import DEFAULT_PROBLEM, PACKAGE_DIR, TARGETS, source_path
 
     names = {f"controllers/kernel/{p.name}" for p in TEMPLATE_PARTS}
-    names |= {f"fmus/fourtank/{name}" for t in TARGETS
+    names |= {f"fmus/{source_path(name).relative_to(PACKAGE_DIR).as_posix()}" for t in TARGETS
               for name in (*t.sources, t.model_description)}
     return names | {f"controllers/models/{DEFAULT_MODEL.name}", "fmus/__init__.py",
                     f"fmus/fourtank/{DEFAULT_PROBLEM.name}"}

@@ -55,7 +55,7 @@ from controllers.errors import DataError, DesignError, SetpointError
 from controllers.problem import ControlProblem, constraint_names, output_constraints
 
 __all__ = ["JSON_KEYS", "MAX_HORIZON", "Certificate", "Reference", "admissible_ranges",
-           "compute_certificate", "uncertified_certificate", "w_y_bar_from_data"]
+           "box_ranges", "compute_certificate", "uncertified_certificate", "w_y_bar_from_data"]
 
 JSON_KEYS = ("sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r", "nu_o",
              "rho_o", "c_o", "kappa", "L_max", "w_y_bar", "w_bar", "w_L", "a", "b", "e_o0",
@@ -473,22 +473,16 @@ def w_y_bar_from_data(model: Any, u: np.ndarray, y: np.ndarray, split: np.ndarra
     return float(np.max(np.abs(y_n[mask] - xi[mask])))
 
 
-def admissible_ranges(cert: Certificate,
-                      model: Any) -> list[tuple[str, float | None, float | None]]:
-    """Per-output admissible set-point interval ``(name, lo, hi)`` in physical units.
-
-    From the box rows of ``L`` and :meth:`Certificate.admissible_box` (``ass:setpoint`` and
-    ``eq:condition-recursive-feasibility``); ``(name, None, None)`` when it is empty (or
-    undefined: a NaN bound). Whether the model reaches a set-point (``‖ū‖∞ ≤ 1``) is not part of
-    it: :meth:`Certificate.reference` decides that.
-    """
-    rhs = cert.admissible_box()
+def box_ranges(model: Any, L: np.ndarray, rhs: np.ndarray
+               ) -> list[tuple[str, float | None, float | None]]:
+    """``{y : L y ≤ rhs}`` (normalised) of the box rows of ``L`` (one nonzero entry) as an
+    interval ``(name, lo, hi)`` per output, physical units; ``(name, None, None)`` where it
+    is empty or undefined (a NaN bound)."""
     out: list[tuple[str, float | None, float | None]] = []
     for j, name in enumerate(model.output_names):
         lo, hi = -math.inf, math.inf
-        for row, r in zip(cert.L, rhs, strict=True):
-            others = np.delete(row, j)
-            if row[j] == 0 or np.any(others != 0):
+        for row, r in zip(L, rhs, strict=True):
+            if row[j] == 0 or np.count_nonzero(row) != 1:
                 continue
             bound = float(r / row[j])
             if math.isnan(bound):
@@ -498,9 +492,19 @@ def admissible_ranges(cert: Certificate,
                 hi = min(hi, bound)
             else:
                 lo = max(lo, bound)
-        plo, phi = (lo * model.y_scale[j] + model.y_offset[j],
-                    hi * model.y_scale[j] + model.y_offset[j])
-        if model.y_scale[j] < 0:
-            plo, phi = phi, plo
-        out.append((name, float(plo), float(phi)) if plo <= phi else (name, None, None))
+        a, b = sorted((float(lo * model.y_scale[j] + model.y_offset[j]),
+                       float(hi * model.y_scale[j] + model.y_offset[j])))
+        out.append((name, a, b) if lo <= hi else (name, None, None))
     return out
+
+
+def admissible_ranges(cert: Certificate,
+                      model: Any) -> list[tuple[str, float | None, float | None]]:
+    """Per-output admissible set-point interval ``(name, lo, hi)`` in physical units.
+
+    :func:`box_ranges` of :meth:`Certificate.admissible_box` (``ass:setpoint`` and
+    ``eq:condition-recursive-feasibility``); ``(name, None, None)`` when it is empty (or
+    undefined: a NaN bound). Whether the model reaches a set-point (``‖ū‖∞ ≤ 1``) is not part of
+    it: :meth:`Certificate.reference` decides that.
+    """
+    return box_ranges(model, cert.L, cert.admissible_box())

@@ -23,14 +23,15 @@ answers that for either law of the robust MPC:
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
-__all__ = ["Diagnosis", "Finding", "box_ranges", "diagnose", "required_error"]
+from controllers.certification.certificates import box_ranges
+
+__all__ = ["Diagnosis", "Finding", "diagnose", "required_error"]
 
 
 @dataclass
@@ -83,28 +84,6 @@ class Diagnosis:
                 "admissible_setpoints": {n: None if lo is None else [lo, hi]
                                          for n, lo, hi in self.admissible},
                 "required_w_y_bar": self.required_w_y_bar}
-
-
-def box_ranges(model: Any, L: np.ndarray, rhs: np.ndarray
-               ) -> list[tuple[str, float | None, float | None]]:
-    """``{y : L y ≤ rhs}`` (normalised) of box rows as an interval per output, physical
-    units; ``(name, None, None)`` where it is empty."""
-    out: list[tuple[str, float | None, float | None]] = []
-    for j, name in enumerate(model.output_names):
-        lo, hi = -math.inf, math.inf
-        for row, r in zip(L, rhs, strict=True):
-            if row[j] == 0 or np.count_nonzero(row) != 1:
-                continue
-            bound = float(r / row[j])
-            if row[j] > 0:
-                hi = min(hi, bound)
-            else:
-                lo = max(lo, bound)
-        a, b = (lo * model.y_scale[j] + model.y_offset[j],
-                hi * model.y_scale[j] + model.y_offset[j])
-        a, b = sorted((float(a), float(b)))
-        out.append((name, a, b) if lo <= hi else (name, None, None))
-    return out
 
 
 def required_error(passes: Callable[[float], bool], current: float,

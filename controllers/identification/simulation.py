@@ -229,7 +229,12 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
     :func:`controllers.identification.training.init_params`)."""
     import torch
 
-    from controllers.identification.training import CONSTRAINED, constrain, init_params
+    from controllers.identification.training import (
+        constrain,
+        init_params,
+        project,
+        trainable_params,
+    )
 
     opt = options or SimOptions()
     torch.set_num_threads(1)
@@ -242,15 +247,8 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
     rng = np.random.default_rng(opt.seed)
     n_batches = min(STEPS_PER_EPOCH, B)
 
-    p0 = init or init_params(n, m, p, opt.seed, opt.bz_init)
-    params = {k: torch.tensor(np.asarray(v, dtype=float), dtype=dtype, requires_grad=True)
-              for k, v in p0.items()}
-    if not opt.train_uz:
-        params["U_z"] = torch.zeros_like(params["U_z"])
-    with torch.no_grad():
-        q, _ = constrain(params, target, opt.sigma_z_max)
-        for k in CONSTRAINED:
-            params[k].copy_(q[k])
+    params = trainable_params(init or init_params(n, m, p, opt.seed, opt.bz_init),
+                              opt.train_uz, target, opt.sigma_z_max)
     x0 = torch.zeros(B, n, dtype=dtype, requires_grad=True)
     trainable = [v for v in params.values() if v.requires_grad] + [x0]
     adam = torch.optim.Adam(trainable, lr=opt.lr)
@@ -263,8 +261,7 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
         q, _ = constrain(params, target, opt.sigma_z_max)
         return q, {k: v.detach().numpy().copy() for k, v in q.items()}
 
-    best: dict[str, np.ndarray] | None = None
-    best_score, best_step, history = math.inf, -1, []
+    best = _Selection()
     patience = opt.patience * STEPS_PER_EPOCH
     every = opt.eval_every or max(MIN_EVAL_EVERY, steps // EVALUATIONS)
     batches: list[np.ndarray] = []
@@ -274,13 +271,11 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
         q, qn = weights()
         if step % every == 0 or step == steps:
             xi = simulate(qn, record, opt.x0_samples, starts)
-            score = float(np.mean(rms(record, xi)[scored]))
-            history.append({"step": step, "score": score, "time": time.perf_counter() - t0})
-            if math.isfinite(score) and score < best_score and nu_numpy(qn) < 1.0:
-                best, best_score, best_step = qn, score, step
+            best.offer(step, qn, float(np.mean(rms(record, xi)[scored])),
+                       time.perf_counter() - t0)
             if progress is not None:
                 progress(step)
-            if patience and step - best_step >= patience:
+            if patience and step - best.step >= patience:
                 break
         if step == steps:
             break
@@ -291,13 +286,28 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
         loss = SimLoss(U[idx], Y[idx], w / w.sum(), S[idx])
         _descend(loss(qn, x0.detach().numpy()[idx]), q, x0, idx, (n, m, p), adam)
         scheduler.step()
+        project(params, target, opt.sigma_z_max)
         with torch.no_grad():
-            q, _ = constrain(params, target, opt.sigma_z_max)
-            for k in CONSTRAINED:
-                params[k].copy_(q[k])
             x0.clamp_(-1.0, 1.0)
-    if best is None:
-        best = weights()[1]
-    return Candidate(params=best, nu=nu_numpy(best), score=best_score,
-                     best_step=best_step, steps_run=history[-1]["step"],
-                     wall_time=time.perf_counter() - t0, options=asdict(opt), history=history)
+    chosen = best.params if best.params is not None else weights()[1]
+    return Candidate(params=chosen, nu=nu_numpy(chosen), score=best.score,
+                     best_step=best.step, steps_run=best.history[-1]["step"],
+                     wall_time=time.perf_counter() - t0, options=asdict(opt),
+                     history=best.history)
+
+
+@dataclass
+class _Selection:
+    """Model selection: the best weights so far by validation score (ν < 1 only) and every
+    evaluation's record."""
+
+    params: dict[str, np.ndarray] | None = None
+    score: float = math.inf
+    step: int = -1
+    history: list[dict[str, Any]] = field(default_factory=list)
+
+    def offer(self, step: int, qn: dict[str, np.ndarray], score: float, t: float) -> None:
+        """Record the evaluation at ``step`` and keep ``qn`` when it is the best yet."""
+        self.history.append({"step": step, "score": score, "time": t})
+        if math.isfinite(score) and score < self.score and nu_numpy(qn) < 1.0:
+            self.params, self.score, self.step = qn, score, step

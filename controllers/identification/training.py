@@ -315,43 +315,123 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
     torch.set_num_threads(1)
     torch.manual_seed(opt.seed)
     rng = np.random.default_rng(opt.seed)
-    dtype = torch.float64
-    m, p_out = u_train.shape[1], y_train.shape[1]
     target = 1.0 - opt.nu_margin
-
-    p0 = init or init_params(opt.n, m, p_out, opt.seed, opt.bz_init)
-    params = {k: torch.tensor(np.asarray(v, dtype=float), dtype=dtype, requires_grad=True)
-              for k, v in p0.items()}
-    if not opt.train_uz:
-        params["U_z"] = torch.zeros_like(params["U_z"])
-    if opt.constraint == "project":
-        with torch.no_grad():
-            q, _ = constrain(params, target, opt.sigma_z_max)
-            for k in CONSTRAINED:
-                params[k].copy_(q[k])
-
+    p0 = init or init_params(opt.n, u_train.shape[1], y_train.shape[1], opt.seed, opt.bz_init)
+    params = trainable_params(p0, opt.train_uz,
+                              target if opt.constraint == "project" else None, opt.sigma_z_max)
     split_all = np.asarray(split_all)
     U, Y = _subsequences(u_train, y_train, u_all, y_all, split_all, experiment, opt)
-    starts = range(U.shape[2])
-    batch = opt.batch if 0 < opt.batch <= len(starts) else len(starts)
-    n_batches = math.ceil(len(starts) / batch)
     optimiser = torch.optim.Adam([v for v in params.values() if v.requires_grad], lr=opt.lr)
     gamma = (opt.lr_final / opt.lr) ** (1.0 / max(1, opt.epochs - 1))
     scheduler = torch.optim.lr_scheduler.ExponentialLR(optimiser, gamma)
+    validation_fit = _validation(u_all, y_all, split_all, experiment, opt)
 
-    def effective() -> tuple[dict[str, Any], Any]:
+    best: dict[str, np.ndarray] | None = None
+    best_score, best_epoch, history = -np.inf, -1, []
+    t0 = time.perf_counter()
+    bar = tqdm(range(opt.epochs), desc="train", unit="epoch", disable=not progress)
+    for epoch in bar:
+        loss = _epoch(params, U, Y, optimiser, rng, opt, target)
+        scheduler.step()
+        pn = _numpy_params(params, opt, target)
+        fit = validation_fit(pn)
+        nu_val = nu_numpy(pn)
+        record = {"epoch": epoch, "loss": loss, "nu": nu_val,
+                  "fit_val": [float(f) for f in fit],
+                  "uo_norm": float(np.max(np.sum(np.abs(pn["U_o"]), axis=1))),
+                  "time": time.perf_counter() - t0}
+        history.append(record)
+        score = float(np.mean(fit))
+        if nu_val < 1.0 and score > best_score:
+            best, best_score, best_epoch = pn, score, epoch
+        bar.set_postfix(loss=f"{loss:.2e}", fit="/".join(f"{f:.1f}" for f in fit),
+                        nu=f"{nu_val:.3f}")
+        if callback is not None:
+            callback(epoch, record, pn)
+        if opt.patience and epoch - best_epoch >= opt.patience:
+            break
+    bar.close()
+    if best is None:
+        best = _numpy_params(params, opt, target)
+    return TrainResult(params=best, nu=nu_numpy(best), best_epoch=best_epoch,
+                       epochs_run=len(history), wall_time=time.perf_counter() - t0,
+                       history=history, options=asdict(opt))
+
+
+def project(params: dict[str, Any], target: float, sigma_z_max: float) -> None:
+    """Project the trainable weights onto ``ν ≤ target`` (and ``σ̄_z ≤ sigma_z_max``) in
+    place: :func:`constrain` of :data:`CONSTRAINED`."""
+    import torch
+
+    with torch.no_grad():
+        q, _ = constrain(params, target, sigma_z_max)
+        for k in CONSTRAINED:
+            params[k].copy_(q[k])
+
+
+def trainable_params(p0: dict[str, np.ndarray], train_uz: bool, target: float | None,
+                     sigma_z_max: float = 0.0) -> dict[str, Any]:
+    """The trainable float64 tensors from the weights ``p0``: ``U_z = 0`` (not trained)
+    unless ``train_uz``; projected onto ``ν ≤ target`` unless ``target`` is None."""
+    import torch
+
+    params = {k: torch.tensor(np.asarray(v, dtype=float), dtype=torch.float64,
+                              requires_grad=True) for k, v in p0.items()}
+    if not train_uz:
+        params["U_z"] = torch.zeros_like(params["U_z"])
+    if target is not None:
+        project(params, target, sigma_z_max)
+    return params
+
+
+def _effective(params: dict[str, Any], opt: TrainOptions, target: float
+               ) -> tuple[dict[str, Any], Any]:
+    """The weights the loss sees and their ν: projected, or as they are (penalty mode)."""
+    if opt.constraint == "project":
+        return constrain(params, target, opt.sigma_z_max)
+    return params, nu_torch(params)
+
+
+def _numpy_params(params: dict[str, Any], opt: TrainOptions, target: float
+                  ) -> dict[str, np.ndarray]:
+    """The effective weights as numpy arrays (copies)."""
+    import torch
+
+    with torch.no_grad():
+        q, _ = _effective(params, opt, target)
+        return {k: v.detach().numpy().copy() for k, v in q.items()}
+
+
+def _epoch(params: dict[str, Any], U: Any, Y: Any, optimiser: Any,
+           rng: np.random.Generator, opt: TrainOptions, target: float) -> float:
+    """One pass over the subsequences in shuffled batches; the mean batch loss."""
+    import torch
+
+    count = U.shape[2]
+    batch = opt.batch if 0 < opt.batch <= count else count
+    n_batches = math.ceil(count / batch)
+    order = rng.permutation(count)
+    total = 0.0
+    for b in range(n_batches):
+        idx = torch.as_tensor(order[b * batch:(b + 1) * batch])
+        q, _ = _effective(params, opt, target)
+        loss, reg = _batch_loss(q, U[:, :, idx], Y[:, :, idx], opt, target)
+        total += loss.item()
+        optimiser.zero_grad()
+        (loss + reg).backward()
+        optimiser.step()
         if opt.constraint == "project":
-            return constrain(params, target, opt.sigma_z_max)
-        return params, nu_torch(params)
+            project(params, target, opt.sigma_z_max)
+    return total / n_batches
 
-    def numpy_params() -> dict[str, np.ndarray]:
-        with torch.no_grad():
-            q, _ = effective()
-            return {k: v.detach().numpy().copy() for k, v in q.items()}
 
-    # Validation (model selection): open loop from x = 0 in each experiment, starting
-    # ``eval_washout`` steps before its validation rows so that the initial transient has died
-    # out; the validation rows of every experiment are scored together.
+def _validation(u_all: np.ndarray, y_all: np.ndarray, split_all: np.ndarray,
+                experiment: np.ndarray | None, opt: TrainOptions
+                ) -> Callable[[dict[str, np.ndarray]], np.ndarray]:
+    """The validation FIT of a set of weights (model selection): open loop from ``x = 0`` in
+    each experiment, starting ``eval_washout`` steps before its validation rows so that the
+    initial transient has died out; the validation rows of every experiment scored together
+    (the training rows when there are none)."""
     scored = "val" if np.any(split_all == "val") else "train"
     windows = sequences.eval_windows(split_all, experiment, scored, opt.eval_washout)
     y_val = np.concatenate([y_all[a:b][split_all[a:b] == scored] for a, b in windows])
@@ -361,50 +441,7 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
                              for a, b in windows])
         return metrics.fit(y_val, xi)
 
-    best: dict[str, np.ndarray] | None = None
-    best_score, best_epoch, history = -np.inf, -1, []
-    t0 = time.perf_counter()
-    bar = tqdm(range(opt.epochs), desc="train", unit="epoch", disable=not progress)
-    for epoch in bar:
-        order = rng.permutation(len(starts))
-        total = 0.0
-        for b in range(n_batches):
-            idx = torch.as_tensor(order[b * batch:(b + 1) * batch])
-            q, _ = effective()
-            loss, reg = _batch_loss(q, U[:, :, idx], Y[:, :, idx], opt, target)
-            total += loss.item()
-            optimiser.zero_grad()
-            (loss + reg).backward()
-            optimiser.step()
-            if opt.constraint == "project":
-                with torch.no_grad():
-                    q, _ = constrain(params, target, opt.sigma_z_max)
-                    for k in CONSTRAINED:
-                        params[k].copy_(q[k])
-        scheduler.step()
-        pn = numpy_params()
-        val = {"fit": validation_fit(pn)}
-        nu_val = nu_numpy(pn)
-        record = {"epoch": epoch, "loss": total / n_batches, "nu": nu_val,
-                  "fit_val": [float(f) for f in val["fit"]],
-                  "uo_norm": float(np.max(np.sum(np.abs(pn["U_o"]), axis=1))),
-                  "time": time.perf_counter() - t0}
-        history.append(record)
-        score = float(np.mean(val["fit"]))
-        if nu_val < 1.0 and score > best_score:
-            best, best_score, best_epoch = pn, score, epoch
-        bar.set_postfix(loss=f"{record['loss']:.2e}",
-                        fit="/".join(f"{f:.1f}" for f in val["fit"]), nu=f"{nu_val:.3f}")
-        if callback is not None:
-            callback(epoch, record, pn)
-        if opt.patience and epoch - best_epoch >= opt.patience:
-            break
-    bar.close()
-    if best is None:
-        best = numpy_params()
-    return TrainResult(params=best, nu=nu_numpy(best), best_epoch=best_epoch,
-                       epochs_run=len(history), wall_time=time.perf_counter() - t0,
-                       history=history, options=asdict(opt))
+    return validation_fit
 
 
 def build_model(params: dict[str, np.ndarray], problem: Any,

@@ -126,18 +126,26 @@ class SingleShootingNLP:
     def g(self, wv: np.ndarray, pv: np.ndarray) -> list:
         return [self.constraints(wv, pv, self.rollout(wv, pv, True))]
 
+    def stage_gradient(self, ro: Any, x_ref: np.ndarray, u_ref: np.ndarray,
+                       pv: np.ndarray) -> np.ndarray:
+        """∇ of the stage costs ``Σ ‖x_i − x_ref‖²_Q + ‖u_i − u_ref‖²_R`` (and the input-rate
+        term) over the inputs ``u_0 … u_{N−1}`` of rollout ``ro``, the reference held fixed
+        (N m,)."""
+        p = self.p
+        N, n, m = p.N, p.n, p.m
+        dx = (ro.x[1:N] - x_ref) @ (2 * p.Q)
+        g = dx.ravel() @ ro.S[1:N].reshape((N - 1) * n, N * m) + (
+            (ro.u - u_ref) @ (2 * p.R)).ravel()
+        if p.has_du:
+            g += du_gradient(ro.u, self._u_prev(pv), p.du_weight).ravel()
+        return g
+
     def gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
         """``[f, ∇f]``."""
         p = self.p
         ro = self.rollout(wv, pv, True)
-        x_bar, u_bar = self._reference(pv)
-        N, n, m = p.N, p.n, p.m
         grad = np.zeros(p.nw)
-        dx = (ro.x[1:N] - x_bar) @ (2 * p.Q)
-        grad[self.iu] = dx.ravel() @ ro.S[1:N].reshape((N - 1) * n, N * m) + (
-            (ro.u - u_bar) @ (2 * p.R)).ravel()
-        if p.has_du:
-            grad[self.iu] += du_gradient(ro.u, self._u_prev(pv), p.du_weight).ravel()
+        grad[self.iu] = self.stage_gradient(ro, *self._reference(pv), pv)
         grad[p.it] = 2 * p.s * wv[p.it]
         return [self.objective(wv, pv, ro), grad]
 

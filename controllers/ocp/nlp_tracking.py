@@ -29,7 +29,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controllers.ocp.input_rate import du_cost, du_gradient
+from controllers.ocp.input_rate import du_cost
 from controllers.ocp.nlp_single_shooting import SingleShootingNLP
 from controllers.ocp.steady_state import steady_state
 
@@ -134,14 +134,8 @@ class TrackingNLP(SingleShootingNLP):
         p = self.p
         ro = self.rollout(wv, pv, True)
         xs, Xs = self.steady(wv, pv)
-        us = wv[self.ius]
-        N, n, m = p.N, p.n, p.m
         grad = np.zeros(self._nwf)
-        dx = (ro.x[1:N] - xs) @ (2 * p.Q)
-        grad[self._iuf] = dx.ravel() @ ro.S[1:N].reshape((N - 1) * n, N * m) + (
-            (ro.u - us) @ (2 * p.R)).ravel()
-        if p.has_du:
-            grad[self._iuf] += du_gradient(ro.u, self._u_prev(pv), p.du_weight).ravel()
+        grad[self._iuf] = self.stage_gradient(ro, xs, wv[self.ius], pv)
         self._grad_us(wv, ro, Xs, self._dcost_dxs(ro, xs, pv), grad)
         grad[self._itf] = 2 * p.s * wv[p.it]
         return [self.objective(wv, pv, ro), grad if self._E is None else grad @ self._E]

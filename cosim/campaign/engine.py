@@ -325,6 +325,40 @@ class _Attempts:
     lost_unstarted: int = 0
 
 
+def _submit_again(at: _Attempts, started: bool, submitter: Any) -> Any:
+    """Count a run lost with its worker (a try when it had started) and submit it again,
+    unless it has used its tries or submissions: the new future, or None."""
+    if started:
+        at.lost_tries += 1
+    else:
+        at.lost_unstarted += 1
+    if at.lost_tries < MAX_TRIES and at.submissions < MAX_SUBMISSIONS:
+        at.submissions += 1
+        return submitter.submit(at.task, at.submissions)
+    return None
+
+
+def _record(out: Path, plan: Plan, at: _Attempts, outcome: Any, error: BaseException | None,
+            stats: ExecutionStats, on_done: Callable[[str], None]) -> None:
+    """Write a run that came back (ok, failed, or a Dask error), Ctrl-C deferred while it is
+    written. It ran once more than it was lost; one lost at its last try, as often as it
+    was lost."""
+    tries = at.lost_tries + (0 if cluster.lost_worker(error) else 1)
+    guard = interrupts.current()
+    t1 = time.perf_counter()
+    with guard.deferred() if guard is not None else contextlib.nullcontext():
+        status = store.write_run(
+            out, plan.spec, dict(at.task, tries=tries, lost_unstarted=at.lost_unstarted),
+            outcome, error)
+    stats.write_s += time.perf_counter() - t1
+    if outcome is not None:
+        stats.run_s += outcome["wall_time_s"]
+    stats.done += 1
+    on_done(status)
+    if guard is not None:
+        guard.check()
+
+
 def _execute(plan: Plan, pending: list[dict[str, Any]], out: Path, workers: int | None,
              scheduler: str | None, on_done: Callable[[str], None],
              probe: Callable[[Any], Any] | None = None, *,
@@ -370,33 +404,12 @@ def _execute(plan: Plan, pending: list[dict[str, Any]], out: Path, workers: int 
                     not_run += 1     # never ran: not written, --resume runs it
                     continue
                 if cluster.lost_worker(error):
-                    if starts.started(str(future.key)):
-                        at.lost_tries += 1
-                    else:
-                        at.lost_unstarted += 1
-                    if at.lost_tries < MAX_TRIES and at.submissions < MAX_SUBMISSIONS:
-                        at.submissions += 1
-                        again = submitter.submit(at.task, at.submissions)
+                    again = _submit_again(at, starts.started(str(future.key)), submitter)
+                    if again is not None:
                         futures[again] = at
                         done.add(again)
                         continue
-                # a run that came back (ok, failed, or a Dask error) ran once more than it
-                # was lost; one lost at its last try, as often as it was lost
-                tries = at.lost_tries + (0 if cluster.lost_worker(error) else 1)
-                guard = interrupts.current()
-                t1 = time.perf_counter()
-                with guard.deferred() if guard is not None else contextlib.nullcontext():
-                    status = store.write_run(
-                        out, plan.spec,
-                        dict(at.task, tries=tries, lost_unstarted=at.lost_unstarted),
-                        outcome, error)
-                stats.write_s += time.perf_counter() - t1
-                if outcome is not None:
-                    stats.run_s += outcome["wall_time_s"]
-                stats.done += 1
-                on_done(status)
-                if guard is not None:
-                    guard.check()
+                _record(out, plan, at, outcome, error, stats, on_done)
             if not_run:
                 raise cluster.NoWorkers(f"{watchdog.reason}: {not_run} runs not run (start "
                                         "workers, then run the campaign again with --resume)")

@@ -61,13 +61,7 @@ def _tolerance(text: str) -> float | dict[str, float]:
         key = name.strip() if sep else "*"
         if sep and not key:
             raise argparse.ArgumentTypeError(f"'{part}': no signal name before '='")
-        try:
-            number = float(value)
-        except ValueError:
-            raise argparse.ArgumentTypeError(f"'{value}' is not a number") from None
-        if not (math.isfinite(number) and number >= 0):
-            raise argparse.ArgumentTypeError(f"'{value}' must be finite and >= 0")
-        values[key] = number
+        values[key] = _window(value)
     if not values:
         raise argparse.ArgumentTypeError("empty tolerance")
     if set(values) == {"*"}:
@@ -76,6 +70,7 @@ def _tolerance(text: str) -> float | dict[str, float]:
 
 
 def _window(text: str) -> float:
+    """A finite number >= 0 (a time window, a tolerance)."""
     try:
         value = float(text)
     except ValueError:

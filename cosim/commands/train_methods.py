@@ -188,23 +188,14 @@ def _prediction_error(record: Any, ev: Any, problem: Any) -> tuple[Any, dict[str
                      "at_last_step": None if profile is None else at(-1)}
 
 
-def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, trained: Trained,
-           out: Path, figure: Path, wall: float, command: str, sidecar: dict | None) -> int:
-    """Score the model against its baseline, write the model file, the figure and the
-    ``--history``; print the report."""
+def _model_record(args: argparse.Namespace, data: Any, record: Any, trained: Trained,
+                  ev: Any, wall: float, command: str, sidecar: dict | None) -> dict[str, Any]:
+    """The model file's ``training`` record: the command, data, scores against the
+    baseline, the free-run protocol and the δISS bounds."""
     from controllers.certification import bounds
-    from controllers.identification import training
-    from cosim.commands import train_report
-    from cosim.core.atomicio import output_error, replacing
 
-    names, units = list(problem.output_names), list(problem.output_units)
-    ev = train_report.evaluate(trained.params, record, problem, data.experiment_names,
-                               args.x0_samples)
-    scored = next(s for s in ("test", "val", "train") if np.any(record.split == s))
-    err = np.abs(record.y - ev.xi)[record.split == scored]
-    w_y_bar = float(np.max(err))
     sz, sr, ph = bounds.gate_bounds(trained.params)
-    doc = {
+    return {
         "command": command,
         "data": [str(p) for p in (*args.data, *args.val, *args.test)],
         "data_meta": sidecar,
@@ -221,7 +212,7 @@ def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, train
         "fit": {s: d["fit"] for s, d in ev.scores["splits"].items()},
         "max_abs_err": {s: float(np.max(np.abs(record.y - ev.xi)[record.split == s]))
                         for s in ev.scores["splits"]},
-        "w_y_bar_split": scored,
+        "w_y_bar_split": _scored_split(record),
         "fit_protocol": ("free-run simulation of each experiment from the initial state "
                          f"estimated from its first {args.x0_samples} samples, read through "
                          "the sensor limits; RMS in the outputs' units, FIT per split on its "
@@ -234,25 +225,52 @@ def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, train
         "wall_time_s": round(wall, 1),
         "torch_version": __import__("torch").__version__,
     }
+
+
+def _scored_split(record: Any) -> str:
+    """The split whose worst output error is the model's w̄_y: test, else val, else train."""
+    return next(s for s in ("test", "val", "train") if np.any(record.split == s))
+
+
+def _write_history(path: str | None, history: list[str] | None) -> None:
+    """The ``--history`` CSV (atomic), when asked for and kept."""
+    from cosim.core.atomicio import output_error, replacing
+
+    if history is None or not path:
+        return
+    try:
+        with replacing(path) as tmp:
+            Path(tmp).write_text("".join(history), encoding="utf-8")
+    except OSError as exc:
+        raise output_error(path, exc) from None
+
+
+def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, trained: Trained,
+           out: Path, figure: Path, wall: float, command: str, sidecar: dict | None) -> int:
+    """Score the model against its baseline, write the model file, the figure and the
+    ``--history``; print the report."""
+    from controllers.identification import training
+    from cosim.commands import train_report
+    from cosim.core.atomicio import output_error, replacing
+
+    ev = train_report.evaluate(trained.params, record, problem, data.experiment_names,
+                               args.x0_samples)
+    err = np.abs(record.y - ev.xi)[record.split == _scored_split(record)]
+    doc = _model_record(args, data, record, trained, ev, wall, command, sidecar)
     profile, doc["prediction_error"] = _prediction_error(record, ev, problem)
-    model = training.build_model(trained.params, problem, doc, w_y_bar=w_y_bar)
+    model = training.build_model(trained.params, problem, doc, w_y_bar=float(np.max(err)))
     model.prediction_error = profile
     try:
         model.save(out)   # atomic: a failed write leaves the previous file unchanged
     except OSError as exc:
         raise output_error(out, exc) from None
-    if trained.history is not None and args.history:
-        try:
-            with replacing(args.history) as tmp:
-                Path(tmp).write_text("".join(trained.history), encoding="utf-8")
-        except OSError as exc:
-            raise output_error(args.history, exc) from None
+    _write_history(args.history, trained.history)
     logged = sidecar is None or len(args.data) > 1 or bool(args.val or args.test)
     with replacing(figure) as tmp_figure:
         train_report.figure(tmp_figure, ev, record, model, logged,
                             f"{trained.label}, nu = {trained.nu:.3f}: free runs over the data")
     if not args.quiet:
-        train_report.print_report(ev, names, units)
+        train_report.print_report(ev, list(problem.output_names), list(problem.output_units))
         print(f"nu = {trained.nu:.4f}, ||U_o||_inf = {doc['U_o_inf_norm']:.2f}, "
               f"{trained.label}, {doc['wall_time_s']:.0f} s")
         print(f"wrote {out} and {figure}")

@@ -30,7 +30,7 @@ import shutil
 import tempfile
 import threading
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from pathlib import Path
 from typing import Any
 
@@ -170,6 +170,20 @@ class FmuComponent(Component):
         self.varmap.check(self.variables, inputs, outputs, units, fmu=str(self.path))
 
     # -- life cycle ---------------------------------------------------------------------------
+    @contextlib.contextmanager
+    def _guard(self, what: Callable[[], str]) -> Iterator[None]:
+        """Run FMU calls: a failure, an FMI status check's included, becomes the
+        :class:`FmuError` of :meth:`_fail` naming ``what()``; the project's own
+        :class:`CosimError` (a bad name, a bad value) passes unchanged."""
+        try:
+            yield
+        except FmuError as exc:  # a status check (a CosimError, but raised by the FMU)
+            raise self._fail(what(), exc) from None
+        except CosimError:
+            raise
+        except Exception as exc:
+            raise self._fail(what(), exc) from None
+
     def _fail(self, what: str, exc: BaseException) -> FmuError:
         """The :class:`FmuError` for ``exc`` raised by ``what``, with the FMU's recent log.
 
@@ -228,7 +242,7 @@ class FmuComponent(Component):
         except Exception as exc:
             raise self._fail("instantiation", exc) from None
         self._prepare_buffers()
-        try:
+        with self._guard(lambda: f"initialisation at t={t0!r}"):
             if not fmi3_:
                 self._fmu.setupExperiment(startTime=t0)
             for key, value in self.start_values.items():
@@ -240,12 +254,6 @@ class FmuComponent(Component):
             self._fmu.exitInitializationMode()
             if self.interface == "me":
                 self._init_me(t0)
-        except FmuError as exc:  # a status check (a CosimError, but raised by the FMU)
-            raise self._fail(f"initialisation at t={t0!r}", exc) from None
-        except CosimError:
-            raise
-        except Exception as exc:
-            raise self._fail(f"initialisation at t={t0!r}", exc) from None
         self._t = t0
 
     def _raw(self, fname: str) -> Any:
@@ -364,7 +372,7 @@ class FmuComponent(Component):
         An input may be a tunable parameter (a problem input bound to one,
         :mod:`cosim.core.binding`): with Model Exchange it is set in Event Mode, as FMI asks.
         """
-        try:
+        with self._guard(lambda: f"setting inputs at t={self._t!r}"):
             if self.interface == "me" and not self._tunable_set.isdisjoint(values):
                 self._fmu.enterEventMode()
                 self._set_many(values)
@@ -372,12 +380,6 @@ class FmuComponent(Component):
                 self._fmu.enterContinuousTimeMode()
             else:
                 self._set_many(values)
-        except FmuError as exc:  # a status check (a CosimError, but raised by the FMU)
-            raise self._fail(f"setting inputs at t={self._t!r}", exc) from None
-        except CosimError:
-            raise
-        except Exception as exc:
-            raise self._fail(f"setting inputs at t={self._t!r}", exc) from None
         self._dirty = True
 
     def set_parameter(self, name: str, value: float) -> None:

@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 
 from cosim.core import csvio
-from cosim.core.datagen import SPLITS, split_sizes
+from cosim.core.datagen import SPLITS, Dataset, split_sizes
 from cosim.core.errors import CosimError
 
 __all__ = ["EXPERIMENT_COLUMN", "LOG_WORDING", "MISSING", "SPLIT_COLUMN", "TIME_COLUMN",
@@ -70,18 +70,13 @@ LOG_WORDING = csvio.Wording(
 
 
 @dataclass
-class LogData:
-    """A logged record, the problem's signals only, with its split and experiments.
+class LogData(Dataset):
+    """A logged record, the problem's signals only, with its split and experiments: a
+    :class:`~cosim.core.datagen.Dataset` (``time`` [s] as logged; ``u``, ``y`` in the
+    problem's order and units) with the experiments and provenance.
 
     Attributes
     ----------
-    time : (T,) array
-        [s], as logged.
-    u, y : (T, m), (T, p) arrays
-        Inputs and outputs in the problem's order and units.
-    input_names, output_names : list of str
-    split : (T,) array of str
-        ``train`` / ``val`` / ``test`` per row.
     experiment : (T,) int array
         Index of each row's experiment (0, 1, ... in file order).
     experiment_names : list of str or None
@@ -93,12 +88,6 @@ class LogData:
         rows, columns used and ignored, experiments, split.
     """
 
-    time: np.ndarray
-    u: np.ndarray
-    y: np.ndarray
-    input_names: list[str]
-    output_names: list[str]
-    split: np.ndarray
     experiment: np.ndarray
     experiment_names: list[str | None]
     lines: np.ndarray
@@ -141,6 +130,56 @@ def fraction_split(experiment: np.ndarray, fractions: tuple[float, float]) -> np
         idx = np.flatnonzero(experiment == e)
         split[idx] = np.repeat(np.array(SPLITS), split_sizes(idx.size, fractions))
     return split.astype(str)
+
+
+def _read_rows(f: Any, path: Path, header: list[str], j_time: int, signals: list[int],
+               j_split: int | None, j_exp: int | None
+               ) -> tuple[list[list[float]], list[str], list[str], list[int], list[bool]]:
+    """The data rows of an open log: per row the time and signal values (NaN for a missing
+    sample), its split and experiment labels (when those columns are read), its file line
+    and whether a sample is missing."""
+    values, split, labels, lines, absent = [], [], [], [], []
+    for line, row in f.rows(len(header)):
+        cells = [f.number(row[j_time], line, j_time + 1, TIME_COLUMN)]
+        gone = False
+        for j in signals:
+            if row[j].strip().lower() in MISSING:
+                gone = True
+                cells.append(math.nan)
+            else:
+                cells.append(f.number(row[j], line, j + 1, header[j]))
+        values.append(cells)
+        absent.append(gone)
+        if j_split is not None:
+            label = row[j_split].strip()
+            if label not in SPLITS:
+                raise CosimError(f"{path}:{line}:{j_split + 1}: split must be one of "
+                                 f"{', '.join(SPLITS)}, got {label!r}")
+            split.append(label)
+        if j_exp is not None:
+            label = row[j_exp].strip()
+            if not label:
+                raise CosimError(f"{path}:{line}:{j_exp + 1}: empty value in column "
+                                 f"'{EXPERIMENT_COLUMN}'")
+            labels.append(label)
+        lines.append(line)
+    return values, split, labels, lines, absent
+
+
+def _assign_split(column: list[str] | None, keep: np.ndarray, experiment: np.ndarray,
+                  fractions: tuple[float, float] | None,
+                  default_fractions: tuple[float, float], whole_split: str | None
+                  ) -> tuple[np.ndarray, str]:
+    """The kept rows' split and where it came from: the file's column, the whole file, or
+    fractions of each experiment in time order."""
+    if column is not None:
+        return np.array(column)[keep], f"column '{SPLIT_COLUMN}'"
+    if whole_split is not None:
+        return np.full(int(np.count_nonzero(keep)), whole_split), f"every row ({whole_split})"
+    used = fractions if fractions is not None else default_fractions
+    source = (f"fractions {used[0]:g},{used[1]:g} of each experiment in time order"
+              + (" (--split)" if fractions is not None else " (default, no split column)"))
+    return fraction_split(experiment, used), source
 
 
 def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequence[str],
@@ -186,31 +225,8 @@ def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequenc
         # with --split fractions (or a whole-file split) the split column is not read
         j_split = col.get(SPLIT_COLUMN) if fractions is None and whole_split is None else None
         j_exp = col.get(EXPERIMENT_COLUMN)
-        values, split, labels, lines, absent = [], [], [], [], []
-        for line, row in f.rows(len(header)):
-            cells = [f.number(row[j_time], line, j_time + 1, TIME_COLUMN)]
-            gone = False
-            for j in signals:
-                if row[j].strip().lower() in MISSING:
-                    gone = True
-                    cells.append(math.nan)
-                else:
-                    cells.append(f.number(row[j], line, j + 1, header[j]))
-            values.append(cells)
-            absent.append(gone)
-            if j_split is not None:
-                label = row[j_split].strip()
-                if label not in SPLITS:
-                    raise CosimError(f"{path}:{line}:{j_split + 1}: split must be one of "
-                                     f"{', '.join(SPLITS)}, got {label!r}")
-                split.append(label)
-            if j_exp is not None:
-                label = row[j_exp].strip()
-                if not label:
-                    raise CosimError(f"{path}:{line}:{j_exp + 1}: empty value in column "
-                                     f"'{EXPERIMENT_COLUMN}'")
-                labels.append(label)
-            lines.append(line)
+        values, split, labels, lines, absent = _read_rows(f, path, header, j_time, signals,
+                                                          j_split, j_exp)
     if not values:
         raise CosimError(f"{path}:2: no data rows")
     arr = np.array(values, dtype=float)
@@ -224,17 +240,8 @@ def read_log(path: str | Path, input_names: Sequence[str], output_names: Sequenc
     experiment, exp_names = _parts(experiment, exp_names, gaps, missing, path.stem)
     keep = ~missing
     arr, line_arr, experiment = arr[keep], line_arr[keep], experiment[keep]
-    if j_split is not None:
-        split_arr = np.array(split)[keep]
-        source = f"column '{SPLIT_COLUMN}'"
-    elif whole_split is not None:
-        split_arr = np.full(len(arr), whole_split)
-        source = f"every row ({whole_split})"
-    else:
-        used = fractions if fractions is not None else default_fractions
-        split_arr = fraction_split(experiment, used)
-        source = (f"fractions {used[0]:g},{used[1]:g} of each experiment in time order"
-                  + (" (--split)" if fractions is not None else " (default, no split column)"))
+    split_arr, source = _assign_split(split if j_split is not None else None, keep,
+                                      experiment, fractions, default_fractions, whole_split)
     m = len(input_names)
     data = LogData(time=arr[:, 0], u=arr[:, 1:1 + m], y=arr[:, 1 + m:],
                    input_names=list(input_names), output_names=list(output_names),

@@ -183,3 +183,29 @@ def build(kind: str, dest: Path) -> Path:
     else:
         from pythonfmu.builder import FmuBuilder
     return Path(FmuBuilder.build_FMU(script, dest=dest))
+
+
+#: A short set-point scenario of the four-tank stand-ins (2,000 s).
+SHORT_SCENARIO = "time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,\n2000,,\n"
+
+
+def crashy_campaign(folder: Path, pyfmu_dir: Path, runs: int, seed: int) -> Path:
+    """A PI campaign on the Crashy FMU (``folder/crashy.toml`` and its ``short.csv``) whose
+    draws segfault at t = 300 s or never (``plant.crash_at``); the spec's path."""
+    (folder / "short.csv").write_text(SHORT_SCENARIO)
+    spec = folder / "crashy.toml"
+    spec.write_text(f"""\
+[campaign]
+runs = {runs}
+seed = {seed}
+scenario = "short.csv"
+controller = "pi"
+plant = "{pyfmu_dir / 'Crashy.fmu'}"
+
+[controller.options]
+pairing = "diagonal"
+
+[draw]
+"plant.crash_at" = {{ choice = [300.0, 1e9] }}
+""")
+    return spec

@@ -37,6 +37,7 @@ import pytest
 
 from cosim.campaign import run_campaign
 from cosim.campaign.engine import MAX_TRIES
+from tests.cosim import pyfmu_models
 
 pytestmark = pytest.mark.slow
 
@@ -47,7 +48,7 @@ NOT_COMPARED = ("wall_time_s", "step_ms_p99", "tries")
 #: Bound of every wait for a process or a campaign [s].
 WAIT = 240.0
 
-SHORT = "time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,\n2000,,\n"
+SHORT = pyfmu_models.SHORT_SCENARIO
 MPC_SPEC = """\
 [campaign]
 name = "deployments"
@@ -352,22 +353,7 @@ def test_a_worker_killed_mid_run_costs_a_try_not_the_run(
 
 def test_a_run_that_kills_its_worker_every_time_fails_after_the_last_try(
         tmp_path: Path, pyfmu_dir: Path) -> None:
-    (tmp_path / "short.csv").write_text(SHORT)
-    spec = tmp_path / "crashy.toml"
-    spec.write_text(f"""\
-[campaign]
-runs = 3
-seed = 3
-scenario = "short.csv"
-controller = "pi"
-plant = "{pyfmu_dir / 'Crashy.fmu'}"
-
-[controller.options]
-pairing = "diagonal"
-
-[draw]
-"plant.crash_at" = {{ choice = [300.0, 1e9] }}
-""")
+    spec = pyfmu_models.crashy_campaign(tmp_path, pyfmu_dir, runs=3, seed=3)
     with started(tmp_path / "dask",
                  {"DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": "0"}) as cluster:
         cluster.add_worker(nworkers=2, nthreads=1)

@@ -18,12 +18,13 @@ import pandas as pd
 import pytest
 
 from cosim.campaign import run_campaign
+from tests.cosim import pyfmu_models
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
 #: Per-run columns that measure the machine, not the closed loop.
 WALL_CLOCK = ("wall_time_s", "step_ms_p99")
-SHORT = "time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,\n2000,,\n"
+SHORT = pyfmu_models.SHORT_SCENARIO
 
 
 def spec_text(tmp_path: Path, runs: int = 3, extra: str = "") -> str:
@@ -140,22 +141,7 @@ def test_external_cluster_gives_the_local_engines_kpis(tmp_path: Path,
 @pytest.mark.slow
 def test_segfaulting_draws_fail_and_the_campaign_goes_on(tmp_path: Path,
                                                           pyfmu_dir: Path) -> None:
-    (tmp_path / "short.csv").write_text(SHORT)
-    spec = tmp_path / "crashy.toml"
-    spec.write_text(f"""\
-[campaign]
-runs = 6
-seed = 1
-scenario = "short.csv"
-controller = "pi"
-plant = "{pyfmu_dir / 'Crashy.fmu'}"
-
-[controller.options]
-pairing = "diagonal"
-
-[draw]
-"plant.crash_at" = {{ choice = [300.0, 1e9] }}
-""")
+    spec = pyfmu_models.crashy_campaign(tmp_path, pyfmu_dir, runs=6, seed=1)
     result = run_campaign(spec, tmp_path / "out", workers=2)
     table = result.table.sort_values("run")
     crashed = table["plant.crash_at"] == 300.0

@@ -20,6 +20,7 @@ from pathlib import Path
 import pytest
 
 from cosim.core.compare import read_table
+from tests.cosim import pyfmu_models
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[1]
@@ -28,7 +29,7 @@ LONG = "time,ref.h1,ref.h2\n0,0.6,0.6\n5000,0.7,\n25000,,\n"
 #: The hostile single-tank FMUs of pyfmu_models (pump a fills h1, pump b fills h2).
 TANKS = ("Slow.fmu", "Hang.fmu", "NativeHang.fmu", "Segfault.fmu", "Exits.fmu", "Nan.fmu")
 #: 80 steps.
-SHORT = "time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,\n2000,,\n"
+SHORT = pyfmu_models.SHORT_SCENARIO
 
 
 def scenario(tmp_path: Path, text: str = LONG, name: str = "sc.csv") -> Path:
