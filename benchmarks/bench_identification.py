@@ -14,8 +14,8 @@ is taken over the rest, in the output's unit.
 
 Records:
 
-- ``heater``: the heated vessel of ``tests/cosim/test_cli_train_logged.py`` (a Wiener plant,
-  power [kW] -> temperature [degC], Ts = 5 s, 0.05 degC noise), 1,000 + 1,000 samples;
+- ``heater``: the heated vessel of ``tests/cosim/commands/test_cli_train_logged.py`` (a
+  Wiener plant, power [kW] -> temperature [degC], Ts = 5 s, 0.05 degC noise), 1,000 + 1,000 samples;
 - ``tanks``: two cascaded tanks with square-root outflows, the upper one overflowing into the
   lower one, a level sensor saturating at 10 V, process and sensor noise (made here, seeded:
   :func:`tanks_record`), pump voltage -> lower level [V], Ts = 4 s, 1,024 + 1,024 samples;
@@ -117,8 +117,8 @@ def write_csv(path: Path, u: np.ndarray, y: np.ndarray, Ts: float, names: tuple[
 
 def built_in(work: Path) -> dict[str, Path]:
     """The two records made here, as folders of est.csv, val.csv and problem.toml."""
-    from tests.cosim.test_cli_train_logged import PROBLEM as HEATER
-    from tests.cosim.test_cli_train_logged import TS, heater
+    from tests.cosim.commands.test_cli_train_logged import PROBLEM as HEATER
+    from tests.cosim.commands.test_cli_train_logged import TS, heater
 
     out = {}
     folder = work / "heater"

@@ -425,7 +425,7 @@ def clip_variants(args: argparse.Namespace) -> None:
     below the margin only), on Hessian-like matrices (eigenvalues 0.05 … 6e4, three below the
     margin, as the paper scenario's ~2.4 per decomposition), for N m = 30 … 120."""
     from controllers.kernel import compiled_kernel as ck
-    from tests.controllers.test_compiled_kernel import random_fhocp
+    from tests.controllers.kernel.test_compiled_kernel import random_fhocp
 
     saved = ck.LAPACK_EIG_MIN_NU
     try:

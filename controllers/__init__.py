@@ -43,7 +43,7 @@ _EXPORTS = {
     "equilibrium": ("controllers.equilibrium", "equilibrium"),
     "FHOCP": ("controllers.ocp.fhocp", "FHOCP"),
     "FHOCPResult": ("controllers.ocp.fhocp", "FHOCPResult"),
-    "RobustMPC": ("controllers.ocp.robust_mpc", "RobustMPC"),
+    "RobustMPC": ("controllers.ocp.paper_mpc", "RobustMPC"),
     "GRUObserver": ("controllers.observer", "GRUObserver"),
     "ReferenceGovernor": ("controllers.ocp.governor", "ReferenceGovernor"),
     "ControllersError": ("controllers.errors", "ControllersError"),

@@ -22,7 +22,7 @@ __all__ = ["ControlLaw", "LawStep", "setpoint_text"]
 
 @dataclass
 class LawStep:
-    """One step of a law: the step record (:class:`controllers.ocp.robust_mpc.StepRecord`),
+    """One step of a law: the step record (:class:`controllers.ocp.paper_mpc.StepRecord`),
     whether the requested set-point was refused, the fraction of the way to it the reference
     governor moved (1: no governor, or all the way), and the law's own diagnostics (by
     name, in the problem's units)."""

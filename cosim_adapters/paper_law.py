@@ -1,6 +1,6 @@
 """The paper's law of the ``robust-mpc`` component (``law="paper"``): :class:`PaperLaw`.
 
-``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.robust_mpc.RobustMPC`: the FHOCP
+``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.paper_mpc.RobustMPC`: the FHOCP
 ``eq:optimization`` with the shifted-candidate fallback) for the reference ``(x̄, ū, α)`` of
 :meth:`controllers.certification.certificates.Certificate.reference` (Assumption 1, ``eq:condition-
 recursive-feasibility``), and its set-point handling: on a set-point change the rate limit
@@ -54,7 +54,7 @@ class PaperLaw:
                  setpoint_rate: float | None, name: str, certified: bool = True) -> None:
         from controllers.ocp.fhocp import FHOCP
         from controllers.ocp.governor import ReferenceGovernor
-        from controllers.ocp.robust_mpc import RobustMPC
+        from controllers.ocp.paper_mpc import RobustMPC
 
         self.model, self.cert, self.fhocp_options = model, cert, dict(fhocp_options)
         self.fhocp = FHOCP.from_certificate(cert, **self.fhocp_options)

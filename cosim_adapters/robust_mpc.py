@@ -19,7 +19,7 @@ section V). Then one of two control laws (option ``law``) gives ``u_k``:
   when ``ȳ`` changes, the equilibrium ``(x̄, ū)`` and ``α`` (``eq:def-alpha``) via
   :meth:`controllers.certification.certificates.Certificate.reference`, which also checks
   Assumption 1 (``ass:setpoint``) and ``eq:condition-recursive-feasibility``; then
-  ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.robust_mpc.RobustMPC`: the
+  ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.paper_mpc.RobustMPC`: the
   FHOCP ``eq:optimization`` with the shifted-candidate fallback).
 
 Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
@@ -330,7 +330,7 @@ class RobustMPCController(Component):
         return dict(self._diag)
 
     def summary(self) -> dict:
-        from controllers.ocp.robust_mpc import solver_summary
+        from controllers.ocp.paper_mpc import solver_summary
 
         out = solver_summary(self.law.records)
         out.update(self.certification.summary())

@@ -13,7 +13,7 @@ EXAMPLES = sorted((ROOT / "examples").glob("*.py"))
 #: Examples run with more options, or by a test of their own: own_plant.py (the whole
 #: pipeline on a plant that is not four tanks) runs per plant in tests/test_example_plants.py;
 #: tracking_theorem.py (the checker of a finished tracking_theorem campaign) checks the two
-#: runs of that campaign in tests/cosim/test_shipped_campaigns.py.
+#: runs of that campaign in tests/cosim/campaign/test_shipped_campaigns.py.
 ELSEWHERE = {"own_plant", "tracking_theorem"}
 
 

@@ -21,7 +21,7 @@
  * Same mathematics as controllers/ocp/shooting.py (GRUShooting.rollout,
  * stage_hessians) and controllers/ocp/nlp_single_shooting.py (SingleShootingNLP.objective,
  * constraints, gradient, jacobian, hessian, hessian_convex) -- see there for the formulas;
- * checked against them to ~1e-14 (tests/controllers/test_compiled_kernel.py).
+ * checked against them to ~1e-14 (tests/controllers/kernel/test_compiled_kernel.py).
  *
  * Build-time variants (macros, chosen by controllers/kernel/compiled_kernel.py):
  *   (default)        W-mode: explicit J_h, [A B] and stage Hessians W_i, then Z_i^T W_i Z_i

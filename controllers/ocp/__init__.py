@@ -7,6 +7,6 @@ derivatives, :mod:`~controllers.ocp.shooting`, :mod:`~controllers.ocp.nlp_single
 :mod:`~controllers.ocp.nlp_tracking`; the multiple-shooting baseline), their one answer check
 and status (:mod:`~controllers.ocp.fhocp_result`, :mod:`~controllers.ocp.solve_status`), the
 solver settings, and the control laws that solve them each step
-(:mod:`~controllers.ocp.robust_mpc`, :mod:`~controllers.ocp.tracking_mpc`) with the reference
+(:mod:`~controllers.ocp.paper_mpc`, :mod:`~controllers.ocp.tracking_mpc`) with the reference
 governor (:mod:`~controllers.ocp.governor`).
 """

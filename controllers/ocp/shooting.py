@@ -14,7 +14,7 @@ instructions per stage (0.6 ms and 1.8 ms per horizon, even compiled 0.13 ms and
 written as dense matrix products (BLAS) they take a few microseconds per stage. The state
 update itself is :func:`controllers.gru.step` (the one source of the equations); the derivative
 formulas below are checked against casadi's automatic differentiation of that same function
-in ``tests/controllers/test_shooting.py``.
+in ``tests/controllers/ocp/test_shooting.py``.
 
 Derivatives of ``f = h + z∘(x − h)`` with ``z = σ(a_z)``, ``r = σ(a_r)``, ``ρ = r∘x``,
 ``h = tanh(a_h)``, ``a_h = W_h u + U_h ρ + b_h`` (``v = (x, u)``, ``D· = ∂·/∂v``)::

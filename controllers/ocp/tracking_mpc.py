@@ -4,7 +4,7 @@
 the target ``r = ȳ − d̂`` from the candidate of the recursive-feasibility argument (the
 previous plan shifted by one stage with the artificial steady input ``u_s`` appended, and the
 same ``u_s``), and applies that candidate when a solve fails. Unlike the paper's law
-(:class:`controllers.ocp.robust_mpc.RobustMPC`) no set-point is ever refused: ``r`` enters the
+(:class:`controllers.ocp.paper_mpc.RobustMPC`) no set-point is ever refused: ``r`` enters the
 cost only, so the candidate stays feasible whatever ``r`` does (docs: design/tracking.md,
 claim 1). :class:`DisturbanceFilter` is the offset-free estimate ``d̂``.
 """
@@ -17,7 +17,7 @@ import numpy as np
 
 from controllers.ocp.fhocp_result import FHOCPResult
 from controllers.ocp.fhocp_tracking import TrackingFHOCP
-from controllers.ocp.robust_mpc import StepRecord
+from controllers.ocp.paper_mpc import StepRecord
 from controllers.ocp.solver_settings import FEAS_TOL
 
 __all__ = ["DisturbanceFilter", "TrackingMPC"]
@@ -50,7 +50,7 @@ class TrackingMPC:
     fhocp : TrackingFHOCP
     accept_suboptimal : bool
         Apply a feasible iterate of a capped solve that costs no more than the candidate
-        (suboptimal MPC, as :class:`controllers.ocp.robust_mpc.RobustMPC`).
+        (suboptimal MPC, as :class:`controllers.ocp.paper_mpc.RobustMPC`).
     """
 
     def __init__(self, fhocp: TrackingFHOCP, accept_suboptimal: bool = True) -> None:

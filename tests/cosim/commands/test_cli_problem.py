@@ -15,7 +15,7 @@ from cosim.cli import main
 from cosim.core import datagen
 from tests.cosim import units_fmu
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

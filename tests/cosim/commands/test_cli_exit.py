@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 #: A library whose destructor aborts the process, as a crashing FMU destructor would.
 ABORTING = '#include <stdlib.h>\n__attribute__((destructor)) static void bye(void) { abort(); }\n'

@@ -14,7 +14,7 @@ from controllers.kernel.kernel_abi import QpStatus
 from controllers.kernel.kernel_sqp import KernelSQP
 from controllers.ocp.casadi_callbacks import quiet_stdout
 from controllers.ocp.fhocp import FHOCP
-from tests.controllers.test_compiled_kernel import needs_cc, random_fhocp, same_start_solves
+from tests.controllers.kernel.test_compiled_kernel import needs_cc, random_fhocp, same_start_solves
 
 
 @pytest.fixture(scope="module")

@@ -8,7 +8,7 @@ from controllers.equilibrium import equilibrium
 from controllers.gru import output, simulate, step
 from controllers.observer import GRUObserver
 from controllers.ocp.fhocp import FHOCP, FHOCPData
-from controllers.ocp.robust_mpc import RobustMPC
+from controllers.ocp.paper_mpc import RobustMPC
 from controllers.ocp.solver_settings import FEAS_TOL
 from cosim_adapters.gru_plant import GRUPlant
 from tests.controllers.random_gru import N

@@ -12,7 +12,7 @@ import pytest
 
 from cosim.cli import main
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SCENARIOS = sorted((ROOT / "scenarios").glob("*.csv"))
 
 

@@ -13,7 +13,7 @@ import pytest
 from controllers.model import GRUModel
 from cosim.campaign import load, run_campaign
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 CAMPAIGNS = sorted((ROOT / "scenarios" / "campaigns").glob("*.toml"))
 
 

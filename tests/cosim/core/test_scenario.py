@@ -9,7 +9,7 @@ import pytest
 from cosim.core.errors import CosimError
 from cosim.core.scenario import BIAS, NOISE, PLANT, REF, load
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def write(tmp_path: Path, text: str, name: str = "sc.csv") -> Path:

@@ -13,7 +13,7 @@ from cosim.campaign.report import clopper_pearson_upper
 from cosim.cli import main
 from cosim.core.errors import CosimError
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SCENARIO = ROOT / "scenarios" / "leak_tank1.csv"
 GOOD = f"""\
 [campaign]

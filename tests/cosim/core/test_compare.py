@@ -278,7 +278,7 @@ def test_tolerance_for_a_signal_that_is_not_compared_exit_2(tmp_path: Path, ref:
 def test_help_example_tolerance_names_real_result_columns(tmp_path: Path, capsys) -> None:
     """The --help example (plant.h1=...) works on real result files; a bare h1 is refused
     with a hint."""
-    reference = Path(__file__).resolve().parents[2] / "scenarios" / "references" \
+    reference = Path(__file__).resolve().parents[3] / "scenarios" / "references" \
         / "leak_tank1__pi.csv"
     with pytest.raises(SystemExit):
         main(["compare", "--help"])

@@ -21,7 +21,7 @@ from cosim.campaign import run_campaign
 from tests.cosim import pyfmu_models
 
 HERE = Path(__file__).resolve().parent
-ROOT = HERE.parents[1]
+ROOT = HERE.parents[2]
 #: Per-run columns that measure the machine, not the closed loop.
 WALL_CLOCK = ("wall_time_s", "step_ms_p99")
 SHORT = pyfmu_models.SHORT_SCENARIO

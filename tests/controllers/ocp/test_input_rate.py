@@ -17,8 +17,8 @@ from controllers.kernel import compiled_kernel as ck
 from controllers.ocp.fhocp import FHOCP
 from controllers.ocp.input_rate import du_cost, du_gradient, du_hessian, du_weights
 from controllers.ocp.nlp_single_shooting import SingleShootingNLP
-from controllers.ocp.robust_mpc import RobustMPC
-from tests.controllers.test_compiled_kernel import random_fhocp, rel
+from controllers.ocp.paper_mpc import RobustMPC
+from tests.controllers.kernel.test_compiled_kernel import random_fhocp, rel
 
 needs_cc = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,
                               reason="no C compiler")

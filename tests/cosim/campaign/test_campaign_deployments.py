@@ -41,7 +41,7 @@ from tests.cosim import pyfmu_models
 
 pytestmark = pytest.mark.slow
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 DASK = str(Path(sys.executable).with_name("dask"))
 #: Per-run columns that measure the machine (or the deployment), not the closed loop.
 NOT_COMPARED = ("wall_time_s", "step_ms_p99", "tries")

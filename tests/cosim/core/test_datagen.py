@@ -13,7 +13,7 @@ from cosim.core import datagen
 from cosim.core.errors import CosimError
 from tests.fourtank_problem import FOURTANK
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 FMU = ROOT / "fmus" / "FourTank.fmu"
 needs_fmu = pytest.mark.skipif(not FMU.exists(), reason="run 'cosim build-fmu' first")
 

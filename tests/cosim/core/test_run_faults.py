@@ -23,7 +23,7 @@ from cosim.core.compare import read_table
 from tests.cosim import pyfmu_models
 
 HERE = Path(__file__).resolve().parent
-ROOT = HERE.parents[1]
+ROOT = HERE.parents[2]
 #: 1000 steps of 25 s.
 LONG = "time,ref.h1,ref.h2\n0,0.6,0.6\n5000,0.7,\n25000,,\n"
 #: The hostile single-tank FMUs of pyfmu_models (pump a fills h1, pump b fills h2).

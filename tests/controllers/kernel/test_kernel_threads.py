@@ -13,7 +13,7 @@ import pytest
 
 from controllers.equilibrium import equilibrium
 from controllers.ocp.fhocp import FHOCP
-from tests.controllers.test_compiled_kernel import needs_cc
+from tests.controllers.kernel.test_compiled_kernel import needs_cc
 
 #: Two closed loops through different set-points (normalised outputs), so that two threads
 #: sharing any state would disturb each other.

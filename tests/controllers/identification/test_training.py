@@ -18,7 +18,7 @@ from cosim.cli import main  # noqa: E402
 from cosim.core import datagen  # noqa: E402
 from tests.fourtank_problem import FOURTANK  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 FMU = ROOT / "fmus" / "FourTank.fmu"
 needs_fmu = pytest.mark.skipif(not FMU.exists(), reason="run 'cosim build-fmu' first")
 

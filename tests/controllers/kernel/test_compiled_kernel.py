@@ -112,7 +112,7 @@ def same_start_solves(a: FHOCP, b: FHOCP, cert, setpoints: list, repeats: int):
 def test_same_solves_as_the_numpy_fhocp(cert) -> None:
     """Same status and iterations, the optimum to 1e-9, from identical warm starts (the
     kernel's derivatives in casadi's SQP loop, as the numpy callbacks; its own loop:
-    tests/controllers/test_kernel_sqp.py)."""
+    tests/controllers/kernel/test_kernel_sqp.py)."""
     a = FHOCP.from_certificate(cert, kernel="numpy").setup()
     b = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi"}).setup()
     assert a.kernel is None and b.kernel is not None
