@@ -29,6 +29,12 @@ only ``x̂``: it is checked before the solve (:meth:`FHOCP.x0_infeasible`), and 
 is reported as ``"infeasible_x0"`` without calling the solver. The design record (docs:
 design/solver.md) lists the alternatives measured and why they won or lost.
 
+One solve procedure serves every law (:meth:`FHOCP.solve_request`): the ``i = 0`` row, the
+solver within its budget, the independent answer check, the judge and the warm start; what a
+law asks for is a :class:`SolveRequest` (its candidate, the solver's buffers, its answer
+check): the paper's :class:`Setpoint` (:meth:`FHOCP.solve`), the tracking law's
+:class:`controllers.ocp.fhocp_tracking.Target`; a third law brings its own request.
+
 Every answer is checked independently of the solver's status: the inputs are rolled out with
 numpy (:func:`controllers.gru.simulate`) and the constraint violations, the terminal-set
 violation and the defect between the solver's and numpy's trajectories are measured (see
@@ -43,7 +49,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, Protocol
 
 import casadi as ca
 import numpy as np
@@ -64,7 +70,8 @@ from controllers.ocp.input_rate import du_cost, du_weights
 from controllers.ocp.solve_status import SolveStatus
 from controllers.ocp.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
-__all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPData", "FHOCPResult", "bind_buffers"]
+__all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPData", "FHOCPResult", "Setpoint", "SolveRequest",
+           "bind_buffers"]
 
 
 
@@ -102,6 +109,62 @@ class FHOCPData:
     a: np.ndarray
     b: np.ndarray
     s: float
+
+
+class SolveRequest(Protocol):
+    """What one solve is asked for: the law's part of :meth:`FHOCP.solve_request` (the
+    paper's set-point, :class:`Setpoint`; the tracking law's target and candidate,
+    :class:`controllers.ocp.fhocp_tracking.Target`). A third law brings its own."""
+
+    def candidate(self, fhocp: Any, x_hat: np.ndarray, e_o: float, status: str
+                  ) -> FHOCPResult:
+        """The law's candidate, evaluated, with ``status`` (reported when ``x̂`` fails the
+        ``i = 0`` row and no solver is called)."""
+        ...
+
+    def write(self, fhocp: Any, ins: dict[str, np.ndarray], x_hat: np.ndarray,
+              e_o: float) -> None:
+        """The solver's parameters, bounds and initial guess (its argument buffers)."""
+        ...
+
+    def check(self, fhocp: Any, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray,
+              e_o: float, status: str) -> FHOCPResult:
+        """The independent check of the solver's answer ``wopt`` (solver status
+        ``status``)."""
+        ...
+
+
+@dataclass(frozen=True)
+class Setpoint:
+    """The paper's request (``eq:optimization``): the set-point ``(x̄, ū)``, the terminal
+    radius α, the initial inputs (``None``: the previous solution shifted with ``ū``
+    appended when ``warm``, else ``ū``) and ``u_{−1}``."""
+
+    x_bar: np.ndarray
+    u_bar: np.ndarray
+    alpha: float
+    u_init: np.ndarray | None
+    warm: bool
+    u_prev: np.ndarray
+
+    def candidate(self, fhocp: FHOCP, x_hat: np.ndarray, e_o: float, status: str
+                  ) -> FHOCPResult:
+        res = fhocp.candidate(x_hat, np.tile(self.u_bar, (fhocp.N, 1)), self.x_bar,
+                              self.u_bar, e_o, self.alpha, self.u_prev)
+        res.status = status
+        return res
+
+    def write(self, fhocp: FHOCP, ins: dict[str, np.ndarray], x_hat: np.ndarray,
+              e_o: float) -> None:
+        fhocp.layout.write(ins, fhocp.tightened_bounds(e_o), x_hat, self.x_bar, self.u_bar,
+                           self.alpha, self.u_init, fhocp._warm if self.warm else None,
+                           fhocp.warm_duals, fhocp.plain_rollout,
+                           self.u_prev if fhocp.has_du else None)
+
+    def check(self, fhocp: FHOCP, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray,
+              e_o: float, status: str) -> FHOCPResult:
+        return fhocp.check_answer(wopt, pv, x_hat, e_o, self.x_bar, self.u_bar, self.alpha,
+                                  self.u_prev, status)
 
 
 class FHOCP:
@@ -272,6 +335,7 @@ class FHOCP:
         """The solver of ``nlp`` (the compiled kernel's SQP, casadi ``sqpmethod`` or IPOPT)
         and its argument buffers; forgets the warm start."""
         self._warm: dict[str, np.ndarray] | None = None
+        self._compiled_loop = False
         if self.solver == "sqp":
             opts = {k: v for k, v in opts.items()
                     if k not in ("ipopt", "grad_f", "jac_g", "hess_lag")}
@@ -286,6 +350,7 @@ class FHOCP:
 
                 self._solver = KernelSQP(self.kernel, sqp, self.time_budget)
                 self._buffer = self._solver.buffers()
+                self._compiled_loop = True
                 return
             sqp.pop("tol_du_relative", None)   # the kernel's own test: sqpmethod's is absolute
             sqp.pop("reuse_step", None)        # the kernel's own: sqpmethod has no reuse
@@ -324,6 +389,14 @@ class FHOCP:
             bounds.flags.writeable = False
             self._bounds_eo, self._bounds = e_o, bounds
         return self._bounds
+
+    def plain_rollout(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
+        """States ``x_0 … x_N`` from ``x̂`` under ``u_seq`` by the solver's own means,
+        without derivatives (the initial guess's terminal gap): the kernel's, else the
+        single-shooting NLP's or numpy's."""
+        if self.kernel is not None or self._nlp is None:
+            return self.simulate(x_hat, u_seq)
+        return self._shoot.rollout(x_hat, u_seq, derivatives=False).x
 
     def rollout(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
         """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m)."""
@@ -426,54 +499,65 @@ class FHOCP:
             The input applied at the previous step, ``u_{−1}`` of the input-rate term
             (ignored without one); ``None``: ``ū`` (the first step).
         """
-        if self._solver is None:
-            self.setup()
-        x_hat = np.asarray(x_hat, dtype=float).reshape(self.n)
         x_bar = np.asarray(x_bar, dtype=float).reshape(self.n)
         u_bar = np.asarray(u_bar, dtype=float).reshape(self.m)
+        request = Setpoint(x_bar, u_bar, float(alpha), u_init, warm, self._u_prev(u_prev, u_bar))
+        return self.solve_request(x_hat, e_o, request)
+
+    def solve_request(self, x_hat: np.ndarray, e_o: float, request: SolveRequest
+                      ) -> FHOCPResult:
+        """One solve, the same for every law: the ``i = 0`` row checked first (a violated
+        one is reported as ``"infeasible_x0"`` with the request's candidate, no solver
+        called), the request's parameters, bounds and initial guess written, the solver run
+        (within the optional time budget), its answer checked independently by the
+        request, judged (:func:`~controllers.ocp.fhocp_result.judge`) and kept as the next
+        warm start. ``solve_time``: the solver and the check."""
+        if self._solver is None:
+            self.setup()
         t0 = time.perf_counter()
-        u_prev = self._u_prev(u_prev, u_bar)
+        x_hat = np.asarray(x_hat, dtype=float).reshape(self.n)
         if self.formulation == "single-shooting" and self.x0_infeasible(x_hat, e_o):
-            res = self.candidate(x_hat, np.tile(u_bar, (self.N, 1)), x_bar, u_bar, e_o, alpha,
-                                 u_prev)
-            res.status = SolveStatus.INFEASIBLE_X0
+            res = request.candidate(self, x_hat, e_o, SolveStatus.INFEASIBLE_X0)
             res.solve_time = time.perf_counter() - t0
             return res
         buf, trigger, ins, outs = self._buffer
-        simulate = (self.simulate if self.kernel is not None or self._nlp is None
-                    else lambda xh, u: self._shoot.rollout(xh, u, derivatives=False).x)
-        self.layout.write(ins, self.tightened_bounds(e_o), x_hat, x_bar, u_bar, alpha, u_init,
-                          self._warm if warm else None, self.warm_duals, simulate,
-                          u_prev if self.has_du else None)
+        request.write(self, ins, x_hat, e_o)
         self._arm_deadline(t0)
-        with quiet_stdout():  # qpOASES prints the errors its SQP handles
-            trigger()
+        if self._compiled_loop:
+            trigger()   # the compiled SQP: no casadi, nothing printed
+        else:
+            with quiet_stdout():  # qpOASES prints the errors its SQP handles
+                trigger()
         stats = solver_stats(buf)
-        elapsed = time.perf_counter() - t0
         wopt = outs["x"].copy()
-        t = float(wopt[self.it])
-        # the independent check: a rollout apart from the solver's (the kernel's plain one,
-        # cross-checked against numpy when loaded, in one call; or numpy's). IPOPT may
-        # overshoot a bound by ~1e-9: u is clipped
-        out = None
-        if self.kernel is not None:
-            u, x, out, _ = self.kernel.assess_w(wopt, ins["p"], self.tightened_bounds(e_o),
-                                                alpha)
-            cost, defect = out.cost, out.defect
-        else:
-            u = np.clip(wopt[self.iu], -1.0, 1.0)
-            x = self.simulate(x_hat, u)
-            cost = self.cost(x, u, x_bar, u_bar, u_prev=u_prev)
-            defect = float(np.max(np.abs(self._xtraj(wopt, ins["p"]) - x)))
-        res = FHOCPResult(u=u, x=x, cost=cost, status=str(stats.get("return_status", "unknown")),
-                          success=False, solve_time=elapsed, t=t, defect=defect,
-                          lam_x=outs["lam_x"].copy(), lam_g=outs["lam_g"].copy())
-        if out is not None:
-            set_residuals(res, out, alpha)
-        else:
-            self._residuals(res, x, e_o, x_bar, alpha)
+        res = request.check(self, wopt, ins["p"], x_hat, e_o,
+                            str(stats.get("return_status", "unknown")))
+        res.solve_time = time.perf_counter() - t0
+        res.lam_x, res.lam_g = outs["lam_x"].copy(), outs["lam_g"].copy()
         judge(res, stats, wopt)
         self._keep_warm(res, wopt)
+        return res
+
+    def check_answer(self, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray, e_o: float,
+                     x_bar: np.ndarray, u_bar: np.ndarray, alpha: float, u_prev: np.ndarray,
+                     status: str) -> FHOCPResult:
+        """The independent check of the solver's answer ``wopt`` at ``p``: a rollout apart
+        from the solver's (the kernel's plain one, cross-checked against numpy when loaded,
+        in one call; or numpy's), its cost and residuals, and the defect against the
+        solver's own trajectory. IPOPT may overshoot a bound by ~1e-9: u is clipped."""
+        t = float(wopt[self.it])
+        if self.kernel is not None:
+            u, x, out, _ = self.kernel.assess_w(wopt, pv, self.tightened_bounds(e_o), alpha)
+            res = FHOCPResult(u=u, x=x, cost=out.cost, status=status, success=False, t=t,
+                              defect=out.defect)
+            set_residuals(res, out, alpha)
+            return res
+        u = np.clip(wopt[self.iu], -1.0, 1.0)
+        x = self.simulate(x_hat, u)
+        res = FHOCPResult(u=u, x=x, cost=self.cost(x, u, x_bar, u_bar, u_prev=u_prev),
+                          status=status, success=False, t=t,
+                          defect=float(np.max(np.abs(self._xtraj(wopt, pv) - x))))
+        self._residuals(res, x, e_o, x_bar, alpha)
         return res
 
     def _arm_deadline(self, t0: float) -> None:

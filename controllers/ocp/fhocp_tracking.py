@@ -27,22 +27,21 @@ the terminal set and ``Y_s``.
 from __future__ import annotations
 
 import math
-import time
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from controllers import gru
 from controllers.errors import DesignError
-from controllers.kernel.kernel_sqp import KernelSQP
 from controllers.ocp.fhocp import FHOCP
-from controllers.ocp.fhocp_result import FHOCPResult, judge, set_residuals, solver_stats
+from controllers.ocp.fhocp_result import FHOCPResult, set_residuals
 from controllers.ocp.input_rate import du_cost
 from controllers.ocp.solve_status import SolveStatus
 from controllers.ocp.steady_state import steady_state
 
 __all__ = ["CONTROL_HORIZON_FRACTION", "DEFAULTS", "LINE_SEARCH", "SQP_OVERRIDES", "US_RATE",
-           "TrackingFHOCP", "default_control_horizon", "steady_output_bounds"]
+           "Target", "TrackingFHOCP", "default_control_horizon", "steady_output_bounds"]
 
 #: The SQP's line search for the tracking FHOCP (over ``sqpmethod``'s defaults, 3 trials with
 #: β = 0.8, the last accepted): a set-point step moves ``u_s`` far, and the short search let
@@ -99,6 +98,40 @@ def steady_output_bounds(cert: Any, alpha_c: float) -> np.ndarray:
     N = cert.N
     return (cert.h - cert.e_tilde * cert.a[N] - cert.b[N] - cert.w_L
             - float(alpha_c) * cert.c_s)
+
+
+@dataclass(frozen=True)
+class Target:
+    """The tracking law's request (:class:`~controllers.ocp.fhocp.SolveRequest`): the target
+    ``r = ȳ − d̂``, the candidate (inputs, steady input ``u_s``, Newton's start ``x_s0``),
+    ``u_{−1}``, whether to warm start the multipliers and the centre of ``u_s``'s move
+    limit (:meth:`TrackingFHOCP.solve_tracking`)."""
+
+    r: np.ndarray
+    u_init: np.ndarray
+    us_init: np.ndarray
+    x_s0: np.ndarray
+    u_prev: np.ndarray
+    warm: bool
+    us_centre: np.ndarray
+
+    def candidate(self, fhocp: TrackingFHOCP, x_hat: np.ndarray, e_o: float, status: str
+                  ) -> FHOCPResult:
+        return fhocp.check(x_hat, self.u_init, self.us_init, e_o, self.r, self.x_s0,
+                           self.u_prev, status)
+
+    def write(self, fhocp: TrackingFHOCP, ins: dict[str, np.ndarray], x_hat: np.ndarray,
+              e_o: float) -> None:
+        fhocp.write_request(ins, x_hat, e_o, self)
+
+    def check(self, fhocp: TrackingFHOCP, wopt: np.ndarray, pv: np.ndarray,
+              x_hat: np.ndarray, e_o: float, status: str) -> FHOCPResult:
+        if fhocp.kernel is not None:
+            return fhocp._check_answer(wopt, pv, e_o, status)
+        res = fhocp.check(x_hat, wopt[fhocp.iu], wopt[fhocp.ius], e_o, self.r, self.x_s0,
+                          self.u_prev, status)
+        res.defect = float(np.max(np.abs(fhocp._xtraj(wopt, pv) - res.x)))
+        return res
 
 
 class TrackingFHOCP(FHOCP):
@@ -290,7 +323,8 @@ class TrackingFHOCP(FHOCP):
                        u_init: np.ndarray, us_init: np.ndarray, x_s0: np.ndarray,
                        u_prev: np.ndarray | None = None, warm: bool = True,
                        us_centre: np.ndarray | None = None) -> FHOCPResult:
-        """Solve at ``x̂`` with ``ê_o`` for the target ``r = ȳ − d̂`` (normalised).
+        """Solve at ``x̂`` with ``ê_o`` for the target ``r = ȳ − d̂`` (normalised): the
+        :class:`Target` request in :meth:`~controllers.ocp.fhocp.FHOCP.solve_request`.
 
         Parameters
         ----------
@@ -307,69 +341,49 @@ class TrackingFHOCP(FHOCP):
             Centre of the move limit on ``u_s`` (:attr:`us_rate`): the candidate's ``u_s``,
             so that the candidate stays feasible (default ``us_init``).
         """
-        if self._solver is None:
-            self.setup()
-        t0 = time.perf_counter()
-        x_hat = np.asarray(x_hat, dtype=float).reshape(self.n)
-        r = np.asarray(r, dtype=float).reshape(self.p)
         # np.minimum/maximum: np.clip's dispatch costs ~10 µs a call on this hot path
         us_init = np.minimum(np.maximum(np.asarray(us_init, dtype=float).reshape(self.m),
                                         -1.0), 1.0)
         u_init = np.minimum(np.maximum(np.asarray(u_init, dtype=float).reshape(
             self.N, self.m), -1.0), 1.0)
-        x_s0 = np.asarray(x_s0, dtype=float).reshape(self.n)
         up = us_init if u_prev is None else np.asarray(u_prev, dtype=float).reshape(self.m)
-        if self.x0_infeasible(x_hat, e_o):
-            res = self.check(x_hat, u_init, us_init, e_o, r, x_s0, up,
-                             SolveStatus.INFEASIBLE_X0)
-            res.solve_time = time.perf_counter() - t0
-            return res
-        buf, trigger, ins, outs = self._buffer
+        request = Target(np.asarray(r, dtype=float).reshape(self.p), u_init, us_init,
+                         np.asarray(x_s0, dtype=float).reshape(self.n), up, warm,
+                         us_init if us_centre is None else np.asarray(us_centre, dtype=float))
+        return self.solve_request(x_hat, e_o, request)
+
+    def write_request(self, ins: dict[str, np.ndarray], x_hat: np.ndarray, e_o: float,
+                      request: Target) -> None:
+        """The solver's buffers for a :class:`Target`: ``p = (x̂, x_s0, r[, u_{−1}])``, the
+        bounds (the tightened rows, ``Y_s``, the move limit on ``u_s``), the candidate as
+        the initial guess with ``t`` its terminal gap, and the multipliers shifted by one
+        stage (``warm``) or zeros."""
         pv = ins["p"]
         n = self.n
-        pv[:n], pv[n:2 * n], pv[2 * n:2 * n + self.p] = x_hat, x_s0, r
+        pv[:n], pv[n:2 * n], pv[2 * n:2 * n + self.p] = x_hat, request.x_s0, request.r
         if self.has_du:
-            pv[2 * n + self.p:] = up
+            pv[2 * n + self.p:] = request.u_prev
         self._write_bounds(ins, e_o)
         if self.us_rate is not None:   # the steady input moves at most us_rate per step
-            c = us_init if us_centre is None else np.asarray(us_centre, dtype=float)
+            c = request.us_centre
             ins["lbx"][self.ius] = np.maximum(c - self.us_rate, -1.0)
             ins["ubx"][self.ius] = np.minimum(c + self.us_rate, 1.0)
         w0 = ins["x0"]
-        w0[self.iu.ravel()] = u_init.ravel()
-        w0[self.ius] = np.minimum(np.maximum(us_init, ins["lbx"][self.ius]), ins["ubx"][self.ius])
+        w0[self.iu.ravel()] = request.u_init.ravel()
+        w0[self.ius] = np.minimum(np.maximum(request.us_init, ins["lbx"][self.ius]),
+                                  ins["ubx"][self.ius])
         if self.kernel is not None:   # the rollout stays cached for the solve
             gap = self.kernel.terminal_gap(w0, pv)
         else:
-            gap = float(np.max(np.abs(self.simulate(x_hat, u_init)[-1] - x_s0)))
+            gap = float(np.max(np.abs(self.simulate(x_hat, request.u_init)[-1]
+                                      - request.x_s0)))
         w0[self.it] = min(max(gap, 1e-6), self.alpha_c)
-        if warm and self._warm is not None and self.warm_duals:
+        if request.warm and self._warm is not None and self.warm_duals:
             ins["lam_x0"][:] = self._warm["lam_x"][self._perm_x]
             ins["lam_g0"][:] = self._warm["lam_g"][self._perm_g]
         else:
             ins["lam_x0"][:] = 0.0
             ins["lam_g0"][:] = 0.0
-        self._arm_deadline(t0)
-        if isinstance(buf, KernelSQP):
-            trigger()   # no casadi, nothing printed
-        else:
-            from controllers.ocp.casadi_callbacks import quiet_stdout
-
-            with quiet_stdout():
-                trigger()
-        stats = solver_stats(buf)
-        wopt = outs["x"].copy()
-        status = str(stats.get("return_status", "unknown"))
-        if self.kernel is not None:
-            res = self._check_answer(wopt, pv, e_o, status)
-        else:
-            res = self.check(x_hat, wopt[self.iu], wopt[self.ius], e_o, r, x_s0, up, status)
-            res.defect = float(np.max(np.abs(self._xtraj(wopt, pv) - res.x)))
-        res.solve_time = time.perf_counter() - t0
-        res.lam_x, res.lam_g = outs["lam_x"].copy(), outs["lam_g"].copy()
-        judge(res, stats, wopt)
-        self._keep_warm(res, wopt)
-        return res
 
     def _check_answer(self, w: np.ndarray, p: np.ndarray, e_o: float, status: str
                       ) -> FHOCPResult:

@@ -174,13 +174,25 @@ class SingleShootingNLP:
         p = self.p
         ro = self.rollout(wv, pv, True)
         x_bar, _ = self._reference(pv)
-        N, n, m, q, nw, iu = p.N, p.n, p.m, p.qr, p.nw, self.iu
-        lf = float(lf[0])
+        lf0 = float(lf[0])
+        H = np.zeros((p.nw, p.nw))
+        H[np.ix_(self.iu, self.iu)] = self.input_hessian(ro, x_bar, lf0, lg)
+        H[p.it, p.it] = 2 * lf0 * p.s
+        return H
+
+    def input_hessian(self, ro: Any, x_ref: np.ndarray, lf: float, lg: np.ndarray
+                      ) -> np.ndarray:
+        """The block of the inputs ``u_0 … u_{N−1}`` (N m × N m) of the Hessian of the
+        Lagrangian at rollout ``ro``, the reference ``x_ref`` held fixed; ``lg``: the
+        multipliers of the output rows and the terminal rows (its first ``(N−1) q + 2 n``
+        entries are read)."""
+        p = self.p
+        N, n, m, q = p.N, p.n, p.m, p.qr
         lam_out = lg[: (N - 1) * q].reshape(N - 1, q)
-        lam_term = lg[(N - 1) * q:(N - 1) * q + n] + lg[(N - 1) * q + n:]
+        lam_term = lg[(N - 1) * q:(N - 1) * q + n] + lg[(N - 1) * q + n:(N - 1) * q + 2 * n]
         # adjoints μ_i of the state terms, i = 1 … N
         c = np.zeros((N + 1, n))
-        c[1:N] = 2 * lf * (ro.x[1:N] - x_bar) @ p.Q + lam_out @ p.DUo
+        c[1:N] = 2 * lf * (ro.x[1:N] - x_ref) @ p.Q + lam_out @ p.DUo
         c[N] = lam_term
         mu = np.zeros((N + 1, n))
         mu[N] = c[N]
@@ -189,7 +201,6 @@ class SingleShootingNLP:
         W = self.shoot.stage_hessians(ro, mu[1:])
         W[1:, :n, :n] += 2 * lf * p.Q
         S = ro.S[:N]
-        H = np.zeros((nw, nw))
         ST = np.transpose(S, (0, 2, 1))
         SW = np.matmul(ST, W[:, :n, :n])
         Huu = SW.reshape(N * N * m, n).reshape(N, N * m, n)
@@ -203,9 +214,7 @@ class SingleShootingNLP:
         Hv[stages, :, stages, :] += W[:, n:, n:] + 2 * lf * p.R
         if self._du_hess is not None:
             Huu += lf * self._du_hess
-        H[np.ix_(iu, iu)] = Huu
-        H[p.it, p.it] = 2 * lf * p.s
-        return H
+        return Huu
 
     def hessian_triu(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
                      lg: np.ndarray) -> list:

@@ -164,15 +164,11 @@ class TrackingNLP(SingleShootingNLP):
         p = self.p
         ro = self.rollout(wv, pv, True)
         xs, Xs = self.steady(wv, pv)
-        N, n, m, q, iu, ius = p.N, p.n, p.m, p.qr, self._iuf, self._iusf
+        N, m, iu, ius = p.N, p.m, self._iuf, self._iusf
         lf0 = float(lf[0])
-        # the input block: the paper's FHOCP's with x̄ = x_s (its adjoints read p[n:2n])
-        pv_ref = pv.copy()
-        pv_ref[n:2 * n] = xs
-        lg_paper = lg[: (N - 1) * q + 2 * n]
+        # the input block: the paper's FHOCP's with x̄ = x_s held fixed
         H = np.zeros((self._nwf, self._nwf))
-        Hu = self._input_hessian(wv, pv_ref, lf0, lg_paper, ro)
-        H[np.ix_(iu, iu)] = Hu
+        H[np.ix_(iu, iu)] = self.input_hessian(ro, xs, lf0, lg)
         S = ro.S[1:N]                                      # (N − 1, n, N m)
         cross = -np.einsum("ikc,kj->cj", S, 2 * p.Q @ Xs)  # Σ S_iᵀ (−2Q) X_s
         cross -= np.tile(2 * p.R, (N, 1))
@@ -208,17 +204,6 @@ class TrackingNLP(SingleShootingNLP):
         Z = np.vstack([Xs, np.eye(p.m)])
         return Z.T @ W @ Z
 
-    def _input_hessian(self, wv: np.ndarray, pv: np.ndarray, lf: float, lg: np.ndarray,
-                       ro: Any) -> np.ndarray:
-        """The input block as :meth:`SingleShootingNLP.hessian` computes it (``p`` holding
-        ``x̄ = x_s``)."""
-        p = self.p
-        nu = p.N * p.m
-        w_paper = np.concatenate([wv[self.iu], [wv[p.it]]])
-        view: Any = _PaperView(self, ro)
-        H = SingleShootingNLP.hessian(view, w_paper, pv, np.array([lf]), lg)
-        return H[:nu, :nu]
-
     def _self_test_point(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """A random ``(w, p)`` of :meth:`SingleShootingNLP.self_test` against the ``HAS_ASS``
         kernel: ``x_s0`` near ``x̂`` (Newton's start), ``u_s`` inside the input box."""
@@ -239,34 +224,3 @@ class TrackingNLP(SingleShootingNLP):
         rollout, compared above, and ``x_s`` verified by a numpy GRU step), not the kernel's
         ``assess``."""
         return []
-
-
-class _PaperView:
-    """The tracking NLP seen as the paper's (``w = (u, t)``, ``p = (x̂, x̄, …)``) by
-    :meth:`SingleShootingNLP.hessian`: its rollout cache and the problem's paper-shaped
-    attributes."""
-
-    def __init__(self, nlp: TrackingNLP, ro: Any) -> None:
-        self._ro = ro
-        self.p = _PaperDims(nlp.p)
-        self.shoot = nlp.shoot
-        self.iu = nlp._iuf
-        self._du_hess = nlp._du_hess
-
-    def rollout(self, wv: np.ndarray, pv: np.ndarray, deriv: bool) -> Any:
-        return self._ro
-
-    def _reference(self, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        n = self.p.n
-        return pv[n:2 * n], pv[:0]
-
-
-class _PaperDims:
-    """The paper FHOCP's dimensions and weights of a tracking FHOCP (``nw = N m + 1``, ``t``
-    last)."""
-
-    def __init__(self, fh: Any) -> None:
-        self.N, self.n, self.m, self.qr = fh.N, fh.n, fh.m, fh.qr
-        self.nw = fh.N * fh.m + 1
-        self.it = fh.N * fh.m
-        self.Q, self.R, self.s, self.DUo = fh.Q, fh.R, fh.s, fh.DUo

@@ -7,7 +7,7 @@ import pytest
 from controllers.equilibrium import equilibrium
 from controllers.gru import output, simulate, step
 from controllers.observer import GRUObserver
-from controllers.ocp.fhocp import FHOCP, FHOCPData
+from controllers.ocp.fhocp import FHOCP, FHOCPData, Setpoint
 from controllers.ocp.paper_mpc import RobustMPC
 from controllers.ocp.solver_settings import FEAS_TOL
 from cosim_adapters.gru_plant import GRUPlant
@@ -271,3 +271,45 @@ def test_default_solver_is_sqp_unless_ipopt_options_given(cert):
 def test_sqp_solver_rejected_for_multiple_shooting(cert):
     with pytest.raises(ValueError, match="solver"):
         make(cert, formulation="multiple-shooting", solver="sqp")
+
+
+class CountingRequest:
+    """A third law's request (the :class:`~controllers.ocp.fhocp.SolveRequest` protocol):
+    the paper's set-point, with the calls :meth:`FHOCP.solve_request` makes counted."""
+
+    def __init__(self, inner: Setpoint) -> None:
+        self.inner = inner
+        self.calls: list[str] = []
+
+    def candidate(self, fhocp, x_hat, e_o, status):
+        self.calls.append("candidate")
+        return self.inner.candidate(fhocp, x_hat, e_o, status)
+
+    def write(self, fhocp, ins, x_hat, e_o):
+        self.calls.append("write")
+        self.inner.write(fhocp, ins, x_hat, e_o)
+
+    def check(self, fhocp, wopt, pv, x_hat, e_o, status):
+        self.calls.append("check")
+        return self.inner.check(fhocp, wopt, pv, x_hat, e_o, status)
+
+
+def test_one_solve_procedure_takes_any_request(model, cert):
+    """FHOCP.solve is solve_request with the paper's Setpoint, to the bit; a request of
+    another kind goes through the same procedure: the i = 0 row first (the request's
+    candidate, no solver), else write, solve, the request's check, the one judge."""
+    fh = FHOCP.from_certificate(cert).setup()
+    x_hat = start_state(model, np.array([0.05, 0.0]))
+    ref = cert.reference(np.array([0.1, 0.1]))
+    plain = fh.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
+    fh.reset_warm_start()
+    request = CountingRequest(Setpoint(ref.x_bar, ref.u_bar, ref.alpha, None, False,
+                                       ref.u_bar))
+    again = fh.solve_request(x_hat, 0.02, request)
+    assert request.calls == ["write", "check"]
+    assert again.success and again.status == plain.status == "optimal"
+    assert np.array_equal(again.u, plain.u) and again.cost == plain.cost
+    request.calls.clear()
+    refused = fh.solve_request(x_hat, 1.0, request)   # a_0 ê_o exceeds the output range
+    assert request.calls == ["candidate"] and refused.status == "infeasible_x0"
+    assert not refused.success and np.array_equal(refused.u, np.tile(ref.u_bar, (fh.N, 1)))
