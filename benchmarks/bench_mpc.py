@@ -434,7 +434,8 @@ def clip_variants(args: argparse.Namespace) -> None:
             us, out = {}, {}
             for name, thr in (("own", 10**6), ("dsyevr", 1)):
                 ck.LAPACK_EIG_MIN_NU = thr
-                k = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo)
+                k = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2,
+                                                LUo=fh.LUo))
                 if k is None or (name == "dsyevr") != ("-DGK_LAPACK_EIG" in k.flags):
                     print(f"N m = {N * fh.m}: no {name} kernel ({ck.last_error})")
                     return

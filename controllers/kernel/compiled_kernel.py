@@ -41,6 +41,7 @@ import os
 import shutil
 import threading
 from collections.abc import Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -50,7 +51,8 @@ from controllers.kernel.cbuild import compile_library, compiler_id, default_cach
 from controllers.kernel.kernel_abi import c_declarations
 from controllers.kernel.kernel_lib import Kernel, Workspace
 
-__all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "Workspace", "build",
+__all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "KernelProblem", "Workspace",
+           "build",
            "default_cache_dir", "for_fhocp", "generate_source", "last_error"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
@@ -87,20 +89,67 @@ def _c_array(name: str, a: np.ndarray) -> str:
     return f"static const double {name}[{max(a.size, 1)}] = {{{body or '0.0'}}};\n"
 
 
-def generate_source(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
-                    DUo: np.ndarray, s: float, clip: float | None,
-                    LUo: np.ndarray | None = None,
-                    du_weight: np.ndarray | None = None,
-                    offset_weight: np.ndarray | None = None,
-                    control_horizon: int | None = None) -> str:
-    """The complete C source (symbol prefix left as ``@PFX@``); ``LUo`` (q×n): the full
-    output-constraint rows ``L U_o`` of the answer check (``assess``), none when omitted;
-    ``du_weight`` (m,): the input-rate weights (:mod:`controllers.ocp.input_rate`; none or all
-    zero: no input-rate term, ``HAS_DU 0``); ``offset_weight`` (p,): the diagonal of the
-    tracking FHOCP's offset weight T (:mod:`controllers.ocp.fhocp_tracking`: the artificial
-    steady state, ``HAS_ASS 1``; none: the paper's FHOCP); ``control_horizon`` ``M < N``
-    (tracking FHOCP only): the free inputs ``u_0 … u_{M−1}``, the tail held at ``u_s``
-    (``NM``; none: ``N``)."""
+@dataclass(frozen=True)
+class KernelProblem:
+    """What a kernel is generated from, described once: the FHOCP's model, horizon, weights
+    and constraint rows (:meth:`of` an FHOCP; a future exported controller compiles the
+    same).
+
+    Attributes
+    ----------
+    params : mapping of arrays
+        GRU weights (``eq:gru``).
+    N : int
+        Horizon.
+    Q, R : arrays
+        Stage weights (n×n, m×m).
+    DUo : (q, n) array
+        The reduced output-constraint rows ``D U_o`` of the NLP.
+    s : float
+        Terminal weight.
+    clip : float, optional
+        Eigenvalue-clipping margin of the SQP's Hessian (none: no clipping).
+    LUo : (q, n) array, optional
+        The full output-constraint rows ``L U_o`` of the answer check (``assess``).
+    du_weight : (m,) array, optional
+        Input-rate weights (:mod:`controllers.ocp.input_rate`; none or all zero: no
+        input-rate term, ``HAS_DU 0``).
+    offset_weight : (p,) array, optional
+        The tracking FHOCP's offset weights T (:mod:`controllers.ocp.fhocp_tracking`: the
+        artificial steady state, ``HAS_ASS 1``; none: the paper's FHOCP).
+    control_horizon : int, optional
+        ``M < N`` (tracking only): the free inputs ``u_0 … u_{M−1}``, the tail held at
+        ``u_s`` (``NM``; none: ``N``).
+    """
+
+    params: Mapping[str, np.ndarray]
+    N: int
+    Q: np.ndarray
+    R: np.ndarray
+    DUo: np.ndarray
+    s: float
+    clip: float | None = None
+    LUo: np.ndarray | None = None
+    du_weight: np.ndarray | None = None
+    offset_weight: np.ndarray | None = None
+    control_horizon: int | None = None
+
+    @classmethod
+    def of(cls, fhocp: Any) -> KernelProblem:
+        """The kernel problem of an :class:`~controllers.ocp.fhocp.FHOCP` (or a tracking
+        FHOCP: its offset weights and control horizon)."""
+        return cls(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s,
+                   fhocp.sqp_options.get("hessian_eigen_clip"), fhocp.LUo, fhocp.du_weight,
+                   getattr(fhocp, "offset_weight", None),
+                   getattr(fhocp, "control_horizon", None))
+
+
+def generate_source(problem: KernelProblem) -> str:
+    """The complete C source of ``problem``'s kernel (symbol prefix left as ``@PFX@``)."""
+    params, N, Q, R, DUo, s = (problem.params, problem.N, problem.Q, problem.R, problem.DUo,
+                               problem.s)
+    clip, LUo, du_weight = problem.clip, problem.LUo, problem.du_weight
+    offset_weight, control_horizon = problem.offset_weight, problem.control_horizon
     P = {k: np.asarray(v, dtype=float) for k, v in params.items()}
     n, m = P["W_z"].shape
     DUo = np.atleast_2d(np.asarray(DUo, dtype=float))
@@ -205,33 +254,24 @@ def choose_mode(n: int, m: int, N: int, M: int | None = None) -> str:
     return "contract" if cc < 0.8 * cw else "w"
 
 
-def build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
-          DUo: np.ndarray, s: float, clip: float | None, *, LUo: np.ndarray | None = None,
-          du_weight: np.ndarray | None = None, offset_weight: np.ndarray | None = None,
-          control_horizon: int | None = None, cache_dir: str | Path | None = None,
+def build(problem: KernelProblem, *, cache_dir: str | Path | None = None,
           cc: str | None = None, cflags: tuple[str, ...] | None = None,
           verbose: bool = False) -> Kernel | None:
-    """Compiled kernel for this problem, from the cache or freshly built; ``None`` on failure
-    (reason in :data:`last_error`). ``LUo``: the full output-constraint rows ``L U_o`` of
-    :meth:`Workspace.assess` (``FHOCP.LUo``); ``du_weight``: the input-rate weights
-    (``FHOCP.du_weight``; none: no input-rate term); ``offset_weight``: the tracking FHOCP's
-    offset weights (none: the paper's FHOCP); ``control_horizon``: its ``M``
-    (:func:`generate_source`). Thread-safe; the library is shared by every caller in the
-    process (each takes its own :meth:`Kernel.workspace`)."""
+    """Compiled kernel for ``problem``, from the cache or freshly built; ``None`` on failure
+    (reason in :data:`last_error`). Thread-safe; the library is shared by every caller in
+    the process (each takes its own :meth:`Kernel.workspace`)."""
     global last_error
     with _LOCK:
-        k, last_error = _build(params, N, Q, R, DUo, s, clip, LUo, cache_dir, cc, cflags,
-                               verbose, du_weight, offset_weight, control_horizon)
+        k, last_error = _build(problem, cache_dir, cc, cflags, verbose)
         return k
 
 
-def _build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarray,
-           DUo: np.ndarray, s: float, clip: float | None, LUo: np.ndarray | None,
-           cache_dir: str | Path | None, cc: str | None, cflags: tuple[str, ...] | None,
-           verbose: bool, du_weight: np.ndarray | None = None,
-           offset_weight: np.ndarray | None = None,
-           control_horizon: int | None = None) -> tuple[Kernel | None, str | None]:
+def _build(problem: KernelProblem, cache_dir: str | Path | None, cc: str | None,
+           cflags: tuple[str, ...] | None, verbose: bool
+           ) -> tuple[Kernel | None, str | None]:
     """:func:`build`: ``(kernel, None)`` or ``(None, reason)``; the caller holds ``_LOCK``."""
+    params, N, clip = problem.params, problem.N, problem.clip
+    control_horizon = problem.control_horizon
     if os.environ.get("GRU_MPC_KERNEL", "1") == "0":
         return None, "disabled by GRU_MPC_KERNEL=0"
     cc = cc or os.environ.get("CC") or "gcc"
@@ -261,8 +301,7 @@ def _build(params: Mapping[str, np.ndarray], N: int, Q: np.ndarray, R: np.ndarra
     if (use_blas or lapack_eig) and blas is not None:
         libs = [f"-L{blas.parent}", f"-l:{blas.name}", f"-Wl,-rpath,{blas.parent}"]
     try:
-        src = generate_source(params, N, Q, R, DUo, s, clip, LUo, du_weight, offset_weight,
-                              control_horizon)
+        src = generate_source(problem)
     except ValueError as exc:
         return None, f"cannot generate the kernel: {exc}"
     key = hashlib.sha256("\0".join([GENERATOR_VERSION, compiler_id(cc), " ".join(flags),
@@ -320,10 +359,7 @@ def for_fhocp(fhocp: Any) -> tuple[Workspace | None, str | None]:
 
     clip = fhocp.sqp_options.get("hessian_eigen_clip")
     with _LOCK:
-        k, reason = _build(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s, clip,
-                           fhocp.LUo, None, None, None, False, fhocp.du_weight,
-                           getattr(fhocp, "offset_weight", None),
-                           getattr(fhocp, "control_horizon", None))
+        k, reason = _build(KernelProblem.of(fhocp), None, None, None, False)
         if k is not None:
             key = str(k.path)
             if key not in _SELF_TESTED:

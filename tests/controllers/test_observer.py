@@ -56,7 +56,7 @@ def test_observer_with_the_compiled_step_implements_eq_observer() -> None:
 
     m = random_gru_model(0, n=6)
     p = m.params
-    k = ck.build(p, 3, np.eye(6), np.eye(2), np.zeros((1, 6)), 1.0, None)
+    k = ck.build(ck.KernelProblem(p, 3, np.eye(6), np.eye(2), np.zeros((1, 6)), 1.0))
     assert k is not None, ck.last_error
     rng = np.random.default_rng(0)
     Lz, Lr = rng.normal(0, 0.3, (6, 2)), rng.normal(0, 0.3, (6, 2))

@@ -64,7 +64,7 @@ def test_kernel_matches_the_numpy_derivatives(n: int, N: int, mode: str, m: int,
         monkeypatch.setenv("GRU_MPC_KERNEL_BLAS", "on")
     fh = random_fhocp(n, N, seed=n + N, m=m, p=p, kernel="numpy")
     assert (fh.m, fh.p, fh.q) == (m, p, 2 * p)
-    k = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2)
+    k = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2))
     assert k is not None, ck.last_error
     assert ("-DGK_BLAS" in k.flags) == bool(blas)
     assert ({"w": None, "contract": "-DGK_CONTRACT", "backward": "-DGK_BACKWARD"}[mode]
@@ -202,10 +202,11 @@ def test_cache_reuses_a_build_and_keys_on_the_problem(cert, tmp_path: Path,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("GRU_MPC_KERNEL_CACHE", str(tmp_path))
     fh = FHOCP.from_certificate(cert, kernel="numpy").setup()
-    k1 = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2)
-    k2 = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2)
+    k1 = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2))
+    k2 = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2))
     assert k1 is not None and k1.path == k2.path and len(list(tmp_path.glob("*.so"))) == 1
-    k3 = ck.build(fh.params, fh.N, 2 * fh.Q, fh.R, fh.DUo, fh.s, 1e-2)  # other weights
+    other = ck.KernelProblem(fh.params, fh.N, 2 * fh.Q, fh.R, fh.DUo, fh.s, 1e-2)  # weights
+    k3 = ck.build(other)
     assert k3.path != k1.path and len(list(tmp_path.glob("*.so"))) == 2
 
 
@@ -225,7 +226,7 @@ def test_answer_check_and_observer_step_match_numpy(n: int, N: int, m: int, p: i
     from controllers.ocp.fhocp import FHOCPResult
 
     fh = random_fhocp(n, N, seed=3 * n + N, m=m, p=p, kernel="numpy")
-    lib = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo)
+    lib = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo))
     assert lib is not None and lib.nl == fh.q, ck.last_error
     k = lib.workspace()
     rng = np.random.default_rng(7)
@@ -308,8 +309,8 @@ def test_portable_build_gives_the_same_derivatives(tmp_path: Path,
     AVX2/FMA) against numpy and against the default build."""
     monkeypatch.setenv("GRU_MPC_KERNEL_CACHE", str(tmp_path))
     fh = random_fhocp(20, 15, seed=5, kernel="numpy")
-    fast = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2)
-    portable = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2,
+    fast = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2))
+    portable = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2),
                         cflags=(*ck.DEFAULT_CFLAGS, "-DGK_NO_CLONES"))
     assert fast is not None and portable is not None and fast.path != portable.path
     nlp = SingleShootingNLP(fh, None)
@@ -335,8 +336,9 @@ def test_every_variant_compiles_without_a_warning(tracking: bool, tmp_path: Path
     fh = random_fhocp(6, 5, seed=3, kernel="numpy")
     extra = ({"offset_weight": np.ones(2), "du_weight": np.full(2, 0.1), "control_horizon": 3}
              if tracking else {})
-    src = ck.generate_source(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo,
-                             **extra).replace(ck.PREFIX_PLACEHOLDER, "gk_test_")
+    src = ck.generate_source(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2,
+                                              LUo=fh.LUo, **extra)
+                             ).replace(ck.PREFIX_PLACEHOLDER, "gk_test_")
     c_file = tmp_path / "kernel.c"
     c_file.write_text(src)
     variants = [[], ["-DGK_BACKWARD"], ["-DGK_LAPACK_EIG"], ["-DGK_TIMERS"], ["-DGK_NO_CLONES"]]

@@ -102,8 +102,8 @@ def test_kernel_matches_numpy_with_the_term(n: int, N: int, mode: str, m: int, p
     dw = rng.uniform(0.5, 20.0, m)
     dw[0] = 0.0 if m > 1 else dw[0]   # a zero weight among nonzero ones
     fh = random_fhocp(n, N, seed=n + N, m=m, p=p, kernel="numpy", du_weight=dw)
-    lib = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo,
-                   du_weight=fh.du_weight)
+    lib = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2,
+                                    LUo=fh.LUo, du_weight=fh.du_weight))
     assert lib is not None, ck.last_error
     assert lib.npar == fh.npar == 2 * n + 2 * m
     k = lib.workspace()
@@ -139,10 +139,10 @@ def test_the_self_test_sees_the_term() -> None:
     """A kernel whose input-rate weights differ from the problem's fails the load-time
     self-test (so a wrong term would never be used)."""
     fh = random_fhocp(9, 7, seed=4, kernel="numpy", du_weight=[2.0, 1.0])
-    wrong = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo,
-                     du_weight=np.array([2.0, 1.5]))
-    right = ck.build(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2, LUo=fh.LUo,
-                     du_weight=fh.du_weight)
+    wrong = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2,
+                                      LUo=fh.LUo, du_weight=np.array([2.0, 1.5])))
+    right = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2,
+                                      LUo=fh.LUo, du_weight=fh.du_weight))
     nlp = SingleShootingNLP(fh, None)
     assert nlp.self_test(right.workspace(), 1e-2) < ck.KERNEL_SELF_TEST_TOL
     assert nlp.self_test(wrong.workspace(), 1e-2) > 1e-3
@@ -156,8 +156,8 @@ def test_zero_weight_is_the_paper_cost_bit_for_bit(cert) -> None:
     b = FHOCP.from_certificate(cert, du_weight=0.0).setup()
     assert not b.has_du and b.npar == 2 * b.n + b.m
     assert a.kernel is not None and a.kernel.path == b.kernel.path
-    src = ck.generate_source(a.params, a.N, a.Q, a.R, a.DUo, a.s, 1e-2, a.LUo,
-                             np.zeros(a.m))
+    src = ck.generate_source(ck.KernelProblem(a.params, a.N, a.Q, a.R, a.DUo, a.s, 1e-2,
+                                              a.LUo, np.zeros(a.m)))
     assert "#define HAS_DU 0" in src and "static const double DW[" not in src
     x_hat, _ = equilibrium(cert.params, np.array([0.0, 0.0]))
     for y in ([0.1, 0.1], [0.0, 0.05]):
