@@ -18,6 +18,7 @@ interrupted returns with ``status`` ``"failed"`` or ``"interrupted"``, its rows 
 from __future__ import annotations
 
 import contextlib
+import json
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -206,6 +207,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     opts = dict(options or {})
     if model is not None:
         opts["model"] = str(model)
+    controller, opts = registry.expand(controller, opts)   # a controller file read
     opts = with_problem(controller, opts, problem)
     if out is not None:
         outpaths.out_dir(out, "--out")
@@ -319,8 +321,26 @@ def _execute(master: Any, meta: dict, out: str | Path | None, figure: bool,
             stream.close()
             raise
         _raise_load_error(result, CosimError, SimulationFailed)
+        _describe_controller(folder.path, meta)
         doc = results.write(folder.path, result, meta, figure=figure, stream=stream)
     return RunOutput(result, doc, folder.path, meta)
+
+
+def _describe_controller(folder: Path, meta: dict) -> None:
+    """``controller.json`` of the run (:mod:`cosim.core.controller_file`), its name in
+    ``meta`` (``controller_file``); none when an option is a Python object (the API)."""
+    from cosim.core import controller_file
+    from cosim.core.errors import CosimError
+
+    meta["controller_file"] = None
+    try:
+        doc = controller_file.describe(meta["controller"], meta["controller_options"])
+    except CosimError:
+        return
+    from cosim.core.atomicio import write_text
+
+    write_text(folder / controller_file.FILE_NAME, json.dumps(doc, indent=1) + "\n")
+    meta["controller_file"] = controller_file.FILE_NAME
 
 
 def _raise_load_error(result: RunResult, cosim_error: type, failed: type) -> None:

@@ -215,6 +215,22 @@ def _file(value: Any, loc: _Locator, table: str, key: str, kind: str) -> Path:
     return path
 
 
+def _controller_file(name: str, loc: _Locator, table: str, index: int = 0) -> str:
+    """A controller file (``*.json``, :mod:`cosim.core.controller_file`) as an absolute path,
+    checked now (found beside the spec or in the current folder); a controller name as is."""
+    from cosim.core import controller_file
+    from cosim.core.errors import CosimError
+
+    if not controller_file.is_controller_file(name):
+        return name
+    path = _resolve(name, loc.path.parent)
+    try:
+        controller_file.load(path)
+    except CosimError as exc:
+        raise loc.error(f"controller = {name!r}: {exc}", table, "controller", index) from None
+    return str(path)
+
+
 def _distribution(key: str, value: Any, loc: _Locator) -> Distribution:
     if isinstance(value, int | float) and not isinstance(value, bool):
         return Distribution(key, "constant", (float(_number(value, loc, "draw", key)),))
@@ -322,6 +338,7 @@ def _variants(items: Any, loc: _Locator, controller: str,
         if not isinstance(ctrl, str) or not ctrl:
             raise loc.error(f"[[variant]] controller = {ctrl!r}: expected a controller name",
                             "variant", "controller", k)
+        ctrl = _controller_file(ctrl, loc, "variant", k)
         own = item.get("options", {})
         if not isinstance(own, dict):
             raise loc.error("[[variant]] options: expected a table { key = value }",
@@ -439,6 +456,7 @@ def load(path: str | Path) -> CampaignSpec:
     if not isinstance(controller, str) or not controller:
         raise loc.error(f"controller = {controller!r}: expected a controller name",
                         "campaign", "controller")
+    controller = _controller_file(controller, loc, "campaign")
     plant = _plant(camp.get("plant"), loc)
     vmap = _file(camp["map"], loc, "campaign", "map", "variable map") if "map" in camp else None
     model = (_file(camp["model"], loc, "campaign", "model", "model file")

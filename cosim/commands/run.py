@@ -21,6 +21,8 @@ set-points and perturbations. Writes into DIR (--out):
   figure.png    outputs vs set-points with constraint bounds, inputs with bounds,
                 perturbation times marked
   timings.csv   wall-clock diagnostics of the controller (solve times), when it has any
+  controller.json  the controller and the options it was given, its model file
+                fingerprinted: --controller controller.json runs the same controller again
 
 Nothing is lost when a run is stopped. Rows stream into DIR/results.csv.part as the run goes
 (flushed at least once a second) and become results.csv when the run ends: a run killed
@@ -73,7 +75,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "it: variables by name or the problem's 'variable' keys, units "
                         "converted, checked before the first step")
     p.add_argument("--controller", metavar="NAME", default=None,
-                   help="controller: 'robust-mpc' (default), 'pi', or module:Class")
+                   help="controller: 'robust-mpc' (default), 'pi', module:Class, or a "
+                        "controller file (FILE.json: the controller.json a run writes, its "
+                        "options; --option overrides them)")
     p.add_argument("--model", metavar="FILE", default=None,
                    help="GRU model file for the robust MPC (default: the shipped "
                         "controllers/models/fourtank_gru.json); same as --option model=FILE")

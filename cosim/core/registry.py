@@ -1,4 +1,6 @@
-"""Controller registry: short names → ``"module:Class"``; a ``module:Class`` string also works.
+"""Controller registry: short names → ``"module:Class"``; a ``module:Class`` string also works,
+and so does a controller file (``*.json``, :mod:`cosim.core.controller_file`: a controller's
+name and options recorded by a run).
 
 Controllers are :class:`~cosim.core.component.Component` classes constructible without arguments.
 """
@@ -14,7 +16,7 @@ from typing import Any
 from cosim.core.component import Component
 from cosim.core.errors import CosimError
 
-__all__ = ["CONTROLLERS", "DEFAULT", "create", "parse_options", "resolve"]
+__all__ = ["CONTROLLERS", "DEFAULT", "create", "expand", "parse_options", "resolve"]
 
 #: Built-in controllers.
 CONTROLLERS: dict[str, str] = {
@@ -26,14 +28,30 @@ CONTROLLERS: dict[str, str] = {
 DEFAULT = "robust-mpc"
 
 
+def expand(name: str, options: Mapping[str, Any] | None = None
+           ) -> tuple[str, dict[str, Any]]:
+    """``(name, options)`` with a controller file read: its controller and its options,
+    ``options`` given here taking precedence; a registry name or ``module:Class`` as
+    given."""
+    from cosim.core import controller_file
+
+    if not controller_file.is_controller_file(name):
+        return name, dict(options or {})
+    inner, recorded = controller_file.load(name)
+    return inner, {**recorded, **dict(options or {})}
+
+
 def resolve(name: str) -> type[Component]:
-    """The controller class for a registry name or a ``module:Class`` string.
+    """The controller class for a registry name, a ``module:Class`` string or a controller
+    file.
 
     Raises
     ------
     CosimError
-        Unknown name, module not importable, class missing or not a Component.
+        Unknown name, module not importable, class missing or not a Component; a bad
+        controller file.
     """
+    name, _ = expand(name)
     spec = CONTROLLERS.get(name, name)
     if ":" not in spec:
         raise CosimError(f"unknown controller '{name}' (known: {', '.join(CONTROLLERS)}; "
@@ -78,9 +96,10 @@ def parse_options(items: Sequence[str]) -> dict[str, Any]:
 
 
 def create(name: str, options: Mapping[str, Any] | None = None) -> Component:
-    """Instantiate a controller by name, with keyword ``options`` for its constructor."""
+    """Instantiate a controller by name (or controller file, :func:`expand`), with keyword
+    ``options`` for its constructor."""
+    name, options = expand(name, options)
     cls = resolve(name)
-    options = dict(options or {})
     params = inspect.signature(cls).parameters
     declared = getattr(cls, "OPTIONS", None)   # a component taking **options names them
     if declared is not None or not any(p.kind is inspect.Parameter.VAR_KEYWORD
