@@ -254,7 +254,7 @@ def test_full_disk_is_one_line_and_keeps_the_previous_files(tmp_path: Path,
     first = run(tmp_path, sc, "--plant", fmu2_path, "--controller", "pi", "--out", out)
     assert first.returncode == 0, first.stderr
     previous = {p.name: p.read_bytes() for p in out.iterdir()}
-    assert set(previous) == {"results.csv", "summary.json", "figure.png"}
+    assert set(previous) == {"results.csv", "summary.json", "figure.png", "controller.json"}
     # results.csv is ~300 kB: writes past 100 kB fail with EFBIG, like a full disk
     proc = run(tmp_path, sc, "--plant", fmu2_path, "--controller", "pi", "--out", out,
                preexec_fn=lambda: _limit_file_size(100_000))
@@ -303,12 +303,13 @@ def test_rerun_leaves_no_file_of_the_previous_run(tmp_path: Path, fmu2_path: Pat
                 "--out", out)
     assert first.returncode == 0, first.stderr
     assert {p.name for p in out.iterdir()} == {"results.csv", "summary.json", "figure.png",
-                                               "timings.csv"}
+                                               "timings.csv", "controller.json"}
     second = run(tmp_path, sc, "--plant", fmu2_path, "--controller", "pi", "--out", out,
                  "--no-figure")
     assert second.returncode == 0, second.stderr
-    assert {p.name for p in out.iterdir()} == {"results.csv", "summary.json"}
+    assert {p.name for p in out.iterdir()} == {"results.csv", "summary.json", "controller.json"}
     assert json.loads((out / "summary.json").read_text())["controller"] == "pi"
+    assert json.loads((out / "controller.json").read_text())["controller"] == "pi"
 
 
 def test_default_plant_does_not_depend_on_the_current_folder(tmp_path: Path,
