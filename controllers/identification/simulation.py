@@ -250,11 +250,8 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
     params = trainable_params(init or init_params(n, m, p, opt.seed, opt.bz_init),
                               opt.train_uz, target, opt.sigma_z_max)
     x0 = torch.zeros(B, n, dtype=dtype, requires_grad=True)
-    trainable = [v for v in params.values() if v.requires_grad] + [x0]
-    adam = torch.optim.Adam(trainable, lr=opt.lr)
     steps = opt.steps
-    gamma = (opt.lr_final / opt.lr) ** (1.0 / max(1, steps - 1))
-    scheduler = torch.optim.lr_scheduler.ExponentialLR(adam, gamma)
+    adam, scheduler = _optimiser([v for v in params.values() if v.requires_grad] + [x0], opt)
     scored = _scored(record)
 
     def weights() -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -294,6 +291,16 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
                      best_step=best.step, steps_run=best.history[-1]["step"],
                      wall_time=time.perf_counter() - t0, options=asdict(opt),
                      history=best.history)
+
+
+def _optimiser(trainable: list[Any], opt: SimOptions) -> tuple[Any, Any]:
+    """Adam over ``trainable`` with its learning rate decaying exponentially from ``lr`` to
+    ``lr_final`` over the steps."""
+    import torch
+
+    adam = torch.optim.Adam(trainable, lr=opt.lr)
+    gamma = (opt.lr_final / opt.lr) ** (1.0 / max(1, opt.steps - 1))
+    return adam, torch.optim.lr_scheduler.ExponentialLR(adam, gamma)
 
 
 @dataclass

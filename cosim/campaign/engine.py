@@ -223,8 +223,6 @@ def _bind(spec: CampaignSpec, name: str, line: int, ctrl: Any, problem: Any,
 def prepare(spec: CampaignSpec) -> Plan:
     """Check the spec against the real plant and controllers, draw every run, pack the
     files; raises :class:`CosimError` (exit 2) before anything runs."""
-    from controllers.model import DEFAULT_MODEL
-    from cosim.api import with_problem
     from cosim.core import registry, varmap
     from cosim.core import scenario as scenario_mod
 
@@ -243,27 +241,12 @@ def prepare(spec: CampaignSpec) -> Plan:
     sc = scenario_mod.load(spec.scenario)
     ctx = DrawContext.build(spec, sc.start_time)
     draws = [draw_run(spec, i, ctx) for i in range(spec.runs)]
-    controllers, variant_options, varmaps = {}, {}, {}
+    controllers, variant_options, varmaps, names = {}, {}, {}, {}
     for k, v in enumerate(spec.variants):
-        options = dict(v.options)
-        if "model" not in options and registry.CONTROLLERS.get(v.controller) == \
-                registry.CONTROLLERS["robust-mpc"]:
-            options["model"] = str(DEFAULT_MODEL)
         line = v.line or _problem_line(spec)
+        names[v.name], options, local = _variant_options(spec, k, v, line, files)
         try:
-            options = with_problem(v.controller, options,
-                                   str(spec.problem) if spec.problem is not None else None)
-        except CosimError as exc:
-            raise CosimError(f"{spec.path}:{line}: variant '{v.name}': {exc}") from None
-        local = dict(options)
-        for key, what, ext in (("model", "model file", "json"),
-                               ("problem", "problem file", "toml")):
-            if isinstance(options.get(key), str | Path):
-                name = f"{key}_{k}.{ext}"
-                files[name] = _read(Path(options[key]), what)
-                options[key] = name
-        try:
-            controllers[v.name] = ctrl = registry.create(v.controller, local)
+            controllers[v.name] = ctrl = registry.create(names[v.name], local)
         except CosimError as exc:
             raise CosimError(f"{spec.path}:{line}: variant '{v.name}': {exc}") from None
         variant_options[v.name] = options
@@ -278,7 +261,7 @@ def prepare(spec: CampaignSpec) -> Plan:
     for d in draws:
         for v in spec.variants:
             tasks.append({
-                "run": d.run, "variant": v.name, "controller": v.controller,
+                "run": d.run, "variant": v.name, "controller": names[v.name],
                 "options": variant_options[v.name], "draw": asdict(d),
                 "scenario": "scenario.csv", "scenario_name": str(spec.scenario),
                 "plant": plant, "map": "plant.map.toml" if spec.map else None,
@@ -287,6 +270,35 @@ def prepare(spec: CampaignSpec) -> Plan:
                 "step_timeout": spec.step_timeout, "timeout": timeout,
             })
     return Plan(spec, assets, tasks, fingerprint, timeout)
+
+
+def _variant_options(spec: CampaignSpec, k: int, v: Any, line: int, files: dict[str, bytes]
+                     ) -> tuple[str, dict[str, Any], dict[str, Any]]:
+    """Variant ``v``'s controller name and options, a controller file read
+    (:func:`cosim.core.registry.expand`), the default model and the campaign's problem
+    added: ``(name, options for the tasks, options here)``; the files the options name are
+    packed into ``files`` (``model_<k>.json``, ``problem_<k>.toml``) and named so in the
+    tasks' options, so that a worker on another machine needs none of this one's files."""
+    from controllers.model import DEFAULT_MODEL
+    from cosim.api import with_problem
+    from cosim.core import registry
+
+    name, options = registry.expand(v.controller, v.options)
+    if "model" not in options and registry.CONTROLLERS.get(name) == \
+            registry.CONTROLLERS["robust-mpc"]:
+        options["model"] = str(DEFAULT_MODEL)
+    try:
+        options = with_problem(name, options,
+                               str(spec.problem) if spec.problem is not None else None)
+    except CosimError as exc:
+        raise CosimError(f"{spec.path}:{line}: variant '{v.name}': {exc}") from None
+    local = dict(options)
+    for key, what, ext in (("model", "model file", "json"), ("problem", "problem file", "toml")):
+        if isinstance(options.get(key), str | Path):
+            packed = f"{key}_{k}.{ext}"
+            files[packed] = _read(Path(options[key]), what)
+            options[key] = packed
+    return name, options, local
 
 
 def _entries(vmap: Any) -> tuple[str, tuple[tuple[Any, ...], ...]] | None:

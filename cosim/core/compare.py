@@ -252,6 +252,34 @@ class Comparison:
         return format_report(self, quiet=quiet)
 
 
+def _selected(result: Table, reference: Table, signals: Sequence[str] | None) -> list[str]:
+    """The signals to compare: the given ones (each in both files), else every signal of
+    the reference when both files have the same; a one-line error naming what is missing."""
+    if signals is None:
+        only_res = [n for n in result.names if n not in reference.names]
+        only_ref = [n for n in reference.names if n not in result.names]
+        if only_ref or only_res:
+            parts = []
+            if only_ref:
+                parts.append(f"{result.path} lacks {_names(only_ref)} (in the reference)")
+            if only_res:
+                parts.append(f"{reference.path} lacks {_names(only_res)} (in the result)")
+            common = [n for n in reference.names if n in result.names]
+            hint = (f"; choose with --signals (common: {_names(common)})" if common
+                    else "; the files have no signal in common")
+            raise CosimError("; ".join(parts) + hint)
+        return list(reference.names)
+    chosen = list(dict.fromkeys(s.strip() for s in signals if s.strip()))
+    if not chosen:
+        raise CosimError("no signals selected")
+    for where, table in (("result", result), ("reference", reference)):
+        missing = [s for s in chosen if s not in table.names]
+        if missing:
+            raise CosimError(f"{table.path}: no signal {_names(missing)} in the {where} "
+                             f"(it has {_names(table.names)})")
+    return chosen
+
+
 def compare_tables(result: Table, reference: Table, signals: Sequence[str] | None = None,
                    rtol: Tolerance = DEFAULT_RTOL, atol: Tolerance = DEFAULT_ATOL,
                    band: bool = False, window: float | None = None) -> Comparison:
@@ -277,29 +305,7 @@ def compare_tables(result: Table, reference: Table, signals: Sequence[str] | Non
         A signal missing in one file, no signals, a bad tolerance or window, a per-signal
         tolerance naming a signal that is not compared, or a cell that is not a number.
     """
-    if signals is None:
-        only_res = [n for n in result.names if n not in reference.names]
-        only_ref = [n for n in reference.names if n not in result.names]
-        if only_ref or only_res:
-            parts = []
-            if only_ref:
-                parts.append(f"{result.path} lacks {_names(only_ref)} (in the reference)")
-            if only_res:
-                parts.append(f"{reference.path} lacks {_names(only_res)} (in the result)")
-            common = [n for n in reference.names if n in result.names]
-            hint = (f"; choose with --signals (common: {_names(common)})" if common
-                    else "; the files have no signal in common")
-            raise CosimError("; ".join(parts) + hint)
-        signals = list(reference.names)
-    else:
-        signals = list(dict.fromkeys(s.strip() for s in signals if s.strip()))
-        if not signals:
-            raise CosimError("no signals selected")
-        for where, table in (("result", result), ("reference", reference)):
-            missing = [s for s in signals if s not in table.names]
-            if missing:
-                raise CosimError(f"{table.path}: no signal {_names(missing)} in the {where} "
-                                 f"(it has {_names(table.names)})")
+    signals = _selected(result, reference, signals)
     for label, tol in (("rtol", rtol), ("atol", atol)):
         _check_tolerance_names(label, tol, signals)
     if window is not None and not (math.isfinite(window) and window >= 0):

@@ -111,3 +111,30 @@ def test_a_campaign_variant_takes_a_controller_file(tmp_path: Path) -> None:
     (tmp_path / "c.toml").write_text(text.replace("pi.json", "missing.json"))
     with pytest.raises(CosimError, match=re.escape("c.toml:7: controller = 'missing.json': ")):
         spec.load(tmp_path / "c.toml")
+
+
+def test_a_campaign_runs_a_recorded_controller_as_cosim_run_does(
+        tmp_path: Path, fmu2_path: Path, model: Path, capsys: pytest.CaptureFixture) -> None:
+    """The engine expands the file when it plans (its model packed with the campaign, so a
+    worker elsewhere needs none of this machine's files): the variant's run is the recorded
+    run, to the bit."""
+    from cosim.campaign import engine, store
+    from cosim.campaign.spec import load
+    from cosim.campaign.task import run_task
+
+    (tmp_path / "s.csv").write_text(SHORT)
+    code, err = run(capsys, str(tmp_path / "s.csv"), "--plant", str(fmu2_path), "--model",
+                    str(model), "--option", "N=30", "--out", str(tmp_path / "one"))
+    assert code == 0, err
+    (tmp_path / "c.toml").write_text(
+        f'[campaign]\nruns = 1\nscenario = "s.csv"\nplant = "{fmu2_path}"\n\n'
+        '[[variant]]\nname = "recorded"\ncontroller = "one/controller.json"\n')
+    plan = engine.prepare(load(tmp_path / "c.toml"))
+    (task,) = plan.tasks
+    assert task["controller"] == "robust-mpc" and task["options"]["N"] == 30
+    assert task["options"]["model"] == "model_0.json" and "model_0.json" in plan.assets.files
+    out = tmp_path / "out"
+    for t in store.open_folder(plan, out, resume=False, force=False):
+        store.write_run(out, plan.spec, t, run_task(t, plan.assets), None)
+    (folder,) = (out / "runs").iterdir()
+    assert (folder / "results.csv").read_bytes() == (tmp_path / "one" / "results.csv").read_bytes()
