@@ -59,7 +59,9 @@ class MPCOptions:
     Q, R : array, number or mapping, optional
         Cost weights in normalised units (default ``I_n`` and ``0.01 I_m``, paper section V):
         a matrix, one number (times the identity) or, for ``R``, an object of diagonal
-        weights by input name (inputs not named: 0.01).
+        weights by input name (inputs not named: 0.01). ``Q="outputs"``: the stage cost on
+        the model's outputs, ``U_oᵀ U_o + 10⁻³ I`` (positive definite, as the theorem needs;
+        the terminal weight ``s`` follows from it as from any Q).
     e_o0 : float
         ``ê_o,0`` (paper: 0.02).
     gain_scale : float, optional

@@ -103,6 +103,25 @@ def _weight(key: str, value: Any, size: int, names: list[str] | None) -> np.ndar
     return w
 
 
+#: ``Q="outputs"``: the stage cost on the model's outputs, ``Q = U_oᵀ U_o + ε I`` (ε keeps Q
+#: positive definite, as the theorem needs, and the hidden states all but free).
+OUTPUT_WEIGHT_EPS = 1e-3
+
+
+def _state_weight(value: Any, params: Mapping[str, np.ndarray]) -> np.ndarray | None:
+    """The state weight ``Q``: :func:`_weight`, or ``"outputs"``: ``U_oᵀ U_o + ε I``
+    (:data:`OUTPUT_WEIGHT_EPS`), the outputs' tracking error rather than every hidden
+    state's distance to the reference."""
+    n = params["U_o"].shape[1]
+    if isinstance(value, str):
+        if value != "outputs":
+            raise CosimError(f"option Q={value!r}: expected a number, a {n}x{n} matrix or "
+                             "\"outputs\"")
+        Uo = np.asarray(params["U_o"], dtype=float)
+        return Uo.T @ Uo + OUTPUT_WEIGHT_EPS * np.eye(n)
+    return _weight("Q", value, n, None)
+
+
 class RobustMPCController(Component):
     """Robust MPC with GRU model and observer (Schimperna & Magni), normalised internally.
 
@@ -184,7 +203,7 @@ class RobustMPCController(Component):
             self.du_weight = du_weights(o.du_weight, len(inputs), inputs)
         except ControllersError as exc:
             raise CosimError(f"option {exc}") from None
-        kwargs: dict[str, Any] = {"N": o.N, "Q": _weight("Q", o.Q, self.model.n, None),
+        kwargs: dict[str, Any] = {"N": o.N, "Q": _state_weight(o.Q, self.model.params),
                                   "R": _weight("R", o.R, len(inputs), inputs),
                                   "e_o0": o.e_o0}
         gains_certified = True

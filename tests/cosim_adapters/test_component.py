@@ -176,11 +176,24 @@ def test_governor_keeps_fhocp_feasible_after_large_step(tmp_path):
     ({"du_weight": True}, "du_weight=True"),
     ({"du_weight": {"qa": -2}}, "du_weight={'qa': -2}"),
     ({"du_weight": {"qc": 1}}, "option du_weight: unknown input 'qc' (inputs: qa, qb)"),
+    ({"Q": "inputs"}, "option Q='inputs': expected a number, a 20x20 matrix or \"outputs\""),
 ])
 def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
     with pytest.raises(CosimError) as info:
         RobustMPCController(**options)
     assert words in str(info.value) and "\n" not in str(info.value)
+
+
+def test_output_stage_cost() -> None:
+    """Q="outputs": U_oᵀ U_o + 10⁻³ I, positive definite, and the certificate's terminal
+    weight s follows it (s = n λmax(Q) / (1 − ρ_s²), as for any Q)."""
+    default = RobustMPCController(law="paper")
+    c = RobustMPCController(law="paper", Q="outputs")
+    Uo = c.model.params["U_o"]
+    assert np.allclose(c.cert.Q, Uo.T @ Uo + 1e-3 * np.eye(c.model.n))
+    assert np.min(np.linalg.eigvalsh(c.cert.Q)) > 0 and c.summary()["options"]["Q"] == "outputs"
+    ratio = np.max(np.linalg.eigvalsh(c.cert.Q)) / np.max(np.linalg.eigvalsh(default.cert.Q))
+    assert c.cert.s == pytest.approx(ratio * default.cert.s, rel=1e-9)
 
 
 def test_solver_option_selects_the_nlp_solver() -> None:
