@@ -94,8 +94,8 @@ class KernelSQP:
             self.options, self.info)
 
     def buffers(self) -> tuple[KernelSQP, Any, dict[str, np.ndarray], dict[str, np.ndarray]]:
-        """``(self, trigger, ins, outs)``, as :func:`controllers.ocp.fhocp.bind_buffers` gives
-        for a casadi solver."""
+        """``(self, trigger, ins, outs)``, as
+        :func:`controllers.ocp.casadi_callbacks.bind_buffers` gives for a casadi solver."""
         return self, self.solve, self.ins, self.outs
 
     def solve(self) -> None:

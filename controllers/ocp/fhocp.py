@@ -31,9 +31,10 @@ design/solver.md) lists the alternatives measured and why they won or lost.
 
 One solve procedure serves every law (:meth:`FHOCP.solve_request`): the ``i = 0`` row, the
 solver within its budget, the independent answer check, the judge and the warm start; what a
-law asks for is a :class:`SolveRequest` (its candidate, the solver's buffers, its answer
-check): the paper's :class:`Setpoint` (:meth:`FHOCP.solve`), the tracking law's
-:class:`controllers.ocp.fhocp_tracking.Target`; a third law brings its own request.
+law asks for is a :class:`~controllers.ocp.requests.SolveRequest` (its candidate, the
+solver's buffers, its answer check): the paper's :class:`~controllers.ocp.requests.Setpoint`
+(:meth:`FHOCP.solve`), the tracking law's :class:`controllers.ocp.fhocp_tracking.Target`; a
+third law brings its own request.
 
 Every answer is checked independently of the solver's status: the inputs are rolled out with
 numpy (:func:`controllers.gru.simulate`) and the constraint violations, the terminal-set
@@ -49,7 +50,7 @@ from __future__ import annotations
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import casadi as ca
 import numpy as np
@@ -57,7 +58,7 @@ import numpy as np
 from controllers import gru
 from controllers.errors import DesignError
 from controllers.kernel.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
-from controllers.ocp.casadi_callbacks import quiet_stdout
+from controllers.ocp.casadi_callbacks import bind_buffers, quiet_stdout
 from controllers.ocp.fhocp_layout import FHOCPLayout
 from controllers.ocp.fhocp_result import (
     FHOCPResult,
@@ -67,6 +68,7 @@ from controllers.ocp.fhocp_result import (
     solver_stats,
 )
 from controllers.ocp.input_rate import du_cost, du_weights
+from controllers.ocp.requests import Setpoint, SolveRequest
 from controllers.ocp.solve_status import SolveStatus
 from controllers.ocp.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
@@ -109,62 +111,6 @@ class FHOCPData:
     a: np.ndarray
     b: np.ndarray
     s: float
-
-
-class SolveRequest(Protocol):
-    """What one solve is asked for: the law's part of :meth:`FHOCP.solve_request` (the
-    paper's set-point, :class:`Setpoint`; the tracking law's target and candidate,
-    :class:`controllers.ocp.fhocp_tracking.Target`). A third law brings its own."""
-
-    def candidate(self, fhocp: Any, x_hat: np.ndarray, e_o: float, status: str
-                  ) -> FHOCPResult:
-        """The law's candidate, evaluated, with ``status`` (reported when ``x̂`` fails the
-        ``i = 0`` row and no solver is called)."""
-        ...
-
-    def write(self, fhocp: Any, ins: dict[str, np.ndarray], x_hat: np.ndarray,
-              e_o: float) -> None:
-        """The solver's parameters, bounds and initial guess (its argument buffers)."""
-        ...
-
-    def check(self, fhocp: Any, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray,
-              e_o: float, status: str) -> FHOCPResult:
-        """The independent check of the solver's answer ``wopt`` (solver status
-        ``status``)."""
-        ...
-
-
-@dataclass(frozen=True)
-class Setpoint:
-    """The paper's request (``eq:optimization``): the set-point ``(x̄, ū)``, the terminal
-    radius α, the initial inputs (``None``: the previous solution shifted with ``ū``
-    appended when ``warm``, else ``ū``) and ``u_{−1}``."""
-
-    x_bar: np.ndarray
-    u_bar: np.ndarray
-    alpha: float
-    u_init: np.ndarray | None
-    warm: bool
-    u_prev: np.ndarray
-
-    def candidate(self, fhocp: FHOCP, x_hat: np.ndarray, e_o: float, status: str
-                  ) -> FHOCPResult:
-        res = fhocp.candidate(x_hat, np.tile(self.u_bar, (fhocp.N, 1)), self.x_bar,
-                              self.u_bar, e_o, self.alpha, self.u_prev)
-        res.status = status
-        return res
-
-    def write(self, fhocp: FHOCP, ins: dict[str, np.ndarray], x_hat: np.ndarray,
-              e_o: float) -> None:
-        fhocp.layout.write(ins, fhocp.tightened_bounds(e_o), x_hat, self.x_bar, self.u_bar,
-                           self.alpha, self.u_init, fhocp._warm if self.warm else None,
-                           fhocp.warm_duals, fhocp.plain_rollout,
-                           self.u_prev if fhocp.has_du else None)
-
-    def check(self, fhocp: FHOCP, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray,
-              e_o: float, status: str) -> FHOCPResult:
-        return fhocp.check_answer(wopt, pv, x_hat, e_o, self.x_bar, self.u_bar, self.alpha,
-                                  self.u_prev, status)
 
 
 class FHOCP:
@@ -576,18 +522,3 @@ class FHOCP:
     def reset_warm_start(self) -> None:
         """Forget the previous solution (next solve starts cold)."""
         self._warm = None
-
-
-def bind_buffers(solver: Any) -> tuple:
-    """Bind numpy arrays to the solver's zero-copy argument and result buffers (converting
-    numpy arrays to and from ``DM`` costs tens of microseconds per vector)."""
-    buf, trigger = solver.buffer()
-    ins = {name: np.zeros(solver.sparsity_in(i).nnz())
-           for i, name in enumerate(solver.name_in())}
-    outs = {name: np.zeros(solver.sparsity_out(i).nnz())
-            for i, name in enumerate(solver.name_out())}
-    for i, name in enumerate(solver.name_in()):
-        buf.set_arg(i, memoryview(ins[name]))
-    for i, name in enumerate(solver.name_out()):
-        buf.set_res(i, memoryview(outs[name]))
-    return buf, trigger, ins, outs

@@ -102,7 +102,7 @@ def steady_output_bounds(cert: Any, alpha_c: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Target:
-    """The tracking law's request (:class:`~controllers.ocp.fhocp.SolveRequest`): the target
+    """The tracking law's request (:class:`~controllers.ocp.requests.SolveRequest`): the target
     ``r = ȳ − d̂``, the candidate (inputs, steady input ``u_s``, Newton's start ``x_s0``),
     ``u_{−1}``, whether to warm start the multipliers and the centre of ``u_s``'s move
     limit (:meth:`TrackingFHOCP.solve_tracking`)."""
