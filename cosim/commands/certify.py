@@ -78,6 +78,9 @@ def register(subparsers: Any) -> None:
     p.add_argument("--problem", metavar="PROBLEM.toml", default=None,
                    help="control problem file: must agree with the model's own (checked), "
                         "or gives the problem of a model file without one")
+    p.add_argument("--quiet", action="store_true",
+                   help="print nothing but errors and the one-line verdict of an uncertified "
+                        "model (the exit status says certified: 0, uncertified: 1)")
     p.add_argument("--json", action="store_true",
                    help="print JSON with the paper's names (a list when several set-points)")
     p.add_argument("--N", type=int, default=None,
@@ -264,7 +267,7 @@ def run(args: argparse.Namespace) -> int:
             docs = [{**d, "tracking": tracking} for d in docs]
         docs = [{**d, "verdict": verdict.to_json()} for d in docs]
         print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1))
-    else:
+    elif not args.quiet:
         _print_table(args.model, model, cert, note, per_setpoint)
         if tracking is not None:
             _print_tracking(tracking)
@@ -276,7 +279,7 @@ def run(args: argparse.Namespace) -> int:
         path = figure(args.plot, model, cert, setpoints_phys)
         print(f"figure written to {path}", file=sys.stderr)
     if args.save:
-        _save(args.model, model, cert, verdict, setpoints_phys)
+        _save(args.model, model, cert, verdict, setpoints_phys, args.quiet)
     if not verdict.certified:
         print(f"cosim certify: not certified ({len(verdict.reasons())} hypothesis check(s) "
               "failed); the robust MPC runs this model uncertified, or refuses with "
@@ -337,7 +340,8 @@ def _setpoint_checks(model: Any, cert: Any, setpoints_phys: list, setpoints: lis
     return per_setpoint, failures
 
 
-def _save(path: str, model: Any, cert: Any, verdict: Any, setpoints_phys: list) -> None:
+def _save(path: str, model: Any, cert: Any, verdict: Any, setpoints_phys: list,
+          quiet: bool = False) -> None:
     """``--save``: the observer gains, ``w̄_y`` and the verdict into the model file (atomic)."""
     from cosim.core.atomicio import output_error
 
@@ -351,8 +355,9 @@ def _save(path: str, model: Any, cert: Any, verdict: Any, setpoints_phys: list) 
         model.save(path)
     except OSError as exc:
         raise output_error(path, exc) from None
-    print(f"saved L_z, L_r, w_y_bar and the verdict (certified: "
-          f"{str(verdict.certified).lower()}) to {path}", file=sys.stderr)
+    if not quiet:
+        print(f"saved L_z, L_r, w_y_bar and the verdict (certified: "
+              f"{str(verdict.certified).lower()}) to {path}", file=sys.stderr)
 
 
 def _paper_verdict(model: Any, cert: Any, kwargs: dict, setpoints: list,

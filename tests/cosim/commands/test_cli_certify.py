@@ -79,6 +79,21 @@ def test_failing_setpoint_exit_1_names_the_hypothesis(model_file: Path, capsys) 
     assert "FAILS: set-point: h1=1.99 m" in captured.out
 
 
+def test_quiet_prints_only_the_verdict_of_an_uncertified_model(model_file: Path,
+                                                              capsys) -> None:
+    """--quiet (as the other commands have it): the exit status says the verdict; nothing on
+    standard output, standard error only for an uncertified model."""
+    assert main(["certify", str(model_file), "--setpoint", "1.0,1.0", "--quiet",
+                 "--save"]) == 0
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err == ""
+    assert GRUModel.load(model_file).certificate["certified"] is True   # saved all the same
+    assert main(["certify", str(model_file), "--setpoint", "1.99,1.0", "--quiet"]) == 1
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.count("\n") == 1
+    assert "not certified (1 hypothesis check(s) failed)" in captured.err
+
+
 def test_non_delta_iss_model_exit_1(tmp_path: Path, capsys) -> None:
     m = random_gru_model(0)
     m.params["U_z"] *= 40
