@@ -1,6 +1,7 @@
 """Your own plant, from its FMU to a campaign: the exothermic CSTR (or another example plant).
 
-    python examples/own_plant.py [--plant cstr|heater|mixing_tank] [--epochs E] [--out DIR]
+    python examples/own_plant.py [--plant cstr|heater|mixing_tank|furnace] [--epochs E]
+        [--sigma-z-max S] [--option KEY=VALUE ...] [--out DIR]
 
 The walk-through of the user guide (docs/guide/own-plant.md), as one command running the
 ``cosim`` commands a user types:
@@ -22,7 +23,10 @@ controller and its ratio to the PI's (summed over the outputs, each IAE divided 
 output's box width), the same for the inputs' total variation, and the campaign's
 violations and median IAE ratio; ``walkthrough.json`` holds the same numbers.
 ``--epochs 150`` trains briefly (the tests run it so); the default epochs of ``cosim train``
-give the numbers quoted in the guide.
+give the numbers quoted in the guide. ``--sigma-z-max`` goes to ``cosim train`` (a faster
+certified contraction, a smaller terminal weight) and each ``--option KEY=VALUE`` to every
+robust-MPC run and campaign variant (``--option 'Q="outputs"'``: the stage cost on the
+outputs): the guide's recipe for plants whose PI loops are hard to beat.
 """
 
 from __future__ import annotations
@@ -81,14 +85,15 @@ def cosim_command(*args: Any) -> None:
 
 
 def identify(fmu: Path, problem: Path, work: Path, epochs: int | None,
-             seed: int) -> tuple[Path, float]:
+             seed: int, train_args: tuple[str, ...] = ()) -> tuple[Path, float]:
     """generate-data and train; the model file and the training's wall time [s]."""
     data, model = work / "data" / "plant.csv", work / "models" / "plant_gru.json"
     cosim_command("generate-data", "--plant", fmu, "--problem", problem, "--steps", STEPS,
                   "--seed", seed, "--out", data, "--quiet")
     extra = [] if epochs is None else ["--epochs", epochs]
     t0 = time.perf_counter()
-    cosim_command("train", data, *extra, "--seed", seed, "--out", model, "--quiet")
+    cosim_command("train", data, *extra, *train_args, "--seed", seed, "--out", model,
+                  "--quiet")
     return model, time.perf_counter() - t0
 
 
@@ -188,8 +193,18 @@ def summed(values: dict[str, float], channels: Any) -> float:
     return float(sum(values[c.name] / (c.max - c.min) for c in channels))
 
 
+def _toml(value: Any) -> str:
+    """A JSON value (an ``--option``'s) as a TOML inline value."""
+    if isinstance(value, dict):
+        return "{ " + ", ".join(f"{k} = {_toml(v)}" for k, v in value.items()) + " }"
+    if isinstance(value, list):
+        return "[" + ", ".join(_toml(v) for v in value) + "]"
+    return json.dumps(value)
+
+
 def campaign(name: str, fmu: Path, model: Path, problem: Path, scenario: Path, work: Path,
-             runs: int, square: bool) -> dict[str, Any]:
+             runs: int, square: bool, mpc_options: dict[str, Any] | None = None
+             ) -> dict[str, Any]:
     """A campaign with the plant's parameters drawn per run, every controller on the same
     draws: failed and violating runs per variant and, for a square plant, the median over the
     draws of the robust MPC's summed IAE and total variation divided by the PI's."""
@@ -200,6 +215,7 @@ def campaign(name: str, fmu: Path, model: Path, problem: Path, scenario: Path, w
     draws = "\n".join(f'"plant.{k}" = {{ uniform = [{lo}, {hi}] }}'
                       for k, (lo, hi) in UNCERTAIN[name].items())
     spec = work / "campaign.toml"
+    mpc = ", ".join(f"{k} = {_toml(v)}" for k, v in (mpc_options or {}).items())
     # the PI is tuned from the same model (a variant's own model key)
     pi = (f'\n[[variant]]\nname = "pi"\ncontroller = "pi"\nmodel = "{model}"\n' if square
           else "")
@@ -217,10 +233,11 @@ problem = "{problem}"
 
 [[variant]]
 name = "robust-mpc"
+options = {{ {mpc} }}
 
 [[variant]]
 name = "robust-mpc-paper"
-options = {{ law = "paper" }}
+options = {{ law = "paper"{", " + mpc if mpc else ""} }}
 {pi}""")
     cosim_command("campaign", spec, "--out", work / "campaign", "--force", "--quiet")
     summary = json.loads((work / "campaign" / "summary.json").read_text())
@@ -249,15 +266,20 @@ options = {{ law = "paper" }}
 
 
 def walkthrough(name: str, out: Path, epochs: int | None, runs: int = RUNS,
-                seed: int = 0) -> dict[str, Any]:
-    """The whole walk-through for example plant ``name``; the numbers it prints."""
+                seed: int = 0, sigma_z_max: float | None = None,
+                options: tuple[str, ...] = ()) -> dict[str, Any]:
+    """The whole walk-through for example plant ``name``; the numbers it prints
+    (``sigma_z_max``: ``cosim train --sigma-z-max``; ``options``: ``KEY=VALUE`` of every
+    robust-MPC run and variant)."""
     from controllers.model import GRUModel
     from controllers.problem_file import load
+    from cosim.core.registry import parse_options
 
     problem_path = EXAMPLES / name / "problem.toml"
     problem = load(problem_path)
     fmu = build_plant(name, out / "fmu")
-    model_path, train_s = identify(fmu, problem_path, out, epochs, seed)
+    train_args = () if sigma_z_max is None else ("--sigma-z-max", str(sigma_z_max))
+    model_path, train_s = identify(fmu, problem_path, out, epochs, seed, train_args)
     setpoints = plant_setpoints(fmu, problem)
     verdict = certify(model_path, problem, setpoints)
     model = GRUModel.load(model_path)
@@ -267,18 +289,20 @@ def walkthrough(name: str, out: Path, epochs: int | None, runs: int = RUNS,
         "train_s": round(train_s, 1), "fit_test": model.training["fit"]["test"],
         "certify": verdict, "setpoints": [y.tolist() for y in setpoints]}
     square = problem.m == problem.p
-    for key, (controller, options) in CONTROLLERS.items():
+    report["options"] = list(options)
+    for key, (controller, own) in CONTROLLERS.items():
         if controller == "pi" and not square:
             continue
+        given = (*own, *options) if controller == "robust-mpc" else own
         report[key] = run(scenario, fmu, model_path, controller, out / "runs" / key,
-                          problem, setpoints, options)
+                          problem, setpoints, given)
     if square:
         mpc, pi = report["robust-mpc"], report["pi"]
         report["iae_ratio"] = mpc["iae_sum"] / pi["iae_sum"]
         report["tv_ratio"] = mpc["tv_sum"] / pi["tv_sum"]
     if runs:
         report["campaign"] = campaign(name, fmu, model_path, problem_path, scenario, out, runs,
-                                      square)
+                                      square, parse_options(list(options)))
     (out / "walkthrough.json").write_text(json.dumps(report, indent=1) + "\n")
     return report
 
@@ -292,9 +316,14 @@ def main() -> None:
                         help=f"campaign runs per controller (default {RUNS}; 0: none)")
     parser.add_argument("--out", type=Path, default=None)
     parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--sigma-z-max", type=float, default=None,
+                        help="cosim train --sigma-z-max (default: no cap)")
+    parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="robust-MPC option of every run and variant, repeatable")
     args = parser.parse_args()
     out = args.out or Path(tempfile.mkdtemp(prefix=f"own-plant-{args.plant}-"))
-    r = walkthrough(args.plant, out, args.epochs, args.runs, args.seed)
+    r = walkthrough(args.plant, out, args.epochs, args.runs, args.seed, args.sigma_z_max,
+                    tuple(args.option))
     print(r["problem"])
     print(f"training {r['train_s']:.0f} s; test FIT: "
           + ", ".join(f"{k} {v:.1f} %" for k, v in r["fit_test"].items()))
