@@ -321,14 +321,17 @@ def _execute(master: Any, meta: dict, out: str | Path | None, figure: bool,
             stream.close()
             raise
         _raise_load_error(result, CosimError, SimulationFailed)
-        _describe_controller(folder.path, meta)
+        described = _describe_controller(meta)
         doc = results.write(folder.path, result, meta, figure=figure, stream=stream)
+        if described is not None:   # after the results: a failed write keeps them on disk
+            _write_description(folder.path, described)
     return RunOutput(result, doc, folder.path, meta)
 
 
-def _describe_controller(folder: Path, meta: dict) -> None:
-    """``controller.json`` of the run (:mod:`cosim.core.controller_file`), its name in
-    ``meta`` (``controller_file``); none when an option is a Python object (the API)."""
+def _describe_controller(meta: dict) -> dict | None:
+    """The run's controller description (:mod:`cosim.core.controller_file`), its file name
+    recorded in ``meta`` (``controller_file``); ``None`` when an option is a Python object
+    (the API)."""
     from cosim.core import controller_file
     from cosim.core.errors import CosimError
 
@@ -336,11 +339,21 @@ def _describe_controller(folder: Path, meta: dict) -> None:
     try:
         doc = controller_file.describe(meta["controller"], meta["controller_options"])
     except CosimError:
-        return
-    from cosim.core.atomicio import write_text
-
-    write_text(folder / controller_file.FILE_NAME, json.dumps(doc, indent=1) + "\n")
+        return None
     meta["controller_file"] = controller_file.FILE_NAME
+    return doc
+
+
+def _write_description(folder: Path, doc: dict) -> None:
+    """``controller.json`` into the run folder (atomic; one-line error on failure)."""
+    from cosim.core import controller_file
+    from cosim.core.atomicio import output_error, write_text
+
+    path = folder / controller_file.FILE_NAME
+    try:
+        write_text(path, json.dumps(doc, indent=1) + "\n")
+    except OSError as exc:
+        raise output_error(path, exc) from None
 
 
 def _raise_load_error(result: RunResult, cosim_error: type, failed: type) -> None:
