@@ -18,7 +18,6 @@ interrupted returns with ``status`` ``"failed"`` or ``"interrupted"``, its rows 
 from __future__ import annotations
 
 import contextlib
-import json
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -324,7 +323,9 @@ def _execute(master: Any, meta: dict, out: str | Path | None, figure: bool,
         described = _describe_controller(meta)
         doc = results.write(folder.path, result, meta, figure=figure, stream=stream)
         if described is not None:   # after the results: a failed write keeps them on disk
-            _write_description(folder.path, described)
+            from cosim.core import controller_file
+
+            controller_file.write(folder.path / controller_file.FILE_NAME, described)
     return RunOutput(result, doc, folder.path, meta)
 
 
@@ -342,18 +343,6 @@ def _describe_controller(meta: dict) -> dict | None:
         return None
     meta["controller_file"] = controller_file.FILE_NAME
     return doc
-
-
-def _write_description(folder: Path, doc: dict) -> None:
-    """``controller.json`` into the run folder (atomic; one-line error on failure)."""
-    from cosim.core import controller_file
-    from cosim.core.atomicio import output_error, write_text
-
-    path = folder / controller_file.FILE_NAME
-    try:
-        write_text(path, json.dumps(doc, indent=1) + "\n")
-    except OSError as exc:
-        raise output_error(path, exc) from None
 
 
 def _raise_load_error(result: RunResult, cosim_error: type, failed: type) -> None:

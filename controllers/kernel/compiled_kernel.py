@@ -357,13 +357,13 @@ def for_fhocp(fhocp: Any) -> tuple[Workspace | None, str | None]:
     be built or disagrees with them. Thread-safe."""
     import warnings
 
-    clip = fhocp.sqp_options.get("hessian_eigen_clip")
+    problem = KernelProblem.of(fhocp)
     with _LOCK:
-        k, reason = _build(KernelProblem.of(fhocp), None, None, None, False)
+        k, reason = _build(problem, None, None, None, False)
         if k is not None:
             key = str(k.path)
             if key not in _SELF_TESTED:
-                _SELF_TESTED[key] = fhocp.numpy_nlp().self_test(k.workspace(), clip)
+                _SELF_TESTED[key] = fhocp.numpy_nlp().self_test(k.workspace(), problem.clip)
             if _SELF_TESTED[key] > KERNEL_SELF_TEST_TOL:
                 reason = (f"self-test against the numpy derivatives failed (relative "
                           f"difference {_SELF_TESTED[key]:.1e})")

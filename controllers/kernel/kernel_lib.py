@@ -64,7 +64,6 @@ class Kernel:
         self.workspace_bytes = int(abi[ABI_COUNT - 1])
         dims = Dims()
         self._fn("dims")(ctypes.byref(dims))
-        self.dims = dims
         self.n, self.m, self.N = dims.n_states, dims.n_inputs, dims.horizon
         self.q, self.nw, self.ng = dims.n_reduced_rows, dims.n_decision, dims.n_constraints
         self.npar, self.M, self.nl = dims.n_parameters, dims.control_horizon, dims.n_assess_rows

@@ -336,14 +336,6 @@ class FHOCP:
             self._bounds_eo, self._bounds = e_o, bounds
         return self._bounds
 
-    def plain_rollout(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
-        """States ``x_0 … x_N`` from ``x̂`` under ``u_seq`` by the solver's own means,
-        without derivatives (the initial guess's terminal gap): the kernel's, else the
-        single-shooting NLP's or numpy's."""
-        if self.kernel is not None or self._nlp is None:
-            return self.simulate(x_hat, u_seq)
-        return self._shoot.rollout(x_hat, u_seq, derivatives=False).x
-
     def rollout(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
         """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m)."""
         if self._solver is None:

@@ -126,12 +126,7 @@ class Target:
 
     def check(self, fhocp: TrackingFHOCP, wopt: np.ndarray, pv: np.ndarray,
               x_hat: np.ndarray, e_o: float, status: str) -> FHOCPResult:
-        if fhocp.kernel is not None:
-            return fhocp._check_answer(wopt, pv, e_o, status)
-        res = fhocp.check(x_hat, wopt[fhocp.iu], wopt[fhocp.ius], e_o, self.r, self.x_s0,
-                          self.u_prev, status)
-        res.defect = float(np.max(np.abs(fhocp._xtraj(wopt, pv) - res.x)))
-        return res
+        return fhocp.check_request(wopt, pv, x_hat, e_o, self, status)
 
 
 class TrackingFHOCP(FHOCP):
@@ -384,6 +379,18 @@ class TrackingFHOCP(FHOCP):
         else:
             ins["lam_x0"][:] = 0.0
             ins["lam_g0"][:] = 0.0
+
+    def check_request(self, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray, e_o: float,
+                      request: Target, status: str) -> FHOCPResult:
+        """The independent check of the solver's answer ``wopt`` to a :class:`Target`: in
+        one compiled call with a kernel (:meth:`_check_answer`), else :meth:`check` with the
+        defect against the solver's own trajectory."""
+        if self.kernel is not None:
+            return self._check_answer(wopt, pv, e_o, status)
+        res = self.check(x_hat, wopt[self.iu], wopt[self.ius], e_o, request.r, request.x_s0,
+                         request.u_prev, status)
+        res.defect = float(np.max(np.abs(self._xtraj(wopt, pv) - res.x)))
+        return res
 
     def _check_answer(self, w: np.ndarray, p: np.ndarray, e_o: float, status: str
                       ) -> FHOCPResult:

@@ -69,7 +69,7 @@ class Setpoint:
               e_o: float) -> None:
         fhocp.layout.write(ins, fhocp.tightened_bounds(e_o), x_hat, self.x_bar, self.u_bar,
                            self.alpha, self.u_init, fhocp._warm if self.warm else None,
-                           fhocp.warm_duals, fhocp.plain_rollout,
+                           fhocp.warm_duals, fhocp.rollout,
                            self.u_prev if fhocp.has_du else None)
 
     def check(self, fhocp: FHOCP, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray,

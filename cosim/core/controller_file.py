@@ -71,11 +71,11 @@ def describe(controller: str, options: Mapping[str, Any]) -> dict[str, Any]:
     return {"format": FORMAT, "controller": controller, "options": opts, "files": files}
 
 
-def write(path: str | Path, controller: str, options: Mapping[str, Any]) -> Path:
-    """Write the description (:func:`describe`) atomically; its path."""
+def write(path: str | Path, doc: Mapping[str, Any]) -> Path:
+    """Write a description (:func:`describe`) atomically; its path. A failed write is a
+    one-line :class:`~cosim.core.errors.OutputError` naming the file."""
     from cosim.core.atomicio import output_error, write_text
 
-    doc = describe(controller, options)
     try:
         write_text(path, json.dumps(doc, indent=1) + "\n")
     except OSError as exc:

@@ -59,7 +59,8 @@ def test_a_run_recorded_runs_again_the_same(tmp_path: Path, fmu2_path: Path, mod
 
 def test_a_changed_model_is_refused_in_one_line(tmp_path: Path, fmu2_path: Path, model: Path,
                                                 capsys: pytest.CaptureFixture) -> None:
-    desc = controller_file.write(tmp_path / "ctrl.json", "robust-mpc", {"model": str(model)})
+    desc = controller_file.write(tmp_path / "ctrl.json",
+                                 controller_file.describe("robust-mpc", {"model": str(model)}))
     model.write_text(model.read_text().replace('"Ts"', ' "Ts"', 1))   # retrained, say
     scenario = tmp_path / "s.csv"
     scenario.write_text(SHORT)
@@ -101,7 +102,8 @@ def test_a_campaign_variant_takes_a_controller_file(tmp_path: Path) -> None:
     """Found beside the spec, checked when the spec is read."""
     from cosim.campaign import spec
 
-    controller_file.write(tmp_path / "pi.json", "pi", {"pairing": "diagonal"})
+    controller_file.write(tmp_path / "pi.json",
+                          controller_file.describe("pi", {"pairing": "diagonal"}))
     (tmp_path / "s.csv").write_text(SHORT)
     text = ('[campaign]\nruns = 1\nscenario = "s.csv"\n\n[[variant]]\nname = "a"\n'
             'controller = "pi.json"\n')
