@@ -11,6 +11,8 @@ The Python API (the twins of the ``cosim`` commands)::
     campaign = cosim.run_campaign("scenarios/campaigns/theorem.toml", workers=2)
     campaign.table                                           # runs.parquet as a DataFrame
 
+    cosim.export_fmu(out="Controller.fmu")                   # the robust MPC as an FMU
+
 Names are imported on first use, so that ``import cosim`` (and ``cosim --help``) stays fast.
 """
 
@@ -32,6 +34,7 @@ __all__ = [
     "Signal",
     "SimulationFailed",
     "__version__",
+    "export_fmu",
     "load_scenario",
     "run",
     "run_campaign",
@@ -39,6 +42,7 @@ __all__ = [
 
 _EXPORTS = {
     "run": ("cosim.api", "run"),
+    "export_fmu": ("cosim.api", "export_fmu"),
     "RunOutput": ("cosim.api", "RunOutput"),
     "run_campaign": ("cosim.campaign", "run_campaign"),
     "CampaignResult": ("cosim.campaign", "CampaignResult"),

@@ -1,4 +1,5 @@
-"""The Python API: ``cosim.run`` and ``cosim.run_campaign``, the twins of the commands.
+"""The Python API: ``cosim.run``, ``cosim.export_fmu`` and ``cosim.run_campaign``, the twins
+of the commands.
 
     >>> import cosim
     >>> out = cosim.run("scenarios/leak_tank1.csv", controller="pi")
@@ -26,7 +27,7 @@ from typing import Any
 from cosim.core.build import TARGETS
 from cosim.core.master import RunResult
 
-__all__ = ["DEFAULT_PLANT", "RunOutput", "plant_path", "run"]
+__all__ = ["DEFAULT_PLANT", "RunOutput", "export_fmu", "plant_path", "run"]
 
 #: The project's plant FMU (FMI 2.0): ``FourTank.fmu`` beside its sources in the ``fmus``
 #: package when that folder is writable (a source checkout: ``fmus/FourTank.fmu``), else in
@@ -248,6 +249,35 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     finally:
         if bar is not None:
             bar.close()
+
+
+def export_fmu(model: str | Path | None = None, out: str | Path = "Controller.fmu", *,
+               fmi: int = 3, problem: str | Path | None = None,
+               options: Mapping[str, Any] | None = None) -> Path:
+    """The robust MPC of ``model`` (default: the shipped one) as a controller FMU at ``out``
+    (FMI ``fmi``, 2 or 3), the twin of ``cosim export-fmu`` (docs: guide/controller-fmu.md):
+    the controller ``run(..., options=options)`` would build, its step compiled in C.
+
+    Raises
+    ------
+    CosimError
+        A controller that cannot be exported (the paper's law, no compiled kernel), no C
+        compiler, a failed build (an existing ``out`` is intact).
+    """
+    import warnings
+
+    from cosim.core import registry
+    from cosim_adapters.controller_export import export_fmu as export
+
+    opts = dict(options or {})
+    if model is not None:
+        opts["model"] = str(model)
+    if problem is not None:
+        opts["problem"] = str(problem)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # no kernel: export says so
+        ctrl = registry.create("robust-mpc", opts)
+    return export(ctrl, out, fmi)
 
 
 def with_problem(controller: str, options: Mapping[str, Any], problem: Any) -> dict:

@@ -40,6 +40,8 @@ COMMANDS = (
     "cosim.commands.run",
     "cosim.commands.build_fmu",
     "cosim.commands.build_kernel",
+    "cosim.commands.export_fmu",
+    "cosim.commands.export_ssp",
     "cosim.commands.generate_data",
     "cosim.commands.train",
     "cosim.commands.certify",

@@ -52,10 +52,12 @@ def _run(cmd: list[str], timeout: float = 600, **kwargs: object) -> subprocess.C
 def _package_data() -> set[str]:
     """Files the installed package reads at run time, as paths inside the wheel."""
     from controllers.kernel.compiled_kernel import TEMPLATE_PARTS
+    from controllers.kernel.controller_source import CONTROLLER_C
     from controllers.model import DEFAULT_MODEL
     from cosim.core.build import DEFAULT_PROBLEM, PACKAGE_DIR, TARGETS, source_path
 
-    names = {f"controllers/kernel/{p.name}" for p in TEMPLATE_PARTS}
+    names = {f"controllers/kernel/{p.name}" for p in (*TEMPLATE_PARTS, CONTROLLER_C)}
+    names |= {"fmus/controller/model.c", "fmus/controller/model.h"}
     names |= {f"fmus/{source_path(name).relative_to(PACKAGE_DIR).as_posix()}" for t in TARGETS
               for name in (*t.sources, t.model_description)}
     return names | {f"controllers/models/{DEFAULT_MODEL.name}", "fmus/__init__.py",
@@ -169,6 +171,19 @@ def test_cosim_run_from_an_empty_folder(venv: Path, site_packages: Path,
     assert proc.returncode == 0, _tail(proc)
     assert f"{cache / 'fmus' / 'FourTank.fmu'}: up to date" in proc.stdout, proc.stdout
     assert f"{cache / 'fmus' / 'FourTank3.fmu'}: built" in proc.stdout, proc.stdout
+
+    # the controller FMU builds from the installed sources, and runs in place of the MPC
+    proc = _run([str(venv / "bin" / "cosim"), "export-fmu", "--out", "Mpc.fmu", "--quiet"],
+                cwd=work, env=env)
+    assert proc.returncode == 0, _tail(proc)
+    proc = _run([str(venv / "bin" / "cosim"), "run", "steps.csv", "--controller", "Mpc.fmu",
+                 "--out", "fmu"], cwd=work, env=env)
+    assert proc.returncode == 0, _tail(proc)
+    fmu_rows = (work / "fmu" / "results.csv").read_text().splitlines()
+    py_rows = (work / "out" / "results.csv").read_text().splitlines()
+    qa = [[row.split(",")[rows[0].split(",").index('"ctrl.qa"')] for row in rows[1:]]
+          for rows in (fmu_rows, py_rows)]
+    assert qa[0] == qa[1]
 
     # and the packages that ran are the installed ones, nothing of the repository in reach
     probe = ("import json, sys, cosim, controllers, fmus; print(json.dumps("

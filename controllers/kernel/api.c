@@ -111,6 +111,16 @@ EXPORT void PFX(xtraj)(gk_ws *ws, const double *w, const double *p, double *x) {
   memcpy(x, ws->mem.X, sizeof ws->mem.X);
 }
 
+/* The output y = U_o x + b_o (the sum over x first, then b_o: the observer's y_hat, in Python
+ * and in the exported controller alike) */
+EXPORT void PFX(output)(const double *x, double *y) {
+  for (int a = 0; a < NY; a++) {
+    double s = 0.0;
+    for (int k = 0; k < NX; k++) s += UO[a * NX + k] * x[k];
+    y[a] = s + BO[a];
+  }
+}
+
 /* One GRU step x+ = f(x, u) with extra gate inputs dz, dr (the observer eq:observer, as
  * controllers.gru.step) */
 EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
@@ -338,7 +348,7 @@ EXPORT int PFX(steady)(gk_ws *ws, const double *us, const double *x0, double *xs
 EXPORT void PFX(dims)(gk_dims *out) {
   out->n_states = NX; out->n_inputs = NU; out->horizon = NH; out->n_reduced_rows = NQ;
   out->n_decision = NW; out->n_constraints = NG; out->n_parameters = NP;
-  out->control_horizon = NM; out->n_assess_rows = NL;
+  out->control_horizon = NM; out->n_assess_rows = NL; out->n_outputs = NY;
 }
 
 /* the interface types' layout, then the instance's size (kernel_abi.check_layout) */

@@ -52,17 +52,17 @@ from controllers.kernel.kernel_abi import c_declarations
 from controllers.kernel.kernel_lib import Kernel, Workspace
 
 __all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "KernelProblem", "Workspace",
-           "build",
-           "default_cache_dir", "for_fhocp", "generate_source", "last_error"]
+           "build", "default_cache_dir", "for_fhocp", "generate_source", "last_error",
+           "variant_flags"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-10"
+GENERATOR_VERSION = "gru-fhocp-kernel-11"
 #: The C template, joined in this order after the generated header: the interface
 #: (``gru_fhocp.h``), the solver instance's memory, the mathematics bottom-up, the exported
-#: API, the QP and the SQP.
+#: API, the equilibrium for an output (tracking kernels), the QP and the SQP.
 TEMPLATE_PARTS = tuple(Path(__file__).with_name(name) for name in (
     "gru_fhocp.h", "memory.c", "rollout.c", "steady_state.c", "derivatives.c", "hessian.c",
-    "eigen_clip.c", "api.c", "qp.c", "sqp.c"))
+    "eigen_clip.c", "api.c", "equilibrium.c", "qp.c", "sqp.c"))
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")
 PREFIX_PLACEHOLDER = "@PFX@"
 
@@ -212,10 +212,13 @@ def casadi_openblas() -> Path | None:
 #: eigenvalue clipping when N m >= this, else the own tred2/tql2 (all pairs). On Hessian-like
 #: matrices with 3 eigenvalues below the margin (the paper scenario clips ~2.4 per
 #: decomposition), ``benchmarks/bench_mpc.py --clip``: own / dsyevr 83 / 61 µs at N m = 30,
-#: 366 / 273 µs at 60, 2.6 / 0.86 ms at 120. Not below 40: at N m = 30 (the paper's problem)
-#: the closed loop showed no difference (p99 9.8 / 10.0 ms over 4 alternating runs), and
-#: the default kernel then needs no OpenBLAS.
-LAPACK_EIG_MIN_NU = 40
+#: 366 / 273 µs at 60, 2.6 / 0.86 ms at 120. Not below 80: at N m = 30 (the paper's problem)
+#: the closed loop showed no difference (p99 9.8 / 10.0 ms over 4 alternating runs), nor at
+#: the tracking law's default N m = 40 on the four-tank (median step 0.79 ms either way), and
+#: a kernel without OpenBLAS gives the same answers on every CPU (OpenBLAS picks its kernels
+#: by CPU), to the bit those of the exported controller (:mod:`controllers.kernel.
+#: controller_source`, which cannot carry OpenBLAS).
+LAPACK_EIG_MIN_NU = 80
 
 
 
@@ -254,6 +257,40 @@ def choose_mode(n: int, m: int, N: int, M: int | None = None) -> str:
     return "contract" if cc < 0.8 * cw else "w"
 
 
+def variant_flags(problem: KernelProblem, flags: tuple[str, ...] = DEFAULT_CFLAGS,
+                  blas: bool = True) -> tuple[tuple[str, ...], list[str]]:
+    """``(flags, libs)`` of ``problem``'s kernel: ``flags`` with its build-time variant
+    (:func:`choose_mode`) and, when ``blas`` and casadi's OpenBLAS is there, LAPACK's
+    eigenvalue clipping for large problems (and ``GRU_MPC_KERNEL_BLAS=on``: the BLAS
+    products), with the libraries to link; ``blas=False``: a self-contained library (the
+    exported controller)."""
+    params, N, clip = problem.params, problem.N, problem.clip
+    control_horizon = problem.control_horizon
+    libs: list[str] = []
+    n_states = np.shape(params["W_z"])[0]
+    openblas = casadi_openblas() if blas else None
+    # BLAS (casadi's OpenBLAS) for the big products only when GRU_MPC_KERNEL_BLAS=on: the
+    # register-blocked products beat it at every size measured (Jacobian / Hessian at
+    # N = 15, blocked against BLAS: 164 / 445 and 325 / 475 µs at n = 40, 469 / 1364 and
+    # 564 / 861 µs at n = 80, 1.87 / 4.21 and 1.58 / 2.08 ms at n = 160; closed-loop median
+    # at n = 80: 2.3–2.9 against 4.5–4.6 ms)
+    use_blas = openblas is not None and os.environ.get("GRU_MPC_KERNEL_BLAS") == "on"
+    mode = choose_mode(n_states, np.shape(params["W_z"])[1], int(N),
+                       None if control_horizon is None else int(control_horizon))
+    if mode != "w":
+        flags = (*flags, {"contract": "-DGK_CONTRACT", "backward": "-DGK_BACKWARD"}[mode])
+    lapack_eig = (openblas is not None and clip is not None
+                  and int(control_horizon or N) * np.shape(params["W_z"])[1] >= LAPACK_EIG_MIN_NU
+                  and os.environ.get("GRU_MPC_KERNEL_BLAS", "auto") != "off")
+    if use_blas:
+        flags = (*flags, "-DGK_BLAS")
+    if lapack_eig:
+        flags = (*flags, "-DGK_LAPACK_EIG")
+    if (use_blas or lapack_eig) and openblas is not None:
+        libs = [f"-L{openblas.parent}", f"-l:{openblas.name}", f"-Wl,-rpath,{openblas.parent}"]
+    return flags, libs
+
+
 def build(problem: KernelProblem, *, cache_dir: str | Path | None = None,
           cc: str | None = None, cflags: tuple[str, ...] | None = None,
           verbose: bool = False) -> Kernel | None:
@@ -270,36 +307,12 @@ def _build(problem: KernelProblem, cache_dir: str | Path | None, cc: str | None,
            cflags: tuple[str, ...] | None, verbose: bool
            ) -> tuple[Kernel | None, str | None]:
     """:func:`build`: ``(kernel, None)`` or ``(None, reason)``; the caller holds ``_LOCK``."""
-    params, N, clip = problem.params, problem.N, problem.clip
-    control_horizon = problem.control_horizon
     if os.environ.get("GRU_MPC_KERNEL", "1") == "0":
         return None, "disabled by GRU_MPC_KERNEL=0"
     cc = cc or os.environ.get("CC") or "gcc"
     if shutil.which(cc) is None:
         return None, f"no C compiler {cc!r} on PATH"
-    flags = tuple(cflags) if cflags is not None else DEFAULT_CFLAGS
-    libs: list[str] = []
-    n_states = np.shape(params["W_z"])[0]
-    blas = casadi_openblas()
-    # BLAS (casadi's OpenBLAS) for the big products only when GRU_MPC_KERNEL_BLAS=on: the
-    # register-blocked products beat it at every size measured (Jacobian / Hessian at
-    # N = 15, blocked against BLAS: 164 / 445 and 325 / 475 µs at n = 40, 469 / 1364 and
-    # 564 / 861 µs at n = 80, 1.87 / 4.21 and 1.58 / 2.08 ms at n = 160; closed-loop median
-    # at n = 80: 2.3–2.9 against 4.5–4.6 ms)
-    use_blas = blas is not None and os.environ.get("GRU_MPC_KERNEL_BLAS") == "on"
-    mode = choose_mode(n_states, np.shape(params["W_z"])[1], int(N),
-                       None if control_horizon is None else int(control_horizon))
-    if mode != "w":
-        flags = (*flags, {"contract": "-DGK_CONTRACT", "backward": "-DGK_BACKWARD"}[mode])
-    lapack_eig = (blas is not None and clip is not None
-                  and int(control_horizon or N) * np.shape(params["W_z"])[1] >= LAPACK_EIG_MIN_NU
-                  and os.environ.get("GRU_MPC_KERNEL_BLAS", "auto") != "off")
-    if use_blas and blas is not None:
-        flags = (*flags, "-DGK_BLAS")
-    if lapack_eig:
-        flags = (*flags, "-DGK_LAPACK_EIG")
-    if (use_blas or lapack_eig) and blas is not None:
-        libs = [f"-L{blas.parent}", f"-l:{blas.name}", f"-Wl,-rpath,{blas.parent}"]
+    flags, libs = variant_flags(problem, tuple(cflags) if cflags is not None else DEFAULT_CFLAGS)
     try:
         src = generate_source(problem)
     except ValueError as exc:
@@ -320,7 +333,8 @@ def _build(problem: KernelProblem, cache_dir: str | Path | None, cc: str | None,
             _FAILED[key] = reason
             return None, reason
         meta = {"flags": list(flags), "libs": libs, "compiler": compiler_id(cc),
-                "generator": GENERATOR_VERSION, "n": int(n_states), "N": int(N)}
+                "generator": GENERATOR_VERSION, "n": int(np.shape(problem.params["W_z"])[0]),
+                "N": int(problem.N)}
         with contextlib.suppress(OSError):   # informative only
             write_atomic(cdir / f"gk{key}.json", json.dumps(meta, indent=1).encode())
         if verbose:

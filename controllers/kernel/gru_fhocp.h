@@ -58,6 +58,8 @@ void PFX(simulate)(gk_ws *ws, const double *x0, const double *u, double *x);
 void PFX(xtraj)(gk_ws *ws, const double *w, const double *p, double *x);
 
 /* ---- the model */
+/* The output y = U_o x + b_o (NY). */
+void PFX(output)(const double *x, double *y);
 /* One step of eq:gru with extra gate inputs dz, dr (eq:observer; NULL: none). */
 void PFX(gru_step)(const double *x, const double *u, const double *dz, const double *dr,
                    double *xn);
@@ -67,6 +69,9 @@ int PFX(eq_newton)(const double *y, const double *x0, const double *u0, int max_
                    double tol, double *xo, double *uo);
 /* The artificial steady state x_s(u_s) by Newton from x0 (HAS_ASS only); 0 converged. */
 int PFX(steady)(gk_ws *ws, const double *us, const double *x0, double *xs);
+/* The equilibrium (x, u), |u|inf <= 1, whose output U_o x + b_o is closest to y (HAS_ASS
+ * only; equilibrium.c): 0 when y is reached, 1 for the closest reachable one. */
+int PFX(equilibrium)(gk_ws *ws, const double *y, double *x, double *u);
 
 /* ---- the library */
 void PFX(dims)(gk_dims *out);

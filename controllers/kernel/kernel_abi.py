@@ -157,6 +157,8 @@ class Dims(ctypes.Structure):
     ----------
     n_states, n_inputs, horizon : int
         n, m and N of the FHOCP.
+    n_outputs : int
+        p, the model's outputs.
     n_reduced_rows : int
         The reduced output-constraint rows ``D U_o`` of the NLP's constraints (q).
     n_decision, n_constraints, n_parameters : int
@@ -169,7 +171,7 @@ class Dims(ctypes.Structure):
 
     _fields_ = [(name, ctypes.c_long) for name in (
         "n_states", "n_inputs", "horizon", "n_reduced_rows", "n_decision", "n_constraints",
-        "n_parameters", "control_horizon", "n_assess_rows")]
+        "n_parameters", "control_horizon", "n_assess_rows", "n_outputs")]
 
 
 class Counters(ctypes.Structure):

@@ -67,6 +67,7 @@ class Kernel:
         self.n, self.m, self.N = dims.n_states, dims.n_inputs, dims.horizon
         self.q, self.nw, self.ng = dims.n_reduced_rows, dims.n_decision, dims.n_constraints
         self.npar, self.M, self.nl = dims.n_parameters, dims.control_horizon, dims.n_assess_rows
+        self.p = dims.n_outputs
         self.flags: tuple[str, ...] = ()
         self._externals: dict[str, Any] = {}
         self.c: dict[str, Any] = {}
@@ -77,10 +78,17 @@ class Kernel:
         f = self._fn("gru_step")
         f.argtypes, f.restype = [_VP] * 5, None
         self.c["gru_step"] = f
+        f = self._fn("output")
+        f.argtypes, f.restype = [_VP] * 2, None
+        self.c["output"] = f
         if hasattr(self.lib, prefix + "steady"):    # the tracking FHOCP's kernel (HAS_ASS)
             f = self._fn("steady")
             f.argtypes, f.restype = [_VP] * 4, _CI
             self.c["steady"] = f
+        if hasattr(self.lib, prefix + "equilibrium"):   # HAS_ASS
+            f = self._fn("equilibrium")
+            f.argtypes, f.restype = [_VP] * 4, _CI
+            self.c["equilibrium"] = f
         if hasattr(self.lib, prefix + "eq_newton"):
             f = self._fn("eq_newton")
             f.argtypes, f.restype = [_VP, _VP, _VP, _CI, _CD, _VP, _VP], _CI
@@ -136,7 +144,8 @@ class Workspace:
             ("x0", n), ("u", (N, m)), ("w", kernel.nw), ("p", kernel.npar), ("xb", n),
             ("ub", m), ("up", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))),
             ("xs", n),
-            ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", m), ("xe", n), ("ue", m))}
+            ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", m), ("xe", n), ("ue", m),
+            ("yp", kernel.p))}
         self._addr = {name: int(a.ctypes.data) for name, a in self._buf.items()}
         self._out = Assessment()
         self._addr["out"] = ctypes.addressof(self._out)
@@ -178,6 +187,30 @@ class Workspace:
         b["xe"][:] = x0
         rc = self.kernel.c["steady"](self._ws, a["ue"], a["xe"], a["xn"])
         return b["xn"].copy() if rc == 0 else None
+
+    @property
+    def has_equilibrium(self) -> bool:
+        """The library has :meth:`equilibrium` (a tracking FHOCP's kernel)."""
+        return "equilibrium" in self.kernel.c
+
+    def equilibrium(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """``(x, u, reached)``: the equilibrium whose output is closest to ``y`` over
+        ``‖u‖∞ ≤ 1`` (:func:`controllers.equilibrium.equilibrium_for_output` in C: the same
+        starting inputs and choice between them, a projected Gauss–Newton on the steady
+        state's Newton in place of scipy's bounded least squares); ``reached``: ``y`` itself
+        (to :data:`~controllers.equilibrium.REACH_TOL`)."""
+        b, a = self._buf, self._addr
+        b["yp"][:] = y
+        rc = self.kernel.c["equilibrium"](self._ws, a["yp"], a["xe"], a["ue"])
+        return b["xe"].copy(), b["ue"].copy(), rc == 0
+
+    def output(self, x: np.ndarray) -> np.ndarray:
+        """``U_o x + b_o`` (:func:`controllers.gru.output`, summed in a fixed order: the
+        exported controller's)."""
+        b, a = self._buf, self._addr
+        b["xn"][:] = x
+        self.kernel.c["output"](a["xn"], a["yp"])
+        return b["yp"].copy()
 
     def gru_step(self, x: np.ndarray, u: np.ndarray, dz: np.ndarray, dr: np.ndarray
                  ) -> np.ndarray:

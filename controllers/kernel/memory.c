@@ -86,7 +86,9 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 #define UPREV(p) ((p) + 2 * NX + NU)
 #endif
 #define QP_NC (2 * (NW + NG))   /* one-sided constraints of the QP (qp.c) */
+#ifndef EXPORT
 #define EXPORT __attribute__((visibility("default")))
+#endif
 #define A32 __attribute__((aligned(32)))
 /* hot entry points get an AVX2/FMA clone selected at load time (ifunc), portable otherwise */
 #if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__) && __GNUC__ >= 11 && \

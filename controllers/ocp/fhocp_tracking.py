@@ -274,12 +274,25 @@ class TrackingFHOCP(FHOCP):
     def check(self, x_hat: np.ndarray, u: np.ndarray, u_s: np.ndarray, e_o: float,
               r: np.ndarray, x_s0: np.ndarray, u_prev: np.ndarray | None = None,
               status: str = SolveStatus.CANDIDATE) -> FHOCPResult:
-        """Evaluate ``(u, u_s)`` independently of the solver: rollout, ``x_s`` recomputed
-        (the kernel's Newton, its fixed point verified by a numpy GRU step; numpy's Newton
-        without a kernel), cost and residuals (output rows, input box, terminal set,
-        ``Y_s``)."""
+        """Evaluate ``(u, u_s)`` independently of the solver: rollout, ``x_s`` recomputed,
+        cost and residuals (output rows, input box, terminal set, ``Y_s``). With a kernel the
+        answer check of the solver's answers in one compiled call (:meth:`_check_answer`,
+        the exported controller's too; ``u`` in the control horizon's form, its rows from M
+        on equal to ``u_s``, as every candidate is), else numpy (Newton for ``x_s``)."""
         u = np.clip(np.asarray(u, dtype=float), -1.0, 1.0)
         u_s = np.clip(np.asarray(u_s, dtype=float), -1.0, 1.0)
+        if self.kernel is not None:
+            w = np.zeros(self.nw)
+            w[self.iu[:self.control_horizon].ravel()] = u[:self.control_horizon].ravel()
+            w[self.ius] = u_s
+            up = u_s if u_prev is None else np.asarray(u_prev, dtype=float).reshape(self.m)
+            pv = np.concatenate([np.asarray(x_hat, dtype=float).reshape(self.n),
+                                 np.asarray(x_s0, dtype=float).reshape(self.n),
+                                 np.asarray(r, dtype=float).reshape(self.p),
+                                 up if self.has_du else np.zeros(0)])
+            res = self._check_answer(w, pv, e_o, status)
+            res.defect = 0.0   # no solver trajectory to compare with
+            return res
         x = self.simulate(np.asarray(x_hat, dtype=float), u)
         x_s, ok = self.steady_state(u_s, x_s0)
         res = FHOCPResult(u=u, x=x, cost=float("nan"), status=status, success=False)

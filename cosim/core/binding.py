@@ -159,6 +159,29 @@ def _pint_parse(unit: str) -> tuple[Any, str | None]:
         return None, token if isinstance(token, str) and token else unit
 
 
+def si_base_unit(unit: str) -> dict[str, float] | None:
+    """The FMI ``<BaseUnit>`` of a unit string (Modelica syntax): SI exponents (``kg``, ``m``,
+    ``s``, ``A``, ``K``, ``mol``, ``cd``; zeros left out) and ``factor``, ``offset`` when not
+    1 and 0 (``value_SI = factor · value + offset``, 15 significant digits); ``None`` when
+    pint does not know the unit."""
+    q1, _ = _pint_parse(unit)
+    if q1 is None:
+        return None
+    ureg = pint_units()
+    zero = ureg.Quantity(0.0, q1.units).to_base_units().magnitude
+    one = q1.to_base_units().magnitude
+    dims = {"[mass]": "kg", "[length]": "m", "[time]": "s", "[current]": "A",
+            "[temperature]": "K", "[substance]": "mol", "[luminosity]": "cd"}
+    out: dict[str, float] = {dims[d]: int(e) for d, e in q1.dimensionality.items()
+                             if d in dims and e}
+    factor, offset = float(f"{one - zero:.15g}"), float(f"{zero:.15g}")
+    if factor != 1.0:
+        out["factor"] = factor
+    if offset != 0.0:
+        out["offset"] = offset
+    return out
+
+
 def _suggest(token: str, extra: Iterable[str]) -> str:
     """``; did you mean 'x'?`` for a unit token, or a few spellings that work."""
     names = [*extra, *pint_units()._units]

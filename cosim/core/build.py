@@ -35,10 +35,33 @@ from pathlib import Path
 import fmus
 from cosim.core.errors import CosimError
 
-__all__ = ["BUILD_DIR", "CACHE_APP", "CFLAGS", "DEFAULT_PROBLEM", "FMU_DIR", "GLUE_DIR",
-           "GLUE_FILES", "LDFLAGS", "MODEL_IDENTIFIER", "PACKAGE_DIR", "SOURCE_DIR", "TARGETS",
-           "Target", "build_fmu", "build_fmus", "cache_dir", "compiler", "default_plant",
-           "display_path", "fmi_headers_dir", "output_dir", "source_path", "writable"]
+__all__ = [
+    "BUILD_DIR",
+    "CACHE_APP",
+    "CFLAGS",
+    "DEFAULT_PROBLEM",
+    "FMU_DIR",
+    "GLUE_DIR",
+    "GLUE_FILES",
+    "LDFLAGS",
+    "MODEL_IDENTIFIER",
+    "PACKAGE_DIR",
+    "SOURCE_DIR",
+    "TARGETS",
+    "Target",
+    "add_member",
+    "build_fmu",
+    "build_fmus",
+    "cache_dir",
+    "check_platform",
+    "compiler",
+    "default_plant",
+    "display_path",
+    "fmi_headers_dir",
+    "output_dir",
+    "source_path",
+    "writable",
+]
 
 #: The ``fmus`` package folder: ``fmus/`` of a source checkout, or of site-packages.
 PACKAGE_DIR = Path(fmus.__file__).resolve().parent
@@ -190,7 +213,8 @@ def _source_hash(target: Target, cc: str) -> str:
     return digest.hexdigest()
 
 
-def _check_platform() -> None:
+def check_platform() -> None:
+    """Raise :class:`CosimError` unless this is x86-64 Linux (the FMUs' only platform)."""
     if platform.system() != "Linux" or platform.machine() not in ("x86_64", "AMD64"):
         raise CosimError(
             f"building the FMUs is supported on x86_64 Linux only, not "
@@ -220,7 +244,8 @@ def _compile(target: Target, cc: str, out: Path) -> None:
 ZIP_DATE = (2000, 1, 1, 0, 0, 0)
 
 
-def _add(zf: zipfile.ZipFile, arcname: str, data: bytes, executable: bool = False) -> None:
+def add_member(zf: zipfile.ZipFile, arcname: str, data: bytes, executable: bool = False
+               ) -> None:
     """One member with a fixed time stamp and permissions (a reproducible archive)."""
     info = zipfile.ZipInfo(arcname, date_time=ZIP_DATE)
     info.compress_type = zipfile.ZIP_DEFLATED
@@ -238,8 +263,8 @@ def _zip_fmu(target: Target, binary: Path, digest: str) -> None:
                    (binary, f"binaries/{target.platform_dir}/{MODEL_IDENTIFIER}.so")]
         members += [(source_path(name), f"sources/{name}") for name in target.sources]
         for path, arcname in members:
-            _add(zf, arcname, path.read_bytes(), executable=arcname.endswith(".so"))
-        _add(zf, "sources/BUILD_HASH", (digest + "\n").encode())
+            add_member(zf, arcname, path.read_bytes(), executable=arcname.endswith(".so"))
+        add_member(zf, "sources/BUILD_HASH", (digest + "\n").encode())
 
 
 def _stored_hash(target: Target) -> str | None:
@@ -271,7 +296,7 @@ def build_fmu(target: Target, force: bool = False) -> bool:
     digest = _source_hash(target, cc)
     if not force and _stored_hash(target) == digest:
         return False
-    _check_platform()
+    check_platform()
     out_dir = BUILD_DIR / f"fmi{target.fmi_version}"
     try:
         out_dir.mkdir(parents=True, exist_ok=True)

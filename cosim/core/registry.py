@@ -1,6 +1,7 @@
 """Controller registry: short names → ``"module:Class"``; a ``module:Class`` string also works,
 and so does a controller file (``*.json``, :mod:`cosim.core.controller_file`: a controller's
-name and options recorded by a run).
+name and options recorded by a run) and a controller FMU (``*.fmu``, :mod:`cosim.core.
+fmu_controller`).
 
 Controllers are :class:`~cosim.core.component.Component` classes constructible without arguments.
 """
@@ -16,7 +17,8 @@ from typing import Any
 from cosim.core.component import Component
 from cosim.core.errors import CosimError
 
-__all__ = ["CONTROLLERS", "DEFAULT", "create", "expand", "parse_options", "resolve"]
+__all__ = ["CONTROLLERS", "DEFAULT", "FMU_CONTROLLER", "create", "expand", "parse_options",
+           "resolve"]
 
 #: Built-in controllers.
 CONTROLLERS: dict[str, str] = {
@@ -24,6 +26,8 @@ CONTROLLERS: dict[str, str] = {
     "robust-mpc": "cosim_adapters.robust_mpc:RobustMPCController",
 }
 
+#: The component of a controller FMU (``--controller Controller.fmu``).
+FMU_CONTROLLER = "cosim.core.fmu_controller:FmuController"
 #: The controller ``cosim run`` uses when none is named.
 DEFAULT = "robust-mpc"
 
@@ -35,6 +39,8 @@ def expand(name: str, options: Mapping[str, Any] | None = None
     given."""
     from cosim.core import controller_file
 
+    if name.lower().endswith(".fmu"):   # a controller FMU (cosim export-fmu)
+        return FMU_CONTROLLER, {"path": name, **dict(options or {})}
     if not controller_file.is_controller_file(name):
         return name, dict(options or {})
     inner, recorded = controller_file.load(name)

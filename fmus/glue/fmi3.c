@@ -457,7 +457,7 @@ fmi3Status fmi3DoStep(fmi3Instance instance, fmi3Float64 currentCommunicationPoi
     *lastSuccessfulTime = INST->model.time;
     const Status status = instance_do_step(INST, f, currentCommunicationPoint,
                                            communicationStepSize);
-    if (status == STATUS_OK) *lastSuccessfulTime = INST->model.time;
+    if (status <= STATUS_WARNING) *lastSuccessfulTime = INST->model.time;
     RETURN(status);
 }
 

@@ -109,12 +109,23 @@ Instance *instance_new(const Instance *tmp, size_t size, const char *function,
     inst->event_mode_used = false;
     inst->state = ST_INSTANTIATED;
     model_set_defaults(&inst->model);
+#ifdef MODEL_HAS_RESOURCES
+    if (!model_acquire(&inst->model)) {
+        LOG_ERROR(tmp, "%s: out of memory", function);
+        tmp->host->release(tmp, copy);
+        tmp->host->release(tmp, inst);
+        return NULL;
+    }
+#endif
     return inst;
 }
 
 void instance_free(Instance *inst) {
     if (!inst) return;
     const Host *host = inst->host;
+#ifdef MODEL_HAS_RESOURCES
+    model_release(&inst->model);
+#endif
     host->release(inst, inst->name);
     host->release(inst, inst);
 }
@@ -126,7 +137,8 @@ Status instance_set_debug_logging(Instance *inst, const char *function, bool on,
         return STATUS_ERROR;
     for (size_t i = 0; i < nCategories; i++) {
         if (!categories[i] || (strcmp(categories[i], "logStatusError") != 0 &&
-                               strcmp(categories[i], "logEvents") != 0)) {
+                               strcmp(categories[i], "logEvents") != 0 &&
+                               strcmp(categories[i], "logStatusWarning") != 0)) {
             LOG_ERROR(inst, "%s: unknown log category '%s'", function,
                       categories[i] ? categories[i] : "(null)");
             return STATUS_ERROR;
@@ -235,9 +247,19 @@ Status instance_set_float64(Instance *inst, const char *function, const unsigned
 /* FMU state                                                                                 */
 /* ---------------------------------------------------------------------------------------- */
 
+#ifdef MODEL_NO_FMU_STATE
+/* A model that owns memory beyond ModelData (MODEL_HAS_RESOURCES) cannot save its state. */
+#define NO_FMU_STATE(function)                                                             \
+    return instance_refuse(inst, (function), STATUS_ERROR,                                 \
+                           ": this FMU cannot save its state (canGetAndSetFMUState is false)");
+#else
+#define NO_FMU_STATE(function)
+#endif
+
 Status instance_get_fmu_state(Instance *inst, const char *function, void **state,
                               const char *state_name) {
     BEGIN(function, ANY_STATE, TYPE_ANY)
+    NO_FMU_STATE(function)
     if (instance_null_arg(inst, function, state, state_name)) return STATUS_ERROR;
     SavedState *s = (SavedState *)*state;
     if (!s) {
@@ -256,6 +278,7 @@ Status instance_get_fmu_state(Instance *inst, const char *function, void **state
 Status instance_set_fmu_state(Instance *inst, const char *function, const void *state,
                               const char *state_name) {
     BEGIN(function, ANY_STATE, TYPE_ANY)
+    NO_FMU_STATE(function)
     if (instance_null_arg(inst, function, state, state_name)) return STATUS_ERROR;
     const SavedState *s = (const SavedState *)state;
     inst->model = s->model;
@@ -266,6 +289,7 @@ Status instance_set_fmu_state(Instance *inst, const char *function, const void *
 Status instance_free_fmu_state(Instance *inst, const char *function, void **state,
                                const char *state_name) {
     BEGIN(function, ANY_STATE, TYPE_ANY)
+    NO_FMU_STATE(function)
     if (instance_null_arg(inst, function, state, state_name)) return STATUS_ERROR;
     if (*state) inst->host->release(inst, *state);
     *state = NULL;
@@ -274,6 +298,7 @@ Status instance_free_fmu_state(Instance *inst, const char *function, void **stat
 
 Status instance_serialized_size(Instance *inst, const char *function, size_t *size) {
     BEGIN(function, ANY_STATE, TYPE_ANY)
+    NO_FMU_STATE(function)
     if (instance_null_arg(inst, function, size, "size")) return STATUS_ERROR;
     *size = sizeof(SavedState);
     return STATUS_OK;
@@ -288,6 +313,7 @@ static bool check_size(Instance *inst, const char *function, size_t size) {
 Status instance_serialize(Instance *inst, const char *function, const void *state,
                           const char *state_name, unsigned char bytes[], size_t size) {
     BEGIN(function, ANY_STATE, TYPE_ANY)
+    NO_FMU_STATE(function)
     if (instance_null_arg(inst, function, state, state_name) ||
         instance_null_arg(inst, function, bytes, "serializedState") ||
         !check_size(inst, function, size))
@@ -299,6 +325,7 @@ Status instance_serialize(Instance *inst, const char *function, const void *stat
 Status instance_deserialize(Instance *inst, const char *function, const unsigned char bytes[],
                             size_t size, void **state, const char *state_name) {
     BEGIN(function, ANY_STATE, TYPE_ANY)
+    NO_FMU_STATE(function)
     if (instance_null_arg(inst, function, bytes, "serializedState") ||
         instance_null_arg(inst, function, state, state_name) ||
         !check_size(inst, function, size))
@@ -430,5 +457,11 @@ Status instance_do_step(Instance *inst, const char *function, double currentComm
         inst->state = ST_ERROR;
         return STATUS_ERROR;
     }
+#ifdef MODEL_HAS_WARNINGS
+    if (model_warning(&inst->model, msg, sizeof(msg))) {
+        instance_log(inst, STATUS_WARNING, "logStatusWarning", "%s: %s", function, msg);
+        return STATUS_WARNING;
+    }
+#endif
     return STATUS_OK;
 }

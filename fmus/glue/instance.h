@@ -1,5 +1,6 @@
 /*
- * The FMI-version-independent layer shared by fmi2.c and fmi3.c, for every C plant model.
+ * The FMI-version-independent layer shared by fmi2.c and fmi3.c, for every C model (the plant
+ * models and the controller FMU, fmus/controller/).
  *
  * Laid out as the Modelica Reference-FMUs are: this folder (fmus/glue/) is the FMI glue every
  * model shares; a model's folder (fmus/fourtank/) holds its model.h and model.c, its model
@@ -24,6 +25,20 @@
  *   void model_get_derivatives(const ModelData *m, double dx[N_STATES]);
  *   const char *model_do_step(ModelData *m, double step, char *msg, size_t n);
  *                                                       NULL or a message (state unchanged)
+ *
+ * Optional parts of the contract, each switched on by a macro its model.h defines:
+ *
+ *   MODEL_HAS_RESOURCES   the model owns memory beyond ModelData (the controller's solver):
+ *       bool model_acquire(ModelData *m);   at instantiation, after model_set_defaults;
+ *                                           false: out of memory (the instantiation fails)
+ *       void model_release(ModelData *m);   when the instance is freed
+ *     A plain copy of ModelData does not copy that memory, so such a model also defines
+ *   MODEL_NO_FMU_STATE    the FMU cannot save its state (canGetAndSetFMUState="false"): the
+ *                         FMU-state calls are refused with a logged reason.
+ *   MODEL_HAS_WARNINGS    after each successful model_do_step the glue asks
+ *       const char *model_warning(ModelData *m, char *msg, size_t n);
+ *                                           NULL, or a message logged (logStatusWarning)
+ *                                           and returned as status Warning
  *
  * An Instance holds the model (model.h) plus the FMI bookkeeping common to FMI 2.0 and 3.0:
  * interface type, state machine, debug logging, saved FMU states. Each instance_* function

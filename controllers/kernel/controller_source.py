@@ -1,0 +1,264 @@
+"""The whole controller step in C (``controllers/kernel/controller.c``): its constants, source,
+build and a ctypes handle.
+
+An exported controller (the controller FMU, :mod:`cosim.core.controller_fmu`) runs the step of
+the robust MPC's tracking law without Python: the GRU observer (``eq:observer``,
+``eq:eo-evolution``), the output-disturbance estimate, the tracking FHOCP
+(``eq:optimization`` with an artificial steady state) on the compiled kernel with its answer
+check and candidate fallback, in the problem's units. :class:`ControllerDesign` is what the
+C step needs besides the kernel (:class:`~controllers.kernel.compiled_kernel.KernelProblem`):
+scalings, input box, observer gains and bound, tightening, ``Y_s``, terminal radius, the
+SQP's options and the warm start's permutations, taken from the Python objects that run the
+same step (:meth:`ControllerDesign.of`), so that both give the same inputs.
+:func:`generate_source` joins the kernel's source, these constants and ``controller.c``;
+:func:`build` compiles it (a self-contained library: no BLAS) and :class:`CompiledController`
+steps it from Python (the tests and the benchmark).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import hashlib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from controllers.equilibrium import REACH_TOL
+from controllers.kernel.cbuild import compile_library, compiler_id, default_cache_dir
+from controllers.kernel.compiled_kernel import (
+    GENERATOR_VERSION,
+    PREFIX_PLACEHOLDER,
+    KernelProblem,
+    variant_flags,
+)
+from controllers.kernel.compiled_kernel import (
+    generate_source as kernel_source,
+)
+
+__all__ = ["CONTROLLER_C", "STATUS_TEXT", "CompiledController", "ControllerDesign", "build",
+           "generate_source"]
+
+#: The C step (joined after the kernel and the constants).
+CONTROLLER_C = Path(__file__).with_name("controller.c")
+#: The C step's status codes (``enum ctl_status``; :func:`controllers.ocp.solve_status.
+#: status_code`'s numbers).
+STATUS_TEXT = ("optimal", "infeasible at x_hat", "infeasible", "iteration or time limit",
+               "answer check failed", "other")
+#: Compiler flags of the exported step: the kernel's, warnings as errors.
+CFLAGS = ("-O3", "-fPIC", "-std=gnu99", "-Wall", "-Wextra", "-Werror",
+          "-Wno-aggressive-loop-optimizations")
+
+
+@dataclass(frozen=True)
+class ControllerDesign:
+    """What the C step needs besides its kernel: arrays in normalised units unless said.
+
+    Attributes
+    ----------
+    kernel : KernelProblem
+        The tracking FHOCP's kernel problem.
+    y_offset, y_scale, u_offset, u_scale : arrays
+        The model's normalisation (``(raw − offset) / scale``).
+    u_lo, u_hi : arrays
+        The input box in the problem's units.
+    L_z, L_r : (n, p) arrays
+        Observer gains (``eq:observer``).
+    rho_o, w_bar, e_o0 : float
+        ``ê_o,k+1 = ρ_o ê_o,k + w̄`` (``eq:eo-evolution``) from ``ê_o,0``.
+    beta : float
+        The disturbance filter's gain.
+    certified : bool
+        False: the output rows are tightened around ``y + d̂`` (the uncertified mode).
+    L, h, a, b, w_L, Lbo : arrays
+        The output polytope and its tightening (``eq:optimization-constraint``).
+    ys_base : (q,) array
+        ``Y_s``'s right-hand side on ``L U_o x_s``.
+    alpha_c, us_rate : float
+        Terminal radius; ``u_s``'s move limit per step (−1: none).
+    pair_up, pair_lo : int arrays
+        The reduced rows' upper and lower ``L`` rows (−1: none).
+    perm_x, perm_g : int arrays
+        The warm start's shift of the multipliers.
+    sqp : dict
+        The kernel SQP's options (:class:`controllers.kernel.kernel_abi.SqpOptions` fields).
+    feas_tol, defect_tol, xs_check_tol : float
+        The answer check's tolerances.
+    """
+
+    kernel: KernelProblem
+    y_offset: np.ndarray
+    y_scale: np.ndarray
+    u_offset: np.ndarray
+    u_scale: np.ndarray
+    u_lo: np.ndarray
+    u_hi: np.ndarray
+    L_z: np.ndarray
+    L_r: np.ndarray
+    rho_o: float
+    w_bar: float
+    e_o0: float
+    beta: float
+    certified: bool
+    L: np.ndarray
+    h: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    w_L: np.ndarray
+    Lbo: np.ndarray
+    ys_base: np.ndarray
+    alpha_c: float
+    us_rate: float
+    pair_up: np.ndarray
+    pair_lo: np.ndarray
+    perm_x: np.ndarray
+    perm_g: np.ndarray
+    sqp: dict[str, float]
+    feas_tol: float
+    defect_tol: float
+    xs_check_tol: float
+
+    @classmethod
+    def of(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
+           u_lo: np.ndarray, u_hi: np.ndarray) -> ControllerDesign:
+        """The design of a tracking FHOCP set up on its compiled kernel's SQP
+        (:class:`controllers.ocp.fhocp_tracking.TrackingFHOCP`), its observer
+        (:class:`controllers.observer.GRUObserver`), the disturbance filter's ``beta``, the
+        model's normalisation and the input box."""
+        from controllers.kernel.kernel_sqp import KernelSQP
+        from controllers.ocp.fhocp_tracking import XS_CHECK_TOL
+        from controllers.ocp.solver_settings import DEFECT_TOL, FEAS_TOL
+
+        if not isinstance(fhocp._solver, KernelSQP):
+            raise ValueError("the exported controller runs the compiled kernel's SQP: the "
+                             "FHOCP must solve with loop=\"kernel\" on a compiled kernel")
+        o = fhocp._solver.options
+        sqp = {name: getattr(o, name) for name, _ in o._fields_}
+        arr = np.asarray
+        return cls(
+            kernel=KernelProblem.of(fhocp), y_offset=arr(model.y_offset, float),
+            y_scale=arr(model.y_scale, float), u_offset=arr(model.u_offset, float),
+            u_scale=arr(model.u_scale, float), u_lo=arr(u_lo, float), u_hi=arr(u_hi, float),
+            L_z=arr(observer.L_z, float), L_r=arr(observer.L_r, float),
+            rho_o=float(observer.rho_o), w_bar=float(observer.w_bar),
+            e_o0=float(observer.e_o0), beta=float(beta), certified=bool(certified),
+            L=fhocp.L, h=fhocp.h, a=fhocp.a, b=fhocp.b, w_L=fhocp.w_L, Lbo=fhocp.Lbo,
+            ys_base=fhocp._ys_base, alpha_c=float(fhocp.alpha_c),
+            us_rate=-1.0 if fhocp.us_rate is None else float(fhocp.us_rate),
+            pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=fhocp._perm_x,
+            perm_g=fhocp._perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
+            xs_check_tol=XS_CHECK_TOL)
+
+
+def _array(name: str, a: Any, ctype: str = "double") -> str:
+    a = np.ascontiguousarray(np.asarray(a, dtype=float if ctype == "double" else int)).ravel()
+    if ctype == "double" and not np.all(np.isfinite(a)):
+        raise ValueError(f"non-finite entries in {name}")
+    body = ", ".join(repr(float(v)) if ctype == "double" else str(int(v)) for v in a)
+    return f"static const {ctype} {name}[{max(a.size, 1)}] = {{{body or '0'}}};\n"
+
+
+def _constants(d: ControllerDesign) -> str:
+    """The ``CT_*`` constants of ``controller.c``."""
+    s = d.sqp
+    lines = ["/* the controller's constants (controllers/kernel/controller_source.py) */\n"]
+    for name, value in (("CT_Y_OFFSET", d.y_offset), ("CT_Y_SCALE", d.y_scale),
+                        ("CT_U_OFFSET", d.u_offset), ("CT_U_SCALE", d.u_scale),
+                        ("CT_U_LO", d.u_lo), ("CT_U_HI", d.u_hi), ("CT_LZ", d.L_z),
+                        ("CT_LR", d.L_r), ("CT_L", d.L), ("CT_H", d.h), ("CT_A", d.a),
+                        ("CT_B", d.b), ("CT_WL", d.w_L), ("CT_LBO", d.Lbo),
+                        ("CT_YS_BASE", d.ys_base)):
+        lines.append(_array(name, value))
+    for name, value in (("CT_PAIR_UP", d.pair_up), ("CT_PAIR_LO", d.pair_lo),
+                        ("CT_PERM_X", d.perm_x), ("CT_PERM_G", d.perm_g)):
+        lines.append(_array(name, value, "int"))
+    for name, value in (("CT_RHO_O", d.rho_o), ("CT_W_BAR", d.w_bar), ("CT_E_O0", d.e_o0),
+                        ("CT_BETA", d.beta), ("CT_ALPHA_C", d.alpha_c),
+                        ("CT_US_RATE", d.us_rate), ("CT_FEAS_TOL", d.feas_tol),
+                        ("CT_DEFECT_TOL", d.defect_tol), ("CT_XS_CHECK_TOL", d.xs_check_tol),
+                        ("CT_REACH_TOL", REACH_TOL), ("CT_SQP_TOL_PR", s["tol_pr"]),
+                        ("CT_SQP_TOL_DU", s["tol_du"]), ("CT_SQP_MIN_STEP", s["min_step_size"]),
+                        ("CT_SQP_C1", s["c1"]), ("CT_SQP_BETA", s["beta"]),
+                        ("CT_SQP_REUSE_STEP", s["reuse_step"])):
+        lines.append(f"#define {name} ({float(value)!r})\n")
+    for name, value in (("CT_CERTIFIED", int(d.certified)), ("CT_SQP_MAX_ITER", s["max_iter"]),
+                        ("CT_SQP_MAX_ITER_LS", s["max_iter_ls"]),
+                        ("CT_SQP_TOL_DU_RELATIVE", s["tol_du_relative"])):
+        lines.append(f"#define {name} {int(value)}\n")
+    return "".join(lines)
+
+
+def generate_source(design: ControllerDesign) -> str:
+    """The C source of the controller step (symbol prefix left as ``@PFX@``): the kernel,
+    the constants, ``controller.c``."""
+    problem = design.kernel
+    if problem.offset_weight is None:
+        raise ValueError("the exported controller runs the tracking law")
+    return "\n".join([kernel_source(problem), _constants(design), CONTROLLER_C.read_text()])
+
+
+def build(design: ControllerDesign, prefix: str = "ctl_", cache_dir: Path | None = None,
+          cc: str = "gcc") -> tuple[Path, str]:
+    """Compile the controller step into a shared library (cached by its source);
+    ``(path, symbol prefix)``. Raises ``RuntimeError`` with the compiler's first error."""
+    flags, _ = variant_flags(design.kernel, (*CFLAGS, "-shared"), blas=False)
+    src = generate_source(design).replace(PREFIX_PLACEHOLDER, prefix)
+    key = hashlib.sha256("\0".join([GENERATOR_VERSION, compiler_id(cc), " ".join(flags),
+                                    src]).encode()).hexdigest()[:16]
+    cdir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
+    so = cdir / f"ctl{key}.so"
+    if not so.exists():
+        reason = compile_library(src, cdir, f"ctl{key}", cc, flags)
+        if reason is not None:
+            raise RuntimeError(reason)
+    return so, prefix
+
+
+class CompiledController:
+    """One instance of a compiled controller step (:func:`build`), stepped from Python."""
+
+    def __init__(self, path: Path, prefix: str, n_inputs: int, n_outputs: int) -> None:
+        self.lib = ctypes.CDLL(str(path))
+        f = {name: getattr(self.lib, prefix + name) for name in (
+            "ctl_new", "ctl_free", "ctl_reset", "ctl_step", "ctl_outputs",
+            "ctl_take_warnings")}
+        vp = ctypes.c_void_p
+        f["ctl_new"].restype = vp
+        for name in ("ctl_free", "ctl_reset", "ctl_take_warnings"):
+            f[name].argtypes = [vp]
+        f["ctl_step"].argtypes = [vp, vp, vp]
+        f["ctl_outputs"].argtypes = [vp] * 6
+        self._f = f
+        self._st = f["ctl_new"]()
+        if not self._st:
+            raise MemoryError("cannot allocate a controller instance")
+        self.m, self.p = n_inputs, n_outputs
+        self._y, self._r = np.zeros(n_outputs), np.zeros(n_outputs)
+        self._u, self._yp = np.zeros(n_inputs), np.zeros(n_outputs)
+        self._ints = (ctypes.c_int * 3)()
+
+    def step(self, y: np.ndarray, ref: np.ndarray) -> dict[str, Any]:
+        """One step at the measured outputs and set-points (the problem's units): the inputs
+        ``u``, ``status``, ``fallback``, ``iterations``, ``y_pred`` and ``warnings``."""
+        self._y[:], self._r[:] = y, ref
+        self._f["ctl_step"](self._st, self._y.ctypes.data, self._r.ctypes.data)
+        i = self._ints
+        base = ctypes.addressof(i)
+        size = ctypes.sizeof(ctypes.c_int)
+        self._f["ctl_outputs"](self._st, self._u.ctypes.data, base, base + size,
+                               base + 2 * size, self._yp.ctypes.data)
+        return {"u": self._u.copy(), "status": int(i[0]), "fallback": int(i[1]),
+                "iterations": int(i[2]), "y_pred": self._yp.copy(),
+                "warnings": int(self._f["ctl_take_warnings"](self._st))}
+
+    def reset(self) -> None:
+        self._f["ctl_reset"](self._st)
+
+    def close(self) -> None:
+        if self._st:
+            self._f["ctl_free"](self._st)
+            self._st = None
+
+    def __del__(self) -> None:
+        self.close()

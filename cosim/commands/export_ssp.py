@@ -1,0 +1,87 @@
+"""``cosim export-ssp``: plant FMU and controller FMU connected by name in one SSP file."""
+
+from __future__ import annotations
+
+import argparse
+
+from cosim.core.errors import exit_codes_help
+
+__all__ = ["DESCRIPTION", "HELP", "register", "run"]
+
+HELP = "write an SSP file of a plant FMU and a controller FMU connected by name"
+
+DESCRIPTION = """\
+Write an SSP 1.0 archive (SystemStructure.ssd and both FMUs under resources/) of a plant FMU
+and a controller FMU (cosim export-fmu): the controller's inputs named as the plant's outputs
+read them, the plant's inputs named as the controller's outputs read those, the set-points
+ref.<output> are constants of a parameter set (--setpoint NAME=VALUE, default: the middle of
+each output's box), and the default experiment's fixed step is the controller's sample time.
+libcosim and other SSP runners run it as it is (docs: guide/controller-fmu.md)."""
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    """Add the ``export-ssp`` sub-command."""
+    p = subparsers.add_parser("export-ssp", help=HELP, description=DESCRIPTION,
+                              epilog=exit_codes_help(),
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--plant", metavar="PLANT.fmu", default=None,
+                   help="plant FMU (default: the project's four-tank, FMI 2.0)")
+    p.add_argument("--controller", metavar="CONTROLLER.fmu", required=True,
+                   help="controller FMU (cosim export-fmu)")
+    p.add_argument("--setpoint", metavar="NAME=VALUE", action="append", default=[],
+                   help="a set-point, e.g. ref.h1=1.3 (repeatable; default: the middle of the "
+                        "output's box)")
+    p.add_argument("--stop", type=float, default=None, metavar="SECONDS",
+                   help="the default experiment's stop time (default: 100 samples)")
+    p.add_argument("--out", metavar="FILE.ssp", default="ClosedLoop.ssp",
+                   help="the SSP file to write (default: ClosedLoop.ssp)")
+    p.add_argument("--quiet", action="store_true", help="print nothing on success")
+    p.set_defaults(func=run)
+
+
+def _setpoints(items: list[str], controller: str) -> dict[str, float]:
+    """``--setpoint`` values over the controller's ``ref.*`` start values."""
+    from pathlib import Path
+
+    import fmpy
+
+    from cosim.core.errors import CosimError
+
+    values = {v.name: float(v.start) for v in fmpy.read_model_description(
+        str(Path(controller))).modelVariables
+        if v.causality == "input" and v.name.startswith("ref.") and v.start is not None}
+    for item in items:
+        name, sep, text = item.partition("=")
+        try:
+            values[name.strip()] = float(text)
+        except ValueError:
+            sep = ""
+        if not sep:
+            raise CosimError(f"--setpoint {item}: expected NAME=VALUE with a number") from None
+    return values
+
+
+def run(args: argparse.Namespace) -> int:
+    """Write the SSP file; print what it connects unless ``--quiet``."""
+    from pathlib import Path
+
+    import fmpy
+
+    from cosim.api import plant_path
+    from cosim.core.errors import CosimError
+    from cosim.core.ssp import connections, write_ssp
+
+    plant = plant_path(args.plant)
+    if not Path(args.controller).is_file():
+        raise CosimError(f"{args.controller}: controller FMU not found")
+    setpoints = _setpoints(args.setpoint, args.controller)
+    step = fmpy.read_model_description(args.controller).defaultExperiment
+    stop = args.stop if args.stop is not None else 100 * float(getattr(step, "stepSize", 1.0)
+                                                                or 1.0)
+    out = write_ssp(plant, args.controller, args.out, setpoints, stop)
+    if not args.quiet:
+        links, _ = connections(plant, Path(args.controller))
+        print(f"{out}: {plant.name} and {Path(args.controller).name} connected ("
+              + ", ".join(f"{a} -> {b}" for a, b in links) + "); set-points "
+              + ", ".join(f"{k}={v:g}" for k, v in sorted(setpoints.items())))
+    return 0

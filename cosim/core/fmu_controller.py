@@ -1,0 +1,78 @@
+"""A controller FMU as the run's controller: ``cosim run SCENARIO --controller Controller.fmu``.
+
+:class:`FmuController` steps a Co-Simulation controller FMU (one that ``cosim export-fmu``
+writes, or any FMU with the same conventions) where the master steps a controller, in the
+order a controller FMU is meant to run: set the measured outputs ``y_k`` and the set-points
+``ref.<output>``, ``doStep(t_k, Ts)``, read the inputs ``u_k`` to apply to the plant over
+``[t_k, t_k+1)`` (docs: guide/controller-fmu.md). Its outputs named ``status``,
+``fallback``, ``iterations`` and ``pred.<output>`` are diagnostics (recorded, not wired to
+the plant); every other output is an input of the plant, as a controller's are. Its sample
+time is the FMU's default experiment step size.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from cosim.core.errors import CosimError
+from cosim.core.fmu import FmuComponent
+
+__all__ = ["DIAGNOSTIC_OUTPUTS", "FmuController"]
+
+#: Outputs of a controller FMU that are diagnostics, not plant inputs (and ``pred.*``).
+DIAGNOSTIC_OUTPUTS = frozenset({"status", "fallback", "iterations"})
+
+
+def _diagnostic(name: str) -> bool:
+    return name in DIAGNOSTIC_OUTPUTS or name.startswith("pred.")
+
+
+class FmuController(FmuComponent):
+    """A controller FMU (module docstring).
+
+    Parameters
+    ----------
+    path : str or Path
+        The controller FMU (FMI 2.0 or 3.0 Co-Simulation).
+    name : str
+        Component name.
+    """
+
+    direct_feedthrough = True
+    OPTIONS = ("path", "name")
+
+    def __init__(self, path: str | Path, name: str = "ctrl") -> None:
+        super().__init__(path, name=name, interface="cs")
+        self._diag_names = [s.name for s in self.outputs if _diagnostic(s.name)]
+        self.outputs = tuple(s for s in self.outputs if not _diagnostic(s.name))
+        self._u_names = [s.name for s in self.outputs]
+        experiment = self.md.defaultExperiment
+        step = getattr(experiment, "stepSize", None) if experiment is not None else None
+        if step is None:
+            raise CosimError(f"{self.path}: a controller FMU needs its sample time as the "
+                             "default experiment's stepSize")
+        self.sample_time = float(step)
+        self.bounds = {v.name: (float(v.min), float(v.max))
+                       for v in self.md.modelVariables
+                       if v.causality == "output" and not _diagnostic(v.name)
+                       and v.min is not None and v.max is not None}
+        self._diag: dict[str, float] = {}
+
+    def setup(self, t0: float, stop_time: float | None = None) -> None:
+        """Load and initialise the FMU (again after a run: a fresh instance)."""
+        if self._fmu is not None:
+            self.terminate()
+        super().setup(t0, stop_time)
+
+    def get_outputs(self) -> dict[str, float]:
+        """The inputs to apply (the diagnostics are kept for :meth:`diagnostics`)."""
+        values = super().get_outputs()
+        self._diag = {n: values[n] for n in self._diag_names}
+        return {n: values[n] for n in self._u_names}
+
+    def diagnostics(self) -> dict[str, float]:
+        return dict(self._diag)
+
+    def summary(self) -> dict:
+        return {"controller": "fmu", "fmu": str(self.path),
+                "description": self.md.description or ""}

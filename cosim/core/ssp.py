@@ -1,0 +1,157 @@
+"""An SSP file (System Structure and Parameterization 1.0) of a plant FMU and a controller FMU
+connected by name: ``cosim export-ssp``.
+
+The controller's inputs named as the plant's outputs read them, the plant's inputs named as
+the controller's outputs read those (a controller FMU of ``cosim export-fmu`` and its problem's
+plant connect so); every other controller input (the set-points ``ref.<output>``) gets a
+constant value from a parameter set, and the controller's other outputs (``status``,
+``pred.*``) stay unconnected. Both FMUs go into the archive's ``resources/``; the default
+experiment's fixed step is the controller's sample time (the Open Simulation Platform's
+annotation, which libcosim reads), so that libcosim runs the file as it is.
+"""
+
+from __future__ import annotations
+
+import zipfile
+from collections.abc import Mapping
+from pathlib import Path
+from xml.sax.saxutils import quoteattr
+
+from cosim.core.atomicio import replacing
+from cosim.core.build import add_member
+from cosim.core.errors import CosimError
+
+__all__ = ["connections", "system_structure", "write_ssp"]
+
+_NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
+       'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
+       'xmlns:ssv="http://ssp-standard.org/SSP1/SystemStructureParameterValues" '
+       'xmlns:osp="http://opensimulationplatform.com/SSP/OSPAnnotations"')
+
+
+def _real_variables(path: Path) -> dict[str, object]:
+    import fmpy
+
+    try:
+        md = fmpy.read_model_description(str(path))
+    except Exception as exc:   # not a zip, no modelDescription.xml, bad XML
+        raise CosimError(f"{path}: cannot read the FMU's model description: {exc}") from None
+    return {v.name: v for v in md.modelVariables if v.type in ("Real", "Float64")}
+
+
+def connections(plant: Path, controller: Path) -> tuple[list[tuple[str, str]], list[str]]:
+    """``(connections, free inputs)``: ``(from "plant.x" or "mpc.x", to ...)`` by name, and the
+    controller inputs no plant output feeds (its set-points).
+
+    Raises
+    ------
+    CosimError
+        A controller output no plant input takes, or no connection at all: the two FMUs do
+        not belong together.
+    """
+    pv, cv = _real_variables(plant), _real_variables(controller)
+    links, free = [], []
+    for name, var in cv.items():
+        if var.causality == "input":
+            if name in pv and pv[name].causality == "output":
+                links.append((f"plant.{name}", f"mpc.{name}"))
+            else:
+                free.append(name)
+        elif var.causality == "output" and name in pv and pv[name].causality == "input":
+            links.append((f"mpc.{name}", f"plant.{name}"))
+    if not any(a.startswith("mpc.") for a, _ in links) or not any(
+            a.startswith("plant.") for a, _ in links):
+        raise CosimError(f"{controller} and {plant}: no input of one is named as an output of "
+                         "the other both ways (a controller FMU reads the plant's outputs and "
+                         "writes its inputs, by name)")
+    return links, free
+
+
+def _connectors(variables: Mapping[str, object], names: set[str]) -> str:
+    out = []
+    for name in sorted(names):
+        var = variables[name]
+        unit = getattr(var, "unit", None) or getattr(getattr(var, "declaredType", None),
+                                                     "unit", None)
+        real = f"<ssc:Real unit={quoteattr(unit)}/>" if unit else "<ssc:Real/>"
+        out.append(f"        <ssd:Connector name={quoteattr(name)} "
+                   f"kind=\"{var.causality}\">{real}</ssd:Connector>\n")
+    return "".join(out)
+
+
+def system_structure(plant: Path, controller: Path, setpoints: Mapping[str, float],
+                     step_size: float, stop_time: float) -> str:
+    """The ``SystemStructure.ssd`` of plant and controller (module docstring); ``setpoints``:
+    the values of the controller's free inputs."""
+    links, free = connections(plant, controller)
+    missing = sorted(set(free) - set(setpoints))
+    if missing:
+        raise CosimError(f"{controller}: input {missing[0]!r} is fed by no plant output: give "
+                         f"it a value (--setpoint {missing[0]}=VALUE)")
+    unknown = sorted(set(setpoints) - set(free))
+    if unknown:
+        raise CosimError(f"--setpoint {unknown[0]}: not a free input of {controller} "
+                         f"(free: {', '.join(free)})")
+    pv, cv = _real_variables(plant), _real_variables(controller)
+    used = {"plant": set(), "mpc": set(free)}
+    for a, b in links:
+        for end in (a, b):
+            comp, _, name = end.partition(".")
+            used[comp].add(name)
+    params = "".join(f"                <ssv:Parameter name={quoteattr(n)}><ssv:Real "
+                     f"value=\"{float(v)!r}\"/></ssv:Parameter>\n"
+                     for n, v in sorted(setpoints.items()))
+    conns = "".join(
+        f"      <ssd:Connection startElement=\"{a.partition('.')[0]}\" "
+        f"startConnector={quoteattr(a.partition('.')[2])} endElement=\"{b.partition('.')[0]}\" "
+        f"endConnector={quoteattr(b.partition('.')[2])}/>\n" for a, b in links)
+    return (
+        f'<?xml version="1.0" encoding="UTF-8"?>\n<ssd:SystemStructureDescription {_NS} '
+        'version="1.0" name="ClosedLoop">\n  <ssd:System name="ClosedLoop">\n'
+        "    <ssd:Elements>\n"
+        f"      <ssd:Component name=\"plant\" source=\"resources/{plant.name}\" "
+        'type="application/x-fmu-sharedlibrary">\n        <ssd:Connectors>\n'
+        + _connectors(pv, used["plant"]) + "        </ssd:Connectors>\n      </ssd:Component>\n"
+        f"      <ssd:Component name=\"mpc\" source=\"resources/{controller.name}\" "
+        'type="application/x-fmu-sharedlibrary">\n        <ssd:Connectors>\n'
+        + _connectors(cv, used["mpc"]) + "        </ssd:Connectors>\n"
+        "        <ssd:ParameterBindings>\n          <ssd:ParameterBinding>\n"
+        "            <ssd:ParameterValues>\n"
+        '              <ssv:ParameterSet version="1.0" name="setpoints">\n'
+        "                <ssv:Parameters>\n" + params + "                </ssv:Parameters>\n"
+        "              </ssv:ParameterSet>\n            </ssd:ParameterValues>\n"
+        "          </ssd:ParameterBinding>\n        </ssd:ParameterBindings>\n"
+        "      </ssd:Component>\n    </ssd:Elements>\n    <ssd:Connections>\n" + conns
+        + "    </ssd:Connections>\n  </ssd:System>\n"
+        f'  <ssd:DefaultExperiment startTime="0" stopTime="{float(stop_time)!r}">\n'
+        "    <ssd:Annotations>\n"
+        '      <ssc:Annotation type="com.opensimulationplatform">\n'
+        f'        <osp:Algorithm><osp:FixedStepAlgorithm baseStepSize="{float(step_size)!r}"/>'
+        "</osp:Algorithm>\n      </ssc:Annotation>\n    </ssd:Annotations>\n"
+        "  </ssd:DefaultExperiment>\n</ssd:SystemStructureDescription>\n")
+
+
+def write_ssp(plant: str | Path, controller: str | Path, out: str | Path,
+              setpoints: Mapping[str, float], stop_time: float,
+              step_size: float | None = None) -> Path:
+    """Write the SSP archive ``out`` of ``plant`` and ``controller`` (atomically); the step is
+    the controller's default experiment step size unless ``step_size``. Returns ``out``."""
+    import fmpy
+
+    plant, controller, out = Path(plant), Path(controller), Path(out)
+    for path in (plant, controller):
+        if not path.is_file():
+            raise CosimError(f"{path}: FMU not found")
+    if plant.name == controller.name:
+        raise CosimError(f"{plant} and {controller}: the two FMUs need different file names")
+    if step_size is None:
+        exp = fmpy.read_model_description(str(controller)).defaultExperiment
+        if exp is None or exp.stepSize is None:
+            raise CosimError(f"{controller}: no default experiment step size: give --step")
+        step_size = float(exp.stepSize)
+    ssd = system_structure(plant, controller, setpoints, step_size, stop_time)
+    with replacing(out) as part, zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
+        add_member(zf, "SystemStructure.ssd", ssd.encode())
+        for path in (plant, controller):
+            add_member(zf, f"resources/{path.name}", path.read_bytes())
+    return out

@@ -1,0 +1,72 @@
+"""The robust MPC exported as a controller FMU: from a :class:`~cosim_adapters.robust_mpc.
+RobustMPCController` to :func:`cosim.core.controller_fmu.build_controller_fmu`.
+
+The FMU runs the same step as the Python component, in C: the component's own observer,
+tracking FHOCP (set up on its compiled kernel), disturbance filter, scalings and input box
+become the constants of :mod:`controllers.kernel.controller_source`, and the problem's signals
+the FMU's variables (measured outputs and set-points ``ref.<output>`` in, the inputs to apply
+out, named and in the units of the problem; docs: guide/controller-fmu.md). The tracking law
+(the default) is exported, for any numbers of inputs and outputs; the paper's law is not
+(yet).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import re
+import uuid
+from pathlib import Path
+from typing import Any
+
+from cosim.core.controller_fmu import ControllerInterface, Port, build_controller_fmu
+from cosim.core.errors import CosimError
+
+__all__ = ["export_fmu", "fmu_identifier"]
+
+
+def fmu_identifier(out: str | Path) -> str:
+    """The FMU's model identifier from its file name: ``Controller.fmu`` → ``Controller``
+    (other characters than letters, digits and ``_`` become ``_``)."""
+    stem = re.sub(r"\W", "_", Path(out).name.removesuffix(".fmu"), flags=re.ASCII)
+    return stem if stem and not stem[0].isdigit() else f"C{stem}"
+
+
+def _why_not(ctrl: Any) -> str:
+    """Why ``ctrl`` cannot be exported (empty: it can)."""
+    if ctrl.law.name != "tracking":
+        return (f"law {ctrl.law.name!r}: the controller FMU runs the tracking law (the "
+                "default, law=\"tracking\")")
+    fhocp = ctrl.fhocp
+    if fhocp.kernel is None or not fhocp._compiled_loop:
+        reason = fhocp.kernel_error or "the options select another solver"
+        return f"the controller FMU runs the compiled kernel's SQP, unavailable here ({reason})"
+    return ""
+
+
+def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
+    """Build the controller FMU of ``ctrl`` (a robust MPC) at ``out`` (FMI 2 or 3); returns
+    ``out``. Raises :class:`CosimError` (one line) when it cannot be exported or built."""
+    from controllers.kernel.compiled_kernel import PREFIX_PLACEHOLDER, variant_flags
+    from controllers.kernel.controller_source import ControllerDesign, generate_source
+
+    why = _why_not(ctrl)
+    if why:
+        raise CosimError(f"cannot export {ctrl.model_path}: {why}")
+    law = ctrl.law
+    design = ControllerDesign.of(ctrl.fhocp, ctrl.observer, law.disturbance.beta,
+                                 law.certified, ctrl.model, ctrl._lo, ctrl._hi)
+    source = generate_source(design).replace(PREFIX_PLACEHOLDER, "mpc_")
+    flags, _ = variant_flags(design.kernel, (), blas=False)
+    pr = ctrl.problem
+    digest = hashlib.sha256(source.encode()).hexdigest()
+    certified = "certified" if ctrl.certification.certified else "uncertified"
+    iface = ControllerInterface(
+        identifier=fmu_identifier(out), token="{" + str(uuid.UUID(hex=digest[:32])) + "}",
+        description=(f"Robust GRU MPC (Schimperna & Magni), tracking law, {certified}: model "
+                     f"{Path(ctrl.model_path).name}, problem {pr.name}, N={ctrl.fhocp.N}"),
+        sample_time=float(ctrl.sample_time),
+        measured=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
+                       for c in pr.outputs),
+        applied=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
+                      for c in pr.inputs))
+    return build_controller_fmu(iface, source, out, fmi_version=fmi_version, flags=flags)

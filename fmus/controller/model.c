@@ -1,0 +1,103 @@
+/*
+ * The robust MPC as a co-simulation model (see model.h): the FMI variables of the controller
+ * step. A communication step of k sample times runs k controller steps with the inputs held
+ * (k = 1 in a master that steps at the controller's sample time); a step that is not a
+ * multiple of the sample time is refused. A non-finite measurement or set-point holds the
+ * last inputs and is logged as a warning.
+ */
+#include "model.h"
+
+#include <math.h>
+#include <stdio.h>
+
+/* warning bits of controller.c (CTL_WARN_*) */
+#define WARN_NONFINITE_INPUT 1
+#define WARN_UNREACHABLE_START 2
+
+void model_set_defaults(ModelData *m) {
+    m->time = 0.0;
+    for (int a = 0; a < CTL_NY; a++) {
+        m->y[a] = CTL_Y_START[a];
+        m->ref[a] = CTL_Y_START[a];
+    }
+    if (m->ctl) mpc_ctl_reset(m->ctl);
+}
+
+void model_initialize(ModelData *m) { (void)m; }
+
+bool model_acquire(ModelData *m) {
+    m->ctl = mpc_ctl_new();
+    return m->ctl != NULL;
+}
+
+void model_release(ModelData *m) {
+    mpc_ctl_free(m->ctl);
+    m->ctl = NULL;
+}
+
+const char *model_variable_name(unsigned vr) {
+    return vr < N_VARIABLES ? CTL_NAMES[vr] : NULL;
+}
+
+double model_get(const ModelData *m, unsigned vr) {
+    double u[CTL_NU], pred[CTL_NY];
+    int status, fallback, iterations;
+    if (vr == VR_TIME) return m->time;
+    if (vr < VR_REF) return m->y[vr - VR_Y];
+    if (vr < VR_U) return m->ref[vr - VR_REF];
+    mpc_ctl_outputs(m->ctl, u, &status, &fallback, &iterations, pred);
+    if (vr < VR_STATUS) return u[vr - VR_U];
+    if (vr == VR_STATUS) return status;
+    if (vr == VR_FALLBACK) return fallback;
+    if (vr == VR_ITERATIONS) return iterations;
+    return pred[vr - VR_PRED];
+}
+
+const char *model_set(ModelData *m, unsigned vr, double value, bool initialized) {
+    (void)initialized;
+    if (vr >= VR_Y && vr < VR_REF) {
+        m->y[vr - VR_Y] = value;
+        return NULL;
+    }
+    if (vr >= VR_REF && vr < VR_U) {
+        m->ref[vr - VR_REF] = value;
+        return NULL;
+    }
+    return "is not an input of the controller";
+}
+
+const char *model_state_name(size_t i) {
+    (void)i;
+    return "";
+}
+
+void model_get_states(const ModelData *m, double *x) { (void)m, (void)x; }
+void model_set_states(ModelData *m, const double *x) { (void)m, (void)x; }
+void model_get_derivatives(const ModelData *m, double *dx) { (void)m, (void)dx; }
+
+const char *model_do_step(ModelData *m, double step, char *msg, size_t n) {
+    const double k = floor(step / CTL_TS + 0.5);
+    if (k < 1.0 || fabs(step - k * CTL_TS) > 1e-9 * CTL_TS) {
+        snprintf(msg, n, "communicationStepSize %.17g s is not a multiple of the controller's "
+                 "sample time %.17g s", step, CTL_TS);
+        return msg;
+    }
+    for (double i = 0.0; i < k; i += 1.0) mpc_ctl_step(m->ctl, m->y, m->ref);
+    m->time += step;
+    return NULL;
+}
+
+const char *model_warning(ModelData *m, char *msg, size_t n) {
+    const int w = mpc_ctl_take_warnings(m->ctl);
+    if (w & WARN_NONFINITE_INPUT) {
+        snprintf(msg, n, "a measured output or set-point is not finite at t = %.17g s: the "
+                 "last inputs are held and the observer is not advanced", m->time);
+        return msg;
+    }
+    if (w & WARN_UNREACHABLE_START) {
+        snprintf(msg, n, "the first measured outputs are no equilibrium output the inputs' box "
+                 "reaches: the observer starts at the closest reachable equilibrium");
+        return msg;
+    }
+    return NULL;
+}

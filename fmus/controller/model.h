@@ -1,0 +1,73 @@
+/*
+ * The robust MPC as a co-simulation model: the controller FMU's side of the FMI glue
+ * (fmus/glue/instance.h) every C model shares.
+ *
+ * One source for every exported controller: what differs between them -- the model, the
+ * problem, the weights, the certificate -- is in two generated files beside this one
+ * (cosim/core/controller_fmu.py): controller_step.c (the whole controller step in C,
+ * controllers/kernel/controller.c on the compiled FHOCP kernel) and controller_names.h (the
+ * identifier, the instantiation token, the numbers of signals, their names, the start values
+ * and the sample time). The controller's state lives in its instance (ctl_state, allocated
+ * at instantiation), so that instances in one process are independent.
+ *
+ * Value references: 0 time; then the measured outputs (inputs of the FMU, named as the
+ * plant's outputs), their set-points ref.<output>, the inputs to apply (outputs of the FMU,
+ * named as the plant's inputs), status, fallback, iterations and the predicted outputs
+ * pred.<output>.
+ */
+#ifndef CONTROLLER_MODEL_H
+#define CONTROLLER_MODEL_H
+
+#include <stdbool.h>
+#include <stddef.h>
+
+#include "controller_names.h"
+
+#define N_STATES 0
+#define N_EVENT_INDICATORS 0
+#define MODEL_HAS_RESOURCES 1
+#define MODEL_NO_FMU_STATE 1
+#define MODEL_HAS_WARNINGS 1
+
+#define VR_TIME 0
+#define VR_Y 1                              /* CTL_NY measured outputs */
+#define VR_REF (VR_Y + CTL_NY)              /* CTL_NY set-points */
+#define VR_U (VR_REF + CTL_NY)              /* CTL_NU inputs to apply */
+#define VR_STATUS (VR_U + CTL_NU)
+#define VR_FALLBACK (VR_STATUS + 1)
+#define VR_ITERATIONS (VR_FALLBACK + 1)
+#define VR_PRED (VR_ITERATIONS + 1)         /* CTL_NY predicted outputs */
+#define N_VARIABLES (VR_PRED + CTL_NY)
+
+/* the controller step (controller_step.c: controllers/kernel/controller.c) */
+typedef struct ctl_state ctl_state;
+ctl_state *mpc_ctl_new(void);
+void mpc_ctl_free(ctl_state *st);
+void mpc_ctl_reset(ctl_state *st);
+int mpc_ctl_step(ctl_state *st, const double *y_phys, const double *r_phys);
+int mpc_ctl_take_warnings(ctl_state *st);
+void mpc_ctl_outputs(const ctl_state *st, double *u_phys, int *status, int *fallback,
+                    int *iterations, double *y_pred);
+
+typedef struct {
+    double time;              /* [s] */
+    double y[CTL_NY];         /* the measured outputs (the problem's units) */
+    double ref[CTL_NY];       /* their set-points */
+    ctl_state *ctl;           /* the controller (model_acquire) */
+} ModelData;
+
+void model_set_defaults(ModelData *m);
+void model_initialize(ModelData *m);
+bool model_acquire(ModelData *m);
+void model_release(ModelData *m);
+const char *model_variable_name(unsigned vr);
+double model_get(const ModelData *m, unsigned vr);
+const char *model_set(ModelData *m, unsigned vr, double value, bool initialized);
+const char *model_state_name(size_t i);
+void model_get_states(const ModelData *m, double *x);
+void model_set_states(ModelData *m, const double *x);
+void model_get_derivatives(const ModelData *m, double *dx);
+const char *model_do_step(ModelData *m, double step, char *msg, size_t n);
+const char *model_warning(ModelData *m, char *msg, size_t n);
+
+#endif /* CONTROLLER_MODEL_H */
