@@ -18,7 +18,7 @@ import uuid
 from pathlib import Path
 from typing import Any
 
-from cosim.core.controller_fmu import ControllerInterface, Port, build_controller_fmu
+from cosim.core.controller_fmu import ControllerInterface, Parameter, Port, build_controller_fmu
 from cosim.core.errors import CosimError
 
 __all__ = ["export_fmu", "fmu_identifier"]
@@ -68,5 +68,8 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
         measured=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
                        for c in pr.outputs),
         applied=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
-                      for c in pr.inputs))
+                      for c in pr.inputs),
+        parameters=(Parameter("offset_filter", law.disturbance.beta, 0.0, 1.0,
+                              "gain of the output-disturbance estimate d_hat, in (0, 1] "
+                              "(option offset_filter)"),))
     return build_controller_fmu(iface, source, out, fmi_version=fmi_version, flags=flags)

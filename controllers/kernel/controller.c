@@ -40,6 +40,9 @@ enum ctl_status {
   CTL_OPTIMAL = 0, CTL_INFEASIBLE_X0 = 1, CTL_INFEASIBLE = 2, CTL_LIMIT = 3,
   CTL_RESIDUAL_CHECK_FAILED = 4, CTL_OTHER = 5
 };
+/* the tunable parameters (ctl_set_parameter): the disturbance filter's gain (option
+ * offset_filter, in (0, 1]) */
+enum { CTL_P_OFFSET_FILTER = 0, CTL_N_PARAMETERS = 1 };
 /* warnings a step may raise (ctl_state.warnings, a bit mask cleared by ctl_take_warnings) */
 enum { CTL_WARN_NONFINITE_INPUT = 1, CTL_WARN_UNREACHABLE_START = 2 };
 
@@ -57,6 +60,8 @@ typedef struct ctl_state {
   double xhat[NX], e_o;
   /* the output-disturbance estimate d_hat (DisturbanceFilter) */
   double dhat[NY];
+  /* the tunable parameters (CTL_P_*) */
+  double parameters[CTL_N_PARAMETERS];
   /* the tracking MPC: artificial steady state, plan, last input, next initial guess */
   int started, has_plan, has_uprev, has_guess;
   double us[NU], xs[NX], plan[NH * NU], uprev[NU], g_u[NH * NU], g_us[NU], g_xs[NX];
@@ -312,6 +317,7 @@ EXPORT void PFX(ctl_reset)(ctl_state *st) {
   for (int j = 0; j < NU; j++) st->u_phys[j] = 0.5 * (CT_U_LO[j] + CT_U_HI[j]);
   for (int a = 0; a < NY; a++) st->y_pred[a] = NAN;
   st->status = CTL_OTHER;
+  st->parameters[CTL_P_OFFSET_FILTER] = CT_BETA;
 }
 
 /* A new controller instance (NULL when out of memory): every allocation it will ever make. */
@@ -366,7 +372,8 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     st->started = 1;
   }
   PFX(output)(st->xhat, yh);
-  for (int a = 0; a < NY; a++) st->dhat[a] = st->dhat[a] + CT_BETA * ((y[a] - yh[a]) - st->dhat[a]);
+  const double beta = st->parameters[CTL_P_OFFSET_FILTER];
+  for (int a = 0; a < NY; a++) st->dhat[a] = st->dhat[a] + beta * ((y[a] - yh[a]) - st->dhat[a]);
   if (!CT_CERTIFIED)   /* the measured tightening is around y + d_hat */
     for (int j = 0; j < NL; j++) {
       double s = 0.0;
@@ -396,6 +403,20 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     st->u_phys[j] = v < CT_U_LO[j] ? CT_U_LO[j] : (v > CT_U_HI[j] ? CT_U_HI[j] : v);
   }
   for (int a = 0; a < NY; a++) st->y_pred[a] = st->y_pred[a] * CT_Y_SCALE[a] + CT_Y_OFFSET[a];
+  return 0;
+}
+
+/* Tunable parameter i (CTL_P_*): its value, or NaN for an unknown one. */
+EXPORT double PFX(ctl_get_parameter)(const ctl_state *st, int i) {
+  return i >= 0 && i < CTL_N_PARAMETERS ? st->parameters[i] : NAN;
+}
+
+/* Set tunable parameter i (CTL_P_*) from the next step on: NULL, or why the value is refused
+ * (then nothing changes). */
+EXPORT const char *PFX(ctl_set_parameter)(ctl_state *st, int i, double value) {
+  if (i != CTL_P_OFFSET_FILTER) return "is not a parameter of the controller";
+  if (!(value > 0.0 && value <= 1.0)) return "must be in (0, 1]";
+  st->parameters[i] = value;
   return 0;
 }
 

@@ -35,7 +35,7 @@ from cosim.core.build import (
 )
 from cosim.core.errors import CosimError
 
-__all__ = ["CONTROLLER_DIR", "ControllerInterface", "Port", "build_controller_fmu",
+__all__ = ["CONTROLLER_DIR", "ControllerInterface", "Parameter", "Port", "build_controller_fmu",
            "model_description", "names_header"]
 
 #: The controller model's source (package data of :mod:`fmus`).
@@ -61,10 +61,22 @@ class Port:
 
 
 @dataclass(frozen=True)
+class Parameter:
+    """A tunable parameter of the controller step: name, start value, box, description."""
+
+    name: str
+    start: float
+    low: float
+    high: float
+    description: str = ""
+
+
+@dataclass(frozen=True)
 class ControllerInterface:
     """What the FMU declares besides the step: its identifier (a C identifier, the binary's
     name), instantiation token, description, sample time, the measured outputs (the FMU's
-    inputs, with set-points ``ref.<name>``) and the inputs to apply (its outputs)."""
+    inputs, with set-points ``ref.<name>``), the inputs to apply (its outputs) and the tunable
+    parameters, in ``fmus/controller/model.h``'s order."""
 
     identifier: str
     token: str
@@ -72,9 +84,10 @@ class ControllerInterface:
     sample_time: float
     measured: tuple[Port, ...]
     applied: tuple[Port, ...]
+    parameters: tuple[Parameter, ...] = ()
     generation_tool: str = "gru-mpc-cosim (cosim export-fmu)"
 
-    def variables(self) -> list[tuple[str, str, str, str, Port | None, str]]:
+    def variables(self) -> list[tuple[str, str, str, str, Port | Parameter | None, str]]:
         """``(name, causality, variability, unit, port, description)`` in value-reference
         order from 1 (``fmus/controller/model.h``)."""
         out = [(p.name, "input", "continuous", p.unit, p, p.description or f"measured {p.name}")
@@ -86,6 +99,7 @@ class ControllerInterface:
         out += [(name, "output", "discrete", "1", None, text) for name, text in DIAGNOSTICS]
         out += [(f"pred.{p.name}", "output", "discrete", p.unit, None,
                  f"{p.name} the model predicts at the next sample") for p in self.measured]
+        out += [(q.name, "parameter", "tunable", "1", q, q.description) for q in self.parameters]
         return out
 
 
@@ -129,12 +143,14 @@ def _units(iface: ControllerInterface) -> str:
     return "  <UnitDefinitions>\n" + "\n".join(lines) + "\n  </UnitDefinitions>\n"
 
 
-def _attrs(port: Port | None, causality: str, unit: str, fmi3: bool) -> str:
+def _attrs(port: Port | Parameter | None, causality: str, unit: str) -> str:
     """A variable's unit, box and start attributes."""
     out = [f"unit={quoteattr(unit)}"]
     if port is not None:
-        out += [f'min="{port.low!r}"', f'max="{port.high!r}"']
-        if causality == "input":
+        out += [f'min="{float(port.low)!r}"', f'max="{float(port.high)!r}"']
+        if isinstance(port, Parameter):
+            out.append(f'start="{float(port.start)!r}"')
+        elif causality == "input":
             out.append(f'start="{0.5 * (port.low + port.high)!r}"')
     return " ".join(out)
 
@@ -173,8 +189,9 @@ def model_description(iface: ControllerInterface, fmi_version: int) -> str:
     outputs = []
     for vr, (name, causality, variability, unit, port, text) in enumerate(
             iface.variables(), start=1):
-        initial = ' initial="calculated"' if causality == "output" else ""
-        attrs = _attrs(port, causality, unit, fmi3)
+        initial = {"output": ' initial="calculated"', "parameter": ' initial="exact"'}.get(
+            causality, "")
+        attrs = _attrs(port, causality, unit)
         common = (f"name={q(name)} valueReference=\"{vr}\" causality=\"{causality}\" "
                   f"variability=\"{variability}\"{initial} description={q(text)}")
         if fmi3:

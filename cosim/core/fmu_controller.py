@@ -7,7 +7,8 @@ order a controller FMU is meant to run: set the measured outputs ``y_k`` and the
 ``[t_k, t_k+1)`` (docs: guide/controller-fmu.md). Its outputs named ``status``,
 ``fallback``, ``iterations`` and ``pred.<output>`` are diagnostics (recorded, not wired to
 the plant); every other output is an input of the plant, as a controller's are. Its sample
-time is the FMU's default experiment step size.
+time is the FMU's default experiment step size; its parameters (``offset_filter``) are
+options of the component.
 """
 
 from __future__ import annotations
@@ -36,13 +37,23 @@ class FmuController(FmuComponent):
         The controller FMU (FMI 2.0 or 3.0 Co-Simulation).
     name : str
         Component name.
+    **parameters
+        Values of its parameters, set before its initialisation (``cosim run --controller
+        Controller.fmu --option offset_filter=0.5``).
     """
 
     direct_feedthrough = True
-    OPTIONS = ("path", "name")
 
-    def __init__(self, path: str | Path, name: str = "ctrl") -> None:
+    def __init__(self, path: str | Path, name: str = "ctrl", **parameters: float) -> None:
         super().__init__(path, name=name, interface="cs")
+        unknown = sorted(set(parameters) - set(self.parameters))
+        if unknown:
+            raise CosimError(f"{self.path}: {unknown[0]!r} is not a parameter of the "
+                             f"controller FMU (parameters: {', '.join(self.parameters)})")
+        for key, value in parameters.items():
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                raise CosimError(f"{self.path}: parameter {key}={value!r}: expected a number")
+        self.start_values = {k: float(v) for k, v in parameters.items()}
         self._diag_names = [s.name for s in self.outputs if _diagnostic(s.name)]
         self.outputs = tuple(s for s in self.outputs if not _diagnostic(s.name))
         self._u_names = [s.name for s in self.outputs]
@@ -75,4 +86,4 @@ class FmuController(FmuComponent):
 
     def summary(self) -> dict:
         return {"controller": "fmu", "fmu": str(self.path),
-                "description": self.md.description or ""}
+                "description": self.md.description or "", "parameters": dict(self.start_values)}

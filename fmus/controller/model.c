@@ -3,7 +3,8 @@
  * step. A communication step of k sample times runs k controller steps with the inputs held
  * (k = 1 in a master that steps at the controller's sample time); a step that is not a
  * multiple of the sample time is refused. A non-finite measurement or set-point holds the
- * last inputs and is logged as a warning.
+ * last inputs and is logged as a warning. A tunable parameter set between steps holds from
+ * the next step on.
  */
 #include "model.h"
 
@@ -43,6 +44,7 @@ double model_get(const ModelData *m, unsigned vr) {
     double u[CTL_NU], pred[CTL_NY];
     int status, fallback, iterations;
     if (vr == VR_TIME) return m->time;
+    if (vr >= VR_PARAM) return mpc_ctl_get_parameter(m->ctl, (int)(vr - VR_PARAM));
     if (vr < VR_REF) return m->y[vr - VR_Y];
     if (vr < VR_U) return m->ref[vr - VR_REF];
     mpc_ctl_outputs(m->ctl, u, &status, &fallback, &iterations, pred);
@@ -63,7 +65,9 @@ const char *model_set(ModelData *m, unsigned vr, double value, bool initialized)
         m->ref[vr - VR_REF] = value;
         return NULL;
     }
-    return "is not an input of the controller";
+    if (vr >= VR_PARAM && vr < N_VARIABLES)
+        return mpc_ctl_set_parameter(m->ctl, (int)(vr - VR_PARAM), value);
+    return "is not an input or parameter of the controller";
 }
 
 const char *model_state_name(size_t i) {

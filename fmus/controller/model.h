@@ -12,8 +12,8 @@
  *
  * Value references: 0 time; then the measured outputs (inputs of the FMU, named as the
  * plant's outputs), their set-points ref.<output>, the inputs to apply (outputs of the FMU,
- * named as the plant's inputs), status, fallback, iterations and the predicted outputs
- * pred.<output>.
+ * named as the plant's inputs), status, fallback, iterations, the predicted outputs
+ * pred.<output>, and the tunable parameters (controller.c CTL_P_*: offset_filter).
  */
 #ifndef CONTROLLER_MODEL_H
 #define CONTROLLER_MODEL_H
@@ -37,7 +37,9 @@
 #define VR_FALLBACK (VR_STATUS + 1)
 #define VR_ITERATIONS (VR_FALLBACK + 1)
 #define VR_PRED (VR_ITERATIONS + 1)         /* CTL_NY predicted outputs */
-#define N_VARIABLES (VR_PRED + CTL_NY)
+#define VR_PARAM (VR_PRED + CTL_NY)         /* N_PARAMETERS tunable parameters */
+#define N_PARAMETERS 1
+#define N_VARIABLES (VR_PARAM + N_PARAMETERS)
 
 /* the controller step (controller_step.c: controllers/kernel/controller.c) */
 typedef struct ctl_state ctl_state;
@@ -46,6 +48,8 @@ void mpc_ctl_free(ctl_state *st);
 void mpc_ctl_reset(ctl_state *st);
 int mpc_ctl_step(ctl_state *st, const double *y_phys, const double *r_phys);
 int mpc_ctl_take_warnings(ctl_state *st);
+double mpc_ctl_get_parameter(const ctl_state *st, int i);
+const char *mpc_ctl_set_parameter(ctl_state *st, int i, double value);
 void mpc_ctl_outputs(const ctl_state *st, double *u_phys, int *status, int *fallback,
                     int *iterations, double *y_pred);
 

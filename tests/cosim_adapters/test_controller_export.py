@@ -71,6 +71,27 @@ def test_the_master_runs_the_fmu_as_the_python_controller(
     assert float(np.median(err)) < 0.02
 
 
+def test_a_tuned_parameter_is_the_python_option(fourtank_fmus: dict[int, Path],
+                                                tmp_path: Path) -> None:
+    """The FMU's tunable ``offset_filter`` set to 0.6 (``--option`` of its component) gives
+    the Python controller with ``offset_filter=0.6``; 0 fails the run at its start with the
+    FMU's reason; an option the FMU has no parameter for is named."""
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,1.3,1.4\n1500,,\n")
+    fmu = str(fourtank_fmus[3])
+    py = cosim.run(scenario, options={"offset_filter": 0.6}, figure=False)
+    tuned = cosim.run(scenario, controller=fmu, options={"offset_filter": 0.6}, figure=False)
+    _same_inputs(tuned, py, {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
+    assert tuned.summary["controller_summary"]["parameters"] == {"offset_filter": 0.6}
+    default = cosim.run(scenario, controller=fmu, figure=False).to_pandas()
+    assert not np.array_equal(default["ctrl.qa"], tuned.to_pandas()["ctrl.qa"])
+    refused = cosim.run(scenario, controller=fmu, options={"offset_filter": 0.0}, figure=False)
+    assert refused.status == "failed"
+    assert "cannot set offset_filter = 0: must be in (0, 1]" in refused.reason
+    with pytest.raises(CosimError, match="'N' is not a parameter of the controller FMU"):
+        cosim.run(scenario, controller=fmu, options={"N": 40}, figure=False)
+
+
 def _cstr_case(tmp_path: Path) -> tuple[Path, Path, Path]:
     """The example CSTR (pythonfmu), a GRU model of its problem, set-point steps."""
     import importlib.util

@@ -59,6 +59,8 @@ def test_the_tools_that_judge_fmus_find_it_compliant(version: int,
     assert var["h1"].unit == "m" and var["qa"].unit == "m3/s"
     assert float(var["qb"].max) == pytest.approx(1.11e-3)
     assert not md.coSimulation.canGetAndSetFMUstate
+    beta = var["offset_filter"]
+    assert (beta.causality, beta.variability, float(beta.start)) == ("parameter", "tunable", 0.3)
 
 
 def _controller(path: Path, logger=None) -> Plant:
