@@ -277,7 +277,8 @@ def _variant_options(spec: CampaignSpec, k: int, v: Any, line: int, files: dict[
     """Variant ``v``'s controller name and options, a controller file read
     (:func:`cosim.core.registry.expand`), the default model and the campaign's problem
     added: ``(name, options for the tasks, options here)``; the files the options name are
-    packed into ``files`` (``model_<k>.json``, ``problem_<k>.toml``) and named so in the
+    packed into ``files`` (``model_<k>.json``, ``problem_<k>.toml``, a controller FMU's
+    ``path_<k>.fmu``) and named so in the
     tasks' options, so that a worker on another machine needs none of this one's files."""
     from controllers.model import DEFAULT_MODEL
     from cosim.api import with_problem
@@ -293,7 +294,10 @@ def _variant_options(spec: CampaignSpec, k: int, v: Any, line: int, files: dict[
     except CosimError as exc:
         raise CosimError(f"{spec.path}:{line}: variant '{v.name}': {exc}") from None
     local = dict(options)
-    for key, what, ext in (("model", "model file", "json"), ("problem", "problem file", "toml")):
+    for key, what, ext in (("model", "model file", "json"), ("problem", "problem file", "toml"),
+                           ("path", "controller FMU", "fmu")):
+        if key == "path" and name != registry.FMU_CONTROLLER:
+            continue
         if isinstance(options.get(key), str | Path):
             packed = f"{key}_{k}.{ext}"
             files[packed] = _read(Path(options[key]), what)

@@ -216,11 +216,19 @@ def _file(value: Any, loc: _Locator, table: str, key: str, kind: str) -> Path:
 
 
 def _controller_file(name: str, loc: _Locator, table: str, index: int = 0) -> str:
-    """A controller file (``*.json``, :mod:`cosim.core.controller_file`) as an absolute path,
-    checked now (found beside the spec or in the current folder); a controller name as is."""
+    """A controller file (``*.json``, :mod:`cosim.core.controller_file`) or a controller FMU
+    (``*.fmu``) as an absolute path, checked now (found beside the spec or in the current
+    folder); a controller name as is."""
     from cosim.core import controller_file
     from cosim.core.errors import CosimError
 
+    if name.lower().endswith(".fmu"):
+        path = _resolve(name, loc.path.parent)
+        if not path.is_file():
+            raise loc.error(f"controller = {name!r}: controller FMU not found (looked beside "
+                            f"the spec, {loc.path.parent}, and in the current folder)", table,
+                            "controller", index)
+        return str(path)
     if not controller_file.is_controller_file(name):
         return name
     path = _resolve(name, loc.path.parent)

@@ -258,7 +258,11 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
     sc = sc.with_changes(at_start, draw["setpoints"] or None, draw["stop_time"])
     run["phase"] = "building the controller"
     options = dict(task["options"])
-    for key in ("model", "problem"):
+    from cosim.core.registry import FMU_CONTROLLER
+
+    packed = ("model", "problem", "path") if task["controller"] == FMU_CONTROLLER else (
+        "model", "problem")
+    for key in packed:   # the files packed with the campaign
         if key in options:
             options[key] = str(folder / options[key])
     run["key"], ctrl = POOL.take(task["controller"], options)

@@ -165,3 +165,49 @@ def test_the_paper_law_is_not_exported(tmp_path: Path) -> None:
     with pytest.raises(CosimError, match="law 'paper': the controller FMU runs the tracking law"):
         export_fmu(ctrl, tmp_path / "C.fmu")
     assert not (tmp_path / "C.fmu").exists()
+
+
+def test_a_campaign_qualifies_the_fmu_on_the_python_controllers_draws(
+        fourtank_fmus: dict[int, Path], tmp_path: Path) -> None:
+    """A campaign variant ``controller = "Mpc.fmu"`` (packed with the campaign, found beside
+    the spec) runs on a Dask worker on the draws of the Python variant: plant uncertainty and
+    sensor noise, the same inputs and levels run by run."""
+    (tmp_path / "Mpc.fmu").write_bytes(fourtank_fmus[3].read_bytes())
+    spec = tmp_path / "spec.toml"
+    spec.write_text(f"""[campaign]
+name = "fmu-vs-python"
+runs = 2
+seed = 7
+scenario = "{PAPER.as_posix()}"
+controller = "robust-mpc"
+
+[draw]
+"plant.a1" = {{ uniform = [1.2445e-4, 1.3755e-4] }}
+"plant.gamma_a" = {{ uniform = [0.27, 0.33] }}
+"sensor.h1.noise" = {{ uniform = [0.0, 0.005] }}
+
+[setpoints]
+count = 2
+hold = 500
+
+[[variant]]
+name = "python"
+
+[[variant]]
+name = "fmu"
+controller = "Mpc.fmu"
+""")
+    import pandas as pd
+
+    result = cosim.run_campaign(spec, tmp_path / "out", workers=1)
+    assert result.status == "ok"
+    for run in range(2):
+        py, fmu = (pd.read_csv(tmp_path / "out" / "runs" / f"{run:06d}-{v}" / "results.csv")
+                   for v in ("python", "fmu"))
+        for column in ("ctrl.qa", "ctrl.qb", "plant.h1", "plant.h2"):
+            np.testing.assert_array_equal(fmu[column], py[column])
+
+    spec.write_text(spec.read_text().replace('"Mpc.fmu"', '"Nope.fmu"'))
+    with pytest.raises(CosimError, match=r"spec.toml:\d+.*'Nope.fmu': controller FMU not "
+                                         "found"):
+        cosim.run_campaign(spec, tmp_path / "out2", workers=1)
