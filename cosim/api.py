@@ -253,22 +253,32 @@ def run(scenario: str | Path, plant: str | Path | None = None,
 
 def export_fmu(model: str | Path | None = None, out: str | Path = "Controller.fmu", *,
                fmi: int = 3, problem: str | Path | None = None,
-               options: Mapping[str, Any] | None = None) -> Path:
+               options: Mapping[str, Any] | None = None,
+               controller: str | Path | None = None) -> Path:
     """The robust MPC of ``model`` (default: the shipped one) as a controller FMU at ``out``
     (FMI ``fmi``, 2 or 3), the twin of ``cosim export-fmu`` (docs: guide/controller-fmu.md):
     the controller ``run(..., options=options)`` would build, its step compiled in C.
+    ``controller``: a run's ``controller.json`` (:mod:`cosim.core.controller_file`), the
+    robust MPC it describes (``options`` over its own).
 
     Raises
     ------
     CosimError
-        A controller that cannot be exported (the paper's law, no compiled kernel), no C
-        compiler, a failed build (an existing ``out`` is intact).
+        A controller that cannot be exported (the paper's law, no compiled kernel, a
+        description of another controller), no C compiler, a failed build (an existing
+        ``out`` is intact).
     """
     import warnings
 
     from cosim.core import registry
+    from cosim.core.errors import CosimError
     from cosim_adapters.controller_export import export_fmu as export
 
+    if controller is not None:
+        name, options = registry.expand(str(controller), options)
+        if registry.CONTROLLERS.get(name, name) != registry.CONTROLLERS["robust-mpc"]:
+            raise CosimError(f"{controller}: describes controller {name!r}; only the robust "
+                             "MPC is exported")
     opts = dict(options or {})
     if model is not None:
         opts["model"] = str(model)

@@ -18,9 +18,10 @@ the disturbance estimate and the reference handling, in C (gcc). Its inputs are 
 outputs, named as the plant's outputs in the problem, and their set-points ref.<output>; its
 outputs the inputs to apply, named as the plant's inputs, the solver status, whether the
 fallback was applied, the SQP iterations and the predicted outputs pred.<output>: all in the
-problem's units, so that plant and controller connect by name. Its sample time is the
-problem's Ts. The same model, problem and --options as cosim run give the same inputs (docs:
-guide/controller-fmu.md). Run it with: cosim run SCENARIO --controller Controller.fmu"""
+problem's units, so that plant and controller connect by name; its tunable parameter
+offset_filter. Its sample time is the problem's Ts. The same model, problem and --options as
+cosim run give the same inputs (docs: guide/controller-fmu.md); --controller takes them from
+a run's controller.json. Run it with: cosim run SCENARIO --controller Controller.fmu"""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -36,6 +37,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "gives the problem of a model file without one")
     p.add_argument("--option", metavar="KEY=VALUE", action="append", default=[],
                    help="robust-mpc option, as for cosim run (e.g. N=40), repeatable")
+    p.add_argument("--controller", metavar="CONTROLLER.json", default=None,
+                   help="a run's controller.json: the robust MPC it describes (its model and "
+                        "options; --option over them)")
     p.add_argument("--fmi", type=int, choices=(2, 3), default=3,
                    help="FMI version (default: 3)")
     p.add_argument("--out", metavar="FILE.fmu", default="Controller.fmu",
@@ -53,7 +57,7 @@ def run(args: argparse.Namespace) -> int:
     from cosim.core import registry
 
     path = export_fmu(args.model, args.out, fmi=args.fmi, problem=args.problem,
-                      options=registry.parse_options(args.option))
+                      options=registry.parse_options(args.option), controller=args.controller)
     if not args.quiet:
         md = fmpy.read_model_description(str(path))
         ins = [v.name for v in md.modelVariables if v.causality == "input"

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import fmpy
 import numpy as np
 import pytest
 
@@ -90,6 +91,27 @@ def test_a_tuned_parameter_is_the_python_option(fourtank_fmus: dict[int, Path],
     assert "cannot set offset_filter = 0: must be in (0, 1]" in refused.reason
     with pytest.raises(CosimError, match="'N' is not a parameter of the controller FMU"):
         cosim.run(scenario, controller=fmu, options={"N": 40}, figure=False)
+
+
+def test_a_runs_controller_json_exports_that_controller(tmp_path: Path) -> None:
+    """``cosim export-fmu --controller run/controller.json``: the robust MPC of that run (its
+    options: offset_filter 0.5 as the FMU's start value), with the run's inputs."""
+    from cosim.cli import main
+
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,1.2,1.3\n1250,,\n")
+    py = cosim.run(scenario, options={"offset_filter": 0.5}, out=tmp_path / "run", figure=False)
+    fmu = tmp_path / "Mpc.fmu"
+    assert main(["export-fmu", "--controller", str(tmp_path / "run" / "controller.json"),
+                 "--out", str(fmu), "--quiet"]) == 0
+    md = fmpy.read_model_description(str(fmu))
+    assert {v.name: v.start for v in md.modelVariables}["offset_filter"] == "0.5"
+    _same_inputs(cosim.run(scenario, controller=str(fmu), figure=False), py,
+                 {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
+    (tmp_path / "pi.json").write_text('{"format": "gru-mpc-controller/1", "controller": "pi", '
+                                      '"options": {}, "files": {}}')
+    with pytest.raises(CosimError, match="describes controller 'pi'; only the robust MPC"):
+        cosim.export_fmu(controller=tmp_path / "pi.json", out=tmp_path / "P.fmu")
 
 
 def _cstr_case(tmp_path: Path) -> tuple[Path, Path, Path]:
