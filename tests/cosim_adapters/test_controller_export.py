@@ -4,9 +4,10 @@ Python controller component it was exported from.
 Stepped in the project's master (set ``y_k`` and the set-points, controller ``doStep``, read
 ``u_k``, plant ``doStep``), plant FMU + controller FMU give the same inputs as the Python
 ``robust-mpc`` to ≤ 1e-9 of each input's box -- measured: to the bit -- on the paper scenario
-(FMI 2 and 3) and on a plant of another kind (the example CSTR, a pythonfmu FMU, with a GRU
-model of its problem whose first measured output no input in the box reaches), with the
-same statuses and fallbacks; the compiled step alone (:class:`controllers.kernel.
+(FMI 2 and 3) and on plants of other kinds (the example CSTR and mixing tank, pythonfmu
+FMUs, with GRU models of their problems whose first measured outputs no input in the box
+reaches), with the same statuses and fallbacks; with a tuned parameter, from a run's
+``controller.json`` and in a campaign too; the compiled step alone (:class:`controllers.kernel.
 controller_source.CompiledController`) replays the Python controller's measurements to the
 same inputs.
 """
@@ -114,8 +115,10 @@ def test_a_runs_controller_json_exports_that_controller(tmp_path: Path) -> None:
         cosim.export_fmu(controller=tmp_path / "pi.json", out=tmp_path / "P.fmu")
 
 
-def _cstr_case(tmp_path: Path) -> tuple[Path, Path, Path]:
-    """The example CSTR (pythonfmu), a GRU model of its problem, set-point steps."""
+def _example_case(tmp_path: Path, plant_name: str, seed: int, steps: str
+                  ) -> tuple[Path, Path, Path]:
+    """An example plant of ``fmus/examples`` (pythonfmu), a GRU model of its problem, and the
+    set-point scenario ``steps``."""
     import importlib.util
 
     spec = importlib.util.spec_from_file_location("example_plants",
@@ -126,30 +129,39 @@ def _cstr_case(tmp_path: Path) -> tuple[Path, Path, Path]:
     from controllers.problem_file import load
     from tests.controllers.random_gru import random_gru_model
 
-    plant = examples.build("cstr", tmp_path / "plants")
-    model = random_gru_model(3, n=10, problem=load(examples.problem_file("cstr")))
+    plant = examples.build(plant_name, tmp_path / "plants")
+    model = random_gru_model(seed, n=10, problem=load(examples.problem_file(plant_name)))
     model.w_y_bar = 0.01
-    path = tmp_path / "cstr_gru.json"
+    path = tmp_path / f"{plant_name}_gru.json"
     model.save(path)
-    steps = tmp_path / "steps.csv"
-    steps.write_text("time,ref.CA,ref.T\n0,0.5,330\n1500,0.6,320\n3000,0.4,335\n4500,,\n")
-    return plant, path, steps
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text(steps)
+    return plant, path, scenario
 
 
-def test_a_plant_of_another_kind(tmp_path: Path) -> None:
-    """The CSTR at Ts = 15 s in L/min, K and mol/L: the FMU's inputs are the Python
-    controller's, through the unreachable first output (the closest equilibrium) and the
-    failed solves of a model far from the plant (statuses and fallbacks alike)."""
+@pytest.mark.parametrize(("plant_name", "seed", "steps", "boxes"), [
+    ("cstr", 3, "time,ref.CA,ref.T\n0,0.5,330\n1500,0.6,320\n3000,0.4,335\n4500,,\n",
+     {"F": (50.0, 150.0), "Tc": (290.0, 350.0)}),
+    ("mixing_tank", 4, "time,ref.h,ref.T\n0,1.0,45\n500,1.1,43\n2000,,\n",
+     {"Fh": (0.3, 1.5), "Fc": (0.3, 1.5), "Fw": (0.3, 1.5)})],
+    ids=["cstr-2x2", "mixing-tank-3x2"])
+def test_plants_of_other_kinds(plant_name: str, seed: int, steps: str, boxes: dict,
+                               tmp_path: Path) -> None:
+    """The CSTR at Ts = 15 s in L/min, K and mol/L, and the mixing tank with 3 inputs and 2
+    outputs at Ts = 10 s: the FMU's inputs are the Python controller's, through the
+    unreachable first outputs (the closest equilibrium) and, on the CSTR, the failed solves of
+    a model far from the plant (statuses and fallbacks alike)."""
     from cosim.cli import main
 
-    plant, model, steps = _cstr_case(tmp_path)
-    fmu = tmp_path / "CstrController.fmu"
+    plant, model, steps_csv = _example_case(tmp_path, plant_name, seed, steps)
+    fmu = tmp_path / "Controller.fmu"
     assert main(["export-fmu", str(model), "--out", str(fmu), "--quiet"]) == 0
-    py = cosim.run(steps, plant=plant, model=model, figure=False)
-    run = cosim.run(steps, plant=plant, controller=str(fmu), figure=False)
-    _same_inputs(run, py, {"F": (50.0, 150.0), "Tc": (290.0, 350.0)})
-    statuses = set(py.to_pandas()["ctrl.status"])
-    assert statuses - {0.0}, "the case should reach failed solves"
+    py = cosim.run(steps_csv, plant=plant, model=model, figure=False)
+    run = cosim.run(steps_csv, plant=plant, controller=str(fmu), figure=False)
+    _same_inputs(run, py, boxes)
+    if plant_name == "cstr":
+        statuses = set(py.to_pandas()["ctrl.status"])
+        assert statuses - {0.0}, "the case should reach failed solves"
 
 
 def test_the_compiled_step_replays_the_python_controller() -> None:
