@@ -254,12 +254,16 @@ def run(scenario: str | Path, plant: str | Path | None = None,
 def export_fmu(model: str | Path | None = None, out: str | Path = "Controller.fmu", *,
                fmi: int = 3, problem: str | Path | None = None,
                options: Mapping[str, Any] | None = None,
-               controller: str | Path | None = None) -> Path:
+               controller: str | Path | None = None,
+               scenario: str | Path | None = None) -> Path:
     """The robust MPC of ``model`` (default: the shipped one) as a controller FMU at ``out``
     (FMI ``fmi``, 2 or 3), the twin of ``cosim export-fmu`` (docs: guide/controller-fmu.md):
     the controller ``run(..., options=options)`` would build, its step compiled in C.
     ``controller``: a run's ``controller.json`` (:mod:`cosim.core.controller_file`), the
-    robust MPC it describes (``options`` over its own).
+    robust MPC it describes (``options`` over its own). ``scenario``: the set-points the FMU
+    will meet, checked against the certified design as ``run`` checks a scenario's (one
+    outside it exports the uncertified mode, as ``run`` would switch to it); the FMU cannot
+    look ahead, so without one it keeps the design's certificate.
 
     Raises
     ------
@@ -287,6 +291,10 @@ def export_fmu(model: str | Path | None = None, out: str | Path = "Controller.fm
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # no kernel: export says so
         ctrl = registry.create("robust-mpc", opts)
+    if scenario is not None:
+        from cosim.core.scenario import load
+
+        ctrl.expect_setpoints(load(scenario).setpoints())
     return export(ctrl, out, fmi)
 
 

@@ -49,6 +49,7 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     from controllers.kernel.compiled_kernel import PREFIX_PLACEHOLDER, variant_flags
     from controllers.kernel.controller_source import ControllerDesign, generate_source
 
+    ctrl.setup(0.0)   # its solver built (again after a switch to the uncertified mode)
     why = _why_not(ctrl)
     if why:
         raise CosimError(f"cannot export {ctrl.model_path}: {why}")

@@ -5,17 +5,21 @@
  * controller (the controller FMU, fmus/controller/). It is the C twin of the Python
  * controller step, line for line and in the same order of kernel calls:
  *
- *   ctl_step                cosim_adapters/robust_mpc.py   RobustMPCController.step
- *     law_step              cosim_adapters/tracking.py     TrackingLaw.step
- *       make_step           controllers/ocp/tracking_mpc.py TrackingMPC.make_step
- *         solve             controllers/ocp/fhocp_tracking.py TrackingFHOCP.solve_tracking
- *                           + controllers/ocp/fhocp.py FHOCP.solve_request (write_request,
- *                           the kernel SQP, _check_answer, judge, the warm start)
- *         check             TrackingFHOCP.check (the candidate's answer check)
- *     observer_step         controllers/observer.py        GRUObserver.make_step (eq:observer,
- *                           eq:eo-evolution)
+ *   ctl_step        cosim_adapters/robust_mpc.py RobustMPCController.step: the scalings, the
+ *                   observer's first estimate, the law (cosim_adapters/tracking.py
+ *                   TrackingLaw.step: its first steady state, d_hat, the target), then the
+ *                   observer's update (controllers/observer.py GRUObserver.make_step:
+ *                   eq:observer, eq:eo-evolution)
+ *   make_step       controllers/ocp/tracking_mpc.py TrackingMPC.make_step (the candidate, the
+ *                   fallback, the next guess)
+ *   solve           controllers/ocp/fhocp_tracking.py TrackingFHOCP.solve_tracking and
+ *                   controllers/ocp/fhocp.py FHOCP.solve_request: the i = 0 row,
+ *                   write_request, the kernel SQP, check_answer (_check_answer and
+ *                   fhocp_result.judge, the warm start)
+ *   check           TrackingFHOCP.check (the candidate's answer check)
  *
- * so that the same measurements give the same inputs (tests/cosim/test_controller_fmu.py).
+ * so that the same measurements give the same inputs, to the bit
+ * (tests/cosim_adapters/test_controller_export.py, tests/fmus/test_controller_fmu.py).
  * The tightened bounds (eq:optimization-constraint) are h - a_i e_o - b_i - w_L - L b_o,
  * evaluated in numpy's order. The observer's first estimate is the model equilibrium whose
  * output is closest to the first measured output (paper section V; the kernel's
@@ -32,8 +36,6 @@
 #if !defined(CT_FEAS_TOL)
 #error "the controller's constants (controller_source.py) must precede controller.c"
 #endif
-
-#include <float.h>
 
 /* the step's status codes: controllers/ocp/solve_status.py status_code */
 enum ctl_status {
@@ -226,14 +228,14 @@ static void check_answer(ctl_state *st, int sqp_status) {
 }
 
 /* one solve for the target rt from the guess (TrackingFHOCP.solve_tracking, FHOCP.
- * solve_request): the i = 0 row first, then the SQP and its answer check, into st->res */
-static void solve(ctl_state *st, const double *xhat, double e_o, const double *rt,
-                  const double *g_u, const double *g_us, const double *xs0, const double *up,
+ * solve_request) against the bounds tighten() wrote: the i = 0 row first, then the SQP and
+ * its answer check, into st->res */
+static void solve(ctl_state *st, const double *xhat, const double *rt, const double *g_u,
+                  const double *g_us, const double *xs0, const double *up,
                   const double *us_centre) {
   double u_init[NH * NU], us_init[NU];
   for (int c = 0; c < NH * NU; c++) u_init[c] = clip1(g_u[c]);
   for (int j = 0; j < NU; j++) us_init[j] = clip1(g_us[j]);
-  (void)e_o;
   double x0v = -INFINITY;
   for (int j = 0; j < NL; j++) {
     double s = 0.0;
@@ -252,8 +254,7 @@ static void solve(ctl_state *st, const double *xhat, double e_o, const double *r
 
 /* ---------------------------------------------------------------- the law */
 /* TrackingMPC.make_step: u_k for the target rt, with the candidate as fallback */
-static void make_step(ctl_state *st, const double *xhat, double e_o, const double *rt,
-                      double *u) {
+static void make_step(ctl_state *st, const double *xhat, const double *rt, double *u) {
   double *cand = st->cand;
   if (st->has_plan) {
     memcpy(cand, st->plan + NU, (NH - 1) * NU * sizeof(double));
@@ -266,9 +267,9 @@ static void make_step(ctl_state *st, const double *xhat, double e_o, const doubl
   memcpy(us0, st->us, sizeof us0);
   memcpy(xs0, st->xs, sizeof xs0);
   if (st->has_guess)
-    solve(st, xhat, e_o, rt, st->g_u, st->g_us, st->g_xs, up, us0);
+    solve(st, xhat, rt, st->g_u, st->g_us, st->g_xs, up, us0);
   else
-    solve(st, xhat, e_o, rt, cand, us0, xs0, up, us0);
+    solve(st, xhat, rt, cand, us0, xs0, up, us0);
   ctl_result *res = &st->res;
   int use = res->success, fallback = 0;
   const ctl_result *applied = res;
@@ -311,9 +312,12 @@ EXPORT void PFX(ctl_reset)(ctl_state *st) {
   st->ws = ws;
   PFX(invalidate)(ws);
   st->e_o = CT_E_O0;
-  st->opts = (gk_sqp_opts){CT_SQP_TOL_PR, CT_SQP_TOL_DU, CT_SQP_MAX_ITER, CT_SQP_MAX_ITER_LS,
-                           CT_SQP_MIN_STEP, CT_SQP_C1, CT_SQP_BETA, INFINITY,
-                           CT_SQP_TOL_DU_RELATIVE, CT_SQP_REUSE_STEP};
+  st->opts = (gk_sqp_opts){.tol_pr = CT_SQP_TOL_PR, .tol_du = CT_SQP_TOL_DU,
+                           .max_iter = CT_SQP_MAX_ITER, .max_iter_ls = CT_SQP_MAX_ITER_LS,
+                           .min_step_size = CT_SQP_MIN_STEP, .c1 = CT_SQP_C1,
+                           .beta = CT_SQP_BETA, .time_budget = INFINITY,
+                           .tol_du_relative = CT_SQP_TOL_DU_RELATIVE,
+                           .reuse_step = CT_SQP_REUSE_STEP};
   for (int j = 0; j < NU; j++) st->u_phys[j] = 0.5 * (CT_U_LO[j] + CT_U_HI[j]);
   for (int a = 0; a < NY; a++) st->y_pred[a] = NAN;
   st->status = CTL_OTHER;
@@ -382,7 +386,7 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     }
   tighten(st, e_o);
   for (int a = 0; a < NY; a++) rt[a] = yr[a] - st->dhat[a];
-  make_step(st, st->xhat, e_o, rt, u);
+  make_step(st, st->xhat, rt, u);
   /* the observer (GRUObserver.make_step) */
   PFX(output)(st->xhat, yh);
   for (int a = 0; a < NY; a++) d[a] = y[a] - yh[a];

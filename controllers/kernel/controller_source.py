@@ -151,11 +151,20 @@ class ControllerDesign:
             xs_check_tol=XS_CHECK_TOL)
 
 
+def _number(v: float) -> str:
+    """A double as C source: its shortest exact repr, ``±INFINITY`` for an unbounded row (the
+    uncertified mode leaves the ``i = 0`` rows free)."""
+    if np.isnan(v):
+        raise ValueError("NaN in the controller's constants")
+    return repr(float(v)) if np.isfinite(v) else ("INFINITY" if v > 0 else "-INFINITY")
+
+
 def _array(name: str, a: Any, ctype: str = "double") -> str:
     a = np.ascontiguousarray(np.asarray(a, dtype=float if ctype == "double" else int)).ravel()
-    if ctype == "double" and not np.all(np.isfinite(a)):
-        raise ValueError(f"non-finite entries in {name}")
-    body = ", ".join(repr(float(v)) if ctype == "double" else str(int(v)) for v in a)
+    try:
+        body = ", ".join(_number(v) if ctype == "double" else str(int(v)) for v in a)
+    except ValueError as exc:
+        raise ValueError(f"{name}: {exc}") from None
     return f"static const {ctype} {name}[{max(a.size, 1)}] = {{{body or '0'}}};\n"
 
 

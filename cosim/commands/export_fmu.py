@@ -40,6 +40,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--controller", metavar="CONTROLLER.json", default=None,
                    help="a run's controller.json: the robust MPC it describes (its model and "
                         "options; --option over them)")
+    p.add_argument("--scenario", metavar="SCENARIO.csv", default=None,
+                   help="the set-points the FMU will meet, checked against the certified "
+                        "design as cosim run checks them (one outside it exports the "
+                        "uncertified mode)")
     p.add_argument("--fmi", type=int, choices=(2, 3), default=3,
                    help="FMI version (default: 3)")
     p.add_argument("--out", metavar="FILE.fmu", default="Controller.fmu",
@@ -57,7 +61,8 @@ def run(args: argparse.Namespace) -> int:
     from cosim.core import registry
 
     path = export_fmu(args.model, args.out, fmi=args.fmi, problem=args.problem,
-                      options=registry.parse_options(args.option), controller=args.controller)
+                      options=registry.parse_options(args.option), controller=args.controller,
+                      scenario=args.scenario)
     if not args.quiet:
         md = fmpy.read_model_description(str(path))
         ins = [v.name for v in md.modelVariables if v.causality == "input"

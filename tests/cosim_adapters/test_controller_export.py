@@ -139,27 +139,37 @@ def _example_case(tmp_path: Path, plant_name: str, seed: int, steps: str
     return plant, path, scenario
 
 
-@pytest.mark.parametrize(("plant_name", "seed", "steps", "boxes"), [
+CSTR = {"F": (50.0, 150.0), "Tc": (290.0, 350.0)}
+
+
+@pytest.mark.parametrize(("plant_name", "seed", "steps", "boxes", "certified", "fails"), [
     ("cstr", 3, "time,ref.CA,ref.T\n0,0.5,330\n1500,0.6,320\n3000,0.4,335\n4500,,\n",
-     {"F": (50.0, 150.0), "Tc": (290.0, 350.0)}),
+     CSTR, True, True),
+    ("cstr", 3, "time,ref.CA,ref.T\n0,0.5,330\n750,0.995,330\n2250,,\n", CSTR, False, False),
     ("mixing_tank", 4, "time,ref.h,ref.T\n0,1.0,45\n500,1.1,43\n2000,,\n",
-     {"Fh": (0.3, 1.5), "Fc": (0.3, 1.5), "Fw": (0.3, 1.5)})],
-    ids=["cstr-2x2", "mixing-tank-3x2"])
+     {"Fh": (0.3, 1.5), "Fc": (0.3, 1.5), "Fw": (0.3, 1.5)}, True, False)],
+    ids=["cstr-2x2", "cstr-uncertified", "mixing-tank-3x2"])
 def test_plants_of_other_kinds(plant_name: str, seed: int, steps: str, boxes: dict,
-                               tmp_path: Path) -> None:
+                               certified: bool, fails: bool, tmp_path: Path) -> None:
     """The CSTR at Ts = 15 s in L/min, K and mol/L, and the mixing tank with 3 inputs and 2
-    outputs at Ts = 10 s: the FMU's inputs are the Python controller's, through the
-    unreachable first outputs (the closest equilibrium) and, on the CSTR, the failed solves of
-    a model far from the plant (statuses and fallbacks alike)."""
+    outputs at Ts = 10 s, each exported with ``--scenario`` (its set-points checked as
+    ``cosim run`` checks them): the FMU's inputs are the Python controller's, through the
+    unreachable first outputs (the closest equilibrium), the failed solves of a model far
+    from the plant (statuses and fallbacks alike) and, for a set-point outside the certified
+    steady outputs, the uncertified mode (the tightening around ``y + d̂``)."""
     from cosim.cli import main
 
     plant, model, steps_csv = _example_case(tmp_path, plant_name, seed, steps)
     fmu = tmp_path / "Controller.fmu"
-    assert main(["export-fmu", str(model), "--out", str(fmu), "--quiet"]) == 0
+    assert main(["export-fmu", str(model), "--scenario", str(steps_csv), "--out", str(fmu),
+                 "--quiet"]) == 0
+    description = fmpy.read_model_description(str(fmu)).description
+    assert (", certified:" in description) is certified, description
     py = cosim.run(steps_csv, plant=plant, model=model, figure=False)
+    assert py.summary["controller_summary"]["certified"] is certified
     run = cosim.run(steps_csv, plant=plant, controller=str(fmu), figure=False)
     _same_inputs(run, py, boxes)
-    if plant_name == "cstr":
+    if fails:
         statuses = set(py.to_pandas()["ctrl.status"])
         assert statuses - {0.0}, "the case should reach failed solves"
 
