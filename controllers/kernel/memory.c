@@ -37,6 +37,9 @@
  *
  * The interface (exported entry points, instances, types): gru_fhocp.h.
  */
+#ifndef _POSIX_C_SOURCE
+#define _POSIX_C_SOURCE 200809L   /* posix_memalign, clock_gettime under -std=c99 too */
+#endif
 #include <math.h>
 #include <stdlib.h>
 #include <string.h>
