@@ -1,8 +1,9 @@
-"""Shared pytest fixtures: the built four-tank plant FMUs.
+"""Shared pytest fixtures: the built four-tank plant FMUs and the exported controller FMUs.
 
 Tests that need a real FMU take ``fmu2_path`` (FMI 2.0) or ``fmu3_path`` (FMI 3.0). The FMUs
 are built once per session by :func:`cosim.core.build.build_fmus`, which only recompiles when the
-C sources changed.
+C sources changed. ``controller_fmus`` is the default robust MPC exported by ``cosim
+export-fmu`` for FMI 2 and 3, once per session.
 """
 
 from __future__ import annotations
@@ -30,3 +31,16 @@ def fmu2_path(fmu_paths: list[Path]) -> Path:
 def fmu3_path(fmu_paths: list[Path]) -> Path:
     """``fmus/FourTank3.fmu``: the FMI 3.0 plant (Co-Simulation and Model Exchange)."""
     return fmu_paths[1]
+
+
+@pytest.fixture(scope="session")
+def controller_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]:
+    """The default robust MPC of the shipped model as controller FMUs, by FMI version
+    (``Controller2.fmu``, ``Controller3.fmu``)."""
+    from cosim.cli import main
+
+    out = tmp_path_factory.mktemp("controller")
+    fmus = {v: out / f"Controller{v}.fmu" for v in (2, 3)}
+    for version, path in fmus.items():
+        assert main(["export-fmu", "--fmi", str(version), "--out", str(path), "--quiet"]) == 0
+    return fmus

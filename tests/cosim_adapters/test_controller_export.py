@@ -31,18 +31,6 @@ TOL = 1e-9
 
 
 @pytest.fixture(scope="module")
-def fourtank_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]:
-    """The default robust MPC of the shipped model, exported for FMI 2 and FMI 3."""
-    from cosim.cli import main
-
-    out = tmp_path_factory.mktemp("export")
-    fmus = {v: out / f"Controller{v}.fmu" for v in (2, 3)}
-    for version, path in fmus.items():
-        assert main(["export-fmu", "--fmi", str(version), "--out", str(path), "--quiet"]) == 0
-    return fmus
-
-
-@pytest.fixture(scope="module")
 def python_paper_run() -> cosim.RunOutput:
     return cosim.run(PAPER, figure=False)
 
@@ -60,8 +48,8 @@ def _same_inputs(fmu_run: cosim.RunOutput, py_run: cosim.RunOutput, inputs: dict
 
 @pytest.mark.parametrize("version", [2, 3])
 def test_the_master_runs_the_fmu_as_the_python_controller(
-        version: int, fourtank_fmus: dict[int, Path], python_paper_run: cosim.RunOutput) -> None:
-    run = cosim.run(PAPER, controller=str(fourtank_fmus[version]), figure=False)
+        version: int, controller_fmus: dict[int, Path], python_paper_run: cosim.RunOutput) -> None:
+    run = cosim.run(PAPER, controller=str(controller_fmus[version]), figure=False)
     _same_inputs(run, python_paper_run, {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
     summary = run.summary["controller_summary"]
     assert summary["controller"] == "fmu" and "tracking law, certified" in summary[
@@ -73,14 +61,14 @@ def test_the_master_runs_the_fmu_as_the_python_controller(
     assert float(np.median(err)) < 0.02
 
 
-def test_a_tuned_parameter_is_the_python_option(fourtank_fmus: dict[int, Path],
+def test_a_tuned_parameter_is_the_python_option(controller_fmus: dict[int, Path],
                                                 tmp_path: Path) -> None:
     """The FMU's tunable ``offset_filter`` set to 0.6 (``--option`` of its component) gives
     the Python controller with ``offset_filter=0.6``; 0 fails the run at its start with the
     FMU's reason; an option the FMU has no parameter for is named."""
     scenario = tmp_path / "steps.csv"
     scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,1.3,1.4\n1500,,\n")
-    fmu = str(fourtank_fmus[3])
+    fmu = str(controller_fmus[3])
     py = cosim.run(scenario, options={"offset_filter": 0.6}, figure=False)
     tuned = cosim.run(scenario, controller=fmu, options={"offset_filter": 0.6}, figure=False)
     _same_inputs(tuned, py, {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
@@ -212,11 +200,11 @@ def test_the_paper_law_is_not_exported(tmp_path: Path) -> None:
 
 
 def test_a_campaign_qualifies_the_fmu_on_the_python_controllers_draws(
-        fourtank_fmus: dict[int, Path], tmp_path: Path) -> None:
+        controller_fmus: dict[int, Path], tmp_path: Path) -> None:
     """A campaign variant ``controller = "Mpc.fmu"`` (packed with the campaign, found beside
     the spec) runs on a Dask worker on the draws of the Python variant: plant uncertainty and
     sensor noise, the same inputs and levels run by run."""
-    (tmp_path / "Mpc.fmu").write_bytes(fourtank_fmus[3].read_bytes())
+    (tmp_path / "Mpc.fmu").write_bytes(controller_fmus[3].read_bytes())
     spec = tmp_path / "spec.toml"
     spec.write_text(f"""[campaign]
 name = "fmu-vs-python"

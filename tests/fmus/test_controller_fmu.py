@@ -21,18 +21,6 @@ TS = 25.0
 REFS = [(0, (0.65, 0.65)), (40, (1.3, 1.4)), (90, (0.9, 1.2))]   # (from step, (h1, h2))
 
 
-@pytest.fixture(scope="module")
-def controller_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]:
-    """The default robust MPC of the shipped model, exported for FMI 2 and FMI 3."""
-    from cosim.cli import main
-
-    out = tmp_path_factory.mktemp("controller")
-    fmus = {v: out / f"Controller{v}.fmu" for v in (2, 3)}
-    for version, path in fmus.items():
-        assert main(["export-fmu", "--fmi", str(version), "--out", str(path), "--quiet"]) == 0
-    return fmus
-
-
 def _ref(k: int) -> tuple[float, float]:
     return next(r for start, r in reversed(REFS) if k >= start)
 
