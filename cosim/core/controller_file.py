@@ -34,8 +34,9 @@ __all__ = ["FILE_NAME", "FORMAT", "describe", "is_controller_file", "load", "wri
 FORMAT = "gru-mpc-controller/1"
 #: The name of the description a run writes into its output folder.
 FILE_NAME = "controller.json"
-#: Options that name files: fingerprinted when they are paths to existing files.
-FILE_OPTIONS = ("model", "problem")
+#: Options that name files (the robust MPC's model and problem, a controller FMU's path):
+#: fingerprinted when they are paths to existing files.
+FILE_OPTIONS = ("model", "problem", "path")
 _KEYS = {"format", "controller", "options", "files"}
 
 

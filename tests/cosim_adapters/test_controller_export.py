@@ -14,6 +14,7 @@ same inputs.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import fmpy
@@ -70,9 +71,17 @@ def test_a_tuned_parameter_is_the_python_option(controller_fmus: dict[int, Path]
     scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,1.3,1.4\n1500,,\n")
     fmu = str(controller_fmus[3])
     py = cosim.run(scenario, options={"offset_filter": 0.6}, figure=False)
-    tuned = cosim.run(scenario, controller=fmu, options={"offset_filter": 0.6}, figure=False)
+    tuned = cosim.run(scenario, controller=fmu, options={"offset_filter": 0.6},
+                      out=tmp_path / "tuned", figure=False)
     _same_inputs(tuned, py, {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
     assert tuned.summary["controller_summary"]["parameters"] == {"offset_filter": 0.6}
+    # its controller.json names the FMU (fingerprinted) and the parameter: the same run again
+    recorded = json.loads((tmp_path / "tuned" / "controller.json").read_text())
+    assert recorded["options"] == {"path": fmu, "offset_filter": 0.6}
+    assert "sha256" in recorded["files"]["path"]
+    again = cosim.run(scenario, controller=str(tmp_path / "tuned" / "controller.json"),
+                      figure=False)
+    _same_inputs(again, tuned, {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
     default = cosim.run(scenario, controller=fmu, figure=False).to_pandas()
     assert not np.array_equal(default["ctrl.qa"], tuned.to_pandas()["ctrl.qa"])
     refused = cosim.run(scenario, controller=fmu, options={"offset_filter": 0.0}, figure=False)
