@@ -70,7 +70,7 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
                        for c in pr.outputs),
         applied=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
                       for c in pr.inputs),
-        parameters=(Parameter("offset_filter", law.disturbance.beta, 0.0, 1.0,
+        parameters=(Parameter("offset_filter", "1", 0.0, 1.0,
                               "gain of the output-disturbance estimate d_hat, in (0, 1] "
-                              "(option offset_filter)"),))
+                              "(option offset_filter)", start=law.disturbance.beta),))
     return build_controller_fmu(iface, source, out, fmi_version=fmi_version, flags=flags)

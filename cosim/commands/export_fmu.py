@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from cosim.commands import add_design_arguments
 from cosim.core.errors import exit_codes_help
 
 __all__ = ["DESCRIPTION", "HELP", "register", "run"]
@@ -32,11 +33,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("model", metavar="MODEL.json", nargs="?", default=None,
                    help="GRU model file (default: the shipped controllers/models/"
                         "fourtank_gru.json)")
-    p.add_argument("--problem", metavar="PROBLEM.toml", default=None,
-                   help="control problem file: must agree with the model's own (checked), or "
-                        "gives the problem of a model file without one")
-    p.add_argument("--option", metavar="KEY=VALUE", action="append", default=[],
-                   help="robust-mpc option, as for cosim run (e.g. N=40), repeatable")
+    add_design_arguments(p, "robust-mpc option, as for cosim run (e.g. N=40), repeatable")
     p.add_argument("--controller", metavar="CONTROLLER.json", default=None,
                    help="a run's controller.json: the robust MPC it describes (its model and "
                         "options; --option over them)")

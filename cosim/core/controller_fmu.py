@@ -61,14 +61,10 @@ class Port:
 
 
 @dataclass(frozen=True)
-class Parameter:
-    """A tunable parameter of the controller step: name, start value, box, description."""
+class Parameter(Port):
+    """A tunable parameter of the controller step: a :class:`Port` with its start value."""
 
-    name: str
-    start: float
-    low: float
-    high: float
-    description: str = ""
+    start: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -99,7 +95,8 @@ class ControllerInterface:
         out += [(name, "output", "discrete", "1", None, text) for name, text in DIAGNOSTICS]
         out += [(f"pred.{p.name}", "output", "discrete", p.unit, None,
                  f"{p.name} the model predicts at the next sample") for p in self.measured]
-        out += [(q.name, "parameter", "tunable", "1", q, q.description) for q in self.parameters]
+        out += [(q.name, "parameter", "tunable", q.unit, q, q.description)
+                for q in self.parameters]
         return out
 
 
