@@ -47,7 +47,11 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     """Build the controller FMU of ``ctrl`` (a robust MPC) at ``out`` (FMI 2 or 3); returns
     ``out``. Raises :class:`CosimError` (one line) when it cannot be exported or built."""
     from controllers.kernel.compiled_kernel import PREFIX_PLACEHOLDER, variant_flags
-    from controllers.kernel.controller_source import ControllerDesign, generate_source
+    from controllers.kernel.controller_source import (
+        PARAMETERS,
+        ControllerDesign,
+        generate_source,
+    )
 
     ctrl.setup(0.0)   # its solver built (again after a switch to the uncertified mode)
     why = _why_not(ctrl)
@@ -59,6 +63,7 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     source = generate_source(design).replace(PREFIX_PLACEHOLDER, "mpc_")
     flags, _ = variant_flags(design.kernel, (), blas=False)
     pr = ctrl.problem
+    starts = {"offset_filter": design.beta}   # the options' values in this design
     digest = hashlib.sha256(source.encode()).hexdigest()
     certified = "certified" if ctrl.certification.certified else "uncertified"
     iface = ControllerInterface(
@@ -70,7 +75,6 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
                        for c in pr.outputs),
         applied=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
                       for c in pr.inputs),
-        parameters=(Parameter("offset_filter", "1", 0.0, 1.0,
-                              "gain of the output-disturbance estimate d_hat, in (0, 1] "
-                              "(option offset_filter)", start=law.disturbance.beta),))
+        parameters=tuple(Parameter(name, "1", low, high, text, start=starts[name])
+                         for name, low, high, text in PARAMETERS))
     return build_controller_fmu(iface, source, out, fmi_version=fmi_version, flags=flags)

@@ -45,6 +45,8 @@ enum ctl_status {
 /* the tunable parameters (ctl_set_parameter): the disturbance filter's gain (option
  * offset_filter, in (0, 1]) */
 enum { CTL_P_OFFSET_FILTER = 0, CTL_N_PARAMETERS = 1 };
+/* controller_source.py PARAMETERS names them, in this order */
+typedef char ctl_parameters_agree[CT_NPARAM == CTL_N_PARAMETERS ? 1 : -1];
 /* warnings a step may raise (ctl_state.warnings, a bit mask cleared by ctl_take_warnings) */
 enum { CTL_WARN_NONFINITE_INPUT = 1, CTL_WARN_UNREACHABLE_START = 2 };
 

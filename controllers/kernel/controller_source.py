@@ -37,15 +37,16 @@ from controllers.kernel.compiled_kernel import (
     generate_source as kernel_source,
 )
 
-__all__ = ["CONTROLLER_C", "STATUS_TEXT", "CompiledController", "ControllerDesign", "build",
+__all__ = ["CONTROLLER_C", "PARAMETERS", "CompiledController", "ControllerDesign", "build",
            "generate_source"]
 
+#: The tunable parameters of the C step, in its order (``controller.c`` ``CTL_P_*``):
+#: ``(name, low, high, description)``; each is the option of that name.
+PARAMETERS = (("offset_filter", 0.0, 1.0,
+               "gain of the output-disturbance estimate d_hat, in (0, 1] (option "
+               "offset_filter)"),)
 #: The C step (joined after the kernel and the constants).
 CONTROLLER_C = Path(__file__).with_name("controller.c")
-#: The C step's status codes (``enum ctl_status``; :func:`controllers.ocp.solve_status.
-#: status_code`'s numbers).
-STATUS_TEXT = ("optimal", "infeasible at x_hat", "infeasible", "iteration or time limit",
-               "answer check failed", "other")
 #: Compiler flags of the exported step: the kernel's, warnings as errors.
 CFLAGS = ("-O3", "-fPIC", "-std=gnu99", "-Wall", "-Wextra", "-Werror",
           "-Wno-aggressive-loop-optimizations")
@@ -191,7 +192,8 @@ def _constants(d: ControllerDesign) -> str:
                         ("CT_SQP_C1", s["c1"]), ("CT_SQP_BETA", s["beta"]),
                         ("CT_SQP_REUSE_STEP", s["reuse_step"])):
         lines.append(f"#define {name} ({float(value)!r})\n")
-    for name, value in (("CT_CERTIFIED", int(d.certified)), ("CT_SQP_MAX_ITER", s["max_iter"]),
+    for name, value in (("CT_CERTIFIED", int(d.certified)), ("CT_NPARAM", len(PARAMETERS)),
+                        ("CT_SQP_MAX_ITER", s["max_iter"]),
                         ("CT_SQP_MAX_ITER_LS", s["max_iter_ls"]),
                         ("CT_SQP_TOL_DU_RELATIVE", s["tol_du_relative"])):
         lines.append(f"#define {name} {int(value)}\n")

@@ -15,7 +15,6 @@ the instance's own). The archive is reproducible (fixed time stamps) and written
 
 from __future__ import annotations
 
-import os
 import subprocess
 import tempfile
 import zipfile
@@ -113,6 +112,7 @@ def names_header(iface: ControllerInterface) -> str:
         f"#define MODEL_IDENTIFIER {_c_string(iface.identifier)}\n"
         f"#define INSTANTIATION_TOKEN {_c_string(iface.token)}\n"
         f"#define CTL_NY {len(iface.measured)}\n#define CTL_NU {len(iface.applied)}\n"
+        f"#define CTL_NPARAM {len(iface.parameters)}\n"
         f"#define CTL_TS ({float(iface.sample_time)!r})\n"
         f"static const char *const CTL_NAMES[] = {{{', '.join(map(_c_string, names))}}};\n"
         f"static const double CTL_Y_START[] = {{{', '.join(repr(v) for v in starts)}}};\n")
@@ -273,7 +273,6 @@ def build_controller_fmu(iface: ControllerInterface, step_source: str, out: str 
             if fmi_version == 3:
                 add_member(zf, "sources/buildDescription.xml", _build_description(
                     iface.identifier, flags).encode())
-    os.utime(out)
     return out
 
 

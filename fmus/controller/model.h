@@ -37,9 +37,8 @@
 #define VR_FALLBACK (VR_STATUS + 1)
 #define VR_ITERATIONS (VR_FALLBACK + 1)
 #define VR_PRED (VR_ITERATIONS + 1)         /* CTL_NY predicted outputs */
-#define VR_PARAM (VR_PRED + CTL_NY)         /* N_PARAMETERS tunable parameters */
-#define N_PARAMETERS 1
-#define N_VARIABLES (VR_PARAM + N_PARAMETERS)
+#define VR_PARAM (VR_PRED + CTL_NY)         /* CTL_NPARAM tunable parameters */
+#define N_VARIABLES (VR_PARAM + CTL_NPARAM)
 
 /* the controller step (controller_step.c: controllers/kernel/controller.c) */
 typedef struct ctl_state ctl_state;
