@@ -317,3 +317,17 @@ def test_its_sources_build_as_its_build_description_says(controller_fmus: dict[i
         qa, qb, status, _ = _control(ctrl, (0.62, 0.71), (0.8, 0.9))
         assert status == 0 and 0.0 <= qa <= 9.05e-4 and 0.0 <= qb <= 1.11e-3
     ctrl.close()
+
+
+@pytest.mark.parametrize("version", [2, 3])
+def test_reset_gives_a_fresh_controller(version: int, controller_fmus: dict[int, Path]) -> None:
+    """``fmi2Reset`` / ``fmi3Reset`` after some steps, initialised again: the same inputs as
+    the first time (observer, plan and warm start forgotten; the parameter set again)."""
+    ctrl = _controller(controller_fmus[version])
+    ctrl.set(offset_filter=0.7)
+    first = [_control(ctrl, (0.6 + 0.01 * k, 0.7), (1.0, 1.1)) for k in range(5)]
+    ctrl.fmu.reset()
+    ctrl.time = 0.0
+    ctrl.initialize(offset_filter=0.7)
+    assert [_control(ctrl, (0.6 + 0.01 * k, 0.7), (1.0, 1.1)) for k in range(5)] == first
+    ctrl.close()
