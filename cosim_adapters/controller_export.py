@@ -53,6 +53,8 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
         generate_source,
     )
 
+    if not str(out).endswith(".fmu"):
+        raise CosimError(f"--out {out}: an FMU's file name ends with .fmu")
     ctrl.setup(0.0)   # its solver built (again after a switch to the uncertified mode)
     why = _why_not(ctrl)
     if why:
