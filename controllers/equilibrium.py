@@ -197,14 +197,20 @@ def equilibrium(model_or_params: Any, y_bar_norm: Sequence[float]) -> tuple[np.n
     return x, u
 
 
-def equilibrium_for_output(model_or_params: Any,
-                           y_norm: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+def equilibrium_for_output(model_or_params: Any, y_norm: Sequence[float],
+                           kernel: Any = None) -> tuple[np.ndarray, np.ndarray]:
     """Equilibrium ``(x, u)`` whose output is closest to ``y`` (normalised), never raising.
 
     Used for the observer's initial state ``x̂_0`` (paper section V: the equilibrium for the
     first measured output); when ``y`` is not reachable the closest reachable equilibrium
-    (least squares over ``‖u‖∞ ≤ 1``) is returned.
+    (least squares over ``‖u‖∞ ≤ 1``) is returned. ``kernel``: a compiled kernel's workspace
+    of the same model; a tracking FHOCP's has the same search compiled
+    (:meth:`controllers.kernel.kernel_lib.Workspace.equilibrium`, the exported controller's),
+    which is then used.
     """
+    if kernel is not None and kernel.has_equilibrium:
+        x, u, _ = kernel.equilibrium(np.asarray(y_norm, dtype=float).reshape(-1))
+        return x, u
     params = _params(model_or_params)
     x, u, _ = _solve(params, np.asarray(y_norm, dtype=float).reshape(-1))
     return x, u

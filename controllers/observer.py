@@ -89,14 +89,10 @@ class GRUObserver:
 
     def init_from_output(self, y0: np.ndarray) -> np.ndarray:
         """Set ``x̂_0`` to the model equilibrium whose output is (closest to) ``y0``
-        (normalised), as in the paper's section V; returns ``x̂_0``. With a tracking
-        FHOCP's kernel (:attr:`kernel`) the compiled search of
-        :meth:`~controllers.kernel.kernel_lib.Workspace.equilibrium` (the exported
-        controller's), else :func:`~controllers.equilibrium.equilibrium_for_output`."""
-        if self.kernel is not None and self.kernel.has_equilibrium:
-            self.x_hat = self.kernel.equilibrium(np.asarray(y0, dtype=float))[0]
-        else:
-            self.x_hat, _ = equilibrium_for_output(self.params, y0)
+        (normalised), as in the paper's section V (with :attr:`kernel`, its compiled search
+        when it has one: :func:`~controllers.equilibrium.equilibrium_for_output`); returns
+        ``x̂_0``."""
+        self.x_hat, _ = equilibrium_for_output(self.params, y0, self.kernel)
         return self.x_hat
 
     def y_hat(self) -> np.ndarray:

@@ -168,12 +168,8 @@ class TrackingLaw:
             self.setpoint_changes += 1
             self.y_ref = y_ref
         tracker, model = self.tracker, self.model
-        if tracker.u_s is None:   # the equilibrium x̂_0 starts at (the kernel's search)
-            ws = self.fhocp.kernel
-            if ws is not None and ws.has_equilibrium:
-                x_s, u_s, _ = ws.equilibrium(observer.y_hat())
-            else:
-                x_s, u_s = equilibrium_for_output(model.params, observer.y_hat())
+        if tracker.u_s is None:   # the equilibrium x̂_0 starts at
+            x_s, u_s = equilibrium_for_output(model.params, observer.y_hat(), self.fhocp.kernel)
             tracker.start(u_s, x_s)
         d_hat = self.disturbance.update(y, observer.y_hat())
         if not self.certified:   # the measured tightening is around y + d̂

@@ -83,8 +83,6 @@ typedef struct ctl_state {
   int status, fallback, iterations, warnings;
 } ctl_state;
 
-static double clip1(double v) { return v < -1.0 ? -1.0 : (v > 1.0 ? 1.0 : v); }
-
 static int all_finite(const double *a, int n) {
   for (int k = 0; k < n; k++)
     if (!isfinite(a[k])) return 0;
@@ -110,7 +108,7 @@ static void tighten(ctl_state *st, double e_o) {
 static void assess(ctl_state *st, const double *w, const double *p, ctl_result *r) {
   gk_assessment out;
   PFX(assess_w)(st->ws, w, p, st->bnd, CT_ALPHA_C, r->u, r->x, &out, r->xs);
-  for (int j = 0; j < NU; j++) r->us[j] = clip1(w[NUU + j]);
+  for (int j = 0; j < NU; j++) r->us[j] = gk_clip1(w[NUU + j]);
   r->cost = out.cost;
   r->defect = out.defect;
   if (!(out.steady_residual <= CT_XS_CHECK_TOL)) {
@@ -146,8 +144,8 @@ static void check(ctl_state *st, const double *xhat, const double *u_in, const d
                   const double *rt, const double *xs0, const double *up, int status,
                   ctl_result *r) {
   double w[NW] = {0.0}, p[NP];
-  for (int c = 0; c < NUU; c++) w[c] = clip1(u_in[c]);
-  for (int j = 0; j < NU; j++) w[NUU + j] = clip1(us_in[j]);
+  for (int c = 0; c < NUU; c++) w[c] = gk_clip1(u_in[c]);
+  for (int j = 0; j < NU; j++) w[NUU + j] = gk_clip1(us_in[j]);
   parameters(p, xhat, xs0, rt, up);
   assess(st, w, p, r);
   r->defect = 0.0;
@@ -236,8 +234,8 @@ static void solve(ctl_state *st, const double *xhat, const double *rt, const dou
                   const double *g_us, const double *xs0, const double *up,
                   const double *us_centre) {
   double u_init[NH * NU], us_init[NU];
-  for (int c = 0; c < NH * NU; c++) u_init[c] = clip1(g_u[c]);
-  for (int j = 0; j < NU; j++) us_init[j] = clip1(g_us[j]);
+  for (int c = 0; c < NH * NU; c++) u_init[c] = gk_clip1(g_u[c]);
+  for (int j = 0; j < NU; j++) us_init[j] = gk_clip1(g_us[j]);
   double x0v = -INFINITY;
   for (int j = 0; j < NL; j++) {
     double s = 0.0;
@@ -289,7 +287,7 @@ static void make_step(ctl_state *st, const double *xhat, const double *rt, doubl
     memcpy(u, res->u, NU * sizeof(double));
   } else {
     memcpy(st->plan, cand, sizeof st->plan);
-    for (int j = 0; j < NU; j++) u[j] = clip1(cand[j]);
+    for (int j = 0; j < NU; j++) u[j] = gk_clip1(cand[j]);
   }
   st->has_plan = 1;
   st->has_guess = all_finite(res->xs, NX);
@@ -372,7 +370,7 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     double x_s[NX], u_s[NU];
     PFX(output)(st->xhat, yh);
     PFX(equilibrium)(st->ws, yh, x_s, u_s);
-    for (int j = 0; j < NU; j++) st->us[j] = clip1(u_s[j]);
+    for (int j = 0; j < NU; j++) st->us[j] = gk_clip1(u_s[j]);
     memcpy(st->xs, x_s, sizeof x_s);
     st->has_plan = st->has_guess = 0;
     st->started = 1;

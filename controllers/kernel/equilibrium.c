@@ -8,6 +8,7 @@
 /* Residual below which an output counts as reached (controllers/equilibrium.py REACH_TOL). */
 #define GK_REACH_TOL 1e-8
 
+/* v clipped to [-1, 1] (the exported controller's step uses it too) */
 static double gk_clip1(double v) { return v < -1.0 ? -1.0 : (v > 1.0 ? 1.0 : v); }
 
 static double gk_max_abs_diff(const double *a, const double *b, int n) {
@@ -27,11 +28,7 @@ static int eq_residual(gk_ws *ws, const double *u, const double *y, double *x, d
   double xs[NX];
   if (PFX(steady)(ws, u, x, xs) != 0) return 1;
   memcpy(x, xs, sizeof xs);
-  for (int a = 0; a < NY; a++) {
-    double s = BO[a];
-    for (int k = 0; k < NX; k++) s += UO[a * NX + k] * x[k];
-    F[a] = s;
-  }
+  PFX(output)(x, F);
   for (int a = 0; a < NY; a++) F[a] -= y[a];
   if (J)
     for (int a = 0; a < NY; a++)

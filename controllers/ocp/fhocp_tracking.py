@@ -285,11 +285,8 @@ class TrackingFHOCP(FHOCP):
             w = np.zeros(self.nw)
             w[self.iu[:self.control_horizon].ravel()] = u[:self.control_horizon].ravel()
             w[self.ius] = u_s
-            up = u_s if u_prev is None else np.asarray(u_prev, dtype=float).reshape(self.m)
-            pv = np.concatenate([np.asarray(x_hat, dtype=float).reshape(self.n),
-                                 np.asarray(x_s0, dtype=float).reshape(self.n),
-                                 np.asarray(r, dtype=float).reshape(self.p),
-                                 up if self.has_du else np.zeros(0)])
+            pv = np.zeros(self.npar)
+            self._write_parameters(pv, x_hat, x_s0, r, u_s if u_prev is None else u_prev)
             res = self._check_answer(w, pv, e_o, status)
             res.defect = 0.0   # no solver trajectory to compare with
             return res
@@ -367,10 +364,7 @@ class TrackingFHOCP(FHOCP):
         the initial guess with ``t`` its terminal gap, and the multipliers shifted by one
         stage (``warm``) or zeros."""
         pv = ins["p"]
-        n = self.n
-        pv[:n], pv[n:2 * n], pv[2 * n:2 * n + self.p] = x_hat, request.x_s0, request.r
-        if self.has_du:
-            pv[2 * n + self.p:] = request.u_prev
+        self._write_parameters(pv, x_hat, request.x_s0, request.r, request.u_prev)
         self._write_bounds(ins, e_o)
         if self.us_rate is not None:   # the steady input moves at most us_rate per step
             c = request.us_centre
@@ -423,6 +417,15 @@ class TrackingFHOCP(FHOCP):
         res.constraint_violation = max(res.constraint_violation,
                                        float(np.max(self.LUo @ x_s - self._ys_rhs)))
         return res
+
+    def _write_parameters(self, pv: np.ndarray, x_hat: Any, x_s0: Any, r: Any,
+                          u_prev: Any) -> None:
+        """``p = (x̂, x_s0, r[, u_{−1}])`` into ``pv`` (``u_{−1}`` only with the input-rate
+        term)."""
+        n = self.n
+        pv[:n], pv[n:2 * n], pv[2 * n:2 * n + self.p] = x_hat, x_s0, r
+        if self.has_du:
+            pv[2 * n + self.p:] = u_prev
 
     def _write_bounds(self, ins: dict[str, np.ndarray], e_o: float) -> None:
         """Variable and constraint bounds of one solve (the tightened rows for ``ê_o``)."""

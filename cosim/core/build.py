@@ -59,6 +59,7 @@ __all__ = [
     "display_path",
     "fmi_headers_dir",
     "output_dir",
+    "run_compiler",
     "source_path",
     "writable",
 ]
@@ -227,16 +228,22 @@ def _compile(target: Target, cc: str, out: Path) -> None:
     sources = [str(source_path(name)) for name in target.sources if name.endswith(".c")]
     cmd = [cc, *CFLAGS, f"-I{include}", f"-I{SOURCE_DIR}", f"-I{GLUE_DIR}", "-o", str(out),
            *sources, *LDFLAGS]
+    run_compiler(cmd, target.fmu_name)
+
+
+def run_compiler(cmd: list[str], what: str) -> None:
+    """Run the compiler command ``cmd`` (its first element the compiler) building ``what``;
+    a failure raises :class:`CosimError` in one line: its first error line."""
     try:
-        result = subprocess.run(cmd, capture_output=True, text=True, check=False)
-    except OSError as exc:
-        raise CosimError(f"cannot run C compiler {cc}: {exc}") from exc
+        result = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=600)
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise CosimError(f"cannot run C compiler {cmd[0]}: {exc}") from None
     if result.returncode != 0:
         lines = [ln for ln in result.stderr.splitlines() if "error" in ln] or [
             ln for ln in result.stderr.splitlines() if ln.strip()
         ]
         first = lines[0].strip() if lines else f"exit status {result.returncode}"
-        raise CosimError(f"compiling {target.fmu_name} failed: {first}")
+        raise CosimError(f"compiling {what} failed: {first}")
 
 
 #: Time stamp of every FMU member: the same sources give the same FMU, byte for byte (a

@@ -15,7 +15,6 @@ the instance's own). The archive is reproducible (fixed time stamps) and written
 
 from __future__ import annotations
 
-import subprocess
 import tempfile
 import zipfile
 from collections.abc import Sequence
@@ -31,6 +30,7 @@ from cosim.core.build import (
     check_platform,
     compiler,
     fmi_headers_dir,
+    run_compiler,
 )
 from cosim.core.errors import CosimError
 
@@ -213,19 +213,10 @@ def model_description(iface: ControllerInterface, fmi_version: int) -> str:
 
 
 def _compile(folder: Path, glue: str, flags: Sequence[str], out: Path) -> None:
-    cc = compiler()
     sources = [folder / name for name in ("model.c", "controller_step.c", "instance.c", glue)]
-    cmd = [cc, *CFLAGS, *flags, f"-I{fmi_headers_dir()}", f"-I{folder}", "-o", str(out),
-           *map(str, sources), "-Wl,--no-undefined", "-lm"]
-    try:
-        res = subprocess.run(cmd, capture_output=True, text=True, check=False, timeout=600)
-    except (OSError, subprocess.SubprocessError) as exc:
-        raise CosimError(f"cannot run the C compiler {cc}: {exc}") from None
-    if res.returncode != 0:
-        lines = [ln for ln in res.stderr.splitlines() if "error" in ln] or [
-            ln for ln in res.stderr.splitlines() if ln.strip()]
-        raise CosimError(f"compiling the controller FMU failed: "
-                         f"{lines[0].strip() if lines else f'exit status {res.returncode}'}")
+    run_compiler([compiler(), *CFLAGS, *flags, f"-I{fmi_headers_dir()}", f"-I{folder}", "-o",
+                  str(out), *map(str, sources), "-Wl,--no-undefined", "-lm"],
+                 "the controller FMU")
 
 
 def build_controller_fmu(iface: ControllerInterface, step_source: str, out: str | Path, *,

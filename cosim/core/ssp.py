@@ -15,6 +15,7 @@ from __future__ import annotations
 import zipfile
 from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 from xml.sax.saxutils import quoteattr
 
 from cosim.core.atomicio import replacing
@@ -29,7 +30,7 @@ _NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
        'xmlns:osp="http://opensimulationplatform.com/SSP/OSPAnnotations"')
 
 
-def _real_variables(path: Path) -> dict[str, object]:
+def _real_variables(path: Path) -> dict[str, Any]:
     import fmpy
 
     try:
@@ -49,7 +50,12 @@ def connections(plant: Path, controller: Path) -> tuple[list[tuple[str, str]], l
         A controller output no plant input takes, or no connection at all: the two FMUs do
         not belong together.
     """
-    pv, cv = _real_variables(plant), _real_variables(controller)
+    return _links(_real_variables(plant), _real_variables(controller), plant, controller)
+
+
+def _links(pv: Mapping[str, Any], cv: Mapping[str, Any], plant: Path, controller: Path
+           ) -> tuple[list[tuple[str, str]], list[str]]:
+    """:func:`connections` of the plant's and the controller's real variables."""
     links, free = [], []
     for name, var in cv.items():
         if var.causality == "input":
@@ -67,7 +73,7 @@ def connections(plant: Path, controller: Path) -> tuple[list[tuple[str, str]], l
     return links, free
 
 
-def _connectors(variables: Mapping[str, object], names: set[str]) -> str:
+def _connectors(variables: Mapping[str, Any], names: set[str]) -> str:
     out = []
     for name in sorted(names):
         var = variables[name]
@@ -83,7 +89,8 @@ def system_structure(plant: Path, controller: Path, setpoints: Mapping[str, floa
                      step_size: float, stop_time: float) -> str:
     """The ``SystemStructure.ssd`` of plant and controller (module docstring); ``setpoints``:
     the values of the controller's free inputs."""
-    links, free = connections(plant, controller)
+    pv, cv = _real_variables(plant), _real_variables(controller)
+    links, free = _links(pv, cv, plant, controller)
     missing = sorted(set(free) - set(setpoints))
     if missing:
         raise CosimError(f"{controller}: input {missing[0]!r} is fed by no plant output: give "
@@ -92,7 +99,6 @@ def system_structure(plant: Path, controller: Path, setpoints: Mapping[str, floa
     if unknown:
         raise CosimError(f"--setpoint {unknown[0]}: not a free input of {controller} "
                          f"(free: {', '.join(free)})")
-    pv, cv = _real_variables(plant), _real_variables(controller)
     used = {"plant": set(), "mpc": set(free)}
     for a, b in links:
         for end in (a, b):
