@@ -3,11 +3,12 @@ RobustMPCController` to :func:`cosim.core.controller_fmu.build_controller_fmu`.
 
 The FMU runs the same step as the Python component, in C: the component's own observer,
 tracking FHOCP (set up on its compiled kernel), disturbance filter, scalings and input box
-become the constants of :mod:`controllers.kernel.controller_source`, and the problem's signals
-the FMU's variables (measured outputs and set-points ``ref.<output>`` in, the inputs to apply
-out, named and in the units of the problem; docs: guide/controller-fmu.md). The tracking law
-(the default) is exported, for any numbers of inputs and outputs; the paper's law is not
-(yet).
+become the numbers of :mod:`controllers.kernel.controller_source` (data in the FMU's
+resources: one binary for every design of the same dimensions and signals), and the problem's
+signals the FMU's variables (measured outputs and set-points ``ref.<output>`` in, the inputs
+to apply out, named and in the units of the problem; docs: guide/controller-fmu.md). The
+tracking law (the default) is exported, for any numbers of inputs and outputs; the paper's
+law is not (yet).
 """
 
 from __future__ import annotations
@@ -50,6 +51,7 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     from controllers.kernel.controller_source import (
         PARAMETERS,
         ControllerDesign,
+        design_data,
         generate_source,
     )
 
@@ -79,4 +81,5 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
                       for c in pr.inputs),
         parameters=tuple(Parameter(name, "1", low, high, text, start=starts[name])
                          for name, low, high, text in PARAMETERS))
-    return build_controller_fmu(iface, source, out, fmi_version=fmi_version, flags=flags)
+    return build_controller_fmu(iface, source, design_data(design), out,
+                                fmi_version=fmi_version, flags=flags)

@@ -51,12 +51,12 @@ def _run(cmd: list[str], timeout: float = 600, **kwargs: object) -> subprocess.C
 
 def _package_data() -> set[str]:
     """Files the installed package reads at run time, as paths inside the wheel."""
-    from controllers.kernel.compiled_kernel import TEMPLATE_PARTS
+    from controllers.kernel.compiled_kernel import LOADER_C, TEMPLATE_PARTS
     from controllers.kernel.controller_source import CONTROLLER_C
     from controllers.model import DEFAULT_MODEL
     from cosim.core.build import DEFAULT_PROBLEM, PACKAGE_DIR, TARGETS, source_path
 
-    names = {f"controllers/kernel/{p.name}" for p in (*TEMPLATE_PARTS, CONTROLLER_C)}
+    names = {f"controllers/kernel/{p.name}" for p in (*TEMPLATE_PARTS, CONTROLLER_C, LOADER_C)}
     names |= {"fmus/controller/model.c", "fmus/controller/model.h"}
     names |= {f"fmus/{source_path(name).relative_to(PACKAGE_DIR).as_posix()}" for t in TARGETS
               for name in (*t.sources, t.model_description)}

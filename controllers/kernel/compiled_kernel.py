@@ -10,19 +10,24 @@ agrees with the numpy callbacks to ~1e-14 (checked at load time, once per librar
 process: :meth:`controllers.ocp.nlp_single_shooting.SingleShootingNLP.self_test`).
 
 The C source is the fixed template (the interface ``kernel/gru_fhocp.h``, then ``memory.c``
-… ``sqp.c``) preceded by a generated header holding the problem's dimensions and constants
-(GRU weights, Q, R, s, the reduced constraint rows ``D U_o``, the eigenvalue-clipping
-margin, the input-rate weights when there are any: ``HAS_DU``, ``DW``) as ``static const``
-arrays, so that gcc sees every loop bound, and the interface types shared with Python
-(:mod:`controllers.kernel.kernel_abi`). The library holds no mutable state: each FHOCP gets its own
-workspace (:class:`~controllers.kernel.kernel_lib.Workspace`, one C struct), so FHOCPs may solve
-concurrently from several threads. The shared library is cached under a hash of the
-generated source, the compiler's identity and the flags, in the user's cache folder
-(``~/.cache/gru-mpc/kernels`` on Linux; ``GRU_MPC_KERNEL_CACHE``): a second controller for
-the same model and problem loads it in milliseconds; a changed model, horizon, weight or
-generator gives a new hash (a user's model gets its own kernel on first use, 2–4 s; ``make``
-and ``cosim build-kernel`` build the shipped model's). Files are written under temporary
-names and renamed, so processes building one kernel at once agree.
+… ``sqp.c``) preceded by a generated header holding the problem's dimensions (so that gcc
+sees every loop bound) and the interface types shared with Python
+(:mod:`controllers.kernel.kernel_abi`), and followed by the loader of its numbers (GRU
+weights, Q, R, s, the reduced constraint rows ``D U_o``, the eigenvalue-clipping margin, the
+input-rate weights when there are any: ``HAS_DU``, ``DW``; :func:`kernel_constants`), which
+are declared in the source and read at load time (``loader.c``,
+:mod:`controllers.kernel.constants`). So one compiled library serves every problem of the
+same dimensions, and the exported controller (:mod:`controllers.kernel.controller_source`),
+compiled from the same source with its numbers as data, computes exactly what this kernel
+does. Each FHOCP gets its own workspace (:class:`~controllers.kernel.kernel_lib.Workspace`,
+one C struct), so FHOCPs may solve concurrently from several threads. The library is cached
+under a hash of the generated source, the compiler's identity and the flags, in the user's
+cache folder (``~/.cache/gru-mpc/kernels`` on Linux; ``GRU_MPC_KERNEL_CACHE``); a problem's
+numbers go into a copy of it named by their hash (a loaded library holds one problem's
+numbers), made in milliseconds: a new model of known dimensions needs no compiler; new
+dimensions compile on first use (2–4 s; ``make`` and ``cosim build-kernel`` build the
+shipped model's). Files are written under temporary names and renamed, so processes
+building one kernel at once agree.
 
 Nothing here is needed for correctness: :func:`build` returns ``None`` (with the reason in
 :data:`last_error`) when no C compiler is found, compilation fails or ``GRU_MPC_KERNEL=0`` is
@@ -48,21 +53,24 @@ from typing import Any
 import numpy as np
 
 from controllers.kernel.cbuild import compile_library, compiler_id, default_cache_dir, write_atomic
+from controllers.kernel.constants import Constants
 from controllers.kernel.kernel_abi import c_declarations
 from controllers.kernel.kernel_lib import Kernel, Workspace
 
 __all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "KernelProblem", "Workspace",
-           "build", "default_cache_dir", "for_fhocp", "generate_source", "last_error",
-           "variant_flags"]
+           "build", "default_cache_dir", "for_fhocp", "generate_source", "kernel_constants",
+           "last_error", "library_source", "loader_source", "variant_flags"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-11"
+GENERATOR_VERSION = "gru-fhocp-kernel-12"
 #: The C template, joined in this order after the generated header: the interface
 #: (``gru_fhocp.h``), the solver instance's memory, the mathematics bottom-up, the exported
 #: API, the equilibrium for an output (tracking kernels), the QP and the SQP.
 TEMPLATE_PARTS = tuple(Path(__file__).with_name(name) for name in (
     "gru_fhocp.h", "memory.c", "rollout.c", "steady_state.c", "derivatives.c", "hessian.c",
     "eigen_clip.c", "api.c", "equilibrium.c", "qp.c", "sqp.c"))
+#: The loader of a library's numbers (:func:`loader_source`), joined after every use.
+LOADER_C = Path(__file__).with_name("loader.c")
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")
 PREFIX_PLACEHOLDER = "@PFX@"
 
@@ -79,14 +87,6 @@ _LOADED: dict[str, Kernel] = {}
 _LOCK = threading.RLock()
 #: Builds that failed in this process, by cache key: not retried (the reason is kept).
 _FAILED: dict[str, str] = {}
-
-
-def _c_array(name: str, a: np.ndarray) -> str:
-    a = np.ascontiguousarray(np.asarray(a, dtype=float)).ravel()
-    if not np.all(np.isfinite(a)):
-        raise ValueError(f"non-finite entries in {name}")
-    body = ", ".join(repr(float(v)) for v in a)   # repr: shortest exact round trip
-    return f"static const double {name}[{max(a.size, 1)}] = {{{body or '0.0'}}};\n"
 
 
 @dataclass(frozen=True)
@@ -145,56 +145,81 @@ class KernelProblem:
 
 
 def generate_source(problem: KernelProblem) -> str:
-    """The complete C source of ``problem``'s kernel (symbol prefix left as ``@PFX@``)."""
-    params, N, Q, R, DUo, s = (problem.params, problem.N, problem.Q, problem.R, problem.DUo,
-                               problem.s)
-    clip, LUo, du_weight = problem.clip, problem.LUo, problem.du_weight
-    offset_weight, control_horizon = problem.offset_weight, problem.control_horizon
-    P = {k: np.asarray(v, dtype=float) for k, v in params.items()}
-    n, m = P["W_z"].shape
-    DUo = np.atleast_2d(np.asarray(DUo, dtype=float))
-    q = DUo.shape[0]
-    if DUo.shape[1] != n:
-        raise ValueError("DUo must be q x n")
-    Q = np.asarray(Q, dtype=float).reshape(n, n)
-    R = np.asarray(R, dtype=float).reshape(m, m)
-    LUo = np.zeros((0, n)) if LUo is None else np.atleast_2d(np.asarray(LUo, dtype=float))
-    if LUo.shape[1] != n:
-        raise ValueError("LUo must be q x n")
-    dw = np.zeros(m) if du_weight is None else np.asarray(du_weight, dtype=float).reshape(m)
-    has_du = bool(np.any(dw != 0.0))
-    N = int(N)
-    M = N if control_horizon is None else int(control_horizon)
+    """The C source of ``problem``'s kernel up to ``sqp.c`` (symbol prefix left as
+    ``@PFX@``): its dimensions defined, its numbers (:func:`kernel_constants`) declared and
+    not defined (:func:`library_source` adds their loader)."""
+    params, N, offset_weight = problem.params, int(problem.N), problem.offset_weight
+    n, m = np.shape(params["W_z"])
+    q = np.atleast_2d(np.asarray(problem.DUo, dtype=float)).shape[0]
+    M = N if problem.control_horizon is None else int(problem.control_horizon)
     if M < 1 or M > N or (M < N and offset_weight is None):
         raise ValueError(f"control horizon {M} must be in 1..N = {N}, below N only "
                          "with the artificial steady state")
+    constants = kernel_constants(problem)
+    n_l = 0 if problem.LUo is None else np.atleast_2d(np.asarray(problem.LUo)).shape[0]
+    Q = np.asarray(problem.Q, dtype=float).reshape(n, n)
     hdr = [f"/* generated by controllers.kernel.compiled_kernel ({GENERATOR_VERSION}); "
            "do not edit */\n",
            f"#define NX {n}\n#define NU {m}\n#define NH {N}\n#define NM {M}\n"
            f"#define NQ {q}\n"
-           f"#define NY {P['U_o'].shape[0]}\n#define NL {LUo.shape[0]}\n",
-           f"#define HAS_DU {int(has_du)}\n#define HAS_ASS {int(offset_weight is not None)}\n",
-           f"#define PFX(name) {PREFIX_PLACEHOLDER}##name\n", c_declarations()]
-    for key in ("W_z", "W_r", "W_h", "U_z", "U_r", "U_h", "b_z", "b_r", "b_h"):
-        hdr.append(_c_array(key.replace("_", "").upper(), P[key]))
-    for key in ("U_z", "U_r", "U_h"):   # transposed copies for column-oriented mat-vecs
-        hdr.append(_c_array(key.replace("_", "").upper() + "T", P[key].T))
-    hdr.append(_c_array("UO", P["U_o"]))
-    hdr.append(_c_array("BO", P["b_o"]))
-    hdr.append(_c_array("JZ", np.hstack([P["U_z"], P["W_z"]])))
-    hdr.append(_c_array("JR", np.hstack([P["U_r"], P["W_r"]])))
-    hdr.append(_c_array("QW", Q))
-    hdr.append(_c_array("RW", R))
-    hdr.append(_c_array("DUO", DUo if q else np.zeros((1, n))))
-    hdr.append(_c_array("LUO", LUo if LUo.shape[0] else np.zeros((1, n))))
-    hdr.append(f"static const double SW = {float(s)!r};\n")
-    if has_du:
-        hdr.append(_c_array("DW", dw))
-    if offset_weight is not None:
-        hdr.append(_c_array("TW", np.asarray(offset_weight, dtype=float).reshape(-1)))
-    hdr.append(f"#define QDIAG {int(np.count_nonzero(Q - np.diag(np.diag(Q))) == 0)}\n")
-    hdr.append(f"static const double CLIP = {(-1.0 if clip is None else float(clip))!r};\n")
+           f"#define NY {np.shape(params['U_o'])[0]}\n#define NL {n_l}\n",
+           f"#define HAS_DU {int(_has_du(problem))}\n"
+           f"#define HAS_ASS {int(offset_weight is not None)}\n",
+           f"#define PFX(name) {PREFIX_PLACEHOLDER}##name\n", c_declarations(),
+           constants.declarations(),
+           f"#define QDIAG {int(np.count_nonzero(Q - np.diag(np.diag(Q))) == 0)}\n"]
     return "".join(hdr) + "\n" + "".join(p.read_text() for p in TEMPLATE_PARTS)
+
+
+def loader_source(constants: Constants) -> str:
+    """The table of ``constants`` and their loader (``loader.c``: ``PFX(load_data)``), to
+    join after every use of them."""
+    return constants.table() + LOADER_C.read_text()
+
+
+def library_source(problem: KernelProblem) -> str:
+    """The complete C source of ``problem``'s kernel library: :func:`generate_source` and the
+    loader of its numbers (the same for every problem of the same dimensions)."""
+    return generate_source(problem) + loader_source(kernel_constants(problem))
+
+
+def _has_du(problem: KernelProblem) -> bool:
+    return problem.du_weight is not None and bool(np.any(np.asarray(problem.du_weight) != 0.0))
+
+
+def kernel_constants(problem: KernelProblem) -> Constants:
+    """The numbers of ``problem``'s kernel: the GRU's weights (``eq:gru``, with transposed
+    and stacked copies for the mat-vecs), the output map, the stage and terminal weights, the
+    constraint rows and the clipping margin."""
+    P = {k: np.asarray(v, dtype=float) for k, v in problem.params.items()}
+    n, m = P["W_z"].shape
+    DUo = np.atleast_2d(np.asarray(problem.DUo, dtype=float))
+    if DUo.shape[1] != n:
+        raise ValueError("DUo must be q x n")
+    LUo = (np.zeros((0, n)) if problem.LUo is None
+           else np.atleast_2d(np.asarray(problem.LUo, dtype=float)))
+    if LUo.shape[1] != n:
+        raise ValueError("LUo must be q x n")
+    c = Constants()
+    for key in ("W_z", "W_r", "W_h", "U_z", "U_r", "U_h", "b_z", "b_r", "b_h"):
+        c.array(key.replace("_", "").upper(), P[key])
+    for key in ("U_z", "U_r", "U_h"):   # transposed copies for column-oriented mat-vecs
+        c.array(key.replace("_", "").upper() + "T", P[key].T)
+    c.array("UO", P["U_o"])
+    c.array("BO", P["b_o"])
+    c.array("JZ", np.hstack([P["U_z"], P["W_z"]]))
+    c.array("JR", np.hstack([P["U_r"], P["W_r"]]))
+    c.array("QW", np.asarray(problem.Q, dtype=float).reshape(n, n))
+    c.array("RW", np.asarray(problem.R, dtype=float).reshape(m, m))
+    c.array("DUO", DUo if DUo.shape[0] else np.zeros((1, n)))
+    c.array("LUO", LUo if LUo.shape[0] else np.zeros((1, n)))
+    c.scalar("SW", float(problem.s))
+    if _has_du(problem):
+        c.array("DW", np.asarray(problem.du_weight, dtype=float).reshape(m))
+    if problem.offset_weight is not None:
+        c.array("TW", np.asarray(problem.offset_weight, dtype=float).reshape(-1))
+    c.scalar("CLIP", -1.0 if problem.clip is None else float(problem.clip))
+    return c
 
 
 def casadi_openblas() -> Path | None:
@@ -314,7 +339,8 @@ def _build(problem: KernelProblem, cache_dir: str | Path | None, cc: str | None,
         return None, f"no C compiler {cc!r} on PATH"
     flags, libs = variant_flags(problem, tuple(cflags) if cflags is not None else DEFAULT_CFLAGS)
     try:
-        src = generate_source(problem)
+        src = library_source(problem)
+        data = kernel_constants(problem).data()
     except ValueError as exc:
         return None, f"cannot generate the kernel: {exc}"
     key = hashlib.sha256("\0".join([GENERATOR_VERSION, compiler_id(cc), " ".join(flags),
@@ -323,11 +349,13 @@ def _build(problem: KernelProblem, cache_dir: str | Path | None, cc: str | None,
         return None, _FAILED[key]
     prefix = f"gk{key}_"
     cdir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    so = cdir / f"gk{key}.so"
+    shared = cdir / f"gk{key}.so"
+    # the problem's own copy of the library: a loaded library holds one problem's numbers
+    so = cdir / f"gk{key}-{hashlib.sha256(data).hexdigest()[:12]}.so"
     loaded = _LOADED.get(str(so))
     if loaded is not None and so.exists():
         return loaded, None
-    if not so.exists():
+    if not shared.exists():
         reason = _compile(src.replace(PREFIX_PLACEHOLDER, prefix), cdir, key, cc, flags, libs)
         if reason is not None:
             _FAILED[key] = reason
@@ -338,12 +366,13 @@ def _build(problem: KernelProblem, cache_dir: str | Path | None, cc: str | None,
         with contextlib.suppress(OSError):   # informative only
             write_atomic(cdir / f"gk{key}.json", json.dumps(meta, indent=1).encode())
         if verbose:
-            print(f"compiled FHOCP kernel: built {so}")
+            print(f"compiled FHOCP kernel: built {shared}")
     try:
-        k = Kernel(so, prefix)
-    except OSError as exc:
-        _FAILED[key] = f"cannot load {so}: {exc}"
-        return None, _FAILED[key]
+        if not so.exists():
+            write_atomic(so, shared.read_bytes())
+        k = Kernel(so, prefix, data)
+    except (OSError, ValueError) as exc:
+        return None, f"cannot load {so}: {exc}"
     k.flags = flags
     _LOADED[str(so)] = k
     return k, None

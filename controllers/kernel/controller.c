@@ -1,8 +1,10 @@
 /* controller.c: the whole step of the robust MPC's tracking law in C, on the compiled kernel.
  *
- * Joined after the kernel (gru_fhocp.h, memory.c ... sqp.c) and a generated header of the
+ * Joined after the kernel (gru_fhocp.h, memory.c ... sqp.c) and the declarations of the
  * controller's constants (controllers/kernel/controller_source.py: CT_*), for an exported
- * controller (the controller FMU, fmus/controller/). It is the C twin of the Python
+ * controller (the controller FMU, fmus/controller/); the numbers of both are loaded at run
+ * time (loader.c, PFX(load_data)), so that one binary serves every design of its
+ * dimensions. It is the C twin of the Python
  * controller step, line for line and in the same order of kernel calls:
  *
  *   ctl_step        cosim_adapters/robust_mpc.py RobustMPCController.step: the scalings, the
@@ -33,7 +35,7 @@
 #if !HAS_ASS
 #error "the exported controller runs the tracking law (a kernel with HAS_ASS)"
 #endif
-#if !defined(CT_FEAS_TOL)
+#ifndef CT_NPARAM
 #error "the controller's constants (controller_source.py) must precede controller.c"
 #endif
 
@@ -324,7 +326,8 @@ EXPORT void PFX(ctl_reset)(ctl_state *st) {
   st->parameters[CTL_P_OFFSET_FILTER] = CT_BETA;
 }
 
-/* A new controller instance (NULL when out of memory): every allocation it will ever make. */
+/* A new controller instance (NULL when out of memory, or before PFX(load_data) gave the
+ * numbers): every allocation it will ever make. */
 EXPORT ctl_state *PFX(ctl_new)(void) {
   ctl_state *st = (ctl_state *)calloc(1, sizeof(ctl_state));
   if (!st) return 0;

@@ -25,20 +25,28 @@ from typing import Any
 
 import numpy as np
 
-from controllers.equilibrium import REACH_TOL
-from controllers.kernel.cbuild import compile_library, compiler_id, default_cache_dir
+from controllers.kernel.cbuild import (
+    compile_library,
+    compiler_id,
+    default_cache_dir,
+    write_atomic,
+)
 from controllers.kernel.compiled_kernel import (
     GENERATOR_VERSION,
     PREFIX_PLACEHOLDER,
     KernelProblem,
+    kernel_constants,
+    loader_source,
     variant_flags,
 )
 from controllers.kernel.compiled_kernel import (
     generate_source as kernel_source,
 )
+from controllers.kernel.constants import Constants
+from controllers.kernel.kernel_lib import load_data
 
 __all__ = ["CONTROLLER_C", "PARAMETERS", "CompiledController", "ControllerDesign", "build",
-           "generate_source"]
+           "controller_constants", "design_data", "generate_source"]
 
 #: The tunable parameters of the C step, in its order (``controller.c`` ``CTL_P_*``):
 #: ``(name, low, high, description)``; each is the option of that name.
@@ -48,7 +56,7 @@ PARAMETERS = (("offset_filter", 0.0, 1.0,
 #: The C step (joined after the kernel and the constants).
 CONTROLLER_C = Path(__file__).with_name("controller.c")
 #: Compiler flags of the exported step: the kernel's, warnings as errors.
-CFLAGS = ("-O3", "-fPIC", "-std=gnu99", "-Wall", "-Wextra", "-Werror",
+CFLAGS = ("-O3", "-fPIC", "-std=gnu99", "-pthread", "-Wall", "-Wextra", "-Werror",
           "-Wno-aggressive-loop-optimizations")
 
 
@@ -152,84 +160,91 @@ class ControllerDesign:
             xs_check_tol=XS_CHECK_TOL)
 
 
-def _number(v: float) -> str:
-    """A double as C source: its shortest exact repr, ``±INFINITY`` for an unbounded row (the
-    uncertified mode leaves the ``i = 0`` rows free)."""
-    if np.isnan(v):
-        raise ValueError("NaN in the controller's constants")
-    return repr(float(v)) if np.isfinite(v) else ("INFINITY" if v > 0 else "-INFINITY")
-
-
-def _array(name: str, a: Any, ctype: str = "double") -> str:
-    a = np.ascontiguousarray(np.asarray(a, dtype=float if ctype == "double" else int)).ravel()
-    try:
-        body = ", ".join(_number(v) if ctype == "double" else str(int(v)) for v in a)
-    except ValueError as exc:
-        raise ValueError(f"{name}: {exc}") from None
-    return f"static const {ctype} {name}[{max(a.size, 1)}] = {{{body or '0'}}};\n"
-
-
-def _constants(d: ControllerDesign) -> str:
-    """The ``CT_*`` constants of ``controller.c``."""
+def controller_constants(d: ControllerDesign) -> Constants:
+    """The ``CT_*`` constants of ``controller.c``: the design's numbers."""
     s = d.sqp
-    lines = ["/* the controller's constants (controllers/kernel/controller_source.py) */\n"]
+    c = Constants()
     for name, value in (("CT_Y_OFFSET", d.y_offset), ("CT_Y_SCALE", d.y_scale),
                         ("CT_U_OFFSET", d.u_offset), ("CT_U_SCALE", d.u_scale),
                         ("CT_U_LO", d.u_lo), ("CT_U_HI", d.u_hi), ("CT_LZ", d.L_z),
                         ("CT_LR", d.L_r), ("CT_L", d.L), ("CT_H", d.h), ("CT_A", d.a),
                         ("CT_B", d.b), ("CT_WL", d.w_L), ("CT_LBO", d.Lbo),
                         ("CT_YS_BASE", d.ys_base)):
-        lines.append(_array(name, value))
+        c.array(name, value, finite=False)   # an unbounded row: +-inf (uncertified mode)
     for name, value in (("CT_PAIR_UP", d.pair_up), ("CT_PAIR_LO", d.pair_lo),
                         ("CT_PERM_X", d.perm_x), ("CT_PERM_G", d.perm_g)):
-        lines.append(_array(name, value, "int"))
+        c.array(name, value, "int")
     for name, value in (("CT_RHO_O", d.rho_o), ("CT_W_BAR", d.w_bar), ("CT_E_O0", d.e_o0),
                         ("CT_BETA", d.beta), ("CT_ALPHA_C", d.alpha_c),
                         ("CT_US_RATE", d.us_rate), ("CT_FEAS_TOL", d.feas_tol),
                         ("CT_DEFECT_TOL", d.defect_tol), ("CT_XS_CHECK_TOL", d.xs_check_tol),
-                        ("CT_REACH_TOL", REACH_TOL), ("CT_SQP_TOL_PR", s["tol_pr"]),
-                        ("CT_SQP_TOL_DU", s["tol_du"]), ("CT_SQP_MIN_STEP", s["min_step_size"]),
-                        ("CT_SQP_C1", s["c1"]), ("CT_SQP_BETA", s["beta"]),
-                        ("CT_SQP_REUSE_STEP", s["reuse_step"])):
-        lines.append(f"#define {name} ({float(value)!r})\n")
-    for name, value in (("CT_CERTIFIED", int(d.certified)), ("CT_NPARAM", len(PARAMETERS)),
-                        ("CT_SQP_MAX_ITER", s["max_iter"]),
+                        ("CT_SQP_TOL_PR", s["tol_pr"]), ("CT_SQP_TOL_DU", s["tol_du"]),
+                        ("CT_SQP_MIN_STEP", s["min_step_size"]), ("CT_SQP_C1", s["c1"]),
+                        ("CT_SQP_BETA", s["beta"]), ("CT_SQP_REUSE_STEP", s["reuse_step"])):
+        c.scalar(name, float(value))
+    for name, value in (("CT_CERTIFIED", int(d.certified)), ("CT_SQP_MAX_ITER", s["max_iter"]),
                         ("CT_SQP_MAX_ITER_LS", s["max_iter_ls"]),
                         ("CT_SQP_TOL_DU_RELATIVE", s["tol_du_relative"])):
-        lines.append(f"#define {name} {int(value)}\n")
-    return "".join(lines)
+        c.scalar(name, int(value), "int")
+    return c
+
+
+def design_constants(design: ControllerDesign) -> Constants:
+    """Every number of the controller step: its kernel's, then ``controller.c``'s."""
+    return kernel_constants(design.kernel) + controller_constants(design)
 
 
 def generate_source(design: ControllerDesign) -> str:
     """The C source of the controller step (symbol prefix left as ``@PFX@``): the kernel,
-    the constants, ``controller.c``."""
+    ``controller.c`` and the loader of its numbers (``loader.c``), which are declared, not
+    defined: the source is the same for every design of the same dimensions, and
+    :func:`design_data` is what a design adds (``PFX(load_data)``)."""
     problem = design.kernel
     if problem.offset_weight is None:
         raise ValueError("the exported controller runs the tracking law")
-    return "\n".join([kernel_source(problem), _constants(design), CONTROLLER_C.read_text()])
+    consts = controller_constants(design)
+    return "\n".join([kernel_source(problem),
+                      "/* the controller's constants (controller_source.py) */\n"
+                      f"#define CT_NPARAM {len(PARAMETERS)}\n" + consts.declarations(),
+                      CONTROLLER_C.read_text(), loader_source(design_constants(design))])
+
+
+def design_data(design: ControllerDesign) -> bytes:
+    """The data file of ``design``'s numbers (:mod:`controllers.kernel.constants`), which the
+    library of :func:`generate_source` loads."""
+    return design_constants(design).data()
 
 
 def build(design: ControllerDesign, prefix: str = "ctl_", cache_dir: Path | None = None,
           cc: str = "gcc") -> tuple[Path, str]:
-    """Compile the controller step into a shared library (cached by its source);
-    ``(path, symbol prefix)``. Raises ``RuntimeError`` with the compiler's first error."""
+    """Compile the controller step into a shared library (cached by its source: compiled once
+    for every design of the same dimensions) and give ``design`` its own copy (a loaded
+    library holds one design's numbers); ``(path, symbol prefix)``. Raises ``RuntimeError``
+    with the compiler's first error."""
     flags, _ = variant_flags(design.kernel, (*CFLAGS, "-shared"), blas=False)
     src = generate_source(design).replace(PREFIX_PLACEHOLDER, prefix)
     key = hashlib.sha256("\0".join([GENERATOR_VERSION, compiler_id(cc), " ".join(flags),
                                     src]).encode()).hexdigest()[:16]
     cdir = Path(cache_dir) if cache_dir is not None else default_cache_dir()
-    so = cdir / f"ctl{key}.so"
-    if not so.exists():
+    shared = cdir / f"ctl{key}.so"
+    if not shared.exists():
         reason = compile_library(src, cdir, f"ctl{key}", cc, flags)
         if reason is not None:
             raise RuntimeError(reason)
+    so = cdir / f"ctl{key}-{hashlib.sha256(design_data(design)).hexdigest()[:12]}.so"
+    if not so.exists():
+        write_atomic(so, shared.read_bytes())
     return so, prefix
 
 
 class CompiledController:
-    """One instance of a compiled controller step (:func:`build`), stepped from Python."""
+    """One instance of a compiled controller step (:func:`build`) with its design's numbers
+    (:func:`design_data`), stepped from Python. A loaded library holds one design's numbers
+    (other numbers are refused: ``ValueError``); :func:`build` gives each design its own
+    copy."""
 
-    def __init__(self, path: Path, prefix: str, n_inputs: int, n_outputs: int) -> None:
+    def __init__(self, path: Path, prefix: str, data: bytes, n_inputs: int,
+                 n_outputs: int) -> None:
         self.lib = ctypes.CDLL(str(path))
         f = {name: getattr(self.lib, prefix + name) for name in (
             "ctl_new", "ctl_free", "ctl_reset", "ctl_step", "ctl_outputs",
@@ -241,6 +256,8 @@ class CompiledController:
         f["ctl_step"].argtypes = [vp, vp, vp]
         f["ctl_outputs"].argtypes = [vp] * 6
         self._f = f
+        self._st = None
+        load_data(self.lib, prefix, data, path)
         self._st = f["ctl_new"]()
         if not self._st:
             raise MemoryError("cannot allocate a controller instance")
@@ -267,7 +284,7 @@ class CompiledController:
         self._f["ctl_reset"](self._st)
 
     def close(self) -> None:
-        if self._st:
+        if getattr(self, "_st", None):
             self._f["ctl_free"](self._st)
             self._st = None
 

@@ -17,19 +17,34 @@
  * p = (x_hat, x_bar, u_bar[, u_prev]) (paper law) or (x_hat, x_s0, r[, u_prev]) (tracking,
  * HAS_ASS), NP entries; inputs are normalised to [-1, 1].
  *
+ * Numbers: the problem's (GRU weights, cost weights, constraint rows, clipping margin) are
+ * declared by the generated header and loaded once, before any instance, from a data file
+ * (PFX(load_data), loader.c; controllers/kernel/constants.py): the source and the binary are
+ * the same for every problem of the same dimensions.
+ *
  * State: a solver instance, gk_ws (memory.c), holds the memory that persists between calls
  * (gk_mem: the rollout cached by (w, p), counters) and the per-call workspace (gk_work); the
- * library itself holds none (constants only), so instances solve concurrently from several
- * threads, one thread per instance, with the answers they give one after the other.
+ * library itself holds only its numbers, written once by PFX(load_data), so instances solve
+ * concurrently from several threads, one thread per instance, with the answers they give one
+ * after the other.
  */
 #ifndef GRU_FHOCP_H
 #define GRU_FHOCP_H
 
+#include <stddef.h>
+
 typedef long long int casadi_int;
 typedef struct gk_ws gk_ws;
 
+/* ---- the numbers */
+/* Load the library's numbers from the data file bytes[0 .. size) (loader.c): NULL, or why
+ * they are refused (another layout, damaged, or other numbers than those already loaded),
+ * written to msg (n chars). Nothing is written unless the whole file is valid. */
+const char *PFX(load_data)(const unsigned char *bytes, size_t size, char *msg, size_t n);
+
 /* ---- instances */
-/* A new solver instance (NULL when out of memory); every call below taking one writes only it. */
+/* A new solver instance (NULL when out of memory or before PFX(load_data)); every call below
+ * taking one writes only it. */
 gk_ws *PFX(ws_new)(void);
 void PFX(ws_free)(gk_ws *ws);
 /* Forget the cached rollout. */

@@ -50,17 +50,31 @@ _WS_CALLS: dict[str, tuple[list[Any], Any]] = {
     "counters": ([_VP], None), "invalidate": ([], None), "clip": ([_VP], _CI)}
 
 
+def load_data(lib: ctypes.CDLL, prefix: str, data: bytes, path: Path) -> None:
+    """Give the library ``lib`` its numbers, the data file ``data``
+    (:mod:`controllers.kernel.constants`); ``ValueError`` naming ``path`` and the reason when
+    the library refuses them (another layout, or another problem's numbers already loaded)."""
+    f = getattr(lib, prefix + "load_data")
+    f.restype = ctypes.c_char_p
+    f.argtypes = [ctypes.c_char_p, ctypes.c_size_t, ctypes.c_char_p, ctypes.c_size_t]
+    msg = ctypes.create_string_buffer(512)
+    why = f(data, len(data), msg, len(msg))
+    if why is not None:
+        raise ValueError(f"{path}: its numbers are refused: {why.decode()}")
+
+
 class Kernel:
     """A loaded kernel library: its dimensions, its entry points and casadi external
     functions; :meth:`workspace` gives each user its own C state."""
 
-    def __init__(self, path: Path, prefix: str) -> None:
+    def __init__(self, path: Path, prefix: str, data: bytes) -> None:
         self.path = Path(path)
         self.prefix = prefix
         self.lib = ctypes.CDLL(str(self.path))
         abi = (ctypes.c_long * ABI_COUNT)()
         self._fn("abi")(abi)
         check_layout(tuple(abi))
+        load_data(self.lib, prefix, data, self.path)
         self.workspace_bytes = int(abi[ABI_COUNT - 1])
         dims = Dims()
         self._fn("dims")(ctypes.byref(dims))

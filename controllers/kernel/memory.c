@@ -2,7 +2,9 @@
  * its dimensions, variants and the solver instance's memory (gk_mem, gk_work).
  *
  * The generated header above this line defines the dimensions (NX states, NU inputs, NY
- * outputs, NH horizon stages, NQ reduced output-constraint rows), the GRU weights (row-major,
+ * outputs, NH horizon stages, NQ reduced output-constraint rows) and declares the numbers,
+ * which loader.c (joined last) reads at load time (controllers/kernel/constants.py): the
+ * GRU weights (row-major,
  * eq:gru; U^T copies for column-oriented mat-vecs, J_z = [U_z W_z], J_r = [U_r W_r]), the cost
  * weights QW (NX x NX, QDIAG when diagonal), RW (NU x NU), SW (s), the reduced constraint rows
  * DUO (NQ x NX), the eigenvalue clipping margin CLIP (< 0: no clipping), HAS_DU and DW (NU,
@@ -190,8 +192,12 @@ static void ws_reset(gk_ws *ws) {
 }
 
 /* a new workspace (NULL when out of memory); free it with PFX(ws_free) */
+/* whether the library's numbers are loaded (loader.c, joined last: PFX(load_data)) */
+static int gk_data_ready(void);
+
 EXPORT gk_ws *PFX(ws_new)(void) {
   void *mem = 0;
+  if (!gk_data_ready()) return 0;
   if (posix_memalign(&mem, 64, sizeof(gk_ws)) != 0) return 0;
   ws_reset((gk_ws *)mem);
   return (gk_ws *)mem;

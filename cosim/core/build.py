@@ -193,7 +193,8 @@ def display_path(path: Path) -> str:
         return str(path)
 
 
-def _compiler_version(cc: str) -> str:
+def compiler_version(cc: str) -> str:
+    """The first line of ``cc --version`` (part of every build's key)."""
     try:
         out = subprocess.run([cc, "--version"], capture_output=True, text=True, check=False)
     except OSError as exc:
@@ -209,7 +210,7 @@ def _source_hash(target: Target, cc: str) -> str:
             raise CosimError(f"missing FMU source {display_path(path)}")
         digest.update(name.encode() + b"\0" + path.read_bytes() + b"\0")
     digest.update(" ".join((*CFLAGS, *LDFLAGS)).encode())
-    digest.update(_compiler_version(cc).encode())
+    digest.update(compiler_version(cc).encode())
     digest.update(Path(__file__).read_bytes())
     return digest.hexdigest()
 

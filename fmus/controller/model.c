@@ -10,6 +10,8 @@
 
 #include <math.h>
 #include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
 
 /* warning bits of controller.c (CTL_WARN_*) */
 #define WARN_NONFINITE_INPUT 1
@@ -26,9 +28,49 @@ void model_set_defaults(ModelData *m) {
 
 void model_initialize(ModelData *m) { (void)m; }
 
-bool model_acquire(ModelData *m) {
+/* Read resources/CTL_DATA_FILE and hand it to the controller step (mpc_load_data): NULL, or
+ * the reason in msg. */
+static const char *load_data(const char *resources, char *msg, size_t n) {
+    char path[4096];
+    if (!resources) return "no resource location given (the controller's numbers are in "
+                           "resources/" CTL_DATA_FILE ")";
+    const size_t len = strlen(resources);
+    const bool slash = len > 0 && (resources[len - 1] == '/' || resources[len - 1] == '\\');
+    if ((size_t)snprintf(path, sizeof path, "%s%s%s", resources, slash ? "" : "/",
+                         CTL_DATA_FILE) >= sizeof path)
+        return "the resources folder's path is too long";
+    FILE *f = fopen(path, "rb");
+    if (!f) {
+        snprintf(msg, n, "cannot open %s", path);
+        return msg;
+    }
+    unsigned char *bytes = NULL;
+    long size = -1;
+    if (fseek(f, 0, SEEK_END) == 0 && (size = ftell(f)) >= 0 && fseek(f, 0, SEEK_SET) == 0 &&
+        (bytes = (unsigned char *)malloc(size > 0 ? (size_t)size : 1)) != NULL &&
+        fread(bytes, 1, (size_t)size, f) != (size_t)size)
+        size = -1;
+    fclose(f);
+    const char *why = NULL;
+    if (!bytes || size < 0) {
+        snprintf(msg, n, "cannot read %s", path);
+        why = msg;
+    } else {
+        char reason[400];
+        if (mpc_load_data(bytes, (size_t)size, reason, sizeof reason)) {
+            snprintf(msg, n, "%s: %s", path, reason);
+            why = msg;
+        }
+    }
+    free(bytes);
+    return why;
+}
+
+const char *model_acquire(ModelData *m, const char *resources, char *msg, size_t n) {
+    const char *why = load_data(resources, msg, n);
+    if (why) return why;
     m->ctl = mpc_ctl_new();
-    return m->ctl != NULL;
+    return m->ctl ? NULL : "out of memory";
 }
 
 void model_release(ModelData *m) {

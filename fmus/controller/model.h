@@ -2,13 +2,16 @@
  * The robust MPC as a co-simulation model: the controller FMU's side of the FMI glue
  * (fmus/glue/instance.h) every C model shares.
  *
- * One source for every exported controller: what differs between them -- the model, the
- * problem, the weights, the certificate -- is in two generated files beside this one
- * (cosim/core/controller_fmu.py): controller_step.c (the whole controller step in C,
- * controllers/kernel/controller.c on the compiled FHOCP kernel) and controller_names.h (the
- * identifier, the instantiation token, the numbers of signals, their names, the start values
- * and the sample time). The controller's state lives in its instance (ctl_state, allocated
- * at instantiation), so that instances in one process are independent.
+ * One source for every exported controller: what differs between them is in two generated
+ * files beside this one (cosim/core/controller_fmu.py) and one data file. controller_step.c
+ * is the whole controller step in C (controllers/kernel/controller.c on the compiled FHOCP
+ * kernel) for given dimensions; controller_names.h holds the instantiation
+ * token, the numbers of signals, their names, the start values and the sample time. The
+ * numbers -- the model's weights, the problem's weights and boxes, the certificate's
+ * tightening, the observer's gains -- are data: resources/controller.dat (CTL_DATA_FILE),
+ * read at instantiation, so that one binary serves every design of its dimensions and
+ * signals. The controller's state lives in its instance (ctl_state, allocated at
+ * instantiation), so that instances in one process are independent.
  *
  * Value references: 0 time; then the measured outputs (inputs of the FMU, named as the
  * plant's outputs), their set-points ref.<output>, the inputs to apply (outputs of the FMU,
@@ -29,6 +32,9 @@
 #define MODEL_NO_FMU_STATE 1
 #define MODEL_HAS_WARNINGS 1
 
+/* the controller's numbers, in the FMU's resources folder (controllers/kernel/constants.py) */
+#define CTL_DATA_FILE "controller.dat"
+
 #define VR_TIME 0
 #define VR_Y 1                              /* CTL_NY measured outputs */
 #define VR_REF (VR_Y + CTL_NY)              /* CTL_NY set-points */
@@ -40,8 +46,9 @@
 #define VR_PARAM (VR_PRED + CTL_NY)         /* CTL_NPARAM tunable parameters */
 #define N_VARIABLES (VR_PARAM + CTL_NPARAM)
 
-/* the controller step (controller_step.c: controllers/kernel/controller.c) */
+/* the controller step (controller_step.c: controllers/kernel/controller.c, loader.c) */
 typedef struct ctl_state ctl_state;
+const char *mpc_load_data(const unsigned char *bytes, size_t size, char *msg, size_t n);
 ctl_state *mpc_ctl_new(void);
 void mpc_ctl_free(ctl_state *st);
 void mpc_ctl_reset(ctl_state *st);
@@ -61,7 +68,7 @@ typedef struct {
 
 void model_set_defaults(ModelData *m);
 void model_initialize(ModelData *m);
-bool model_acquire(ModelData *m);
+const char *model_acquire(ModelData *m, const char *resources, char *msg, size_t n);
 void model_release(ModelData *m);
 const char *model_variable_name(unsigned vr);
 double model_get(const ModelData *m, unsigned vr);

@@ -8,6 +8,8 @@
  * fmi2Error with a message sent through the environment's logger; they never crash the
  * importer. The model itself (equations, variables, integrator) lives in model.c.
  */
+#include <ctype.h>
+#include <stdlib.h>
 #include <string.h>
 
 #include "fmi2Functions.h"
@@ -69,11 +71,33 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
                                       nCategories, categories));
 }
 
+/* The local path of an FMI 2 resource location (a file URI: file:///path, file:/path or
+ * file://localhost/path, percent-encoded) in out[n]; false when it is none of these. */
+static bool resource_path(const char *uri, char *out, size_t n) {
+    if (!uri || strncmp(uri, "file:", 5) != 0) return false;
+    const char *p = uri + 5;
+    if (strncmp(p, "//localhost/", 12) == 0) p += 11;
+    else if (strncmp(p, "///", 3) == 0) p += 2;
+    else if (strncmp(p, "//", 2) == 0) return false; /* a file on another host */
+    size_t k = 0;
+    for (; *p; p++) {
+        int c = (unsigned char)*p;
+        if (c == '%' && isxdigit((unsigned char)p[1]) && isxdigit((unsigned char)p[2])) {
+            const char hex[3] = {p[1], p[2], 0};
+            c = (int)strtol(hex, NULL, 16);
+            p += 2;
+        }
+        if (k + 1 >= n) return false;
+        out[k++] = (char)c;
+    }
+    out[k] = 0;
+    return true;
+}
+
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
                               fmi2String fmuResourceLocation,
                               const fmi2CallbackFunctions *functions, fmi2Boolean visible,
                               fmi2Boolean loggingOn) {
-    (void)fmuResourceLocation;
     (void)visible;
     if (!functions || !functions->allocateMemory || !functions->freeMemory) return NULL;
     Fmi2Instance tmp;
@@ -88,9 +112,11 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         LOG_ERROR(&tmp.base, "fmi2Instantiate: unknown FMU type %d", (int)fmuType);
         return NULL;
     }
+    char resources[4096];
+    const bool local = resource_path(fmuResourceLocation, resources, sizeof resources);
     return instance_new(&tmp.base, sizeof(tmp), "fmi2Instantiate",
                         fmuType == fmi2CoSimulation ? TYPE_CS : TYPE_ME, instanceName,
-                        loggingOn ? true : false);
+                        loggingOn ? true : false, local ? resources : NULL);
 }
 
 void fmi2FreeInstance(fmi2Component c) { instance_free(INST); }

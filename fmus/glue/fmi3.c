@@ -96,7 +96,8 @@ fmi3Status fmi3SetDebugLogging(fmi3Instance instance, fmi3Boolean loggingOn,
 }
 
 static Instance *instantiate(InterfaceType type, fmi3String instanceName,
-                             fmi3String instantiationToken, fmi3Boolean loggingOn,
+                             fmi3String instantiationToken, fmi3String resourcePath,
+                             fmi3Boolean loggingOn,
                              fmi3InstanceEnvironment environment,
                              fmi3LogMessageCallback logMessage) {
     Fmi3Instance tmp;
@@ -105,7 +106,7 @@ static Instance *instantiate(InterfaceType type, fmi3String instanceName,
                                       instantiationToken, "instantiationToken"))
         return NULL;
     return instance_new(&tmp.base, sizeof(tmp), "fmi3Instantiate", type, instanceName,
-                        loggingOn);
+                        loggingOn, resourcePath);
 }
 
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName,
@@ -114,9 +115,8 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName,
                                           fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage) {
-    (void)resourcePath;
     (void)visible;
-    return instantiate(TYPE_ME, instanceName, instantiationToken, loggingOn,
+    return instantiate(TYPE_ME, instanceName, instantiationToken, resourcePath, loggingOn,
                        instanceEnvironment, logMessage);
 }
 
@@ -126,13 +126,12 @@ fmi3Instance fmi3InstantiateCoSimulation(
     fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
     size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
     fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate) {
-    (void)resourcePath;
     (void)visible;
     (void)earlyReturnAllowed;
     (void)requiredIntermediateVariables;
     (void)intermediateUpdate;
-    Instance *inst = instantiate(TYPE_CS, instanceName, instantiationToken, loggingOn,
-                                 instanceEnvironment, logMessage);
+    Instance *inst = instantiate(TYPE_CS, instanceName, instantiationToken, resourcePath,
+                                 loggingOn, instanceEnvironment, logMessage);
     if (inst && nRequiredIntermediateVariables > 0) {
         LOG_ERROR(inst, "fmi3InstantiateCoSimulation: intermediate updates are not supported");
         instance_free(inst);

@@ -92,7 +92,8 @@ bool instance_check_instantiation(const Instance *tmp, const char *function, con
 }
 
 Instance *instance_new(const Instance *tmp, size_t size, const char *function,
-                       InterfaceType type, const char *name, bool logging) {
+                       InterfaceType type, const char *name, bool logging,
+                       const char *resources) {
     Instance *inst = (Instance *)tmp->host->alloc(tmp, size);
     char *copy = (char *)tmp->host->alloc(tmp, strlen(name) + 1);
     if (!inst || !copy) {
@@ -110,12 +111,16 @@ Instance *instance_new(const Instance *tmp, size_t size, const char *function,
     inst->state = ST_INSTANTIATED;
     model_set_defaults(&inst->model);
 #ifdef MODEL_HAS_RESOURCES
-    if (!model_acquire(&inst->model)) {
-        LOG_ERROR(tmp, "%s: out of memory", function);
+    char msg[512];
+    const char *why = model_acquire(&inst->model, resources, msg, sizeof msg);
+    if (why) {
+        LOG_ERROR(tmp, "%s: %s", function, why);
         tmp->host->release(tmp, copy);
         tmp->host->release(tmp, inst);
         return NULL;
     }
+#else
+    (void)resources;
 #endif
     return inst;
 }

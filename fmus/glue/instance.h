@@ -7,7 +7,7 @@
  * descriptions and nothing about FMI. The build compiles model.c with instance.c and fmi2.c or
  * fmi3.c, the model's folder first on the include path.
  *
- * The model contract: a model's model.h defines MODEL_IDENTIFIER, INSTANTIATION_TOKEN,
+ * The model contract: a model's model.h defines INSTANTIATION_TOKEN,
  * N_STATES, N_EVENT_INDICATORS, N_VARIABLES (the value references are 0 .. N_VARIABLES - 1)
  * and the struct ModelData, which holds a `double time` (the model's time, written by the
  * glue) and everything else the model stores per instance (copied as plain memory for FMU
@@ -28,9 +28,13 @@
  *
  * Optional parts of the contract, each switched on by a macro its model.h defines:
  *
- *   MODEL_HAS_RESOURCES   the model owns memory beyond ModelData (the controller's solver):
- *       bool model_acquire(ModelData *m);   at instantiation, after model_set_defaults;
- *                                           false: out of memory (the instantiation fails)
+ *   MODEL_HAS_RESOURCES   the model owns memory beyond ModelData (the controller's solver)
+ *                         and may read the FMU's resources folder:
+ *       const char *model_acquire(ModelData *m, const char *resources, char *msg, size_t n);
+ *                                           at instantiation, after model_set_defaults;
+ *                                           resources: the folder's local path (NULL when
+ *                                           the environment gave none); NULL, or why it
+ *                                           fails (logged; the instantiation fails)
  *       void model_release(ModelData *m);   when the instance is freed
  *     A plain copy of ModelData does not copy that memory, so such a model also defines
  *   MODEL_NO_FMU_STATE    the FMU cannot save its state (canGetAndSetFMUState="false"): the
@@ -136,9 +140,11 @@ bool instance_check_instantiation(const Instance *tmp, const char *function, con
                                   const char *token, const char *token_label);
 
 /* Allocate `size` bytes (>= sizeof(Instance)) through tmp's host, copy `tmp` (with the glue's
- * extra fields) into it and set up a fresh instance; NULL (logged) when out of memory. */
+ * extra fields) into it and set up a fresh instance; `resources`: the local path of the
+ * FMU's resources folder, or NULL. NULL (logged) when out of memory or the model refuses. */
 Instance *instance_new(const Instance *tmp, size_t size, const char *function,
-                       InterfaceType type, const char *name, bool logging);
+                       InterfaceType type, const char *name, bool logging,
+                       const char *resources);
 
 void instance_free(Instance *inst);
 

@@ -174,14 +174,20 @@ def test_plants_of_other_kinds(plant_name: str, seed: int, steps: str, boxes: di
 def test_the_compiled_step_replays_the_python_controller() -> None:
     """:class:`CompiledController` fed the measurements the Python controller saw gives its
     inputs, statuses and fallbacks, step by step."""
-    from controllers.kernel.controller_source import CompiledController, ControllerDesign, build
+    from controllers.kernel.controller_source import (
+        CompiledController,
+        ControllerDesign,
+        build,
+        design_data,
+    )
     from cosim_adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController()
     law = ctrl.law
     design = ControllerDesign.of(ctrl.fhocp, ctrl.observer, law.disturbance.beta,
                                  law.certified, ctrl.model, ctrl._lo, ctrl._hi)
-    compiled = CompiledController(*build(design), n_inputs=2, n_outputs=2)
+    compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
+                                  n_outputs=2)
     rng = np.random.default_rng(5)
     y = np.array([0.62, 0.71])
     ctrl.setup(0.0)
@@ -252,3 +258,84 @@ controller = "Mpc.fmu"
     with pytest.raises(CosimError, match=r"spec.toml:\d+.*'Nope.fmu': controller FMU not "
                                          "found"):
         cosim.run_campaign(spec, tmp_path / "out2", workers=1)
+
+
+def _instantiate(unzipped: Path, logger: list[str]) -> object:
+    """Instantiate the controller FMU extracted in ``unzipped`` (FMI 2 or 3), logging into
+    ``logger``; the fmpy slave."""
+    from fmpy.fmi2 import FMU2Slave
+    from fmpy.fmi3 import FMU3Slave
+
+    from tests.fmus.fourtank_run import Plant
+
+    plant = Plant.__new__(Plant)
+    plant.md = fmpy.read_model_description(str(unzipped / "modelDescription.xml"))
+    plant.version = int(plant.md.fmiVersion[0])
+    token = plant.md.guid if plant.version == 2 else plant.md.instantiationToken
+    cls = FMU2Slave if plant.version == 2 else FMU3Slave
+    plant.fmu = cls(guid=token, unzipDirectory=str(unzipped), instanceName="mpc",
+                    modelIdentifier=plant.md.coSimulation.modelIdentifier)
+    plant._instantiate(lambda status, category, message: logger.append(message))
+    return plant.fmu
+
+
+def test_one_binary_serves_every_model_of_its_dimensions(tmp_path: Path,
+                                                         monkeypatch: pytest.MonkeyPatch) -> None:
+    """Two GRU models of the CSTR (other weights, the same dimensions) exported in turn
+    through a compiler that counts its builds: one build (the second export reuses the
+    binary), the binaries equal byte for byte and the numbers (``resources/controller.dat``)
+    not, and each FMU gives its own Python controller's inputs. A data file of another
+    layout, or a damaged one, is refused at instantiation with the reason logged; the FMI 2
+    resource location is a file URI (here with a space, percent-encoded)."""
+    import shutil
+    import zipfile
+
+    from controllers.kernel.constants import Constants
+    from cosim.cli import main
+    from cosim.core import controller_fmu
+
+    if shutil.which("gcc") is None:
+        pytest.skip("gcc not found")
+    counter = tmp_path / "builds"
+    wrapper = tmp_path / "cc"
+    wrapper.write_text("#!/bin/sh\ncase \"$*\" in *model.c*) echo build >> "
+                       f"'{counter}';; esac\nexec gcc \"$@\"\n")
+    wrapper.chmod(0o755)
+    monkeypatch.setenv("CC", str(wrapper))
+    monkeypatch.setattr(controller_fmu, "cache_dir", lambda: tmp_path / "cache")
+    steps = "time,ref.CA,ref.T\n0,0.5,330\n750,0.55,325\n1500,,\n"
+    fmus, archives = {}, {}
+    for seed in (3, 7):
+        plant, model, steps_csv = _example_case(tmp_path / f"m{seed}", "cstr", seed, steps)
+        fmus[seed] = tmp_path / f"Controller{seed}.fmu"
+        assert main(["export-fmu", str(model), "--scenario", str(steps_csv), "--out",
+                     str(fmus[seed]), "--quiet"]) == 0
+        with zipfile.ZipFile(fmus[seed]) as zf:
+            archives[seed] = {n: zf.read(n) for n in zf.namelist()}
+        py = cosim.run(steps_csv, plant=plant, model=model, figure=False)
+        run = cosim.run(steps_csv, plant=plant, controller=str(fmus[seed]), figure=False)
+        _same_inputs(run, py, CSTR)
+    assert counter.read_text().count("build") == 1
+    (b3,), (b7,) = ([d for n, d in a.items() if n.startswith("binaries/")]
+                    for a in archives.values())
+    assert b3 == b7
+    assert archives[3]["resources/controller.dat"] != archives[7]["resources/controller.dat"]
+
+    fmu2 = tmp_path / "Controller2.fmu"
+    assert main(["export-fmu", str(model), "--fmi", "2", "--out", str(fmu2), "--quiet"]) == 0
+    unzipped = tmp_path / "with space"
+    with zipfile.ZipFile(fmu2) as zf:
+        zf.extractall(unzipped)
+    log: list[str] = []
+    _instantiate(unzipped, log).freeInstance()   # read through the percent-encoded URI
+    other = Constants()
+    other.scalar("X", 1.0)
+    data = unzipped / "resources" / "controller.dat"
+    good = data.read_bytes()
+    for bad, reason in ((other.data(), "is not this library's"),
+                        (good[:-8], "expected"), (b"", "not a controller data file")):
+        data.write_bytes(bad)
+        log.clear()
+        with pytest.raises(Exception, match="nstantiate"):
+            _instantiate(unzipped, log)
+        assert any("controller.dat" in m and reason in m for m in log), log

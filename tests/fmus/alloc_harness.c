@@ -1,6 +1,6 @@
 /* Counts the allocations a controller FMU (FMI 3, the four-tank problem: value references 1-4
  * in, 5-6 out) makes while it steps, malloc & co. interposed by this executable
- * (tests/fmus/test_controller_fmu.py). Usage: alloc_harness LIBRARY TOKEN TS */
+ * (tests/fmus/test_controller_fmu.py). Usage: alloc_harness LIBRARY TOKEN TS RESOURCES */
 #include <dlfcn.h>
 #include <math.h>
 #include <stdio.h>
@@ -28,7 +28,7 @@ int posix_memalign(void **p, size_t a, size_t n) {
 #define SYM(T, name) T *name = (T *)dlsym(lib, #name); if (!name) return 2;
 
 int main(int argc, char **argv) {
-  if (argc < 4) return 2;
+  if (argc < 5) return 2;
   void *lib = dlopen(argv[1], RTLD_NOW | RTLD_LOCAL);
   if (!lib) { fprintf(stderr, "%s\n", dlerror()); return 2; }
   SYM(fmi3InstantiateCoSimulationTYPE, fmi3InstantiateCoSimulation)
@@ -40,7 +40,7 @@ int main(int argc, char **argv) {
   SYM(fmi3FreeInstanceTYPE, fmi3FreeInstance)
   const double ts = atof(argv[3]);
   counting = 1;
-  fmi3Instance c = fmi3InstantiateCoSimulation("mpc", argv[2], NULL, fmi3False, fmi3False,
+  fmi3Instance c = fmi3InstantiateCoSimulation("mpc", argv[2], argv[4], fmi3False, fmi3False,
                                                fmi3False, fmi3False, NULL, 0, NULL, NULL, NULL);
   if (!c || fmi3EnterInitializationMode(c, fmi3False, 0.0, 0.0, fmi3False, 0.0) ||
       fmi3ExitInitializationMode(c)) return 2;

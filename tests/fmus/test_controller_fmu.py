@@ -273,7 +273,8 @@ def test_it_never_allocates_after_instantiation(controller_fmus: dict[int, Path]
         zf.extractall(tmp_path / "fmu")
     md = fmpy.read_model_description(str(path))
     lib = tmp_path / "fmu" / "binaries" / "x86_64-linux" / f"{path.stem}.so"
-    proc = subprocess.run([str(harness), str(lib), md.instantiationToken, str(TS)],
+    proc = subprocess.run([str(harness), str(lib), md.instantiationToken, str(TS),
+                           f"{tmp_path / 'fmu' / 'resources'}/"],
                           capture_output=True, text=True, timeout=120, check=False)
     assert proc.returncode == 0, proc.stderr
     assert "allocations while stepping: 0, status ok" in proc.stdout, proc.stdout
