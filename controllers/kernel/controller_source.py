@@ -202,11 +202,11 @@ def generate_source(design: ControllerDesign) -> str:
     problem = design.kernel
     if problem.offset_weight is None:
         raise ValueError("the exported controller runs the tracking law")
-    consts = controller_constants(design)
-    return "\n".join([kernel_source(problem),
+    kernel, own = kernel_constants(problem), controller_constants(design)
+    return "\n".join([kernel_source(problem, kernel),
                       "/* the controller's constants (controller_source.py) */\n"
-                      f"#define CT_NPARAM {len(PARAMETERS)}\n" + consts.declarations(),
-                      CONTROLLER_C.read_text(), loader_source(design_constants(design))])
+                      f"#define CT_NPARAM {len(PARAMETERS)}\n" + own.declarations(),
+                      CONTROLLER_C.read_text(), loader_source(kernel + own)])
 
 
 def design_data(design: ControllerDesign) -> bytes:
