@@ -123,6 +123,12 @@ class ControlProblem:
     pairing : str
         The default of :attr:`pairings` ("" when there are none).
     description : str
+    train : dict of str to Any
+        ``cosim train``'s options chosen for this plant (the problem file's ``[train]``),
+        empty when none; what the command line overrides.
+    mpc : dict of str to Any
+        The robust MPC's options chosen for this plant (the problem file's ``[mpc]``: keys
+        and values as ``--option``'s), empty when none; what a run's options override.
     source : str
         Where the problem was read from (messages only; not compared, not saved).
     """
@@ -134,6 +140,8 @@ class ControlProblem:
     pairings: Mapping[str, tuple[PILoop, ...]] = field(default_factory=dict)
     pairing: str = ""
     description: str = ""
+    train: Mapping[str, Any] = field(default_factory=dict)
+    mpc: Mapping[str, Any] = field(default_factory=dict)
     source: str = field(default="", compare=False)
 
     # -- the signals by kind ---------------------------------------------------------------
@@ -211,6 +219,9 @@ class ControlProblem:
             doc["pi"] = {"pairing": self.pairing,
                          "pairings": {k: [lp.to_dict() for lp in v]
                                       for k, v in self.pairings.items()}}
+        for table in ("train", "mpc"):
+            if getattr(self, table):
+                doc[table] = dict(getattr(self, table))
         return doc
 
     def differences(self, other: ControlProblem) -> list[str]:

@@ -27,6 +27,20 @@ A problem file declares the plant's signals in its own names and units::
     [pi.pairings]
     main = [{ output = "CA", input = "F", K = -40.0, Ti = 300.0, Tt = 300.0 }]
 
+    [train]                        # optional: how to identify this plant's model
+    sigma_z_max = 0.9              # cosim train's options (cosim.commands.train)
+
+    [mpc]                          # optional: the robust MPC's tuning for this plant
+    Q = "outputs"                  # any robust-mpc option (cosim_adapters.mpc_options)
+    R = 0.001
+
+The ``[train]`` and ``[mpc]`` tables hold what was chosen for this plant: ``cosim train``'s
+modelling options and the robust MPC's options (keys as ``--option``'s). They travel with the
+problem into the data sidecar and the model file, and an option given on the command line
+overrides them. Their keys are checked here for form only (names, TOML values); their meaning
+and values by what takes them (:data:`cosim.commands.train.PROBLEM_OPTIONS`,
+:meth:`cosim_adapters.mpc_options.MPCOptions.resolve`; errors located by :func:`locate_key`).
+
 Every fault is a :class:`~controllers.errors.ProblemFileError` (exit 2) naming the file and
 line: invalid TOML, an unknown key, a missing ``unit``/``min``/``max``/``Ts``/``name``,
 ``min ≥ max``, a non-finite number, a name used twice, no inputs or no outputs, a bad loop.
@@ -46,9 +60,9 @@ from typing import Any
 from controllers.errors import ProblemFileError
 from controllers.problem import Channel, ControlProblem, PILoop
 
-__all__ = ["load", "loads", "locate", "problem_from_dict"]
+__all__ = ["load", "loads", "locate", "locate_key", "problem_from_dict"]
 
-_TOP = {"problem", "inputs", "outputs", "pi"}
+_TOP = {"problem", "inputs", "outputs", "pi", "train", "mpc"}
 _PROBLEM = {"name", "Ts", "description"}
 _CHANNEL = {"unit", "min", "max", "variable", "description", "normalization"}
 _INPUT = _CHANNEL | {"hold", "levels"}
@@ -72,7 +86,7 @@ class _Locator:
     def line(self, table: str, key: str | None) -> int:
         """Line of ``key`` in ``[table]`` (or of the header; of ``name = {...}`` in the
         parent table for an inline table)."""
-        current, header = None, 0
+        current, header = "", 0           # "": the top level, before any table
         for i, raw in enumerate(self.lines, start=1):
             s = raw.strip()
             m = re.match(r"^\[\s*([^\]]+?)\s*\]", s)
@@ -87,7 +101,7 @@ class _Locator:
         if header:
             return header
         parent, _, last = table.rpartition(".")
-        if parent:
+        if table:   # an inline table, or a top-level key (parent ""): where it is set
             return self.line(parent, last)
         return 1
 
@@ -120,7 +134,7 @@ def loads(text: str, source: str = "<problem>") -> ControlProblem:
         raise ProblemFileError(f"{where}: invalid TOML ({re.sub(r' ?[(]at .*[)]', '', msg)})"
                                ) from None
     loc = _Locator(source, text)
-    _known(doc, _TOP, "the top level (tables: problem, inputs, outputs, pi)", loc, "")
+    _known(doc, _TOP, "the top level (tables: problem, inputs, outputs, pi, train, mpc)", loc, "")
     channels = {}
     for kind in ("inputs", "outputs"):
         table = doc.get(kind, {})
@@ -128,7 +142,8 @@ def loads(text: str, source: str = "<problem>") -> ControlProblem:
             raise ProblemFileError(f"{loc(kind)}: '{kind}' must be tables [{kind}.NAME]")
         channels[kind] = [dict(v, name=k) if isinstance(v, dict) else v
                           for k, v in table.items()]
-    flat = {"problem": doc.get("problem"), **channels, "pi": doc.get("pi")}
+    flat = {"problem": doc.get("problem"), **channels, "pi": doc.get("pi"),
+            "train": doc.get("train"), "mpc": doc.get("mpc")}
 
     def where(table: str, key: str | None = None) -> str:
         return loc(table, key)
@@ -142,8 +157,8 @@ def problem_from_dict(doc: Any, source: str = "<problem>") -> ControlProblem:
         raise ProblemFileError(f"{source}: 'problem' must be an object")
     flat = {"problem": {k: doc[k] for k in _PROBLEM if k in doc},
             "inputs": doc.get("inputs", []), "outputs": doc.get("outputs", []),
-            "pi": doc.get("pi")}
-    unknown = sorted(set(doc) - {*_PROBLEM, "inputs", "outputs", "pi"})
+            "pi": doc.get("pi"), "train": doc.get("train"), "mpc": doc.get("mpc")}
+    unknown = sorted(set(doc) - {*_PROBLEM, "inputs", "outputs", "pi", "train", "mpc"})
     if unknown:
         raise ProblemFileError(f"{source}: problem: unknown key '{unknown[0]}'")
 
@@ -165,6 +180,12 @@ def locate(problem: ControlProblem, signal: str, key: str | None = None) -> str:
     kind = "inputs" if signal in problem.input_names else "outputs"
     if signal not in problem.input_names and signal not in problem.output_names:
         raise KeyError(signal)
+    return locate_key(problem, f"{kind}.{signal}", key)
+
+
+def locate_key(problem: ControlProblem, table: str, key: str | None = None) -> str:
+    """Where ``key`` of ``[table]`` of ``problem`` is declared (``"mpc"``, ``"R"``):
+    ``file:line`` in a problem file, ``source: problem.mpc.R`` in the JSON form."""
     source = problem.source or "<problem>"
     path = Path(source)
     if path.suffix.lower() == ".toml":
@@ -172,8 +193,8 @@ def locate(problem: ControlProblem, signal: str, key: str | None = None) -> str:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError):
             return source
-        return _Locator(source, text)(f"{kind}.{signal}", key)
-    return f"{source}: problem.{kind}.{signal}" + (f".{key}" if key else "")
+        return _Locator(source, text)(table, key)
+    return f"{source}: problem.{table}" + (f".{key}" if key else "")
 
 
 def _with_source(problem: ControlProblem, source: str) -> ControlProblem:
@@ -253,7 +274,8 @@ def _build(doc: dict[str, Any], where: Where, toml: bool) -> ControlProblem:
     pairings, pairing = _pi(doc.get("pi"), kinds["inputs"], kinds["outputs"], where, toml)
     return ControlProblem(name=name.strip(), Ts=Ts, inputs=kinds["inputs"],
                           outputs=kinds["outputs"], pairings=pairings, pairing=pairing,
-                          description=description)
+                          description=description, train=_options(doc, "train", where),
+                          mpc=_options(doc, "mpc", where))
 
 
 def _table(kind: str, name: Any, index: int, toml: bool) -> str:
@@ -396,3 +418,35 @@ def _pi(doc: Any, inputs: tuple[Channel, ...], outputs: tuple[Channel, ...], whe
         raise ProblemFileError(f"{where('pi', 'pairing')}: pairing {pairing!r} is not one of "
                                f"{', '.join(pairings)}")
     return pairings, pairing
+
+
+def _options(doc: dict[str, Any], table: str, where: Where) -> dict[str, Any]:
+    """The ``[train]`` or ``[mpc]`` table: option names and plain values (checked by what
+    takes them)."""
+    options = doc.get(table)
+    if options is None:
+        return {}
+    if not isinstance(options, dict):
+        raise ProblemFileError(f"{where(table)}: [{table}] must be a table of options "
+                               "(KEY = VALUE)")
+    out = {}
+    for key, value in options.items():
+        if not key.isidentifier():
+            raise ProblemFileError(f"{where(table, key)}: [{table}] key {key!r} is not an "
+                                   "option name")
+        out[key] = _plain(value, where(table, key), f"[{table}] '{key}'")
+    return out
+
+
+def _plain(value: Any, at: str, what: str) -> Any:
+    """``value`` as JSON data (numbers, strings, booleans, lists, tables; not TOML dates)."""
+    if isinstance(value, dict):
+        return {str(k): _plain(v, at, what) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_plain(v, at, what) for v in value]
+    if isinstance(value, float) and not math.isfinite(value):
+        raise ProblemFileError(f"{at}: {what} must be finite, got {value!r}")
+    if value is None or isinstance(value, bool | int | float | str):
+        return value
+    raise ProblemFileError(f"{at}: {what} must be a number, string, boolean, list or table, "
+                           f"got {type(value).__name__}")

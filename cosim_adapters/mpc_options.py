@@ -167,6 +167,33 @@ class MPCOptions:
                     if getattr(given, k) is None}
         return dataclasses.replace(given, **defaults)
 
+    @classmethod
+    def resolve(cls, given: Mapping[str, Any], problem: Any = None) -> MPCOptions:
+        """A run's options: ``given`` (its ``--option`` values) over the problem's ``[mpc]``
+        table (:attr:`controllers.problem.ControlProblem.mpc`: the tuning chosen for the
+        plant), checked, with the law's defaults filled in.
+
+        The problem's options of the other law than the run's are left out (a plant tuned
+        for the tracking law still runs the paper's law); a bad one is an error naming the
+        problem file and line.
+        """
+        tuned = dict(getattr(problem, "mpc", None) or {})
+        if not tuned:
+            return cls.from_mapping(given)
+        from controllers.problem_file import locate_key
+
+        cls.from_mapping(given)                 # the run's own errors first, as they are
+        law = given.get("law", tuned.get("law", "tracking"))
+        other = PAPER_ONLY if law == "tracking" else TRACKING_ONLY
+        tuned = {k: v for k, v in tuned.items() if k not in other}
+        for key in sorted(tuned, key=lambda k: k != "law"):
+            try:
+                cls.from_mapping({"law": law, key: tuned[key]} if key != "law"
+                                 else {key: tuned[key]})
+            except CosimError as exc:
+                raise CosimError(f"{locate_key(problem, 'mpc', key)}: [mpc] {exc}") from None
+        return cls.from_mapping({**tuned, **given})
+
     def to_dict(self) -> dict[str, Any]:
         """The options as plain data (the run summary's ``options``; JSON-serialisable for
         numbers, lists and objects)."""

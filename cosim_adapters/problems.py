@@ -5,7 +5,8 @@ model file holds it (:attr:`controllers.model.GRUModel.problem`). The rules, the
 every command and controller:
 
 - a model with a problem: that problem; a ``--problem`` given as well must be the same
-  (otherwise one line naming both and what differs, exit 2);
+  (otherwise one line naming both and what differs, exit 2), but for its ``[mpc]`` table
+  (the robust MPC's tuning, which may change after training): the given one's is used;
 - a model without one (written before problems existed): the ``--problem`` given, or the
   default plant's, checked against the model's signals, sample time and normalisation;
 - no model (the PI baseline, ``generate-data``): the ``--problem`` given, or the default
@@ -18,6 +19,7 @@ checks) and gives the variable map the FMU component converts through.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -77,6 +79,8 @@ def problem_for(model: Any, arg: str | Path | ControlProblem | None = None) -> C
                 raise CosimError(f"{_name(arg, given)} contradicts the problem of "
                                  f"{model.source or 'the model'} ({own.name!r}): "
                                  f"{'; '.join(diff[:3])}")
+            if given.mpc != own.mpc:            # the tuning, located in the given file
+                return dataclasses.replace(own, mpc=dict(given.mpc), source=given.source)
         return own
     problem = load_problem(arg)
     if model is not None:

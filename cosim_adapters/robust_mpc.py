@@ -68,7 +68,7 @@ from cosim_adapters.mpc_options import MPCOptions
 from cosim_adapters.paper_law import PaperLaw
 from cosim_adapters.tracking import TrackingLaw
 
-__all__ = ["RobustMPCController"]
+__all__ = ["RobustMPCController", "design_arguments"]
 
 
 def _plain(value: Any) -> Any:
@@ -122,6 +122,16 @@ def _state_weight(value: Any, params: Mapping[str, np.ndarray]) -> np.ndarray | 
     return _weight("Q", value, n, None)
 
 
+def design_arguments(o: MPCOptions, model: Any) -> dict[str, Any]:
+    """The certificate's design arguments of the options ``o`` on ``model`` (its problem's
+    inputs): ``N``, ``Q`` (``"outputs"`` built from its ``U_o``), ``R`` (an object by input
+    name as a diagonal) and ``e_o0``; what the controller and ``cosim certify`` compute the
+    certificate (:func:`controllers.certification.certificates.compute_certificate`) with."""
+    inputs = list(model.problem.input_names)
+    return {"N": o.N, "Q": _state_weight(o.Q, model.params),
+            "R": _weight("R", o.R, len(inputs), inputs), "e_o0": o.e_o0}
+
+
 class RobustMPCController(Component):
     """Robust MPC with GRU model and observer (Schimperna & Magni), normalised internally.
 
@@ -130,10 +140,13 @@ class RobustMPCController(Component):
     model : str or Path, optional
         Model file (default: the shipped ``controllers/models/fourtank_gru.json``).
     problem : str or Path, optional
-        A problem file: must be the model's own (a check), or the problem of a model file
-        that has none (:mod:`cosim_adapters.problems`).
+        A problem file: must be the model's own (a check; its ``[mpc]`` table, the tuning,
+        may differ and is the one used), or the problem of a model file that has none
+        (:mod:`cosim_adapters.problems`).
     options : MPCOptions or mapping, optional
-        The design (:class:`cosim_adapters.mpc_options.MPCOptions`), as an object or by key.
+        The design (:class:`cosim_adapters.mpc_options.MPCOptions`), as an object (used as
+        it is) or by key (over the problem's ``[mpc]`` table,
+        :meth:`~cosim_adapters.mpc_options.MPCOptions.resolve`).
     name : str
         Component name.
     **option_values
@@ -156,12 +169,6 @@ class RobustMPCController(Component):
 
         if not isinstance(name, str) or not name:
             raise CosimError(f"option name={name!r}: expected a non-empty string")
-        if not isinstance(options, MPCOptions):
-            options = MPCOptions.from_mapping({**(options or {}), **option_values})
-        elif option_values:
-            options = MPCOptions.from_mapping({**options.to_dict(), **option_values})
-        #: the design (:class:`cosim_adapters.mpc_options.MPCOptions`, defaults filled in)
-        self.options = options
         self.name = name
         self.model_path = Path(model) if model is not None else DEFAULT_MODEL
         try:
@@ -170,6 +177,13 @@ class RobustMPCController(Component):
             raise CosimError(str(exc)) from None
         self.problem = problem_for(self.model, problem)
         self.model.problem = self.problem
+        if not isinstance(options, MPCOptions):
+            options = MPCOptions.resolve({**(options or {}), **option_values}, self.problem)
+        elif option_values:
+            options = MPCOptions.from_mapping({**options.to_dict(), **option_values})
+        #: the design (:class:`cosim_adapters.mpc_options.MPCOptions`, defaults filled in;
+        #: the problem's ``[mpc]`` under the options given, :meth:`MPCOptions.resolve`)
+        self.options = options
         #: the control law (:class:`cosim_adapters.law.ControlLaw`): everything that differs
         #: between ``law="tracking"`` and ``law="paper"``
         self.law: ControlLaw
@@ -203,9 +217,7 @@ class RobustMPCController(Component):
             self.du_weight = du_weights(o.du_weight, len(inputs), inputs)
         except ControllersError as exc:
             raise CosimError(f"option {exc}") from None
-        kwargs: dict[str, Any] = {"N": o.N, "Q": _state_weight(o.Q, self.model.params),
-                                  "R": _weight("R", o.R, len(inputs), inputs),
-                                  "e_o0": o.e_o0}
+        kwargs = design_arguments(o, self.model)
         gains_certified = True
         try:
             if o.gain_scale is None and self.model.L_z is None:

@@ -84,15 +84,17 @@ def register(subparsers: Any) -> None:
     p.add_argument("--json", action="store_true",
                    help="print JSON with the paper's names (a list when several set-points)")
     p.add_argument("--N", type=int, default=None,
-                   help="prediction horizon N (default 80, the tracking law's; 15 with --law "
-                        "paper)")
-    p.add_argument("--law", choices=("paper", "tracking"), default="tracking",
-                   help="the robust MPC's law to certify for (default tracking, as robust-mpc's "
-                        "law): tracking also computes and checks the tracking law's hypotheses "
-                        "(its defaults: zero observer gains, alpha_c = alpha_min(N) of the "
-                        "design above; docs: design/tracking.md); paper: the certificate alone")
-    p.add_argument("--e-o0", type=float, default=0.02, dest="e_o0",
-                   help="initial observer-error bound ê_o,0 (default 0.02)")
+                   help="prediction horizon N (default: the problem's [mpc] N, else 80, the "
+                        "tracking law's; 15 with --law paper)")
+    p.add_argument("--law", choices=("paper", "tracking"), default=None,
+                   help="the robust MPC's law to certify for (default: the problem's [mpc] "
+                        "law, else tracking, as robust-mpc's): tracking also computes and "
+                        "checks the tracking law's hypotheses (its defaults: zero observer "
+                        "gains, alpha_c = alpha_min(N) of the design above; docs: "
+                        "design/tracking.md); paper: the certificate alone")
+    p.add_argument("--e-o0", type=float, default=None, dest="e_o0",
+                   help="initial observer-error bound ê_o,0 (default: the problem's [mpc] "
+                        "e_o0, else 0.02)")
     g = p.add_mutually_exclusive_group()
     g.add_argument("--gain-scale", type=float, metavar="THETA",
                    help="observer gains = THETA × LP-optimal gains")
@@ -242,7 +244,7 @@ def run(args: argparse.Namespace) -> int:
     if w_y_bar is None and model.w_y_bar is None:
         raise CosimError(f"{args.model}: no 'w_y_bar' in the model file; estimate it with "
                          "--data DATA.csv")
-    kwargs = dict(N=args.N, e_o0=args.e_o0, w_y_bar=w_y_bar)
+    kwargs = {**_design(args, model), "w_y_bar": w_y_bar}
     try:
         cert, note, no_theta = _certificate(args, model, setpoints, kwargs)
     except (CosimError, ControllersError) as exc:
@@ -291,15 +293,12 @@ def run(args: argparse.Namespace) -> int:
 def _check_args(args: argparse.Namespace) -> None:
     """Default ``--model`` and ``--N`` (the law's), and reject bad numbers in one line."""
     from controllers.model import DEFAULT_MODEL
-    from controllers.ocp.fhocp_tracking import DEFAULTS as TRACKING
 
     if args.model is None:
         args.model = str(DEFAULT_MODEL)
-    if args.N is None:
-        args.N = TRACKING["N"] if args.law == "tracking" else 15
-    if args.N < 1:
+    if args.N is not None and args.N < 1:
         raise CosimError(f"--N must be >= 1, got {args.N}")
-    if not (math.isfinite(args.e_o0) and args.e_o0 >= 0):
+    if args.e_o0 is not None and not (math.isfinite(args.e_o0) and args.e_o0 >= 0):
         raise CosimError(f"--e-o0 must be a non-negative number, got {args.e_o0}")
     if args.gain_scale is not None and not (math.isfinite(args.gain_scale)
                                             and args.gain_scale >= 0):
@@ -308,6 +307,21 @@ def _check_args(args: argparse.Namespace) -> None:
         from cosim.core.outpaths import figure_file
 
         figure_file(args.plot, "--plot")
+
+
+def _design(args: argparse.Namespace, model: Any) -> dict[str, Any]:
+    """The design certified: ``--law``, ``--N`` and ``--e-o0`` over the problem's ``[mpc]``
+    table (its ``Q`` and ``R`` too: the weights the run will use), the law's defaults
+    (:meth:`cosim_adapters.mpc_options.MPCOptions.resolve`); sets ``args.law`` and
+    ``args.N``."""
+    from cosim_adapters.mpc_options import MPCOptions
+    from cosim_adapters.robust_mpc import design_arguments
+
+    given = {k: v for k, v in (("law", args.law), ("N", args.N), ("e_o0", args.e_o0))
+             if v is not None}
+    options = MPCOptions.resolve(given, model.problem)
+    args.law, args.N = options.law, options.N
+    return design_arguments(options, model)
 
 
 def _setpoint_checks(model: Any, cert: Any, setpoints_phys: list, setpoints: list

@@ -9,8 +9,8 @@ from typing import Any
 
 from cosim.core.errors import exit_codes_help
 
-__all__ = ["DESCRIPTION", "HELP", "MAX_EPOCHS", "MAX_STATES", "SHIPPED_MODEL", "register",
-           "run"]
+__all__ = ["DESCRIPTION", "HELP", "MAX_EPOCHS", "MAX_STATES", "PROBLEM_OPTIONS", "SHIPPED_MODEL",
+           "register", "run"]
 
 #: The shipped model (package data of ``controllers``, ``controllers.model.DEFAULT_MODEL``):
 #: never written unless named explicitly with --out.
@@ -24,6 +24,11 @@ MAX_STATES = 1000
 EPOCHS = {"truncated": 2000}
 #: Default learning rates (first, last) of each method.
 LEARNING_RATES = {"simulation": (0.03, 0.003), "truncated": (0.02, 0.0005)}
+#: The options a problem file's ``[train]`` table may set (the plant's own modelling choices,
+#: :attr:`controllers.problem.ControlProblem.train`), by the type of their value; the command
+#: line overrides them.
+PROBLEM_OPTIONS: dict[str, type] = {"epochs": int, "n": int, "sizes": list, "seeds": int,
+                                    "sigma_z_max": float, "nu_margin": float}
 #: Options of ``--method truncated`` only.
 TRUNCATED_ONLY = ("seq_len", "stride", "batch", "washout", "constraint", "penalty_weight",
                   "uo_weight")
@@ -62,6 +67,9 @@ washout, the epoch with the best validation FIT).
 At the end, per split and per experiment: the free-run RMS in the outputs' units and the FIT,
 next to an ARX model fitted on the same training rows (orders chosen on validation); a model
 worse than that linear baseline on validation says so. The model file records it all.
+
+The problem file's [train] table may set --epochs, --n, --sizes, --seeds, --sigma-z-max and
+--nu-margin for its plant (sigma_z_max = 0.9); the command line overrides it.
 
 The model file goes to --out, by default models/<DATA stem>_gru.json in the CURRENT folder
 (data/fourtank.csv -> models/fourtank_gru.json). The shipped model
@@ -138,6 +146,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "rows, else 1,000-row windows)")
     _training_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
+    for action in parser._actions:   # absent unless given: the [train] table's, else defaults
+        if action.dest in PROBLEM_OPTIONS:
+            action.default = argparse.SUPPRESS
     parser.set_defaults(func=run)
 
 
@@ -192,6 +203,70 @@ def _training_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--patience", type=int, default=d.patience,
                         help="stop after this many epochs without a better validation score "
                         "(0 = off)")
+
+
+def _option_defaults() -> dict[str, Any]:
+    """The defaults of :data:`PROBLEM_OPTIONS` (``None``: chosen later, from the record)."""
+    from controllers.identification.training import TrainOptions
+
+    d = TrainOptions()
+    return {"epochs": None, "n": None, "sizes": None, "seeds": None,
+            "sigma_z_max": d.sigma_z_max, "nu_margin": d.nu_margin}
+
+
+def _problem_options(args: argparse.Namespace, problem: Any) -> None:
+    """Fill :data:`PROBLEM_OPTIONS` not given on the command line from the problem's
+    ``[train]`` table, else their defaults, and check every option (a bad value of the
+    table: one line naming the problem file and line)."""
+    from controllers.problem_file import locate_key
+    from cosim.core.errors import CosimError
+
+    table = dict(getattr(problem, "train", None) or {})
+    unknown = sorted(set(table) - set(PROBLEM_OPTIONS))
+    if unknown:
+        raise CosimError(f"{locate_key(problem, 'train', unknown[0])}: [train] has no option "
+                         f"{unknown[0]!r} (options: {', '.join(PROBLEM_OPTIONS)})")
+    given = {key for key in PROBLEM_OPTIONS if hasattr(args, key)}
+    if given & {"n", "sizes"}:   # the command line's sizes replace the table's
+        table = {k: v for k, v in table.items() if k not in ("n", "sizes")}
+    from_table = []
+    for key, default in _option_defaults().items():
+        if key in given:
+            continue
+        if key in table:
+            setattr(args, key, _table_value(key, table[key], locate_key(problem, "train",
+                                                                         key)))
+            from_table.append(key)
+        else:
+            setattr(args, key, default)
+    try:
+        _check_options(args)
+    except CosimError as exc:
+        flag = str(exc).split(" ", 1)[0]
+        key = flag.removeprefix("--").replace("-", "_")
+        if key in from_table:
+            raise CosimError(f"{locate_key(problem, 'train', key)}: [train] {key}: "
+                             f"{str(exc).removeprefix(flag + ' ')}") from None
+        raise
+
+
+def _table_value(key: str, value: Any, where: str) -> Any:
+    """``value`` of ``[train]``'s ``key`` as the command line would give it."""
+    from cosim.core.errors import CosimError
+
+    kind = PROBLEM_OPTIONS[key]
+    if kind is list:   # --sizes 4,8: a list of sizes (or the same text)
+        ok = isinstance(value, str) or (isinstance(value, list) and value and all(
+            isinstance(v, int) and not isinstance(v, bool) for v in value))
+        if not ok:
+            raise CosimError(f"{where}: [train] {key} must be a list of GRU sizes, got "
+                             f"{value!r}")
+        return value if isinstance(value, str) else ",".join(map(str, value))
+    if isinstance(value, bool) or not isinstance(value, int | float) or (
+            kind is int and not isinstance(value, int)):
+        what = "an integer" if kind is int else "a number"
+        raise CosimError(f"{where}: [train] {key} must be {what}, got {value!r}")
+    return kind(value)
 
 
 def _problem(args: argparse.Namespace) -> tuple[Any, bool]:
@@ -366,8 +441,8 @@ def run(args: argparse.Namespace) -> int:
     from cosim.core import outpaths
     from cosim.core.errors import CosimError
 
-    _check_options(args)
     problem, given = _problem(args)
+    _problem_options(args, problem)
     data = _read(args, problem, given)
     if not np.any(data.split == "train"):
         raise CosimError(f"{args.data[0]}: no rows in split 'train'")

@@ -3,12 +3,17 @@
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
 
 import pytest
 
+from controllers.errors import ProblemFileError
+from controllers.problem_file import load, problem_from_dict
 from cosim.core.errors import CosimError
 from cosim_adapters.mpc_options import LAW_DEFAULTS, MPCOptions
 from cosim_adapters.robust_mpc import RobustMPCController
+from tests.fourtank_problem import with_table
 
 
 @pytest.mark.parametrize("law", ["tracking", "paper"])
@@ -52,3 +57,50 @@ def test_the_controller_takes_the_description_or_its_keys() -> None:
     json.dumps(summary["options"])
     over = RobustMPCController(options=by_keys.options, N=12)   # a key over the object
     assert over.options.N == 12 and over.options.law == "paper"
+
+
+# -- the problem's [mpc] table: the tuning chosen for the plant ---------------------------------
+
+def test_the_problems_mpc_table_tunes_the_controller_and_options_override_it(
+        tmp_path: Path) -> None:
+    path = with_table(tmp_path, "mpc", "N = 12\nR = 0.02\ncontrol_horizon = 5\n")
+    problem = load(path)
+    assert problem.mpc == {"N": 12, "R": 0.02, "control_horizon": 5}
+    assert problem_from_dict(json.loads(json.dumps(problem.to_dict()))) == problem
+    tuned = RobustMPCController(problem=path)        # the shipped model's problem, retuned
+    assert (tuned.options.N, tuned.options.R, tuned.options.control_horizon) == (12, 0.02, 5)
+    assert tuned.fhocp.N == 12
+    over = RobustMPCController(problem=path, N=10)   # an option given wins
+    assert (over.options.N, over.options.R) == (10, 0.02)
+    paper = RobustMPCController(problem=path, law="paper")   # the other law's keys left out
+    assert paper.options.control_horizon is None and paper.options.N == 12
+    plain = RobustMPCController()                    # the model's own problem: no [mpc]
+    assert LAW_DEFAULTS["tracking"]["N"] == plain.options.N
+
+
+@pytest.mark.parametrize(("table", "anchor", "message"), [
+    ("du_weight = -1\n", "du_weight = -1", "[mpc] option du_weight=-1: expected"),
+    ("horizon = 3\n", "horizon = 3", "[mpc] controller 'robust-mpc' has no option 'horizon'"),
+    ('law = "fast"\n', 'law = "fast"', "[mpc] option law='fast': expected one of"),
+])
+def test_a_bad_mpc_table_names_the_problem_file_and_line(tmp_path: Path, table: str,
+                                                         anchor: str, message: str) -> None:
+    path = with_table(tmp_path, "mpc", "N = 12\n" + table)
+    text = path.read_text()
+    line = text[:text.index(anchor)].count("\n") + 1
+    with pytest.raises(CosimError) as err:
+        RobustMPCController(problem=path)
+    assert str(err.value).startswith(f"{path}:{line}: {message}"), err.value
+    assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize(("table", "message"), [
+    ("N = 1979-05-27\n", "[mpc] 'N' must be a number, string, boolean, list or table"),
+    ("Q = [1.0, nan]\n", "[mpc] 'Q' must be finite"),
+])
+def test_a_value_toml_has_but_json_lacks_is_refused_when_read(tmp_path: Path, table: str,
+                                                              message: str) -> None:
+    path = with_table(tmp_path, "mpc", table)
+    line = path.read_text().count("\n")
+    with pytest.raises(ProblemFileError, match=re.escape(f"{path}:{line}: {message}")):
+        load(path)

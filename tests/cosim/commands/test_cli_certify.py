@@ -504,3 +504,23 @@ def test_the_tracking_laws_hypotheses(model_file: Path, capsys) -> None:
     out = capsys.readouterr().out
     assert "FAILS: room for set-points: " in out and "set-points that pass: h1: none" in out
     assert "even an exact model would not pass" in out
+
+
+def test_certify_takes_the_design_of_the_problems_mpc_table(tmp_path: Path, capsys) -> None:
+    """The problem's [mpc] N, Q and R are the design certified (the controller's), under
+    the flags given."""
+    from cosim_adapters.robust_mpc import RobustMPCController
+    from tests.fourtank_problem import with_table
+
+    tuned = with_table(tmp_path, "mpc", 'Q = "outputs"\nN = 40\n')
+
+    def certify(*extra: str) -> dict:
+        assert main(["certify", "--json", *extra]) in (0, 1)
+        doc = json.loads(capsys.readouterr().out)
+        return doc[0] if isinstance(doc, list) else doc
+
+    plain, own = certify(), certify("--problem", str(tuned))
+    ctrl = RobustMPCController(problem=tuned)
+    assert own["s"] == pytest.approx(ctrl.cert.s, rel=1e-12) and ctrl.cert.N == 40
+    assert own["s"] != pytest.approx(plain["s"], rel=1e-3)   # Q = U_oᵀU_o + εI, not I
+    assert len(own["a"]) == 41 and len(certify("--problem", str(tuned), "--N", "30")["a"]) == 31

@@ -217,6 +217,11 @@ CASES: dict[str, tuple[Callable[[str], str], str, str]] = {
                                  "output 'CA' -> FMU variable 'CA': a unit the FMU "
                                  "contradicts: the problem says 'K', Reactor.fmu declares "
                                  "'mol/m3'"),
+    "a date in [train]": (lambda t: t + "[train]\nepochs = 1979-05-27\n",
+                          "epochs = 1979-05-27", "[train] 'epochs' must be a number, string, "
+                                                 "boolean, list or table, got date"),
+    "[mpc] not a table": (lambda t: "# a plant\n\nmpc = 3\n" + t, "mpc = 3",
+                          "[mpc] must be a table of options"),
     "unit nobody knows": (_replace('unit = "L/min"', 'unit = "Lpmm"'), 'unit = "Lpmm"',
                           "the problem's unit 'Lpmm' is not understood"),
 }

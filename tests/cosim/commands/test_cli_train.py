@@ -9,6 +9,7 @@ import pytest
 
 from controllers.model import GRUModel
 from cosim.cli import main
+from tests.fourtank_problem import with_table
 
 
 def _write_data(path: Path) -> Path:
@@ -181,3 +182,46 @@ def test_deeply_nested_sidecar_and_init_model(data: Path, tmp_path: Path,
                  str(init)]) == 2
     assert capsys.readouterr().err == (f"cosim train: error: {init}: invalid model file (JSON "
                                        "nested too deeply)\n")
+
+
+# -- the problem file's [train] table: this plant's modelling choices ---------------------------
+
+def test_the_problems_train_table_sets_options_the_command_line_overrides(
+        data: Path, tmp_path: Path) -> None:
+    problem = with_table(tmp_path, "train", "n = 2\nepochs = 1\nsigma_z_max = 0.9\n")
+    out = tmp_path / "a.json"
+    assert main(["train", str(data), "--problem", str(problem), "--out", str(out),
+                 "--quiet"]) == 0
+    model = GRUModel.load(out)
+    assert model.n == 2 and model.problem.train == {"n": 2, "epochs": 1, "sigma_z_max": 0.9}
+    assert model.training["options"]["sigma_z_max"] == 0.9
+    out = tmp_path / "b.json"
+    assert main(["train", str(data), "--problem", str(problem), "--out", str(out), "--n", "3",
+                 "--sigma-z-max", "0", "--quiet"]) == 0
+    model = GRUModel.load(out)
+    assert model.n == 3 and model.training["options"]["sigma_z_max"] == 0.0
+    sizes = with_table(tmp_path, "train", "sizes = [2, 5]\nseeds = 1\nepochs = 1\n")
+    out = tmp_path / "c.json"
+    assert main(["train", str(data), "--problem", str(sizes), "--out", str(out), "--n", "3",
+                 "--quiet"]) == 0                    # --n replaces the table's sizes
+    assert GRUModel.load(out).n == 3
+
+
+@pytest.mark.parametrize("table, anchor, message", [
+    ("sigma_z_max = 1.5\n", "sigma_z_max", "[train] sigma_z_max: must be in [0, 1), got 1.5"),
+    ("n = 2.5\n", "n = 2.5", "[train] n must be an integer, got 2.5"),
+    ("hidden = 3\n", "hidden", "[train] has no option 'hidden' (options: epochs, n, sizes"),
+    ('sizes = [4, "x"]\n', "sizes", "[train] sizes must be a list of GRU sizes"),
+])
+def test_a_bad_train_table_names_the_problem_file_and_line(
+        table: str, anchor: str, message: str, data: Path, tmp_path: Path,
+        capsys: pytest.CaptureFixture) -> None:
+    problem = with_table(tmp_path, "train", "epochs = 1\n" + table)
+    text = problem.read_text()
+    line = text[:text.index(anchor, text.index("[train]"))].count("\n") + 1
+    out = tmp_path / "m.json"
+    assert main(["train", str(data), "--problem", str(problem), "--out", str(out),
+                 "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"cosim train: error: {problem}:{line}: {message}"), err
+    assert err.count("\n") == 1 and not out.exists()

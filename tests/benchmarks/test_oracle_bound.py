@@ -1,0 +1,44 @@
+"""``benchmarks/oracle_bound.py``: the IAE oracle of the example heater in closed loop with
+its FMU (its model is the plant's own, its solves all pass their checks, it tracks)."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cosim
+
+ROOT = Path(__file__).resolve().parents[2]
+BENCH = ROOT / "benchmarks"
+PROBLEM = ROOT / "fmus" / "examples" / "heater" / "problem.toml"
+
+
+@pytest.fixture(scope="module")
+def heater_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    spec = importlib.util.spec_from_file_location("examples_build",
+                                                  ROOT / "fmus" / "examples" / "build.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.build("heater", tmp_path_factory.mktemp("heater"))
+
+
+def test_the_oracle_knows_the_plant_and_tracks(heater_fmu: Path, tmp_path: Path,
+                                               monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.syspath_prepend(str(BENCH))
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.T\n0,55\n800,35\n1600,\n")
+    run = cosim.run(scenario, plant=heater_fmu, controller="oracle_bound:OracleController",
+                    options={"plant": "heater", "fmu": str(heater_fmu), "problem": str(PROBLEM),
+                             "horizon": 30}, problem=PROBLEM)
+    assert run.status == "ok", run.reason
+    info = run.summary["controller_summary"]
+    assert info["failures"] == 0 and info["steps"] == 81
+    assert info["prediction_error_max"] < 1e-9          # the plant's own equations and RK4
+    df = run.to_pandas()
+    T, P = df["plant.T"].to_numpy(), df["ctrl.P"].to_numpy()
+    assert np.all((P >= -1e-9) & (P <= 2000 + 1e-9))
+    assert abs(T[39] - 55) < 0.05 and abs(T[-1] - 35) < 0.05   # each set-point reached
+    assert P[0] == pytest.approx(2000.0, abs=1e-6)             # full power towards 55 degC
