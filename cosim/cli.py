@@ -45,6 +45,7 @@ COMMANDS = (
     "cosim.commands.generate_data",
     "cosim.commands.train",
     "cosim.commands.certify",
+    "cosim.commands.tune",
     "cosim.commands.compare",
     "cosim.commands.campaign",
 )

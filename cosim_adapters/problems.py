@@ -6,7 +6,8 @@ every command and controller:
 
 - a model with a problem: that problem; a ``--problem`` given as well must be the same
   (otherwise one line naming both and what differs, exit 2), but for its ``[mpc]`` table
-  (the robust MPC's tuning, which may change after training): the given one's is used;
+  (the robust MPC's tuning, which may change after training): the given one's, when it
+  has one, is used;
 - a model without one (written before problems existed): the ``--problem`` given, or the
   default plant's, checked against the model's signals, sample time and normalisation;
 - no model (the PI baseline, ``generate-data``): the ``--problem`` given, or the default
@@ -79,7 +80,7 @@ def problem_for(model: Any, arg: str | Path | ControlProblem | None = None) -> C
                 raise CosimError(f"{_name(arg, given)} contradicts the problem of "
                                  f"{model.source or 'the model'} ({own.name!r}): "
                                  f"{'; '.join(diff[:3])}")
-            if given.mpc != own.mpc:            # the tuning, located in the given file
+            if given.mpc and given.mpc != own.mpc:   # the tuning, located in the given file
                 return dataclasses.replace(own, mpc=dict(given.mpc), source=given.source)
         return own
     problem = load_problem(arg)

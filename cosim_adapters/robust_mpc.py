@@ -141,8 +141,8 @@ class RobustMPCController(Component):
         Model file (default: the shipped ``controllers/models/fourtank_gru.json``).
     problem : str or Path, optional
         A problem file: must be the model's own (a check; its ``[mpc]`` table, the tuning,
-        may differ and is the one used), or the problem of a model file that has none
-        (:mod:`cosim_adapters.problems`).
+        may differ and, when it has one, is the one used), or the problem of a model file
+        that has none (:mod:`cosim_adapters.problems`).
     options : MPCOptions or mapping, optional
         The design (:class:`cosim_adapters.mpc_options.MPCOptions`), as an object (used as
         it is) or by key (over the problem's ``[mpc]`` table,

@@ -38,6 +38,11 @@ from cosim_adapters.law import LawStep, setpoint_text
 __all__ = ["ALPHA_C_SPAN", "TrackingLaw", "fallback_alpha_c", "steady_outputs_text",
            "tracking_design"]
 
+#: How far a target may lie beyond ``Y_s`` (normalised) before it is noted
+#: (:meth:`TrackingLaw._watch_target`).
+TARGET_TOL = 1e-6
+#: At most this many notes of targets outside ``Y_s`` in a run's summary.
+MAX_NOTES = 5
 #: The terminal radius of a design without a certified ``α_min`` (no observer-gain scale
 #: passes, or the uncertified mode): the one whose terminal set spans this much of every
 #: normalised output (``α_c max_j c_s(j)``; the normalised box is 2 wide).
@@ -157,6 +162,8 @@ class TrackingLaw:
         self.disturbance.reset()
         self.y_ref: np.ndarray | None = None
         self.setpoint_changes = 0
+        #: per set-point whose target left ``Y_s``: its first time, steps, last target, d̂
+        self.outside: dict[int, dict[str, Any]] = {}
 
     def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float) -> LawStep:
         """``d̂`` advanced with ``y − g(x̂)``, the FHOCP solved for ``r = ȳ − d̂``; the
@@ -174,6 +181,7 @@ class TrackingLaw:
         d_hat = self.disturbance.update(y, observer.y_hat())
         if not self.certified:   # the measured tightening is around y + d̂
             self.fhocp.set_output_shift(d_hat)
+        self._watch_target(y_ref - d_hat, d_hat, t)
         rec = tracker.make_step(observer.x_hat, observer.e_o, y_ref - d_hat)
         params = model.params
         y_s = model.denormalize_y(params["U_o"] @ tracker.x_s + params["b_o"])
@@ -182,6 +190,40 @@ class TrackingLaw:
         d_phys = d_hat * np.abs(model.y_scale)
         diag.update({f"d_hat_{n}": float(v) for n, v in zip(names, d_phys, strict=True)})
         return LawStep(rec, False, diag)
+
+    def _watch_target(self, r: np.ndarray, d_hat: np.ndarray, t: float) -> None:
+        """Note the steps whose target ``r = ȳ − d̂`` (the steady output the model must
+        reach for the plant to show ``ȳ``) lies outside ``Y_s`` (shifted by ``d̂`` when
+        uncertified): the law then settles at the closest admissible steady state, a static
+        offset no filter removes (docs: design/tracking.md, "The plants' own choices")."""
+        fh = self.fhocp
+        limit = fh.ys_bounds if self.certified else fh.ys_bounds - fh.L @ d_hat
+        if not np.max(fh.L @ r - limit) > TARGET_TOL:
+            return
+        seen = self.outside.setdefault(self.setpoint_changes, {"from": t, "steps": 0})
+        seen.update(steps=seen["steps"] + 1, r=r.copy(), d_hat=d_hat.copy(), y_ref=self.y_ref)
+
+    def notes(self) -> list[str]:
+        """One line per set-point whose target left ``Y_s`` (:meth:`_watch_target`), in the
+        problem's names and units: what the run's end prints."""
+        model, names = self.model, self.model.problem.output_names
+        units = self.model.problem.output_units
+        out = []
+        for seen in list(self.outside.values())[:MAX_NOTES]:
+            needed = model.denormalize_y(seen["r"])
+            d = seen["d_hat"] * np.abs(model.y_scale)
+            out.append(
+                f"from t = {seen['from']:g} s the {setpoint_text(model, seen['y_ref'])} needs "
+                "the model's steady output at " + ", ".join(
+                    f"{n}={v:.4g} {u}".rstrip() for n, v, u in zip(names, needed, units,
+                                                                    strict=True))
+                + " (disturbance estimate " + ", ".join(
+                    f"{n} {v:+.3g} {u}".rstrip() for n, v, u in zip(names, d, units,
+                                                                    strict=True))
+                + f"), outside the certified steady outputs "
+                f"({steady_outputs_text(model, self.fhocp) or 'none'}) on {seen['steps']} "
+                "steps: tracked to the closest admissible steady output, a static offset")
+        return out
 
     def setpoint_reason(self, y: np.ndarray) -> str:
         fh = self.fhocp
@@ -218,7 +260,9 @@ class TrackingLaw:
                 "offset_free": False, "setpoint_rate": None, "governor": False,
                 "governor_steps": 0, "governor_holds": 0,
                 "setpoint_changes": self.setpoint_changes, "setpoint_rejected_steps": 0,
-                "setpoint_rejections": []}
+                "setpoint_rejections": [],
+                "target_outside_Ys_steps": sum(v["steps"] for v in self.outside.values()),
+                "notes": self.notes()}
 
 
 def steady_outputs_text(model: Any, fhocp: Any) -> str:

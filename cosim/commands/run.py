@@ -162,4 +162,6 @@ def run(args: argparse.Namespace) -> int:
         viol = sum(v["count"] for v in k["violations"].values())
         print(f"cosim run: ok: {result.steps} steps in {result.wall_time_s:.2f} s; IAE {iae}; "
               f"{viol} constraint violations; results in {out}")
+        for note in output.summary.get("controller_summary", {}).get("notes") or []:
+            print(f"cosim run: note: {note}")
     return EXIT_OK

@@ -104,3 +104,18 @@ def test_a_value_toml_has_but_json_lacks_is_refused_when_read(tmp_path: Path, ta
     line = path.read_text().count("\n")
     with pytest.raises(ProblemFileError, match=re.escape(f"{path}:{line}: {message}")):
         load(path)
+
+
+def test_a_tuned_model_keeps_its_mpc_table_under_a_problem_file_without_one(
+        tmp_path: Path) -> None:
+    from controllers.model import DEFAULT_MODEL
+    from tests.fourtank_problem import PATH
+
+    doc = json.loads(Path(DEFAULT_MODEL).read_text())
+    doc["problem"]["mpc"] = {"N": 12}
+    model = tmp_path / "tuned.json"
+    model.write_text(json.dumps(doc))
+    assert RobustMPCController(model=model).options.N == 12
+    assert RobustMPCController(model=model, problem=PATH).options.N == 12
+    retuned = with_table(tmp_path, "mpc", "N = 14\n")
+    assert RobustMPCController(model=model, problem=retuned).options.N == 14

@@ -5,6 +5,7 @@ violation, no static offset, nothing rejected."""
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import pytest
@@ -94,3 +95,28 @@ def test_on_the_paper_scenario_it_beats_the_pi_with_less_input_motion_than_the_p
     assert sum(k["iae"].values()) <= 0.72 * sum(pi["iae"].values())
     assert sum(k["tv"].values()) < sum(paper["tv"].values()), (k["tv"], paper["tv"])
     assert all(abs(v) < 5e-3 for sp in k["setpoints"] for v in sp["offset"].values())
+
+
+def test_a_target_the_disturbance_pushes_outside_Ys_is_noted(tmp_path: Path,
+                                                              capsys: pytest.CaptureFixture
+                                                              ) -> None:
+    """A set-point inside ``Y_s`` (h1 in about [0.49, 1.51] m) whose target ȳ − d̂ is not: a
+    sensor reading 0.1 m high makes the model's steady h1 about 0.45 m, the law settles at the
+    closest admissible one, and the run says so in the problem's names and units."""
+    from cosim.cli import main
+
+    scenario = tmp_path / "bias.csv"
+    scenario.write_text("time,ref.h1,ref.h2,sensor.h1.bias\n0,0.55,0.8,0.1\n2500,,,\n")
+    assert main(["run", str(scenario), "--out", str(tmp_path / "run"), "--no-figure"]) == 0
+    out = capsys.readouterr().out
+    note = [line for line in out.splitlines() if line.startswith("cosim run: note: ")]
+    assert len(note) == 1, out
+    assert re.search(r"the set-point h1=0.55 m, h2=0.8 m needs the model's steady output at "
+                     r"h1=0\.4[45]\d* m, h2=0\.[78]\d* m \(disturbance estimate h1 \+0\.1\d* m",
+                     note[0]), note[0]
+    assert re.search(r"outside the certified steady outputs \(h1 in \[0\.49\d*, 1\.5\d*\] m",
+                     note[0]), note[0]
+    clean = tmp_path / "clean.csv"
+    clean.write_text("time,ref.h1,ref.h2\n0,0.55,0.8\n2500,,\n")
+    summary = run(clean).summary["controller_summary"]
+    assert summary["target_outside_Ys_steps"] == 0 and summary["notes"] == []

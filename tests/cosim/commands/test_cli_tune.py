@@ -1,0 +1,70 @@
+"""``cosim tune``: the robust MPC's weightings run on the model as the plant against the PI
+tuned from it, the choice by the rule, saved into the model file; bad input, one line."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from controllers.model import DEFAULT_MODEL, GRUModel
+from cosim.cli import main
+from cosim.commands.tune import CANDIDATES, choose
+
+
+@pytest.fixture()
+def model(tmp_path: Path) -> Path:
+    """A copy of the shipped four-tank model (its problem has no [mpc] table)."""
+    path = tmp_path / "fourtank.json"
+    path.write_bytes(Path(DEFAULT_MODEL).read_bytes())
+    return path
+
+
+def test_tune_runs_every_weighting_chooses_by_the_rule_and_saves(
+        model: Path, capsys: pytest.CaptureFixture) -> None:
+    from cosim_adapters.robust_mpc import RobustMPCController
+
+    assert main(["tune", str(model), "--json", "--save"]) == 0
+    doc = json.loads(capsys.readouterr().out)
+    rows, best = doc["candidates"], doc["chosen"]
+    assert set(rows) == set(CANDIDATES) and doc["options"] == CANDIDATES[best]
+    passing = {n: r for n, r in rows.items() if r["violations"] == 0 and r["tv"] <= 1.2}
+    assert passing and rows[best]["iae"] == min(r["iae"] for r in passing.values())
+    assert all(0.0 < r["iae"] < 2.0 and r["tv"] > 0.0 for r in rows.values())
+    saved = GRUModel.load(model)
+    assert saved.problem.mpc == CANDIDATES[best]
+    assert CANDIDATES[best]["Q"] == RobustMPCController(model=model).options.Q
+
+
+def test_the_rule() -> None:
+    rows = {"defaults": {"iae": 1.1, "tv": 0.9, "violations": 0},
+            "fast": {"iae": 0.8, "tv": 1.5, "violations": 0},      # too much input motion
+            "faster": {"iae": 0.7, "tv": 1.0, "violations": 2},    # violates
+            "better": {"iae": 0.95, "tv": 1.1, "violations": 0}}
+    assert choose(rows, 1.2) == "better"
+    assert choose(rows, 2.0) == "fast"
+    assert choose({k: {**r, "violations": 1} for k, r in rows.items()}, 1.2) == "defaults"
+
+
+@pytest.mark.parametrize(("args", "words"), [
+    (["--tv-ratio", "0"], "--tv-ratio must be a positive number, got 0.0"),
+    (["--scenario", "nowhere.csv"], "nowhere.csv"),
+])
+def test_bad_input_is_one_line_exit_2(model: Path, args: list[str], words: str,
+                                      capsys: pytest.CaptureFixture) -> None:
+    before = model.read_bytes()
+    assert main(["tune", str(model), "--save", *args]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("cosim tune: error: ") and words in err and err.count("\n") == 1
+    assert model.read_bytes() == before
+
+
+def test_a_model_without_a_problem_is_refused(tmp_path: Path,
+                                              capsys: pytest.CaptureFixture) -> None:
+    doc = json.loads(Path(DEFAULT_MODEL).read_text())
+    del doc["problem"]
+    path = tmp_path / "old.json"
+    path.write_text(json.dumps(doc))
+    assert main(["tune", str(path)]) == 2
+    assert "the model file has no control problem" in capsys.readouterr().err
