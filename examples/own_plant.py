@@ -12,6 +12,7 @@ The walk-through of the user guide (docs/guide/own-plant.md), as one command run
 4. the set-points a user would pick: steady outputs of the plant itself (inputs held at
    points inside their boxes until it settles), whatever the model makes of them;
 5. ``cosim certify --auto-gain-scale --save --setpoint ...``: certified, or not and why;
+   ``cosim tune --save``: the MPC's cost weights chosen on the model, against the PI;
 6. ``cosim run`` of a set-point scenario with the robust MPC (its default, the tracking law,
    and the paper's law: ``--option law='"paper"'``), certified or uncertified, and, for a
    square plant, with the PI baseline tuned from the model (RGA pairing, SIMC);
@@ -112,6 +113,16 @@ def certify(model: Path, problem: Any, setpoints: list[np.ndarray]) -> dict[str,
     return {"exit": proc.returncode, "certified": verdict["certified"],
             "reasons": [f["detail"] for f in verdict["findings"] if not f["holds"]],
             "admissible": verdict["admissible_setpoints"]}
+
+
+def tune(model: Path) -> dict[str, Any]:
+    """``cosim tune --save``: the robust MPC's weights chosen on the model (the weighting,
+    its options and every candidate's IAE and TV ratios on the model)."""
+    proc = subprocess.run([sys.executable, "-m", "cosim.cli", "tune", str(model), "--save",
+                           "--json"], capture_output=True, text=True, check=False)
+    if proc.returncode != 0:
+        raise SystemExit(f"cosim tune failed (exit {proc.returncode}): {proc.stderr}")
+    return json.loads(proc.stdout)
 
 
 def plant_setpoints(fmu: Path, problem: Any) -> list[np.ndarray]:
@@ -282,12 +293,13 @@ def walkthrough(name: str, out: Path, epochs: int | None, runs: int = RUNS,
     model_path, train_s = identify(fmu, problem_path, out, epochs, seed, train_args)
     setpoints = plant_setpoints(fmu, problem)
     verdict = certify(model_path, problem, setpoints)
+    tuned = tune(model_path)
     model = GRUModel.load(model_path)
     scenario = write_scenario(out / "scenario.csv", problem, setpoints)
     report: dict[str, Any] = {
         "plant": name, "problem": problem.describe(), "epochs": epochs,
         "train_s": round(train_s, 1), "fit_test": model.training["fit"]["test"],
-        "certify": verdict, "setpoints": [y.tolist() for y in setpoints]}
+        "certify": verdict, "tune": tuned, "setpoints": [y.tolist() for y in setpoints]}
     square = problem.m == problem.p
     report["options"] = list(options)
     for key, (controller, own) in CONTROLLERS.items():
@@ -330,6 +342,10 @@ def main() -> None:
     v = r["certify"]
     print(f"certify: {'certified' if v['certified'] else 'not certified'} (exit {v['exit']})"
           + "".join(f"; {reason}" for reason in v["reasons"][:2]))
+    t = r["tune"]
+    base = "the PI's" if t["against"] == "pi" else "the default weights'"
+    print(f"tune: {t['chosen']} ({', '.join(f'{k}={v}' for k, v in t['options'].items())}; "
+          f"on the model {t['candidates'][t['chosen']]['iae']:.3f}x {base} IAE)")
     for controller in CONTROLLERS:
         if controller in r:
             c = r[controller]

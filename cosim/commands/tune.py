@@ -20,10 +20,14 @@ DESCRIPTION = """\
 Run the robust MPC (its tracking law) with a few cost weightings, and the PI baseline tuned
 from the same model, in closed loop with the GRU model itself as the plant (no FMU needed) on
 a set-point scenario: --scenario, else steps between four steady outputs of the model, each
-held six of its slowest time constants, with Gaussian sensor noise of the model's measured
-one-step prediction error. Choose the weighting with the lowest summed IAE (each output's
-IAE over its box width) among those without constraint violations whose input total
-variation is at most --tv-ratio times the PI's (default 1.2); none: the defaults.
+held six of its slowest time constants, with Gaussian sensor noise whose standard deviation
+is the model's measured one-step prediction error (its 95th percentile, else the largest
+error w_y_bar: an upper estimate of the sensors' noise, so that a weighting that passes the
+noise on to the inputs loses where the data were noisy). Choose the weighting with the
+lowest summed IAE (each output's IAE over its box width) among those without constraint
+violations whose input total variation is at most --tv-ratio times the PI's (default 1.2);
+none: the defaults. A plant that is not square has no PI baseline: the defaults are the
+reference then.
 
 The candidates, in normalised units: the defaults (Q = I, R = 0.01 I, S = 0.05); the stage
 cost on the outputs (Q = "outputs"); the same with light input weights (R = 0.001, S =
@@ -100,8 +104,9 @@ def scenario(model: Any, path: Path) -> Path:
 
 
 def _noise(model: Any) -> np.ndarray:
-    """Sensor noise std per output [its unit]: the measured one-step prediction error, else
-    ``w̄_y``, else none."""
+    """Sensor noise std per output [its unit]: the measured one-step prediction error (its
+    95th percentile, :mod:`controllers.certification.prediction_error`), else ``w̄_y``, else
+    none; an upper estimate on purpose (module docstring)."""
     profile = model.prediction_error
     if profile is not None and len(profile) > 1:
         err = np.asarray(profile[1], dtype=float)
@@ -153,7 +158,9 @@ def run(args: argparse.Namespace) -> int:
         sc = Path(args.scenario) if args.scenario else scenario(model, Path(tmp) / "steps.csv")
         plant = f"model:{args.model}"
         results = {}
-        for name, options in {"pi": None, **CANDIDATES}.items():
+        square = model.problem.m == model.problem.p
+        runs = {"pi": None, **CANDIDATES} if square else dict(CANDIDATES)
+        for name, options in runs.items():
             controller = "pi" if options is None else "robust-mpc"
             opts = {"law": "tracking", **options} if options is not None else {}
             out = cosim.run(sc, plant=plant, controller=controller, model=args.model,
@@ -161,15 +168,17 @@ def run(args: argparse.Namespace) -> int:
             if out.status != "ok":
                 raise SimulationFailed(f"{name}: the run {out.status}: {out.reason}")
             results[name] = _score(out.summary)
-    pi = results.pop("pi")
-    rows = {n: {"iae": r["iae"] / pi["iae"], "tv": r["tv"] / pi["tv"] if pi["tv"] else 0.0,
+    base = results.pop("pi") if square else results["defaults"]   # no PI: not square
+    rows = {n: {"iae": r["iae"] / base["iae"],
+                "tv": r["tv"] / base["tv"] if base["tv"] else 0.0,
                 "violations": r["violations"]} for n, r in results.items()}
     best = choose(rows, args.tv_ratio)
+    against = "pi" if square else "defaults"
     if args.json:
-        print(json.dumps({"candidates": rows, "chosen": best,
+        print(json.dumps({"candidates": rows, "chosen": best, "against": against,
                           "options": CANDIDATES[best]}, indent=1))
     elif not args.quiet:
-        _print(args, sc if args.scenario else None, rows, best)
+        _print(args, sc if args.scenario else None, rows, best, against)
     if args.save:
         _save(Path(args.model), model, CANDIDATES[best])
         if not args.quiet and not args.json:
@@ -178,9 +187,10 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _print(args: argparse.Namespace, sc: Path | None, rows: dict[str, dict[str, float]],
-           best: str) -> None:
+           best: str, against: str) -> None:
     where = f"scenario {sc}" if sc else "the model's own steps"
-    print(f"{args.model} as the plant, {where}; summed IAE and input TV ÷ the PI's:")
+    of = "the PI's" if against == "pi" else "the defaults' (no PI: not a square plant)"
+    print(f"{args.model} as the plant, {where}; summed IAE and input TV ÷ {of}:")
     for name, r in rows.items():
         mark = "  <- chosen" if name == best else ""
         print(f"  {name:28s} IAE {r['iae']:.3f}  TV {r['tv']:.3f}  violations "
