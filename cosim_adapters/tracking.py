@@ -209,20 +209,24 @@ class TrackingLaw:
         model, names = self.model, self.model.problem.output_names
         units = self.model.problem.output_units
         out = []
+        ys = steady_outputs_text(model, self.fhocp) or "none"
         for seen in list(self.outside.values())[:MAX_NOTES]:
+            head = f"from t = {seen['from']:g} s the {setpoint_text(model, seen['y_ref'])}"
+            tail = (f" on {seen['steps']} steps: tracked to the closest admissible steady "
+                    "output, a static offset")
+            if not self.certified:   # Y_s is around y + d̂: the set-point itself is outside
+                out.append(f"{head} is outside the admissible steady outputs ({ys}){tail}")
+                continue
             needed = model.denormalize_y(seen["r"])
             d = seen["d_hat"] * np.abs(model.y_scale)
             out.append(
-                f"from t = {seen['from']:g} s the {setpoint_text(model, seen['y_ref'])} needs "
-                "the model's steady output at " + ", ".join(
+                f"{head} needs the model's steady output at " + ", ".join(
                     f"{n}={v:.4g} {u}".rstrip() for n, v, u in zip(names, needed, units,
                                                                     strict=True))
                 + " (disturbance estimate " + ", ".join(
                     f"{n} {v:+.3g} {u}".rstrip() for n, v, u in zip(names, d, units,
                                                                     strict=True))
-                + f"), outside the certified steady outputs "
-                f"({steady_outputs_text(model, self.fhocp) or 'none'}) on {seen['steps']} "
-                "steps: tracked to the closest admissible steady output, a static offset")
+                + f"), outside the certified steady outputs ({ys}){tail}")
         return out
 
     def setpoint_reason(self, y: np.ndarray) -> str:

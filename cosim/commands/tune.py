@@ -78,6 +78,7 @@ def scenario(model: Any, path: Path) -> Path:
     from controllers.equilibrium import equilibrium_output, jacobians
 
     problem, params = model.problem, model.params
+    lo, hi = np.array(problem.output_bounds).T
     targets, slowest = [], 0.0
     for k in range(len(PATTERN)):
         u = np.array([c.min + PATTERN[(k + j) % len(PATTERN)] * (c.max - c.min)
@@ -86,7 +87,6 @@ def scenario(model: Any, path: Path) -> Path:
         x, y = equilibrium_output(params, un)
         rho = float(np.max(np.abs(np.linalg.eigvals(jacobians(params, x, un)[0]))))
         slowest = max(slowest, -1.0 / math.log(min(max(rho, 1e-12), 1.0 - 1e-12)))
-        lo, hi = np.array(problem.output_bounds).T
         targets.append(np.clip(model.denormalize_y(y), lo + 0.05 * (hi - lo),
                                hi - 0.05 * (hi - lo)))
     hold = int(min(max(math.ceil(HOLD_TIME_CONSTANTS * slowest), HOLD_MIN), HOLD_MAX))
@@ -138,7 +138,10 @@ def choose(rows: dict[str, dict[str, float]], tv_ratio: float) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Run the candidates and the PI on the model, print the table, save the choice."""
+    import sys
     import tempfile
+
+    from tqdm import tqdm
 
     import cosim
     from controllers.errors import ControllersError
@@ -160,7 +163,9 @@ def run(args: argparse.Namespace) -> int:
         results = {}
         square = model.problem.m == model.problem.p
         runs = {"pi": None, **CANDIDATES} if square else dict(CANDIDATES)
-        for name, options in runs.items():
+        bar = tqdm(runs.items(), desc="tune", unit="run", file=sys.stderr,
+                   disable=args.quiet or not sys.stderr.isatty(), dynamic_ncols=True)
+        for name, options in bar:
             controller = "pi" if options is None else "robust-mpc"
             opts = {"law": "tracking", **options} if options is not None else {}
             out = cosim.run(sc, plant=plant, controller=controller, model=args.model,

@@ -120,3 +120,12 @@ def test_a_target_the_disturbance_pushes_outside_Ys_is_noted(tmp_path: Path,
     clean.write_text("time,ref.h1,ref.h2\n0,0.55,0.8\n2500,,\n")
     summary = run(clean).summary["controller_summary"]
     assert summary["target_outside_Ys_steps"] == 0 and summary["notes"] == []
+    # uncertified (a set-point outside the certified Y_s), and outside the measured one too
+    low = tmp_path / "low.csv"
+    low.write_text("time,ref.h1,ref.h2\n0,0.03,0.8\n2500,,\n")
+    summary = run(low).summary["controller_summary"]
+    assert summary["certified"] is False and summary["target_outside_Ys_steps"] == 101
+    assert re.fullmatch(r"from t = 0 s the set-point h1=0.03 m, h2=0.8 m is outside the "
+                        r"admissible steady outputs \(h1 in \[0\.1\d*, 1\.8\d*\] m; .*\) on "
+                        r"101 steps: tracked to the closest admissible steady output, a static "
+                        r"offset", summary["notes"][0]), summary["notes"]
