@@ -12,7 +12,8 @@ import numpy as np
 
 from cosim.core.errors import exit_codes_help
 
-__all__ = ["CANDIDATES", "DESCRIPTION", "HELP", "choose", "register", "run", "scenario"]
+__all__ = ["CANDIDATES", "DESCRIPTION", "HELP", "choose", "hint", "register", "run",
+           "scenario"]
 
 HELP = "choose the robust MPC's cost weights on the model itself, against the PI tuned from it"
 
@@ -51,6 +52,9 @@ CANDIDATES: dict[str, dict[str, Any]] = {
 #: Where the inputs are held for the generated scenario's set-points (fractions of each
 #: input's box; input j takes the pattern shifted by j).
 PATTERN = (0.3, 0.7, 0.5, 0.2)
+#: A contraction rate of the certificate (``rho_s``, ``lem:Vs``) above which a tuning that
+#: does not beat the PI points at the training (:func:`hint`).
+RHO_HINT = 0.99
 #: Hold of each generated set-point: this many of the model's slowest time constants, within
 #: these bounds [samples].
 HOLD_TIME_CONSTANTS, HOLD_MIN, HOLD_MAX = 6.0, 20, 300
@@ -136,6 +140,29 @@ def choose(rows: dict[str, dict[str, float]], tv_ratio: float) -> str:
     return min(ok, key=lambda n: rows[n]["iae"]) if ok else "defaults"
 
 
+def hint(model: Any, rows: dict[str, dict[str, float]], best: str) -> str | None:
+    """What to do when no weighting beats the PI on the model (``None`` when one does): with
+    a slow certified contraction, the terminal weight ``s = n λ_max(Q) / (1 − ρ_s²)``
+    (``eq:definition_s``) makes every horizon's end costly, and only a model trained to
+    contract faster lowers it (docs: design/tracking.md, "Other plants")."""
+    if rows[best]["iae"] < 1.0:
+        return None
+    from controllers.certification.certificates import compute_certificate
+    from cosim_adapters.mpc_options import MPCOptions
+    from cosim_adapters.robust_mpc import design_arguments
+
+    text = f"no weighting beats the PI on the model (the best: {rows[best]['iae']:.2f}x its IAE)"
+    options = MPCOptions.resolve({"law": "tracking", **CANDIDATES[best]}, model.problem)
+    cert = compute_certificate(model, gain_scale=0.0, **design_arguments(options, model))
+    if cert.rho_s > RHO_HINT:
+        text += (f": the certified terminal weight s = {cert.s:,.0f} (rho_s = "
+                 f"{cert.rho_s:.4f}) makes ending a horizon away from the steady state costly, "
+                 "so every weighting approaches it slowly; a model trained to contract faster "
+                 "has a smaller one: cosim train --sigma-z-max 0.9 (or [train] sigma_z_max = "
+                 "0.9 in the problem file)")
+    return text
+
+
 def run(args: argparse.Namespace) -> int:
     """Run the candidates and the PI on the model, print the table, save the choice."""
     import sys
@@ -179,11 +206,14 @@ def run(args: argparse.Namespace) -> int:
                 "violations": r["violations"]} for n, r in results.items()}
     best = choose(rows, args.tv_ratio)
     against = "pi" if square else "defaults"
+    advice = hint(model, rows, best) if square else None
     if args.json:
         print(json.dumps({"candidates": rows, "chosen": best, "against": against,
-                          "options": CANDIDATES[best]}, indent=1))
+                          "options": CANDIDATES[best], "hint": advice}, indent=1))
     elif not args.quiet:
         _print(args, sc if args.scenario else None, rows, best, against)
+        if advice:
+            print(f"cosim tune: hint: {advice}")
     if args.save:
         _save(Path(args.model), model, CANDIDATES[best])
         if not args.quiet and not args.json:

@@ -68,3 +68,18 @@ def test_a_model_without_a_problem_is_refused(tmp_path: Path,
     path.write_text(json.dumps(doc))
     assert main(["tune", str(path)]) == 2
     assert "the model file has no control problem" in capsys.readouterr().err
+
+
+def test_the_hint_points_at_the_training_when_no_weighting_beats_the_pi() -> None:
+    """The shipped model's certificate contracts slowly (rho_s 0.9997): a tuning whose best
+    weighting is still above the PI names the terminal weight and the training option."""
+    from cosim.commands.tune import hint
+
+    model = GRUModel.load(DEFAULT_MODEL)
+    rows = {n: {"iae": 1.3, "tv": 0.5, "violations": 0} for n in CANDIDATES}
+    text = hint(model, rows, "output cost")
+    assert text.startswith("no weighting beats the PI on the model (the best: 1.30x its IAE)")
+    assert "certified terminal weight s = " in text and "rho_s = 0.99" in text
+    assert "cosim train --sigma-z-max 0.9" in text
+    rows["output cost"]["iae"] = 0.9
+    assert hint(model, rows, "output cost") is None
