@@ -12,6 +12,7 @@ The Python API (the twins of the ``cosim`` commands)::
     campaign.table                                           # runs.parquet as a DataFrame
 
     cosim.export_fmu(out="Controller.fmu")                   # the robust MPC as an FMU
+    cosim.tune("models/plant_gru.json", save=True)           # its weights, chosen on the model
 
 Names are imported on first use, so that ``import cosim`` (and ``cosim --help``) stays fast.
 """
@@ -38,6 +39,7 @@ __all__ = [
     "load_scenario",
     "run",
     "run_campaign",
+    "tune",
 ]
 
 _EXPORTS = {
@@ -45,6 +47,7 @@ _EXPORTS = {
     "export_fmu": ("cosim.api", "export_fmu"),
     "RunOutput": ("cosim.api", "RunOutput"),
     "run_campaign": ("cosim.campaign", "run_campaign"),
+    "tune": ("cosim.tuning", "tune"),
     "CampaignResult": ("cosim.campaign", "CampaignResult"),
     "Master": ("cosim.core.master", "Master"),
     "RunResult": ("cosim.core.master", "RunResult"),

@@ -10,7 +10,7 @@ import pytest
 
 from controllers.model import DEFAULT_MODEL, GRUModel
 from cosim.cli import main
-from cosim.commands.tune import CANDIDATES, choose
+from cosim.tuning import CANDIDATES, choose
 
 
 @pytest.fixture()
@@ -73,7 +73,7 @@ def test_a_model_without_a_problem_is_refused(tmp_path: Path,
 def test_the_hint_points_at_the_training_when_no_weighting_beats_the_pi() -> None:
     """The shipped model's certificate contracts slowly (rho_s 0.9997): a tuning whose best
     weighting is still above the PI names the terminal weight and the training option."""
-    from cosim.commands.tune import hint
+    from cosim.tuning import hint
 
     model = GRUModel.load(DEFAULT_MODEL)
     rows = {n: {"iae": 1.3, "tv": 0.5, "violations": 0} for n in CANDIDATES}
@@ -83,3 +83,19 @@ def test_the_hint_points_at_the_training_when_no_weighting_beats_the_pi() -> Non
     assert "cosim train --sigma-z-max 0.9" in text
     rows["output cost"]["iae"] = 0.9
     assert hint(model, rows, "output cost") is None
+
+
+def test_the_python_twin(model: Path, tmp_path: Path) -> None:
+    """``cosim.tune``: the same table as an object, the choice saved, a bad argument one
+    line."""
+    import cosim
+    from cosim.core.errors import CosimError
+
+    steps = tmp_path / "steps.csv"
+    steps.write_text("time,ref.h1,ref.h2\n0,0.8,0.7\n1000,1.1,0.9\n2000,,\n")
+    result = cosim.tune(model, steps, save=True)
+    assert result.chosen in CANDIDATES and result.against == "pi" and result.saved
+    assert result.scenario == steps and result.to_dict()["options"] == result.options
+    assert GRUModel.load(model).problem.mpc == result.options
+    with pytest.raises(CosimError, match="tv_ratio must be a positive number, got -1"):
+        cosim.tune(model, tv_ratio=-1)

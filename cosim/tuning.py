@@ -1,0 +1,251 @@
+"""Tuning the robust MPC on its model: the cost weights chosen as the PI baseline is tuned.
+
+:func:`tune` runs the robust MPC (its tracking law) with the weightings of :data:`CANDIDATES`,
+and the PI baseline tuned from the same model, in closed loop with the GRU model itself as the
+plant (``plant = "model:…"``: no FMU needed) on a set-point scenario (given, else
+:func:`scenario`: steps between four steady outputs of the model, each held six of its slowest
+time constants, with Gaussian sensor noise whose standard deviation is the model's measured
+one-step prediction error: an upper estimate of the sensors' noise, so that a weighting that
+passes noise on to the inputs loses where the data were noisy), and keeps the weighting with
+the lowest summed IAE (each output's IAE over its box width) among those without constraint
+violations whose input total variation is at most ``tv_ratio`` times the PI's
+(:func:`choose`); a plant that is not square has no PI baseline, and the default weights are
+the reference. ``save=True`` writes the choice into the model file's problem as its ``[mpc]``
+table (:attr:`controllers.problem.ControlProblem.mpc`), which every later run of the model
+uses under its own options. ``cosim tune`` is its command (:mod:`cosim.commands.tune`).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import tempfile
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["CANDIDATES", "RHO_HINT", "TuneResult", "choose", "hint", "scenario", "tune"]
+
+#: The weightings tried (robust-MPC options; ``Q``, ``R``, ``du_weight`` in normalised units).
+CANDIDATES: dict[str, dict[str, Any]] = {
+    "defaults": {"Q": 1.0, "R": 0.01, "du_weight": 0.05},
+    "output cost": {"Q": "outputs", "R": 0.01, "du_weight": 0.05},
+    "output cost, light inputs": {"Q": "outputs", "R": 0.001, "du_weight": 0.01},
+    "output cost, free inputs": {"Q": "outputs", "R": 0.001, "du_weight": 0.0},
+}
+#: Where the inputs are held for the generated scenario's set-points (fractions of each
+#: input's box; input j takes the pattern shifted by j).
+PATTERN = (0.3, 0.7, 0.5, 0.2)
+#: A contraction rate of the certificate (``rho_s``, ``lem:Vs``) above which a tuning that
+#: does not beat the PI points at the training (:func:`hint`).
+RHO_HINT = 0.99
+#: Hold of each generated set-point: this many of the model's slowest time constants, within
+#: these bounds [samples].
+HOLD_TIME_CONSTANTS, HOLD_MIN, HOLD_MAX = 6.0, 20, 300
+
+
+
+@dataclass
+class TuneResult:
+    """What :func:`tune` found.
+
+    Attributes
+    ----------
+    rows : dict
+        Candidate name → ``iae`` and ``tv`` (summed, over the reference's) and ``violations``.
+    chosen : str
+        The candidate :func:`choose` picked.
+    against : {"pi", "defaults"}
+        The reference of the ratios: the PI tuned from the model, or (not a square plant)
+        the default weights.
+    hint : str or None
+        What to do when no weighting beats the PI (:func:`hint`).
+    scenario : Path or None
+        The scenario given (``None``: the generated one).
+    """
+
+    rows: dict[str, dict[str, float]]
+    chosen: str
+    against: str
+    hint: str | None = None
+    scenario: Path | None = None
+    saved: bool = field(default=False)
+
+    @property
+    def options(self) -> dict[str, Any]:
+        """The chosen weighting's robust-MPC options."""
+        return dict(CANDIDATES[self.chosen])
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain data (``cosim tune --json``)."""
+        return {"candidates": self.rows, "chosen": self.chosen, "against": self.against,
+                "options": self.options, "hint": self.hint}
+
+
+def tune(model: str | Path, scenario_file: str | Path | None = None, *,
+         tv_ratio: float = 1.2, save: bool = False, progress: bool = False) -> TuneResult:
+    """Tune the robust MPC's weights on ``model`` (module docstring).
+
+    Raises
+    ------
+    CosimError
+        A bad argument, a model file without a control problem, a bad scenario (one line).
+    SimulationFailed
+        A closed loop failed.
+    OutputError
+        ``save``: the model file could not be written (it keeps its previous content).
+    """
+    from controllers.errors import ControllersError
+    from controllers.model import GRUModel
+    from cosim.core.errors import CosimError
+
+    if not (isinstance(tv_ratio, int | float) and math.isfinite(tv_ratio) and tv_ratio > 0):
+        raise CosimError(f"tv_ratio must be a positive number, got {tv_ratio!r}")
+    try:
+        gru = GRUModel.load(model)
+    except ControllersError as exc:
+        raise CosimError(str(exc)) from None
+    if gru.problem is None:
+        raise CosimError(f"{model}: the model file has no control problem (train it with "
+                         "'cosim train --problem')")
+    square = gru.problem.m == gru.problem.p
+    with tempfile.TemporaryDirectory(prefix="cosim-tune-") as tmp:
+        sc = Path(scenario_file) if scenario_file else scenario(gru, Path(tmp) / "steps.csv")
+        results = _closed_loops(model, sc, square, progress)
+    base = results.pop("pi") if square else results["defaults"]
+    rows = {n: {"iae": r["iae"] / base["iae"],
+                "tv": r["tv"] / base["tv"] if base["tv"] else 0.0,
+                "violations": r["violations"]} for n, r in results.items()}
+    best = choose(rows, tv_ratio)
+    result = TuneResult(rows, best, "pi" if square else "defaults",
+                        hint(gru, rows, best) if square else None,
+                        Path(scenario_file) if scenario_file else None)
+    if save:
+        _save(Path(model), gru, result.options)
+        result.saved = True
+    return result
+
+
+def _closed_loops(model: str | Path, sc: Path, square: bool, progress: bool
+                  ) -> dict[str, dict[str, float]]:
+    """:func:`_score` of the PI (square plants) and of every candidate, the model as the
+    plant."""
+    from tqdm import tqdm
+
+    import cosim
+    from cosim.core.errors import SimulationFailed
+
+    runs: dict[str, Any] = {"pi": None, **CANDIDATES} if square else dict(CANDIDATES)
+    results = {}
+    for name, options in tqdm(runs.items(), desc="tune", unit="run", file=sys.stderr,
+                              disable=not progress, dynamic_ncols=True):
+        controller = "pi" if options is None else "robust-mpc"
+        opts = {"law": "tracking", **options} if options is not None else {}
+        out = cosim.run(sc, plant=f"model:{model}", controller=controller, model=model,
+                        options=opts, seed=0)
+        if out.status != "ok":
+            raise SimulationFailed(f"{name}: the run {out.status}: {out.reason}")
+        results[name] = _score(out.summary)
+    return results
+
+
+def scenario(model: Any, path: Path) -> Path:
+    """Write the generated scenario (module docstring) of ``model`` to ``path``."""
+    from controllers.equilibrium import equilibrium_output, jacobians
+
+    problem, params = model.problem, model.params
+    lo, hi = np.array(problem.output_bounds).T
+    targets, slowest = [], 0.0
+    for k in range(len(PATTERN)):
+        u = np.array([c.min + PATTERN[(k + j) % len(PATTERN)] * (c.max - c.min)
+                      for j, c in enumerate(problem.inputs)])
+        un = model.normalize_u(u)
+        x, y = equilibrium_output(params, un)
+        rho = float(np.max(np.abs(np.linalg.eigvals(jacobians(params, x, un)[0]))))
+        slowest = max(slowest, -1.0 / math.log(min(max(rho, 1e-12), 1.0 - 1e-12)))
+        targets.append(np.clip(model.denormalize_y(y), lo + 0.05 * (hi - lo),
+                               hi - 0.05 * (hi - lo)))
+    hold = int(min(max(math.ceil(HOLD_TIME_CONSTANTS * slowest), HOLD_MIN), HOLD_MAX))
+    noise = _noise(model)
+    names = problem.output_names
+    header = ["time", *(f"ref.{o}" for o in names), *(f"sensor.{o}.noise" for o in names)]
+    rows = [",".join(header)]
+    for k, y in enumerate(targets):
+        first = [f"{v:.6g}" for v in noise] if k == 0 else [""] * len(names)
+        rows.append(",".join([f"{k * hold * problem.Ts:g}", *(f"{v:.6g}" for v in y),
+                              *first]))
+    rows.append(",".join([f"{len(targets) * hold * problem.Ts:g}"] + [""] * (2 * len(names))))
+    path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    return path
+
+
+def _noise(model: Any) -> np.ndarray:
+    """Sensor noise std per output [its unit]: the measured one-step prediction error (its
+    95th percentile, :mod:`controllers.certification.prediction_error`), else ``w̄_y``, else
+    none; an upper estimate on purpose (module docstring)."""
+    profile = model.prediction_error
+    if profile is not None and len(profile) > 1:
+        err = np.asarray(profile[1], dtype=float)
+    elif model.w_y_bar is not None:
+        err = np.full(model.p, float(model.w_y_bar))
+    else:
+        err = np.zeros(model.p)
+    return err * np.abs(np.asarray(model.y_scale, dtype=float))
+
+
+def _score(summary: dict[str, Any]) -> dict[str, float]:
+    """Summed IAE (each over its output's box width), summed input TV (each over its box
+    width) and the violations of a run's summary."""
+    k, sig = summary["kpis"], summary["signals"]
+    width = {**{o: s["max"] - s["min"] for o, s in sig["outputs"].items()},
+             **{u: s["max"] - s["min"] for u, s in sig["inputs"].items()}}
+    return {"iae": sum(v / width[o] for o, v in k["iae"].items()),
+            "tv": sum(v / width[u] for u, v in k["tv"].items()),
+            "violations": sum(v["count"] for v in k["violations"].values())}
+
+
+def choose(rows: dict[str, dict[str, float]], tv_ratio: float) -> str:
+    """The candidate of ``rows`` (name → :func:`_score` ratios to the PI: ``iae``, ``tv``,
+    ``violations``) with the lowest IAE within the TV bound and without violations, else
+    ``"defaults"``."""
+    ok = [n for n, r in rows.items() if r["violations"] == 0 and r["tv"] <= tv_ratio]
+    return min(ok, key=lambda n: rows[n]["iae"]) if ok else "defaults"
+
+
+def hint(model: Any, rows: dict[str, dict[str, float]], best: str) -> str | None:
+    """What to do when no weighting beats the PI on the model (``None`` when one does): with
+    a slow certified contraction, the terminal weight ``s = n λ_max(Q) / (1 − ρ_s²)``
+    (``eq:definition_s``) makes every horizon's end costly, and only a model trained to
+    contract faster lowers it (docs: design/tracking.md, "Other plants")."""
+    if rows[best]["iae"] < 1.0:
+        return None
+    from controllers.certification.certificates import compute_certificate
+    from cosim_adapters.mpc_options import MPCOptions
+    from cosim_adapters.robust_mpc import design_arguments
+
+    text = f"no weighting beats the PI on the model (the best: {rows[best]['iae']:.2f}x its IAE)"
+    options = MPCOptions.resolve({"law": "tracking", **CANDIDATES[best]}, model.problem)
+    cert = compute_certificate(model, gain_scale=0.0, **design_arguments(options, model))
+    if cert.rho_s > RHO_HINT:
+        text += (f": the certified terminal weight s = {cert.s:,.0f} (rho_s = "
+                 f"{cert.rho_s:.4f}) makes ending a horizon away from the steady state costly, "
+                 "so every weighting approaches it slowly; a model trained to contract faster "
+                 "has a smaller one: cosim train --sigma-z-max 0.9 (or [train] sigma_z_max = "
+                 "0.9 in the problem file)")
+    return text
+
+
+def _save(path: Path, model: Any, options: dict[str, Any]) -> None:
+    """The model file with ``options`` over its problem's ``[mpc]`` table (atomic: a failed
+    write leaves it as it was)."""
+    import dataclasses
+
+    from cosim.core.atomicio import output_error
+
+    model.problem = dataclasses.replace(model.problem, mpc={**model.problem.mpc, **options})
+    try:
+        model.save(path)
+    except OSError as exc:
+        raise output_error(path, exc) from None
