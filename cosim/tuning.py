@@ -20,7 +20,7 @@ from __future__ import annotations
 import math
 import sys
 import tempfile
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -46,7 +46,6 @@ RHO_HINT = 0.99
 HOLD_TIME_CONSTANTS, HOLD_MIN, HOLD_MAX = 6.0, 20, 300
 
 
-
 @dataclass
 class TuneResult:
     """What :func:`tune` found.
@@ -64,6 +63,8 @@ class TuneResult:
         What to do when no weighting beats the PI (:func:`hint`).
     scenario : Path or None
         The scenario given (``None``: the generated one).
+    saved : bool
+        The choice was written into the model file.
     """
 
     rows: dict[str, dict[str, float]]
@@ -71,7 +72,7 @@ class TuneResult:
     against: str
     hint: str | None = None
     scenario: Path | None = None
-    saved: bool = field(default=False)
+    saved: bool = False
 
     @property
     def options(self) -> dict[str, Any]:
