@@ -339,3 +339,24 @@ def test_one_binary_serves_every_model_of_its_dimensions(tmp_path: Path,
         with pytest.raises(Exception, match="nstantiate"):
             _instantiate(unzipped, log)
         assert any("controller.dat" in m and reason in m for m in log), log
+
+
+def test_a_tuned_models_weights_are_the_fmus(tmp_path: Path) -> None:
+    """A model whose problem carries ``[mpc]`` weights (``cosim tune --save`` writes them)
+    exports the controller with those weights: its FMU gives the tuned Python controller's
+    inputs, not the default one's."""
+    from controllers.model import DEFAULT_MODEL
+
+    doc = json.loads(Path(DEFAULT_MODEL).read_text())
+    doc["problem"]["mpc"] = {"Q": "outputs", "R": 0.001, "du_weight": 0.01}
+    model = tmp_path / "tuned.json"
+    model.write_text(json.dumps(doc))
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,1.2,1.3\n1250,,\n")
+    fmu = cosim.export_fmu(model=model, out=tmp_path / "Tuned.fmu")
+    py = cosim.run(scenario, model=model, figure=False)
+    assert py.summary["controller_summary"]["options"]["Q"] == "outputs"
+    boxes = {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)}
+    _same_inputs(cosim.run(scenario, controller=str(fmu), figure=False), py, boxes)
+    default = cosim.run(scenario, figure=False).to_pandas()
+    assert not np.array_equal(default["ctrl.qa"], py.to_pandas()["ctrl.qa"])
