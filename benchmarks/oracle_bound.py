@@ -44,6 +44,7 @@ sys.path.insert(0, str(ROOT))
 
 from controllers.problem import ControlProblem  # noqa: E402
 from cosim.core.component import Component, Signal  # noqa: E402
+from cosim.core.kpis import summed  # noqa: E402
 
 #: Largest shooting defect [K], input-box excess [normalised] and slack shortfall an answer
 #: may have.
@@ -273,12 +274,6 @@ class OracleController(Component):
                 "prediction_error_max": max(self.pred_err, default=0.0)}
 
 
-def summed_iae(summary: Mapping[str, Any]) -> float:
-    """The summed IAE of ``examples/own_plant.py``: each output's over its box width."""
-    iae, signals = summary["kpis"]["iae"], summary["signals"]["outputs"]
-    return sum(iae[o] / (signals[o]["max"] - signals[o]["min"]) for o in iae)
-
-
 def main(argv: list[str] | None = None) -> int:
     import cosim
 
@@ -302,9 +297,9 @@ def main(argv: list[str] | None = None) -> int:
                              "horizon": horizon}, problem=problem)
     if run.status != "ok":
         raise SystemExit(f"oracle_bound: the oracle's run {run.status}: {run.reason}")
-    iae = {"oracle": summed_iae(run.summary)}
+    iae = {"oracle": summed(run.summary, "iae")}
     for name in ("pi", "robust-mpc"):
-        iae[name] = summed_iae(json.loads((d / "runs" / name / "summary.json").read_text()))
+        iae[name] = summed(json.loads((d / "runs" / name / "summary.json").read_text()), "iae")
     o, pi, mpc = iae["oracle"], iae["pi"], iae["robust-mpc"]
     info = run.summary.get("controller_summary", {})
     print(f"{plant}: oracle (N = {horizon}, {time.perf_counter() - t0:.0f} s, "

@@ -91,8 +91,10 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
 
     Raises
     ------
+    ParameterError
+        A bad ``tv_ratio``.
     CosimError
-        A bad argument, a model file without a control problem, a bad scenario (one line).
+        A model file without a control problem, a bad scenario (one line).
     SimulationFailed
         A closed loop failed.
     OutputError
@@ -100,10 +102,10 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
     """
     from controllers.errors import ControllersError
     from controllers.model import GRUModel
-    from cosim.core.errors import CosimError
+    from cosim.core.errors import CosimError, ParameterError
 
     if not (isinstance(tv_ratio, int | float) and math.isfinite(tv_ratio) and tv_ratio > 0):
-        raise CosimError(f"tv_ratio must be a positive number, got {tv_ratio!r}")
+        raise ParameterError("tv_ratio", f" must be a positive number, got {tv_ratio!r}")
     try:
         gru = GRUModel.load(model)
     except ControllersError as exc:
@@ -197,14 +199,12 @@ def _noise(model: Any) -> np.ndarray:
 
 
 def _score(summary: dict[str, Any]) -> dict[str, float]:
-    """Summed IAE (each over its output's box width), summed input TV (each over its box
-    width) and the violations of a run's summary."""
-    k, sig = summary["kpis"], summary["signals"]
-    width = {**{o: s["max"] - s["min"] for o, s in sig["outputs"].items()},
-             **{u: s["max"] - s["min"] for u, s in sig["inputs"].items()}}
-    return {"iae": sum(v / width[o] for o, v in k["iae"].items()),
-            "tv": sum(v / width[u] for u, v in k["tv"].items()),
-            "violations": sum(v["count"] for v in k["violations"].values())}
+    """Summed IAE and input TV (:func:`cosim.core.kpis.summed`: each over its box width) and
+    the violations of a run's summary."""
+    from cosim.core.kpis import summed
+
+    return {"iae": summed(summary, "iae"), "tv": summed(summary, "tv"),
+            "violations": sum(v["count"] for v in summary["kpis"]["violations"].values())}
 
 
 def choose(rows: dict[str, dict[str, float]], tv_ratio: float) -> str:

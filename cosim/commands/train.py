@@ -26,7 +26,8 @@ EPOCHS = {"truncated": 2000}
 LEARNING_RATES = {"simulation": (0.03, 0.003), "truncated": (0.02, 0.0005)}
 #: The options a problem file's ``[train]`` table may set (the plant's own modelling choices,
 #: :attr:`controllers.problem.ControlProblem.train`), by the type of their value; the command
-#: line overrides them.
+#: line overrides them (their flags default to absent: the table's value, else
+#: :func:`_option_defaults`).
 PROBLEM_OPTIONS: dict[str, type] = {"epochs": int, "n": int, "sizes": list, "seeds": int,
                                     "sigma_z_max": float, "nu_margin": float}
 #: Options of ``--method truncated`` only.
@@ -124,17 +125,17 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "(default), or the paper's truncated subsequences")
     parser.add_argument("--seed", type=int, default=d.seed,
                         help=f"random seed, the first of --seeds ({d.seed})")
-    parser.add_argument("--epochs", type=int, default=None,
+    parser.add_argument("--epochs", type=int, default=argparse.SUPPRESS,
                         help=f"maximum epochs, at most {MAX_EPOCHS} (simulation: 3000 for "
                              "at most 5,000 training rows, else 1000; truncated "
                              f"{EPOCHS['truncated']})")
-    parser.add_argument("--n", type=int, default=None,
+    parser.add_argument("--n", type=int, default=argparse.SUPPRESS,
                         help=f"GRU states, at most {MAX_STATES}: one size (default: --sizes; "
                              f"{d.n} with --method truncated)")
-    parser.add_argument("--sizes", default=None, metavar="N,N,...",
+    parser.add_argument("--sizes", default=argparse.SUPPRESS, metavar="N,N,...",
                         help="the GRU sizes tried (default "
                              f"{','.join(map(str, DEFAULT_SIZES))})")
-    parser.add_argument("--seeds", type=int, default=None,
+    parser.add_argument("--seeds", type=int, default=argparse.SUPPRESS,
                         help=f"seeds tried per size (default {DEFAULT_SEEDS})")
     parser.add_argument("--workers", type=int, default=0,
                         help="worker processes fitting the candidates (default: one per CPU)")
@@ -146,9 +147,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                              "rows, else 1,000-row windows)")
     _training_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
-    for action in parser._actions:   # absent unless given: the [train] table's, else defaults
-        if action.dest in PROBLEM_OPTIONS:
-            action.default = argparse.SUPPRESS
     parser.set_defaults(func=run)
 
 
@@ -177,7 +175,7 @@ def _training_arguments(parser: argparse.ArgumentParser) -> None:
                         help="learning rate reached at the end (simulation "
                              f"{LEARNING_RATES['simulation'][1]}, truncated "
                              f"{LEARNING_RATES['truncated'][1]})")
-    parser.add_argument("--nu-margin", type=float, default=d.nu_margin,
+    parser.add_argument("--nu-margin", type=float, default=argparse.SUPPRESS,
                         help=f"enforce nu <= 1 - margin ({d.nu_margin})")
     parser.add_argument("--constraint", choices=("project", "penalty"), default=None,
                         help="truncated: how nu < 1 is enforced (default project)")
@@ -193,7 +191,7 @@ def _training_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"initial update-gate bias ({d.bz_init})")
     parser.add_argument("--train-uz", action="store_true",
                         help="also train U_z (default: U_z = 0, the nu budget goes to U_h)")
-    parser.add_argument("--sigma-z-max", type=float, default=d.sigma_z_max,
+    parser.add_argument("--sigma-z-max", type=float, default=argparse.SUPPRESS,
                         help="also keep sigma_z_bar <= this (0 = no cap; it sets the "
                              "contraction rates rho_s, rho_o)")
     parser.add_argument("--history", default=None, metavar="CSV",

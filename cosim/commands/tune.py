@@ -57,16 +57,16 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Tune (:func:`cosim.tuning.tune`), print the table, the hint and what was saved."""
-    import math
     import sys
 
-    from cosim.core.errors import CosimError
+    from cosim.core.errors import ParameterError
     from cosim.tuning import tune
 
-    if not (math.isfinite(args.tv_ratio) and args.tv_ratio > 0):
-        raise CosimError(f"--tv-ratio must be a positive number, got {args.tv_ratio}")
-    result = tune(args.model, args.scenario, tv_ratio=args.tv_ratio, save=args.save,
-                  progress=not args.quiet and sys.stderr.isatty())
+    try:
+        result = tune(args.model, args.scenario, tv_ratio=args.tv_ratio, save=args.save,
+                      progress=not args.quiet and sys.stderr.isatty())
+    except ParameterError as exc:   # worded for the command line: --tv-ratio
+        raise exc.as_option() from None
     if args.json:
         print(json.dumps(result.to_dict(), indent=1))
         return 0

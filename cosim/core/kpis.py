@@ -16,7 +16,7 @@ import math
 import numpy as np
 
 __all__ = ["PER_INPUT", "PER_OUTPUT", "SETTLE_ROWS", "VIOLATION_FIELDS", "compute", "flat",
-           "setpoint_errors"]
+           "setpoint_errors", "summed"]
 
 #: Rows at the end of a set-point interval over which the static offset is averaged.
 SETTLE_ROWS = 20
@@ -103,6 +103,16 @@ def compute(columns: list[str], rows: list[list[float]], outputs: list[str],
                    if math.isfinite(seg["offset"].get(o, math.nan))]
         kpis["worst_offset"][o] = max(offsets, default=math.nan)
     return _finite(kpis)
+
+
+def summed(summary: dict, kpi: str) -> float:
+    """A run's ``kpi`` summed over its signals, each divided by its box width: ``"iae"`` over
+    the outputs, ``"tv"`` over the inputs, from ``summary`` (``kpis`` and ``signals`` of a
+    ``summary.json``): one number for a plant of any size, in units of its boxes."""
+    kind = "inputs" if kpi in PER_INPUT else "outputs"
+    boxes = summary["signals"][kind]
+    return float(sum(v / (boxes[s]["max"] - boxes[s]["min"])
+                     for s, v in summary["kpis"][kpi].items()))
 
 
 def flat(kpis: dict) -> dict[str, float]:

@@ -92,3 +92,13 @@ def test_kpis_without_rows_or_set_points() -> None:
                      [], ["u"], {"y": (0.0, 1.2)})
     assert kpis.flat(k) == {"tv.u": 1.0, "violations.y.max": pytest.approx(0.3),
                             "violations.y.count": 1.0}
+
+
+def test_summed_kpis_are_in_units_of_the_boxes() -> None:
+    """``kpis.summed``: a plant of any size as one number (each signal over its box width)."""
+    summary = {"kpis": {"iae": {"T": 650.0, "CA": 0.9}, "tv": {"P": 4000.0}},
+               "signals": {"outputs": {"T": {"min": 15.0, "max": 80.0},
+                                       "CA": {"min": 0.1, "max": 1.0}},
+                           "inputs": {"P": {"min": 0.0, "max": 2000.0}}}}
+    assert kpis.summed(summary, "iae") == pytest.approx(650.0 / 65.0 + 0.9 / 0.9)
+    assert kpis.summed(summary, "tv") == pytest.approx(2.0)
