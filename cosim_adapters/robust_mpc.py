@@ -10,7 +10,7 @@ advances ``x̂`` with the last input and the measured output, and ``ê_o`` by
 section V). Then one of two control laws (option ``law``) gives ``u_k``:
 
 - ``"tracking"`` (the default): the tracking law of :mod:`cosim_adapters.tracking`, the
-  tracking FHOCP of :mod:`controllers.ocp.fhocp_tracking` (an artificial steady state as a
+  tracking FHOCP of :mod:`controllers.ocp.law_tracking` (an artificial steady state as a
   decision variable, offset-free through the disturbance estimate ``d̂`` in the cost, the
   input-rate terms of ``du_weight``); every set-point is accepted, and an unreachable or
   inadmissible one is tracked to the closest admissible steady state (docs:

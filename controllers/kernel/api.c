@@ -195,9 +195,9 @@ EXPORT void PFX(assess)(gk_ws *ws, const double *xh, const double *u, const doub
 /* The check of the solver's answer w at p = (x_hat, x_bar, u_bar[, u_prev]): u = clip(w_u, -1, 1)
  * into uc (NH x NU: the tail of a control horizon at u_s), assess_core of uc into x and out,
  * and out->defect the defect max |x_solver - x| against the solver's own trajectory at (w, p)
- * (the cached rollout). With HAS_ASS (the tracking FHOCP, p = (x_hat, x_s0, r[, u_prev])) the
+ * (the cached rollout). With HAS_ASS (the tracking law, p = (x_hat, x_s0, r[, u_prev])) the
  * reference is x_s(u_s) of the clipped u_s (Newton from x_s0), written to xs (NX), out->cost
- * adds the offset term and the last input's step to u_s (as TrackingFHOCP.tracking_cost), and
+ * adds the offset term and the last input's step to u_s (as TrackingLaw.cost), and
  * out->steady_residual is the fixed point residual |f(x_s, u_s) - x_s|inf by a plain GRU step
  * (NaN when Newton failed); without HAS_ASS xs is not written and the residual is 0. */
 EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const double *bnd,

@@ -131,12 +131,12 @@ class ControllerDesign:
     @classmethod
     def of(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
            u_lo: np.ndarray, u_hi: np.ndarray) -> ControllerDesign:
-        """The design of a tracking FHOCP set up on its compiled kernel's SQP
-        (:class:`controllers.ocp.fhocp_tracking.TrackingFHOCP`), its observer
+        """The design of an FHOCP with the tracking law set up on its compiled kernel's
+        SQP (:class:`controllers.ocp.law_tracking.TrackingLaw`), its observer
         (:class:`controllers.observer.GRUObserver`), the disturbance filter's ``beta``, the
         model's normalisation and the input box."""
         from controllers.kernel.kernel_sqp import KernelSQP
-        from controllers.ocp.fhocp_tracking import XS_CHECK_TOL
+        from controllers.ocp.law_tracking import XS_CHECK_TOL
         from controllers.ocp.solver_settings import DEFECT_TOL, FEAS_TOL
 
         if not isinstance(fhocp._solver, KernelSQP):
@@ -145,6 +145,7 @@ class ControllerDesign:
         o = fhocp._solver.options
         sqp = {name: getattr(o, name) for name, _ in o._fields_}
         arr = np.asarray
+        law = fhocp.law
         return cls(
             kernel=KernelProblem.of(fhocp), y_offset=arr(model.y_offset, float),
             y_scale=arr(model.y_scale, float), u_offset=arr(model.u_offset, float),
@@ -153,10 +154,10 @@ class ControllerDesign:
             rho_o=float(observer.rho_o), w_bar=float(observer.w_bar),
             e_o0=float(observer.e_o0), beta=float(beta), certified=bool(certified),
             L=fhocp.L, h=fhocp.h, a=fhocp.a, b=fhocp.b, w_L=fhocp.w_L, Lbo=fhocp.Lbo,
-            ys_base=fhocp._ys_base, alpha_c=float(fhocp.alpha_c),
-            us_rate=-1.0 if fhocp.us_rate is None else float(fhocp.us_rate),
-            pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=fhocp._perm_x,
-            perm_g=fhocp._perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
+            ys_base=law.ys_base, alpha_c=float(law.alpha_c),
+            us_rate=-1.0 if law.us_rate is None else float(law.us_rate),
+            pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=law.perm_x,
+            perm_g=law.perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
             xs_check_tol=XS_CHECK_TOL)
 
 

@@ -22,7 +22,7 @@ __attribute__((always_inline)) static inline double add_quad(
 #if HAS_DU
 /* The input-rate term (controllers/ocp/input_rate.py) of inputs u (nst x NU) after up = u_{-1}:
  * sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); nst = NM on w (the free inputs: with a
- * control horizon the step to u_s is the tracking FHOCP's last term, ass_cost), NH on a
+ * control horizon the step to u_s is the tracking law's last term, ass_cost), NH on a
  * rollout's inputs */
 static double du_cost(const double *u, const double *up, int nst) {
   double acc = 0.0;

@@ -16,7 +16,7 @@
  * Decision variables w = (u_0 .. u_{N-1}, t) (NW = NH*NU + 1), parameters p = (x_hat, x_bar,
  * u_bar) (NP = 2 NX + NU), then u_prev = u_{-1} when HAS_DU (NP = 2 NX + 2 NU): the cost's
  * input-rate term sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); without it (HAS_DU 0)
- * none of its code is compiled. HAS_ASS 1: the tracking FHOCP (controllers/ocp/fhocp_tracking.py,
+ * none of its code is compiled. HAS_ASS 1: the tracking law (controllers/ocp/law_tracking.py,
  * steady_state.c), w = (u_0 .. u_{NM-1}, u_s, t), p = (x_hat, x_s0, r[, u_prev]), the
  * artificial steady state x_s(u_s) in place of x_bar and u_s in place of u_bar; NM <= NH the
  * control horizon: u_i = u_s for i >= NM (UC, KC, NSC below; NM = NH without one).
@@ -78,7 +78,7 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 #define NW (NUA + 1)
 #define NG ((NH - 1) * NQ + 2 * NX + HAS_ASS * NQ)
 #if HAS_ASS
-/* the tracking FHOCP (steady_state.c): p = (x_hat, x_s0, r[, u_prev]), the set-point
+/* the tracking law (steady_state.c): p = (x_hat, x_s0, r[, u_prev]), the set-point
  * reference x_bar = x_s(u_s) and u_bar = u_s of the decision vector */
 #define NP (2 * NX + NY + HAS_DU * NU)
 #define XREF(ws, p) ((void)(p), (const double *)(ws)->mem.xs)

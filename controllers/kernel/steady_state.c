@@ -1,6 +1,6 @@
 /* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
  * generated header, gru_fhocp.h and the parts into one translation unit): the artificial steady state of
- * the tracking FHOCP (HAS_ASS 1; controllers/ocp/fhocp_tracking.py, the same mathematics as
+ * the tracking law (HAS_ASS 1; controllers/ocp/law_tracking.py, the same mathematics as
  * controllers/ocp/steady_state.py and controllers/ocp/nlp_tracking.py).
  *
  * The decision vector ends with u_s (then t); x_s = x_s(u_s) is the GRU's fixed point
@@ -117,7 +117,7 @@ static void steady_state(gk_ws *ws, const double *us, const double *x0) {
   for (int j = 0; j < NU; j++) lu_solve(M, piv, ws->mem.XS + j, NU);
 }
 
-/* the tracking FHOCP's extra cost: ||U_o x_s + b_o - r||^2_T (+ ||u_{NM-1} - u_s||^2_S: the
+/* the tracking law's extra cost: ||U_o x_s + b_o - r||^2_T (+ ||u_{NM-1} - u_s||^2_S: the
  * last free input's step to u_s, u_{N-1}'s without a control horizon) */
 static double ass_cost(const gk_ws *ws, const double *w, const double *p) {
   const double *r = p + 2 * NX;

@@ -29,20 +29,21 @@ only ``x̂``: it is checked before the solve (:meth:`FHOCP.x0_infeasible`), and 
 is reported as ``"infeasible_x0"`` without calling the solver. The design record (docs:
 design/solver.md) lists the alternatives measured and why they won or lost.
 
-One solve procedure serves every law (:meth:`FHOCP.solve_request`): the ``i = 0`` row, the
-solver within its budget, the independent answer check, the judge and the warm start; what a
-law asks for is a :class:`~controllers.ocp.requests.SolveRequest` (its candidate, the
-solver's buffers, its answer check): the paper's :class:`~controllers.ocp.requests.Setpoint`
-(:meth:`FHOCP.solve`), the tracking law's :class:`controllers.ocp.fhocp_tracking.Target`; a
-third law brings its own request.
+One class for every control law: what differs between the laws (the reference and its
+artificial steady state, the terminal ingredients, the layout of ``w``, the answer check) is a
+law object (:class:`controllers.ocp.law.Law`): the paper's set-point
+(:class:`~controllers.ocp.law_setpoint.SetpointLaw`, the default) or the tracking law's
+artificial steady state (:class:`~controllers.ocp.law_tracking.TrackingLaw`). One solve
+procedure serves them all (:meth:`FHOCP.solve`): the ``i = 0`` row, the solver within its
+budget, the law's independent answer check, the judge and the warm start.
 
 Every answer is checked independently of the solver's status: the inputs are rolled out with
 numpy (:func:`controllers.gru.simulate`) and the constraint violations, the terminal-set
 violation and the defect between the solver's and numpy's trajectories are measured (see
 :class:`FHOCPResult`). An answer is accepted only when the solver reports success AND these
-residuals are within tolerance: :func:`controllers.ocp.fhocp_result.judge`, the one check of this
-problem and of the tracking law's (:mod:`controllers.ocp.fhocp_tracking`), whose statuses are
-:class:`controllers.ocp.solve_status.SolveStatus`.
+residuals are within tolerance: :func:`controllers.ocp.fhocp_result.judge`, the one judge of
+every law, whose statuses are :class:`controllers.ocp.solve_status.SolveStatus` (the kernel's
+too).
 """
 
 from __future__ import annotations
@@ -59,21 +60,14 @@ from controllers import gru
 from controllers.errors import DesignError
 from controllers.kernel.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
 from controllers.ocp.casadi_callbacks import bind_buffers, quiet_stdout
-from controllers.ocp.fhocp_layout import FHOCPLayout
-from controllers.ocp.fhocp_result import (
-    FHOCPResult,
-    judge,
-    keeps_warm_start,
-    set_residuals,
-    solver_stats,
-)
-from controllers.ocp.input_rate import du_cost, du_weights
-from controllers.ocp.requests import Setpoint, SolveRequest
+from controllers.ocp.fhocp_result import FHOCPResult, judge, keeps_warm_start, solver_stats
+from controllers.ocp.input_rate import du_weights
+from controllers.ocp.law import Law
+from controllers.ocp.law_setpoint import SetpointLaw
 from controllers.ocp.solve_status import SolveStatus
 from controllers.ocp.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
-__all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPData", "FHOCPResult", "Setpoint", "SolveRequest",
-           "bind_buffers"]
+__all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPData", "FHOCPResult", "bind_buffers"]
 
 
 
@@ -114,14 +108,21 @@ class FHOCPData:
 
 
 class FHOCP:
-    """The FHOCP ``eq:optimization``: declare, :meth:`setup` once, :meth:`solve` each step.
+    """The FHOCP ``eq:optimization`` of a control law: declare, :meth:`setup` once,
+    :meth:`solve` each step.
 
     Parameters
     ----------
     data : FHOCPData or Certificate
         What the problem is made of (:class:`FHOCPData`'s attributes; a
         :class:`~controllers.certification.certificates.Certificate` has them all).
+    law : Law, optional
+        The control law's part of the problem (:class:`controllers.ocp.law.Law`): default
+        the paper's set-point, :class:`~controllers.ocp.law_setpoint.SetpointLaw`; the
+        tracking law's :class:`~controllers.ocp.law_tracking.TrackingLaw`. The object then
+        serves this problem (as ``law``).
     formulation : {"single-shooting", "multiple-shooting"}
+        Multiple shooting is the plain baseline of the paper's law.
     ipopt_options : dict, optional
         Overrides of the IPOPT options (``FAST_IPOPT_OPTIONS`` for single shooting, IPOPT
         defaults for multiple shooting).
@@ -131,9 +132,10 @@ class FHOCP:
         Solver of the single-shooting formulation (default ``"sqp"``; ``"ipopt"`` when
         ``ipopt_options`` are given, and always for multiple shooting).
     sqp_options : dict, optional
-        Overrides of :data:`~controllers.ocp.solver_settings.SQP_OPTIONS` (``loop``:
-        ``"kernel"``, the SQP in the compiled kernel, or ``"casadi"``, ``sqpmethod``;
-        ``tol_du_relative``: the kernel's relative dual test, ignored by ``sqpmethod``).
+        Overrides of :data:`~controllers.ocp.solver_settings.SQP_OPTIONS` and of the law's
+        (``loop``: ``"kernel"``, the SQP in the compiled kernel, or ``"casadi"``,
+        ``sqpmethod``; ``tol_du_relative``: the kernel's relative dual test, ignored by
+        ``sqpmethod``).
     time_budget : float, optional
         Wall-time budget of one solve [s] (status ``"time_budget_exceeded"``). Off by
         default: a wall-clock limit makes closed-loop results depend on the machine.
@@ -147,21 +149,30 @@ class FHOCP:
 
     Attributes
     ----------
+    law : Law
+        The control law's part (above).
     has_du : bool
         The cost has the input-rate term (some ``du_weight`` > 0); then ``p`` ends with
         ``u_{−1}``.
-    npar : int
-        Length of the parameter vector ``p = (x̂, x̄, ū[, u_{−1}])``.
+    nw, ng, npar, it, iu, ix
+        The law's layout of ``w``, ``g`` and ``p`` (:class:`controllers.ocp.law.Law`).
+    warm_start : dict or None
+        The previous accepted solve's ``w``, ``lam_x``, ``lam_g`` (the next one's warm start).
     """
 
-    def __init__(self, data: FHOCPData | Any, *, formulation: str = "single-shooting",
+    def __init__(self, data: FHOCPData | Any, *, law: Law | None = None,
+                 formulation: str = "single-shooting",
                  ipopt_options: Mapping[str, Any] | None = None,
                  warm_duals: bool | None = None, time_budget: float | None = None,
                  solver: str | None = None,
                  sqp_options: Mapping[str, Any] | None = None, kernel: str = "auto",
                  du_weight: float | np.ndarray = 0.0) -> None:
+        self.law: Any = SetpointLaw() if law is None else law
         if formulation not in ("single-shooting", "multiple-shooting"):
             raise DesignError(f"unknown formulation {formulation!r}")
+        if formulation not in self.law.formulations:
+            raise DesignError(f"the {self.law.name} law's FHOCP is "
+                              f"{' or '.join(self.law.formulations)} only, not {formulation}")
         if kernel not in ("auto", "numpy"):
             raise DesignError(f"kernel must be \"auto\" or \"numpy\", got {kernel!r}")
         self.kernel_mode = kernel
@@ -173,10 +184,30 @@ class FHOCP:
                                                and formulation != "single-shooting"):
             raise DesignError(f"unknown solver {solver!r} for formulation {formulation!r}")
         self.solver = solver
-        self.sqp_options = {**SQP_OPTIONS, **(sqp_options or {})}
+        self.sqp_options = {**SQP_OPTIONS, **self.law.sqp_overrides, **(sqp_options or {})}
         if self.sqp_options["loop"] not in ("kernel", "casadi"):
             raise DesignError(f"sqp_options loop must be \"kernel\" or \"casadi\", got "
                               f"{self.sqp_options['loop']!r}")
+        self.formulation = formulation
+        self.time_budget = None if time_budget is None else float(time_budget)
+        self.warm_duals = (formulation == "single-shooting") if warm_duals is None else warm_duals
+        base = dict(FAST_IPOPT_OPTIONS) if formulation == "single-shooting" else {
+            "print_level": 0, "sb": "yes"}
+        base.update(ipopt_options or {})
+        self.ipopt_options = base
+        self._declare(data, du_weight)
+        self.law.attach(self, data)   # the law's layout of w, g and p
+        lay = self.law
+        self.nw, self.iu, self.it, self.ix = lay.nw, lay.iu, lay.it, lay.ix
+        self.ng, self.npar = lay.ng, lay.npar
+        self._solver = None
+        self._nlp: Any = None
+        self._buffer: tuple | None = None
+        self.warm_start: dict[str, np.ndarray] | None = None
+
+    # -- construction ------------------------------------------------------------------
+    def _declare(self, data: Any, du_weight: float | np.ndarray) -> None:
+        """The model, weights, constraint rows and tightening of ``data``."""
         self.params = {k: np.asarray(v, dtype=float) for k, v in data.params.items()}
         self.n, self.m, self.p = gru.dimensions(self.params)
         self.N = int(data.N)
@@ -195,24 +226,14 @@ class FHOCP:
         self.s = float(data.s)
         self.du_weight = du_weights(du_weight, self.m)
         self.has_du = bool(np.any(self.du_weight > 0))
-        self.npar = 2 * self.n + self.m + (self.m if self.has_du else 0)
-        self.formulation = formulation
-        self.time_budget = None if time_budget is None else float(time_budget)
-        self.warm_duals = (formulation == "single-shooting") if warm_duals is None else warm_duals
-        base = dict(FAST_IPOPT_OPTIONS) if formulation == "single-shooting" else {
-            "print_level": 0, "sb": "yes"}
-        base.update(ipopt_options or {})
-        self.ipopt_options = base
         self.LUo = self.L @ self.params["U_o"]
         self.Lbo = self.L @ self.params["b_o"]
-        self._pair_rows()
-        self._solver = None
-        self._nlp: Any = None
-        self._buffer: tuple | None = None
+        #: ``L d`` of :meth:`set_output_shift` (``None``: the rows as declared)
+        self.output_shift: np.ndarray | None = None
         self._bounds_eo = float("nan")
         self._bounds = np.zeros((self.N, self.q))
+        self._pair_rows()
 
-    # -- construction ------------------------------------------------------------------
     def _pair_rows(self) -> None:
         """Merge opposite rows of ``L`` (``L_k = −L_j``, a box) into two-sided constraints.
 
@@ -241,30 +262,24 @@ class FHOCP:
 
     @classmethod
     def from_certificate(cls, cert: Any, **options: Any) -> FHOCP:
-        """The FHOCP of a :class:`~controllers.certification.certificates.Certificate` (its weights,
-        constraints, tightening and terminal weight); ``options`` as the constructor's
-        keyword arguments (``formulation``, ``solver``, ``sqp_options``, ...)."""
+        """The FHOCP of a :class:`~controllers.certification.certificates.Certificate` (its
+        weights, constraints, tightening and terminal weight); ``options`` as the
+        constructor's keyword arguments (``law``, ``formulation``, ``solver``, ...)."""
         return cls(cert, **options)
 
     def setup(self) -> FHOCP:
         """Build the solver (a few ms; again after :meth:`setup` to restart it exactly).
 
         The single-shooting SQP takes its derivatives from the compiled kernel
-        (:mod:`controllers.kernel.compiled_kernel`) unless ``kernel="numpy"``, or when it cannot be
-        built or fails its self-test (then the numpy callbacks, with a one-line warning).
-        Returns ``self``.
+        (:mod:`controllers.kernel.compiled_kernel`, the law's variant) unless
+        ``kernel="numpy"``, or when it cannot be built or fails its self-test (then the
+        numpy callbacks of the law's NLP, with a one-line warning). Returns ``self``.
         """
-        single = self.formulation == "single-shooting"
         self.kernel = None
-        self.layout = FHOCPLayout(self, single)
-        lay = self.layout
-        self.nw, self.iu, self.it, self.ix, self.ng = lay.nw, lay.iu, lay.it, lay.ix, lay.ng
-        if single:
-            from controllers.ocp.nlp_single_shooting import SingleShootingNLP
-
+        if self.formulation == "single-shooting":
             if self.solver == "sqp" and self.kernel_mode == "auto":
                 self.kernel, self.kernel_error = for_fhocp(self)
-            self._nlp = SingleShootingNLP(self, self.kernel)
+            self._nlp = self.law.nlp(self.kernel)
             self._shoot = self._nlp.shoot
             nlp, opts = self._nlp.ipopt_problem(self.ipopt_options, self.time_budget)
             self._xtraj = self._nlp.trajectory
@@ -280,7 +295,7 @@ class FHOCP:
     def _build_solver(self, nlp: dict, opts: dict[str, Any], name: str) -> None:
         """The solver of ``nlp`` (the compiled kernel's SQP, casadi ``sqpmethod`` or IPOPT)
         and its argument buffers; forgets the warm start."""
-        self._warm: dict[str, np.ndarray] | None = None
+        self.warm_start = None
         self._compiled_loop = False
         if self.solver == "sqp":
             opts = {k: v for k, v in opts.items()
@@ -310,11 +325,8 @@ class FHOCP:
 
     def numpy_nlp(self) -> Any:
         """The numpy twin of this problem's derivatives (what the compiled kernel is
-        self-tested against): a :class:`~controllers.ocp.nlp_single_shooting.SingleShootingNLP`
-        without a kernel."""
-        from controllers.ocp.nlp_single_shooting import SingleShootingNLP
-
-        return SingleShootingNLP(self, None)
+        self-tested against): the law's NLP without a kernel."""
+        return self.law.nlp(None)
 
     def simulate(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
         """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m): the compiled
@@ -328,13 +340,26 @@ class FHOCP:
     # -- solving -----------------------------------------------------------------------
     def tightened_bounds(self, e_o: float) -> np.ndarray:
         """Right-hand sides ``h − a_i ê_o − b_i − w_L − L b_o`` for ``i = 0 … N−1`` (N×q,
-        read-only: the last one is kept, ``ê_o`` settles at its fixed point)."""
+        read-only: the last one is kept, ``ê_o`` settles at its fixed point), minus ``L d``
+        of :meth:`set_output_shift`."""
         e_o = float(e_o)
         if self._bounds_eo != e_o:
             bounds = self.h - self.a * e_o - self.b - self.w_L - self.Lbo
+            if self.output_shift is not None:
+                bounds = bounds - self.output_shift
             bounds.flags.writeable = False
             self._bounds_eo, self._bounds = e_o, bounds
         return self._bounds
+
+    def set_output_shift(self, d: np.ndarray | None) -> None:
+        """Constrain ``y + d`` instead of the model's ``y``: every output row
+        ``L (U_o x_i + b_o + d) ≤ …`` (and the law's rows on steady outputs; the tracking
+        law's uncertified mode's ``d = d̂``, the filtered output mismatch, so that the
+        measured tightening is around the output the plant will show); ``None`` restores the
+        rows as declared."""
+        self.output_shift = (None if d is None
+                             else self.L @ np.asarray(d, dtype=float).reshape(self.p))
+        self._bounds_eo = float("nan")
 
     def rollout(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
         """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m)."""
@@ -358,108 +383,33 @@ class FHOCP:
         it."""
         return self.check_x0(x_hat, e_o) > FEAS_TOL
 
-    def candidate(self, x_hat: np.ndarray, u_seq: np.ndarray, x_bar: np.ndarray,
-                  u_bar: np.ndarray, e_o: float, alpha: float,
-                  u_prev: np.ndarray | None = None) -> FHOCPResult:
-        """Evaluate a given input sequence (cost, trajectory, residuals) without solving;
-        ``u_prev``: ``u_{−1}`` of the input-rate term (see :meth:`cost`)."""
-        u_seq = np.clip(np.asarray(u_seq, dtype=float), -1.0, 1.0)
-        if self.kernel is not None:   # the same check in one compiled call
-            x, out = self.kernel.assess(x_hat, u_seq, x_bar, u_bar,
-                                        self.tightened_bounds(e_o), alpha,
-                                        self._u_prev(u_prev, u_bar))
-            res = FHOCPResult(u=u_seq, x=x, cost=out.cost, status=SolveStatus.CANDIDATE,
-                              success=False, t=out.terminal_distance)
-            set_residuals(res, out, alpha)
-            return res
-        x = self.simulate(np.asarray(x_hat, dtype=float), u_seq)
-        tN = float(np.max(np.abs(x[-1] - x_bar)))
-        res = FHOCPResult(u=u_seq, x=x, cost=self.cost(x, u_seq, x_bar, u_bar, tN, u_prev),
-                          status=SolveStatus.CANDIDATE, success=False, t=tN)
-        self._residuals(res, x, e_o, x_bar, alpha)
-        return res
+    def solve(self, x_hat: np.ndarray, e_o: float, *args: Any, **kwargs: Any) -> FHOCPResult:
+        """Solve ``eq:optimization`` at ``x̂`` with ``ê_o`` for the law's request of
+        ``args``, ``kwargs`` (:meth:`Law.request <controllers.ocp.law.Law.request>`): the
+        paper's ``(x̄, ū, α[, u_init, warm, u_prev])``
+        (:meth:`~controllers.ocp.law_setpoint.SetpointLaw.request`), the tracking law's
+        ``(r, u_init, us_init, x_s0[, u_prev, warm, us_centre])``
+        (:meth:`~controllers.ocp.law_tracking.TrackingLaw.request`). See
+        :meth:`solve_request`."""
+        return self.solve_request(x_hat, e_o, self.law.request(*args, **kwargs))
 
-    def assess(self, x_hat: np.ndarray, u_seq: np.ndarray, x_bar: np.ndarray, e_o: float,
-               alpha: float) -> tuple[float, float]:
-        """``(max output violation at i = 1 … N−1, ‖x_N − x̄‖∞)`` of ``u_seq`` (N, m) from
-        ``x̂`` (the reference governor's feasibility test; the i = 0 row only involves
-        ``x̂``)."""
-        bounds = self.tightened_bounds(e_o)
-        if self.kernel is not None:
-            _, out = self.kernel.assess(x_hat, u_seq, x_bar, np.zeros(self.m), bounds, alpha)
-            return out.violation_rows, out.terminal_distance
-        x = self.rollout(x_hat, u_seq)
-        viol = float(np.max(x[1: self.N] @ self.LUo.T - bounds[1:])) if self.N > 1 else (
-            -np.inf)
-        return viol, float(np.max(np.abs(x[self.N] - x_bar)))
-
-    def cost(self, x: np.ndarray, u: np.ndarray, x_bar: np.ndarray, u_bar: np.ndarray,
-             t: float | None = None, u_prev: np.ndarray | None = None) -> float:
-        """Cost ``eq:optimization-cost`` (``t`` defaults to ``‖x_N − x̄‖∞``), plus the
-        input-rate term when :attr:`has_du` with ``u_{−1} = u_prev`` (``None``: ``ū``, the
-        first step's convention: the sequence ``ū`` repeated then pays nothing for it)."""
-        dx = x[: self.N] - x_bar
-        du = u - u_bar
-        tN = float(np.max(np.abs(x[self.N] - x_bar))) if t is None else t
-        J = float(np.vdot(dx @ self.Q, dx) + np.vdot(du @ self.R, du) + self.s * tN ** 2)
-        if self.has_du:
-            J += du_cost(u, self._u_prev(u_prev, u_bar), self.du_weight)
-        return J
-
-    def _u_prev(self, u_prev: np.ndarray | None, u_bar: np.ndarray) -> np.ndarray:
-        """``u_{−1}`` (m,): ``u_prev``, else ``ū`` (before any input was applied)."""
-        return np.asarray(u_bar if u_prev is None else u_prev, dtype=float).reshape(self.m)
-
-    def _residuals(self, res: FHOCPResult, x: np.ndarray, e_o: float, x_bar: np.ndarray,
-                   alpha: float) -> None:
-        ub = self.tightened_bounds(e_o)
-        lhs = x[: self.N] @ self.LUo.T
-        viol = max(0.0, float(np.max(lhs - ub)),
-                   float(np.max(np.abs(res.u))) - 1.0)
-        res.constraint_violation = viol
-        dN = float(np.max(np.abs(x[self.N] - x_bar)))
-        res.terminal_violation = max(0.0, dN - alpha)
-        act = int(np.sum(lhs[1:] - ub[1:] > -1e-6)) + int(dN - alpha > -1e-6)
-        act += int(np.sum(np.abs(res.u) > 1 - 1e-6))
-        res.active = act
-
-    def solve(self, x_hat: np.ndarray, e_o: float, x_bar: np.ndarray, u_bar: np.ndarray,
-              alpha: float, u_init: np.ndarray | None = None, warm: bool = True,
-              u_prev: np.ndarray | None = None) -> FHOCPResult:
-        """Solve ``eq:optimization`` at ``x̂`` with ``ê_o``, set-point ``(x̄, ū)``, terminal α.
-
-        Parameters
-        ----------
-        u_init : (N, m) array, optional
-            Initial guess of the inputs; default: the previous solution shifted by one stage
-            with ``ū`` appended (and its multipliers, shifted too) when ``warm``, else ``ū``.
-        u_prev : (m,) array, optional
-            The input applied at the previous step, ``u_{−1}`` of the input-rate term
-            (ignored without one); ``None``: ``ū`` (the first step).
-        """
-        x_bar = np.asarray(x_bar, dtype=float).reshape(self.n)
-        u_bar = np.asarray(u_bar, dtype=float).reshape(self.m)
-        request = Setpoint(x_bar, u_bar, float(alpha), u_init, warm, self._u_prev(u_prev, u_bar))
-        return self.solve_request(x_hat, e_o, request)
-
-    def solve_request(self, x_hat: np.ndarray, e_o: float, request: SolveRequest
-                      ) -> FHOCPResult:
+    def solve_request(self, x_hat: np.ndarray, e_o: float, request: Any) -> FHOCPResult:
         """One solve, the same for every law: the ``i = 0`` row checked first (a violated
         one is reported as ``"infeasible_x0"`` with the request's candidate, no solver
         called), the request's parameters, bounds and initial guess written, the solver run
-        (within the optional time budget), its answer checked independently by the
-        request, judged (:func:`~controllers.ocp.fhocp_result.judge`) and kept as the next
+        (within the optional time budget), its answer checked independently by the law,
+        judged (:func:`~controllers.ocp.fhocp_result.judge`) and kept as the next
         warm start. ``solve_time``: the solver and the check."""
         if self._solver is None:
             self.setup()
         t0 = time.perf_counter()
         x_hat = np.asarray(x_hat, dtype=float).reshape(self.n)
         if self.formulation == "single-shooting" and self.x0_infeasible(x_hat, e_o):
-            res = request.candidate(self, x_hat, e_o, SolveStatus.INFEASIBLE_X0)
+            res = self.law.fallback(x_hat, e_o, request, SolveStatus.INFEASIBLE_X0)
             res.solve_time = time.perf_counter() - t0
             return res
         buf, trigger, ins, outs = self._buffer
-        request.write(self, ins, x_hat, e_o)
+        self.law.write(ins, x_hat, e_o, request)
         self._arm_deadline(t0)
         if self._compiled_loop:
             trigger()   # the compiled SQP: no casadi, nothing printed
@@ -468,35 +418,18 @@ class FHOCP:
                 trigger()
         stats = solver_stats(buf)
         wopt = outs["x"].copy()
-        res = request.check(self, wopt, ins["p"], x_hat, e_o,
-                            str(stats.get("return_status", "unknown")))
+        res = self.law.check_answer(wopt, ins["p"], x_hat, e_o, request,
+                                    str(stats.get("return_status", "unknown")))
         res.solve_time = time.perf_counter() - t0
         res.lam_x, res.lam_g = outs["lam_x"].copy(), outs["lam_g"].copy()
         judge(res, stats, wopt)
         self._keep_warm(res, wopt)
         return res
 
-    def check_answer(self, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray, e_o: float,
-                     x_bar: np.ndarray, u_bar: np.ndarray, alpha: float, u_prev: np.ndarray,
-                     status: str) -> FHOCPResult:
-        """The independent check of the solver's answer ``wopt`` at ``p``: a rollout apart
-        from the solver's (the kernel's plain one, cross-checked against numpy when loaded,
-        in one call; or numpy's), its cost and residuals, and the defect against the
-        solver's own trajectory. IPOPT may overshoot a bound by ~1e-9: u is clipped."""
-        t = float(wopt[self.it])
-        if self.kernel is not None:
-            u, x, out, _ = self.kernel.assess_w(wopt, pv, self.tightened_bounds(e_o), alpha)
-            res = FHOCPResult(u=u, x=x, cost=out.cost, status=status, success=False, t=t,
-                              defect=out.defect)
-            set_residuals(res, out, alpha)
-            return res
-        u = np.clip(wopt[self.iu], -1.0, 1.0)
-        x = self.simulate(x_hat, u)
-        res = FHOCPResult(u=u, x=x, cost=self.cost(x, u, x_bar, u_bar, u_prev=u_prev),
-                          status=status, success=False, t=t,
-                          defect=float(np.max(np.abs(self._xtraj(wopt, pv) - x))))
-        self._residuals(res, x, e_o, x_bar, alpha)
-        return res
+    def solver_trajectory(self, w: np.ndarray, p: np.ndarray) -> np.ndarray:
+        """States ``x_0 … x_N`` the solver's own formulation gives at ``(w, p)`` (the answer
+        check's defect compares a rollout apart from it with these)."""
+        return self._xtraj(w, p)
 
     def _arm_deadline(self, t0: float) -> None:
         """Start the optional wall-time budget of the solve that began at ``t0`` (checked by
@@ -509,8 +442,8 @@ class FHOCP:
         """Keep ``w`` and its multipliers as the next solve's warm start
         (:func:`controllers.ocp.fhocp_result.keeps_warm_start`)."""
         if keeps_warm_start(res, w):
-            self._warm = {"w": w, "lam_x": res.lam_x, "lam_g": res.lam_g}
+            self.warm_start = {"w": w, "lam_x": res.lam_x, "lam_g": res.lam_g}
 
     def reset_warm_start(self) -> None:
         """Forget the previous solution (next solve starts cold)."""
-        self._warm = None
+        self.warm_start = None

@@ -1,9 +1,9 @@
-"""One solve of ``eq:optimization`` (:class:`FHOCPResult`) and the one answer check every FHOCP
-applies to it (:func:`judge`, with the solver's statistics read by :func:`solver_stats`, the
-residuals of the compiled check by :func:`set_residuals`): what :mod:`controllers.ocp.fhocp` and
-:mod:`controllers.ocp.fhocp_tracking` return and what the kernel's self-test
-(:mod:`controllers.ocp.nlp_single_shooting`) compares, in a module of its own so that none of
-them imports another."""
+"""One solve of ``eq:optimization`` (:class:`FHOCPResult`) and the one judge of every answer
+(:func:`judge`, with the solver's statistics read by :func:`solver_stats`, the residuals of
+the compiled check by :func:`set_residuals`): what :mod:`controllers.ocp.fhocp` returns for
+every law (:mod:`controllers.ocp.law_setpoint`, :mod:`controllers.ocp.law_tracking`) and what
+the kernel's self-test (:mod:`controllers.ocp.nlp_single_shooting`) compares, in a module of
+its own so that none of them imports another."""
 
 from __future__ import annotations
 
@@ -15,7 +15,8 @@ import numpy as np
 from controllers.ocp.solve_status import SOLVER_SUCCEEDED, SolveStatus
 from controllers.ocp.solver_settings import DEFECT_TOL, FEAS_TOL
 
-__all__ = ["FHOCPResult", "judge", "keeps_warm_start", "set_residuals", "solver_stats"]
+__all__ = ["FHOCPResult", "judge", "keeps_warm_start", "plan_residuals", "set_residuals",
+           "solver_stats"]
 
 
 @dataclass
@@ -68,14 +69,31 @@ class FHOCPResult:
     feasible: bool = False
     lam_x: np.ndarray | None = field(default=None, repr=False)
     lam_g: np.ndarray | None = field(default=None, repr=False)
-    #: the tracking FHOCP's artificial steady input and state
-    #: (:mod:`controllers.ocp.fhocp_tracking`)
+    #: the tracking law's artificial steady input and state
+    #: (:mod:`controllers.ocp.law_tracking`)
     u_s: np.ndarray | None = None
     x_s: np.ndarray | None = field(default=None, repr=False)
 
 
+def plan_residuals(res: FHOCPResult, x: np.ndarray, LUo: np.ndarray, bounds: np.ndarray,
+                   x_ref: np.ndarray, alpha: float) -> float:
+    """The residuals of the plan ``(res.u, x)`` (``x_0 … x_N``) into ``res``: the output
+    rows' ``L U_o x_i ≤ bounds_i`` (``i = 0 … N−1``, ``eq:optimization-constraint``) and
+    the input box's violation, the terminal set's ``‖x_N − x_ref‖∞ ≤ α`` and the rows
+    active within 1e-6; returns ``‖x_N − x_ref‖∞``. Every law's numpy answer check."""
+    N = bounds.shape[0]
+    lhs = x[:N] @ LUo.T
+    res.constraint_violation = max(0.0, float(np.max(lhs - bounds)),
+                                   float(np.max(np.abs(res.u))) - 1.0)
+    dN = float(np.max(np.abs(x[N] - x_ref)))
+    res.terminal_violation = max(0.0, dN - alpha)
+    res.active = (int(np.sum(lhs[1:] - bounds[1:] > -1e-6)) + int(dN - alpha > -1e-6)
+                  + int(np.sum(np.abs(res.u) > 1 - 1e-6)))
+    return dN
+
+
 def set_residuals(res: FHOCPResult, out: Any, alpha: float) -> None:
-    """:meth:`FHOCP._residuals` from the compiled check's
+    """:func:`plan_residuals` from the compiled check's
     :class:`~controllers.kernel.kernel_abi.Assessment`
     (:meth:`controllers.kernel.kernel_lib.Workspace.
     assess`)."""

@@ -34,20 +34,24 @@ from controllers.ocp.nlp_single_shooting import SingleShootingNLP
 from controllers.ocp.steady_state import steady_state
 
 if TYPE_CHECKING:
-    from controllers.ocp.fhocp_tracking import TrackingFHOCP
+    from controllers.ocp.fhocp import FHOCP
 
 __all__ = ["TrackingNLP"]
 
 
 class TrackingNLP(SingleShootingNLP):
-    """Function and derivative evaluations of :class:`~controllers.ocp.fhocp_tracking.
-    TrackingFHOCP` (see the module docstring); a kernel workspace as for the parent."""
+    """Function and derivative evaluations of an FHOCP with the tracking law
+    (:class:`~controllers.ocp.law_tracking.TrackingLaw`; see the module docstring); a kernel
+    workspace as for the parent."""
 
-    def __init__(self, fhocp: TrackingFHOCP, kernel: Any = None) -> None:
+    def __init__(self, fhocp: FHOCP, kernel: Any = None) -> None:
         super().__init__(fhocp, kernel)
+        law = fhocp.law
         self.p: Any = fhocp
         self.ng = fhocp.ng
-        self.ius = fhocp.ius
+        self.ius = law.ius
+        #: the offset weights ``T``
+        self.T = law.offset_weight
         from controllers.ocp.shooting import GRUShooting
 
         #: one stage at (x_s, u_s): the second derivatives of the curvature term
@@ -61,8 +65,8 @@ class TrackingNLP(SingleShootingNLP):
         self._itf = N * m + m
         self._nwf = N * m + m + 1
         self._E: np.ndarray | None = None   # None: w_N = w (no control horizon)
-        if fhocp.control_horizon < N:
-            src = np.concatenate([fhocp.iu.ravel(), fhocp.ius, [fhocp.it]])
+        if law.control_horizon < N:
+            src = np.concatenate([fhocp.iu.ravel(), law.ius, [fhocp.it]])
             self._E = np.zeros((self._nwf, fhocp.nw))
             self._E[np.arange(self._nwf), src] = 1.0
 
@@ -97,7 +101,7 @@ class TrackingNLP(SingleShootingNLP):
         du = ro.u - us
         e = self._offset(xs, pv)
         J = float(np.vdot(dx @ p.Q, dx) + np.vdot(du @ p.R, du)
-                  + p.s * float(wv[p.it]) ** 2 + np.vdot(e * p.offset_weight, e))
+                  + p.s * float(wv[p.it]) ** 2 + np.vdot(e * self.T, e))
         if p.has_du:
             J += du_cost(ro.u, self._u_prev(pv), p.du_weight)
             J += float(np.vdot((ro.u[-1] - us) * p.du_weight, ro.u[-1] - us))
@@ -116,7 +120,7 @@ class TrackingNLP(SingleShootingNLP):
         p = self.p
         e = self._offset(xs, pv)
         return (-2 * np.sum(ro.x[: p.N] - xs, axis=0) @ p.Q
-                + p.params["U_o"].T @ (2 * p.offset_weight * e))
+                + p.params["U_o"].T @ (2 * self.T * e))
 
     def _grad_us(self, wv: np.ndarray, ro: Any, Xs: np.ndarray, lx: np.ndarray,
                  grad: np.ndarray) -> None:
@@ -175,7 +179,7 @@ class TrackingNLP(SingleShootingNLP):
         if p.has_du:
             cross[(N - 1) * m:] -= 2 * np.diag(p.du_weight)
             H[np.ix_(iu[-m:], iu[-m:])] += lf0 * 2 * np.diag(p.du_weight)
-        M = 2 * N * p.Q + p.params["U_o"].T @ (2 * p.offset_weight[:, None]
+        M = 2 * N * p.Q + p.params["U_o"].T @ (2 * self.T[:, None]
                                                 * p.params["U_o"])
         Hs = Xs.T @ M @ Xs + 2 * N * p.R
         if p.has_du:
@@ -211,7 +215,7 @@ class TrackingNLP(SingleShootingNLP):
         n, m = p.n, p.m
         us = rng.uniform(-0.8, 0.8, m)
         x0 = rng.uniform(-0.3, 0.3, n)
-        wv = np.concatenate([rng.uniform(-1, 1, p.control_horizon * m), us,
+        wv = np.concatenate([rng.uniform(-1, 1, p.law.control_horizon * m), us,
                              rng.uniform(0, 0.1, 1)])
         pv = np.concatenate([x0, x0 + rng.normal(0, 0.01, n),
                              rng.uniform(-1, 1, p.npar - 2 * n)])
@@ -220,7 +224,7 @@ class TrackingNLP(SingleShootingNLP):
     def _answer_check_pairs(self, kernel: Any, rng: np.random.Generator, u: np.ndarray,
                             pv: np.ndarray, x_np: np.ndarray) -> list[tuple[Any, Any]]:
         """None: the tracking FHOCP's answer check
-        (:meth:`~controllers.ocp.fhocp_tracking.TrackingFHOCP.check`) is its own (the plain
+        (:meth:`~controllers.ocp.law_tracking.TrackingLaw.evaluate`) is its own (the plain
         rollout, compared above, and ``x_s`` verified by a numpy GRU step), not the kernel's
         ``assess``."""
         return []

@@ -1,6 +1,7 @@
 """The tracking MPC law: the tracking FHOCP each step, with the candidate as fallback.
 
-:class:`TrackingMPC` solves :class:`~controllers.ocp.fhocp_tracking.TrackingFHOCP` every step for
+:class:`TrackingMPC` solves the FHOCP with the tracking law
+(:class:`~controllers.ocp.law_tracking.TrackingLaw`) every step for
 the target ``r = ȳ − d̂`` from the candidate of the recursive-feasibility argument (the
 previous plan shifted by one stage with the artificial steady input ``u_s`` appended, and the
 same ``u_s``), and applies that candidate when a solve fails. Unlike the paper's law
@@ -15,8 +16,8 @@ import time
 
 import numpy as np
 
+from controllers.ocp.fhocp import FHOCP
 from controllers.ocp.fhocp_result import FHOCPResult
-from controllers.ocp.fhocp_tracking import TrackingFHOCP
 from controllers.ocp.paper_mpc import StepRecord
 from controllers.ocp.solver_settings import FEAS_TOL
 
@@ -47,13 +48,14 @@ class TrackingMPC:
 
     Parameters
     ----------
-    fhocp : TrackingFHOCP
+    fhocp : controllers.ocp.fhocp.FHOCP
+        With the tracking law (:class:`~controllers.ocp.law_tracking.TrackingLaw`).
     accept_suboptimal : bool
         Apply a feasible iterate of a capped solve that costs no more than the candidate
         (suboptimal MPC, as :class:`controllers.ocp.paper_mpc.RobustMPC`).
     """
 
-    def __init__(self, fhocp: TrackingFHOCP, accept_suboptimal: bool = True) -> None:
+    def __init__(self, fhocp: FHOCP, accept_suboptimal: bool = True) -> None:
         self.fhocp = fhocp
         self.accept_suboptimal = bool(accept_suboptimal)
         #: the design's hypotheses
@@ -96,16 +98,16 @@ class TrackingMPC:
         g_u, g_us, g_xs = self._guess or (cand, self.u_s, self.x_s)
         t0 = time.perf_counter()
         try:
-            res = fh.solve_tracking(x_hat, e_o, r, g_u, g_us, g_xs, up, us_centre=self.u_s)
+            res = fh.solve(x_hat, e_o, r, g_u, g_us, g_xs, up, us_centre=self.u_s)
         except Exception as exc:   # a solver crash: the candidate, as a failed solve
-            res = fh.check(x_hat, cand, self.u_s, e_o, r, self.x_s, up)
+            res = fh.law.evaluate(x_hat, cand, self.u_s, e_o, r, self.x_s, up)
             res.status = f"solver_error: {type(exc).__name__}: {exc}"[:200]
             res.solve_time = time.perf_counter() - t0
         use = res.success
         fallback = False
         feasible = True
         if not use:
-            chk = fh.check(x_hat, cand, self.u_s, e_o, r, self.x_s, up)
+            chk = fh.law.evaluate(x_hat, cand, self.u_s, e_o, r, self.x_s, up)
             feasible = (chk.constraint_violation <= FEAS_TOL
                         and chk.terminal_violation <= FEAS_TOL)
             use = self.accept_suboptimal and res.feasible and (

@@ -101,9 +101,9 @@ def same_start_solves(a: FHOCP, b: FHOCP, cert, setpoints: list, repeats: int):
     for y in setpoints:
         ref = cert.reference(np.array(y))
         for _ in range(repeats):
-            warm = copy.deepcopy(a._warm)
+            warm = copy.deepcopy(a.warm_start)
             ra = a.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
-            b._warm = warm
+            b.warm_start = warm
             yield ra, b.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
             x_hat = a.rollout(x_hat, ra.u)[1]
 
@@ -227,7 +227,7 @@ def test_ipopt_and_multiple_shooting_keep_numpy(cert) -> None:
                                                 (11, 8, 3, 2), (8, 9, 1, 3)])
 def test_answer_check_and_observer_step_match_numpy(n: int, N: int, m: int, p: int) -> None:
     """assess / assess_w (cost, residuals, defect of an answer) and gru_step (eq:observer's
-    update) against FHOCP.cost, FHOCP._residuals and controllers.gru.step, including answers
+    update) against the law's cost, its residuals and controllers.gru.step, including answers
     outside the input box, violated output rows and terminal sets."""
     from controllers import gru
     from controllers.ocp.fhocp import FHOCPResult
@@ -247,13 +247,13 @@ def test_answer_check_and_observer_step_match_numpy(n: int, N: int, m: int, p: i
         u = np.clip(w[:-1].reshape(N, fh.m), -1.0, 1.0)
         x = gru.simulate(fh.params, x0, u)[0]
         ref = FHOCPResult(u=u, x=x, cost=0.0, status="", success=False)
-        _residuals_with(fh, ref, x, bounds, x_bar, alpha)
+        fh.law.residuals(ref, x, bounds, x_bar, alpha)
         uc, xk, out, _ = k.assess_w(w, np.concatenate([x0, x_bar, u_bar]), bounds, alpha)
         # the defect: the solver's trajectory (unclipped inputs) against the check's
         xs = gru.simulate(fh.params, x0, w[:-1].reshape(N, fh.m))[0]
         assert np.array_equal(uc, u) and rel(xk, x) < 1e-13
         assert abs(out.defect - np.max(np.abs(xs - x))) < 1e-13
-        assert rel(out.cost, fh.cost(x, u, x_bar, u_bar)) < 1e-12
+        assert rel(out.cost, fh.law.cost(x, u, x_bar, u_bar)) < 1e-12
         viol = max(0.0, out.violation_first, out.violation_rows, out.u_max - 1.0)
         assert abs(viol - ref.constraint_violation) < 1e-12
         assert abs(max(0.0, out.terminal_distance - alpha) - ref.terminal_violation) < 1e-12
@@ -265,21 +265,10 @@ def test_answer_check_and_observer_step_match_numpy(n: int, N: int, m: int, p: i
     assert seen == {(False, False), (False, True), (True, False), (True, True)}
 
 
-def _residuals_with(fh: FHOCP, res, x, bounds, x_bar, alpha) -> None:
-    """FHOCP._residuals with given bounds (its formulas, written out again)."""
-    lhs = x[: fh.N] @ fh.LUo.T
-    res.constraint_violation = max(0.0, float(np.max(lhs - bounds)),
-                                   float(np.max(np.abs(res.u))) - 1.0)
-    dN = float(np.max(np.abs(x[fh.N] - x_bar)))
-    res.terminal_violation = max(0.0, dN - alpha)
-    res.active = (int(np.sum(lhs[1:] - bounds[1:] > -1e-6)) + int(dN - alpha > -1e-6)
-                  + int(np.sum(np.abs(res.u) > 1 - 1e-6)))
-
-
 @needs_cc
 def test_compiled_candidate_and_governor_test_match_numpy(cert) -> None:
-    """FHOCP.candidate and FHOCP.assess (the governor's feasibility test) give the numpy
-    path's numbers with the kernel."""
+    """The paper's law's evaluate and assess (the governor's feasibility test) give the
+    numpy path's numbers with the kernel."""
     a = FHOCP.from_certificate(cert, kernel="numpy").setup()
     b = FHOCP.from_certificate(cert).setup()
     assert b.kernel is not None
@@ -288,14 +277,14 @@ def test_compiled_candidate_and_governor_test_match_numpy(cert) -> None:
     rng = np.random.default_rng(3)
     for _ in range(10):
         u = rng.uniform(-1.2, 1.2, (a.N, a.m))
-        ra = a.candidate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
-        rb = b.candidate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
+        ra = a.law.evaluate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
+        rb = b.law.evaluate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
         assert rel(rb.x, ra.x) < 1e-13 and rel(rb.cost, ra.cost) < 1e-12
         assert abs(rb.t - ra.t) < 1e-13 and rb.active == ra.active
         assert abs(rb.constraint_violation - ra.constraint_violation) < 1e-12
         assert abs(rb.terminal_violation - ra.terminal_violation) < 1e-12
-        va, da = a.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
-        vb, db = b.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
+        va, da = a.law.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
+        vb, db = b.law.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
         assert abs(va - vb) < 1e-12 and abs(da - db) < 1e-13
 
 

@@ -7,7 +7,8 @@ import pytest
 from controllers.equilibrium import equilibrium
 from controllers.gru import output, simulate, step
 from controllers.observer import GRUObserver
-from controllers.ocp.fhocp import FHOCP, FHOCPData, Setpoint
+from controllers.ocp.fhocp import FHOCP, FHOCPData
+from controllers.ocp.law_setpoint import SetpointLaw
 from controllers.ocp.paper_mpc import RobustMPC
 from controllers.ocp.solver_settings import FEAS_TOL
 from cosim_adapters.gru_plant import GRUPlant
@@ -184,8 +185,8 @@ def test_capped_feasible_iterate_is_applied_as_suboptimal(model, cert):
     ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     rec = ctrl.make_step(x, 0.02)
     assert not rec.result.success and rec.result.status == "Maximum_Iterations_Exceeded"
-    cand = ctrl.fhocp.candidate(x, np.tile(ref.u_bar, (N, 1)), ref.x_bar, ref.u_bar, 0.02,
-                                ref.alpha)
+    cand = ctrl.fhocp.law.evaluate(x, np.tile(ref.u_bar, (N, 1)), ref.x_bar, ref.u_bar,
+                                   0.02, ref.alpha)
     if rec.result.feasible:
         assert rec.suboptimal and not rec.fallback
         np.testing.assert_array_equal(rec.u, rec.result.u[0])
@@ -273,43 +274,59 @@ def test_sqp_solver_rejected_for_multiple_shooting(cert):
         make(cert, formulation="multiple-shooting", solver="sqp")
 
 
-class CountingRequest:
-    """A third law's request (the :class:`~controllers.ocp.fhocp.SolveRequest` protocol):
-    the paper's set-point, with the calls :meth:`FHOCP.solve_request` makes counted."""
+class CountingLaw(SetpointLaw):
+    """A third law (the :class:`~controllers.ocp.law.Law` protocol): the paper's set-point,
+    with the calls the FHOCP's one solve procedure makes counted."""
 
-    def __init__(self, inner: Setpoint) -> None:
-        self.inner = inner
+    name = "counting"
+
+    def __init__(self) -> None:
+        super().__init__()
         self.calls: list[str] = []
 
-    def candidate(self, fhocp, x_hat, e_o, status):
-        self.calls.append("candidate")
-        return self.inner.candidate(fhocp, x_hat, e_o, status)
+    def fallback(self, x_hat, e_o, request, status):
+        self.calls.append("fallback")
+        return super().fallback(x_hat, e_o, request, status)
 
-    def write(self, fhocp, ins, x_hat, e_o):
+    def write(self, ins, x_hat, e_o, request):
         self.calls.append("write")
-        self.inner.write(fhocp, ins, x_hat, e_o)
+        super().write(ins, x_hat, e_o, request)
 
-    def check(self, fhocp, wopt, pv, x_hat, e_o, status):
-        self.calls.append("check")
-        return self.inner.check(fhocp, wopt, pv, x_hat, e_o, status)
+    def check_answer(self, wopt, pv, x_hat, e_o, request, status):
+        self.calls.append("check_answer")
+        return super().check_answer(wopt, pv, x_hat, e_o, request, status)
 
 
-def test_one_solve_procedure_takes_any_request(model, cert):
-    """FHOCP.solve is solve_request with the paper's Setpoint, to the bit; a request of
-    another kind goes through the same procedure: the i = 0 row first (the request's
-    candidate, no solver), else write, solve, the request's check, the one judge."""
+def test_one_fhocp_takes_any_law(model, cert):
+    """The FHOCP with another law object goes through the same procedure and gives the
+    default law's answer to the bit: the i = 0 row first (the law's fallback, no solver),
+    else write, solve, the law's answer check, the one judge."""
     fh = FHOCP.from_certificate(cert).setup()
     x_hat = start_state(model, np.array([0.05, 0.0]))
     ref = cert.reference(np.array([0.1, 0.1]))
     plain = fh.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
-    fh.reset_warm_start()
-    request = CountingRequest(Setpoint(ref.x_bar, ref.u_bar, ref.alpha, None, False,
-                                       ref.u_bar))
-    again = fh.solve_request(x_hat, 0.02, request)
-    assert request.calls == ["write", "check"]
+    law = CountingLaw()
+    counted = FHOCP.from_certificate(cert, law=law).setup()
+    again = counted.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
+    assert law.calls == ["write", "check_answer"] and counted.law is law
     assert again.success and again.status == plain.status == "optimal"
     assert np.array_equal(again.u, plain.u) and again.cost == plain.cost
-    request.calls.clear()
-    refused = fh.solve_request(x_hat, 1.0, request)   # a_0 ê_o exceeds the output range
-    assert request.calls == ["candidate"] and refused.status == "infeasible_x0"
+    law.calls.clear()
+    refused = counted.solve(x_hat, 1.0, ref.x_bar, ref.u_bar, ref.alpha)   # a_0 ê_o > range
+    assert law.calls == ["fallback"] and refused.status == "infeasible_x0"
     assert not refused.success and np.array_equal(refused.u, np.tile(ref.u_bar, (fh.N, 1)))
+
+
+def test_a_law_object_serves_one_fhocp_and_its_formulations(cert):
+    """A law keeps its FHOCP's layout: a second FHOCP refuses it; the tracking law is single
+    shooting only, refused by name for multiple shooting."""
+    from controllers.errors import DesignError
+    from controllers.ocp.law_tracking import TrackingLaw
+
+    law = SetpointLaw()
+    FHOCP.from_certificate(cert, law=law)
+    with pytest.raises(DesignError, match="already serves another FHOCP"):
+        FHOCP.from_certificate(cert, law=law)
+    with pytest.raises(DesignError, match="tracking law's FHOCP is single-shooting only"):
+        FHOCP.from_certificate(cert, law=TrackingLaw(1e3, 0.05),
+                               formulation="multiple-shooting")

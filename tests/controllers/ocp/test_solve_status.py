@@ -1,6 +1,6 @@
-"""One status and one answer check for both FHOCPs (controllers.ocp.solve_status,
-controllers.ocp.fhocp_result.judge): the paper's and the tracking law's problems report the same
-outcomes the same way."""
+"""One status and one judge for both laws (controllers.ocp.solve_status,
+controllers.ocp.fhocp_result.judge): the FHOCP with the paper's and with the tracking law report
+the same outcomes the same way."""
 
 from __future__ import annotations
 
@@ -8,21 +8,19 @@ import numpy as np
 import pytest
 
 from controllers.certification import certificates as certs
-from controllers.errors import DesignError
 from controllers.ocp.fhocp import FHOCP
 from controllers.ocp.fhocp_result import FHOCPResult, judge
-from controllers.ocp.fhocp_tracking import TrackingFHOCP
+from controllers.ocp.law_tracking import TrackingLaw
 from controllers.ocp.solve_status import OTHER_STATUS, SolveStatus, status_code
 from controllers.ocp.steady_state import steady_state
 from tests.controllers.random_gru import random_gru_model
 
 
-def _tracking(time_budget: float | None = None, loop: str = "kernel") -> TrackingFHOCP:
+def _tracking(time_budget: float | None = None, loop: str = "kernel") -> FHOCP:
     cert = certs.compute_certificate(random_gru_model(4, n=6), N=5, gain_scale=0.0,
                                      w_y_bar=0.01)
-    return TrackingFHOCP.from_certificate(cert, offset_weight=1e3, alpha_c=0.05,
-                                          time_budget=time_budget,
-                                          sqp_options={"loop": loop})
+    return FHOCP.from_certificate(cert, law=TrackingLaw(1e3, 0.05), time_budget=time_budget,
+                                  sqp_options={"loop": loop})
 
 
 def test_status_codes_are_the_diagnostics_numbers() -> None:
@@ -57,16 +55,19 @@ def test_the_tracking_problem_reports_its_time_budget_as_the_paper_problem(loop:
     us = np.full(fh.m, 0.1)
     xs, _, ok = steady_state(fh.params, us, np.zeros(fh.n))
     assert ok
-    res = fh.solve_tracking(xs, 0.0, np.full(fh.p, 0.3), np.tile(us, (fh.N, 1)), us, xs,
-                            warm=False)
+    res = fh.solve(xs, 0.0, np.full(fh.p, 0.3), np.tile(us, (fh.N, 1)), us, xs, warm=False)
     assert res.status == SolveStatus.TIME_BUDGET_EXCEEDED and not res.success
 
 
-def test_both_problems_allow_the_same_x0_tolerance() -> None:
-    fh = _tracking()
-    assert type(fh).x0_infeasible is FHOCP.x0_infeasible
+def test_both_laws_are_one_problem_class() -> None:
+    """One FHOCP: the tracking law's is no subclass (the i = 0 row, its tolerance, the
+    solve procedure are the same code)."""
+    assert type(_tracking()) is FHOCP is type(FHOCP.from_certificate(
+        certs.compute_certificate(random_gru_model(4, n=6), N=5, w_y_bar=0.01)))
 
 
-def test_the_tracking_problem_refuses_the_paper_entry_point_in_one_line() -> None:
-    with pytest.raises(DesignError, match="solve_tracking"):
+def test_a_law_refuses_another_laws_request_by_its_own_arguments() -> None:
+    """The paper's set-point ``(x̄, ū, α)`` handed to the tracking law's FHOCP: its request
+    names the argument it lacks."""
+    with pytest.raises(TypeError, match="x_s0"):
         _tracking().solve(np.zeros(6), 0.0, np.zeros(6), np.zeros(2), 0.1)
