@@ -49,10 +49,10 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     ``out``. Raises :class:`CosimError` (one line) when it cannot be exported or built."""
     from controllers.kernel.compiled_kernel import PREFIX_PLACEHOLDER, variant_flags
     from controllers.kernel.controller_source import (
-        PARAMETERS,
         ControllerDesign,
         design_data,
         generate_source,
+        parameters,
     )
 
     if not str(out).endswith(".fmu"):
@@ -67,7 +67,6 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     source = generate_source(design).replace(PREFIX_PLACEHOLDER, "mpc_")
     flags, _ = variant_flags(design.kernel, (), blas=False)
     pr = ctrl.problem
-    starts = {"offset_filter": design.beta}   # the options' values in this design
     digest = hashlib.sha256(source.encode()).hexdigest()
     certified = "certified" if ctrl.certification.certified else "uncertified"
     iface = ControllerInterface(
@@ -79,7 +78,8 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
                        for c in pr.outputs),
         applied=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
                       for c in pr.inputs),
-        parameters=tuple(Parameter(name, "1", low, high, text, start=starts[name])
-                         for name, low, high, text in PARAMETERS))
+        parameters=tuple(Parameter(name, "1", low, high, text, start=start)
+                         for name, low, high, text, start in parameters(
+                             design, pr.input_names, pr.output_names)))
     return build_controller_fmu(iface, source, design_data(design), out,
                                 fmi_version=fmi_version, flags=flags)

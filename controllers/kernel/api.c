@@ -145,7 +145,7 @@ static void assess_core(gk_ws *ws, const double *xh, const double *u, const doub
   simulate(xh, u, x, ws->work.sz, ws->work.sr, ws->work.sh);
   double acc = 0.0;
   for (int i = 0; i < NH; i++) acc = add_quad(acc, x + i * NX, xb, QW, NX, QDIAG);
-  for (int i = 0; i < NH; i++) acc = add_quad(acc, u + i * NU, ub, RW, NU, 0);
+  for (int i = 0; i < NH; i++) acc = add_quad(acc, u + i * NU, ub, ws->mem.rw, NU, 0);
   double dN = 0.0;
   for (int k = 0; k < NX; k++) {
     const double d = fabs(x[NH * NX + k] - xb[k]);
@@ -172,7 +172,7 @@ static void assess_core(gk_ws *ws, const double *xh, const double *u, const doub
   }
   if (dN - alpha > -1e-6) act++;
 #if HAS_DU
-  out->cost = acc + SW * dN * dN + du_cost(u, up, NH);
+  out->cost = acc + SW * dN * dN + du_cost(ws->mem.dw, u, up, NH);
 #else
   (void)up;
   out->cost = acc + SW * dN * dN;
@@ -219,12 +219,12 @@ EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const dou
   for (int a = 0; a < NY; a++) {
     double e = BO[a] - ry[a];
     for (int k = 0; k < NX; k++) e += UO[a * NX + k] * xs[k];
-    out->cost += (e * TW[a]) * e;
+    out->cost += (e * ws->mem.tw[a]) * e;
   }
 #if HAS_DU
   for (int j = 0; j < NU; j++) {   /* zero with a control horizon: u_{N-1} = u_s */
     const double d = uc[(NH - 1) * NU + j] - us[j];
-    out->cost += (d * DW[j]) * d;
+    out->cost += (d * ws->mem.dw[j]) * d;
   }
 #endif
   PFX(gru_step)(xs, us, 0, 0, xn);

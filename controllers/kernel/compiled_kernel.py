@@ -134,6 +134,11 @@ class KernelProblem:
     offset_weight: np.ndarray | None = None
     control_horizon: int | None = None
 
+    @property
+    def has_du(self) -> bool:
+        """The input-rate term is compiled (``HAS_DU``): some ``du_weight`` is not 0."""
+        return self.du_weight is not None and bool(np.any(np.asarray(self.du_weight) != 0.0))
+
     @classmethod
     def of(cls, fhocp: Any) -> KernelProblem:
         """The kernel problem of an :class:`~controllers.ocp.fhocp.FHOCP`, with its law's
@@ -164,7 +169,7 @@ def generate_source(problem: KernelProblem, constants: Constants | None = None) 
            f"#define NX {n}\n#define NU {m}\n#define NH {N}\n#define NM {M}\n"
            f"#define NQ {q}\n"
            f"#define NY {np.shape(params['U_o'])[0]}\n#define NL {n_l}\n",
-           f"#define HAS_DU {int(_has_du(problem))}\n"
+           f"#define HAS_DU {int(problem.has_du)}\n"
            f"#define HAS_ASS {int(offset_weight is not None)}\n",
            f"#define PFX(name) {PREFIX_PLACEHOLDER}##name\n", c_declarations(),
            constants.declarations(),
@@ -184,10 +189,6 @@ def library_source(problem: KernelProblem, constants: Constants | None = None) -
     every problem of the same dimensions."""
     constants = kernel_constants(problem) if constants is None else constants
     return generate_source(problem, constants) + loader_source(constants)
-
-
-def _has_du(problem: KernelProblem) -> bool:
-    return problem.du_weight is not None and bool(np.any(np.asarray(problem.du_weight) != 0.0))
 
 
 def kernel_constants(problem: KernelProblem) -> Constants:
@@ -217,7 +218,7 @@ def kernel_constants(problem: KernelProblem) -> Constants:
     c.array("DUO", DUo if DUo.shape[0] else np.zeros((1, n)))
     c.array("LUO", LUo if LUo.shape[0] else np.zeros((1, n)))
     c.scalar("SW", float(problem.s))
-    if _has_du(problem):
+    if problem.has_du:
         c.array("DW", np.asarray(problem.du_weight, dtype=float).reshape(m))
     if problem.offset_weight is not None:
         c.array("TW", np.asarray(problem.offset_weight, dtype=float).reshape(-1))

@@ -44,9 +44,17 @@ enum ctl_status {
   CTL_OPTIMAL = 0, CTL_INFEASIBLE_X0 = 1, CTL_INFEASIBLE = 2, CTL_LIMIT = 3,
   CTL_RESIDUAL_CHECK_FAILED = 4, CTL_OTHER = 5
 };
-/* the tunable parameters (ctl_set_parameter): the disturbance filter's gain (option
- * offset_filter, in (0, 1]) */
-enum { CTL_P_OFFSET_FILTER = 0, CTL_N_PARAMETERS = 1 };
+/* the tunable parameters (ctl_set_parameter), in this order: the disturbance filter's gain
+ * (option offset_filter, in (0, 1]), the diagonal of R (option R: NU entries, R kept positive
+ * definite), the input-rate weights S (option du_weight: NU entries >= 0, with HAS_DU) and
+ * the offset weights T (option offset_weight: NY entries > 0). The weights are the kernel
+ * instance's (gk_mem.rw, dw, tw); Q and s are not tunable: s is the certificate's
+ * (eq:definition_s, from Q), and the tracking law's hypotheses (H3) hold for any R > 0,
+ * S >= 0, T > 0. */
+enum {
+  CTL_P_OFFSET_FILTER = 0, CTL_P_R = 1, CTL_P_DU = CTL_P_R + NU,
+  CTL_P_T = CTL_P_DU + HAS_DU * NU, CTL_N_PARAMETERS = CTL_P_T + NY
+};
 /* controller_source.py PARAMETERS names them, in this order */
 typedef char ctl_parameters_agree[CT_NPARAM == CTL_N_PARAMETERS ? 1 : -1];
 /* warnings a step may raise (ctl_state.warnings, a bit mask cleared by ctl_take_warnings) */
@@ -66,8 +74,8 @@ typedef struct ctl_state {
   double xhat[NX], e_o;
   /* the output-disturbance estimate d_hat (DisturbanceFilter) */
   double dhat[NY];
-  /* the tunable parameters (CTL_P_*) */
-  double parameters[CTL_N_PARAMETERS];
+  /* the disturbance filter's gain (CTL_P_OFFSET_FILTER; the weights are ws's) */
+  double beta;
   /* the tracking MPC: artificial steady state, plan, last input, next initial guess */
   int started, has_plan, has_uprev, has_guess;
   double us[NU], xs[NX], plan[NH * NU], uprev[NU], g_u[NH * NU], g_us[NU], g_xs[NX];
@@ -323,7 +331,8 @@ EXPORT void PFX(ctl_reset)(ctl_state *st) {
   for (int j = 0; j < NU; j++) st->u_phys[j] = 0.5 * (CT_U_LO[j] + CT_U_HI[j]);
   for (int a = 0; a < NY; a++) st->y_pred[a] = NAN;
   st->status = CTL_OTHER;
-  st->parameters[CTL_P_OFFSET_FILTER] = CT_BETA;
+  st->beta = CT_BETA;
+  ws_default_weights(ws);
 }
 
 /* A new controller instance (NULL when out of memory, or before PFX(load_data) gave the
@@ -379,7 +388,7 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     st->started = 1;
   }
   PFX(output)(st->xhat, yh);
-  const double beta = st->parameters[CTL_P_OFFSET_FILTER];
+  const double beta = st->beta;
   for (int a = 0; a < NY; a++) st->dhat[a] = st->dhat[a] + beta * ((y[a] - yh[a]) - st->dhat[a]);
   if (!CT_CERTIFIED)   /* the measured tightening is around y + d_hat */
     for (int j = 0; j < NL; j++) {
@@ -413,17 +422,60 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
   return 0;
 }
 
+/* where tunable parameter i (CTL_P_*) lives, NULL for an unknown one */
+static double *parameter(ctl_state *st, int i) {
+  gk_mem *m = &st->ws->mem;
+  if (i == CTL_P_OFFSET_FILTER) return &st->beta;
+  if (i >= CTL_P_R && i < CTL_P_DU) return m->rw + (i - CTL_P_R) * (NU + 1);
+#if HAS_DU
+  if (i >= CTL_P_DU && i < CTL_P_T) return m->dw + (i - CTL_P_DU);
+#endif
+  if (i >= CTL_P_T && i < CTL_N_PARAMETERS) return m->tw + (i - CTL_P_T);
+  return 0;
+}
+
+/* a (NU x NU) is positive definite: its Cholesky factorisation exists */
+static int positive_definite(const double *a) {
+  double l[NU * NU];
+  for (int j = 0; j < NU; j++)
+    for (int k = 0; k <= j; k++) {
+      double s = a[j * NU + k];
+      for (int c = 0; c < k; c++) s -= l[j * NU + c] * l[k * NU + c];
+      if (j == k) {
+        if (!(s > 0.0)) return 0;
+        l[j * NU + j] = sqrt(s);
+      } else {
+        l[j * NU + k] = s / l[k * NU + k];
+      }
+    }
+  return 1;
+}
+
 /* Tunable parameter i (CTL_P_*): its value, or NaN for an unknown one. */
 EXPORT double PFX(ctl_get_parameter)(const ctl_state *st, int i) {
-  return i >= 0 && i < CTL_N_PARAMETERS ? st->parameters[i] : NAN;
+  const double *v = parameter((ctl_state *)st, i);
+  return v ? *v : NAN;
 }
 
 /* Set tunable parameter i (CTL_P_*) from the next step on: NULL, or why the value is refused
  * (then nothing changes). */
 EXPORT const char *PFX(ctl_set_parameter)(ctl_state *st, int i, double value) {
-  if (i != CTL_P_OFFSET_FILTER) return "is not a parameter of the controller";
-  if (!(value > 0.0 && value <= 1.0)) return "must be in (0, 1]";
-  st->parameters[i] = value;
+  double *v = parameter(st, i);
+  if (!v) return "is not a parameter of the controller";
+  if (i == CTL_P_OFFSET_FILTER) {
+    if (!(value > 0.0 && value <= 1.0)) return "must be in (0, 1]";
+  } else if (i < CTL_P_DU) {
+    double r[NU * NU];
+    memcpy(r, st->ws->mem.rw, sizeof r);
+    r[(i - CTL_P_R) * (NU + 1)] = value;
+    if (!(isfinite(value) && positive_definite(r)))
+      return "must keep R positive definite (a finite diagonal weight > 0)";
+  } else if (i < CTL_P_T) {
+    if (!(value >= 0.0 && isfinite(value))) return "must be a finite weight >= 0";
+  } else if (!(value > 0.0 && isfinite(value))) {
+    return "must be a finite weight > 0";
+  }
+  *v = value;
   return 0;
 }
 

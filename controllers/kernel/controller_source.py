@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import ctypes
 import hashlib
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,14 +46,17 @@ from controllers.kernel.compiled_kernel import (
 from controllers.kernel.constants import Constants
 from controllers.kernel.kernel_lib import load_data
 
-__all__ = ["CONTROLLER_C", "PARAMETERS", "CompiledController", "ControllerDesign", "build",
-           "controller_constants", "design_data", "generate_source"]
+__all__ = [
+    "CONTROLLER_C",
+    "CompiledController",
+    "ControllerDesign",
+    "build",
+    "controller_constants",
+    "design_data",
+    "generate_source",
+    "parameters",
+]
 
-#: The tunable parameters of the C step, in its order (``controller.c`` ``CTL_P_*``):
-#: ``(name, low, high, description)``; each is the option of that name.
-PARAMETERS = (("offset_filter", 0.0, 1.0,
-               "gain of the output-disturbance estimate d_hat, in (0, 1] (option "
-               "offset_filter)"),)
 #: The C step (joined after the kernel and the constants).
 CONTROLLER_C = Path(__file__).with_name("controller.c")
 #: Compiler flags of the exported step: the kernel's, warnings as errors.
@@ -195,6 +199,38 @@ def design_constants(design: ControllerDesign) -> Constants:
     return kernel_constants(design.kernel) + controller_constants(design)
 
 
+def parameters(design: ControllerDesign, inputs: Sequence[str], outputs: Sequence[str]
+               ) -> tuple[tuple[str, float, float, str, float], ...]:
+    """The tunable parameters of the C step, in its order (``controller.c`` ``CTL_P_*``), for
+    a problem with these input and output names: ``(name, low, high, description, start)``,
+    ``start`` the design's value. Each is the option of its name (``R``, ``du_weight``,
+    ``offset_weight`` by signal: ``R.<input>`` its diagonal entry; ``du_weight`` only when the
+    design has the input-rate term). Normalised units, as the options."""
+    k = design.kernel
+    inf = float("inf")
+    out = [("offset_filter", 0.0, 1.0, "gain of the output-disturbance estimate d_hat, in "
+            "(0, 1] (option offset_filter)", float(design.beta))]
+    R = np.asarray(k.R, dtype=float)
+    out += [(f"R.{name}", 0.0, inf, f"input weight R of {name} (diagonal entry; R stays "
+             "positive definite; option R)", float(R[j, j])) for j, name in enumerate(inputs)]
+    if k.has_du:
+        du = np.asarray(k.du_weight, dtype=float)
+        out += [(f"du_weight.{name}", 0.0, inf, f"input-rate weight S of {name}, >= 0 "
+                 "(option du_weight)", float(du[j])) for j, name in enumerate(inputs)]
+    T = np.asarray(k.offset_weight, dtype=float)
+    out += [(f"offset_weight.{name}", 0.0, inf, f"offset weight T of {name}, > 0 (option "
+             "offset_weight)", float(T[a])) for a, name in enumerate(outputs)]
+    if len(out) != _parameter_count(k):
+        raise ValueError("one name per input and output is needed")
+    return tuple(out)
+
+
+def _parameter_count(problem: KernelProblem) -> int:
+    """``CTL_N_PARAMETERS`` of ``controller.c`` for ``problem``."""
+    m, p = np.shape(problem.params["W_z"])[1], np.shape(problem.params["U_o"])[0]
+    return 1 + m + (m if problem.has_du else 0) + p
+
+
 def generate_source(design: ControllerDesign) -> str:
     """The C source of the controller step (symbol prefix left as ``@PFX@``): the kernel,
     ``controller.c`` and the loader of its numbers (``loader.c``), which are declared, not
@@ -206,7 +242,8 @@ def generate_source(design: ControllerDesign) -> str:
     kernel, own = kernel_constants(problem), controller_constants(design)
     return "\n".join([kernel_source(problem, kernel),
                       "/* the controller's constants (controller_source.py) */\n"
-                      f"#define CT_NPARAM {len(PARAMETERS)}\n" + own.declarations(),
+                      f"#define CT_NPARAM {_parameter_count(problem)}\n"
+                      + own.declarations(),
                       CONTROLLER_C.read_text(), loader_source(kernel + own)])
 
 

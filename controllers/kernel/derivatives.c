@@ -24,38 +24,38 @@ __attribute__((always_inline)) static inline double add_quad(
  * sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); nst = NM on w (the free inputs: with a
  * control horizon the step to u_s is the tracking law's last term, ass_cost), NH on a
  * rollout's inputs */
-static double du_cost(const double *u, const double *up, int nst) {
+static double du_cost(const double *dw, const double *u, const double *up, int nst) {
   double acc = 0.0;
   for (int i = 0; i < nst; i++) {
     const double *prev = i ? u + (i - 1) * NU : up;
     for (int j = 0; j < NU; j++) {
       const double d = u[i * NU + j] - prev[j];
-      acc += (d * DW[j]) * d;
+      acc += (d * dw[j]) * d;
     }
   }
   return acc;
 }
 
 /* its gradient on w's free inputs 2 DW (d_i - d_{i+1}) (d_NM = 0) added into g (NUU) */
-static void du_gradient(const double *u, const double *up, double *g) {
+static void du_gradient(const double *dw, const double *u, const double *up, double *g) {
   for (int i = 0; i < NM; i++)
     for (int j = 0; j < NU; j++) {
       const double *prev = i ? u + (i - 1) * NU : up;
       double s = u[i * NU + j] - prev[j];
       if (i + 1 < NM) s -= u[(i + 1) * NU + j] - u[i * NU + j];
-      g[i * NU + j] += 2.0 * DW[j] * s;
+      g[i * NU + j] += 2.0 * dw[j] * s;
     }
 }
 
 /* lf times its constant Hessian 2 D' diag(DW) D added into the upper triangle of H (row-major
  * NW x NW): 4 DW on the diagonal blocks (2 DW on the last), -2 DW on the first superdiagonal
  * block (before hessian_finish mirrors the triangle) */
-static void du_hessian(double lf, double *H) {
+static void du_hessian(const double *dw, double lf, double *H) {
   for (int i = 0; i < NM; i++)
     for (int j = 0; j < NU; j++) {
       const int r = i * NU + j;
-      H[r * NW + r] += 2.0 * lf * DW[j] * (i + 1 < NM ? 2.0 : 1.0);
-      if (i + 1 < NM) H[r * NW + r + NU] -= 2.0 * lf * DW[j];
+      H[r * NW + r] += 2.0 * lf * dw[j] * (i + 1 < NM ? 2.0 : 1.0);
+      if (i + 1 < NM) H[r * NW + r + NU] -= 2.0 * lf * dw[j];
     }
 }
 #endif
@@ -64,12 +64,12 @@ HOT static double cost(const gk_ws *ws, const double *w, const double *p) {
   const double *xb = XREF(ws, p), *ub = UREF(w, p), t = w[IT];
   double acc = 0.0;
   for (int i = 0; i < NH; i++) acc = add_quad(acc, ws->mem.X + i * NX, xb, QW, NX, QDIAG);
-  for (int i = 0; i < NM; i++) acc = add_quad(acc, w + i * NU, ub, RW, NU, 0);   /* tail: 0 */
+  for (int i = 0; i < NM; i++) acc = add_quad(acc, w + i * NU, ub, ws->mem.rw, NU, 0);   /* tail: 0 */
 #if HAS_ASS
   acc += ass_cost(ws, w, p);
 #endif
 #if HAS_DU
-  return acc + SW * t * t + du_cost(w, UPREV(p), NM);
+  return acc + SW * t * t + du_cost(ws->mem.dw, w, UPREV(p), NM);
 #else
   return acc + SW * t * t;
 #endif
@@ -114,11 +114,11 @@ HOT static void gradient(const gk_ws *ws, const double *w, const double *p, doub
   for (int i = 0; i < NM; i++)
     for (int k = 0; k < NU; k++) {
       double s = 0.0;
-      for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * RW[j * NU + k]);
+      for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * ws->mem.rw[j * NU + k]);
       grad[i * NU + k] += s;
     }
 #if HAS_DU
-  du_gradient(w, UPREV(p), grad);
+  du_gradient(ws->mem.dw, w, UPREV(p), grad);
 #endif
 #if HAS_ASS
   ass_gradient(ws, w, p, grad);
@@ -172,7 +172,7 @@ __attribute__((always_inline)) static inline void hessian_finish(gk_ws *ws, cons
                                                                const double *lg, double *H,
                                                                double lf) {
 #if HAS_DU
-  du_hessian(lf, H);
+  du_hessian(ws->mem.dw, lf, H);
 #endif
 #if HAS_ASS
   ass_hessian(ws, lf, H);

@@ -67,18 +67,19 @@ VARIANT_ONLY HOT static void point_hessian(const double *x, const double *z, con
 /* The blocks of stage i's Z_i' T Z_i (Z_i = [S_i; E_i], T: the stage's W_i, or its
  * Hessian-to-go in backward mode) that involve u_i, added into the upper triangle of H
  * (row-major NW x NW, mirrored by hessian_finish): C = (T^ux S_i)' (K x NU, C[c NU + j]) at
- * (w_c, u_i,j) and T^uu (+ 2 lf R on a free input) at (u_i, u_i), u_i at column uc = UC(i).
+ * (w_c, u_i,j) and T^uu (+ 2 lf R on a free input, R = rw) at (u_i, u_i), u_i at column uc = UC(i).
  * In the tail of a control horizon (uc < K: u_i = u_s is one of S_i's columns) the u_s
  * block receives C + C' (both halves of S_us' T^xu + T^ux S_us). */
 __attribute__((always_inline)) static inline void add_stage_input(double *H, const double *C,
                                                                 int K, int uc, int free_u,
-                                                                const double *T, double lf) {
+                                                                const double *T, double lf,
+                                                                const double *rw) {
   const int kf = K < uc ? K : uc;
   for (int c = 0; c < kf; c++)
     for (int j = 0; j < NU; j++) H[c * NW + uc + j] += C[c * NU + j];
   for (int j1 = 0; j1 < NU; j1++)
     for (int j2 = j1; j2 < NU; j2++) {
-      double v = T[(NX + j1) * NV + NX + j2] + (free_u ? 2.0 * lf * RW[j1 * NU + j2] : 0.0);
+      double v = T[(NX + j1) * NV + NX + j2] + (free_u ? 2.0 * lf * rw[j1 * NU + j2] : 0.0);
       if (uc < K) v += C[(uc + j1) * NU + j2] + C[(uc + j2) * NU + j1];
       H[(uc + j1) * NW + uc + j2] += v;
     }
@@ -144,7 +145,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
         C[c * NU + j] = s;
       }
     }
-    add_stage_input(H, C, K, UC(i), i < NM, T, lf);
+    add_stage_input(H, C, K, UC(i), i < NM, T, lf, ws->mem.rw);
     for (int a = 0; a < NX; a++)
       for (int b = 0; b < NX; b++) P[a * NX + b] = T[a * NV + b];
   }
@@ -183,7 +184,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
           C[c * NU + j] = s;
         }
     }
-    add_stage_input(H, C, K, UC(i), i < NM, W, lf);
+    add_stage_input(H, C, K, UC(i), i < NM, W, lf, ws->mem.rw);
   }
   hessian_finish(ws, p, lg, H, lf);
 }
@@ -262,7 +263,7 @@ HOT static void hessian(gk_ws *ws, const double *w, const double *p, double lf, 
     gk_gemm_upper(1, Kc, Kc, 5 * NX, L, NUU, R, NUU, H, NW, 1);
 #endif
     for (int j1 = 0; j1 < NU; j1++)
-      for (int j2 = j1; j2 < NU; j2++) H[(K + j1) * NW + K + j2] += 2.0 * lf * RW[j1 * NU + j2];
+      for (int j2 = j1; j2 < NU; j2++) H[(K + j1) * NW + K + j2] += 2.0 * lf * ws->mem.rw[j1 * NU + j2];
   }
   hessian_finish(ws, p, lg, H, lf);
 }

@@ -133,6 +133,17 @@ typedef struct gk_mem {
   double xs_z[NX], xs_r[NX], xs_h[NX], xs_jh[NX * NV];   /* its gates and J_h */
   int xs_piv[NX], xs_status;
 #endif
+  /* the cost weights a solve reads, per instance: R (NU x NU), S = diag(dw) (HAS_DU), the
+   * offset weights T = diag(tw) (HAS_ASS); the library's RW, DW, TW at ws_reset, tunable
+   * between solves (the exported controller's parameters, controller.c). Q and s stay the
+   * library's: s = n lambda_max(Q) / (1 - rho_s^2) is the certificate's (eq:definition_s). */
+  double rw[NU * NU];
+#if HAS_DU
+  double dw[NU];
+#endif
+#if HAS_ASS
+  double tw[NY];
+#endif
   long n_calls, n_eig, n_clipped, n_evs; /* clipping counters (PFX(counters)) */
 #ifdef GK_TIMERS
   double tk_acc[4];
@@ -186,9 +197,21 @@ struct gk_ws {
   gk_work work;
 };
 
+/* the library's cost weights into the instance's (gk_mem.rw, dw, tw) */
+static void ws_default_weights(gk_ws *ws) {
+  memcpy(ws->mem.rw, RW, sizeof ws->mem.rw);
+#if HAS_DU
+  memcpy(ws->mem.dw, DW, sizeof ws->mem.dw);
+#endif
+#if HAS_ASS
+  memcpy(ws->mem.tw, TW, sizeof ws->mem.tw);
+#endif
+}
+
 static void ws_reset(gk_ws *ws) {
   memset(ws, 0, sizeof *ws);
   ws->mem.c_level = -1;
+  ws_default_weights(ws);
 }
 
 /* a new workspace (NULL when out of memory); free it with PFX(ws_free) */

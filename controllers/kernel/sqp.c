@@ -52,7 +52,7 @@ HOT static void lagrangian_gradient(const gk_ws *ws, const double *w, const doub
     if (i < NM)
       for (int c = 0; c < NU; c++) {
         double s = 0.0;
-        for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * RW[j * NU + c]);
+        for (int j = 0; j < NU; j++) s += (w[i * NU + j] - ub[j]) * (2.0 * ws->mem.rw[j * NU + c]);
         gl[i * NU + c] = gu[c] + s + lam_x[i * NU + c];
       }
     else   /* the tail of a control horizon: u_i = u_s */
@@ -60,7 +60,7 @@ HOT static void lagrangian_gradient(const gk_ws *ws, const double *w, const doub
     memcpy(mun, mu, sizeof mu);
   }
 #if HAS_DU
-  du_gradient(w, UPREV(p), gl);
+  du_gradient(ws->mem.dw, w, UPREV(p), gl);
 #endif
 #if HAS_ASS
   ass_lagrangian_gradient(ws, w, p, lam_x, lg, gl);

@@ -125,12 +125,12 @@ static double ass_cost(const gk_ws *ws, const double *w, const double *p) {
   for (int a = 0; a < NY; a++) {
     double e = BO[a] - r[a];
     for (int k = 0; k < NX; k++) e += UO[a * NX + k] * ws->mem.xs[k];
-    acc += (e * TW[a]) * e;
+    acc += (e * ws->mem.tw[a]) * e;
   }
 #if HAS_DU
   for (int j = 0; j < NU; j++) {
     const double d = w[(NM - 1) * NU + j] - w[NUU + j];
-    acc += (d * DW[j]) * d;
+    acc += (d * ws->mem.dw[j]) * d;
   }
 #else
   (void)w;
@@ -163,7 +163,7 @@ static void ass_dcost_dxs(const gk_ws *ws, const double *p, double *gx) {
   for (int a = 0; a < NY; a++) {
     double e = BO[a] - r[a];
     for (int k = 0; k < NX; k++) e += UO[a * NX + k] * xs[k];
-    te[a] = 2.0 * TW[a] * e;
+    te[a] = 2.0 * ws->mem.tw[a] * e;
   }
   for (int a = 0; a < NY; a++)
     for (int k = 0; k < NX; k++) gx[k] += UO[a * NX + k] * te[a];
@@ -178,12 +178,12 @@ static void ass_grad_us(const gk_ws *ws, const double *w, const double *lx, doub
     double s = 0.0;
     for (int k = 0; k < NX; k++) s += ws->mem.XS[k * NU + c] * lx[k];
     for (int i = 0; i < NM; i++)
-      for (int j = 0; j < NU; j++) s -= (w[i * NU + j] - us[j]) * (2.0 * RW[j * NU + c]);
+      for (int j = 0; j < NU; j++) s -= (w[i * NU + j] - us[j]) * (2.0 * ws->mem.rw[j * NU + c]);
     grad[NUU + c] += s;
   }
 #if HAS_DU
   for (int j = 0; j < NU; j++) {
-    const double d = 2.0 * DW[j] * (w[(NM - 1) * NU + j] - us[j]);
+    const double d = 2.0 * ws->mem.dw[j] * (w[(NM - 1) * NU + j] - us[j]);
     grad[(NM - 1) * NU + j] += d;
     grad[NUU + j] -= d;
   }
@@ -244,7 +244,7 @@ HOT static void ass_hessian(gk_ws *ws, double lf, double *H) {
       for (int a = 0; a < NY; a++) {
         double ux = 0.0;
         for (int l = 0; l < NX; l++) ux += UO[a * NX + l] * XS[l * NU + c];
-        t += UO[a * NX + k] * 2.0 * TW[a] * ux;
+        t += UO[a * NX + k] * 2.0 * ws->mem.tw[a] * ux;
       }
       QX[k * NU + c] = s;
       MX[k * NU + c] = NH * s + t;
@@ -275,19 +275,19 @@ HOT static void ass_hessian(gk_ws *ws, double lf, double *H) {
       H[(NUU + a) * NW + NUU + b] -= lf * (V[(NUU + a) * NU + b] + V[(NUU + b) * NU + a]);
   for (int i = 0; i < NM; i++)
     for (int a = 0; a < NU; a++)
-      for (int b = 0; b < NU; b++) H[(i * NU + a) * NW + NUU + b] -= 2.0 * lf * RW[a * NU + b];
+      for (int b = 0; b < NU; b++) H[(i * NU + a) * NW + NUU + b] -= 2.0 * lf * ws->mem.rw[a * NU + b];
   for (int a = 0; a < NU; a++)
     for (int b = 0; b < NU; b++) {
-      double s = 2.0 * NM * RW[a * NU + b];
+      double s = 2.0 * NM * ws->mem.rw[a * NU + b];
       for (int k = 0; k < NX; k++) s += XS[k * NU + a] * MX[k * NU + b];
       H[(NUU + a) * NW + NUU + b] += lf * s;
     }
 #if HAS_DU
   for (int j = 0; j < NU; j++) {
     const int r = (NM - 1) * NU + j;
-    H[r * NW + r] += 2.0 * lf * DW[j];
-    H[r * NW + NUU + j] -= 2.0 * lf * DW[j];
-    H[(NUU + j) * NW + NUU + j] += 2.0 * lf * DW[j];
+    H[r * NW + r] += 2.0 * lf * ws->mem.dw[j];
+    H[r * NW + NUU + j] -= 2.0 * lf * ws->mem.dw[j];
+    H[(NUU + j) * NW + NUU + j] += 2.0 * lf * ws->mem.dw[j];
   }
 #endif
 }

@@ -19,6 +19,7 @@ archive is reproducible (fixed time stamps) and written atomically.
 from __future__ import annotations
 
 import hashlib
+import math
 import tempfile
 import zipfile
 from collections.abc import Sequence
@@ -152,7 +153,9 @@ def _attrs(port: Port | Parameter | None, causality: str, unit: str) -> str:
     """A variable's unit, box and start attributes."""
     out = [f"unit={quoteattr(unit)}"]
     if port is not None:
-        out += [f'min="{float(port.low)!r}"', f'max="{float(port.high)!r}"']
+        out.append(f'min="{float(port.low)!r}"')
+        if math.isfinite(port.high):   # no upper bound (a weight): no max
+            out.append(f'max="{float(port.high)!r}"')
         if isinstance(port, Parameter):
             out.append(f'start="{float(port.start)!r}"')
         elif causality == "input":

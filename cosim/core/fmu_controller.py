@@ -7,13 +7,17 @@ order a controller FMU is meant to run: set the measured outputs ``y_k`` and the
 ``[t_k, t_k+1)`` (docs: guide/controller-fmu.md). Its outputs named ``status``,
 ``fallback``, ``iterations`` and ``pred.<output>`` are diagnostics (recorded, not wired to
 the plant); every other output is an input of the plant, as a controller's are. Its sample
-time is the FMU's default experiment step size; its parameters (``offset_filter``) are
-options of the component.
+time is the FMU's default experiment step size; its parameters (``offset_filter``, the
+weights ``R.<input>``, ``du_weight.<input>``, ``offset_weight.<output>``) are options of the
+component, a family of them also in the robust MPC's form (``R=0.02``: every entry;
+``offset_weight={"h1": 1e3}``: by signal).
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 from cosim.core.errors import CosimError
 from cosim.core.fmu import FmuComponent
@@ -39,13 +43,16 @@ class FmuController(FmuComponent):
         Component name.
     **parameters
         Values of its parameters, set before its initialisation (``cosim run --controller
-        Controller.fmu --option offset_filter=0.5``).
+        Controller.fmu --option offset_filter=0.5``); a family ``key.<signal>`` also as
+        ``key`` with one number (every signal) or an object by signal name
+        (``--option 'offset_weight={"h1": 1000}'``).
     """
 
     direct_feedthrough = True
 
-    def __init__(self, path: str | Path, name: str = "ctrl", **parameters: float) -> None:
+    def __init__(self, path: str | Path, name: str = "ctrl", **parameters: Any) -> None:
         super().__init__(path, name=name, interface="cs")
+        parameters = self._expand(parameters)
         unknown = sorted(set(parameters) - set(self.parameters))
         if unknown:
             raise CosimError(f"{self.path}: {unknown[0]!r} is not a parameter of the "
@@ -68,6 +75,24 @@ class FmuController(FmuComponent):
                        if v.causality == "output" and not _diagnostic(v.name)
                        and v.min is not None and v.max is not None}
         self._diag: dict[str, float] = {}
+
+    def _expand(self, given: dict[str, Any]) -> dict[str, Any]:
+        """``key=value`` for a family of parameters ``key.<signal>`` (the robust MPC's option
+        form: one number for every signal, or an object by signal name) as its members."""
+        out: dict[str, Any] = {}
+        for key, value in given.items():
+            family = [p for p in self.parameters if p.startswith(key + ".")]
+            if key in self.parameters or not family:
+                out[key] = value
+            elif isinstance(value, Mapping):
+                for signal, v in value.items():
+                    if f"{key}.{signal}" not in family:
+                        raise CosimError(f"{self.path}: option {key}: {signal!r} is not one of "
+                                         f"its signals ({', '.join(family)})")
+                    out[f"{key}.{signal}"] = v
+            else:
+                out.update(dict.fromkeys(family, value))
+        return out
 
     def setup(self, t0: float, stop_time: float | None = None) -> None:
         """Load and initialise the FMU (again after a run: a fresh instance)."""

@@ -91,6 +91,42 @@ def test_a_tuned_parameter_is_the_python_option(controller_fmus: dict[int, Path]
         cosim.run(scenario, controller=fmu, options={"N": 40}, figure=False)
 
 
+def test_tuned_weights_are_the_python_options(controller_fmus: dict[int, Path],
+                                             tmp_path: Path) -> None:
+    """The FMU's weights as tunable parameters (``R.<input>``, ``du_weight.<input>``,
+    ``offset_weight.<output>``, their start values the design's): set through the robust
+    MPC's option form they give the Python controller with those options; a weight that
+    would leave R not positive definite, or a negative one, fails the run with the FMU's
+    reason."""
+    md = fmpy.read_model_description(str(controller_fmus[2]))
+    params = {v.name: v for v in md.modelVariables if v.causality == "parameter"}
+    assert list(params) == ["offset_filter", "R.qa", "R.qb", "du_weight.qa", "du_weight.qb",
+                            "offset_weight.h1", "offset_weight.h2"]
+    assert all(v.variability == "tunable" for v in params.values())
+    assert params["R.qa"].max is None and float(params["offset_weight.h1"].start) == 1e4
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,1.3,1.4\n1500,,\n")
+    options = {"R": {"qa": 0.05}, "du_weight": 0.2, "offset_weight": {"h1": 1e3}}
+    py = cosim.run(scenario, options=options, figure=False)
+    for version in (2, 3):
+        tuned = cosim.run(scenario, controller=str(controller_fmus[version]), options=options,
+                          out=tmp_path / f"fmi{version}", figure=False)
+        _same_inputs(tuned, py, {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
+    assert tuned.summary["controller_summary"]["parameters"] == {
+        "R.qa": 0.05, "du_weight.qa": 0.2, "du_weight.qb": 0.2, "offset_weight.h1": 1e3}
+    default = cosim.run(scenario, controller=str(controller_fmus[3]), figure=False).to_pandas()
+    assert not np.array_equal(default["ctrl.qa"], tuned.to_pandas()["ctrl.qa"])
+    for bad, why in ((("R", 0.0), "must keep R positive definite"),
+                     (("du_weight", -1.0), "must be a finite weight >= 0"),
+                     (("offset_weight", 0.0), "must be a finite weight > 0")):
+        refused = cosim.run(scenario, controller=str(controller_fmus[3]),
+                            options=dict([bad]), figure=False)
+        assert refused.status == "failed" and why in refused.reason, refused.reason
+    with pytest.raises(CosimError, match="'h3' is not one of its signals"):
+        cosim.run(scenario, controller=str(controller_fmus[3]),
+                  options={"offset_weight": {"h3": 1.0}}, figure=False)
+
+
 def test_a_runs_controller_json_exports_that_controller(tmp_path: Path) -> None:
     """``cosim export-fmu --controller run/controller.json``: the robust MPC of that run (its
     options: offset_filter 0.5 as the FMU's start value), with the run's inputs."""

@@ -185,15 +185,20 @@ def test_an_ssp_file_of_plant_and_controller_runs_in_libcosim(
 
 def test_two_instances_in_one_process_are_independent(controller_fmus: dict[int, Path]) -> None:
     """Two controllers stepped in turn give what each gives alone (the solver's state is the
-    instance's)."""
+    instance's, its tuned weights too: the first one's are set, the second keeps the
+    design's)."""
     rng = np.random.default_rng(2)
     ys = [0.6 + 0.1 * np.cumsum(rng.normal(0, 0.02, (30, 2)), axis=0) + s for s in (0.0, 0.4)]
+    tuned = {"R.qa": 0.05, "offset_weight.h1": 1e3, "du_weight.qb": 0.5}
     alone = []
-    for y in ys:
+    for y, weights in zip(ys, (tuned, {}), strict=True):
         ctrl = _controller(controller_fmus[3])
+        ctrl.set(**weights)
         alone.append([_control(ctrl, tuple(v), (1.0, 1.1)) for v in y])
         ctrl.close()
     a, b = _controller(controller_fmus[3]), _controller(controller_fmus[3])
+    a.set(**tuned)
+    assert b.get("R.qa", "offset_weight.h1") == [0.01, 1e4]
     together: list[list] = [[], []]
     for k in range(30):
         together[0].append(_control(a, tuple(ys[0][k]), (1.0, 1.1)))
