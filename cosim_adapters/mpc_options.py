@@ -48,13 +48,13 @@ class MPCOptions:
     ----------
     law : {"tracking", "paper"}
         ``"tracking"`` (default): the tracking FHOCP (:mod:`cosim_adapters.tracking`,
-        :mod:`controllers.ocp.law_tracking`): an artificial steady state as a decision
+        :mod:`controllers.ocp.reference_tracking`): an artificial steady state as a decision
         variable, offset-free through ``d̂`` in the cost, no governor, nothing rejected (an
         unreachable or inadmissible set-point is tracked to the closest admissible steady
         state); zero observer gains. ``"paper"``: the paper's FHOCP with the set-point's
         equilibrium, the governor and set-point rejection.
     N : int, optional
-        Prediction horizon (default 80, :data:`controllers.ocp.law_tracking.DEFAULTS`; the
+        Prediction horizon (default 80, :data:`controllers.ocp.reference_tracking.DEFAULTS`; the
         paper's 15 with ``law="paper"``).
     Q, R : array, number or mapping, optional
         Cost weights in normalised units (default ``I_n`` and ``0.01 I_m``, paper section V):
@@ -110,8 +110,8 @@ class MPCOptions:
     control_horizon : int, optional
         ``law="tracking"``: the number ``M ≤ N`` of free inputs ``u_0 … u_{M−1}``; the
         others are held at the artificial steady input ``u_s`` (the guarantees unchanged:
-        :class:`controllers.ocp.law_tracking.TrackingLaw`). Default ``⌈N / 4⌉`` (20 at the
-        default N = 80).
+        :class:`controllers.ocp.reference_tracking.ArtificialSteadyState`). Default
+        ``⌈N / 4⌉`` (20 at the default N = 80).
     certificate : {"auto", "require", "keep"}
         Where the certificate does not cover the run (a hypothesis fails, or a set-point of
         the run lies outside the certified set): ``"auto"`` runs uncertified, with the

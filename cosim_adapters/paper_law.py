@@ -11,6 +11,7 @@ theory. It implements :class:`cosim_adapters.law.ControlLaw`.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -19,7 +20,29 @@ from controllers.errors import SetpointError
 from cosim.core.errors import CosimError
 from cosim_adapters.law import LawStep, setpoint_text
 
-__all__ = ["PaperLaw", "closest_admissible"]
+__all__ = ["PaperLaw", "SetpointHandling", "closest_admissible"]
+
+
+@dataclass(frozen=True)
+class SetpointHandling:
+    """How the paper's law meets a set-point change (the options of these names).
+
+    Attributes
+    ----------
+    governor : bool
+        The admissible reference governor after set-point changes.
+    offset_free : bool
+        Shift the set-point by ``d̂`` (outside the theorem).
+    offset_filter : float
+        ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)``.
+    setpoint_rate : float or None
+        Largest move of the FHOCP's set-point per sample, in the outputs' units.
+    """
+
+    governor: bool
+    offset_free: bool
+    offset_filter: float
+    setpoint_rate: float | None
 
 
 class PaperLaw:
@@ -32,14 +55,8 @@ class PaperLaw:
         Its certificate (the tightening, ``(x̄, ū, α)`` of each set-point).
     fhocp_options : mapping
         :class:`controllers.ocp.fhocp.FHOCP` keyword arguments (solver, kernel, ``du_weight``).
-    governor : bool
-        The admissible reference governor after set-point changes.
-    offset_free : bool
-        Shift the set-point by ``d̂`` (outside the theorem).
-    offset_filter : float
-        ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)``.
-    setpoint_rate : float or None
-        Largest move of the FHOCP's set-point per sample, in the outputs' units.
+    handling : SetpointHandling
+        The governor, the offset-free shift, its filter and the set-point rate.
     name : str
         The component's name (in error messages).
     certified : bool
@@ -49,9 +66,8 @@ class PaperLaw:
 
     name = "paper"
 
-    def __init__(self, model: Any, cert: Any, fhocp_options: dict[str, Any], *,
-                 governor: bool, offset_free: bool, offset_filter: float,
-                 setpoint_rate: float | None, name: str, certified: bool = True) -> None:
+    def __init__(self, model: Any, cert: Any, fhocp_options: dict[str, Any],
+                 handling: SetpointHandling, *, name: str, certified: bool = True) -> None:
         from controllers.ocp.fhocp import FHOCP
         from controllers.ocp.governor import ReferenceGovernor
         from controllers.ocp.paper_mpc import RobustMPC
@@ -59,10 +75,12 @@ class PaperLaw:
         self.model, self.cert, self.fhocp_options = model, cert, dict(fhocp_options)
         self.fhocp = FHOCP.from_certificate(cert, **self.fhocp_options)
         self.mpc = RobustMPC(self.fhocp)
-        self.governor = ReferenceGovernor(cert, self.fhocp) if governor else None
-        self.offset_free = bool(offset_free)
-        self.offset_filter = float(offset_filter)
-        self.setpoint_rate = None if setpoint_rate is None else float(setpoint_rate)
+        self.handling = handling
+        self.governor = ReferenceGovernor(cert, self.fhocp) if handling.governor else None
+        self.offset_free = bool(handling.offset_free)
+        self.offset_filter = float(handling.offset_filter)
+        self.setpoint_rate = (None if handling.setpoint_rate is None
+                              else float(handling.setpoint_rate))
         self.component = name
         self.certified = certified
         self.reset()
@@ -108,9 +126,7 @@ class PaperLaw:
         return f"{setpoint_text(self.model, y)}: {failed[0]}" if failed else ""
 
     def uncertified(self, cert: Any, reason: str) -> PaperLaw:
-        return PaperLaw(self.model, cert, self.fhocp_options, governor=self.governor
-                        is not None, offset_free=self.offset_free,
-                        offset_filter=self.offset_filter, setpoint_rate=self.setpoint_rate,
+        return PaperLaw(self.model, cert, self.fhocp_options, self.handling,
                         name=self.component, certified=False)
 
     def summary(self) -> dict[str, Any]:

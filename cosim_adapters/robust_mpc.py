@@ -10,7 +10,7 @@ advances ``x̂`` with the last input and the measured output, and ``ê_o`` by
 section V). Then one of two control laws (option ``law``) gives ``u_k``:
 
 - ``"tracking"`` (the default): the tracking law of :mod:`cosim_adapters.tracking`, the
-  tracking FHOCP of :mod:`controllers.ocp.law_tracking` (an artificial steady state as a
+  tracking FHOCP of :mod:`controllers.ocp.reference_tracking` (an artificial steady state as a
   decision variable, offset-free through the disturbance estimate ``d̂`` in the cost, the
   input-rate terms of ``du_weight``); every set-point is accepted, and an unreachable or
   inadmissible one is tracked to the closest admissible steady state (docs:
@@ -65,7 +65,7 @@ from cosim.core.errors import CosimError
 from cosim_adapters.certification import Certification, check_setpoints, go_uncertified
 from cosim_adapters.law import ControlLaw
 from cosim_adapters.mpc_options import MPCOptions
-from cosim_adapters.paper_law import PaperLaw
+from cosim_adapters.paper_law import PaperLaw, SetpointHandling
 from cosim_adapters.tracking import TrackingLaw
 
 __all__ = ["RobustMPCController", "design_arguments"]
@@ -241,9 +241,9 @@ class RobustMPCController(Component):
                       "offset_weight": o.offset_weight, "alpha_c": o.alpha_c,
                       "offset_filter": o.offset_filter, "control_horizon": o.control_horizon}
             return TrackingLaw.build(self.model, cert, design, self.name, gains_certified)
-        law = PaperLaw(self.model, cert, fhocp_options, governor=bool(o.governor),
-                       offset_free=o.offset_free, offset_filter=float(o.offset_filter),
-                       setpoint_rate=o.setpoint_rate, name=self.name)
+        handling = SetpointHandling(bool(o.governor), bool(o.offset_free),
+                                    float(o.offset_filter), o.setpoint_rate)
+        law = PaperLaw(self.model, cert, fhocp_options, handling, name=self.name)
         return law, cert.failures()
 
     def _signals(self) -> None:

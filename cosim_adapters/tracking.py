@@ -2,7 +2,7 @@
 
 :class:`cosim_adapters.robust_mpc.RobustMPCController` with ``law="tracking"`` (the default) runs
 :class:`controllers.ocp.tracking_mpc.TrackingMPC` (the tracking FHOCP of
-:mod:`controllers.ocp.law_tracking`: artificial steady state, offset cost with the disturbance
+:mod:`controllers.ocp.reference_tracking`: artificial steady state, offset cost with the disturbance
 estimate ``d̂``, input-rate penalty) instead of the paper's law with its reference governor.
 This module builds it from the model and the problem (:func:`tracking_design`) and runs it
 (:class:`TrackingLaw`, a :class:`cosim_adapters.law.ControlLaw`); the design record is
@@ -62,7 +62,7 @@ def tracking_design(model: Any, cert_gains: Any, design: Mapping[str, Any],
     (module docstring) on ``model`` (and its ``problem``); ``failures``: its hypotheses that
     fail, in words (empty: certified). ``design``: ``kwargs`` (``N``, ``Q``, ``R``,
     ``e_o0``), ``offset_weight``, ``alpha_c``, ``offset_filter`` (``β``), ``fhocp_options``
-    and ``control_horizon`` (``M``; default :func:`controllers.ocp.law_tracking.
+    and ``control_horizon`` (``M``; default :func:`controllers.ocp.reference_tracking.
     default_control_horizon`, at most N). ``cert_gains``: the paper law's certificate, whose
     ``α_min`` is the default ``α_c`` when ``gains_certified`` (its observer-gain scale
     passed), else :func:`fallback_alpha_c`; ``cert``: the design's certificate (default:
@@ -71,7 +71,11 @@ def tracking_design(model: Any, cert_gains: Any, design: Mapping[str, Any],
     from controllers.certification import certificates as certs
     from controllers.certification.tracking_checks import failures, tracking_hypotheses
     from controllers.ocp.fhocp import FHOCP
-    from controllers.ocp.law_tracking import DEFAULTS, TrackingLaw, default_control_horizon
+    from controllers.ocp.reference_tracking import (
+        DEFAULTS,
+        ArtificialSteadyState,
+        default_control_horizon,
+    )
     from controllers.ocp.tracking_mpc import DisturbanceFilter, TrackingMPC
 
     problem, kwargs = model.problem, design["kwargs"]
@@ -100,8 +104,8 @@ def tracking_design(model: Any, cert_gains: Any, design: Mapping[str, Any],
             alpha_c = cert_gains.alpha_min() if gains_certified else math.nan
             if not (math.isfinite(alpha_c) and alpha_c > 0):
                 alpha_c = fallback_alpha_c(cert)
-        fhocp = FHOCP.from_certificate(cert, law=TrackingLaw(T, alpha_c, control_horizon=M),
-                                       **design["fhocp_options"])
+        reference = ArtificialSteadyState(T, alpha_c, control_horizon=M)
+        fhocp = FHOCP.from_certificate(cert, reference=reference, **design["fhocp_options"])
     except ControllersError as exc:
         raise CosimError(str(exc)) from None
     hypotheses = tracking_hypotheses(fhocp, cert, beta)
@@ -156,7 +160,7 @@ class TrackingLaw:
 
     @property
     def alpha(self) -> float:
-        return self.fhocp.law.alpha_c
+        return self.fhocp.reference.alpha_c
 
     def reset(self) -> None:
         self.tracker.reset()
@@ -198,7 +202,7 @@ class TrackingLaw:
         uncertified): the law then settles at the closest admissible steady state, a static
         offset no filter removes (docs: design/tracking.md, "The plants' own choices")."""
         fh = self.fhocp
-        ys = fh.law.ys_bounds
+        ys = fh.reference.ys_bounds
         limit = ys if self.certified else ys - fh.L @ d_hat
         if not np.max(fh.L @ r - limit) > TARGET_TOL:
             return
@@ -233,7 +237,7 @@ class TrackingLaw:
 
     def setpoint_reason(self, y: np.ndarray) -> str:
         fh = self.fhocp
-        if np.any(fh.L @ y > fh.law.ys_bounds + 1e-12):
+        if np.any(fh.L @ y > fh.reference.ys_bounds + 1e-12):
             return (f"{setpoint_text(self.model, y)} is outside the certified steady outputs "
                     f"({steady_outputs_text(self.model, fh) or 'none'})")
         return ""
@@ -258,9 +262,9 @@ class TrackingLaw:
 
     def summary(self) -> dict[str, Any]:
         fh = self.fhocp
-        return {"alpha_c": fh.law.alpha_c, "control_horizon": fh.law.control_horizon,
+        return {"alpha_c": fh.reference.alpha_c, "control_horizon": fh.reference.control_horizon,
                 "offset_weight": {n: float(w) for n, w in zip(
-                    self.model.problem.output_names, fh.law.offset_weight, strict=True)},
+                    self.model.problem.output_names, fh.reference.offset_weight, strict=True)},
                 "offset_filter": self.disturbance.beta,
                 "tracking_hypotheses": self.tracker.hypotheses,
                 "offset_free": False, "setpoint_rate": None, "governor": False,
@@ -277,7 +281,7 @@ def steady_outputs_text(model: Any, fhocp: Any) -> str:
     parts = []
     for j, name in enumerate(problem.output_names):
         hi = lo = None
-        for row, rhs in zip(fhocp.L, fhocp.law.ys_bounds, strict=True):
+        for row, rhs in zip(fhocp.L, fhocp.reference.ys_bounds, strict=True):
             if row[j] > 0 and np.count_nonzero(row) == 1:
                 hi = rhs / row[j]
             elif row[j] < 0 and np.count_nonzero(row) == 1:

@@ -63,7 +63,7 @@ def intervals(folder: Path, points: int = 81) -> pd.DataFrame:
                                **{k: v for k, v in spec.options.items() if k != "law"})
     model, fh = ctrl.model, ctrl.fhocp
     names = list(ctrl.problem.output_names)
-    rhs = fh.law.ys_bounds
+    rhs = fh.reference.ys_bounds
     Y = steady_output_grid(model, points)
     Y = Y[np.all(rhs + 1e-12 >= Y @ fh.L.T, axis=1)]          # admissible steady outputs
     scale = np.abs(model.y_scale)

@@ -1,7 +1,7 @@
 """The tracking law's hypotheses, computed at run time (docs: design/tracking.md, H3-H6).
 
 What the paper's certificate (:mod:`controllers.certification.certificates`) checks stays; the
-tracking law (:mod:`controllers.ocp.law_tracking`) adds, once per model and design:
+tracking law (:mod:`controllers.ocp.reference_tracking`) adds, once per model and design:
 
 - (H3) the weights: ``Q ≻ 0``, ``R ≻ 0``, ``S ⪰ 0`` (the Δu weights), ``T ≻ 0`` (the offset
   weights), and the terminal weight ``s`` of ``eq:definition_s`` (the certificate's);
@@ -48,13 +48,13 @@ def _ys_nonempty(L: np.ndarray, rhs: np.ndarray) -> tuple[bool, np.ndarray | Non
 
 def tracking_hypotheses(fhocp: Any, cert: Any, beta: float,
                         grid_points: int = 11) -> dict[str, Any]:
-    """The hypotheses of the FHOCP ``fhocp`` with the tracking law (a
-    :class:`~controllers.ocp.law_tracking.TrackingLaw`) designed from ``cert``, with the
-    disturbance filter's ``beta`` (module docstring)."""
+    """The hypotheses of the FHOCP ``fhocp`` with the tracking law's reference (a
+    :class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`) designed from
+    ``cert``, with the disturbance filter's ``beta`` (module docstring)."""
     eig = np.linalg.eigvalsh
-    law = fhocp.law
+    ass = fhocp.reference   # the artificial steady state
     a_min = float(cert.alpha_min())
-    nonempty, centre = _ys_nonempty(fhocp.L, law.ys_bounds)
+    nonempty, centre = _ys_nonempty(fhocp.L, ass.ys_bounds)
     P = fhocp.params
     m = fhocp.m
     axes = [np.linspace(-1.0, 1.0, grid_points)] * m
@@ -66,7 +66,7 @@ def tracking_hypotheses(fhocp: Any, cert: Any, beta: float,
         if not ok:
             continue
         x = xs
-        if np.all(fhocp.L @ output(P, xs) <= law.ys_bounds):
+        if np.all(fhocp.L @ output(P, xs) <= ass.ys_bounds):
             admissible += 1
             G = P["U_o"] @ Xs
             sv.append(float(np.linalg.svd(G, compute_uv=False)[-1]))
@@ -74,11 +74,11 @@ def tracking_hypotheses(fhocp: Any, cert: Any, beta: float,
         "Q_min_eigenvalue": float(eig(fhocp.Q)[0]),
         "R_min_eigenvalue": float(eig(fhocp.R)[0]),
         "du_weight_min": float(np.min(fhocp.du_weight)),
-        "offset_weight_min": float(np.min(law.offset_weight)),
+        "offset_weight_min": float(np.min(ass.offset_weight)),
         "s": float(fhocp.s),
-        "alpha_c": float(law.alpha_c),
+        "alpha_c": float(ass.alpha_c),
         "alpha_min": a_min,
-        "recursive_feasibility": bool(law.alpha_c > 0 and a_min <= law.alpha_c),
+        "recursive_feasibility": bool(ass.alpha_c > 0 and a_min <= ass.alpha_c),
         "Ys_nonempty": bool(nonempty),
         "Ys_centre": None if centre is None else [float(v) for v in centre],
         "grid_points": int(grid.shape[0]),

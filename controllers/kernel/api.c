@@ -197,7 +197,7 @@ EXPORT void PFX(assess)(gk_ws *ws, const double *xh, const double *u, const doub
  * and out->defect the defect max |x_solver - x| against the solver's own trajectory at (w, p)
  * (the cached rollout). With HAS_ASS (the tracking law, p = (x_hat, x_s0, r[, u_prev])) the
  * reference is x_s(u_s) of the clipped u_s (Newton from x_s0), written to xs (NX), out->cost
- * adds the offset term and the last input's step to u_s (as TrackingLaw.cost), and
+ * adds the offset term and the last input's step to u_s (as ArtificialSteadyState.cost), and
  * out->steady_residual is the fixed point residual |f(x_s, u_s) - x_s|inf by a plain GRU step
  * (NaN when Newton failed); without HAS_ASS xs is not written and the residual is 0. */
 EXPORT void PFX(assess_w)(gk_ws *ws, const double *w, const double *p, const double *bnd,

@@ -115,7 +115,7 @@ class KernelProblem:
         Input-rate weights (:mod:`controllers.ocp.input_rate`; none or all zero: no
         input-rate term, ``HAS_DU 0``).
     offset_weight : (p,) array, optional
-        The tracking law's offset weights T (:mod:`controllers.ocp.law_tracking`: the
+        The tracking law's offset weights T (:mod:`controllers.ocp.reference_tracking`: the
         artificial steady state, ``HAS_ASS 1``; none: the paper's law).
     control_horizon : int, optional
         ``M < N`` (tracking only): the free inputs ``u_0 … u_{M−1}``, the tail held at
@@ -142,11 +142,11 @@ class KernelProblem:
     @classmethod
     def of(cls, fhocp: Any) -> KernelProblem:
         """The kernel problem of an :class:`~controllers.ocp.fhocp.FHOCP`, with its law's
-        terms (:meth:`controllers.ocp.law.Law.kernel_terms`: the tracking law's offset
+        terms (:meth:`controllers.ocp.reference.Reference.kernel_terms`: the tracking law's offset
         weights and control horizon)."""
         return cls(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s,
                    fhocp.sqp_options.get("hessian_eigen_clip"), fhocp.LUo, fhocp.du_weight,
-                   **fhocp.law.kernel_terms())
+                   **fhocp.reference.kernel_terms())
 
 
 def generate_source(problem: KernelProblem, constants: Constants | None = None) -> str:

@@ -14,11 +14,11 @@
  *                   eq:observer, eq:eo-evolution)
  *   make_step       controllers/ocp/tracking_mpc.py TrackingMPC.make_step (the candidate, the
  *                   fallback, the next guess)
- *   solve           controllers/ocp/law_tracking.py TrackingLaw.request, and
+ *   solve           controllers/ocp/reference_tracking.py ArtificialSteadyState.request, and
  *                   controllers/ocp/fhocp.py FHOCP.solve_request: the i = 0 row,
  *                   write_request, the kernel SQP, check_answer (_check_answer and
  *                   fhocp_result.judge, the warm start)
- *   check           TrackingLaw.evaluate (the candidate's answer check)
+ *   check           ArtificialSteadyState.evaluate (the candidate's answer check)
  *
  * so that the same measurements give the same inputs, to the bit
  * (tests/cosim_adapters/test_controller_export.py, tests/fmus/test_controller_fmu.py).
@@ -112,7 +112,7 @@ static void tighten(ctl_state *st, double e_o) {
     st->ys_rhs[j] = CT_CERTIFIED ? CT_YS_BASE[j] : CT_YS_BASE[j] - st->shift[j];
 }
 
-/* the answer check of (w, p) into r (TrackingLaw._check_compiled): the kernel's plain
+/* the answer check of (w, p) into r (ArtificialSteadyState._check_compiled): the kernel's plain
  * rollout, x_s(u_s) from p's x_s0 with its fixed point verified, cost and residuals (output
  * rows, input box, terminal set, Y_s) */
 static void assess(ctl_state *st, const double *w, const double *p, ctl_result *r) {
@@ -148,7 +148,7 @@ static void parameters(double *p, const double *xhat, const double *xs0, const d
 #endif
 }
 
-/* TrackingLaw.evaluate: (u, u_s) evaluated apart from the solver into r, by the answer check
+/* ArtificialSteadyState.evaluate: (u, u_s) evaluated apart from the solver into r, by the answer check
  * of the w they make (u in the control horizon's form) */
 static void check(ctl_state *st, const double *xhat, const double *u_in, const double *us_in,
                   const double *rt, const double *xs0, const double *up, int status,
@@ -171,7 +171,7 @@ static int sqp_status_code(int sqp) {
   return CTL_OTHER;
 }
 
-/* the solver's buffers for the target rt (TrackingLaw.write) */
+/* the solver's buffers for the target rt (ArtificialSteadyState.write) */
 static void write_request(ctl_state *st, const double *xhat, const double *rt,
                           const double *u_init, const double *us_init, const double *xs0,
                           const double *up, const double *us_centre) {
@@ -216,7 +216,7 @@ static void write_request(ctl_state *st, const double *xhat, const double *rt,
   for (int c = 0; c < NG; c++) st->lg[c] = st->has_warm ? st->warm_lg[CT_PERM_G[c]] : 0.0;
 }
 
-/* the answer check of the solver's w (TrackingLaw._check_compiled) and its judgement
+/* the answer check of the solver's w (ArtificialSteadyState._check_compiled) and its judgement
  * (fhocp_result.judge) into st->res */
 static void check_answer(ctl_state *st, int sqp_status) {
   ctl_result *r = &st->res;
@@ -237,7 +237,7 @@ static void check_answer(ctl_state *st, int sqp_status) {
   }
 }
 
-/* one solve for the target rt from the guess (TrackingLaw.request, FHOCP.
+/* one solve for the target rt from the guess (ArtificialSteadyState.request, FHOCP.
  * solve_request) against the bounds tighten() wrote: the i = 0 row first, then the SQP and
  * its answer check, into st->res */
 static void solve(ctl_state *st, const double *xhat, const double *rt, const double *g_u,

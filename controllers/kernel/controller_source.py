@@ -136,11 +136,11 @@ class ControllerDesign:
     def of(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
            u_lo: np.ndarray, u_hi: np.ndarray) -> ControllerDesign:
         """The design of an FHOCP with the tracking law set up on its compiled kernel's
-        SQP (:class:`controllers.ocp.law_tracking.TrackingLaw`), its observer
+        SQP (:class:`controllers.ocp.reference_tracking.ArtificialSteadyState`), its observer
         (:class:`controllers.observer.GRUObserver`), the disturbance filter's ``beta``, the
         model's normalisation and the input box."""
         from controllers.kernel.kernel_sqp import KernelSQP
-        from controllers.ocp.law_tracking import XS_CHECK_TOL
+        from controllers.ocp.reference_tracking import XS_CHECK_TOL
         from controllers.ocp.solver_settings import DEFECT_TOL, FEAS_TOL
 
         if not isinstance(fhocp._solver, KernelSQP):
@@ -149,7 +149,7 @@ class ControllerDesign:
         o = fhocp._solver.options
         sqp = {name: getattr(o, name) for name, _ in o._fields_}
         arr = np.asarray
-        law = fhocp.law
+        ass = fhocp.reference   # the artificial steady state
         return cls(
             kernel=KernelProblem.of(fhocp), y_offset=arr(model.y_offset, float),
             y_scale=arr(model.y_scale, float), u_offset=arr(model.u_offset, float),
@@ -158,10 +158,10 @@ class ControllerDesign:
             rho_o=float(observer.rho_o), w_bar=float(observer.w_bar),
             e_o0=float(observer.e_o0), beta=float(beta), certified=bool(certified),
             L=fhocp.L, h=fhocp.h, a=fhocp.a, b=fhocp.b, w_L=fhocp.w_L, Lbo=fhocp.Lbo,
-            ys_base=law.ys_base, alpha_c=float(law.alpha_c),
-            us_rate=-1.0 if law.us_rate is None else float(law.us_rate),
-            pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=law.perm_x,
-            perm_g=law.perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
+            ys_base=ass.ys_base, alpha_c=float(ass.alpha_c),
+            us_rate=-1.0 if ass.us_rate is None else float(ass.us_rate),
+            pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=ass.perm_x,
+            perm_g=ass.perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
             xs_check_tol=XS_CHECK_TOL)
 
 

@@ -1,6 +1,6 @@
 /* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
  * generated header, gru_fhocp.h and the parts into one translation unit): the artificial steady state of
- * the tracking law (HAS_ASS 1; controllers/ocp/law_tracking.py, the same mathematics as
+ * the tracking law (HAS_ASS 1; controllers/ocp/reference_tracking.py, the same mathematics as
  * controllers/ocp/steady_state.py and controllers/ocp/nlp_tracking.py).
  *
  * The decision vector ends with u_s (then t); x_s = x_s(u_s) is the GRU's fixed point

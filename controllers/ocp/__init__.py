@@ -1,10 +1,11 @@
 """The optimal-control problem and its solvers (``eq:optimization``, ``eq:mpc``).
 
-One FHOCP (:mod:`~controllers.ocp.fhocp`) for every control law, the law a strategy object
-(:mod:`~controllers.ocp.law`): the paper's set-point (:mod:`~controllers.ocp.law_setpoint`)
-and the tracking law's artificial steady state (:mod:`~controllers.ocp.law_tracking`, with
-:mod:`~controllers.ocp.steady_state`); their NLP formulations (single shooting with exact
-derivatives, :mod:`~controllers.ocp.shooting`, :mod:`~controllers.ocp.nlp_single_shooting`,
+One FHOCP (:mod:`~controllers.ocp.fhocp`) for every control law, with a pluggable reference
+(:mod:`~controllers.ocp.reference`): the paper's set-point
+(:mod:`~controllers.ocp.reference_setpoint`) and the tracking law's artificial steady state
+(:mod:`~controllers.ocp.reference_tracking`, with :mod:`~controllers.ocp.steady_state`);
+their NLP formulations (single shooting with exact derivatives,
+:mod:`~controllers.ocp.shooting`, :mod:`~controllers.ocp.nlp_single_shooting`,
 :mod:`~controllers.ocp.nlp_tracking`; the multiple-shooting baseline), the one judge of every
 answer and its status (:mod:`~controllers.ocp.fhocp_result`,
 :mod:`~controllers.ocp.solve_status`), the solver settings, and the controllers that solve

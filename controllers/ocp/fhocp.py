@@ -29,13 +29,14 @@ only ``x̂``: it is checked before the solve (:meth:`FHOCP.x0_infeasible`), and 
 is reported as ``"infeasible_x0"`` without calling the solver. The design record (docs:
 design/solver.md) lists the alternatives measured and why they won or lost.
 
-One class for every control law: what differs between the laws (the reference and its
-artificial steady state, the terminal ingredients, the layout of ``w``, the answer check) is a
-law object (:class:`controllers.ocp.law.Law`): the paper's set-point
-(:class:`~controllers.ocp.law_setpoint.SetpointLaw`, the default) or the tracking law's
-artificial steady state (:class:`~controllers.ocp.law_tracking.TrackingLaw`). One solve
-procedure serves them all (:meth:`FHOCP.solve`): the ``i = 0`` row, the solver within its
-budget, the law's independent answer check, the judge and the warm start.
+One class for every control law, with a pluggable reference: what differs between the laws
+(the reference and its artificial steady state, the terminal ingredients, the layout of ``w``,
+the answer check) is a strategy object (:class:`controllers.ocp.reference.Reference`): the
+paper's set-point (:class:`~controllers.ocp.reference_setpoint.FixedSetpoint`, the default)
+or the tracking law's artificial steady state
+(:class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`). One solve procedure
+serves them all (:meth:`FHOCP.solve`): the ``i = 0`` row, the solver within its budget, the
+reference's independent answer check, the judge and the warm start.
 
 Every answer is checked independently of the solver's status: the inputs are rolled out with
 numpy (:func:`controllers.gru.simulate`) and the constraint violations, the terminal-set
@@ -62,8 +63,8 @@ from controllers.kernel.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
 from controllers.ocp.casadi_callbacks import bind_buffers, quiet_stdout
 from controllers.ocp.fhocp_result import FHOCPResult, judge, keeps_warm_start, solver_stats
 from controllers.ocp.input_rate import du_weights
-from controllers.ocp.law import Law
-from controllers.ocp.law_setpoint import SetpointLaw
+from controllers.ocp.reference import Reference
+from controllers.ocp.reference_setpoint import FixedSetpoint
 from controllers.ocp.solve_status import SolveStatus
 from controllers.ocp.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
@@ -116,23 +117,22 @@ class FHOCP:
     data : FHOCPData or Certificate
         What the problem is made of (:class:`FHOCPData`'s attributes; a
         :class:`~controllers.certification.certificates.Certificate` has them all).
-    law : Law, optional
-        The control law's part of the problem (:class:`controllers.ocp.law.Law`): default
-        the paper's set-point, :class:`~controllers.ocp.law_setpoint.SetpointLaw`; the
-        tracking law's :class:`~controllers.ocp.law_tracking.TrackingLaw`. The object then
-        serves this problem (as ``law``).
+    reference : Reference, optional
+        The control law's part of the problem (:class:`controllers.ocp.reference.Reference`):
+        default the paper's set-point,
+        :class:`~controllers.ocp.reference_setpoint.FixedSetpoint`; the tracking law's
+        :class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`. The object then
+        serves this problem (as ``reference``).
     formulation : {"single-shooting", "multiple-shooting"}
         Multiple shooting is the plain baseline of the paper's law.
     ipopt_options : dict, optional
         Overrides of the IPOPT options (``FAST_IPOPT_OPTIONS`` for single shooting, IPOPT
         defaults for multiple shooting).
-    warm_duals : bool
-        Warm start the multipliers too (single shooting default; off for the plain baseline).
     solver : {"sqp", "ipopt"}, optional
         Solver of the single-shooting formulation (default ``"sqp"``; ``"ipopt"`` when
         ``ipopt_options`` are given, and always for multiple shooting).
     sqp_options : dict, optional
-        Overrides of :data:`~controllers.ocp.solver_settings.SQP_OPTIONS` and of the law's
+        Overrides of :data:`~controllers.ocp.solver_settings.SQP_OPTIONS` and of the reference's
         (``loop``: ``"kernel"``, the SQP in the compiled kernel, or ``"casadi"``,
         ``sqpmethod``; ``tol_du_relative``: the kernel's relative dual test, ignored by
         ``sqpmethod``).
@@ -149,30 +149,31 @@ class FHOCP:
 
     Attributes
     ----------
-    law : Law
+    reference : Reference
         The control law's part (above).
     has_du : bool
         The cost has the input-rate term (some ``du_weight`` > 0); then ``p`` ends with
         ``u_{−1}``.
     nw, ng, npar, it, iu, ix
-        The law's layout of ``w``, ``g`` and ``p`` (:class:`controllers.ocp.law.Law`).
+        The reference's layout of ``w``, ``g`` and ``p``
+        (:class:`controllers.ocp.reference.Reference`).
     warm_start : dict or None
         The previous accepted solve's ``w``, ``lam_x``, ``lam_g`` (the next one's warm start).
     """
 
-    def __init__(self, data: FHOCPData | Any, *, law: Law | None = None,
+    def __init__(self, data: FHOCPData | Any, *, reference: Reference | None = None,
                  formulation: str = "single-shooting",
                  ipopt_options: Mapping[str, Any] | None = None,
-                 warm_duals: bool | None = None, time_budget: float | None = None,
+                 time_budget: float | None = None,
                  solver: str | None = None,
                  sqp_options: Mapping[str, Any] | None = None, kernel: str = "auto",
                  du_weight: float | np.ndarray = 0.0) -> None:
-        self.law: Any = SetpointLaw() if law is None else law
+        self.reference: Any = FixedSetpoint() if reference is None else reference
         if formulation not in ("single-shooting", "multiple-shooting"):
             raise DesignError(f"unknown formulation {formulation!r}")
-        if formulation not in self.law.formulations:
-            raise DesignError(f"the {self.law.name} law's FHOCP is "
-                              f"{' or '.join(self.law.formulations)} only, not {formulation}")
+        if formulation not in self.reference.formulations:
+            raise DesignError(f"the {self.reference.name} law's FHOCP is "
+                              f"{' or '.join(self.reference.formulations)} only, not {formulation}")
         if kernel not in ("auto", "numpy"):
             raise DesignError(f"kernel must be \"auto\" or \"numpy\", got {kernel!r}")
         self.kernel_mode = kernel
@@ -184,20 +185,21 @@ class FHOCP:
                                                and formulation != "single-shooting"):
             raise DesignError(f"unknown solver {solver!r} for formulation {formulation!r}")
         self.solver = solver
-        self.sqp_options = {**SQP_OPTIONS, **self.law.sqp_overrides, **(sqp_options or {})}
+        self.sqp_options = {**SQP_OPTIONS, **self.reference.sqp_overrides, **(sqp_options or {})}
         if self.sqp_options["loop"] not in ("kernel", "casadi"):
             raise DesignError(f"sqp_options loop must be \"kernel\" or \"casadi\", got "
                               f"{self.sqp_options['loop']!r}")
         self.formulation = formulation
         self.time_budget = None if time_budget is None else float(time_budget)
-        self.warm_duals = (formulation == "single-shooting") if warm_duals is None else warm_duals
+        #: warm start the multipliers too (single shooting; not the plain baseline)
+        self.warm_duals = formulation == "single-shooting"
         base = dict(FAST_IPOPT_OPTIONS) if formulation == "single-shooting" else {
             "print_level": 0, "sb": "yes"}
         base.update(ipopt_options or {})
         self.ipopt_options = base
         self._declare(data, du_weight)
-        self.law.attach(self, data)   # the law's layout of w, g and p
-        lay = self.law
+        self.reference.attach(self, data)   # its layout of w, g and p
+        lay = self.reference
         self.nw, self.iu, self.it, self.ix = lay.nw, lay.iu, lay.it, lay.ix
         self.ng, self.npar = lay.ng, lay.npar
         self._solver = None
@@ -264,22 +266,22 @@ class FHOCP:
     def from_certificate(cls, cert: Any, **options: Any) -> FHOCP:
         """The FHOCP of a :class:`~controllers.certification.certificates.Certificate` (its
         weights, constraints, tightening and terminal weight); ``options`` as the
-        constructor's keyword arguments (``law``, ``formulation``, ``solver``, ...)."""
+        constructor's keyword arguments (``reference``, ``formulation``, ``solver``, ...)."""
         return cls(cert, **options)
 
     def setup(self) -> FHOCP:
         """Build the solver (a few ms; again after :meth:`setup` to restart it exactly).
 
         The single-shooting SQP takes its derivatives from the compiled kernel
-        (:mod:`controllers.kernel.compiled_kernel`, the law's variant) unless
+        (:mod:`controllers.kernel.compiled_kernel`, the reference's variant) unless
         ``kernel="numpy"``, or when it cannot be built or fails its self-test (then the
-        numpy callbacks of the law's NLP, with a one-line warning). Returns ``self``.
+        numpy callbacks of the reference's NLP, with a one-line warning). Returns ``self``.
         """
         self.kernel = None
         if self.formulation == "single-shooting":
             if self.solver == "sqp" and self.kernel_mode == "auto":
                 self.kernel, self.kernel_error = for_fhocp(self)
-            self._nlp = self.law.nlp(self.kernel)
+            self._nlp = self.reference.nlp(self.kernel)
             self._shoot = self._nlp.shoot
             nlp, opts = self._nlp.ipopt_problem(self.ipopt_options, self.time_budget)
             self._xtraj = self._nlp.trajectory
@@ -325,8 +327,8 @@ class FHOCP:
 
     def numpy_nlp(self) -> Any:
         """The numpy twin of this problem's derivatives (what the compiled kernel is
-        self-tested against): the law's NLP without a kernel."""
-        return self.law.nlp(None)
+        self-tested against): the reference's NLP without a kernel."""
+        return self.reference.nlp(None)
 
     def simulate(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
         """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m): the compiled
@@ -353,7 +355,7 @@ class FHOCP:
 
     def set_output_shift(self, d: np.ndarray | None) -> None:
         """Constrain ``y + d`` instead of the model's ``y``: every output row
-        ``L (U_o x_i + b_o + d) ≤ …`` (and the law's rows on steady outputs; the tracking
+        ``L (U_o x_i + b_o + d) ≤ …`` (and the reference's rows on steady outputs; the tracking
         law's uncertified mode's ``d = d̂``, the filtered output mismatch, so that the
         measured tightening is around the output the plant will show); ``None`` restores the
         rows as declared."""
@@ -384,20 +386,21 @@ class FHOCP:
         return self.check_x0(x_hat, e_o) > FEAS_TOL
 
     def solve(self, x_hat: np.ndarray, e_o: float, *args: Any, **kwargs: Any) -> FHOCPResult:
-        """Solve ``eq:optimization`` at ``x̂`` with ``ê_o`` for the law's request of
-        ``args``, ``kwargs`` (:meth:`Law.request <controllers.ocp.law.Law.request>`): the
-        paper's ``(x̄, ū, α[, u_init, warm, u_prev])``
-        (:meth:`~controllers.ocp.law_setpoint.SetpointLaw.request`), the tracking law's
+        """Solve ``eq:optimization`` at ``x̂`` with ``ê_o`` for the reference's request of
+        ``args``, ``kwargs``
+        (:meth:`Reference.request <controllers.ocp.reference.Reference.request>`): the paper's
+        ``(x̄, ū, α[, u_init, warm, u_prev])``
+        (:meth:`~controllers.ocp.reference_setpoint.FixedSetpoint.request`), the tracking law's
         ``(r, u_init, us_init, x_s0[, u_prev, warm, us_centre])``
-        (:meth:`~controllers.ocp.law_tracking.TrackingLaw.request`). See
+        (:meth:`~controllers.ocp.reference_tracking.ArtificialSteadyState.request`). See
         :meth:`solve_request`."""
-        return self.solve_request(x_hat, e_o, self.law.request(*args, **kwargs))
+        return self.solve_request(x_hat, e_o, self.reference.request(*args, **kwargs))
 
     def solve_request(self, x_hat: np.ndarray, e_o: float, request: Any) -> FHOCPResult:
         """One solve, the same for every law: the ``i = 0`` row checked first (a violated
         one is reported as ``"infeasible_x0"`` with the request's candidate, no solver
         called), the request's parameters, bounds and initial guess written, the solver run
-        (within the optional time budget), its answer checked independently by the law,
+        (within the optional time budget), its answer checked independently by the reference,
         judged (:func:`~controllers.ocp.fhocp_result.judge`) and kept as the next
         warm start. ``solve_time``: the solver and the check."""
         if self._solver is None:
@@ -405,11 +408,11 @@ class FHOCP:
         t0 = time.perf_counter()
         x_hat = np.asarray(x_hat, dtype=float).reshape(self.n)
         if self.formulation == "single-shooting" and self.x0_infeasible(x_hat, e_o):
-            res = self.law.fallback(x_hat, e_o, request, SolveStatus.INFEASIBLE_X0)
+            res = self.reference.fallback(x_hat, e_o, request, SolveStatus.INFEASIBLE_X0)
             res.solve_time = time.perf_counter() - t0
             return res
         buf, trigger, ins, outs = self._buffer
-        self.law.write(ins, x_hat, e_o, request)
+        self.reference.write(ins, x_hat, e_o, request)
         self._arm_deadline(t0)
         if self._compiled_loop:
             trigger()   # the compiled SQP: no casadi, nothing printed
@@ -418,7 +421,7 @@ class FHOCP:
                 trigger()
         stats = solver_stats(buf)
         wopt = outs["x"].copy()
-        res = self.law.check_answer(wopt, ins["p"], x_hat, e_o, request,
+        res = self.reference.check_answer(wopt, ins["p"], x_hat, e_o, request,
                                     str(stats.get("return_status", "unknown")))
         res.solve_time = time.perf_counter() - t0
         res.lam_x, res.lam_g = outs["lam_x"].copy(), outs["lam_g"].copy()

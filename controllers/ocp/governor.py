@@ -152,7 +152,7 @@ class ReferenceGovernor:
     def feasible(self, x_hat: np.ndarray, e_o: float, u_seq: np.ndarray, x_bar: np.ndarray,
                  alpha: float) -> bool:
         """``u_seq`` satisfies every constraint of ``eq:optimization`` from ``x̂``."""
-        viol, dist = self.fhocp.law.assess(x_hat, u_seq, x_bar, e_o, alpha)
+        viol, dist = self.fhocp.reference.assess(x_hat, u_seq, x_bar, e_o, alpha)
         return bool(not viol > 0.0 and dist <= alpha)
 
     def step(self, x_hat: np.ndarray, e_o: float, v: np.ndarray, x_bar: np.ndarray,

@@ -108,7 +108,7 @@ class SingleShootingNLP:
     def objective(self, wv: np.ndarray, pv: np.ndarray, ro: Any) -> float:
         """``eq:optimization-cost`` at the rolled-out point."""
         x_bar, u_bar = self._reference(pv)
-        return self.p.law.cost(ro.x, ro.u, x_bar, u_bar, float(wv[self.p.it]),
+        return self.p.reference.cost(ro.x, ro.u, x_bar, u_bar, float(wv[self.p.it]),
                                self._u_prev(pv))
 
     def constraints(self, wv: np.ndarray, pv: np.ndarray, ro: Any) -> np.ndarray:
@@ -341,8 +341,8 @@ class SingleShootingNLP:
     def _answer_check_pairs(self, kernel: Any, rng: np.random.Generator, u: np.ndarray,
                             pv: np.ndarray, x_np: np.ndarray) -> list[tuple[Any, Any]]:
         """(kernel, numpy) pairs of the answer check at ``(u, p)``: the kernel's rollout, its
-        cost and residuals (:meth:`SetpointLaw.evaluate <controllers.ocp.law_setpoint.
-        SetpointLaw.evaluate>`) against the law's ``cost`` and ``residuals``."""
+        cost and residuals (:meth:`FixedSetpoint.evaluate <controllers.ocp.reference_setpoint.
+        FixedSetpoint.evaluate>`) against the law's ``cost`` and ``residuals``."""
         from controllers.ocp.fhocp_result import FHOCPResult, set_residuals
 
         p, n = self.p, self.p.n
@@ -352,12 +352,12 @@ class SingleShootingNLP:
         x_k, out = kernel.assess(pv[:n], u, x_bar, u_bar, p.tightened_bounds(e_o), alpha,
                                  u_prev)
         ref = FHOCPResult(u=u, x=x_np, cost=0.0, status="", success=False)
-        p.law.residuals(ref, x_np, p.tightened_bounds(e_o), pv[n:2 * n], alpha)
+        p.reference.residuals(ref, x_np, p.tightened_bounds(e_o), pv[n:2 * n], alpha)
         got = FHOCPResult(u=u, x=x_k, cost=0.0, status="", success=False)
         set_residuals(got, out, alpha)
         return [(x_k, x_np),
                 (np.array([out.cost, got.constraint_violation, got.terminal_violation]),
-                 np.array([p.law.cost(x_np, u, x_bar, u_bar, u_prev=u_prev),
+                 np.array([p.reference.cost(x_np, u, x_bar, u_bar, u_prev=u_prev),
                            ref.constraint_violation, ref.terminal_violation]))]
 
     def sqp_functions(self) -> dict[str, NumpyCallback]:

@@ -40,18 +40,18 @@ __all__ = ["TrackingNLP"]
 
 
 class TrackingNLP(SingleShootingNLP):
-    """Function and derivative evaluations of an FHOCP with the tracking law
-    (:class:`~controllers.ocp.law_tracking.TrackingLaw`; see the module docstring); a kernel
-    workspace as for the parent."""
+    """Function and derivative evaluations of an FHOCP with the tracking law's reference
+    (:class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`; see the module
+    docstring); a kernel workspace as for the parent."""
 
     def __init__(self, fhocp: FHOCP, kernel: Any = None) -> None:
         super().__init__(fhocp, kernel)
-        law = fhocp.law
+        ass = fhocp.reference   # the artificial steady state
         self.p: Any = fhocp
         self.ng = fhocp.ng
-        self.ius = law.ius
+        self.ius = ass.ius
         #: the offset weights ``T``
-        self.T = law.offset_weight
+        self.T = ass.offset_weight
         from controllers.ocp.shooting import GRUShooting
 
         #: one stage at (x_s, u_s): the second derivatives of the curvature term
@@ -65,8 +65,8 @@ class TrackingNLP(SingleShootingNLP):
         self._itf = N * m + m
         self._nwf = N * m + m + 1
         self._E: np.ndarray | None = None   # None: w_N = w (no control horizon)
-        if law.control_horizon < N:
-            src = np.concatenate([fhocp.iu.ravel(), law.ius, [fhocp.it]])
+        if ass.control_horizon < N:
+            src = np.concatenate([fhocp.iu.ravel(), ass.ius, [fhocp.it]])
             self._E = np.zeros((self._nwf, fhocp.nw))
             self._E[np.arange(self._nwf), src] = 1.0
 
@@ -215,7 +215,7 @@ class TrackingNLP(SingleShootingNLP):
         n, m = p.n, p.m
         us = rng.uniform(-0.8, 0.8, m)
         x0 = rng.uniform(-0.3, 0.3, n)
-        wv = np.concatenate([rng.uniform(-1, 1, p.law.control_horizon * m), us,
+        wv = np.concatenate([rng.uniform(-1, 1, p.reference.control_horizon * m), us,
                              rng.uniform(0, 0.1, 1)])
         pv = np.concatenate([x0, x0 + rng.normal(0, 0.01, n),
                              rng.uniform(-1, 1, p.npar - 2 * n)])
@@ -224,7 +224,7 @@ class TrackingNLP(SingleShootingNLP):
     def _answer_check_pairs(self, kernel: Any, rng: np.random.Generator, u: np.ndarray,
                             pv: np.ndarray, x_np: np.ndarray) -> list[tuple[Any, Any]]:
         """None: the tracking FHOCP's answer check
-        (:meth:`~controllers.ocp.law_tracking.TrackingLaw.evaluate`) is its own (the plain
-        rollout, compared above, and ``x_s`` verified by a numpy GRU step), not the kernel's
-        ``assess``."""
+        (:meth:`~controllers.ocp.reference_tracking.ArtificialSteadyState.evaluate`) is its
+        own (the plain rollout, compared above, and ``x_s`` verified by a numpy GRU step), not
+        the kernel's ``assess``."""
         return []

@@ -119,7 +119,7 @@ class RobustMPC:
             res = self.fhocp.solve(x_hat, e_o, self.x_bar, self.u_bar, self.alpha,
                                    u_init=candidate, u_prev=self.u_prev)
         except Exception as exc:
-            res = self.fhocp.law.evaluate(x_hat, cand, self.x_bar, self.u_bar, e_o,
+            res = self.fhocp.reference.evaluate(x_hat, cand, self.x_bar, self.u_bar, e_o,
                                           self.alpha, self.u_prev)
             res.status = f"solver_error: {type(exc).__name__}: {exc}"[:200]
             res.solve_time = time.perf_counter() - t0
@@ -130,7 +130,7 @@ class RobustMPC:
             self.records.append(rec)
             self.u_prev = rec.u
             return rec
-        chk = self.fhocp.law.evaluate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha,
+        chk = self.fhocp.reference.evaluate(x_hat, cand, self.x_bar, self.u_bar, e_o, self.alpha,
                                       self.u_prev)
         feasible = chk.constraint_violation <= FEAS_TOL and chk.terminal_violation <= FEAS_TOL
         if self.accept_suboptimal and res.feasible and (

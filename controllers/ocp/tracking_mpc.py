@@ -1,7 +1,7 @@
 """The tracking MPC law: the tracking FHOCP each step, with the candidate as fallback.
 
 :class:`TrackingMPC` solves the FHOCP with the tracking law
-(:class:`~controllers.ocp.law_tracking.TrackingLaw`) every step for
+(:class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`) every step for
 the target ``r = ȳ − d̂`` from the candidate of the recursive-feasibility argument (the
 previous plan shifted by one stage with the artificial steady input ``u_s`` appended, and the
 same ``u_s``), and applies that candidate when a solve fails. Unlike the paper's law
@@ -49,7 +49,7 @@ class TrackingMPC:
     Parameters
     ----------
     fhocp : controllers.ocp.fhocp.FHOCP
-        With the tracking law (:class:`~controllers.ocp.law_tracking.TrackingLaw`).
+        With the tracking law (:class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`).
     accept_suboptimal : bool
         Apply a feasible iterate of a capped solve that costs no more than the candidate
         (suboptimal MPC, as :class:`controllers.ocp.paper_mpc.RobustMPC`).
@@ -100,14 +100,14 @@ class TrackingMPC:
         try:
             res = fh.solve(x_hat, e_o, r, g_u, g_us, g_xs, up, us_centre=self.u_s)
         except Exception as exc:   # a solver crash: the candidate, as a failed solve
-            res = fh.law.evaluate(x_hat, cand, self.u_s, e_o, r, self.x_s, up)
+            res = fh.reference.evaluate(x_hat, cand, self.u_s, e_o, r, self.x_s, up)
             res.status = f"solver_error: {type(exc).__name__}: {exc}"[:200]
             res.solve_time = time.perf_counter() - t0
         use = res.success
         fallback = False
         feasible = True
         if not use:
-            chk = fh.law.evaluate(x_hat, cand, self.u_s, e_o, r, self.x_s, up)
+            chk = fh.reference.evaluate(x_hat, cand, self.u_s, e_o, r, self.x_s, up)
             feasible = (chk.constraint_violation <= FEAS_TOL
                         and chk.terminal_violation <= FEAS_TOL)
             use = self.accept_suboptimal and res.feasible and (

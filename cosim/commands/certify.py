@@ -410,7 +410,11 @@ def _tracking(model: Any, cert: Any, kwargs: dict, setpoints: list,
     from controllers.certification.tracking_checks import failures, tracking_hypotheses
     from controllers.errors import ControllersError
     from controllers.ocp.fhocp import FHOCP
-    from controllers.ocp.law_tracking import DEFAULTS, TrackingLaw, steady_output_bounds
+    from controllers.ocp.reference_tracking import (
+        DEFAULTS,
+        ArtificialSteadyState,
+        steady_output_bounds,
+    )
     from cosim_adapters.tracking import fallback_alpha_c
 
     try:
@@ -421,7 +425,8 @@ def _tracking(model: Any, cert: Any, kwargs: dict, setpoints: list,
         alpha_c = cert.alpha_min() if gains_certified and not cert.failures() else math.nan
         if not (math.isfinite(alpha_c) and alpha_c > 0):
             alpha_c = fallback_alpha_c(cert_t)
-        fh = FHOCP.from_certificate(cert_t, law=TrackingLaw(DEFAULTS["offset_weight"], alpha_c),
+        reference = ArtificialSteadyState(DEFAULTS["offset_weight"], alpha_c)
+        fh = FHOCP.from_certificate(cert_t, reference=reference,
                                     du_weight=DEFAULTS["du_weight"])
     except ControllersError as exc:
         raise CosimError(f"{model.source}: tracking law: {exc}") from None
@@ -432,7 +437,7 @@ def _tracking(model: Any, cert: Any, kwargs: dict, setpoints: list,
             model, gain_scale=0.0, **{**kwargs, "w_y_bar": w}), alpha_c)
 
     design = [msg for msg in failures(h) if not msg.startswith("no admissible steady")]
-    return h, diagnose(model, cert_t, "tracking", setpoints, fh.law.ys_bounds, design, rhs_at)
+    return h, diagnose(model, cert_t, "tracking", setpoints, fh.reference.ys_bounds, design, rhs_at)
 
 
 def _print_tracking(h: dict) -> None:

@@ -168,7 +168,7 @@ def _prediction_error(record: Any, ev: Any, problem: Any) -> tuple[Any, dict[str
     :func:`controllers.certification.prediction_error.error_profile`: what the uncertified mode
     tightens by) and its summary for the model file, in the outputs' units."""
     from controllers.certification.prediction_error import error_profile
-    from controllers.ocp.law_tracking import DEFAULTS as TRACKING
+    from controllers.ocp.reference_tracking import DEFAULTS as TRACKING
 
     held = np.isin(record.split, ("val", "test"))
     profile = error_profile(record.y, ev.xi, held if np.any(held) else record.split == "train",

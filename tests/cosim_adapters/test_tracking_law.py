@@ -59,9 +59,9 @@ def test_defaults_and_summary() -> None:
     assert s["du_weight"] == {"qa": 0.05, "qb": 0.05} and s["gain_scale"] == 0.0
     assert s["alpha_c"] == pytest.approx(RobustMPCController(N=80, law="paper").cert.alpha_min())
     assert c.fhocp.sqp_options["max_iter"] == 40
-    assert s["control_horizon"] == c.fhocp.law.control_horizon == 20       # ⌈N / 4⌉
+    assert s["control_horizon"] == c.fhocp.reference.control_horizon == 20       # ⌈N / 4⌉
     assert c.fhocp.nw == 20 * 2 + 2 + 1
-    assert RobustMPCController(law="tracking", N=10).fhocp.law.control_horizon == 3
+    assert RobustMPCController(law="tracking", N=10).fhocp.reference.control_horizon == 3
     assert RobustMPCController(law="tracking", control_horizon=80).fhocp.nw == 80 * 2 + 2 + 1
     assert RobustMPCController(law="tracking", max_iter=7).fhocp.sqp_options["max_iter"] == 7
     assert RobustMPCController(law="paper").fhocp.sqp_options["max_iter"] == 15

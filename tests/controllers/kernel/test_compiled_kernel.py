@@ -247,13 +247,13 @@ def test_answer_check_and_observer_step_match_numpy(n: int, N: int, m: int, p: i
         u = np.clip(w[:-1].reshape(N, fh.m), -1.0, 1.0)
         x = gru.simulate(fh.params, x0, u)[0]
         ref = FHOCPResult(u=u, x=x, cost=0.0, status="", success=False)
-        fh.law.residuals(ref, x, bounds, x_bar, alpha)
+        fh.reference.residuals(ref, x, bounds, x_bar, alpha)
         uc, xk, out, _ = k.assess_w(w, np.concatenate([x0, x_bar, u_bar]), bounds, alpha)
         # the defect: the solver's trajectory (unclipped inputs) against the check's
         xs = gru.simulate(fh.params, x0, w[:-1].reshape(N, fh.m))[0]
         assert np.array_equal(uc, u) and rel(xk, x) < 1e-13
         assert abs(out.defect - np.max(np.abs(xs - x))) < 1e-13
-        assert rel(out.cost, fh.law.cost(x, u, x_bar, u_bar)) < 1e-12
+        assert rel(out.cost, fh.reference.cost(x, u, x_bar, u_bar)) < 1e-12
         viol = max(0.0, out.violation_first, out.violation_rows, out.u_max - 1.0)
         assert abs(viol - ref.constraint_violation) < 1e-12
         assert abs(max(0.0, out.terminal_distance - alpha) - ref.terminal_violation) < 1e-12
@@ -277,14 +277,14 @@ def test_compiled_candidate_and_governor_test_match_numpy(cert) -> None:
     rng = np.random.default_rng(3)
     for _ in range(10):
         u = rng.uniform(-1.2, 1.2, (a.N, a.m))
-        ra = a.law.evaluate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
-        rb = b.law.evaluate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
+        ra = a.reference.evaluate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
+        rb = b.reference.evaluate(x_hat, u, ref.x_bar, ref.u_bar, 0.02, ref.alpha)
         assert rel(rb.x, ra.x) < 1e-13 and rel(rb.cost, ra.cost) < 1e-12
         assert abs(rb.t - ra.t) < 1e-13 and rb.active == ra.active
         assert abs(rb.constraint_violation - ra.constraint_violation) < 1e-12
         assert abs(rb.terminal_violation - ra.terminal_violation) < 1e-12
-        va, da = a.law.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
-        vb, db = b.law.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
+        va, da = a.reference.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
+        vb, db = b.reference.assess(x_hat, ra.u, ref.x_bar, 0.02, ref.alpha)
         assert abs(va - vb) < 1e-12 and abs(da - db) < 1e-13
 
 

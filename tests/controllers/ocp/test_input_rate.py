@@ -128,7 +128,7 @@ def test_kernel_matches_numpy_with_the_term(n: int, N: int, mode: str, m: int, p
         x = nlp.shoot.rollout(pv[:n], u, derivatives=False).x
         bounds = fh.tightened_bounds(0.01)
         _, out = k.assess(pv[:n], u, x_bar, u_bar, bounds, 0.3, up)
-        assert rel(out.cost, fh.law.cost(x, u, x_bar, u_bar, u_prev=up)) < 1e-12
+        assert rel(out.cost, fh.reference.cost(x, u, x_bar, u_bar, u_prev=up)) < 1e-12
         _, _, out_w, _ = k.assess_w(w, pv, bounds, 0.3)
         assert rel(out_w.cost, out.cost) < 1e-14
     assert nlp.self_test(k, 1e-2) < ck.KERNEL_SELF_TEST_TOL
@@ -196,7 +196,7 @@ def test_the_solvers_agree_on_the_optimum_with_the_term(cert) -> None:
         assert np.max(np.abs(res[k].u - best.u)) < 1e-4, k
         assert abs(res[k].cost - best.cost) < 1e-6 * (1 + best.cost), k
     # the term is in the reported cost, at the u_{−1} given
-    plain = FHOCP.from_certificate(cert).law.cost(best.x, best.u, ref.x_bar, ref.u_bar)
+    plain = FHOCP.from_certificate(cert).reference.cost(best.x, best.u, ref.x_bar, ref.u_bar)
     assert best.cost == pytest.approx(plain + du_cost(best.u, u_prev, dw), rel=1e-12)
 
 
@@ -229,8 +229,8 @@ def test_the_controller_passes_the_applied_input(cert) -> None:
         rec = mpc.make_step(x_hat, 0.02)
         assert np.array_equal(fh._buffer[2]["p"][2 * fh.n + fh.m:], u_prev)
         r = rec.result
-        assert r.cost == pytest.approx(fh.law.cost(r.x, r.u, ref.x_bar, ref.u_bar, u_prev=u_prev),
-                                       rel=1e-12)
+        want = fh.reference.cost(r.x, r.u, ref.x_bar, ref.u_bar, u_prev=u_prev)
+        assert r.cost == pytest.approx(want, rel=1e-12)
         applied.append(rec.u)
         assert np.array_equal(mpc.u_prev, rec.u)
         x_hat = fh.rollout(x_hat, r.u)[1]

@@ -8,8 +8,8 @@ from controllers.equilibrium import equilibrium
 from controllers.gru import output, simulate, step
 from controllers.observer import GRUObserver
 from controllers.ocp.fhocp import FHOCP, FHOCPData
-from controllers.ocp.law_setpoint import SetpointLaw
 from controllers.ocp.paper_mpc import RobustMPC
+from controllers.ocp.reference_setpoint import FixedSetpoint
 from controllers.ocp.solver_settings import FEAS_TOL
 from cosim_adapters.gru_plant import GRUPlant
 from tests.controllers.random_gru import N
@@ -185,7 +185,7 @@ def test_capped_feasible_iterate_is_applied_as_suboptimal(model, cert):
     ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     rec = ctrl.make_step(x, 0.02)
     assert not rec.result.success and rec.result.status == "Maximum_Iterations_Exceeded"
-    cand = ctrl.fhocp.law.evaluate(x, np.tile(ref.u_bar, (N, 1)), ref.x_bar, ref.u_bar,
+    cand = ctrl.fhocp.reference.evaluate(x, np.tile(ref.u_bar, (N, 1)), ref.x_bar, ref.u_bar,
                                    0.02, ref.alpha)
     if rec.result.feasible:
         assert rec.suboptimal and not rec.fallback
@@ -274,9 +274,9 @@ def test_sqp_solver_rejected_for_multiple_shooting(cert):
         make(cert, formulation="multiple-shooting", solver="sqp")
 
 
-class CountingLaw(SetpointLaw):
-    """A third law (the :class:`~controllers.ocp.law.Law` protocol): the paper's set-point,
-    with the calls the FHOCP's one solve procedure makes counted."""
+class CountingReference(FixedSetpoint):
+    """A third law's reference (the :class:`~controllers.ocp.reference.Reference` protocol):
+    the paper's set-point, with the calls the FHOCP's one solve procedure makes counted."""
 
     name = "counting"
 
@@ -297,36 +297,36 @@ class CountingLaw(SetpointLaw):
         return super().check_answer(wopt, pv, x_hat, e_o, request, status)
 
 
-def test_one_fhocp_takes_any_law(model, cert):
-    """The FHOCP with another law object goes through the same procedure and gives the
-    default law's answer to the bit: the i = 0 row first (the law's fallback, no solver),
-    else write, solve, the law's answer check, the one judge."""
+def test_one_fhocp_takes_any_reference(model, cert):
+    """The FHOCP with another reference object goes through the same procedure and gives the
+    default's answer to the bit: the i = 0 row first (the reference's fallback, no solver),
+    else write, solve, the reference's answer check, the one judge."""
     fh = FHOCP.from_certificate(cert).setup()
     x_hat = start_state(model, np.array([0.05, 0.0]))
     ref = cert.reference(np.array([0.1, 0.1]))
     plain = fh.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
-    law = CountingLaw()
-    counted = FHOCP.from_certificate(cert, law=law).setup()
+    reference = CountingReference()
+    counted = FHOCP.from_certificate(cert, reference=reference).setup()
     again = counted.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
-    assert law.calls == ["write", "check_answer"] and counted.law is law
+    assert reference.calls == ["write", "check_answer"] and counted.reference is reference
     assert again.success and again.status == plain.status == "optimal"
     assert np.array_equal(again.u, plain.u) and again.cost == plain.cost
-    law.calls.clear()
+    reference.calls.clear()
     refused = counted.solve(x_hat, 1.0, ref.x_bar, ref.u_bar, ref.alpha)   # a_0 ê_o > range
-    assert law.calls == ["fallback"] and refused.status == "infeasible_x0"
+    assert reference.calls == ["fallback"] and refused.status == "infeasible_x0"
     assert not refused.success and np.array_equal(refused.u, np.tile(ref.u_bar, (fh.N, 1)))
 
 
-def test_a_law_object_serves_one_fhocp_and_its_formulations(cert):
-    """A law keeps its FHOCP's layout: a second FHOCP refuses it; the tracking law is single
-    shooting only, refused by name for multiple shooting."""
+def test_a_reference_object_serves_one_fhocp_and_its_formulations(cert):
+    """A reference keeps its FHOCP's layout: a second FHOCP refuses it; the tracking law's is
+    single shooting only, refused by name for multiple shooting."""
     from controllers.errors import DesignError
-    from controllers.ocp.law_tracking import TrackingLaw
+    from controllers.ocp.reference_tracking import ArtificialSteadyState
 
-    law = SetpointLaw()
-    FHOCP.from_certificate(cert, law=law)
+    reference = FixedSetpoint()
+    FHOCP.from_certificate(cert, reference=reference)
     with pytest.raises(DesignError, match="already serves another FHOCP"):
-        FHOCP.from_certificate(cert, law=law)
+        FHOCP.from_certificate(cert, reference=reference)
     with pytest.raises(DesignError, match="tracking law's FHOCP is single-shooting only"):
-        FHOCP.from_certificate(cert, law=TrackingLaw(1e3, 0.05),
+        FHOCP.from_certificate(cert, reference=ArtificialSteadyState(1e3, 0.05),
                                formulation="multiple-shooting")

@@ -10,7 +10,7 @@ import pytest
 from controllers.certification import certificates as certs
 from controllers.ocp.fhocp import FHOCP
 from controllers.ocp.fhocp_result import FHOCPResult, judge
-from controllers.ocp.law_tracking import TrackingLaw
+from controllers.ocp.reference_tracking import ArtificialSteadyState
 from controllers.ocp.solve_status import OTHER_STATUS, SolveStatus, status_code
 from controllers.ocp.steady_state import steady_state
 from tests.controllers.random_gru import random_gru_model
@@ -19,8 +19,8 @@ from tests.controllers.random_gru import random_gru_model
 def _tracking(time_budget: float | None = None, loop: str = "kernel") -> FHOCP:
     cert = certs.compute_certificate(random_gru_model(4, n=6), N=5, gain_scale=0.0,
                                      w_y_bar=0.01)
-    return FHOCP.from_certificate(cert, law=TrackingLaw(1e3, 0.05), time_budget=time_budget,
-                                  sqp_options={"loop": loop})
+    return FHOCP.from_certificate(cert, reference=ArtificialSteadyState(1e3, 0.05),
+                                  time_budget=time_budget, sqp_options={"loop": loop})
 
 
 def test_status_codes_are_the_diagnostics_numbers() -> None:

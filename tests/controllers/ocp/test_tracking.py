@@ -1,4 +1,4 @@
-"""The FHOCP with the tracking law (controllers.ocp.law_tracking): its steady state, its exact
+"""The FHOCP with the tracking law (controllers.ocp.reference_tracking): its steady state, its exact
 derivatives, the compiled kernel's HAS_ASS variant against the numpy twin, and the tracking law
 in the GRU world (any set-point tracked to the closest admissible steady state, offset-free under a
 constant output disturbance)."""
@@ -14,7 +14,7 @@ from controllers.errors import DesignError
 from controllers.gru import output, step
 from controllers.model import DEFAULT_MODEL, GRUModel
 from controllers.ocp.fhocp import FHOCP
-from controllers.ocp.law_tracking import TrackingLaw, steady_output_bounds
+from controllers.ocp.reference_tracking import ArtificialSteadyState, steady_output_bounds
 from controllers.ocp.steady_state import steady_state
 from controllers.ocp.tracking_mpc import DisturbanceFilter, TrackingMPC
 from tests.controllers.random_gru import random_gru_model
@@ -23,8 +23,8 @@ from tests.controllers.random_gru import random_gru_model
 def _fhocp(model: GRUModel, N: int = 6, du: float = 0.1, control_horizon: object = None,
            **options: object) -> FHOCP:
     cert = certs.compute_certificate(model, N=N, gain_scale=0.0, w_y_bar=0.01)
-    law = TrackingLaw(1e3, 0.05, control_horizon=control_horizon)  # bad values: refused
-    return FHOCP.from_certificate(cert, law=law, du_weight=du, **options)
+    ass = ArtificialSteadyState(1e3, 0.05, control_horizon=control_horizon)  # bad: refused
+    return FHOCP.from_certificate(cert, reference=ass, du_weight=du, **options)
 
 
 def _point(fh: FHOCP, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -33,7 +33,7 @@ def _point(fh: FHOCP, seed: int) -> tuple[np.ndarray, np.ndarray]:
     us = rng.uniform(-0.5, 0.5, m)
     xs, _, ok = steady_state(fh.params, us, np.zeros(n))
     assert ok
-    wv = np.concatenate([rng.uniform(-1, 1, fh.law.control_horizon * m), us + 0.01, [0.03]])
+    wv = np.concatenate([rng.uniform(-1, 1, fh.reference.control_horizon * m), us + 0.01, [0.03]])
     pv = np.concatenate([xs + rng.normal(0, 0.05, n), xs + rng.normal(0, 1e-3, n),
                          rng.uniform(-0.5, 0.5, fh.npar - 2 * n)])
     return wv, pv
@@ -94,7 +94,7 @@ def test_the_compiled_kernel_agrees_with_the_numpy_twin(m: int, p: int, du: floa
     monkeypatch.setenv("GRU_MPC_KERNEL_MODE", mode)
     fh = _fhocp(random_gru_model(5, n=6, m=m, p=p), du=du, control_horizon=M).setup()
     assert fh.kernel is not None, fh.kernel_error
-    assert fh.law.control_horizon == fh.kernel.kernel.M
+    assert fh.reference.control_horizon == fh.kernel.kernel.M
     assert fh.numpy_nlp().self_test(fh.kernel, fh.sqp_options["hessian_eigen_clip"]) < 1e-9
 
 
@@ -102,7 +102,7 @@ def test_the_compiled_kernel_agrees_with_the_numpy_twin(m: int, p: int, du: floa
 def fourtank() -> tuple[GRUModel, FHOCP]:
     model = GRUModel.load(DEFAULT_MODEL)
     cert = certs.compute_certificate(model, N=15, gain_scale=0.0)
-    fh = FHOCP.from_certificate(cert, law=TrackingLaw(1e5, 0.0199), du_weight=0.1,
+    fh = FHOCP.from_certificate(cert, reference=ArtificialSteadyState(1e5, 0.0199), du_weight=0.1,
                                 sqp_options={"max_iter": 100})
     return model, fh.setup()
 
@@ -145,7 +145,7 @@ def test_an_inadmissible_setpoint_is_tracked_to_the_closest_admissible_steady_st
     law, y, fallbacks = _closed_loop(model, fh, y0, y_ref, 300, np.zeros(2))
     assert not any(fallbacks[1:])
     ys = output(model.params, law.x_s)
-    rows = fh.LUo @ law.x_s - (fh.law.ys_bounds - fh.Lbo)
+    rows = fh.LUo @ law.x_s - (fh.reference.ys_bounds - fh.Lbo)
     assert np.max(rows) < 1e-7                          # y_s in Y_s, on its boundary
     assert np.max(rows) > -1e-4
     assert abs(ys[1] - y_ref[1]) < 1e-3                 # the reachable coordinate is held
@@ -173,7 +173,7 @@ def test_the_law_reaches_a_reachable_setpoint_on_any_plant_shape(m: int, p: int,
     assert fh.kernel is not None, fh.kernel_error
     target, _, _ = steady_state(P, np.full(m, 0.3), np.zeros(6))
     y_ref = output(P, target)
-    assert np.all(fh.LUo @ target <= fh.law.ys_bounds - fh.Lbo)   # inside Y_s
+    assert np.all(fh.LUo @ target <= fh.reference.ys_bounds - fh.Lbo)   # inside Y_s
     x, _, _ = steady_state(P, np.zeros(m), np.zeros(6))
     law = TrackingMPC(fh)
     law.start(np.zeros(m), x)
@@ -183,7 +183,7 @@ def test_the_law_reaches_a_reachable_setpoint_on_any_plant_shape(m: int, p: int,
         fallbacks.append(rec.fallback)
         x = step(P, x, rec.u)
         assert law.plan is not None and law.u_s is not None
-        M_ = fh.law.control_horizon
+        M_ = fh.reference.control_horizon
         assert np.array_equal(law.plan[M_:], np.tile(law.u_s, (fh.N - M_, 1)))
     assert not any(fallbacks[1:])
     assert np.max(np.abs(output(P, x) - y_ref)) < 1e-4
@@ -196,15 +196,15 @@ def test_a_control_horizon_is_the_full_problem_restricted_to_a_held_tail() -> No
     m = fh.m
     assert fh.nw == 2 * m + m + 1 and fh.it == 3 * m
     assert fh.iu[:2].ravel().tolist() == list(range(2 * m))
-    ius = fh.law.ius
+    ius = fh.reference.ius
     assert all(row.tolist() == ius.tolist() for row in fh.iu[2:])
     w = np.arange(fh.nw, dtype=float)
-    shifted = w[fh.law.perm_x]
+    shifted = w[fh.reference.perm_x]
     assert shifted[fh.iu[0]].tolist() == w[fh.iu[1]].tolist()   # u_0 <- u_1
     assert shifted[fh.iu[1]].tolist() == w[ius].tolist()        # u_1 <- u_2 = u_s
     assert shifted[ius].tolist() == w[ius].tolist()
     full = _fhocp(random_gru_model(4, n=8), N=6)
-    assert full.law.control_horizon == 6 and full.nw == 6 * m + m + 1
+    assert full.reference.control_horizon == 6 and full.nw == 6 * m + m + 1
     for bad in (0, 7, 2.0, True):
         with pytest.raises(DesignError, match=r"control_horizon must be an integer in 1\.\.N"):
             _fhocp(random_gru_model(4, n=8), N=6, control_horizon=bad)
@@ -220,8 +220,8 @@ def test_the_relative_dual_test_ends_converged_solves_as_converged() -> None:
     y0, y1 = model.normalize_y(np.array([0.78, 1.27])), model.normalize_y(np.array([0.97, 0.62]))
     runs = {}
     for relative in (False, True):
-        fh = FHOCP.from_certificate(cert, law=TrackingLaw(1e5, 0.0199), du_weight=0.1,
-                                    sqp_options={"tol_du_relative": relative})
+        fh = FHOCP.from_certificate(cert, reference=ArtificialSteadyState(1e5, 0.0199),
+                                    du_weight=0.1, sqp_options={"tol_du_relative": relative})
         law = _closed_loop(model, fh.setup(), y0, y1, 60, np.zeros(2))[0]
         runs[relative] = (np.array([r.u for r in law.records]),
                           [r.result.status for r in law.records],
@@ -239,7 +239,7 @@ def test_sqpmethod_ignores_the_kernels_relative_dual_test() -> None:
     assert fh.sqp_options["tol_du_relative"] is True        # SQP_OVERRIDES
     wv, pv = _point(fh, 3)
     n = fh.n
-    res = fh.solve(pv[:n], 0.0, pv[2 * n:2 * n + fh.p], wv[fh.iu], wv[fh.law.ius],
+    res = fh.solve(pv[:n], 0.0, pv[2 * n:2 * n + fh.p], wv[fh.iu], wv[fh.reference.ius],
                    pv[n:2 * n])
     assert np.all(np.isfinite(res.u)) and res.iterations >= 1
 
@@ -258,12 +258,12 @@ def test_the_compiled_answer_check_is_the_numpy_check(m: int, p: int, du: float,
     n = fh.n
     for seed in range(4):
         wv, pv = _point(fh, seed)
-        wv[fh.law.ius] += 0.5 * (seed == 3)              # u_s beyond the box: clipped by both
+        wv[fh.reference.ius] += 0.5 * (seed == 3)              # u_s beyond the box: clipped by both
         x_hat, xs0, r = pv[:n], pv[n:2 * n], pv[2 * n:2 * n + fh.p]
         up = pv[2 * n + fh.p:] if fh.has_du else None
         e_o = 0.01 * seed
-        got = fh.law._check_compiled(wv, pv, e_o, "s")
-        want = ref.law.evaluate(x_hat, wv[fh.iu], wv[fh.law.ius], e_o, r, xs0, up, "s")
+        got = fh.reference._check_compiled(wv, pv, e_o, "s")
+        want = ref.reference.evaluate(x_hat, wv[fh.iu], wv[fh.reference.ius], e_o, r, xs0, up, "s")
         assert np.max(np.abs(got.x - want.x)) < 1e-12
         assert np.max(np.abs(got.x_s - want.x_s)) < 1e-12
         assert np.array_equal(got.u, want.u) and np.array_equal(got.u_s, want.u_s)
@@ -272,7 +272,7 @@ def test_the_compiled_answer_check_is_the_numpy_check(m: int, p: int, du: float,
             assert abs(getattr(got, key) - getattr(want, key)) < 1e-12, key
         assert got.active == want.active and got.defect < 1e-14
         gap = fh.kernel.terminal_gap(wv, pv)
-        x_s = want.x_s if seed < 3 else steady_state(fh.params, wv[fh.law.ius], xs0)[0]
+        x_s = want.x_s if seed < 3 else steady_state(fh.params, wv[fh.reference.ius], xs0)[0]
         assert abs(gap - np.max(np.abs(ref.simulate(x_hat, wv[fh.iu])[-1] - x_s))) < 1e-12
 
 
@@ -285,8 +285,8 @@ def test_derivative_reuse_keeps_the_answers_with_fewer_derivatives() -> None:
     y0, y1 = model.normalize_y(np.array([0.78, 1.27])), model.normalize_y(np.array([0.97, 0.62]))
     runs = {}
     for options in ({"reuse_step": 0.0}, {}):
-        fh = FHOCP.from_certificate(cert, law=TrackingLaw(1e4, 0.0199), du_weight=0.05,
-                                    sqp_options=options).setup()
+        fh = FHOCP.from_certificate(cert, reference=ArtificialSteadyState(1e4, 0.0199),
+                                    du_weight=0.05, sqp_options=options).setup()
         sqp, trigger, ins, outs = fh._buffer
         reuses: list[int] = []
 

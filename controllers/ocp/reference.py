@@ -1,33 +1,33 @@
-"""What a control law brings to the FHOCP ``eq:optimization``: the :class:`Law` protocol.
+"""What a control law brings to the FHOCP ``eq:optimization``: the :class:`Reference` protocol.
 
 One class builds and solves the finite-horizon problem (:class:`controllers.ocp.fhocp.FHOCP`):
 the model ``eq:gru`` rolled out from ``x̂``, the stage cost, the terminal weight ``s``, the
 tightened output rows (``eq:optimization-constraint``), the input box, the ``i = 0`` test,
 the solver, the judge of every answer (:func:`controllers.ocp.fhocp_result.judge`, one status
-enum with the kernel) and the warm start. What differs between control laws is a law object
-given to that class, implementing this protocol:
+enum with the kernel) and the warm start. What differs between control laws is a strategy
+object given to that class (its pluggable reference), implementing this protocol:
 
 * **the reference**: the paper's set-point ``(x̄, ū)`` given with every solve
-  (:class:`controllers.ocp.law_setpoint.SetpointLaw`), or an artificial steady state
+  (:class:`controllers.ocp.reference_setpoint.FixedSetpoint`), or an artificial steady state
   ``(x_s(u_s), u_s)`` that is a decision variable, with an offset cost towards a target
-  (:class:`controllers.ocp.law_tracking.TrackingLaw`);
+  (:class:`controllers.ocp.reference_tracking.ArtificialSteadyState`, the tracking law's);
 * **the terminal ingredients**: the set-point's ``α(ȳ)`` per solve, or a constant ``α_c``
   with the steady outputs restricted to ``Y_s``;
 * **the decision vector and the rows beyond the output rows** (its layout: ``nw``, ``iu``,
   ``it``, ``ng``, ``npar``), the NLP's numpy derivatives (the compiled kernel's twin) and the
-  kernel's variant of the law (:meth:`Law.kernel_terms`);
-* **one solve's request** (:meth:`Law.request`: what the law's caller hands
-  :meth:`FHOCP.solve`), written into the solver's buffers (:meth:`Law.write`), the
-  independent check of the solver's answer (:meth:`Law.check_answer`) and the candidate
-  evaluated when ``x̂`` fails the ``i = 0`` row (:meth:`Law.fallback`).
+  kernel's variant (:meth:`Reference.kernel_terms`);
+* **one solve's request** (:meth:`Reference.request`: what the law's controller hands
+  :meth:`FHOCP.solve`), written into the solver's buffers (:meth:`Reference.write`), the
+  independent check of the solver's answer (:meth:`Reference.check_answer`) and the
+  candidate evaluated when ``x̂`` fails the ``i = 0`` row (:meth:`Reference.fallback`).
 
-The Δu weight ``S`` is the problem's (:mod:`controllers.ocp.input_rate`); a law decides its
-terms beyond ``u_0 − u_{−1}`` (the tracking law's ``u_{N−1} − u_s``).
+The Δu weight ``S`` is the problem's (:mod:`controllers.ocp.input_rate`); a reference decides
+its terms beyond ``u_0 − u_{−1}`` (the tracking law's ``u_{N−1} − u_s``).
 
 A third law (offset-free MPC with a disturbance model, say) is one new module implementing
 this protocol, and its tests: the FHOCP, its solvers, the judge and the controllers that
-step it do not change. A law object serves the one FHOCP it is given to
-(:meth:`Law.attach`): it keeps that problem's layout and buffers.
+step it do not change. A reference object serves the one FHOCP it is given to
+(:meth:`Reference.attach`): it keeps that problem's layout and buffers.
 """
 
 from __future__ import annotations
@@ -43,10 +43,10 @@ if TYPE_CHECKING:
     from controllers.ocp.fhocp import FHOCP
     from controllers.ocp.fhocp_result import FHOCPResult
 
-__all__ = ["Law", "attach_once"]
+__all__ = ["Reference", "attach_once"]
 
 
-class Law(Protocol):
+class Reference(Protocol):
     """A control law's part of ``eq:optimization`` (module docstring).
 
     Attributes
@@ -56,7 +56,7 @@ class Law(Protocol):
     formulations : tuple of str
         The FHOCP formulations it supports (``"single-shooting"``, ``"multiple-shooting"``).
     sqp_overrides : mapping
-        The law's SQP options over :data:`~controllers.ocp.solver_settings.SQP_OPTIONS`
+        Its SQP options over :data:`~controllers.ocp.solver_settings.SQP_OPTIONS`
         (the caller's ``sqp_options`` override these).
     nw, ng, npar, it : int
         Sizes of the decision vector ``w``, of the constraints ``g`` and of the parameters
@@ -80,11 +80,11 @@ class Law(Protocol):
 
     def attach(self, fhocp: FHOCP, data: Any) -> None:
         """Serve ``fhocp`` (built from ``data``, an ``FHOCPData`` or a certificate): check
-        the law against its dimensions, compute the layout."""
+        the reference against its dimensions, compute the layout."""
         ...
 
     def kernel_terms(self) -> dict[str, Any]:
-        """The law's fields of :class:`controllers.kernel.compiled_kernel.KernelProblem`
+        """Its fields of :class:`controllers.kernel.compiled_kernel.KernelProblem`
         (none: the paper's kernel)."""
         ...
 
@@ -117,9 +117,10 @@ class Law(Protocol):
         ...
 
 
-def attach_once(law: Any, fhocp: FHOCP) -> None:
-    """Refuse a law object already serving another FHOCP (it holds that one's layout)."""
-    owner = getattr(law, "fhocp", None)
+def attach_once(reference: Any, fhocp: FHOCP) -> None:
+    """Refuse a reference object already serving another FHOCP (it holds that one's
+    layout)."""
+    owner = getattr(reference, "fhocp", None)
     if owner is not None and owner is not fhocp:
-        raise DesignError(f"this {type(law).__name__} already serves another FHOCP: give "
-                          "each FHOCP its own law object")
+        raise DesignError(f"this {type(reference).__name__} already serves another FHOCP: "
+                          "give each FHOCP its own")

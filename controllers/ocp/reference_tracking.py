@@ -1,4 +1,4 @@
-"""The tracking law: ``eq:optimization`` with an artificial steady state and an offset cost.
+"""The tracking law's reference: an artificial steady state and an offset cost in the FHOCP.
 
     min_{u, u_s}  Σ_{i<N} ‖x_i − x_s‖²_Q + ‖u_i − u_s‖²_R + s ‖x_N − x_s‖²_∞
                   + ‖g(x_s) + d̂ − ȳ‖²_T  [+ Σ_{i<N} ‖u_i − u_{i−1}‖²_S + ‖u_{N−1} − u_s‖²_S]
@@ -7,7 +7,7 @@
           ‖u_i‖∞ ≤ 1,  ‖u_s‖∞ ≤ 1,  ‖x_N − x_s‖∞ ≤ α_c,  x_s = f(x_s, u_s)
           L(U_o x_s + b_o) ≤ h − ẽ_o a_N − b_N − w_L − α_c c_s                (y_s ∈ Y_s)
 
-The :class:`~controllers.ocp.law.Law` of the tracking MPC
+The :class:`~controllers.ocp.reference.Reference` of the tracking MPC
 (:mod:`controllers.ocp.tracking_mpc`): the FHOCP (:class:`controllers.ocp.fhocp.FHOCP`) with
 the set-point ``(x̄, ū)`` of the paper's law replaced by a decision variable: the steady
 input ``u_s`` and its steady state ``x_s(u_s)`` (:mod:`controllers.ocp.steady_state`), as in
@@ -23,9 +23,9 @@ paper's recursive-feasibility argument holds with ``x̄ := x_s`` (docs: design/t
 Single shooting only, solved by the SQP (the compiled kernel with ``HAS_ASS``, its numpy twin
 :class:`controllers.ocp.nlp_tracking.TrackingNLP` otherwise) or IPOPT. Every answer is checked
 independently: numpy rollout, the steady state recomputed, the output rows, the input box,
-the terminal set and ``Y_s``. Build it as
-``FHOCP.from_certificate(cert, law=TrackingLaw(offset_weight, alpha_c))`` and solve with
-``fhocp.solve(x̂, ê_o, r, u_init, us_init, x_s0)`` (:meth:`TrackingLaw.request`).
+the terminal set and ``Y_s``. Build it as ``FHOCP.from_certificate(cert,
+reference=ArtificialSteadyState(offset_weight, alpha_c))`` and solve with ``fhocp.solve(x̂,
+ê_o, r, u_init, us_init, x_s0)`` (:meth:`ArtificialSteadyState.request`).
 """
 
 from __future__ import annotations
@@ -40,15 +40,24 @@ from controllers import gru
 from controllers.errors import DesignError
 from controllers.ocp.fhocp_result import FHOCPResult, plan_residuals, set_residuals
 from controllers.ocp.input_rate import du_cost
-from controllers.ocp.law import attach_once
+from controllers.ocp.reference import attach_once
 from controllers.ocp.solve_status import SolveStatus
 from controllers.ocp.steady_state import steady_state
 
 if TYPE_CHECKING:
     from controllers.ocp.fhocp import FHOCP
 
-__all__ = ["CONTROL_HORIZON_FRACTION", "DEFAULTS", "LINE_SEARCH", "SQP_OVERRIDES", "US_RATE",
-           "Target", "TrackingLaw", "default_control_horizon", "steady_output_bounds"]
+__all__ = [
+    "CONTROL_HORIZON_FRACTION",
+    "DEFAULTS",
+    "LINE_SEARCH",
+    "SQP_OVERRIDES",
+    "US_RATE",
+    "ArtificialSteadyState",
+    "Target",
+    "default_control_horizon",
+    "steady_output_bounds",
+]
 
 #: The SQP's line search for the tracking FHOCP (over ``sqpmethod``'s defaults, 3 trials with
 #: β = 0.8, the last accepted): a set-point step moves ``u_s`` far, and the short search let
@@ -109,8 +118,8 @@ def steady_output_bounds(cert: Any, alpha_c: float) -> np.ndarray:
 
 @dataclass(frozen=True)
 class Target:
-    """One solve's request of the tracking law (:meth:`TrackingLaw.request`): the target
-    ``r = ȳ − d̂``, the candidate (inputs, steady input ``u_s``, Newton's start ``x_s0``),
+    """One solve's request of the tracking law (:meth:`ArtificialSteadyState.request`): the
+    target ``r = ȳ − d̂``, the candidate (inputs, steady input ``u_s``, Newton's start ``x_s0``),
     ``u_{−1}``, whether to warm start the multipliers and the centre of ``u_s``'s move
     limit."""
 
@@ -123,9 +132,9 @@ class Target:
     us_centre: np.ndarray
 
 
-class TrackingLaw:
+class ArtificialSteadyState:
     """The tracking law's part of the FHOCP (module docstring), a
-    :class:`~controllers.ocp.law.Law`.
+    :class:`~controllers.ocp.reference.Reference`.
 
     Parameters
     ----------
@@ -223,7 +232,7 @@ class TrackingLaw:
 
     @property
     def _fh(self) -> FHOCP:
-        assert self.fhocp is not None, "the law serves no FHOCP yet"
+        assert self.fhocp is not None, "the reference serves no FHOCP yet"
         return self.fhocp
 
     def kernel_terms(self) -> dict[str, Any]:

@@ -1,7 +1,7 @@
-"""The paper's law in the FHOCP ``eq:optimization``: a set-point given with every solve.
+"""The paper's reference in the FHOCP ``eq:optimization``: a set-point given with every solve.
 
-The :class:`~controllers.ocp.law.Law` of the paper's robust MPC (``eq:mpc``): the reference
-``(x̄, ū)`` of the requested output and the terminal radius ``α(ȳ)`` (``eq:def-alpha``) are
+The :class:`~controllers.ocp.reference.Reference` of the paper's robust MPC (``eq:mpc``): the
+reference ``(x̄, ū)`` of the requested output and the terminal radius ``α(ȳ)`` (``eq:def-alpha``) are
 parameters of each solve (:class:`Setpoint`), the cost ``eq:optimization-cost`` is::
 
     Σ_{i<N} ‖x_i − x̄‖²_Q + ‖u_i − ū‖²_R + s ‖x_N − x̄‖²_∞  [+ Σ_{i<N} ‖u_i − u_{i−1}‖²_S]
@@ -12,9 +12,9 @@ nlp_single_shooting`) and the plain multiple-shooting baseline; the layout of ``
 ``g`` and the warm start are :class:`controllers.ocp.fhocp_layout.FHOCPLayout`'s.
 
 Besides the protocol, what the paper's controllers ask of their problem: a given plan
-evaluated (:meth:`SetpointLaw.evaluate`, the fallback candidate of ``eq:mpc``'s proof), its
-cost (:meth:`SetpointLaw.cost`) and the reference governor's feasibility test
-(:meth:`SetpointLaw.assess`).
+evaluated (:meth:`FixedSetpoint.evaluate`, the fallback candidate of ``eq:mpc``'s proof), its
+cost (:meth:`FixedSetpoint.cost`) and the reference governor's feasibility test
+(:meth:`FixedSetpoint.assess`).
 """
 
 from __future__ import annotations
@@ -28,13 +28,13 @@ import numpy as np
 from controllers.ocp.fhocp_layout import FHOCPLayout
 from controllers.ocp.fhocp_result import FHOCPResult, plan_residuals, set_residuals
 from controllers.ocp.input_rate import du_cost
-from controllers.ocp.law import attach_once
+from controllers.ocp.reference import attach_once
 from controllers.ocp.solve_status import SolveStatus
 
 if TYPE_CHECKING:
     from controllers.ocp.fhocp import FHOCP
 
-__all__ = ["Setpoint", "SetpointLaw"]
+__all__ = ["FixedSetpoint", "Setpoint"]
 
 
 @dataclass(frozen=True)
@@ -51,9 +51,10 @@ class Setpoint:
     u_prev: np.ndarray
 
 
-class SetpointLaw:
-    """The paper's law (module docstring): :class:`~controllers.ocp.law.Law` with the
-    set-point a parameter of each solve; the FHOCP's default law."""
+class FixedSetpoint:
+    """The paper's law's reference (module docstring): a
+    :class:`~controllers.ocp.reference.Reference` with the set-point a parameter of each
+    solve; the FHOCP's default."""
 
     name = "paper"
     formulations = ("single-shooting", "multiple-shooting")
@@ -80,7 +81,7 @@ class SetpointLaw:
 
     @property
     def _fh(self) -> FHOCP:
-        assert self.fhocp is not None, "the law serves no FHOCP yet"
+        assert self.fhocp is not None, "the reference serves no FHOCP yet"
         return self.fhocp
 
     # -- one solve -----------------------------------------------------------------------
