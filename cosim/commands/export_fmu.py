@@ -19,8 +19,9 @@ the disturbance estimate and the reference handling, in C (gcc). Its inputs are 
 outputs, named as the plant's outputs in the problem, and their set-points ref.<output>; its
 outputs the inputs to apply, named as the plant's inputs, the solver status, whether the
 fallback was applied, the SQP iterations and the predicted outputs pred.<output>: all in the
-problem's units, so that plant and controller connect by name; its tunable parameter
-offset_filter. Its sample time is the problem's Ts. The same model, problem and --options as
+problem's units, so that plant and controller connect by name; its tunable parameters
+offset_filter and the weights R.<input>, du_weight.<input>, offset_weight.<output>. Its
+sample time is the problem's Ts. The same model, problem and --options as
 cosim run give the same inputs (docs: guide/controller-fmu.md); --controller takes them from
 a run's controller.json. Run it with: cosim run SCENARIO --controller Controller.fmu"""
 
