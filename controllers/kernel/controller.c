@@ -16,7 +16,8 @@
  *                   fallback, the next guess)
  *   solve           controllers/ocp/reference_tracking.py ArtificialSteadyState.request, and
  *                   controllers/ocp/fhocp.py FHOCP.solve_request: the i = 0 row,
- *                   write_request, the kernel SQP, check_answer (_check_answer and
+ *                   write_request (ArtificialSteadyState.write), the kernel SQP,
+ *                   check_answer (ArtificialSteadyState._check_compiled and
  *                   fhocp_result.judge, the warm start)
  *   check           ArtificialSteadyState.evaluate (the candidate's answer check)
  *
