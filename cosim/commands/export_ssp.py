@@ -15,8 +15,11 @@ Write an SSP 1.0 archive (SystemStructure.ssd and both FMUs under resources/) of
 and a controller FMU (cosim export-fmu): the controller's inputs named as the plant's outputs
 read them, the plant's inputs named as the controller's outputs read those, the set-points
 ref.<output> are constants of a parameter set (--setpoint NAME=VALUE, default: the middle of
-each output's box), and the default experiment's fixed step is the controller's sample time.
-libcosim and other SSP runners run it as it is (docs: guide/controller-fmu.md)."""
+each output's box), so are the controller's tunable parameters given a value (--parameter
+NAME=VALUE: its weights R.<input>, du_weight.<input>, offset_weight.<output>, offset_filter;
+the others keep the design's), and the default experiment's fixed step is the controller's
+sample time. libcosim and other SSP runners run it as it is (docs:
+guide/controller-fmu.md)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -31,6 +34,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--setpoint", metavar="NAME=VALUE", action="append", default=[],
                    help="a set-point, e.g. ref.h1=1.3 (repeatable; default: the middle of the "
                         "output's box)")
+    p.add_argument("--parameter", metavar="NAME=VALUE", action="append", default=[],
+                   help="a value of the controller's tunable parameters, e.g. R.qa=0.05 "
+                        "(repeatable; default: the design's)")
     p.add_argument("--stop", type=float, default=None, metavar="SECONDS",
                    help="the default experiment's stop time (default: 100 samples)")
     p.add_argument("--out", metavar="FILE.ssp", default="ClosedLoop.ssp",
@@ -45,11 +51,17 @@ def _setpoints(items: list[str], controller: str) -> dict[str, float]:
 
     import fmpy
 
-    from cosim.core.errors import CosimError
-
     values = {v.name: float(v.start) for v in fmpy.read_model_description(
         str(Path(controller))).modelVariables
         if v.causality == "input" and v.name.startswith("ref.") and v.start is not None}
+    return {**values, **_values(items, "--setpoint")}
+
+
+def _values(items: list[str], option: str) -> dict[str, float]:
+    """``NAME=VALUE`` items of ``option`` as numbers by name."""
+    from cosim.core.errors import CosimError
+
+    values = {}
     for item in items:
         name, sep, text = item.partition("=")
         try:
@@ -57,7 +69,7 @@ def _setpoints(items: list[str], controller: str) -> dict[str, float]:
         except ValueError:
             sep = ""
         if not sep:
-            raise CosimError(f"--setpoint {item}: expected NAME=VALUE with a number") from None
+            raise CosimError(f"{option} {item}: expected NAME=VALUE with a number") from None
     return values
 
 
@@ -78,10 +90,16 @@ def run(args: argparse.Namespace) -> int:
     step = fmpy.read_model_description(args.controller).defaultExperiment
     stop = args.stop if args.stop is not None else 100 * float(getattr(step, "stepSize", 1.0)
                                                                 or 1.0)
-    out = write_ssp(plant, args.controller, args.out, setpoints, stop)
+    parameters = _values(args.parameter, "--parameter")
+    out = write_ssp(plant, args.controller, args.out, setpoints, stop, parameters=parameters)
     if not args.quiet:
         links, _ = connections(plant, Path(args.controller))
+        tuned = f"; parameters {_listed(parameters)}" if parameters else ""
         print(f"{out}: {plant.name} and {Path(args.controller).name} connected ("
               + ", ".join(f"{a} -> {b}" for a, b in links) + "); set-points "
-              + ", ".join(f"{k}={v:g}" for k, v in sorted(setpoints.items())))
+              + _listed(setpoints) + tuned)
     return 0
+
+
+def _listed(values: dict[str, float]) -> str:
+    return ", ".join(f"{k}={v:g}" for k, v in sorted(values.items()))

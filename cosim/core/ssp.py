@@ -4,7 +4,8 @@ connected by name: ``cosim export-ssp``.
 The controller's inputs named as the plant's outputs read them, the plant's inputs named as
 the controller's outputs read those (a controller FMU of ``cosim export-fmu`` and its problem's
 plant connect so); every other controller input (the set-points ``ref.<output>``) gets a
-constant value from a parameter set, and the controller's other outputs (``status``,
+constant value from a parameter set, as do the controller's tunable parameters given a value
+(its weights, ``offset_filter``), and the controller's other outputs (``status``,
 ``pred.*``) stay unconnected. Both FMUs go into the archive's ``resources/``; the default
 experiment's fixed step is the controller's sample time (the Open Simulation Platform's
 annotation, which libcosim reads), so that libcosim runs the file as it is.
@@ -86,11 +87,25 @@ def _connectors(variables: Mapping[str, Any], names: set[str]) -> str:
 
 
 def system_structure(plant: Path, controller: Path, setpoints: Mapping[str, float],
-                     step_size: float, stop_time: float) -> str:
+                     step_size: float, stop_time: float,
+                     parameters: Mapping[str, float] | None = None) -> str:
     """The ``SystemStructure.ssd`` of plant and controller (module docstring); ``setpoints``:
-    the values of the controller's free inputs."""
+    the values of the controller's free inputs; ``parameters``: values of its parameters
+    (the others keep their start values)."""
     pv, cv = _real_variables(plant), _real_variables(controller)
     links, free = _links(pv, cv, plant, controller)
+    parameters = dict(parameters or {})
+    tunable = [n for n, v in cv.items() if v.causality == "parameter"]
+    unknown = sorted(set(parameters) - set(tunable))
+    if unknown:
+        raise CosimError(f"--parameter {unknown[0]}: not a parameter of {controller} "
+                         f"(parameters: {', '.join(tunable) or 'none'})")
+    for name, value in parameters.items():
+        low, high = cv[name].min, cv[name].max
+        if (low is not None and value < float(low)) or (high is not None
+                                                         and value > float(high)):
+            raise CosimError(f"--parameter {name}={value:g}: outside its range "
+                             f"[{low}, {high if high is not None else 'inf'}] in {controller}")
     missing = sorted(set(free) - set(setpoints))
     if missing:
         raise CosimError(f"{controller}: input {missing[0]!r} is fed by no plant output: give "
@@ -99,14 +114,14 @@ def system_structure(plant: Path, controller: Path, setpoints: Mapping[str, floa
     if unknown:
         raise CosimError(f"--setpoint {unknown[0]}: not a free input of {controller} "
                          f"(free: {', '.join(free)})")
-    used = {"plant": set(), "mpc": set(free)}
+    used = {"plant": set(), "mpc": set(free) | set(parameters)}
     for a, b in links:
         for end in (a, b):
             comp, _, name = end.partition(".")
             used[comp].add(name)
     params = "".join(f"                <ssv:Parameter name={quoteattr(n)}><ssv:Real "
                      f"value=\"{float(v)!r}\"/></ssv:Parameter>\n"
-                     for n, v in sorted(setpoints.items()))
+                     for n, v in sorted({**setpoints, **parameters}.items()))
     conns = "".join(
         f"      <ssd:Connection startElement=\"{a.partition('.')[0]}\" "
         f"startConnector={quoteattr(a.partition('.')[2])} endElement=\"{b.partition('.')[0]}\" "
@@ -139,9 +154,11 @@ def system_structure(plant: Path, controller: Path, setpoints: Mapping[str, floa
 
 def write_ssp(plant: str | Path, controller: str | Path, out: str | Path,
               setpoints: Mapping[str, float], stop_time: float,
-              step_size: float | None = None) -> Path:
+              step_size: float | None = None,
+              parameters: Mapping[str, float] | None = None) -> Path:
     """Write the SSP archive ``out`` of ``plant`` and ``controller`` (atomically); the step is
-    the controller's default experiment step size unless ``step_size``. Returns ``out``."""
+    the controller's default experiment step size unless ``step_size``; ``parameters``: values
+    of the controller's parameters. Returns ``out``."""
     import fmpy
 
     plant, controller, out = Path(plant), Path(controller), Path(out)
@@ -155,7 +172,7 @@ def write_ssp(plant: str | Path, controller: str | Path, out: str | Path,
         if exp is None or exp.stepSize is None:
             raise CosimError(f"{controller}: no default experiment step size: give --step")
         step_size = float(exp.stepSize)
-    ssd = system_structure(plant, controller, setpoints, step_size, stop_time)
+    ssd = system_structure(plant, controller, setpoints, step_size, stop_time, parameters)
     with replacing(out) as part, zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
         add_member(zf, "SystemStructure.ssd", ssd.encode())
         for path in (plant, controller):

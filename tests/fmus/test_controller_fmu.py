@@ -133,10 +133,13 @@ def test_libcosim_runs_plant_and_controller_connected(controller_fmus: dict[int,
     assert abs(h[-1, 0] - 1.3) < 0.05   # and it tracks
 
 
-def _jacobi(plant_path: Path, controller: Path, ref, steps: int) -> np.ndarray:
+def _jacobi(plant_path: Path, controller: Path, ref, steps: int,
+            parameters: dict | None = None) -> np.ndarray:
     """The levels h1, h2 after each step of fmpy stepping both FMUs from the values of the
-    last communication point (libcosim's fixed-step algorithm)."""
+    last communication point (libcosim's fixed-step algorithm); ``parameters``: the
+    controller's, set before its first step."""
     plant, ctrl = Plant(plant_path, "cs"), _controller(controller)
+    ctrl.set(**(parameters or {}))
     try:
         plant.initialize()
         h = np.empty((steps, 2))
@@ -156,7 +159,8 @@ def _jacobi(plant_path: Path, controller: Path, ref, steps: int) -> np.ndarray:
 def test_an_ssp_file_of_plant_and_controller_runs_in_libcosim(
         controller_fmus: dict[int, Path], fmu2_path: Path, tmp_path: Path) -> None:
     """``cosim export-ssp``: libcosim loads the archive unchanged (connections, set-points,
-    fixed step from the file) and runs the trajectory of fmpy's loop stepping the same way."""
+    the controller's tuned weights, fixed step from the file) and runs the trajectory of fmpy's
+    loop stepping the same way."""
     from libcosimpy.CosimExecution import CosimExecution
     from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
     from libcosimpy.CosimObserver import CosimObserver
@@ -164,9 +168,11 @@ def test_an_ssp_file_of_plant_and_controller_runs_in_libcosim(
     from cosim.cli import main
 
     ssp = tmp_path / "loop.ssp"
+    tuned = {"R.qa": 0.05, "offset_weight.h1": 1e3}
     assert main(["export-ssp", "--plant", str(fmu2_path), "--controller",
                  str(controller_fmus[2]), "--setpoint", "ref.h1=1.3", "--setpoint",
-                 "ref.h2=1.4", "--out", str(ssp), "--quiet"]) == 0
+                 "ref.h2=1.4", "--parameter", "R.qa=0.05", "--parameter",
+                 "offset_weight.h1=1000", "--out", str(ssp), "--quiet"]) == 0
     log_output_level(CosimLogLevel.ERROR)
     execution = CosimExecution.from_ssp_file(str(ssp))
     observer = CosimObserver.create_last_value()
@@ -179,8 +185,10 @@ def test_an_ssp_file_of_plant_and_controller_runs_in_libcosim(
     for k in range(steps):
         assert execution.step()
         h_cosim[k] = observer.last_real_values(plant, [vr["h1"], vr["h2"]])
-    h = _jacobi(fmu2_path, controller_fmus[2], lambda k: (1.3, 1.4), steps)
+    h = _jacobi(fmu2_path, controller_fmus[2], lambda k: (1.3, 1.4), steps, tuned)
     np.testing.assert_array_equal(h_cosim, h)
+    default = _jacobi(fmu2_path, controller_fmus[2], lambda k: (1.3, 1.4), steps)
+    assert not np.array_equal(default, h)   # the tuned weights took effect
 
 
 def test_two_instances_in_one_process_are_independent(controller_fmus: dict[int, Path]) -> None:

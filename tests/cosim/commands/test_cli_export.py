@@ -61,3 +61,21 @@ def test_an_ssp_needs_fmus_that_belong_together(capsys: pytest.CaptureFixture,
                      str(tmp_path / "x.ssp"))
     assert code == 2 and err.count("\n") == 1 and "--setpoint ref.h9" in err, err
     assert not (tmp_path / "x.ssp").exists()
+
+
+@pytest.mark.parametrize(("item", "reason"), [
+    ("N=40", "--parameter N: not a parameter of"),
+    ("R.qa=-1", "--parameter R.qa=-1: outside its range [0.0, inf]"),
+    ("offset_filter=2", "--parameter offset_filter=2: outside its range [0.0, 1.0]"),
+    ("R.qa=x", "--parameter R.qa=x: expected NAME=VALUE with a number"),
+])
+def test_an_ssps_controller_parameters_are_checked(capsys: pytest.CaptureFixture,
+                                                   controller_fmus: dict[int, Path],
+                                                   tmp_path: Path, item: str,
+                                                   reason: str) -> None:
+    """``--parameter``: a name the controller has, within its declared range; one line, no
+    file written."""
+    code, err = _run(capsys, "export-ssp", "--controller", str(controller_fmus[2]),
+                     "--parameter", item, "--out", str(tmp_path / "x.ssp"))
+    assert code == 2 and err.count("\n") == 1 and reason in err, err
+    assert not (tmp_path / "x.ssp").exists()
