@@ -98,7 +98,6 @@ def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
     import contextlib
 
     from controllers.identification import sequences, training
-    from cosim.core.atomicio import output_error, replacing
     from cosim.core.errors import CosimError
 
     spans = sequences.stretches(data.split, data.experiment, "train")
@@ -126,30 +125,10 @@ def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
     if init is not None and init["W_z"].shape[0] != opts.n:
         raise CosimError(f"{args.init}: model has n={init['W_z'].shape[0]}, but --n is "
                          f"{opts.n}")
-    names = list(problem.output_names)
     train_mask = data.split == "train"
     with contextlib.ExitStack() as stack:
-        callback = None
-        if args.history:
-            history = Path(args.history)
-            tmp = stack.enter_context(replacing(history))
-            fh = stack.enter_context(open(tmp, "w", encoding="utf-8", newline=""))
-
-            def log(line: str) -> None:
-                try:
-                    fh.write(line)
-                    fh.flush()
-                except OSError as exc:
-                    raise output_error(history, exc) from None
-
-            log("epoch,time_s,loss,nu," + "".join(f"fit_val_{n}," for n in names)
-                + "U_o_inf_norm\n")
-
-            def callback(epoch: int, rec: dict, _weights: dict) -> None:
-                log(f"{epoch},{rec['time']:.2f},{rec['loss']:.6e},{rec['nu']:.6f},"
-                    + "".join(f"{f:.4f}," for f in rec["fit_val"])
-                    + f"{rec['uo_norm']:.4f}\n")
-
+        callback = (_history_log(stack, Path(args.history), list(problem.output_names))
+                    if args.history else None)
         result = training.train(record.u[train_mask], record.y[train_mask], record.u,
                                 record.y, data.split, opts, progress=progress, init=init,
                                 callback=callback, experiment=data.experiment)
@@ -161,6 +140,30 @@ def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
                                                            ("batch", args.batch))
                                             if v is None]}}
     return Trained(result.params, result.nu, rec, None, f"GRU n={opts.n}")
+
+
+def _history_log(stack: Any, history: Path, names: list[str]) -> Any:
+    """The epoch callback of :func:`truncated` writing ``--history`` as training goes (a
+    temporary file entered into ``stack``, an ``ExitStack``, renamed onto ``history`` when it
+    closes)."""
+    from cosim.core.atomicio import open_replacing, output_error
+
+    fh = stack.enter_context(open_replacing(history, "w", newline=""))
+
+    def log(line: str) -> None:
+        try:
+            fh.write(line)
+            fh.flush()
+        except OSError as exc:
+            raise output_error(history, exc) from None
+
+    log("epoch,time_s,loss,nu," + "".join(f"fit_val_{n}," for n in names) + "U_o_inf_norm\n")
+
+    def callback(epoch: int, rec: dict, _weights: dict) -> None:
+        log(f"{epoch},{rec['time']:.2f},{rec['loss']:.6e},{rec['nu']:.6f},"
+            + "".join(f"{f:.4f}," for f in rec["fit_val"]) + f"{rec['uo_norm']:.4f}\n")
+
+    return callback
 
 
 def _prediction_error(record: Any, ev: Any, problem: Any) -> tuple[Any, dict[str, Any]]:
