@@ -187,7 +187,6 @@ class ArtificialSteadyState:
         """Serve ``fhocp``: ``T`` on its outputs, ``Y_s`` (of ``data``, a certificate, when
         not given), the control horizon and the layout."""
         attach_once(self, fhocp)
-        self.fhocp = fhocp
         T = np.broadcast_to(np.asarray(self._offset_weight, dtype=float), (fhocp.p,)).copy()
         if not np.all(np.isfinite(T)) or np.any(T <= 0):
             raise DesignError(f"offset weights must be positive, got {T.tolist()}")
@@ -204,6 +203,7 @@ class ArtificialSteadyState:
             raise DesignError(f"control_horizon must be an integer in 1..N = {N}, got "
                               f"{self._control_horizon!r}")
         self.control_horizon = int(M)
+        self.fhocp = fhocp   # valid for it: it serves it from here on
         self._layout(fhocp)
 
     def _layout(self, fh: FHOCP) -> None:
