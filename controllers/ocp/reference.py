@@ -43,7 +43,7 @@ if TYPE_CHECKING:
     from controllers.ocp.fhocp import FHOCP
     from controllers.ocp.fhocp_result import FHOCPResult
 
-__all__ = ["Reference", "attach_once"]
+__all__ = ["Reference", "ServesOne"]
 
 
 class Reference(Protocol):
@@ -117,10 +117,20 @@ class Reference(Protocol):
         ...
 
 
-def attach_once(reference: Any, fhocp: FHOCP) -> None:
-    """Refuse a reference object already serving another FHOCP (it holds that one's
-    layout)."""
-    owner = getattr(reference, "fhocp", None)
-    if owner is not None and owner is not fhocp:
-        raise DesignError(f"this {type(reference).__name__} already serves another FHOCP: "
-                          "give each FHOCP its own")
+class ServesOne:
+    """What both references share: the one FHOCP a reference serves (:meth:`Reference.
+    attach`), ``None`` before."""
+
+    fhocp: FHOCP | None = None
+
+    def _refuse_another(self, fhocp: FHOCP) -> None:
+        """Refuse ``fhocp`` when this object already serves another (it holds that one's
+        layout)."""
+        if self.fhocp is not None and self.fhocp is not fhocp:
+            raise DesignError(f"this {type(self).__name__} already serves another FHOCP: "
+                              "give each FHOCP its own")
+
+    @property
+    def _fh(self) -> FHOCP:
+        assert self.fhocp is not None, "the reference serves no FHOCP yet"
+        return self.fhocp

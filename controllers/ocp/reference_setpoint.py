@@ -28,7 +28,7 @@ import numpy as np
 from controllers.ocp.fhocp_layout import FHOCPLayout
 from controllers.ocp.fhocp_result import FHOCPResult, plan_residuals, set_residuals
 from controllers.ocp.input_rate import du_cost
-from controllers.ocp.reference import attach_once
+from controllers.ocp.reference import ServesOne
 from controllers.ocp.solve_status import SolveStatus
 
 if TYPE_CHECKING:
@@ -51,7 +51,7 @@ class Setpoint:
     u_prev: np.ndarray
 
 
-class FixedSetpoint:
+class FixedSetpoint(ServesOne):
     """The paper's law's reference (module docstring): a
     :class:`~controllers.ocp.reference.Reference` with the set-point a parameter of each
     solve; the FHOCP's default."""
@@ -60,11 +60,8 @@ class FixedSetpoint:
     formulations = ("single-shooting", "multiple-shooting")
     sqp_overrides = MappingProxyType({})
 
-    def __init__(self) -> None:
-        self.fhocp: FHOCP | None = None
-
     def attach(self, fhocp: FHOCP, data: Any) -> None:
-        attach_once(self, fhocp)
+        self._refuse_another(fhocp)
         self.fhocp = fhocp
         self.layout = FHOCPLayout(fhocp, fhocp.formulation == "single-shooting")
         lay = self.layout
@@ -78,11 +75,6 @@ class FixedSetpoint:
         from controllers.ocp.nlp_single_shooting import SingleShootingNLP
 
         return SingleShootingNLP(self._fh, kernel)
-
-    @property
-    def _fh(self) -> FHOCP:
-        assert self.fhocp is not None, "the reference serves no FHOCP yet"
-        return self.fhocp
 
     # -- one solve -----------------------------------------------------------------------
     def request(self, x_bar: np.ndarray, u_bar: np.ndarray, alpha: float,

@@ -40,7 +40,7 @@ from controllers import gru
 from controllers.errors import DesignError
 from controllers.ocp.fhocp_result import FHOCPResult, plan_residuals, set_residuals
 from controllers.ocp.input_rate import du_cost
-from controllers.ocp.reference import attach_once
+from controllers.ocp.reference import ServesOne
 from controllers.ocp.solve_status import SolveStatus
 from controllers.ocp.steady_state import steady_state
 
@@ -132,7 +132,7 @@ class Target:
     us_centre: np.ndarray
 
 
-class ArtificialSteadyState:
+class ArtificialSteadyState(ServesOne):
     """The tracking law's part of the FHOCP (module docstring), a
     :class:`~controllers.ocp.reference.Reference`.
 
@@ -181,12 +181,11 @@ class ArtificialSteadyState:
         self._ys_bounds = ys_bounds
         self._control_horizon = control_horizon
         self.us_rate: float | None = US_RATE
-        self.fhocp: FHOCP | None = None
 
     def attach(self, fhocp: FHOCP, data: Any) -> None:
         """Serve ``fhocp``: ``T`` on its outputs, ``Y_s`` (of ``data``, a certificate, when
         not given), the control horizon and the layout."""
-        attach_once(self, fhocp)
+        self._refuse_another(fhocp)
         T = np.broadcast_to(np.asarray(self._offset_weight, dtype=float), (fhocp.p,)).copy()
         if not np.all(np.isfinite(T)) or np.any(T <= 0):
             raise DesignError(f"offset weights must be positive, got {T.tolist()}")
@@ -229,11 +228,6 @@ class ArtificialSteadyState:
         :meth:`~controllers.ocp.fhocp.FHOCP.set_output_shift`)."""
         shift = self._fh.output_shift
         return self.ys_base if shift is None else self.ys_base - shift
-
-    @property
-    def _fh(self) -> FHOCP:
-        assert self.fhocp is not None, "the reference serves no FHOCP yet"
-        return self.fhocp
 
     def kernel_terms(self) -> dict[str, Any]:
         """The kernel's artificial steady state (``HAS_ASS``) and control horizon."""
