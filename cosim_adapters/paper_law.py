@@ -77,10 +77,6 @@ class PaperLaw:
         self.mpc = RobustMPC(self.fhocp)
         self.handling = handling
         self.governor = ReferenceGovernor(cert, self.fhocp) if handling.governor else None
-        self.offset_free = bool(handling.offset_free)
-        self.offset_filter = float(handling.offset_filter)
-        self.setpoint_rate = (None if handling.setpoint_rate is None
-                              else float(handling.setpoint_rate))
         self.component = name
         self.certified = certified
         self.reset()
@@ -130,7 +126,8 @@ class PaperLaw:
                         name=self.component, certified=False)
 
     def summary(self) -> dict[str, Any]:
-        return {"offset_free": self.offset_free, "setpoint_rate": self.setpoint_rate,
+        h = self.handling
+        return {"offset_free": h.offset_free, "setpoint_rate": h.setpoint_rate,
                 "governor": self.governor is not None,
                 "governor_steps": self.governed_steps, "governor_holds": self.governor_holds,
                 "setpoint_changes": self.setpoint_changes,
@@ -141,15 +138,16 @@ class PaperLaw:
     def _update_reference(self, observer: Any, y_ref: np.ndarray, y: np.ndarray,
                           t: float) -> bool:
         """Recompute ``(x̄, ū, α)`` when the set-point changes; ``True`` when rejected."""
+        h = self.handling
         target = y_ref
-        if self.setpoint_rate is not None and self.y_model is not None:
-            step = self.setpoint_rate / np.abs(self.model.y_scale)
-            base = self.y_model + (self.d_hat if self.offset_free else 0.0)
+        if h.setpoint_rate is not None and self.y_model is not None:
+            step = h.setpoint_rate / np.abs(self.model.y_scale)
+            base = self.y_model + (self.d_hat if h.offset_free else 0.0)
             target = base + np.clip(y_ref - base, -step, step)
-        if self.offset_free:
-            self.d_hat = self.d_hat + self.offset_filter * (y - observer.y_hat() - self.d_hat)
+        if h.offset_free:
+            self.d_hat = self.d_hat + h.offset_filter * (y - observer.y_hat() - self.d_hat)
             target = target - self.d_hat
-        tol = 1e-3 if self.offset_free else 1e-12
+        tol = 1e-3 if h.offset_free else 1e-12
         self.lam = 1.0
         if self.y_model is not None and np.max(np.abs(target - self.y_model)) < tol:
             return False

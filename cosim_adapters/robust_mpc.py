@@ -241,8 +241,9 @@ class RobustMPCController(Component):
                       "offset_weight": o.offset_weight, "alpha_c": o.alpha_c,
                       "offset_filter": o.offset_filter, "control_horizon": o.control_horizon}
             return TrackingLaw.build(self.model, cert, design, self.name, gains_certified)
+        rate = None if o.setpoint_rate is None else float(o.setpoint_rate)
         handling = SetpointHandling(bool(o.governor), bool(o.offset_free),
-                                    float(o.offset_filter), o.setpoint_rate)
+                                    float(o.offset_filter), rate)
         law = PaperLaw(self.model, cert, fhocp_options, handling, name=self.name)
         return law, cert.failures()
 
