@@ -162,8 +162,8 @@ def describe(model: Any, y: np.ndarray) -> str:
     return "[" + ", ".join(f"{v:.6g}" for v in y) + "] (normalised)"
 
 
-def equilibrium(model_or_params: Any, y_bar_norm: Sequence[float]) -> tuple[np.ndarray,
-                                                                             np.ndarray]:
+def equilibrium(model_or_params: Any, y_bar_norm: Sequence[float],
+                kernel: Any = None) -> tuple[np.ndarray, np.ndarray]:
     """Model equilibrium ``(x̄, ū)`` with output ``ȳ`` (normalised) and ``‖ū‖∞ ≤ 1``.
 
     Solves ``x̄ = f(x̄, ū)``, ``U_o x̄ + b_o = ȳ`` (``eq:gru``; the reference of the FHOCP
@@ -175,6 +175,9 @@ def equilibrium(model_or_params: Any, y_bar_norm: Sequence[float]) -> tuple[np.n
         With a :class:`GRUModel`, error messages are in physical units.
     y_bar_norm : (p,) array
         Set-point in normalised units.
+    kernel : optional
+        A compiled kernel's workspace of the same model: its compiled search
+        (:func:`equilibrium_for_output`'s, the exported controller's) is used.
 
     Raises
     ------
@@ -184,7 +187,11 @@ def equilibrium(model_or_params: Any, y_bar_norm: Sequence[float]) -> tuple[np.n
     """
     params = _params(model_or_params)
     y = np.asarray(y_bar_norm, dtype=float).reshape(-1)
-    x, u, err = _solve(params, y)
+    if kernel is not None and kernel.has_equilibrium:
+        x, u, reached = kernel.equilibrium(y)
+        err = 0.0 if reached else np.inf
+    else:
+        x, u, err = _solve(params, y)
     if err > REACH_TOL:
         reach = params["U_o"] @ x + params["b_o"]
         m, p = params["W_z"].shape[1], params["U_o"].shape[0]

@@ -2,13 +2,14 @@
 RobustMPCController` to :func:`cosim.core.controller_fmu.build_controller_fmu`.
 
 The FMU runs the same step as the Python component, in C: the component's own observer,
-tracking FHOCP (set up on its compiled kernel), disturbance filter, scalings and input box
-become the numbers of :mod:`controllers.kernel.controller_source` (data in the FMU's
-resources: one binary for every design of the same dimensions and signals), and the problem's
-signals the FMU's variables (measured outputs and set-points ``ref.<output>`` in, the inputs
-to apply out, named and in the units of the problem; docs: guide/controller-fmu.md). The
-tracking law (the default) is exported, for any numbers of inputs and outputs; the paper's
-law is not (yet).
+FHOCP (set up on its compiled kernel), law, scalings and input box become the numbers of
+:mod:`controllers.kernel.controller_source` (data in the FMU's resources: one binary for
+every design of the same dimensions, signals and law), and the problem's signals the FMU's
+variables (measured outputs and set-points ``ref.<output>`` in, the inputs to apply out,
+named and in the units of the problem; docs: guide/controller-fmu.md). Both laws are
+exported, for any numbers of inputs and outputs: the tracking law (the default) and the
+paper's without its reference governor (``governor=false``: the paper's controller, with
+``offset_free`` and ``setpoint_rate`` as in Python); the governor is not compiled.
 """
 
 from __future__ import annotations
@@ -34,9 +35,11 @@ def fmu_identifier(out: str | Path) -> str:
 
 def _why_not(ctrl: Any) -> str:
     """Why ``ctrl`` cannot be exported (empty: it can)."""
-    if ctrl.law.name != "tracking":
-        return (f"law {ctrl.law.name!r}: the controller FMU runs the tracking law (the "
-                "default, law=\"tracking\")")
+    law = ctrl.law
+    if law.name == "paper" and law.handling.governor:
+        return ("the paper's law with its reference governor (governor=true, its default): "
+                "the controller FMU runs the paper's law without it (--option "
+                "governor=false: the paper's controller) or the tracking law (the default)")
     fhocp = ctrl.fhocp
     if fhocp.kernel is None or not fhocp._compiled_loop:
         reason = fhocp.kernel_error or "the options select another solver"
@@ -62,8 +65,13 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     if why:
         raise CosimError(f"cannot export {ctrl.model_path}: {why}")
     law = ctrl.law
-    design = ControllerDesign.of(ctrl.fhocp, ctrl.observer, law.disturbance.beta,
-                                 law.certified, ctrl.model, ctrl._lo, ctrl._hi)
+    if law.name == "paper":
+        design = ControllerDesign.of_paper(law, ctrl.observer, ctrl.model, ctrl._lo, ctrl._hi)
+        title = "paper's law" + (", offset-free" if law.handling.offset_free else "")
+    else:
+        design = ControllerDesign.of(ctrl.fhocp, ctrl.observer, law.disturbance.beta,
+                                     law.certified, ctrl.model, ctrl._lo, ctrl._hi)
+        title = "tracking law"
     source = generate_source(design).replace(PREFIX_PLACEHOLDER, "mpc_")
     flags, _ = variant_flags(design.kernel, (), blas=False)
     pr = ctrl.problem
@@ -71,7 +79,7 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     certified = "certified" if ctrl.certification.certified else "uncertified"
     iface = ControllerInterface(
         identifier=fmu_identifier(out), token="{" + str(uuid.UUID(hex=digest[:32])) + "}",
-        description=(f"Robust GRU MPC (Schimperna & Magni), tracking law, {certified}: model "
+        description=(f"Robust GRU MPC (Schimperna & Magni), {title}, {certified}: model "
                      f"{Path(ctrl.model_path).name}, problem {pr.name}, N={ctrl.fhocp.N}"),
         sample_time=float(ctrl.sample_time),
         measured=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")

@@ -155,7 +155,7 @@ class PaperLaw:
         if self.governor is not None and self.y_model is not None:
             return self._govern(observer, target, y_ref, requested_changed, t)
         try:
-            ref = self.cert.reference(target)
+            ref = self.cert.reference(target, kernel=self.fhocp.kernel)
         except SetpointError as exc:
             if self.y_model is not None:
                 self._reject(exc, y_ref, requested_changed, t)
@@ -181,13 +181,16 @@ class PaperLaw:
         to the model's equilibrium output for the measured ``y``; ``None`` when neither is."""
         from controllers.equilibrium import equilibrium_for_output
 
-        x_eq, _ = equilibrium_for_output(self.model.params, y)
-        for start in (target, self.model.params["U_o"] @ x_eq + self.model.params["b_o"]):
+        kernel = self.fhocp.kernel
+        x_eq, _ = equilibrium_for_output(self.model.params, y, kernel)
+        y_eq = (kernel.output(x_eq) if kernel is not None   # the exported controller's sum
+                else self.model.params["U_o"] @ x_eq + self.model.params["b_o"])
+        for start in (target, y_eq):
             inside = closest_admissible(self.cert, start)
             if inside is None:
                 continue
             try:
-                return self.cert.reference(inside)
+                return self.cert.reference(inside, kernel=self.fhocp.kernel)
             except SetpointError:
                 continue
         return None
@@ -219,7 +222,7 @@ class PaperLaw:
         mpc = self.mpc
         if requested_changed and self.governor.newton(target, mpc.x_bar, mpc.u_bar) is None:
             try:  # reachable with ‖ū‖∞ ≤ 1? (the multi-start solve decides)
-                self.cert.reference(target)
+                self.cert.reference(target, kernel=self.fhocp.kernel)
             except SetpointError as exc:
                 self._reject(exc, y_ref, requested_changed, t)
                 self.unreachable = np.array(target, dtype=float)

@@ -237,11 +237,13 @@ class Certificate:
                            "= rho_s^N (L_max e_tilde + w_bar)/(1 - rho_s)")
         return out
 
-    def reference(self, y_bar_norm: Sequence[float], *, check: bool = True) -> Reference:
+    def reference(self, y_bar_norm: Sequence[float], *, check: bool = True,
+                  kernel: Any = None) -> Reference:
         """Everything the FHOCP needs for a set-point: ``x̄, ū`` and ``α``.
 
         ``(x̄, ū)`` is the model equilibrium with output ``ȳ`` (:func:`controllers.equilibrium.
-        equilibrium`), ``α`` is ``eq:def-alpha``; call again whenever ``ȳ`` changes.
+        equilibrium`, on ``kernel``'s compiled search when given), ``α`` is ``eq:def-alpha``;
+        call again whenever ``ȳ`` changes.
 
         Raises
         ------
@@ -259,7 +261,8 @@ class Certificate:
             if failed:
                 where = describe(self.model, y) if self.model is not None else str(y.tolist())
                 raise SetpointError(f"set-point {where}: " + "; ".join(failed))
-        x_bar, u_bar = equilibrium(self.model if self.model is not None else self.params, y)
+        x_bar, u_bar = equilibrium(self.model if self.model is not None else self.params, y,
+                                   kernel)
         return Reference(y_bar=y, x_bar=x_bar, u_bar=u_bar, alpha=self.alpha(y))
 
     def ok(self, y_bar_norm: Sequence[float] | None = None) -> bool:

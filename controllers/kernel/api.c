@@ -334,16 +334,14 @@ HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u
 }
 #endif
 
-#if HAS_ASS
-/* the artificial steady state of u_s by Newton from x0 (steady_state.c) into xs (NX);
- * 0 when converged. Uses the workspace's steady-state scratch and invalidates its cache. */
+/* the steady state of u_s by Newton from x0 (steady_state.c) into xs (NX); 0 when
+ * converged. Uses the workspace's steady-state scratch and invalidates its cache. */
 EXPORT int PFX(steady)(gk_ws *ws, const double *us, const double *x0, double *xs) {
   ws->mem.c_level = -1;
   steady_state(ws, us, x0);
   memcpy(xs, ws->mem.xs, sizeof ws->mem.xs);
   return ws->mem.xs_status;
 }
-#endif
 
 EXPORT void PFX(dims)(gk_dims *out) {
   out->n_states = NX; out->n_inputs = NU; out->horizon = NH; out->n_reduced_rows = NQ;

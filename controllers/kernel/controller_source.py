@@ -2,24 +2,27 @@
 build and a ctypes handle.
 
 An exported controller (the controller FMU, :mod:`cosim.core.controller_fmu`) runs the step of
-the robust MPC's tracking law without Python: the GRU observer (``eq:observer``,
-``eq:eo-evolution``), the output-disturbance estimate, the tracking FHOCP
-(``eq:optimization`` with an artificial steady state) on the compiled kernel with its answer
-check and candidate fallback, in the problem's units. :class:`ControllerDesign` is what the
-C step needs besides the kernel (:class:`~controllers.kernel.compiled_kernel.KernelProblem`):
-scalings, input box, observer gains and bound, tightening, ``Y_s``, terminal radius, the
-SQP's options and the warm start's permutations, taken from the Python objects that run the
-same step (:meth:`ControllerDesign.of`), so that both give the same inputs.
-:func:`generate_source` joins the kernel's source, these constants and ``controller.c``;
-:func:`build` compiles it (a self-contained library: no BLAS) and :class:`CompiledController`
-steps it from Python (the tests and the benchmark).
+the robust MPC without Python: the GRU observer (``eq:observer``, ``eq:eo-evolution``) and
+one of two laws on the compiled kernel, with its answer check and candidate fallback, in the
+problem's units. The tracking law (``law_tracking.c``): the output-disturbance estimate and
+the tracking FHOCP (``eq:optimization`` with an artificial steady state). The paper's law
+(``law_paper.c``, without the governor): the reference ``(x̄, ū, α)`` of each set-point
+checked against the certificate, the FHOCP ``eq:optimization`` and the fallback of ``eq:mpc``.
+:class:`ControllerDesign` is what the C step needs besides the kernel
+(:class:`~controllers.kernel.compiled_kernel.KernelProblem`): scalings, input box, observer
+gains and bound, tightening, the SQP's options, the warm start's permutations and the law's
+own numbers, taken from the Python objects that run the same step (:meth:`ControllerDesign.
+of`, :meth:`ControllerDesign.of_paper`), so that both give the same inputs.
+:func:`generate_source` joins the kernel's source, these constants, ``controller.h``, the
+law's file and ``controller.c``; :func:`build` compiles it (a self-contained library: no
+BLAS) and :class:`CompiledController` steps it from Python (the tests and the benchmark).
 """
 
 from __future__ import annotations
 
 import ctypes
 import hashlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -57,8 +60,13 @@ __all__ = [
     "parameters",
 ]
 
-#: The C step (joined after the kernel and the constants).
+#: The C step (joined after the kernel, the constants, ``controller.h`` and the law's file).
 CONTROLLER_C = Path(__file__).with_name("controller.c")
+#: What the step and the laws share, and each law's file (``controller.h`` says what it
+#: defines).
+CONTROLLER_H = Path(__file__).with_name("controller.h")
+LAW_C = {"tracking": Path(__file__).with_name("law_tracking.c"),
+         "paper": Path(__file__).with_name("law_paper.c")}
 #: Compiler flags of the exported step: the kernel's, warnings as errors.
 CFLAGS = ("-O3", "-fPIC", "-std=gnu99", "-pthread", "-Wall", "-Wextra", "-Werror",
           "-Wno-aggressive-loop-optimizations")
@@ -86,18 +94,21 @@ class ControllerDesign:
         False: the output rows are tightened around ``y + d̂`` (the uncertified mode).
     L, h, a, b, w_L, Lbo : arrays
         The output polytope and its tightening (``eq:optimization-constraint``).
-    ys_base : (q,) array
-        ``Y_s``'s right-hand side on ``L U_o x_s``.
-    alpha_c, us_rate : float
-        Terminal radius; ``u_s``'s move limit per step (−1: none).
     pair_up, pair_lo : int arrays
         The reduced rows' upper and lower ``L`` rows (−1: none).
     perm_x, perm_g : int arrays
         The warm start's shift of the multipliers.
     sqp : dict
         The kernel SQP's options (:class:`controllers.kernel.kernel_abi.SqpOptions` fields).
-    feas_tol, defect_tol, xs_check_tol : float
+    feas_tol, defect_tol : float
         The answer check's tolerances.
+    law : {"tracking", "paper"}
+        The law's file (``law_tracking.c``, ``law_paper.c``).
+    law_data : mapping
+        The law's own ``CT_*`` numbers (:meth:`of`, :meth:`of_paper` say which); integers
+        are C ``int`` constants.
+    offset_free : bool
+        The paper's law's ``offset_free`` (compiled: it decides the parameters).
     """
 
     kernel: KernelProblem
@@ -120,9 +131,6 @@ class ControllerDesign:
     b: np.ndarray
     w_L: np.ndarray
     Lbo: np.ndarray
-    ys_base: np.ndarray
-    alpha_c: float
-    us_rate: float
     pair_up: np.ndarray
     pair_lo: np.ndarray
     perm_x: np.ndarray
@@ -130,7 +138,9 @@ class ControllerDesign:
     sqp: dict[str, float]
     feas_tol: float
     defect_tol: float
-    xs_check_tol: float
+    law: str
+    law_data: Mapping[str, Any]
+    offset_free: bool = False
 
     @classmethod
     def of(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
@@ -138,9 +148,62 @@ class ControllerDesign:
         """The design of an FHOCP with the tracking law set up on its compiled kernel's
         SQP (:class:`controllers.ocp.reference_tracking.ArtificialSteadyState`), its observer
         (:class:`controllers.observer.GRUObserver`), the disturbance filter's ``beta``, the
-        model's normalisation and the input box."""
-        from controllers.kernel.kernel_sqp import KernelSQP
+        model's normalisation and the input box. The law's numbers: ``Y_s``'s right-hand
+        side on ``L U_o x_s`` (``CT_YS_BASE``), the terminal radius (``CT_ALPHA_C``), ``u_s``'s
+        move limit per step (``CT_US_RATE``, −1: none) and the steady state's check
+        tolerance (``CT_XS_CHECK_TOL``)."""
         from controllers.ocp.reference_tracking import XS_CHECK_TOL
+
+        ass = fhocp.reference   # the artificial steady state
+        law_data = {"CT_YS_BASE": np.asarray(ass.ys_base, float),
+                    "CT_ALPHA_C": float(ass.alpha_c),
+                    "CT_US_RATE": -1.0 if ass.us_rate is None else float(ass.us_rate),
+                    "CT_XS_CHECK_TOL": float(XS_CHECK_TOL)}
+        return cls._common(fhocp, observer, beta, certified, model, u_lo, u_hi, ass,
+                           "tracking", law_data)
+
+    @classmethod
+    def of_paper(cls, law: Any, observer: Any, model: Any, u_lo: np.ndarray,
+                 u_hi: np.ndarray) -> ControllerDesign:
+        """The design of the paper's law (:class:`cosim_adapters.paper_law.PaperLaw`, its
+        FHOCP on its compiled kernel's SQP, without the governor) with its observer, the
+        model's normalisation and the input box. The law's numbers: the certificate's
+        set-point checks (``Certificate.ok``, ``alpha``: its ``L``, ``h``, ``ẽ_o a_N``,
+        ``b_N``, ``w_L``, ``c_s``, the two sides of ``eq:condition-recursive-feasibility``
+        and whether the design conditions hold), the admissible box per output
+        (``closest_admissible``) and the set-point rate (−1: none)."""
+        cert, h = law.cert, law.handling
+        if h.governor:
+            raise ValueError("the exported paper's law runs without the governor")
+        lo, hi = admissible_box_bounds(cert)
+        design_ok = (cert.nu < 1 and cert.nu_o < 1 and cert.rho_s < 1
+                     and bool(np.isfinite(cert.e_tilde)))
+        # (recursive_feasibility: ρ_s^N (L_max ẽ_o + w̄) ≤ α (1 − ρ_s); never read without
+        # design_ok)
+        rf_lhs = (cert.rho_s ** cert.N * (cert.L_max * cert.e_tilde + cert.w_bar)
+                  if design_ok else 0.0)
+        law_data = {"CT_CERT_L": np.asarray(cert.L, float), "CT_CERT_H": np.asarray(cert.h, float),
+                    "CT_CERT_EAN": np.asarray(cert.e_tilde * cert.a[cert.N], float),
+                    "CT_CERT_BN": np.asarray(cert.b[cert.N], float),
+                    "CT_CERT_WL": np.asarray(cert.w_L, float),
+                    "CT_CERT_CS": np.asarray(cert.c_s, float),
+                    "CT_CERT_RF_LHS": float(rf_lhs),
+                    "CT_CERT_RF_ONE_MINUS_RHO": float(1 - cert.rho_s),
+                    "CT_CERT_DESIGN_OK": int(design_ok), "CT_BOX_LO": lo, "CT_BOX_HI": hi,
+                    "CT_SETPOINT_RATE": -1.0 if h.setpoint_rate is None
+                    else float(h.setpoint_rate)}
+        fhocp = law.fhocp
+        return cls._common(fhocp, observer, h.offset_filter, law.certified, model, u_lo,
+                           u_hi, fhocp.reference.layout, "paper", law_data,
+                           offset_free=bool(h.offset_free))
+
+    @classmethod
+    def _common(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
+                u_lo: np.ndarray, u_hi: np.ndarray, layout: Any, law: str,
+                law_data: dict[str, Any], offset_free: bool = False) -> ControllerDesign:
+        """What every law's design holds; ``layout``: where the warm start's permutations
+        are (``perm_x``, ``perm_g``)."""
+        from controllers.kernel.kernel_sqp import KernelSQP
         from controllers.ocp.solver_settings import DEFECT_TOL, FEAS_TOL
 
         if not isinstance(fhocp._solver, KernelSQP):
@@ -149,7 +212,6 @@ class ControllerDesign:
         o = fhocp._solver.options
         sqp = {name: getattr(o, name) for name, _ in o._fields_}
         arr = np.asarray
-        ass = fhocp.reference   # the artificial steady state
         return cls(
             kernel=KernelProblem.of(fhocp), y_offset=arr(model.y_offset, float),
             y_scale=arr(model.y_scale, float), u_offset=arr(model.u_offset, float),
@@ -158,11 +220,25 @@ class ControllerDesign:
             rho_o=float(observer.rho_o), w_bar=float(observer.w_bar),
             e_o0=float(observer.e_o0), beta=float(beta), certified=bool(certified),
             L=fhocp.L, h=fhocp.h, a=fhocp.a, b=fhocp.b, w_L=fhocp.w_L, Lbo=fhocp.Lbo,
-            ys_base=ass.ys_base, alpha_c=float(ass.alpha_c),
-            us_rate=-1.0 if ass.us_rate is None else float(ass.us_rate),
-            pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=ass.perm_x,
-            perm_g=ass.perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
-            xs_check_tol=XS_CHECK_TOL)
+            pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=layout.perm_x,
+            perm_g=layout.perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
+            law=law, law_data=law_data, offset_free=offset_free)
+
+
+def admissible_box_bounds(cert: Any) -> tuple[np.ndarray, np.ndarray]:
+    """The admissible set-points' box per output, ``(lo, hi)`` (normalised; ±∞ where no
+    row bounds it): the single-output rows of ``L ȳ ≤`` :meth:`~controllers.certification.
+    certificates.Certificate.admissible_box`, as :func:`cosim_adapters.paper_law.
+    closest_admissible` reads them."""
+    rhs = cert.admissible_box()
+    p = np.shape(cert.L)[1]
+    lo, hi = np.full(p, -np.inf), np.full(p, np.inf)
+    for j in range(p):
+        hi[j] = min((r / row[j] for row, r in zip(cert.L, rhs, strict=True)
+                     if row[j] > 0 and np.count_nonzero(row) == 1), default=np.inf)
+        lo[j] = max((r / row[j] for row, r in zip(cert.L, rhs, strict=True)
+                     if row[j] < 0 and np.count_nonzero(row) == 1), default=-np.inf)
+    return lo, hi
 
 
 def controller_constants(d: ControllerDesign) -> Constants:
@@ -173,16 +249,14 @@ def controller_constants(d: ControllerDesign) -> Constants:
                         ("CT_U_OFFSET", d.u_offset), ("CT_U_SCALE", d.u_scale),
                         ("CT_U_LO", d.u_lo), ("CT_U_HI", d.u_hi), ("CT_LZ", d.L_z),
                         ("CT_LR", d.L_r), ("CT_L", d.L), ("CT_H", d.h), ("CT_A", d.a),
-                        ("CT_B", d.b), ("CT_WL", d.w_L), ("CT_LBO", d.Lbo),
-                        ("CT_YS_BASE", d.ys_base)):
+                        ("CT_B", d.b), ("CT_WL", d.w_L), ("CT_LBO", d.Lbo)):
         c.array(name, value, finite=False)   # an unbounded row: +-inf (uncertified mode)
     for name, value in (("CT_PAIR_UP", d.pair_up), ("CT_PAIR_LO", d.pair_lo),
                         ("CT_PERM_X", d.perm_x), ("CT_PERM_G", d.perm_g)):
         c.array(name, value, "int")
     for name, value in (("CT_RHO_O", d.rho_o), ("CT_W_BAR", d.w_bar), ("CT_E_O0", d.e_o0),
-                        ("CT_BETA", d.beta), ("CT_ALPHA_C", d.alpha_c),
-                        ("CT_US_RATE", d.us_rate), ("CT_FEAS_TOL", d.feas_tol),
-                        ("CT_DEFECT_TOL", d.defect_tol), ("CT_XS_CHECK_TOL", d.xs_check_tol),
+                        ("CT_BETA", d.beta), ("CT_FEAS_TOL", d.feas_tol),
+                        ("CT_DEFECT_TOL", d.defect_tol),
                         ("CT_SQP_TOL_PR", s["tol_pr"]), ("CT_SQP_TOL_DU", s["tol_du"]),
                         ("CT_SQP_MIN_STEP", s["min_step_size"]), ("CT_SQP_C1", s["c1"]),
                         ("CT_SQP_BETA", s["beta"]), ("CT_SQP_REUSE_STEP", s["reuse_step"])):
@@ -191,6 +265,13 @@ def controller_constants(d: ControllerDesign) -> Constants:
                         ("CT_SQP_MAX_ITER_LS", s["max_iter_ls"]),
                         ("CT_SQP_TOL_DU_RELATIVE", s["tol_du_relative"])):
         c.scalar(name, int(value), "int")
+    for name, value in d.law_data.items():
+        if isinstance(value, np.ndarray):
+            c.array(name, value, finite=False)
+        elif isinstance(value, int):
+            c.scalar(name, value, "int")
+        else:
+            c.scalar(name, float(value))
     return c
 
 
@@ -201,15 +282,19 @@ def design_constants(design: ControllerDesign) -> Constants:
 
 def parameters(design: ControllerDesign, inputs: Sequence[str], outputs: Sequence[str]
                ) -> tuple[tuple[str, float, float, str, float], ...]:
-    """The tunable parameters of the C step, in its order (``controller.c`` ``CTL_P_*``), for
+    """The tunable parameters of the C step, in its order (the law file's ``LAW_P_*``), for
     a problem with these input and output names: ``(name, low, high, description, start)``,
-    ``start`` the design's value. Each is the option of its name (``R``, ``du_weight``,
-    ``offset_weight`` by signal: ``R.<input>`` its diagonal entry; ``du_weight`` only when the
-    design has the input-rate term). Normalised units, as the options."""
+    ``start`` the design's value. Each is the option of its name (``offset_filter``; ``R``,
+    ``du_weight``, ``offset_weight`` by signal: ``R.<input>`` its diagonal entry;
+    ``du_weight`` only when the design has the input-rate term, ``offset_weight`` under the
+    tracking law, ``offset_filter`` under the paper's with ``offset_free`` only). Normalised
+    units, as the options."""
     k = design.kernel
     inf = float("inf")
-    out = [("offset_filter", 0.0, 1.0, "gain of the output-disturbance estimate d_hat, in "
-            "(0, 1] (option offset_filter)", float(design.beta))]
+    out = []
+    if design.law == "tracking" or design.offset_free:
+        out.append(("offset_filter", 0.0, 1.0, "gain of the output-disturbance estimate "
+                    "d_hat, in (0, 1] (option offset_filter)", float(design.beta)))
     R = np.asarray(k.R, dtype=float)
     out += [(f"R.{name}", 0.0, inf, f"input weight R of {name} (diagonal entry; R stays "
              "positive definite; option R)", float(R[j, j])) for j, name in enumerate(inputs)]
@@ -217,33 +302,42 @@ def parameters(design: ControllerDesign, inputs: Sequence[str], outputs: Sequenc
         du = np.asarray(k.du_weight, dtype=float)
         out += [(f"du_weight.{name}", 0.0, inf, f"input-rate weight S of {name}, >= 0 "
                  "(option du_weight)", float(du[j])) for j, name in enumerate(inputs)]
-    T = np.asarray(k.offset_weight, dtype=float)
-    out += [(f"offset_weight.{name}", 0.0, inf, f"offset weight T of {name}, > 0 (option "
-             "offset_weight)", float(T[a])) for a, name in enumerate(outputs)]
-    if len(out) != _parameter_count(k):
+    if design.law == "tracking":
+        T = np.asarray(k.offset_weight, dtype=float)
+        out += [(f"offset_weight.{name}", 0.0, inf, f"offset weight T of {name}, > 0 "
+                 "(option offset_weight)", float(T[a])) for a, name in enumerate(outputs)]
+    if len(out) != _parameter_count(design):
         raise ValueError("one name per input and output is needed")
     return tuple(out)
 
 
-def _parameter_count(problem: KernelProblem) -> int:
-    """``CTL_N_PARAMETERS`` of ``controller.c`` for ``problem``."""
-    m, p = np.shape(problem.params["W_z"])[1], np.shape(problem.params["U_o"])[0]
-    return 1 + m + (m if problem.has_du else 0) + p
+def _parameter_count(design: ControllerDesign) -> int:
+    """``LAW_N_PARAMETERS`` of the law's file for ``design``."""
+    k = design.kernel
+    m, p = np.shape(k.params["W_z"])[1], np.shape(k.params["U_o"])[0]
+    rate = m if k.has_du else 0
+    if design.law == "tracking":
+        return 1 + m + rate + p
+    return int(design.offset_free) + m + rate
 
 
 def generate_source(design: ControllerDesign) -> str:
     """The C source of the controller step (symbol prefix left as ``@PFX@``): the kernel,
-    ``controller.c`` and the loader of its numbers (``loader.c``), which are declared, not
-    defined: the source is the same for every design of the same dimensions, and
+    ``controller.h``, the law's file, ``controller.c`` and the loader of its numbers
+    (``loader.c``), which are declared, not defined: the source is the same for every design
+    of the same dimensions and law (and, for the paper's, ``offset_free``), and
     :func:`design_data` is what a design adds (``PFX(load_data)``)."""
     problem = design.kernel
-    if problem.offset_weight is None:
-        raise ValueError("the exported controller runs the tracking law")
+    if (problem.offset_weight is None) != (design.law == "paper"):
+        raise ValueError(f"the {design.law} law's design on another law's kernel")
     kernel, own = kernel_constants(problem), controller_constants(design)
+    switches = f"#define CT_NPARAM {_parameter_count(design)}\n"
+    if design.law == "paper":
+        switches += f"#define CT_OFFSET_FREE {int(design.offset_free)}\n"
     return "\n".join([kernel_source(problem, kernel),
                       "/* the controller's constants (controller_source.py) */\n"
-                      f"#define CT_NPARAM {_parameter_count(problem)}\n"
-                      + own.declarations(),
+                      + switches + own.declarations(),
+                      CONTROLLER_H.read_text(), LAW_C[design.law].read_text(),
                       CONTROLLER_C.read_text(), loader_source(kernel + own)])
 
 

@@ -1,10 +1,10 @@
 /* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
- * generated header, gru_fhocp.h and the parts into one translation unit), HAS_ASS kernels
- * only: the model equilibrium whose output is closest to a given one (controllers/
- * equilibrium.py equilibrium_for_output), on the artificial steady state's Newton
- * (steady_state.c). The tracking law starts its observer and its steady state there (paper
- * section V), in Python and in the exported controller alike. */
-#if HAS_ASS
+ * generated header, gru_fhocp.h and the parts into one translation unit), every
+ * kernel: the model equilibrium whose output is closest to a given one (controllers/
+ * equilibrium.py equilibrium_for_output), on the steady state's Newton (steady_state.c).
+ * The observer starts there (paper section V), the tracking law's steady state too, and the
+ * paper's law finds the reference (x_bar, u_bar) of each set-point with it, in Python and in
+ * the exported controller alike. */
 /* Residual below which an output counts as reached (controllers/equilibrium.py REACH_TOL). */
 #define GK_REACH_TOL 1e-8
 
@@ -161,4 +161,3 @@ EXPORT int PFX(equilibrium)(gk_ws *ws, const double *y, double *x, double *u) {
   }
   return best > GK_REACH_TOL;
 }
-#endif /* HAS_ASS */

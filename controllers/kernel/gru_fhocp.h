@@ -82,10 +82,10 @@ void PFX(gru_step)(const double *x, const double *u, const double *dz, const dou
  * 0 converged, 1 not converged or NaN, 2 singular. */
 int PFX(eq_newton)(const double *y, const double *x0, const double *u0, int max_iter,
                    double tol, double *xo, double *uo);
-/* The artificial steady state x_s(u_s) by Newton from x0 (HAS_ASS only); 0 converged. */
+/* The steady state x_s(u_s) = f(x_s, u_s) by Newton from x0; 0 converged. */
 int PFX(steady)(gk_ws *ws, const double *us, const double *x0, double *xs);
-/* The equilibrium (x, u), |u|inf <= 1, whose output U_o x + b_o is closest to y (HAS_ASS
- * only; equilibrium.c): 0 when y is reached, 1 for the closest reachable one. */
+/* The equilibrium (x, u), |u|inf <= 1, whose output U_o x + b_o is closest to y
+ * (equilibrium.c): 0 when y is reached, 1 for the closest reachable one. */
 int PFX(equilibrium)(gk_ws *ws, const double *y, double *x, double *u);
 
 /* ---- the library */

@@ -95,11 +95,11 @@ class Kernel:
         f = self._fn("output")
         f.argtypes, f.restype = [_VP] * 2, None
         self.c["output"] = f
-        if hasattr(self.lib, prefix + "steady"):    # the tracking FHOCP's kernel (HAS_ASS)
+        if hasattr(self.lib, prefix + "steady"):
             f = self._fn("steady")
             f.argtypes, f.restype = [_VP] * 4, _CI
             self.c["steady"] = f
-        if hasattr(self.lib, prefix + "equilibrium"):   # HAS_ASS
+        if hasattr(self.lib, prefix + "equilibrium"):
             f = self._fn("equilibrium")
             f.argtypes, f.restype = [_VP] * 4, _CI
             self.c["equilibrium"] = f
@@ -204,7 +204,7 @@ class Workspace:
 
     @property
     def has_equilibrium(self) -> bool:
-        """The library has :meth:`equilibrium` (a tracking FHOCP's kernel)."""
+        """The library has :meth:`equilibrium` (every kernel of this generator)."""
         return "equilibrium" in self.kernel.c
 
     def equilibrium(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:

@@ -126,13 +126,13 @@ typedef struct gk_mem {
 #endif
   A32 double S[(NH + 1) * NX * NSC];     /* S_i = dx_i/dw_u, NX x NSC row-major; cols >= KC(i) 0 */
   double uf[NUF];                        /* the inputs u_0 .. u_{N-1} of the cached point */
-#if HAS_ASS
-  /* the artificial steady state of the cached point (steady_state.c): x_s = f(x_s, u_s),
-   * X_s = dx_s/du_s = (I - A_s)^-1 B_s (NX x NU row-major), LU of I - A_s, Newton's status */
+  /* the steady state x_s = f(x_s, u_s) of the last Newton (steady_state.c; the artificial
+   * steady state of the cached point with HAS_ASS, the equilibrium search's in every
+   * kernel): X_s = dx_s/du_s = (I - A_s)^-1 B_s (NX x NU row-major), LU of I - A_s,
+   * Newton's status */
   double xs[NX], XS[NX * NU], xs_lu[NX * NX];
   double xs_z[NX], xs_r[NX], xs_h[NX], xs_jh[NX * NV];   /* its gates and J_h */
   int xs_piv[NX], xs_status;
-#endif
   /* the cost weights a solve reads, per instance: R (NU x NU), S = diag(dw) (HAS_DU), the
    * offset weights T = diag(tw) (HAS_ASS); the library's RW, DW, TW at ws_reset, tunable
    * between solves (the exported controller's parameters, controller.c). Q and s stay the

@@ -11,8 +11,10 @@
  * TW = diag T) and, with HAS_DU, the terminal input-rate term ||u_{N-1} - u_s||^2_S; the
  * constraints add the rows D U_o x_s (the steady output in Y_s, bounds set per solve). The
  * Hessian's u_s block includes the curvature of x_s(u_s) (ass_curvature, hessian.c:
- * one transposed solve and the point Hessian at (x_s, u_s)). */
-#if HAS_ASS
+ * one transposed solve and the point Hessian at (x_s, u_s)).
+ *
+ * The steady state's Newton (steady_state) is compiled in every kernel: the equilibrium
+ * search (equilibrium.c) runs on it, for either law; the rest only with HAS_ASS. */
 #define XS_MAX_ITER 50
 #define XS_TOL 1e-13
 
@@ -51,24 +53,6 @@ static void lu_solve(const double *LU, const int *piv, double *b, int st) {
     double s = b[c * st];
     for (int q = c + 1; q < NX; q++) s -= LU[c * NX + q] * b[q * st];
     b[c * st] = s / LU[c * NX + c];
-  }
-}
-
-/* solve (LU)' y = b in place (the transposed system of lu_factor's matrix) */
-static void lu_solve_t(const double *LU, const int *piv, double *b) {
-  for (int c = 0; c < NX; c++) {      /* U' w = b */
-    double s = b[c];
-    for (int q = 0; q < c; q++) s -= LU[q * NX + c] * b[q];
-    b[c] = s / LU[c * NX + c];
-  }
-  for (int c = NX - 1; c >= 0; c--) { /* L' v = w (unit diagonal) */
-    double s = b[c];
-    for (int q = c + 1; q < NX; q++) s -= LU[q * NX + c] * b[q];
-    b[c] = s;
-  }
-  for (int c = NX - 1; c >= 0; c--) { /* y = P' v: the row swaps in reverse */
-    const int pr = piv[c];
-    if (pr != c) { const double t = b[c]; b[c] = b[pr]; b[pr] = t; }
   }
 }
 
@@ -115,6 +99,25 @@ static void steady_state(gk_ws *ws, const double *us, const double *x0) {
   for (int k = 0; k < NX; k++)
     for (int j = 0; j < NU; j++) ws->mem.XS[k * NU + j] = df[k * NV + NX + j];
   for (int j = 0; j < NU; j++) lu_solve(M, piv, ws->mem.XS + j, NU);
+}
+
+#if HAS_ASS
+/* solve (LU)' y = b in place (the transposed system of lu_factor's matrix) */
+static void lu_solve_t(const double *LU, const int *piv, double *b) {
+  for (int c = 0; c < NX; c++) {      /* U' w = b */
+    double s = b[c];
+    for (int q = 0; q < c; q++) s -= LU[q * NX + c] * b[q];
+    b[c] = s / LU[c * NX + c];
+  }
+  for (int c = NX - 1; c >= 0; c--) { /* L' v = w (unit diagonal) */
+    double s = b[c];
+    for (int q = c + 1; q < NX; q++) s -= LU[q * NX + c] * b[q];
+    b[c] = s;
+  }
+  for (int c = NX - 1; c >= 0; c--) { /* y = P' v: the row swaps in reverse */
+    const int pr = piv[c];
+    if (pr != c) { const double t = b[c]; b[c] = b[pr]; b[pr] = t; }
+  }
 }
 
 /* the tracking law's extra cost: ||U_o x_s + b_o - r||^2_T (+ ||u_{NM-1} - u_s||^2_S: the

@@ -126,7 +126,8 @@ class ReferenceGovernor:
             eq = self.newton(r, x0, u0)
             if eq is None:
                 try:
-                    ref = self.cert.reference(r, check=False)
+                    ref = self.cert.reference(r, check=False,
+                                              kernel=getattr(self.fhocp, "kernel", None))
                     eq = (ref.x_bar, ref.u_bar)
                 except SetpointError:
                     eq = None

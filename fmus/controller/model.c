@@ -3,8 +3,9 @@
  * step. A communication step of k sample times runs k controller steps with the inputs held
  * (k = 1 in a master that steps at the controller's sample time); a step that is not a
  * multiple of the sample time is refused. A non-finite measurement or set-point holds the
- * last inputs and is logged as a warning. A tunable parameter set between steps holds from
- * the next step on.
+ * last inputs and is logged as a warning, as is a set-point the paper's law refuses (one
+ * message per step, the most serious). A tunable parameter set between steps holds from the
+ * next step on.
  */
 #include "model.h"
 
@@ -13,9 +14,11 @@
 #include <stdlib.h>
 #include <string.h>
 
-/* warning bits of controller.c (CTL_WARN_*) */
+/* warning bits of the controller step (controllers/kernel/controller.h CTL_WARN_*) */
 #define WARN_NONFINITE_INPUT 1
 #define WARN_UNREACHABLE_START 2
+#define WARN_SETPOINT_REJECTED 4
+#define WARN_NO_ADMISSIBLE_SETPOINT 8
 
 void model_set_defaults(ModelData *m) {
     m->time = 0.0;
@@ -138,6 +141,18 @@ const char *model_warning(ModelData *m, char *msg, size_t n) {
     if (w & WARN_NONFINITE_INPUT) {
         snprintf(msg, n, "a measured output or set-point is not finite at t = %.17g s: the "
                  "last inputs are held and the observer is not advanced", m->time);
+        return msg;
+    }
+    if (w & WARN_NO_ADMISSIBLE_SETPOINT) {
+        snprintf(msg, n, "no admissible set-point at t = %.17g s (the paper's law: the "
+                 "set-points and the closest admissible ones fail the certificate's "
+                 "hypotheses or are not reachable): the inputs are held", m->time);
+        return msg;
+    }
+    if (w & WARN_SETPOINT_REJECTED) {
+        snprintf(msg, n, "set-point refused at t = %.17g s (the paper's law: it fails a "
+                 "hypothesis of th:feasibility-stability, or no input in the box reaches "
+                 "it): the last admissible set-point is kept", m->time);
         return msg;
     }
     if (w & WARN_UNREACHABLE_START) {

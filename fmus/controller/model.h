@@ -16,8 +16,8 @@
  * Value references: 0 time; then the measured outputs (inputs of the FMU, named as the
  * plant's outputs), their set-points ref.<output>, the inputs to apply (outputs of the FMU,
  * named as the plant's inputs), status, fallback, iterations, the predicted outputs
- * pred.<output>, and the tunable parameters (controller.c CTL_P_*: offset_filter, the diagonal
- * of R, du_weight, offset_weight by signal).
+ * pred.<output>, and the tunable parameters (the law file's LAW_P_*: offset_filter, the
+ * diagonal of R, du_weight, offset_weight by signal, as the law has them).
  */
 #ifndef CONTROLLER_MODEL_H
 #define CONTROLLER_MODEL_H

@@ -240,14 +240,97 @@ def test_the_compiled_step_replays_the_python_controller() -> None:
     compiled.close()
 
 
-def test_the_paper_law_is_not_exported(tmp_path: Path) -> None:
+def test_the_paper_law_with_its_governor_is_refused(tmp_path: Path) -> None:
     from cosim_adapters.controller_export import export_fmu
     from cosim_adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController(law="paper")
-    with pytest.raises(CosimError, match="law 'paper': the controller FMU runs the tracking law"):
+    with pytest.raises(CosimError, match="the paper's law with its reference governor "
+                                         r"\(governor=true, its default\): the controller FMU "
+                                         "runs the paper's law without it"):
         export_fmu(ctrl, tmp_path / "C.fmu")
     assert not (tmp_path / "C.fmu").exists()
+
+
+PAPER_LAW = {"law": "paper", "governor": False}
+
+
+def test_the_paper_law_exported_runs_as_the_python_law(tmp_path: Path) -> None:
+    """``cosim export-fmu --option law=\"paper\" --option governor=false`` (the paper's
+    controller): on the paper scenario, through its failed solves and fallbacks after the
+    set-point steps, the FMU gives the Python law's inputs, statuses and fallbacks (to the
+    bit here); its tunable parameters are R's diagonal (no offset filter without
+    ``offset_free``, no offset weight), and R tuned gives the Python law with that R."""
+    fmu = cosim.export_fmu(out=tmp_path / "Paper.fmu", options=PAPER_LAW)
+    md = fmpy.read_model_description(str(fmu))
+    assert "paper's law, certified" in md.description
+    assert [v.name for v in md.modelVariables if v.causality == "parameter"] == ["R.qa", "R.qb"]
+    boxes = {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)}
+    py = cosim.run(PAPER, options=PAPER_LAW, figure=False)
+    assert set(py.to_pandas()["ctrl.fallback"]) == {0.0, 1.0}
+    _same_inputs(cosim.run(PAPER, controller=str(fmu), figure=False), py, boxes)
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,0.8,0.9\n1000,,\n")
+    tuned = {"R": {"qa": 0.05}}
+    _same_inputs(cosim.run(scenario, controller=str(fmu), options=tuned, figure=False),
+                 cosim.run(scenario, options={**PAPER_LAW, **tuned}, figure=False), boxes)
+
+
+@pytest.mark.parametrize(("options", "refs", "first_outside", "named"), [
+    ({}, ((0.65, 0.65), (1.3, 1.4), (3.0, 0.3)), False, 1),
+    ({"offset_free": True, "setpoint_rate": 0.05, "du_weight": 0.1},
+     ((0.65, 0.65), (0.9, 1.0), (3.0, 0.3)), False, 0),
+    ({}, ((3.0, 0.3), (0.8, 0.9), (0.7, 0.8)), True, 1)],
+    ids=["paper", "offset-free-rate-limited", "uncertified-first-outside"])
+def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tuple,
+                                                        first_outside: bool,
+                                                        named: int) -> None:
+    """The paper's law in C (``law_paper.c``) fed the measurements the Python law saw:
+    its inputs, statuses and fallbacks step by step (to the bit), through set-point steps,
+    the offset-free shift and the rate limit, a set-point outside the theory (refused, the
+    last admissible one kept: one warning per refused request, where the Python law names
+    one; rate-limited, the set-point stops at the boundary, refused step by step, unnamed,
+    as in Python) and, uncertified, a first set-point outside (the closest admissible
+    one)."""
+    from controllers.kernel.controller_source import (
+        CompiledController,
+        ControllerDesign,
+        build,
+        design_data,
+        parameters,
+    )
+    from cosim_adapters.robust_mpc import RobustMPCController
+
+    ctrl = RobustMPCController(**PAPER_LAW, **options)
+    if first_outside:
+        ctrl.expect_setpoints([{"h1": 3.0, "h2": 0.3}])
+        assert not ctrl.law.certified
+    ctrl.setup(0.0)
+    design = ControllerDesign.of_paper(ctrl.law, ctrl.observer, ctrl.model, ctrl._lo,
+                                       ctrl._hi)
+    names = [p[0] for p in parameters(design, ("qa", "qb"), ("h1", "h2"))]
+    assert names == (["offset_filter"] if "offset_free" in options else []) + [
+        "R.qa", "R.qb"] + (["du_weight.qa", "du_weight.qb"] if "du_weight" in options else [])
+    compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
+                                  n_outputs=2)
+    rng = np.random.default_rng(5)
+    y = np.array([0.62, 0.71])
+    refused = 0
+    for k in range(75):
+        ref = np.array(refs[min(k // 25, 2)])
+        y = y + rng.normal(0.0, 2e-3, 2)
+        ctrl.set_inputs({"h1": y[0], "h2": y[1], "ref.h1": ref[0], "ref.h2": ref[1]})
+        ctrl.step(25.0 * k, 25.0)
+        out = compiled.step(y, ref)
+        u = np.array([ctrl.get_outputs()[n] for n in ("qa", "qb")])
+        np.testing.assert_array_equal(out["u"], u)
+        assert out["status"] == ctrl.diagnostics()["status"]
+        assert out["fallback"] == ctrl.diagnostics()["fallback"]
+        assert bool(out["warnings"] & 4) == (len(ctrl.law.rejections) > refused), k
+        refused = len(ctrl.law.rejections)
+    assert refused == named
+    assert ctrl.law.rejected > 0
+    compiled.close()
 
 
 def test_a_campaign_qualifies_the_fmu_on_the_python_controllers_draws(

@@ -1,0 +1,143 @@
+/* controller.h: what the exported controller's two parts share (controllers/kernel/
+ * controller_source.py joins the kernel, the controller's constants, this file, the law's
+ * file -- law_tracking.c or law_paper.c -- and controller.c into one translation unit).
+ *
+ * A law file defines, for controller.c:
+ *
+ *   law_state           everything the law keeps between steps (its FHOCP's buffers, warm
+ *                       start, plan, set-point handling), the kernel's solver instance ws
+ *                       included; with the fields status, fallback, iterations and y_pred
+ *                       (normalised) of its last step
+ *   LAW_N_PARAMETERS    how many tunable parameters it has (CT_NPARAM must agree)
+ *   law_reset(ls, ws)   a new run
+ *   law_step(ls, xhat, e_o, y, yr, u, warnings)
+ *                       u_k (normalised) for the estimate x_hat, the bound e_o, the measured
+ *                       output y and the set-point yr (normalised), raising CTL_WARN_* bits;
+ *                       u comes holding the inputs applied last (left so: they are held)
+ *   law_parameter(ls, i), law_refuse(ls, i, value)
+ *                       where tunable parameter i lives (NULL: none), why a value is refused
+ *                       (NULL: accepted)
+ */
+#ifndef CT_NPARAM
+#error "the controller's constants (controller_source.py) must precede controller.h"
+#endif
+
+/* the step's status codes: controllers/ocp/solve_status.py status_code */
+enum ctl_status {
+  CTL_OPTIMAL = 0, CTL_INFEASIBLE_X0 = 1, CTL_INFEASIBLE = 2, CTL_LIMIT = 3,
+  CTL_RESIDUAL_CHECK_FAILED = 4, CTL_OTHER = 5
+};
+/* warnings a step may raise (a bit mask cleared by ctl_take_warnings; fmus/controller/model.c
+ * logs them): a non-finite measurement or set-point; a first measured output no input in
+ * the box reaches; (the paper's law) a set-point outside the theory refused, the last
+ * admissible one kept; no admissible set-point at all to start from */
+enum {
+  CTL_WARN_NONFINITE_INPUT = 1, CTL_WARN_UNREACHABLE_START = 2,
+  CTL_WARN_SETPOINT_REJECTED = 4, CTL_WARN_NO_ADMISSIBLE_SETPOINT = 8
+};
+
+/* one solve or one answer check (controllers/ocp/fhocp_result.py FHOCPResult); us and xs:
+ * the artificial steady state (the tracking law) */
+typedef struct ctl_result {
+  double u[NH * NU], us[NU], xs[NX], x[(NH + 1) * NX];
+  double cost, cv, tv, defect;
+  int success, feasible, status, iterations;
+} ctl_result;
+
+static int all_finite(const double *a, int n) {
+  for (int k = 0; k < n; k++)
+    if (!isfinite(a[k])) return 0;
+  return 1;
+}
+
+/* the status of a failed kernel SQP, as status_code names the solver's own status */
+static int sqp_status_code(int sqp) {
+  if (sqp == GK_SQP_MAXIMUM_ITERATIONS_EXCEEDED || sqp == GK_SQP_USER_REQUESTED_STOP)
+    return CTL_LIMIT;
+  return CTL_OTHER;
+}
+
+/* the kernel SQP's options of the design (controllers/kernel/kernel_abi.py SqpOptions) */
+static gk_sqp_opts sqp_options(void) {
+  return (gk_sqp_opts){.tol_pr = CT_SQP_TOL_PR, .tol_du = CT_SQP_TOL_DU,
+                       .max_iter = CT_SQP_MAX_ITER, .max_iter_ls = CT_SQP_MAX_ITER_LS,
+                       .min_step_size = CT_SQP_MIN_STEP, .c1 = CT_SQP_C1,
+                       .beta = CT_SQP_BETA, .time_budget = INFINITY,
+                       .tol_du_relative = CT_SQP_TOL_DU_RELATIVE,
+                       .reuse_step = CT_SQP_REUSE_STEP};
+}
+
+/* the tightened output bounds h - a_i e_o - b_i - w_L - L b_o (eq:optimization-constraint;
+ * controllers/ocp/fhocp.py FHOCP.tightened_bounds, in numpy's order) into bnd (NH x NL) */
+static void tightened_bounds(double e_o, double *bnd) {
+  for (int i = 0; i < NH; i++)
+    for (int j = 0; j < NL; j++) {
+      double v = CT_H[j] - CT_A[i * NL + j] * e_o;
+      v = v - CT_B[i * NL + j];
+      v = v - CT_WL[j];
+      bnd[i * NL + j] = v - CT_LBO[j];
+    }
+}
+
+/* the i = 0 row's violation at x_hat (FHOCP.check_x0): it involves x_hat only */
+static double x0_violation(const double *xhat, const double *bnd) {
+  double v = -INFINITY;
+  for (int j = 0; j < NL; j++) {
+    double s = 0.0;
+    for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * xhat[k];
+    v = fmax(v, s - bnd[j]);
+  }
+  return v;
+}
+
+/* the row-paired output rows i >= 1 of the single-shooting FHOCP's g (controllers/ocp/
+ * fhocp_layout.py FHOCPLayout: D U_o x_i, upper and lower L rows per reduced row) into
+ * lbg, ubg (the first (NH - 1) NQ entries) */
+static void output_rows(const double *bnd, double *lbg, double *ubg) {
+  for (int i = 1; i < NH; i++)
+    for (int r = 0; r < NQ; r++) {
+      const int pos = (i - 1) * NQ + r;
+      ubg[pos] = bnd[i * NL + CT_PAIR_UP[r]];
+      if (CT_PAIR_LO[r] >= 0) lbg[pos] = -bnd[i * NL + CT_PAIR_LO[r]];
+    }
+}
+
+/* the answer check's judgement (controllers/ocp/fhocp_result.py set_residuals, judge) of the
+ * solver's w into r, the assessment of (u, x) already there; iterations the SQP's */
+static void judge(ctl_result *r, const double *w, int sqp_status, const gk_sqp_info *info) {
+  const int ok = sqp_status == GK_SQP_SOLVE_SUCCEEDED;
+  r->iterations = info->iterations + info->discarded_iterations;
+  r->feasible = all_finite(w, NW) && r->cv <= CT_FEAS_TOL && r->tv <= CT_FEAS_TOL &&
+                r->defect <= CT_DEFECT_TOL;
+  r->success = ok && r->feasible;
+  r->status = r->success ? CTL_OPTIMAL
+              : ok       ? CTL_RESIDUAL_CHECK_FAILED
+                         : sqp_status_code(sqp_status);
+}
+
+/* a (NU x NU) is positive definite: its Cholesky factorisation exists */
+static int positive_definite(const double *a) {
+  double l[NU * NU];
+  for (int j = 0; j < NU; j++)
+    for (int k = 0; k <= j; k++) {
+      double s = a[j * NU + k];
+      for (int c = 0; c < k; c++) s -= l[j * NU + c] * l[k * NU + c];
+      if (j == k) {
+        if (!(s > 0.0)) return 0;
+        l[j * NU + j] = sqrt(s);
+      } else {
+        l[j * NU + k] = s / l[k * NU + k];
+      }
+    }
+  return 1;
+}
+
+/* why a value of R's diagonal entry j is refused (NULL: R stays positive definite) */
+static const char *refuse_r(const gk_ws *ws, int j, double value) {
+  double r[NU * NU];
+  memcpy(r, ws->mem.rw, sizeof r);
+  r[j * (NU + 1)] = value;
+  if (!(isfinite(value) && positive_definite(r)))
+    return "must keep R positive definite (a finite diagonal weight > 0)";
+  return 0;
+}

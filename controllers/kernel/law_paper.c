@@ -1,0 +1,360 @@
+/* law_paper.c: the paper's law in C (law="paper", governor=false: the paper's controller),
+ * joined between controller.h and controller.c (see controller.h for what a law file
+ * defines). It is the C twin of the Python law, in the same order of kernel calls:
+ *
+ *   law_step        cosim_adapters/paper_law.py PaperLaw.step and _update_reference: the
+ *                   set-point rate limit (setpoint_rate), the offset-free shift by d_hat
+ *                   (offset_free), the reference (x_bar, u_bar, alpha) of each new set-point,
+ *                   the rejection of one outside the theory (the last admissible one kept)
+ *   reference       controllers/certification/certificates.py Certificate.reference: the
+ *                   hypotheses at y_bar (Assumption 1, alpha of eq:def-alpha > 0,
+ *                   eq:condition-recursive-feasibility; nu < 1 and nu_o < 1 are the
+ *                   design's), then the model equilibrium with output y_bar (the kernel's
+ *                   PFX(equilibrium), which the Python law calls too)
+ *   first_admissible PaperLaw._first_admissible and closest_admissible (the uncertified
+ *                   mode's first set-point outside the theory)
+ *   make_step       controllers/ocp/paper_mpc.py RobustMPC.make_step: eq:mpc with the
+ *                   candidate of the proof of th:feasibility-stability as fallback, and the
+ *                   suboptimal iterate no costlier than it
+ *   solve           controllers/ocp/fhocp.py FHOCP.solve_request with the paper's reference
+ *                   (controllers/ocp/reference_setpoint.py FixedSetpoint: write, through
+ *                   controllers/ocp/fhocp_layout.py FHOCPLayout.write; check_answer and
+ *                   fhocp_result.judge; the warm start)
+ *   evaluate        FixedSetpoint.evaluate (a given plan's answer check)
+ *
+ * so that the same measurements give the same inputs (tests/cosim_adapters/
+ * test_controller_export.py). The admissible reference governor (governor=true, the
+ * Python law's default) is not compiled: export refuses it by name.
+ *
+ * Where the Python component raises (a certified design whose first set-point is outside
+ * the theory), the C step takes the closest admissible set-point as the uncertified law
+ * does and raises CTL_WARN_SETPOINT_REJECTED; with no admissible set-point at all it holds
+ * the inputs and raises CTL_WARN_NO_ADMISSIBLE_SETPOINT.
+ */
+#if HAS_ASS
+#error "law_paper.c runs on the paper's FHOCP kernel (HAS_ASS 0)"
+#endif
+#ifndef CT_OFFSET_FREE
+#error "the paper's law needs CT_OFFSET_FREE (controller_source.py)"
+#endif
+
+/* How far inside the admissible box the closest admissible set-point is put (paper_law.py
+ * INSIDE) and the change of the FHOCP's set-point that counts as one (_update_reference). */
+#define PAPER_INSIDE 1e-3
+#define PAPER_SAME_TOL (CT_OFFSET_FREE ? 1e-3 : 1e-12)
+
+/* the tunable parameters (law_parameter), in this order: the disturbance filter's gain
+ * (option offset_filter, in (0, 1]; with offset_free only), the diagonal of R (option R: NU
+ * entries, R kept positive definite) and the input-rate weights S (option du_weight: NU
+ * entries >= 0, with HAS_DU). The weights are the kernel instance's (gk_mem.rw, dw); Q and
+ * s are not tunable (s is the certificate's, eq:definition_s, from Q); the theorem holds for
+ * any R > 0, and S is outside the paper's cost. */
+enum {
+  LAW_P_OFFSET_FILTER = 0, LAW_P_R = CT_OFFSET_FREE, LAW_P_DU = LAW_P_R + NU,
+  LAW_N_PARAMETERS = LAW_P_DU + HAS_DU * NU
+};
+
+typedef struct law_state {
+  gk_ws *ws;
+  /* the set-point handling: the requested set-point, the FHOCP's, the offset estimate d_hat
+   * and its gain (a parameter) */
+  int has_ref, has_model, has_reference;
+  double y_ref[NY], y_model[NY], dhat[NY], beta;
+  /* the reference (x_bar, u_bar, alpha) of the FHOCP's set-point */
+  double x_bar[NX], u_bar[NU], alpha;
+  /* the robust MPC: the plan, the last input (u_{-1} of the input-rate term) */
+  int has_plan, has_uprev;
+  double plan[NH * NU], uprev[NU], cand[NH * NU];
+  /* the FHOCP's warm start (its last answer and multipliers) */
+  int has_warm;
+  double warm_w[NW], warm_lx[NW], warm_lg[NG];
+  /* the solver's buffers */
+  double p[NP], lbx[NW], ubx[NW], lbg[NG], ubg[NG], w[NW], lx[NW], lg[NG], g[NG], f;
+  double bnd[NH * NL];
+  ctl_result res, chk;
+  gk_sqp_opts opts;
+  gk_sqp_info info;
+  /* what the last step gave (y_pred normalised) */
+  double y_pred[NY];
+  int status, fallback, iterations;
+} law_state;
+
+/* ---------------------------------------------------------------- the reference */
+/* Certificate.ok at y (normalised), alpha (eq:def-alpha) into *alpha: the margins
+ * h - e_tilde a_N - b_N - w_L - L y of Assumption 1, in numpy's order */
+static int admissible(const double *y, double *alpha) {
+  double a = INFINITY;
+  int ok = CT_CERT_DESIGN_OK;
+  for (int j = 0; j < NL; j++) {
+    double ly = 0.0;
+    for (int c = 0; c < NY; c++) ly += -CT_CERT_L[j * NY + c] * y[c];
+    const double m = (((ly + CT_CERT_H[j]) - CT_CERT_EAN[j]) - CT_CERT_BN[j]) - CT_CERT_WL[j];
+    if (!(m > 0.0)) ok = 0;
+    if (CT_CERT_CS[j] > 0.0) a = fmin(a, m / CT_CERT_CS[j]);
+  }
+  *alpha = a;
+  return ok && a > 0.0 && CT_CERT_RF_LHS <= a * CT_CERT_RF_ONE_MINUS_RHO;
+}
+
+/* Certificate.reference: (x_bar, u_bar, alpha) of the set-point y into st; 0, or 1 when y
+ * fails a hypothesis or is not reachable with |u|inf <= 1 (nothing written then) */
+static int reference(law_state *st, const double *y) {
+  double alpha, x[NX], u[NU];
+  if (!admissible(y, &alpha)) return 1;
+  if (PFX(equilibrium)(st->ws, y, x, u) != 0) return 1;
+  memcpy(st->x_bar, x, sizeof x);
+  memcpy(st->u_bar, u, sizeof u);
+  st->alpha = alpha;
+  st->has_reference = 1;
+  return 0;
+}
+
+/* closest_admissible: y moved into the admissible box, PAPER_INSIDE within it; 1 when the box
+ * is empty for some output */
+static int closest_admissible(const double *y, double *out) {
+  for (int a = 0; a < NY; a++) {
+    const double lo = CT_BOX_LO[a], hi = CT_BOX_HI[a];
+    if (!(lo + 2 * PAPER_INSIDE <= hi)) return 1;
+    out[a] = fmin(fmax(y[a], lo + PAPER_INSIDE), hi - PAPER_INSIDE);
+  }
+  return 0;
+}
+
+/* PaperLaw._first_admissible: the reference of the admissible set-point closest to target,
+ * else to the output of the equilibrium closest to the measured y, into st and y_bar; 1 when
+ * neither has one */
+static int first_admissible(law_state *st, const double *target, const double *y,
+                            double *y_bar) {
+  double x_eq[NX], u_eq[NU], starts[2][NY], inside[NY];
+  PFX(equilibrium)(st->ws, y, x_eq, u_eq);
+  memcpy(starts[0], target, sizeof starts[0]);
+  PFX(output)(x_eq, starts[1]);
+  for (int s = 0; s < 2; s++) {
+    if (closest_admissible(starts[s], inside) != 0) continue;
+    if (reference(st, inside) == 0) {
+      memcpy(y_bar, inside, sizeof inside);
+      return 0;
+    }
+  }
+  return 1;
+}
+
+/* PaperLaw._update_reference (without the governor): the FHOCP's set-point for the request
+ * yr at the measured y; raises CTL_WARN_SETPOINT_REJECTED once per requested set-point
+ * refused. 1 when there is no reference to regulate to (the first set-point and none
+ * admissible). */
+static int update_reference(law_state *st, const double *xhat, const double *y,
+                            const double *yr, int *warnings) {
+  double target[NY], yh[NY];
+  memcpy(target, yr, sizeof target);
+  if (CT_SETPOINT_RATE >= 0.0 && st->has_model)
+    for (int a = 0; a < NY; a++) {
+      const double step = CT_SETPOINT_RATE / fabs(CT_Y_SCALE[a]);
+      const double base = st->y_model[a] + (CT_OFFSET_FREE ? st->dhat[a] : 0.0);
+      target[a] = base + fmin(fmax(yr[a] - base, -step), step);
+    }
+  if (CT_OFFSET_FREE) {
+    PFX(output)(xhat, yh);
+    for (int a = 0; a < NY; a++) {
+      st->dhat[a] = st->dhat[a] + st->beta * (((y[a] - yh[a])) - st->dhat[a]);
+      target[a] = target[a] - st->dhat[a];
+    }
+  }
+  if (st->has_model) {
+    double d = 0.0;
+    for (int a = 0; a < NY; a++) d = fmax(d, fabs(target[a] - st->y_model[a]));
+    if (d < PAPER_SAME_TOL) return 0;
+  }
+  int changed = !st->has_ref;
+  for (int a = 0; a < NY; a++) changed |= yr[a] != st->y_ref[a];
+  memcpy(st->y_ref, yr, sizeof st->y_ref);
+  st->has_ref = 1;
+  if (reference(st, target) == 0) {
+    memcpy(st->y_model, target, sizeof target);
+    st->has_model = 1;
+    return 0;
+  }
+  if (changed) *warnings |= CTL_WARN_SETPOINT_REJECTED;
+  if (st->has_model) return 0;   /* the last admissible set-point is kept */
+  if (first_admissible(st, target, y, st->y_model) == 0) {
+    st->has_model = 1;
+    return 0;
+  }
+  *warnings |= CTL_WARN_NO_ADMISSIBLE_SETPOINT;
+  return 1;
+}
+
+/* ---------------------------------------------------------------- the FHOCP */
+/* u_{-1} of the input-rate term: the input applied last, u_bar before the first */
+static const double *u_prev(const law_state *st) {
+  return st->has_uprev ? st->uprev : st->u_bar;
+}
+
+/* FixedSetpoint.evaluate: the plan u (clipped) from x_hat evaluated apart from the solver into
+ * r (the kernel's answer check of a given sequence) */
+static void evaluate(law_state *st, const double *xhat, const double *u, int status,
+                     ctl_result *r) {
+  gk_assessment out;
+  for (int c = 0; c < NH * NU; c++) r->u[c] = gk_clip1(u[c]);
+  PFX(assess)(st->ws, xhat, r->u, st->x_bar, st->u_bar, u_prev(st), st->bnd, st->alpha, r->x,
+              &out);
+  r->cost = out.cost;
+  r->cv = fmax(fmax(0.0, out.violation_first), fmax(out.violation_rows, out.u_max - 1.0));
+  r->tv = fmax(0.0, out.terminal_distance - st->alpha);
+  r->defect = 0.0;
+  r->status = status;
+  r->success = r->feasible = 0;
+  r->iterations = 0;
+}
+
+/* FixedSetpoint.write through FHOCPLayout.write: p = (x_hat, x_bar, u_bar[, u_{-1}]), the
+ * bounds (t <= alpha), the output and terminal rows, the initial guess (the last answer
+ * shifted by one stage with u_bar appended, else u_bar repeated; t its terminal gap) and the
+ * multipliers shifted the same way */
+static void write_request(law_state *st, const double *xhat) {
+  double *p = st->p;
+  memcpy(p, xhat, NX * sizeof(double));
+  memcpy(p + NX, st->x_bar, NX * sizeof(double));
+  memcpy(p + 2 * NX, st->u_bar, NU * sizeof(double));
+#if HAS_DU
+  memcpy(p + 2 * NX + NU, u_prev(st), NU * sizeof(double));
+#endif
+  for (int c = 0; c < NW; c++) {
+    st->lbx[c] = c == IT ? 0.0 : -1.0;
+    st->ubx[c] = c == IT ? st->alpha : 1.0;
+  }
+  for (int c = 0; c < NG; c++) {
+    st->lbg[c] = -INFINITY;
+    st->ubg[c] = INFINITY;
+  }
+  output_rows(st->bnd, st->lbg, st->ubg);
+  const int r0 = (NH - 1) * NQ;
+  for (int k = 0; k < NX; k++) {
+    st->ubg[r0 + k] = 0.0;
+    st->lbg[r0 + NX + k] = 0.0;
+  }
+  for (int c = 0; c < NW; c++) st->w[c] = 0.0;
+  if (st->has_warm) {
+    memcpy(st->w, st->warm_w + NU, (NH - 1) * NU * sizeof(double));
+    memcpy(st->w + (NH - 1) * NU, st->u_bar, NU * sizeof(double));
+  } else {
+    for (int i = 0; i < NH; i++) memcpy(st->w + i * NU, st->u_bar, NU * sizeof(double));
+  }
+  for (int c = 0; c < NH * NU; c++) st->w[c] = gk_clip1(st->w[c]);
+  const double gap = PFX(terminal_gap)(st->ws, st->w, p);
+  st->w[IT] = fmin(fmax(gap, 1e-6), fmax(st->alpha, 0.0));
+  for (int c = 0; c < NW; c++) st->lx[c] = st->has_warm ? st->warm_lx[CT_PERM_X[c]] : 0.0;
+  for (int c = 0; c < NG; c++) st->lg[c] = st->has_warm ? st->warm_lg[CT_PERM_G[c]] : 0.0;
+}
+
+/* FHOCP.solve_request with the paper's reference, into st->res: the i = 0 row first (a
+ * violated one: u_bar repeated, evaluated, status infeasible_x0), then the SQP, the answer
+ * check (FixedSetpoint.check_answer, judge) and the warm start (keeps_warm_start) */
+static void solve(law_state *st, const double *xhat) {
+  double ubar_seq[NH * NU];
+  if (x0_violation(xhat, st->bnd) > CT_FEAS_TOL) {
+    for (int i = 0; i < NH; i++) memcpy(ubar_seq + i * NU, st->u_bar, NU * sizeof(double));
+    evaluate(st, xhat, ubar_seq, CTL_INFEASIBLE_X0, &st->res);
+    return;
+  }
+  write_request(st, xhat);
+  const int status = PFX(sqp)(st->ws, st->p, st->lbx, st->ubx, st->lbg, st->ubg, st->w, st->lx,
+                              st->lg, st->g, &st->f, &st->opts, &st->info);
+  ctl_result *r = &st->res;
+  gk_assessment out;
+  PFX(assess_w)(st->ws, st->w, st->p, st->bnd, st->alpha, r->u, r->x, &out, 0);
+  r->cost = out.cost;
+  r->defect = out.defect;
+  r->cv = fmax(fmax(0.0, out.violation_first), fmax(out.violation_rows, out.u_max - 1.0));
+  r->tv = fmax(0.0, out.terminal_distance - st->alpha);
+  judge(r, st->w, status, &st->info);
+  if (r->success || (all_finite(st->w, NW) && all_finite(st->lg, NG) && all_finite(st->lx, NW))) {
+    memcpy(st->warm_w, st->w, sizeof st->warm_w);
+    memcpy(st->warm_lx, st->lx, sizeof st->warm_lx);
+    memcpy(st->warm_lg, st->lg, sizeof st->warm_lg);
+    st->has_warm = 1;
+  }
+}
+
+/* RobustMPC.make_step: u_k = k^MPC(x_hat, e_o) (eq:mpc), the candidate of the proof (the
+ * plan shifted with u_bar appended, u_bar repeated at first) applied when the solve fails,
+ * unless the solver's iterate is feasible and no costlier (suboptimal MPC) */
+static void make_step(law_state *st, const double *xhat, double *u) {
+  double *cand = st->cand;
+  if (st->has_plan) {
+    memcpy(cand, st->plan + NU, (NH - 1) * NU * sizeof(double));
+    memcpy(cand + (NH - 1) * NU, st->u_bar, NU * sizeof(double));
+  } else {
+    for (int i = 0; i < NH; i++) memcpy(cand + i * NU, st->u_bar, NU * sizeof(double));
+  }
+  solve(st, xhat);
+  ctl_result *res = &st->res;
+  int use = res->success, fallback = 0;
+  const ctl_result *applied = res;
+  if (!use) {
+    evaluate(st, xhat, cand, CTL_OTHER, &st->chk);
+    const int feasible = st->chk.cv <= CT_FEAS_TOL && st->chk.tv <= CT_FEAS_TOL;
+    use = res->feasible && (!feasible || res->cost <= st->chk.cost);
+    fallback = !use;
+    if (!use) applied = &st->chk;
+  }
+  if (use) {
+    memcpy(st->plan, res->u, sizeof st->plan);
+    memcpy(u, res->u, NU * sizeof(double));
+  } else {
+    memcpy(st->plan, cand, sizeof st->plan);
+    for (int j = 0; j < NU; j++) u[j] = gk_clip1(cand[j]);
+  }
+  st->has_plan = 1;
+  memcpy(st->uprev, u, sizeof st->uprev);
+  st->has_uprev = 1;
+  st->status = res->status;
+  st->fallback = fallback;
+  st->iterations = res->iterations;
+  PFX(output)(applied->x + NX, st->y_pred);
+}
+
+/* ---------------------------------------------------------------- the law's interface */
+static void law_reset(law_state *st, gk_ws *ws) {
+  memset(st, 0, sizeof *st);
+  st->ws = ws;
+  st->opts = sqp_options();
+  st->alpha = NAN;
+  for (int a = 0; a < NY; a++) st->y_pred[a] = NAN;
+  st->status = CTL_OTHER;
+  st->beta = CT_BETA;
+}
+
+/* PaperLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr; with
+ * no admissible set-point to start from, u is left as it came (controller.c: the inputs
+ * held, the box's middle before any) */
+static void law_step(law_state *st, const double *xhat, double e_o, const double *y,
+                     const double *yr, double *u, int *warnings) {
+  if (update_reference(st, xhat, y, yr, warnings) != 0) {   /* u as it came: held */
+    st->status = CTL_OTHER;
+    st->fallback = 1;
+    st->iterations = 0;
+    return;
+  }
+  tightened_bounds(e_o, st->bnd);
+  make_step(st, xhat, u);
+}
+
+/* where tunable parameter i (LAW_P_*) lives, NULL for an unknown one */
+static double *law_parameter(law_state *st, int i) {
+  gk_mem *m = &st->ws->mem;
+  if (CT_OFFSET_FREE && i == LAW_P_OFFSET_FILTER) return &st->beta;
+  if (i >= LAW_P_R && i < LAW_P_DU) return m->rw + (i - LAW_P_R) * (NU + 1);
+#if HAS_DU
+  if (i >= LAW_P_DU && i < LAW_N_PARAMETERS) return m->dw + (i - LAW_P_DU);
+#endif
+  return 0;
+}
+
+/* why the value of tunable parameter i (a known one) is refused; NULL: accepted */
+static const char *law_refuse(const law_state *st, int i, double value) {
+  if (CT_OFFSET_FREE && i == LAW_P_OFFSET_FILTER)
+    return value > 0.0 && value <= 1.0 ? 0 : "must be in (0, 1]";
+  if (i < LAW_P_DU) return refuse_r(st->ws, i - LAW_P_R, value);
+  return value >= 0.0 && isfinite(value) ? 0 : "must be a finite weight >= 0";
+}

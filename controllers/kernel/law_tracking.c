@@ -1,0 +1,303 @@
+/* law_tracking.c: the robust MPC's tracking law in C (the default law), joined between
+ * controller.h and controller.c (see controller.h for what a law file defines). It is the C
+ * twin of the Python law, line for line and in the same order of kernel calls:
+ *
+ *   law_step        cosim_adapters/tracking.py TrackingLaw.step: its first steady state (the
+ *                   equilibrium of the estimate's output), the output-disturbance estimate
+ *                   d_hat (DisturbanceFilter), the uncertified mode's shift of the output rows
+ *                   by L d_hat, the target r = y_ref - d_hat
+ *   make_step       controllers/ocp/tracking_mpc.py TrackingMPC.make_step (the candidate, the
+ *                   fallback, the next guess)
+ *   solve           controllers/ocp/reference_tracking.py ArtificialSteadyState.request, and
+ *                   controllers/ocp/fhocp.py FHOCP.solve_request: the i = 0 row,
+ *                   write_request (ArtificialSteadyState.write), the kernel SQP,
+ *                   check_answer (ArtificialSteadyState._check_compiled and
+ *                   fhocp_result.judge, the warm start)
+ *   check           ArtificialSteadyState.evaluate (the candidate's answer check)
+ *
+ * so that the same measurements give the same inputs, to the bit
+ * (tests/cosim_adapters/test_controller_export.py, tests/fmus/test_controller_fmu.py).
+ */
+#if !HAS_ASS
+#error "law_tracking.c runs on a tracking FHOCP's kernel (HAS_ASS)"
+#endif
+
+/* the tunable parameters (law_parameter), in this order: the disturbance filter's gain
+ * (option offset_filter, in (0, 1]), the diagonal of R (option R: NU entries, R kept positive
+ * definite), the input-rate weights S (option du_weight: NU entries >= 0, with HAS_DU) and
+ * the offset weights T (option offset_weight: NY entries > 0). The weights are the kernel
+ * instance's (gk_mem.rw, dw, tw); Q and s are not tunable: s is the certificate's
+ * (eq:definition_s, from Q), and the tracking law's hypotheses (H3) hold for any R > 0,
+ * S >= 0, T > 0. controller_source.py parameters() names them, in this order. */
+enum {
+  LAW_P_OFFSET_FILTER = 0, LAW_P_R = 1, LAW_P_DU = LAW_P_R + NU,
+  LAW_P_T = LAW_P_DU + HAS_DU * NU, LAW_N_PARAMETERS = LAW_P_T + NY
+};
+
+typedef struct law_state {
+  gk_ws *ws;
+  /* the output-disturbance estimate d_hat (DisturbanceFilter) and its gain (a parameter) */
+  double dhat[NY], beta;
+  /* the tracking MPC: artificial steady state, plan, last input, next initial guess */
+  int started, has_plan, has_uprev, has_guess;
+  double us[NU], xs[NX], plan[NH * NU], uprev[NU], g_u[NH * NU], g_us[NU], g_xs[NX];
+  /* the FHOCP's warm start (its last multipliers) */
+  int has_warm;
+  double warm_lx[NW], warm_lg[NG];
+  /* the solver's buffers */
+  double p[NP], lbx[NW], ubx[NW], lbg[NG], ubg[NG], w[NW], lx[NW], lg[NG], g[NG], f;
+  double bnd[NH * NL], ys_rhs[NL], shift[NL], cand[NH * NU];
+  ctl_result res, chk;
+  gk_sqp_opts opts;
+  gk_sqp_info info;
+  /* what the last step gave (y_pred normalised) */
+  double y_pred[NY];
+  int status, fallback, iterations;
+} law_state;
+
+/* the tightened bounds (controller.h), in the uncertified mode around y + d_hat, and Y_s's
+ * right-hand side */
+static void tighten(law_state *st, double e_o) {
+  tightened_bounds(e_o, st->bnd);
+  if (!CT_CERTIFIED)
+    for (int i = 0; i < NH; i++)
+      for (int j = 0; j < NL; j++) st->bnd[i * NL + j] -= st->shift[j];
+  for (int j = 0; j < NL; j++)
+    st->ys_rhs[j] = CT_CERTIFIED ? CT_YS_BASE[j] : CT_YS_BASE[j] - st->shift[j];
+}
+
+/* the answer check of (w, p) into r (ArtificialSteadyState._check_compiled): the kernel's plain
+ * rollout, x_s(u_s) from p's x_s0 with its fixed point verified, cost and residuals (output
+ * rows, input box, terminal set, Y_s) */
+static void assess(law_state *st, const double *w, const double *p, ctl_result *r) {
+  gk_assessment out;
+  PFX(assess_w)(st->ws, w, p, st->bnd, CT_ALPHA_C, r->u, r->x, &out, r->xs);
+  for (int j = 0; j < NU; j++) r->us[j] = gk_clip1(w[NUU + j]);
+  r->cost = out.cost;
+  r->defect = out.defect;
+  if (!(out.steady_residual <= CT_XS_CHECK_TOL)) {
+    for (int k = 0; k < NX; k++) r->xs[k] = NAN;
+    r->cv = r->tv = INFINITY;
+    return;
+  }
+  r->cv = fmax(fmax(0.0, out.violation_first), fmax(out.violation_rows, out.u_max - 1.0));
+  r->tv = fmax(0.0, out.terminal_distance - CT_ALPHA_C);
+  for (int j = 0; j < NL; j++) {
+    double s = 0.0;
+    for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * r->xs[k];
+    r->cv = fmax(r->cv, s - st->ys_rhs[j]);
+  }
+}
+
+/* p = (x_hat, x_s0, r[, u_prev]) */
+static void parameters(double *p, const double *xhat, const double *xs0, const double *rt,
+                       const double *up) {
+  memcpy(p, xhat, NX * sizeof(double));
+  memcpy(p + NX, xs0, NX * sizeof(double));
+  memcpy(p + 2 * NX, rt, NY * sizeof(double));
+#if HAS_DU
+  memcpy(p + 2 * NX + NY, up, NU * sizeof(double));
+#else
+  (void)up;
+#endif
+}
+
+/* ArtificialSteadyState.evaluate: (u, u_s) evaluated apart from the solver into r, by the answer check
+ * of the w they make (u in the control horizon's form) */
+static void check(law_state *st, const double *xhat, const double *u_in, const double *us_in,
+                  const double *rt, const double *xs0, const double *up, int status,
+                  ctl_result *r) {
+  double w[NW] = {0.0}, p[NP];
+  for (int c = 0; c < NUU; c++) w[c] = gk_clip1(u_in[c]);
+  for (int j = 0; j < NU; j++) w[NUU + j] = gk_clip1(us_in[j]);
+  parameters(p, xhat, xs0, rt, up);
+  assess(st, w, p, r);
+  r->defect = 0.0;
+  r->status = status;
+  r->success = r->feasible = 0;
+  r->iterations = 0;
+}
+
+/* the solver's buffers for the target rt (ArtificialSteadyState.write) */
+static void write_request(law_state *st, const double *xhat, const double *rt,
+                          const double *u_init, const double *us_init, const double *xs0,
+                          const double *up, const double *us_centre) {
+  double *p = st->p;
+  parameters(p, xhat, xs0, rt, up);
+  for (int c = 0; c < NW; c++) {
+    st->lbx[c] = c == IT ? 0.0 : -1.0;
+    st->ubx[c] = c == IT ? CT_ALPHA_C : 1.0;
+  }
+  if (CT_US_RATE > 0.0)
+    for (int j = 0; j < NU; j++) {
+      st->lbx[NUU + j] = fmax(us_centre[j] - CT_US_RATE, -1.0);
+      st->ubx[NUU + j] = fmin(us_centre[j] + CT_US_RATE, 1.0);
+    }
+  /* the constraint rows: output rows i >= 1 (paired), the terminal rows, Y_s */
+  const int r0 = (NH - 1) * NQ;
+  for (int c = 0; c < NG; c++) {
+    st->lbg[c] = -INFINITY;
+    st->ubg[c] = INFINITY;
+  }
+  output_rows(st->bnd, st->lbg, st->ubg);
+  for (int k = 0; k < NX; k++) {
+    st->ubg[r0 + k] = 0.0;
+    st->lbg[r0 + NX + k] = 0.0;
+  }
+  for (int r = 0; r < NQ; r++) {
+    st->ubg[r0 + 2 * NX + r] = st->ys_rhs[CT_PAIR_UP[r]];
+    if (CT_PAIR_LO[r] >= 0) st->lbg[r0 + 2 * NX + r] = -st->ys_rhs[CT_PAIR_LO[r]];
+  }
+  /* the initial guess: the candidate, t its terminal gap, the multipliers shifted */
+  memcpy(st->w, u_init, NUU * sizeof(double));
+  for (int j = 0; j < NU; j++)
+    st->w[NUU + j] = fmin(fmax(us_init[j], st->lbx[NUU + j]), st->ubx[NUU + j]);
+  const double gap = PFX(terminal_gap)(st->ws, st->w, p);
+  st->w[IT] = fmin(fmax(gap, 1e-6), CT_ALPHA_C);
+  for (int c = 0; c < NW; c++) st->lx[c] = st->has_warm ? st->warm_lx[CT_PERM_X[c]] : 0.0;
+  for (int c = 0; c < NG; c++) st->lg[c] = st->has_warm ? st->warm_lg[CT_PERM_G[c]] : 0.0;
+}
+
+/* the answer check of the solver's w (ArtificialSteadyState._check_compiled) and its judgement
+ * (fhocp_result.judge) into st->res */
+static void check_answer(law_state *st, int sqp_status) {
+  ctl_result *r = &st->res;
+  assess(st, st->w, st->p, r);
+  judge(r, st->w, sqp_status, &st->info);
+  /* the warm start (fhocp_result.keeps_warm_start) */
+  if (r->success || (all_finite(st->w, NW) && all_finite(st->lg, NG) && all_finite(st->lx, NW))) {
+    memcpy(st->warm_lx, st->lx, sizeof st->warm_lx);
+    memcpy(st->warm_lg, st->lg, sizeof st->warm_lg);
+    st->has_warm = 1;
+  }
+}
+
+/* one solve for the target rt from the guess (ArtificialSteadyState.request, FHOCP.
+ * solve_request) against the bounds tighten() wrote: the i = 0 row first, then the SQP and
+ * its answer check, into st->res */
+static void solve(law_state *st, const double *xhat, const double *rt, const double *g_u,
+                  const double *g_us, const double *xs0, const double *up,
+                  const double *us_centre) {
+  double u_init[NH * NU], us_init[NU];
+  for (int c = 0; c < NH * NU; c++) u_init[c] = gk_clip1(g_u[c]);
+  for (int j = 0; j < NU; j++) us_init[j] = gk_clip1(g_us[j]);
+  if (x0_violation(xhat, st->bnd) > CT_FEAS_TOL) {
+    check(st, xhat, u_init, us_init, rt, xs0, up, CTL_INFEASIBLE_X0, &st->res);
+    return;
+  }
+  write_request(st, xhat, rt, u_init, us_init, xs0, up, us_centre);
+  const int status = PFX(sqp)(st->ws, st->p, st->lbx, st->ubx, st->lbg, st->ubg, st->w, st->lx,
+                              st->lg, st->g, &st->f, &st->opts, &st->info);
+  check_answer(st, status);
+}
+
+/* ---------------------------------------------------------------- the law */
+/* TrackingMPC.make_step: u_k for the target rt, with the candidate as fallback */
+static void make_step(law_state *st, const double *xhat, const double *rt, double *u) {
+  double *cand = st->cand;
+  if (st->has_plan) {
+    memcpy(cand, st->plan + NU, (NH - 1) * NU * sizeof(double));
+    memcpy(cand + (NH - 1) * NU, st->us, NU * sizeof(double));
+  } else {
+    for (int i = 0; i < NH; i++) memcpy(cand + i * NU, st->us, NU * sizeof(double));
+  }
+  double up[NU], us0[NU], xs0[NX];
+  memcpy(up, st->has_uprev ? st->uprev : st->us, sizeof up);
+  memcpy(us0, st->us, sizeof us0);
+  memcpy(xs0, st->xs, sizeof xs0);
+  if (st->has_guess)
+    solve(st, xhat, rt, st->g_u, st->g_us, st->g_xs, up, us0);
+  else
+    solve(st, xhat, rt, cand, us0, xs0, up, us0);
+  ctl_result *res = &st->res;
+  int use = res->success, fallback = 0;
+  const ctl_result *applied = res;
+  if (!use) {
+    check(st, xhat, cand, us0, rt, xs0, up, CTL_OTHER, &st->chk);
+    const int feasible = st->chk.cv <= CT_FEAS_TOL && st->chk.tv <= CT_FEAS_TOL;
+    use = res->feasible && (!feasible || res->cost <= st->chk.cost);
+    fallback = !use;
+    if (!use) applied = &st->chk;
+  }
+  if (use) {
+    memcpy(st->plan, res->u, sizeof st->plan);
+    memcpy(st->us, res->us, sizeof st->us);
+    memcpy(st->xs, res->xs, sizeof st->xs);
+    memcpy(u, res->u, NU * sizeof(double));
+  } else {
+    memcpy(st->plan, cand, sizeof st->plan);
+    for (int j = 0; j < NU; j++) u[j] = gk_clip1(cand[j]);
+  }
+  st->has_plan = 1;
+  st->has_guess = all_finite(res->xs, NX);
+  if (st->has_guess) {
+    memcpy(st->g_u, res->u + NU, (NH - 1) * NU * sizeof(double));
+    memcpy(st->g_u + (NH - 1) * NU, res->us, NU * sizeof(double));
+    memcpy(st->g_us, res->us, sizeof st->g_us);
+    memcpy(st->g_xs, res->xs, sizeof st->g_xs);
+  }
+  memcpy(st->uprev, u, sizeof st->uprev);
+  st->has_uprev = 1;
+  st->status = res->status;
+  st->fallback = fallback;
+  st->iterations = res->iterations;
+  PFX(output)(applied->x + NX, st->y_pred);
+}
+
+/* ---------------------------------------------------------------- the law's interface */
+static void law_reset(law_state *st, gk_ws *ws) {
+  memset(st, 0, sizeof *st);
+  st->ws = ws;
+  st->opts = sqp_options();
+  for (int a = 0; a < NY; a++) st->y_pred[a] = NAN;
+  st->status = CTL_OTHER;
+  st->beta = CT_BETA;
+}
+
+/* TrackingLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr */
+static void law_step(law_state *st, const double *xhat, double e_o, const double *y,
+                     const double *yr, double *u, int *warnings) {
+  double yh[NY], rt[NY];
+  (void)warnings;
+  if (!st->started) {
+    double x_s[NX], u_s[NU];
+    PFX(output)(xhat, yh);
+    PFX(equilibrium)(st->ws, yh, x_s, u_s);
+    for (int j = 0; j < NU; j++) st->us[j] = gk_clip1(u_s[j]);
+    memcpy(st->xs, x_s, sizeof x_s);
+    st->has_plan = st->has_guess = 0;
+    st->started = 1;
+  }
+  PFX(output)(xhat, yh);
+  const double beta = st->beta;
+  for (int a = 0; a < NY; a++) st->dhat[a] = st->dhat[a] + beta * ((y[a] - yh[a]) - st->dhat[a]);
+  if (!CT_CERTIFIED)   /* the measured tightening is around y + d_hat */
+    for (int j = 0; j < NL; j++) {
+      double s = 0.0;
+      for (int a = 0; a < NY; a++) s += CT_L[j * NY + a] * st->dhat[a];
+      st->shift[j] = s;
+    }
+  tighten(st, e_o);
+  for (int a = 0; a < NY; a++) rt[a] = yr[a] - st->dhat[a];
+  make_step(st, xhat, rt, u);
+}
+
+/* where tunable parameter i (LAW_P_*) lives, NULL for an unknown one */
+static double *law_parameter(law_state *st, int i) {
+  gk_mem *m = &st->ws->mem;
+  if (i == LAW_P_OFFSET_FILTER) return &st->beta;
+  if (i >= LAW_P_R && i < LAW_P_DU) return m->rw + (i - LAW_P_R) * (NU + 1);
+#if HAS_DU
+  if (i >= LAW_P_DU && i < LAW_P_T) return m->dw + (i - LAW_P_DU);
+#endif
+  if (i >= LAW_P_T && i < LAW_N_PARAMETERS) return m->tw + (i - LAW_P_T);
+  return 0;
+}
+
+/* why the value of tunable parameter i (a known one) is refused; NULL: accepted */
+static const char *law_refuse(const law_state *st, int i, double value) {
+  if (i == LAW_P_OFFSET_FILTER) return value > 0.0 && value <= 1.0 ? 0 : "must be in (0, 1]";
+  if (i < LAW_P_DU) return refuse_r(st->ws, i - LAW_P_R, value);
+  if (i < LAW_P_T) return value >= 0.0 && isfinite(value) ? 0 : "must be a finite weight >= 0";
+  return value > 0.0 && isfinite(value) ? 0 : "must be a finite weight > 0";
+}
