@@ -10,12 +10,17 @@ interleaved. Printed: each one's median and p99 step [ms] over all repeats and t
 ratios to the baseline (issue: no slower at the median and at the p99), and the largest
 difference of their inputs (they agree to the bit).
 
-Usage: ``.venv/bin/python benchmarks/bench_controller_fmu.py [--repeats R] [--fmi 2|3]``
+``--option KEY=VALUE`` (repeatable, the value read as JSON, as ``cosim run``'s): the robust
+MPC's options, e.g. ``--option 'law="paper"' --option governor=false`` for the paper's law.
+
+Usage: ``.venv/bin/python benchmarks/bench_controller_fmu.py [--repeats R] [--fmi 2|3]
+[--option KEY=VALUE]``
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import sys
 import tempfile
@@ -36,7 +41,7 @@ from cosim.core.fmu_controller import FmuController  # noqa: E402
 SCENARIO = HERE.parent / "scenarios" / "paper_steps.csv"
 
 
-def record(scenario: Path) -> list[dict[str, float]]:
+def record(scenario: Path, options: dict[str, object]) -> list[dict[str, float]]:
     """The controller's inputs at every step of the closed loop."""
     from cosim_adapters.robust_mpc import RobustMPCController
 
@@ -49,7 +54,7 @@ def record(scenario: Path) -> list[dict[str, float]]:
 
     RobustMPCController.set_inputs = recording   # type: ignore[method-assign]
     try:
-        out = cosim.run(scenario, figure=False)
+        out = cosim.run(scenario, options=options, figure=False)
     finally:
         RobustMPCController.set_inputs = original   # type: ignore[method-assign]
     assert out.status == "ok", out.reason
@@ -77,12 +82,18 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--fmi", type=int, choices=(2, 3), default=3)
     parser.add_argument("--scenario", type=Path, default=SCENARIO)
+    parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                        help="a robust-mpc option (VALUE read as JSON), repeatable")
     args = parser.parse_args(argv)
+    options = {}
+    for item in args.option:
+        key, _, value = item.partition("=")
+        options[key] = json.loads(value)
 
-    steps = record(args.scenario)
+    steps = record(args.scenario, options)
     with tempfile.TemporaryDirectory() as tmp:
-        fmu = cosim.export_fmu(out=Path(tmp) / "Controller.fmu", fmi=args.fmi)
-        python = registry.create("robust-mpc")
+        fmu = cosim.export_fmu(out=Path(tmp) / "Controller.fmu", fmi=args.fmi, options=options)
+        python = registry.create("robust-mpc", options)
         exported = FmuController(fmu)
         dt = float(python.sample_time)
         times: dict[str, list[np.ndarray]] = {"python": [], "fmu": []}
@@ -93,7 +104,8 @@ def main(argv: list[str] | None = None) -> int:
                 times[name].append(t)
                 inputs[name] = u
         exported.terminate()
-    print(f"{len(steps)} controller steps x {args.repeats} repeats, FMI {args.fmi}.0")
+    print(f"{len(steps)} controller steps x {args.repeats} repeats, FMI {args.fmi}.0, "
+          f"options {options or 'default'}")
     base = np.concatenate(times["python"])
     for name in ("python", "fmu"):
         t = np.concatenate(times[name]) * 1e3

@@ -19,7 +19,7 @@ def test_export_errors_are_one_line(capsys: pytest.CaptureFixture, tmp_path: Pat
     cases = [
         (["export-fmu", "--out", str(tmp_path / "C.zip")], "an FMU's file name ends with .fmu"),
         (["export-fmu", "--option", 'law="paper"', "--out", str(tmp_path / "C.fmu")],
-         "law 'paper': the controller FMU runs the tracking law"),
+         "the paper's law with its reference governor (governor=true, its default)"),
         (["export-fmu", str(tmp_path / "nope.json"), "--out", str(tmp_path / "C.fmu")],
          "nope.json"),
         (["export-fmu", "--controller", str(tmp_path / "nope.json"),
