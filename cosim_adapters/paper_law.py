@@ -251,17 +251,13 @@ INSIDE = 1e-3
 
 
 def closest_admissible(cert: Any, y: np.ndarray) -> np.ndarray | None:
-    """``y`` moved into the admissible box of ``cert`` (box rows ``±y_j ≤ rhs``:
-    :meth:`controllers.certification.certificates.Certificate.admissible_box`), :data:`INSIDE`
-    within it; ``None`` when the box is empty for some output."""
-    rhs = cert.admissible_box()
+    """``y`` moved into the admissible bounds of ``cert`` (:meth:`controllers.certification.
+    certificates.Certificate.admissible_bounds`), :data:`INSIDE` within them; ``None`` when
+    a range is empty for some output."""
+    lo, hi = cert.admissible_bounds()
     out = np.array(y, dtype=float)
     for j in range(out.size):
-        hi = min((r / row[j] for row, r in zip(cert.L, rhs, strict=True)
-                  if row[j] > 0 and np.count_nonzero(row) == 1), default=np.inf)
-        lo = max((r / row[j] for row, r in zip(cert.L, rhs, strict=True)
-                  if row[j] < 0 and np.count_nonzero(row) == 1), default=-np.inf)
-        if not lo + 2 * INSIDE <= hi:
+        if not lo[j] + 2 * INSIDE <= hi[j]:
             return None
-        out[j] = min(max(out[j], lo + INSIDE), hi - INSIDE)
+        out[j] = min(max(out[j], lo[j] + INSIDE), hi[j] - INSIDE)
     return out

@@ -206,6 +206,19 @@ class Certificate:
         return (self.h - self.e_tilde * self.a[self.N] - self.b[self.N] - self.w_L
                 - self.alpha_min() * self.c_s)
 
+    def admissible_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The admissible set-points' bounds per output, ``(lo, hi)`` (normalised; ±∞ where
+        no row bounds it): the single-output rows of ``L ȳ ≤`` :meth:`admissible_box`."""
+        rhs = self.admissible_box()
+        p = np.shape(self.L)[1]
+        lo, hi = np.full(p, -np.inf), np.full(p, np.inf)
+        for j in range(p):
+            hi[j] = min((r / row[j] for row, r in zip(self.L, rhs, strict=True)
+                         if row[j] > 0 and np.count_nonzero(row) == 1), default=np.inf)
+            lo[j] = max((r / row[j] for row, r in zip(self.L, rhs, strict=True)
+                         if row[j] < 0 and np.count_nonzero(row) == 1), default=-np.inf)
+        return lo, hi
+
     # -- hypotheses ------------------------------------------------------------------------
     def failures(self, y_bar_norm: Sequence[float] | None = None) -> list[str]:
         """Each failed hypothesis of ``th:feasibility-stability``, as one message each.

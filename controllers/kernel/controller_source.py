@@ -170,12 +170,12 @@ class ControllerDesign:
         model's normalisation and the input box. The law's numbers: the certificate's
         set-point checks (``Certificate.ok``, ``alpha``: its ``L``, ``h``, ``ẽ_o a_N``,
         ``b_N``, ``w_L``, ``c_s``, the two sides of ``eq:condition-recursive-feasibility``
-        and whether the design conditions hold), the admissible box per output
-        (``closest_admissible``) and the set-point rate (−1: none)."""
+        and whether the design conditions hold), the admissible range per output
+        (``Certificate.admissible_bounds``) and the set-point rate (−1: none)."""
         cert, h = law.cert, law.handling
         if h.governor:
             raise ValueError("the exported paper's law runs without the governor")
-        lo, hi = admissible_box_bounds(cert)
+        lo, hi = cert.admissible_bounds()
         design_ok = (cert.nu < 1 and cert.nu_o < 1 and cert.rho_s < 1
                      and bool(np.isfinite(cert.e_tilde)))
         # (recursive_feasibility: ρ_s^N (L_max ẽ_o + w̄) ≤ α (1 − ρ_s); never read without
@@ -223,22 +223,6 @@ class ControllerDesign:
             pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=layout.perm_x,
             perm_g=layout.perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
             law=law, law_data=law_data, offset_free=offset_free)
-
-
-def admissible_box_bounds(cert: Any) -> tuple[np.ndarray, np.ndarray]:
-    """The admissible set-points' box per output, ``(lo, hi)`` (normalised; ±∞ where no
-    row bounds it): the single-output rows of ``L ȳ ≤`` :meth:`~controllers.certification.
-    certificates.Certificate.admissible_box`, as :func:`cosim_adapters.paper_law.
-    closest_admissible` reads them."""
-    rhs = cert.admissible_box()
-    p = np.shape(cert.L)[1]
-    lo, hi = np.full(p, -np.inf), np.full(p, np.inf)
-    for j in range(p):
-        hi[j] = min((r / row[j] for row, r in zip(cert.L, rhs, strict=True)
-                     if row[j] > 0 and np.count_nonzero(row) == 1), default=np.inf)
-        lo[j] = max((r / row[j] for row, r in zip(cert.L, rhs, strict=True)
-                     if row[j] < 0 and np.count_nonzero(row) == 1), default=-np.inf)
-    return lo, hi
 
 
 def controller_constants(d: ControllerDesign) -> Constants:
