@@ -190,7 +190,7 @@ class PaperLaw:
             if inside is None:
                 continue
             try:
-                return self.cert.reference(inside, kernel=self.fhocp.kernel)
+                return self.cert.reference(inside, kernel=kernel)
             except SetpointError:
                 continue
         return None

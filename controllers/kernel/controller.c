@@ -109,7 +109,8 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     const double v = u[j] * CT_U_SCALE[j] + CT_U_OFFSET[j];
     st->u_phys[j] = v < CT_U_LO[j] ? CT_U_LO[j] : (v > CT_U_HI[j] ? CT_U_HI[j] : v);
   }
-  for (int a = 0; a < NY; a++) st->y_pred[a] = st->law.y_pred[a] * CT_Y_SCALE[a] + CT_Y_OFFSET[a];
+  for (int a = 0; a < NY; a++)
+    st->y_pred[a] = st->law.last.y_pred[a] * CT_Y_SCALE[a] + CT_Y_OFFSET[a];
   return 0;
 }
 
@@ -142,8 +143,8 @@ EXPORT int PFX(ctl_take_warnings)(ctl_state *st) {
 EXPORT void PFX(ctl_outputs)(const ctl_state *st, double *u_phys, int *status, int *fallback,
                              int *iterations, double *y_pred) {
   if (u_phys) memcpy(u_phys, st->u_phys, sizeof st->u_phys);
-  if (status) *status = st->law.status;
-  if (fallback) *fallback = st->law.fallback;
-  if (iterations) *iterations = st->law.iterations;
+  if (status) *status = st->law.last.status;
+  if (fallback) *fallback = st->law.last.fallback;
+  if (iterations) *iterations = st->law.last.iterations;
   if (y_pred) memcpy(y_pred, st->y_pred, sizeof st->y_pred);
 }

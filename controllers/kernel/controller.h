@@ -6,8 +6,7 @@
  *
  *   law_state           everything the law keeps between steps (its FHOCP's buffers, warm
  *                       start, plan, set-point handling), the kernel's solver instance ws
- *                       included; with the fields status, fallback, iterations and y_pred
- *                       (normalised) of its last step
+ *                       included; with `last` (ctl_last), what its last step gave
  *   LAW_N_PARAMETERS    how many tunable parameters it has (CT_NPARAM must agree)
  *   law_reset(ls, ws)   a new run
  *   law_step(ls, xhat, e_o, y, yr, u, warnings)
@@ -43,6 +42,31 @@ typedef struct ctl_result {
   double cost, cv, tv, defect;
   int success, feasible, status, iterations;
 } ctl_result;
+
+/* what a law's last step gave (controller.c reports it): the solve's status, whether the
+ * candidate was applied, the SQP iterations and the model's output at the next sample under
+ * the applied plan (normalised) */
+typedef struct ctl_last {
+  double y_pred[NY];
+  int status, fallback, iterations;
+} ctl_last;
+
+/* before any step */
+static void last_reset(ctl_last *l) {
+  for (int a = 0; a < NY; a++) l->y_pred[a] = NAN;
+  l->status = CTL_OTHER;
+  l->fallback = l->iterations = 0;
+}
+
+/* the step whose solve gave res and whose applied plan is applied's (res or the candidate's
+ * check) */
+static void last_record(ctl_last *l, const ctl_result *res, const ctl_result *applied,
+                        int fallback) {
+  l->status = res->status;
+  l->fallback = fallback;
+  l->iterations = res->iterations;
+  PFX(output)(applied->x + NX, l->y_pred);
+}
 
 static int all_finite(const double *a, int n) {
   for (int k = 0; k < n; k++)
@@ -100,6 +124,22 @@ static void output_rows(const double *bnd, double *lbg, double *ubg) {
       ubg[pos] = bnd[i * NL + CT_PAIR_UP[r]];
       if (CT_PAIR_LO[r] >= 0) lbg[pos] = -bnd[i * NL + CT_PAIR_LO[r]];
     }
+}
+
+/* the output rows', input box's and terminal set's violations of an assessment with the
+ * terminal radius alpha into r (controllers/ocp/fhocp_result.py set_residuals) */
+static void set_residuals(ctl_result *r, const gk_assessment *out, double alpha) {
+  r->cv = fmax(fmax(0.0, out->violation_first), fmax(out->violation_rows, out->u_max - 1.0));
+  r->tv = fmax(0.0, out->terminal_distance - alpha);
+}
+
+/* after a failed solve res, with chk the candidate's check: whether the solver's iterate is
+ * applied instead of the candidate (controllers/ocp/paper_mpc.py RobustMPC.make_step,
+ * tracking_mpc.py TrackingMPC.make_step: suboptimal MPC, a feasible iterate no costlier than
+ * a feasible candidate) */
+static int keeps_iterate(const ctl_result *res, const ctl_result *chk) {
+  const int feasible = chk->cv <= CT_FEAS_TOL && chk->tv <= CT_FEAS_TOL;
+  return res->feasible && (!feasible || res->cost <= chk->cost);
 }
 
 /* the answer check's judgement (controllers/ocp/fhocp_result.py set_residuals, judge) of the

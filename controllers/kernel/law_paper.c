@@ -74,9 +74,7 @@ typedef struct law_state {
   ctl_result res, chk;
   gk_sqp_opts opts;
   gk_sqp_info info;
-  /* what the last step gave (y_pred normalised) */
-  double y_pred[NY];
-  int status, fallback, iterations;
+  ctl_last last;   /* what the last step gave */
 } law_state;
 
 /* ---------------------------------------------------------------- the reference */
@@ -199,8 +197,7 @@ static void evaluate(law_state *st, const double *xhat, const double *u, int sta
   PFX(assess)(st->ws, xhat, r->u, st->x_bar, st->u_bar, u_prev(st), st->bnd, st->alpha, r->x,
               &out);
   r->cost = out.cost;
-  r->cv = fmax(fmax(0.0, out.violation_first), fmax(out.violation_rows, out.u_max - 1.0));
-  r->tv = fmax(0.0, out.terminal_distance - st->alpha);
+  set_residuals(r, &out, st->alpha);
   r->defect = 0.0;
   r->status = status;
   r->success = r->feasible = 0;
@@ -265,8 +262,7 @@ static void solve(law_state *st, const double *xhat) {
   PFX(assess_w)(st->ws, st->w, st->p, st->bnd, st->alpha, r->u, r->x, &out, 0);
   r->cost = out.cost;
   r->defect = out.defect;
-  r->cv = fmax(fmax(0.0, out.violation_first), fmax(out.violation_rows, out.u_max - 1.0));
-  r->tv = fmax(0.0, out.terminal_distance - st->alpha);
+  set_residuals(r, &out, st->alpha);
   judge(r, st->w, status, &st->info);
   if (r->success || (all_finite(st->w, NW) && all_finite(st->lg, NG) && all_finite(st->lx, NW))) {
     memcpy(st->warm_w, st->w, sizeof st->warm_w);
@@ -293,8 +289,7 @@ static void make_step(law_state *st, const double *xhat, double *u) {
   const ctl_result *applied = res;
   if (!use) {
     evaluate(st, xhat, cand, CTL_OTHER, &st->chk);
-    const int feasible = st->chk.cv <= CT_FEAS_TOL && st->chk.tv <= CT_FEAS_TOL;
-    use = res->feasible && (!feasible || res->cost <= st->chk.cost);
+    use = keeps_iterate(res, &st->chk);
     fallback = !use;
     if (!use) applied = &st->chk;
   }
@@ -308,10 +303,7 @@ static void make_step(law_state *st, const double *xhat, double *u) {
   st->has_plan = 1;
   memcpy(st->uprev, u, sizeof st->uprev);
   st->has_uprev = 1;
-  st->status = res->status;
-  st->fallback = fallback;
-  st->iterations = res->iterations;
-  PFX(output)(applied->x + NX, st->y_pred);
+  last_record(&st->last, res, applied, fallback);
 }
 
 /* ---------------------------------------------------------------- the law's interface */
@@ -320,8 +312,7 @@ static void law_reset(law_state *st, gk_ws *ws) {
   st->ws = ws;
   st->opts = sqp_options();
   st->alpha = NAN;
-  for (int a = 0; a < NY; a++) st->y_pred[a] = NAN;
-  st->status = CTL_OTHER;
+  last_reset(&st->last);
   st->beta = CT_BETA;
 }
 
@@ -331,9 +322,9 @@ static void law_reset(law_state *st, gk_ws *ws) {
 static void law_step(law_state *st, const double *xhat, double e_o, const double *y,
                      const double *yr, double *u, int *warnings) {
   if (update_reference(st, xhat, y, yr, warnings) != 0) {   /* u as it came: held */
-    st->status = CTL_OTHER;
-    st->fallback = 1;
-    st->iterations = 0;
+    st->last.status = CTL_OTHER;
+    st->last.fallback = 1;
+    st->last.iterations = 0;
     return;
   }
   tightened_bounds(e_o, st->bnd);

@@ -50,9 +50,7 @@ typedef struct law_state {
   ctl_result res, chk;
   gk_sqp_opts opts;
   gk_sqp_info info;
-  /* what the last step gave (y_pred normalised) */
-  double y_pred[NY];
-  int status, fallback, iterations;
+  ctl_last last;   /* what the last step gave */
 } law_state;
 
 /* the tightened bounds (controller.h), in the uncertified mode around y + d_hat, and Y_s's
@@ -80,8 +78,7 @@ static void assess(law_state *st, const double *w, const double *p, ctl_result *
     r->cv = r->tv = INFINITY;
     return;
   }
-  r->cv = fmax(fmax(0.0, out.violation_first), fmax(out.violation_rows, out.u_max - 1.0));
-  r->tv = fmax(0.0, out.terminal_distance - CT_ALPHA_C);
+  set_residuals(r, &out, CT_ALPHA_C);
   for (int j = 0; j < NL; j++) {
     double s = 0.0;
     for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * r->xs[k];
@@ -214,8 +211,7 @@ static void make_step(law_state *st, const double *xhat, const double *rt, doubl
   const ctl_result *applied = res;
   if (!use) {
     check(st, xhat, cand, us0, rt, xs0, up, CTL_OTHER, &st->chk);
-    const int feasible = st->chk.cv <= CT_FEAS_TOL && st->chk.tv <= CT_FEAS_TOL;
-    use = res->feasible && (!feasible || res->cost <= st->chk.cost);
+    use = keeps_iterate(res, &st->chk);
     fallback = !use;
     if (!use) applied = &st->chk;
   }
@@ -238,10 +234,7 @@ static void make_step(law_state *st, const double *xhat, const double *rt, doubl
   }
   memcpy(st->uprev, u, sizeof st->uprev);
   st->has_uprev = 1;
-  st->status = res->status;
-  st->fallback = fallback;
-  st->iterations = res->iterations;
-  PFX(output)(applied->x + NX, st->y_pred);
+  last_record(&st->last, res, applied, fallback);
 }
 
 /* ---------------------------------------------------------------- the law's interface */
@@ -249,8 +242,7 @@ static void law_reset(law_state *st, gk_ws *ws) {
   memset(st, 0, sizeof *st);
   st->ws = ws;
   st->opts = sqp_options();
-  for (int a = 0; a < NY; a++) st->y_pred[a] = NAN;
-  st->status = CTL_OTHER;
+  last_reset(&st->last);
   st->beta = CT_BETA;
 }
 

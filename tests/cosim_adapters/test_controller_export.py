@@ -15,6 +15,7 @@ same inputs.
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 from pathlib import Path
 
 import fmpy
@@ -29,6 +30,8 @@ PAPER = ROOT / "scenarios" / "paper_steps.csv"
 #: The issue's bar: the FMU's inputs within this share of each input's box of the Python
 #: controller's (they are equal to the bit on this machine).
 TOL = 1e-9
+#: The paper's law without its governor (the paper's controller): the law the FMU exports.
+PAPER_LAW = {"law": "paper", "governor": False}
 
 
 @pytest.fixture(scope="module")
@@ -175,30 +178,44 @@ def _example_case(tmp_path: Path, plant_name: str, seed: int, steps: str
 CSTR = {"F": (50.0, 150.0), "Tc": (290.0, 350.0)}
 
 
-@pytest.mark.parametrize(("plant_name", "seed", "steps", "boxes", "certified", "fails"), [
+MIXING = {"Fh": (0.3, 1.5), "Fc": (0.3, 1.5), "Fw": (0.3, 1.5)}
+
+
+@pytest.mark.parametrize(("plant_name", "seed", "steps", "boxes", "certified", "fails",
+                          "options"), [
     ("cstr", 3, "time,ref.CA,ref.T\n0,0.5,330\n1500,0.6,320\n3000,0.4,335\n4500,,\n",
-     CSTR, True, True),
-    ("cstr", 3, "time,ref.CA,ref.T\n0,0.5,330\n750,0.995,330\n2250,,\n", CSTR, False, False),
-    ("mixing_tank", 4, "time,ref.h,ref.T\n0,1.0,45\n500,1.1,43\n2000,,\n",
-     {"Fh": (0.3, 1.5), "Fc": (0.3, 1.5), "Fw": (0.3, 1.5)}, True, False)],
-    ids=["cstr-2x2", "cstr-uncertified", "mixing-tank-3x2"])
+     CSTR, True, True, {}),
+    ("cstr", 3, "time,ref.CA,ref.T\n0,0.5,330\n750,0.995,330\n2250,,\n", CSTR, False, False,
+     {}),
+    ("mixing_tank", 4, "time,ref.h,ref.T\n0,1.0,45\n500,1.1,43\n2000,,\n", MIXING, True,
+     False, {}),
+    ("cstr", 3, "time,ref.CA,ref.T\n0,0.536,340.4\n1500,0.47,339.9\n3000,0.6,340.8\n"
+     "4500,,\n", CSTR, True, False, PAPER_LAW),
+    ("mixing_tank", 4, "time,ref.h,ref.T\n0,1.34,41.66\n500,1.43,44.72\n2000,,\n", MIXING,
+     True, False, PAPER_LAW)],
+    ids=["cstr-2x2", "cstr-uncertified", "mixing-tank-3x2", "cstr-2x2-paper",
+         "mixing-tank-3x2-paper"])
 def test_plants_of_other_kinds(plant_name: str, seed: int, steps: str, boxes: dict,
-                               certified: bool, fails: bool, tmp_path: Path) -> None:
+                               certified: bool, fails: bool, options: dict,
+                               tmp_path: Path) -> None:
     """The CSTR at Ts = 15 s in L/min, K and mol/L, and the mixing tank with 3 inputs and 2
     outputs at Ts = 10 s, each exported with ``--scenario`` (its set-points checked as
     ``cosim run`` checks them): the FMU's inputs are the Python controller's, through the
     unreachable first outputs (the closest equilibrium), the failed solves of a model far
     from the plant (statuses and fallbacks alike) and, for a set-point outside the certified
-    steady outputs, the uncertified mode (the tightening around ``y + d̂``)."""
+    steady outputs, the uncertified mode (the tightening around ``y + d̂``); the paper's law
+    (without its governor) on both, from equilibrium outputs of the models."""
     from cosim.cli import main
 
     plant, model, steps_csv = _example_case(tmp_path, plant_name, seed, steps)
     fmu = tmp_path / "Controller.fmu"
+    flags = [a for k, v in options.items() for a in ("--option", f"{k}={json.dumps(v)}")]
     assert main(["export-fmu", str(model), "--scenario", str(steps_csv), "--out", str(fmu),
-                 "--quiet"]) == 0
+                 "--quiet", *flags]) == 0
     description = fmpy.read_model_description(str(fmu)).description
     assert (", certified:" in description) is certified, description
-    py = cosim.run(steps_csv, plant=plant, model=model, figure=False)
+    assert ("paper's law" in description) is bool(options)
+    py = cosim.run(steps_csv, plant=plant, model=model, options=options, figure=False)
     assert py.summary["controller_summary"]["certified"] is certified
     run = cosim.run(steps_csv, plant=plant, controller=str(fmu), figure=False)
     _same_inputs(run, py, boxes)
@@ -224,11 +241,20 @@ def test_the_compiled_step_replays_the_python_controller() -> None:
                                  law.certified, ctrl.model, ctrl._lo, ctrl._hi)
     compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
                                   n_outputs=2)
+    ctrl.setup(0.0)
+    for _ in _replayed(ctrl, compiled, [(0.65, 0.65)] * 30 + [(1.3, 1.4)] * 30):
+        pass
+    compiled.close()
+
+
+def _replayed(ctrl: object, compiled: object, refs: list[tuple[float, float]]
+              ) -> Iterator[dict]:
+    """Step the four-tank's Python controller ``ctrl`` and its compiled step on the same
+    noisy measurements with the set-points ``refs`` (one per step): the same inputs (to the
+    bit), statuses and fallbacks at every step; yields the compiled step's outputs."""
     rng = np.random.default_rng(5)
     y = np.array([0.62, 0.71])
-    ctrl.setup(0.0)
-    for k in range(60):
-        ref = np.array([0.65, 0.65]) if k < 30 else np.array([1.3, 1.4])
+    for k, ref in enumerate(np.array(refs, dtype=float)):
         y = y + rng.normal(0.0, 2e-3, 2)
         ctrl.set_inputs({"h1": y[0], "h2": y[1], "ref.h1": ref[0], "ref.h2": ref[1]})
         ctrl.step(25.0 * k, 25.0)
@@ -237,7 +263,7 @@ def test_the_compiled_step_replays_the_python_controller() -> None:
         np.testing.assert_array_equal(out["u"], u)
         assert out["status"] == ctrl.diagnostics()["status"]
         assert out["fallback"] == ctrl.diagnostics()["fallback"]
-    compiled.close()
+        yield out
 
 
 def test_the_paper_law_with_its_governor_is_refused(tmp_path: Path) -> None:
@@ -251,8 +277,6 @@ def test_the_paper_law_with_its_governor_is_refused(tmp_path: Path) -> None:
         export_fmu(ctrl, tmp_path / "C.fmu")
     assert not (tmp_path / "C.fmu").exists()
 
-
-PAPER_LAW = {"law": "paper", "governor": False}
 
 
 def test_the_paper_law_exported_runs_as_the_python_law(tmp_path: Path) -> None:
@@ -313,19 +337,8 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
         "R.qa", "R.qb"] + (["du_weight.qa", "du_weight.qb"] if "du_weight" in options else [])
     compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
                                   n_outputs=2)
-    rng = np.random.default_rng(5)
-    y = np.array([0.62, 0.71])
     refused = 0
-    for k in range(75):
-        ref = np.array(refs[min(k // 25, 2)])
-        y = y + rng.normal(0.0, 2e-3, 2)
-        ctrl.set_inputs({"h1": y[0], "h2": y[1], "ref.h1": ref[0], "ref.h2": ref[1]})
-        ctrl.step(25.0 * k, 25.0)
-        out = compiled.step(y, ref)
-        u = np.array([ctrl.get_outputs()[n] for n in ("qa", "qb")])
-        np.testing.assert_array_equal(out["u"], u)
-        assert out["status"] == ctrl.diagnostics()["status"]
-        assert out["fallback"] == ctrl.diagnostics()["fallback"]
+    for k, out in enumerate(_replayed(ctrl, compiled, [r for r in refs for _ in range(25)])):
         assert bool(out["warnings"] & 4) == (len(ctrl.law.rejections) > refused), k
         refused = len(ctrl.law.rejections)
     assert refused == named
