@@ -133,6 +133,19 @@ static void set_residuals(ctl_result *r, const gk_assessment *out, double alpha)
   r->tv = fmax(0.0, out->terminal_distance - alpha);
 }
 
+/* the candidate of the proof of th:feasibility-stability into cand (NH x NU): the plan
+ * shifted by one stage with u_end appended (the reference input: u_bar, or the tracking law's
+ * u_s), u_end repeated before any plan (RobustMPC.candidate, TrackingMPC.make_step) */
+static void shifted_candidate(double *cand, const double *plan, int has_plan,
+                              const double *u_end) {
+  if (has_plan) {
+    memcpy(cand, plan + NU, (NH - 1) * NU * sizeof(double));
+    memcpy(cand + (NH - 1) * NU, u_end, NU * sizeof(double));
+  } else {
+    for (int i = 0; i < NH; i++) memcpy(cand + i * NU, u_end, NU * sizeof(double));
+  }
+}
+
 /* after a failed solve res, with chk the candidate's check: whether the solver's iterate is
  * applied instead of the candidate (controllers/ocp/paper_mpc.py RobustMPC.make_step,
  * tracking_mpc.py TrackingMPC.make_step: suboptimal MPC, a feasible iterate no costlier than

@@ -277,12 +277,7 @@ static void solve(law_state *st, const double *xhat) {
  * unless the solver's iterate is feasible and no costlier (suboptimal MPC) */
 static void make_step(law_state *st, const double *xhat, double *u) {
   double *cand = st->cand;
-  if (st->has_plan) {
-    memcpy(cand, st->plan + NU, (NH - 1) * NU * sizeof(double));
-    memcpy(cand + (NH - 1) * NU, st->u_bar, NU * sizeof(double));
-  } else {
-    for (int i = 0; i < NH; i++) memcpy(cand + i * NU, st->u_bar, NU * sizeof(double));
-  }
+  shifted_candidate(cand, st->plan, st->has_plan, st->u_bar);
   solve(st, xhat);
   ctl_result *res = &st->res;
   int use = res->success, fallback = 0;

@@ -192,12 +192,7 @@ static void solve(law_state *st, const double *xhat, const double *rt, const dou
 /* TrackingMPC.make_step: u_k for the target rt, with the candidate as fallback */
 static void make_step(law_state *st, const double *xhat, const double *rt, double *u) {
   double *cand = st->cand;
-  if (st->has_plan) {
-    memcpy(cand, st->plan + NU, (NH - 1) * NU * sizeof(double));
-    memcpy(cand + (NH - 1) * NU, st->us, NU * sizeof(double));
-  } else {
-    for (int i = 0; i < NH; i++) memcpy(cand + i * NU, st->us, NU * sizeof(double));
-  }
+  shifted_candidate(cand, st->plan, st->has_plan, st->us);
   double up[NU], us0[NU], xs0[NX];
   memcpy(up, st->has_uprev ? st->uprev : st->us, sizeof up);
   memcpy(us0, st->us, sizeof us0);
