@@ -11,7 +11,8 @@ ratios to the baseline (issue: no slower at the median and at the p99), and the 
 difference of their inputs (they agree to the bit).
 
 ``--option KEY=VALUE`` (repeatable, the value read as JSON, as ``cosim run``'s): the robust
-MPC's options, e.g. ``--option 'law="paper"' --option governor=false`` for the paper's law.
+MPC's options, e.g. ``--option 'law="paper"'`` for the paper's law with its reference
+governor, ``--option governor=false`` added for the paper's controller without it.
 
 Usage: ``.venv/bin/python benchmarks/bench_controller_fmu.py [--repeats R] [--fmi 2|3]
 [--option KEY=VALUE]``

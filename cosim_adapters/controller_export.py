@@ -8,8 +8,9 @@ every design of the same dimensions, signals and law), and the problem's signals
 variables (measured outputs and set-points ``ref.<output>`` in, the inputs to apply out,
 named and in the units of the problem; docs: guide/controller-fmu.md). Both laws are
 exported, for any numbers of inputs and outputs: the tracking law (the default) and the
-paper's without its reference governor (``governor=false``: the paper's controller, with
-``offset_free`` and ``setpoint_rate`` as in Python); the governor is not compiled.
+paper's, with ``offset_free`` and ``setpoint_rate`` as in Python, and with its reference
+governor (its default) for as many inputs as outputs (``governor=false`` for others: the
+paper's controller).
 """
 
 from __future__ import annotations
@@ -36,10 +37,12 @@ def fmu_identifier(out: str | Path) -> str:
 def _why_not(ctrl: Any) -> str:
     """Why ``ctrl`` cannot be exported (empty: it can)."""
     law = ctrl.law
-    if law.name == "paper" and law.handling.governor:
-        return ("the paper's law with its reference governor (governor=true, its default): "
-                "the controller FMU runs the paper's law without it (--option "
-                "governor=false: the paper's controller) or the tracking law (the default)")
+    gov = law.governor if law.name == "paper" else None
+    if gov is not None and gov.m != gov.p:
+        return (f"the paper's law's reference governor (governor=true, its default) is "
+                f"compiled for as many inputs as outputs; this problem has {gov.m} inputs "
+                f"and {gov.p} outputs: export it with --option governor=false (the paper's "
+                "controller) or the tracking law (the default)")
     fhocp = ctrl.fhocp
     if fhocp.kernel is None or not fhocp._compiled_loop:
         reason = fhocp.kernel_error or "the options select another solver"

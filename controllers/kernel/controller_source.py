@@ -6,7 +6,7 @@ the robust MPC without Python: the GRU observer (``eq:observer``, ``eq:eo-evolut
 one of two laws on the compiled kernel, with its answer check and candidate fallback, in the
 problem's units. The tracking law (``law_tracking.c``): the output-disturbance estimate and
 the tracking FHOCP (``eq:optimization`` with an artificial steady state). The paper's law
-(``law_paper.c``, without the governor): the reference ``(x̄, ū, α)`` of each set-point
+(``law_paper.c``, with its reference governor): the reference ``(x̄, ū, α)`` of each set-point
 checked against the certificate, the FHOCP ``eq:optimization`` and the fallback of ``eq:mpc``.
 :class:`ControllerDesign` is what the C step needs besides the kernel
 (:class:`~controllers.kernel.compiled_kernel.KernelProblem`): scalings, input box, observer
@@ -166,15 +166,21 @@ class ControllerDesign:
     def of_paper(cls, law: Any, observer: Any, model: Any, u_lo: np.ndarray,
                  u_hi: np.ndarray) -> ControllerDesign:
         """The design of the paper's law (:class:`cosim_adapters.paper_law.PaperLaw`, its
-        FHOCP on its compiled kernel's SQP, without the governor) with its observer, the
-        model's normalisation and the input box. The law's numbers: the certificate's
-        set-point checks (``Certificate.ok``, ``alpha``: its ``L``, ``h``, ``ẽ_o a_N``,
-        ``b_N``, ``w_L``, ``c_s``, the two sides of ``eq:condition-recursive-feasibility``
-        and whether the design conditions hold), the admissible range per output
-        (``Certificate.admissible_bounds``) and the set-point rate (−1: none)."""
-        cert, h = law.cert, law.handling
-        if h.governor:
-            raise ValueError("the exported paper's law runs without the governor")
+        FHOCP on its compiled kernel's SQP) with its observer, the model's normalisation and
+        the input box. The law's numbers: the certificate's set-point checks
+        (``Certificate.ok``, ``alpha``: its ``L``, ``h``, ``ẽ_o a_N``, ``b_N``, ``w_L``,
+        ``c_s``, the two sides of ``eq:condition-recursive-feasibility`` and whether the
+        design conditions hold), the admissible range per output
+        (``Certificate.admissible_bounds``), the set-point rate (−1: none) and the reference
+        governor's (:class:`controllers.ocp.governor.ReferenceGovernor`: whether it runs, its
+        levels, ``λ_max``'s floor and growth, the Newton's cap and tolerance). The governor
+        is compiled for as many inputs as outputs only (``ValueError`` otherwise)."""
+        from controllers.kernel.kernel_lib import EQ_NEWTON_MAX_ITER, EQ_NEWTON_TOL
+        from controllers.ocp.governor import LAM_GROW, LAM_MIN
+
+        cert, h, gov = law.cert, law.handling, law.governor
+        if gov is not None and gov.m != gov.p:
+            raise ValueError("the exported governor needs as many inputs as outputs")
         lo, hi = cert.admissible_bounds()
         design_ok = (cert.nu < 1 and cert.nu_o < 1 and cert.rho_s < 1
                      and bool(np.isfinite(cert.e_tilde)))
@@ -191,7 +197,12 @@ class ControllerDesign:
                     "CT_CERT_RF_ONE_MINUS_RHO": float(1 - cert.rho_s),
                     "CT_CERT_DESIGN_OK": int(design_ok), "CT_BOX_LO": lo, "CT_BOX_HI": hi,
                     "CT_SETPOINT_RATE": -1.0 if h.setpoint_rate is None
-                    else float(h.setpoint_rate)}
+                    else float(h.setpoint_rate),
+                    "CT_GOVERNOR": int(gov is not None),
+                    "CT_GOV_LEVELS": int(gov.levels if gov is not None else 0),
+                    "CT_GOV_LAM_MIN": float(LAM_MIN), "CT_GOV_LAM_GROW": float(LAM_GROW),
+                    "CT_EQ_NEWTON_MAX_ITER": int(EQ_NEWTON_MAX_ITER),
+                    "CT_EQ_NEWTON_TOL": float(EQ_NEWTON_TOL)}
         fhocp = law.fhocp
         return cls._common(fhocp, observer, h.offset_filter, law.certified, model, u_lo,
                            u_hi, fhocp.reference.layout, "paper", law_data,

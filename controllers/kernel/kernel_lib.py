@@ -37,7 +37,12 @@ from controllers.kernel.kernel_abi import (
     check_layout,
 )
 
-__all__ = ["Kernel", "Workspace"]
+__all__ = ["EQ_NEWTON_MAX_ITER", "EQ_NEWTON_TOL", "Kernel", "Workspace"]
+
+#: :meth:`Workspace.eq_newton`'s iteration cap and tolerance on ``max |F|`` (those of
+#: :func:`controllers.equilibrium.equilibrium_newton`; the exported governor's too).
+EQ_NEWTON_MAX_ITER = 20
+EQ_NEWTON_TOL = 1e-11
 
 _VP, _CD, _CI = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
 #: ctypes signatures of the entry points taking a workspace first: (arguments after it, result)
@@ -286,8 +291,9 @@ class Workspace:
         b["p"][:] = p
         return float(self._c["terminal_gap"](self._ws, a["w"], a["p"]))
 
-    def eq_newton(self, y: np.ndarray, x0: np.ndarray, u0: np.ndarray, max_iter: int = 20,
-                  tol: float = 1e-11) -> tuple[np.ndarray, np.ndarray] | None:
+    def eq_newton(self, y: np.ndarray, x0: np.ndarray, u0: np.ndarray,
+                  max_iter: int = EQ_NEWTON_MAX_ITER, tol: float = EQ_NEWTON_TOL
+                  ) -> tuple[np.ndarray, np.ndarray] | None:
         """:func:`controllers.equilibrium.equilibrium_newton`, compiled: ``(x, u)`` or
         ``None``."""
         b, a = self._buf, self._addr

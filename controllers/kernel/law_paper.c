@@ -1,6 +1,6 @@
-/* law_paper.c: the paper's law in C (law="paper", governor=false: the paper's controller),
- * joined between controller.h and controller.c (see controller.h for what a law file
- * defines). It is the C twin of the Python law, in the same order of kernel calls:
+/* law_paper.c: the paper's law in C (law="paper"), joined between controller.h and
+ * controller.c (see controller.h for what a law file defines). It is the C twin of the Python
+ * law, in the same order of kernel calls:
  *
  *   law_step        cosim_adapters/paper_law.py PaperLaw.step and _update_reference: the
  *                   set-point rate limit (setpoint_rate), the offset-free shift by d_hat
@@ -13,9 +13,13 @@
  *                   PFX(equilibrium), which the Python law calls too)
  *   first_admissible PaperLaw._first_admissible and closest_admissible (the uncertified
  *                   mode's first set-point outside the theory)
+ *   govern          PaperLaw._govern with controllers/ocp/governor.py ReferenceGovernor
+ *                   (CT_GOVERNOR, as many inputs as outputs): the admissible reference
+ *                   governor after a set-point change, lambda_max adapted to the solver
  *   make_step       controllers/ocp/paper_mpc.py RobustMPC.make_step: eq:mpc with the
- *                   candidate of the proof of th:feasibility-stability as fallback, and the
- *                   suboptimal iterate no costlier than it
+ *                   candidate of the proof of th:feasibility-stability as fallback (the
+ *                   governor's feasible candidate when it moved), and the suboptimal iterate
+ *                   no costlier than it
  *   solve           controllers/ocp/fhocp.py FHOCP.solve_request with the paper's reference
  *                   (controllers/ocp/reference_setpoint.py FixedSetpoint: write, through
  *                   controllers/ocp/fhocp_layout.py FHOCPLayout.write; check_answer and
@@ -23,8 +27,10 @@
  *   evaluate        FixedSetpoint.evaluate (a given plan's answer check)
  *
  * so that the same measurements give the same inputs (tests/cosim_adapters/
- * test_controller_export.py). The admissible reference governor (governor=true, the
- * Python law's default) is not compiled: export refuses it by name.
+ * test_controller_export.py). The governor is compiled for NU == NY (the kernel's square
+ * Newton, PFX(eq_newton)); with more outputs than inputs the Python governor moves along the
+ * surface of equilibrium outputs and with fewer it takes least-squares Newton steps: export
+ * refuses those by name.
  *
  * Where the Python component raises (a certified design whose first set-point is outside
  * the theory), the C step takes the closest admissible set-point as the uncertified law
@@ -65,6 +71,12 @@ typedef struct law_state {
   /* the robust MPC: the plan, the last input (u_{-1} of the input-rate term) */
   int has_plan, has_uprev;
   double plan[NH * NU], uprev[NU], cand[NH * NU];
+  /* the reference governor (CT_GOVERNOR): lambda_max, whether its last step moved, the last
+   * request refused as unreachable, and the candidate it found feasible this step (the
+   * solve's initial guess and the fallback) */
+  double lam_max;
+  int moved, has_unreachable, has_gcand;
+  double unreachable[NY], gcand[NH * NU], gx[(NH + 1) * NX];
   /* the FHOCP's warm start (its last answer and multipliers) */
   int has_warm;
   double warm_w[NW], warm_lx[NW], warm_lg[NG];
@@ -94,12 +106,17 @@ static int admissible(const double *y, double *alpha) {
   return ok && a > 0.0 && CT_CERT_RF_LHS <= a * CT_CERT_RF_ONE_MINUS_RHO;
 }
 
-/* Certificate.reference: (x_bar, u_bar, alpha) of the set-point y into st; 0, or 1 when y
- * fails a hypothesis or is not reachable with |u|inf <= 1 (nothing written then) */
+/* Certificate.reference: (x_bar, u_bar, alpha) of the set-point y into x, u, *alpha; 0, or 1
+ * when y fails a hypothesis or is not reachable with |u|inf <= 1 */
+static int reference_of(law_state *st, const double *y, double *x, double *u, double *alpha) {
+  if (!admissible(y, alpha)) return 1;
+  return PFX(equilibrium)(st->ws, y, x, u) != 0;
+}
+
+/* the same into st (the FHOCP's reference); nothing written when it fails */
 static int reference(law_state *st, const double *y) {
   double alpha, x[NX], u[NU];
-  if (!admissible(y, &alpha)) return 1;
-  if (PFX(equilibrium)(st->ws, y, x, u) != 0) return 1;
+  if (reference_of(st, y, x, u, &alpha) != 0) return 1;
   memcpy(st->x_bar, x, sizeof x);
   memcpy(st->u_bar, u, sizeof u);
   st->alpha = alpha;
@@ -137,13 +154,105 @@ static int first_admissible(law_state *st, const double *target, const double *y
   return 1;
 }
 
-/* PaperLaw._update_reference (without the governor): the FHOCP's set-point for the request
- * yr at the measured y; raises CTL_WARN_SETPOINT_REJECTED once per requested set-point
- * refused. 1 when there is no reference to regulate to (the first set-point and none
- * admissible). */
+/* ---------------------------------------------------------------- the governor */
+#if NU == NY
+static const double GOV_ZERO_U[NU];
+
+/* ReferenceGovernor.newton: the equilibrium with output y by the kernel's Newton from
+ * (x0, u0) into x, u; 0, or 1 when it does not converge or leaves |u|inf <= 1 (kernel_lib.py
+ * eq_newton) */
+static int gov_newton(const double *y, const double *x0, const double *u0, double *x,
+                      double *u) {
+  if (PFX(eq_newton)(y, x0, u0, CT_EQ_NEWTON_MAX_ITER, CT_EQ_NEWTON_TOL, x, u) != 0) return 1;
+  double umax = 0.0;
+  for (int j = 0; j < NU; j++) umax = fmax(umax, fabs(u[j]));
+  return umax > 1.0;
+}
+
+/* ReferenceGovernor.feasible: the sequence u satisfies every constraint of eq:optimization
+ * from x_hat (the output rows at i >= 1, the terminal set |x_N - xb|inf <= alpha) */
+static int gov_feasible(law_state *st, const double *xhat, const double *u, const double *xb,
+                        double alpha) {
+  gk_assessment out;
+  PFX(assess)(st->ws, xhat, u, xb, GOV_ZERO_U, GOV_ZERO_U, st->bnd, alpha, st->gx, &out);
+  return !(out.violation_rows > 0.0) && out.terminal_distance <= alpha;
+}
+
+/* ReferenceGovernor.step: move the FHOCP's set-point from st->y_model towards r by the
+ * largest of lam_max, lam_max/2, ... (CT_GOV_LEVELS values) whose equilibrium passes the
+ * set-point checks and has a feasible candidate (the plan shifted with u_bar(v+) appended,
+ * or that offset by u_bar(v+) - u_bar(v)) into st->gcand; the reference written. Returns the
+ * fraction moved, 0 (the reference as it was) when none. */
+static double gov_step(law_state *st, const double *xhat, const double *r, double lam_max) {
+  if (!st->has_plan) return 0.0;
+  double lam = lam_max;
+  for (int level = 0; level < CT_GOV_LEVELS; level++) {
+    double y[NY], xb[NX], ub[NU], alpha;
+    for (int a = 0; a < NY; a++) y[a] = st->y_model[a] + lam * (r[a] - st->y_model[a]);
+    if (admissible(y, &alpha) && gov_newton(y, st->x_bar, st->u_bar, xb, ub) == 0) {
+      double *cand = st->gcand;
+      for (int option = 0; option < 2; option++) {
+        shifted_candidate(cand, st->plan, 1, ub);
+        if (option == 1)
+          for (int c = 0; c < NH * NU; c++)
+            cand[c] = gk_clip1(cand[c] + (ub[c % NU] - st->u_bar[c % NU]));
+        if (gov_feasible(st, xhat, cand, xb, alpha)) {
+          memcpy(st->y_model, y, sizeof y);
+          memcpy(st->x_bar, xb, sizeof xb);
+          memcpy(st->u_bar, ub, sizeof ub);
+          st->alpha = alpha;
+          return lam;
+        }
+      }
+    }
+    lam *= 0.5;
+  }
+  return 0.0;
+}
+
+/* PaperLaw._govern with ReferenceGovernor.govern: the FHOCP's set-point moved towards the
+ * admissible target; a target outside the theory, or one no input in the box reaches (the
+ * kernel's Newton, then its multi-start search), is refused (CTL_WARN_SETPOINT_REJECTED once
+ * per request) and the last set-point kept. lambda_max halves (not below CT_GOV_LAM_MIN)
+ * after a solve that did not converge and grows by CT_GOV_LAM_GROW (not above 1) after a
+ * converged one that followed a move. */
+static void govern(law_state *st, const double *xhat, const double *target, int changed,
+                   int *warnings) {
+  double alpha, x[NX], u[NU];
+  if (!admissible(target, &alpha)) {
+    if (changed) *warnings |= CTL_WARN_SETPOINT_REJECTED;
+    return;
+  }
+  if (!changed && st->has_unreachable) {
+    int same = 1;
+    for (int a = 0; a < NY; a++) same &= target[a] == st->unreachable[a];
+    if (same) return;   /* still the unreachable request: refused again */
+  }
+  if (changed && gov_newton(target, st->x_bar, st->u_bar, x, u) != 0 &&
+      reference_of(st, target, x, u, &alpha) != 0) {
+    *warnings |= CTL_WARN_SETPOINT_REJECTED;
+    memcpy(st->unreachable, target, sizeof st->unreachable);
+    st->has_unreachable = 1;
+    return;
+  }
+  if (st->has_plan && !st->res.success)
+    st->lam_max = fmax(st->lam_max * 0.5, CT_GOV_LAM_MIN);
+  else if (st->moved && st->has_plan)
+    st->lam_max = fmin(1.0, st->lam_max * CT_GOV_LAM_GROW);
+  const double lam = gov_step(st, xhat, target, st->lam_max);
+  st->moved = lam > 0.0;
+  st->has_gcand = st->moved;
+}
+#endif
+
+/* PaperLaw._update_reference: the FHOCP's set-point for the request yr at the measured y
+ * (after the first, through the governor when CT_GOVERNOR); raises CTL_WARN_SETPOINT_REJECTED
+ * once per requested set-point refused. 1 when there is no reference to regulate to (the
+ * first set-point and none admissible). */
 static int update_reference(law_state *st, const double *xhat, const double *y,
                             const double *yr, int *warnings) {
   double target[NY], yh[NY];
+  st->has_gcand = 0;
   memcpy(target, yr, sizeof target);
   if (CT_SETPOINT_RATE >= 0.0 && st->has_model)
     for (int a = 0; a < NY; a++) {
@@ -167,6 +276,12 @@ static int update_reference(law_state *st, const double *xhat, const double *y,
   for (int a = 0; a < NY; a++) changed |= yr[a] != st->y_ref[a];
   memcpy(st->y_ref, yr, sizeof st->y_ref);
   st->has_ref = 1;
+#if NU == NY
+  if (CT_GOVERNOR && st->has_model) {
+    govern(st, xhat, target, changed, warnings);
+    return 0;
+  }
+#endif
   if (reference(st, target) == 0) {
     memcpy(st->y_model, target, sizeof target);
     st->has_model = 1;
@@ -205,10 +320,10 @@ static void evaluate(law_state *st, const double *xhat, const double *u, int sta
 }
 
 /* FixedSetpoint.write through FHOCPLayout.write: p = (x_hat, x_bar, u_bar[, u_{-1}]), the
- * bounds (t <= alpha), the output and terminal rows, the initial guess (the last answer
- * shifted by one stage with u_bar appended, else u_bar repeated; t its terminal gap) and the
- * multipliers shifted the same way */
-static void write_request(law_state *st, const double *xhat) {
+ * bounds (t <= alpha), the output and terminal rows, the initial guess (u_init when given:
+ * the governor's candidate; else the last answer shifted by one stage with u_bar appended,
+ * else u_bar repeated; t its terminal gap) and the multipliers shifted by one stage */
+static void write_request(law_state *st, const double *xhat, const double *u_init) {
   double *p = st->p;
   memcpy(p, xhat, NX * sizeof(double));
   memcpy(p + NX, st->x_bar, NX * sizeof(double));
@@ -231,7 +346,9 @@ static void write_request(law_state *st, const double *xhat) {
     st->lbg[r0 + NX + k] = 0.0;
   }
   for (int c = 0; c < NW; c++) st->w[c] = 0.0;
-  if (st->has_warm) {
+  if (u_init) {
+    memcpy(st->w, u_init, NH * NU * sizeof(double));
+  } else if (st->has_warm) {
     memcpy(st->w, st->warm_w + NU, (NH - 1) * NU * sizeof(double));
     memcpy(st->w + (NH - 1) * NU, st->u_bar, NU * sizeof(double));
   } else {
@@ -245,16 +362,17 @@ static void write_request(law_state *st, const double *xhat) {
 }
 
 /* FHOCP.solve_request with the paper's reference, into st->res: the i = 0 row first (a
- * violated one: u_bar repeated, evaluated, status infeasible_x0), then the SQP, the answer
- * check (FixedSetpoint.check_answer, judge) and the warm start (keeps_warm_start) */
-static void solve(law_state *st, const double *xhat) {
+ * violated one: u_bar repeated, evaluated, status infeasible_x0), then the SQP from u_init
+ * (NULL: the warm start), the answer check (FixedSetpoint.check_answer, judge) and the warm
+ * start (keeps_warm_start) */
+static void solve(law_state *st, const double *xhat, const double *u_init) {
   double ubar_seq[NH * NU];
   if (x0_violation(xhat, st->bnd) > CT_FEAS_TOL) {
     for (int i = 0; i < NH; i++) memcpy(ubar_seq + i * NU, st->u_bar, NU * sizeof(double));
     evaluate(st, xhat, ubar_seq, CTL_INFEASIBLE_X0, &st->res);
     return;
   }
-  write_request(st, xhat);
+  write_request(st, xhat, u_init);
   const int status = PFX(sqp)(st->ws, st->p, st->lbx, st->ubx, st->lbg, st->ubg, st->w, st->lx,
                               st->lg, st->g, &st->f, &st->opts, &st->info);
   ctl_result *r = &st->res;
@@ -273,12 +391,16 @@ static void solve(law_state *st, const double *xhat) {
 }
 
 /* RobustMPC.make_step: u_k = k^MPC(x_hat, e_o) (eq:mpc), the candidate of the proof (the
- * plan shifted with u_bar appended, u_bar repeated at first) applied when the solve fails,
- * unless the solver's iterate is feasible and no costlier (suboptimal MPC) */
+ * plan shifted with u_bar appended, u_bar repeated at first; the governor's feasible
+ * candidate when it moved the set-point, which the solve starts from) applied when the solve
+ * fails, unless the solver's iterate is feasible and no costlier (suboptimal MPC) */
 static void make_step(law_state *st, const double *xhat, double *u) {
   double *cand = st->cand;
-  shifted_candidate(cand, st->plan, st->has_plan, st->u_bar);
-  solve(st, xhat);
+  if (st->has_gcand)
+    memcpy(cand, st->gcand, sizeof st->cand);
+  else
+    shifted_candidate(cand, st->plan, st->has_plan, st->u_bar);
+  solve(st, xhat, st->has_gcand ? st->gcand : 0);
   ctl_result *res = &st->res;
   int use = res->success, fallback = 0;
   const ctl_result *applied = res;
@@ -309,6 +431,7 @@ static void law_reset(law_state *st, gk_ws *ws) {
   st->alpha = NAN;
   last_reset(&st->last);
   st->beta = CT_BETA;
+  st->lam_max = 1.0;
 }
 
 /* PaperLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr; with
@@ -316,13 +439,13 @@ static void law_reset(law_state *st, gk_ws *ws) {
  * held, the box's middle before any) */
 static void law_step(law_state *st, const double *xhat, double e_o, const double *y,
                      const double *yr, double *u, int *warnings) {
+  tightened_bounds(e_o, st->bnd);   /* (the governor's feasibility test reads them) */
   if (update_reference(st, xhat, y, yr, warnings) != 0) {   /* u as it came: held */
     st->last.status = CTL_OTHER;
     st->last.fallback = 1;
     st->last.iterations = 0;
     return;
   }
-  tightened_bounds(e_o, st->bnd);
   make_step(st, xhat, u);
 }
 

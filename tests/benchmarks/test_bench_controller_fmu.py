@@ -14,7 +14,8 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 @pytest.mark.parametrize("options", [[], ["--option", 'law="paper"', "--option",
-                                           "governor=false"]], ids=["tracking", "paper"])
+                                           "governor=false"], ["--option", 'law="paper"']],
+                         ids=["tracking", "paper", "paper-governor"])
 def test_the_benchmark_prints_ratios_and_equal_inputs(options: list[str], tmp_path: Path
                                                       ) -> None:
     scenario = tmp_path / "short.csv"

@@ -30,7 +30,8 @@ PAPER = ROOT / "scenarios" / "paper_steps.csv"
 #: The issue's bar: the FMU's inputs within this share of each input's box of the Python
 #: controller's (they are equal to the bit on this machine).
 TOL = 1e-9
-#: The paper's law without its governor (the paper's controller): the law the FMU exports.
+#: The paper's law without its governor (the paper's controller; its default, with it, is
+#: ``{"law": "paper"}``).
 PAPER_LAW = {"law": "paper", "governor": False}
 
 
@@ -192,9 +193,11 @@ MIXING = {"Fh": (0.3, 1.5), "Fc": (0.3, 1.5), "Fw": (0.3, 1.5)}
     ("cstr", 3, "time,ref.CA,ref.T\n0,0.536,340.4\n1500,0.47,339.9\n3000,0.6,340.8\n"
      "4500,,\n", CSTR, True, False, PAPER_LAW),
     ("mixing_tank", 4, "time,ref.h,ref.T\n0,1.34,41.66\n500,1.43,44.72\n2000,,\n", MIXING,
-     True, False, PAPER_LAW)],
+     True, False, PAPER_LAW),
+    ("cstr", 3, "time,ref.CA,ref.T\n0,0.536,340.4\n1500,0.6575,321.93\n3000,0.47,339.9\n"
+     "4500,0.6,340.8\n6000,,\n", CSTR, True, False, {"law": "paper"})],
     ids=["cstr-2x2", "cstr-uncertified", "mixing-tank-3x2", "cstr-2x2-paper",
-         "mixing-tank-3x2-paper"])
+         "mixing-tank-3x2-paper", "cstr-2x2-paper-governor"])
 def test_plants_of_other_kinds(plant_name: str, seed: int, steps: str, boxes: dict,
                                certified: bool, fails: bool, options: dict,
                                tmp_path: Path) -> None:
@@ -204,7 +207,9 @@ def test_plants_of_other_kinds(plant_name: str, seed: int, steps: str, boxes: di
     unreachable first outputs (the closest equilibrium), the failed solves of a model far
     from the plant (statuses and fallbacks alike) and, for a set-point outside the certified
     steady outputs, the uncertified mode (the tightening around ``y + d̂``); the paper's law
-    (without its governor) on both, from equilibrium outputs of the models."""
+    (without its governor) on both, from equilibrium outputs of the models, and with its
+    governor on the CSTR through a set-point the certificate admits but no input in the box
+    reaches (refused, the last one kept, as in Python)."""
     from cosim.cli import main
 
     plant, model, steps_csv = _example_case(tmp_path, plant_name, seed, steps)
@@ -222,6 +227,10 @@ def test_plants_of_other_kinds(plant_name: str, seed: int, steps: str, boxes: di
     if fails:
         statuses = set(py.to_pandas()["ctrl.status"])
         assert statuses - {0.0}, "the case should reach failed solves"
+    if options.get("governor", options.get("law") == "paper"):
+        summary = py.summary["controller_summary"]
+        assert summary["governor_steps"] > 0
+        assert "is not reachable with inputs inside" in summary["setpoint_rejections"][0]
 
 
 def test_the_compiled_step_replays_the_python_controller() -> None:
@@ -266,46 +275,46 @@ def _replayed(ctrl: object, compiled: object, refs: list[tuple[float, float]]
         yield out
 
 
-def test_the_paper_law_with_its_governor_is_refused(tmp_path: Path) -> None:
-    from cosim_adapters.controller_export import export_fmu
-    from cosim_adapters.robust_mpc import RobustMPCController
-
-    ctrl = RobustMPCController(law="paper")
-    with pytest.raises(CosimError, match="the paper's law with its reference governor "
-                                         r"\(governor=true, its default\): the controller FMU "
-                                         "runs the paper's law without it"):
-        export_fmu(ctrl, tmp_path / "C.fmu")
-    assert not (tmp_path / "C.fmu").exists()
-
-
-
-def test_the_paper_law_exported_runs_as_the_python_law(tmp_path: Path) -> None:
+@pytest.mark.parametrize("law", [PAPER_LAW, {"law": "paper"}], ids=["paper", "governor"])
+def test_the_paper_law_exported_runs_as_the_python_law(law: dict, tmp_path: Path) -> None:
     """``cosim export-fmu --option law=\"paper\" --option governor=false`` (the paper's
-    controller): on the paper scenario, through its failed solves and fallbacks after the
-    set-point steps, the FMU gives the Python law's inputs, statuses and fallbacks (to the
-    bit here); its tunable parameters are R's diagonal (no offset filter without
-    ``offset_free``, no offset weight), and R tuned gives the Python law with that R."""
-    fmu = cosim.export_fmu(out=tmp_path / "Paper.fmu", options=PAPER_LAW)
+    controller) and ``--option law=\"paper\"`` (with its reference governor): on the paper
+    scenario, through its failed solves and fallbacks after the set-point steps, the FMU
+    gives the Python law's inputs, statuses and fallbacks (to the bit here); its tunable
+    parameters are R's diagonal (no offset filter without ``offset_free``, no offset
+    weight), and R tuned gives the Python law with that R."""
+    fmu = cosim.export_fmu(out=tmp_path / "Paper.fmu", options=law)
     md = fmpy.read_model_description(str(fmu))
     assert "paper's law, certified" in md.description
     assert [v.name for v in md.modelVariables if v.causality == "parameter"] == ["R.qa", "R.qb"]
     boxes = {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)}
-    py = cosim.run(PAPER, options=PAPER_LAW, figure=False)
-    assert set(py.to_pandas()["ctrl.fallback"]) == {0.0, 1.0}
+    py = cosim.run(PAPER, options=law, figure=False)
+    if law.get("governor", True):
+        assert py.summary["controller_summary"]["governor_steps"] > 0
+    else:
+        assert set(py.to_pandas()["ctrl.fallback"]) == {0.0, 1.0}
     _same_inputs(cosim.run(PAPER, controller=str(fmu), figure=False), py, boxes)
     scenario = tmp_path / "steps.csv"
     scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,0.8,0.9\n1000,,\n")
     tuned = {"R": {"qa": 0.05}}
     _same_inputs(cosim.run(scenario, controller=str(fmu), options=tuned, figure=False),
-                 cosim.run(scenario, options={**PAPER_LAW, **tuned}, figure=False), boxes)
+                 cosim.run(scenario, options={**law, **tuned}, figure=False), boxes)
+
+
+GOVERNOR = {"governor": True}
 
 
 @pytest.mark.parametrize(("options", "refs", "first_outside", "named"), [
     ({}, ((0.65, 0.65), (1.3, 1.4), (3.0, 0.3)), False, 1),
     ({"offset_free": True, "setpoint_rate": 0.05, "du_weight": 0.1},
      ((0.65, 0.65), (0.9, 1.0), (3.0, 0.3)), False, 0),
-    ({}, ((3.0, 0.3), (0.8, 0.9), (0.7, 0.8)), True, 1)],
-    ids=["paper", "offset-free-rate-limited", "uncertified-first-outside"])
+    ({}, ((3.0, 0.3), (0.8, 0.9), (0.7, 0.8)), True, 1),
+    (GOVERNOR, ((0.65, 0.65), (1.3, 1.4), (0.5, 0.6), (3.0, 0.3), (1.0, 1.2)), False, 1),
+    ({**GOVERNOR, "offset_free": True, "setpoint_rate": 0.05, "du_weight": 0.1},
+     ((0.65, 0.65), (1.3, 1.4), (0.5, 0.6), (1.9, 0.2), (1.0, 1.2)), False, 0),
+    (GOVERNOR, ((3.0, 0.3), (0.8, 0.9), (0.3, 0.4)), True, 1)],
+    ids=["paper", "offset-free-rate-limited", "uncertified-first-outside", "governor",
+         "governor-offset-free-rate-limited", "governor-uncertified-first-outside"])
 def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tuple,
                                                         first_outside: bool,
                                                         named: int) -> None:
@@ -315,7 +324,9 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
     last admissible one kept: one warning per refused request, where the Python law names
     one; rate-limited, the set-point stops at the boundary, refused step by step, unnamed,
     as in Python) and, uncertified, a first set-point outside (the closest admissible
-    one)."""
+    one); with the reference governor (``governor=true``, the Python law's default) through
+    its moves by fractions of the step, ``λ_max`` halved after failed solves and grown
+    again, and its holds."""
     from controllers.kernel.controller_source import (
         CompiledController,
         ControllerDesign,
@@ -325,7 +336,7 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
     )
     from cosim_adapters.robust_mpc import RobustMPCController
 
-    ctrl = RobustMPCController(**PAPER_LAW, **options)
+    ctrl = RobustMPCController(**{**PAPER_LAW, **options})
     if first_outside:
         ctrl.expect_setpoints([{"h1": 3.0, "h2": 0.3}])
         assert not ctrl.law.certified
@@ -337,12 +348,15 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
         "R.qa", "R.qb"] + (["du_weight.qa", "du_weight.qb"] if "du_weight" in options else [])
     compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
                                   n_outputs=2)
-    refused = 0
+    refused, fractions = 0, set()
     for k, out in enumerate(_replayed(ctrl, compiled, [r for r in refs for _ in range(25)])):
         assert bool(out["warnings"] & 4) == (len(ctrl.law.rejections) > refused), k
         refused = len(ctrl.law.rejections)
+        fractions.add(ctrl.law.lam)
     assert refused == named
     assert ctrl.law.rejected > 0
+    if "governor" in options and not first_outside:   # it moved by fractions of the step
+        assert ctrl.law.governed_steps > 0 and min(fractions - {0.0}) < 0.5, fractions
     compiled.close()
 
 
