@@ -22,6 +22,7 @@
 
 void model_set_defaults(ModelData *m) {
     m->time = 0.0;
+    m->warnings = 0;
     for (int a = 0; a < CTL_NY; a++) {
         m->y[a] = CTL_Y_START[a];
         m->ref[a] = CTL_Y_START[a];
@@ -133,29 +134,37 @@ const char *model_do_step(ModelData *m, double step, char *msg, size_t n) {
     }
     for (double i = 0.0; i < k; i += 1.0) mpc_ctl_step(m->ctl, m->y, m->ref);
     m->time += step;
+    m->warnings |= mpc_ctl_take_warnings(m->ctl);
     return NULL;
 }
 
+/* the warnings the step raised, one per call (the glue logs each until NULL), the most
+ * serious first */
 const char *model_warning(ModelData *m, char *msg, size_t n) {
-    const int w = mpc_ctl_take_warnings(m->ctl);
-    if (w & WARN_NONFINITE_INPUT) {
+    const int w = m->warnings;
+    const int bit = w & WARN_NONFINITE_INPUT         ? WARN_NONFINITE_INPUT
+                    : w & WARN_NO_ADMISSIBLE_SETPOINT ? WARN_NO_ADMISSIBLE_SETPOINT
+                    : w & WARN_SETPOINT_REJECTED      ? WARN_SETPOINT_REJECTED
+                                                      : w & WARN_UNREACHABLE_START;
+    m->warnings &= ~bit;
+    if (bit == WARN_NONFINITE_INPUT) {
         snprintf(msg, n, "a measured output or set-point is not finite at t = %.17g s: the "
                  "last inputs are held and the observer is not advanced", m->time);
         return msg;
     }
-    if (w & WARN_NO_ADMISSIBLE_SETPOINT) {
+    if (bit == WARN_NO_ADMISSIBLE_SETPOINT) {
         snprintf(msg, n, "no admissible set-point at t = %.17g s (the paper's law: the "
                  "set-points and the closest admissible ones fail the certificate's "
                  "hypotheses or are not reachable): the inputs are held", m->time);
         return msg;
     }
-    if (w & WARN_SETPOINT_REJECTED) {
+    if (bit == WARN_SETPOINT_REJECTED) {
         snprintf(msg, n, "set-point refused at t = %.17g s (the paper's law: it fails a "
                  "hypothesis of th:feasibility-stability, or no input in the box reaches "
                  "it): the last admissible set-point is kept", m->time);
         return msg;
     }
-    if (w & WARN_UNREACHABLE_START) {
+    if (bit == WARN_UNREACHABLE_START) {
         snprintf(msg, n, "the first measured outputs are no equilibrium output the inputs' box "
                  "reaches: the observer starts at the closest reachable equilibrium");
         return msg;

@@ -65,6 +65,7 @@ typedef struct {
     double y[CTL_NY];         /* the measured outputs (the problem's units) */
     double ref[CTL_NY];       /* their set-points */
     ctl_state *ctl;           /* the controller (model_acquire) */
+    int warnings;             /* raised by the last step, not yet logged (model_warning) */
 } ModelData;
 
 void model_set_defaults(ModelData *m);

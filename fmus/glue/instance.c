@@ -463,10 +463,13 @@ Status instance_do_step(Instance *inst, const char *function, double currentComm
         return STATUS_ERROR;
     }
 #ifdef MODEL_HAS_WARNINGS
-    if (model_warning(&inst->model, msg, sizeof(msg))) {
+    Status status = STATUS_OK;
+    while (model_warning(&inst->model, msg, sizeof(msg))) {   /* one line per warning */
         instance_log(inst, STATUS_WARNING, "logStatusWarning", "%s: %s", function, msg);
-        return STATUS_WARNING;
+        status = STATUS_WARNING;
     }
-#endif
+    return status;
+#else
     return STATUS_OK;
+#endif
 }

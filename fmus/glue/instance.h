@@ -41,8 +41,9 @@
  *                         FMU-state calls are refused with a logged reason.
  *   MODEL_HAS_WARNINGS    after each successful model_do_step the glue asks
  *       const char *model_warning(ModelData *m, char *msg, size_t n);
- *                                           NULL, or a message logged (logStatusWarning)
- *                                           and returned as status Warning
+ *                                           until it returns NULL: each message is logged
+ *                                           (logStatusWarning, one line each) and the step
+ *                                           returns status Warning
  *
  * An Instance holds the model (model.h) plus the FMI bookkeeping common to FMI 2.0 and 3.0:
  * interface type, state machine, debug logging, saved FMU states. Each instance_* function

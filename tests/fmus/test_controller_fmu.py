@@ -252,6 +252,25 @@ def test_bad_measurements_and_steps_are_reported(controller_fmus: dict[int, Path
     two.close()
 
 
+def test_every_warning_of_a_step_is_logged(tmp_path: Path) -> None:
+    """A step raising two warnings logs both, one line each, most serious first: the paper's
+    law's FMU at a first measured output no input in the box reaches and a set-point outside
+    the theory (the closest admissible one taken), FMI 2 and 3."""
+    import cosim
+
+    for version in (2, 3):
+        fmu = cosim.export_fmu(out=tmp_path / f"Paper{version}.fmu", fmi=version,
+                               options={"law": "paper", "governor": False})
+        log: list[tuple[int, str, str]] = []
+        ctrl = _controller(fmu, logger=lambda s, c, m, log=log: log.append((s, c, m)))
+        _control(ctrl, (1.9, 0.05), (3.0, 0.3))
+        warnings = [m for s, c, m in log if s == 1 and c == "logStatusWarning"]
+        assert len(warnings) == 2, log
+        assert "set-point refused" in warnings[0], warnings
+        assert "no equilibrium output the inputs' box reaches" in warnings[1], warnings
+        ctrl.close()
+
+
 def test_the_levels_it_reads_are_the_plants(controller_fmus: dict[int, Path]) -> None:
     """Every measured output of the controller is an output of the plant, with its unit."""
     plant = {v.name: v for v in fmpy.read_model_description(
