@@ -236,7 +236,8 @@ def equilibrium_newton(params: Mapping[str, np.ndarray], y: np.ndarray, x0: np.n
     The Newton matrix is ``(n + p) × (n + m)``: square when ``m = p`` (a linear solve, as the
     compiled kernel's ``eq_newton``); otherwise each step is its least-squares solution
     (``numpy.linalg.lstsq``): the minimum-norm step when ``m > p`` (the equilibrium closest
-    to ``(x0, u0)`` along the continuation), Gauss–Newton when ``p > m`` (it reaches a zero
+    to ``(x0, u0)`` along the continuation; the kernel's ``eq_newton`` takes the same step by
+    the normal equations), Gauss–Newton when ``p > m`` (it reaches a zero
     residual only for a set-point on the surface of equilibrium outputs, else ``None``).
     """
     n = x0.shape[0]

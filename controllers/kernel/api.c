@@ -262,16 +262,55 @@ EXPORT double PFX(terminal_gap)(gk_ws *ws, const double *w, const double *p) {
   return d;
 }
 
+/* Solve A z = b in place (A n x n, row-major, destroyed; z into b): Gaussian elimination
+ * with partial pivoting, as LAPACK gesv. 0, or 2 on a zero pivot. Always inlined into
+ * eq_newton's clones: compiled once per clone, the same arithmetic (FMA contraction
+ * included) in every library built from this source, the exported controller's too. */
+static inline __attribute__((always_inline)) int eq_gauss(double *A, double *b, int n) {
+  for (int c = 0; c < n; c++) {
+    int piv = c;
+    double best = fabs(A[c * n + c]);
+    for (int rr = c + 1; rr < n; rr++)
+      if (fabs(A[rr * n + c]) > best) { best = fabs(A[rr * n + c]); piv = rr; }
+    if (best == 0.0) return 2;
+    if (piv != c) {
+      for (int q = 0; q < n; q++) {
+        const double t = A[c * n + q]; A[c * n + q] = A[piv * n + q]; A[piv * n + q] = t;
+      }
+      const double t = b[c]; b[c] = b[piv]; b[piv] = t;
+    }
+    const double inv = 1.0 / A[c * n + c];
+    for (int rr = c + 1; rr < n; rr++) {
+      const double l = A[rr * n + c] * inv;
+      if (l == 0.0) continue;
+      for (int q = c; q < n; q++) A[rr * n + q] -= l * A[c * n + q];
+      b[rr] -= l * b[c];
+    }
+  }
+  for (int c = n - 1; c >= 0; c--) {
+    double s = b[c];
+    for (int q = c + 1; q < n; q++) s -= A[c * n + q] * b[q];
+    b[c] = s / A[c * n + c];
+  }
+  return 0;
+}
+
 /* Equilibrium x = f(x, u), U_o x + b_o = y by Newton's method from (x0, u0), as
- * controllers.ocp.governor.equilibrium_newton (square system: NU == NY). Returns 0 when
- * max|F| < tol was reached (x, u written; the caller checks |u| <= 1), 1 when not converged
- * in max_iter iterations, 2 on a singular Newton matrix. */
-#if NU == NY
+ * controllers.equilibrium.equilibrium_newton, for NU >= NY: the Newton matrix K is
+ * (NX + NY) x (NX + NU); square (NU == NY), each step solves K d = -F; wide (NU > NY), each
+ * step is the minimum-norm solution d = K^T z, (K K^T) z = -F (the equilibrium closest to
+ * (x0, u0) along the continuation). Returns 0 when max|F| < tol was reached (x, u written;
+ * the caller checks |u| <= 1), 1 when not converged in max_iter iterations, 2 on a singular
+ * Newton matrix. */
+#if NU >= NY
 HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u0, int max_iter,
                               double tol, double *xo, double *uo) {
-  enum { NE = NX + NY };
-  double x[NX], u[NU], F[NE], K[NE * NE], z[NX], r[NX], h[NX], jh[NX * NV], df[NX * NV];
-  double xn[NX];
+  enum { NR = NX + NY, NC = NX + NU };
+  double x[NX], u[NU], F[NR], K[NR * NC], z[NX], r[NX], h[NX], jh[NX * NV], df[NX * NV];
+  double xn[NX], d[NC];
+#if NU > NY
+  double A[NR * NR], zz[NR];
+#endif
   memcpy(x, x0, sizeof x);
   memcpy(u, u0, sizeof u);
   for (int it = 0; it < max_iter; it++) {
@@ -283,7 +322,7 @@ HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u
       for (int k = 0; k < NX; k++) s += UO[a * NX + k] * x[k];
       F[NX + a] = s - y[a];
     }
-    for (int k = 0; k < NE; k++) fmax = fmax > fabs(F[k]) ? fmax : fabs(F[k]);
+    for (int k = 0; k < NR; k++) fmax = fmax > fabs(F[k]) ? fmax : fabs(F[k]);
     if (!(fmax == fmax)) return 1;   /* NaN */
     if (fmax < tol) {
       memcpy(xo, x, sizeof x);
@@ -292,41 +331,31 @@ HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u
     }
     stage_jac(x, z, r, h, jh, df);
     for (int k = 0; k < NX; k++) {
-      for (int c = 0; c < NV; c++) K[k * NE + c] = df[k * NV + c];
-      K[k * NE + k] -= 1.0;
+      for (int c = 0; c < NV; c++) K[k * NC + c] = df[k * NV + c];
+      K[k * NC + k] -= 1.0;
     }
     for (int a = 0; a < NY; a++) {
-      for (int c = 0; c < NX; c++) K[(NX + a) * NE + c] = UO[a * NX + c];
-      for (int c = 0; c < NU; c++) K[(NX + a) * NE + NX + c] = 0.0;
+      for (int c = 0; c < NX; c++) K[(NX + a) * NC + c] = UO[a * NX + c];
+      for (int c = 0; c < NU; c++) K[(NX + a) * NC + NX + c] = 0.0;
     }
-    /* solve K d = -F: Gaussian elimination with partial pivoting (as LAPACK gesv) */
-    double d[NE];
-    for (int k = 0; k < NE; k++) d[k] = -F[k];
-    for (int c = 0; c < NE; c++) {
-      int piv = c;
-      double best = fabs(K[c * NE + c]);
-      for (int rr = c + 1; rr < NE; rr++)
-        if (fabs(K[rr * NE + c]) > best) { best = fabs(K[rr * NE + c]); piv = rr; }
-      if (best == 0.0) return 2;
-      if (piv != c) {
-        for (int q = 0; q < NE; q++) {
-          const double t = K[c * NE + q]; K[c * NE + q] = K[piv * NE + q]; K[piv * NE + q] = t;
-        }
-        const double t = d[c]; d[c] = d[piv]; d[piv] = t;
+#if NU == NY
+    for (int k = 0; k < NR; k++) d[k] = -F[k];
+    if (eq_gauss(K, d, NR) != 0) return 2;
+#else
+    for (int i = 0; i < NR; i++)
+      for (int j = 0; j < NR; j++) {
+        double s = 0.0;
+        for (int c = 0; c < NC; c++) s += K[i * NC + c] * K[j * NC + c];
+        A[i * NR + j] = s;
       }
-      const double inv = 1.0 / K[c * NE + c];
-      for (int rr = c + 1; rr < NE; rr++) {
-        const double l = K[rr * NE + c] * inv;
-        if (l == 0.0) continue;
-        for (int q = c; q < NE; q++) K[rr * NE + q] -= l * K[c * NE + q];
-        d[rr] -= l * d[c];
-      }
+    for (int k = 0; k < NR; k++) zz[k] = -F[k];
+    if (eq_gauss(A, zz, NR) != 0) return 2;
+    for (int c = 0; c < NC; c++) {
+      double s = 0.0;
+      for (int i = 0; i < NR; i++) s += K[i * NC + c] * zz[i];
+      d[c] = s;
     }
-    for (int c = NE - 1; c >= 0; c--) {
-      double s = d[c];
-      for (int q = c + 1; q < NE; q++) s -= K[c * NE + q] * d[q];
-      d[c] = s / K[c * NE + c];
-    }
+#endif
     for (int k = 0; k < NX; k++) x[k] += d[k];
     for (int k = 0; k < NU; k++) u[k] += d[NX + k];
   }

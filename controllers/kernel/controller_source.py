@@ -174,13 +174,13 @@ class ControllerDesign:
         (``Certificate.admissible_bounds``), the set-point rate (−1: none) and the reference
         governor's (:class:`controllers.ocp.governor.ReferenceGovernor`: whether it runs, its
         levels, ``λ_max``'s floor and growth, the Newton's cap and tolerance). The governor
-        is compiled for as many inputs as outputs only (``ValueError`` otherwise)."""
+        is compiled for at least as many inputs as outputs (``ValueError`` otherwise)."""
         from controllers.kernel.kernel_lib import EQ_NEWTON_MAX_ITER, EQ_NEWTON_TOL
         from controllers.ocp.governor import LAM_GROW, LAM_MIN
 
         cert, h, gov = law.cert, law.handling, law.governor
-        if gov is not None and gov.m != gov.p:
-            raise ValueError("the exported governor needs as many inputs as outputs")
+        if gov is not None and gov.m < gov.p:
+            raise ValueError("the exported governor needs at least as many inputs as outputs")
         lo, hi = cert.admissible_bounds()
         design_ok = (cert.nu < 1 and cert.nu_o < 1 and cert.rho_s < 1
                      and bool(np.isfinite(cert.e_tilde)))

@@ -163,7 +163,8 @@ class Workspace:
             ("x0", n), ("u", (N, m)), ("w", kernel.nw), ("p", kernel.npar), ("xb", n),
             ("ub", m), ("up", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))),
             ("xs", n),
-            ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", m), ("xe", n), ("ue", m),
+            ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", kernel.p), ("xe", n),
+            ("ue", m),
             ("yp", kernel.p))}
         self._addr = {name: int(a.ctypes.data) for name, a in self._buf.items()}
         self._out = Assessment()
@@ -294,8 +295,9 @@ class Workspace:
     def eq_newton(self, y: np.ndarray, x0: np.ndarray, u0: np.ndarray,
                   max_iter: int = EQ_NEWTON_MAX_ITER, tol: float = EQ_NEWTON_TOL
                   ) -> tuple[np.ndarray, np.ndarray] | None:
-        """:func:`controllers.equilibrium.equilibrium_newton`, compiled: ``(x, u)`` or
-        ``None``."""
+        """:func:`controllers.equilibrium.equilibrium_newton`, compiled (at least as many
+        inputs as outputs; with more, its minimum-norm steps by the normal equations):
+        ``(x, u)`` or ``None``."""
         b, a = self._buf, self._addr
         b["y"][:] = y
         b["x0"][:] = x0

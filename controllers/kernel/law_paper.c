@@ -14,8 +14,9 @@
  *   first_admissible PaperLaw._first_admissible and closest_admissible (the uncertified
  *                   mode's first set-point outside the theory)
  *   govern          PaperLaw._govern with controllers/ocp/governor.py ReferenceGovernor
- *                   (CT_GOVERNOR, as many inputs as outputs): the admissible reference
- *                   governor after a set-point change, lambda_max adapted to the solver
+ *                   (CT_GOVERNOR, at least as many inputs as outputs): the admissible
+ *                   reference governor after a set-point change, lambda_max adapted to the
+ *                   solver
  *   make_step       controllers/ocp/paper_mpc.py RobustMPC.make_step: eq:mpc with the
  *                   candidate of the proof of th:feasibility-stability as fallback (the
  *                   governor's feasible candidate when it moved), and the suboptimal iterate
@@ -27,10 +28,10 @@
  *   evaluate        FixedSetpoint.evaluate (a given plan's answer check)
  *
  * so that the same measurements give the same inputs (tests/cosim_adapters/
- * test_controller_export.py). The governor is compiled for NU == NY (the kernel's square
- * Newton, PFX(eq_newton)); with more outputs than inputs the Python governor moves along the
- * surface of equilibrium outputs and with fewer it takes least-squares Newton steps: export
- * refuses those by name.
+ * test_controller_export.py). The governor is compiled for NU >= NY (the kernel's Newton,
+ * PFX(eq_newton), which the Python governor calls too); with more outputs than inputs the
+ * Python governor moves along the surface of equilibrium outputs instead: export refuses
+ * that by name.
  *
  * Where the Python component raises (a certified design whose first set-point is outside
  * the theory), the C step takes the closest admissible set-point as the uncertified law
@@ -155,7 +156,7 @@ static int first_admissible(law_state *st, const double *target, const double *y
 }
 
 /* ---------------------------------------------------------------- the governor */
-#if NU == NY
+#if NU >= NY
 static const double GOV_ZERO_U[NU];
 
 /* ReferenceGovernor.newton: the equilibrium with output y by the kernel's Newton from
@@ -276,7 +277,7 @@ static int update_reference(law_state *st, const double *xhat, const double *y,
   for (int a = 0; a < NY; a++) changed |= yr[a] != st->y_ref[a];
   memcpy(st->y_ref, yr, sizeof st->y_ref);
   st->has_ref = 1;
-#if NU == NY
+#if NU >= NY
   if (CT_GOVERNOR && st->has_model) {
     govern(st, xhat, target, changed, warnings);
     return 0;

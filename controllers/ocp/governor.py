@@ -25,8 +25,8 @@ paper's.
 
 Equilibria along the segment come from a Newton continuation from ``(x̄(v), ū(v))``
 (:func:`controllers.equilibrium.equilibrium_newton`, a few (n + p)×(n + m) solves: 22×22 for
-the four tanks, in the compiled kernel when ``m = p``; a least-squares step in numpy
-otherwise) instead of the multi-start least squares of
+the four tanks, in the compiled kernel when ``m ≥ p`` (with ``m > p`` its minimum-norm
+step); a least-squares step in numpy otherwise) instead of the multi-start least squares of
 :func:`controllers.equilibrium.equilibrium`.
 
 More outputs than inputs (``p > m``): the equilibrium outputs form an ``m``-dimensional
@@ -109,8 +109,8 @@ class ReferenceGovernor:
     def newton(self, y: np.ndarray, x0: np.ndarray,
                u0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """:func:`controllers.equilibrium.equilibrium_newton` from ``(x0, u0)``: the FHOCP's
-        compiled kernel when it has one (same iteration, ~25× faster; compiled for ``m = p``
-        only), else numpy."""
+        compiled kernel when it has one (same iteration, ~25× faster; compiled for ``m ≥ p``,
+        the exported controller's too), else numpy."""
         kernel = getattr(self.fhocp, "kernel", None)
         if kernel is not None and "eq_newton" in kernel.kernel.c:
             return kernel.eq_newton(y, x0, u0)

@@ -17,7 +17,7 @@ GRU observer, the law's FHOCP on the compiled kernel with its answer check and f
 tightening of the certificate (or of the uncertified mode) and the law's reference handling,
 in C (gcc). Laws: the default tracking law (the disturbance estimate, an artificial steady
 state), or the paper's (--option 'law="paper"'; offset_free and setpoint_rate as in cosim
-run) with its reference governor (as many inputs as outputs) or without it (--option
+run) with its reference governor (inputs >= outputs) or without it (--option
 governor=false: the paper's controller). Its inputs are the
 measured outputs, named as the plant's outputs in the problem, and their set-points
 ref.<output>; its outputs the inputs to apply, named as the plant's inputs, the solver
