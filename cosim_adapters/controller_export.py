@@ -8,9 +8,8 @@ every design of the same dimensions, signals and law), and the problem's signals
 variables (measured outputs and set-points ``ref.<output>`` in, the inputs to apply out,
 named and in the units of the problem; docs: guide/controller-fmu.md). Both laws are
 exported, for any numbers of inputs and outputs: the tracking law (the default) and the
-paper's, with ``offset_free`` and ``setpoint_rate`` as in Python, and with its reference
-governor (its default) for at least as many inputs as outputs (``governor=false`` for
-others: the paper's controller).
+paper's, with ``offset_free`` and ``setpoint_rate`` as in Python, with its reference governor
+(its default) or without it (``governor=false``: the paper's controller).
 """
 
 from __future__ import annotations
@@ -36,14 +35,6 @@ def fmu_identifier(out: str | Path) -> str:
 
 def _why_not(ctrl: Any) -> str:
     """Why ``ctrl`` cannot be exported (empty: it can)."""
-    law = ctrl.law
-    gov = law.governor if law.name == "paper" else None
-    if gov is not None and gov.m < gov.p:
-        return (f"the paper's law's reference governor (governor=true, its default) is "
-                f"compiled for at least as many inputs as outputs; this problem has {gov.m} "
-                f"input(s) and {gov.p} outputs (the governor moves along the surface of "
-                "equilibrium outputs): export it with --option governor=false (the paper's "
-                "controller) or the tracking law (the default)")
     fhocp = ctrl.fhocp
     if fhocp.kernel is None or not fhocp._compiled_loop:
         reason = fhocp.kernel_error or "the options select another solver"

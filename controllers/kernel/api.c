@@ -296,13 +296,13 @@ static inline __attribute__((always_inline)) int eq_gauss(double *A, double *b, 
 }
 
 /* Equilibrium x = f(x, u), U_o x + b_o = y by Newton's method from (x0, u0), as
- * controllers.equilibrium.equilibrium_newton, for NU >= NY: the Newton matrix K is
- * (NX + NY) x (NX + NU); square (NU == NY), each step solves K d = -F; wide (NU > NY), each
- * step is the minimum-norm solution d = K^T z, (K K^T) z = -F (the equilibrium closest to
- * (x0, u0) along the continuation). Returns 0 when max|F| < tol was reached (x, u written;
- * the caller checks |u| <= 1), 1 when not converged in max_iter iterations, 2 on a singular
- * Newton matrix. */
-#if NU >= NY
+ * controllers.equilibrium.equilibrium_newton: the Newton matrix K is (NX + NY) x (NX + NU);
+ * square (NU == NY), each step solves K d = -F; wide (NU > NY), each step is the
+ * minimum-norm solution d = K^T z, (K K^T) z = -F (the equilibrium closest to (x0, u0) along
+ * the continuation); tall (NU < NY), the Gauss-Newton step (K^T K) d = -K^T F (a zero
+ * residual only for a y on the surface of equilibrium outputs). Returns 0 when max|F| < tol
+ * was reached (x, u written; the caller checks |u| <= 1), 1 when not converged in max_iter
+ * iterations, 2 on a singular Newton matrix. */
 HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u0, int max_iter,
                               double tol, double *xo, double *uo) {
   enum { NR = NX + NY, NC = NX + NU };
@@ -310,6 +310,8 @@ HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u
   double xn[NX], d[NC];
 #if NU > NY
   double A[NR * NR], zz[NR];
+#elif NU < NY
+  double A[NC * NC];
 #endif
   memcpy(x, x0, sizeof x);
   memcpy(u, u0, sizeof u);
@@ -341,7 +343,7 @@ HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u
 #if NU == NY
     for (int k = 0; k < NR; k++) d[k] = -F[k];
     if (eq_gauss(K, d, NR) != 0) return 2;
-#else
+#elif NU > NY
     for (int i = 0; i < NR; i++)
       for (int j = 0; j < NR; j++) {
         double s = 0.0;
@@ -355,13 +357,24 @@ HOT EXPORT int PFX(eq_newton)(const double *y, const double *x0, const double *u
       for (int i = 0; i < NR; i++) s += K[i * NC + c] * zz[i];
       d[c] = s;
     }
+#else
+    for (int i = 0; i < NC; i++) {
+      for (int j = 0; j < NC; j++) {
+        double s = 0.0;
+        for (int q = 0; q < NR; q++) s += K[q * NC + i] * K[q * NC + j];
+        A[i * NC + j] = s;
+      }
+      double s = 0.0;
+      for (int q = 0; q < NR; q++) s -= K[q * NC + i] * F[q];
+      d[i] = s;
+    }
+    if (eq_gauss(A, d, NC) != 0) return 2;
 #endif
     for (int k = 0; k < NX; k++) x[k] += d[k];
     for (int k = 0; k < NU; k++) u[k] += d[NX + k];
   }
   return 1;
 }
-#endif
 
 /* the steady state of u_s by Newton from x0 (steady_state.c) into xs (NX); 0 when
  * converged. Uses the workspace's steady-state scratch and invalidates its cache. */

@@ -1,6 +1,7 @@
 /* controller.h: what the exported controller's two parts share (controllers/kernel/
  * controller_source.py joins the kernel, the controller's constants, this file, the law's
- * file -- law_tracking.c or law_paper.c -- and controller.c into one translation unit).
+ * files -- law_tracking.c, or law_paper.c and law_paper_governor.c -- and controller.c into
+ * one translation unit).
  *
  * A law file defines, for controller.c:
  *

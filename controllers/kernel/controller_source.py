@@ -62,11 +62,12 @@ __all__ = [
 
 #: The C step (joined after the kernel, the constants, ``controller.h`` and the law's file).
 CONTROLLER_C = Path(__file__).with_name("controller.c")
-#: What the step and the laws share, and each law's file (``controller.h`` says what it
-#: defines).
+#: What the step and the laws share, and each law's files, joined in this order
+#: (``controller.h`` says what a law defines; the paper's reference governor is its own file).
 CONTROLLER_H = Path(__file__).with_name("controller.h")
-LAW_C = {"tracking": Path(__file__).with_name("law_tracking.c"),
-         "paper": Path(__file__).with_name("law_paper.c")}
+LAW_C = {"tracking": (Path(__file__).with_name("law_tracking.c"),),
+         "paper": (Path(__file__).with_name("law_paper.c"),
+                   Path(__file__).with_name("law_paper_governor.c"))}
 #: Compiler flags of the exported step: the kernel's, warnings as errors.
 CFLAGS = ("-O3", "-fPIC", "-std=gnu99", "-pthread", "-Wall", "-Wextra", "-Werror",
           "-Wno-aggressive-loop-optimizations")
@@ -173,14 +174,11 @@ class ControllerDesign:
         design conditions hold), the admissible range per output
         (``Certificate.admissible_bounds``), the set-point rate (−1: none) and the reference
         governor's (:class:`controllers.ocp.governor.ReferenceGovernor`: whether it runs, its
-        levels, ``λ_max``'s floor and growth, the Newton's cap and tolerance). The governor
-        is compiled for at least as many inputs as outputs (``ValueError`` otherwise)."""
+        levels, ``λ_max``'s floor and growth, the Newton's cap and tolerance)."""
         from controllers.kernel.kernel_lib import EQ_NEWTON_MAX_ITER, EQ_NEWTON_TOL
         from controllers.ocp.governor import LAM_GROW, LAM_MIN
 
         cert, h, gov = law.cert, law.handling, law.governor
-        if gov is not None and gov.m < gov.p:
-            raise ValueError("the exported governor needs at least as many inputs as outputs")
         lo, hi = cert.admissible_bounds()
         design_ok = (cert.nu < 1 and cert.nu_o < 1 and cert.rho_s < 1
                      and bool(np.isfinite(cert.e_tilde)))
@@ -318,7 +316,7 @@ def _parameter_count(design: ControllerDesign) -> int:
 
 def generate_source(design: ControllerDesign) -> str:
     """The C source of the controller step (symbol prefix left as ``@PFX@``): the kernel,
-    ``controller.h``, the law's file, ``controller.c`` and the loader of its numbers
+    ``controller.h``, the law's files, ``controller.c`` and the loader of its numbers
     (``loader.c``), which are declared, not defined: the source is the same for every design
     of the same dimensions and law (and, for the paper's, ``offset_free``), and
     :func:`design_data` is what a design adds (``PFX(load_data)``)."""
@@ -332,7 +330,7 @@ def generate_source(design: ControllerDesign) -> str:
     return "\n".join([kernel_source(problem, kernel),
                       "/* the controller's constants (controller_source.py) */\n"
                       + switches + own.declarations(),
-                      CONTROLLER_H.read_text(), LAW_C[design.law].read_text(),
+                      CONTROLLER_H.read_text(), *(f.read_text() for f in LAW_C[design.law]),
                       CONTROLLER_C.read_text(), loader_source(kernel + own)])
 
 

@@ -78,8 +78,8 @@ void PFX(output)(const double *x, double *y);
 /* One step of eq:gru with extra gate inputs dz, dr (eq:observer; NULL: none). */
 void PFX(gru_step)(const double *x, const double *u, const double *dz, const double *dr,
                    double *xn);
-/* The equilibrium x = f(x, u) with output y by Newton from (x0, u0) (NU >= NY only; NU > NY:
- * minimum-norm steps); 0 converged, 1 not converged or NaN, 2 singular. */
+/* The equilibrium x = f(x, u) with output y by Newton from (x0, u0) (NU > NY: minimum-norm
+ * steps; NU < NY: Gauss-Newton); 0 converged, 1 not converged or NaN, 2 singular. */
 int PFX(eq_newton)(const double *y, const double *x0, const double *u0, int max_iter,
                    double tol, double *xo, double *uo);
 /* The steady state x_s(u_s) = f(x_s, u_s) by Newton from x0; 0 converged. */

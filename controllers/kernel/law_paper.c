@@ -13,10 +13,9 @@
  *                   PFX(equilibrium), which the Python law calls too)
  *   first_admissible PaperLaw._first_admissible and closest_admissible (the uncertified
  *                   mode's first set-point outside the theory)
- *   govern          PaperLaw._govern with controllers/ocp/governor.py ReferenceGovernor
- *                   (CT_GOVERNOR, at least as many inputs as outputs): the admissible
- *                   reference governor after a set-point change, lambda_max adapted to the
- *                   solver
+ *   govern          (law_paper_governor.c) PaperLaw._govern with controllers/ocp/
+ *                   governor.py ReferenceGovernor (CT_GOVERNOR): the admissible reference
+ *                   governor after the first set-point
  *   make_step       controllers/ocp/paper_mpc.py RobustMPC.make_step: eq:mpc with the
  *                   candidate of the proof of th:feasibility-stability as fallback (the
  *                   governor's feasible candidate when it moved), and the suboptimal iterate
@@ -28,10 +27,7 @@
  *   evaluate        FixedSetpoint.evaluate (a given plan's answer check)
  *
  * so that the same measurements give the same inputs (tests/cosim_adapters/
- * test_controller_export.py). The governor is compiled for NU >= NY (the kernel's Newton,
- * PFX(eq_newton), which the Python governor calls too); with more outputs than inputs the
- * Python governor moves along the surface of equilibrium outputs instead: export refuses
- * that by name.
+ * test_controller_export.py).
  *
  * Where the Python component raises (a certified design whose first set-point is outside
  * the theory), the C step takes the closest admissible set-point as the uncertified law
@@ -78,6 +74,10 @@ typedef struct law_state {
   double lam_max;
   int moved, has_unreachable, has_gcand;
   double unreachable[NY], gcand[NH * NU], gx[(NH + 1) * NX];
+  /* (more outputs than inputs) the equilibrium of the last request the governor moves
+   * towards along the surface of equilibrium outputs: the request, whether it has one */
+  int has_target, target_ok;
+  double target_r[NY], target_x[NX], target_u[NU];
   /* the FHOCP's warm start (its last answer and multipliers) */
   int has_warm;
   double warm_w[NW], warm_lx[NW], warm_lg[NG];
@@ -155,96 +155,9 @@ static int first_admissible(law_state *st, const double *target, const double *y
   return 1;
 }
 
-/* ---------------------------------------------------------------- the governor */
-#if NU >= NY
-static const double GOV_ZERO_U[NU];
-
-/* ReferenceGovernor.newton: the equilibrium with output y by the kernel's Newton from
- * (x0, u0) into x, u; 0, or 1 when it does not converge or leaves |u|inf <= 1 (kernel_lib.py
- * eq_newton) */
-static int gov_newton(const double *y, const double *x0, const double *u0, double *x,
-                      double *u) {
-  if (PFX(eq_newton)(y, x0, u0, CT_EQ_NEWTON_MAX_ITER, CT_EQ_NEWTON_TOL, x, u) != 0) return 1;
-  double umax = 0.0;
-  for (int j = 0; j < NU; j++) umax = fmax(umax, fabs(u[j]));
-  return umax > 1.0;
-}
-
-/* ReferenceGovernor.feasible: the sequence u satisfies every constraint of eq:optimization
- * from x_hat (the output rows at i >= 1, the terminal set |x_N - xb|inf <= alpha) */
-static int gov_feasible(law_state *st, const double *xhat, const double *u, const double *xb,
-                        double alpha) {
-  gk_assessment out;
-  PFX(assess)(st->ws, xhat, u, xb, GOV_ZERO_U, GOV_ZERO_U, st->bnd, alpha, st->gx, &out);
-  return !(out.violation_rows > 0.0) && out.terminal_distance <= alpha;
-}
-
-/* ReferenceGovernor.step: move the FHOCP's set-point from st->y_model towards r by the
- * largest of lam_max, lam_max/2, ... (CT_GOV_LEVELS values) whose equilibrium passes the
- * set-point checks and has a feasible candidate (the plan shifted with u_bar(v+) appended,
- * or that offset by u_bar(v+) - u_bar(v)) into st->gcand; the reference written. Returns the
- * fraction moved, 0 (the reference as it was) when none. */
-static double gov_step(law_state *st, const double *xhat, const double *r, double lam_max) {
-  if (!st->has_plan) return 0.0;
-  double lam = lam_max;
-  for (int level = 0; level < CT_GOV_LEVELS; level++) {
-    double y[NY], xb[NX], ub[NU], alpha;
-    for (int a = 0; a < NY; a++) y[a] = st->y_model[a] + lam * (r[a] - st->y_model[a]);
-    if (admissible(y, &alpha) && gov_newton(y, st->x_bar, st->u_bar, xb, ub) == 0) {
-      double *cand = st->gcand;
-      for (int option = 0; option < 2; option++) {
-        shifted_candidate(cand, st->plan, 1, ub);
-        if (option == 1)
-          for (int c = 0; c < NH * NU; c++)
-            cand[c] = gk_clip1(cand[c] + (ub[c % NU] - st->u_bar[c % NU]));
-        if (gov_feasible(st, xhat, cand, xb, alpha)) {
-          memcpy(st->y_model, y, sizeof y);
-          memcpy(st->x_bar, xb, sizeof xb);
-          memcpy(st->u_bar, ub, sizeof ub);
-          st->alpha = alpha;
-          return lam;
-        }
-      }
-    }
-    lam *= 0.5;
-  }
-  return 0.0;
-}
-
-/* PaperLaw._govern with ReferenceGovernor.govern: the FHOCP's set-point moved towards the
- * admissible target; a target outside the theory, or one no input in the box reaches (the
- * kernel's Newton, then its multi-start search), is refused (CTL_WARN_SETPOINT_REJECTED once
- * per request) and the last set-point kept. lambda_max halves (not below CT_GOV_LAM_MIN)
- * after a solve that did not converge and grows by CT_GOV_LAM_GROW (not above 1) after a
- * converged one that followed a move. */
+/* the reference governor (law_paper_governor.c, joined after this file) */
 static void govern(law_state *st, const double *xhat, const double *target, int changed,
-                   int *warnings) {
-  double alpha, x[NX], u[NU];
-  if (!admissible(target, &alpha)) {
-    if (changed) *warnings |= CTL_WARN_SETPOINT_REJECTED;
-    return;
-  }
-  if (!changed && st->has_unreachable) {
-    int same = 1;
-    for (int a = 0; a < NY; a++) same &= target[a] == st->unreachable[a];
-    if (same) return;   /* still the unreachable request: refused again */
-  }
-  if (changed && gov_newton(target, st->x_bar, st->u_bar, x, u) != 0 &&
-      reference_of(st, target, x, u, &alpha) != 0) {
-    *warnings |= CTL_WARN_SETPOINT_REJECTED;
-    memcpy(st->unreachable, target, sizeof st->unreachable);
-    st->has_unreachable = 1;
-    return;
-  }
-  if (st->has_plan && !st->res.success)
-    st->lam_max = fmax(st->lam_max * 0.5, CT_GOV_LAM_MIN);
-  else if (st->moved && st->has_plan)
-    st->lam_max = fmin(1.0, st->lam_max * CT_GOV_LAM_GROW);
-  const double lam = gov_step(st, xhat, target, st->lam_max);
-  st->moved = lam > 0.0;
-  st->has_gcand = st->moved;
-}
-#endif
+                   int *warnings);
 
 /* PaperLaw._update_reference: the FHOCP's set-point for the request yr at the measured y
  * (after the first, through the governor when CT_GOVERNOR); raises CTL_WARN_SETPOINT_REJECTED
@@ -277,12 +190,10 @@ static int update_reference(law_state *st, const double *xhat, const double *y,
   for (int a = 0; a < NY; a++) changed |= yr[a] != st->y_ref[a];
   memcpy(st->y_ref, yr, sizeof st->y_ref);
   st->has_ref = 1;
-#if NU >= NY
   if (CT_GOVERNOR && st->has_model) {
     govern(st, xhat, target, changed, warnings);
     return 0;
   }
-#endif
   if (reference(st, target) == 0) {
     memcpy(st->y_model, target, sizeof target);
     st->has_model = 1;

@@ -25,15 +25,17 @@ paper's.
 
 Equilibria along the segment come from a Newton continuation from ``(x̄(v), ū(v))``
 (:func:`controllers.equilibrium.equilibrium_newton`, a few (n + p)×(n + m) solves: 22×22 for
-the four tanks, in the compiled kernel when ``m ≥ p`` (with ``m > p`` its minimum-norm
-step); a least-squares step in numpy otherwise) instead of the multi-start least squares of
+the four tanks, in the compiled kernel when there is one, its least-squares steps by the
+normal equations when ``m ≠ p``; numpy's otherwise) instead of the multi-start least squares of
 :func:`controllers.equilibrium.equilibrium`.
 
 More outputs than inputs (``p > m``): the equilibrium outputs form an ``m``-dimensional
 surface, and the points of the segment ``v → r`` between two reachable set-points are in
 general not on it. The governor then moves along the surface instead: the equilibrium input
 ``ū(r)`` is found once per requested ``r``, and ``v⁺`` is the equilibrium output of
-``ū(v) + λ (ū(r) − ū(v))`` (``v⁺ = r`` at ``λ = 1``); each ``v⁺`` is checked for Assumption 1
+``ū(v) + λ (ū(r) − ū(v))`` (``v⁺ = r`` at ``λ = 1``; the state equilibrium by the compiled
+kernel's Newton when there is one, a level it does not converge at skipped, as the exported
+controller does); each ``v⁺`` is checked for Assumption 1
 and ``eq:condition-recursive-feasibility`` as above (the polytope argument does not apply off
 the segment).
 
@@ -109,12 +111,24 @@ class ReferenceGovernor:
     def newton(self, y: np.ndarray, x0: np.ndarray,
                u0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """:func:`controllers.equilibrium.equilibrium_newton` from ``(x0, u0)``: the FHOCP's
-        compiled kernel when it has one (same iteration, ~25× faster; compiled for ``m ≥ p``,
-        the exported controller's too), else numpy."""
+        compiled kernel when it has one (same iteration, ~25× faster; the exported
+        controller's too), else numpy."""
         kernel = getattr(self.fhocp, "kernel", None)
         if kernel is not None and "eq_newton" in kernel.kernel.c:
             return kernel.eq_newton(y, x0, u0)
         return equilibrium_newton(self.params, y, x0, u0)
+
+    def equilibrium_output(self, u: np.ndarray, x0: np.ndarray
+                           ) -> tuple[np.ndarray, np.ndarray] | None:
+        """``(x, y)``: the state equilibrium ``x = f(x, u)`` from ``x0`` and its output: the
+        FHOCP's compiled kernel's Newton and output sum when it has one (``None`` when the
+        Newton does not converge; the exported controller's), else numpy's
+        :func:`controllers.equilibrium.equilibrium_output`."""
+        kernel = getattr(self.fhocp, "kernel", None)
+        if kernel is not None and "steady" in kernel.kernel.c:
+            x = kernel.steady_state(u, x0)
+            return None if x is None else (x, kernel.output(x))
+        return equilibrium_output(self.params, u, x0)
 
     def target(self, r: np.ndarray, x0: np.ndarray,
                u0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
@@ -177,7 +191,11 @@ class ReferenceGovernor:
                 y, eq = np.asarray(r, dtype=float), along
             else:
                 ub = u_bar + lam * (along[1] - u_bar)
-                xb, y = equilibrium_output(self.params, ub, x_bar)
+                state = self.equilibrium_output(ub, x_bar)
+                if state is None:
+                    lam *= 0.5
+                    continue
+                xb, y = state
                 eq = (xb, ub)
             if not self.cert.ok(y):
                 lam *= 0.5

@@ -266,17 +266,18 @@ def test_the_compiled_step_replays_the_python_controller() -> None:
 
 def _replayed(ctrl: object, compiled: object, refs: list[tuple[float, float]]
               ) -> Iterator[dict]:
-    """Step the four-tank's Python controller ``ctrl`` and its compiled step on the same
-    noisy measurements with the set-points ``refs`` (one per step): the same inputs (to the
+    """Step a Python controller ``ctrl`` of the four-tank's outputs and its compiled step on
+    the same noisy measurements with the set-points ``refs`` (one per step): the same inputs (to the
     bit), statuses and fallbacks at every step; yields the compiled step's outputs."""
     rng = np.random.default_rng(5)
     y = np.array([0.62, 0.71])
+    inputs = ctrl.problem.input_names
     for k, ref in enumerate(np.array(refs, dtype=float)):
         y = y + rng.normal(0.0, 2e-3, 2)
         ctrl.set_inputs({"h1": y[0], "h2": y[1], "ref.h1": ref[0], "ref.h2": ref[1]})
         ctrl.step(25.0 * k, 25.0)
         out = compiled.step(y, ref)
-        u = np.array([ctrl.get_outputs()[n] for n in ("qa", "qb")])
+        u = np.array([ctrl.get_outputs()[n] for n in inputs])
         np.testing.assert_array_equal(out["u"], u)
         assert out["status"] == ctrl.diagnostics()["status"]
         assert out["fallback"] == ctrl.diagnostics()["fallback"]
@@ -366,6 +367,43 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
     if "governor" in options and not first_outside:   # it moved by fractions of the step
         assert ctrl.law.governed_steps > 0 and min(fractions - {0.0}) < 0.5, fractions
     compiled.close()
+
+
+def test_the_compiled_governor_moves_along_the_surface_of_equilibrium_outputs(
+        tmp_path: Path) -> None:
+    """One input, two outputs: the reachable set-points are a curve, and the governor moves
+    along it (the equilibrium outputs of ``ū(v) + λ (ū(r) − ū(v))``), by fractions of the
+    step here (N = 5); a set-point off the curve is refused as unreachable. The compiled
+    step gives the Python law's inputs, statuses and fallbacks, to the bit."""
+    from controllers.equilibrium import equilibrium_output
+    from controllers.kernel.controller_source import (
+        CompiledController,
+        ControllerDesign,
+        build,
+        design_data,
+    )
+    from cosim_adapters.robust_mpc import RobustMPCController
+    from tests.controllers.random_gru import random_gru_model
+
+    model = random_gru_model(7, n=8, m=1, p=2)
+    model.w_y_bar = 0.002
+    model.save(tmp_path / "gru_1x2.json")
+    x0, v = equilibrium_output(model.params, np.full(1, -0.9))
+    _, r = equilibrium_output(model.params, np.full(1, 0.9), x0)
+    v, r = model.denormalize_y(v), model.denormalize_y(r)
+    ctrl = RobustMPCController(model=tmp_path / "gru_1x2.json", law="paper", N=5)
+    ctrl.expect_setpoints([{"h1": a[0], "h2": a[1]} for a in (v, r)])
+    assert ctrl.law.certified
+    ctrl.setup(0.0)
+    design = ControllerDesign.of_paper(ctrl.law, ctrl.observer, ctrl.model, ctrl._lo,
+                                       ctrl._hi)
+    compiled = CompiledController(*build(design), design_data(design), n_inputs=1,
+                                  n_outputs=2)
+    refs = [tuple(v)] * 20 + [tuple(r)] * 40 + [tuple((v + r) / 2)] * 10 + [tuple(v)] * 30
+    fractions = {ctrl.law.lam for _ in _replayed(ctrl, compiled, refs)}
+    compiled.close()
+    assert min(fractions - {0.0}) < 0.5 and ctrl.law.governed_steps > 10, fractions
+    assert len(ctrl.law.rejections) == 1 and "is not reachable" in ctrl.law.rejections[0]
 
 
 def test_a_campaign_qualifies_the_fmu_on_the_python_controllers_draws(

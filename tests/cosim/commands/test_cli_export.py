@@ -15,23 +15,9 @@ def _run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str]:
     return code, capsys.readouterr().err
 
 
-def _one_input_model(tmp_path: Path) -> Path:
-    """A GRU model of one input and two outputs (the test problem of its dimensions)."""
-    from tests.controllers.random_gru import random_gru_model
-
-    model = random_gru_model(4, n=10, m=1, p=2)
-    model.w_y_bar = 0.01
-    model.save(tmp_path / "gru_1x2.json")
-    return tmp_path / "gru_1x2.json"
-
-
 def test_export_errors_are_one_line(capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
     cases = [
         (["export-fmu", "--out", str(tmp_path / "C.zip")], "an FMU's file name ends with .fmu"),
-        (["export-fmu", str(_one_input_model(tmp_path)), "--option", 'law="paper"',
-          "--out", str(tmp_path / "C.fmu")],
-         "the paper's law's reference governor (governor=true, its default) is compiled for "
-         "at least as many inputs as outputs; this problem has 1 input(s) and 2 outputs"),
         (["export-fmu", str(tmp_path / "nope.json"), "--out", str(tmp_path / "C.fmu")],
          "nope.json"),
         (["export-fmu", "--controller", str(tmp_path / "nope.json"),
