@@ -164,8 +164,7 @@ class Workspace:
             ("ub", m), ("up", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))),
             ("xs", n),
             ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", kernel.p), ("xe", n),
-            ("ue", m),
-            ("yp", kernel.p))}
+            ("ue", m), ("yp", kernel.p))}
         self._addr = {name: int(a.ctypes.data) for name, a in self._buf.items()}
         self._out = Assessment()
         self._addr["out"] = ctypes.addressof(self._out)
