@@ -55,7 +55,8 @@ from controllers.errors import DataError, DesignError, SetpointError
 from controllers.problem import ControlProblem, constraint_names, output_constraints
 
 __all__ = ["JSON_KEYS", "MAX_HORIZON", "Certificate", "Reference", "admissible_ranges",
-           "box_ranges", "compute_certificate", "uncertified_certificate", "w_y_bar_from_data"]
+           "box_bounds", "box_ranges", "compute_certificate", "uncertified_certificate",
+           "w_y_bar_from_data"]
 
 JSON_KEYS = ("sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r", "nu_o",
              "rho_o", "c_o", "kappa", "L_max", "w_y_bar", "w_bar", "w_L", "a", "b", "e_o0",
@@ -209,15 +210,7 @@ class Certificate:
     def admissible_bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """The admissible set-points' bounds per output, ``(lo, hi)`` (normalised; ±∞ where
         no row bounds it): the single-output rows of ``L ȳ ≤`` :meth:`admissible_box`."""
-        rhs = self.admissible_box()
-        p = np.shape(self.L)[1]
-        lo, hi = np.full(p, -np.inf), np.full(p, np.inf)
-        for j in range(p):
-            hi[j] = min((r / row[j] for row, r in zip(self.L, rhs, strict=True)
-                         if row[j] > 0 and np.count_nonzero(row) == 1), default=np.inf)
-            lo[j] = max((r / row[j] for row, r in zip(self.L, rhs, strict=True)
-                         if row[j] < 0 and np.count_nonzero(row) == 1), default=-np.inf)
-        return lo, hi
+        return box_bounds(self.L, self.admissible_box())
 
     # -- hypotheses ------------------------------------------------------------------------
     def failures(self, y_bar_norm: Sequence[float] | None = None) -> list[str]:
@@ -489,25 +482,33 @@ def w_y_bar_from_data(model: Any, u: np.ndarray, y: np.ndarray, split: np.ndarra
     return float(np.max(np.abs(y_n[mask] - xi[mask])))
 
 
-def box_ranges(model: Any, L: np.ndarray, rhs: np.ndarray
-               ) -> list[tuple[str, float | None, float | None]]:
-    """``{y : L y ≤ rhs}`` (normalised) of the box rows of ``L`` (one nonzero entry) as an
-    interval ``(name, lo, hi)`` per output, physical units; ``(name, None, None)`` where it
-    is empty or undefined (a NaN bound)."""
-    out: list[tuple[str, float | None, float | None]] = []
-    for j, name in enumerate(model.output_names):
-        lo, hi = -math.inf, math.inf
+def box_bounds(L: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``{y : L y ≤ rhs}`` of the box rows of ``L`` (one nonzero entry) as bounds per output,
+    ``(lo, hi)`` (normalised): ±∞ where no row bounds an output, NaN where a bound is NaN."""
+    p = np.shape(L)[1]
+    lo, hi = np.full(p, -np.inf), np.full(p, np.inf)
+    for j in range(p):
         for row, r in zip(L, rhs, strict=True):
             if row[j] == 0 or np.count_nonzero(row) != 1:
                 continue
             bound = float(r / row[j])
             if math.isnan(bound):
-                lo, hi = math.inf, -math.inf
+                lo[j] = hi[j] = math.nan
                 break
             if row[j] > 0:
-                hi = min(hi, bound)
+                hi[j] = min(hi[j], bound)
             else:
-                lo = max(lo, bound)
+                lo[j] = max(lo[j], bound)
+    return lo, hi
+
+
+def box_ranges(model: Any, L: np.ndarray, rhs: np.ndarray
+               ) -> list[tuple[str, float | None, float | None]]:
+    """:func:`box_bounds` as an interval ``(name, lo, hi)`` per output, physical units;
+    ``(name, None, None)`` where it is empty or undefined (a NaN bound)."""
+    out: list[tuple[str, float | None, float | None]] = []
+    for j, (lo, hi) in enumerate(zip(*box_bounds(L, rhs), strict=True)):
+        name = model.output_names[j]
         a, b = sorted((float(lo * model.y_scale[j] + model.y_offset[j]),
                        float(hi * model.y_scale[j] + model.y_offset[j])))
         out.append((name, a, b) if lo <= hi else (name, None, None))
