@@ -188,8 +188,9 @@ class TrackingLaw:
             self.fhocp.set_output_shift(d_hat)
         self._watch_target(y_ref - d_hat, d_hat, t)
         rec = tracker.make_step(observer.x_hat, observer.e_o, y_ref - d_hat)
-        params = model.params
-        y_s = model.denormalize_y(params["U_o"] @ tracker.x_s + params["b_o"])
+        params, kernel = model.params, self.fhocp.kernel
+        y_s = model.denormalize_y(kernel.output(tracker.x_s) if kernel is not None   # the
+                                  else params["U_o"] @ tracker.x_s + params["b_o"])  # FMU's sum
         names = model.problem.output_names
         diag = {f"y_model_{n}": float(v) for n, v in zip(names, y_s, strict=True)}
         d_phys = d_hat * np.abs(model.y_scale)

@@ -30,7 +30,7 @@ typedef struct ctl_state {
   /* the law */
   law_state law;
   /* what the last step gave */
-  double u_phys[NU], y_pred[NY];
+  double u_phys[NU], y_pred[NY], y_target[NY];
   int warnings;
 } ctl_state;
 
@@ -44,7 +44,7 @@ EXPORT void PFX(ctl_reset)(ctl_state *st) {
   st->e_o = CT_E_O0;
   law_reset(&st->law, ws);
   for (int j = 0; j < NU; j++) st->u_phys[j] = 0.5 * (CT_U_LO[j] + CT_U_HI[j]);
-  for (int a = 0; a < NY; a++) st->y_pred[a] = NAN;
+  for (int a = 0; a < NY; a++) st->y_pred[a] = st->y_target[a] = NAN;
 }
 
 /* A new controller instance (NULL when out of memory, or before PFX(load_data) gave the
@@ -69,8 +69,9 @@ EXPORT void PFX(ctl_free)(ctl_state *st) {
 
 /* One control step (RobustMPCController.step) at the measured outputs y and set-points ref
  * (the problem's units): writes u_phys (the inputs to apply, in their boxes), status,
- * fallback, iterations and y_pred (the model's output at the next sample under the applied
- * plan); advances the observer. A non-finite y or ref changes nothing (the last inputs are
+ * fallback, iterations, y_pred (the model's output at the next sample under the applied
+ * plan) and y_target (the steady output the FHOCP steers the model to); advances the
+ * observer. A non-finite y or ref changes nothing (the last inputs are
  * held) and sets CTL_WARN_NONFINITE_INPUT; returns 1 then, else 0. */
 EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_phys) {
   double y[NY], yr[NY], yh[NY], u[NU], dz[NX], dr[NX], xn[NX], d[NY];
@@ -109,8 +110,10 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     const double v = u[j] * CT_U_SCALE[j] + CT_U_OFFSET[j];
     st->u_phys[j] = v < CT_U_LO[j] ? CT_U_LO[j] : (v > CT_U_HI[j] ? CT_U_HI[j] : v);
   }
-  for (int a = 0; a < NY; a++)
+  for (int a = 0; a < NY; a++) {
     st->y_pred[a] = st->law.last.y_pred[a] * CT_Y_SCALE[a] + CT_Y_OFFSET[a];
+    st->y_target[a] = st->law.last.y_target[a] * CT_Y_SCALE[a] + CT_Y_OFFSET[a];
+  }
   return 0;
 }
 
@@ -139,12 +142,14 @@ EXPORT int PFX(ctl_take_warnings)(ctl_state *st) {
 }
 
 /* what the last step gave: the inputs to apply (NU, the problem's units), the status code,
- * whether the candidate was applied, the SQP iterations, the predicted outputs (NY) */
+ * whether the candidate was applied, the SQP iterations, the predicted outputs (NY) and the
+ * steady outputs the FHOCP steers the model to (NY; NaN before the first step) */
 EXPORT void PFX(ctl_outputs)(const ctl_state *st, double *u_phys, int *status, int *fallback,
-                             int *iterations, double *y_pred) {
+                             int *iterations, double *y_pred, double *y_target) {
   if (u_phys) memcpy(u_phys, st->u_phys, sizeof st->u_phys);
   if (status) *status = st->law.last.status;
   if (fallback) *fallback = st->law.last.fallback;
   if (iterations) *iterations = st->law.last.iterations;
   if (y_pred) memcpy(y_pred, st->y_pred, sizeof st->y_pred);
+  if (y_target) memcpy(y_target, st->y_target, sizeof st->y_target);
 }

@@ -45,16 +45,18 @@ typedef struct ctl_result {
 } ctl_result;
 
 /* what a law's last step gave (controller.c reports it): the solve's status, whether the
- * candidate was applied, the SQP iterations and the model's output at the next sample under
- * the applied plan (normalised) */
+ * candidate was applied, the SQP iterations, the model's output at the next sample under the
+ * applied plan and the steady output the FHOCP steered the model to (the paper's law: its
+ * set-point, the governed one; the tracking law: the artificial steady state's output y_s;
+ * the Python law's diagnostics y_model_<output>), normalised */
 typedef struct ctl_last {
-  double y_pred[NY];
+  double y_pred[NY], y_target[NY];
   int status, fallback, iterations;
 } ctl_last;
 
 /* before any step */
 static void last_reset(ctl_last *l) {
-  for (int a = 0; a < NY; a++) l->y_pred[a] = NAN;
+  for (int a = 0; a < NY; a++) l->y_pred[a] = l->y_target[a] = NAN;
   l->status = CTL_OTHER;
   l->fallback = l->iterations = 0;
 }

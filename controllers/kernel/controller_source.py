@@ -379,7 +379,7 @@ class CompiledController:
         for name in ("ctl_free", "ctl_reset", "ctl_take_warnings"):
             f[name].argtypes = [vp]
         f["ctl_step"].argtypes = [vp, vp, vp]
-        f["ctl_outputs"].argtypes = [vp] * 6
+        f["ctl_outputs"].argtypes = [vp] * 7
         self._f = f
         self._st = None
         load_data(self.lib, prefix, data, path)
@@ -389,20 +389,23 @@ class CompiledController:
         self.m, self.p = n_inputs, n_outputs
         self._y, self._r = np.zeros(n_outputs), np.zeros(n_outputs)
         self._u, self._yp = np.zeros(n_inputs), np.zeros(n_outputs)
+        self._yt = np.zeros(n_outputs)
         self._ints = (ctypes.c_int * 3)()
 
     def step(self, y: np.ndarray, ref: np.ndarray) -> dict[str, Any]:
         """One step at the measured outputs and set-points (the problem's units): the inputs
-        ``u``, ``status``, ``fallback``, ``iterations``, ``y_pred`` and ``warnings``."""
+        ``u``, ``status``, ``fallback``, ``iterations``, ``y_pred``, ``y_target`` and
+        ``warnings``."""
         self._y[:], self._r[:] = y, ref
         self._f["ctl_step"](self._st, self._y.ctypes.data, self._r.ctypes.data)
         i = self._ints
         base = ctypes.addressof(i)
         size = ctypes.sizeof(ctypes.c_int)
         self._f["ctl_outputs"](self._st, self._u.ctypes.data, base, base + size,
-                               base + 2 * size, self._yp.ctypes.data)
+                               base + 2 * size, self._yp.ctypes.data, self._yt.ctypes.data)
         return {"u": self._u.copy(), "status": int(i[0]), "fallback": int(i[1]),
                 "iterations": int(i[2]), "y_pred": self._yp.copy(),
+                "y_target": self._yt.copy(),
                 "warnings": int(self._f["ctl_take_warnings"](self._st))}
 
     def reset(self) -> None:

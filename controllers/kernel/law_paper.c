@@ -359,6 +359,7 @@ static void law_step(law_state *st, const double *xhat, double e_o, const double
     return;
   }
   make_step(st, xhat, u);
+  memcpy(st->last.y_target, st->y_model, sizeof st->last.y_target);
 }
 
 /* where tunable parameter i (LAW_P_*) lives, NULL for an unknown one */

@@ -267,6 +267,7 @@ static void law_step(law_state *st, const double *xhat, double e_o, const double
   tighten(st, e_o);
   for (int a = 0; a < NY; a++) rt[a] = yr[a] - st->dhat[a];
   make_step(st, xhat, rt, u);
+  PFX(output)(st->xs, st->last.y_target);   /* the steady output y_s */
 }
 
 /* where tunable parameter i (LAW_P_*) lives, NULL for an unknown one */

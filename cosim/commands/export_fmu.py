@@ -20,13 +20,13 @@ state), or the paper's (--option 'law="paper"'; offset_free and setpoint_rate as
 run) with its reference governor (its default) or without it (--option governor=false: the
 paper's controller). Its inputs are the measured outputs, named as the plant's outputs in
 the problem, and their set-points ref.<output>; its outputs the inputs to apply, named as
-the plant's inputs, the solver status, whether the fallback was applied, the SQP iterations
-and the predicted outputs pred.<output>: all in the problem's units, so that plant and
-controller connect by name; its tunable parameters the law's: offset_filter and the
-weights R.<input>, du_weight.<input>, offset_weight.<output> (tracking). Its sample time is
-the problem's Ts. The same model, problem and --options as cosim run give the same inputs
-(docs: guide/controller-fmu.md); --controller takes them from a run's controller.json. Run
-it with:
+the plant's inputs, the solver status, whether the fallback was applied, the SQP iterations,
+the predicted outputs pred.<output> and the steady outputs the model is steered to
+target.<output>: all in the problem's units, so that plant and controller connect by name;
+its tunable parameters the law's: offset_filter and the weights R.<input>,
+du_weight.<input>, offset_weight.<output> (tracking). Its sample time is the problem's Ts.
+The same model, problem and --options as cosim run give the same inputs (docs:
+guide/controller-fmu.md); --controller takes them from a run's controller.json. Run it with:
 cosim run SCENARIO --controller Controller.fmu"""
 
 

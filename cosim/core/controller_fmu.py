@@ -103,6 +103,10 @@ class ControllerInterface:
         out += [(name, "output", "discrete", "1", None, text) for name, text in DIAGNOSTICS]
         out += [(f"pred.{p.name}", "output", "discrete", p.unit, None,
                  f"{p.name} the model predicts at the next sample") for p in self.measured]
+        out += [(f"target.{p.name}", "output", "discrete", p.unit, None,
+                 f"steady {p.name} the controller steers the model to (the paper's law: its "
+                 "governed set-point; the tracking law: the artificial steady state's)")
+                for p in self.measured]
         out += [(q.name, "parameter", "tunable", q.unit, q, q.description)
                 for q in self.parameters]
         return out

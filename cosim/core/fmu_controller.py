@@ -5,12 +5,12 @@ writes, or any FMU with the same conventions) where the master steps a controlle
 order a controller FMU is meant to run: set the measured outputs ``y_k`` and the set-points
 ``ref.<output>``, ``doStep(t_k, Ts)``, read the inputs ``u_k`` to apply to the plant over
 ``[t_k, t_k+1)`` (docs: guide/controller-fmu.md). Its outputs named ``status``,
-``fallback``, ``iterations`` and ``pred.<output>`` are diagnostics (recorded, not wired to
-the plant); every other output is an input of the plant, as a controller's are. Its sample
-time is the FMU's default experiment step size; its parameters (``offset_filter``, the
-weights ``R.<input>``, ``du_weight.<input>``, ``offset_weight.<output>``) are options of the
-component, a family of them also in the robust MPC's form (``R=0.02``: every entry;
-``offset_weight={"h1": 1e3}``: by signal).
+``fallback``, ``iterations``, ``pred.<output>`` and ``target.<output>`` are diagnostics
+(recorded, not wired to the plant); every other output is an input of the plant, as a
+controller's are. Its sample time is the FMU's default experiment step size; its parameters
+(``offset_filter``, the weights ``R.<input>``, ``du_weight.<input>``,
+``offset_weight.<output>``) are options of the component, a family of them also in the
+robust MPC's form (``R=0.02``: every entry; ``offset_weight={"h1": 1e3}``: by signal).
 """
 
 from __future__ import annotations
@@ -24,12 +24,13 @@ from cosim.core.fmu import FmuComponent
 
 __all__ = ["DIAGNOSTIC_OUTPUTS", "FmuController"]
 
-#: Outputs of a controller FMU that are diagnostics, not plant inputs (and ``pred.*``).
+#: Outputs of a controller FMU that are diagnostics, not plant inputs (and ``pred.*``,
+#: ``target.*``).
 DIAGNOSTIC_OUTPUTS = frozenset({"status", "fallback", "iterations"})
 
 
 def _diagnostic(name: str) -> bool:
-    return name in DIAGNOSTIC_OUTPUTS or name.startswith("pred.")
+    return name in DIAGNOSTIC_OUTPUTS or name.startswith(("pred.", "target."))
 
 
 class FmuController(FmuComponent):

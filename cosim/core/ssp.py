@@ -2,13 +2,13 @@
 connected by name: ``cosim export-ssp``.
 
 The controller's inputs named as the plant's outputs read them, the plant's inputs named as
-the controller's outputs read those (a controller FMU of ``cosim export-fmu`` and its problem's
-plant connect so); every other controller input (the set-points ``ref.<output>``) gets a
-constant value from a parameter set, as do the controller's tunable parameters given a value
-(its weights, ``offset_filter``), and the controller's other outputs (``status``,
-``pred.*``) stay unconnected. Both FMUs go into the archive's ``resources/``; the default
-experiment's fixed step is the controller's sample time (the Open Simulation Platform's
-annotation, which libcosim reads), so that libcosim runs the file as it is.
+the controller's outputs read those (a controller FMU of ``cosim export-fmu`` and its
+problem's plant connect so); every other controller input (the set-points ``ref.<output>``)
+gets a constant value from a parameter set, as do the controller's tunable parameters given
+a value (its weights, ``offset_filter``), and the controller's other outputs (``status``,
+``pred.*``, ``target.*``) stay unconnected. Both FMUs go into the archive's ``resources/``;
+the default experiment's fixed step is the controller's sample time (the Open Simulation
+Platform's annotation, which libcosim reads), so that libcosim runs the file as it is.
 """
 
 from __future__ import annotations

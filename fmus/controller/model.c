@@ -87,18 +87,19 @@ const char *model_variable_name(unsigned vr) {
 }
 
 double model_get(const ModelData *m, unsigned vr) {
-    double u[CTL_NU], pred[CTL_NY];
+    double u[CTL_NU], pred[CTL_NY], target[CTL_NY];
     int status, fallback, iterations;
     if (vr == VR_TIME) return m->time;
     if (vr >= VR_PARAM) return mpc_ctl_get_parameter(m->ctl, (int)(vr - VR_PARAM));
     if (vr < VR_REF) return m->y[vr - VR_Y];
     if (vr < VR_U) return m->ref[vr - VR_REF];
-    mpc_ctl_outputs(m->ctl, u, &status, &fallback, &iterations, pred);
+    mpc_ctl_outputs(m->ctl, u, &status, &fallback, &iterations, pred, target);
     if (vr < VR_STATUS) return u[vr - VR_U];
     if (vr == VR_STATUS) return status;
     if (vr == VR_FALLBACK) return fallback;
     if (vr == VR_ITERATIONS) return iterations;
-    return pred[vr - VR_PRED];
+    if (vr < VR_TARGET) return pred[vr - VR_PRED];
+    return target[vr - VR_TARGET];
 }
 
 const char *model_set(ModelData *m, unsigned vr, double value, bool initialized) {

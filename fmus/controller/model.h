@@ -44,7 +44,8 @@
 #define VR_FALLBACK (VR_STATUS + 1)
 #define VR_ITERATIONS (VR_FALLBACK + 1)
 #define VR_PRED (VR_ITERATIONS + 1)         /* CTL_NY predicted outputs */
-#define VR_PARAM (VR_PRED + CTL_NY)         /* CTL_NPARAM tunable parameters */
+#define VR_TARGET (VR_PRED + CTL_NY)        /* CTL_NY steady outputs the FHOCP steers to */
+#define VR_PARAM (VR_TARGET + CTL_NY)       /* CTL_NPARAM tunable parameters */
 #define N_VARIABLES (VR_PARAM + CTL_NPARAM)
 
 /* the controller step (controller_step.c: controllers/kernel/controller.c, loader.c) */
@@ -58,7 +59,7 @@ int mpc_ctl_take_warnings(ctl_state *st);
 double mpc_ctl_get_parameter(const ctl_state *st, int i);
 const char *mpc_ctl_set_parameter(ctl_state *st, int i, double value);
 void mpc_ctl_outputs(const ctl_state *st, double *u_phys, int *status, int *fallback,
-                    int *iterations, double *y_pred);
+                    int *iterations, double *y_pred, double *y_target);
 
 typedef struct {
     double time;              /* [s] */

@@ -49,6 +49,9 @@ def _same_inputs(fmu_run: cosim.RunOutput, py_run: cosim.RunOutput, inputs: dict
         assert worst <= TOL, (name, worst)
     np.testing.assert_array_equal(a["ctrl.status"], b["ctrl.status"])
     np.testing.assert_array_equal(a["ctrl.fallback"], b["ctrl.fallback"])
+    for name in (c.removeprefix("ctrl.y_model_") for c in b.columns
+                 if c.startswith("ctrl.y_model_")):   # the steady output steered to
+        np.testing.assert_array_equal(a[f"ctrl.target.{name}"], b[f"ctrl.y_model_{name}"])
 
 
 @pytest.mark.parametrize("version", [2, 3])
@@ -279,8 +282,10 @@ def _replayed(ctrl: object, compiled: object, refs: list[tuple[float, float]]
         out = compiled.step(y, ref)
         u = np.array([ctrl.get_outputs()[n] for n in inputs])
         np.testing.assert_array_equal(out["u"], u)
-        assert out["status"] == ctrl.diagnostics()["status"]
-        assert out["fallback"] == ctrl.diagnostics()["fallback"]
+        diag = ctrl.diagnostics()
+        assert out["status"] == diag["status"]
+        assert out["fallback"] == diag["fallback"]
+        np.testing.assert_array_equal(out["y_target"], [diag["y_model_h1"], diag["y_model_h2"]])
         yield out
 
 
@@ -291,7 +296,8 @@ def test_the_paper_law_exported_runs_as_the_python_law(law: dict, tmp_path: Path
     scenario, through its failed solves and fallbacks after the set-point steps, the FMU
     gives the Python law's inputs, statuses and fallbacks (to the bit here); its tunable
     parameters are R's diagonal (no offset filter without ``offset_free``, no offset
-    weight), and R tuned gives the Python law with that R."""
+    weight), and R tuned gives the Python law with that R. Its outputs ``target.<output>``
+    are the FHOCP's set-point: with the governor, short of the request after a step."""
     fmu = cosim.export_fmu(out=tmp_path / "Paper.fmu", options=law)
     md = fmpy.read_model_description(str(fmu))
     assert "paper's law, certified" in md.description
@@ -302,7 +308,10 @@ def test_the_paper_law_exported_runs_as_the_python_law(law: dict, tmp_path: Path
         assert py.summary["controller_summary"]["governor_steps"] > 0
     else:
         assert set(py.to_pandas()["ctrl.fallback"]) == {0.0, 1.0}
-    _same_inputs(cosim.run(PAPER, controller=str(fmu), figure=False), py, boxes)
+    run = cosim.run(PAPER, controller=str(fmu), figure=False)
+    _same_inputs(run, py, boxes)
+    df = run.to_pandas()   # the governed set-point short of the request after a step: seen
+    assert bool((df["ctrl.target.h1"] != df["ref.h1"]).any()) is law.get("governor", True)
     scenario = tmp_path / "steps.csv"
     scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,0.8,0.9\n1000,,\n")
     tuned = {"R": {"qa": 0.05}}

@@ -43,8 +43,9 @@ def test_the_tools_that_judge_fmus_find_it_compliant(version: int,
     assert (units["m3/s"].baseUnit.m, units["m3/s"].baseUnit.s) == (3, -1)
     var = {v.name: v for v in md.modelVariables}
     assert [var[n].causality for n in ("h1", "h2", "ref.h1", "ref.h2")] == ["input"] * 4
-    assert [var[n].causality for n in ("qa", "qb", "status", "pred.h1")] == ["output"] * 4
-    assert var["h1"].unit == "m" and var["qa"].unit == "m3/s"
+    assert [var[n].causality for n in ("qa", "qb", "status", "pred.h1", "target.h2")
+            ] == ["output"] * 5
+    assert var["h1"].unit == var["target.h2"].unit == "m" and var["qa"].unit == "m3/s"
     assert float(var["qb"].max) == pytest.approx(1.11e-3)
     assert not md.coSimulation.canGetAndSetFMUstate
     beta = var["offset_filter"]
