@@ -55,6 +55,7 @@ int main(int argc, char **argv) {
     y[0] += 0.05 * (y[2] - y[0]);
     y[1] += 0.05 * (y[3] - y[1]);
     const double h1 = y[0];
+    if (k == 50) y[2] = 0.7, y[3] = 0.8;   /* a set-point step (the paper's law's governor) */
     if (k == 100) y[0] = NAN;   /* one bad measurement: the warning path */
     bad |= fmi3SetFloat64(c, in, 4, y, 4) > fmi3Warning;
     bad |= fmi3DoStep(c, t, ts, fmi3True, &a, &b, &e, &last) > fmi3Warning;
