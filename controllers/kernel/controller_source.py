@@ -280,8 +280,9 @@ def parameters(design: ControllerDesign, inputs: Sequence[str], outputs: Sequenc
     ``start`` the design's value. Each is the option of its name (``offset_filter``; ``R``,
     ``du_weight``, ``offset_weight`` by signal: ``R.<input>`` its diagonal entry;
     ``du_weight`` only when the design has the input-rate term, ``offset_weight`` under the
-    tracking law, ``offset_filter`` under the paper's with ``offset_free`` only). Normalised
-    units, as the options."""
+    tracking law, ``offset_filter`` under the paper's with ``offset_free`` only,
+    ``setpoint_rate`` under the paper's when the design has a rate). Normalised units, as the
+    options (the set-point rate: each output's units per sample)."""
     k = design.kernel
     inf = float("inf")
     out = []
@@ -299,6 +300,10 @@ def parameters(design: ControllerDesign, inputs: Sequence[str], outputs: Sequenc
         T = np.asarray(k.offset_weight, dtype=float)
         out += [(f"offset_weight.{name}", 0.0, inf, f"offset weight T of {name}, > 0 "
                  "(option offset_weight)", float(T[a])) for a, name in enumerate(outputs)]
+    elif _rate_tunable(design):
+        out.append(("setpoint_rate", 0.0, inf, "largest move of the set-point per sample, "
+                    "> 0, in each output's units (option setpoint_rate)",
+                    float(design.law_data["CT_SETPOINT_RATE"])))
     if len(out) != _parameter_count(design):
         raise ValueError("one name per input and output is needed")
     return tuple(out)
@@ -311,14 +316,20 @@ def _parameter_count(design: ControllerDesign) -> int:
     rate = m if k.has_du else 0
     if design.law == "tracking":
         return 1 + m + rate + p
-    return int(design.offset_free) + m + rate
+    return int(design.offset_free) + m + rate + int(_rate_tunable(design))
+
+
+def _rate_tunable(design: ControllerDesign) -> bool:
+    """The paper's law designed with a set-point rate (``CT_RATE_TUNABLE``)."""
+    return design.law == "paper" and float(design.law_data["CT_SETPOINT_RATE"]) >= 0.0
 
 
 def generate_source(design: ControllerDesign) -> str:
     """The C source of the controller step (symbol prefix left as ``@PFX@``): the kernel,
     ``controller.h``, the law's files, ``controller.c`` and the loader of its numbers
     (``loader.c``), which are declared, not defined: the source is the same for every design
-    of the same dimensions and law (and, for the paper's, ``offset_free``), and
+    of the same dimensions and law (and, for the paper's, ``offset_free`` and whether it has
+    a set-point rate), and
     :func:`design_data` is what a design adds (``PFX(load_data)``)."""
     problem = design.kernel
     if (problem.offset_weight is None) != (design.law == "paper"):
@@ -326,7 +337,8 @@ def generate_source(design: ControllerDesign) -> str:
     kernel, own = kernel_constants(problem), controller_constants(design)
     switches = f"#define CT_NPARAM {_parameter_count(design)}\n"
     if design.law == "paper":
-        switches += f"#define CT_OFFSET_FREE {int(design.offset_free)}\n"
+        switches += (f"#define CT_OFFSET_FREE {int(design.offset_free)}\n"
+                     f"#define CT_RATE_TUNABLE {int(_rate_tunable(design))}\n")
     return "\n".join([kernel_source(problem, kernel),
                       "/* the controller's constants (controller_source.py) */\n"
                       + switches + own.declarations(),

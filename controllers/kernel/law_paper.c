@@ -37,8 +37,8 @@
 #if HAS_ASS
 #error "law_paper.c runs on the paper's FHOCP kernel (HAS_ASS 0)"
 #endif
-#ifndef CT_OFFSET_FREE
-#error "the paper's law needs CT_OFFSET_FREE (controller_source.py)"
+#if !defined(CT_OFFSET_FREE) || !defined(CT_RATE_TUNABLE)
+#error "the paper's law needs CT_OFFSET_FREE and CT_RATE_TUNABLE (controller_source.py)"
 #endif
 
 /* How far inside the admissible box the closest admissible set-point is put (paper_law.py
@@ -48,13 +48,15 @@
 
 /* the tunable parameters (law_parameter), in this order: the disturbance filter's gain
  * (option offset_filter, in (0, 1]; with offset_free only), the diagonal of R (option R: NU
- * entries, R kept positive definite) and the input-rate weights S (option du_weight: NU
- * entries >= 0, with HAS_DU). The weights are the kernel instance's (gk_mem.rw, dw); Q and
- * s are not tunable (s is the certificate's, eq:definition_s, from Q); the theorem holds for
- * any R > 0, and S is outside the paper's cost. */
+ * entries, R kept positive definite), the input-rate weights S (option du_weight: NU
+ * entries >= 0, with HAS_DU) and the set-point rate (option setpoint_rate, > 0, in each
+ * output's units per sample; when the design has one: CT_RATE_TUNABLE). The weights are the
+ * kernel instance's (gk_mem.rw, dw); Q and s are not tunable (s is the certificate's,
+ * eq:definition_s, from Q); the theorem holds for any R > 0, and S and the rate are outside
+ * the paper's law. */
 enum {
   LAW_P_OFFSET_FILTER = 0, LAW_P_R = CT_OFFSET_FREE, LAW_P_DU = LAW_P_R + NU,
-  LAW_N_PARAMETERS = LAW_P_DU + HAS_DU * NU
+  LAW_P_RATE = LAW_P_DU + HAS_DU * NU, LAW_N_PARAMETERS = LAW_P_RATE + CT_RATE_TUNABLE
 };
 
 typedef struct law_state {
@@ -63,6 +65,7 @@ typedef struct law_state {
    * and its gain (a parameter) */
   int has_ref, has_model, has_reference;
   double y_ref[NY], y_model[NY], dhat[NY], beta;
+  double rate;   /* the set-point rate (< 0: none), a parameter when the design has one */
   /* the reference (x_bar, u_bar, alpha) of the FHOCP's set-point */
   double x_bar[NX], u_bar[NU], alpha;
   /* the robust MPC: the plan, the last input (u_{-1} of the input-rate term) */
@@ -168,9 +171,9 @@ static int update_reference(law_state *st, const double *xhat, const double *y,
   double target[NY], yh[NY];
   st->has_gcand = 0;
   memcpy(target, yr, sizeof target);
-  if (CT_SETPOINT_RATE >= 0.0 && st->has_model)
+  if (st->rate >= 0.0 && st->has_model)
     for (int a = 0; a < NY; a++) {
-      const double step = CT_SETPOINT_RATE / fabs(CT_Y_SCALE[a]);
+      const double step = st->rate / fabs(CT_Y_SCALE[a]);
       const double base = st->y_model[a] + (CT_OFFSET_FREE ? st->dhat[a] : 0.0);
       target[a] = base + fmin(fmax(yr[a] - base, -step), step);
     }
@@ -343,6 +346,7 @@ static void law_reset(law_state *st, gk_ws *ws) {
   st->alpha = NAN;
   last_reset(&st->last);
   st->beta = CT_BETA;
+  st->rate = CT_SETPOINT_RATE;
   st->lam_max = 1.0;
 }
 
@@ -368,8 +372,9 @@ static double *law_parameter(law_state *st, int i) {
   if (CT_OFFSET_FREE && i == LAW_P_OFFSET_FILTER) return &st->beta;
   if (i >= LAW_P_R && i < LAW_P_DU) return m->rw + (i - LAW_P_R) * (NU + 1);
 #if HAS_DU
-  if (i >= LAW_P_DU && i < LAW_N_PARAMETERS) return m->dw + (i - LAW_P_DU);
+  if (i >= LAW_P_DU && i < LAW_P_RATE) return m->dw + (i - LAW_P_DU);
 #endif
+  if (CT_RATE_TUNABLE && i == LAW_P_RATE) return &st->rate;
   return 0;
 }
 
@@ -378,5 +383,6 @@ static const char *law_refuse(const law_state *st, int i, double value) {
   if (CT_OFFSET_FREE && i == LAW_P_OFFSET_FILTER)
     return value > 0.0 && value <= 1.0 ? 0 : "must be in (0, 1]";
   if (i < LAW_P_DU) return refuse_r(st->ws, i - LAW_P_R, value);
-  return value >= 0.0 && isfinite(value) ? 0 : "must be a finite weight >= 0";
+  if (i < LAW_P_RATE) return value >= 0.0 && isfinite(value) ? 0 : "must be a finite weight >= 0";
+  return value > 0.0 && isfinite(value) ? 0 : "must be a finite rate > 0";
 }

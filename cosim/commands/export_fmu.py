@@ -24,9 +24,10 @@ the plant's inputs, the solver status, whether the fallback was applied, the SQP
 the predicted outputs pred.<output> and the steady outputs the model is steered to
 target.<output>: all in the problem's units, so that plant and controller connect by name;
 its tunable parameters the law's: offset_filter and the weights R.<input>,
-du_weight.<input>, offset_weight.<output> (tracking). Its sample time is the problem's Ts.
-The same model, problem and --options as cosim run give the same inputs (docs:
-guide/controller-fmu.md); --controller takes them from a run's controller.json. Run it with:
+du_weight.<input>, offset_weight.<output> (tracking), setpoint_rate (the paper's, when
+designed with one). Its sample time is the problem's Ts. The same model, problem and
+--options as cosim run give the same inputs (docs: guide/controller-fmu.md); --controller
+takes them from a run's controller.json. Run it with:
 cosim run SCENARIO --controller Controller.fmu"""
 
 

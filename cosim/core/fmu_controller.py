@@ -9,8 +9,9 @@ order a controller FMU is meant to run: set the measured outputs ``y_k`` and the
 (recorded, not wired to the plant); every other output is an input of the plant, as a
 controller's are. Its sample time is the FMU's default experiment step size; its parameters
 (``offset_filter``, the weights ``R.<input>``, ``du_weight.<input>``,
-``offset_weight.<output>``) are options of the component, a family of them also in the
-robust MPC's form (``R=0.02``: every entry; ``offset_weight={"h1": 1e3}``: by signal).
+``offset_weight.<output>``, ``setpoint_rate``) are options of the component, a family of
+them also in the robust MPC's form (``R=0.02``: every entry; ``offset_weight={"h1": 1e3}``:
+by signal).
 """
 
 from __future__ import annotations

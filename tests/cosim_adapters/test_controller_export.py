@@ -322,6 +322,27 @@ def test_the_paper_law_exported_runs_as_the_python_law(law: dict, tmp_path: Path
 GOVERNOR = {"governor": True}
 
 
+def test_a_tuned_setpoint_rate_is_the_python_option(tmp_path: Path) -> None:
+    """The paper's law designed with a set-point rate has it as a tunable parameter
+    ``setpoint_rate`` (each output's units per sample): tuned to 0.02 m the FMU gives the
+    Python law with ``setpoint_rate=0.02``; 0 is refused by the FMU, one line."""
+    law = {"law": "paper", "setpoint_rate": 0.05}
+    fmu = cosim.export_fmu(out=tmp_path / "Rate.fmu", options=law)
+    md = fmpy.read_model_description(str(fmu))
+    rate = {v.name: v for v in md.modelVariables}["setpoint_rate"]
+    assert rate.causality == "parameter" and float(rate.start) == 0.05
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,1.3,1.4\n1500,,\n")
+    tuned = cosim.run(scenario, controller=str(fmu), options={"setpoint_rate": 0.02},
+                      figure=False)
+    _same_inputs(tuned, cosim.run(scenario, options={**law, "setpoint_rate": 0.02},
+                                  figure=False), {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
+    refused = cosim.run(scenario, controller=str(fmu), options={"setpoint_rate": 0.0},
+                        figure=False)
+    assert refused.status == "failed"
+    assert "cannot set setpoint_rate = 0: must be a finite rate > 0" in refused.reason
+
+
 @pytest.mark.parametrize(("options", "refs", "first_outside", "named"), [
     ({}, ((0.65, 0.65), (1.3, 1.4), (3.0, 0.3)), False, 1),
     ({"offset_free": True, "setpoint_rate": 0.05, "du_weight": 0.1},
@@ -363,7 +384,8 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
                                        ctrl._hi)
     names = [p[0] for p in parameters(design, ("qa", "qb"), ("h1", "h2"))]
     assert names == (["offset_filter"] if "offset_free" in options else []) + [
-        "R.qa", "R.qb"] + (["du_weight.qa", "du_weight.qb"] if "du_weight" in options else [])
+        "R.qa", "R.qb"] + (["du_weight.qa", "du_weight.qb"] if "du_weight" in options else []
+                           ) + (["setpoint_rate"] if "setpoint_rate" in options else [])
     compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
                                   n_outputs=2)
     refused, fractions = 0, set()
