@@ -320,7 +320,9 @@ class Workspace:
             a = arrays[name]
             if a.dtype != np.float64 or not a.flags.c_contiguous:
                 raise ValueError(f"sqp array {name!r} must be contiguous float64")
-        keep = ({name: arrays[name] for name in names}, options, info)   # alive with the fn
+        # alive with the function: the arrays, the options, the info and this workspace (the
+        # C memory at self._ws is freed with it)
+        keep = ({name: arrays[name] for name in names}, options, info, self)
         addr = [self._ws, *(int(keep[0][name].ctypes.data) for name in names),
                 ctypes.addressof(options), ctypes.addressof(info)]
         fn = self._c["sqp"]

@@ -221,3 +221,22 @@ def test_derivative_reuse_never_costs_convergence(cert, max_iter: int) -> None:
             assert np.array_equal(ra.u, rb.u)
     if max_iter < 15:
         assert restarts > 0
+
+
+@needs_cc
+def test_the_sqp_keeps_its_workspace_alive() -> None:
+    """The SQP holds its workspace (the C memory its solves run in): the FHOCP dropped, the
+    workspace is freed with the solver, never under it."""
+    import gc
+    import weakref
+
+    fh = random_fhocp(5, 6, seed=3)
+    solver, ws = fh._solver, weakref.ref(fh.kernel)
+    assert isinstance(solver, KernelSQP)
+    del fh
+    gc.collect()
+    assert ws() is not None and ws()._finalizer.alive
+    solver.solve()    # runs in the live workspace
+    del solver
+    gc.collect()
+    assert ws() is None
