@@ -295,7 +295,14 @@ class FmuComponent(Component):
         self._out_args = tuple(out_args)
         self._set_plans: dict[tuple[str, ...], tuple[Any, tuple, list[Any]]] = {}
 
+    def _instance(self) -> None:
+        """Raise unless the FMU is instantiated: the raw calls below pass its instance's
+        address, which :meth:`terminate` frees."""
+        if self._fmu is None:
+            raise RuntimeError("no FMU instance (before setup() or after terminate())")
+
     def _get(self) -> None:
+        self._instance()
         status = self._cget(*self._out_args)
         if status > 1:
             self._check(self._get_name, status)
@@ -325,6 +332,7 @@ class FmuComponent(Component):
         self._set_many({name: value})
 
     def _set_many(self, values: Mapping[str, float]) -> None:
+        self._instance()
         buf, args, conv = self._plan(tuple(values))
         if any(conv):
             buf[:] = [v if c is None else c(v) for v, c in zip(values.values(), conv, strict=True)]
@@ -402,6 +410,7 @@ class FmuComponent(Component):
     def step(self, t: float, dt: float) -> None:
         """Advance from ``t`` to ``t + dt`` with the inputs held."""
         try:
+            self._instance()
             if self.interface == "cs":
                 if self._fmi3:
                     _, terminate, early, _ = self._fmu.doStep(t, dt)

@@ -77,6 +77,21 @@ def test_start_values(fmu3_path: Path) -> None:
         comp.terminate()  # idempotent
 
 
+@pytest.mark.parametrize("which", ["fmu2_path", "fmu3_path"])
+def test_a_terminated_fmu_is_never_called_again(which: str,
+                                                request: pytest.FixtureRequest) -> None:
+    """After terminate() (the instance freed) reading, setting and stepping fail in one line
+    naming why; the FMU is not called with the freed instance."""
+    comp = FmuComponent(request.getfixturevalue(which))
+    comp.setup(0.0)
+    comp.get_outputs()
+    comp.terminate()
+    for call in (comp.get_outputs, lambda: comp.set_inputs(U), lambda: comp.step(0.0, 25.0)):
+        with pytest.raises(SimulationFailed, match="after terminate") as info:
+            call()
+        assert "\n" not in str(info.value)
+
+
 def test_fmu_error_becomes_simulation_failed_with_its_log(fmu2_path: Path) -> None:
     comp = FmuComponent(fmu2_path)
     comp.setup(0.0)
