@@ -71,8 +71,8 @@ EXPORT void PFX(ctl_free)(ctl_state *st) {
  * (the problem's units): writes u_phys (the inputs to apply, in their boxes), status,
  * fallback, iterations, y_pred (the model's output at the next sample under the applied
  * plan) and y_target (the steady output the FHOCP steers the model to); advances the
- * observer. A non-finite y or ref changes nothing (the last inputs are
- * held) and sets CTL_WARN_NONFINITE_INPUT; returns 1 then, else 0. */
+ * observer. A non-finite y or ref changes nothing (the last inputs are held) and sets
+ * CTL_WARN_NONFINITE_INPUT; returns 1 then, else 0. */
 EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_phys) {
   double y[NY], yr[NY], yh[NY], u[NU], dz[NX], dr[NX], xn[NX], d[NY];
   if (!all_finite(y_phys, NY) || !all_finite(r_phys, NY)) {
