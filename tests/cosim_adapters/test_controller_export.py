@@ -30,9 +30,9 @@ PAPER = ROOT / "scenarios" / "paper_steps.csv"
 #: The issue's bar: the FMU's inputs within this share of each input's box of the Python
 #: controller's (they are equal to the bit on this machine).
 TOL = 1e-9
-#: The paper's law without its governor (the paper's controller; its default, with it, is
-#: ``{"law": "paper"}``).
+#: The paper's law without its governor (the paper's controller), and with it (its default).
 PAPER_LAW = {"law": "paper", "governor": False}
+GOVERNED = {"law": "paper", "governor": True}
 
 
 @pytest.fixture(scope="module")
@@ -185,7 +185,6 @@ CSTR = {"F": (50.0, 150.0), "Tc": (290.0, 350.0)}
 MIXING = {"Fh": (0.3, 1.5), "Fc": (0.3, 1.5), "Fw": (0.3, 1.5)}
 
 
-GOVERNED = {"law": "paper"}   # the paper's law with its governor (its default)
 FAILS, UNREACHABLE = "failed solves", "an admissible set-point no input reaches"
 
 
@@ -319,8 +318,6 @@ def test_the_paper_law_exported_runs_as_the_python_law(law: dict, tmp_path: Path
                  cosim.run(scenario, options={**law, **tuned}, figure=False), boxes)
 
 
-GOVERNOR = {"governor": True}
-
 
 def test_a_tuned_setpoint_rate_is_the_python_option(tmp_path: Path) -> None:
     """The paper's law designed with a set-point rate has it as a tunable parameter
@@ -348,10 +345,10 @@ def test_a_tuned_setpoint_rate_is_the_python_option(tmp_path: Path) -> None:
     ({"offset_free": True, "setpoint_rate": 0.05, "du_weight": 0.1},
      ((0.65, 0.65), (0.9, 1.0), (3.0, 0.3)), False, 0),
     ({}, ((3.0, 0.3), (0.8, 0.9), (0.7, 0.8)), True, 1),
-    (GOVERNOR, ((0.65, 0.65), (1.3, 1.4), (0.5, 0.6), (3.0, 0.3), (1.0, 1.2)), False, 1),
-    ({**GOVERNOR, "offset_free": True, "setpoint_rate": 0.05, "du_weight": 0.1},
+    (GOVERNED, ((0.65, 0.65), (1.3, 1.4), (0.5, 0.6), (3.0, 0.3), (1.0, 1.2)), False, 1),
+    ({**GOVERNED, "offset_free": True, "setpoint_rate": 0.05, "du_weight": 0.1},
      ((0.65, 0.65), (1.3, 1.4), (0.5, 0.6), (1.9, 0.2), (1.0, 1.2)), False, 0),
-    (GOVERNOR, ((3.0, 0.3), (0.8, 0.9), (0.3, 0.4)), True, 1)],
+    (GOVERNED, ((3.0, 0.3), (0.8, 0.9), (0.3, 0.4)), True, 1)],
     ids=["paper", "offset-free-rate-limited", "uncertified-first-outside", "governor",
          "governor-offset-free-rate-limited", "governor-uncertified-first-outside"])
 def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tuple,
