@@ -402,7 +402,8 @@ def test_the_compiled_governor_moves_along_the_surface_of_equilibrium_outputs(
     """One input, two outputs: the reachable set-points are a curve, and the governor moves
     along it (the equilibrium outputs of ``ū(v) + λ (ū(r) − ū(v))``), by fractions of the
     step here (N = 5); a set-point off the curve is refused as unreachable. The compiled
-    step gives the Python law's inputs, statuses and fallbacks, to the bit."""
+    step gives the Python law's inputs, statuses and fallbacks, to the bit, and so does the
+    FMU in closed loop with the model as the plant."""
     from controllers.equilibrium import equilibrium_output
     from controllers.kernel.controller_source import (
         CompiledController,
@@ -432,6 +433,19 @@ def test_the_compiled_governor_moves_along_the_surface_of_equilibrium_outputs(
     compiled.close()
     assert min(fractions - {0.0}) < 0.5 and ctrl.law.governed_steps > 10, fractions
     assert len(ctrl.law.rejections) == 1 and "is not reachable" in ctrl.law.rejections[0]
+    # the FMU of one input, in closed loop with the model as the plant: the Python law's
+    steps = tmp_path / "steps.csv"
+    steps.write_text("time,ref.h1,ref.h2\n" + "".join(
+        f"{t},{float(a[0])!r},{float(a[1])!r}\n" for t, a in ((0, v), (500, r), (1500, v)))
+        + "2500,,\n")
+    plant, options = f"model:{tmp_path / 'gru_1x2.json'}", {"law": "paper", "N": 5}
+    fmu = cosim.export_fmu(tmp_path / "gru_1x2.json", out=tmp_path / "C.fmu", options=options,
+                           scenario=steps)
+    py = cosim.run(steps, plant=plant, model=tmp_path / "gru_1x2.json", options=options,
+                   figure=False)
+    _same_inputs(cosim.run(steps, plant=plant, controller=str(fmu), figure=False), py,
+                 {"qa": (0.0, 9.05e-4)})
+    assert min(set(py.to_pandas()["ctrl.governor_lambda"]) - {0.0}) < 0.5
 
 
 def test_a_campaign_qualifies_the_fmu_on_the_python_controllers_draws(
