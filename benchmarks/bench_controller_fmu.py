@@ -21,7 +21,6 @@ Usage: ``.venv/bin/python benchmarks/bench_controller_fmu.py [--repeats R] [--fm
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import tempfile
@@ -37,6 +36,7 @@ sys.path.insert(0, str(HERE.parent))
 
 import cosim  # noqa: E402
 from cosim.core import registry  # noqa: E402
+from cosim.core.errors import CosimError  # noqa: E402
 from cosim.core.fmu_controller import FmuController  # noqa: E402
 
 SCENARIO = HERE.parent / "scenarios" / "paper_steps.csv"
@@ -86,10 +86,10 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                         help="a robust-mpc option (VALUE read as JSON), repeatable")
     args = parser.parse_args(argv)
-    options = {}
-    for item in args.option:
-        key, _, value = item.partition("=")
-        options[key] = json.loads(value)
+    try:
+        options = registry.parse_options(args.option)   # as cosim run reads --option
+    except CosimError as exc:
+        parser.error(str(exc))
 
     steps = record(args.scenario, options)
     with tempfile.TemporaryDirectory() as tmp:
