@@ -28,7 +28,7 @@ import numpy as np
 from controllers.errors import UnreachableSetpoint
 from controllers.gru import NUMPY_OPS, gates, step
 
-__all__ = ["EQ_TOL", "REACH_TOL", "box_boundary", "describe", "equilibrium",
+__all__ = ["EQ_TOL", "NEWTON_MAX_ITER", "REACH_TOL", "box_boundary", "describe", "equilibrium",
            "equilibrium_for_output", "equilibrium_newton", "equilibrium_output", "jacobians",
            "reachable_boundary", "state_equilibrium"]
 
@@ -223,12 +223,14 @@ def equilibrium_for_output(model_or_params: Any, y_norm: Sequence[float],
     return x, u
 
 
-#: Residual ∞-norm accepted for an equilibrium from Newton's method (normalised units).
+#: Residual ∞-norm accepted for an equilibrium from Newton's method (normalised units), and
+#: its iteration cap (the compiled kernel's ``eq_newton`` and the exported governor's too).
 EQ_TOL = 1e-11
+NEWTON_MAX_ITER = 20
 
 
 def equilibrium_newton(params: Mapping[str, np.ndarray], y: np.ndarray, x0: np.ndarray,
-                       u0: np.ndarray, max_iter: int = 20,
+                       u0: np.ndarray, max_iter: int = NEWTON_MAX_ITER,
                        ) -> tuple[np.ndarray, np.ndarray] | None:
     """Equilibrium ``x = f(x, u)``, ``U_o x + b_o = y`` (``eq:gru``) by Newton's method from
     ``(x0, u0)``; ``None`` when it does not converge or leaves ``‖u‖∞ ≤ 1``.

@@ -175,7 +175,7 @@ class ControllerDesign:
         (``Certificate.admissible_bounds``), the set-point rate (−1: none) and the reference
         governor's (:class:`controllers.ocp.governor.ReferenceGovernor`: whether it runs, its
         levels, ``λ_max``'s floor and growth, the Newton's cap and tolerance)."""
-        from controllers.kernel.kernel_lib import EQ_NEWTON_MAX_ITER, EQ_NEWTON_TOL
+        from controllers.equilibrium import EQ_TOL, NEWTON_MAX_ITER
         from controllers.ocp.governor import LAM_GROW, LAM_MIN
 
         cert, h, gov = law.cert, law.handling, law.governor
@@ -199,8 +199,8 @@ class ControllerDesign:
                     "CT_GOVERNOR": int(gov is not None),
                     "CT_GOV_LEVELS": int(gov.levels if gov is not None else 0),
                     "CT_GOV_LAM_MIN": float(LAM_MIN), "CT_GOV_LAM_GROW": float(LAM_GROW),
-                    "CT_EQ_NEWTON_MAX_ITER": int(EQ_NEWTON_MAX_ITER),
-                    "CT_EQ_NEWTON_TOL": float(EQ_NEWTON_TOL)}
+                    "CT_EQ_NEWTON_MAX_ITER": int(NEWTON_MAX_ITER),
+                    "CT_EQ_NEWTON_TOL": float(EQ_TOL)}
         fhocp = law.fhocp
         return cls._common(fhocp, observer, h.offset_filter, law.certified, model, u_lo,
                            u_hi, fhocp.reference.layout, "paper", law_data,

@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.equilibrium import EQ_TOL, NEWTON_MAX_ITER
 from controllers.kernel.kernel_abi import (
     ABI_COUNT,
     Assessment,
@@ -37,12 +38,7 @@ from controllers.kernel.kernel_abi import (
     check_layout,
 )
 
-__all__ = ["EQ_NEWTON_MAX_ITER", "EQ_NEWTON_TOL", "Kernel", "Workspace"]
-
-#: :meth:`Workspace.eq_newton`'s iteration cap and tolerance on ``max |F|`` (those of
-#: :func:`controllers.equilibrium.equilibrium_newton`; the exported governor's too).
-EQ_NEWTON_MAX_ITER = 20
-EQ_NEWTON_TOL = 1e-11
+__all__ = ["Kernel", "Workspace"]
 
 _VP, _CD, _CI = ctypes.c_void_p, ctypes.c_double, ctypes.c_int
 #: ctypes signatures of the entry points taking a workspace first: (arguments after it, result)
@@ -292,7 +288,7 @@ class Workspace:
         return float(self._c["terminal_gap"](self._ws, a["w"], a["p"]))
 
     def eq_newton(self, y: np.ndarray, x0: np.ndarray, u0: np.ndarray,
-                  max_iter: int = EQ_NEWTON_MAX_ITER, tol: float = EQ_NEWTON_TOL
+                  max_iter: int = NEWTON_MAX_ITER, tol: float = EQ_TOL
                   ) -> tuple[np.ndarray, np.ndarray] | None:
         """:func:`controllers.equilibrium.equilibrium_newton`, compiled (at least as many
         inputs as outputs; with more, its minimum-norm steps by the normal equations):
