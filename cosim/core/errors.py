@@ -12,6 +12,7 @@ The exit codes and what they mean are defined here once, in :data:`EXIT_CODES`;
 from __future__ import annotations
 
 import textwrap
+import unicodedata
 from collections.abc import Mapping
 
 __all__ = [
@@ -27,7 +28,36 @@ __all__ = [
     "ParameterError",
     "SimulationFailed",
     "exit_codes_help",
+    "one_line",
 ]
+
+
+#: Unicode categories a message shows escaped: control and format characters (an escape
+#: sequence, a bidirectional override), line and paragraph separators.
+_ESCAPED = frozenset({"Cc", "Cf", "Zl", "Zp"})
+_NAMED = {"\n": "\\n", "\r": "\\r", "\t": "\\t"}
+
+
+def one_line(text: str) -> str:
+    """``text`` as one line a terminal shows as it is: every control or format character
+    (a line break, an escape sequence from a file or an FMU) written as its escape.
+
+    >>> one_line("sc.csv:3:2: '0.6\\n1' and '\\x1b[31m'")
+    "sc.csv:3:2: '0.6\\\\n1' and '\\\\x1b[31m'"
+    """
+    if text.isascii() and text.isprintable():
+        return text
+    out = []
+    for ch in text:
+        if ch in _NAMED:
+            out.append(_NAMED[ch])
+        elif unicodedata.category(ch) in _ESCAPED:
+            code = ord(ch)
+            out.append(f"\\x{code:02x}" if code < 0x100 else f"\\u{code:04x}"
+                       if code < 0x10000 else f"\\U{code:08x}")
+        else:
+            out.append(ch)
+    return "".join(out)
 
 
 class CosimError(Exception):

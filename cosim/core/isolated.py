@@ -1,112 +1,81 @@
-"""An :class:`~cosim.core.fmu.FmuComponent` whose native code runs in a worker process.
+"""FMUs whose native code runs in a worker process: :class:`IsolatedFmuComponent` (a plant,
+``cosim run --isolate``) and :class:`IsolatedFmuController` (a controller FMU: always).
 
-An FMU is native code: a segmentation fault inside ``doStep`` would take the whole runner
-down with it, results and all, and a ``doStep`` stuck in a loop would hang it for ever.
-:class:`IsolatedFmuComponent` keeps the modelDescription (and the variable map) in this
-process and loads the FMU in a ``spawn``-ed worker; the two talk over a pipe in small tuples
-of strings and floats (one round trip per step).
+Each keeps the modelDescription (and the variable map) in this process and loads the FMU in
+a :class:`~cosim.core.worker.Worker`, which a crash cannot take down and a timeout can kill:
+one round trip per step (inputs in, outputs out).
 
-* When the worker dies (segfault, ``os._exit``, killed), the step raises
+* When the worker dies (segfault, ``abort()``, ``exit()``, killed), the step raises
   :class:`~cosim.core.errors.SimulationFailed` ``"... worker died (signal 11, SIGSEGV)"`` and the
   master keeps every row recorded so far.
 * With a ``timeout``, a request the worker has not answered within that many seconds kills
   the worker (SIGKILL) and fails the step: ``"doStep at t=500.0 took longer than the step
-  timeout of 5 s (worker killed)"``.
+  timeout of 5 s (worker killed)"``. The master hands an isolated controller the run's step
+  timeout (:attr:`isolated`), since a ``SIGALRM`` cannot stop native code.
 * A signal that interrupts the parent while the worker is busy (Ctrl-C, SIGTERM) kills the
   worker at once in :meth:`IsolatedFmuComponent.terminate`: nothing waits for a hung FMU.
-* The FMU is extracted into a ``cosim-fmu-*`` folder that this process creates and removes,
-  so nothing is left behind however the worker ends. The worker also dies with its parent
-  (``PR_SET_PDEATHSIG`` on Linux).
+* The FMU is extracted into the worker's scratch folder, which this process creates and
+  removes, so nothing is left behind however the worker ends.
 """
 
 from __future__ import annotations
 
-import contextlib
-import ctypes
-import multiprocessing as mp
-import os
-import shutil
-import signal as _signal
-import sys
-import tempfile
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from cosim.core.errors import CosimError, ParameterError, SimulationFailed
+from cosim.core.errors import ParameterError, SimulationFailed
 from cosim.core.fmu import FmuComponent
+from cosim.core.fmu_controller import FmuController
 from cosim.core.varmap import MappedSignal, VarMap
+from cosim.core.worker import TERMINATE_WAIT, Worker
 
-__all__ = ["DEFAULT_STEP_TIMEOUT", "IsolatedFmuComponent"]
+__all__ = ["DEFAULT_STEP_TIMEOUT", "REHEARSAL_TIMEOUT", "TERMINATE_WAIT", "FmuServer",
+           "IsolatedFmuComponent", "IsolatedFmuController", "rehearse"]
 
-#: Step timeout [s] of an isolated plant when none is given (``cosim run --isolate``): far
-#: above any healthy step of a process model, short enough that a hung FMU is noticed.
+#: Step timeout [s] of an isolated FMU when none is given (``cosim run --isolate``, a
+#: controller FMU): far above any healthy step of a process model or a controller, short
+#: enough that a hung FMU is noticed.
 DEFAULT_STEP_TIMEOUT = 60.0
-#: How long :meth:`IsolatedFmuComponent.terminate` waits for an idle worker to finish.
-TERMINATE_WAIT = 5.0
-_PR_SET_PDEATHSIG = 1
+#: Wall-clock limit [s] of each request of :func:`rehearse` (a healthy FMU answers in far
+#: less).
+REHEARSAL_TIMEOUT = 30.0
 
 
-def _die_with_parent() -> None:  # pragma: no cover - runs in the child process
-    """Ask Linux to kill this process when its parent dies (no orphaned, hung workers)."""
-    if sys.platform.startswith("linux"):
-        with contextlib.suppress(Exception):
-            libc = ctypes.CDLL(None, use_errno=True)
-            libc.prctl(_PR_SET_PDEATHSIG, _signal.SIGKILL, 0, 0, 0)
+class FmuServer:  # pragma: no cover - runs in the worker process
+    """An :class:`~cosim.core.fmu.FmuComponent` served by a worker: each request answers with
+    the outputs, in the modelDescription's order."""
 
+    def __init__(self, path: str, name: str, interface: str,
+                 start_values: tuple[tuple[str, float], ...],
+                 mapping: tuple[tuple[str, str, str | None, float, float], ...],
+                 map_path: str, scratch: str) -> None:
+        varmap = VarMap(Path(map_path), {m[0]: MappedSignal(*m) for m in mapping})
+        self.comp = FmuComponent(path, name=name, interface=interface,
+                                 start_values=dict(start_values), varmap=varmap,
+                                 unpack_dir=scratch)
 
-def _worker(conn: Any, path: str, name: str, interface: str,
-            start_values: tuple[tuple[str, float], ...],
-            mapping: tuple[tuple[str, str, str | None, float, float], ...],
-            map_path: str, unpack_dir: str) -> None:  # pragma: no cover - child process
-    """Serve one FMU: ``(op, *args)`` requests, ``("ok", result)`` or ``(kind, msg)`` replies."""
-    _die_with_parent()
-    # signals reach the whole process group: the parent handles them (and stops this worker)
-    for sig in (_signal.SIGINT, _signal.SIGTERM, _signal.SIGHUP):
-        _signal.signal(sig, _signal.SIG_IGN)
-    varmap = VarMap(Path(map_path), {m[0]: MappedSignal(*m) for m in mapping})
-    comp = FmuComponent(path, name=name, interface=interface,
-                        start_values=dict(start_values), varmap=varmap, unpack_dir=unpack_dir)
-    while True:
-        try:
-            msg = conn.recv()
-        except EOFError:
-            break
-        op = msg[0]
-        try:
-            if op == "setup":
-                comp.setup(msg[1])
-                result: Any = tuple(comp.get_outputs().items())
-            elif op == "step":
-                _, t, dt, inputs = msg
-                if inputs:
-                    comp.set_inputs(dict(inputs))
-                comp.step(t, dt)
-                result = tuple(comp.get_outputs().values())
-            elif op == "set_parameter":
-                comp.set_parameter(msg[1], msg[2])
-                result = tuple(comp.get_outputs().values())
-            elif op == "terminate":
-                comp.terminate()
-                conn.send(("ok", None))
-                break
-            else:
-                raise CosimError(f"unknown request {op!r}")
-            conn.send(("ok", result))
-        except SimulationFailed as exc:
-            conn.send(("failed", str(exc)))
-        except CosimError as exc:
-            conn.send(("error", str(exc)))
-        except Exception as exc:
-            conn.send(("failed", f"{type(exc).__name__}: {exc}"))
-    conn.close()
-    # skip interpreter teardown: FMU libraries stay loaded and some (embedded interpreters,
-    # static destructors) do not survive it; nothing is left to flush
-    os._exit(0)
+    def setup(self, t0: float) -> tuple[tuple[str, float], ...]:
+        self.comp.setup(t0)
+        return tuple(self.comp.get_outputs().items())
+
+    def step(self, t: float, dt: float, inputs: tuple[tuple[str, float], ...]
+             ) -> tuple[float, ...]:
+        if inputs:
+            self.comp.set_inputs(dict(inputs))
+        self.comp.step(t, dt)
+        return tuple(self.comp.get_outputs().values())
+
+    def set_parameter(self, name: str, value: float) -> tuple[float, ...]:
+        self.comp.set_parameter(name, value)
+        return tuple(self.comp.get_outputs().values())
+
+    def close(self) -> None:
+        self.comp.terminate()
 
 
 class IsolatedFmuComponent(FmuComponent):
-    """Same interface as :class:`FmuComponent`; the FMU runs in a child process.
+    """Same interface as :class:`FmuComponent`; the FMU runs in a worker process.
 
     Parameters
     ----------
@@ -118,88 +87,56 @@ class IsolatedFmuComponent(FmuComponent):
         ``None``: wait for ever.
     """
 
+    #: The FMU's native code runs in a worker process, whose requests :attr:`timeout` bounds.
+    isolated = True
+
     def __init__(self, *args: Any, timeout: float | None = None, **kwargs: Any) -> None:
         super().__init__(*args, **kwargs)
-        if timeout is not None and not (timeout > 0 and timeout < float("inf")):
-            raise ParameterError("step_timeout", f" {timeout!r}: expected a positive number "
-                                 "of seconds")
         self.timeout = timeout
-        self._proc: Any = None
-        self._conn: Any = None
-        self._busy = False
-        self._workdir: Path | None = None
+        self._worker: Worker | None = None
         self._pending: dict[str, float] = {}
         self._outputs: dict[str, float] = {}
 
+    @property
+    def timeout(self) -> float | None:
+        """Wall-clock limit [s] of every request to the worker (``None``: none)."""
+        return self._timeout
+
+    @timeout.setter
+    def timeout(self, value: float | None) -> None:
+        if value is not None and not (value > 0 and value < float("inf")):
+            raise ParameterError("step_timeout", f" {value!r}: expected a positive number "
+                                 "of seconds")
+        self._timeout = value
+        worker = getattr(self, "_worker", None)
+        if worker is not None:
+            worker.timeout = value
+
+    @property
+    def label(self) -> str:
+        """How messages name this FMU."""
+        return self.path.name
+
     def setup(self, t0: float, stop_time: float | None = None) -> None:
         """Start the worker, which extracts, loads and initialises the FMU."""
-        ctx = mp.get_context("spawn")
-        parent, child = ctx.Pipe()
+        self.terminate()
         mapping = tuple((m.signal, m.variable, m.unit, m.scale, m.offset)
                         for m in self.varmap.signals.values())
-        self._workdir = Path(tempfile.mkdtemp(prefix="cosim-fmu-"))
-        self._proc = ctx.Process(
-            target=_worker, daemon=True,
-            args=(child, str(self.path), self.name, self.interface,
-                  tuple((k, float(v)) for k, v in self.start_values.items()), mapping,
-                  str(self.varmap.path), str(self._workdir)))
-        self._proc.start()
-        child.close()
-        self._conn = parent
+        self._worker = Worker(
+            self.label, "cosim.core.isolated:FmuServer",
+            {"path": str(self.path), "name": self.name, "interface": self.interface,
+             "start_values": tuple((k, float(v)) for k, v in self.start_values.items()),
+             "mapping": mapping, "map_path": str(self.varmap.path)},
+            timeout=self.timeout, scratch=True)
+        self._worker.start()
+        self._pending.clear()
         self._t = t0
-        self._outputs = dict(self._call(("setup", float(t0)), f"initialisation at t={t0!r}"))
+        self._outputs = dict(self._call(f"initialisation at t={t0!r}", "setup", float(t0)))
 
-    def _call(self, msg: tuple, what: str) -> Any:
-        conn = self._conn
-        try:
-            self._busy = True
-            conn.send(msg)
-            if self.timeout is not None and not conn.poll(self.timeout):
-                self._kill()
-                raise SimulationFailed(f"{self.path.name}: {what} took longer than the step "
-                                       f"timeout of {self.timeout:g} s (worker killed)")
-            kind, result = conn.recv()
-            self._busy = False
-        except (EOFError, BrokenPipeError, ConnectionResetError, OSError):
-            why = self._death()
-            raise SimulationFailed(f"{self.path.name}: {what} failed: {why}") from None
-        if kind == "ok":
-            return result
-        if kind == "error":
-            raise CosimError(result)
-        raise SimulationFailed(result)
-
-    def _death(self) -> str:
-        """Why the worker is gone (after a broken pipe); cleans up."""
-        proc = self._proc
-        code = None
-        if proc is not None:
-            proc.join(timeout=TERMINATE_WAIT)
-            code = proc.exitcode
-        self._kill()
-        if code is not None and code < 0:
-            try:
-                sig = _signal.Signals(-code).name
-            except ValueError:
-                sig = "unknown"
-            return f"worker died (signal {-code}, {sig})"
-        return f"worker died (exit code {code})"
-
-    def _kill(self) -> None:
-        """Kill the worker now and remove its folder (idempotent)."""
-        conn, self._conn = self._conn, None
-        if conn is not None:
-            with contextlib.suppress(OSError):
-                conn.close()
-        proc, self._proc = self._proc, None
-        if proc is not None:
-            if proc.is_alive():
-                proc.kill()
-            proc.join()
-        self._busy = False
-        if self._workdir is not None:
-            shutil.rmtree(self._workdir, ignore_errors=True)
-            self._workdir = None
+    def _call(self, what: str, method: str, *args: Any) -> Any:
+        if self._worker is None:
+            raise SimulationFailed(f"{self.label}: {what} failed: no worker")
+        return self._worker.call(what, method, *args)
 
     def set_inputs(self, values: Mapping[str, float]) -> None:
         """Inputs travel with the next step request."""
@@ -207,19 +144,17 @@ class IsolatedFmuComponent(FmuComponent):
 
     def set_parameter(self, name: str, value: float) -> None:
         """Change a tunable parameter in the worker (or a start value before setup)."""
-        if self._conn is None:
+        if self._worker is None or not self._worker.alive:
             self.start_values[name] = value
             return
-        vals = self._call(("set_parameter", name, float(value)), f"setting {name}")
+        vals = self._call(f"setting {name}", "set_parameter", name, float(value))
         self._outputs = dict(zip(self._out_names, vals, strict=True))
 
     def step(self, t: float, dt: float) -> None:
         """One round trip: inputs, ``doStep``, outputs."""
-        if self._conn is None:
-            raise SimulationFailed(f"{self.path.name}: doStep at t={t!r} failed: no worker")
         inputs = tuple((k, float(v)) for k, v in self._pending.items())
         self._pending.clear()
-        vals = self._call(("step", float(t), float(dt), inputs), f"doStep at t={t!r}")
+        vals = self._call(f"doStep at t={t!r}", "step", float(t), float(dt), inputs)
         self._outputs = dict(zip(self._out_names, vals, strict=True))
         self._t = t + dt
 
@@ -234,15 +169,47 @@ class IsolatedFmuComponent(FmuComponent):
         killed at once; an idle one is asked to terminate the FMU and given
         :data:`TERMINATE_WAIT` seconds.
         """
-        conn = self._conn
-        if conn is not None and not self._busy:
-            try:
-                conn.send(("terminate",))
-                if conn.poll(TERMINATE_WAIT):
-                    conn.recv()
-            except (EOFError, OSError):
-                pass
-            proc = self._proc
-            if proc is not None:
-                proc.join(timeout=TERMINATE_WAIT)
-        self._kill()
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.stop()
+
+
+class IsolatedFmuController(FmuController, IsolatedFmuComponent):
+    """A controller FMU (:class:`~cosim.core.fmu_controller.FmuController`) whose native code
+    runs in a worker process: what ``cosim run --controller Controller.fmu`` and campaigns
+    step. Its requests time out after :data:`DEFAULT_STEP_TIMEOUT` seconds unless the run
+    gives a step timeout (``--step-timeout``: the master sets :attr:`timeout`)."""
+
+    def __init__(self, path: str | Path, name: str = "ctrl", **parameters: Any) -> None:
+        super().__init__(path, name, **parameters)
+        self.timeout = DEFAULT_STEP_TIMEOUT
+
+    @property
+    def label(self) -> str:
+        """Messages name the controller FMU as such."""
+        return f"controller FMU {self.path.name}"
+
+
+def rehearse(fmus: Sequence[tuple[IsolatedFmuComponent, Mapping[str, float]]],
+             step_size: float) -> None:
+    """Set up each FMU at ``t = 0``, set its inputs (each pair's mapping) and step it once by
+    ``step_size``, each in its worker (a crash or a hang fails the rehearsal, not this
+    process; every request bounded by :data:`REHEARSAL_TIMEOUT`); then end them.
+
+    Raises
+    ------
+    SimulationFailed
+        An FMU failed, crashed or hung: how, in one line.
+    CosimError
+        An FMU refused a start value (bad input).
+    """
+    try:
+        for fmu, _ in fmus:
+            fmu.timeout = REHEARSAL_TIMEOUT
+            fmu.setup(0.0)
+        for fmu, inputs in fmus:
+            fmu.set_inputs(inputs)
+            fmu.step(0.0, step_size)
+    finally:
+        for fmu, _ in fmus:
+            fmu.terminate()

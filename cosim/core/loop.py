@@ -38,6 +38,13 @@ class Run:
         self.sink = record
         self.step_timeout = step_timeout
         self.deadline = deadline
+        # a controller in a worker process bounds its own steps (a SIGALRM cannot stop its
+        # native code, nor reach a thread that is not the main one): it gets the limit
+        self.alarm = step_timeout
+        if getattr(master.controller, "isolated", False):
+            if step_timeout is not None:
+                master.controller.timeout = step_timeout
+            self.alarm = None
         self.guard: interrupts.SignalGuard | None = None
         sc, ctrl = master.scenario, master.controller
         self.times = communication_times(sc.start_time, sc.stop_time, master.dt)
@@ -123,7 +130,7 @@ class Run:
 
     def _control(self, t: float, ym: dict[str, float]) -> None:
         """The controller step: ``u`` and the diagnostics from ``y_m(t)`` and the set-points."""
-        ctrl, cin, limit = self.m.controller, self.cin, self.step_timeout
+        ctrl, cin, limit = self.m.controller, self.cin, self.alarm
         for name in self.m.measured:
             cin[name] = ym[name]
         cin.update(self.refs)

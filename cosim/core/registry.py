@@ -1,7 +1,7 @@
 """Controller registry: short names → ``"module:Class"``; a ``module:Class`` string also works,
 and so does a controller file (``*.json``, :mod:`cosim.core.controller_file`: a controller's
 name and options recorded by a run) and a controller FMU (``*.fmu``, :mod:`cosim.core.
-fmu_controller`).
+fmu_controller`, run in a worker process of its own: :mod:`cosim.core.isolated`).
 
 Controllers are :class:`~cosim.core.component.Component` classes constructible without arguments.
 """
@@ -26,8 +26,9 @@ CONTROLLERS: dict[str, str] = {
     "robust-mpc": "cosim_adapters.robust_mpc:RobustMPCController",
 }
 
-#: The component of a controller FMU (``--controller Controller.fmu``).
-FMU_CONTROLLER = "cosim.core.fmu_controller:FmuController"
+#: The component of a controller FMU (``--controller Controller.fmu``): native code, run in a
+#: worker process that a crash cannot take down and a timeout can kill.
+FMU_CONTROLLER = "cosim.core.isolated:IsolatedFmuController"
 #: The controller ``cosim run`` uses when none is named.
 DEFAULT = "robust-mpc"
 
@@ -83,13 +84,14 @@ def parse_options(items: Sequence[str]) -> dict[str, Any]:
     """Parse ``KEY=VALUE`` strings; a value is read as JSON when it parses, else as text.
 
     ``setpoint_rate=0.02`` gives a float, ``offset_free=true`` a bool, ``R=[[0.02,0],[0,0.02]]``
-    a nested list, ``model=my.json`` the string ``"my.json"``.
+    a nested list, ``model=my.json`` the string ``"my.json"``. A key is an identifier, or
+    identifiers joined by dots (a controller FMU's parameter: ``R.qa=0.05``).
     """
     options: dict[str, Any] = {}
     for item in items:
         key, sep, text = item.partition("=")
         key = key.strip()
-        if not sep or not key.isidentifier():
+        if not sep or not all(part.isidentifier() for part in key.split(".")):
             raise CosimError(f"controller option '{item}': expected KEY=VALUE")
         try:
             options[key] = json.loads(text)

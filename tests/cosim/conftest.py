@@ -1,4 +1,5 @@
-"""Fixtures for the co-simulation tests: FMUs from other exporters (pythonfmu, pythonfmu3)."""
+"""Fixtures for the co-simulation tests: FMUs from other exporters (pythonfmu, pythonfmu3), and
+hostile C FMUs (:mod:`tests.cosim.hostile`)."""
 
 from __future__ import annotations
 
@@ -16,4 +17,16 @@ def pyfmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     for kind in pyfmu_models.KINDS:
         pyfmu_models.build(kind, dest)
     (dest / "quadtank.map.toml").write_text(pyfmu_models.MAP)
+    return dest
+
+
+@pytest.fixture(scope="session")
+def hostile_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A folder with ``HostileController.fmu`` and ``HostilePlant.fmu``, compiled from the C
+    sources of :mod:`tests.cosim.hostile`."""
+    from tests.cosim import hostile
+
+    dest = tmp_path_factory.mktemp("hostile")
+    for role in hostile.IDENTIFIERS:
+        hostile.build(role, dest)
     return dest
