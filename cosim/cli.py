@@ -27,6 +27,7 @@ from cosim.core.errors import (
     CosimError,
     SimulationFailed,
     exit_codes_help,
+    one_line,
 )
 
 __all__ = ["COMMANDS", "build_parser", "entry", "main"]
@@ -81,24 +82,24 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     def one_line_warning(message: Warning | str, category: type[Warning], filename: str,
                          lineno: int, file: object = None, line: str | None = None) -> None:
-        print(f"cosim {args.command}: warning: {message}", file=sys.stderr)
+        print(f"cosim {args.command}: warning: {one_line(str(message))}", file=sys.stderr)
 
     warnings.showwarning = one_line_warning
     try:
         with interrupts.handling_signals():
             return int(args.func(args) or 0)
     except SimulationFailed as exc:
-        print(f"cosim {args.command}: failed: {exc}", file=sys.stderr)
+        print(f"cosim {args.command}: failed: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_FAILED
     except CosimError as exc:
-        print(f"cosim {args.command}: error: {exc}", file=sys.stderr)
+        print(f"cosim {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_INPUT_ERROR
     except ControllersError as exc:
         # the numerical core's errors: a ValueError is bad input, a RuntimeError a failure
         if isinstance(exc, RuntimeError):
-            print(f"cosim {args.command}: failed: {exc}", file=sys.stderr)
+            print(f"cosim {args.command}: failed: {one_line(str(exc))}", file=sys.stderr)
             return EXIT_FAILED
-        print(f"cosim {args.command}: error: {exc}", file=sys.stderr)
+        print(f"cosim {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
         return EXIT_INPUT_ERROR
     except KeyboardInterrupt as exc:
         signum = getattr(exc, "signum", signal.SIGINT)

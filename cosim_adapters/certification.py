@@ -111,7 +111,16 @@ def go_uncertified(ctrl: Any, reason: str) -> None:
         raise CosimError(f"controller {ctrl.name!r}: the model is not certified for this run "
                          f"({reason}); with the option certificate=\"auto\" (the default; not "
                          "--require-certificate) it runs uncertified")
-    cert_u = uncertified_certificate(ctrl.cert, measured_margins(ctrl, ctrl.cert)[0])
+    cert = ctrl.cert
+    if not np.isfinite(cert.s):
+        # the terminal weight of eq:definition_s grows without bound (rho_s >= 1): no
+        # cost, certified or not, is defined; the one tightening left cannot help
+        raise CosimError(f"controller {ctrl.name!r}: the model cannot be controlled: "
+                         f"{reason}; and its terminal weight s (eq:definition_s) is infinite "
+                         f"(rho_s = {cert.rho_s:.4g} >= 1, lem:Vs: the model is not "
+                         "contractive), so not even the uncertified mode has a cost to "
+                         "minimise; retrain the model (cosim train) for a certificate")
+    cert_u = uncertified_certificate(cert, measured_margins(ctrl, cert)[0])
     ctrl.law = ctrl.law.uncertified(cert_u, reason)
     ctrl.observer = GRUObserver.from_certificate(ctrl.cert)
     ctrl.certification = Certification(False, reason, "measured")

@@ -97,9 +97,11 @@ def _weight(key: str, value: Any, size: int, names: list[str] | None) -> np.ndar
                          + (" or an object by input name" if names else "")) from None
     if w.ndim == 0:
         w = float(w) * np.eye(size)
-    if w.shape != (size, size) or not np.all(np.isfinite(w)):
+    if w.shape != (size, size):
         raise CosimError(f"option {key}: expected a number or a {size}x{size} matrix, got "
                          f"shape {w.shape}")
+    if not np.all(np.isfinite(w)):
+        raise CosimError(f"option {key}={_plain(value)!r}: expected finite numbers")
     return w
 
 

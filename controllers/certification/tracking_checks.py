@@ -37,6 +37,13 @@ def _ys_nonempty(L: np.ndarray, rhs: np.ndarray) -> tuple[bool, np.ndarray | Non
     from scipy.optimize import linprog
 
     p = L.shape[1]
+    rhs = np.asarray(rhs, dtype=float)
+    if np.any(np.isnan(rhs) | (rhs == -np.inf)):   # a row tightened past any bound: empty
+        return False, None
+    keep = np.isfinite(rhs)   # a row loosened past any bound constrains nothing
+    L, rhs = L[keep], rhs[keep]
+    if not rhs.size:
+        return True, np.zeros(p)
     norms = np.linalg.norm(L, axis=1)
     # max r s.t. L y + ‖L_j‖ r ≤ rhs: the Chebyshev ball (r ≥ 0 when non-empty)
     res = linprog(np.r_[np.zeros(p), -1.0], A_ub=np.c_[L, norms], b_ub=rhs,

@@ -62,7 +62,7 @@ __all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "KernelProblem
            "last_error", "library_source", "loader_source", "variant_flags"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-12"
+GENERATOR_VERSION = "gru-fhocp-kernel-13"
 #: The C template, joined in this order after the generated header: the interface
 #: (``gru_fhocp.h``), the solver instance's memory, the mathematics bottom-up, the exported
 #: API, the equilibrium for an output (tracking kernels), the QP and the SQP.
@@ -73,6 +73,11 @@ TEMPLATE_PARTS = tuple(Path(__file__).with_name(name) for name in (
 LOADER_C = Path(__file__).with_name("loader.c")
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")
 PREFIX_PLACEHOLDER = "@PFX@"
+
+#: The plausible magnitude of a GRU weight or bias (their range in a data file,
+#: :mod:`controllers.kernel.constants`): trained models hold weights of order one to a few
+#: hundred; beyond this a file is damaged or edited.
+WEIGHT_LIMIT = 1e6
 
 #: Largest relative difference between the compiled kernel and the numpy derivatives at the
 #: load-time self-test (they agree to ~1e-14).
@@ -205,14 +210,15 @@ def kernel_constants(problem: KernelProblem) -> Constants:
     if LUo.shape[1] != n:
         raise ValueError("LUo must be q x n")
     c = Constants()
+    w = (-WEIGHT_LIMIT, WEIGHT_LIMIT)
     for key in ("W_z", "W_r", "W_h", "U_z", "U_r", "U_h", "b_z", "b_r", "b_h"):
-        c.array(key.replace("_", "").upper(), P[key])
+        c.array(key.replace("_", "").upper(), P[key], limits=w)
     for key in ("U_z", "U_r", "U_h"):   # transposed copies for column-oriented mat-vecs
-        c.array(key.replace("_", "").upper() + "T", P[key].T)
-    c.array("UO", P["U_o"])
-    c.array("BO", P["b_o"])
-    c.array("JZ", np.hstack([P["U_z"], P["W_z"]]))
-    c.array("JR", np.hstack([P["U_r"], P["W_r"]]))
+        c.array(key.replace("_", "").upper() + "T", P[key].T, limits=w)
+    c.array("UO", P["U_o"], limits=w)
+    c.array("BO", P["b_o"], limits=w)
+    c.array("JZ", np.hstack([P["U_z"], P["W_z"]]), limits=w)
+    c.array("JR", np.hstack([P["U_r"], P["W_r"]]), limits=w)
     c.array("QW", np.asarray(problem.Q, dtype=float).reshape(n, n))
     c.array("RW", np.asarray(problem.R, dtype=float).reshape(m, m))
     c.array("DUO", DUo if DUo.shape[0] else np.zeros((1, n)))

@@ -10,37 +10,63 @@ controller (:mod:`controllers.kernel.controller_source`), compiled from the same
 carries its model, weights and certificate as a file in the controller FMU's
 ``resources/``.
 
-The data file: the magic ``GKDATA01`` (8 bytes), the layout key (:meth:`Constants.key`: 16
-ASCII hex digits of the names, types and sizes, so that a file is never read into another
-layout), the number of values (uint64) and the values (float64; integers exact), little
-endian, in declaration order.
+Each constant has a plausible range (:data:`PLAUSIBLE` unless its definition narrows it, and
+whether ``±inf`` may stand for "unbounded"): a value outside it is refused where the file is
+written and where it is read, so that a damaged or edited file is never run.
+
+The data file, little endian: the magic ``GKDATA02`` (8 bytes), the layout key
+(:meth:`Constants.key`: 16 ASCII hex digits of the names, types and sizes, so that a file is
+never read into another layout), the number of values (uint64), the checksum of everything
+after the header (uint64: its CRC-32, :func:`checksum`, which changes with any changed byte),
+then per constant its range (float64 low, high, and 1.0 where ``±inf`` is allowed, else
+0.0), then the values (float64; integers exact), both in declaration order.
 """
 
 from __future__ import annotations
 
 import hashlib
 import struct
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["MAGIC", "Constant", "Constants"]
+__all__ = ["HEADER", "INT_RANGE", "MAGIC", "PLAUSIBLE", "Constant", "Constants", "checksum"]
 
 #: The first bytes of a data file (``loader.c`` GK_DATA_MAGIC).
-MAGIC = b"GKDATA01"
+MAGIC = b"GKDATA02"
+#: Bytes before the ranges: magic, key, number of values, checksum (``loader.c``
+#: GK_DATA_HEADER).
+HEADER = 40
 #: Largest integer a constant of C type ``int`` may hold.
 _INT_MAX = 2**31 - 1
+#: The plausible magnitude of a ``double`` constant whose definition gives no range: far
+#: beyond any weight, box, gain or tolerance a design holds, short of an absurd value.
+PLAUSIBLE = 1e15
+#: The plausible range of an ``int`` constant whose definition gives no range (indices, with
+#: -1 for none; counts; flags).
+INT_RANGE = (-1, 10_000_000)
+
+
+def checksum(data: bytes) -> int:
+    """The CRC-32 of ``data`` (zlib's, ``loader.c`` gk_crc32): it detects any changed byte,
+    and any burst of changed bits up to 32 long."""
+    return zlib.crc32(data)
 
 
 @dataclass(frozen=True)
 class Constant:
-    """One named constant: its values (flattened), C type and whether it is a scalar."""
+    """One named constant: its values (flattened), C type, whether it is a scalar, and its
+    plausible range ``[low, high]`` (``infinite``: ``±inf`` allowed too)."""
 
     name: str
     values: np.ndarray
     ctype: str
     scalar: bool
+    low: float = -PLAUSIBLE
+    high: float = PLAUSIBLE
+    infinite: bool = False
 
     @property
     def size(self) -> int:
@@ -62,7 +88,8 @@ class Constants:
         out._items = [*self._items, *other._items]
         return out
 
-    def _add(self, name: str, values: object, ctype: str, scalar: bool, finite: bool) -> None:
+    def _add(self, name: str, values: object, ctype: str, scalar: bool, finite: bool,
+             limits: tuple[float, float] | None) -> None:
         if ctype not in ("double", "int"):
             raise ValueError(f"{name}: C type {ctype!r} is not double or int")
         if any(c.name == name for c in self._items):
@@ -72,16 +99,27 @@ class Constants:
             raise ValueError(f"non-finite entries in {name}")
         if ctype == "int" and not (np.all(a == np.round(a)) and np.all(np.abs(a) <= _INT_MAX)):
             raise ValueError(f"{name}: entries are not C ints")
-        self._items.append(Constant(name, a, ctype, scalar))
+        low, high = limits if limits is not None else (
+            INT_RANGE if ctype == "int" else (-PLAUSIBLE, PLAUSIBLE))
+        if not low <= high:
+            raise ValueError(f"{name}: empty range [{low!r}, {high!r}]")
+        beyond = np.isfinite(a) & ((a < low) | (a > high))
+        if np.any(beyond):
+            raise ValueError(f"{name}: {float(a[beyond][0])!r} is outside its plausible range "
+                             f"[{low:g}, {high:g}]")
+        self._items.append(Constant(name, a, ctype, scalar, float(low), float(high),
+                                    not finite))
 
-    def array(self, name: str, values: object, ctype: str = "double",
-              finite: bool = True) -> None:
-        """Add the array ``name`` (``finite=False``: ±inf allowed; NaN never is)."""
-        self._add(name, values, ctype, False, finite)
+    def array(self, name: str, values: object, ctype: str = "double", finite: bool = True,
+              limits: tuple[float, float] | None = None) -> None:
+        """Add the array ``name`` (``finite=False``: ±inf allowed; NaN never is), its
+        finite values inside ``limits`` (default: ``±PLAUSIBLE``; an int's :data:`INT_RANGE`)."""
+        self._add(name, values, ctype, False, finite, limits)
 
-    def scalar(self, name: str, value: float, ctype: str = "double") -> None:
-        """Add the scalar ``name``."""
-        self._add(name, [value], ctype, True, True)
+    def scalar(self, name: str, value: float, ctype: str = "double",
+               limits: tuple[float, float] | None = None) -> None:
+        """Add the scalar ``name`` (inside ``limits``, as :meth:`array`)."""
+        self._add(name, [value], ctype, True, True, limits)
 
     def declarations(self) -> str:
         """The definitions without values (filled by ``loader.c`` from a data file)."""
@@ -111,8 +149,11 @@ class Constants:
                 "static const gk_datum GK_DATA[GK_DATA_COUNT] = {\n" + rows + "};\n")
 
     def data(self) -> bytes:
-        """The data file of these values."""
+        """The data file of these values (module docstring)."""
         values = np.concatenate([c.values if c.values.size else np.zeros(1)
                                  for c in self._items]) if self._items else np.zeros(0)
-        return (MAGIC + self.key().encode() + struct.pack("<Q", values.size)
-                + values.astype("<f8").tobytes())
+        ranges = np.array([(c.low, c.high, float(c.infinite)) for c in self._items],
+                          dtype=float).reshape(-1)
+        body = ranges.astype("<f8").tobytes() + values.astype("<f8").tobytes()
+        return (MAGIC + self.key().encode() + struct.pack("<QQ", values.size, checksum(body))
+                + body)

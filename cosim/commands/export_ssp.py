@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from cosim.core.errors import exit_codes_help
 
@@ -45,15 +46,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _setpoints(items: list[str], controller: str) -> dict[str, float]:
-    """``--setpoint`` values over the controller's ``ref.*`` start values."""
-    from pathlib import Path
-
-    import fmpy
-
-    values = {v.name: float(v.start) for v in fmpy.read_model_description(
-        str(Path(controller))).modelVariables
-        if v.causality == "input" and v.name.startswith("ref.") and v.start is not None}
+def _setpoints(items: list[str], md: Any) -> dict[str, float]:
+    """``--setpoint`` values over the ``ref.*`` start values of the controller's model
+    description ``md``."""
+    values = {v.name: float(v.start) for v in md.modelVariables
+              if v.causality == "input" and v.name.startswith("ref.") and v.start is not None}
     return {**values, **_values(items, "--setpoint")}
 
 
@@ -77,17 +74,17 @@ def run(args: argparse.Namespace) -> int:
     """Write the SSP file; print what it connects unless ``--quiet``."""
     from pathlib import Path
 
-    import fmpy
-
     from cosim.api import plant_path
     from cosim.core.errors import CosimError
+    from cosim.core.fmu_archive import read_model_description
     from cosim.core.ssp import connections, write_ssp
 
     plant = plant_path(args.plant)
     if not Path(args.controller).is_file():
         raise CosimError(f"{args.controller}: controller FMU not found")
-    setpoints = _setpoints(args.setpoint, args.controller)
-    step = fmpy.read_model_description(args.controller).defaultExperiment
+    md = read_model_description(args.controller)
+    setpoints = _setpoints(args.setpoint, md)
+    step = md.defaultExperiment
     stop = args.stop if args.stop is not None else 100 * float(getattr(step, "stepSize", 1.0)
                                                                 or 1.0)
     parameters = _values(args.parameter, "--parameter")

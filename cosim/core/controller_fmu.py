@@ -42,7 +42,7 @@ from cosim.core.build import (
 from cosim.core.errors import CosimError
 
 __all__ = ["CONTROLLER_DIR", "ControllerInterface", "Parameter", "Port", "build_controller_fmu",
-           "model_description", "names_header"]
+           "check_interface", "model_description", "names_header"]
 
 #: The controller model's source (package data of :mod:`fmus`).
 CONTROLLER_DIR = PACKAGE_DIR / "controller"
@@ -263,12 +263,15 @@ def build_controller_fmu(iface: ControllerInterface, step_source: str, data: byt
     numbers ``data`` (``resources/controller.dat``) into the FMU ``out`` (FMI
     ``fmi_version``; ``flags``: extra compiler flags, the step's build-time variant);
     returns ``out``. The binary depends on the sources only: it is compiled once and reused
-    for every ``data``. An existing ``out`` is replaced only when the new FMU is complete.
+    for every ``data``. An existing ``out`` is replaced only when the new FMU is complete and
+    runs: its numbers are checked (:func:`check_interface`), and it is instantiated and
+    stepped once in a worker process before it takes the place of ``out``.
 
     Raises
     ------
     CosimError
-        No C compiler, another platform than x86-64 Linux, or a failed compilation.
+        No C compiler, another platform than x86-64 Linux, a failed compilation, numbers
+        that cannot run, or an FMU that does not.
     OutputError
         ``out`` cannot be written (an existing file is intact).
     """
@@ -278,6 +281,7 @@ def build_controller_fmu(iface: ControllerInterface, step_source: str, data: byt
         raise CosimError(f"FMU name {iface.identifier!r} is not a C identifier (letters, "
                          "digits and _; not starting with a digit)")
     check_platform()
+    check_interface(iface)
     out = Path(out)
     glue = f"fmi{fmi_version}.c"
     platform_dir = "x86_64-linux" if fmi_version == 3 else "linux64"
@@ -288,17 +292,50 @@ def build_controller_fmu(iface: ControllerInterface, step_source: str, data: byt
     for name in ("instance.h", "instance.c", glue):
         files[name] = (GLUE_DIR / name).read_bytes()
     binary = _binary(files, glue, flags)
-    with replacing(out) as part, zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
-        add_member(zf, "modelDescription.xml", model_description(iface, fmi_version).encode())
-        add_member(zf, f"binaries/{platform_dir}/{iface.identifier}.so", binary,
-                   executable=True)
-        add_member(zf, f"resources/{DATA_FILE}", data)
-        for name, source in sorted(files.items()):
-            add_member(zf, f"sources/{name}", source)
-        if fmi_version == 3:
-            add_member(zf, "sources/buildDescription.xml", _build_description(
-                iface.identifier, flags).encode())
+    with replacing(out) as part:
+        with zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
+            add_member(zf, "modelDescription.xml",
+                       model_description(iface, fmi_version).encode())
+            add_member(zf, f"binaries/{platform_dir}/{iface.identifier}.so", binary,
+                       executable=True)
+            add_member(zf, f"resources/{DATA_FILE}", data)
+            for name, source in sorted(files.items()):
+                add_member(zf, f"sources/{name}", source)
+            if fmi_version == 3:
+                add_member(zf, "sources/buildDescription.xml", _build_description(
+                    iface.identifier, flags).encode())
+        _rehearse(part, out, iface.sample_time)
     return out
+
+
+def _rehearse(part: Path, out: Path, sample_time: float) -> None:
+    """Instantiate the FMU ``part`` (to become ``out``) and run one controller step at its
+    start values, in a worker process: an FMU that cannot run is never written."""
+    from cosim.core.isolated import IsolatedFmuController, rehearse
+
+    try:
+        rehearse([(IsolatedFmuController(part), {})], sample_time)
+    except CosimError as exc:
+        why = str(exc).replace(str(part), out.name).replace(part.name, out.name)
+        raise CosimError(f"{out}: the exported FMU does not run, so it is not written: "
+                         f"{why}") from None
+
+
+def check_interface(iface: ControllerInterface) -> None:
+    """Raise :class:`CosimError` unless every number the modelDescription declares can run:
+    a positive, finite sample time; each signal's box ``low <= high`` with a finite
+    ``low``; each parameter's finite start inside its box."""
+    if not (math.isfinite(iface.sample_time) and iface.sample_time > 0):
+        raise CosimError(f"sample time {iface.sample_time!r}: expected a positive, finite "
+                         "number of seconds")
+    for port in (*iface.measured, *iface.applied, *iface.parameters):
+        if not (math.isfinite(port.low) and port.low <= port.high) or math.isnan(port.high):
+            raise CosimError(f"{port.name}: its box [{port.low!r}, {port.high!r}] is not "
+                             "one (a finite low, a high not below it)")
+        if isinstance(port, Parameter) and not (
+                math.isfinite(port.start) and port.low <= port.start <= port.high):
+            raise CosimError(f"parameter {port.name}: its start value {port.start!r} is "
+                             f"not inside its box [{port.low!r}, {port.high!r}]")
 
 
 def _build_description(identifier: str, flags: Sequence[str]) -> str:

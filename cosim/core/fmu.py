@@ -196,8 +196,10 @@ class FmuComponent(Component):
         if status == FmuError.FATAL:
             self._fatal = True
         log = f" (FMU log: {' | '.join(self._log)})" if self._log else ""
-        msg = " ".join(str(exc).split())
-        return FmuError(f"{self.path.name}: {what} failed: {msg}{log}",
+        msg = " ".join(str(exc).split()) + log
+        if self._tmpdir is not None:   # the extracted archive, as the FMU's own folder
+            msg = msg.replace(str(self._tmpdir), f"<{self.path.name}>")
+        return FmuError(f"{self.path.name}: {what} failed: {msg}",
                         function=str(getattr(exc, "function", "") or ""), status=status)
 
     def setup(self, t0: float, stop_time: float | None = None) -> None:
@@ -240,13 +242,15 @@ class FmuComponent(Component):
             else:
                 self._fmu.instantiate(callbacks=fmu_log.fmi2_callbacks(), loggingOn=True)
         except Exception as exc:
-            raise self._fail("instantiation", exc) from None
+            # nothing has run: an FMU that refuses to instantiate (its resources damaged,
+            # a wrong token) is a bad FMU (exit 2)
+            raise CosimError(str(self._fail("instantiation", exc))) from None
         self._prepare_buffers()
         with self._guard(lambda: f"initialisation at t={t0!r}"):
             if not fmi3_:
                 self._fmu.setupExperiment(startTime=t0)
-            for key, value in self.start_values.items():
-                self._set_var(key, value)
+        self._set_start_values()
+        with self._guard(lambda: f"initialisation at t={t0!r}"):
             if fmi3_:
                 self._fmu.enterInitializationMode(startTime=t0)
             else:
@@ -255,6 +259,15 @@ class FmuComponent(Component):
             if self.interface == "me":
                 self._init_me(t0)
         self._t = t0
+
+    def _set_start_values(self) -> None:
+        """Set :attr:`start_values`; a value the FMU refuses is bad input (nothing has run):
+        a :class:`CosimError` naming it, with the FMU's reason from its log."""
+        for key, value in self.start_values.items():
+            try:
+                self._set_var(key, value)
+            except FmuError as exc:
+                raise CosimError(str(self._fail(f"setting {key} = {value!r}", exc))) from None
 
     def _raw(self, fname: str) -> Any:
         """The FMU's C function as a bare ctypes function (no argument conversion).

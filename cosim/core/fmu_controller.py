@@ -16,6 +16,7 @@ by signal).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -60,8 +61,7 @@ class FmuController(FmuComponent):
             raise CosimError(f"{self.path}: {unknown[0]!r} is not a parameter of the "
                              f"controller FMU (parameters: {', '.join(self.parameters)})")
         for key, value in parameters.items():
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                raise CosimError(f"{self.path}: parameter {key}={value!r}: expected a number")
+            self._check_parameter(key, value)
         self.start_values = {k: float(v) for k, v in parameters.items()}
         self._diag_names = [s.name for s in self.outputs if _diagnostic(s.name)]
         self.outputs = tuple(s for s in self.outputs if not _diagnostic(s.name))
@@ -77,6 +77,21 @@ class FmuController(FmuComponent):
                        if v.causality == "output" and not _diagnostic(v.name)
                        and v.min is not None and v.max is not None}
         self._diag: dict[str, float] = {}
+
+    def _check_parameter(self, key: str, value: Any) -> None:
+        """A finite number inside the box the modelDescription declares for ``key``, else
+        :class:`CosimError` (bad input: nothing has run)."""
+        if isinstance(value, bool) or not isinstance(value, int | float):
+            raise CosimError(f"{self.path}: parameter {key}={value!r}: expected a number")
+        if not math.isfinite(value):
+            raise CosimError(f"{self.path}: parameter {key}={value!r}: expected a finite "
+                             "number")
+        var = self.variable_of(key)
+        low = float(var.min) if var.min is not None else -math.inf
+        high = float(var.max) if var.max is not None else math.inf
+        if not low <= value <= high:
+            raise CosimError(f"{self.path}: parameter {key}={value!r}: outside its range "
+                             f"[{low:g}, {high:g}] (the FMU's modelDescription)")
 
     def _expand(self, given: dict[str, Any]) -> dict[str, Any]:
         """``key=value`` for a family of parameters ``key.<signal>`` (the robust MPC's option

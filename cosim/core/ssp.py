@@ -13,6 +13,7 @@ Platform's annotation, which libcosim reads), so that libcosim runs the file as 
 
 from __future__ import annotations
 
+import math
 import zipfile
 from collections.abc import Mapping
 from pathlib import Path
@@ -21,9 +22,10 @@ from xml.sax.saxutils import quoteattr
 
 from cosim.core.atomicio import replacing
 from cosim.core.build import add_member
-from cosim.core.errors import CosimError
+from cosim.core.errors import CosimError, SimulationFailed
+from cosim.core.fmu_archive import read_model_description
 
-__all__ = ["connections", "system_structure", "write_ssp"]
+__all__ = ["connections", "rehearse", "system_structure", "write_ssp"]
 
 _NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
        'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
@@ -32,13 +34,20 @@ _NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
 
 
 def _real_variables(path: Path) -> dict[str, Any]:
-    import fmpy
-
-    try:
-        md = fmpy.read_model_description(str(path))
-    except Exception as exc:   # not a zip, no modelDescription.xml, bad XML
-        raise CosimError(f"{path}: cannot read the FMU's model description: {exc}") from None
+    md = read_model_description(path)
     return {v.name: v for v in md.modelVariables if v.type in ("Real", "Float64")}
+
+
+def _check_value(option: str, name: str, value: float, var: Any, fmu: Path) -> None:
+    """A value the SSP gives variable ``var`` of ``fmu``: finite and inside its declared
+    box, else :class:`CosimError` naming the option."""
+    if not math.isfinite(value):
+        raise CosimError(f"{option} {name}={value!r}: expected a finite number")
+    low = float(var.min) if var.min is not None else -math.inf
+    high = float(var.max) if var.max is not None else math.inf
+    if not low <= value <= high:
+        raise CosimError(f"{option} {name}={value:g}: outside its range [{low:g}, {high:g}] "
+                         f"in {fmu}")
 
 
 def connections(plant: Path, controller: Path) -> tuple[list[tuple[str, str]], list[str]]:
@@ -101,11 +110,7 @@ def system_structure(plant: Path, controller: Path, setpoints: Mapping[str, floa
         raise CosimError(f"--parameter {unknown[0]}: not a parameter of {controller} "
                          f"(parameters: {', '.join(tunable) or 'none'})")
     for name, value in parameters.items():
-        low, high = cv[name].min, cv[name].max
-        if (low is not None and value < float(low)) or (high is not None
-                                                         and value > float(high)):
-            raise CosimError(f"--parameter {name}={value:g}: outside its range "
-                             f"[{low}, {high if high is not None else 'inf'}] in {controller}")
+        _check_value("--parameter", name, value, cv[name], controller)
     missing = sorted(set(free) - set(setpoints))
     if missing:
         raise CosimError(f"{controller}: input {missing[0]!r} is fed by no plant output: give "
@@ -114,6 +119,13 @@ def system_structure(plant: Path, controller: Path, setpoints: Mapping[str, floa
     if unknown:
         raise CosimError(f"--setpoint {unknown[0]}: not a free input of {controller} "
                          f"(free: {', '.join(free)})")
+    for name, value in setpoints.items():
+        _check_value("--setpoint", name, value, cv[name], controller)
+    if not (math.isfinite(step_size) and step_size > 0):
+        raise CosimError(f"--step {step_size!r}: expected a positive, finite number of seconds")
+    if not (math.isfinite(stop_time) and stop_time >= step_size):
+        raise CosimError(f"--stop {stop_time!r}: expected a finite stop time of at least one "
+                         f"step ({step_size:g} s)")
     used = {"plant": set(), "mpc": set(free) | set(parameters)}
     for a, b in links:
         for end in (a, b):
@@ -155,12 +167,22 @@ def system_structure(plant: Path, controller: Path, setpoints: Mapping[str, floa
 def write_ssp(plant: str | Path, controller: str | Path, out: str | Path,
               setpoints: Mapping[str, float], stop_time: float,
               step_size: float | None = None,
-              parameters: Mapping[str, float] | None = None) -> Path:
+              parameters: Mapping[str, float] | None = None, *, check: bool = True) -> Path:
     """Write the SSP archive ``out`` of ``plant`` and ``controller`` (atomically); the step is
     the controller's default experiment step size unless ``step_size``; ``parameters``: values
-    of the controller's parameters. Returns ``out``."""
-    import fmpy
+    of the controller's parameters. Returns ``out``.
 
+    Nothing is written that cannot run: every value is finite and inside its variable's
+    declared box, the stop time is at least one step, and (``check``) both FMUs are loaded,
+    initialised and stepped once with these values (:func:`rehearse`).
+
+    Raises
+    ------
+    CosimError
+        A value, an FMU or a connection the SSP cannot run with (``out`` is not touched).
+    OutputError
+        ``out`` cannot be written (an existing file is intact).
+    """
     plant, controller, out = Path(plant), Path(controller), Path(out)
     for path in (plant, controller):
         if not path.is_file():
@@ -168,13 +190,36 @@ def write_ssp(plant: str | Path, controller: str | Path, out: str | Path,
     if plant.name == controller.name:
         raise CosimError(f"{plant} and {controller}: the two FMUs need different file names")
     if step_size is None:
-        exp = fmpy.read_model_description(str(controller)).defaultExperiment
+        exp = read_model_description(controller).defaultExperiment
         if exp is None or exp.stepSize is None:
             raise CosimError(f"{controller}: no default experiment step size: give --step")
         step_size = float(exp.stepSize)
     ssd = system_structure(plant, controller, setpoints, step_size, stop_time, parameters)
+    if check:
+        rehearse(plant, controller, setpoints, step_size, parameters)
     with replacing(out) as part, zipfile.ZipFile(part, "w", zipfile.ZIP_DEFLATED) as zf:
         add_member(zf, "SystemStructure.ssd", ssd.encode())
         for path in (plant, controller):
             add_member(zf, f"resources/{path.name}", path.read_bytes())
     return out
+
+
+def rehearse(plant: Path, controller: Path, setpoints: Mapping[str, float], step_size: float,
+             parameters: Mapping[str, float] | None = None) -> None:
+    """Load, initialise and step once both FMUs as the SSP will (the controller with its
+    ``parameters`` and ``setpoints``), each in a worker process
+    (:func:`cosim.core.isolated.rehearse`).
+
+    Raises
+    ------
+    CosimError
+        Either FMU cannot: what it refused or how it failed, in one line.
+    """
+    from cosim.core.isolated import IsolatedFmuComponent, IsolatedFmuController
+    from cosim.core.isolated import rehearse as rehearse_fmus
+
+    ctrl = IsolatedFmuController(controller, **dict(parameters or {}))
+    try:
+        rehearse_fmus([(IsolatedFmuComponent(plant), {}), (ctrl, dict(setpoints))], step_size)
+    except SimulationFailed as exc:
+        raise CosimError(f"the SSP would not run: {exc}") from None

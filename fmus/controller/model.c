@@ -2,7 +2,7 @@
  * The robust MPC as a co-simulation model (see model.h): the FMI variables of the controller
  * step. A communication step of k sample times runs k controller steps with the inputs held
  * (k = 1 in a master that steps at the controller's sample time); a step that is not a
- * multiple of the sample time is refused. A non-finite measurement or set-point holds the
+ * multiple of the sample time, or of more than CTL_MAX_STEPS_PER_CALL samples, is refused. A non-finite measurement or set-point holds the
  * last inputs and is logged as a warning, as is a set-point the paper's law refuses (one
  * message per step, the most serious). A tunable parameter set between steps holds from the
  * next step on.
@@ -131,6 +131,11 @@ const char *model_do_step(ModelData *m, double step, char *msg, size_t n) {
     if (k < 1.0 || fabs(step - k * CTL_TS) > 1e-9 * CTL_TS) {
         snprintf(msg, n, "communicationStepSize %.17g s is not a multiple of the controller's "
                  "sample time %.17g s", step, CTL_TS);
+        return msg;
+    }
+    if (k > CTL_MAX_STEPS_PER_CALL) {
+        snprintf(msg, n, "communicationStepSize %.17g s is %.17g sample times: at most %d "
+                 "controller steps per doStep", step, k, CTL_MAX_STEPS_PER_CALL);
         return msg;
     }
     for (double i = 0.0; i < k; i += 1.0) mpc_ctl_step(m->ctl, m->y, m->ref);

@@ -36,6 +36,10 @@
 /* the controller's numbers, in the FMU's resources folder (controllers/kernel/constants.py) */
 #define CTL_DATA_FILE "controller.dat"
 
+/* the most controller steps one doStep runs: a communication step of more sample times is
+ * refused (one call stays bounded in time; a master steps at one sample time) */
+#define CTL_MAX_STEPS_PER_CALL 1000
+
 #define VR_TIME 0
 #define VR_Y 1                              /* CTL_NY measured outputs */
 #define VR_REF (VR_Y + CTL_NY)              /* CTL_NY set-points */

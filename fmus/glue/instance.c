@@ -208,6 +208,9 @@ static bool check_values(Instance *inst, const char *function, const unsigned in
     return true;
 }
 
+/* Values one set call takes without allocating (the undo buffer of instance_set_float64). */
+#define SET_STACK_VALUES 64
+
 static bool known_vr(Instance *inst, const char *function, unsigned int vr) {
     if (vr < N_VARIABLES) return true;
     LOG_ERROR(inst, "%s: unknown value reference %u", function, vr);
@@ -236,16 +239,32 @@ Status instance_set_float64(Instance *inst, const char *function, const unsigned
     if (!check_values(inst, function, vr, vr_name, nvr, values, values_name, nValues))
         return STATUS_ERROR;
     const bool initialized = inst->state != ST_INSTANTIATED && inst->state != ST_INITIALIZATION;
-    for (size_t i = 0; i < nvr; i++) {
+    for (size_t i = 0; i < nvr; i++)
         if (!known_vr(inst, function, vr[i])) return STATUS_ERROR;
+    /* all or nothing: a value the model refuses puts back the ones set before it, last
+     * first (each was accepted once, from the state it is put back into) */
+    double stack[SET_STACK_VALUES];
+    double *previous = nvr <= SET_STACK_VALUES
+                           ? stack
+                           : (double *)inst->host->alloc(inst, nvr * sizeof(double));
+    if (!previous) {
+        LOG_ERROR(inst, "%s: out of memory", function);
+        return STATUS_ERROR;
+    }
+    Status status = STATUS_OK;
+    for (size_t i = 0; i < nvr; i++) {
+        previous[i] = model_get(&inst->model, vr[i]);
         const char *why = model_set(&inst->model, vr[i], values[i], initialized);
         if (why) {
-            LOG_ERROR(inst, "%s: cannot set %s = %.17g: %s", function,
-                      model_variable_name(vr[i]), values[i], why);
-            return STATUS_ERROR;
+            LOG_ERROR(inst, "%s: cannot set %s = %.17g: %s (no value of this call is set)",
+                      function, model_variable_name(vr[i]), values[i], why);
+            while (i-- > 0) (void)model_set(&inst->model, vr[i], previous[i], initialized);
+            status = STATUS_ERROR;
+            break;
         }
     }
-    return STATUS_OK;
+    if (previous != stack) inst->host->release(inst, previous);
+    return status;
 }
 
 /* ---------------------------------------------------------------------------------------- */

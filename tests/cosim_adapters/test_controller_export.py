@@ -72,8 +72,9 @@ def test_the_master_runs_the_fmu_as_the_python_controller(
 def test_a_tuned_parameter_is_the_python_option(controller_fmus: dict[int, Path],
                                                 tmp_path: Path) -> None:
     """The FMU's tunable ``offset_filter`` set to 0.6 (``--option`` of its component) gives
-    the Python controller with ``offset_filter=0.6``; 0 fails the run at its start with the
-    FMU's reason; an option the FMU has no parameter for is named."""
+    the Python controller with ``offset_filter=0.6``; 0, refused by the FMU, is bad input
+    (the FMU's reason, the previous run's files kept); an option the FMU has no parameter for
+    is named."""
     scenario = tmp_path / "steps.csv"
     scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,1.3,1.4\n1500,,\n")
     fmu = str(controller_fmus[3])
@@ -91,9 +92,11 @@ def test_a_tuned_parameter_is_the_python_option(controller_fmus: dict[int, Path]
     _same_inputs(again, tuned, {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
     default = cosim.run(scenario, controller=fmu, figure=False).to_pandas()
     assert not np.array_equal(default["ctrl.qa"], tuned.to_pandas()["ctrl.qa"])
-    refused = cosim.run(scenario, controller=fmu, options={"offset_filter": 0.0}, figure=False)
-    assert refused.status == "failed"
-    assert "cannot set offset_filter = 0: must be in (0, 1]" in refused.reason
+    # refused by the FMU at its start: bad input, nothing runs (and nothing is written)
+    with pytest.raises(CosimError, match=r"cannot set offset_filter = 0: must be in \(0, 1\]"):
+        cosim.run(scenario, controller=fmu, options={"offset_filter": 0.0},
+                  out=tmp_path / "tuned", figure=False)
+    assert json.loads((tmp_path / "tuned" / "controller.json").read_text()) == recorded
     with pytest.raises(CosimError, match="'N' is not a parameter of the controller FMU"):
         cosim.run(scenario, controller=fmu, options={"N": 40}, figure=False)
 
@@ -103,8 +106,8 @@ def test_tuned_weights_are_the_python_options(controller_fmus: dict[int, Path],
     """The FMU's weights as tunable parameters (``R.<input>``, ``du_weight.<input>``,
     ``offset_weight.<output>``, their start values the design's): set through the robust
     MPC's option form they give the Python controller with those options; a weight that
-    would leave R not positive definite, or a negative one, fails the run with the FMU's
-    reason."""
+    would leave R not positive definite (the FMU's reason), or one outside its declared box,
+    is bad input."""
     md = fmpy.read_model_description(str(controller_fmus[2]))
     params = {v.name: v for v in md.modelVariables if v.causality == "parameter"}
     assert list(params) == ["offset_filter", "R.qa", "R.qb", "du_weight.qa", "du_weight.qb",
@@ -124,11 +127,11 @@ def test_tuned_weights_are_the_python_options(controller_fmus: dict[int, Path],
     default = cosim.run(scenario, controller=str(controller_fmus[3]), figure=False).to_pandas()
     assert not np.array_equal(default["ctrl.qa"], tuned.to_pandas()["ctrl.qa"])
     for bad, why in ((("R", 0.0), "must keep R positive definite"),
-                     (("du_weight", -1.0), "must be a finite weight >= 0"),
+                     (("du_weight", -1.0), r"du_weight.qa=-1.0: outside its range \[0, inf\]"),
                      (("offset_weight", 0.0), "must be a finite weight > 0")):
-        refused = cosim.run(scenario, controller=str(controller_fmus[3]),
-                            options=dict([bad]), figure=False)
-        assert refused.status == "failed" and why in refused.reason, refused.reason
+        with pytest.raises(CosimError, match=why):   # bad input: nothing runs
+            cosim.run(scenario, controller=str(controller_fmus[3]), options=dict([bad]),
+                      figure=False)
     with pytest.raises(CosimError, match="'h3' is not one of its signals"):
         cosim.run(scenario, controller=str(controller_fmus[3]),
                   options={"offset_weight": {"h3": 1.0}}, figure=False)
@@ -322,7 +325,7 @@ def test_the_paper_law_exported_runs_as_the_python_law(law: dict, tmp_path: Path
 def test_a_tuned_setpoint_rate_is_the_python_option(tmp_path: Path) -> None:
     """The paper's law designed with a set-point rate has it as a tunable parameter
     ``setpoint_rate`` (each output's units per sample): tuned to 0.02 m the FMU gives the
-    Python law with ``setpoint_rate=0.02``; 0 is refused by the FMU, one line."""
+    Python law with ``setpoint_rate=0.02``; 0 is refused by the FMU, one line (bad input)."""
     law = {"law": "paper", "setpoint_rate": 0.05}
     fmu = cosim.export_fmu(out=tmp_path / "Rate.fmu", options=law)
     md = fmpy.read_model_description(str(fmu))
@@ -334,10 +337,8 @@ def test_a_tuned_setpoint_rate_is_the_python_option(tmp_path: Path) -> None:
                       figure=False)
     _same_inputs(tuned, cosim.run(scenario, options={**law, "setpoint_rate": 0.02},
                                   figure=False), {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)})
-    refused = cosim.run(scenario, controller=str(fmu), options={"setpoint_rate": 0.0},
-                        figure=False)
-    assert refused.status == "failed"
-    assert "cannot set setpoint_rate = 0: must be a finite rate > 0" in refused.reason
+    with pytest.raises(CosimError, match="cannot set setpoint_rate = 0: must be a finite rate"):
+        cosim.run(scenario, controller=str(fmu), options={"setpoint_rate": 0.0}, figure=False)
 
 
 @pytest.mark.parametrize(("options", "refs", "first_outside", "named"), [
@@ -513,14 +514,39 @@ def _instantiate(unzipped: Path, logger: list[str]) -> object:
     return plant.fmu
 
 
+def _flipped(data: bytes, at: int) -> bytes:
+    """``data`` with one bit of byte ``at`` flipped (a damaged file)."""
+    out = bytearray(data)
+    out[at] ^= 0x10
+    return bytes(out)
+
+
+def _edited(data: bytes, index: int, value: float) -> bytes:
+    """The data file ``data`` with value ``index`` (negative: from the end) set to ``value``
+    and its checksum made to match (an edited file)."""
+    import struct
+    import zlib
+
+    from controllers.kernel.constants import HEADER
+
+    out = bytearray(data)
+    (count,) = struct.unpack("<Q", out[24:32])
+    at = len(out) - 8 * count + 8 * (index % count)
+    out[at:at + 8] = struct.pack("<d", value)
+    out[32:HEADER] = struct.pack("<Q", zlib.crc32(bytes(out[HEADER:])))
+    return bytes(out)
+
+
 def test_one_binary_serves_every_model_of_its_dimensions(tmp_path: Path,
                                                          monkeypatch: pytest.MonkeyPatch) -> None:
     """Two GRU models of the CSTR (other weights, the same dimensions) exported in turn
     through a compiler that counts its builds: one build (the second export reuses the
     binary), the binaries equal byte for byte and the numbers (``resources/controller.dat``)
     not, and each FMU gives its own Python controller's inputs. A data file of another
-    layout, or a damaged one, is refused at instantiation with the reason logged; the FMI 2
-    resource location is a file URI (here with a space, percent-encoded)."""
+    layout or format, a truncated or damaged one (a flipped bit anywhere: its checksum), or an
+    edited one (a weight of 1e300 or a NaN, its checksum made to match: the value's plausible
+    range) is refused at instantiation with the reason logged; the FMI 2 resource location
+    is a file URI (here with a space, percent-encoded)."""
     import shutil
     import zipfile
 
@@ -567,7 +593,13 @@ def test_one_binary_serves_every_model_of_its_dimensions(tmp_path: Path,
     data = unzipped / "resources" / "controller.dat"
     good = data.read_bytes()
     for bad, reason in ((other.data(), "is not this library's"),
-                        (good[:-8], "expected"), (b"", "not a controller data file")):
+                        (good[:-8], "expected"), (b"", "not a controller data file"),
+                        (b"GKDATA01" + good[8:], "its format GKDATA01 is not this library's"),
+                        (_flipped(good, len(good) - 100), "damaged: its checksum"),
+                        (_flipped(good, 50), "damaged: its checksum"),   # in the ranges
+                        (_edited(good, 0, 1e300), "WZ[0] = 1.0000000000000001e+300 is outside "
+                                                  "its plausible range [-1e+06, 1e+06]"),
+                        (_edited(good, -1, np.nan), "is NaN")):
         data.write_bytes(bad)
         log.clear()
         with pytest.raises(Exception, match="nstantiate"):

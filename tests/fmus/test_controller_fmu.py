@@ -253,6 +253,37 @@ def test_bad_measurements_and_steps_are_reported(controller_fmus: dict[int, Path
     two.close()
 
 
+@pytest.mark.parametrize("version", [2, 3])
+def test_a_refused_set_sets_nothing_and_a_step_is_bounded(
+        version: int, controller_fmus: dict[int, Path]) -> None:
+    """Setting several values is all or nothing: one the FMU refuses (``R.qb = 0``) leaves
+    the values before it in the same call (``R.qa``, ``offset_filter``) as they were, with
+    the reason logged; and a communication step of more than ``CTL_MAX_STEPS_PER_CALL``
+    (1000) samples is refused before it runs, with the reason logged."""
+    log: list[tuple[int, str, str]] = []
+    ctrl = _controller(controller_fmus[version],
+                       logger=lambda s, c, m, log=log: log.append((s, c, m)))
+    before = ctrl.get("R.qa", "offset_filter", "R.qb")
+    with pytest.raises(Exception, match=r"SetReal|SetFloat64"):
+        ctrl.set(**{"R.qa": 0.5, "offset_filter": 0.9, "R.qb": 0.0})
+    assert ctrl.get("R.qa", "offset_filter", "R.qb") == before
+    assert any("cannot set R.qb = 0" in m and "no value of this call is set" in m
+               for _, _, m in log), log
+    _control(ctrl, (0.62, 0.71), (1.0, 1.1))
+    for samples in (1001, 1e9):   # refused before any step (unbounded, 1e9 runs for days)
+        log.clear()
+        with pytest.raises(Exception, match=r"DoStep|doStep"):
+            ctrl.fmu.doStep(currentCommunicationPoint=ctrl.time,
+                            communicationStepSize=samples * TS)
+        assert any("at most 1000 controller steps per doStep" in m for _, _, m in log), log
+        ctrl.initialized = False   # in the Error state: only freed (FMI)
+        ctrl.close()
+        ctrl = _controller(controller_fmus[version],
+                           logger=lambda s, c, m, log=log: log.append((s, c, m)))
+    assert _control(ctrl, (0.62, 0.71), (1.0, 1.1))[2] == 0   # status optimal
+    ctrl.close()
+
+
 def test_every_warning_of_a_step_is_logged(tmp_path: Path) -> None:
     """A step raising two warnings logs both, one line each, most serious first: the paper's
     law's FMU at a first measured output no input in the box reaches and a set-point outside

@@ -112,6 +112,19 @@ def test_refused_values(plant, name, value, why):
     assert name in msg and why in msg
 
 
+def test_a_refused_value_leaves_the_whole_call_unset(plant):
+    """Setting several values is all or nothing: the values before the refused one in the
+    same call are put back (in any state the call is allowed in)."""
+    for initialized in (False, True):
+        if initialized:
+            _initialized(plant)
+        before = plant.get("qa", "S", "gamma_a")
+        with pytest.raises(FMICallException):
+            plant.set(qa=5e-4, S=0.07, gamma_a=1.5)
+        assert plant.get("qa", "S", "gamma_a") == before
+        assert "no value of this call is set" in plant.log.last_error()
+
+
 def test_tunable_parameter_after_initialisation_is_accepted(plant):
     _initialized(plant)
     plant.set(S=0.07, a1=1.2e-4, gamma_a=0.25)

@@ -61,19 +61,40 @@ def test_an_ssp_needs_fmus_that_belong_together(capsys: pytest.CaptureFixture,
     assert not (tmp_path / "x.ssp").exists()
 
 
-@pytest.mark.parametrize(("item", "reason"), [
-    ("N=40", "--parameter N: not a parameter of"),
-    ("R.qa=-1", "--parameter R.qa=-1: outside its range [0.0, inf]"),
-    ("offset_filter=2", "--parameter offset_filter=2: outside its range [0.0, 1.0]"),
-    ("R.qa=x", "--parameter R.qa=x: expected NAME=VALUE with a number"),
+@pytest.mark.parametrize(("args", "reason"), [
+    (["--parameter", "N=40"], "--parameter N: not a parameter of"),
+    (["--parameter", "R.qa=-1"], "--parameter R.qa=-1: outside its range [0, inf]"),
+    (["--parameter", "offset_filter=2"], "--parameter offset_filter=2: outside its range [0, 1]"),
+    (["--parameter", "R.qa=x"], "--parameter R.qa=x: expected NAME=VALUE with a number"),
+    (["--parameter", "offset_filter=nan"], "--parameter offset_filter=nan: expected a finite"),
+    (["--parameter", "R.qa=inf"], "--parameter R.qa=inf: expected a finite number"),
+    # inside the declared box, refused by the FMU itself: the rehearsal finds it
+    (["--parameter", "R.qa=0"], "cannot set R.qa = 0: must keep R positive definite"),
+    (["--parameter", "offset_filter=0"], "cannot set offset_filter = 0: must be in (0, 1]"),
+    (["--setpoint", "ref.h1=nan"], "--setpoint ref.h1=nan: expected a finite number"),
+    (["--setpoint", "ref.h1=5"], "--setpoint ref.h1=5: outside its range [0, 2]"),
+    (["--stop", "-5"], "--stop -5.0: expected a finite stop time of at least one step (25 s)"),
+    (["--stop", "inf"], "--stop inf: expected a finite stop time"),
 ])
-def test_an_ssps_controller_parameters_are_checked(capsys: pytest.CaptureFixture,
-                                                   controller_fmus: dict[int, Path],
-                                                   tmp_path: Path, item: str,
-                                                   reason: str) -> None:
-    """``--parameter``: a name the controller has, within its declared range; one line, no
-    file written."""
-    code, err = _run(capsys, "export-ssp", "--controller", str(controller_fmus[2]),
-                     "--parameter", item, "--out", str(tmp_path / "x.ssp"))
+def test_an_ssp_that_cannot_run_is_not_written(capsys: pytest.CaptureFixture,
+                                               controller_fmus: dict[int, Path],
+                                               tmp_path: Path, args: list[str],
+                                               reason: str) -> None:
+    """``--parameter``: a name the controller has, a finite value within its declared range
+    that the controller takes; ``--setpoint``: finite, inside the output's box; ``--stop``:
+    at least one step. One line, exit 2, no file written: libcosim would refuse or abort."""
+    code, err = _run(capsys, "export-ssp", "--controller", str(controller_fmus[2]), *args,
+                     "--out", str(tmp_path / "x.ssp"))
     assert code == 2 and err.count("\n") == 1 and reason in err, err
+    assert not (tmp_path / "x.ssp").exists()
+
+
+def test_an_ssp_of_a_controller_that_is_no_fmu_is_one_line(capsys: pytest.CaptureFixture,
+                                                           tmp_path: Path) -> None:
+    bad = tmp_path / "X.fmu"
+    bad.write_text("not a zip archive")
+    code, err = _run(capsys, "export-ssp", "--controller", str(bad), "--out",
+                     str(tmp_path / "x.ssp"))
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
+    assert f"{bad}: cannot read modelDescription.xml" in err
     assert not (tmp_path / "x.ssp").exists()
