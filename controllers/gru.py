@@ -21,11 +21,15 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["NUMPY_OPS", "PARAM_NAMES", "Ops", "casadi_ops", "dimensions", "gates", "output",
+__all__ = ["NUMPY_OPS", "PARAM_NAMES", "WEIGHT_LIMIT", "Ops", "casadi_ops", "dimensions", "gates", "output",
            "simulate", "step", "torch_ops"]
 
 #: Names of the trainable arrays, in the model file's order.
 PARAM_NAMES = ("W_z", "U_z", "b_z", "W_r", "U_r", "b_r", "W_h", "U_h", "b_h", "U_o", "b_o")
+#: The plausible magnitude of a weight or bias of ``eq:gru`` (in normalised units): trained
+#: models hold weights of order one to a few hundred; beyond this a model file, or the
+#: controller FMU's data file, is damaged or edited, and is refused.
+WEIGHT_LIMIT = 1e6
 
 
 @dataclass(frozen=True)

@@ -44,7 +44,7 @@ from typing import Any
 import numpy as np
 
 from controllers.errors import ControllersError, ModelFileError
-from controllers.gru import PARAM_NAMES
+from controllers.gru import PARAM_NAMES, WEIGHT_LIMIT
 
 __all__ = ["DEFAULT_MODEL", "FORMAT_NAME", "FORMAT_VERSION", "NORMALIZATION_KEYS", "GRUModel",
            "write_atomic"]
@@ -176,16 +176,24 @@ class GRUModel:
     def save(self, path: str | Path) -> None:
         """Write the model file atomically (JSON, full float precision).
 
-        The text goes to a temporary file beside ``path`` that is flushed to disk and renamed
-        onto ``path`` (:func:`write_atomic`): a failed write (full disk, unwritable folder)
-        leaves the previous file byte-identical.
+        Nothing is written that would not load: the text is read back as :meth:`load`
+        reads it first. It goes to a temporary file beside ``path`` that is flushed to disk
+        and renamed onto ``path`` (:func:`write_atomic`): a failed write (full disk,
+        unwritable folder) leaves the previous file byte-identical.
 
         Raises
         ------
+        ModelFileError
+            The model would not load (a non-finite or absurd weight); ``path`` is unchanged.
         OSError
             When the file cannot be written; ``path`` is then unchanged.
         """
-        write_atomic(path, self.to_json())
+        try:
+            text = self.to_json()
+            type(self).from_dict(json.loads(text), source="the model")
+        except ValueError as exc:   # what load would refuse (a ModelFileError)
+            raise ModelFileError(f"{path}: not written, it would not load: {exc}") from None
+        write_atomic(path, text)
 
     @classmethod
     def load(cls, path: str | Path) -> GRUModel:
@@ -320,8 +328,10 @@ def write_atomic(path: str | Path, text: str) -> None:
             os.close(dir_fd)
 
 
-def _array(value: Any, key: str, ndim: int, source: str) -> np.ndarray:
-    """``value`` as a finite ``ndim``-D float array (one-line errors naming ``key``)."""
+def _array(value: Any, key: str, ndim: int, source: str,
+           limit: float | None = None) -> np.ndarray:
+    """``value`` as a finite ``ndim``-D float array, its magnitude at most ``limit`` when
+    given (one-line errors naming ``key``)."""
     try:
         arr = np.array(value, dtype=float)
     except (TypeError, ValueError):
@@ -331,7 +341,16 @@ def _array(value: Any, key: str, ndim: int, source: str) -> np.ndarray:
                              f"{arr.shape}")
     if not np.all(np.isfinite(arr)):
         raise ModelFileError(f"{source}: '{key}' has a non-finite value")
+    if limit is not None and arr.size and np.max(np.abs(arr)) > limit:
+        raise ModelFileError(f"{source}: '{key}' has the value {_largest(arr)!r}, beyond the "
+                             f"plausible ±{limit:g} of a GRU weight (a damaged or edited "
+                             "file)")
     return arr
+
+
+def _largest(arr: np.ndarray) -> float:
+    """The entry of ``arr`` of the largest magnitude."""
+    return float(arr.flat[int(np.argmax(np.abs(arr)))])
 
 
 def _params(doc: dict, source: str) -> dict[str, np.ndarray]:
@@ -340,7 +359,8 @@ def _params(doc: dict, source: str) -> dict[str, np.ndarray]:
     for name in PARAM_NAMES:
         if name not in doc:
             raise ModelFileError(f"{source}: missing array '{name}'")
-        params[name] = _array(doc[name], name, 1 if name.startswith("b") else 2, source)
+        params[name] = _array(doc[name], name, 1 if name.startswith("b") else 2, source,
+                              limit=WEIGHT_LIMIT)
     n, m = params["W_z"].shape
     p = params["U_o"].shape[0]
     expected = {"W_z": (n, m), "U_z": (n, n), "b_z": (n,), "W_r": (n, m), "U_r": (n, n),

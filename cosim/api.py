@@ -168,7 +168,10 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     step : float, optional
         Communication step [s] (default: the controller's sample time).
     isolate : bool
-        Run the FMU in a worker process (a crash fails the run instead of this process).
+        Run the plant FMU and a Python controller in worker processes too (a controller FMU
+        always runs in one): a crash fails the run instead of this process, a hang is
+        stopped by the step timeout (:data:`~cosim.core.isolated.DEFAULT_STEP_TIMEOUT`
+        unless ``step_timeout``).
     step_timeout : float, optional
         Wall-clock limit of one plant or controller step [s] (implies ``isolate``).
     seed : int
@@ -213,6 +216,10 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         outpaths.out_dir(out, "--out")
     ctrl = registry.create(controller, opts)
     ctrl.expect_setpoints(sc.setpoints())   # a controller that refuses them: nothing runs
+    if isolate and not getattr(ctrl, "isolated", False):
+        from cosim.core.isolated import IsolatedController
+
+        ctrl = IsolatedController(ctrl, controller, opts)
     notice = getattr(ctrl, "notice", None)
     if notice and on_notice is not None:
         on_notice(notice)

@@ -85,6 +85,7 @@ def _weight(key: str, value: Any, size: int, names: list[str] | None) -> np.ndar
     identity), an object by signal name (diagonal; ``names`` given) or a matrix."""
     if value is None:
         return None
+    given = value
     if isinstance(value, Mapping) and names is not None:
         unknown = sorted(set(value) - set(names))
         if unknown:
@@ -101,7 +102,7 @@ def _weight(key: str, value: Any, size: int, names: list[str] | None) -> np.ndar
         raise CosimError(f"option {key}: expected a number or a {size}x{size} matrix, got "
                          f"shape {w.shape}")
     if not np.all(np.isfinite(w)):
-        raise CosimError(f"option {key}={_plain(value)!r}: expected finite numbers")
+        raise CosimError(f"option {key}={_plain(given)!r}: expected finite numbers")
     return w
 
 

@@ -52,6 +52,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers.gru import WEIGHT_LIMIT
 from controllers.kernel.cbuild import compile_library, compiler_id, default_cache_dir, write_atomic
 from controllers.kernel.constants import Constants
 from controllers.kernel.kernel_abi import c_declarations
@@ -73,11 +74,6 @@ TEMPLATE_PARTS = tuple(Path(__file__).with_name(name) for name in (
 LOADER_C = Path(__file__).with_name("loader.c")
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")
 PREFIX_PLACEHOLDER = "@PFX@"
-
-#: The plausible magnitude of a GRU weight or bias (their range in a data file,
-#: :mod:`controllers.kernel.constants`): trained models hold weights of order one to a few
-#: hundred; beyond this a file is damaged or edited.
-WEIGHT_LIMIT = 1e6
 
 #: Largest relative difference between the compiled kernel and the numpy derivatives at the
 #: load-time self-test (they agree to ~1e-14).

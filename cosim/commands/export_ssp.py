@@ -20,7 +20,10 @@ each output's box), so are the controller's tunable parameters given a value (--
 NAME=VALUE: its weights R.<input>, du_weight.<input>, offset_weight.<output>, offset_filter;
 the others keep the design's), and the default experiment's fixed step is the controller's
 sample time. libcosim and other SSP runners run it as it is (docs:
-guide/controller-fmu.md)."""
+guide/controller-fmu.md). Nothing that cannot run is written: every value must be finite and
+inside its variable's declared range and the stop time at least one step, and both FMUs are
+instantiated with these values and stepped once, each in a worker process, before the file
+is written (exit 2 and one line naming what they refused)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:

@@ -33,8 +33,11 @@ renamed into place: a full disk leaves the previous file intact. A rerun into th
 replaces the earlier run's files and removes those it does not write again; a second run into
 a DIR that a run is still writing is refused.
 
-A plant FMU is native code: use --isolate so that a crashing FMU cannot take the runner down,
-and --step-timeout so that a hung one is stopped (it implies --isolate).
+An FMU is native code. A controller FMU always runs in a worker process of its own: a crash,
+abort() or exit() in it fails the run (exit 1, partial results kept), a hung step is stopped
+after 60 s (--step-timeout). Use --isolate so that the plant FMU and a Python controller run
+in workers too, and --step-timeout so that a hung one is stopped sooner (it implies
+--isolate). Ctrl-C and SIGTERM kill a worker stuck in native code at once.
 """
 
 EPILOG = """\
@@ -94,8 +97,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="communication step (default: the controller's sample time; must "
                         "divide it)")
     p.add_argument("--isolate", action="store_true",
-                   help="run the FMU in a worker process (a crashing FMU fails the run "
-                        "cleanly instead of killing it); its steps time out after "
+                   help="run the plant FMU and a Python controller in worker processes (a "
+                        "controller FMU always runs in one): a crash fails the run cleanly "
+                        "instead of killing it; their steps time out after "
                         f"{DEFAULT_STEP_TIMEOUT:g} s unless --step-timeout says otherwise")
     p.add_argument("--step-timeout", metavar="SECONDS", type=float, default=None,
                    help="fail the run when one plant step or one controller step takes "

@@ -152,9 +152,9 @@ class CsvReader:
         ``"utf-8"``, or ``"utf-8-sig"`` to drop a byte-order mark.
     whole_file : bool
         Read the whole file at once and split it with :meth:`str.splitlines` (scenario
-        files): a byte that is not UTF-8 is then reported before any row, and a line break
-        inside a quoted cell is dropped. Default: read line by line, as the :mod:`csv`
-        module does.
+        files): a byte that is not UTF-8 is then reported before any row, and a quoted cell
+        that spans lines is refused (``malformed``). Default: read line by line, as the
+        :mod:`csv` module does.
 
     Raises
     ------
@@ -186,6 +186,7 @@ class CsvReader:
                 except OSError as exc:
                     raise self.error(wording.unreadable, exc) from None
         self._reader = csv.reader(source)
+        self._whole_file = whole_file
 
     def __enter__(self) -> CsvReader:
         return self
@@ -209,8 +210,13 @@ class CsvReader:
 
     def _next(self) -> list[str] | None:
         """The next row's cells, or ``None`` at the end of the file."""
+        first = self.line + 1
         try:
-            return next(self._reader, None)
+            row = next(self._reader, None)
+            if self._whole_file and self.line > first:
+                # split into lines first, the reader would join them without the break
+                raise csv.Error(f"a quoted cell spans lines {first} to {self.line}")
+            return row
         except UnicodeDecodeError as exc:
             raise self.error(self.wording.not_text, exc, line=self.line + 1) from None
         except csv.Error as exc:

@@ -1,5 +1,6 @@
-"""FMUs whose native code runs in a worker process: :class:`IsolatedFmuComponent` (a plant,
-``cosim run --isolate``) and :class:`IsolatedFmuController` (a controller FMU: always).
+"""Components whose native code runs in a worker process: :class:`IsolatedFmuComponent` (a
+plant FMU, ``cosim run --isolate``), :class:`IsolatedFmuController` (a controller FMU: always)
+and :class:`IsolatedController` (a Python controller, ``cosim run --isolate``).
 
 Each keeps the modelDescription (and the variable map) in this process and loads the FMU in
 a :class:`~cosim.core.worker.Worker`, which a crash cannot take down and a timeout can kill:
@@ -24,14 +25,16 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from cosim.core.errors import ParameterError, SimulationFailed
+from cosim.core.component import Component
+from cosim.core.errors import CosimError, ParameterError, SimulationFailed
 from cosim.core.fmu import FmuComponent
 from cosim.core.fmu_controller import FmuController
 from cosim.core.varmap import MappedSignal, VarMap
 from cosim.core.worker import TERMINATE_WAIT, Worker
 
-__all__ = ["DEFAULT_STEP_TIMEOUT", "REHEARSAL_TIMEOUT", "TERMINATE_WAIT", "FmuServer",
-           "IsolatedFmuComponent", "IsolatedFmuController", "rehearse"]
+__all__ = ["DEFAULT_STEP_TIMEOUT", "REHEARSAL_TIMEOUT", "TERMINATE_WAIT", "ControllerServer",
+           "FmuServer", "IsolatedController", "IsolatedFmuComponent", "IsolatedFmuController",
+           "rehearse"]
 
 #: Step timeout [s] of an isolated FMU when none is given (``cosim run --isolate``, a
 #: controller FMU): far above any healthy step of a process model or a controller, short
@@ -188,6 +191,144 @@ class IsolatedFmuController(FmuController, IsolatedFmuComponent):
     def label(self) -> str:
         """Messages name the controller FMU as such."""
         return f"controller FMU {self.path.name}"
+
+
+class ControllerServer:  # pragma: no cover - runs in the worker process
+    """A controller of the registry (:func:`cosim.core.registry.create`) served by a worker:
+    each step answers with its outputs and diagnostics."""
+
+    def __init__(self, controller: str, options: dict[str, Any]) -> None:
+        from cosim.core import registry
+
+        self.ctrl = registry.create(controller, options)
+
+    def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:
+        self.ctrl.expect_setpoints(setpoints)
+
+    def setup(self, t0: float) -> None:
+        self.ctrl.setup(t0)
+
+    def step(self, t: float, dt: float, inputs: tuple[tuple[str, float], ...]
+             ) -> tuple[tuple[tuple[str, float], ...], tuple[tuple[str, Any], ...]]:
+        self.ctrl.set_inputs(dict(inputs))
+        self.ctrl.step(t, dt)
+        return tuple(self.ctrl.get_outputs().items()), tuple(self.ctrl.diagnostics().items())
+
+    def summary(self) -> dict:
+        return dict(self.ctrl.summary() or {})
+
+    def close(self) -> None:
+        self.ctrl.terminate()
+
+
+class IsolatedController(Component):
+    """A controller of the registry whose steps run in a worker process (``cosim run
+    --isolate``): a Python controller stuck in native code (a solver, a compiled kernel) or
+    crashing in it ends the run as an isolated FMU does.
+
+    The controller is built here too (``local``: its signals, sample time, bounds, notice and
+    problem, and every check of its options, before anything runs), and again in the worker
+    from its registry name and options, which runs it.
+
+    Parameters
+    ----------
+    local : Component
+        The controller built in this process (:func:`cosim.core.registry.create`).
+    controller : str
+        Its registry name (or ``module:Class``, or controller file).
+    options : mapping
+        Its options (picklable: they travel to the worker).
+    """
+
+    isolated = True
+
+    def __init__(self, local: Component, controller: str, options: Mapping[str, Any]) -> None:
+        self.local = local
+        self.controller = controller
+        self.options = dict(options)
+        self.name = local.name
+        self.inputs, self.outputs = local.inputs, local.outputs
+        self.direct_feedthrough = local.direct_feedthrough
+        self.sample_time = local.sample_time
+        self.bounds = dict(getattr(local, "bounds", {}) or {})
+        self.timing_diagnostics = local.timing_diagnostics
+        self.timeout: float | None = DEFAULT_STEP_TIMEOUT
+        self._worker: Worker | None = None
+        self._setpoints: list[dict[str, float]] | None = None
+        self._pending: dict[str, float] = {}
+        self._outputs: dict[str, float] = {}
+        self._diag: dict[str, Any] = {}
+
+    def __getattr__(self, name: str) -> Any:
+        """What else a run asks the controller (its ``notice``, its ``problem``): the local
+        one's."""
+        if name.startswith("_") or name == "local":
+            raise AttributeError(name)
+        return getattr(self.local, name)
+
+    @property
+    def label(self) -> str:
+        """How messages name this controller."""
+        return f"controller {self.name!r}"
+
+    def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:
+        """Checked here (a refusal is bad input); handed to the worker at :meth:`setup`."""
+        self.local.expect_setpoints(setpoints)
+        self._setpoints = [dict(s) for s in setpoints]
+
+    def setup(self, t0: float) -> None:
+        """Start the worker, which builds the controller, and set it up at ``t0``."""
+        self.terminate()
+        # building a controller (its certificate, its solver) takes longer than a step
+        build = None if self.timeout is None else max(self.timeout, DEFAULT_STEP_TIMEOUT)
+        self._worker = Worker(self.label, "cosim.core.isolated:ControllerServer",
+                              {"controller": self.controller, "options": self.options},
+                              timeout=build)
+        self._worker.start()
+        if self._setpoints is not None:
+            self._worker.call("expecting the set-points", "expect_setpoints", self._setpoints)
+        self._worker.call(f"setup at t={t0!r}", "setup", float(t0))
+        self._pending.clear()
+
+    def set_inputs(self, values: Mapping[str, float]) -> None:
+        """Inputs travel with the next step request."""
+        self._pending.update(values)
+
+    def step(self, t: float, dt: float) -> None:
+        """One round trip: inputs, the controller's step, outputs and diagnostics."""
+        if self._worker is None:
+            raise SimulationFailed(f"{self.label}: step at t={t!r} failed: no worker")
+        inputs = tuple((k, float(v)) for k, v in self._pending.items())
+        self._pending.clear()
+        self._worker.timeout = self.timeout
+        outputs, diag = self._worker.call(f"step at t={t!r}", "step", float(t), float(dt),
+                                          inputs)
+        self._outputs, self._diag = dict(outputs), dict(diag)
+
+    def get_outputs(self) -> dict[str, float]:
+        """Outputs of the last step."""
+        return dict(self._outputs)
+
+    def diagnostics(self) -> dict[str, Any]:
+        """Diagnostics of the last step."""
+        return dict(self._diag)
+
+    def summary(self) -> dict:
+        """The worker's controller's summary (the local one's when the worker is gone)."""
+        worker = self._worker
+        if worker is not None and worker.alive and not worker.busy:
+            try:
+                return worker.call("summarising the run", "summary")
+            except CosimError:
+                pass
+        return dict(self.local.summary() or {})
+
+    def terminate(self) -> None:
+        """Stop the worker (idempotent; a busy one is killed at once)."""
+        worker, self._worker = self._worker, None
+        if worker is not None:
+            worker.stop()
+        self.local.terminate()
 
 
 def rehearse(fmus: Sequence[tuple[IsolatedFmuComponent, Mapping[str, float]]],

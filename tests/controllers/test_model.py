@@ -85,6 +85,30 @@ def test_nan_value(tmp_path):
         GRUModel.load(write(tmp_path, doc))
 
 
+def test_an_absurd_weight_is_refused(tmp_path):
+    """A weight far beyond what training gives (an edited or damaged file): refused by name,
+    as the controller FMU's data file refuses it."""
+    doc = make_model().to_dict()
+    doc["U_h"][1][3] = -2e6
+    with pytest.raises(ModelFileError, match=r"'U_h' has the value -2000000\.0, beyond the "
+                                             r"plausible ±1e\+06 of a GRU weight"):
+        GRUModel.load(write(tmp_path, doc))
+
+
+def test_a_model_that_would_not_load_is_not_written(tmp_path):
+    path = tmp_path / "m.json"
+    model = make_model()
+    model.save(path)
+    before = path.read_bytes()
+    for value in (math.nan, 1e300):
+        model.params["W_z"][0, 0] = value
+        with pytest.raises(ModelFileError, match="not written, it would not load: the model: "
+                                                 "'W_z' has"):
+            model.save(path)
+        assert path.read_bytes() == before
+    assert [p.name for p in tmp_path.iterdir()] == ["m.json"]
+
+
 @pytest.mark.parametrize(("key", "value", "message"), [
     ("u_scale", [1.0, 0.0], "'normalization.u_scale' has a zero entry"),
     ("y_offset", [1.0], "'normalization.y_offset' must have 2 entries"),

@@ -22,11 +22,12 @@ def pyfmu_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
 
 @pytest.fixture(scope="session")
 def hostile_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    """A folder with ``HostileController.fmu`` and ``HostilePlant.fmu``, compiled from the C
-    sources of :mod:`tests.cosim.hostile`."""
+    """A folder with ``HostileController.fmu``, ``HostilePlant.fmu`` and ``libspin.so``,
+    compiled from the C sources of :mod:`tests.cosim.hostile`."""
     from tests.cosim import hostile
 
     dest = tmp_path_factory.mktemp("hostile")
     for role in hostile.IDENTIFIERS:
         hostile.build(role, dest)
+    hostile.build_spin(dest)
     return dest

@@ -80,3 +80,24 @@ class ReadOnlyEstimatePI(PIController):
     @initial_estimate.setter
     def initial_estimate(self, value: object) -> None:
         raise RuntimeError("initial_estimate is read-only")
+
+
+class NativePI(PIController):
+    """The PI baseline gone wrong in native code from ``fault_at`` seconds on (as a solver or
+    a compiled kernel can): ``fault="crash"`` reads address 0 (a segfault), ``fault="hang"``
+    spins in the C loop ``hostile_spin`` of ``library`` (``tests/cosim/hostile/spin.c``),
+    which no signal handler interrupts."""
+
+    def __init__(self, fault: str = "crash", fault_at: float = 0.0, library: str = "") -> None:
+        super().__init__()
+        self.fault, self.fault_at, self.library = fault, float(fault_at), library
+
+    def step(self, t: float, dt: float) -> None:
+        import ctypes
+
+        if t >= self.fault_at:
+            if self.fault == "hang":
+                ctypes.CDLL(self.library).hostile_spin()
+            else:
+                ctypes.string_at(0)
+        super().step(t, dt)

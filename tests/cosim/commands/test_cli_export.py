@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cosim.cli import main
@@ -98,3 +99,29 @@ def test_an_ssp_of_a_controller_that_is_no_fmu_is_one_line(capsys: pytest.Captur
     assert code == 2 and err.count("\n") == 1 and "Traceback" not in err, err
     assert f"{bad}: cannot read modelDescription.xml" in err
     assert not (tmp_path / "x.ssp").exists()
+
+
+def test_a_model_no_law_can_control_is_named_in_the_users_terms(
+        capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
+    """The shipped model with its candidate, recurrent and output weights scaled up by 100
+    (rho_s >= 1: no certificate, and an infinite terminal weight): export-fmu and run refuse
+    it in one line that names the quantity, never a library's internal message (scipy's
+    "Invalid input for linprog"), and write nothing."""
+    import json
+
+    from controllers.model import DEFAULT_MODEL
+
+    doc = json.loads(Path(DEFAULT_MODEL).read_text())
+    for key in ("W_h", "U_h", "U_o"):
+        doc[key] = (100 * np.asarray(doc[key])).tolist()
+    model = tmp_path / "scaled.json"
+    model.write_text(json.dumps(doc))
+    scenario = tmp_path / "s.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,,\n")
+    for argv in (["export-fmu", str(model), "--out", str(tmp_path / "C.fmu")],
+                 ["run", str(scenario), "--model", str(model), "--out", str(tmp_path / "o")]):
+        code, err = _run(capsys, *argv)
+        assert code == 2 and err.count("\n") == 1, err
+        assert "the model cannot be controlled" in err and "terminal weight s" in err, err
+        assert "linprog" not in err and "SW" not in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv", "scaled.json"]

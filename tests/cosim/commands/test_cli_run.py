@@ -153,6 +153,24 @@ MALFORMED = {
 }
 
 
+def test_control_characters_in_a_file_reach_the_terminal_escaped(
+        tmp_path: Path, fmu2_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """A cell with an escape sequence or a bidirectional override: one line, the characters
+    written as escapes, never sent to the terminal as they are. A quoted cell that spans
+    lines is refused (it was read as its lines joined: "0.6\\n1" as 0.61)."""
+    for cell, why in (("\x1b[31m", "'\\x1b[31m' is not a number"),
+                      ("\u202e0.7", "'\\u202e0.7' is not a number"),
+                      ('"0.6\r\n1"', "malformed CSV: a quoted cell spans lines 2 to 3"),
+                      ('"0.6\n1"', "malformed CSV: a quoted cell spans lines 2 to 3")):
+        path = tmp_path / "s.csv"
+        path.write_bytes(f"time,ref.h1,ref.h2\n0,1,{cell}\n100,,\n".encode())
+        code, _out, err = run(capsys, str(path), "--controller", "pi", "--plant",
+                              str(fmu2_path), "--out", str(tmp_path / "out"))
+        assert code == 2 and err.count("\n") == 1 and err.endswith("\n"), repr(err)
+        assert err[:-1].isprintable() and why in err, repr(err)
+    assert not (tmp_path / "out").exists()
+
+
 @pytest.mark.parametrize("case", sorted(MALFORMED))
 def test_malformed_scenarios_exit_2_with_location(case: str, tmp_path: Path, fmu2_path: Path,
                                                   capsys: pytest.CaptureFixture) -> None:
@@ -336,6 +354,8 @@ def test_bad_pi_options_exit_2(option: str, message: str, tmp_path: Path, fmu2_p
     ("R=[1,2,3]", "option R: expected a number or a 2x2 matrix, got shape (3,)"),
     ("R=[[0.01,0],[0,-0.01]]", "cost weight R must be symmetric positive definite"),
     ('gain_scale="x"', "gain scale must be a non-negative number, got 'x'"),
+    ("R=NaN", "option R=nan: expected finite numbers"),
+    ('R={"qa": Infinity}', "option R={'qa': inf}: expected finite numbers"),
 ])
 def test_bad_robust_mpc_options_exit_2(option: str, message: str, tmp_path: Path,
                                        fmu2_path: Path, capsys: pytest.CaptureFixture) -> None:

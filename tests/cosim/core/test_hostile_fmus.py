@@ -165,6 +165,30 @@ def test_a_signal_ends_a_run_stuck_in_a_controller_fmu_at_once(
     assert leftovers(tmp_path) == []
 
 
+@pytest.mark.slow
+@pytest.mark.parametrize(("fault", "what"), [
+    ("hang", "controller 'pi': step at t=500.0 took longer than the step timeout of 2 s "
+             "(worker killed)"),
+    ("crash", "controller 'pi': step at t=500.0 failed: worker died (signal 11, SIGSEGV)")])
+def test_a_python_controller_gone_wrong_in_native_code_is_contained(
+        fault: str, what: str, tmp_path: Path, hostile_dir: Path) -> None:
+    """``--step-timeout`` (``--isolate``) runs a Python controller in a worker too: stuck in
+    a C loop (deaf to the SIGALRM that stops one stuck in Python) or crashing in native
+    code, it ends the run as a hostile FMU does."""
+    out = tmp_path / "out"
+    proc, took = _run(tmp_path, _scenario(tmp_path), "--controller",
+                      "tests.cosim.sleepy:NativePI", "--option", f'fault="{fault}"',
+                      "--option", f"fault_at={FAULT_TIME}", "--option",
+                      f'library="{hostile_dir / "libspin.so"}"', "--out", out,
+                      "--step-timeout", "2")
+    assert proc.returncode == 1, proc.stderr
+    assert what in one_line(proc.stderr)
+    assert took < 2 + 30
+    _stopped_at(out, 20, 475.0, what)
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["isolated"] is True and summary["controller"] == "tests.cosim.sleepy:NativePI"
+
+
 def test_the_python_api_survives_a_crashing_controller_fmu(tmp_path: Path,
                                                            hostile_dir: Path) -> None:
     """``cosim.run`` in this very process: the controller FMU segfaults, the run fails with

@@ -36,6 +36,12 @@ def test_options_are_parsed_as_json_or_text() -> None:
         "a": 0.02, "b": True, "c": [1, 2], "model": "my.json", "e": ""}
     with pytest.raises(CosimError, match="expected KEY=VALUE"):
         parse_options(["novalue"])
+    # a controller FMU's parameter of a family: identifiers joined by dots
+    assert parse_options(["R.qa=0.05", "offset_weight.h_1=1e3"]) == {
+        "R.qa": 0.05, "offset_weight.h_1": 1e3}
+    for bad in ("R.=1", ".qa=1", "R..qa=1", "1R=1", "R qa=1"):
+        with pytest.raises(CosimError, match="expected KEY=VALUE"):
+            parse_options([bad])
 
 
 def test_create_passes_options_and_names_unknown_ones() -> None:

@@ -16,6 +16,9 @@ glue): native code that behaves until ``fault_time`` and then does what ``fault`
 pointer), ``abort`` (after a line on standard error), ``exit`` (``exit(0)``), ``flood``
 (1 MiB on standard output and 200 logged warnings every step, then healthy), ``signal``
 (SIGTERM to its whole process group).
+
+:func:`build_spin` compiles ``spin.c``, a C loop that never returns, for a Python controller
+stuck in native code (``tests/cosim/sleepy.py`` ``NativePI``).
 """
 
 from __future__ import annotations
@@ -76,6 +79,16 @@ def model_description(role: str) -> str:
             "  <ModelStructure>\n    <Outputs>\n" + unknowns + "    </Outputs>\n"
             "    <InitialUnknowns>\n" + unknowns + "    </InitialUnknowns>\n"
             "  </ModelStructure>\n</fmiModelDescription>\n")
+
+
+def build_spin(folder: Path) -> Path:
+    """``folder/libspin.so``: ``hostile_spin()``, a C loop that never returns (``spin.c``)."""
+    from cosim.core.build import compiler, run_compiler
+
+    out = folder / "libspin.so"
+    run_compiler([compiler(), "-shared", "-fPIC", "-O2", "-o", str(out), str(HERE / "spin.c")],
+                 "libspin.so")
+    return out
 
 
 def build(role: str, folder: Path) -> Path:
