@@ -6,8 +6,10 @@ component (the baseline) and the controller FMU exported from it (``cosim export
 ``--fmi``) each replay them ``--repeats`` times in fresh instances, both as the master steps
 a controller (``set_inputs``, ``step``, ``get_outputs``: the FMU through
 :class:`cosim.core.fmu_controller.FmuController`, fmpy's ctypes calls included), runs
-interleaved. Printed: each one's median and p99 step [ms] over all repeats and the FMU's
-ratios to the baseline (issue: no slower at the median and at the p99), and the largest
+interleaved; and the FMU as ``cosim run`` steps it, in a worker process of its own
+(:class:`cosim.core.isolated.IsolatedFmuController`: one round trip per step). Printed: each
+one's median and p99 step [ms] over all repeats and its ratios to the baseline (issue: the
+FMU no slower at the median and at the p99), what the worker adds per step, and the largest
 difference of their inputs (they agree to the bit).
 
 ``--option KEY=VALUE`` (repeatable, the value read as JSON, as ``cosim run``'s): the robust
@@ -38,6 +40,7 @@ import cosim  # noqa: E402
 from cosim.core import registry  # noqa: E402
 from cosim.core.errors import CosimError  # noqa: E402
 from cosim.core.fmu_controller import FmuController  # noqa: E402
+from cosim.core.isolated import IsolatedFmuController  # noqa: E402
 
 SCENARIO = HERE.parent / "scenarios" / "paper_steps.csv"
 
@@ -94,28 +97,31 @@ def main(argv: list[str] | None = None) -> int:
     steps = record(args.scenario, options)
     with tempfile.TemporaryDirectory() as tmp:
         fmu = cosim.export_fmu(out=Path(tmp) / "Controller.fmu", fmi=args.fmi, options=options)
-        python = registry.create("robust-mpc", options)
-        exported = FmuController(fmu)
-        dt = float(python.sample_time)
-        times: dict[str, list[np.ndarray]] = {"python": [], "fmu": []}
+        controllers = {"python": registry.create("robust-mpc", options),
+                       "fmu": FmuController(fmu), "worker": IsolatedFmuController(fmu)}
+        dt = float(controllers["python"].sample_time)
+        times: dict[str, list[np.ndarray]] = {name: [] for name in controllers}
         inputs: dict[str, np.ndarray] = {}
         for _ in range(args.repeats):   # interleaved, fresh instances each time
-            for name, ctrl in (("python", python), ("fmu", exported)):
+            for name, ctrl in controllers.items():
                 t, u = replay(ctrl, steps, dt)
                 times[name].append(t)
                 inputs[name] = u
-        exported.terminate()
+        for ctrl in controllers.values():
+            ctrl.terminate()
     print(f"{len(steps)} controller steps x {args.repeats} repeats, FMI {args.fmi}.0, "
           f"options {options or 'default'}")
-    base = np.concatenate(times["python"])
-    for name in ("python", "fmu"):
-        t = np.concatenate(times[name]) * 1e3
+    ms = {name: np.concatenate(t) * 1e3 for name, t in times.items()}
+    base = ms["python"]
+    for name, t in ms.items():
         med, p99 = float(np.median(t)), float(np.percentile(t, 99))
-        ratio = (f"  ({med / (np.median(base) * 1e3):.2f}x, "
-                 f"{p99 / (np.percentile(base, 99) * 1e3):.2f}x the Python step)"
-                 if name == "fmu" else "  (baseline)")
+        ratio = (f"  ({med / np.median(base):.2f}x, {p99 / np.percentile(base, 99):.2f}x the "
+                 "Python step)" if name != "python" else "  (baseline)")
         print(f"{name:>7}: median {med:.3f} ms, p99 {p99:.3f} ms{ratio}")
-    diff = float(np.max(np.abs(inputs["fmu"] - inputs["python"])))
+    added = float(np.median(ms["worker"]) - np.median(ms["fmu"]))
+    print(f"the worker process adds {added * 1e3:.0f} us per step at the median")
+    diff = max(float(np.max(np.abs(inputs[name] - inputs["python"])))
+               for name in ("fmu", "worker"))
     print(f"largest input difference: {diff:.3g}")
     return 0
 

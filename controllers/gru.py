@@ -21,8 +21,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["NUMPY_OPS", "PARAM_NAMES", "WEIGHT_LIMIT", "Ops", "casadi_ops", "dimensions", "gates", "output",
-           "simulate", "step", "torch_ops"]
+__all__ = ["NUMPY_OPS", "PARAM_NAMES", "WEIGHT_LIMIT", "Ops", "casadi_ops", "dimensions",
+           "gates", "output", "simulate", "step", "torch_ops"]
 
 #: Names of the trainable arrays, in the model file's order.
 PARAM_NAMES = ("W_z", "U_z", "b_z", "W_r", "U_r", "b_r", "W_h", "U_h", "b_h", "U_o", "b_o")

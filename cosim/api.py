@@ -216,7 +216,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         outpaths.out_dir(out, "--out")
     ctrl = registry.create(controller, opts)
     ctrl.expect_setpoints(sc.setpoints())   # a controller that refuses them: nothing runs
-    if isolate and not getattr(ctrl, "isolated", False):
+    if isolate and not ctrl.isolated:
         from cosim.core.isolated import IsolatedController
 
         ctrl = IsolatedController(ctrl, controller, opts)

@@ -265,8 +265,7 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
         ctrl.initial_estimate = None if x0 is None else np.asarray(x0, dtype=float)
     run["phase"] = "loading the plant"
     run["plant"] = plant = _plant(task, folder, draw["seed"])
-    if task.get("isolate") and task["plant"][0] == "fmu" and not getattr(ctrl, "isolated",
-                                                                         False):
+    if task.get("isolate") and task["plant"][0] == "fmu" and not ctrl.isolated:
         # a Python controller's steps in a worker too (its pooled instance stays the pool's)
         from cosim.core.isolated import IsolatedController
 

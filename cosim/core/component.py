@@ -52,6 +52,10 @@ class Component(ABC):
     timing_diagnostics : frozenset of str
         Diagnostics that are wall-clock measurements (e.g. ``solve_ms``). The master records
         them apart (``timings.csv``) so that ``results.csv`` stays reproducible byte for byte.
+    isolated : bool
+        Whether the component runs its steps in a worker process whose every request its
+        ``timeout`` attribute bounds (:mod:`cosim.core.isolated`): the master hands such a
+        controller the run's step timeout instead of arming ``SIGALRM``.
     """
 
     name: str = "component"
@@ -61,6 +65,7 @@ class Component(ABC):
     sample_time: float | None = None
     bounds: dict[str, tuple[float, float]] = {}  # noqa: RUF012 - read-only class default
     timing_diagnostics: frozenset[str] = frozenset()
+    isolated: bool = False
 
     def setup(self, t0: float) -> None:  # noqa: B027 - optional hook
         """Prepare for a run starting at ``t0`` (instantiate, initialise)."""

@@ -11,7 +11,10 @@ controller's are. Its sample time is the FMU's default experiment step size; its
 (``offset_filter``, the weights ``R.<input>``, ``du_weight.<input>``,
 ``offset_weight.<output>``, ``setpoint_rate``) are options of the component, a family of
 them also in the robust MPC's form (``R=0.02``: every entry; ``offset_weight={"h1": 1e3}``:
-by signal).
+by signal), each checked against the box its modelDescription declares before anything
+runs. ``cosim run`` and campaigns step it in a worker process of its own
+(:class:`cosim.core.isolated.IsolatedFmuController`); this class runs it in this process
+(a benchmark's baseline).
 """
 
 from __future__ import annotations

@@ -2,9 +2,10 @@
 plant FMU, ``cosim run --isolate``), :class:`IsolatedFmuController` (a controller FMU: always)
 and :class:`IsolatedController` (a Python controller, ``cosim run --isolate``).
 
-Each keeps the modelDescription (and the variable map) in this process and loads the FMU in
-a :class:`~cosim.core.worker.Worker`, which a crash cannot take down and a timeout can kill:
-one round trip per step (inputs in, outputs out).
+Each keeps what a run asks of it in this process (an FMU's modelDescription and variable
+map; a Python controller built here too, for its signals and checks) and runs the native
+code in a :class:`~cosim.core.worker.Worker`, which a crash cannot take down and a timeout
+can kill: one round trip per step (inputs in, outputs out).
 
 * When the worker dies (segfault, ``abort()``, ``exit()``, killed), the step raises
   :class:`~cosim.core.errors.SimulationFailed` ``"... worker died (signal 11, SIGSEGV)"`` and the
@@ -15,7 +16,7 @@ one round trip per step (inputs in, outputs out).
   timeout (:attr:`isolated`), since a ``SIGALRM`` cannot stop native code.
 * A signal that interrupts the parent while the worker is busy (Ctrl-C, SIGTERM) kills the
   worker at once in :meth:`IsolatedFmuComponent.terminate`: nothing waits for a hung FMU.
-* The FMU is extracted into the worker's scratch folder, which this process creates and
+* An FMU is extracted into the worker's scratch folder, which this process creates and
   removes, so nothing is left behind however the worker ends.
 """
 
@@ -30,11 +31,10 @@ from cosim.core.errors import CosimError, ParameterError, SimulationFailed
 from cosim.core.fmu import FmuComponent
 from cosim.core.fmu_controller import FmuController
 from cosim.core.varmap import MappedSignal, VarMap
-from cosim.core.worker import TERMINATE_WAIT, Worker
+from cosim.core.worker import Worker
 
-__all__ = ["DEFAULT_STEP_TIMEOUT", "REHEARSAL_TIMEOUT", "TERMINATE_WAIT", "ControllerServer",
-           "FmuServer", "IsolatedController", "IsolatedFmuComponent", "IsolatedFmuController",
-           "rehearse"]
+__all__ = ["DEFAULT_STEP_TIMEOUT", "REHEARSAL_TIMEOUT", "ControllerServer", "FmuServer",
+           "IsolatedController", "IsolatedFmuComponent", "IsolatedFmuController", "rehearse"]
 
 #: Step timeout [s] of an isolated FMU when none is given (``cosim run --isolate``, a
 #: controller FMU): far above any healthy step of a process model or a controller, short
@@ -170,7 +170,7 @@ class IsolatedFmuComponent(FmuComponent):
 
         A worker still busy with a request (the parent was interrupted while waiting) is
         killed at once; an idle one is asked to terminate the FMU and given
-        :data:`TERMINATE_WAIT` seconds.
+        :data:`cosim.core.worker.TERMINATE_WAIT` seconds.
         """
         worker, self._worker = self._worker, None
         if worker is not None:

@@ -41,7 +41,7 @@ class Run:
         # a controller in a worker process bounds its own steps (a SIGALRM cannot stop its
         # native code, nor reach a thread that is not the main one): it gets the limit
         self.alarm = step_timeout
-        if getattr(master.controller, "isolated", False):
+        if master.controller.isolated:
             if step_timeout is not None:
                 master.controller.timeout = step_timeout
             self.alarm = None

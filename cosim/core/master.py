@@ -169,10 +169,12 @@ class Master:
             :class:`cosim.core.results.ResultsStream` that streams ``results.csv`` to disk. An
             exception it raises ends the run (status ``failed``).
         step_timeout : float, optional
-            Wall-clock limit [s] of one controller step (``SIGALRM`` in the main thread, so a
-            controller hung in Python code is stopped; elsewhere the step is measured after
-            it returns). Plant steps are bounded by the plant itself (see
-            :class:`cosim.core.isolated.IsolatedFmuComponent`).
+            Wall-clock limit [s] of one controller step: a controller that runs in a worker
+            process (``isolated``: a controller FMU, :mod:`cosim.core.isolated`) gets it as
+            its own ``timeout`` and kills its worker past it; any other is stopped by
+            ``SIGALRM`` in the main thread (a controller hung in Python code; elsewhere the
+            step is measured after it returns). Plant steps are bounded by the plant itself
+            (see :class:`cosim.core.isolated.IsolatedFmuComponent`).
         deadline : float, optional
             ``time.monotonic()`` value past which the run stops with status ``failed``
             (checked between steps: the whole-run timeout of campaigns).

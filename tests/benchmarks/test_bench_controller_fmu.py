@@ -1,5 +1,6 @@
 """``benchmarks/bench_controller_fmu.py`` run as a user runs it (its own process), on a short
-scenario: it prints both steps' times, the FMU's ratios, and inputs equal to the bit."""
+scenario: it prints the steps' times (the Python step, the FMU in this process and in a
+worker), the FMU's ratios, and inputs equal to the bit."""
 
 from __future__ import annotations
 
@@ -26,6 +27,8 @@ def test_the_benchmark_prints_ratios_and_equal_inputs(options: list[str], tmp_pa
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert "41 controller steps x 1 repeats, FMI 2.0, options " in proc.stdout
     assert ("'law': 'paper'" in proc.stdout) is bool(options)
-    assert re.search(r"fmu: median [0-9.]+ ms, p99 [0-9.]+ ms  \([0-9.]+x, [0-9.]+x the "
-                     r"Python step\)", proc.stdout), proc.stdout
+    for name in ("fmu", "worker"):
+        assert re.search(name + r": median [0-9.]+ ms, p99 [0-9.]+ ms  \([0-9.]+x, [0-9.]+x "
+                         r"the Python step\)", proc.stdout), proc.stdout
+    assert re.search(r"the worker process adds -?[0-9]+ us per step", proc.stdout)
     assert "largest input difference: 0\n" in proc.stdout

@@ -66,7 +66,7 @@ def test_errors_keep_their_kind(worker: Worker) -> None:
     with pytest.raises(CosimError, match="that value is bad input") as info:
         worker.call("refusing", "refuse")
     assert not isinstance(info.value, SimulationFailed)
-    with pytest.raises(SimulationFailed, match="^ValueError: an internal error$"):
+    with pytest.raises(SimulationFailed, match=r"^ValueError: an internal error$"):
         worker.call("failing", "fail")
     with pytest.raises(SimulationFailed, match="unknown request '_private'"):
         worker.call("peeking", "_private")
