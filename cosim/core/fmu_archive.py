@@ -8,13 +8,15 @@ fault is a one-line :class:`~cosim.core.errors.CosimError` naming the FMU.
 
 from __future__ import annotations
 
+import math
 import zipfile
 from pathlib import Path, PurePosixPath
 from typing import Any
 
 from cosim.core.errors import CosimError
 
-__all__ = ["MAX_UNPACKED_BYTES", "check_binary", "read_model_description", "safe_extract"]
+__all__ = ["MAX_UNPACKED_BYTES", "check_binary", "read_model_description", "safe_extract",
+           "why_not_valid"]
 
 #: Refuse archives that would unpack to more than this many bytes (zip bombs).
 MAX_UNPACKED_BYTES = 2 * 1024**3
@@ -77,3 +79,13 @@ def check_binary(path: Path, unzipped: Path, model_identifier: str, fmi3: bool) 
     have = sorted(p.name for p in bins.iterdir() if p.is_dir()) if bins.is_dir() else []
     also = f" (it has binaries for: {', '.join(have)})" if have else " (it has no binaries)"
     raise CosimError(f"{path}: no binary for this platform: '{rel}' is missing{also}")
+
+
+def why_not_valid(var: Any, value: float) -> str:
+    """Why ``value`` cannot be given to the modelDescription's variable ``var`` (``""`` when it
+    can): not finite, or outside the box its ``min`` and ``max`` declare."""
+    if not math.isfinite(value):
+        return "expected a finite number"
+    low = float(var.min) if var.min is not None else -math.inf
+    high = float(var.max) if var.max is not None else math.inf
+    return "" if low <= value <= high else f"outside its range [{low:g}, {high:g}]"

@@ -19,13 +19,13 @@ runs. ``cosim run`` and campaigns step it in a worker process of its own
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
 from cosim.core.errors import CosimError
 from cosim.core.fmu import FmuComponent
+from cosim.core.fmu_archive import why_not_valid
 
 __all__ = ["DIAGNOSTIC_OUTPUTS", "FmuController"]
 
@@ -86,15 +86,10 @@ class FmuController(FmuComponent):
         :class:`CosimError` (bad input: nothing has run)."""
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise CosimError(f"{self.path}: parameter {key}={value!r}: expected a number")
-        if not math.isfinite(value):
-            raise CosimError(f"{self.path}: parameter {key}={value!r}: expected a finite "
-                             "number")
-        var = self.variable_of(key)
-        low = float(var.min) if var.min is not None else -math.inf
-        high = float(var.max) if var.max is not None else math.inf
-        if not low <= value <= high:
-            raise CosimError(f"{self.path}: parameter {key}={value!r}: outside its range "
-                             f"[{low:g}, {high:g}] (the FMU's modelDescription)")
+        why = why_not_valid(self.variable_of(key), value)
+        if why:
+            raise CosimError(f"{self.path}: parameter {key}={value!r}: {why} (the FMU's "
+                             "modelDescription)")
 
     def _expand(self, given: dict[str, Any]) -> dict[str, Any]:
         """``key=value`` for a family of parameters ``key.<signal>`` (the robust MPC's option

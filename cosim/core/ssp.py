@@ -23,7 +23,7 @@ from xml.sax.saxutils import quoteattr
 from cosim.core.atomicio import replacing
 from cosim.core.build import add_member
 from cosim.core.errors import CosimError, SimulationFailed
-from cosim.core.fmu_archive import read_model_description
+from cosim.core.fmu_archive import read_model_description, why_not_valid
 
 __all__ = ["connections", "rehearse", "system_structure", "write_ssp"]
 
@@ -41,13 +41,9 @@ def _real_variables(path: Path) -> dict[str, Any]:
 def _check_value(option: str, name: str, value: float, var: Any, fmu: Path) -> None:
     """A value the SSP gives variable ``var`` of ``fmu``: finite and inside its declared
     box, else :class:`CosimError` naming the option."""
-    if not math.isfinite(value):
-        raise CosimError(f"{option} {name}={value!r}: expected a finite number")
-    low = float(var.min) if var.min is not None else -math.inf
-    high = float(var.max) if var.max is not None else math.inf
-    if not low <= value <= high:
-        raise CosimError(f"{option} {name}={value:g}: outside its range [{low:g}, {high:g}] "
-                         f"in {fmu}")
+    why = why_not_valid(var, value)
+    if why:
+        raise CosimError(f"{option} {name}={value:g}: {why} in {fmu}")
 
 
 def connections(plant: Path, controller: Path) -> tuple[list[tuple[str, str]], list[str]]:
