@@ -46,8 +46,6 @@ LOCAL_CONFIG = {
     # threads: Dask queues "root-ish" tasks only); runs that wait on a worker that dies are
     # submitted again without using up a try
     "distributed.scheduler.worker-saturation": 1.0,
-    # the isolated FMU worker is a child process of the Dask worker
-    "distributed.worker.daemon": False,
     "distributed.admin.tick.limit": "1h",
 }
 

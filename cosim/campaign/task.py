@@ -157,7 +157,7 @@ def _plant(task: dict[str, Any], folder: Path, seed: int) -> Any:
         vmap = varmap.VarMap(Path(path), {m[0]: varmap.MappedSignal(*m) for m in entries})
     else:
         vmap = varmap.load(folder / task["map"]) if task.get("map") else None
-    if task.get("isolate"):   # a daemon Dask worker cannot start it: the run says so
+    if task.get("isolate"):
         from cosim.core.isolated import DEFAULT_STEP_TIMEOUT, IsolatedFmuComponent
 
         return IsolatedFmuComponent(folder / name, interface=task["interface"], varmap=vmap,

@@ -3,10 +3,11 @@ timeout can kill.
 
 An FMU is native code (a plant's, a controller's): a segmentation fault, an ``abort()`` or an
 ``exit()`` inside it would end the runner, results and all, and a call stuck in a loop would
-hang it for ever, deaf to Ctrl-C. A :class:`Worker` runs a *server* object, built in a
-``spawn``-ed child process from a ``module:Class`` name and keyword arguments, and calls its
-methods over a pipe: one round trip per call, in small tuples of strings and floats
-(:mod:`cosim.core.isolated` serves the FMUs so).
+hang it for ever, deaf to Ctrl-C. A :class:`Worker` runs a *server* object, built in a child
+process (a fresh interpreter: this process's ``__main__`` is never run again there) from a
+``module:Class`` name and keyword arguments, and calls its methods over a socket: one round
+trip per call, in small tuples of strings and floats (:mod:`cosim.core.isolated` serves the
+FMUs so).
 
 * A call the worker does not answer within :attr:`Worker.timeout` seconds kills the worker
   (SIGKILL) and fails: ``"doStep at t=500.0 took longer than the step timeout of 5 s (worker
@@ -19,7 +20,8 @@ methods over a pipe: one round trip per call, in small tuples of strings and flo
   then kills it at once: nothing waits for a hung call.
 * The worker ignores those signals and sits in a process group of its own: the parent decides
   when it ends, and a signal the native code sends to its own group never reaches the parent.
-  It dies with its parent (``PR_SET_PDEATHSIG`` on Linux).
+  It dies with its parent (``PR_SET_PDEATHSIG`` on Linux). It is a plain child process, not
+  a :mod:`multiprocessing` one, so a daemonic process (a Dask worker) may start it too.
 * Its standard output and error go into a pipe that a thread of the parent drains, keeping the
   last :data:`OUTPUT_TAIL` bytes: a flood of output costs neither memory nor the terminal,
   and the last line explains a death.
@@ -32,10 +34,13 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import importlib
-import multiprocessing as mp
+import json
 import os
+import select
 import shutil
 import signal as _signal
+import socket
+import subprocess
 import sys
 import tempfile
 import threading
@@ -56,23 +61,23 @@ LAST_WORDS = 200
 _PR_SET_PDEATHSIG = 1
 
 
-def _detach(out: Any) -> None:  # pragma: no cover - runs in the child process
-    """Make this process a worker: it dies with its parent, ignores the signals the parent
-    handles, leaves the parent's process group, and writes its output into ``out``."""
+#: What the child interpreter runs: the parent's import path first, then :func:`_main` with
+#: its socket's file descriptor and the parent's process id.
+_BOOT = ("import json, sys; sys.path[:0] = json.loads(sys.argv[3]); "
+         "from cosim.core.worker import _main; _main(int(sys.argv[1]), int(sys.argv[2]))")
+
+
+def _detach(parent: int) -> None:  # pragma: no cover - runs in the child process
+    """Make this process a worker: it dies with its parent and ignores the signals the
+    parent handles (the parent kills it)."""
     if sys.platform.startswith("linux"):
         with contextlib.suppress(Exception):
             libc = ctypes.CDLL(None, use_errno=True)
             libc.prctl(_PR_SET_PDEATHSIG, _signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:   # the parent died before the line above
+        os._exit(1)
     for sig in (_signal.SIGINT, _signal.SIGTERM, _signal.SIGHUP):
         _signal.signal(sig, _signal.SIG_IGN)
-    with contextlib.suppress(OSError):
-        os.setpgid(0, 0)
-    for stream in (sys.stdout, sys.stderr):
-        with contextlib.suppress(Exception):
-            stream.flush()
-    os.dup2(out.fileno(), 1)
-    os.dup2(out.fileno(), 2)
-    out.close()
 
 
 def _build(server: str, kwargs: dict[str, Any]) -> Any:  # pragma: no cover - child process
@@ -80,13 +85,17 @@ def _build(server: str, kwargs: dict[str, Any]) -> Any:  # pragma: no cover - ch
     return getattr(importlib.import_module(module), name)(**kwargs)
 
 
-def _serve(conn: Any, out: Any, server: str,
-           kwargs: dict[str, Any]) -> None:  # pragma: no cover - child process
-    """The worker's loop: ``(method, *args)`` requests, ``("ok", result)`` or ``(kind, message)``
-    replies (``"error"``: a :class:`CosimError`, bad input; ``"failed"``: anything else);
+def _main(fd: int, parent: int) -> None:  # pragma: no cover - child process
+    """The worker's loop on the socket ``fd``: first ``(server, kwargs)``, then
+    ``(method, *args)`` requests answered ``("ok", result)`` or ``(kind, message)``
+    (``"error"``: a :class:`CosimError`, bad input; ``"failed"``: anything else);
     ``("stop",)`` ends it."""
-    _detach(out)
+    from multiprocessing.connection import Connection
+
+    _detach(parent)
+    conn = Connection(fd)
     try:
+        server, kwargs = conn.recv()
         obj, broken = _build(server, kwargs), None
     except CosimError as exc:
         obj, broken = None, ("error", str(exc))
@@ -122,15 +131,19 @@ def _serve(conn: Any, out: Any, server: str,
         except (OSError, ValueError):
             break
     conn.close()
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
     # skip interpreter teardown: native libraries stay loaded and some (embedded
     # interpreters, static destructors) do not survive it; nothing is left to flush
     os._exit(0)
 
 
 class _Tail:
-    """Drains a pipe in a daemon thread, keeping its last :data:`OUTPUT_TAIL` bytes."""
+    """Drains a pipe (its file descriptor ``reader``) in a daemon thread, keeping its last
+    :data:`OUTPUT_TAIL` bytes; closes it at the end."""
 
-    def __init__(self, reader: Any) -> None:
+    def __init__(self, reader: int) -> None:
         self._reader = reader
         self._data = bytearray()
         self._lock = threading.Lock()
@@ -140,7 +153,7 @@ class _Tail:
         self._thread.start()
 
     def _drain(self) -> None:
-        fd = self._reader.fileno()
+        fd = self._reader
         while True:
             try:
                 chunk = os.read(fd, 65536)
@@ -153,7 +166,7 @@ class _Tail:
                 self._data += chunk
                 del self._data[:-OUTPUT_TAIL]
         with contextlib.suppress(OSError):
-            self._reader.close()
+            os.close(fd)
 
     def last_line(self, wait: float = 1.0) -> str:
         """The last non-blank line written (once the writer has closed the pipe, or after
@@ -197,6 +210,7 @@ class Worker:
         self.scratch = scratch
         self._proc: Any = None
         self._conn: Any = None
+        self._poller: Any = None
         self._tail: _Tail | None = None
         self._folder: Path | None = None
         self.busy = False
@@ -212,35 +226,43 @@ class Worker:
         return self._conn is not None
 
     def start(self) -> None:
-        """Start the worker process (the server is built there).
+        """Start the worker process; the server is built there (a failure to build it
+        answers every call).
 
         Raises
         ------
         CosimError
-            This process is a daemon (a Dask worker started as one), which may not have
-            child processes.
+            The worker process cannot be started (no process left, no memory).
         """
+        from multiprocessing.connection import Connection
+
         self.stop()
-        if mp.current_process().daemon:
-            raise CosimError(f"{self.label}: runs in a worker process of its own, and this "
-                             "process is a daemon, which may not start one (a Dask worker: "
-                             "start it with DASK_DISTRIBUTED__WORKER__DAEMON=False)")
-        ctx = mp.get_context("spawn")
-        parent, child = ctx.Pipe()
-        reader, writer = ctx.Pipe(duplex=False)
         kwargs = dict(self.kwargs)
         if self.scratch:
             self._folder = Path(tempfile.mkdtemp(prefix="cosim-fmu-"))
             kwargs["scratch"] = str(self._folder)
-        self._proc = ctx.Process(target=_serve, args=(child, writer, self.server, kwargs),
-                                 daemon=True, name=f"cosim-worker {self.label}")
+        ours, theirs = socket.socketpair()
+        reader, writer = os.pipe()
         try:
-            self._proc.start()
+            self._proc = subprocess.Popen(
+                [sys.executable, "-c", _BOOT, str(theirs.fileno()), str(os.getpid()),
+                 json.dumps(sys.path)],
+                stdin=subprocess.DEVNULL, stdout=writer, stderr=writer,
+                pass_fds=(theirs.fileno(),), process_group=0)
+        except OSError as exc:
+            ours.close()
+            os.close(reader)
+            self.kill()
+            raise CosimError(f"{self.label}: cannot start its worker process: "
+                             f"{exc.strerror or exc}") from None
         finally:
-            child.close()
-            writer.close()
-        self._conn = parent
+            theirs.close()
+            os.close(writer)
+        self._conn = Connection(ours.detach())
+        self._poller = select.poll()   # made once: a call waits with one system call
+        self._poller.register(self._conn.fileno(), select.POLLIN)
         self._tail = _Tail(reader)
+        self._conn.send((self.server, kwargs))
 
     def call(self, what: str, method: str, *args: Any) -> Any:
         """The server's ``method(*args)``; ``what`` names the call in messages.
@@ -259,7 +281,7 @@ class Worker:
         try:
             self.busy = True
             conn.send((method, *args))
-            if self.timeout is not None and not conn.poll(self.timeout):
+            if self.timeout is not None and not self._poller.poll(1e3 * self.timeout):
                 self.kill()
                 raise SimulationFailed(f"{self.label}: {what} took longer than the step "
                                        f"timeout of {self.timeout:g} s (worker killed)")
@@ -279,8 +301,9 @@ class Worker:
         proc, tail = self._proc, self._tail
         code = None
         if proc is not None:
-            proc.join(timeout=TERMINATE_WAIT)
-            code = proc.exitcode
+            with contextlib.suppress(subprocess.TimeoutExpired):
+                proc.wait(timeout=TERMINATE_WAIT)
+            code = proc.returncode
         words = tail.last_line() if tail is not None else ""
         self.kill()
         if code is not None and code < 0:
@@ -303,11 +326,10 @@ class Worker:
                 conn.close()
         proc, self._proc = self._proc, None
         if proc is not None:
-            if proc.is_alive():
-                proc.kill()
-            proc.join()
-            with contextlib.suppress(ValueError):
-                proc.close()
+            if proc.poll() is None:
+                with contextlib.suppress(OSError):
+                    proc.kill()
+            proc.wait()
         self.busy = False
         self._tail = None
         if self._folder is not None:
@@ -328,7 +350,8 @@ class Worker:
                 pass
             proc = self._proc
             if proc is not None:
-                proc.join(timeout=TERMINATE_WAIT)
+                with contextlib.suppress(subprocess.TimeoutExpired):
+                    proc.wait(timeout=TERMINATE_WAIT)
         self.kill()
 
     def output_bytes(self) -> int:

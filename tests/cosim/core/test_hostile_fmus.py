@@ -237,3 +237,30 @@ options = {{ fault = {FAULTS["segfault"]}, fault_time = {FAULT_TIME} }}
             if status == "failed":
                 assert "worker died (signal 11, SIGSEGV)" in summary["reason"]
                 assert summary["steps"] == 20
+
+
+@pytest.mark.slow
+def test_a_campaign_with_isolate_goes_on_past_a_crashing_plant(tmp_path: Path,
+                                                               hostile_dir: Path) -> None:
+    """``isolate = true`` on a real Dask worker (a daemonic one may start the workers too):
+    the plant FMU segfaults at 500 s in every run, each run fails alone with the reason, the
+    Python controller (in a worker of its own) and the campaign go on."""
+    (tmp_path / "Hostile.fmu").write_bytes((hostile_dir / "HostilePlant.fmu").read_bytes())
+    _scenario(tmp_path, "segfault")
+    spec = tmp_path / "spec.toml"
+    spec.write_text("""[campaign]
+name = "hostile-plant"
+runs = 3
+seed = 1
+scenario = "sc.csv"
+plant = "Hostile.fmu"
+controller = "pi"
+isolate = true
+""")
+    result = cosim.run_campaign(spec, tmp_path / "out", workers=1)
+    assert result.status != "ok"
+    for run in range(3):
+        summary = json.loads((tmp_path / "out" / "runs" / f"{run:06d}-pi" / "summary.json")
+                             .read_text())
+        assert summary["status"] == "failed" and summary["steps"] == 20
+        assert "doStep at t=500.0 failed: worker died (signal 11, SIGSEGV)" in summary["reason"]

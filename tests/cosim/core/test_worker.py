@@ -1,10 +1,14 @@
 """A server in a worker process (:mod:`cosim.core.worker`): calls answered, a hung call
 killed at its timeout, a death named with the worker's last output, a flood of output
-drained and dropped, errors by kind, the worker in a process group of its own."""
+drained and dropped, errors by kind, the worker in a process group of its own, started from
+a script that has no main guard."""
 
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 import pytest
 
@@ -12,6 +16,7 @@ from cosim.core.errors import CosimError, SimulationFailed
 from cosim.core.worker import OUTPUT_TAIL, Worker
 
 SERVER = "tests.cosim.core.worker_servers:Echo"
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture
@@ -82,3 +87,23 @@ def test_a_server_that_cannot_be_built_answers_every_call_with_why() -> None:
                 w.call("echoing", "echo", 1)
     finally:
         w.stop()
+
+
+def test_a_script_without_a_main_guard_starts_a_worker(tmp_path: Path) -> None:
+    """The worker is a fresh interpreter: a user's script that starts one at its top level
+    (no ``if __name__ == "__main__":``) is not run again in it, as ``multiprocessing``'s
+    spawn would."""
+    script = tmp_path / "script.py"
+    script.write_text(f"""
+from cosim.core.worker import Worker
+print("script ran")
+w = Worker("echo", {SERVER!r}, {{"greeting": "hi"}}, timeout=30.0)
+w.start()
+print(w.call("echoing", "echo", 7))
+w.stop()
+""")
+    proc = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                          timeout=120, check=False, cwd=ROOT,
+                          env=dict(os.environ, PYTHONPATH=str(ROOT)))
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == "script ran\n('hi', 7)\n"
