@@ -31,6 +31,7 @@ from hypothesis import strategies as st  # noqa: E402
 
 from controllers.errors import ControllersError  # noqa: E402
 from cosim.core.errors import CosimError, SimulationFailed  # noqa: E402
+from tests.cosim.pyfmu_models import MAP  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 #: Each example's time limit: a reader that takes longer is as good as hung.
@@ -117,16 +118,6 @@ def _read(path: Path, read: Callable[[Path], Any]) -> None:
 
 SCENARIO = (ROOT / "scenarios" / "leak_tank1.csv").read_text()
 PROBLEM = (ROOT / "fmus" / "fourtank" / "problem.toml").read_text()
-MAP = """[signals.qa]
-variable = "Fa"
-unit = "l/min"
-scale = 60000.0
-
-[signals.h1]
-variable = "L1"
-unit = "cm"
-scale = 100.0
-"""
 LOG = "time,qa,qb,h1,h2,split\n" + "".join(
     f"{25 * k},{4e-4 + 1e-5 * (k % 7)},{5e-4 - 1e-5 * (k % 5)},{0.6 + 0.01 * (k % 3)},"
     f"{0.7 - 0.01 * (k % 4)},{'train' if k < 30 else 'val' if k < 35 else 'test'}\n"

@@ -232,7 +232,8 @@ class Worker:
         Raises
         ------
         CosimError
-            The worker process cannot be started (no process left, no memory).
+            The worker process cannot be started (no process left, no memory), or its
+            arguments cannot be sent to it (not picklable).
         """
         from multiprocessing.connection import Connection
 
@@ -262,7 +263,12 @@ class Worker:
         self._poller = select.poll()   # made once: a call waits with one system call
         self._poller.register(self._conn.fileno(), select.POLLIN)
         self._tail = _Tail(reader)
-        self._conn.send((self.server, kwargs))
+        try:
+            self._conn.send((self.server, kwargs))
+        except Exception as exc:   # an option that cannot travel (a function, a lock)
+            self.kill()
+            raise CosimError(f"{self.label}: its arguments cannot be sent to its worker "
+                             f"process: {type(exc).__name__}: {exc}") from None
 
     def call(self, what: str, method: str, *args: Any) -> Any:
         """The server's ``method(*args)``; ``what`` names the call in messages.

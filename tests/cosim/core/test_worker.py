@@ -107,3 +107,11 @@ w.stop()
                           env=dict(os.environ, PYTHONPATH=str(ROOT)))
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout == "script ran\n('hi', 7)\n"
+
+
+def test_arguments_that_cannot_travel_are_named() -> None:
+    w = Worker("echo", SERVER, {"greeting": lambda: "hi"}, timeout=30.0)
+    with pytest.raises(CosimError, match=r"^echo: its arguments cannot be sent to its worker "
+                                         r"process: "):
+        w.start()
+    assert not w.alive
