@@ -22,6 +22,10 @@ every step), zero observer gains, and, for the tracking law, the output rows tig
 ``y + d̂`` (the filtered output mismatch, the output the plant will show). No guarantee follows;
 the summary says ``certified: false`` with the reason, and the run prints it once
 (:attr:`Certification.notice`).
+
+A model no mode runs (``ν ≥ 1``: an infinite terminal weight,
+:meth:`controllers.certification.certificates.Certificate.unusable`) is refused in the words
+of ``cosim certify``'s verdict, *not usable*, whatever the option.
 """
 
 from __future__ import annotations
@@ -99,27 +103,37 @@ def margin_text(model: Any, cert: Any) -> str:
     return ", ".join(parts)
 
 
+#: How a refusal of a model no mode runs begins, after the controller's name (``cosim certify``
+#: reads the reason after it: its verdict and ``cosim run``'s error are the same words).
+NOT_USABLE = "the model is not usable: "
+
+
+class NotUsable(CosimError):
+    """The robust MPC refuses the model, certified or not: ``controller 'mpc': the model is not
+    usable: <why; fix: ...>`` (:attr:`why`)."""
+
+    def __init__(self, component: str, why: str) -> None:
+        super().__init__(f"controller {component!r}: {NOT_USABLE}{why}")
+        self.why = why
+
+
 def go_uncertified(ctrl: Any, reason: str) -> None:
     """Switch ``ctrl`` to the uncertified design (module docstring): the same law
     (:meth:`cosim_adapters.law.ControlLaw.uncertified`) on the certificate tightened by the
     measured prediction error, zero observer gains; or refuse when it requires a
-    certificate."""
+    certificate, or when no mode runs the model (in the words of ``cosim certify``'s
+    verdict)."""
     from controllers.certification.certificates import uncertified_certificate
     from controllers.observer import GRUObserver
 
+    cert = ctrl.cert
+    unusable = cert.unusable()
+    if unusable:
+        raise NotUsable(ctrl.name, unusable)
     if ctrl.certificate_mode != "auto":
         raise CosimError(f"controller {ctrl.name!r}: the model is not certified for this run "
                          f"({reason}); with the option certificate=\"auto\" (the default; not "
                          "--require-certificate) it runs uncertified")
-    cert = ctrl.cert
-    if not np.isfinite(cert.s):
-        # the terminal weight of eq:definition_s grows without bound (rho_s >= 1): no
-        # cost, certified or not, is defined; the one tightening left cannot help
-        raise CosimError(f"controller {ctrl.name!r}: the model cannot be controlled: "
-                         f"{reason}; and its terminal weight s (eq:definition_s) is infinite "
-                         f"(rho_s = {cert.rho_s:.4g} >= 1, lem:Vs: the model is not "
-                         "contractive), so not even the uncertified mode has a cost to "
-                         "minimise; retrain the model (cosim train) for a certificate")
     cert_u = uncertified_certificate(cert, measured_margins(ctrl, cert)[0])
     ctrl.law = ctrl.law.uncertified(cert_u, reason)
     ctrl.observer = GRUObserver.from_certificate(ctrl.cert)

@@ -244,20 +244,20 @@ class TrackingLaw:
         return ""
 
     def uncertified(self, cert: Any, reason: str) -> TrackingLaw:
-        from cosim_adapters.certification import margin_text
+        from cosim_adapters.certification import NotUsable, margin_text
 
         design = self.design
         cert_u, tracker, disturbance, _ = tracking_design(self.model, cert, design,
                                                           gains_certified=False, cert=cert)
         if not tracker.hypotheses["Ys_nonempty"]:
             given = design["alpha_c"]
-            raise CosimError(
-                f"controller {self.component!r}: {reason}, and even the model's measured "
-                f"prediction error ({margin_text(self.model, cert_u)}) leaves no admissible "
-                "output in the box" + (f" with alpha_c = {given:g}: a smaller alpha_c"
-                                       if given is not None else ": the model is too far "
-                                       "from the plant to control it; train it longer or on "
-                                       "more data"))
+            raise NotUsable(
+                self.component,
+                f"{reason}, and even the model's measured prediction error "
+                f"({margin_text(self.model, cert_u)}) leaves no admissible output in the box"
+                + (f" with alpha_c = {given:g}; fix: a smaller alpha_c" if given is not None
+                   else ": the model is too far from the plant to control it; fix: train it "
+                   "longer or on more data"))
         return TrackingLaw(self.model, cert_u, tracker, disturbance, design, self.component,
                            certified=False)
 

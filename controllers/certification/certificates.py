@@ -54,9 +54,12 @@ from controllers.certification.design import MAX_HORIZON, gain, horizon, weight
 from controllers.errors import DataError, DesignError, SetpointError
 from controllers.problem import ControlProblem, constraint_names, output_constraints
 
-__all__ = ["JSON_KEYS", "MAX_HORIZON", "Certificate", "Reference", "admissible_ranges",
+__all__ = ["JSON_KEYS", "MAX_HORIZON", "NU_FIX", "Certificate", "Reference", "admissible_ranges",
            "box_bounds", "box_ranges", "compute_certificate", "uncertified_certificate",
            "w_y_bar_from_data"]
+
+#: What would make a model with ``ν ≥ 1`` usable (``cosim certify``'s fix, ``cosim run``'s).
+NU_FIX = "train the model with the nu constraint (cosim train keeps nu <= 0.98)"
 
 JSON_KEYS = ("sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r", "nu_o",
              "rho_o", "c_o", "kappa", "L_max", "w_y_bar", "w_bar", "w_L", "a", "b", "e_o0",
@@ -213,6 +216,23 @@ class Certificate:
         return box_bounds(self.L, self.admissible_box())
 
     # -- hypotheses ------------------------------------------------------------------------
+    def unusable(self) -> str:
+        """Why no robust MPC runs with this model, certified or uncertified, with what would
+        fix it (one sentence; ``""`` when one does): the one verdict ``cosim certify``
+        prints and saves and ``cosim run`` refuses with.
+
+        With ``ν ≥ 1`` (``th:stability-bonassi``) the contraction ``ρ_s`` of ``lem:Vs`` is
+        ``≥ 1``, so the terminal weight ``s`` of ``eq:definition_s`` is infinite: the FHOCP
+        has no finite cost, and no tightening, the theorem's or the uncertified mode's
+        measured one, makes it so.
+        """
+        if self.nu < 1 and math.isfinite(self.s):
+            return ""
+        return (f"stability index nu = {self.nu:.4g} >= 1 (th:stability-bonassi), so rho_s "
+                f"= {self.rho_s:.4g} >= 1 (lem:Vs) and the terminal weight s "
+                "(eq:definition_s) is infinite: the FHOCP has no finite cost, certified or "
+                f"not; fix: {NU_FIX}")
+
     def failures(self, y_bar_norm: Sequence[float] | None = None) -> list[str]:
         """Each failed hypothesis of ``th:feasibility-stability``, as one message each.
 

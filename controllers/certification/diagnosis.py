@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from controllers.certification.certificates import box_ranges
+from controllers.certification.certificates import NU_FIX, box_ranges
 
 __all__ = ["Diagnosis", "Finding", "diagnose", "required_error"]
 
@@ -59,12 +59,15 @@ class Diagnosis:
         Every finding holds.
     usable : bool
         The robust MPC runs with this model (certified, or uncertified with a measured
-        tightening): ν < 1.
+        tightening): :meth:`~controllers.certification.certificates.Certificate.unusable`
+        names no reason.
     findings : list of Finding
     admissible : list of (name, lo, hi)
         The set-points that pass, per output, physical units (``None``: none).
     required_w_y_bar : float or None
         The largest ``w̄_y`` (normalised) with which the set-points asked for would pass.
+    unusable : str
+        Why the model is not usable, with what would fix it (``""`` when it is).
     """
 
     law: str
@@ -73,6 +76,7 @@ class Diagnosis:
     findings: list[Finding] = field(default_factory=list)
     admissible: list[tuple[str, float | None, float | None]] = field(default_factory=list)
     required_w_y_bar: float | None = None
+    unusable: str = ""
 
     def reasons(self) -> list[str]:
         """The failing hypotheses, one line each."""
@@ -80,6 +84,7 @@ class Diagnosis:
 
     def to_json(self) -> dict[str, Any]:
         return {"law": self.law, "certified": self.certified, "usable": self.usable,
+                "unusable_reason": self.unusable or None,
                 "findings": [f.to_json() for f in self.findings],
                 "admissible_setpoints": {n: None if lo is None else [lo, hi]
                                          for n, lo, hi in self.admissible},
@@ -141,8 +146,7 @@ def diagnose(model: Any, cert: Any, law: str, setpoints: Sequence[np.ndarray],
     findings = [Finding("stability (δISS, th:stability-bonassi)", cert.nu < 1,
                         f"stability index nu = {cert.nu:.4g} " + ("< 1" if cert.nu < 1
                                                                     else ">= 1"),
-                        "" if cert.nu < 1 else "train the model with the nu constraint "
-                        "(cosim train keeps nu <= 0.98)")]
+                        "" if cert.nu < 1 else NU_FIX)]
     findings += [Finding(f"{law} law design", False, msg, "see the docs' certificates "
                          "guide") for msg in design_failures]
     ranges = box_ranges(model, cert.L, admissible_rhs)
@@ -183,5 +187,6 @@ def diagnose(model: Any, cert: Any, law: str, setpoints: Sequence[np.ndarray],
                 f"{_setpoint_text(model, y)} is outside the set-points that pass "
                 f"({_interval_text(ranges, units)})", fix))
     certified = all(f.holds for f in findings)
-    return Diagnosis(law=law, certified=certified, usable=bool(cert.nu < 1),
+    return Diagnosis(law=law, certified=certified, usable=not cert.unusable(),
+                     unusable=cert.unusable(),
                      findings=findings, admissible=ranges, required_w_y_bar=required)

@@ -18,7 +18,13 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from cosim.core.errors import EXIT_FAILED, EXIT_OK, CosimError, exit_codes_help
+from cosim.core.errors import (
+    EXIT_FAILED,
+    EXIT_INPUT_ERROR,
+    EXIT_OK,
+    CosimError,
+    exit_codes_help,
+)
 
 __all__ = ["EPILOG", "EXIT_NOTES", "HELP", "figure", "register", "run"]
 
@@ -27,6 +33,8 @@ EXIT_NOTES = {
     EXIT_OK: "certified: every hypothesis holds",
     EXIT_FAILED: "usable but not certified: a hypothesis fails (named, with what would fix "
                  "it); the robust MPC runs uncertified with this model",
+    EXIT_INPUT_ERROR: "not usable: no robust MPC runs this model, certified or not (named "
+                      "why, with what would fix it); cosim run refuses it in the same words",
 }
 
 
@@ -263,6 +271,9 @@ def run(args: argparse.Namespace) -> int:
         design = [m for m in failures[:n_design] if not m.startswith("δISS")]
         verdict = _paper_verdict(model, cert, kwargs, setpoints,
                                  design + ([no_theta] if no_theta else []))
+    if verdict.usable and not verdict.certified:
+        verdict.unusable = _refusal(args, setpoints_phys)   # the run's own judgement
+        verdict.usable = not verdict.unusable
     if args.json:
         docs = [cert.to_json(sp) for _, sp, _, _ in per_setpoint] or [cert.to_json()]
         if tracking is not None:
@@ -282,12 +293,41 @@ def run(args: argparse.Namespace) -> int:
         print(f"figure written to {path}", file=sys.stderr)
     if args.save:
         _save(args.model, model, cert, verdict, setpoints_phys, args.quiet)
+    if not verdict.usable:
+        print(f"cosim certify: not usable: {verdict.unusable}", file=sys.stderr)
+        return EXIT_INPUT_ERROR
     if not verdict.certified:
         print(f"cosim certify: not certified ({len(verdict.reasons())} hypothesis check(s) "
               "failed); the robust MPC runs this model uncertified, or refuses with "
               "--require-certificate", file=sys.stderr)
         return EXIT_FAILED
     return EXIT_OK
+
+
+def _refusal(args: argparse.Namespace, setpoints_phys: list) -> str:
+    """Why the robust MPC of the design certified refuses the model in its uncertified mode
+    (``""`` when it runs it): the controller ``cosim run`` would build, for these set-points
+    (:class:`cosim_adapters.certification.NotUsable`), so that the verdict and the run never
+    disagree."""
+    import warnings
+
+    from cosim.core import registry
+    from cosim_adapters.certification import NotUsable
+
+    options: dict[str, Any] = {"model": args.model, "law": args.law, "N": args.N}
+    for key in ("e_o0", "gain_scale", "problem"):
+        if getattr(args, key, None) is not None:
+            options[key] = getattr(args, key)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")   # a slow fallback is not a refusal
+            ctrl = registry.create("robust-mpc", options)
+            names = list(ctrl.model.output_names)
+            ctrl.expect_setpoints([dict(zip(names, map(float, sp), strict=True))
+                                   for sp in setpoints_phys])
+    except NotUsable as exc:
+        return exc.why
+    return ""
 
 
 def _check_args(args: argparse.Namespace) -> None:
@@ -390,7 +430,8 @@ def _paper_verdict(model: Any, cert: Any, kwargs: dict, setpoints: list,
 def _print_verdict(verdict: Any) -> None:
     word = ("CERTIFIED" if verdict.certified else
             "NOT CERTIFIED (usable: the robust MPC runs uncertified, with the model's measured "
-            "error as its tightening)")
+            "error as its tightening)" if verdict.usable else
+            "NOT USABLE (the robust MPC refuses this model, certified or not)")
     print(f"verdict ({verdict.law} law): {word}")
     for f in verdict.findings:
         print(f"  {'holds' if f.holds else 'FAILS'}: {f.hypothesis}: {f.detail}")

@@ -94,16 +94,20 @@ def test_quiet_prints_only_the_verdict_of_an_uncertified_model(model_file: Path,
     assert "not certified (1 hypothesis check(s) failed)" in captured.err
 
 
-def test_non_delta_iss_model_exit_1(tmp_path: Path, capsys) -> None:
+def test_non_delta_iss_model_is_not_usable_exit_2(tmp_path: Path, capsys) -> None:
+    """ν ≥ 1: the table, the failing hypothesis with its fix, the verdict NOT USABLE and one
+    line on standard error (exit 2: cosim run refuses it)."""
     m = random_gru_model(0)
     m.params["U_z"] *= 40
     m.w_y_bar = 0.01
     path = tmp_path / "bad.json"
     m.save(path)
-    assert main(["certify", str(path)]) == 1
-    out = capsys.readouterr().out
-    assert "th:stability-bonassi" in out
-    assert "FAILS: stability (δISS, th:stability-bonassi): stability index nu = " in out
+    assert main(["certify", str(path)]) == 2
+    captured = capsys.readouterr()
+    assert "th:stability-bonassi" in captured.out
+    assert "FAILS: stability (δISS, th:stability-bonassi): stability index nu = " in captured.out
+    assert captured.err.startswith("cosim certify: not usable: stability index nu = ")
+    assert captured.err.count("\n") == 1
 
 
 def test_bad_model_file_exit_2_one_line(tmp_path: Path, capsys) -> None:
@@ -262,7 +266,10 @@ def test_save_writes_the_verdict_certified_or_not(case: str, tmp_path: Path,
                                                   no_admissible_setpoint: Path,
                                                   capsys) -> None:
     """--save always writes what was computed: the gains, w̄_y and the verdict, whose
-    ``certified`` is false with the reasons (exit 1)."""
+    ``certified`` is false with the reasons. Both models are refused by the robust MPC (ν ≥ 1:
+    an infinite terminal weight; a test error wider than the box: no admissible output even
+    with the measured tightening): exit 2, the saved ``usable`` false with the reason, the
+    verdict NOT USABLE, and ``cosim run`` refusing it in the same words."""
     if case == "nu":  # ν ≥ 1 (th:stability-bonassi fails)
         m = random_gru_model(0)
         m.params["U_z"] *= 40
@@ -272,16 +279,30 @@ def test_save_writes_the_verdict_certified_or_not(case: str, tmp_path: Path,
         extra: list[str] = []
     else:
         path, extra = no_admissible_setpoint, ["--gain-scale", "0"]
-    assert main(["certify", str(path), "--save", *extra]) == 1
-    err = capsys.readouterr().err
+    assert main(["certify", str(path), "--save", *extra]) == 2
+    captured = capsys.readouterr()
+    err = captured.err
     assert f"verdict (certified: false) to {path}" in err
     saved = GRUModel.load(path)
     assert saved.certificate["certified"] is False and saved.L_z is not None
     failing = [f for f in saved.certificate["findings"] if not f["holds"]]
     assert failing and failing[0]["hypothesis"] == (
         "stability (δISS, th:stability-bonassi)" if case == "nu" else "room for set-points")
-    assert saved.certificate["usable"] is (case != "nu")
+    assert saved.certificate["usable"] is False
     assert not [p.name for p in tmp_path.iterdir() if p.name.startswith(".")]  # no temp file
+    assert "NOT USABLE (the robust MPC refuses this model" in captured.out
+    why = err.splitlines()[-1].removeprefix("cosim certify: not usable: ")
+    assert why == saved.certificate["unusable_reason"]
+    assert why.startswith("stability index nu = " if case == "nu" else
+                          "no admissible steady output: ")
+    assert ("fix: train the model" if case == "nu" else "fix: train it longer") in why
+    scenario = tmp_path / "s.csv"
+    scenario.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n250,,\n")
+    gains = ["--option", "gain_scale=0"] if extra else []   # the design certified
+    assert main(["run", str(scenario), "--model", str(path), "--out", str(tmp_path / "o"),
+                 *gains]) == 2
+    assert capsys.readouterr().err == (f"cosim run: error: controller 'mpc': the model is "
+                                       f"not usable: {why}\n")
 
 
 def test_save_on_a_full_disk_keeps_the_model_file(model_file: Path, tmp_path: Path) -> None:
