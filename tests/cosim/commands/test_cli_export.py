@@ -122,6 +122,6 @@ def test_a_model_no_law_can_control_is_named_in_the_users_terms(
                  ["run", str(scenario), "--model", str(model), "--out", str(tmp_path / "o")]):
         code, err = _run(capsys, *argv)
         assert code == 2 and err.count("\n") == 1, err
-        assert "the model cannot be controlled" in err and "terminal weight s" in err, err
+        assert "the model is not usable" in err and "terminal weight s" in err, err
         assert "linprog" not in err and "SW" not in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv", "scaled.json"]
