@@ -23,9 +23,10 @@ every step), zero observer gains, and, for the tracking law, the output rows tig
 the summary says ``certified: false`` with the reason, and the run prints it once
 (:attr:`Certification.notice`).
 
-A model no mode runs (``ν ≥ 1``: an infinite terminal weight,
-:meth:`controllers.certification.certificates.Certificate.unusable`) is refused in the words
-of ``cosim certify``'s verdict, *not usable*, whatever the option.
+A model no mode runs is refused with :class:`NotUsable`, in the words of ``cosim certify``'s
+verdict, *not usable*, whatever the option: ``ν ≥ 1`` (an infinite terminal weight,
+:meth:`controllers.certification.certificates.Certificate.unusable`), or, for the tracking
+law, a measured tightening that leaves no admissible output in the box.
 """
 
 from __future__ import annotations
