@@ -2,7 +2,9 @@
 (its verdict line, exit code and saved ``certificate``), ``cosim run`` and ``cosim
 export-fmu`` agree on whether the robust MPC runs the model, and a refusal is the same
 sentence everywhere, never a library's message; a usable model runs a scenario with the model
-itself as the plant, without a constraint violation."""
+itself as the plant, without a constraint violation. Named cases, then generated ones
+(hypothesis): the shipped model with a weight array scaled, its gate biases shifted, its
+output box narrowed."""
 
 from __future__ import annotations
 
@@ -12,12 +14,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from controllers.model import DEFAULT_MODEL
 from cosim.cli import main
 
-#: The scenario: a set-point step to ``{h1},{h2}`` (each case's).
-SCENARIO = "time,ref.h1,ref.h2\n0,0.65,0.65\n500,{h1},{h2}\n1000,,\n"
+#: The scenario: a set-point step from ``start`` to ``{h1},{h2}`` (each case's).
+SCENARIO = "time,ref.h1,ref.h2\n0,{start}\n500,{h1},{h2}\n1000,,\n"
 
 
 def _scaled(*keys: str, by: float) -> Callable[[dict], None]:
@@ -56,46 +60,89 @@ def _run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
     return code, out, err
 
 
+def _agree(doc: dict, setpoint: str, folder: Path, capsys: pytest.CaptureFixture,
+           start: str = "0.65,0.65") -> int:
+    """certify, run (the model as the plant) and export-fmu on the model ``doc`` with the
+    scenario's second set-point ``setpoint``: the same verdict, the same refusal sentence,
+    no internal message, no violation on a usable model; certify's exit code."""
+    model = folder / "model.json"
+    model.write_text(json.dumps(doc))
+    scenario = folder / "s.csv"
+    h1, h2 = setpoint.split(",")
+    scenario.write_text(SCENARIO.format(start=start, h1=h1, h2=h2))
+    code, out, err = _run(capsys, "certify", str(model), "--save", "--setpoint", start,
+                          "--setpoint", setpoint)
+    assert code in (0, 1, 2) and not any(word in err for word in INTERNAL), err
+    verdict = json.loads(model.read_text())["certificate"]
+    usable = code < 2
+    assert verdict["usable"] is usable and verdict["certified"] is (code == 0), (code, err)
+    why = None
+    if not usable:
+        assert "NOT USABLE" in out
+        why = err.splitlines()[-1].removeprefix("cosim certify: not usable: ")
+        assert why == verdict["unusable_reason"] and "fix: " in why
+    for argv in (["run", str(scenario), "--model", str(model), "--plant", f"model:{model}",
+                  "--out", str(folder / "run"), "--quiet", "--no-figure"],
+                 ["export-fmu", str(model), "--out", str(folder / "C.fmu"), "--quiet"]):
+        status, _, err = _run(capsys, *argv)
+        assert not any(word in err for word in INTERNAL), err
+        if usable:
+            assert status == 0, err
+        else:
+            assert status == 2 and err == (f"cosim {argv[0]}: error: controller 'mpc': the "
+                                           f"model is not usable: {why}\n"), err
+    if usable:
+        summary = json.loads((folder / "run" / "summary.json").read_text())
+        assert sum(v["count"] for v in summary["kpis"]["violations"].values()) == 0
+    else:
+        assert not (folder / "run").exists() and not (folder / "C.fmu").exists()
+    return code
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", list(CASES))
 def test_certify_run_and_export_agree(case: str, tmp_path: Path,
                                       capsys: pytest.CaptureFixture) -> None:
     edit, setpoint, exit_code = CASES[case]
-    usable = exit_code < 2
     doc = json.loads(Path(DEFAULT_MODEL).read_text())
     edit(doc)
-    model = tmp_path / "model.json"
-    model.write_text(json.dumps(doc))
-    scenario = tmp_path / "s.csv"
-    h1, h2 = setpoint.split(",")
-    scenario.write_text(SCENARIO.format(h1=h1, h2=h2))
+    assert _agree(doc, setpoint, tmp_path, capsys) == exit_code
 
-    code, out, err = _run(capsys, "certify", str(model), "--save", "--setpoint", setpoint)
-    verdict = json.loads(model.read_text())["certificate"]
-    assert code == exit_code and verdict["usable"] is usable, (code, err)
-    assert verdict["certified"] is (code == 0)
-    if usable:
-        assert verdict["unusable_reason"] is None
-    else:
-        assert "NOT USABLE" in out
-        why = err.splitlines()[-1].removeprefix("cosim certify: not usable: ")
-        assert why == verdict["unusable_reason"] and "fix: " in why
 
-    for argv in (["run", str(scenario), "--model", str(model), "--plant", f"model:{model}",
-                  "--out", str(tmp_path / "run"), "--quiet", "--no-figure"],
-                 ["export-fmu", str(model), "--out", str(tmp_path / "C.fmu"), "--quiet"]):
-        code, _, err = _run(capsys, *argv)
-        assert not any(word in err for word in INTERNAL), err
-        if usable:
-            assert code == 0, err
+WEIGHTS = ("W_z", "U_z", "W_r", "U_r", "W_h", "U_h", "U_o")
+
+
+@st.composite
+def damaged_models(draw: st.DrawFn) -> dict:
+    """The shipped model, one to two of its weight arrays scaled (by 0.3 to 30), its update
+    gate's bias shifted, or its output box narrowed."""
+    doc = json.loads(Path(DEFAULT_MODEL).read_text())
+    for _ in range(draw(st.integers(1, 2))):
+        kind = draw(st.sampled_from(("scale", "scale", "bias", "box")))
+        if kind == "scale":
+            _scaled(draw(st.sampled_from(WEIGHTS)),
+                    by=draw(st.sampled_from((0.3, 0.5, 2.0, 3.0, 10.0, 30.0))))(doc)
+        elif kind == "bias":
+            shift = draw(st.sampled_from((-5.0, 2.0, 5.0)))
+            doc["b_z"] = [v + shift for v in doc["b_z"]]
         else:
-            assert code == 2 and err == (f"cosim {argv[0]}: error: controller 'mpc': the "
-                                         f"model is not usable: {why}\n"), err
-    if usable:
-        summary = json.loads((tmp_path / "run" / "summary.json").read_text())
-        assert sum(v["count"] for v in summary["kpis"]["violations"].values()) == 0
-    else:
-        assert not (tmp_path / "run").exists() and not (tmp_path / "C.fmu").exists()
+            half = draw(st.sampled_from((0.05, 0.2, 0.5)))
+            for channel in doc["problem"]["outputs"]:
+                channel["min"], channel["max"] = 1.0 - half, 1.0 + half
+    return doc
+
+
+@pytest.mark.slow
+@settings(max_examples=12, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(doc=damaged_models())
+def test_generated_damage_gets_one_verdict(doc: dict, tmp_path_factory: pytest.TempPathFactory,
+                                            capsys: pytest.CaptureFixture) -> None:
+    box = doc["problem"]["outputs"][0]
+    mid = 0.5 * (box["min"] + box["max"])
+    low = box["min"] + 0.4 * (box["max"] - box["min"])
+    _agree(doc, f"{mid},{mid}", tmp_path_factory.mktemp("model"), capsys,
+           start=f"{low},{low}")
 
 
 def test_a_model_without_a_certificate_is_refused_alike(tmp_path: Path,
@@ -107,7 +154,7 @@ def test_a_model_without_a_certificate_is_refused_alike(tmp_path: Path,
     model = tmp_path / "model.json"
     model.write_text(json.dumps(doc))
     scenario = tmp_path / "s.csv"
-    scenario.write_text(SCENARIO.format(h1=1.2, h2=1.3))
+    scenario.write_text(SCENARIO.format(start="0.65,0.65", h1=1.2, h2=1.3))
     c1, _, certify = _run(capsys, "certify", str(model), "--quiet")
     c2, _, run = _run(capsys, "run", str(scenario), "--model", str(model), "--out",
                       str(tmp_path / "run"))
