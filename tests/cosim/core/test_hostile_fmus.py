@@ -229,6 +229,7 @@ options = {{ fault = {FAULTS["segfault"]}, fault_time = {FAULT_TIME} }}
 """)
     result = cosim.run_campaign(spec, tmp_path / "out", workers=1)
     assert result.status != "ok"
+    assert result.summary["retried_runs"] == 0 and set(result.table["tries"]) == {1}
     for run in range(2):
         for variant, status in (("healthy", "ok"), ("crashing", "failed")):
             summary = json.loads((tmp_path / "out" / "runs" / f"{run:06d}-{variant}"
@@ -259,6 +260,7 @@ isolate = true
 """)
     result = cosim.run_campaign(spec, tmp_path / "out", workers=1)
     assert result.status != "ok"
+    assert result.summary["retried_runs"] == 0 and set(result.table["tries"]) == {1}
     for run in range(3):
         summary = json.loads((tmp_path / "out" / "runs" / f"{run:06d}-pi" / "summary.json")
                              .read_text())
