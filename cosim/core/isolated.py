@@ -45,6 +45,14 @@ DEFAULT_STEP_TIMEOUT = 60.0
 REHEARSAL_TIMEOUT = 30.0
 
 
+def _call(worker: Worker | None, label: str, what: str, method: str, *args: Any) -> Any:
+    """``worker.call(what, method, *args)``; a component that has no worker (never set up, or
+    terminated) fails the call in the same words."""
+    if worker is None:
+        raise SimulationFailed(f"{label}: {what} failed: no worker")
+    return worker.call(what, method, *args)
+
+
 class FmuServer:  # pragma: no cover - runs in the worker process
     """An :class:`~cosim.core.fmu.FmuComponent` served by a worker: each request answers with
     the outputs, in the modelDescription's order."""
@@ -137,9 +145,7 @@ class IsolatedFmuComponent(FmuComponent):
         self._outputs = dict(self._call(f"initialisation at t={t0!r}", "setup", float(t0)))
 
     def _call(self, what: str, method: str, *args: Any) -> Any:
-        if self._worker is None:
-            raise SimulationFailed(f"{self.label}: {what} failed: no worker")
-        return self._worker.call(what, method, *args)
+        return _call(self._worker, self.label, what, method, *args)
 
     def set_inputs(self, values: Mapping[str, float]) -> None:
         """Inputs travel with the next step request."""
@@ -296,13 +302,12 @@ class IsolatedController(Component):
 
     def step(self, t: float, dt: float) -> None:
         """One round trip: inputs, the controller's step, outputs and diagnostics."""
-        if self._worker is None:
-            raise SimulationFailed(f"{self.label}: step at t={t!r} failed: no worker")
         inputs = tuple((k, float(v)) for k, v in self._pending.items())
         self._pending.clear()
-        self._worker.timeout = self.timeout
-        outputs, diag = self._worker.call(f"step at t={t!r}", "step", float(t), float(dt),
-                                          inputs)
+        if self._worker is not None:
+            self._worker.timeout = self.timeout
+        outputs, diag = _call(self._worker, self.label, f"step at t={t!r}", "step", float(t),
+                              float(dt), inputs)
         self._outputs, self._diag = dict(outputs), dict(diag)
 
     def get_outputs(self) -> dict[str, float]:
