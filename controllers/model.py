@@ -69,6 +69,8 @@ class GRUModel:
     u_offset, u_scale, y_offset, y_scale : ndarray
         ``normalised = (raw − offset) / scale``.
     input_names, input_units, output_names, output_units : list of str
+        The model's inputs are the problem's manipulated inputs then its measured
+        disturbances (:attr:`controllers.problem.ControlProblem.model_inputs`).
     Ts : float
         Sample time [s].
     training : dict
@@ -115,8 +117,18 @@ class GRUModel:
 
     @property
     def m(self) -> int:
-        """Number of inputs."""
+        """Number of model inputs (manipulated inputs and measured disturbances)."""
         return self.params["W_z"].shape[1]
+
+    @property
+    def q(self) -> int:
+        """Number of measured disturbances among the inputs (the last ``q``)."""
+        return self.problem.q if self.problem is not None else 0
+
+    @property
+    def m_u(self) -> int:
+        """Number of manipulated inputs (the first ``m_u`` model inputs)."""
+        return self.m - self.q
 
     @property
     def p(self) -> int:
@@ -268,13 +280,15 @@ class GRUModel:
     def mismatch(self, problem: Any) -> str:
         """How ``problem`` contradicts this model's signals, sample time or normalisation
         (an empty string when it does not)."""
-        if list(problem.input_names) != list(self.input_names) or list(
+        names = list(problem.model_input_names)
+        units = [c.unit for c in problem.model_inputs]
+        if names != list(self.input_names) or list(
                 problem.output_names) != list(self.output_names):
-            return (f"signals {list(problem.input_names)} -> {list(problem.output_names)} vs "
+            return (f"signals {names} -> {list(problem.output_names)} vs "
                     f"the model's {self.input_names} -> {self.output_names}")
-        if list(problem.input_units) != list(self.input_units) or list(
+        if units != list(self.input_units) or list(
                 problem.output_units) != list(self.output_units):
-            return (f"units {list(problem.input_units)} -> {list(problem.output_units)} vs the "
+            return (f"units {units} -> {list(problem.output_units)} vs the "
                     f"model's {self.input_units} -> {self.output_units}")
         if not math.isclose(problem.Ts, self.Ts, rel_tol=1e-12):
             return f"Ts {problem.Ts:g} s vs the model's {self.Ts:g} s"

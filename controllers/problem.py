@@ -1,6 +1,12 @@
 """The control problem: the plant's manipulated inputs and controlled outputs, by name, in the
 plant's own units, with their boxes, the sample time and the normalisation.
 
+A problem may also declare measured disturbances: signals the controller does not move but
+measures (an inlet temperature, a feed concentration, a load), each an input of the plant
+FMU or one of its tunable parameters, and dead times (``delay``, whole samples) on inputs and
+disturbances. The model's inputs are the manipulated inputs then the disturbances
+(:attr:`ControlProblem.model_inputs`), each seen ``delay`` samples late.
+
 A problem is declared once, in a TOML file (:func:`controllers.problem_file.load`), and then
 travels: ``cosim generate-data`` records it in the data set's sidecar, ``cosim train`` copies
 it into the model file (:attr:`controllers.model.GRUModel.problem`), and every later stage
@@ -51,6 +57,15 @@ class Channel:
         Inputs: shortest and longest hold time of the identification excitation [samples].
     levels : (float, float) or None
         Inputs: the range of the excitation's levels (default: the box).
+    delay : int
+        Inputs and disturbances: the dead time between the signal and its effect on the
+        outputs [samples]: the model sees ``signal(k − delay)`` at sample ``k``.
+    rate : float or None
+        Disturbances: the largest change per sample (problem units), which bounds how far
+        the real disturbance moves from the value the MPC holds over its horizon; ``None``:
+        the data's largest change per sample.
+    preview : bool
+        Disturbances: known ahead from the scenario (rather than held at the last value).
     """
 
     name: str
@@ -63,6 +78,9 @@ class Channel:
     description: str = ""
     hold: tuple[int, int] | None = None
     levels: tuple[float, float] | None = None
+    delay: int = 0
+    rate: float | None = None
+    preview: bool = False
 
     def __post_init__(self) -> None:
         if not self.variable:
@@ -89,6 +107,12 @@ class Channel:
             doc["hold"] = list(self.hold)
         if self.levels is not None:
             doc["levels"] = list(self.levels)
+        if self.delay:
+            doc["delay"] = self.delay
+        if self.rate is not None:
+            doc["rate"] = self.rate
+        if self.preview:
+            doc["preview"] = True
         return doc
 
 
@@ -118,6 +142,8 @@ class ControlProblem:
     Ts : float
         Controller sample time [s].
     inputs, outputs : tuple of Channel
+    disturbances : tuple of Channel
+        The measured disturbances (the problem file's ``[disturbances]``), empty when none.
     pairings : dict of str to tuple of PILoop
         The PI baseline's loop sets by name (the problem file's ``[pi]``), empty when none.
     pairing : str
@@ -137,6 +163,7 @@ class ControlProblem:
     Ts: float
     inputs: tuple[Channel, ...]
     outputs: tuple[Channel, ...]
+    disturbances: tuple[Channel, ...] = ()
     pairings: Mapping[str, tuple[PILoop, ...]] = field(default_factory=dict)
     pairing: str = ""
     description: str = ""
@@ -156,8 +183,36 @@ class ControlProblem:
         return len(self.outputs)
 
     @property
+    def q(self) -> int:
+        """Number of measured disturbances."""
+        return len(self.disturbances)
+
+    @property
     def input_names(self) -> tuple[str, ...]:
         return tuple(c.name for c in self.inputs)
+
+    @property
+    def disturbance_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.disturbances)
+
+    @property
+    def model_inputs(self) -> tuple[Channel, ...]:
+        """The model's inputs: the manipulated inputs, then the measured disturbances."""
+        return (*self.inputs, *self.disturbances)
+
+    @property
+    def model_input_names(self) -> tuple[str, ...]:
+        return tuple(c.name for c in self.model_inputs)
+
+    @property
+    def delays(self) -> tuple[int, ...]:
+        """The dead time of each model input [samples] (:attr:`model_inputs`' order)."""
+        return tuple(c.delay for c in self.model_inputs)
+
+    @property
+    def signals(self) -> tuple[Channel, ...]:
+        """Every signal: inputs, outputs, disturbances."""
+        return (*self.inputs, *self.outputs, *self.disturbances)
 
     @property
     def output_names(self) -> tuple[str, ...]:
@@ -180,32 +235,37 @@ class ControlProblem:
         return tuple(c.bounds for c in self.outputs)
 
     def bounds(self) -> dict[str, tuple[float, float]]:
-        """All boxes by signal name (inputs and outputs)."""
-        return {c.name: c.bounds for c in (*self.inputs, *self.outputs)}
+        """All boxes by signal name (inputs, outputs, disturbances)."""
+        return {c.name: c.bounds for c in self.signals}
 
     def units(self) -> dict[str, str]:
-        """All units by signal name (inputs and outputs)."""
-        return {c.name: c.unit for c in (*self.inputs, *self.outputs)}
+        """All units by signal name (inputs, outputs, disturbances)."""
+        return {c.name: c.unit for c in self.signals}
 
     def channel(self, name: str) -> Channel:
-        """The input or output ``name``."""
-        for c in (*self.inputs, *self.outputs):
+        """The input, output or disturbance ``name``."""
+        for c in self.signals:
             if c.name == name:
                 return c
         raise KeyError(name)
 
     def normalization(self) -> dict[str, np.ndarray]:
-        """``u_offset, u_scale, y_offset, y_scale`` of the model file."""
-        return {"u_offset": np.array([c.offset for c in self.inputs], dtype=float),
-                "u_scale": np.array([c.scale for c in self.inputs], dtype=float),
+        """``u_offset, u_scale, y_offset, y_scale`` of the model file (``u``: the model's
+        inputs, :attr:`model_inputs`)."""
+        return {"u_offset": np.array([c.offset for c in self.model_inputs], dtype=float),
+                "u_scale": np.array([c.scale for c in self.model_inputs], dtype=float),
                 "y_offset": np.array([c.offset for c in self.outputs], dtype=float),
                 "y_scale": np.array([c.scale for c in self.outputs], dtype=float)}
 
     def describe(self) -> str:
-        """One line: ``name: F [L/min], Tc [K] -> CA [mol/L], T [K] at Ts = 15 s``."""
+        """One line: ``name: F [L/min], Tc [K] -> CA [mol/L], T [K] at Ts = 15 s`` (and
+        ``; measured: Tin [K]``, ``F [L/min] +2 samples`` for disturbances and dead times)."""
         def sig(cs: tuple[Channel, ...]) -> str:
-            return ", ".join(f"{c.name} [{c.unit}]" for c in cs)
-        return f"{self.name}: {sig(self.inputs)} -> {sig(self.outputs)} at Ts = {self.Ts:g} s"
+            return ", ".join(f"{c.name} [{c.unit}]" + (f" +{c.delay} samples" if c.delay else "")
+                             for c in cs)
+        measured = f"; measured: {sig(self.disturbances)}" if self.disturbances else ""
+        return (f"{self.name}: {sig(self.inputs)} -> {sig(self.outputs)} at Ts = "
+                f"{self.Ts:g} s{measured}")
 
     # -- (de)serialisation (the model file's and the data sidecar's "problem") --------------
     def to_dict(self) -> dict[str, Any]:
@@ -215,6 +275,8 @@ class ControlProblem:
             doc["description"] = self.description
         doc["inputs"] = [c.to_dict() for c in self.inputs]
         doc["outputs"] = [c.to_dict() for c in self.outputs]
+        if self.disturbances:
+            doc["disturbances"] = [c.to_dict() for c in self.disturbances]
         if self.pairings:
             doc["pi"] = {"pairing": self.pairing,
                          "pairings": {k: [lp.to_dict() for lp in v]
@@ -233,12 +295,13 @@ class ControlProblem:
         if not math.isclose(self.Ts, other.Ts, rel_tol=1e-12):
             out.append(f"Ts {self.Ts:g} vs {other.Ts:g} s")
         for kind, a, b in (("inputs", self.inputs, other.inputs),
-                           ("outputs", self.outputs, other.outputs)):
+                           ("outputs", self.outputs, other.outputs),
+                           ("disturbances", self.disturbances, other.disturbances)):
             if [c.name for c in a] != [c.name for c in b]:
                 out.append(f"{kind} {[c.name for c in a]} vs {[c.name for c in b]}")
                 continue
             for ca, cb in zip(a, b, strict=True):
-                for key in ("unit", "min", "max", "variable", "offset", "scale"):
+                for key in ("unit", "min", "max", "variable", "offset", "scale", "delay"):
                     va, vb = getattr(ca, key), getattr(cb, key)
                     same = (math.isclose(va, vb, rel_tol=1e-12, abs_tol=0.0)
                             if isinstance(va, float) else va == vb)

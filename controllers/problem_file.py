@@ -22,6 +22,15 @@ A problem file declares the plant's signals in its own names and units::
     min = 0.2
     max = 1.0
 
+    [disturbances.Tin]             # optional: a measured disturbance (the FMU input or
+    unit = "K"                     #   tunable parameter "Tin"), not moved by the controller
+    min = 280.0
+    max = 320.0
+    rate = 0.5                     # optional: largest change per sample (default: the data's)
+    preview = false                # optional: known ahead from the scenario
+    delay = 2                      # optional, inputs too: dead time [samples]
+    hold = [5, 80]                 # optional: its excitation in cosim generate-data
+
     [pi]                           # optional: the PI baseline's loops (square plants)
     pairing = "main"
     [pi.pairings]
@@ -43,7 +52,9 @@ and values by what takes them (:data:`cosim.commands.train.PROBLEM_OPTIONS`,
 
 Every fault is a :class:`~controllers.errors.ProblemFileError` (exit 2) naming the file and
 line: invalid TOML, an unknown key, a missing ``unit``/``min``/``max``/``Ts``/``name``,
-``min ≥ max``, a non-finite number, a name used twice, no inputs or no outputs, a bad loop.
+``min ≥ max``, a non-finite number, a name used twice, a ``delay`` that is not a whole
+number of samples in ``[0, MAX_DELAY]``, a ``rate`` not in ``(0, max − min]``, no inputs or
+no outputs, a bad loop.
 Checks against a plant FMU (a signal it lacks, the wrong causality, a unit it contradicts)
 belong to the co-simulation side (:mod:`cosim.core.binding`).
 """
@@ -62,10 +73,15 @@ from controllers.problem import Channel, ControlProblem, PILoop
 
 __all__ = ["load", "loads", "locate", "locate_key", "problem_from_dict"]
 
-_TOP = {"problem", "inputs", "outputs", "pi", "train", "mpc"}
+_TOP = {"problem", "inputs", "outputs", "disturbances", "pi", "train", "mpc"}
 _PROBLEM = {"name", "Ts", "description"}
 _CHANNEL = {"unit", "min", "max", "variable", "description", "normalization"}
-_INPUT = _CHANNEL | {"hold", "levels"}
+_INPUT = _CHANNEL | {"hold", "levels", "delay"}
+_DISTURBANCE = _INPUT | {"rate", "preview"}
+#: The longest dead time a signal may declare [samples].
+MAX_DELAY = 50
+#: The signal tables: the problem's attribute and JSON key; whether one is needed.
+_KINDS = (("inputs", True), ("outputs", True), ("disturbances", False))
 _NORM = {"offset", "scale"}
 _PI = {"pairing", "pairings"}
 _LOOP = {"output", "input", "K", "Ti", "Tt"}
@@ -134,9 +150,10 @@ def loads(text: str, source: str = "<problem>") -> ControlProblem:
         raise ProblemFileError(f"{where}: invalid TOML ({re.sub(r' ?[(]at .*[)]', '', msg)})"
                                ) from None
     loc = _Locator(source, text)
-    _known(doc, _TOP, "the top level (tables: problem, inputs, outputs, pi, train, mpc)", loc, "")
+    _known(doc, _TOP, "the top level (tables: problem, inputs, outputs, disturbances, pi, "
+           "train, mpc)", loc, "")
     channels = {}
-    for kind in ("inputs", "outputs"):
+    for kind, _needed in _KINDS:
         table = doc.get(kind, {})
         if not isinstance(table, dict):
             raise ProblemFileError(f"{loc(kind)}: '{kind}' must be tables [{kind}.NAME]")
@@ -157,8 +174,10 @@ def problem_from_dict(doc: Any, source: str = "<problem>") -> ControlProblem:
         raise ProblemFileError(f"{source}: 'problem' must be an object")
     flat = {"problem": {k: doc[k] for k in _PROBLEM if k in doc},
             "inputs": doc.get("inputs", []), "outputs": doc.get("outputs", []),
+            "disturbances": doc.get("disturbances", []),
             "pi": doc.get("pi"), "train": doc.get("train"), "mpc": doc.get("mpc")}
-    unknown = sorted(set(doc) - {*_PROBLEM, "inputs", "outputs", "pi", "train", "mpc"})
+    unknown = sorted(set(doc) - {*_PROBLEM, "inputs", "outputs", "disturbances", "pi", "train",
+                                 "mpc"})
     if unknown:
         raise ProblemFileError(f"{source}: problem: unknown key '{unknown[0]}'")
 
@@ -175,11 +194,14 @@ def locate(problem: ControlProblem, signal: str, key: str | None = None) -> str:
     Raises
     ------
     KeyError
-        ``signal`` is not an input or output of ``problem``.
+        ``signal`` is not an input, output or disturbance of ``problem``.
     """
-    kind = "inputs" if signal in problem.input_names else "outputs"
-    if signal not in problem.input_names and signal not in problem.output_names:
+    kinds = {**dict.fromkeys(problem.disturbance_names, "disturbances"),
+             **dict.fromkeys(problem.output_names, "outputs"),
+             **dict.fromkeys(problem.input_names, "inputs")}
+    if signal not in kinds:
         raise KeyError(signal)
+    kind = kinds[signal]
     return locate_key(problem, f"{kind}.{signal}", key)
 
 
@@ -254,9 +276,9 @@ def _build(doc: dict[str, Any], where: Where, toml: bool) -> ControlProblem:
                                "a string")
     seen: dict[str, str] = {}
     kinds = {}
-    for kind in ("inputs", "outputs"):
+    for kind, needed in _KINDS:
         entries = doc.get(kind) or []
-        if not isinstance(entries, list) or not entries:
+        if not isinstance(entries, list) or (needed and not entries):
             raise ProblemFileError(f"{where(kind)}: the problem has no {kind} "
                                    f"([{kind}.NAME] tables)")
         chans = []
@@ -273,7 +295,8 @@ def _build(doc: dict[str, Any], where: Where, toml: bool) -> ControlProblem:
         kinds[kind] = tuple(chans)
     pairings, pairing = _pi(doc.get("pi"), kinds["inputs"], kinds["outputs"], where, toml)
     return ControlProblem(name=name.strip(), Ts=Ts, inputs=kinds["inputs"],
-                          outputs=kinds["outputs"], pairings=pairings, pairing=pairing,
+                          outputs=kinds["outputs"], disturbances=kinds["disturbances"],
+                          pairings=pairings, pairing=pairing,
                           description=description, train=_options(doc, "train", where),
                           mpc=_options(doc, "mpc", where))
 
@@ -291,10 +314,14 @@ def _channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Cha
         raise ProblemFileError(f"{where(table)}: signal name {name!r} must start with a "
                                "letter and hold only letters, digits and '_' (it names "
                                "columns such as ref.<name>)")
-    allowed = (_INPUT if kind == "inputs" else _CHANNEL) | ({"name"} if not toml else set())
+    allowed = ({"inputs": _INPUT, "outputs": _CHANNEL, "disturbances": _DISTURBANCE}[kind]
+               | ({"name"} if not toml else set()))
     unknown = [k for k in entry if k not in allowed and k != "name"]
     if unknown:
-        extra = " (hold and levels are for inputs)" if unknown[0] in ("hold", "levels") else ""
+        extra = {"hold": " (hold, levels and delay are for inputs and disturbances)",
+                 "rate": " (rate and preview are for disturbances)"}.get(
+            {"levels": "hold", "delay": "hold", "preview": "rate"}.get(unknown[0], unknown[0]),
+            "")
         raise ProblemFileError(f"{where(table, unknown[0])}: unknown key '{unknown[0]}' in "
                                f"[{kind}.{name}]{extra} (known: "
                                f"{', '.join(sorted(allowed - {'name'}))})")
@@ -318,7 +345,8 @@ def _channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Cha
     if not isinstance(description, str):
         raise ProblemFileError(f"{where(table, 'description')}: 'description' must be a "
                                "string")
-    kw = {**_normalization(entry, where, table), **_excitation(entry, where, table, lo, hi)}
+    kw = {**_normalization(entry, where, table), **_excitation(entry, where, table, lo, hi),
+          **_dynamics(entry, where, table, lo, hi)}
     return Channel(name=name, unit=unit.strip(), min=lo, max=hi, variable=variable,
                    description=description, **kw)
 
@@ -361,6 +389,33 @@ def _excitation(entry: dict[str, Any], where: Where, table: str, lo: float, hi: 
             raise ProblemFileError(f"{at}: 'levels' must satisfy min <= low < high <= max "
                                    f"({lo:g}, {hi:g}), got [{l0:g}, {l1:g}]")
         kw["levels"] = (l0, l1)
+    return kw
+
+
+def _dynamics(entry: dict[str, Any], where: Where, table: str, lo: float, hi: float
+              ) -> dict[str, Any]:
+    """A signal's ``delay`` [samples], and a disturbance's ``rate`` and ``preview``, as
+    keyword arguments (those given)."""
+    kw: dict[str, Any] = {}
+    if "delay" in entry:
+        delay = entry["delay"]
+        if (isinstance(delay, bool) or not isinstance(delay, int)
+                or not 0 <= delay <= MAX_DELAY):
+            raise ProblemFileError(f"{where(table, 'delay')}: 'delay' must be a whole number "
+                                   f"of samples from 0 to {MAX_DELAY}, got {delay!r}")
+        kw["delay"] = delay
+    if "rate" in entry:
+        rate = _number(entry["rate"], where(table, "rate"), "rate")
+        if not 0 < rate <= hi - lo:
+            raise ProblemFileError(f"{where(table, 'rate')}: 'rate' (the largest change per "
+                                   f"sample) must be in (0, max - min = {hi - lo:g}], got "
+                                   f"{rate:g}")
+        kw["rate"] = rate
+    if "preview" in entry:
+        if not isinstance(entry["preview"], bool):
+            raise ProblemFileError(f"{where(table, 'preview')}: 'preview' must be true or "
+                                   "false")
+        kw["preview"] = entry["preview"]
     return kw
 
 

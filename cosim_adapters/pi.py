@@ -23,6 +23,14 @@ Which input controls which output, and the gains, come from (first that applies)
 
 Without any of these the controller refuses to start, as it does on a plant with more
 inputs than outputs or the reverse (use the robust MPC there).
+
+With measured disturbances (the problem's ``[disturbances]``) and a model, the PI adds a
+static feedforward (option ``feedforward``, on by default then): ``u = PI(e) + K_ff (d −
+d_0)``, ``K_ff = −G_u⁺ G_d`` from the model's steady-state gains at the operating point
+(:func:`controllers.disturbances.feedforward_gain`), ``d_0`` the disturbances' nominal values
+(the middle of their boxes); ``feedforward=False`` gives the plain PI, which sees a
+disturbance only once it has moved the outputs. The loops are tuned on the model with the
+disturbances held at ``d_0``.
 """
 
 from __future__ import annotations
@@ -33,7 +41,10 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 from controllers import pi_tuning
+from controllers.disturbances import condition, feedforward_gain
 from controllers.model import GRUModel
 from controllers.pi_tuning import PITuning
 from controllers.problem import ControlProblem, PILoop
@@ -87,6 +98,7 @@ def _tuned(gru: Any, problem: ControlProblem, setpoint: Any, tau_c: Any) -> PITu
             target[problem.output_names.index(name)] = float(value)
     if gru.problem is None:  # a model file without a problem: the one it was checked against
         gru = replace(gru, problem=problem)
+    gru = condition(gru)
     try:
         return pi_tuning.tune(gru, setpoint=target, tau_c=tau_c)
     except UnreachableSetpoint as exc:
@@ -141,6 +153,34 @@ def _initial_inputs(values: Any, problem: ControlProblem) -> dict[str, float]:
     return out
 
 
+def _feedforward(option: Any, gru: GRUModel | None, problem: ControlProblem,
+                 tuning: PITuning | None) -> tuple[np.ndarray, np.ndarray] | None:
+    """The feedforward's ``(K_ff, d_0)`` in physical units, or ``None`` when off."""
+    if option is not None and not isinstance(option, bool):
+        raise CosimError(f"controller 'pi': feedforward must be true or false, got {option!r}")
+    if not problem.disturbances or option is False or (option is None and gru is None):
+        if option and not problem.disturbances:
+            raise CosimError(f"controller 'pi': feedforward=true, but the problem "
+                             f"{problem.name!r} measures no disturbances")
+        return None
+    if gru is None:
+        raise CosimError("controller 'pi': feedforward=true needs a model (--model FILE)")
+    from controllers.errors import ControllersError
+
+    full = gru if gru.problem is not None else replace(gru, problem=problem)
+    try:
+        x, u, _ = pi_tuning.operating_point(
+            condition(full), None if tuning is None else tuning.y_op)
+        gain = feedforward_gain(full, x, np.concatenate([u, np.zeros(problem.q)]))
+    except (ControllersError, np.linalg.LinAlgError) as exc:
+        raise CosimError(f"controller 'pi': no feedforward from {gru.source or 'the model'}: "
+                         f"{exc}") from None
+    u_scale = np.asarray(full.u_scale, dtype=float)
+    m = problem.m
+    physical = gain * u_scale[:m, None] / u_scale[None, m:]
+    return physical, np.array([c.offset for c in problem.disturbances])
+
+
 class PIController(Component):
     """Decentralised PI with anti-windup and input saturation (see the module docstring).
 
@@ -168,6 +208,9 @@ class PIController(Component):
     tune_tau_c : float, optional
         SIMC closed-loop time constant of every tuned loop [s] (default: each loop's
         delay ``θ``); larger is slower and more robust.
+    feedforward : bool, optional
+        The static feedforward from the measured disturbances (module docstring); default:
+        on when the problem has disturbances and a model is given.
 
     Attributes
     ----------
@@ -183,7 +226,7 @@ class PIController(Component):
                  loops: Sequence[Any] | None = None,
                  initial_inputs: Mapping[str, float] | None = None,
                  tune: bool | None = None, tune_setpoint: Mapping[str, float] | None = None,
-                 tune_tau_c: float | None = None) -> None:
+                 tune_tau_c: float | None = None, feedforward: bool | None = None) -> None:
         from cosim_adapters.problems import problem_for
 
         self.name = "pi"
@@ -225,6 +268,11 @@ class PIController(Component):
                   for c in problem.outputs)
         self.outputs = tuple(Signal(c.name, c.unit, c.description) for c in problem.inputs)
         self.initial_inputs = _initial_inputs(initial_inputs, problem)
+        self.feedforward = _feedforward(feedforward, gru, problem, self.tuning)
+        if self.feedforward is not None:
+            self.inputs += tuple(Signal(f"dist.{c.name}", c.unit, c.description)
+                                 for c in problem.disturbances)
+        self.disturbance_defaults = {c.name: c.offset for c in problem.disturbances}
         self._values: dict[str, float] = {}
         self.setup(0.0)
 
@@ -245,9 +293,10 @@ class PIController(Component):
     def step(self, t: float, dt: float) -> None:
         """One PI update per loop; ``dt`` is the sample interval."""
         vals = self._values
+        ff = self._feedforward(vals)
         for loop in self.loops:
             e = vals[f"ref.{loop.y}"] - vals[loop.y]
-            v = self._I[loop.u] + loop.K * e
+            v = self._I[loop.u] + loop.K * e + ff.get(loop.u, 0.0)
             lo, hi = self.bounds[loop.u]
             u = hi if v > hi else lo if v < lo else v
             if u != v:
@@ -255,6 +304,15 @@ class PIController(Component):
             self._I[loop.u] += loop.K * dt / loop.Ti * e + dt / loop.Tt * (u - v)
             self._u[loop.u] = u
         self._steps += 1
+
+    def _feedforward(self, vals: Mapping[str, float]) -> dict[str, float]:
+        """``K_ff (d − d_0)`` by input (physical units); empty without feedforward."""
+        if self.feedforward is None:
+            return {}
+        gain, d0 = self.feedforward
+        d = [vals[f"dist.{c.name}"] for c in self.problem.disturbances]
+        du = gain @ (np.asarray(d) - d0)
+        return dict(zip(self.problem.input_names, du.tolist(), strict=True))
 
     def get_outputs(self) -> dict[str, float]:
         """Inputs to apply (the problem's units)."""
@@ -270,7 +328,11 @@ class PIController(Component):
         saturated."""
         doc = {"pairing": {lp.y: lp.u for lp in self.loops},
                "loops": [lp.to_dict() for lp in self.loops],
-               "auto_tuned": self.tuning is not None}
+               "auto_tuned": self.tuning is not None,
+               "feedforward": None if self.feedforward is None else {
+                   "gain": self.feedforward[0].tolist(),
+                   "inputs": list(self.problem.input_names),
+                   "disturbances": list(self.problem.disturbance_names)}}
         if self.tuning is not None:
             doc["tuning"] = self.tuning.to_dict()
         return {**doc, "steps": self._steps, "saturated_steps": dict(self._sat_steps)}

@@ -102,13 +102,15 @@ def _name(arg: Any, problem: ControlProblem) -> str:
 
 
 def plant_signals(problem: ControlProblem) -> list[Any]:
-    """The problem's inputs and outputs as :class:`cosim.core.binding.Wanted` (plain data), each
+    """The problem's inputs, outputs and measured disturbances (written into the FMU like
+    inputs) as :class:`cosim.core.binding.Wanted` (plain data), each
     with where it is declared (``problem.toml:12``, :func:`controllers.problem_file.locate`)."""
     from controllers.problem_file import locate
     from cosim.core.binding import Wanted
 
     out = []
-    for role, channels in (("input", problem.inputs), ("output", problem.outputs)):
+    for role, channels in (("input", problem.inputs), ("output", problem.outputs),
+                           ("disturbance", problem.disturbances)):
         for c in channels:
             key = "variable" if c.variable != c.name else None
             out.append(Wanted(c.name, c.variable, c.unit, role, locate(problem, c.name, key),

@@ -17,7 +17,7 @@ import numpy as np
 from controllers.identification.metrics import fit
 from controllers.identification.record import SPLITS, Record
 
-__all__ = ["compare", "scores", "verdict"]
+__all__ = ["compare", "mean_rms", "scores", "verdict"]
 
 
 def _split_scores(y: np.ndarray, xi: np.ndarray, mask: np.ndarray, scale: np.ndarray,
@@ -58,7 +58,7 @@ def scores(record: Record, xi: np.ndarray, scale: np.ndarray, names: list[str],
     return out
 
 
-def _mean_rms(doc: dict[str, Any], split: str, scale: np.ndarray, names: list[str]) -> float:
+def mean_rms(doc: dict[str, Any], split: str, scale: np.ndarray, names: list[str]) -> float:
     """Mean over the outputs of the split's RMS, normalised by each output's scale."""
     rms = doc["splits"][split]["rms"]
     vals = [rms[n] / abs(s) if rms[n] is not None else math.inf
@@ -72,8 +72,8 @@ def compare(model: dict[str, Any], baseline: dict[str, Any] | None, scale: np.nd
     rows: ``{"split", "model", "baseline", "ratio"}`` (mean normalised RMS; ``ratio`` model /
     baseline, ``None`` without a baseline)."""
     split = next(s for s in ("val", "test", "train") if s in model["splits"])
-    ours = _mean_rms(model, split, scale, names)
-    theirs = None if baseline is None else _mean_rms(baseline, split, scale, names)
+    ours = mean_rms(model, split, scale, names)
+    theirs = None if baseline is None else mean_rms(baseline, split, scale, names)
     ratio = (ours / theirs if theirs is not None and theirs > 0 and math.isfinite(theirs)
              else None)
     return {"split": split, "model": ours, "baseline": theirs, "ratio": ratio}

@@ -91,12 +91,13 @@ def run(args: argparse.Namespace) -> int:
             raise CosimError(f"{flag} must be in [1, {MAX_STEPS}] samples, got {value}")
     problem = load_problem(args.problem)
     holds = []
-    for c in problem.inputs:
+    for c in problem.model_inputs:
         lo, hi = c.hold if c.hold is not None else DEFAULT_HOLD
         lo = args.hold_min if args.hold_min is not None else lo
         hi = args.hold_max if args.hold_max is not None else hi
         if not 1 <= lo <= hi:
-            raise CosimError(f"input {c.name}: hold times must satisfy 1 <= min <= max, got "
+            raise CosimError(f"{_kind(problem, c.name)} {c.name}: hold times must satisfy "
+                             f"1 <= min <= max, got "
                              f"{lo} and {hi} (--hold-min, --hold-max or the problem's 'hold')")
         holds.append((lo, hi))
     out = outpaths.out_file(args.out, "--out")
@@ -112,10 +113,10 @@ def run(args: argparse.Namespace) -> int:
     # every plant output is recorded (h1..h4 for the four tanks); inputs and the controlled
     # outputs are checked against the FMU (and the map): names, causality, units
     outputs = list(dict.fromkeys([*problem.output_names, *(s.name for s in plant.outputs)]))
-    plant.check_signals(list(problem.input_names), outputs, problem.units())
+    plant.check_signals(list(problem.model_input_names), outputs, problem.units())
     progress = not args.quiet and sys.stderr.isatty()
-    levels = [c.levels if c.levels is not None else c.bounds for c in problem.inputs]
-    data = datagen.generate(plant, args.steps, args.seed, levels, problem.input_names,
+    levels = [c.levels if c.levels is not None else c.bounds for c in problem.model_inputs]
+    data = datagen.generate(plant, args.steps, args.seed, levels, problem.model_input_names,
                             outputs, problem.Ts, holds, progress)
     meta = {"plant": str(plant_path), "map": args.map, "interface": args.interface,
             "seed": args.seed, "Ts": problem.Ts, "hold": [list(h) for h in holds],
@@ -131,3 +132,7 @@ def run(args: argparse.Namespace) -> int:
                                       strict=True))
             print(f"  {name:5s} {y.shape[0]:6d} rows  {ranges}")
     return 0
+
+
+def _kind(problem, name: str) -> str:
+    return "disturbance" if name in problem.disturbance_names else "input"

@@ -410,7 +410,7 @@ def _read(args: argparse.Namespace, problem: Any, given: bool) -> Any:
     files = [(p, "train" if separate and not _has_split_column(p) else None)
              for p in args.data]
     files += [(p, "val") for p in args.val] + [(p, "test") for p in args.test]
-    return logdata.read_logs(files, problem.input_names, problem.output_names, problem.Ts,
+    return logdata.read_logs(files, problem.model_input_names, problem.output_names, problem.Ts,
                              problem.name, fractions, missing_hint=hint)
 
 
@@ -434,6 +434,7 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from controllers.dead_time import delayed
     from controllers.identification.record import Record
     from cosim.commands import train_methods
     from cosim.core import outpaths
@@ -450,7 +451,10 @@ def run(args: argparse.Namespace) -> int:
     if args.history:
         outpaths.out_file(args.history, "--history")
     norm = problem.normalization()
-    record = Record((data.u - norm["u_offset"]) / norm["u_scale"],
+    # the model's inputs: manipulated inputs and measured disturbances, each seen its dead
+    # time late (controllers.dead_time)
+    record = Record(delayed((data.u - norm["u_offset"]) / norm["u_scale"], problem.delays,
+                            data.experiment),
                     (data.y - norm["y_offset"]) / norm["y_scale"], data.split,
                     data.experiment)
     progress = not args.quiet and sys.stderr.isatty()

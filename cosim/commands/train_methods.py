@@ -44,9 +44,10 @@ def _init(args: argparse.Namespace, problem: Any) -> dict[str, np.ndarray] | Non
     if not args.init:
         return None
     start = GRUModel.load(args.init)
-    if start.m != problem.m or start.p != problem.p:
+    m = len(problem.model_inputs)
+    if start.m != m or start.p != problem.p:
         raise CosimError(f"{args.init}: model has m={start.m}, p={start.p}, but the problem "
-                         f"has {problem.m} inputs and {problem.p} outputs")
+                         f"has {m} model inputs and {problem.p} outputs")
     if args.n is not None and start.n != args.n:
         raise CosimError(f"{args.init}: model has n={start.n}, but --n is {args.n}")
     return start.params
@@ -210,6 +211,7 @@ def _model_record(args: argparse.Namespace, data: Any, record: Any, trained: Tra
         "baseline": None if ev.baseline is None else {"model": "ARX", **ev.baseline_orders,
                                                       "scores": ev.baseline},
         "comparison": ev.comparison,
+        **({"without_disturbances": ev.disturbances} if ev.disturbances else {}),
         "worse_than_baseline": ev.warning is not None,
         "sensor_limits": ev.limits,
         "fit": {s: d["fit"] for s, d in ev.scores["splits"].items()},

@@ -30,6 +30,9 @@ class Evaluation:
     comparison: dict[str, Any]
     warning: str | None
     limits: dict[str, Any] = field(default_factory=dict)
+    #: With measured disturbances: the same score with them held at their training mean
+    #: (what the model would simulate without measuring them), and the ratio of the two.
+    disturbances: dict[str, Any] | None = None
 
 
 def evaluate(params: dict[str, np.ndarray], record: Any, problem: Any,
@@ -53,7 +56,35 @@ def evaluate(params: dict[str, np.ndarray], record: Any, problem: Any,
     return Evaluation(xi=xi, scores=ours, baseline=theirs, baseline_xi=bxi,
                       baseline_orders=orders, comparison=comparison,
                       warning=report.verdict(comparison),
-                      limits=record.limits.to_dict(names, scale, np.asarray(norm["y_offset"])))
+                      limits=record.limits.to_dict(names, scale, np.asarray(norm["y_offset"])),
+                      disturbances=_without_disturbances(params, record, problem, ours,
+                                                         comparison, x0_samples))
+
+
+def _without_disturbances(params: dict[str, np.ndarray], record: Any, problem: Any,
+                          ours: dict[str, Any], comparison: dict[str, Any], x0_samples: int
+                          ) -> dict[str, Any] | None:
+    """What measuring the disturbances is worth: the free run with every disturbance held at
+    its training mean, scored on the comparison's split, beside the model's own score
+    (``None`` without disturbances)."""
+    from dataclasses import replace
+
+    from controllers.identification import report
+    from controllers.identification.simulation import simulate
+
+    q = len(getattr(problem, "disturbances", ()))
+    if not q:
+        return None
+    scale, names = np.asarray(problem.normalization()["y_scale"]), list(problem.output_names)
+    u = record.u.copy()
+    u[:, -q:] = np.mean(u[record.split == "train", -q:], axis=0)
+    held = simulate(params, replace(record, u=u), x0_samples)
+    split = comparison["split"]
+    theirs = report.scores(record, held, scale, names)
+    mine = report.mean_rms(ours, split, scale, names)
+    without = report.mean_rms(theirs, split, scale, names)
+    return {"split": split, "held_at": "training mean", "rms": theirs["splits"][split]["rms"],
+            "ratio": without / mine if mine > 0 else None}
 
 
 def _cells(doc: dict[str, Any], names: list[str], units: list[str]) -> str:
@@ -85,6 +116,13 @@ def print_report(ev: Evaluation, names: list[str], units: list[str]) -> None:
     if ev.limits:
         print("  sensor limits found (read as 'at or beyond'): " + "; ".join(
             f"{n} {k} {v:.6g}" for n, lim in ev.limits.items() for k, v in lim.items()))
+    d = ev.disturbances
+    if d is not None:
+        held = ", ".join(f"{n} {_num(d['rms'][n])} {u}".rstrip()
+                         for n, u in zip(names, units, strict=True))
+        ratio = "" if d["ratio"] is None else f": {d['ratio']:.2f}x the error with them"
+        print(f"  {d['split']:5s} GRU with the measured disturbances held at their "
+              f"{d['held_at']}: {held}{ratio}")
     if ev.warning:
         print(f"warning: {ev.warning}")
 

@@ -72,8 +72,9 @@ class Wanted:
         The FMU variable the problem names for it (its own name unless ``variable`` says).
     unit : str
         The problem's unit.
-    role : {"input", "output"}
-        A manipulated input (written into the FMU) or a measured output (read from it).
+    role : {"input", "output", "disturbance"}
+        A manipulated input or a measured disturbance (written into the FMU), or a measured
+        output (read from it).
     where : str
         Where the signal is declared (``problem.toml:12``), for messages.
     unit_where : str
@@ -289,12 +290,12 @@ def unit_conversion(problem_unit: str, fmu_unit: str,
 def _check_role(where: str, w: Wanted, var: Any) -> None:
     """Causality, type and shape of the variable ``w`` is bound to."""
     causality, variability = getattr(var, "causality", None), getattr(var, "variability", None)
-    if w.role == "input":
+    if w.role in ("input", "disturbance"):
         if not (causality == "input" or (causality == "parameter" and variability == "tunable")):
             what = f"a {variability} parameter" if causality == "parameter" else \
                 f"of causality '{causality}'"
-            raise CosimError(f"{where}: the variable is {what}; a problem input must be an FMU "
-                             "input or a tunable parameter")
+            raise CosimError(f"{where}: the variable is {what}; a problem {w.role} must be an "
+                             "FMU input or a tunable parameter")
     elif causality != "output":
         raise CosimError(f"{where}: the variable is of causality '{causality}'; a problem "
                          "output must be an FMU output")

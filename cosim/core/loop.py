@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 from cosim.core import interrupts
 from cosim.core.errors import CosimError, SimulationFailed
 from cosim.core.run_result import PREFIX_CTRL, RowSink, RunResult, communication_times
-from cosim.core.scenario import BIAS, PLANT, REF, UNIFORM
+from cosim.core.scenario import BIAS, DIST, PLANT, REF, UNIFORM
 from cosim.core.sensor import SensorModel
 
 if TYPE_CHECKING:
@@ -59,6 +59,7 @@ class Run:
             perturbation_times=sc.perturbation_times())
         self.refs = {f"ref.{r}": math.nan for r in master.refs}
         self.held = dict.fromkeys(master.scenario_plant, math.nan)
+        self.dist = dict.fromkeys(master.dists, math.nan)
         self.sensor = SensorModel(master.measured, seed=master.seed) if master.use_sensor \
             else None
         self.set_param = getattr(master.plant, "set_parameter", None)
@@ -79,8 +80,8 @@ class Run:
             kind = col.kind
             if kind == REF:
                 self.refs["ref." + col.target] = value
-            elif kind == PLANT:
-                self.held[col.target] = value
+            elif kind in (PLANT, DIST):
+                (self.held if kind == PLANT else self.dist)[col.target] = value
                 if self.set_param is not None:
                     self.set_param(col.target, value)
                 elif started:
@@ -104,10 +105,15 @@ class Run:
         m, t = self.m, self.t
         self._apply(m.scenario.events[0].values, started=False)
         self.next_event = 1
+        for d, value in m.dist_defaults.items():
+            self.dist[d] = value
+            if self.set_param is not None:
+                self.set_param(d, value)
         try:
             m.plant.setup(t)
             if self.set_param is None:
-                m.plant.set_inputs({p: v for p, v in self.held.items() if not math.isnan(v)})
+                m.plant.set_inputs({p: v for p, v in (*self.held.items(), *self.dist.items())
+                                    if not math.isnan(v)})
             m.controller.expect_setpoints(m.scenario.setpoints())
             m.controller.setup(t)
         except (CosimError, SimulationFailed):
@@ -134,6 +140,8 @@ class Run:
         for name in self.m.measured:
             cin[name] = ym[name]
         cin.update(self.refs)
+        for d in self.m.ctrl_dists:
+            cin["dist." + d] = self.dist[d]
         fired: list[bool] = []
         t0 = _time.perf_counter()
         try:
@@ -172,6 +180,7 @@ class Run:
         m = self.m
         row = [t]
         row += map(self.refs.__getitem__, m.refs_keys)
+        row += map(self.dist.__getitem__, m.dists)
         row += map(self.held.__getitem__, m.scenario_plant)
         row += map(y.__getitem__, m.plant_outputs)
         if self.sensor is not None:

@@ -3,8 +3,8 @@
 One communication step ``[t_k, t_k+1)`` (Gauss-Seidel, zero-order hold; see
 :mod:`cosim.core.component` for the timing convention):
 
-1. apply the scenario events due at ``t_k`` (set-points, plant inputs and tunable parameters,
-   sensor bias and noise);
+1. apply the scenario events due at ``t_k`` (set-points, measured disturbances, plant inputs
+   and tunable parameters, sensor bias and noise);
 2. read the plant outputs ``y(t_k)``;
 3. the sensor (only when the scenario perturbs measurements) turns them into ``y_m(t_k)``;
 4. the controller (direct feedthrough) computes ``u_k`` from ``y_m(t_k)`` and the set-points;
@@ -13,8 +13,11 @@ One communication step ``[t_k, t_k+1)`` (Gauss-Seidel, zero-order hold; see
 
 Signals are wired by name: every controller input ``ref.<o>`` comes from the scenario, every
 other controller input from the plant output of the same name, every controller output goes
-to the plant input of the same name. The master knows nothing about the plant or the
-controller beyond that.
+to the plant input of the same name. A measured disturbance ``d`` (the problem's, or a
+controller input ``dist.<d>``) is set on the plant input or tunable parameter ``d`` from the
+scenario's ``dist.<d>`` column (else from the controller's ``disturbance_defaults``, its
+nominal value) and handed to a controller that measures it as ``dist.<d>``. The master
+knows nothing about the plant or the controller beyond that.
 
 A fault in a step (FMU error or crash, controller exception, non-finite plant output) ends the
 run: :meth:`Master.run` returns a :class:`RunResult` with status ``failed``, the reason, and
@@ -35,6 +38,7 @@ from cosim.core.loop import Run
 from cosim.core.run_result import (
     MAX_STEPS,
     PREFIX_CTRL,
+    PREFIX_DIST,
     PREFIX_PLANT,
     PREFIX_REF,
     PREFIX_SENSOR,
@@ -42,7 +46,7 @@ from cosim.core.run_result import (
     RunResult,
     communication_times,
 )
-from cosim.core.scenario import BIAS, NOISE, PLANT, REF, UNIFORM, Scenario
+from cosim.core.scenario import BIAS, DIST, NOISE, PLANT, REF, UNIFORM, Scenario
 
 __all__ = ["MAX_STEPS", "Master", "RowSink", "RunResult", "communication_times"]
 
@@ -63,10 +67,14 @@ class Master:
         updated every ``sample_time / step`` steps (an integer) and held in between.
     seed : int
         Seed of the sensor noise.
+    disturbances : sequence of str, optional
+        The problem's measured disturbances (plant inputs or tunable parameters a
+        ``dist.<name>`` column sets) besides those the controller measures.
     """
 
     def __init__(self, plant: Component, controller: Component, scenario: Scenario, *,
-                 step: float | None = None, seed: int = 0) -> None:
+                 step: float | None = None, seed: int = 0,
+                 disturbances: tuple[str, ...] | list[str] = ()) -> None:
         self.plant = plant
         self.controller = controller
         self.scenario = scenario
@@ -81,6 +89,7 @@ class Master:
             raise ParameterError("step", ": no communication step: the controller has no "
                                  "sample time; give one")
         self.dt = float(dt)
+        self.given_disturbances = tuple(disturbances)
         ts = controller.sample_time
         self.ratio = 1
         if ts is not None and step is not None:
@@ -107,7 +116,10 @@ class Master:
         plant_out = [s.name for s in plant.outputs]
         self.ctrl_outputs = [s.name for s in ctrl.outputs]
         self.refs = [s.name[4:] for s in ctrl.inputs if s.name.startswith("ref.")]
-        self.measured = [s.name for s in ctrl.inputs if not s.name.startswith("ref.")]
+        self.ctrl_dists = [s.name[5:] for s in ctrl.inputs if s.name.startswith("dist.")]
+        self.dists = list(dict.fromkeys([*self.given_disturbances, *self.ctrl_dists]))
+        self.measured = [s.name for s in ctrl.inputs
+                         if not s.name.startswith(("ref.", "dist."))]
         where = getattr(plant, "path", plant.name)
         units = {s.name: s.unit for s in (*ctrl.inputs, *ctrl.outputs) if s.unit}
         check = getattr(plant, "check_signals", None)
@@ -121,16 +133,31 @@ class Master:
             if y not in plant_out:
                 raise CosimError(f"{where}: controller input '{y}' is not an output of the plant"
                                  " (use --map to map it onto the plant's variable)")
+        for d in self.dists:
+            if d not in plant_in:
+                raise CosimError(f"{where}: measured disturbance '{d}' is not an input or "
+                                 "tunable parameter of the plant (name its variable with "
+                                 "variable = \"...\" in the problem, or use --map)")
         settable = getattr(plant, "settable", None)
         at_start = settable(True) if settable else plant_in
         later = settable(False) if settable else plant_in
-        sc.validate(at_start, self.refs, self.measured, driven=self.ctrl_outputs,
-                    plant_tunable=later)
+        sc.validate(at_start, self.refs, self.measured, driven=[*self.ctrl_outputs, *self.dists],
+                    plant_tunable=later, disturbances=self.dists)
         given = {c.target for c in sc.columns_of(REF)}
         for r in self.refs:
             if r not in given:
                 raise CosimError(f"{sc.path}:1:1: no column 'ref.{r}': the controller needs a "
                                  f"set-point for '{r}'")
+        given_d = {c.target for c in sc.columns_of(DIST)}
+        defaults = dict(getattr(ctrl, "disturbance_defaults", None) or {})
+        self.dist_defaults = {}
+        for d in self.dists:
+            if d in given_d:
+                continue
+            if d not in defaults:
+                raise CosimError(f"{sc.path}:1:1: no column 'dist.{d}': the controller "
+                                 f"measures the disturbance '{d}'; give its value")
+            self.dist_defaults[d] = float(defaults[d])
         self.plant_outputs = plant_out
         self.refs_keys = [f"ref.{r}" for r in self.refs]
         self.scenario_plant = [c.target for c in sc.columns_of(PLANT)]
@@ -140,13 +167,15 @@ class Master:
     def columns(self) -> list[str]:
         """Recorded columns, diagnostics excluded (they are appended as they appear).
 
-        ``time``, ``ref.<o>`` (set-points), ``plant.<v>`` (plant inputs/parameters the scenario
+        ``time``, ``ref.<o>`` (set-points), ``dist.<d>`` (measured disturbances, as set on
+        the plant), ``plant.<v>`` (plant inputs/parameters the scenario
         sets, then every plant output), ``sensor.<o>`` (measured values seen by the controller,
         only when the scenario perturbs them), ``ctrl.<u>`` (controller outputs, i.e. the plant
         inputs it drives), then ``ctrl.<d>`` per controller diagnostic.
         """
         cols = ["time"]
         cols += [f"{PREFIX_REF}.{r}" for r in self.refs]
+        cols += [f"{PREFIX_DIST}.{d}" for d in self.dists]
         cols += [f"{PREFIX_PLANT}.{p}" for p in self.scenario_plant]
         cols += [f"{PREFIX_PLANT}.{y}" for y in self.plant_outputs]
         if self.use_sensor:

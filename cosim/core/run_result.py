@@ -8,11 +8,14 @@ import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
-__all__ = ["MAX_STEPS", "PREFIX_CTRL", "PREFIX_PLANT", "PREFIX_REF", "PREFIX_SENSOR",
+__all__ = ["MAX_STEPS", "PREFIX_CTRL", "PREFIX_DIST", "PREFIX_PLANT", "PREFIX_REF",
+           "PREFIX_SENSOR",
            "RowSink", "RunResult", "communication_times"]
 
 #: Column prefixes of recorded signals (results.csv).
 PREFIX_REF, PREFIX_PLANT, PREFIX_SENSOR, PREFIX_CTRL = "ref", "plant", "sensor", "ctrl"
+#: The measured disturbances' columns (set on the plant, measured by the controller).
+PREFIX_DIST = "dist"
 
 
 @dataclass

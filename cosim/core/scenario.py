@@ -33,11 +33,13 @@ from pathlib import Path
 from cosim.core import csvio
 from cosim.core.errors import CosimError
 
-__all__ = ["BIAS", "NOISE", "PLANT", "REF", "SCENARIO_WORDING", "SENSOR_KINDS", "UNIFORM",
+__all__ = ["BIAS", "DIST", "NOISE", "PLANT", "REF", "SCENARIO_WORDING", "SENSOR_KINDS", "UNIFORM",
            "Column", "Event", "Scenario", "load"]
 
 #: Column kinds.
 REF, PLANT, BIAS, NOISE, UNIFORM = "ref", "plant", "bias", "noise", "uniform"
+#: ``dist.<name>``: a measured disturbance, set on the plant and measured by the controller.
+DIST = "dist"
 #: The suffixes of ``sensor.<output>.<suffix>`` columns, by kind.
 SENSOR_KINDS = {"bias": BIAS, "noise": NOISE, "uniform": UNIFORM}
 
@@ -53,10 +55,11 @@ class Column:
     name : str
         The header as written, e.g. ``"sensor.h1.bias"``.
     kind : str
-        :data:`REF`, :data:`PLANT`, :data:`BIAS`, :data:`NOISE` or :data:`UNIFORM`.
+        :data:`REF`, :data:`PLANT`, :data:`DIST`, :data:`BIAS`, :data:`NOISE` or
+        :data:`UNIFORM`.
     target : str
         The signal it acts on: ``"h1"`` for ``ref.h1`` and ``sensor.h1.bias``, ``"qd1"`` for
-        ``plant.qd1``.
+        ``plant.qd1``, ``"Tin"`` for ``dist.Tin``.
     """
 
     index: int
@@ -198,6 +201,7 @@ class Scenario:
         measured: Collection[str] = (),
         driven: Collection[str] = (),
         plant_tunable: Collection[str] | None = None,
+        disturbances: Collection[str] = (),
     ) -> None:
         """Check every column name against the run's signals.
 
@@ -214,6 +218,8 @@ class Scenario:
         plant_tunable : collection of str, optional
             The subset of ``plant_settable`` that may change after the first row (inputs and
             tunable parameters); default: all of ``plant_settable``.
+        disturbances : collection of str
+            The measured disturbances a ``dist.<name>`` column may set (the problem's).
 
         Raises
         ------
@@ -233,6 +239,10 @@ class Scenario:
                 if col.target not in plant_settable:
                     raise CosimError(f"{where}: unknown plant variable '{col.name}': not an "
                                      "input or tunable parameter of the plant")
+            if col.kind == DIST and col.target not in disturbances:
+                known = ", ".join(f"dist.{d}" for d in sorted(disturbances)) or "none"
+                raise CosimError(f"{where}: unknown disturbance '{col.name}': the problem "
+                                 f"measures {known}")
             if col.kind in SENSOR_KINDS.values() and col.target not in measured:
                 known = ", ".join(sorted(measured)) or "none"
                 raise CosimError(f"{where}: unknown measured output in '{col.name}' "
@@ -266,6 +276,8 @@ def _parse_header(path: Path, header: list[str]) -> tuple[Column, ...]:
         parts = name.split(".")
         if parts[0] == "ref" and len(parts) == 2 and parts[1]:
             columns.append(Column(i, name, REF, parts[1]))
+        elif parts[0] == "dist" and len(parts) == 2 and parts[1]:
+            columns.append(Column(i, name, DIST, parts[1]))
         elif parts[0] == "plant" and len(parts) >= 2 and all(parts[1:]):
             columns.append(Column(i, name, PLANT, name[len("plant."):]))
         elif (parts[0] == "sensor" and len(parts) >= 3 and parts[-1] in SENSOR_KINDS
@@ -273,8 +285,9 @@ def _parse_header(path: Path, header: list[str]) -> tuple[Column, ...]:
             columns.append(Column(i, name, SENSOR_KINDS[parts[-1]], ".".join(parts[1:-1])))
         else:
             raise CosimError(
-                f"{where}: unknown signal '{name}': expected ref.<output>, plant.<variable>, "
-                "sensor.<output>.bias, sensor.<output>.noise or sensor.<output>.uniform")
+                f"{where}: unknown signal '{name}': expected ref.<output>, dist.<disturbance>, "
+                "plant.<variable>, sensor.<output>.bias, sensor.<output>.noise or "
+                "sensor.<output>.uniform")
     return tuple(columns)
 
 

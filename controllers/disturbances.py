@@ -1,0 +1,111 @@
+"""Measured disturbances: the GRU conditioned on a held disturbance, and the static
+feedforward it gives.
+
+A model trained with measured disturbances takes ``v = (u, d)`` (``eq:gru`` with ``m_u``
+manipulated inputs then ``q`` disturbances, normalised). The input enters the GRU only
+through ``W_z v``, ``W_r v`` and ``W_h v``, so with ``d`` held at a value ``d̄``::
+
+    W v + b = W_u u + (b + W_d d̄)
+
+the model is a GRU of the manipulated inputs alone whose biases carry the disturbance
+(:func:`condition`). Every design made for a GRU (equilibria, set-points, the FHOCP, PI
+tuning) then applies to the conditioned model unchanged; :class:`BiasShift` moves the biases
+of a conditioned model in place when the measured disturbance changes, so that what was
+built on them (an FHOCP, its kernel workspaces) follows.
+
+The δISS certificate (``th:stability-bonassi``) of the full model over its whole input box
+covers every conditioned one: each row of ``[W_u  U  b + W_d d̄]`` has an ∞-norm no larger
+than the same row of ``[W_u  W_d  U  b]`` when ``‖d̄‖∞ ≤ 1`` (the disturbance inside its
+box), so the gate bounds of :mod:`controllers.certification.bounds` only shrink (docs:
+design/disturbances.md).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+__all__ = ["BiasShift", "condition", "feedforward_gain", "nominal"]
+
+#: The input weights and the biases they shift.
+_GATES = (("W_z", "b_z"), ("W_r", "b_r"), ("W_h", "b_h"))
+
+
+def nominal(model: Any) -> np.ndarray:
+    """The disturbances' nominal value, normalised: ``0`` (the middle of each box, or the
+    normalisation's offset)."""
+    return np.zeros(model.q)
+
+
+def condition(model: Any, d: np.ndarray | None = None) -> Any:
+    """The model of the manipulated inputs alone with the disturbances held at ``d``
+    (normalised; default :func:`nominal`): the module docstring.
+
+    A model without disturbances is returned as it is. The result has its own bias arrays
+    (:class:`BiasShift` moves them) and shares the weights with ``model``.
+    """
+    q = model.q
+    if not q:
+        return model
+    m_u = model.m - q
+    d = nominal(model) if d is None else np.asarray(d, dtype=float).reshape(q)
+    params = dict(model.params)
+    for w, b in _GATES:
+        W = np.asarray(model.params[w], dtype=float)
+        params[w] = W[:, :m_u]
+        params[b] = np.asarray(model.params[b], dtype=float) + W[:, m_u:] @ d
+    problem = replace(model.problem, disturbances=())
+    return replace(model, params=params, u_offset=np.asarray(model.u_offset)[:m_u],
+                   u_scale=np.asarray(model.u_scale)[:m_u],
+                   input_names=list(model.input_names)[:m_u],
+                   input_units=list(model.input_units)[:m_u], problem=problem,
+                   certificate=None)
+
+
+class BiasShift:
+    """Moves the biases of a conditioned model's parameters (``params``, shared by what was
+    built on them) to a new held disturbance, in place.
+
+    Parameters
+    ----------
+    model : GRUModel
+        The full model (inputs and disturbances).
+    params : dict of ndarray
+        The conditioned model's parameters (:func:`condition`), whose ``b_z b_r b_h`` arrays
+        are overwritten.
+    """
+
+    def __init__(self, model: Any, params: dict[str, np.ndarray]) -> None:
+        self.q = model.q
+        m_u = model.m - self.q
+        self._base = {b: np.asarray(model.params[b], dtype=float).copy() for _, b in _GATES}
+        self._W = {b: np.asarray(model.params[w], dtype=float)[:, m_u:] for w, b in _GATES}
+        self.params = params
+        self.d = np.full(self.q, np.nan)
+
+    def set(self, d: np.ndarray) -> bool:
+        """Hold the disturbances at ``d`` (normalised); ``True`` when the biases changed."""
+        d = np.asarray(d, dtype=float).reshape(self.q)
+        if np.array_equal(d, self.d):
+            return False
+        for b, W in self._W.items():
+            np.add(self._base[b], W @ d, out=self.params[b])
+        self.d = d.copy()
+        return True
+
+
+def feedforward_gain(model: Any, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The static feedforward ``Δu = K_ff Δd`` that keeps the outputs where they are when
+    the disturbances move, from the model's steady-state gains at the equilibrium ``(x, u)``
+    (normalised; ``u`` the model's full input ``(u, d)``): ``K_ff = −G_u⁺ G_d`` with
+    ``G = U_o (I − ∂f/∂x)⁻¹ ∂f/∂v`` split into its input and disturbance columns (the
+    least-squares inverse when the plant is not square)."""
+    from controllers.equilibrium import jacobians
+
+    params = {k: np.asarray(v, dtype=float) for k, v in model.params.items()}
+    A, B = jacobians(params, np.asarray(x, dtype=float), np.asarray(u, dtype=float))
+    G = params["U_o"] @ np.linalg.solve(np.eye(A.shape[0]) - A, B)
+    m_u = model.m - model.q
+    return -np.linalg.pinv(G[:, :m_u]) @ G[:, m_u:]
