@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["BiasShift", "condition", "feedforward_gain", "nominal"]
+__all__ = ["BiasShift", "condition", "feedforward_gain", "held_error", "input_gain", "nominal",
+           "rates"]
 
 #: The input weights and the biases they shift.
 _GATES = (("W_z", "b_z"), ("W_r", "b_r"), ("W_h", "b_h"))
@@ -61,7 +62,7 @@ def condition(model: Any, d: np.ndarray | None = None) -> Any:
                    u_scale=np.asarray(model.u_scale)[:m_u],
                    input_names=list(model.input_names)[:m_u],
                    input_units=list(model.input_units)[:m_u], problem=problem,
-                   certificate=None)
+                   certificate=None, held_from=model)
 
 
 class BiasShift:
@@ -84,14 +85,18 @@ class BiasShift:
         self._W = {b: np.asarray(model.params[w], dtype=float)[:, m_u:] for w, b in _GATES}
         self.params = params
         self.d = np.full(self.q, np.nan)
+        #: ``(Δb_z, Δb_r, Δb_h)`` (3n): the shift from the full model's biases
+        self.delta = np.zeros(3 * params["b_z"].shape[0])
 
     def set(self, d: np.ndarray) -> bool:
         """Hold the disturbances at ``d`` (normalised); ``True`` when the biases changed."""
         d = np.asarray(d, dtype=float).reshape(self.q)
         if np.array_equal(d, self.d):
             return False
-        for b, W in self._W.items():
-            np.add(self._base[b], W @ d, out=self.params[b])
+        n = self.delta.size // 3
+        for k, (b, W) in enumerate(self._W.items()):
+            self.delta[k * n:(k + 1) * n] = W @ d
+            np.add(self._base[b], self.delta[k * n:(k + 1) * n], out=self.params[b])
         self.d = d.copy()
         return True
 
@@ -109,3 +114,61 @@ def feedforward_gain(model: Any, x: np.ndarray, u: np.ndarray) -> np.ndarray:
     G = params["U_o"] @ np.linalg.solve(np.eye(A.shape[0]) - A, B)
     m_u = model.m - model.q
     return -np.linalg.pinv(G[:, :m_u]) @ G[:, m_u:]
+
+
+def input_gain(model: Any) -> float:
+    """``γ_d``: how far one step of the full model moves apart (∞-norm) for disturbances
+    ``‖Δd‖∞`` apart, per unit, on ``‖x‖∞ ≤ 1`` (lem:held-disturbance, docs:
+    design/disturbances.md)::
+
+        γ_d = ‖W_h,d‖∞ + ¼ ‖U_h‖∞ ‖W_r,d‖∞ + ¼ (1 + φ̄_h) ‖W_z,d‖∞
+
+    the input terms of the same increment bound as ν's (``th:stability-bonassi``), with the
+    candidate's factor ``1 − z ≤ 1``."""
+    from controllers.certification.bounds import gate_bounds, inf_norm
+
+    P = {k: np.asarray(v, dtype=float) for k, v in model.params.items()}
+    m_u = model.m - model.q
+    _, _, phi_h = gate_bounds(P)
+    return (inf_norm(P["W_h"][:, m_u:]) + 0.25 * inf_norm(P["U_h"]) * inf_norm(P["W_r"][:, m_u:])
+            + 0.25 * (1.0 + phi_h) * inf_norm(P["W_z"][:, m_u:]))
+
+
+def rates(model: Any) -> np.ndarray:
+    """The largest change per sample of each disturbance, normalised: the problem's
+    ``rate``, else the identification data's (the model file's ``training``
+    ``disturbance_rates``), else the whole box (any change in one sample)."""
+    data = (model.training or {}).get("disturbance_rates") or {}
+    out = []
+    for c in model.problem.disturbances:
+        rate = c.rate if c.rate is not None else data.get(c.name)
+        width = c.max - c.min
+        rate = width if rate is None or not np.isfinite(rate) else min(float(rate), width)
+        out.append(rate / abs(c.scale))
+    return np.array(out)
+
+
+def held_error(model: Any, rho_s: float, N: int) -> np.ndarray:
+    """``e_d(i)``, ``i = 0 … N``: a bound of ``‖x_i − x̃_i‖∞`` between the model run with
+    the disturbances held at their value at the prediction's start (what the FHOCP predicts)
+    and with their real values, when each moves at most its :func:`rates` per sample
+    (lem:held-disturbance)::
+
+        e_d(0) = 0,   e_d(i + 1) = ρ_s e_d(i) + γ_d δ_i,   δ_i = min(max(0, i − L) δ, Δ)
+
+    ``δ`` the largest normalised rate, ``Δ`` the largest normalised box width (2 with the
+    default normalisation), ``L`` the shortest dead time of a disturbance (the model sees
+    ``d_{k+i−L}``, known for ``i ≤ L``). Infinite from ``i = 1`` on when ``ρ_s ≥ 1`` and
+    the disturbances can move."""
+    problem = model.problem
+    delta = float(np.max(rates(model), initial=0.0))
+    width = float(max((c.max - c.min) / abs(c.scale) for c in problem.disturbances))
+    lag = min(c.delay for c in problem.disturbances)
+    gamma = input_gain(model)
+    e = np.zeros(N + 1)
+    for i in range(N):
+        step = min(max(0, i - lag) * delta, width)
+        e[i + 1] = rho_s * e[i] + gamma * step if np.isfinite(rho_s) else np.inf
+    if rho_s >= 1 and np.any(e > 0):
+        e[np.argmax(e > 0):] = np.inf
+    return e

@@ -89,6 +89,9 @@ class GRUModel:
         The control problem (signals, boxes, sample time, normalisation, PI loops).
     source : str or None
         The file the model was loaded from (:meth:`load`), for error messages; not saved.
+    held_from : GRUModel or None
+        The full model a conditioned one holds the disturbances of
+        (:func:`controllers.disturbances.condition`); its certificate bounds come from it.
     """
 
     params: dict[str, np.ndarray]
@@ -109,6 +112,9 @@ class GRUModel:
     certificate: dict[str, Any] | None = None
     problem: Any = None
     source: str | None = field(default=None, compare=False, repr=False)
+    #: the full model (inputs and measured disturbances) this one is conditioned on, with the
+    #: disturbances held in its biases (:func:`controllers.disturbances.condition`); not saved
+    held_from: Any = field(default=None, compare=False, repr=False)
 
     @property
     def n(self) -> int:

@@ -22,6 +22,17 @@ section V). Then one of two control laws (option ``law``) gives ``u_k``:
   ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.paper_mpc.RobustMPC`: the
   FHOCP ``eq:optimization`` with the shifted-candidate fallback).
 
+Measured disturbances (the problem's ``[disturbances]``, controller inputs ``dist.<name>``):
+the model's inputs are the manipulated inputs and the disturbances; the controller designs on
+the model with the disturbances held in its biases (:func:`controllers.disturbances.
+condition`, the certificate's bounds the full model's over the whole box) and, each step,
+moves the biases to the measured value (:class:`controllers.disturbances.BiasShift`) before
+the observer and the FHOCP use them: the FHOCP holds the disturbance over its horizon
+(feedforward), and its tightening covers how far the real one may move meanwhile
+(lem:held-disturbance, :func:`controllers.disturbances.held_error`). A measured value outside
+its box is held at the box's edge (counted in ``disturbance_clipped``). The tracking law only,
+and no dead time yet: the paper's law and a problem with ``delay`` are refused, in words.
+
 Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
 (``p > m``) only set-points on the model's ``m``-dimensional surface of equilibrium outputs
 are reachable: the tracking law steers to the closest one, the paper's law refuses the
@@ -180,10 +191,15 @@ class RobustMPCController(Component):
             raise CosimError(str(exc)) from None
         self.problem = problem_for(self.model, problem)
         self.model.problem = self.problem
+        #: the model as trained (inputs and measured disturbances); :attr:`model` holds the
+        #: disturbances in its biases, moved by :attr:`shift` (None without disturbances)
+        self.full_model = self.model
+        self.shift: Any = None
         if not isinstance(options, MPCOptions):
             options = MPCOptions.resolve({**(options or {}), **option_values}, self.problem)
         elif option_values:
             options = MPCOptions.from_mapping({**options.to_dict(), **option_values})
+        self._hold_disturbances(options)
         #: the design (:class:`cosim_adapters.mpc_options.MPCOptions`, defaults filled in;
         #: the problem's ``[mpc]`` under the options given, :meth:`MPCOptions.resolve`)
         self.options = options
@@ -206,6 +222,42 @@ class RobustMPCController(Component):
         if failed:
             go_uncertified(self, "; ".join(failed))
         self.setup(0.0)
+
+    def _hold_disturbances(self, o: MPCOptions) -> None:
+        """With measured disturbances: design on the model that holds them in its biases
+        (module docstring); refuse what is not built yet, in words."""
+        from controllers.disturbances import BiasShift, condition
+
+        pr = self.problem
+        delayed = [c.name for c in pr.model_inputs if c.delay]
+        if delayed:
+            raise CosimError(f"controller {self.name!r}: {', '.join(delayed)} of problem "
+                             f"{pr.name!r} have a dead time (delay); the robust MPC does not "
+                             "predict over dead time yet (issue 46): use the PI baseline")
+        if not pr.disturbances:
+            return
+        if not o.tracking:
+            raise CosimError(f"controller {self.name!r}: law=\"paper\" does not take the "
+                             f"measured disturbances ({', '.join(pr.disturbance_names)}) of "
+                             f"problem {pr.name!r} yet; use the tracking law (the default)")
+        if [c.name for c in pr.disturbances if c.preview]:
+            raise CosimError(f"controller {self.name!r}: preview = true on a disturbance of "
+                             f"problem {pr.name!r}: the robust MPC holds measured "
+                             "disturbances over its horizon; previewing them is not built yet "
+                             "(issue 46)")
+        self.model = condition(self.full_model)
+        self.shift = BiasShift(self.full_model, self.model.params)
+        self._d_offset = np.array([c.offset for c in pr.disturbances])
+        self._d_scale = np.array([c.scale for c in pr.disturbances])
+        self._d_clipped = 0
+
+    def _hold(self, d: np.ndarray) -> None:
+        """Hold the disturbances at ``d`` (normalised) in the model's biases, the FHOCP's
+        and the observer's (the compiled kernel's shift is the thread's: given each step)."""
+        changed = self.shift.set(d)
+        self.fhocp.shift_biases(self.shift.delta, changed)
+        if changed:
+            self.law.disturbance_moved()
 
     def _design(self, o: MPCOptions) -> tuple[ControlLaw, list[str]]:
         """The law of the options ``o`` on this model, and the hypotheses that fail: the
@@ -259,6 +311,13 @@ class RobustMPCController(Component):
         self.inputs = tuple(Signal(c.name, c.unit, c.description or f"measured {c.name}")
                             for c in pr.outputs) + tuple(
             Signal(f"ref.{c.name}", c.unit, f"set-point of {c.name}") for c in pr.outputs)
+        self.inputs += tuple(Signal(f"dist.{c.name}", c.unit, c.description
+                                    or f"measured disturbance {c.name}")
+                             for c in pr.disturbances)
+        #: what a run without a ``dist.<name>`` column applies and measures: the nominal
+        #: value (the middle of the box, or the normalisation's offset)
+        self.disturbance_defaults = {c.name: c.offset for c in pr.disturbances}
+        self._d_names = [f"dist.{c.name}" for c in pr.disturbances]
         self.outputs = tuple(Signal(c.name, c.unit, c.description) for c in pr.inputs)
         self.sample_time = float(self.model.Ts)
         self.bounds = pr.bounds()
@@ -310,6 +369,9 @@ class RobustMPCController(Component):
         x0 = None if self.initial_estimate is None else np.asarray(self.initial_estimate,
                                                                     dtype=float)
         self.observer.reset(x0=x0, e_o0=self.cert.e_o0)
+        if self.shift is not None:   # the kernel is built (and found) for the nominal biases
+            self.shift.set(np.zeros(self.shift.q))
+            self._d_clipped = 0
         self.fhocp.setup()
         self.observer.kernel = self.fhocp.kernel   # its compiled GRU step (same model)
         self.law.reset()
@@ -338,11 +400,17 @@ class RobustMPCController(Component):
                              f"({values})")
         y = self.model.normalize_y(y_phys)
         y_ref = self.model.normalize_y(r_phys)
+        if self.shift is not None:
+            self._hold(self._measured_disturbances(t))
         if self.observer.x_hat is None:
             self.observer.init_from_output(y)
         e_o = self.observer.e_o
         step = self.law.step(self.observer, y, y_ref, t)
         rec, res = step.record, step.record.result
+        if self.shift is not None and rec.fallback and not rec.candidate_feasible:
+            # a measured disturbance moved the steady states beyond the plan: start again
+            # from the equilibrium of the output estimate at the disturbance now measured
+            self.law.restart()
         self.observer.make_step(rec.u, y)
         self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
         self._diag = {
@@ -360,6 +428,23 @@ class RobustMPCController(Component):
             "governor_lambda": step.governor_lambda,
             **step.diagnostics,
         }
+
+    def _measured_disturbances(self, t: float) -> np.ndarray:
+        """The disturbances ``dist.<name>`` normalised, each held inside its box."""
+        try:
+            d_phys = np.array([self._values[n] for n in self._d_names])
+        except KeyError as exc:
+            raise CosimError(f"controller {self.name!r}: input {exc.args[0]!r} was never set "
+                             f"(wire {', '.join(self._d_names)})") from None
+        if not np.all(np.isfinite(d_phys)):
+            values = ", ".join(f"{n}={v:g}" for n, v in zip(self._d_names, d_phys, strict=True))
+            raise CosimError(f"controller {self.name!r}: non-finite measured disturbance at "
+                             f"t={t:g} s ({values})")
+        d = (d_phys - self._d_offset) / self._d_scale
+        if np.any(np.abs(d) > 1.0):
+            self._d_clipped += 1
+            d = np.clip(d, -1.0, 1.0)
+        return d
 
     def diagnostics(self) -> dict[str, float]:
         return dict(self._diag)
@@ -380,6 +465,8 @@ class RobustMPCController(Component):
             "du_weight": {n: float(w) for n, w in zip(self._u_names, self.du_weight,
                                                       strict=True)},
             "gain_scale": self.cert.gain_scale,
+            **({"disturbances": list(self.problem.disturbance_names),
+                "disturbance_clipped": self._d_clipped} if self.shift is not None else {}),
             **self.law.summary(),
             "options": _plain(self.options.to_dict()),
         })

@@ -167,6 +167,8 @@ class TrackingLaw:
         self.disturbance.reset()
         self.y_ref: np.ndarray | None = None
         self.setpoint_changes = 0
+        #: times :meth:`restart` was called
+        self.restarts = 0
         #: per set-point whose target left ``Y_s``: its first time, steps, last target, d̂
         self.outside: dict[int, dict[str, Any]] = {}
 
@@ -196,6 +198,35 @@ class TrackingLaw:
         d_phys = d_hat * np.abs(model.y_scale)
         diag.update({f"d_hat_{n}": float(v) for n, v in zip(names, d_phys, strict=True)})
         return LawStep(rec, False, diag)
+
+    def disturbance_moved(self) -> None:
+        """The measured disturbances moved (the model's biases hold the new values): keep
+        the artificial steady state's output where it was, with the steady input the model
+        now needs for it (the equilibrium for that output at the new disturbances, the
+        nonlinear static feedforward), and move the plan by the same input change. Without
+        it, the steady state would lag behind by the move limit on ``u_s`` and the stage cost
+        would pull the outputs towards that lagging state."""
+        from controllers.equilibrium import equilibrium_for_output
+
+        tracker, kernel = self.tracker, self.fhocp.kernel
+        if tracker.u_s is None or tracker.x_s is None:
+            return
+        params = self.model.params
+        y_s = kernel.output(tracker.x_s) if kernel is not None else \
+            params["U_o"] @ tracker.x_s + params["b_o"]
+        x_s, u_s = equilibrium_for_output(params, y_s, kernel)
+        u_s = np.clip(u_s, -1.0, 1.0)
+        if tracker.plan is not None:
+            tracker.plan = np.clip(tracker.plan + (u_s - tracker.u_s), -1.0, 1.0)
+        tracker.u_s, tracker.x_s = u_s, np.asarray(x_s, dtype=float)
+        tracker._guess = None
+
+    def restart(self) -> None:
+        """Start the artificial steady state again at the next step, from the equilibrium
+        of the current output estimate (as at the first step): after a measured disturbance
+        moved the steady states so far that the shifted plan is no longer feasible."""
+        self.tracker.u_s = None
+        self.restarts += 1
 
     def _watch_target(self, r: np.ndarray, d_hat: np.ndarray, t: float) -> None:
         """Note the steps whose target ``r = ȳ − d̂`` (the steady output the model must
@@ -273,6 +304,7 @@ class TrackingLaw:
                 "setpoint_changes": self.setpoint_changes, "setpoint_rejected_steps": 0,
                 "setpoint_rejections": [],
                 "target_outside_Ys_steps": sum(v["steps"] for v in self.outside.values()),
+                "steady_state_restarts": self.restarts,
                 "notes": self.notes()}
 
 

@@ -122,6 +122,10 @@ class Certificate:
     #: ``"theorem"``: the bounds of ``th:feasibility-stability``; ``"measured"``: the
     #: uncertified design of :func:`uncertified_certificate` (no guarantee).
     tightening: str = "theorem"
+    #: ``(N + 1, q)``: the part of ``b`` that covers the measured disturbances held over the
+    #: horizon (``c_s e_d(i)``, lem:held-disturbance), ``None`` without disturbances; the
+    #: uncertified design's measured margins hold them already (measured with them held)
+    b_held: np.ndarray | None = None
 
     # -- dimensions and derived scalars ----------------------------------------------------
     @property
@@ -371,7 +375,12 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
     params = {k: np.asarray(v, dtype=float) for k, v in model.params.items()}
     n, m = params["W_z"].shape
     p = params["U_o"].shape[0]
-    check_gates(params, getattr(model, "source", None))
+    # a model holding measured disturbances in its biases (controllers.disturbances): the
+    # bounds are the full model's, over the whole box of inputs and disturbances
+    held = getattr(model, "held_from", None)
+    bound = params if held is None else {k: np.asarray(v, dtype=float)
+                                         for k, v in held.params.items()}
+    check_gates(bound, getattr(model, "source", None))
     N = horizon(N)
     if (isinstance(e_o0, bool) or not isinstance(e_o0, (int, float, np.number))
             or not (math.isfinite(e_o0) and e_o0 >= 0)):
@@ -394,7 +403,7 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
         theta = 1.0 if gain_scale is None else float(gain_scale)
         from controllers.certification.observer_gains import observer_gains_lp
 
-        Lz_lp, Lr_lp = observer_gains_lp(params)
+        Lz_lp, Lr_lp = observer_gains_lp(bound)
         L_z, L_r, gain_scale = theta * Lz_lp, theta * Lr_lp, theta
     else:
         L_z, L_r = gain(model.L_z, "L_z", n, p), gain(model.L_r, "L_r", n, p)
@@ -411,23 +420,29 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
         row_names = constraint_names(model, problem)
     L, h = np.asarray(L, dtype=float), np.asarray(h, dtype=float)
 
-    sz, sr, ph = gate_bounds(params)
-    nu_ = nu(params)
+    sz, sr, ph = gate_bounds(bound)
+    nu_ = nu(bound)
     rho_s_ = contraction(sz, nu_)
     cs = c_s(params, L)
-    nu_o_ = nu_o(params, L_z, L_r)
+    nu_o_ = nu_o(bound, L_z, L_r)
     rho_o_ = contraction(sz, nu_o_)
-    kap = kappa(params, L_z, L_r)
-    lmax = L_max(params, L_z, L_r)
+    kap = kappa(bound, L_z, L_r)
+    lmax = L_max(bound, L_z, L_r)
     w_bar = kap * w_y_bar
     a, b = tightening_parameters(N, rho_o_, rho_s_, lmax, cs, cs, w_bar)
+    b_held = None
+    if held is not None:
+        from controllers.disturbances import held_error
+
+        b_held = held_error(held, rho_s_, N)[:, None] * cs[None, :]
+        b = b + b_held
     return Certificate(
         params=params, N=int(N), Q=Q, R=R, L=L, h=h, sigma_z=sz, sigma_r=sr, phi_h=ph,
         nu=nu_, rho_s=rho_s_, c_s=cs, L_z=L_z, L_r=L_r, nu_o=nu_o_, rho_o=rho_o_,
         c_o=cs.copy(), kappa=kap, L_max=lmax, w_y_bar=w_y_bar, w_bar=w_bar,
         w_L=w_L(L, w_y_bar), a=a, b=b, e_o0=float(e_o0), e_inf=e_inf(rho_o_, w_bar),
         s=terminal_weight(n, Q, rho_s_), gain_scale=gain_scale, model=model,
-        row_names=row_names)
+        row_names=row_names, b_held=b_held)
 
 
 def uncertified_certificate(cert: Certificate, margins: np.ndarray) -> Certificate:

@@ -16,7 +16,11 @@ model's free run ``ξ`` of :mod:`controllers.identification.simulation`:
     B_j(i) = q_{95 %} over k of |r_{k+i, j} − d̂_{k, j}|,   k, k + i held-back rows of one
                                                          experiment
 
-made non-decreasing in ``i`` (a prediction further ahead is never assumed better). The 95th
+made non-decreasing in ``i`` (a prediction further ahead is never assumed better). With
+measured disturbances the controller's prediction holds them at their value at ``k`` over its
+horizon (:mod:`controllers.disturbances`): ``ξ_{k+i}`` is then the prediction from the free
+run's state at ``k`` with the applied inputs and the disturbances held
+(:func:`held_predictions`), so that ``B`` covers what holding them costs, measured. The 95th
 percentile (:data:`QUANTILE`), not the largest error: the largest comes from the fastest
 transients of the identification data (input steps across the whole box), which a controller
 near a constraint does not make, and taken whole it swallows a fifth of a quickly trained
@@ -36,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["HORIZON", "QUANTILE", "error_profile", "margins"]
+__all__ = ["HORIZON", "QUANTILE", "error_profile", "held_predictions", "margins"]
 
 #: Steps ahead measured (beyond, the last value holds).
 HORIZON = 200
@@ -44,13 +48,41 @@ HORIZON = 200
 QUANTILE = 0.95
 
 
+def held_predictions(params: dict[str, np.ndarray], u: np.ndarray, x: np.ndarray, q: int,
+                     experiments: list[tuple[int, int]], horizon: int = HORIZON
+                     ) -> np.ndarray:
+    """``(H + 1, T, p)``: the output predicted ``i`` steps ahead of each row ``k`` from the
+    free run's state ``x[k]`` with the inputs ``u`` (normalised, ``T × m``) as applied and
+    their last ``q`` columns (the measured disturbances) held at row ``k``'s; rows past the
+    experiment's end repeat its last prediction."""
+    T, p = len(u), params["U_o"].shape[0]
+    out = np.empty((horizon + 1, T, p))
+    Wz, Wr, Wh = params["W_z"], params["W_r"], params["W_h"]
+    for a, b in experiments:
+        X = np.array(x[a:b], dtype=float)
+        held = u[a:b, u.shape[1] - q:]
+        for i in range(horizon + 1):
+            out[i, a:b] = X @ params["U_o"].T + params["b_o"]
+            if i == horizon:
+                break
+            V = u[np.minimum(np.arange(a, b) + i, b - 1)].copy()
+            V[:, V.shape[1] - q:] = held
+            z = 1.0 / (1.0 + np.exp(-(V @ Wz.T + X @ params["U_z"].T + params["b_z"])))
+            r = 1.0 / (1.0 + np.exp(-(V @ Wr.T + X @ params["U_r"].T + params["b_r"])))
+            h = np.tanh(V @ Wh.T + (r * X) @ params["U_h"].T + params["b_h"])
+            X = z * X + (1.0 - z) * h
+    return out
+
+
 def error_profile(y: np.ndarray, xi: np.ndarray, held_back: np.ndarray,
                   experiments: list[tuple[int, int]], beta: float,
-                  horizon: int = HORIZON, quantile: float = QUANTILE) -> np.ndarray | None:
+                  horizon: int = HORIZON, quantile: float = QUANTILE,
+                  ahead: np.ndarray | None = None) -> np.ndarray | None:
     """``B(i)`` (``(H + 1, p)``, normalised; module docstring) from the measured outputs
     ``y`` and the model's free run ``xi`` (T, p), the held-back rows (a boolean mask) and
     the experiments' row ranges, at the ``quantile`` of the errors (1: their largest);
-    ``None`` when no experiment has two held-back rows."""
+    ``None`` when no experiment has two held-back rows. ``ahead``: the predictions with the
+    disturbances held (:func:`held_predictions`), instead of the free run ``i`` rows on."""
     y, xi = np.asarray(y, dtype=float), np.asarray(xi, dtype=float)
     held_back = np.asarray(held_back, dtype=bool)
     p = y.shape[1]
@@ -70,7 +102,8 @@ def error_profile(y: np.ndarray, xi: np.ndarray, held_back: np.ndarray,
         for i in range(min(horizon, b - a - 1) + 1):
             k = np.flatnonzero(inside[: b - a - i] & inside[i:])
             if k.size:
-                errors[i].append(np.abs(r[k + i] - d[k]))
+                pred = r[k + i] if ahead is None else y[a + k + i] - ahead[i, a + k]
+                errors[i].append(np.abs(pred - d[k]))
     steps = [i for i in range(horizon + 1) if errors[i]]
     if not steps or steps[0] != 0:
         return None

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from controllers import gru
 from controllers.certification.bounds import nu as nu_numpy
 from controllers.identification.initial_state import (
     DEFAULT_SAMPLES,
@@ -45,7 +46,8 @@ from controllers.identification.record import SPLITS, Record
 from controllers.identification.sim_loss import SimLoss, unpack
 
 __all__ = ["LONG_WINDOW", "MAX_WINDOW", "STEPS_PER_EPOCH", "Candidate", "SimOptions",
-           "default_epochs", "fit_candidate", "rms", "simulate", "training_windows"]
+           "default_epochs", "fit_candidate", "free_run_states", "rms", "simulate",
+           "training_windows"]
 
 #: A training stretch up to this many rows is one window...
 MAX_WINDOW = 2000
@@ -164,6 +166,18 @@ def simulate(params: dict[str, np.ndarray], record: Record,
             starts[e] = x0
         xi[a:b] = free_run(params, record.u[a:b], x0)
     return record.limits.clip(xi)
+
+
+def free_run_states(params: dict[str, np.ndarray], record: Record,
+                    samples: int = DEFAULT_SAMPLES) -> np.ndarray:
+    """The states of :func:`simulate`'s free run, ``(T, n)``: row ``k`` is ``x_k``, from
+    which ``ξ_k`` is read (each experiment from its estimated initial state)."""
+    x = np.empty((len(record.y), params["U_z"].shape[0]))
+    for a, b in record.experiments():
+        x0 = estimate_initial_state(params, record.u[a:b], record.y[a:b], record.sat[a:b],
+                                    samples)
+        x[a:b] = gru.simulate(params, x0, record.u[a:b])[0][:-1]
+    return x
 
 
 def rms(record: Record, xi: np.ndarray, rows: np.ndarray | None = None

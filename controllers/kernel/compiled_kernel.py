@@ -63,7 +63,7 @@ __all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "KernelProblem
            "last_error", "library_source", "loader_source", "variant_flags"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-13"
+GENERATOR_VERSION = "gru-fhocp-kernel-14"
 #: The C template, joined in this order after the generated header: the interface
 #: (``gru_fhocp.h``), the solver instance's memory, the mathematics bottom-up, the exported
 #: API, the equilibrium for an output (tracking kernels), the QP and the SQP.
@@ -403,13 +403,17 @@ def for_fhocp(fhocp: Any) -> tuple[Workspace | None, str | None]:
     (its own C state: FHOCPs may solve concurrently), the library self-tested against the
     numpy derivatives once per library and process: ``(workspace, None)``, or
     ``(None, reason)`` with a one-line warning (once per reason and process) when it cannot
-    be built or disagrees with them. Thread-safe."""
+    be built or disagrees with them. Thread-safe. The calling thread's bias shift
+    (:meth:`~controllers.kernel.kernel_lib.Kernel.set_bias_shift`) is reset to zero."""
     import warnings
 
     problem = KernelProblem.of(fhocp)
     with _LOCK:
         k, reason = _build(problem, None, None, None, False)
         if k is not None:
+            # the nominal biases on this thread (a measured disturbance's shift,
+            # FHOCP.shift_biases, is given again at every control step)
+            k.set_bias_shift(np.zeros(3 * k.n))
             key = str(k.path)
             if key not in _SELF_TESTED:
                 _SELF_TESTED[key] = fhocp.numpy_nlp().self_test(k.workspace(), problem.clip)

@@ -49,6 +49,10 @@ gk_ws *PFX(ws_new)(void);
 void PFX(ws_free)(gk_ws *ws);
 /* Forget the cached rollout. */
 void PFX(invalidate)(gk_ws *ws);
+/* The calling thread's shift of the biases (b_z, b_r, b_h; 3 NX): the measured disturbances
+ * held over the horizon (controllers.disturbances); every later call on this thread sees it.
+ * A cached rollout is not forgotten: invalidate the workspaces that hold one. */
+void PFX(set_bias_shift)(const double *db);
 
 /* ---- the FHOCP */
 /* The SQP of the FHOCP in one call (sqp.c): from the initial guess (w, lam_x, lam_g), which

@@ -108,6 +108,10 @@ class Kernel:
             f = self._fn("eq_newton")
             f.argtypes, f.restype = [_VP, _VP, _VP, _CI, _CD, _VP, _VP], _CI
             self.c["eq_newton"] = f
+        f = self._fn("set_bias_shift")
+        f.argtypes, f.restype = [_VP], None
+        self.c["set_bias_shift"] = f
+        self._shift = np.zeros(3 * self.n)
         self.c["ws_new"] = self._fn("ws_new")
         self.c["ws_new"].argtypes, self.c["ws_new"].restype = [], _VP
         self.c["ws_free"] = self._fn("ws_free")
@@ -124,6 +128,15 @@ class Kernel:
 
             self._externals[name] = ca.external(self.prefix + name, str(self.path))
         return self._externals[name]
+
+    def set_bias_shift(self, db: np.ndarray) -> None:
+        """The calling thread's shift of the biases ``(Δb_z, Δb_r, Δb_h)`` (``3n``): the
+        measured disturbances held (:mod:`controllers.disturbances`); every later call on
+        this thread sees it, in every workspace (whose cached rollouts are not forgotten:
+        :meth:`Workspace.invalidate` them)."""
+        shift = self._shift
+        shift[:] = np.asarray(db, dtype=float).reshape(shift.shape)
+        self.c["set_bias_shift"](shift.ctypes.data)
 
     def workspace(self) -> Workspace:
         """A new workspace: the C state and argument buffers of one user (one FHOCP)."""

@@ -212,6 +212,12 @@ VARIANT_ONLY static void rm_gemm(int ta, int tb, int m, int n, int k, const doub
 }
 #endif
 
+/* The measured disturbances held over the horizon, as a shift of the biases b_z, b_r, b_h
+ * (controllers.disturbances: W v + b = W_u u + (b + W_d d)): per thread, so that two
+ * controllers stepping on two threads never see each other's; set by PFX(set_bias_shift)
+ * before the calls of a control step, zero until then. */
+static __thread double gk_db[3 * NX];
+
 /* gates z, r, h of one stage at (x, u), with extra gate inputs dz, dr (eq:observer; NULL:
  * none). Always inlined: compiled inside each AVX2 / portable clone of its callers. */
 __attribute__((always_inline)) static inline void stage_gates(
@@ -219,7 +225,7 @@ __attribute__((always_inline)) static inline void stage_gates(
     double *ri, double *hi) {
   double az[NX], ar[NX], ah[NX], rho[NX];
   for (int k = 0; k < NX; k++) {
-    double sz = BZ[k], sr = BR[k], sh = BH[k];
+    double sz = BZ[k] + gk_db[k], sr = BR[k] + gk_db[NX + k], sh = BH[k] + gk_db[2 * NX + k];
     for (int j = 0; j < NU; j++) {
       sz += WZ[k * NU + j] * ui[j];
       sr += WR[k * NU + j] * ui[j];

@@ -294,6 +294,19 @@ class FHOCP:
         self._build_solver(nlp, opts, "fhocp")
         return self
 
+    def shift_biases(self, db: np.ndarray, changed: bool) -> None:
+        """The measured disturbances held over the horizon moved the model's biases in place
+        (:class:`controllers.disturbances.BiasShift`, shift ``db`` from the nominal ones):
+        forget what was computed at the old ones (``changed``) and give the compiled kernel
+        the shift (its numbers stay the nominal model's; the shift is the calling thread's, so
+        it is given at every control step)."""
+        if changed and self._nlp is not None:
+            self._nlp.forget()
+        if self.kernel is not None:
+            self.kernel.kernel.set_bias_shift(db)
+            if changed:
+                self.kernel.invalidate()
+
     def _build_solver(self, nlp: dict, opts: dict[str, Any], name: str) -> None:
         """The solver of ``nlp`` (the compiled kernel's SQP, casadi ``sqpmethod`` or IPOPT)
         and its argument buffers; forgets the warm start."""

@@ -85,6 +85,12 @@ class SingleShootingNLP:
         #: the input-rate term's constant Hessian (N m × N m), None without the term
         self._du_hess = du_hessian(fhocp.N, fhocp.du_weight) if fhocp.has_du else None
 
+    def forget(self) -> None:
+        """Drop what was computed at the current biases (moved in place by
+        :class:`controllers.disturbances.BiasShift`)."""
+        self._key = None
+        self.shoot.refresh()
+
     # -- one point ----------------------------------------------------------------------
     def rollout(self, wv: np.ndarray, pv: np.ndarray, deriv: bool) -> Any:
         """States (and with ``deriv`` sensitivities) at ``(w, p)``, cached per point."""

@@ -70,6 +70,11 @@ class TrackingNLP(SingleShootingNLP):
             self._E = np.zeros((self._nwf, fhocp.nw))
             self._E[np.arange(self._nwf), src] = 1.0
 
+    def forget(self) -> None:
+        super().forget()
+        self._xs_key = None
+        self._one_stage.refresh()
+
     # -- one point ----------------------------------------------------------------------
     def steady(self, wv: np.ndarray, pv: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``(x_s, X_s)`` at ``(w, p)`` (cached per ``(u_s, x_s0)``)."""

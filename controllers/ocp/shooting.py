@@ -96,8 +96,14 @@ class GRUShooting:
         self.Dx = np.hstack([np.eye(n), np.zeros((n, m))])
         self._W_h_pad = np.hstack([np.zeros((n, n)), P["W_h"]])
         self._W_zrh = np.vstack([P["W_z"], P["W_r"], P["W_h"]])
-        self._b_zrh = np.concatenate([P["b_z"], P["b_r"], P["b_h"]])
         self._U_zr = np.vstack([P["U_z"], P["U_r"]])
+        self.refresh()
+
+    def refresh(self) -> None:
+        """Read the biases again (moved in place by
+        :class:`controllers.disturbances.BiasShift`)."""
+        P = self.P
+        self._b_zrh = np.concatenate([P["b_z"], P["b_r"], P["b_h"]])
 
     def rollout(self, x0: np.ndarray, u: np.ndarray, derivatives: bool = True) -> Rollout:
         """Simulate from ``x0`` with inputs ``u`` (N, m); optionally with ``A, B, S``."""

@@ -167,7 +167,8 @@ def _history_log(stack: Any, history: Path, names: list[str]) -> Any:
     return callback
 
 
-def _prediction_error(record: Any, ev: Any, problem: Any) -> tuple[Any, dict[str, Any]]:
+def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.ndarray],
+                      x0_samples: int) -> tuple[Any, dict[str, Any]]:
     """The model's measured prediction error on held-back rows (val and test, else train;
     :func:`controllers.certification.prediction_error.error_profile`: what the uncertified mode
     tightens by) and its summary for the model file, in the outputs' units."""
@@ -175,8 +176,15 @@ def _prediction_error(record: Any, ev: Any, problem: Any) -> tuple[Any, dict[str
     from controllers.ocp.reference_tracking import DEFAULTS as TRACKING
 
     held = np.isin(record.split, ("val", "test"))
+    ahead = None
+    if problem.q:   # the controller's prediction holds the measured disturbances
+        from controllers.certification.prediction_error import held_predictions
+        from controllers.identification.simulation import free_run_states
+
+        x = free_run_states(params, record, x0_samples)
+        ahead = held_predictions(params, record.u, x, problem.q, record.experiments())
     profile = error_profile(record.y, ev.xi, held if np.any(held) else record.split == "train",
-                            record.experiments(), TRACKING["offset_filter"])
+                            record.experiments(), TRACKING["offset_filter"], ahead=ahead)
     scale = problem.normalization()["y_scale"]
 
     def at(row: int) -> dict[str, float] | None:
@@ -190,6 +198,18 @@ def _prediction_error(record: Any, ev: Any, problem: Any) -> tuple[Any, dict[str
                      "steps": None if profile is None else int(profile.shape[0]),
                      "at_1_step": None if profile is None else at(min(1, len(profile) - 1)),
                      "at_last_step": None if profile is None else at(-1)}
+
+
+def _rates(data: Any, problem: Any) -> dict[str, float]:
+    """Each measured disturbance's largest change per sample in the data (within an
+    experiment), in its units: the held disturbance's tightening when the problem gives no
+    ``rate`` (:func:`controllers.disturbances.rates`)."""
+    out = {}
+    same = data.experiment[1:] == data.experiment[:-1]
+    for j, c in enumerate(problem.disturbances, start=problem.m):
+        steps = np.abs(np.diff(data.u[:, j]))[same]
+        out[c.name] = float(np.max(steps)) if steps.size else 0.0
+    return out
 
 
 def _model_record(args: argparse.Namespace, data: Any, record: Any, trained: Trained,
@@ -262,7 +282,10 @@ def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, train
                                args.x0_samples)
     err = np.abs(record.y - ev.xi)[record.split == _scored_split(record)]
     doc = _model_record(args, data, record, trained, ev, wall, command, sidecar)
-    profile, doc["prediction_error"] = _prediction_error(record, ev, problem)
+    profile, doc["prediction_error"] = _prediction_error(record, ev, problem, trained.params,
+                                                         args.x0_samples)
+    if problem.q:
+        doc["disturbance_rates"] = _rates(data, problem)
     model = training.build_model(trained.params, problem, doc, w_y_bar=float(np.max(err)))
     model.prediction_error = profile
     try:

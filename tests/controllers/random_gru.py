@@ -37,8 +37,8 @@ def random_gru_model(seed: int = 0, n: int = 20, m: int = 2, p: int = 2,
     Inputs and outputs are normalised by the problem's boxes (``‖u‖∞ ≤ 1``; for the
     four-tank ``y = (h − 1) / 1``, the output box [0, 2] m maps to ``[−1, 1]``).
     """
-    if problem is not None:
-        m, p = problem.m, problem.p
+    if problem is not None:   # the model's inputs: the problem's inputs and disturbances
+        m, p = len(problem.model_inputs), problem.p
     rng = np.random.default_rng(seed)
 
     def mat(rows: int, cols: int, row_sum: float) -> np.ndarray:
@@ -56,7 +56,8 @@ def random_gru_model(seed: int = 0, n: int = 20, m: int = 2, p: int = 2,
     norm = problem.normalization()
     return GRUModel(params=params, u_offset=norm["u_offset"], u_scale=norm["u_scale"],
                     y_offset=norm["y_offset"], y_scale=norm["y_scale"],
-                    input_names=list(problem.input_names), input_units=list(problem.input_units),
+                    input_names=list(problem.model_input_names),
+                    input_units=[c.unit for c in problem.model_inputs],
                     output_names=list(problem.output_names),
                     output_units=list(problem.output_units), Ts=problem.Ts,
                     training={"source": f"random_gru_model(seed={seed})"}, problem=problem)

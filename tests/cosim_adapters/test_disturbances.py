@@ -1,0 +1,212 @@
+"""Measured disturbances through the workflow, on the example heater with its ambient
+temperature measured (a tunable parameter of the FMU): ``generate-data`` excites it and logs
+its column, ``train`` makes it a model input and says what measuring it is worth, a scenario's
+``dist.T_in`` sets it on the plant and is recorded, the PI adds its static feedforward, and
+the robust MPC (tracking law, compiled kernel and numpy alike) holds it over its horizon."""
+
+from __future__ import annotations
+
+import csv
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cosim.cli import main
+
+ROOT = Path(__file__).resolve().parents[2]
+PROBLEM = """\
+[problem]
+name = "heater"
+Ts = 20.0
+
+[inputs.P]
+unit = "W"
+min = 0.0
+max = 2000.0
+hold = [3, 60]
+
+[outputs.T]
+unit = "degC"
+min = 15.0
+max = 80.0
+
+[disturbances.T_in]
+unit = "degC"
+min = 5.0
+max = 35.0
+variable = "T_amb"
+rate = 0.5
+hold = [5, 80]
+
+[mpc]
+Q = "outputs"
+R = 0.001
+du_weight = 0
+"""
+#: a set-point step, then ambient steps down and up at a constant set-point
+SCENARIO = "time,ref.T,dist.T_in\n0,40,20\n1000,55,20\n3000,55,10\n5000,55,30\n7000,55,30\n"
+
+
+@pytest.fixture(scope="module")
+def heater(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """The heater FMU, its problem with the ambient measured, data and a briefly trained
+    model."""
+    folder = tmp_path_factory.mktemp("heater_d")
+    spec = importlib.util.spec_from_file_location("example_plants",
+                                                  ROOT / "fmus" / "examples" / "build.py")
+    assert spec is not None and spec.loader is not None
+    examples = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(examples)
+    fmu = examples.build("heater", folder)
+    (folder / "heater.toml").write_text(PROBLEM)
+    (folder / "steps.csv").write_text(SCENARIO)
+    data, model = folder / "data.csv", folder / "gru.json"
+    assert main(["generate-data", "--plant", str(fmu), "--problem", str(folder / "heater.toml"),
+                 "--steps", "3000", "--out", str(data), "--quiet"]) == 0
+    assert main(["train", str(data), "--epochs", "40", "--n", "6", "--out", str(model),
+                 "--quiet"]) == 0
+    return {"fmu": fmu, "folder": folder, "data": data, "model": model,
+            "scenario": folder / "steps.csv"}
+
+
+def _rows(path: Path) -> list[dict[str, float]]:
+    with open(path, newline="") as fh:
+        return [{k: float(v) for k, v in row.items()} for row in csv.DictReader(fh)]
+
+
+def _iae(rows: list[dict[str, float]], start: float, end: float) -> float:
+    return sum(abs(r["ref.T"] - r["plant.T"]) * 20.0 for r in rows if start <= r["time"] < end)
+
+
+def test_generate_data_excites_the_disturbance_and_train_makes_it_an_input(
+        heater: dict[str, Path]) -> None:
+    with open(heater["data"], newline="") as fh:
+        header = next(csv.reader(fh))
+    assert header == ["time", "P", "T_in", "T", "split"]
+    data = np.genfromtxt(heater["data"], delimiter=",", names=True, dtype=None,
+                         encoding="utf-8")
+    t_in = data["T_in"]
+    assert t_in.min() >= 5.0 and t_in.max() <= 35.0 and len(np.unique(t_in)) > 20
+    doc = json.loads(heater["model"].read_text())
+    assert [s["name"] for s in doc["inputs"]] == ["P", "T_in"]
+    assert doc["problem"]["disturbances"][0]["variable"] == "T_amb"
+    # the report: held at their mean the disturbances make the model far worse (the plant
+    # follows its ambient), and the data's largest change per sample is recorded
+    assert doc["training"]["without_disturbances"]["ratio"] > 3.0
+    assert doc["training"]["disturbance_rates"]["T_in"] > 1.0
+
+
+def test_a_scenario_sets_the_disturbance_on_the_plant_and_records_it(
+        heater: dict[str, Path], tmp_path: Path) -> None:
+    runs = {}
+    for ff in ("true", "false"):
+        out = tmp_path / f"pi_{ff}"
+        assert main(["run", str(heater["scenario"]), "--plant", str(heater["fmu"]),
+                     "--controller", "pi", "--model", str(heater["model"]), "--option",
+                     f"feedforward={ff}", "--out", str(out), "--quiet"]) == 0
+        runs[ff] = _rows(out / "results.csv")
+        summary = json.loads((out / "summary.json").read_text())["controller_summary"]
+        assert (summary["feedforward"] is not None) is (ff == "true")
+    with_ff, without = runs["true"], runs["false"]
+    assert [r["dist.T_in"] for r in with_ff][::50] == [20.0] * 3 + [10.0] * 2 + [30.0] * 3
+    # the ambient moves the plant: at the same set-point the PI needs more power when colder
+    at = {r["time"]: r for r in without}
+    assert at[2980.0]["ctrl.P"] < at[4980.0]["ctrl.P"] > at[6980.0]["ctrl.P"]
+    # the feedforward rejects the ambient steps far better, the set-point step alike
+    for start, end in ((3000, 5000), (5000, 7001)):
+        assert _iae(with_ff, start, end) < 0.5 * _iae(without, start, end)
+    assert _iae(with_ff, 0, 3000) == pytest.approx(_iae(without, 0, 3000), rel=1e-9)
+
+
+def test_the_robust_mpc_holds_the_measured_disturbance(heater: dict[str, Path],
+                                                       tmp_path: Path) -> None:
+    results = {}
+    for kernel in ("auto", "numpy"):
+        out = tmp_path / f"mpc_{kernel}"
+        assert main(["run", str(heater["scenario"]), "--plant", str(heater["fmu"]),
+                     "--model", str(heater["model"]), "--option", f'kernel="{kernel}"',
+                     "--out", str(out), "--quiet"]) == 0
+        summary = json.loads((out / "summary.json").read_text())
+        ctrl = summary["controller_summary"]
+        assert ctrl["disturbances"] == ["T_in"] and ctrl["disturbance_clipped"] == 0
+        assert ctrl["kernel"] == ("compiled" if kernel == "auto" else "numpy")
+        assert summary["kpis"]["violations"]["T"]["count"] == 0
+        results[kernel] = _rows(out / "results.csv")
+    compiled, numpy_ = results["auto"], results["numpy"]
+    # the kernel's SQP and casadi's on the numpy derivatives: the same closed loop, nearly
+    assert _iae(compiled, 0, 7001) == pytest.approx(_iae(numpy_, 0, 7001), rel=0.1)
+    # it reacts to the ambient at once (feedforward): more power the step it gets colder
+    at = {r["time"]: r for r in compiled}
+    assert at[3000.0]["ctrl.P"] > at[2980.0]["ctrl.P"] + 100.0
+    assert at[5000.0]["ctrl.P"] < at[4980.0]["ctrl.P"] - 100.0
+    # and tracks the set-point after each step
+    for t in (2980.0, 4980.0, 6980.0):
+        assert abs(at[t]["plant.T"] - 55.0) < 0.5, t
+
+
+def test_the_kernels_shift_of_the_biases_is_the_full_models(heater: dict[str, Path]) -> None:
+    from controllers import gru
+    from cosim_adapters.robust_mpc import RobustMPCController
+
+    ctrl = RobustMPCController(model=heater["model"])
+    full, fh = ctrl.full_model, ctrl.fhocp
+    assert fh.kernel is not None
+    u = np.random.default_rng(0).uniform(-1, 1, (fh.N, 1))
+    x0 = np.full(full.n, 0.1)
+    for d in (0.7, -0.4, 0.0):
+        ctrl._hold(np.array([d]))
+        want = gru.simulate(full.params, x0, np.hstack([u, np.full((fh.N, 1), d)]))[0]
+        assert np.max(np.abs(fh.simulate(x0, u) - want)) < 1e-13, d
+        assert np.max(np.abs(gru.simulate(ctrl.model.params, x0, u)[0] - want)) < 1e-13, d
+        # the observer's step (eq:observer, no correction when y = ŷ) at the disturbance too
+        ctrl.observer.reset(x0=x0)
+        ctrl.observer.make_step(u[0], ctrl.observer.y_hat())
+        assert np.max(np.abs(ctrl.observer.x_hat - want[1])) < 1e-13, d
+
+
+@pytest.mark.parametrize(("edit", "words"), [
+    (("[mpc]", "[mpc]\nlaw = \"paper\""), "law=\"paper\" does not take the measured "
+     "disturbances (T_in)"),
+    (("rate = 0.5", "rate = 0.5\npreview = true"), "preview = true on a disturbance"),
+    (("hold = [3, 60]", "hold = [3, 60]\ndelay = 2"), "P of problem 'heater' have a dead time"),
+])
+def test_what_the_robust_mpc_does_not_take_yet_is_refused_in_words(
+        heater: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str],
+        edit: tuple[str, str], words: str) -> None:
+    problem = tmp_path / "heater.toml"
+    problem.write_text(PROBLEM.replace(*edit))
+    model = json.loads(heater["model"].read_text())
+    from controllers.problem_file import load
+
+    model["problem"] = load(problem).to_dict()
+    path = tmp_path / "gru.json"
+    path.write_text(json.dumps(model))
+    code = main(["run", str(heater["scenario"]), "--plant", str(heater["fmu"]), "--model",
+                 str(path), "--out", str(tmp_path / "out"), "--quiet"])
+    err = capsys.readouterr().err
+    assert code == 2 and words in err and "Traceback" not in err, err
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_scenario_naming_an_unknown_disturbance_is_refused(
+        heater: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    bad = tmp_path / "bad.csv"
+    bad.write_text(SCENARIO.replace("dist.T_in", "dist.T_out"))
+    code = main(["run", str(bad), "--plant", str(heater["fmu"]), "--controller", "pi",
+                 "--model", str(heater["model"]), "--out", str(tmp_path / "o"), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and f"{bad}:1:3: unknown disturbance 'dist.T_out'" in err
+    assert "the problem measures dist.T_in" in err and "\n" not in err
+
+
+def test_without_a_column_the_disturbance_is_nominal(heater: dict[str, Path],
+                                                     tmp_path: Path) -> None:
+    plain = tmp_path / "plain.csv"
+    plain.write_text("time,ref.T\n0,45\n600,45\n")
+    out = tmp_path / "o"
+    assert main(["run", str(plain), "--plant", str(heater["fmu"]), "--model",
+                 str(heater["model"]), "--out", str(out), "--quiet"]) == 0
+    assert {r["dist.T_in"] for r in _rows(out / "results.csv")} == {20.0}
