@@ -226,7 +226,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     bound = run_problem(ctrl, opts.get("problem", problem))
     plant_obj, plant_name = _plant(plant, vmap, interface, isolate, limit, seed, bound)
     master = Master(plant_obj, ctrl, sc, step=step, seed=seed,
-                    disturbances=bound.disturbance_names if bound is not None else ())
+                    disturbances=bound.disturbance_names if bound is not None else None)
     meta = {"scenario": str(sc.path), "plant": plant_name,
             "fmi_version": plant_obj.fmi_version, "interface": interface,
             "isolated": isolate, "step_timeout": limit,

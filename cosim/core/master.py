@@ -69,12 +69,13 @@ class Master:
         Seed of the sensor noise.
     disturbances : sequence of str, optional
         The problem's measured disturbances (plant inputs or tunable parameters a
-        ``dist.<name>`` column sets) besides those the controller measures.
+        ``dist.<name>`` column sets) besides those the controller measures; ``None`` (no
+        problem known): every ``dist.<name>`` column of the scenario names one.
     """
 
     def __init__(self, plant: Component, controller: Component, scenario: Scenario, *,
                  step: float | None = None, seed: int = 0,
-                 disturbances: tuple[str, ...] | list[str] = ()) -> None:
+                 disturbances: tuple[str, ...] | list[str] | None = None) -> None:
         self.plant = plant
         self.controller = controller
         self.scenario = scenario
@@ -89,7 +90,7 @@ class Master:
             raise ParameterError("step", ": no communication step: the controller has no "
                                  "sample time; give one")
         self.dt = float(dt)
-        self.given_disturbances = tuple(disturbances)
+        self.given_disturbances = None if disturbances is None else tuple(disturbances)
         ts = controller.sample_time
         self.ratio = 1
         if ts is not None and step is not None:
@@ -117,7 +118,10 @@ class Master:
         self.ctrl_outputs = [s.name for s in ctrl.outputs]
         self.refs = [s.name[4:] for s in ctrl.inputs if s.name.startswith("ref.")]
         self.ctrl_dists = [s.name[5:] for s in ctrl.inputs if s.name.startswith("dist.")]
-        self.dists = list(dict.fromkeys([*self.given_disturbances, *self.ctrl_dists]))
+        given = self.given_disturbances
+        if given is None:   # no problem known: the scenario's columns name them
+            given = tuple(c.target for c in sc.columns_of(DIST))
+        self.dists = list(dict.fromkeys([*given, *self.ctrl_dists]))
         self.measured = [s.name for s in ctrl.inputs
                          if not s.name.startswith(("ref.", "dist."))]
         where = getattr(plant, "path", plant.name)

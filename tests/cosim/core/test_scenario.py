@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 
 from cosim.core.errors import CosimError
-from cosim.core.scenario import BIAS, NOISE, PLANT, REF, load
+from cosim.core.scenario import BIAS, DIST, NOISE, PLANT, REF, load
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -42,6 +42,8 @@ def test_parses_columns_events_and_times(tmp_path: Path) -> None:
     ("t,ref.h1\n0,1\n1,\n", ":1:1:", "first column must be 'time'"),
     ("time,ref.h1,foo.h2\n0,1,2\n5,,\n", ":1:3:", "unknown signal 'foo.h2'"),
     ("time,ref.h1,sensor.h1.drift\n0,1,2\n5,,\n", ":1:3:", "unknown signal"),
+    ("time,ref.h1,dist.a.b\n0,1,2\n5,,\n", ":1:3:", "expected ref.<output>, dist.<disturbance>"),
+    ("time,ref.h1,dist.\n0,1,2\n5,,\n", ":1:3:", "unknown signal 'dist.'"),
     ("time,ref.h1,ref.h1\n0,1,1\n5,,\n", ":1:3:", "duplicate column 'ref.h1'"),
     ("time,ref.h1\n", ":2:1:", "empty body"),
     ("time,ref.h1\n0,1\n", ":2:1:", "single row"),
@@ -92,6 +94,19 @@ def test_validate_reports_unknown_names_with_line_1_and_column(tmp_path: Path) -
                                          "controller drives"):
         sc.validate(**ok, driven={"qa"})
     sc.validate(**ok, driven={"qb"})  # all known: no error
+
+
+def test_a_disturbance_column_names_one_of_the_problems(tmp_path: Path) -> None:
+    path = write(tmp_path, "time,ref.h1,dist.Tin\n0,1,290\n10,,300\n")
+    sc = load(path)
+    assert [(c.kind, c.target) for c in sc.columns] == [(REF, "h1"), (DIST, "Tin")]
+    ok = dict(plant_settable={"Tin"}, controller_refs={"h1"}, measured={"h1"})
+    sc.validate(**ok, disturbances={"Tin"})
+    with pytest.raises(CosimError, match=r":1:3: unknown disturbance 'dist.Tin': the problem "
+                                         r"measures dist.Tout"):
+        sc.validate(**ok, disturbances={"Tout"})
+    with pytest.raises(CosimError, match=r"measures none"):
+        sc.validate(**ok)
 
 
 def test_fixed_parameters_only_in_first_row(tmp_path: Path) -> None:
