@@ -15,10 +15,11 @@ from __future__ import annotations
 
 import itertools
 from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
-__all__ = ["DelayLine", "delayed"]
+__all__ = ["DelayLine", "delayed", "input_delay"]
 
 
 def delayed(u: np.ndarray, delays: Sequence[int], experiment: np.ndarray | None = None
@@ -53,6 +54,27 @@ def delayed(u: np.ndarray, delays: Sequence[int], experiment: np.ndarray | None 
             v[start:start + k, j] = u[start, j]
             v[start + k:end, j] = u[start:end - k, j]
     return v
+
+
+def input_delay(problem: Any) -> int:
+    """The manipulated inputs' common dead time ``K`` [samples] (0 without a problem): the
+    steps the robust MPC predicts before its decisions act, the shift of its tightening.
+
+    Raises
+    ------
+    DesignError
+        The inputs have different dead times (one line naming them).
+    """
+    if problem is None:
+        return 0
+    delays = {c.name: c.delay for c in problem.inputs}
+    if len(set(delays.values())) > 1:
+        from controllers.errors import DesignError
+
+        raise DesignError("the inputs have different dead times ("
+                          + ", ".join(f"{n} {k}" for n, k in delays.items())
+                          + " samples); the robust MPC takes one dead time for all inputs")
+    return next(iter(delays.values()), 0)
 
 
 class DelayLine:

@@ -84,10 +84,11 @@ def measured_margins(ctrl: Any, cert: Any) -> tuple[np.ndarray, str]:
     """The uncertified tightening of ``cert``'s rows over its horizon, and where it came from:
     the model file's ``prediction_error``, else its ``w̄_y`` at every step."""
     from controllers.certification.prediction_error import margins
+    from controllers.dead_time import input_delay
 
     profile = ctrl.model.prediction_error
     if profile is not None:
-        return margins(profile, cert.L, cert.N), "prediction_error"
+        return margins(profile, cert.L, cert.N, input_delay(ctrl.problem)), "prediction_error"
     w = float(ctrl.model.w_y_bar if ctrl.model.w_y_bar is not None else cert.w_y_bar)
     return np.full(cert.a.shape, w) * np.abs(cert.L).sum(axis=1), "w_y_bar"
 

@@ -65,9 +65,12 @@ class ControlLaw(Protocol):
         """Forget the run (set-points, plans, statistics)."""
         ...
 
-    def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float) -> LawStep:
+    def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float,
+             x_start: np.ndarray | None = None) -> LawStep:
         """``u_k`` for the measured ``y`` and the requested ``ȳ``, at ``x̂`` and ``ê_o`` of
-        ``observer`` (which the controller advances afterwards)."""
+        ``observer`` (which the controller advances afterwards); ``x_start``: the state the
+        FHOCP starts from instead of ``x̂`` (``x̂`` predicted over the inputs' dead time,
+        :mod:`controllers.dead_time`)."""
         ...
 
     def setpoint_reason(self, y: np.ndarray) -> str:

@@ -106,7 +106,10 @@ class PaperLaw:
         self.governed_steps = 0     # steps with the FHOCP set-point short of the requested
         self.governor_holds = 0     # of which the governor could not move it at all
 
-    def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float) -> LawStep:
+    def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float,
+             x_start: np.ndarray | None = None) -> LawStep:
+        if x_start is not None:
+            raise ValueError("the paper's law takes no dead time")
         if self.d_hat is None:
             self.d_hat = np.zeros_like(y)
         self.candidate = None

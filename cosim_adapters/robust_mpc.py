@@ -30,8 +30,14 @@ moves the biases to the measured value (:class:`controllers.disturbances.BiasShi
 the observer and the FHOCP use them: the FHOCP holds the disturbance over its horizon
 (feedforward), and its tightening covers how far the real one may move meanwhile
 (lem:held-disturbance, :func:`controllers.disturbances.held_error`). A measured value outside
-its box is held at the box's edge (counted in ``disturbance_clipped``). The tracking law only,
-and no dead time yet: the paper's law and a problem with ``delay`` are refused, in words.
+its box is held at the box's edge (counted in ``disturbance_clipped``).
+
+Dead time (``delay`` in the problem, one for all inputs: ``K`` samples): the model sees each
+input ``K`` samples late and each disturbance its own ``L`` late; the observer advances with
+those model inputs, and the FHOCP starts from ``x̂`` predicted ``K`` steps ahead with the inputs
+already applied and the disturbances known or held (:meth:`RobustMPCController._ahead`), its
+tightening that of ``K`` steps on. The tracking law only: the paper's law refuses disturbances,
+dead time and ``preview`` in words.
 
 Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
 (``p > m``) only set-points on the model's ``m``-dimensional surface of equilibrium outputs
@@ -195,6 +201,8 @@ class RobustMPCController(Component):
         #: disturbances in its biases, moved by :attr:`shift` (None without disturbances)
         self.full_model = self.model
         self.shift: Any = None
+        #: the inputs' dead time K [samples] (:func:`controllers.dead_time.input_delay`)
+        self.dead_time = 0
         if not isinstance(options, MPCOptions):
             options = MPCOptions.resolve({**(options or {}), **option_values}, self.problem)
         elif option_values:
@@ -226,20 +234,23 @@ class RobustMPCController(Component):
     def _hold_disturbances(self, o: MPCOptions) -> None:
         """With measured disturbances: design on the model that holds them in its biases
         (module docstring); refuse what is not built yet, in words."""
+        from controllers.dead_time import input_delay
         from controllers.disturbances import BiasShift, condition
 
         pr = self.problem
+        try:
+            self.dead_time = input_delay(pr)
+        except ControllersError as exc:
+            raise CosimError(f"controller {self.name!r}: problem {pr.name!r}: {exc}") from None
+        self._lags = np.array([c.delay for c in pr.disturbances], dtype=int)
         delayed = [c.name for c in pr.model_inputs if c.delay]
-        if delayed:
-            raise CosimError(f"controller {self.name!r}: {', '.join(delayed)} of problem "
-                             f"{pr.name!r} have a dead time (delay); the robust MPC does not "
-                             "predict over dead time yet (issue 46): use the PI baseline")
+        if not o.tracking and (pr.disturbances or delayed):
+            what = (f"the measured disturbances ({', '.join(pr.disturbance_names)})"
+                    if pr.disturbances else f"the dead time of {', '.join(delayed)}")
+            raise CosimError(f"controller {self.name!r}: law=\"paper\" does not take {what} "
+                             f"of problem {pr.name!r} yet; use the tracking law (the default)")
         if not pr.disturbances:
             return
-        if not o.tracking:
-            raise CosimError(f"controller {self.name!r}: law=\"paper\" does not take the "
-                             f"measured disturbances ({', '.join(pr.disturbance_names)}) of "
-                             f"problem {pr.name!r} yet; use the tracking law (the default)")
         if [c.name for c in pr.disturbances if c.preview]:
             raise CosimError(f"controller {self.name!r}: preview = true on a disturbance of "
                              f"problem {pr.name!r}: the robust MPC holds measured "
@@ -251,13 +262,45 @@ class RobustMPCController(Component):
         self._d_scale = np.array([c.scale for c in pr.disturbances])
         self._d_clipped = 0
 
-    def _hold(self, d: np.ndarray) -> None:
+    def _hold(self, d: np.ndarray, law: bool = True) -> None:
         """Hold the disturbances at ``d`` (normalised) in the model's biases, the FHOCP's
-        and the observer's (the compiled kernel's shift is the thread's: given each step)."""
+        and the observer's (the compiled kernel's shift is the thread's: given each step);
+        ``law``: the value the FHOCP holds over its horizon, whose moves move the law's
+        steady state (else the observer's model input, seen its dead time late)."""
         changed = self.shift.set(d)
         self.fhocp.shift_biases(self.shift.delta, changed)
-        if changed:
+        if not law:
+            return
+        if self._d_law is not None and not np.array_equal(d, self._d_law):
             self.law.disturbance_moved()
+        self._d_law = np.array(d, dtype=float)
+
+    def _ahead(self) -> np.ndarray:
+        """``x̂`` predicted over the inputs' dead time ``K``: ``K`` steps of the full model with
+        the inputs already applied (``u_{k−K} … u_{k−1}``) and each disturbance as the model
+        sees it, ``d_{k+i−L}`` while known, then held at ``d_k``."""
+        from controllers import gru
+
+        x = np.asarray(self.observer.x_hat, dtype=float)
+        params = self.full_model.params
+        for i in range(self.dead_time):
+            v = self._u_past[i]
+            if self.shift is not None:
+                d = self._d_past[-1].copy()
+                known = i < self._lags
+                d[known] = self._d_past[-1 - self._lags[known] + i, known.nonzero()[0]]
+                v = np.concatenate([v, d])
+            x = gru.step(params, x, v)
+        return x
+
+    def _model_input(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """``v_k`` as the model sees it: the input applied ``K`` samples ago (``u`` itself
+        without dead time) and each disturbance ``L`` samples ago."""
+        u_model = self._u_past[0] if self.dead_time else u
+        if self.shift is None:
+            return u_model, None
+        d = self._d_past[-1 - self._lags, np.arange(self._lags.size)]
+        return u_model, d
 
     def _design(self, o: MPCOptions) -> tuple[ControlLaw, list[str]]:
         """The law of the options ``o`` on this model, and the hypotheses that fail: the
@@ -372,6 +415,11 @@ class RobustMPCController(Component):
         if self.shift is not None:   # the kernel is built (and found) for the nominal biases
             self.shift.set(np.zeros(self.shift.q))
             self._d_clipped = 0
+        #: the disturbances the FHOCP held last; the last ``max L + 1`` measured (oldest
+        #: first); the last ``K`` inputs applied (normalised, oldest first)
+        self._d_law: np.ndarray | None = None
+        self._d_past: np.ndarray | None = None
+        self._u_past: np.ndarray | None = None
         self.fhocp.setup()
         self.observer.kernel = self.fhocp.kernel   # its compiled GRU step (same model)
         self.law.reset()
@@ -401,17 +449,34 @@ class RobustMPCController(Component):
         y = self.model.normalize_y(y_phys)
         y_ref = self.model.normalize_y(r_phys)
         if self.shift is not None:
-            self._hold(self._measured_disturbances(t))
+            d = self._measured_disturbances(t)
+            depth = int(self._lags.max(initial=0)) + 1
+            self._d_past = (np.tile(d, (depth, 1)) if self._d_past is None
+                            else np.vstack([self._d_past[1:], d]))
+            self._hold(d)
         if self.observer.x_hat is None:
             self.observer.init_from_output(y)
+        if self.dead_time and self._u_past is None:
+            # at rest before the run: the past inputs are the input that holds ŷ
+            from controllers.equilibrium import equilibrium_for_output
+
+            _, u0 = equilibrium_for_output(self.model.params, self.observer.y_hat(),
+                                           self.fhocp.kernel)
+            self._u_past = np.tile(np.clip(u0, -1.0, 1.0), (self.dead_time, 1))
         e_o = self.observer.e_o
-        step = self.law.step(self.observer, y, y_ref, t)
+        step = self.law.step(self.observer, y, y_ref, t,
+                             self._ahead() if self.dead_time else None)
         rec, res = step.record, step.record.result
         if self.shift is not None and rec.fallback and not rec.candidate_feasible:
             # a measured disturbance moved the steady states beyond the plan: start again
             # from the equilibrium of the output estimate at the disturbance now measured
             self.law.restart()
-        self.observer.make_step(rec.u, y)
+        u_model, d_model = self._model_input(rec.u)
+        if d_model is not None and self._lags.any():   # the observer's step: v_k
+            self._hold(d_model, law=False)
+        self.observer.make_step(u_model, y)
+        if self.dead_time:
+            self._u_past = np.vstack([self._u_past[1:], rec.u])
         self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
         self._diag = {
             "solve_ms": res.solve_time * 1e3,
@@ -467,6 +532,7 @@ class RobustMPCController(Component):
             "gain_scale": self.cert.gain_scale,
             **({"disturbances": list(self.problem.disturbance_names),
                 "disturbance_clipped": self._d_clipped} if self.shift is not None else {}),
+            "dead_time": self.dead_time,
             **self.law.summary(),
             "options": _plain(self.options.to_dict()),
         })

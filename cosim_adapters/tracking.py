@@ -172,7 +172,8 @@ class TrackingLaw:
         #: per set-point whose target left ``Y_s``: its first time, steps, last target, d̂
         self.outside: dict[int, dict[str, Any]] = {}
 
-    def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float) -> LawStep:
+    def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float,
+             x_start: np.ndarray | None = None) -> LawStep:
         """``d̂`` advanced with ``y − g(x̂)``, the FHOCP solved for ``r = ȳ − d̂``; the
         diagnostics ``y_model_<output>`` (the steady output ``y_s``) and ``d_hat_<output>``
         (``d̂``), in the problem's units."""
@@ -189,7 +190,8 @@ class TrackingLaw:
         if not self.certified:   # the measured tightening is around y + d̂
             self.fhocp.set_output_shift(d_hat)
         self._watch_target(y_ref - d_hat, d_hat, t)
-        rec = tracker.make_step(observer.x_hat, observer.e_o, y_ref - d_hat)
+        x0 = observer.x_hat if x_start is None else x_start
+        rec = tracker.make_step(x0, observer.e_o, y_ref - d_hat)
         params, kernel = model.params, self.fhocp.kernel
         y_s = model.denormalize_y(kernel.output(tracker.x_s) if kernel is not None   # the
                                   else params["U_o"] @ tracker.x_s + params["b_o"])  # FMU's sum

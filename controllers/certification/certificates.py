@@ -429,12 +429,18 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
     kap = kappa(bound, L_z, L_r)
     lmax = L_max(bound, L_z, L_r)
     w_bar = kap * w_y_bar
-    a, b = tightening_parameters(N, rho_o_, rho_s_, lmax, cs, cs, w_bar)
+    # with a dead time of K samples the FHOCP's stage i is K + i steps after the estimate:
+    # its tightening is the theorem's K steps on (controllers.dead_time)
+    from controllers.dead_time import input_delay
+
+    K = input_delay(getattr(held, "problem", None) or getattr(model, "problem", None))
+    a, b = tightening_parameters(N + K, rho_o_, rho_s_, lmax, cs, cs, w_bar)
+    a, b = a[K:], b[K:]
     b_held = None
     if held is not None:
         from controllers.disturbances import held_error
 
-        b_held = held_error(held, rho_s_, N)[:, None] * cs[None, :]
+        b_held = held_error(held, rho_s_, N + K)[K:, None] * cs[None, :]
         b = b + b_held
     return Certificate(
         params=params, N=int(N), Q=Q, R=R, L=L, h=h, sigma_z=sz, sigma_r=sr, phi_h=ph,

@@ -113,9 +113,10 @@ def error_profile(y: np.ndarray, xi: np.ndarray, held_back: np.ndarray,
     return np.maximum.accumulate(bound, axis=0)
 
 
-def margins(profile: Any, L: np.ndarray, N: int) -> np.ndarray:
+def margins(profile: Any, L: np.ndarray, N: int, shift: int = 0) -> np.ndarray:
     """The tightening of the constraint rows ``L y ≤ h`` at steps ``0 … N`` (``(N + 1, q)``):
-    ``Σ_k |L_jk| B_k(min(i, H))``."""
+    ``Σ_k |L_jk| B_k(min(i + shift, H))``; ``shift``: the inputs' dead time, the steps the
+    prediction runs before the FHOCP's first stage."""
     B = np.asarray(profile, dtype=float)
-    idx = np.minimum(np.arange(N + 1), B.shape[0] - 1)
+    idx = np.minimum(np.arange(N + 1) + int(shift), B.shape[0] - 1)
     return B[idx] @ np.abs(np.asarray(L, dtype=float)).T

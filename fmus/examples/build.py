@@ -20,10 +20,12 @@ from pathlib import Path
 HERE = Path(__file__).resolve().parent
 #: Plant name -> its script (the FMU is named after the class inside).
 PLANTS = {"cstr": HERE / "cstr" / "cstr.py", "heater": HERE / "heater" / "heater.py",
+          "heater_dead_time": HERE / "heater_dead_time" / "heater_dead_time.py",
           "mixing_tank": HERE / "mixing_tank" / "mixing_tank.py",
           "furnace": HERE / "furnace" / "furnace.py"}
 #: Plant name -> FMU file name.
-FMU_NAMES = {"cstr": "CSTR.fmu", "heater": "Heater.fmu", "mixing_tank": "MixingTank.fmu",
+FMU_NAMES = {"cstr": "CSTR.fmu", "heater": "Heater.fmu",
+             "heater_dead_time": "HeaterDeadTime.fmu", "mixing_tank": "MixingTank.fmu",
              "furnace": "Furnace.fmu"}
 
 

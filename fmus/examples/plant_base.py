@@ -15,6 +15,7 @@ The file is bundled into each FMU (``build.py`` passes it as a project file).
 from __future__ import annotations
 
 import math
+from typing import ClassVar
 from xml.etree.ElementTree import Element, SubElement
 
 from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real
@@ -39,6 +40,9 @@ class ExamplePlant(Fmi2Slave):
     Class attributes
     ----------------
     INPUTS, OUTPUTS, PARAMETERS : tuple of (name, unit, start, description)
+    DEAD_TIME : dict of str to float
+        Transport delay of an input [s]: the ODE sees the value applied that long ago (the
+        start value before). Default: none.
     STATES : int
         Number of states.
     MAX_SUBSTEP : float
@@ -50,6 +54,7 @@ class ExamplePlant(Fmi2Slave):
     INPUTS: tuple[tuple[str, str, float, str], ...] = ()
     OUTPUTS: tuple[tuple[str, str, float, str], ...] = ()
     PARAMETERS: tuple[tuple[str, str, float, str], ...] = ()
+    DEAD_TIME: ClassVar[dict[str, float]] = {}
     STATES = 1
     MAX_SUBSTEP = 1.0
     SETTLE = 5000.0
@@ -65,6 +70,9 @@ class ExamplePlant(Fmi2Slave):
                 self.register_variable(Real(name, causality=causality,
                                             variability=variability, description=description))
         self._x = [0.0] * self.STATES
+        #: per delayed input: (time applied, value), oldest first
+        self._applied: dict[str, list[tuple[float, float]]] = {n: [] for n in self.DEAD_TIME}
+        self._now: dict[str, float] = {}
 
     # -- the model (subclasses) -----------------------------------------------------------
     def rhs(self, x: list[float]) -> list[float]:
@@ -81,12 +89,14 @@ class ExamplePlant(Fmi2Slave):
 
     # -- FMI --------------------------------------------------------------------------------
     def exit_initialization_mode(self):
+        # a delayed input has held its start value since always (the plant at rest)
+        self._applied = {n: [(-math.inf, float(getattr(self, n)))] for n in self.DEAD_TIME}
         x = self.x_guess()
         self._x = self._integrate(x, self.SETTLE)
         self._publish()
 
     def do_step(self, current_time: float, step_size: float) -> bool:
-        x = self._integrate(self._x, step_size)
+        x = self._integrate(self._x, step_size, current_time)
         if not all(math.isfinite(v) for v in x):
             return False
         self._x = x
@@ -97,10 +107,13 @@ class ExamplePlant(Fmi2Slave):
         for name, value in self.out(self._x).items():
             setattr(self, name, float(value))
 
-    def _integrate(self, x: list[float], span: float) -> list[float]:
+    def _integrate(self, x: list[float], span: float, t0: float | None = None) -> list[float]:
         n = max(1, math.ceil(span / self.MAX_SUBSTEP - 1e-9))
         dt = span / n
-        for _ in range(n):
+        held = self._delayed_inputs(t0) if t0 is not None else {}
+        for k in range(n):
+            for name, history in held.items():   # the value applied DEAD_TIME ago
+                setattr(self, name, _at(history, t0 + k * dt - self.DEAD_TIME[name]))
             k1 = self.rhs(x)
             k2 = self.rhs([a + 0.5 * dt * k for a, k in zip(x, k1, strict=True)])
             k3 = self.rhs([a + 0.5 * dt * k for a, k in zip(x, k2, strict=True)])
@@ -108,7 +121,20 @@ class ExamplePlant(Fmi2Slave):
             x = [a + dt / 6.0 * (p1 + 2.0 * p2 + 2.0 * p3 + p4)
                  for a, p1, p2, p3, p4 in zip(x, k1, k2, k3, k4, strict=True)]
             x = self.clamp(x)
+        for name, value in self._now.items():   # the inputs as set, for the next step
+            setattr(self, name, value)
         return x
+
+    def _delayed_inputs(self, t0: float) -> dict[str, list[tuple[float, float]]]:
+        """Record the delayed inputs' values set for the step from ``t0``; their histories."""
+        for name, history in self._applied.items():
+            value = float(getattr(self, name))
+            self._now[name] = value
+            history.append((t0, value))
+            horizon = t0 - self.DEAD_TIME[name] - 1e-9
+            while len(history) > 2 and history[1][0] <= horizon:
+                history.pop(0)
+        return self._applied
 
     def clamp(self, x: list[float]) -> list[float]:
         """Keep a state physical after each substep (default: unchanged)."""
@@ -144,3 +170,14 @@ class ExamplePlant(Fmi2Slave):
             for unknown in outputs:
                 SubElement(initial, "Unknown", {"index": unknown.get("index")})
         return root
+
+
+def _at(history: list[tuple[float, float]], t: float) -> float:
+    """The value applied last at or before ``t`` (a zero-order hold)."""
+    value = history[0][1]
+    for when, v in history:
+        if when <= t + 1e-9:
+            value = v
+        else:
+            break
+    return value

@@ -185,3 +185,32 @@ def test_the_certificate_of_the_conditioned_model_is_the_full_models() -> None:
     assert held_error(late, cert.rho_s, 15)[5] > 0
     # no contraction: the term is infinite once the disturbance can have moved
     assert np.isinf(held_error(model, 1.0, 5)[2:]).all()
+
+
+def test_dead_time_shifts_the_tightening_by_its_samples() -> None:
+    from controllers.certification.certificates import compute_certificate
+    from controllers.certification.prediction_error import margins
+    from controllers.dead_time import input_delay
+    from controllers.errors import DesignError
+
+    plain = random_gru_model(0, n=10, problem=heater_problem(rate=0.3))
+    late = random_gru_model(0, n=10, problem=ControlProblem(
+        name="heater", Ts=20.0, inputs=(Channel("P", "W", 0.0, 2000.0, delay=3),),
+        outputs=(Channel("T", "degC", 15.0, 80.0),),
+        disturbances=(Channel("T_in", "degC", 5.0, 35.0, rate=0.3),)))
+    for model in (plain, late):
+        model.w_y_bar = 0.01
+    assert input_delay(late.problem) == 3 and input_delay(plain.problem) == 0
+    long = compute_certificate(condition(plain), N=18, gain_scale=0.0)
+    short = compute_certificate(condition(late), N=15, gain_scale=0.0)
+    # the FHOCP's stage i is 3 + i steps after the estimate: the theorem's terms 3 steps on
+    assert np.allclose(short.a, long.a[3:]) and np.allclose(short.b, long.b[3:])
+    assert np.allclose(short.b_held, long.b_held[3:])
+    profile = np.arange(10.0)[:, None]
+    assert margins(profile, np.ones((1, 1)), 4, shift=3)[:, 0].tolist() == [3, 4, 5, 6, 7]
+    assert margins(profile, np.ones((1, 1)), 8, shift=3)[-1, 0] == 9.0   # the last holds
+    mixed = ControlProblem(name="x", Ts=1.0, inputs=(Channel("a", "1", 0.0, 1.0, delay=1),
+                                                     Channel("b", "1", 0.0, 1.0, delay=2)),
+                           outputs=(Channel("y", "1", 0.0, 1.0),))
+    with pytest.raises(DesignError, match=r"different dead times \(a 1, b 2 samples\)"):
+        input_delay(mixed)
