@@ -223,11 +223,13 @@ def hint(model: Any, rows: dict[str, dict[str, float]], best: str) -> str | None
     if rows[best]["iae"] < 1.0:
         return None
     from controllers.certification.certificates import compute_certificate
+    from controllers.disturbances import condition
     from cosim_adapters.mpc_options import MPCOptions
     from cosim_adapters.robust_mpc import design_arguments
 
     text = f"no weighting beats the PI on the model (the best: {rows[best]['iae']:.2f}x its IAE)"
     options = MPCOptions.resolve({"law": "tracking", **CANDIDATES[best]}, model.problem)
+    model = condition(model)   # measured disturbances held: the controller's design
     cert = compute_certificate(model, gain_scale=0.0, **design_arguments(options, model))
     if cert.rho_s > RHO_HINT:
         text += (f": the certified terminal weight s = {cert.s:,.0f} (rho_s = "

@@ -192,13 +192,17 @@ def _admissible_ranges(cert: Any, model: Any) -> list[str]:
 
 
 def _w_y_bar_from_csv(model: Any, path: str) -> float:
-    """``w̄_y`` from a ``cosim generate-data`` record (``--data``)."""
+    """``w̄_y`` from a ``cosim generate-data`` record (``--data``): the full model's (inputs
+    and disturbances, each its dead time late)."""
     from controllers.certification.certificates import w_y_bar_from_data
+    from controllers.dead_time import delayed
     from controllers.errors import DataError
     from cosim.core.datagen import read_csv
 
     data = read_csv(path, input_names=list(model.input_names))
     u = data.u[:, [data.input_names.index(n) for n in model.input_names]]
+    if model.problem is not None:
+        u = delayed(u, model.problem.delays)
     try:
         return w_y_bar_from_data(model, u, data.outputs(list(model.output_names)), data.split)
     except DataError as exc:
@@ -237,18 +241,22 @@ def run(args: argparse.Namespace) -> int:
     """Compute the certificate, print it, check it; returns the exit code."""
     import numpy as np
 
+    from controllers.disturbances import condition
     from controllers.errors import ControllersError
     from controllers.model import GRUModel
     from cosim_adapters.problems import problem_for
 
     _check_args(args)
-    model = GRUModel.load(args.model)
-    model.problem = problem_for(model, getattr(args, "problem", None))
+    full = GRUModel.load(args.model)
+    full.problem = problem_for(full, getattr(args, "problem", None))
+    # measured disturbances: the controller's design, on the model holding them at their
+    # nominal values, its bounds the full model's over the whole box (controllers.disturbances)
+    model = condition(full)
     names = list(model.output_names)
     setpoints_phys = [_parse_setpoint(s, names) for s in args.setpoint]
     setpoints = [model.normalize_y(np.array(s)) for s in setpoints_phys]
 
-    w_y_bar = _w_y_bar_from_csv(model, args.data) if args.data else None
+    w_y_bar = _w_y_bar_from_csv(full, args.data) if args.data else None
     if w_y_bar is None and model.w_y_bar is None:
         raise CosimError(f"{args.model}: no 'w_y_bar' in the model file; estimate it with "
                          "--data DATA.csv")
@@ -292,7 +300,7 @@ def run(args: argparse.Namespace) -> int:
         path = figure(args.plot, model, cert, setpoints_phys)
         print(f"figure written to {path}", file=sys.stderr)
     if args.save:
-        _save(args.model, model, cert, verdict, setpoints_phys, args.quiet)
+        _save(args.model, full, cert, verdict, setpoints_phys, args.quiet)
     if not verdict.usable:
         print(f"cosim certify: not usable: {verdict.unusable}", file=sys.stderr)
         return EXIT_INPUT_ERROR

@@ -269,3 +269,23 @@ def test_the_robust_mpc_predicts_over_the_dead_time(dead_time: dict[str, Path],
     assert _iae(mpc, 0, 7001) < _iae(pi, 0, 7001)
     for start, end in ((3000, 5000), (5000, 7001)):
         assert _iae(mpc, start, end) < 0.6 * _iae(pi, start, end)
+
+
+def test_certify_designs_as_the_controller_and_export_refuses_in_words(
+        heater: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    model = tmp_path / "gru.json"
+    model.write_bytes(heater["model"].read_bytes())
+    before = json.loads(model.read_text())
+    code = main(["certify", str(model), "--data", str(heater["data"]), "--save"])
+    out = capsys.readouterr()
+    assert code in (0, 1) and "Traceback" not in out.err and "must be a" not in out.err, out.err
+    after = json.loads(model.read_text())
+    # the file keeps the full model (inputs and disturbances), with the verdict and gains
+    assert [s["name"] for s in after["inputs"]] == ["P", "T_in"]
+    assert after["W_z"] == before["W_z"] and "certificate" in after and "observer" in after
+    fmu = tmp_path / "c.fmu"
+    code = main(["export-fmu", str(model), "--out", str(fmu), "--quiet"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and "measured disturbances (T_in), which the controller FMU does not " \
+                          "take yet" in err and "\n" not in err
+    assert not fmu.exists()
