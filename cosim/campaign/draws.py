@@ -2,10 +2,10 @@
 
 Every ``[draw]`` key has its own random stream, ``numpy.random.default_rng([seed, run,
 crc32(key)])``: adding or removing one key does not change what the others draw, and a run
-draws the same values whichever worker runs it, in whatever order. Set-point sequences and
-initial states have streams of their own, and the run's noise seed (sensor noise, a GRU
-plant's output perturbation) is ``[seed, run]`` hashed to 32 bits. Variants of a run share all
-of it: controllers are compared on the same draws.
+draws the same values whichever worker runs it, in whatever order. Set-point sequences,
+initial states and disturbance steps have streams of their own, and the run's noise seed
+(sensor noise, a GRU plant's output perturbation) is ``[seed, run]`` hashed to 32 bits.
+Variants of a run share all of it: controllers are compared on the same draws.
 """
 
 from __future__ import annotations
@@ -51,6 +51,9 @@ class RunDraw:
         times from the scenario's start; empty when the spec has no ``[setpoints]``.
     stop_time : float or None
         The run's stop time when ``[setpoints]`` sets it.
+    disturbances : tuple
+        ``(time, {disturbance: value})`` changes replacing the scenario's ``dist.*`` columns;
+        empty when the spec has no ``[disturbances]``.
     plant_start : dict
         GRU-model plant start parameters (``h1_start`` …, ``dx_1`` …).
     initial_estimate : list of float or None
@@ -64,6 +67,7 @@ class RunDraw:
     stop_time: float | None = None
     plant_start: dict[str, float] = field(default_factory=dict)
     initial_estimate: list[float] | None = None
+    disturbances: tuple[tuple[float, dict[str, float]], ...] = ()
 
 
 @dataclass
@@ -198,8 +202,15 @@ def draw_run(spec: CampaignSpec, run: int, ctx: DrawContext) -> RunDraw:
     x_hat0 = None
     if spec.initial_state is not None:
         plant_start, x_hat0 = _initial_state(spec, ctx, run, setpoints, values)
+    steps: list[tuple[float, dict[str, float]]] = []
+    if spec.disturbances is not None:
+        rng = _stream(spec.seed, run, "disturbances")
+        ds = spec.disturbances
+        steps = [(ctx.start_time + j * ds.hold,
+                  {name: float(rng.uniform(lo, hi)) for name, (lo, hi) in ds.ranges.items()})
+                 for j in range(ds.count)]
     return RunDraw(run, run_seed(spec.seed, run), values, tuple(setpoints), stop, plant_start,
-                   x_hat0)
+                   x_hat0, tuple(steps))
 
 
 def _initial_state(spec: CampaignSpec, ctx: DrawContext, run: int,

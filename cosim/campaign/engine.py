@@ -160,7 +160,8 @@ def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, 
     at_start = dict(draw.values)
     at_start.update({f"plant.{k}": v for k, v in draw.plant_start.items()})
     loc = _Locator(spec.path, spec.text)
-    sc = sc.with_changes(at_start, list(draw.setpoints) or None, draw.stop_time)
+    sc = sc.with_changes(at_start, list(draw.setpoints) or None, draw.stop_time,
+                         list(draw.disturbances) or None)
     sample = None
     for name, ctrl in variant_controllers.items():
         if spec.model_plant:

@@ -29,6 +29,11 @@ that controllers are compared on the same draws. Example::
     # h1 = [0.6, 1.4]                  # range per output; default: the certified admissible
                                        # (and reachable) set-points of the robust MPC's model
 
+    [disturbances]                     # random steps of measured disturbances (the problem's
+    count = 3                          # [disturbances]) replacing the scenario's dist.* columns
+    hold = 2000                        # seconds each, from the start; the last to the end
+    T_in = [10.0, 30.0]                # range per disturbance (physical units)
+
     [initial_state]                    # GRU-model plants ("model:...") only
     output_offset = 0.05               # start at the equilibrium of the first set-point ± this
     # observer_error = 0.02            # ‖x_0 − x̂_0‖∞ drawn up to this (default ê_o,0)
@@ -53,7 +58,8 @@ from typing import Any
 
 from cosim.core.errors import CosimError
 
-__all__ = ["CampaignSpec", "Distribution", "InitialState", "SetpointSpec", "Variant", "load"]
+__all__ = ["CampaignSpec", "Distribution", "DisturbanceSpec", "InitialState", "SetpointSpec",
+           "Variant", "load"]
 
 #: Most runs one campaign may ask for.
 MAX_RUNS = 1_000_000
@@ -61,7 +67,8 @@ MAX_RUNS = 1_000_000
 DISTRIBUTIONS = {"uniform": 2, "normal": 2, "choice": None}
 _CAMPAIGN_KEYS = {"name", "runs", "seed", "scenario", "controller", "plant", "map", "model",
                   "problem", "interface", "timeout", "isolate", "step_timeout", "figures"}
-_TOP_KEYS = {"campaign", "controller", "draw", "setpoints", "initial_state", "variant"}
+_TOP_KEYS = {"campaign", "controller", "draw", "setpoints", "disturbances", "initial_state",
+             "variant"}
 _VARIANT_KEYS = {"name", "controller", "options", "model"}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
@@ -86,6 +93,17 @@ class SetpointSpec:
     hold: float
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
     first_certified: bool = False
+
+
+@dataclass(frozen=True)
+class DisturbanceSpec:
+    """``[disturbances]``: ``count`` levels of each measured disturbance, drawn uniformly in
+    its range (physical units), each held ``hold`` seconds from the start (the last to the
+    run's end): steps replacing the scenario's ``dist.*`` columns."""
+
+    count: int
+    hold: float
+    ranges: dict[str, tuple[float, float]]
 
 
 @dataclass(frozen=True)
@@ -129,6 +147,7 @@ class CampaignSpec:
     figures: bool = False
     draws: tuple[Distribution, ...] = ()
     setpoints: SetpointSpec | None = None
+    disturbances: DisturbanceSpec | None = None
     initial_state: InitialState | None = None
     variants: tuple[Variant, ...] = ()
     text: str = ""
@@ -303,6 +322,31 @@ def _setpoints(table: Any, loc: _Locator) -> SetpointSpec:
                             "the output (physical units)", "setpoints", key)
         ranges[key] = (float(value[0]), float(value[1]))
     return SetpointSpec(count, hold, ranges, first == "certified")
+
+
+def _disturbances(table: Any, loc: _Locator) -> DisturbanceSpec:
+    if not isinstance(table, dict):
+        raise loc.error("[disturbances] must be a table", "disturbances")
+    count = int(_number(table.get("count", 1), loc, "disturbances", "count", integer=True,
+                        positive=True))
+    if "hold" not in table:
+        raise loc.error("[disturbances]: 'hold' (seconds each level is held) is missing",
+                        "disturbances")
+    hold = float(_number(table["hold"], loc, "disturbances", "hold", positive=True))
+    ranges = {}
+    for key, value in table.items():
+        if key in ("count", "hold"):
+            continue
+        if (not isinstance(value, list) or len(value) != 2 or not all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value) or value[0] > value[1]):
+            raise loc.error(f"[disturbances] {key} = {value!r}: expected a range [low, high] "
+                            "of the disturbance (physical units)", "disturbances", key)
+        ranges[key] = (float(value[0]), float(value[1]))
+    if not ranges:
+        raise loc.error("[disturbances]: no disturbance ranges (NAME = [low, high])",
+                        "disturbances")
+    return DisturbanceSpec(count, hold, ranges)
 
 
 def _initial_state(table: Any, loc: _Locator) -> InitialState:
@@ -491,6 +535,8 @@ def load(path: str | Path) -> CampaignSpec:
     options = _controller_options(doc, loc, model)
     draws = _draws(doc, loc)
     setpoints = _setpoints(doc["setpoints"], loc) if "setpoints" in doc else None
+    disturbances = (_disturbances(doc["disturbances"], loc) if "disturbances" in doc
+                    else None)
     initial = _initial_state(doc["initial_state"], loc) if "initial_state" in doc else None
     if initial is not None and not (isinstance(plant, str) and plant.startswith("model:")):
         raise loc.error("[initial_state] needs a GRU-model plant (plant = \"model:FILE\")",
@@ -503,5 +549,6 @@ def load(path: str | Path) -> CampaignSpec:
         interface=interface,
         timeout=timeout, isolate=flags["isolate"] or step_timeout is not None,
         step_timeout=step_timeout, figures=flags["figures"], draws=tuple(draws),
-        setpoints=setpoints, initial_state=initial, variants=variants, text=text)
+        setpoints=setpoints, disturbances=disturbances, initial_state=initial,
+        variants=variants, text=text)
     return spec

@@ -110,7 +110,9 @@ def write_run(out: Path, spec: CampaignSpec, task: dict[str, Any],
         "seed": draw["seed"],
         "campaign": {"name": spec.name, "run": task["run"], "variant": task["variant"],
                      "tries": tries, "draws": draw["values"], "setpoints": draw["setpoints"],
-                     "plant_start": draw["plant_start"]},
+                     "plant_start": draw["plant_start"],
+                     **({"disturbances": draw["disturbances"]} if draw.get("disturbances")
+                        else {})},
     }
     folder = out / "runs" / report.run_folder_name(task["run"], task["variant"])
     if theorem is not None:

@@ -134,7 +134,9 @@ class Scenario:
 
     def with_changes(self, at_start: Mapping[str, float] | None = None,
                      setpoints: Sequence[tuple[float, Mapping[str, float]]] | None = None,
-                     stop_time: float | None = None) -> Scenario:
+                     stop_time: float | None = None,
+                     disturbances: Sequence[tuple[float, Mapping[str, float]]] | None = None
+                     ) -> Scenario:
         """A copy with values set in the first row, the set-points replaced, or a new stop.
 
         Parameters
@@ -147,6 +149,8 @@ class Scenario:
             Replace every ``ref.*`` value of the scenario by these set-point changes.
         stop_time : float, optional
             New stop time; later events are dropped.
+        disturbances : sequence of (time, {disturbance: value}), optional
+            Replace every ``dist.*`` value of the scenario by these changes.
 
         Raises
         ------
@@ -163,6 +167,8 @@ class Scenario:
         names = list(at_start or {})
         if setpoints:
             names += [f"ref.{o}" for _, values in setpoints for o in values]
+        if disturbances:
+            names += [f"dist.{d}" for _, values in disturbances for d in values]
         new = [n for n in dict.fromkeys(names) if n not in by_name]
         if new:
             parsed = _parse_header(self.path, ["time", *new])
@@ -178,12 +184,15 @@ class Scenario:
             row = table.setdefault(event.time, {})
             lines[event.time] = event.line
             for col, value in event.values:
-                if not (setpoints and col.kind == REF):
+                if not ((setpoints and col.kind == REF)
+                        or (disturbances and col.kind == DIST)):
                     row[col.name] = value
         table.setdefault(start, {}).update(at_start or {})
-        for t, values in setpoints or ():
-            if start <= t < stop:
-                table.setdefault(float(t), {}).update({f"ref.{o}": v for o, v in values.items()})
+        for prefix, changes in (("ref", setpoints), ("dist", disturbances)):
+            for t, values in changes or ():
+                if start <= t < stop:
+                    table.setdefault(float(t), {}).update(
+                        {f"{prefix}.{o}": v for o, v in values.items()})
         table.setdefault(stop, {})
         events = []
         for t in sorted(table):

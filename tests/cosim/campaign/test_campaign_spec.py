@@ -133,6 +133,43 @@ def test_draws_depend_on_seed_and_run_only(tmp_path: Path) -> None:
     assert draws.draw_run(other, 0, ctx).values != first[0].values
 
 
+def test_disturbance_steps_are_drawn_per_run_in_their_ranges(tmp_path: Path) -> None:
+    from cosim.core import scenario
+
+    text = GOOD + "\n[disturbances]\ncount = 3\nhold = 1000\nTin = [280.0, 300.0]\n"
+    s = spec.load(write(tmp_path, text))
+    assert s.disturbances == spec.DisturbanceSpec(3, 1000.0, {"Tin": (280.0, 300.0)})
+    ctx = draws.DrawContext.build(s, 0.0)
+    runs = [draws.draw_run(s, i, ctx) for i in range(4)]
+    assert runs == [draws.draw_run(s, i, ctx) for i in range(4)]   # seeded
+    for d in runs:
+        assert [t for t, _ in d.disturbances] == [0.0, 1000.0, 2000.0]
+        assert all(280.0 <= v["Tin"] <= 300.0 for _, v in d.disturbances)
+    assert len({d.disturbances[0][1]["Tin"] for d in runs}) == 4
+    # the other draws' streams are their own: adding the steps changes none of them
+    plain = spec.load(write(tmp_path, GOOD, "plain.toml"))
+    assert [draws.draw_run(plain, i, ctx).values for i in range(4)] == [d.values for d in runs]
+    # the steps replace the scenario's dist.* columns
+    sc = write(tmp_path, "time,ref.h1,dist.Tin\n0,1,290\n500,,295\n4000,,\n", "sc.csv")
+    changed = scenario.load(sc).with_changes(disturbances=list(runs[0].disturbances))
+    values = [(e.time, v) for e in changed.events for c, v in e.values if c.name == "dist.Tin"]
+    assert values == [(t, v["Tin"]) for t, v in runs[0].disturbances]   # the file's 295: gone
+
+
+@pytest.mark.parametrize(("table", "message"), [
+    ("count = 2\nTin = [1.0, 2.0]\n", "[disturbances]: 'hold' (seconds each level is held) is "
+     "missing"),
+    ("count = 2\nhold = 10\n", "[disturbances]: no disturbance ranges"),
+    ("hold = 10\nTin = [2.0, 1.0]\n", "[disturbances] Tin = [2.0, 1.0]: expected a range"),
+    ("hold = -1\nTin = [1.0, 2.0]\n", "hold"),
+])
+def test_bad_disturbance_tables_name_the_line(tmp_path: Path, table: str, message: str) -> None:
+    path = write(tmp_path, GOOD + "\n[disturbances]\n" + table)
+    with pytest.raises(CosimError) as err:
+        spec.load(path)
+    assert str(err.value).startswith(f"{path}:") and message in str(err.value), str(err.value)
+
+
 def test_setpoints_default_to_certified_reachable_set_points(tmp_path: Path) -> None:
     from controllers.certification import certificates as certs
 
