@@ -289,3 +289,29 @@ def test_certify_designs_as_the_controller_and_export_refuses_in_words(
     assert code == 2 and "measured disturbances (T_in), which the controller FMU does not " \
                           "take yet" in err and "\n" not in err
     assert not fmu.exists()
+
+
+def test_a_campaign_draws_disturbance_steps_on_dask(dead_time: dict[str, Path],
+                                                    tmp_path: Path) -> None:
+    problem = ROOT / "fmus" / "examples" / "heater_dead_time" / "problem.toml"
+    spec = tmp_path / "spec.toml"
+    spec.write_text(
+        f'[campaign]\nruns = 2\nseed = 5\nscenario = "{dead_time["scenario"]}"\n'
+        f'plant = "{dead_time["fmu"]}"\nmodel = "{dead_time["model"]}"\n'
+        f'problem = "{problem}"\n\n[disturbances]\ncount = 3\nhold = 2400\n'
+        'T_in = [10.0, 30.0]\n\n[[variant]]\nname = "mpc"\ncontroller = "robust-mpc"\n\n'
+        f'[[variant]]\nname = "pi"\ncontroller = "pi"\nmodel = "{dead_time["model"]}"\n')
+    out = tmp_path / "camp"
+    assert main(["campaign", str(spec), "--out", str(out), "--workers", "2", "--quiet"]) == 0
+    seen = {}
+    for run in (0, 1):
+        for variant in ("mpc", "pi"):
+            folder = out / "runs" / f"{run:06d}-{variant}"
+            steps = json.loads((folder / "summary.json").read_text())[
+                "campaign"]["disturbances"]
+            rows = _rows(folder / "results.csv")
+            for t, levels in steps:   # the plant got them, the results record them
+                row = next(r for r in rows if r["time"] >= t)
+                assert row["dist.T_in"] == levels["T_in"]
+            seen[run, variant] = [levels["T_in"] for _, levels in steps]
+    assert seen[0, "mpc"] == seen[0, "pi"] != seen[1, "mpc"] == seen[1, "pi"]
