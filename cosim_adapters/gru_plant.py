@@ -8,6 +8,9 @@ when no FMU is built. ``cosim run --plant model:FILE`` and campaigns (``plant =
 "model:FILE"``) run it like an FMU. Physical units on the outside (``qa, qb`` in, ``h1, h2``
 out) through the model file's normalisation; the output perturbation is uniform in
 ``[−w_y_max, w_y_max]`` per output (normalised), drawn each step from a seeded generator.
+A model with measured disturbances takes them as inputs (``dist.<name>`` columns set them);
+its problem's dead times delay each input as the model was trained
+(:mod:`controllers.dead_time`).
 
 Parameters a scenario may set in its first row (``plant.<name>``), before the plant starts:
 
@@ -121,13 +124,22 @@ class GRUPlant(Component):
     # -- Component interface ------------------------------------------------------------
     def setup(self, t0: float) -> None:
         """Start at the equilibrium for ``y0`` plus ``dx0``; restart the noise generator."""
+        from controllers.dead_time import DelayLine
+        from controllers.disturbances import condition, nominal
         from controllers.equilibrium import equilibrium_for_output
 
         self.rng = np.random.default_rng(self.seed)
-        x_eq, u0 = equilibrium_for_output(self.model, self.model.normalize_y(self.y0))
+        model = self.model   # at rest with the disturbances at their nominal values
+        x_eq, u0 = equilibrium_for_output(condition(model), model.normalize_y(self.y0))
+        u0 = np.concatenate([u0, nominal(model)])
         self.x_start = x_eq + self.dx0
         self.x = self.x_start.copy()
         self.u = u0
+        problem = model.problem
+        self._line = DelayLine(problem.delays) if problem is not None and any(
+            problem.delays) else None
+        if self._line is not None:
+            self._line.push(u0)   # the inputs before the run
         self._dirty = False
         self._draw()
 
@@ -144,7 +156,11 @@ class GRUPlant(Component):
         self.u = self.model.normalize_u(u_phys)
 
     def step(self, t: float, dt: float) -> None:
-        self.x = gru.step(self.model.params, self.x, self.u)
+        v = self.u
+        if self._line is not None:   # each input as the model sees it, its dead time late
+            self._line.push(self.u)
+            v = self._line.current()
+        self.x = gru.step(self.model.params, self.x, v)
         self._draw()
 
     def y_norm(self) -> np.ndarray:
