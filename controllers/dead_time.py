@@ -82,9 +82,9 @@ class DelayLine:
     late) and the ones still to come are known at run time.
 
     ``push(s_k)`` records the signals of sample ``k``; :meth:`current` is ``v_k``;
-    :meth:`ahead` ``(i)`` is ``v_{k+i}`` for ``i < min delay`` where the signals of later
-    samples are not yet needed (the already applied inputs). Before the first push every
-    past value is the first pushed one (at rest).
+    :meth:`ahead` ``(i)`` is ``v_{k+i}`` for ``i ≤ min(delays)``, known from the signals
+    already pushed. Before the first push every past value is the first pushed one (at
+    rest).
     """
 
     def __init__(self, delays: Sequence[int]) -> None:

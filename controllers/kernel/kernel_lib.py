@@ -111,7 +111,6 @@ class Kernel:
         f = self._fn("set_bias_shift")
         f.argtypes, f.restype = [_VP], None
         self.c["set_bias_shift"] = f
-        self._shift = np.zeros(3 * self.n)
         self.c["ws_new"] = self._fn("ws_new")
         self.c["ws_new"].argtypes, self.c["ws_new"].restype = [], _VP
         self.c["ws_free"] = self._fn("ws_free")
@@ -134,8 +133,8 @@ class Kernel:
         measured disturbances held (:mod:`controllers.disturbances`); every later call on
         this thread sees it, in every workspace (whose cached rollouts are not forgotten:
         :meth:`Workspace.invalidate` them)."""
-        shift = self._shift
-        shift[:] = np.asarray(db, dtype=float).reshape(shift.shape)
+        # the caller's own array (two threads may set theirs at once): C copies it
+        shift = np.ascontiguousarray(db, dtype=float).reshape(3 * self.n)
         self.c["set_bias_shift"](shift.ctypes.data)
 
     def workspace(self) -> Workspace:
