@@ -23,8 +23,6 @@ PLANTS = {"cstr": HERE / "cstr" / "cstr.py", "heater": HERE / "heater" / "heater
           "heater_dead_time": HERE / "heater_dead_time" / "heater_dead_time.py",
           "mixing_tank": HERE / "mixing_tank" / "mixing_tank.py",
           "furnace": HERE / "furnace" / "furnace.py"}
-#: Plant name -> the scripts its own one imports (bundled into its FMU beside plant_base.py).
-IMPORTS = {"heater_dead_time": (PLANTS["heater"],)}
 #: Plant name -> FMU file name.
 FMU_NAMES = {"cstr": "CSTR.fmu", "heater": "Heater.fmu",
              "heater_dead_time": "HeaterDeadTime.fmu", "mixing_tank": "MixingTank.fmu",
@@ -43,16 +41,15 @@ def build(name: str, out_dir: Path) -> Path:
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     # pythonfmu imports the script to read its description: plant_base must be importable
-    imports = IMPORTS.get(name, ())
-    folders = [str(p) for p in dict.fromkeys([HERE, *(s.parent for s in imports)])
-               if str(p) not in sys.path]
-    sys.path[:0] = folders
+    added = str(HERE) not in sys.path
+    if added:
+        sys.path.insert(0, str(HERE))
     try:
         path = FmuBuilder.build_FMU(PLANTS[name], dest=out_dir / FMU_NAMES[name],
-                                    project_files={HERE / "plant_base.py", *imports})
+                                    project_files={HERE / "plant_base.py"})
     finally:
-        for folder in folders:
-            sys.path.remove(folder)
+        if added:
+            sys.path.remove(str(HERE))
     return Path(path)
 
 
