@@ -2,7 +2,10 @@
 ``heater/heater.py`` whose power reaches the vessel 40 s late (a transport delay of two
 samples at Ts = 20 s), with its ambient temperature as a measured disturbance.
 
-Same equations as the heater::
+The heater's equations, written here again rather than imported from its script: FMUs built by
+pythonfmu and loaded in one Python host share their scripts' modules by name, so a script
+importing another's would get whichever the host loaded first (measured: a crash when both
+heaters ran in one process)::
 
     C dT/dt = P(t - 40 s) - UA(T) (T - T_amb),   UA(T) = UA0 + UA1 (T - T_amb)
 
