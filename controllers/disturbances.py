@@ -95,8 +95,13 @@ class BiasShift:
             return False
         n = self.delta.size // 3
         for k, (b, W) in enumerate(self._W.items()):
-            self.delta[k * n:(k + 1) * n] = W @ d
-            np.add(self._base[b], self.delta[k * n:(k + 1) * n], out=self.params[b])
+            # Σ_j W_:j d_j from j = 0 on, as the exported controller sums it (controller.c
+            # hold): the same shift to the bit, whatever BLAS a matrix product would call
+            acc = np.zeros(n)
+            for j in range(self.q):
+                acc = acc + W[:, j] * d[j]
+            self.delta[k * n:(k + 1) * n] = acc
+            np.add(self._base[b], acc, out=self.params[b])
         self.d = d.copy()
         return True
 

@@ -327,7 +327,9 @@ def with_problem(controller: str, options: Mapping[str, Any], problem: Any) -> d
     if given is not None and given != problem and str(given) != str(problem):
         raise CosimError(f"--problem {problem} and --option problem={given}: give the "
                          "problem once")
-    params = inspect.signature(registry.resolve(controller)).parameters
+    if registry.expand(controller)[0] == registry.FMU_CONTROLLER:
+        return opts   # a controller FMU's keywords are its parameters: the problem binds
+    params = inspect.signature(registry.resolve(controller)).parameters   # the plant only
     if "problem" in params or any(p.kind is inspect.Parameter.VAR_KEYWORD
                                   for p in params.values()):
         opts["problem"] = problem if not isinstance(problem, Path) else str(problem)

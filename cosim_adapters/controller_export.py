@@ -35,12 +35,6 @@ def fmu_identifier(out: str | Path) -> str:
 
 def _why_not(ctrl: Any) -> str:
     """Why ``ctrl`` cannot be exported (empty: it can)."""
-    pr = ctrl.problem
-    if pr.disturbances or ctrl.dead_time:
-        what = (f"measured disturbances ({', '.join(pr.disturbance_names)})" if pr.disturbances
-                else f"a dead time of {ctrl.dead_time} samples")
-        return (f"its problem {pr.name!r} has {what}, which the controller FMU does not take "
-                "yet (issue 46); run it with cosim run")
     fhocp = ctrl.fhocp
     if fhocp.kernel is None or not fhocp._compiled_loop:
         reason = fhocp.kernel_error or "the options select another solver"
@@ -87,6 +81,8 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
                        for c in pr.outputs),
         applied=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
                       for c in pr.inputs),
+        disturbances=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
+                           for c in pr.disturbances),
         parameters=tuple(Parameter(name, "1", low, high, text, start=start)
                          for name, low, high, text, start in parameters(
                              design, pr.input_names, pr.output_names)))

@@ -276,21 +276,27 @@ class RobustMPCController(Component):
         self._d_law = np.array(d, dtype=float)
 
     def _ahead(self) -> np.ndarray:
-        """``x̂`` predicted over the inputs' dead time ``K``: ``K`` steps of the full model with
-        the inputs already applied (``u_{k−K} … u_{k−1}``) and each disturbance as the model
-        sees it, ``d_{k+i−L}`` while known, then held at ``d_k``."""
+        """``x̂`` predicted over the inputs' dead time ``K``: ``K`` steps of the model with the
+        inputs already applied (``u_{k−K} … u_{k−1}``) and each disturbance as the model sees
+        it, ``d_{k+i−L}`` while known, then held at ``d_k`` (each step's disturbances in the
+        biases, then ``d_k`` again for the FHOCP); the compiled kernel's GRU step when there
+        is one, as the exported controller's (controller.c ahead)."""
         from controllers import gru
 
         x = np.asarray(self.observer.x_hat, dtype=float)
-        params = self.full_model.params
+        kernel = self.fhocp.kernel
+        zero = np.zeros(self.model.n)
         for i in range(self.dead_time):
-            v = self._u_past[i]
             if self.shift is not None:
                 d = self._d_past[-1].copy()
                 known = i < self._lags
                 d[known] = self._d_past[-1 - self._lags[known] + i, known.nonzero()[0]]
-                v = np.concatenate([v, d])
-            x = gru.step(params, x, v)
+                self._hold(d, law=False)
+            v = self._u_past[i]
+            x = (kernel.gru_step(x, v, zero, zero) if kernel is not None
+                 else gru.step(self.model.params, x, v))
+        if self.shift is not None and self.dead_time:
+            self._hold(self._d_past[-1], law=False)   # the FHOCP's: d_k
         return x
 
     def _model_input(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
@@ -464,8 +470,8 @@ class RobustMPCController(Component):
                                            self.fhocp.kernel)
             self._u_past = np.tile(np.clip(u0, -1.0, 1.0), (self.dead_time, 1))
         e_o = self.observer.e_o
-        step = self.law.step(self.observer, y, y_ref, t,
-                             self._ahead() if self.dead_time else None)
+        step = (self.law.step(self.observer, y, y_ref, t, x_start=self._ahead())
+                if self.dead_time else self.law.step(self.observer, y, y_ref, t))
         rec, res = step.record, step.record.result
         if self.shift is not None and rec.fallback and not rec.candidate_feasible:
             # a measured disturbance moved the steady states beyond the plan: start again

@@ -407,7 +407,13 @@ EXPORT void PFX(counters)(const gk_ws *ws, gk_counters *out) {
 
 EXPORT void PFX(invalidate)(gk_ws *ws) { ws->mem.c_level = -1; }
 
-EXPORT void PFX(set_bias_shift)(const double *db) { memcpy(gk_db, db, sizeof gk_db); }
+EXPORT void PFX(set_bias_shift)(const double *db) {
+#if HAS_SHIFT
+  memcpy(gk_db, db, sizeof gk_db);
+#else
+  (void)db;   /* no measured disturbances: nothing moves */
+#endif
+}
 
 EXPORT void PFX(timers)(const gk_ws *ws, double *out) {
 #ifdef GK_TIMERS

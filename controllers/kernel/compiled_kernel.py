@@ -121,6 +121,10 @@ class KernelProblem:
     control_horizon : int, optional
         ``M < N`` (tracking only): the free inputs ``u_0 … u_{M−1}``, the tail held at
         ``u_s`` (``NM``; none: ``N``).
+    bias_shift : bool
+        The biases move with measured disturbances (``HAS_SHIFT``: the per-thread shift of
+        :meth:`~controllers.kernel.kernel_lib.Kernel.set_bias_shift`, ``rollout.c`` gk_db);
+        without them the kernel has no thread-local state at all.
     """
 
     params: Mapping[str, np.ndarray]
@@ -134,6 +138,7 @@ class KernelProblem:
     du_weight: np.ndarray | None = None
     offset_weight: np.ndarray | None = None
     control_horizon: int | None = None
+    bias_shift: bool = False
 
     @property
     def has_du(self) -> bool:
@@ -147,7 +152,8 @@ class KernelProblem:
         weights and control horizon)."""
         return cls(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s,
                    fhocp.sqp_options.get("hessian_eigen_clip"), fhocp.LUo, fhocp.du_weight,
-                   **fhocp.reference.kernel_terms())
+                   **fhocp.reference.kernel_terms(),
+                   bias_shift=bool(getattr(fhocp, "bias_shift", False)))
 
 
 def generate_source(problem: KernelProblem, constants: Constants | None = None) -> str:
@@ -171,7 +177,8 @@ def generate_source(problem: KernelProblem, constants: Constants | None = None) 
            f"#define NQ {q}\n"
            f"#define NY {np.shape(params['U_o'])[0]}\n#define NL {n_l}\n",
            f"#define HAS_DU {int(problem.has_du)}\n"
-           f"#define HAS_ASS {int(offset_weight is not None)}\n",
+           f"#define HAS_ASS {int(offset_weight is not None)}\n"
+           f"#define HAS_SHIFT {int(problem.bias_shift)}\n",
            f"#define PFX(name) {PREFIX_PLACEHOLDER}##name\n", c_declarations(),
            constants.declarations(),
            f"#define QDIAG {int(np.count_nonzero(Q - np.diag(np.diag(Q))) == 0)}\n"]

@@ -18,6 +18,14 @@
  * One controller instance (ctl_state) holds everything a step reads and writes, the kernel's
  * solver instance included: instances are independent, and nothing is allocated after
  * ctl_new. Normalised units inside, the problem's units at ctl_step.
+ *
+ * Measured disturbances (CT_NQD of them) and dead time (CT_DEAD samples on the inputs; each
+ * disturbance its CT_LAGS): as RobustMPCController._hold, _ahead and _model_input. The
+ * disturbances the FHOCP holds are a shift of the biases (controllers/disturbances.py
+ * BiasShift: W_d d, CT_WD), the kernel's per-thread shift (rollout.c gk_db), given at every
+ * step before the kernel's calls; x_hat is predicted over the dead time with the inputs
+ * applied before the FHOCP starts; the observer advances with the model input as the model
+ * sees it (u_{k-K}, d_{k-L}).
  */
 /* controller_source.py parameters() names the law's tunable parameters, in its order */
 typedef char ctl_parameters_agree[CT_NPARAM == LAW_N_PARAMETERS ? 1 : -1];
@@ -32,7 +40,74 @@ typedef struct ctl_state {
   /* what the last step gave */
   double u_phys[NU], y_pred[NY], y_target[NY];
   int warnings;
+#if CT_NQD
+  /* the measured disturbances (normalised, oldest first), the ones in the biases now and
+   * their shift W_d d, the ones the FHOCP held last */
+  int has_d, has_shift, has_d_law;
+  double d_past[(CT_LAG_MAX + 1) * CT_NQD], d_shift[CT_NQD], db[3 * NX], d_law[CT_NQD];
+#endif
+#if CT_DEAD
+  /* the last CT_DEAD inputs applied (normalised, oldest first) */
+  int has_u_past;
+  double u_past[CT_DEAD * NU];
+#endif
 } ctl_state;
+
+#if CT_NQD
+static int same_d(const double *a, const double *b) {
+  for (int j = 0; j < CT_NQD; j++)
+    if (!(a[j] == b[j])) return 0;
+  return 1;
+}
+
+/* Hold the disturbances d (normalised) in the biases (RobustMPCController._hold: BiasShift.set,
+ * FHOCP.shift_biases): the shift W_d d, summed from j = 0 on as numpy does it there, the
+ * cached rollout forgotten when it changed, the thread's shift given every time; law: the
+ * value the FHOCP holds, whose moves move the law's steady state. */
+static void hold(ctl_state *st, const double *d, int law) {
+  if (!st->has_shift || !same_d(d, st->d_shift)) {
+    for (int k = 0; k < 3 * NX; k++) {
+      double s = 0.0;
+      for (int j = 0; j < CT_NQD; j++) s = s + CT_WD[k * CT_NQD + j] * d[j];
+      st->db[k] = s;
+    }
+    memcpy(st->d_shift, d, sizeof st->d_shift);
+    st->has_shift = 1;
+    PFX(invalidate)(st->ws);
+  }
+  PFX(set_bias_shift)(st->db);
+  if (!law) return;
+  if (st->has_d_law && !same_d(d, st->d_law)) law_disturbance_moved(&st->law);
+  memcpy(st->d_law, d, sizeof st->d_law);
+  st->has_d_law = 1;
+}
+
+/* disturbance j as the model sees it i samples on: d_{k+i-L_j} while known, else d_k */
+__attribute__((unused)) static double seen(const ctl_state *st, int i, int j) {
+  const double *newest = st->d_past + CT_LAG_MAX * CT_NQD;
+  return i < CT_LAGS[j] ? newest[(i - CT_LAGS[j]) * CT_NQD + j] : newest[j];
+}
+#endif
+
+#if CT_DEAD
+/* x_hat predicted over the inputs' dead time (RobustMPCController._ahead) into x */
+static void ahead(ctl_state *st, double *x) {
+  double zero[NX] = {0.0}, xn[NX];
+  memcpy(x, st->xhat, NX * sizeof(double));
+  for (int i = 0; i < CT_DEAD; i++) {
+#if CT_NQD
+    double d[CT_NQD];
+    for (int j = 0; j < CT_NQD; j++) d[j] = seen(st, i, j);
+    hold(st, d, 0);
+#endif
+    PFX(gru_step)(x, st->u_past + i * NU, zero, zero, xn);
+    memcpy(x, xn, sizeof xn);
+  }
+#if CT_NQD
+  hold(st, st->d_past + CT_LAG_MAX * CT_NQD, 0);   /* the FHOCP's: d_k */
+#endif
+}
+#endif
 
 /* ---------------------------------------------------------------- the instance */
 EXPORT void PFX(ctl_reset)(ctl_state *st) {
@@ -58,6 +133,12 @@ EXPORT ctl_state *PFX(ctl_new)(void) {
     return 0;
   }
   PFX(ctl_reset)(st);
+#if HAS_SHIFT
+  {   /* the thread's bias shift exists from now on: a step on this thread never allocates */
+    const double zero[3 * NX] = {0.0};
+    PFX(set_bias_shift)(zero);
+  }
+#endif
   return st;
 }
 
@@ -67,15 +148,23 @@ EXPORT void PFX(ctl_free)(ctl_state *st) {
   free(st);
 }
 
-/* One control step (RobustMPCController.step) at the measured outputs y and set-points ref
- * (the problem's units): writes u_phys (the inputs to apply, in their boxes), status,
+/* One control step (RobustMPCController.step) at the measured outputs y, set-points ref and
+ * measured disturbances d (the problem's units; d unused, and may be NULL, without
+ * disturbances): writes u_phys (the inputs to apply, in their boxes), status,
  * fallback, iterations, y_pred (the model's output at the next sample under the applied
  * plan) and y_target (the steady output the FHOCP steers the model to); advances the
- * observer. A non-finite y or ref changes nothing (the last inputs are held) and sets
+ * observer. A non-finite y, ref or d changes nothing (the last inputs are held) and sets
  * CTL_WARN_NONFINITE_INPUT; returns 1 then, else 0. */
-EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_phys) {
+EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_phys,
+                         const double *d_phys) {
   double y[NY], yr[NY], yh[NY], u[NU], dz[NX], dr[NX], xn[NX], d[NY];
-  if (!all_finite(y_phys, NY) || !all_finite(r_phys, NY)) {
+  const double *xstart = st->xhat;
+  (void)d_phys;
+  if (!all_finite(y_phys, NY) || !all_finite(r_phys, NY)
+#if CT_NQD
+      || !d_phys || !all_finite(d_phys, CT_NQD)
+#endif
+  ) {
     st->warnings |= CTL_WARN_NONFINITE_INPUT;
     return 1;
   }
@@ -83,14 +172,63 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     y[a] = (y_phys[a] - CT_Y_OFFSET[a]) / CT_Y_SCALE[a];
     yr[a] = (r_phys[a] - CT_Y_OFFSET[a]) / CT_Y_SCALE[a];
   }
+#if CT_NQD
+  /* the disturbances, each held inside its box (RobustMPCController._measured_disturbances) */
+  double dk[CT_NQD];
+  for (int j = 0; j < CT_NQD; j++) {
+    const double v = (d_phys[j] - CT_D_OFFSET[j]) / CT_D_SCALE[j];
+    dk[j] = v < -1.0 ? -1.0 : (v > 1.0 ? 1.0 : v);
+  }
+  if (!st->has_d)
+    for (int r = 0; r <= CT_LAG_MAX; r++) memcpy(st->d_past + r * CT_NQD, dk, sizeof dk);
+  else {
+    memmove(st->d_past, st->d_past + CT_NQD, CT_LAG_MAX * CT_NQD * sizeof(double));
+    memcpy(st->d_past + CT_LAG_MAX * CT_NQD, dk, sizeof dk);
+  }
+  st->has_d = 1;
+  hold(st, dk, 1);
+#endif
   if (!st->has_xhat) {
     double u0[NU];
     if (PFX(equilibrium)(st->ws, y, st->xhat, u0) != 0)
       st->warnings |= CTL_WARN_UNREACHABLE_START;
     st->has_xhat = 1;
   }
+#if CT_DEAD
+  double xa[NX];
+  if (!st->has_u_past) {   /* at rest before the run: the input that holds y_hat */
+    double xs0[NX], u0[NU];
+    PFX(output)(st->xhat, yh);
+    PFX(equilibrium)(st->ws, yh, xs0, u0);
+    for (int i = 0; i < CT_DEAD; i++)
+      for (int j = 0; j < NU; j++) st->u_past[i * NU + j] = gk_clip1(u0[j]);
+    st->has_u_past = 1;
+  }
+  ahead(st, xa);
+  xstart = xa;
+#endif
   for (int j = 0; j < NU; j++) u[j] = (st->u_phys[j] - CT_U_OFFSET[j]) / CT_U_SCALE[j];
-  law_step(&st->law, st->xhat, st->e_o, y, yr, u, &st->warnings);   /* u: held unless set */
+  law_step(&st->law, st->xhat, xstart, st->e_o, y, yr, u, &st->warnings);   /* u: held unless set */
+#if CT_NQD
+  /* a disturbance that moved the steady states beyond the plan: start again */
+  if (st->law.last.fallback && !st->law.cand_feasible) law_restart(&st->law);
+#endif
+  /* the model input as the model sees it (RobustMPCController._model_input) */
+  double um[NU];
+  memcpy(um, u, sizeof um);
+#if CT_DEAD
+  memcpy(um, st->u_past, sizeof um);
+#endif
+#if CT_NQD
+  int lagged = 0;
+  for (int j = 0; j < CT_NQD; j++) lagged |= CT_LAGS[j] != 0;
+  if (lagged) {
+    double dm[CT_NQD];
+    for (int j = 0; j < CT_NQD; j++)
+      dm[j] = st->d_past[(CT_LAG_MAX - CT_LAGS[j]) * CT_NQD + j];
+    hold(st, dm, 0);
+  }
+#endif
   /* the observer (GRUObserver.make_step) */
   PFX(output)(st->xhat, yh);
   for (int a = 0; a < NY; a++) d[a] = y[a] - yh[a];
@@ -103,9 +241,13 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     dz[k] = sz;
     dr[k] = sr;
   }
-  PFX(gru_step)(st->xhat, u, dz, dr, xn);
+  PFX(gru_step)(st->xhat, um, dz, dr, xn);
   memcpy(st->xhat, xn, sizeof xn);
   st->e_o = CT_RHO_O * st->e_o + CT_W_BAR;
+#if CT_DEAD
+  memmove(st->u_past, st->u_past + NU, (CT_DEAD - 1) * NU * sizeof(double));
+  memcpy(st->u_past + (CT_DEAD - 1) * NU, u, NU * sizeof(double));
+#endif
   for (int j = 0; j < NU; j++) {
     const double v = u[j] * CT_U_SCALE[j] + CT_U_OFFSET[j];
     st->u_phys[j] = v < CT_U_LO[j] ? CT_U_LO[j] : (v > CT_U_HI[j] ? CT_U_HI[j] : v);

@@ -10,10 +10,13 @@
  *                       included; with `last` (ctl_last), what its last step gave
  *   LAW_N_PARAMETERS    how many tunable parameters it has (CT_NPARAM must agree)
  *   law_reset(ls, ws)   a new run
- *   law_step(ls, xhat, e_o, y, yr, u, warnings)
- *                       u_k (normalised) for the estimate x_hat, the bound e_o, the measured
+ *   law_step(ls, xhat, xstart, e_o, y, yr, u, warnings)
+ *                       u_k (normalised) for the estimate x_hat (the FHOCP from xstart: x_hat
+ *                       predicted over the inputs' dead time), the bound e_o, the measured
  *                       output y and the set-point yr (normalised), raising CTL_WARN_* bits;
  *                       u comes holding the inputs applied last (left so: they are held)
+ *   law_disturbance_moved(ls), law_restart(ls), ls->cand_feasible
+ *                       with measured disturbances (CT_NQD > 0; the tracking law only)
  *   law_parameter(ls, i), law_refuse(ls, i, value)
  *                       where tunable parameter i lives (NULL: none), why a value is refused
  *                       (NULL: accepted)

@@ -23,7 +23,7 @@ from __future__ import annotations
 import ctypes
 import hashlib
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -110,6 +110,15 @@ class ControllerDesign:
         are C ``int`` constants.
     offset_free : bool
         The paper's law's ``offset_free`` (compiled: it decides the parameters).
+    d_offset, d_scale : arrays
+        The measured disturbances' normalisation (empty without them).
+    W_d : (3n, q) array
+        Their columns of ``W_z``, ``W_r``, ``W_h``, stacked: the biases' shift ``W_d d``
+        (:class:`controllers.disturbances.BiasShift`).
+    lags : int array
+        Each disturbance's dead time [samples].
+    dead_time : int
+        The inputs' dead time ``K`` [samples] (:func:`controllers.dead_time.input_delay`).
     """
 
     kernel: KernelProblem
@@ -142,7 +151,16 @@ class ControllerDesign:
     law: str
     law_data: Mapping[str, Any]
     offset_free: bool = False
+    d_offset: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    d_scale: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    W_d: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
+    lags: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    dead_time: int = 0
 
+    @property
+    def q(self) -> int:
+        """The number of measured disturbances."""
+        return int(np.size(self.d_offset))
     @classmethod
     def of(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
            u_lo: np.ndarray, u_hi: np.ndarray) -> ControllerDesign:
@@ -221,6 +239,7 @@ class ControllerDesign:
         o = fhocp._solver.options
         sqp = {name: getattr(o, name) for name, _ in o._fields_}
         arr = np.asarray
+        extra = _measured(model)
         return cls(
             kernel=KernelProblem.of(fhocp), y_offset=arr(model.y_offset, float),
             y_scale=arr(model.y_scale, float), u_offset=arr(model.u_offset, float),
@@ -231,7 +250,27 @@ class ControllerDesign:
             L=fhocp.L, h=fhocp.h, a=fhocp.a, b=fhocp.b, w_L=fhocp.w_L, Lbo=fhocp.Lbo,
             pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=layout.perm_x,
             perm_g=layout.perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
-            law=law, law_data=law_data, offset_free=offset_free)
+            law=law, law_data=law_data, offset_free=offset_free, **extra)
+
+
+def _measured(model: Any) -> dict[str, Any]:
+    """The design's measured disturbances and dead time, from the model the controller runs
+    (one holding them in its biases: ``held_from``, :func:`controllers.disturbances.
+    condition`)."""
+    from controllers.dead_time import input_delay
+
+    out: dict[str, Any] = {"dead_time": input_delay(getattr(model, "problem", None))}
+    full = getattr(model, "held_from", None)
+    if full is None:
+        return out
+    q = full.q
+    m_u = full.m - q
+    out.update(d_offset=np.asarray(full.u_offset, float)[m_u:],
+               d_scale=np.asarray(full.u_scale, float)[m_u:],
+               W_d=np.vstack([np.asarray(full.params[w], float)[:, m_u:]
+                              for w in ("W_z", "W_r", "W_h")]),
+               lags=np.array([c.delay for c in full.problem.disturbances], dtype=int))
+    return out
 
 
 def controller_constants(d: ControllerDesign) -> Constants:
@@ -258,6 +297,11 @@ def controller_constants(d: ControllerDesign) -> Constants:
                         ("CT_SQP_MAX_ITER_LS", s["max_iter_ls"]),
                         ("CT_SQP_TOL_DU_RELATIVE", s["tol_du_relative"])):
         c.scalar(name, int(value), "int")
+    if d.q:   # declared only with disturbances (controller.c: #if CT_NQD)
+        for name, value in (("CT_D_OFFSET", d.d_offset), ("CT_D_SCALE", d.d_scale),
+                            ("CT_WD", d.W_d)):
+            c.array(name, value)
+        c.array("CT_LAGS", d.lags, "int")
     for name, value in d.law_data.items():
         if isinstance(value, np.ndarray):
             c.array(name, value, finite=False)
@@ -335,7 +379,9 @@ def generate_source(design: ControllerDesign) -> str:
     if (problem.offset_weight is None) != (design.law == "paper"):
         raise ValueError(f"the {design.law} law's design on another law's kernel")
     kernel, own = kernel_constants(problem), controller_constants(design)
-    switches = f"#define CT_NPARAM {_parameter_count(design)}\n"
+    switches = (f"#define CT_NPARAM {_parameter_count(design)}\n"
+                f"#define CT_NQD {design.q}\n#define CT_DEAD {int(design.dead_time)}\n"
+                f"#define CT_LAG_MAX {int(np.max(design.lags, initial=0))}\n")
     if design.law == "paper":
         switches += (f"#define CT_OFFSET_FREE {int(design.offset_free)}\n"
                      f"#define CT_RATE_TUNABLE {int(_rate_tunable(design))}\n")
@@ -381,7 +427,7 @@ class CompiledController:
     copy."""
 
     def __init__(self, path: Path, prefix: str, data: bytes, n_inputs: int,
-                 n_outputs: int) -> None:
+                 n_outputs: int, n_disturbances: int = 0) -> None:
         self.lib = ctypes.CDLL(str(path))
         f = {name: getattr(self.lib, prefix + name) for name in (
             "ctl_new", "ctl_free", "ctl_reset", "ctl_step", "ctl_outputs",
@@ -390,7 +436,7 @@ class CompiledController:
         f["ctl_new"].restype = vp
         for name in ("ctl_free", "ctl_reset", "ctl_take_warnings"):
             f[name].argtypes = [vp]
-        f["ctl_step"].argtypes = [vp, vp, vp]
+        f["ctl_step"].argtypes = [vp, vp, vp, vp]
         f["ctl_outputs"].argtypes = [vp] * 7
         self._f = f
         self._st = None
@@ -402,14 +448,19 @@ class CompiledController:
         self._y, self._r = np.zeros(n_outputs), np.zeros(n_outputs)
         self._u, self._yp = np.zeros(n_inputs), np.zeros(n_outputs)
         self._yt = np.zeros(n_outputs)
+        self._d = np.zeros(max(n_disturbances, 1))
         self._ints = (ctypes.c_int * 3)()
 
-    def step(self, y: np.ndarray, ref: np.ndarray) -> dict[str, Any]:
-        """One step at the measured outputs and set-points (the problem's units): the inputs
-        ``u``, ``status``, ``fallback``, ``iterations``, ``y_pred``, ``y_target`` and
-        ``warnings``."""
+    def step(self, y: np.ndarray, ref: np.ndarray, d: np.ndarray | None = None
+             ) -> dict[str, Any]:
+        """One step at the measured outputs, set-points and disturbances (the problem's
+        units): the inputs ``u``, ``status``, ``fallback``, ``iterations``, ``y_pred``,
+        ``y_target`` and ``warnings``."""
         self._y[:], self._r[:] = y, ref
-        self._f["ctl_step"](self._st, self._y.ctypes.data, self._r.ctypes.data)
+        if d is not None:
+            self._d[:len(d)] = d
+        self._f["ctl_step"](self._st, self._y.ctypes.data, self._r.ctypes.data,
+                            self._d.ctypes.data)
         i = self._ints
         base = ctypes.addressof(i)
         size = ctypes.sizeof(ctypes.c_int)

@@ -51,7 +51,8 @@ void PFX(ws_free)(gk_ws *ws);
 void PFX(invalidate)(gk_ws *ws);
 /* The calling thread's shift of the biases (b_z, b_r, b_h; 3 NX): the measured disturbances
  * held over the horizon (controllers.disturbances); every later call on this thread sees it.
- * A cached rollout is not forgotten: invalidate the workspaces that hold one. */
+ * A cached rollout is not forgotten: invalidate the workspaces that hold one. A kernel
+ * without HAS_SHIFT (no measured disturbances) ignores it. */
 void PFX(set_bias_shift)(const double *db);
 
 /* ---- the FHOCP */

@@ -353,8 +353,9 @@ static void law_reset(law_state *st, gk_ws *ws) {
 /* PaperLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr; with
  * no admissible set-point to start from, u is left as it came (controller.c: the inputs
  * held, the box's middle before any) */
-static void law_step(law_state *st, const double *xhat, double e_o, const double *y,
-                     const double *yr, double *u, int *warnings) {
+static void law_step(law_state *st, const double *xhat, const double *xstart, double e_o,
+                     const double *y, const double *yr, double *u, int *warnings) {
+  (void)xstart;   /* the paper's law takes no dead time (RobustMPCController refuses it) */
   tightened_bounds(e_o, st->bnd);   /* (the governor's feasibility test reads them) */
   if (update_reference(st, xhat, y, yr, warnings) != 0) {   /* u as it came: held */
     st->last.status = CTL_OTHER;

@@ -2,6 +2,9 @@
  * controller.h and controller.c (see controller.h for what a law file defines). It is the C
  * twin of the Python law, line for line and in the same order of kernel calls:
  *
+ *   law_disturbance_moved, law_restart
+ *                   TrackingLaw.disturbance_moved (the steady state kept at its output under
+ *                   the disturbances now held, the plan moved alike) and restart
  *   law_step        cosim_adapters/tracking.py TrackingLaw.step: its first steady state (the
  *                   equilibrium of the estimate's output), the output-disturbance estimate
  *                   d_hat (DisturbanceFilter), the uncertified mode's shift of the output rows
@@ -38,8 +41,9 @@ typedef struct law_state {
   gk_ws *ws;
   /* the output-disturbance estimate d_hat (DisturbanceFilter) and its gain (a parameter) */
   double dhat[NY], beta;
-  /* the tracking MPC: artificial steady state, plan, last input, next initial guess */
-  int started, has_plan, has_uprev, has_guess;
+  /* the tracking MPC: artificial steady state, plan, last input, next initial guess;
+   * whether the last step's candidate was feasible (StepRecord.candidate_feasible) */
+  int started, has_plan, has_uprev, has_guess, cand_feasible;
   double us[NU], xs[NX], plan[NH * NU], uprev[NU], g_u[NH * NU], g_us[NU], g_xs[NX];
   /* the FHOCP's warm start (its last multipliers) */
   int has_warm;
@@ -204,8 +208,10 @@ static void make_step(law_state *st, const double *xhat, const double *rt, doubl
   ctl_result *res = &st->res;
   int use = res->success, fallback = 0;
   const ctl_result *applied = res;
+  st->cand_feasible = 1;
   if (!use) {
     check(st, xhat, cand, us0, rt, xs0, up, CTL_OTHER, &st->chk);
+    st->cand_feasible = st->chk.cv <= CT_FEAS_TOL && st->chk.tv <= CT_FEAS_TOL;
     use = keeps_iterate(res, &st->chk);
     fallback = !use;
     if (!use) applied = &st->chk;
@@ -241,9 +247,32 @@ static void law_reset(law_state *st, gk_ws *ws) {
   st->beta = CT_BETA;
 }
 
-/* TrackingLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr */
-static void law_step(law_state *st, const double *xhat, double e_o, const double *y,
-                     const double *yr, double *u, int *warnings) {
+/* TrackingLaw.disturbance_moved: the steady state's output kept under the disturbances now in
+ * the biases, its input the equilibrium's, the plan moved by the same input change */
+__attribute__((unused)) static void law_disturbance_moved(law_state *st) {
+  double ys[NY], xs[NX], us[NU];
+  if (!st->started) return;
+  PFX(output)(st->xs, ys);
+  PFX(equilibrium)(st->ws, ys, xs, us);
+  for (int j = 0; j < NU; j++) us[j] = gk_clip1(us[j]);
+  if (st->has_plan)
+    for (int i = 0; i < NH; i++)
+      for (int j = 0; j < NU; j++) {
+        const double du = us[j] - st->us[j];
+        st->plan[i * NU + j] = gk_clip1(st->plan[i * NU + j] + du);
+      }
+  memcpy(st->us, us, sizeof us);
+  memcpy(st->xs, xs, sizeof xs);
+  st->has_guess = 0;
+}
+
+/* TrackingLaw.restart: the steady state starts again at the next step */
+__attribute__((unused)) static void law_restart(law_state *st) { st->started = 0; }
+
+/* TrackingLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr, the
+ * FHOCP from xstart (x_hat, or x_hat predicted over the inputs' dead time) */
+static void law_step(law_state *st, const double *xhat, const double *xstart, double e_o,
+                     const double *y, const double *yr, double *u, int *warnings) {
   double yh[NY], rt[NY];
   (void)warnings;
   if (!st->started) {
@@ -266,7 +295,7 @@ static void law_step(law_state *st, const double *xhat, double e_o, const double
     }
   tighten(st, e_o);
   for (int a = 0; a < NY; a++) rt[a] = yr[a] - st->dhat[a];
-  make_step(st, xhat, rt, u);
+  make_step(st, xstart, rt, u);
   PFX(output)(st->xs, st->last.y_target);   /* the steady output y_s */
 }
 

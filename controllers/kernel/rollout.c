@@ -212,11 +212,14 @@ VARIANT_ONLY static void rm_gemm(int ta, int tb, int m, int n, int k, const doub
 }
 #endif
 
+#if HAS_SHIFT
 /* The measured disturbances held over the horizon, as a shift of the biases b_z, b_r, b_h
  * (controllers.disturbances: W v + b = W_u u + (b + W_d d)): per thread, so that two
  * controllers stepping on two threads never see each other's; set by PFX(set_bias_shift)
- * before the calls of a control step, zero until then. */
+ * before the calls of a control step, zero until then. Only in a kernel of a model with
+ * measured disturbances (the first use on a thread allocates glibc's block for it). */
 static __thread double gk_db[3 * NX];
+#endif
 
 /* gates z, r, h of one stage at (x, u), with extra gate inputs dz, dr (eq:observer; NULL:
  * none). Always inlined: compiled inside each AVX2 / portable clone of its callers. */
@@ -225,7 +228,11 @@ __attribute__((always_inline)) static inline void stage_gates(
     double *ri, double *hi) {
   double az[NX], ar[NX], ah[NX], rho[NX];
   for (int k = 0; k < NX; k++) {
+#if HAS_SHIFT
     double sz = BZ[k] + gk_db[k], sr = BR[k] + gk_db[NX + k], sh = BH[k] + gk_db[2 * NX + k];
+#else
+    double sz = BZ[k], sr = BR[k], sh = BH[k];
+#endif
     for (int j = 0; j < NU; j++) {
       sz += WZ[k * NU + j] * ui[j];
       sr += WR[k * NU + j] * ui[j];

@@ -211,6 +211,9 @@ class FHOCP:
     def _declare(self, data: Any, du_weight: float | np.ndarray) -> None:
         """The model, weights, constraint rows and tightening of ``data``."""
         self.params = {k: np.asarray(v, dtype=float) for k, v in data.params.items()}
+        #: the model holds measured disturbances in its biases, moved each step
+        #: (:meth:`shift_biases`; the compiled kernel's ``HAS_SHIFT``)
+        self.bias_shift = getattr(getattr(data, "model", None), "held_from", None) is not None
         self.n, self.m, self.p = gru.dimensions(self.params)
         self.N = int(data.N)
         self.Q = np.asarray(data.Q, dtype=float)

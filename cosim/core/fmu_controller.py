@@ -2,9 +2,10 @@
 
 :class:`FmuController` steps a Co-Simulation controller FMU (one that ``cosim export-fmu``
 writes, or any FMU with the same conventions) where the master steps a controller, in the
-order a controller FMU is meant to run: set the measured outputs ``y_k`` and the set-points
-``ref.<output>``, ``doStep(t_k, Ts)``, read the inputs ``u_k`` to apply to the plant over
-``[t_k, t_k+1)`` (docs: guide/controller-fmu.md). Its outputs named ``status``,
+order a controller FMU is meant to run: set the measured outputs ``y_k``, the set-points
+``ref.<output>`` and the measured disturbances ``dist.<name>``, ``doStep(t_k, Ts)``, read
+the inputs ``u_k`` to apply to the plant over ``[t_k, t_k+1)`` (docs:
+guide/controller-fmu.md). Its outputs named ``status``,
 ``fallback``, ``iterations``, ``pred.<output>`` and ``target.<output>`` are diagnostics
 (recorded, not wired to the plant); every other output is an input of the plant, as a
 controller's are. Its sample time is the FMU's default experiment step size; its parameters
@@ -79,6 +80,11 @@ class FmuController(FmuComponent):
                        for v in self.md.modelVariables
                        if v.causality == "output" and not _diagnostic(v.name)
                        and v.min is not None and v.max is not None}
+        #: a measured disturbance's value when the scenario has no ``dist.<name>`` column:
+        #: its input's start value (the middle of its box), as the Python controller's
+        self.disturbance_defaults = {
+            v.name[len("dist."):]: float(v.start) for v in self.md.modelVariables
+            if v.causality == "input" and v.name.startswith("dist.") and v.start is not None}
         self._diag: dict[str, float] = {}
 
     def _check_parameter(self, key: str, value: Any) -> None:

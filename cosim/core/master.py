@@ -140,8 +140,9 @@ class Master:
         for d in self.dists:
             if d not in plant_in:
                 raise CosimError(f"{where}: measured disturbance '{d}' is not an input or "
-                                 "tunable parameter of the plant (name its variable with "
-                                 "variable = \"...\" in the problem, or use --map)")
+                                 "tunable parameter of the plant (give the problem that binds "
+                                 "it, --problem, name its variable with variable = \"...\" "
+                                 "there, or use --map)")
         settable = getattr(plant, "settable", None)
         at_start = settable(True) if settable else plant_in
         later = settable(False) if settable else plant_in

@@ -27,6 +27,7 @@ void model_set_defaults(ModelData *m) {
         m->y[a] = CTL_Y_START[a];
         m->ref[a] = CTL_Y_START[a];
     }
+    for (int j = 0; j < CTL_ND; j++) m->d[j] = CTL_D_START[j];
     if (m->ctl) mpc_ctl_reset(m->ctl);
 }
 
@@ -92,7 +93,8 @@ double model_get(const ModelData *m, unsigned vr) {
     if (vr == VR_TIME) return m->time;
     if (vr >= VR_PARAM) return mpc_ctl_get_parameter(m->ctl, (int)(vr - VR_PARAM));
     if (vr < VR_REF) return m->y[vr - VR_Y];
-    if (vr < VR_U) return m->ref[vr - VR_REF];
+    if (vr < VR_D) return m->ref[vr - VR_REF];
+    if (vr < VR_U) return m->d[vr - VR_D];
     mpc_ctl_outputs(m->ctl, u, &status, &fallback, &iterations, pred, target);
     if (vr < VR_STATUS) return u[vr - VR_U];
     if (vr == VR_STATUS) return status;
@@ -108,8 +110,12 @@ const char *model_set(ModelData *m, unsigned vr, double value, bool initialized)
         m->y[vr - VR_Y] = value;
         return NULL;
     }
-    if (vr >= VR_REF && vr < VR_U) {
+    if (vr >= VR_REF && vr < VR_D) {
         m->ref[vr - VR_REF] = value;
+        return NULL;
+    }
+    if (vr >= VR_D && vr < VR_U) {
+        m->d[vr - VR_D] = value;
         return NULL;
     }
     if (vr >= VR_PARAM && vr < N_VARIABLES)
@@ -138,7 +144,7 @@ const char *model_do_step(ModelData *m, double step, char *msg, size_t n) {
                  "controller steps per doStep", step, k, CTL_MAX_STEPS_PER_CALL);
         return msg;
     }
-    for (double i = 0.0; i < k; i += 1.0) mpc_ctl_step(m->ctl, m->y, m->ref);
+    for (double i = 0.0; i < k; i += 1.0) mpc_ctl_step(m->ctl, m->y, m->ref, m->d);
     m->time += step;
     m->warnings |= mpc_ctl_take_warnings(m->ctl);
     return NULL;
@@ -154,8 +160,9 @@ const char *model_warning(ModelData *m, char *msg, size_t n) {
                                                       : w & WARN_UNREACHABLE_START;
     m->warnings &= ~bit;
     if (bit == WARN_NONFINITE_INPUT) {
-        snprintf(msg, n, "a measured output or set-point is not finite at t = %.17g s: the "
-                 "last inputs are held and the observer is not advanced", m->time);
+        snprintf(msg, n, "a measured output, set-point or disturbance is not finite at t = "
+                 "%.17g s: the last inputs are held and the observer is not advanced",
+                 m->time);
         return msg;
     }
     if (bit == WARN_NO_ADMISSIBLE_SETPOINT) {

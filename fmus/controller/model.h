@@ -14,7 +14,8 @@
  * instantiation), so that instances in one process are independent.
  *
  * Value references: 0 time; then the measured outputs (inputs of the FMU, named as the
- * plant's outputs), their set-points ref.<output>, the inputs to apply (outputs of the FMU,
+ * plant's outputs), their set-points ref.<output>, the measured disturbances dist.<name>
+ * (CTL_ND of them, none for most designs), the inputs to apply (outputs of the FMU,
  * named as the plant's inputs), status, fallback, iterations, the predicted outputs
  * pred.<output>, and the tunable parameters (the law file's LAW_P_*: offset_filter, the
  * diagonal of R, du_weight, offset_weight by signal, as the law has them).
@@ -43,7 +44,8 @@
 #define VR_TIME 0
 #define VR_Y 1                              /* CTL_NY measured outputs */
 #define VR_REF (VR_Y + CTL_NY)              /* CTL_NY set-points */
-#define VR_U (VR_REF + CTL_NY)              /* CTL_NU inputs to apply */
+#define VR_D (VR_REF + CTL_NY)              /* CTL_ND measured disturbances */
+#define VR_U (VR_D + CTL_ND)                /* CTL_NU inputs to apply */
 #define VR_STATUS (VR_U + CTL_NU)
 #define VR_FALLBACK (VR_STATUS + 1)
 #define VR_ITERATIONS (VR_FALLBACK + 1)
@@ -58,7 +60,8 @@ const char *mpc_load_data(const unsigned char *bytes, size_t size, char *msg, si
 ctl_state *mpc_ctl_new(void);
 void mpc_ctl_free(ctl_state *st);
 void mpc_ctl_reset(ctl_state *st);
-int mpc_ctl_step(ctl_state *st, const double *y_phys, const double *r_phys);
+int mpc_ctl_step(ctl_state *st, const double *y_phys, const double *r_phys,
+                 const double *d_phys);
 int mpc_ctl_take_warnings(ctl_state *st);
 double mpc_ctl_get_parameter(const ctl_state *st, int i);
 const char *mpc_ctl_set_parameter(ctl_state *st, int i, double value);
@@ -69,6 +72,7 @@ typedef struct {
     double time;              /* [s] */
     double y[CTL_NY];         /* the measured outputs (the problem's units) */
     double ref[CTL_NY];       /* their set-points */
+    double d[CTL_ND > 0 ? CTL_ND : 1];   /* the measured disturbances */
     ctl_state *ctl;           /* the controller (model_acquire) */
     int warnings;             /* raised by the last step, not yet logged (model_warning) */
 } ModelData;

@@ -271,7 +271,7 @@ def test_the_robust_mpc_predicts_over_the_dead_time(dead_time: dict[str, Path],
         assert _iae(mpc, start, end) < 0.6 * _iae(pi, start, end)
 
 
-def test_certify_designs_as_the_controller_and_export_refuses_in_words(
+def test_certify_designs_as_the_controller_and_the_fmu_takes_the_disturbance(
         heater: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
     model = tmp_path / "gru.json"
     model.write_bytes(heater["model"].read_bytes())
@@ -283,12 +283,12 @@ def test_certify_designs_as_the_controller_and_export_refuses_in_words(
     # the file keeps the full model (inputs and disturbances), with the verdict and gains
     assert [s["name"] for s in after["inputs"]] == ["P", "T_in"]
     assert after["W_z"] == before["W_z"] and "certificate" in after and "observer" in after
-    fmu = tmp_path / "c.fmu"
-    code = main(["export-fmu", str(model), "--out", str(fmu), "--quiet"])
-    err = capsys.readouterr().err.strip()
-    assert code == 2 and "measured disturbances (T_in), which the controller FMU does not " \
-                          "take yet" in err and "\n" not in err
-    assert not fmu.exists()
+    fmu = tmp_path / "c.fmu"   # the disturbance without dead time exports too
+    assert main(["export-fmu", str(model), "--out", str(fmu), "--quiet"]) == 0
+    import fmpy
+
+    names = {v.name: v.causality for v in fmpy.read_model_description(str(fmu)).modelVariables}
+    assert names["dist.T_in"] == "input" and names["P"] == "output"
 
 
 def test_a_campaign_draws_disturbance_steps_on_dask(dead_time: dict[str, Path],
@@ -315,3 +315,67 @@ def test_a_campaign_draws_disturbance_steps_on_dask(dead_time: dict[str, Path],
                 assert row["dist.T_in"] == levels["T_in"]
             seen[run, variant] = [levels["T_in"] for _, levels in steps]
     assert seen[0, "mpc"] == seen[0, "pi"] != seen[1, "mpc"] == seen[1, "pi"]
+
+
+def test_the_compiled_step_replays_the_python_controller_with_disturbance_and_dead_time(
+        dead_time: dict[str, Path]) -> None:
+    """The exported controller's C step fed what the Python controller saw (noisy outputs,
+    set-point steps, ambient steps beyond its rate, which move and restart the steady state)
+    gives its inputs, statuses and fallbacks to the bit, step by step."""
+    from controllers.kernel.controller_source import (
+        CompiledController,
+        ControllerDesign,
+        build,
+        design_data,
+    )
+    from cosim_adapters.robust_mpc import RobustMPCController
+
+    ctrl = RobustMPCController(model=dead_time["model"])
+    law = ctrl.law
+    design = ControllerDesign.of(ctrl.fhocp, ctrl.observer, law.disturbance.beta,
+                                 law.certified, ctrl.model, ctrl._lo, ctrl._hi)
+    assert design.q == 1 and design.dead_time == 2
+    compiled = CompiledController(*build(design), design_data(design), n_inputs=1,
+                                  n_outputs=1, n_disturbances=1)
+    ctrl.setup(0.0)
+    rng = np.random.default_rng(3)
+    y = 45.0
+    moved = 0
+    for k in range(120):
+        ref = 45.0 if k < 20 else 55.0 if k < 70 else 50.0
+        d = 20.0 if k < 40 else 10.0 if k < 90 else 30.0
+        y = y + 0.3 * (ref - y) * 0.2 + rng.normal(0.0, 0.05)
+        ctrl.set_inputs({"T": y, "ref.T": ref, "dist.T_in": d})
+        ctrl.step(20.0 * k, 20.0)
+        out = compiled.step(np.array([y]), np.array([ref]), np.array([d]))
+        np.testing.assert_array_equal(out["u"], [ctrl.get_outputs()["P"]])
+        diag = ctrl.diagnostics()
+        assert (out["status"], out["fallback"]) == (diag["status"], diag["fallback"]), k
+        np.testing.assert_array_equal(out["y_target"], [diag["y_model_T"]])
+        moved += k in (40, 90)
+    assert moved == 2
+    compiled.close()
+
+
+def test_the_controller_fmu_takes_the_disturbance_as_the_python_controller(
+        dead_time: dict[str, Path], tmp_path: Path) -> None:
+    """``cosim export-fmu`` of the model with a measured disturbance and dead time: an input
+    ``dist.T_in`` (its box, its middle as start value) and, in closed loop with the plant,
+    the Python controller's inputs to the bit."""
+    import fmpy
+
+    import cosim
+
+    fmu = tmp_path / "Controller.fmu"
+    assert main(["export-fmu", str(dead_time["model"]), "--out", str(fmu), "--quiet"]) == 0
+    md = fmpy.read_model_description(str(fmu))
+    dist = {v.name: v for v in md.modelVariables}["dist.T_in"]
+    assert (dist.causality, float(dist.min), float(dist.max), float(dist.start)) == (
+        "input", 5.0, 35.0, 20.0)
+    py = cosim.run(dead_time["scenario"], plant=dead_time["fmu"], model=dead_time["model"],
+                   figure=False).to_pandas()
+    problem = ROOT / "fmus" / "examples" / "heater_dead_time" / "problem.toml"
+    run = cosim.run(dead_time["scenario"], plant=dead_time["fmu"], controller=str(fmu),
+                    problem=problem, figure=False).to_pandas()   # binds T_in to T_amb
+    np.testing.assert_array_equal(run["ctrl.P"].to_numpy(), py["ctrl.P"].to_numpy())
+    np.testing.assert_array_equal(run["dist.T_in"].to_numpy(), py["dist.T_in"].to_numpy())
