@@ -16,14 +16,15 @@ Write an SSP 1.0 archive (SystemStructure.ssd and both FMUs under resources/) of
 and a controller FMU (cosim export-fmu): the controller's inputs named as the plant's outputs
 read them, the plant's inputs named as the controller's outputs read those, the set-points
 ref.<output> are constants of a parameter set (--setpoint NAME=VALUE, default: the middle of
-each output's box), so are the controller's tunable parameters given a value (--parameter
-NAME=VALUE: its weights R.<input>, du_weight.<input>, offset_weight.<output>, offset_filter;
-the others keep the design's), and the default experiment's fixed step is the controller's
-sample time. libcosim and other SSP runners run it as it is (docs:
-guide/controller-fmu.md). Nothing that cannot run is written: every value must be finite and
-inside its variable's declared range and the stop time at least one step, and both FMUs are
-instantiated with these values and stepped once, each in a worker process, before the file
-is written (exit 2 and one line naming what they refused)."""
+each output's box), so are a measured disturbance's dist.<name> (its box's middle; the plant's
+variable keeps its own value: --setpoint gives the controller's), so are the controller's
+tunable parameters given a value (--parameter NAME=VALUE: its weights R.<input>,
+du_weight.<input>, offset_weight.<output>, offset_filter; the others keep the design's), and
+the default experiment's fixed step is the controller's sample time. libcosim and other SSP
+runners run it as it is (docs: guide/controller-fmu.md). Nothing that cannot run is written:
+every value must be finite and inside its variable's declared range and the stop time at least
+one step, and both FMUs are instantiated with these values and stepped once, each in a worker
+process, before the file is written (exit 2 and one line naming what they refused)."""
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -50,10 +51,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _setpoints(items: list[str], md: Any) -> dict[str, float]:
-    """``--setpoint`` values over the ``ref.*`` start values of the controller's model
-    description ``md``."""
+    """``--setpoint`` values over the ``ref.*`` (and measured disturbances' ``dist.*``) start
+    values of the controller's model description ``md``."""
     values = {v.name: float(v.start) for v in md.modelVariables
-              if v.causality == "input" and v.name.startswith("ref.") and v.start is not None}
+              if v.causality == "input" and v.name.startswith(("ref.", "dist."))
+              and v.start is not None}
     return {**values, **_values(items, "--setpoint")}
 
 
