@@ -297,52 +297,43 @@ def _draw_key(key: str, loc: _Locator) -> None:
                         "sensor.<output>.bias|noise|uniform or ref.<output>", "draw", key)
 
 
-def _setpoints(table: Any, loc: _Locator) -> SetpointSpec:
+def _sequence(table: Any, loc: _Locator, name: str, held: str, signal: str,
+              keys: tuple[str, ...]) -> tuple[int, float, dict[str, tuple[float, float]]]:
+    """``(count, hold, ranges)`` of a table of drawn levels (``[setpoints]``,
+    ``[disturbances]``): its own keys ``keys`` besides ``count`` and ``hold`` are skipped, every
+    other one is a ``signal``'s range ``[low, high]``."""
     if not isinstance(table, dict):
-        raise loc.error("[setpoints] must be a table", "setpoints")
-    count = int(_number(table.get("count", 1), loc, "setpoints", "count", integer=True,
+        raise loc.error(f"[{name}] must be a table", name)
+    count = int(_number(table.get("count", 1), loc, name, "count", integer=True,
                         positive=True))
     if "hold" not in table:
-        raise loc.error("[setpoints]: 'hold' (seconds each set-point is held) is missing",
-                        "setpoints")
-    hold = float(_number(table["hold"], loc, "setpoints", "hold", positive=True))
+        raise loc.error(f"[{name}]: 'hold' (seconds each {held} is held) is missing", name)
+    hold = float(_number(table["hold"], loc, name, "hold", positive=True))
+    ranges = {}
+    for key, value in table.items():
+        if key in ("count", "hold", *keys):
+            continue
+        if (not isinstance(value, list) or len(value) != 2 or not all(
+                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
+                for v in value) or value[0] > value[1]):
+            raise loc.error(f"[{name}] {key} = {value!r}: expected a range [low, high] of "
+                            f"the {signal} (physical units)", name, key)
+        ranges[key] = (float(value[0]), float(value[1]))
+    return count, hold, ranges
+
+
+def _setpoints(table: Any, loc: _Locator) -> SetpointSpec:
+    count, hold, ranges = _sequence(table, loc, "setpoints", "set-point", "output", ("first",))
     first = table.get("first", "drawn")
     if first not in ("drawn", "certified"):
         raise loc.error(f"[setpoints] first = {first!r}: expected \"drawn\" (like the others) "
                         "or \"certified\" (from the certified admissible range)", "setpoints",
                         "first")
-    ranges = {}
-    for key, value in table.items():
-        if key in ("count", "hold", "first"):
-            continue
-        if (not isinstance(value, list) or len(value) != 2 or not all(
-                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                for v in value) or value[0] > value[1]):
-            raise loc.error(f"[setpoints] {key} = {value!r}: expected a range [low, high] of "
-                            "the output (physical units)", "setpoints", key)
-        ranges[key] = (float(value[0]), float(value[1]))
     return SetpointSpec(count, hold, ranges, first == "certified")
 
 
 def _disturbances(table: Any, loc: _Locator) -> DisturbanceSpec:
-    if not isinstance(table, dict):
-        raise loc.error("[disturbances] must be a table", "disturbances")
-    count = int(_number(table.get("count", 1), loc, "disturbances", "count", integer=True,
-                        positive=True))
-    if "hold" not in table:
-        raise loc.error("[disturbances]: 'hold' (seconds each level is held) is missing",
-                        "disturbances")
-    hold = float(_number(table["hold"], loc, "disturbances", "hold", positive=True))
-    ranges = {}
-    for key, value in table.items():
-        if key in ("count", "hold"):
-            continue
-        if (not isinstance(value, list) or len(value) != 2 or not all(
-                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                for v in value) or value[0] > value[1]):
-            raise loc.error(f"[disturbances] {key} = {value!r}: expected a range [low, high] "
-                            "of the disturbance (physical units)", "disturbances", key)
-        ranges[key] = (float(value[0]), float(value[1]))
+    count, hold, ranges = _sequence(table, loc, "disturbances", "level", "disturbance", ())
     if not ranges:
         raise loc.error("[disturbances]: no disturbance ranges (NAME = [low, high])",
                         "disturbances")
