@@ -22,22 +22,10 @@ section V). Then one of two control laws (option ``law``) gives ``u_k``:
   ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.paper_mpc.RobustMPC`: the
   FHOCP ``eq:optimization`` with the shifted-candidate fallback).
 
-Measured disturbances (the problem's ``[disturbances]``, controller inputs ``dist.<name>``):
-the model's inputs are the manipulated inputs and the disturbances; the controller designs on
-the model with the disturbances held in its biases (:func:`controllers.disturbances.
-condition`, the certificate's bounds the full model's over the whole box) and, each step,
-moves the biases to the measured value (:class:`controllers.disturbances.BiasShift`) before
-the observer and the FHOCP use them: the FHOCP holds the disturbance over its horizon
-(feedforward), and its tightening covers how far the real one may move meanwhile
-(lem:held-disturbance, :func:`controllers.disturbances.held_error`). A measured value outside
-its box is held at the box's edge (counted in ``disturbance_clipped``).
-
-Dead time (``delay`` in the problem, one for all inputs: ``K`` samples): the model sees each
-input ``K`` samples late and each disturbance its own ``L`` late; the observer advances with
-those model inputs, and the FHOCP starts from ``x̂`` predicted ``K`` steps ahead with the inputs
-already applied and the disturbances known or held (:meth:`RobustMPCController._ahead`), its
-tightening that of ``K`` steps on. The tracking law only: the paper's law refuses disturbances,
-dead time and ``preview`` in words.
+Measured disturbances (the problem's ``[disturbances]``, controller inputs ``dist.<name>``)
+and dead time (``delay``): the design's model holds the disturbances in its biases, moved to
+the measured value each step, and ``x̂`` is predicted over the dead time before the FHOCP
+starts (:class:`cosim_adapters.held_inputs.HeldInputs`); the tracking law only.
 
 Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
 (``p > m``) only set-points on the model's ``m``-dimensional surface of equilibrium outputs
@@ -198,16 +186,18 @@ class RobustMPCController(Component):
         self.problem = problem_for(self.model, problem)
         self.model.problem = self.problem
         #: the model as trained (inputs and measured disturbances); :attr:`model` holds the
-        #: disturbances in its biases, moved by :attr:`shift` (None without disturbances)
+        #: disturbances in its biases (:attr:`held`)
         self.full_model = self.model
-        self.shift: Any = None
-        #: the inputs' dead time K [samples] (:func:`controllers.dead_time.input_delay`)
-        self.dead_time = 0
         if not isinstance(options, MPCOptions):
             options = MPCOptions.resolve({**(options or {}), **option_values}, self.problem)
         elif option_values:
             options = MPCOptions.from_mapping({**options.to_dict(), **option_values})
-        self._hold_disturbances(options)
+        from cosim_adapters.held_inputs import HeldInputs
+
+        #: the measured disturbances and dead time (:class:`~cosim_adapters.held_inputs.
+        #: HeldInputs`)
+        self.held = HeldInputs(self.name, self.full_model, bool(options.tracking))
+        self.model = self.held.model
         #: the design (:class:`cosim_adapters.mpc_options.MPCOptions`, defaults filled in;
         #: the problem's ``[mpc]`` under the options given, :meth:`MPCOptions.resolve`)
         self.options = options
@@ -230,83 +220,6 @@ class RobustMPCController(Component):
         if failed:
             go_uncertified(self, "; ".join(failed))
         self.setup(0.0)
-
-    def _hold_disturbances(self, o: MPCOptions) -> None:
-        """With measured disturbances: design on the model that holds them in its biases
-        (module docstring); refuse what is not built yet, in words."""
-        from controllers.dead_time import input_delay
-        from controllers.disturbances import BiasShift, condition
-
-        pr = self.problem
-        try:
-            self.dead_time = input_delay(pr)
-        except ControllersError as exc:
-            raise CosimError(f"controller {self.name!r}: problem {pr.name!r}: {exc}") from None
-        self._lags = np.array([c.delay for c in pr.disturbances], dtype=int)
-        delayed = [c.name for c in pr.model_inputs if c.delay]
-        if not o.tracking and (pr.disturbances or delayed):
-            what = (f"the measured disturbances ({', '.join(pr.disturbance_names)})"
-                    if pr.disturbances else f"the dead time of {', '.join(delayed)}")
-            raise CosimError(f"controller {self.name!r}: law=\"paper\" does not take {what} "
-                             f"of problem {pr.name!r} yet; use the tracking law (the default)")
-        if not pr.disturbances:
-            return
-        if [c.name for c in pr.disturbances if c.preview]:
-            raise CosimError(f"controller {self.name!r}: preview = true on a disturbance of "
-                             f"problem {pr.name!r}: the robust MPC holds measured "
-                             "disturbances over its horizon; previewing them is not built yet "
-                             "(issue 46)")
-        self.model = condition(self.full_model)
-        self.shift = BiasShift(self.full_model, self.model.params)
-        self._d_offset = np.array([c.offset for c in pr.disturbances])
-        self._d_scale = np.array([c.scale for c in pr.disturbances])
-        self._d_clipped = 0
-
-    def _hold(self, d: np.ndarray, law: bool = True) -> None:
-        """Hold the disturbances at ``d`` (normalised) in the model's biases, the FHOCP's
-        and the observer's (the compiled kernel's shift is the thread's: given each step);
-        ``law``: the value the FHOCP holds over its horizon, whose moves move the law's
-        steady state (else the observer's model input, seen its dead time late)."""
-        changed = self.shift.set(d)
-        self.fhocp.shift_biases(self.shift.delta, changed)
-        if not law:
-            return
-        if self._d_law is not None and not np.array_equal(d, self._d_law):
-            self.law.disturbance_moved()
-        self._d_law = np.array(d, dtype=float)
-
-    def _ahead(self) -> np.ndarray:
-        """``x̂`` predicted over the inputs' dead time ``K``: ``K`` steps of the model with the
-        inputs already applied (``u_{k−K} … u_{k−1}``) and each disturbance as the model sees
-        it, ``d_{k+i−L}`` while known, then held at ``d_k`` (each step's disturbances in the
-        biases, then ``d_k`` again for the FHOCP); the compiled kernel's GRU step when there
-        is one, as the exported controller's (controller.c ahead)."""
-        from controllers import gru
-
-        x = np.asarray(self.observer.x_hat, dtype=float)
-        kernel = self.fhocp.kernel
-        zero = np.zeros(self.model.n)
-        for i in range(self.dead_time):
-            if self.shift is not None:
-                d = self._d_past[-1].copy()
-                known = i < self._lags
-                d[known] = self._d_past[-1 - self._lags[known] + i, known.nonzero()[0]]
-                self._hold(d, law=False)
-            v = self._u_past[i]
-            x = (kernel.gru_step(x, v, zero, zero) if kernel is not None
-                 else gru.step(self.model.params, x, v))
-        if self.shift is not None and self.dead_time:
-            self._hold(self._d_past[-1], law=False)   # the FHOCP's: d_k
-        return x
-
-    def _model_input(self, u: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
-        """``v_k`` as the model sees it: the input applied ``K`` samples ago (``u`` itself
-        without dead time) and each disturbance ``L`` samples ago."""
-        u_model = self._u_past[0] if self.dead_time else u
-        if self.shift is None:
-            return u_model, None
-        d = self._d_past[-1 - self._lags, np.arange(self._lags.size)]
-        return u_model, d
 
     def _design(self, o: MPCOptions) -> tuple[ControlLaw, list[str]]:
         """The law of the options ``o`` on this model, and the hypotheses that fail: the
@@ -366,7 +279,6 @@ class RobustMPCController(Component):
         #: what a run without a ``dist.<name>`` column applies and measures: the nominal
         #: value (the middle of the box, or the normalisation's offset)
         self.disturbance_defaults = {c.name: c.offset for c in pr.disturbances}
-        self._d_names = [f"dist.{c.name}" for c in pr.disturbances]
         self.outputs = tuple(Signal(c.name, c.unit, c.description) for c in pr.inputs)
         self.sample_time = float(self.model.Ts)
         self.bounds = pr.bounds()
@@ -418,14 +330,7 @@ class RobustMPCController(Component):
         x0 = None if self.initial_estimate is None else np.asarray(self.initial_estimate,
                                                                     dtype=float)
         self.observer.reset(x0=x0, e_o0=self.cert.e_o0)
-        if self.shift is not None:   # the kernel is built (and found) for the nominal biases
-            self.shift.set(np.zeros(self.shift.q))
-            self._d_clipped = 0
-        #: the disturbances the FHOCP held last; the last ``max L + 1`` measured (oldest
-        #: first); the last ``K`` inputs applied (normalised, oldest first)
-        self._d_law: np.ndarray | None = None
-        self._d_past: np.ndarray | None = None
-        self._u_past: np.ndarray | None = None
+        self.held.reset()   # the kernel is built (and found) for the nominal biases
         self.fhocp.setup()
         self.observer.kernel = self.fhocp.kernel   # its compiled GRU step (same model)
         self.law.reset()
@@ -454,35 +359,22 @@ class RobustMPCController(Component):
                              f"({values})")
         y = self.model.normalize_y(y_phys)
         y_ref = self.model.normalize_y(r_phys)
-        if self.shift is not None:
-            d = self._measured_disturbances(t)
-            depth = int(self._lags.max(initial=0)) + 1
-            self._d_past = (np.tile(d, (depth, 1)) if self._d_past is None
-                            else np.vstack([self._d_past[1:], d]))
-            self._hold(d)
+        held = self.held
+        if held.shift is not None:
+            held.measure(self._values, t, self.fhocp, self.law)
         if self.observer.x_hat is None:
             self.observer.init_from_output(y)
-        if self.dead_time and self._u_past is None:
-            # at rest before the run: the past inputs are the input that holds ŷ
-            from controllers.equilibrium import equilibrium_for_output
-
-            _, u0 = equilibrium_for_output(self.model.params, self.observer.y_hat(),
-                                           self.fhocp.kernel)
-            self._u_past = np.tile(np.clip(u0, -1.0, 1.0), (self.dead_time, 1))
         e_o = self.observer.e_o
-        step = (self.law.step(self.observer, y, y_ref, t, x_start=self._ahead())
-                if self.dead_time else self.law.step(self.observer, y, y_ref, t))
+        x_start = held.ahead(self.observer, self.fhocp)
+        step = (self.law.step(self.observer, y, y_ref, t) if x_start is None
+                else self.law.step(self.observer, y, y_ref, t, x_start=x_start))
         rec, res = step.record, step.record.result
-        if self.shift is not None and rec.fallback and not rec.candidate_feasible:
+        if held.shift is not None and rec.fallback and not rec.candidate_feasible:
             # a measured disturbance moved the steady states beyond the plan: start again
             # from the equilibrium of the output estimate at the disturbance now measured
             self.law.restart()
-        u_model, d_model = self._model_input(rec.u)
-        if d_model is not None and self._lags.any():   # the observer's step: v_k
-            self._hold(d_model, law=False)
-        self.observer.make_step(u_model, y)
-        if self.dead_time:
-            self._u_past = np.vstack([self._u_past[1:], rec.u])
+        self.observer.make_step(held.model_input(rec.u, self.fhocp), y)
+        held.applied(rec.u)
         self._u_phys = np.clip(self.model.denormalize_u(rec.u), self._lo, self._hi)
         self._diag = {
             "solve_ms": res.solve_time * 1e3,
@@ -499,23 +391,6 @@ class RobustMPCController(Component):
             "governor_lambda": step.governor_lambda,
             **step.diagnostics,
         }
-
-    def _measured_disturbances(self, t: float) -> np.ndarray:
-        """The disturbances ``dist.<name>`` normalised, each held inside its box."""
-        try:
-            d_phys = np.array([self._values[n] for n in self._d_names])
-        except KeyError as exc:
-            raise CosimError(f"controller {self.name!r}: input {exc.args[0]!r} was never set "
-                             f"(wire {', '.join(self._d_names)})") from None
-        if not np.all(np.isfinite(d_phys)):
-            values = ", ".join(f"{n}={v:g}" for n, v in zip(self._d_names, d_phys, strict=True))
-            raise CosimError(f"controller {self.name!r}: non-finite measured disturbance at "
-                             f"t={t:g} s ({values})")
-        d = (d_phys - self._d_offset) / self._d_scale
-        if np.any(np.abs(d) > 1.0):
-            self._d_clipped += 1
-            d = np.clip(d, -1.0, 1.0)
-        return d
 
     def diagnostics(self) -> dict[str, float]:
         return dict(self._diag)
@@ -536,9 +411,7 @@ class RobustMPCController(Component):
             "du_weight": {n: float(w) for n, w in zip(self._u_names, self.du_weight,
                                                       strict=True)},
             "gain_scale": self.cert.gain_scale,
-            **({"disturbances": list(self.problem.disturbance_names),
-                "disturbance_clipped": self._d_clipped} if self.shift is not None else {}),
-            "dead_time": self.dead_time,
+            **self.held.summary(),
             **self.law.summary(),
             "options": _plain(self.options.to_dict()),
         })

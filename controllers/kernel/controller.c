@@ -20,8 +20,8 @@
  * ctl_new. Normalised units inside, the problem's units at ctl_step.
  *
  * Measured disturbances (CT_NQD of them) and dead time (CT_DEAD samples on the inputs; each
- * disturbance its CT_LAGS): as RobustMPCController._hold, _ahead and _model_input. The
- * disturbances the FHOCP holds are a shift of the biases (controllers/disturbances.py
+ * disturbance its CT_LAGS): as cosim_adapters/held_inputs.py HeldInputs (measure, hold, ahead,
+ * model_input, applied). The disturbances the FHOCP holds are a shift of the biases (controllers/disturbances.py
  * BiasShift: W_d d, CT_WD), the kernel's per-thread shift (rollout.c gk_db), given at every
  * step before the kernel's calls; x_hat is predicted over the dead time with the inputs
  * applied before the FHOCP starts; the observer advances with the model input as the model
@@ -60,7 +60,7 @@ static int same_d(const double *a, const double *b) {
   return 1;
 }
 
-/* Hold the disturbances d (normalised) in the biases (RobustMPCController._hold: BiasShift.set,
+/* Hold the disturbances d (normalised) in the biases (HeldInputs.hold: BiasShift.set,
  * FHOCP.shift_biases): the shift W_d d, summed from j = 0 on as numpy does it there, the
  * cached rollout forgotten when it changed, the thread's shift given every time; law: the
  * value the FHOCP holds, whose moves move the law's steady state. */
@@ -90,7 +90,7 @@ __attribute__((unused)) static double seen(const ctl_state *st, int i, int j) {
 #endif
 
 #if CT_DEAD
-/* x_hat predicted over the inputs' dead time (RobustMPCController._ahead) into x */
+/* x_hat predicted over the inputs' dead time (HeldInputs.ahead) into x */
 static void ahead(ctl_state *st, double *x) {
   double zero[NX] = {0.0}, xn[NX];
   memcpy(x, st->xhat, NX * sizeof(double));
@@ -173,7 +173,7 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
     yr[a] = (r_phys[a] - CT_Y_OFFSET[a]) / CT_Y_SCALE[a];
   }
 #if CT_NQD
-  /* the disturbances, each held inside its box (RobustMPCController._measured_disturbances) */
+  /* the disturbances, each held inside its box (HeldInputs.measure) */
   double dk[CT_NQD];
   for (int j = 0; j < CT_NQD; j++) {
     const double v = (d_phys[j] - CT_D_OFFSET[j]) / CT_D_SCALE[j];
@@ -213,7 +213,7 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
   /* a disturbance that moved the steady states beyond the plan: start again */
   if (st->law.last.fallback && !st->law.cand_feasible) law_restart(&st->law);
 #endif
-  /* the model input as the model sees it (RobustMPCController._model_input) */
+  /* the model input as the model sees it (HeldInputs.model_input) */
   double um[NU];
   memcpy(um, u, sizeof um);
 #if CT_DEAD

@@ -163,7 +163,7 @@ def test_the_kernels_shift_of_the_biases_is_the_full_models(heater: dict[str, Pa
     u = np.random.default_rng(0).uniform(-1, 1, (fh.N, 1))
     x0 = np.full(full.n, 0.1)
     for d in (0.7, -0.4, 0.0):
-        ctrl._hold(np.array([d]))
+        ctrl.held.hold(np.array([d]), ctrl.fhocp)
         want = gru.simulate(full.params, x0, np.hstack([u, np.full((fh.N, 1), d)]))[0]
         assert np.max(np.abs(fh.simulate(x0, u) - want)) < 1e-13, d
         assert np.max(np.abs(gru.simulate(ctrl.model.params, x0, u)[0] - want)) < 1e-13, d

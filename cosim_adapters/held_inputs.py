@@ -1,0 +1,184 @@
+"""What the robust MPC's model sees of its measured disturbances and of the inputs it applied:
+the disturbances held in the model's biases, the dead time predicted over.
+
+:class:`HeldInputs` is the part of :class:`cosim_adapters.robust_mpc.RobustMPCController` that a
+problem with measured disturbances (``[disturbances]``) or dead time (``delay``) adds:
+
+- the design's model: the full model (inputs and disturbances) with the disturbances held in
+  its biases (:func:`controllers.disturbances.condition`), moved to the measured value each
+  step (:class:`controllers.disturbances.BiasShift`) before the observer and the FHOCP use
+  them (:meth:`HeldInputs.hold`); when they move, the law's steady state moves with them;
+- the dead time ``K`` of the inputs (one for all) and each disturbance's ``L``: the last ``K``
+  inputs applied and the last ``max L + 1`` disturbances measured, ``x̂`` predicted over the
+  dead time before the FHOCP starts (:meth:`HeldInputs.ahead`), the observer's step with the
+  model input as the model sees it (:meth:`HeldInputs.model_input`).
+
+The exported controller's C step does the same in the same order (``controllers/kernel/
+controller.c``: hold, ahead), to the bit. Docs: design/disturbances.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from controllers.errors import ControllersError
+from cosim.core.errors import CosimError
+
+__all__ = ["HeldInputs"]
+
+
+class HeldInputs:
+    """The measured disturbances and dead time of one robust MPC (module docstring).
+
+    Parameters
+    ----------
+    name : str
+        The controller's name (messages).
+    model : GRUModel
+        The full model, with its problem.
+    tracking : bool
+        The tracking law (the paper's law refuses disturbances and dead time, in words).
+
+    Attributes
+    ----------
+    model : GRUModel
+        The model the controller designs on: ``model`` itself, or the one holding the
+        disturbances in its biases.
+    shift : BiasShift or None
+        Moves those biases (None without disturbances).
+    dead_time : int
+        The inputs' dead time ``K`` [samples].
+    clipped : int
+        Steps whose measured disturbance left its box (held at the edge).
+    """
+
+    def __init__(self, name: str, model: Any, tracking: bool) -> None:
+        from controllers.dead_time import input_delay
+        from controllers.disturbances import BiasShift, condition
+
+        pr = model.problem
+        self.name = name
+        try:
+            self.dead_time = input_delay(pr)
+        except ControllersError as exc:
+            raise CosimError(f"controller {name!r}: problem {pr.name!r}: {exc}") from None
+        self.lags = np.array([c.delay for c in pr.disturbances], dtype=int)
+        delayed = [c.name for c in pr.model_inputs if c.delay]
+        if not tracking and (pr.disturbances or delayed):
+            what = (f"the measured disturbances ({', '.join(pr.disturbance_names)})"
+                    if pr.disturbances else f"the dead time of {', '.join(delayed)}")
+            raise CosimError(f"controller {name!r}: law=\"paper\" does not take {what} of "
+                             f"problem {pr.name!r} yet; use the tracking law (the default)")
+        if [c.name for c in pr.disturbances if c.preview]:
+            raise CosimError(f"controller {name!r}: preview = true on a disturbance of problem "
+                             f"{pr.name!r}: the robust MPC holds measured disturbances over "
+                             "its horizon; previewing them is not built yet (issue 46)")
+        self.model, self.shift = model, None
+        if pr.disturbances:
+            self.model = condition(model)
+            self.shift = BiasShift(model, self.model.params)
+        self.names = [f"dist.{c.name}" for c in pr.disturbances]
+        self._offset = np.array([c.offset for c in pr.disturbances])
+        self._scale = np.array([c.scale for c in pr.disturbances])
+        self.reset()
+
+    def reset(self) -> None:
+        """A new run: the nominal biases (the kernel is built and found for them), no past."""
+        if self.shift is not None:
+            self.shift.set(np.zeros(self.shift.q))
+        self.clipped = 0
+        #: the disturbances the FHOCP held last; the last ``max L + 1`` measured (oldest
+        #: first); the last ``K`` inputs applied (normalised, oldest first)
+        self._d_law: np.ndarray | None = None
+        self._d_past: np.ndarray | None = None
+        self._u_past: np.ndarray | None = None
+
+    # -- each step, in this order ------------------------------------------------------------
+    def measure(self, values: Mapping[str, float], t: float, fhocp: Any, law: Any) -> None:
+        """Read ``dist.<name>`` (normalised, each held inside its box) and hold it for the
+        FHOCP (:meth:`hold`)."""
+        try:
+            d_phys = np.array([values[n] for n in self.names])
+        except KeyError as exc:
+            raise CosimError(f"controller {self.name!r}: input {exc.args[0]!r} was never set "
+                             f"(wire {', '.join(self.names)})") from None
+        if not np.all(np.isfinite(d_phys)):
+            text = ", ".join(f"{n}={v:g}" for n, v in zip(self.names, d_phys, strict=True))
+            raise CosimError(f"controller {self.name!r}: non-finite measured disturbance at "
+                             f"t={t:g} s ({text})")
+        d = (d_phys - self._offset) / self._scale
+        if np.any(np.abs(d) > 1.0):
+            self.clipped += 1
+            d = np.clip(d, -1.0, 1.0)
+        depth = int(self.lags.max(initial=0)) + 1
+        self._d_past = (np.tile(d, (depth, 1)) if self._d_past is None
+                        else np.vstack([self._d_past[1:], d]))
+        self.hold(d, fhocp, law)
+
+    def hold(self, d: np.ndarray, fhocp: Any, law: Any = None) -> None:
+        """Hold the disturbances at ``d`` (normalised) in the model's biases, the FHOCP's and
+        the observer's (the compiled kernel's shift is the thread's: given every time);
+        ``law``: the value the FHOCP holds, whose moves move the law's steady state (None:
+        the observer's model input, or a step of the prediction)."""
+        changed = self.shift.set(d)
+        fhocp.shift_biases(self.shift.delta, changed)
+        if law is None:
+            return
+        if self._d_law is not None and not np.array_equal(d, self._d_law):
+            law.disturbance_moved()
+        self._d_law = np.array(d, dtype=float)
+
+    def ahead(self, observer: Any, fhocp: Any) -> np.ndarray | None:
+        """``x̂`` predicted over the inputs' dead time ``K`` (None without one): ``K`` steps
+        of the model with the inputs already applied (``u_{k−K} … u_{k−1}``; before the run,
+        the input that holds the first output estimate) and each disturbance as the model
+        sees it, ``d_{k+i−L}`` while known, then held at ``d_k`` (each step's in the biases,
+        then ``d_k`` again for the FHOCP); the compiled kernel's GRU step when there is one,
+        as the exported controller's."""
+        if not self.dead_time:
+            return None
+        from controllers import gru
+        from controllers.equilibrium import equilibrium_for_output
+
+        kernel = fhocp.kernel
+        if self._u_past is None:
+            _, u0 = equilibrium_for_output(self.model.params, observer.y_hat(), kernel)
+            self._u_past = np.tile(np.clip(u0, -1.0, 1.0), (self.dead_time, 1))
+        x = np.asarray(observer.x_hat, dtype=float)
+        zero = np.zeros(self.model.n)
+        for i in range(self.dead_time):
+            if self.shift is not None:
+                d = self._d_past[-1].copy()
+                known = i < self.lags
+                d[known] = self._d_past[-1 - self.lags[known] + i, known.nonzero()[0]]
+                self.hold(d, fhocp)
+            v = self._u_past[i]
+            x = (kernel.gru_step(x, v, zero, zero) if kernel is not None
+                 else gru.step(self.model.params, x, v))
+        if self.shift is not None:
+            self.hold(self._d_past[-1], fhocp)   # the FHOCP's: d_k
+        return x
+
+    def model_input(self, u: np.ndarray, fhocp: Any) -> np.ndarray:
+        """The observer's input ``v_k`` as the model sees it: the input applied ``K`` samples
+        ago (``u`` itself without dead time), each disturbance ``L`` samples ago (held in the
+        biases for the observer's step)."""
+        if self.shift is not None and self.lags.any():
+            self.hold(self._d_past[-1 - self.lags, np.arange(self.lags.size)], fhocp)
+        return self._u_past[0] if self.dead_time else u
+
+    def applied(self, u: np.ndarray) -> None:
+        """Record the step's input (normalised): the dead time's past."""
+        if self.dead_time:
+            self._u_past = np.vstack([self._u_past[1:], u])
+
+    def summary(self) -> dict[str, Any]:
+        """``disturbances`` and ``disturbance_clipped`` (with disturbances), ``dead_time``."""
+        out: dict[str, Any] = {"dead_time": self.dead_time}
+        if self.shift is not None:
+            out = {"disturbances": [n[len("dist."):] for n in self.names],
+                   "disturbance_clipped": self.clipped, **out}
+        return out
