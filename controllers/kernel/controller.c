@@ -21,9 +21,9 @@
  *
  * Measured disturbances (CT_NQD of them) and dead time (CT_DEAD samples on the inputs; each
  * disturbance its CT_LAGS): as cosim_adapters/held_inputs.py HeldInputs (measure, hold, ahead,
- * model_input, applied). The disturbances the FHOCP holds are a shift of the biases (controllers/disturbances.py
- * BiasShift: W_d d, CT_WD), the kernel's per-thread shift (rollout.c gk_db), given at every
- * step before the kernel's calls; x_hat is predicted over the dead time with the inputs
+ * model_input, applied). The disturbances the FHOCP holds are a shift of the biases
+ * (controllers/disturbances.py BiasShift: W_d d, CT_WD), the kernel's per-thread shift
+ * (rollout.c gk_db), given at every step before the kernel's calls; x_hat is predicted over the dead time with the inputs
  * applied before the FHOCP starts; the observer advances with the model input as the model
  * sees it (u_{k-K}, d_{k-L}).
  */
@@ -208,7 +208,8 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
   xstart = xa;
 #endif
   for (int j = 0; j < NU; j++) u[j] = (st->u_phys[j] - CT_U_OFFSET[j]) / CT_U_SCALE[j];
-  law_step(&st->law, st->xhat, xstart, st->e_o, y, yr, u, &st->warnings);   /* u: held unless set */
+  /* u: held unless set */
+  law_step(&st->law, st->xhat, xstart, st->e_o, y, yr, u, &st->warnings);
 #if CT_NQD
   /* a disturbance that moved the steady states beyond the plan: start again */
   if (st->law.last.fallback && !st->law.cand_feasible) law_restart(&st->law);
