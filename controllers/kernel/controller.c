@@ -23,9 +23,9 @@
  * disturbance its CT_LAGS): as cosim_adapters/held_inputs.py HeldInputs (measure, hold, ahead,
  * model_input, applied). The disturbances the FHOCP holds are a shift of the biases
  * (controllers/disturbances.py BiasShift: W_d d, CT_WD), the kernel's per-thread shift
- * (rollout.c gk_db), given at every step before the kernel's calls; x_hat is predicted over the dead time with the inputs
- * applied before the FHOCP starts; the observer advances with the model input as the model
- * sees it (u_{k-K}, d_{k-L}).
+ * (rollout.c gk_db), given at every step before the kernel's calls; x_hat is predicted over
+ * the dead time with the inputs applied before the FHOCP starts; the observer advances with
+ * the model input as the model sees it (u_{k-K}, d_{k-L}).
  */
 /* controller_source.py parameters() names the law's tunable parameters, in its order */
 typedef char ctl_parameters_agree[CT_NPARAM == LAW_N_PARAMETERS ? 1 : -1];
