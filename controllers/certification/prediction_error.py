@@ -55,22 +55,23 @@ def held_predictions(params: dict[str, np.ndarray], u: np.ndarray, x: np.ndarray
     free run's state ``x[k]`` with the inputs ``u`` (normalised, ``T × m``) as applied and
     their last ``q`` columns (the measured disturbances) held at row ``k``'s; rows past the
     experiment's end repeat its last prediction."""
+    from controllers import gru
+
     T, p = len(u), params["U_o"].shape[0]
     out = np.empty((horizon + 1, T, p))
-    Wz, Wr, Wh = params["W_z"], params["W_r"], params["W_h"]
+    # eq:gru on every row at once: the states as columns, the biases as column vectors
+    cols = {**params, **{b: np.asarray(params[b])[:, None] for b in ("b_z", "b_r", "b_h",
+                                                                      "b_o")}}
     for a, b in experiments:
-        X = np.array(x[a:b], dtype=float)
+        X = np.array(x[a:b], dtype=float).T
         held = u[a:b, u.shape[1] - q:]
         for i in range(horizon + 1):
-            out[i, a:b] = X @ params["U_o"].T + params["b_o"]
+            out[i, a:b] = gru.output(cols, X).T
             if i == horizon:
                 break
             V = u[np.minimum(np.arange(a, b) + i, b - 1)].copy()
             V[:, V.shape[1] - q:] = held
-            z = 1.0 / (1.0 + np.exp(-(V @ Wz.T + X @ params["U_z"].T + params["b_z"])))
-            r = 1.0 / (1.0 + np.exp(-(V @ Wr.T + X @ params["U_r"].T + params["b_r"])))
-            h = np.tanh(V @ Wh.T + (r * X) @ params["U_h"].T + params["b_h"])
-            X = z * X + (1.0 - z) * h
+            X = gru.step(cols, X, V.T)
     return out
 
 

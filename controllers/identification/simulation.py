@@ -169,14 +169,13 @@ def simulate(params: dict[str, np.ndarray], record: Record,
 
 
 def free_run_states(params: dict[str, np.ndarray], record: Record,
-                    samples: int = DEFAULT_SAMPLES) -> np.ndarray:
+                    starts: dict[int, np.ndarray]) -> np.ndarray:
     """The states of :func:`simulate`'s free run, ``(T, n)``: row ``k`` is ``x_k``, from
-    which ``ξ_k`` is read (each experiment from its estimated initial state)."""
+    which ``ξ_k`` is read, each experiment from the initial state :func:`simulate` estimated
+    for it (its ``starts``)."""
     x = np.empty((len(record.y), params["U_z"].shape[0]))
-    for a, b in record.experiments():
-        x0 = estimate_initial_state(params, record.u[a:b], record.y[a:b], record.sat[a:b],
-                                    samples)
-        x[a:b] = gru.simulate(params, x0, record.u[a:b])[0][:-1]
+    for e, (a, b) in enumerate(record.experiments()):
+        x[a:b] = gru.simulate(params, starts[e], record.u[a:b])[0][:-1]
     return x
 
 

@@ -167,8 +167,8 @@ def _history_log(stack: Any, history: Path, names: list[str]) -> Any:
     return callback
 
 
-def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.ndarray],
-                      x0_samples: int) -> tuple[Any, dict[str, Any]]:
+def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.ndarray]
+                      ) -> tuple[Any, dict[str, Any]]:
     """The model's measured prediction error on held-back rows (val and test, else train;
     :func:`controllers.certification.prediction_error.error_profile`: what the uncertified mode
     tightens by) and its summary for the model file, in the outputs' units."""
@@ -181,7 +181,7 @@ def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.n
         from controllers.certification.prediction_error import held_predictions
         from controllers.identification.simulation import free_run_states
 
-        x = free_run_states(params, record, x0_samples)
+        x = free_run_states(params, record, ev.starts)   # the scored free run's states
         ahead = held_predictions(params, record.u, x, problem.q, record.experiments())
     profile = error_profile(record.y, ev.xi, held if np.any(held) else record.split == "train",
                             record.experiments(), TRACKING["offset_filter"], ahead=ahead)
@@ -282,8 +282,7 @@ def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, train
                                args.x0_samples)
     err = np.abs(record.y - ev.xi)[record.split == _scored_split(record)]
     doc = _model_record(args, data, record, trained, ev, wall, command, sidecar)
-    profile, doc["prediction_error"] = _prediction_error(record, ev, problem, trained.params,
-                                                         args.x0_samples)
+    profile, doc["prediction_error"] = _prediction_error(record, ev, problem, trained.params)
     if problem.q:
         doc["disturbance_rates"] = _rates(data, problem)
     model = training.build_model(trained.params, problem, doc, w_y_bar=float(np.max(err)))

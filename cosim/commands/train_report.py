@@ -30,6 +30,8 @@ class Evaluation:
     comparison: dict[str, Any]
     warning: str | None
     limits: dict[str, Any] = field(default_factory=dict)
+    #: each experiment's initial state of the free run (by index), estimated once
+    starts: dict[int, np.ndarray] = field(default_factory=dict)
     #: With measured disturbances: the same score with them held at their training mean
     #: (what the model would simulate without measuring them), and the ratio of the two.
     disturbances: dict[str, Any] | None = None
@@ -44,7 +46,8 @@ def evaluate(params: dict[str, np.ndarray], record: Any, problem: Any,
 
     norm = problem.normalization()
     scale, names = np.asarray(norm["y_scale"]), list(problem.output_names)
-    xi = simulate(params, record, x0_samples)
+    starts: dict[int, np.ndarray] = {}
+    xi = simulate(params, record, x0_samples, starts)
     ours = report.scores(record, xi, scale, names, experiment_names)
     arx = linear.fit_arx(record)
     theirs = bxi = orders = None
@@ -57,25 +60,24 @@ def evaluate(params: dict[str, np.ndarray], record: Any, problem: Any,
                       baseline_orders=orders, comparison=comparison,
                       warning=report.verdict(comparison),
                       limits=record.limits.to_dict(names, scale, np.asarray(norm["y_offset"])),
-                      disturbances=_without_disturbances(params, record, problem, ours,
-                                                         comparison, x0_samples))
+                      starts=starts,
+                      disturbances=_without_disturbances(params, record, problem.q, ours,
+                                                         comparison, x0_samples, scale, names))
 
 
-def _without_disturbances(params: dict[str, np.ndarray], record: Any, problem: Any,
-                          ours: dict[str, Any], comparison: dict[str, Any], x0_samples: int
-                          ) -> dict[str, Any] | None:
-    """What measuring the disturbances is worth: the free run with every disturbance held at
-    its training mean, scored on the comparison's split, beside the model's own score
-    (``None`` without disturbances)."""
+def _without_disturbances(params: dict[str, np.ndarray], record: Any, q: int,
+                          ours: dict[str, Any], comparison: dict[str, Any], x0_samples: int,
+                          scale: np.ndarray, names: list[str]) -> dict[str, Any] | None:
+    """What measuring the ``q`` disturbances (the last model inputs) is worth: the free run
+    with every disturbance held at its training mean, scored on the comparison's split,
+    beside the model's own score (``None`` without disturbances)."""
     from dataclasses import replace
 
     from controllers.identification import report
     from controllers.identification.simulation import simulate
 
-    q = len(getattr(problem, "disturbances", ()))
     if not q:
         return None
-    scale, names = np.asarray(problem.normalization()["y_scale"]), list(problem.output_names)
     u = record.u.copy()
     u[:, -q:] = np.mean(u[record.split == "train", -q:], axis=0)
     held = simulate(params, replace(record, u=u), x0_samples)
