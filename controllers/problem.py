@@ -66,6 +66,10 @@ class Channel:
         the data's largest change per sample.
     preview : bool
         Disturbances: known ahead from the scenario (rather than held at the last value).
+    safe : float or None
+        Inputs: the value written to a live plant when its measurements stop coming (the
+        watchdog of ``cosim run --plant opc.tcp://...``) and when the run stops; ``None``:
+        hold the last value written.
     """
 
     name: str
@@ -81,6 +85,7 @@ class Channel:
     delay: int = 0
     rate: float | None = None
     preview: bool = False
+    safe: float | None = None
 
     def __post_init__(self) -> None:
         if not self.variable:
@@ -113,6 +118,8 @@ class Channel:
             doc["rate"] = self.rate
         if self.preview:
             doc["preview"] = True
+        if self.safe is not None:
+            doc["safe"] = self.safe
         return doc
 
 

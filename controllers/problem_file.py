@@ -76,8 +76,8 @@ __all__ = ["load", "loads", "locate", "locate_key", "problem_from_dict"]
 _TOP = {"problem", "inputs", "outputs", "disturbances", "pi", "train", "mpc"}
 _PROBLEM = {"name", "Ts", "description"}
 _CHANNEL = {"unit", "min", "max", "variable", "description", "normalization"}
-_INPUT = _CHANNEL | {"hold", "levels", "delay"}
-_DISTURBANCE = _INPUT | {"rate", "preview"}
+_INPUT = _CHANNEL | {"hold", "levels", "delay", "safe"}
+_DISTURBANCE = (_INPUT - {"safe"}) | {"rate", "preview"}
 #: The longest dead time a signal may declare [samples].
 MAX_DELAY = 50
 #: The signal tables: the problem's attribute and JSON key; whether one is needed.
@@ -347,6 +347,13 @@ def _channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Cha
                                "string")
     kw = {**_normalization(entry, where, table), **_excitation(entry, where, table, lo, hi),
           **_dynamics(entry, where, table, lo, hi)}
+    if "safe" in entry:
+        safe = _number(entry["safe"], where(table, "safe"), "safe")
+        if not lo <= safe <= hi:
+            raise ProblemFileError(f"{where(table, 'safe')}: 'safe' (the value written to a "
+                                   f"live plant when its measurements stop) must be in the "
+                                   f"box [{lo:g}, {hi:g}], got {safe:g}")
+        kw["safe"] = safe
     return Channel(name=name, unit=unit.strip(), min=lo, max=hi, variable=variable,
                    description=description, **kw)
 

@@ -27,7 +27,7 @@ from typing import Any
 from cosim.core.build import TARGETS
 from cosim.core.master import RunResult
 
-__all__ = ["DEFAULT_PLANT", "RunOutput", "export_fmu", "plant_path", "run"]
+__all__ = ["DEFAULT_PLANT", "RunOutput", "export_fmu", "plant_path", "run", "serve_plant"]
 
 #: The project's plant FMU (FMI 2.0): ``FourTank.fmu`` beside its sources in the ``fmus``
 #: package when that folder is writable (a source checkout: ``fmus/FourTank.fmu``), else in
@@ -101,7 +101,7 @@ class RunOutput:
         return pd.DataFrame(self.result.timing_rows, columns=self.result.timing_columns)
 
 
-def _plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
+def open_plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
            step_timeout: float | None, seed: int, problem: Any = None) -> tuple[Any, str]:
     """The plant component; an FMU's variable map binds ``problem`` to it (the user's
     ``varmap`` first: :func:`cosim_adapters.problems.bind_plant`)."""
@@ -137,7 +137,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         step: float | None = None, isolate: bool = False, step_timeout: float | None = None,
         seed: int = 0, figure: bool = True, progress: bool = False,
         on_step: Callable[[int], None] | None = None,
-        on_notice: Callable[[str], None] | None = None) -> RunOutput:
+        on_notice: Callable[[str], None] | None = None, live: Any = None) -> RunOutput:
     """Run a scenario in closed loop (the Python twin of ``cosim run``).
 
     Parameters
@@ -146,7 +146,9 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         Scenario CSV file.
     plant : path or str, optional
         Plant FMU (FMI 2.0 or 3.0; default: the project's :data:`DEFAULT_PLANT`, built if
-        missing), or ``"model:FILE"``: the GRU model itself as the plant.
+        missing), ``"model:FILE"``: the GRU model itself as the plant, or
+        ``"opc.tcp://HOST:PORT"``: a live plant (or ``cosim serve-plant``), on the wall clock
+        (:mod:`cosim.live`).
     controller : str
         ``"robust-mpc"``, ``"pi"`` or ``"module:Class"``.
     map : path, optional
@@ -184,7 +186,10 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         Called with the number of completed steps (progress bars).
     on_notice : callable, optional
         Called, before the run, with the controller's one-line notice when it has one (the
-        robust MPC's: why it runs uncertified, :mod:`cosim_adapters.certification`).
+        robust MPC's: why it runs uncertified, :mod:`cosim_adapters.certification`); a live
+        run's alarms too.
+    live : cosim.live.runner.LiveOptions, optional
+        How a live plant is met (tags, speed, watchdog, security); default: its defaults.
 
     Returns
     -------
@@ -199,6 +204,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     """
     from cosim.core import outpaths, registry, varmap
     from cosim.core import scenario as scenario_mod
+    from cosim.core.errors import ParameterError
     from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
     from cosim.core.master import Master
 
@@ -224,11 +230,24 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     if notice and on_notice is not None:
         on_notice(notice)
     bound = run_problem(ctrl, opts.get("problem", problem))
-    plant_obj, plant_name = _plant(plant, vmap, interface, isolate, limit, seed, bound)
-    master = Master(plant_obj, ctrl, sc, step=step, seed=seed,
-                    disturbances=bound.disturbance_names if bound is not None else None)
-    meta = {"scenario": str(sc.path), "plant": plant_name,
-            "fmi_version": plant_obj.fmi_version, "interface": interface,
+    if is_endpoint(plant):
+        from cosim.core.errors import CosimError
+        from cosim.live.runner import LiveOptions, run_live
+
+        if vmap is not None or interface != "cs":
+            raise CosimError(f"--plant {plant}: a live plant takes no --map or --interface "
+                             "(a tags file maps its names: --tags)")
+        master, where = run_live({"step": step, "seed": seed}, str(plant),
+                                 live or LiveOptions(), sc, ctrl, bound, on_notice)
+    else:
+        if live is not None:
+            raise ParameterError("live", ": live options need a live plant (opc.tcp://...)")
+        plant_obj, plant_name = open_plant(plant, vmap, interface, isolate, limit, seed, bound)
+        master = Master(plant_obj, ctrl, sc, step=step, seed=seed,
+                        disturbances=bound.disturbance_names if bound is not None else None)
+        where = {"plant": plant_name, "fmi_version": plant_obj.fmi_version,
+                 "interface": interface}
+    meta = {"scenario": str(sc.path), **where,
             "isolated": isolate, "step_timeout": limit,
             "map": str(map) if map is not None else None,
             "problem": bound.name if bound is not None else None,
@@ -304,6 +323,20 @@ def export_fmu(model: str | Path | None = None, out: str | Path = "Controller.fm
 
         ctrl.expect_setpoints(load(scenario).setpoints())
     return export(ctrl, out, fmi)
+
+
+def serve_plant(plant: str | Path | None = None, problem: Any = None, **options: Any) -> dict:
+    """Serve a plant FMU as an OPC UA server on the wall clock until a signal or
+    ``duration`` (the twin of ``cosim serve-plant``; options and what it returns:
+    :func:`cosim.live.runner.serve_plant`)."""
+    from cosim.live.runner import serve_plant as serve
+
+    return serve(plant, problem, **options)
+
+
+def is_endpoint(plant: object) -> bool:
+    """Whether ``plant`` names a live plant (``opc.tcp://...``) rather than an FMU."""
+    return isinstance(plant, str) and plant.startswith("opc.tcp://")
 
 
 def with_problem(controller: str, options: Mapping[str, Any], problem: Any) -> dict:

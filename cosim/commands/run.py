@@ -51,6 +51,8 @@ examples:
   cosim run scenarios/paper_steps.csv --plant other.fmu --map other.map.toml --isolate
   cosim run scenarios/paper_steps.csv --model my_gru.json --option 'law="paper"'
   cosim run cstr_steps.csv --plant cstr.fmu --problem cstr.toml --controller pi
+  cosim run scenarios/paper_steps.csv --plant opc.tcp://127.0.0.1:4840 --speed 100 \\
+      --security None --watchdog 3
 
 """ + exit_codes_help()
 
@@ -67,7 +69,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "FourTank.fmu, built if missing, see cosim build-fmu), or "
                         "model:FILE for the GRU model itself as the plant (the paper's "
                         "eq:perturbed-model; its "
-                        "h1_start, h2_start, w_y_max, dx_<i> are scenario plant.* columns)")
+                        "h1_start, h2_start, w_y_max, dx_<i> are scenario plant.* columns), "
+                        "or opc.tcp://HOST:PORT: a live plant's OPC UA server (or cosim "
+                        "serve-plant), on the wall clock")
     p.add_argument("--map", metavar="MAP", default=None,
                    help="variable map TOML for a plant whose variable names or units differ "
                         "(checked against its modelDescription before the first step)")
@@ -111,6 +115,20 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(same as --option 'certificate=\"require\"')")
     p.add_argument("--seed", metavar="N", type=int, default=0,
                    help="seed of the measurement noise (default 0)")
+    live = p.add_argument_group("a live plant (--plant opc.tcp://HOST:PORT; docs: Run on a "
+                                "live process)")
+    live.add_argument("--tags", metavar="TAGS.toml", default=None,
+                      help="map the problem's signals onto the plant's node ids or browse "
+                           "paths (default: by name in the folder named for the problem)")
+    live.add_argument("--speed", metavar="K", type=float, default=None,
+                      help="the plant's speed-up: one sample every Ts/K seconds of the wall "
+                           "clock (default 1; cosim serve-plant's --speed)")
+    live.add_argument("--watchdog", metavar="N", type=int, default=None,
+                      help="after N samples in a row without a fresh measurement, write the "
+                           "problem's safe inputs (safe = VALUE) and raise one alarm line")
+    from cosim.live.security import add_arguments
+
+    add_arguments(p, "client")
     p.add_argument("--no-figure", action="store_true", help="do not draw figure.png")
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar and no summary line (for scripts)")
@@ -128,6 +146,7 @@ def run(args: argparse.Namespace) -> int:
     from cosim.core.errors import EXIT_OK, CosimError, ParameterError, SimulationFailed
 
     options = registry.parse_options(args.option)
+    live = _live_options(args)
     if args.require_certificate:
         options["certificate"] = "require"
     out = Path(args.out) if args.out else None
@@ -141,7 +160,7 @@ def run(args: argparse.Namespace) -> int:
                          model=args.model, options=options, problem=args.problem, out=out,
                          interface=args.interface, step=args.step, isolate=args.isolate,
                          step_timeout=args.step_timeout, seed=args.seed,
-                         figure=not args.no_figure,
+                         figure=not args.no_figure, live=live,
                          progress=not args.quiet and sys.stderr.isatty(),
                          on_notice=lambda text: print(f"cosim run: {text}", file=sys.stderr,
                                                       flush=True))
@@ -166,6 +185,39 @@ def run(args: argparse.Namespace) -> int:
         viol = sum(v["count"] for v in k["violations"].values())
         print(f"cosim run: ok: {result.steps} steps in {result.wall_time_s:.2f} s; IAE {iae}; "
               f"{viol} constraint violations; results in {out}")
+        if result.live:
+            lv = result.live
+            print(f"cosim run: live: {lv['fresh']} of {lv['samples']} samples fresh, "
+                  f"{lv['deadline_misses']} deadline misses, {lv['watchdog_alarms']} alarms, "
+                  f"{lv['reconnects']} reconnects; loop p99 "
+                  f"{(lv['latency_ms']['loop']['p99'] or float('nan')):.3g} ms")
         for note in output.summary.get("controller_summary", {}).get("notes") or []:
             print(f"cosim run: note: {note}")
     return EXIT_OK
+
+
+def _live_options(args: argparse.Namespace) -> object:
+    """The live options of ``--plant opc.tcp://...`` (the password read here), or ``None``
+    for an FMU plant, which takes none of them."""
+    from cosim.core.errors import CosimError
+
+    given = [flag for flag, value in (("--tags", args.tags), ("--speed", args.speed),
+                                      ("--watchdog", args.watchdog),
+                                      ("--security", args.security),
+                                      ("--certificate", args.certificate),
+                                      ("--private-key", args.private_key),
+                                      ("--trust", args.trust), ("--user", args.user))
+             if value not in (None, [])]
+    if not (args.plant or "").startswith("opc.tcp://"):
+        if given:
+            raise CosimError(f"{given[0]}: only for a live plant (--plant opc.tcp://HOST:PORT)")
+        return None
+    from cosim.live import security
+    from cosim.live.runner import LiveOptions
+
+    sec = security.from_args(args, "client")
+    if not sec.secure:
+        print("cosim run: warning: no security (--security None): the plant's values travel "
+              "unsigned and unencrypted", file=sys.stderr, flush=True)
+    return LiveOptions(tags=args.tags, speed=args.speed if args.speed is not None else 1.0,
+                       watchdog=args.watchdog, security=sec)

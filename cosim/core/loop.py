@@ -199,7 +199,9 @@ class Run:
                         j = self.diag_index[key] = len(names)
                         names.append(key)
                         extra.append(math.nan)
-                        self.result.columns.append(f"{PREFIX_CTRL}.{key}")
+                        # a diagnostic named with a prefix keeps it (live.fresh)
+                        self.result.columns.append(key if "." in key
+                                                   else f"{PREFIX_CTRL}.{key}")
                     extra[j] = _as_float(value)
                 row += extra
         guard = self.guard

@@ -91,6 +91,8 @@ class Master:
                                  "sample time; give one")
         self.dt = float(dt)
         self.given_disturbances = None if disturbances is None else tuple(disturbances)
+        #: What executes one run (a live plant's loop replaces it: :mod:`cosim.live.loop`).
+        self.run_class: type[Run] = Run
         ts = controller.sample_time
         self.ratio = 1
         if ts is not None and step is not None:
@@ -221,7 +223,7 @@ class Master:
         if step_timeout is not None and not (math.isfinite(step_timeout) and step_timeout > 0):
             raise ParameterError("step_timeout", f" {step_timeout!r}: expected a positive "
                                  "number of seconds")
-        run = Run(self, record, step_timeout, deadline)
+        run = self.run_class(self, record, step_timeout, deadline)
         own = interrupts.current() is None
         with interrupts.handling_signals() as guard:
             run.guard = guard

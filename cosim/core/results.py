@@ -161,8 +161,9 @@ def summary(result: RunResult, meta: dict | None = None) -> dict:
     Keys: ``status`` (``ok``/``failed``/``interrupted``), ``reason``, ``steps``,
     ``steps_planned``, ``step_size``, ``start_time``, ``stop_time``, ``wall_time_s``,
     ``signals`` (see :func:`signals`), ``kpis`` (see :func:`cosim.core.kpis.compute`),
-    ``controller_summary`` (the controller's own ``summary()``: solver statistics), plus
-    ``meta`` (scenario, plant, controller, seed...).
+    ``controller_summary`` (the controller's own ``summary()``: solver statistics), ``live``
+    (a run against a live plant: :mod:`cosim.live.loop`), plus ``meta`` (scenario, plant,
+    controller, seed...).
     """
     doc = {
         "status": result.status,
@@ -179,6 +180,8 @@ def summary(result: RunResult, meta: dict | None = None) -> dict:
     doc["kpis"] = _kpis.compute(result.columns, result.rows, result.outputs, result.references,
                                 result.inputs, result.bounds)
     doc["controller_summary"] = result.controller_summary
+    if result.live:
+        doc["live"] = result.live
     return jsonable(doc)
 
 

@@ -54,6 +54,7 @@ class RunResult:
     units: dict[str, str] = field(default_factory=dict)
     perturbation_times: list[float] = field(default_factory=list)
     controller_summary: dict = field(default_factory=dict)
+    live: dict = field(default_factory=dict)
     timing_columns: list[str] = field(default_factory=list)
     timing_rows: list[list[float]] = field(default_factory=list)
     wall_time_s: float = 0.0

@@ -1,0 +1,14 @@
+"""A controller against a live process over OPC UA (IEC 62541), on the wall clock.
+
+A plant is reached through its control system, and control systems speak OPC UA. This package
+is the co-simulation's counterpart for that: :mod:`cosim.live.server` serves a plant FMU as an
+OPC UA server stepped on the wall clock (the virtual plant of ``cosim serve-plant``, to
+rehearse on), :mod:`cosim.live.session` is the client that reads a plant's measurements and
+writes its inputs (``cosim run --plant opc.tcp://...``), :mod:`cosim.live.loop` the real-time
+loop that drives any controller through it and answers every fault a live process has
+(stale values, lost links, overrunning steps, signals), :mod:`cosim.live.tags` maps the
+problem's signals onto a real plant's tags, and :mod:`cosim.live.security` holds the
+certificates, trust list and user of a secured connection.
+
+asyncua (pure Python) is imported only when a live command runs.
+"""

@@ -1,0 +1,268 @@
+"""The real-time loop of a run against a live plant, and its answer to every fault.
+
+Each sample ``k`` (every ``period = Ts / speed`` seconds of the wall clock): wait for the
+sample's instant, read the outputs and measured disturbances, step the controller, write the
+inputs, record the row. The loop locks its phase to the plant's samples when the plant
+republishes its values every sample (as ``cosim serve-plant`` does): it reads just after the
+plant's new sample and writes before the next one, so that the closed loop is the
+co-simulation master's (zero-order hold) to the bit.
+
+What a live process does, and what the loop does then (each counted in ``summary.json``'s
+``live`` and marked in ``results.csv``'s ``live.*`` columns):
+
+============================  ==============================================================
+a measurement not fresh       (status not Good, source timestamp older than one sample, no
+                              answer, disconnected): the controller is not stepped (its
+                              observer does not advance) and nothing is written: the inputs
+                              hold. ``live.fresh = 0``.
+``watchdog`` such samples     the safe inputs (``safe = VALUE`` per input in the problem;
+in a row                      without one an input holds its last value) are written and one
+                              alarm line is given; the alarm clears, and control resumes, at
+                              the next fresh sample. ``live.safe = 1``.
+the connection drops          reads say "disconnected" (not fresh) while the session
+                              reconnects with back-off; counted in ``reconnects``.
+a step past its deadline      (inputs not computed within ``DEADLINE`` of the sample): they
+                              are not written, the previous inputs stay. ``live.on_time = 0``.
+Ctrl-C, SIGTERM, SIGHUP       the safe inputs are written, the session closed, the rows kept;
+                              exit 130, 143, 129.
+any write                     clipped to the input's box.
+============================  ==============================================================
+
+Latencies (read, compute, write) and lateness per sample go to ``timings.csv``; their
+median and p99, the jitter (how late each read started) and the counts to the summary.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from cosim.core.loop import Run
+from cosim.core.run_result import RowSink
+from cosim.core.scenario import DIST, PLANT
+
+if TYPE_CHECKING:
+    from cosim.core.master import Master
+    from cosim.live.plant import LivePlant
+
+__all__ = ["DEADLINE", "LiveConfig", "LiveRun"]
+
+#: The fraction of a sample within which the inputs must be written (the rest is the plant's
+#: margin before its next sample).
+DEADLINE = 0.8
+#: How long after the plant's new sample the loop reads, as a fraction of the sample.
+READ_LAG = 0.05
+
+
+@dataclass
+class LiveConfig:
+    """How a live run runs: ``period`` [s of wall clock per sample], ``watchdog`` (stale
+    samples in a row before the safe inputs; ``None``: never), the one-line ``notice``
+    sink, and what the summary names (``endpoint``, ``security``, ``tags``, ``speed``)."""
+
+    period: float
+    watchdog: int | None = None
+    notice: Callable[[str], None] = print
+    describe: dict = field(default_factory=dict)
+
+
+class LiveRun(Run):
+    """One run of a :class:`~cosim.core.master.Master` against a
+    :class:`~cosim.live.plant.LivePlant` (see the module docstring); ``master.live`` is
+    its :class:`LiveConfig`."""
+
+    def __init__(self, master: Master, record: RowSink | None, step_timeout: float | None,
+                 deadline: float | None) -> None:
+        super().__init__(master, record, step_timeout, deadline)
+        self.cfg: LiveConfig = master.live   # type: ignore[attr-defined]
+        self.plant: LivePlant = master.plant  # type: ignore[assignment]
+        self.counts = dict.fromkeys(("samples", "fresh", "stale", "deadline_misses",
+                                     "watchdog_alarms", "safe_writes", "repeated"), 0)
+        self.stale_run = 0
+        self.reasons: dict[str, int] = {}
+        self.lat: list[list[float]] = []     # time, read, compute, write, late [ms]
+        self.locked = False
+        self.last_source: float | None = None
+
+    # -- start ----------------------------------------------------------------------------
+    def _start(self) -> None:
+        """Set-points, connect, set up the controller, lock onto the plant's samples."""
+        m = self.m
+        self._apply(m.scenario.events[0].values, started=False)
+        self.next_event = 1
+        self.dist.update(m.dist_defaults)
+        self.plant.setup(self.t)
+        m.controller.expect_setpoints(m.scenario.setpoints())
+        m.controller.setup(self.t)
+        self.w0 = self._lock_phase()
+
+    def _lock_phase(self) -> float:
+        """The instant of sample 0: just after the plant's next new sample when its
+        values are republished every sample (within 2.5 samples), else now."""
+        P = self.cfg.period
+        first = self.plant.read().source_time
+        end = time.perf_counter() + 2.5 * P
+        while first is not None and time.perf_counter() < end:
+            time.sleep(min(P / 50, 0.01))
+            ts = self.plant.read().source_time
+            if ts is not None and ts != first:
+                self.locked = True
+                return time.perf_counter() + READ_LAG * P
+        return time.perf_counter()
+
+    # -- the loop -----------------------------------------------------------------------------
+    def _loop(self, on_step: Callable[[int], None] | None) -> None:
+        result, times, P = self.result, self.times, self.cfg.period
+        n = len(times) - 1
+        self._start()
+        self.loop0 = time.perf_counter()
+        k = 0
+        while True:
+            self.t = t = times[k]
+            self._apply_events(t)
+            due = self.w0 + k * P
+            wait = due - time.perf_counter()
+            if wait > 0:
+                time.sleep(wait)
+            self._sample(t, due, due + DEADLINE * P)
+            if k == n:
+                break
+            k += 1
+            result.steps = k
+            if on_step is not None:
+                on_step(k)
+            self._check_interrupt()
+
+    def _sample(self, t: float, due: float, deadline: float) -> None:
+        """Read, control, write and record sample ``t``."""
+        c = self.counts
+        c["samples"] += 1
+        r0 = time.perf_counter()
+        reading = self._read()
+        r1 = time.perf_counter()
+        y = reading.values
+        for d in self.m.dists:
+            self.dist[d] = y.get(d, math.nan)
+        compute = write = math.nan
+        on_time = written = safe = 0.0
+        if reading.fresh:
+            c["fresh"] += 1
+            if self.cfg.watchdog is not None and self.stale_run >= self.cfg.watchdog:
+                self.cfg.notice(f"alarm cleared at t = {t:g} s: fresh measurements, control "
+                                "resumed")
+            self.stale_run = 0
+            ym = self._sensed(t, y)
+            u_prev = self.u
+            self._control(t, ym)
+            r2 = time.perf_counter()
+            compute = r2 - r1
+            if r2 <= deadline:
+                on_time = 1.0
+                written = float(self.plant.write(self.u))
+                write = time.perf_counter() - r2
+            else:
+                c["deadline_misses"] += 1
+                self.u = u_prev if u_prev else {u: math.nan for u in self.m.ctrl_outputs}
+        else:
+            ym = y
+            c["stale"] += 1
+            self.stale_run += 1
+            for why in reading.stale.values():
+                key = why if not why.endswith(" s old") else "older than a sample"
+                self.reasons[key] = self.reasons.get(key, 0) + 1
+            self.diag = dict.fromkeys(self.diag, math.nan)
+            if not self.u:
+                self.u = {u: math.nan for u in self.m.ctrl_outputs}
+            safe = float(self._watchdog(t, reading))
+        self.diag = {**self.diag, "live.fresh": float(reading.fresh), "live.on_time": on_time,
+                     "live.written": written, "live.safe": safe}
+        self._record(t, y, ym)
+        ms = 1e3
+        self.lat.append([t, (r1 - r0) * ms, compute * ms, write * ms, (r0 - due) * ms])
+
+    def _read(self) -> Any:
+        """The plant's measurements; a repeat of the last sample (the plant's next one not
+        out yet) is read again for up to a tenth of a sample."""
+        reading = self.plant.read()
+        if self.locked and reading.fresh and reading.source_time == self.last_source:
+            end = time.perf_counter() + 0.1 * self.cfg.period
+            while reading.source_time == self.last_source and time.perf_counter() < end:
+                time.sleep(self.cfg.period / 200)
+                reading = self.plant.read()
+            if reading.source_time == self.last_source:
+                self.counts["repeated"] += 1
+        self.last_source = reading.source_time
+        return reading
+
+    def _sensed(self, t: float, y: dict[str, float]) -> dict[str, float]:
+        """What the controller measures: ``y``, through the scenario's sensor model."""
+        if self.sensor is None:
+            return y
+        self.sensor.set_inputs(y)
+        self.sensor.step(t, self.m.dt)
+        return self.sensor.get_outputs()
+
+    def _watchdog(self, t: float, reading: Any) -> bool:
+        """After ``watchdog`` stale samples in a row: the safe inputs and one alarm line."""
+        n = self.cfg.watchdog
+        if n is None or self.stale_run != n:
+            return False
+        self.counts["watchdog_alarms"] += 1
+        written = self.plant.write_safe()
+        if written:
+            self.counts["safe_writes"] += 1
+            self.u = {**self.u, **written}
+        units = {s.name: s.unit for s in self.plant.inputs}
+        what = (", ".join(f"{k} = {v:g} {units[k]}" for k, v in written.items())
+                if written else "none written (inputs hold their last values)")
+        why = "; ".join(f"{s}: {w}" for s, w in list(reading.stale.items())[:3])
+        self.cfg.notice(f"alarm at t = {t:g} s: no fresh measurement for {n} samples "
+                        f"({why}); safe inputs: {what}")
+        return bool(written)
+
+    # -- the end --------------------------------------------------------------------------------
+    def _finish(self) -> None:
+        """The controller and plant wound up (safe inputs written), then the live summary
+        and the latencies (``timings.csv``)."""
+        super()._finish()
+        result = self.result
+        lat = np.array(self.lat, dtype=float).reshape(-1, 5)
+        ctrl_rows = {row[0]: row[1:] for row in result.timing_rows}
+        extra = result.timing_columns[1:]
+        result.timing_columns = ["time", "live.read_ms", "live.compute_ms", "live.write_ms",
+                                 "live.late_ms", *extra]
+        result.timing_rows = [[*row, *ctrl_rows.get(row[0], [math.nan] * len(extra))]
+                              for row in lat.tolist()]
+        session = self.plant.session
+        result.live = {
+            **self.cfg.describe, "period_s": self.cfg.period, "phase_locked": self.locked,
+            **self.counts, "stale_reasons": self.reasons,
+            "reconnects": session.reconnects, "write_failures": self.plant.write_failures,
+            "clipped": self.plant.clipped, "watchdog": self.cfg.watchdog,
+            "jitter_ms": _stats(np.abs(lat[:, 4])),
+            "latency_ms": {"read": _stats(lat[:, 1]), "compute": _stats(lat[:, 2]),
+                           "write": _stats(lat[:, 3]),
+                           "loop": _stats(lat[:, 1] + lat[:, 2] + lat[:, 3])},
+        }
+
+
+def refused_columns(scenario: Any) -> str | None:
+    """The first scenario column a live plant cannot take (it sets the plant: ``plant.*``,
+    ``dist.*``), or ``None``."""
+    for col in (*scenario.columns_of(PLANT), *scenario.columns_of(DIST)):
+        return col.name
+    return None
+
+
+def _stats(values: np.ndarray) -> dict[str, float | None]:
+    """Median, p99 and max of the finite ``values`` (``None`` when there are none)."""
+    v = values[np.isfinite(values)]
+    if v.size == 0:
+        return {"median": None, "p99": None, "max": None}
+    return {"median": float(np.median(v)), "p99": float(np.percentile(v, 99)),
+            "max": float(v.max())}

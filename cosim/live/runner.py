@@ -1,0 +1,206 @@
+"""The live commands' Python twins: :func:`serve_plant` (``cosim serve-plant``) and
+:func:`run_live` (``cosim run --plant opc.tcp://...``, reached through :func:`cosim.api.run`).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import math
+import signal
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from cosim.core.errors import CosimError, SimulationFailed
+from cosim.live.security import Security
+from cosim.live.server import DEFAULT_ENDPOINT
+
+__all__ = ["LiveOptions", "ServeSummary", "run_live", "serve_plant"]
+
+
+class ServeSummary(dict):
+    """What a served plant did: ``samples``, ``overruns``, ``clipped``, ``stopped_by``."""
+
+
+def serve_plant(plant: str | Path | None = None, problem: Any = None, *,
+                endpoint: str = DEFAULT_ENDPOINT, speed: float = 1.0,
+                security: Security | None = None, frozen: bool = False,
+                record: str | Path | None = None, duration: float | None = None,
+                map: str | Path | None = None, interface: str = "cs",
+                on_notice: Callable[[str], None] = print) -> ServeSummary:
+    """Serve a plant FMU as an OPC UA server on the wall clock until a signal (SIGINT,
+    SIGTERM, SIGHUP) or ``duration`` seconds (the twin of ``cosim serve-plant``; the server:
+    :class:`cosim.live.server.VirtualPlant`).
+
+    Parameters
+    ----------
+    plant : path, optional
+        The plant FMU (default: the project's four-tank, built if missing).
+    problem : path or ControlProblem, optional
+        The control problem the plant is served by (default: the four-tank's).
+    endpoint : str
+        ``opc.tcp://host:port`` to listen on.
+    speed : float
+        Speed-up K: one sample every ``Ts / K`` seconds.
+    security : Security, optional
+        Default: no security.
+    frozen : bool
+        Hold the initial state until a client writes an input.
+    record : path, optional
+        CSV of the plant's trajectory (one row per sample).
+    duration : float, optional
+        Stop after this many seconds [wall clock].
+
+    Raises
+    ------
+    CosimError
+        Bad input (plant, problem, endpoint, speed), or the endpoint cannot be listened on.
+    """
+    from cosim import api
+    from cosim.core import varmap
+    from cosim.live.server import VirtualPlant
+    from cosim_adapters.problems import load_problem
+
+    if not (speed > 0 and speed < float("inf")):
+        raise CosimError(f"--speed {speed!r}: must be a positive number (the speed-up K)")
+    if duration is not None and not duration > 0:
+        raise CosimError(f"--duration {duration!r}: must be a positive number of seconds")
+    check_endpoint(endpoint, "--endpoint")
+    bound = load_problem(problem)
+    vmap = varmap.load(map) if map is not None else None
+    component, _ = api.open_plant(plant, vmap, interface, False, None, 0, bound)
+    server = VirtualPlant(component, bound, endpoint=endpoint, speed=speed,
+                          security=security, frozen=frozen, record=record, notice=on_notice)
+    stopped = {"by": "duration" if duration is not None else ""}
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+            loop.add_signal_handler(sig, _stopper(stop, stopped, sig))
+        try:
+            await server.serve(stop, duration)
+        finally:
+            for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+                loop.remove_signal_handler(sig)
+
+    try:
+        asyncio.run(main())
+    except OSError as exc:
+        raise CosimError(f"--endpoint {endpoint}: cannot listen: {exc.strerror or exc}") \
+            from None
+    except (CosimError, SimulationFailed):
+        raise
+    except Exception as exc:   # the plant FMU failed, or asyncua did
+        what = " ".join(f"{type(exc).__name__}: {exc}".split())
+        raise SimulationFailed(f"the virtual plant stopped at t = {server.t:g} s after "
+                               f"{server.samples} samples: {what}") from exc
+    return ServeSummary(samples=server.samples, overruns=server.overruns,
+                        clipped=server.clipped, stopped_by=stopped["by"])
+
+
+def _stopper(stop: asyncio.Event, stopped: dict, sig: int) -> Callable[[], None]:
+    def handler() -> None:
+        stopped["by"] = signal.Signals(sig).name
+        stop.set()
+    return handler
+
+
+def check_endpoint(endpoint: str, flag: str) -> None:
+    """``opc.tcp://host:port[/path]``, else a one-line error naming ``flag``."""
+    from urllib.parse import urlparse
+
+    url = urlparse(endpoint)
+    port = None
+    with contextlib.suppress(ValueError):
+        port = url.port
+    if url.scheme != "opc.tcp" or not url.hostname or port is None:
+        raise CosimError(f"{flag} {endpoint}: expected opc.tcp://HOST:PORT (e.g. "
+                         f"{DEFAULT_ENDPOINT})")
+
+
+@dataclass(frozen=True)
+class LiveOptions:
+    """How ``cosim run --plant opc.tcp://...`` meets the plant.
+
+    Attributes
+    ----------
+    tags : path, optional
+        A tags file (:mod:`cosim.live.tags`); default: the signals by name in the folder
+        named for the problem (``cosim serve-plant``'s layout).
+    speed : float
+        The plant's speed-up K (1 for a real plant): one sample every ``Ts / K`` seconds.
+    watchdog : int, optional
+        Stale samples in a row before the safe inputs are written.
+    security : Security
+        Default: no security (the command asks for it explicitly).
+    """
+
+    tags: str | Path | None = None
+    speed: float = 1.0
+    watchdog: int | None = None
+    security: Security = field(default_factory=Security)
+
+
+def run_live(master_args: dict, endpoint: str, live: LiveOptions, sc: Any, ctrl: Any,
+             bound: Any, on_notice: Callable[[str], None] | None) -> tuple[Any, dict]:
+    """The master of a run against the live plant at ``endpoint`` (:func:`cosim.api.run`
+    runs it) and what the summary says of the plant.
+
+    Raises
+    ------
+    CosimError
+        No problem to name the signals by, a scenario column that would set the plant, bad
+        live options, an unreadable tags file.
+    """
+    from cosim.core.master import Master
+    from cosim.live import tags as tags_mod
+    from cosim.live.loop import LiveConfig, LiveRun, refused_columns
+    from cosim.live.plant import LivePlant
+    from cosim.live.session import PlantSession
+
+    check_endpoint(endpoint, "--plant")
+    if bound is None:
+        raise CosimError(f"--plant {endpoint}: a live plant is reached through the control "
+                         "problem's signals: give --problem")
+    column = refused_columns(sc)
+    if column is not None:
+        raise CosimError(f"{sc.path}:1:1: column '{column}': a live plant is not set by the "
+                         "scenario (its disturbances are measured, its parameters are the "
+                         "plant's); perturb a virtual plant through cosim serve-plant's "
+                         "writable variables")
+    if not (live.speed > 0 and math.isfinite(live.speed)):
+        raise CosimError(f"--speed {live.speed!r}: must be a positive number (the plant's "
+                         "speed-up K)")
+    if live.watchdog is not None and live.watchdog < 1:
+        raise CosimError(f"--watchdog {live.watchdog!r}: must be a whole number of samples "
+                         ">= 1")
+    if master_args.get("step") is not None:
+        raise CosimError("--step: a live run steps at the controller's sample time")
+    signals = [c.name for c in (*bound.inputs, *bound.outputs, *bound.disturbances)]
+    tags = (tags_mod.load(live.tags, signals) if live.tags is not None
+            else tags_mod.Tags())
+    period = bound.Ts / live.speed
+    session = PlantSession(endpoint, reads=[c.name for c in (*bound.outputs,
+                                                             *bound.disturbances)],
+                           writes=[c.name for c in bound.inputs], tags=tags,
+                           folder=bound.name, security=live.security,
+                           max_age=period * (1 + 1e-3) + 0.002,
+                           timeout=min(max(0.5 * period, 0.05), 5.0))
+    plant = LivePlant(bound, session)
+    try:
+        master = Master(plant, ctrl, sc, disturbances=bound.disturbance_names,
+                        **master_args)
+    except BaseException:
+        session.close()
+        raise
+    master.run_class = LiveRun
+    notice = on_notice or (lambda text: None)
+    master.live = LiveConfig(period=period, watchdog=live.watchdog, notice=notice,
+                             describe={"endpoint": endpoint, "speed": live.speed,
+                                       "security": live.security.describe(),
+                                       "tags": str(live.tags) if live.tags else None})
+    return master, {"plant": endpoint, "fmi_version": "OPC UA", "interface": "opc.tcp",
+                    "live": True}
