@@ -12,3 +12,17 @@ certificates, trust list and user of a secured connection.
 
 asyncua (pure Python) is imported only when a live command runs.
 """
+
+from __future__ import annotations
+
+import logging
+
+#: The loggers of asyncua (and of its certificate checks) and asyncio: a live command speaks
+#: in its own one-line messages, never in a library's log records or tracebacks.
+LIBRARY_LOGGERS = ("asyncua", "asyncuagds", "asyncio")
+
+
+def quiet_libraries() -> None:
+    """Silence :data:`LIBRARY_LOGGERS` (a live command reports what matters itself)."""
+    for name in LIBRARY_LOGGERS:
+        logging.getLogger(name).setLevel(logging.CRITICAL)

@@ -17,6 +17,7 @@ import os
 import sys
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from cosim.core.errors import CosimError
 
@@ -178,6 +179,36 @@ def trusted_files(security: Security) -> list[Path]:
         else:
             files.append(path)
     return files
+
+
+async def validator(security: Security, peer: str) -> Any:
+    """A certificate validator that accepts a peer (``"client"`` or ``"server"``) whose
+    certificate is in the trust list (or issued by a certificate there), valid now, for the
+    application it says it is."""
+    from asyncua.crypto import uacrypto
+    from asyncua.crypto.truststore import TrustStore
+    from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
+    from cryptography import x509
+
+    files = trusted_files(security)
+
+    class FileTrustStore(TrustStore):
+        """asyncua's trust store over certificate files (its own takes folders only)."""
+
+        async def load_trust(self) -> None:
+            certs = [await uacrypto.load_certificate(f) for f in files]
+            self._trust_store = x509.verification.Store(certs) if certs else None
+
+    store = FileTrustStore([], [])
+    try:
+        await store.load()
+    except Exception as exc:
+        raise CosimError(f"--trust: cannot read the trust list ({', '.join(map(str, files))}): "
+                         f"{type(exc).__name__}: {exc}") from None
+    options = CertificateValidatorOptions.TRUSTED_VALIDATION | (
+        CertificateValidatorOptions.PEER_CLIENT if peer == "client"
+        else CertificateValidatorOptions.PEER_SERVER)
+    return CertificateValidator(options, store)
 
 
 def make_certificate(folder: str | Path, name: str, uri: str, *, server: bool,

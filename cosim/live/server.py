@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import logging
 import math
 from collections.abc import Callable
 from datetime import UTC, datetime
@@ -43,7 +42,8 @@ from pathlib import Path
 from typing import Any
 
 from cosim.core.component import Component
-from cosim.live.security import Security, trusted_files
+from cosim.live import quiet_libraries
+from cosim.live.security import Security, validator
 
 __all__ = ["APPLICATION_URI", "DEFAULT_ENDPOINT", "VirtualPlant"]
 
@@ -110,18 +110,11 @@ class VirtualPlant:
         await server.set_application_uri(APPLICATION_URI)
         sec = self.security
         if sec.secure:
-            from asyncua.crypto.truststore import TrustStore
-            from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
-
             server.set_security_policy(
                 [getattr(ua.SecurityPolicyType, f"{sec.policy}_{sec.mode}")])
             await server.load_certificate(str(sec.certificate))
             await server.load_private_key(str(sec.private_key))
-            store = TrustStore(trusted_files(sec), [])
-            await store.load()
-            server.set_certificate_validator(CertificateValidator(
-                CertificateValidatorOptions.TRUSTED_VALIDATION
-                | CertificateValidatorOptions.PEER_CLIENT, store))
+            server.set_certificate_validator(await validator(sec, "client"))
         else:
             server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
         server.set_identity_tokens([ua.UserNameIdentityToken] if users is not None
@@ -184,8 +177,7 @@ class VirtualPlant:
     # -- serving ----------------------------------------------------------------------------
     async def serve(self, stop: asyncio.Event, duration: float | None = None) -> None:
         """Serve until ``stop`` is set or ``duration`` seconds [wall clock] have passed."""
-        for name in ("asyncua", "asyncio"):
-            logging.getLogger(name).setLevel(logging.CRITICAL)
+        quiet_libraries()
         self.plant.setup(0.0)
         self.t = 0.0
         server = await self._server()

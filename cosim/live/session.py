@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import logging
 import math
 import threading
 import time
@@ -27,7 +26,8 @@ from datetime import UTC
 from typing import Any
 
 from cosim.core.errors import CosimError
-from cosim.live.security import Security, trusted_files
+from cosim.live import quiet_libraries
+from cosim.live.security import Security, validator
 from cosim.live.tags import Tag, Tags
 
 __all__ = ["APPLICATION_URI", "PlantSession", "Reading"]
@@ -106,8 +106,7 @@ class PlantSession:
         self._thread = threading.Thread(target=self._loop.run_forever, name="opcua",
                                         daemon=True)
         self._thread.start()
-        for name in ("asyncua", "asyncio"):
-            logging.getLogger(name).setLevel(logging.CRITICAL)
+        quiet_libraries()
 
     # -- calls into the session's thread --------------------------------------------------
     def _call(self, coro: Any, timeout: float) -> Any:
@@ -144,16 +143,10 @@ class PlantSession:
         client.name = "cosim run"
         sec = self.security
         if sec.secure:
-            from asyncua.crypto import security_policies
-            from asyncua.crypto.truststore import TrustStore
-            from asyncua.crypto.validator import CertificateValidator, CertificateValidatorOptions
-
-            store = TrustStore(trusted_files(sec), [])
-            await store.load()
-            client.certificate_validator = CertificateValidator(
-                CertificateValidatorOptions.TRUSTED_VALIDATION
-                | CertificateValidatorOptions.PEER_SERVER, store)
             from asyncua import ua
+            from asyncua.crypto import security_policies
+
+            client.certificate_validator = await validator(sec, "server")
 
             await client.set_security(
                 getattr(security_policies, f"SecurityPolicy{sec.policy}"),
