@@ -325,13 +325,27 @@ def export_fmu(model: str | Path | None = None, out: str | Path = "Controller.fm
     return export(ctrl, out, fmi)
 
 
-def serve_plant(plant: str | Path | None = None, problem: Any = None, **options: Any) -> dict:
-    """Serve a plant FMU as an OPC UA server on the wall clock until a signal or
-    ``duration`` (the twin of ``cosim serve-plant``; options and what it returns:
-    :func:`cosim.live.runner.serve_plant`)."""
-    from cosim.live.runner import serve_plant as serve
+def serve_plant(plant: str | Path | None = None, problem: Any = None, *,
+                map: str | Path | None = None, interface: str = "cs", **options: Any) -> dict:
+    """Serve a plant FMU (default: the project's) bound to ``problem`` (default: the
+    four-tank's) as an OPC UA server on the wall clock, until a signal or ``duration``: the
+    twin of ``cosim serve-plant``. ``options``: ``endpoint``, ``speed``, ``security``,
+    ``frozen``, ``record``, ``duration``, ``on_notice`` (:func:`cosim.live.runner.serve`,
+    which says what it returns).
 
-    return serve(plant, problem, **options)
+    Raises
+    ------
+    CosimError
+        Bad input (plant, problem, map, options), or the endpoint cannot be listened on.
+    """
+    from cosim.core import varmap
+    from cosim.live.runner import serve
+    from cosim_adapters.problems import load_problem
+
+    bound = load_problem(problem)
+    vmap = varmap.load(map) if map is not None else None
+    component, _ = open_plant(plant, vmap, interface, False, None, 0, bound)
+    return serve(component, bound, **options)
 
 
 def is_endpoint(plant: object) -> bool:

@@ -14,7 +14,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("controllers", "cosim", "cosim_adapters")
 #: cosim's application modules: they may use the numerical core and the adapters.
-APPLICATION = ("cosim.api", "cosim.campaign", "cosim.cli", "cosim.commands", "cosim.tuning")
+APPLICATION = ("cosim.api", "cosim.campaign", "cosim.cli", "cosim.commands", "cosim.live",
+               "cosim.tuning")
 
 
 def _config() -> dict:

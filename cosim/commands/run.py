@@ -216,8 +216,5 @@ def _live_options(args: argparse.Namespace) -> object:
     from cosim.live.runner import LiveOptions
 
     sec = security.from_args(args, "client")
-    if not sec.secure:
-        print("cosim run: warning: no security (--security None): the plant's values travel "
-              "unsigned and unencrypted", file=sys.stderr, flush=True)
     return LiveOptions(tags=args.tags, speed=args.speed if args.speed is not None else 1.0,
                        watchdog=args.watchdog, security=sec)

@@ -71,8 +71,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``cosim serve-plant``; returns the exit code."""
+    from cosim.api import serve_plant
     from cosim.live import security
-    from cosim.live.runner import serve_plant
 
     sec = security.from_args(args, "server")
 
@@ -80,9 +80,6 @@ def run(args: argparse.Namespace) -> int:
         if not args.quiet:
             print(f"cosim serve-plant: {text}", file=sys.stderr, flush=True)
 
-    if not sec.secure:
-        notice("warning: no security (--security None): anyone who reaches the endpoint can "
-               "read and write this plant")
     done = serve_plant(args.plant, args.problem, endpoint=args.endpoint, speed=args.speed,
                        security=sec, frozen=args.frozen, record=args.record,
                        duration=args.duration, map=args.map, interface=args.interface,

@@ -1,5 +1,6 @@
-"""The live commands' Python twins: :func:`serve_plant` (``cosim serve-plant``) and
-:func:`run_live` (``cosim run --plant opc.tcp://...``, reached through :func:`cosim.api.run`).
+"""What the live commands run: :func:`serve` (``cosim serve-plant``, through
+:func:`cosim.api.serve_plant`) and :func:`run_live` (``cosim run --plant opc.tcp://...``,
+through :func:`cosim.api.run`).
 """
 
 from __future__ import annotations
@@ -17,29 +18,28 @@ from cosim.core.errors import CosimError, SimulationFailed
 from cosim.live.security import Security
 from cosim.live.server import DEFAULT_ENDPOINT
 
-__all__ = ["LiveOptions", "ServeSummary", "run_live", "serve_plant"]
+__all__ = ["LiveOptions", "ServeSummary", "run_live", "serve"]
 
 
 class ServeSummary(dict):
     """What a served plant did: ``samples``, ``overruns``, ``clipped``, ``stopped_by``."""
 
 
-def serve_plant(plant: str | Path | None = None, problem: Any = None, *,
-                endpoint: str = DEFAULT_ENDPOINT, speed: float = 1.0,
-                security: Security | None = None, frozen: bool = False,
-                record: str | Path | None = None, duration: float | None = None,
-                map: str | Path | None = None, interface: str = "cs",
-                on_notice: Callable[[str], None] = print) -> ServeSummary:
-    """Serve a plant FMU as an OPC UA server on the wall clock until a signal (SIGINT,
-    SIGTERM, SIGHUP) or ``duration`` seconds (the twin of ``cosim serve-plant``; the server:
-    :class:`cosim.live.server.VirtualPlant`).
+def serve(component: Any, bound: Any, *, endpoint: str = DEFAULT_ENDPOINT,
+          speed: float = 1.0, security: Security | None = None, frozen: bool = False,
+          record: str | Path | None = None, duration: float | None = None,
+          on_notice: Callable[[str], None] = print) -> ServeSummary:
+    """Serve the plant ``component`` (bound to the problem ``bound``) as an OPC UA server on
+    the wall clock until a signal (SIGINT, SIGTERM, SIGHUP) or ``duration`` seconds: what
+    :func:`cosim.api.serve_plant` (the twin of ``cosim serve-plant``) runs; the server is
+    :class:`cosim.live.server.VirtualPlant`.
 
     Parameters
     ----------
-    plant : path, optional
-        The plant FMU (default: the project's four-tank, built if missing).
-    problem : path or ControlProblem, optional
-        The control problem the plant is served by (default: the four-tank's).
+    component : Component
+        The plant, not yet set up.
+    bound : ControlProblem
+        The problem it is served by.
     endpoint : str
         ``opc.tcp://host:port`` to listen on.
     speed : float
@@ -56,21 +56,17 @@ def serve_plant(plant: str | Path | None = None, problem: Any = None, *,
     Raises
     ------
     CosimError
-        Bad input (plant, problem, endpoint, speed), or the endpoint cannot be listened on.
+        Bad speed, duration or endpoint, or the endpoint cannot be listened on.
+    SimulationFailed
+        The plant failed while served.
     """
-    from cosim import api
-    from cosim.core import varmap
     from cosim.live.server import VirtualPlant
-    from cosim_adapters.problems import load_problem
 
-    if not (speed > 0 and speed < float("inf")):
+    if not (speed > 0 and math.isfinite(speed)):
         raise CosimError(f"--speed {speed!r}: must be a positive number (the speed-up K)")
     if duration is not None and not duration > 0:
         raise CosimError(f"--duration {duration!r}: must be a positive number of seconds")
     check_endpoint(endpoint, "--endpoint")
-    bound = load_problem(problem)
-    vmap = varmap.load(map) if map is not None else None
-    component, _ = api.open_plant(plant, vmap, interface, False, None, 0, bound)
     server = VirtualPlant(component, bound, endpoint=endpoint, speed=speed,
                           security=security, frozen=frozen, record=record, notice=on_notice)
     stopped = {"by": "duration" if duration is not None else ""}
@@ -152,8 +148,8 @@ def run_live(master_args: dict, endpoint: str, live: LiveOptions, sc: Any, ctrl:
     Raises
     ------
     CosimError
-        No problem to name the signals by, a scenario column that would set the plant, bad
-        live options, an unreadable tags file.
+        A scenario column that would set the plant, bad live options, an unreadable tags
+        file.
     """
     from cosim.core.master import Master
     from cosim.live import tags as tags_mod
@@ -162,9 +158,10 @@ def run_live(master_args: dict, endpoint: str, live: LiveOptions, sc: Any, ctrl:
     from cosim.live.session import PlantSession
 
     check_endpoint(endpoint, "--plant")
-    if bound is None:
-        raise CosimError(f"--plant {endpoint}: a live plant is reached through the control "
-                         "problem's signals: give --problem")
+    if bound is None:   # a controller of its own signals (an FMU): the default problem's
+        from cosim_adapters.problems import load_problem
+
+        bound = load_problem(None)
     column = refused_columns(sc)
     if column is not None:
         raise CosimError(f"{sc.path}:1:1: column '{column}': a live plant is not set by the "
@@ -198,6 +195,9 @@ def run_live(master_args: dict, endpoint: str, live: LiveOptions, sc: Any, ctrl:
         raise
     master.run_class = LiveRun
     notice = on_notice or (lambda text: None)
+    if not live.security.secure:
+        notice("warning: no security (--security None): the plant's values travel unsigned "
+               "and unencrypted")
     master.live = LiveConfig(period=period, watchdog=live.watchdog, notice=notice,
                              describe={"endpoint": endpoint, "speed": live.speed,
                                        "security": live.security.describe(),

@@ -170,14 +170,19 @@ def read_password(user: str) -> str:
 
 
 def trusted_files(security: Security) -> list[Path]:
-    """The trust list's certificate files (folders expanded, sorted)."""
+    """The trust list's certificate files: those named, and in each folder named its
+    ``.der`` and ``.crt`` files and the ``.pem`` files that hold a certificate (not a
+    key), sorted."""
     files: list[Path] = []
     for path in security.trust:
-        if path.is_dir():
-            files += sorted(p for p in path.iterdir()
-                            if p.suffix.lower() in (".der", ".pem", ".crt"))
-        else:
+        if not path.is_dir():
             files.append(path)
+            continue
+        for p in sorted(path.iterdir()):
+            kind = p.suffix.lower()
+            if kind in (".der", ".crt") or (
+                    kind == ".pem" and b"BEGIN CERTIFICATE" in p.read_bytes()[:4096]):
+                files.append(p)
     return files
 
 

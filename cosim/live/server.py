@@ -188,6 +188,9 @@ class VirtualPlant:
             stream = ResultsStream(self.record_path)
         try:
             async with server:
+                if not self.security.secure:
+                    self.notice("warning: no security (--security None): anyone who reaches "
+                                "the endpoint can read and write this plant")
                 self.notice(f"serving '{self.problem.name}' at {self.endpoint} (security "
                             f"{self.security.describe()}), one sample every "
                             f"{self.period:g} s (speed {self.speed:g})"

@@ -104,7 +104,8 @@ def load(path: str | Path, signals: list[str] | tuple[str, ...]) -> Tags:
     try:
         doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        line = getattr(exc, "lineno", 1) or 1
+        m = re.search(r"at line (\d+)", str(exc))
+        line = int(m.group(1)) if m else 1
         raise CosimError(f"{p}:{line}: invalid TOML: {str(exc).split(' (at')[0]}") from None
 
     def where(key: str) -> str:

@@ -1,6 +1,7 @@
 """Controllers for the fault tests of ``cosim run`` and campaigns (``--controller
 tests.cosim.sleepy:<Class>`` from the repository root): the PI baseline made slow, hung from
-some time on, or with a bug (an internal error where a run names the phase it failed in)."""
+some time on, with a bug (an internal error where a run names the phase it failed in), or
+asking for more than its box."""
 
 from __future__ import annotations
 
@@ -101,3 +102,15 @@ class NativePI(PIController):
             else:
                 ctypes.string_at(0)
         super().step(t, dt)
+
+
+class GreedyPI(PIController):
+    """The PI baseline that asks for ``factor`` times the box's upper edge (a controller
+    that does not respect its input box: a live plant must never receive it)."""
+
+    def __init__(self, factor: float = 2.0) -> None:
+        super().__init__()
+        self.factor = float(factor)
+
+    def get_outputs(self) -> dict[str, float]:
+        return {u: self.factor * v for u, v in super().get_outputs().items()}

@@ -37,6 +37,6 @@ def read(endpoint: str, path: list[str]) -> Any:
     """The DataValue at ``path`` below the folder."""
     async def action(client: Any, folder: Any) -> Any:
         node = await folder.get_child([f"2:{p}" for p in path])
-        return await node.read_data_value()
+        return await node.read_data_value(raise_on_bad_status=False)
 
     return call(endpoint, action)

@@ -1,0 +1,170 @@
+"""A live process fails as an FMU never does: each failure's documented answer, against a
+real ``cosim serve-plant`` (its rehearsal switches, a restart, a slow controller, signals)."""
+
+from __future__ import annotations
+
+import json
+import signal
+import subprocess
+import threading
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import pandas as pd
+import pytest
+
+import cosim
+from cosim.live.runner import LiveOptions
+from tests.cosim.live import ua
+from tests.cosim.live.conftest import cosim as cli
+from tests.cosim.live.conftest import env, served, start
+
+SPEED = 250.0    # one sample every 0.1 s
+
+
+def long_scenario(tmp_path: Path, samples: int) -> Path:
+    path = tmp_path / "long.csv"
+    path.write_text(f"time,ref.h1,ref.h2\n0,0.65,0.65\n500,0.9,\n{25 * samples},,\n")
+    return path
+
+
+def later(delay: float, *actions: tuple) -> threading.Thread:
+    """Run ``actions`` ((seconds to wait, callable), ...) in a thread after ``delay``."""
+    def body() -> None:
+        time.sleep(delay)
+        for wait, action in actions:
+            action()
+            time.sleep(wait)
+
+    thread = threading.Thread(target=body, daemon=True)
+    thread.start()
+    return thread
+
+
+@pytest.mark.slow
+def test_bad_then_stale_measurements_hold_then_watchdog_safe_inputs(
+        tmp_path: Path, safe_problem: Path) -> None:
+    record = tmp_path / "plant.csv"
+    notices: list[str] = []
+    with served(tmp_path, "--security", "None", "--speed", str(SPEED), "--problem",
+                str(safe_problem), "--record", str(record)) as s:
+        def flip(flag: str, value: bool) -> Callable[[], None]:
+            return lambda: ua.write(s.endpoint, ["Simulation", flag], value)
+
+        thread = later(1.5, (0.6, flip("BadOutputs", True)), (0.8, flip("BadOutputs", False)),
+                       (0.6, flip("StaleOutputs", True)), (0.0, flip("StaleOutputs", False)))
+        out = cosim.run(long_scenario(tmp_path, 70), plant=s.endpoint, controller="pi",
+                        problem=safe_problem, out=tmp_path / "run", figure=False,
+                        live=LiveOptions(speed=SPEED, watchdog=3), on_notice=notices.append)
+        thread.join(10)
+        assert ua.read(s.endpoint, ["qa"]).Value.Value == 0.0   # safe again at the end
+    lv = out.summary["live"]
+    assert out.status == "ok" and lv["stale"] >= 8, lv
+    assert set(lv["stale_reasons"]) == {"status BadSensorFailure", "older than a sample"}
+    assert lv["watchdog_alarms"] == 2 and lv["safe_writes"] == 2   # two outages
+    rows = pd.read_csv(tmp_path / "run" / "results.csv")
+    assert (rows["live.fresh"] == 0).sum() == lv["stale"]
+    stale = rows.index[rows["live.fresh"] == 0].to_numpy()
+    starts = [i for i in stale if i - 1 not in stale]
+    assert len(starts) == 2
+    safe = rows[rows["live.safe"] == 1]
+    assert list(safe.index) == [i + 2 for i in starts] and (safe["ctrl.qa"] == 0.0).all()
+    for i in starts:                                  # held, not written, before the alarm
+        assert (rows.loc[i:i + 1, "live.written"] == 0).all()
+        assert rows.loc[i + 1, "ctrl.qa"] == rows.loc[i - 1, "ctrl.qa"]
+    assert (rows["live.fresh"].iloc[-10:] == 1).all()
+    assert sum(n.startswith("alarm at t = ") and "qa = 0 m3/s" in n for n in notices) == 2
+    assert sum(n.startswith("alarm cleared") for n in notices) == 2
+    plant = pd.read_csv(record)
+    assert (plant["ctrl.qa"] == 0.0).any()                 # the plant got the safe input
+
+
+@pytest.mark.slow
+def test_lost_connection_reconnects_and_resumes(tmp_path: Path) -> None:
+    first = start(tmp_path, "--security", "None", "--speed", str(SPEED), name="first")
+    servers = [first]
+
+    def restart() -> None:
+        servers.append(start(tmp_path, "--security", "None", "--speed", str(SPEED),
+                             port=first.port, name="second"))
+
+    thread = later(1.5, (0.3, first.stop), (0.0, restart))
+    try:
+        out = cosim.run(long_scenario(tmp_path, 120), plant=first.endpoint, controller="pi",
+                        figure=False, live=LiveOptions(speed=SPEED, watchdog=5))
+        thread.join(40)
+    finally:
+        for server in servers:
+            server.stop()
+    lv = out.summary["live"]
+    assert out.status == "ok" and lv["reconnects"] >= 1, lv
+    assert "disconnected" in lv["stale_reasons"] and lv["watchdog_alarms"] == 1
+    fresh = out.to_pandas()["live.fresh"].to_numpy()
+    assert fresh[:10].all() and fresh[-20:].all() and not fresh.all()
+
+
+@pytest.mark.slow
+def test_step_past_its_deadline_keeps_the_previous_inputs(tmp_path: Path) -> None:
+    record = tmp_path / "plant.csv"
+    with served(tmp_path, "--security", "None", "--speed", str(SPEED), "--frozen", "--record",
+                str(record)) as s:
+        out = cosim.run(long_scenario(tmp_path, 30), plant=s.endpoint,
+                        controller="tests.cosim.sleepy:SleepyPI", figure=False,
+                        options={"hang_at": 500.0, "hang": 0.09},
+                        live=LiveOptions(speed=SPEED))
+        time.sleep(0.3)
+    lv = out.summary["live"]
+    rows = out.to_pandas()
+    late = rows[rows["time"] >= 500.0]
+    assert lv["deadline_misses"] == len(late) and (late["live.on_time"] == 0).all()
+    assert (late["live.written"] == 0).all()
+    before = rows[rows["time"] < 500.0]["ctrl.qa"].iloc[-1]
+    assert (late["ctrl.qa"] == before).all()            # recorded: what the plant kept
+    plant = pd.read_csv(record)
+    assert (plant[plant["time"] >= 500.0]["ctrl.qa"] == before).all()
+
+
+@pytest.mark.slow
+def test_written_values_never_leave_the_box(tmp_path: Path, short_scenario: Path) -> None:
+    record = tmp_path / "plant.csv"
+    with served(tmp_path, "--security", "None", "--speed", str(SPEED), "--record",
+                str(record)) as s:
+        out = cosim.run(short_scenario, plant=s.endpoint, figure=False,
+                        controller="tests.cosim.sleepy:GreedyPI", options={"factor": 3.0},
+                        live=LiveOptions(speed=SPEED))
+        time.sleep(0.3)
+    assert out.summary["live"]["clipped"] > 0
+    plant = pd.read_csv(record)
+    assert plant["ctrl.qa"].between(0.0, 9.05e-4).all()
+    assert plant["ctrl.qb"].between(0.0, 11.1e-4).all() and (plant["ctrl.qb"] == 11.1e-4).any()
+    assert "outside its box" not in s.stderr() and "0 clipped inputs" in s.stderr()
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("signum", "code"), [(signal.SIGTERM, 143), (signal.SIGHUP, 129)])
+def test_signal_writes_safe_inputs_and_keeps_the_rows(tmp_path: Path, safe_problem: Path,
+                                                      signum: int, code: int) -> None:
+    with served(tmp_path, "--security", "None", "--speed", str(SPEED), "--problem",
+                str(safe_problem)) as s:
+        out = tmp_path / "run"
+        proc = subprocess.Popen(cli("run", str(long_scenario(tmp_path, 400)), "--plant",
+                                    s.endpoint, "--security", "None", "--speed", str(SPEED),
+                                    "--controller", "pi", "--problem", str(safe_problem),
+                                    "--out", str(out), "--quiet"),
+                                env=env(), cwd=tmp_path, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        end = time.monotonic() + 60
+        while not (out / "results.csv.part").exists() or \
+                len((out / "results.csv.part").read_text().splitlines()) < 20:
+            assert time.monotonic() < end and proc.poll() is None, proc.communicate()
+            time.sleep(0.1)
+        assert ua.read(s.endpoint, ["qa"]).Value.Value != 0.0
+        proc.send_signal(signum)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == code, err
+        assert ua.read(s.endpoint, ["qa"]).Value.Value == 0.0     # the safe input
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["status"] == "interrupted" and summary["steps"] >= 19
+    assert len(pd.read_csv(out / "results.csv")) in (summary["steps"], summary["steps"] + 1)
+    assert "Traceback" not in err
