@@ -40,6 +40,7 @@ __all__ = ["COMMANDS", "build_parser", "entry", "main"]
 COMMANDS = (
     "cosim.commands.run",
     "cosim.commands.serve_plant",
+    "cosim.commands.make_certificate",
     "cosim.commands.build_fmu",
     "cosim.commands.build_kernel",
     "cosim.commands.export_fmu",

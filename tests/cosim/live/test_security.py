@@ -66,3 +66,11 @@ def test_made_certificate_is_for_the_application(cert: tuple[Path, Path]) -> Non
         x509.SubjectAlternativeName).value.get_values_for_type(x509.UniformResourceIdentifier)
     assert uris == [APPLICATION_URI]
     assert cert[1].stat().st_mode & 0o077 == 0   # the key is private
+
+
+def test_make_certificate_command(tmp_path: Path) -> None:
+    from cosim.cli import main
+
+    assert main(["make-certificate", "--role", "client", "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "client.der").is_file() and (tmp_path / "client.pem").is_file()
+    assert main(["make-certificate", "--role", "client", "--out", str(tmp_path)]) == 2
