@@ -329,7 +329,8 @@ def serve_plant(plant: str | Path | None = None, problem: Any = None, *,
                 map: str | Path | None = None, interface: str = "cs", **options: Any) -> dict:
     """Serve a plant FMU (default: the project's) bound to ``problem`` (default: the
     four-tank's) as an OPC UA server on the wall clock, until a signal or ``duration``: the
-    twin of ``cosim serve-plant``. ``options``: ``endpoint``, ``speed``, ``security``,
+    twin of ``cosim serve-plant``. The FMU runs in a worker process (a crash or a step hung
+    past :data:`~cosim.core.isolated.DEFAULT_STEP_TIMEOUT` stops the server, exit 1). ``options``: ``endpoint``, ``speed``, ``security``,
     ``frozen``, ``record``, ``duration``, ``on_notice`` (:func:`cosim.live.runner.serve`,
     which says what it returns).
 
@@ -339,12 +340,14 @@ def serve_plant(plant: str | Path | None = None, problem: Any = None, *,
         Bad input (plant, problem, map, options), or the endpoint cannot be listened on.
     """
     from cosim.core import varmap
+    from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
     from cosim.live.runner import serve
     from cosim_adapters.problems import load_problem
 
     bound = load_problem(problem)
     vmap = varmap.load(map) if map is not None else None
-    component, _ = open_plant(plant, vmap, interface, False, None, 0, bound)
+    # the FMU's native code in a worker: a crash or a hang stops the server with one line
+    component, _ = open_plant(plant, vmap, interface, True, DEFAULT_STEP_TIMEOUT, 0, bound)
     return serve(component, bound, **options)
 
 

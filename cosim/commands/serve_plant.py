@@ -20,7 +20,9 @@ the FMU's tunable parameters (writable), Simulation/ the plant's Time and Speed 
 rehearsal switches Frozen, StaleOutputs (the outputs stop being republished) and BadOutputs
 (published with status BadSensorFailure). Node ids: ns=2;s=<problem>.<name>.
 
-Stops cleanly on Ctrl-C, SIGTERM or SIGHUP (exit 0), or after --duration seconds.
+The FMU runs in a worker process: a crash in it, or a step hung for 60 s, stops the server
+with one line (exit 1). Stops cleanly on Ctrl-C, SIGTERM or SIGHUP (exit 0), or after
+--duration seconds.
 """
 
 EPILOG = """\

@@ -4,7 +4,7 @@
 measurements read (:meth:`LivePlant.read`) and whose inputs are written to the plant
 (:meth:`LivePlant.write`), never outside their box; it does not step (the plant runs on its
 own clock). Its measured disturbances are read like its outputs. :meth:`LivePlant.terminate`
-writes the safe inputs and closes the session.
+writes the safe inputs (once the run has written to the plant) and closes the session.
 """
 
 from __future__ import annotations
@@ -106,7 +106,8 @@ class LivePlant(Component):
         return {}
 
     def terminate(self) -> None:
-        """Write the safe inputs and close the session (safe to call twice)."""
-        if self.session.connected:
+        """Write the safe inputs, when this run has written to the plant (one that never
+        took control leaves it as it was), and close the session; safe to call twice."""
+        if self.session.connected and self.written:
             self.write_safe()
         self.session.close()

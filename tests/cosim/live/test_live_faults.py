@@ -10,6 +10,7 @@ import threading
 import time
 from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 import pytest
@@ -168,3 +169,51 @@ def test_signal_writes_safe_inputs_and_keeps_the_rows(tmp_path: Path, safe_probl
     assert summary["status"] == "interrupted" and summary["steps"] >= 19
     assert len(pd.read_csv(out / "results.csv")) in (summary["steps"], summary["steps"] + 1)
     assert "Traceback" not in err
+
+
+@pytest.mark.slow
+def test_measured_disturbance_is_read_from_the_plant(tmp_path: Path) -> None:
+    """The heater with a measured ambient temperature and a dead time: the run reads the
+    disturbance the plant measures (a rehearsal changes it on the served plant)."""
+    import importlib.util
+
+    from tests.cosim.live.conftest import ROOT
+
+    spec = importlib.util.spec_from_file_location("example_plants",
+                                                  ROOT / "fmus" / "examples" / "build.py")
+    assert spec is not None and spec.loader is not None
+    examples = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(examples)
+    fmu = examples.build("heater_dead_time", tmp_path / "fmu")
+    problem = examples.problem_file("heater_dead_time")
+    scenario = tmp_path / "heat.csv"
+    scenario.write_text("time,ref.T\n0,40\n1200,\n")
+    record = tmp_path / "plant.csv"
+    with served(tmp_path, str(fmu), "--problem", str(problem), "--security", "None",
+                "--speed", "200", "--record", str(record)) as s:
+        folder = "heater_dead_time"
+
+        def cold() -> None:
+            from asyncua import ua as uat
+
+            async def action(client: Any, _: Any) -> None:
+                node = await client.nodes.objects.get_child([f"2:{folder}", "2:T_in"])
+                await node.write_value(uat.DataValue(uat.Variant(10.0, uat.VariantType.Double)))
+
+            ua.call(s.endpoint, action, folder_name=folder)
+
+        thread = later(2.0, (0.0, cold))
+        out = cosim.run(scenario, plant=s.endpoint, problem=problem, figure=False,
+                        controller="tests.cosim.live.controllers:AmbientP",
+                        live=LiveOptions(speed=200))
+        thread.join(10)
+    rows = out.to_pandas()
+    assert out.status == "ok" and out.summary["live"]["stale"] == 0
+    d = rows["dist.T_in"].to_numpy()
+    assert d[0] != 10.0 and d[-1] == 10.0
+    k = int((d == 10.0).argmax())
+    ff = 50.0 * (20.0 - rows["dist.T_in"])     # the controller used what it measured
+    p = (100.0 * (rows["ref.T"] - rows["plant.T"]) + ff).clip(0.0, 2000.0)
+    assert (rows["ctrl.P"] - p).abs().max() < 1e-9 and rows["ctrl.P"].iloc[k] > 0
+    plant = pd.read_csv(record)
+    assert (plant["dist.T_in"].iloc[-5:] == 10.0).all()

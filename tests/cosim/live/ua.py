@@ -7,14 +7,15 @@ import asyncio
 from typing import Any
 
 
-def call(endpoint: str, action: Any, timeout: float = 20.0) -> Any:
+def call(endpoint: str, action: Any, timeout: float = 20.0,
+         folder_name: str = "fourtank") -> Any:
     """Connect anonymously, run ``await action(client, folder)`` (``folder``: the served
     problem's folder), disconnect; its result."""
     from asyncua import Client
 
     async def main() -> Any:
         async with Client(endpoint, timeout=5) as client:
-            folder = await client.nodes.objects.get_child(["2:fourtank"])
+            folder = await client.nodes.objects.get_child([f"2:{folder_name}"])
             return await action(client, folder)
 
     return asyncio.run(asyncio.wait_for(main(), timeout))
