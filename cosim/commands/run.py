@@ -33,6 +33,11 @@ renamed into place: a full disk leaves the previous file intact. A rerun into th
 replaces the earlier run's files and removes those it does not write again; a second run into
 a DIR that a run is still writing is refused.
 
+With --plant opc.tcp://HOST:PORT the plant is a live process: its control system's OPC UA
+server (or cosim serve-plant), met on the wall clock, each sample read, stepped, written;
+stale values, lost links, late steps and signals each have their answer, written into the
+results (docs: "Run on a live process").
+
 An FMU is native code. A controller FMU always runs in a worker process of its own: a crash,
 abort() or exit() in it fails the run (exit 1, partial results kept), a hung step is stopped
 after 60 s (--step-timeout). Use --isolate so that the plant FMU and a Python controller run

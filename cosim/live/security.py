@@ -83,7 +83,8 @@ def add_arguments(parser: argparse.ArgumentParser, role: str) -> None:
     g.add_argument("--security", metavar="POLICY,MODE", default=None,
                    help=f"{'|'.join(POLICIES)} with {' or '.join(MODES)} (e.g. "
                         "Basic256Sha256,SignAndEncrypt), or None for no security at all "
-                        "(then said so); required")
+                        "(then said so); required" + (" for a live plant" if role == "client"
+                                                      else ""))
     g.add_argument("--certificate", metavar="CERT", default=None,
                    help="this application's certificate (.der or .pem)")
     g.add_argument("--private-key", metavar="KEY", default=None,
