@@ -330,9 +330,10 @@ def serve_plant(plant: str | Path | None = None, problem: Any = None, *,
     """Serve a plant FMU (default: the project's) bound to ``problem`` (default: the
     four-tank's) as an OPC UA server on the wall clock, until a signal or ``duration``: the
     twin of ``cosim serve-plant``. The FMU runs in a worker process (a crash or a step hung
-    past :data:`~cosim.core.isolated.DEFAULT_STEP_TIMEOUT` stops the server, exit 1). ``options``: ``endpoint``, ``speed``, ``security``,
-    ``frozen``, ``record``, ``duration``, ``on_notice`` (:func:`cosim.live.runner.serve`,
-    which says what it returns).
+    past :data:`~cosim.core.isolated.DEFAULT_STEP_TIMEOUT` stops the server, exit 1).
+    ``options``: ``endpoint``, ``speed``, ``security``, ``frozen``, ``record``,
+    ``duration``, ``on_notice`` (:func:`cosim.live.runner.serve`, which says what it
+    returns).
 
     Raises
     ------

@@ -30,7 +30,17 @@ __all__ = ["RowSink", "Run"]
 
 
 class Run:
-    """One execution of a :class:`~cosim.core.master.Master` (see the module docstring)."""
+    """One execution of a :class:`~cosim.core.master.Master` (see the module docstring).
+
+    Attributes
+    ----------
+    own_prefixes : tuple of str
+        Diagnostics named ``<prefix>.<name>`` with one of these prefixes are the loop's own
+        columns, recorded under that name (a live run's ``live.fresh``); every other
+        diagnostic is the controller's, recorded as ``ctrl.<name>``.
+    """
+
+    own_prefixes: tuple[str, ...] = ()
 
     def __init__(self, master: Master, record: RowSink | None, step_timeout: float | None,
                  deadline: float | None) -> None:
@@ -199,9 +209,8 @@ class Run:
                         j = self.diag_index[key] = len(names)
                         names.append(key)
                         extra.append(math.nan)
-                        # a diagnostic named with a prefix keeps it (live.fresh)
-                        self.result.columns.append(key if "." in key
-                                                   else f"{PREFIX_CTRL}.{key}")
+                        own = key.split(".", 1)[0] in self.own_prefixes
+                        self.result.columns.append(key if own else f"{PREFIX_CTRL}.{key}")
                     extra[j] = _as_float(value)
                 row += extra
         guard = self.guard

@@ -36,6 +36,9 @@ class RunResult:
         Plant steps completed.
     steps_planned : int
         Plant steps the scenario asks for.
+    live : dict
+        A run against a live plant: what its loop saw (``summary.json``'s ``live``); empty
+        otherwise.
     """
 
     columns: list[str]

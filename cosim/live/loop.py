@@ -76,6 +76,8 @@ class LiveRun(Run):
     :class:`~cosim.live.plant.LivePlant` (see the module docstring); ``master.live`` is
     its :class:`LiveConfig`."""
 
+    own_prefixes = ("live",)
+
     def __init__(self, master: Master, record: RowSink | None, step_timeout: float | None,
                  deadline: float | None) -> None:
         super().__init__(master, record, step_timeout, deadline)
