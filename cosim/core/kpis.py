@@ -63,7 +63,8 @@ def compute(columns: list[str], rows: list[list[float]], outputs: list[str],
         ``violations`` (``max``: largest amount outside the bounds, ``count``: rows outside).
         Per input: ``tv`` (total variation Σ|Δu|), ``control_effort`` (``integral_square``
         ∫u² dt, ``total_variation`` = ``tv``). ``setpoints``: one entry per interval of
-        constant set-points. Units: the signals' own (IAE: output unit × s).
+        constant set-points. Units: the signals' own (IAE: output unit × s). Rows without a
+        value (NaN: a live plant's sample with nothing measured) add nothing to the sums.
     """
     kpis: dict = {"iae": {}, "final_error": {}, "worst_offset": {}, "violations": {},
                   "tv": {}, "control_effort": {}, "setpoints": []}
@@ -76,8 +77,8 @@ def compute(columns: list[str], rows: list[list[float]], outputs: list[str],
         y, r = _col(columns, data, f"plant.{o}"), _col(columns, data, f"ref.{o}")
         if y is None or r is None:
             continue
-        err = np.abs(r - y)
-        kpis["iae"][o] = float(np.sum(err[:-1] * dt)) if len(t) > 1 else 0.0
+        err = np.abs(r - y)   # NaN where nothing was measured (a live plant's Bad value)
+        kpis["iae"][o] = float(np.nansum(err[:-1] * dt)) if len(t) > 1 else 0.0
         kpis["final_error"][o] = float(r[-1] - y[-1])
     for name, (lo, hi) in bounds.items():
         v = _col(columns, data, f"plant.{name}")
@@ -93,8 +94,8 @@ def compute(columns: list[str], rows: list[list[float]], outputs: list[str],
         v = _col(columns, data, f"ctrl.{u}")
         if v is None:
             continue
-        isq = float(np.sum(v[:-1] ** 2 * dt)) if len(t) > 1 else 0.0
-        tv = float(np.sum(np.abs(np.diff(v))))
+        isq = float(np.nansum(v[:-1] ** 2 * dt)) if len(t) > 1 else 0.0
+        tv = float(np.nansum(np.abs(np.diff(v))))
         kpis["tv"][u] = tv
         kpis["control_effort"][u] = {"integral_square": isq, "total_variation": tv}
     kpis["setpoints"] = setpoint_errors(columns, data, references)

@@ -174,9 +174,9 @@ class LiveRun(Run):
             ym = y
             c["stale"] += 1
             self.stale_run += 1
-            for why in reading.stale.values():
-                key = why if not why.endswith(" s old") else "older than a sample"
-                self.reasons[key] = self.reasons.get(key, 0) + 1
+            for key in {why if not why.endswith(" s old") else "older than a sample"
+                        for why in reading.stale.values()}:
+                self.reasons[key] = self.reasons.get(key, 0) + 1   # samples, per reason
             self.diag = dict.fromkeys(self.diag, math.nan)
             if not self.u:
                 self.u = {u: math.nan for u in self.m.ctrl_outputs}

@@ -64,6 +64,8 @@ def test_bad_then_stale_measurements_hold_then_watchdog_safe_inputs(
     assert out.status == "ok" and lv["stale"] >= 8, lv
     assert set(lv["stale_reasons"]) == {"status BadSensorFailure", "older than a sample"}
     assert lv["watchdog_alarms"] == 2 and lv["safe_writes"] == 2   # two outages
+    assert all(v <= lv["stale"] for v in lv["stale_reasons"].values())
+    assert out.summary["kpis"]["iae"]["h1"] > 0      # the samples without a value skipped
     rows = pd.read_csv(tmp_path / "run" / "results.csv")
     assert (rows["live.fresh"] == 0).sum() == lv["stale"]
     stale = rows.index[rows["live.fresh"] == 0].to_numpy()
