@@ -86,8 +86,12 @@ class TuneResult:
 
 
 def tune(model: str | Path, scenario_file: str | Path | None = None, *,
-         tv_ratio: float = 1.2, save: bool = False, progress: bool = False) -> TuneResult:
-    """Tune the robust MPC's weights on ``model`` (module docstring).
+         tv_ratio: float = 1.2, save: bool = False, progress: bool = False,
+         workers: int = 0) -> TuneResult:
+    """Tune the robust MPC's weights on ``model`` (module docstring). The closed loops run
+    in ``workers`` processes (0: one per CPU, at most one per run; 1: in this process): the
+    same answer either way. Interrupted (Ctrl-C), the workers are stopped and the model file
+    is left as it was.
 
     Raises
     ------
@@ -106,6 +110,8 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
 
     if not (isinstance(tv_ratio, int | float) and math.isfinite(tv_ratio) and tv_ratio > 0):
         raise ParameterError("tv_ratio", f" must be a positive number, got {tv_ratio!r}")
+    if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
+        raise ParameterError("workers", f" must be a whole number >= 0, got {workers!r}")
     try:
         gru = GRUModel.load(model)
     except ControllersError as exc:
@@ -116,7 +122,7 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
     square = gru.problem.m == gru.problem.p
     with tempfile.TemporaryDirectory(prefix="cosim-tune-") as tmp:
         sc = Path(scenario_file) if scenario_file else scenario(gru, Path(tmp) / "steps.csv")
-        results = _closed_loops(model, sc, square, progress)
+        results = _closed_loops(model, sc, square, progress, workers, gru.problem.Ts)
     base = results.pop("pi") if square else results["defaults"]
     rows = {n: {"iae": r["iae"] / base["iae"],
                 "tv": r["tv"] / base["tv"] if base["tv"] else 0.0,
@@ -131,27 +137,115 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
     return result
 
 
-def _closed_loops(model: str | Path, sc: Path, square: bool, progress: bool
-                  ) -> dict[str, dict[str, float]]:
+def _closed_loops(model: str | Path, sc: Path, square: bool, progress: bool, workers: int,
+                  ts: float) -> dict[str, dict[str, float]]:
     """:func:`_score` of the PI (square plants) and of every candidate, the model as the
-    plant."""
+    plant: in ``workers`` spawned processes (0: one per CPU, at most one per run; 1: in this
+    process), one progress bar over all their steps."""
+    import os
+
     from tqdm import tqdm
 
+    from cosim.core import scenario as scenario_mod
+    from cosim.core.master import communication_times
+
+    runs: dict[str, Any] = {"pi": None, **CANDIDATES} if square else dict(CANDIDATES)
+    loaded = scenario_mod.load(sc)
+    steps = len(communication_times(loaded.start_time, loaded.stop_time, ts)) - 1
+    jobs = [(name, str(model), str(sc), options) for name, options in runs.items()]
+    workers = workers or min(len(jobs), os.cpu_count() or 1)
+    bar = tqdm(total=steps * len(jobs), desc="tune", unit="step", file=sys.stderr,
+               disable=not progress, dynamic_ncols=True, mininterval=0.5)
+    done = [0] * len(jobs)
+
+    def tick(index: int, k: int) -> None:
+        bar.update(k - done[index])
+        done[index] = k
+
+    try:
+        if workers <= 1:
+            scores = [_closed_loop(job, lambda k, i=i: tick(i, k)) for i, job in enumerate(jobs)]
+        else:
+            scores = _in_workers(jobs, workers, tick)
+    finally:
+        bar.close()
+    return {name: score for (name, *_), score in zip(jobs, scores, strict=True)}
+
+
+def _closed_loop(job: tuple[str, str, str, Any], tick: Any = None) -> dict[str, float]:
+    """One tuning run (the PI when ``options`` is ``None``), scored."""
     import cosim
     from cosim.core.errors import SimulationFailed
 
-    runs: dict[str, Any] = {"pi": None, **CANDIDATES} if square else dict(CANDIDATES)
-    results = {}
-    for name, options in tqdm(runs.items(), desc="tune", unit="run", file=sys.stderr,
-                              disable=not progress, dynamic_ncols=True):
-        controller = "pi" if options is None else "robust-mpc"
-        opts = {"law": "tracking", **options} if options is not None else {}
-        out = cosim.run(sc, plant=f"model:{model}", controller=controller, model=model,
-                        options=opts, seed=0)
-        if out.status != "ok":
-            raise SimulationFailed(f"{name}: the run {out.status}: {out.reason}")
-        results[name] = _score(out.summary)
-    return results
+    name, model, sc, options = job
+    controller = "pi" if options is None else "robust-mpc"
+    opts = {"law": "tracking", **options} if options is not None else {}
+    out = cosim.run(sc, plant=f"model:{model}", controller=controller, model=model,
+                    options=opts, seed=0, on_step=tick)
+    if out.status != "ok":
+        raise SimulationFailed(f"{name}: the run {out.status}: {out.reason}")
+    return _score(out.summary)
+
+
+#: The progress queue of a tuning worker process (:func:`_start_worker`).
+_TICKS: Any = None
+
+
+def _start_worker(ticks: Any) -> None:
+    global _TICKS
+    _TICKS = ticks
+
+
+def _worker_run(args: tuple[int, tuple[str, str, str, Any]]) -> dict[str, float]:
+    index, job = args
+
+    def tick(k: int) -> None:
+        if _TICKS is not None and (k % 20 == 0):
+            _TICKS.put((index, k))
+
+    return _closed_loop(job, tick)
+
+
+def _in_workers(jobs: list[tuple[str, str, str, Any]], workers: int,
+                tick: Any) -> list[dict[str, float]]:
+    """The runs in ``workers`` spawned processes, in order; on any exception (Ctrl-C) the
+    workers are terminated before it propagates (the model file is untouched)."""
+    import multiprocessing
+    import queue
+    import threading
+    from concurrent.futures import ProcessPoolExecutor
+
+    ctx = multiprocessing.get_context("spawn")
+    ticks = ctx.Queue()
+    stop = threading.Event()
+
+    def pump() -> None:
+        while not stop.is_set():
+            try:
+                tick(*ticks.get(timeout=0.2))
+            except queue.Empty:
+                continue
+            except (EOFError, OSError, ValueError):   # the queue closed under us
+                return
+
+    reader = threading.Thread(target=pump, daemon=True)
+    reader.start()
+    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_start_worker,
+                               initargs=(ticks,))
+    try:
+        scores = list(pool.map(_worker_run, list(enumerate(jobs))))
+    except BaseException:
+        for proc in list(getattr(pool, "_processes", {}).values()):
+            proc.terminate()
+        pool.shutdown(wait=False, cancel_futures=True)
+        raise
+    else:
+        pool.shutdown(wait=True)
+    finally:
+        stop.set()
+        reader.join()
+        ticks.close()
+    return scores
 
 
 def scenario(model: Any, path: Path) -> Path:

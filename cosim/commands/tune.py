@@ -29,9 +29,11 @@ reference then.
 The candidates, in normalised units: the defaults (Q = I, R = 0.01 I, S = 0.05); the stage
 cost on the outputs (Q = "outputs"); the same with light input weights (R = 0.001, S =
 0.01); and without the input-rate weight (R = 0.001, S = 0), fast where the sensors are
-clean. --save writes the choice into the model file's problem as its [mpc] table
-(atomically: a failed write leaves the file as it was), which every later run of the model
-uses under its own --option values (a --problem file with an [mpc] table replaces it).
+clean. The closed loops run in parallel worker processes (--workers), under one progress
+bar. --save writes the choice into the model file's problem as its [mpc] table
+(atomically: a failed write, or Ctrl-C at any time, leaves the file as it was), which every
+later run of the model uses under its own --option values (a --problem file with an [mpc]
+table replaces it).
 
 examples:
   cosim tune models/plant_gru.json                      # the table, nothing written
@@ -50,6 +52,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="largest input total variation allowed, times the PI's (default 1.2)")
     p.add_argument("--save", action="store_true",
                    help="write the choice into the model file's problem ([mpc])")
+    p.add_argument("--workers", type=int, default=0,
+                   help="worker processes for the closed loops (default 0: one per CPU, at "
+                        "most one per run; 1: in this process); the same choice either way")
     p.add_argument("--json", action="store_true", help="print the table as JSON")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=run)
@@ -64,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         result = tune(args.model, args.scenario, tv_ratio=args.tv_ratio, save=args.save,
-                      progress=not args.quiet and sys.stderr.isatty())
+                      progress=not args.quiet and sys.stderr.isatty(), workers=args.workers)
     except ParameterError as exc:   # worded for the command line: --tv-ratio
         raise exc.as_option() from None
     if args.json:

@@ -99,3 +99,43 @@ def test_the_python_twin(model: Path, tmp_path: Path) -> None:
     assert GRUModel.load(model).problem.mpc == result.options
     with pytest.raises(CosimError, match="tv_ratio must be a positive number, got -1"):
         cosim.tune(model, tv_ratio=-1)
+
+
+def test_workers_give_the_same_table(model: Path, tmp_path: Path) -> None:
+    """The closed loops in two worker processes: the same numbers as in this process."""
+    import cosim
+
+    steps = tmp_path / "steps.csv"
+    steps.write_text("time,ref.h1,ref.h2\n0,0.8,0.7\n750,1.1,0.9\n1500,,\n")
+    one = cosim.tune(model, steps, workers=1)
+    two = cosim.tune(model, steps, workers=2)
+    assert one.to_dict() == two.to_dict()
+
+
+@pytest.mark.slow
+def test_ctrl_c_leaves_the_model_file_and_no_worker(model: Path, tmp_path: Path) -> None:
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    root = Path(__file__).resolve().parents[3]
+    before = model.read_bytes()
+    env = dict(os.environ, PYTHONPATH=str(root))
+    proc = subprocess.Popen([sys.executable, "-m", "cosim.cli", "tune", str(model), "--save",
+                             "--workers", "2", "--scenario",
+                             str(root / "scenarios" / "paper_steps.csv")],
+                            env=env, cwd=tmp_path, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, text=True, start_new_session=True)
+    time.sleep(5.0)          # the workers started and running their closed loops
+    assert proc.poll() is None
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "cosim tune: interrupted (SIGINT)"
+    assert model.read_bytes() == before
+    end = time.monotonic() + 10      # the workers (and multiprocessing's tracker) are gone
+    while subprocess.run(["pgrep", "-g", str(proc.pid)], capture_output=True).returncode == 0:
+        assert time.monotonic() < end, "tune's workers outlived it"
+        time.sleep(0.2)

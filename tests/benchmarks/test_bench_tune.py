@@ -1,0 +1,25 @@
+"""``benchmarks/bench_tune.py`` as a user runs it (its own process, the shipped model only):
+tune's time in one process and in workers, their ratio and the same choice are printed."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.slow
+def test_the_benchmark_times_tune_both_ways() -> None:
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_tune.py"),
+                           "--plants", "fourtank"], capture_output=True, text=True,
+                          timeout=600, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    row = re.search(r"^fourtank\s+2 x 2\s+([\d.]+) s\s+([\d.]+) s\s+([\d.]+)x\s+yes",
+                    proc.stdout, re.M)
+    assert row and float(row.group(1)) > 0 and float(row.group(2)) > 0, proc.stdout
+    assert re.search(r"slowest tune with workers: [\d.]+ s", proc.stdout)
