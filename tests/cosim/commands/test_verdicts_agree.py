@@ -162,3 +162,21 @@ def test_a_model_without_a_certificate_is_refused_alike(tmp_path: Path,
     assert certify.removeprefix("cosim certify: error: ") == run.removeprefix(
         "cosim run: error: ")
     assert "sigma_z" in run and "rounds to 1" in run and run.count("\n") == 1
+
+
+@pytest.fixture(scope="module")
+def few_samples(tmp_path_factory: pytest.TempPathFactory) -> dict:
+    """The four tanks identified from a handful of samples: 400 rows of data (280 to train
+    on), one small GRU, a brief training."""
+    folder = tmp_path_factory.mktemp("few")
+    data, model = folder / "data.csv", folder / "gru.json"
+    assert main(["generate-data", "--steps", "400", "--out", str(data), "--quiet"]) == 0
+    assert main(["train", str(data), "--epochs", "40", "--n", "4", "--seeds", "1",
+                 "--out", str(model), "--quiet"]) == 0
+    return json.loads(model.read_text())
+
+
+@pytest.mark.slow
+def test_a_model_trained_on_a_handful_of_samples_gets_one_verdict(
+        few_samples: dict, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    assert _agree(few_samples, "1.0,1.0", tmp_path, capsys, start="0.8,0.8") in (0, 1, 2)
