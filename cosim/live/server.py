@@ -51,7 +51,6 @@ __all__ = ["APPLICATION_URI", "DEFAULT_ENDPOINT", "VirtualPlant"]
 APPLICATION_URI = "urn:gru-mpc-cosim:plant"
 #: Where ``cosim serve-plant`` listens by default.
 DEFAULT_ENDPOINT = "opc.tcp://127.0.0.1:4840"
-_FLAGS = ("Frozen", "StaleOutputs", "BadOutputs")
 
 
 class VirtualPlant:
@@ -201,7 +200,7 @@ class VirtualPlant:
             with contextlib.suppress(Exception):
                 self.plant.terminate()
             if stream is not None:
-                stream.finish(self._columns(), self._rows)
+                stream.finish(self._columns(), [])   # every row was streamed
 
     def _columns(self) -> list[str]:
         p = self.problem
@@ -212,7 +211,6 @@ class VirtualPlant:
     async def _ticks(self, stop: asyncio.Event, duration: float | None, stream: Any) -> None:
         loop = asyncio.get_running_loop()
         end = loop.time() + duration if duration is not None else math.inf
-        self._rows: list[list[float]] = []
         y = self.plant.get_outputs()
         await self._publish(y, fresh=True)
         tick = loop.time()
@@ -241,10 +239,9 @@ class VirtualPlant:
         p, plant = self.problem, self.plant
         u = {c.name: self._input(c) for c in p.inputs}
         d = {c.name: self._input(c) for c in p.disturbances}
-        row = [self.t, *u.values(), *d.values(), *(y[c.name] for c in p.outputs)]
-        self._rows.append(row)
         if stream is not None:
-            stream.append(row, self._columns())
+            stream.append([self.t, *u.values(), *d.values(), *(y[c.name] for c in p.outputs)],
+                          self._columns())
         tunables = set(getattr(plant, "tunables", ()))
         plant.set_inputs({**u, **{k: v for k, v in d.items() if k not in tunables}})
         for k, v in d.items():
