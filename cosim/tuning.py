@@ -44,6 +44,9 @@ RHO_HINT = 0.99
 #: Hold of each generated set-point: this many of the model's slowest time constants, within
 #: these bounds [samples].
 HOLD_TIME_CONSTANTS, HOLD_MIN, HOLD_MAX = 6.0, 20, 300
+#: Closed-loop steps of a tuning (all runs together) above which ``workers=0`` runs them in
+#: worker processes (below, starting the workers costs more than it saves).
+WORKER_STEPS = 2000
 
 
 @dataclass
@@ -89,9 +92,9 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
          tv_ratio: float = 1.2, save: bool = False, progress: bool = False,
          workers: int = 0) -> TuneResult:
     """Tune the robust MPC's weights on ``model`` (module docstring). The closed loops run
-    in ``workers`` processes (0: one per CPU, at most one per run; 1: in this process): the
-    same answer either way. Interrupted (Ctrl-C), the workers are stopped and the model file
-    is left as it was.
+    in ``workers`` processes (0: one per CPU, at most one per run, unless the runs are short:
+    :data:`WORKER_STEPS`; 1: in this process): the same answer either way. Interrupted
+    (Ctrl-C), the workers are stopped and the model file is left as it was.
 
     Raises
     ------
@@ -140,8 +143,9 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
 def _closed_loops(model: str | Path, sc: Path, square: bool, progress: bool, workers: int,
                   ts: float) -> dict[str, dict[str, float]]:
     """:func:`_score` of the PI (square plants) and of every candidate, the model as the
-    plant: in ``workers`` spawned processes (0: one per CPU, at most one per run; 1: in this
-    process), one progress bar over all their steps."""
+    plant: in ``workers`` spawned processes (0: one per CPU, at most one per run, when the
+    runs have more than :data:`WORKER_STEPS` steps together, else 1; 1: in this process), one
+    progress bar over all their steps."""
     import os
 
     from tqdm import tqdm
@@ -153,7 +157,9 @@ def _closed_loops(model: str | Path, sc: Path, square: bool, progress: bool, wor
     loaded = scenario_mod.load(sc)
     steps = len(communication_times(loaded.start_time, loaded.stop_time, ts)) - 1
     jobs = [(name, str(model), str(sc), options) for name, options in runs.items()]
-    workers = workers or min(len(jobs), os.cpu_count() or 1)
+    if not workers:   # a worker takes about a second to start: not worth it for short runs
+        workers = (min(len(jobs), os.cpu_count() or 1) if steps * len(jobs) > WORKER_STEPS
+                   else 1)
     bar = tqdm(total=steps * len(jobs), desc="tune", unit="step", file=sys.stderr,
                disable=not progress, dynamic_ncols=True, mininterval=0.5)
     done = [0] * len(jobs)

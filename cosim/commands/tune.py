@@ -54,7 +54,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="write the choice into the model file's problem ([mpc])")
     p.add_argument("--workers", type=int, default=0,
                    help="worker processes for the closed loops (default 0: one per CPU, at "
-                        "most one per run; 1: in this process); the same choice either way")
+                        "most one per run, unless the runs are short; 1: in this process); "
+                        "the same choice either way")
     p.add_argument("--json", action="store_true", help="print the table as JSON")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=run)
