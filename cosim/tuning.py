@@ -172,7 +172,9 @@ def _closed_loops(model: str | Path, sc: Path, square: bool, progress: bool, wor
         if workers <= 1:
             scores = [_closed_loop(job, lambda k, i=i: tick(i, k)) for i, job in enumerate(jobs)]
         else:
-            scores = _in_workers(jobs, workers, tick)
+            from controllers.workers import map_in_workers
+
+            scores = map_in_workers(_closed_loop, jobs, workers, tick)
     finally:
         bar.close()
     return {name: score for (name, *_), score in zip(jobs, scores, strict=True)}
@@ -191,67 +193,6 @@ def _closed_loop(job: tuple[str, str, str, Any], tick: Any = None) -> dict[str, 
     if out.status != "ok":
         raise SimulationFailed(f"{name}: the run {out.status}: {out.reason}")
     return _score(out.summary)
-
-
-#: The progress queue of a tuning worker process (:func:`_start_worker`).
-_TICKS: Any = None
-
-
-def _start_worker(ticks: Any) -> None:
-    global _TICKS
-    _TICKS = ticks
-
-
-def _worker_run(args: tuple[int, tuple[str, str, str, Any]]) -> dict[str, float]:
-    index, job = args
-
-    def tick(k: int) -> None:
-        if _TICKS is not None and (k % 20 == 0):
-            _TICKS.put((index, k))
-
-    return _closed_loop(job, tick)
-
-
-def _in_workers(jobs: list[tuple[str, str, str, Any]], workers: int,
-                tick: Any) -> list[dict[str, float]]:
-    """The runs in ``workers`` spawned processes, in order; on any exception (Ctrl-C) the
-    workers are terminated before it propagates (the model file is untouched)."""
-    import multiprocessing
-    import queue
-    import threading
-    from concurrent.futures import ProcessPoolExecutor
-
-    ctx = multiprocessing.get_context("spawn")
-    ticks = ctx.Queue()
-    stop = threading.Event()
-
-    def pump() -> None:
-        while not stop.is_set():
-            try:
-                tick(*ticks.get(timeout=0.2))
-            except queue.Empty:
-                continue
-            except (EOFError, OSError, ValueError):   # the queue closed under us
-                return
-
-    reader = threading.Thread(target=pump, daemon=True)
-    reader.start()
-    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_start_worker,
-                               initargs=(ticks,))
-    try:
-        scores = list(pool.map(_worker_run, list(enumerate(jobs))))
-    except BaseException:
-        for proc in list(getattr(pool, "_processes", {}).values()):
-            proc.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    else:
-        pool.shutdown(wait=True)
-    finally:
-        stop.set()
-        reader.join()
-        ticks.close()
-    return scores
 
 
 def scenario(model: Any, path: Path) -> Path:

@@ -13,17 +13,14 @@ workers.
 from __future__ import annotations
 
 import math
-import multiprocessing
 import os
-import queue
-import threading
 from collections.abc import Callable, Sequence
-from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
 from controllers.identification.record import Record
 from controllers.identification.simulation import Candidate, SimOptions, fit_candidate
+from controllers.workers import map_in_workers
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_SIZES", "SearchResult", "candidates", "search"]
 
@@ -49,62 +46,9 @@ def candidates(base: SimOptions, sizes: Sequence[int], seeds: int) -> list[SimOp
             for k in range(seeds)]
 
 
-#: The progress queue of a worker process (:func:`_start_worker`).
-_TICKS: Any = None
-
-
-def _start_worker(ticks: Any) -> None:
-    global _TICKS
-    _TICKS = ticks
-
-
-def _fit(args: tuple[Record, SimOptions, int, Any]) -> tuple[int, Candidate]:
-    record, opt, index, init = args
-
-    def progress(it: int) -> None:
-        if _TICKS is not None:
-            _TICKS.put((index, it))
-
-    return index, fit_candidate(record, opt, progress, init)
-
-
-def _in_workers(todo: list[SimOptions], record: Record, workers: int, init: Any,
-                tick: Callable[[int, int], None]) -> dict[int, Candidate]:
-    """The candidates fitted in ``workers`` spawned processes; on any exception (an
-    interrupt) the workers are terminated before it propagates."""
-    ctx = multiprocessing.get_context("spawn")
-    ticks = ctx.Queue()
-    stop = threading.Event()
-
-    def pump() -> None:
-        while not stop.is_set():
-            try:
-                tick(*ticks.get(timeout=0.2))
-            except queue.Empty:
-                continue
-            except (EOFError, OSError, ValueError):   # the queue closed under us
-                return
-
-    reader = threading.Thread(target=pump, daemon=True)
-    reader.start()
-    pool = ProcessPoolExecutor(workers, mp_context=ctx, initializer=_start_worker,
-                               initargs=(ticks,))
-    results: dict[int, Candidate] = {}
-    try:
-        for i, cand in pool.map(_fit, [(record, o, i, init) for i, o in enumerate(todo)]):
-            results[i] = cand
-    except BaseException:
-        for proc in list(getattr(pool, "_processes", {}).values()):
-            proc.terminate()
-        pool.shutdown(wait=False, cancel_futures=True)
-        raise
-    else:
-        pool.shutdown(wait=True)
-    finally:
-        stop.set()
-        reader.join()
-        ticks.close()
-    return results
+def _fit(args: tuple[Record, SimOptions, Any], progress: Callable[[int], None]) -> Candidate:
+    record, opt, init = args
+    return fit_candidate(record, opt, progress, init)
 
 
 def search(record: Record, base: SimOptions, sizes: Sequence[int] = DEFAULT_SIZES,
@@ -135,7 +79,8 @@ def search(record: Record, base: SimOptions, sizes: Sequence[int] = DEFAULT_SIZE
         results = {i: fit_candidate(record, opt, lambda it, i=i: tick(i, it), init)
                    for i, opt in enumerate(todo)}
     else:
-        results = _in_workers(todo, record, workers, init, tick)
+        results = dict(enumerate(map_in_workers(
+            _fit, [(record, o, init) for o in todo], workers, tick)))
     tried = [{"n": o.n, "seed": o.seed, "score": results[i].score,
               "best_step": results[i].best_step, "nu": results[i].nu,
               "wall_time_s": round(results[i].wall_time, 2), "history": results[i].history}

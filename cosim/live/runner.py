@@ -185,7 +185,7 @@ def run_live(master_args: dict, endpoint: str, live: LiveOptions, sc: Any, ctrl:
                            writes=[c.name for c in bound.inputs], tags=tags,
                            folder=bound.name, security=live.security,
                            max_age=period * (1 + 1e-3) + 0.002,
-                           timeout=min(max(0.5 * period, 0.05), 5.0))
+                           timeout=min(max(0.5 * period, 0.1), 5.0))
     plant = LivePlant(bound, session)
     try:
         master = Master(plant, ctrl, sc, disturbances=bound.disturbance_names,

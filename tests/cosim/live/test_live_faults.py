@@ -62,15 +62,17 @@ def test_bad_then_stale_measurements_hold_then_watchdog_safe_inputs(
         assert ua.read(s.endpoint, ["qa"]).Value.Value == 0.0   # safe again at the end
     lv = out.summary["live"]
     assert out.status == "ok" and lv["stale"] >= 8, lv
-    assert set(lv["stale_reasons"]) == {"status BadSensorFailure", "older than a sample"}
+    assert set(lv["stale_reasons"]) >= {"status BadSensorFailure", "older than a sample"}
     assert lv["watchdog_alarms"] == 2 and lv["safe_writes"] == 2   # two outages
     assert all(v <= lv["stale"] for v in lv["stale_reasons"].values())
     assert out.summary["kpis"]["iae"]["h1"] > 0      # the samples without a value skipped
     rows = pd.read_csv(tmp_path / "run" / "results.csv")
     assert (rows["live.fresh"] == 0).sum() == lv["stale"]
-    stale = rows.index[rows["live.fresh"] == 0].to_numpy()
-    starts = [i for i in stale if i - 1 not in stale]
-    assert len(starts) == 2
+    stale = set(rows.index[rows["live.fresh"] == 0])
+    # the two outages (a loaded machine may add a lone slow read, which the watchdog of 3
+    # samples lets pass)
+    starts = [i for i in sorted(stale) if i - 1 not in stale and {i + 1, i + 2} <= stale]
+    assert len(starts) == 2, sorted(stale)
     safe = rows[rows["live.safe"] == 1]
     assert list(safe.index) == [i + 2 for i in starts] and (safe["ctrl.qa"] == 0.0).all()
     for i in starts:                                  # held, not written, before the alarm
