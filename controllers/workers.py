@@ -5,8 +5,8 @@
 processes (spawned, not forked: no thread or lock of the caller is copied into them) and
 returns the results in the jobs' order; each ``progress(value)`` a job reports reaches the
 caller as ``tick(index, value)`` through a queue read by a thread of the caller. On any
-exception, a Ctrl-C (:class:`KeyboardInterrupt`) included, the workers are terminated
-before it propagates.
+exception, a Ctrl-C (:class:`KeyboardInterrupt`) included, the workers are killed before it
+propagates; on Linux a worker also dies with the process that started it.
 """
 
 from __future__ import annotations
@@ -27,6 +27,20 @@ _TICKS: Any = None
 def _start_worker(ticks: Any) -> None:
     global _TICKS
     _TICKS = ticks
+    _die_with_parent()
+
+
+def _die_with_parent() -> None:
+    """Linux: this worker is killed when the process that started it ends, however it ends
+    (``prctl(PR_SET_PDEATHSIG, SIGKILL)``); elsewhere nothing."""
+    import contextlib
+    import ctypes
+    import signal
+    import sys
+
+    if sys.platform.startswith("linux"):
+        with contextlib.suppress(OSError, AttributeError):
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)
 
 
 def _run(args: tuple[Callable[[Any, Callable[[Any], None]], Any], int, Any]) -> Any:
@@ -63,8 +77,11 @@ def map_in_workers(fn: Callable[[Any, Callable[[Any], None]], Any], jobs: Sequen
     try:
         results = list(pool.map(_run, [(fn, i, job) for i, job in enumerate(jobs)]))
     except BaseException:
-        for proc in list(getattr(pool, "_processes", {}).values()):
-            proc.terminate()
+        # every worker, those the pool has registered and one it was starting when the
+        # exception came (multiprocessing knows it), so that nothing outlives the call
+        for proc in {*getattr(pool, "_processes", {}).values(),
+                     *multiprocessing.active_children()}:
+            proc.kill()
         pool.shutdown(wait=False, cancel_futures=True)
         raise
     else:

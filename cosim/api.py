@@ -102,7 +102,7 @@ class RunOutput:
 
 
 def open_plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
-           step_timeout: float | None, seed: int, problem: Any = None) -> tuple[Any, str]:
+               step_timeout: float | None, seed: int, problem: Any = None) -> tuple[Any, str]:
     """The plant component; an FMU's variable map binds ``problem`` to it (the user's
     ``varmap`` first: :func:`cosim_adapters.problems.bind_plant`)."""
     from cosim.core.errors import CosimError
