@@ -17,11 +17,8 @@ from __future__ import annotations
 
 import argparse
 import os
-import socket
-import subprocess
 import sys
 import tempfile
-import time
 from pathlib import Path
 
 os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # small matrices: threads only cost
@@ -32,49 +29,21 @@ sys.path.insert(0, str(ROOT))
 TS = 25.0     # the four-tank's sample time [s]
 
 
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def serve(speed: float, log: Path) -> tuple[subprocess.Popen, str]:
-    """``cosim serve-plant`` at ``speed``, listening (30 s at most)."""
-    port = free_port()
-    endpoint = f"opc.tcp://127.0.0.1:{port}"
-    env = dict(os.environ, PYTHONPATH=str(ROOT))
-    with log.open("w") as fh:
-        proc = subprocess.Popen([sys.executable, "-m", "cosim.cli", "serve-plant", "--endpoint",
-                                 endpoint, "--security", "None", "--speed", str(speed),
-                                 "--frozen", "--quiet"], env=env, stdout=fh, stderr=fh)
-    end = time.monotonic() + 30
-    while True:
-        try:
-            with socket.create_connection(("127.0.0.1", port), 0.2):
-                return proc, endpoint
-        except OSError:
-            if proc.poll() is not None or time.monotonic() > end:
-                proc.kill()
-                raise SystemExit(f"serve-plant did not start: {log.read_text()}") from None
-            time.sleep(0.1)
-
-
 def one(speed: float, samples: int, folder: Path) -> dict:
     """One live run at ``speed``: its summary's ``live`` section."""
     import cosim
+    from cosim.live.process import served_plant
     from cosim.live.runner import LiveOptions
 
     scenario = folder / "steps.csv"
     t1, t2 = TS * (samples // 3), TS * (2 * samples // 3)
     scenario.write_text(f"time,ref.h1,ref.h2\n0,0.65,0.65\n{t1:g},0.9,\n{t2:g},,1.0\n"
                         f"{TS * samples:g},,\n")
-    proc, endpoint = serve(speed, folder / f"serve_{speed:g}.log")
-    try:
-        out = cosim.run(scenario, plant=endpoint, figure=False,
+    with served_plant("--security", "None", "--speed", str(speed), "--frozen", "--quiet",
+                      log=folder / f"serve_{speed:g}.log",
+                      env=dict(os.environ, PYTHONPATH=str(ROOT))) as plant:
+        out = cosim.run(scenario, plant=plant.endpoint, figure=False,
                         live=LiveOptions(speed=speed))
-    finally:
-        proc.terminate()
-        proc.wait(15)
     if out.status != "ok":
         raise SystemExit(f"speed {speed:g}: the run failed: {out.reason}")
     return out.summary["live"]

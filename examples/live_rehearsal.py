@@ -15,43 +15,18 @@ from __future__ import annotations
 
 import argparse
 import os
-import socket
-import subprocess
-import sys
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 
 import cosim
+from cosim.live.process import served_plant
 from cosim.live.runner import LiveOptions
 
 ROOT = Path(__file__).resolve().parents[1]
 #: The paper's first set-point steps, 60 samples of 25 s.
 SCENARIO = "time,ref.h1,ref.h2\n0,0.65,0.65\n500,0.9,\n1000,,1.0\n1500,,\n"
-
-
-def serve(speed: float, folder: Path) -> tuple[subprocess.Popen, str]:
-    """``cosim serve-plant`` on a free port of 127.0.0.1, listening (30 s at most)."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
-    endpoint = f"opc.tcp://127.0.0.1:{port}"
-    log = (folder / "serve-plant.log").open("w")
-    proc = subprocess.Popen([sys.executable, "-m", "cosim.cli", "serve-plant", "--endpoint",
-                             endpoint, "--speed", str(speed), "--frozen", "--security", "None",
-                             "--record", str(folder / "plant.csv")],
-                            env=dict(os.environ, PYTHONPATH=str(ROOT)), stdout=log, stderr=log)
-    end = time.monotonic() + 30
-    while proc.poll() is None and time.monotonic() < end:
-        try:
-            with socket.create_connection(("127.0.0.1", port), 0.2):
-                return proc, endpoint
-        except OSError:
-            time.sleep(0.1)
-    proc.kill()
-    raise SystemExit(f"serve-plant did not start: {(folder / 'serve-plant.log').read_text()}")
 
 
 def main() -> None:
@@ -64,13 +39,11 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     scenario = out / "steps.csv"
     scenario.write_text(SCENARIO)
-    proc, endpoint = serve(args.speed, out)
-    try:
-        live = cosim.run(scenario, plant=endpoint, out=out / "live",
+    with served_plant("--speed", str(args.speed), "--frozen", "--security", "None",
+                      "--record", str(out / "plant.csv"), log=out / "serve-plant.log",
+                      env=dict(os.environ, PYTHONPATH=str(ROOT))) as plant:
+        live = cosim.run(scenario, plant=plant.endpoint, out=out / "live",
                          live=LiveOptions(speed=args.speed), on_notice=print)
-    finally:
-        proc.terminate()
-        proc.wait(15)
     ref = cosim.run(scenario, out=out / "in-process")
     lv = live.summary["live"]
     loop = lv["latency_ms"]["loop"]

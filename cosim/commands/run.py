@@ -213,7 +213,9 @@ def _live_options(args: argparse.Namespace) -> object:
                                       ("--private-key", args.private_key),
                                       ("--trust", args.trust), ("--user", args.user))
              if value not in (None, [])]
-    if not (args.plant or "").startswith("opc.tcp://"):
+    from cosim.api import is_endpoint
+
+    if not is_endpoint(args.plant):
         if given:
             raise CosimError(f"{given[0]}: only for a live plant (--plant opc.tcp://HOST:PORT)")
         return None

@@ -93,8 +93,12 @@ class VirtualPlant:
         self.clipped = 0
         self._written: set[str] = set()
         self._nodes: dict[str, Any] = {}
-        tunables = set(getattr(plant, "tunables", ()))
-        self.parameters = sorted(tunables - {c.name for c in problem.disturbances})
+        self.tunables = frozenset(getattr(plant, "tunables", ()))
+        self.parameters = sorted(self.tunables - {c.name for c in problem.disturbances})
+        #: The record's columns (``--record``), as ``results.csv`` names them.
+        self.columns = ["time", *(f"ctrl.{c.name}" for c in problem.inputs),
+                        *(f"dist.{c.name}" for c in problem.disturbances),
+                        *(f"plant.{c.name}" for c in problem.outputs)]
         self._param_values: dict[str, float] = {}
 
     # -- the address space ----------------------------------------------------------------
@@ -200,13 +204,7 @@ class VirtualPlant:
             with contextlib.suppress(Exception):
                 self.plant.terminate()
             if stream is not None:
-                stream.finish(self._columns(), [])   # every row was streamed
-
-    def _columns(self) -> list[str]:
-        p = self.problem
-        return (["time", *(f"ctrl.{c.name}" for c in p.inputs),
-                 *(f"dist.{c.name}" for c in p.disturbances),
-                 *(f"plant.{c.name}" for c in p.outputs)])
+                stream.finish(self.columns, [])   # every row was streamed
 
     async def _ticks(self, stop: asyncio.Event, duration: float | None, stream: Any) -> None:
         loop = asyncio.get_running_loop()
@@ -241,11 +239,10 @@ class VirtualPlant:
         d = {c.name: self._input(c) for c in p.disturbances}
         if stream is not None:
             stream.append([self.t, *u.values(), *d.values(), *(y[c.name] for c in p.outputs)],
-                          self._columns())
-        tunables = set(getattr(plant, "tunables", ()))
-        plant.set_inputs({**u, **{k: v for k, v in d.items() if k not in tunables}})
+                          self.columns)
+        plant.set_inputs({**u, **{k: v for k, v in d.items() if k not in self.tunables}})
         for k, v in d.items():
-            if k in tunables:
+            if k in self.tunables:
                 plant.set_parameter(k, v)
         for name in self.parameters:
             v = self._read("Parameters." + name)

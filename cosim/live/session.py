@@ -207,19 +207,20 @@ class PlantSession:
         """The measured signals now; never raises (a failure makes them not fresh)."""
         if not self.connected:
             self._start_reconnect()
-            return Reading(dict.fromkeys(self.reads, math.nan),
-                           dict.fromkeys(self.reads, "disconnected"))
+            return self._nothing("disconnected")
         try:
             values = self._call(self._client.read_attributes(
                 [self._nodes[s] for s in self.reads]), self.timeout)
         except TimeoutError:
-            return Reading(dict.fromkeys(self.reads, math.nan),
-                           dict.fromkeys(self.reads, f"no answer within {self.timeout:g} s"))
+            return self._nothing(f"no answer within {self.timeout:g} s")
         except Exception:
             self._lost()
-            return Reading(dict.fromkeys(self.reads, math.nan),
-                           dict.fromkeys(self.reads, "disconnected"))
+            return self._nothing("disconnected")
         return self._reading(values)
+
+    def _nothing(self, why: str) -> Reading:
+        """A read that brought no value: every signal NaN, not fresh for ``why``."""
+        return Reading(dict.fromkeys(self.reads, math.nan), dict.fromkeys(self.reads, why))
 
     def _reading(self, data: list[Any]) -> Reading:
         now = time.time()

@@ -1,32 +1,24 @@
 """A real ``cosim serve-plant`` in its own process on 127.0.0.1, for the live-plant tests.
 
-:func:`served` starts one on a free port, waits (bounded) until it listens, and stops it
-(SIGTERM, then SIGKILL) however the test ends; nothing is mocked.
+:func:`served` starts one on a free port (:mod:`cosim.live.process`), waits (bounded) until
+it listens, and stops it (SIGTERM, then SIGKILL) however the test ends; nothing is mocked.
 """
 
 from __future__ import annotations
 
 import contextlib
 import os
-import signal
-import socket
-import subprocess
 import sys
-import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
 
+from cosim.live.process import ServedPlant, free_port, start_served_plant
+
+__all__ = ["ROOT", "cosim", "env", "free_port", "served", "start"]
+
 ROOT = Path(__file__).resolve().parents[3]
-
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that nothing listens on now."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def env(**extra: str) -> dict[str, str]:
@@ -39,55 +31,16 @@ def cosim(*args: str) -> list[str]:
     return [sys.executable, "-m", "cosim.cli", *args]
 
 
-@dataclass
-class Server:
-    """A running ``cosim serve-plant``: its endpoint, process and stderr log."""
-
-    endpoint: str
-    port: int
-    proc: subprocess.Popen
-    log: Path
-
-    def stop(self, timeout: float = 15.0) -> int:
-        """SIGTERM, then SIGKILL after ``timeout``; the exit status."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        return self.proc.returncode
-
-    def stderr(self) -> str:
-        return self.log.read_text()
-
-
 def start(tmp: Path, *args: str, port: int | None = None, extra_env: dict | None = None,
-          name: str = "server") -> Server:
-    """Start ``cosim serve-plant ARGS`` on ``port`` (a free one by default); wait until it
-    listens (30 s at most)."""
-    port = port or free_port()
-    endpoint = f"opc.tcp://127.0.0.1:{port}"
-    log = tmp / f"{name}.log"
-    with log.open("w") as fh:
-        proc = subprocess.Popen(cosim("serve-plant", "--endpoint", endpoint, *args),
-                                env=env(**(extra_env or {})), cwd=tmp, stdout=fh, stderr=fh)
-    server = Server(endpoint, port, proc, log)
-    end = time.monotonic() + 30
-    while True:
-        if proc.poll() is not None:
-            raise AssertionError(f"serve-plant exited {proc.returncode}: {server.stderr()}")
-        with contextlib.suppress(OSError), socket.create_connection(("127.0.0.1", port), 0.2):
-            return server
-        if time.monotonic() > end:
-            server.stop()
-            raise AssertionError(f"serve-plant did not listen within 30 s: {server.stderr()}")
-        time.sleep(0.1)
+          name: str = "server") -> ServedPlant:
+    """``cosim serve-plant ARGS`` on ``port`` (a free one by default), its log in ``tmp``;
+    once it listens (30 s at most: :func:`cosim.live.process.start_served_plant`)."""
+    return start_served_plant(*args, log=tmp / f"{name}.log", port=port,
+                              env=env(**(extra_env or {})))
 
 
 @contextlib.contextmanager
-def served(tmp: Path, *args: str, **kw: object) -> Iterator[Server]:
+def served(tmp: Path, *args: str, **kw: object) -> Iterator[ServedPlant]:
     """:func:`start` for the ``with`` block; stopped after it, however it ends."""
     server = start(tmp, *args, **kw)  # type: ignore[arg-type]
     try:
