@@ -63,7 +63,7 @@ __all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "KernelProblem
            "last_error", "library_source", "loader_source", "variant_flags"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-14"
+GENERATOR_VERSION = "gru-fhocp-kernel-15"
 #: The C template, joined in this order after the generated header: the interface
 #: (``gru_fhocp.h``), the solver instance's memory, the mathematics bottom-up, the exported
 #: API, the equilibrium for an output (tracking kernels), the QP and the SQP.

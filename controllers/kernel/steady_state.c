@@ -42,13 +42,16 @@ static int lu_factor(double *A, int *piv) {
 }
 
 /* solve (LU) x = b in place, b of NX entries with stride `st` (a column of a row-major
- * NX x st matrix) */
+ * NX x st matrix). lu_factor swaps whole rows, multipliers included, so L is in the final
+ * row order: every swap is applied to b before the forward substitution (interleaving them
+ * pairs a multiplier with the wrong entry whenever a later column pivots). */
 static void lu_solve(const double *LU, const int *piv, double *b, int st) {
-  for (int c = 0; c < NX; c++) {
+  for (int c = 0; c < NX; c++) {       /* P b */
     const int pr = piv[c];
     if (pr != c) { const double t = b[c * st]; b[c * st] = b[pr * st]; b[pr * st] = t; }
-    for (int r = c + 1; r < NX; r++) b[r * st] -= LU[r * NX + c] * b[c * st];
   }
+  for (int c = 0; c < NX; c++)         /* L v = P b (unit diagonal) */
+    for (int r = c + 1; r < NX; r++) b[r * st] -= LU[r * NX + c] * b[c * st];
   for (int c = NX - 1; c >= 0; c--) {
     double s = b[c * st];
     for (int q = c + 1; q < NX; q++) s -= LU[c * NX + q] * b[q * st];

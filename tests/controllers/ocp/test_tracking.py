@@ -98,6 +98,30 @@ def test_the_compiled_kernel_agrees_with_the_numpy_twin(m: int, p: int, du: floa
     assert fh.numpy_nlp().self_test(fh.kernel, fh.sqp_options["hessian_eigen_clip"]) < 1e-9
 
 
+def test_the_kernels_steady_state_derivative_holds_when_its_lu_pivots() -> None:
+    """X_s = (I − A_s)^{-1} B_s where the LU of I − A_s swaps rows after its first column
+    (a model whose candidate state couples more strongly than it keeps: reset gates open,
+    a rotation in U_h). A default-trained furnace model met this: the kernel failed its
+    self-test and the numpy derivatives made `cosim tune` take minutes."""
+    import scipy.linalg
+
+    from tests.controllers.kernel.test_compiled_kernel import random_fhocp
+
+    n = 6
+    fh = random_fhocp(n, 8, seed=3, du_weight=0.1,
+                      reference=ArtificialSteadyState(1e3, 0.05, ys_bounds=np.full(4, 0.9)))
+    rotation = np.roll(np.eye(n), 1, axis=1)
+    fh.params["U_h"] = 1.5 * (rotation - rotation.T)
+    fh.params["b_r"] = np.full(n, 4.0)
+    us = np.array([0.3, -0.2])
+    xs, _, ok = steady_state(fh.params, us, np.zeros(n))
+    pivots = scipy.linalg.lu_factor(np.eye(n) - jacobians(fh.params, xs, us)[0])[1]
+    assert ok and np.any(pivots[1:] != np.arange(1, n))   # a swap after the first column
+    fh.setup()
+    assert fh.kernel is not None, fh.kernel_error
+    assert fh.numpy_nlp().self_test(fh.kernel, fh.sqp_options["hessian_eigen_clip"]) < 1e-9
+
+
 @pytest.fixture(scope="module")
 def fourtank() -> tuple[GRUModel, FHOCP]:
     model = GRUModel.load(DEFAULT_MODEL)
