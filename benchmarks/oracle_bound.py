@@ -10,15 +10,21 @@ constants, the FMU's start values), and its true state, which both plants expose
 outputs (the zone temperatures). It does not know future set-points. Each sample it solves::
 
     min_{X, U}  Σ_{i=1}^{N} Σ_j |y_{j,i} − r_j| / (box width of y_j)
-    s.t.        X_0 = x_k,  X_{i+1} = F(X_i, u_i),  u_i in the input box
+    s.t.        X_0 = x_k,  X_{i+1} = F(X_i, u_{i−K}, d_k),  u_i in the input box
 
-the summed IAE of ``examples/own_plant.py`` over the horizon (the sampled IAE of
+(``K`` an input's dead time, ``u_{i−K}`` for ``i < K`` the inputs already applied; ``d_k``
+the measured disturbances now, held over the horizon: the oracle knows the present, not the
+future) the summed IAE of ``examples/own_plant.py`` over the horizon (the sampled IAE of
 :mod:`cosim.core.kpis`, zero-order hold), with ``F`` the plant's own RK4 over one sample (the
 same substeps as the FMU's integrator, ``plant_base.py``). Multiple shooting, the absolute
 values as slack variables, IPOPT warm-started from the previous plan; every answer is checked
 without IPOPT (shooting defects, input box, slacks), a failed one replaced by a cold start,
 else by the previous plan shifted (counted in ``failures``). It is a benchmark reference, kept
 out of the shipped packages like ``oracle_nmpc.py``.
+
+``heater_dead_time`` (its power 40 s late, its ambient temperature measured) is the plant of
+``disturbance_campaign.py``, which runs this oracle on each of its campaign's runs
+(``--oracle``: the drawn heat capacity, set-points and ambient steps).
 
 It prints the oracle's summed IAE over the PI's (the best ratio a causal controller could
 reach on this scenario, up to the horizon and the solver's local optima) beside the MPC's,
@@ -52,7 +58,7 @@ CHECK_TOL = 1e-6
 IPOPT_OPTIONS: dict[str, Any] = {"print_level": 0, "tol": 1e-9, "max_iter": 500, "sb": "yes"}
 #: Default horizons [samples]: a few of the slowest time constants (heater 670 s, furnace's
 #: common mode 20-30 min, Ts = 20 s).
-HORIZONS = {"heater": 60, "furnace": 120}
+HORIZONS = {"heater": 60, "furnace": 120, "heater_dead_time": 60}
 
 
 def constants(plant: str) -> dict[str, float]:
@@ -73,23 +79,35 @@ def constants(plant: str) -> dict[str, float]:
     return out
 
 
-def heater_rhs(p: Mapping[str, float]) -> Callable[[Any, Any], Any]:
+def heater_rhs(p: Mapping[str, float]) -> Callable[[Any, Any, Any], Any]:
     """``dT/dt`` of ``fmus/examples/heater/heater.py`` (casadi), its parameters ``p``."""
     k = constants("heater")
     C = p["C_factor"] * k["C"]
 
-    def rhs(x: Any, u: Any) -> Any:
+    def rhs(x: Any, u: Any, _d: Any) -> Any:
         d = x[0] - p["T_amb"]
         return (u[0] - (k["UA0"] + k["UA1"] * ca.fmax(d, 0.0)) * d) / C
     return rhs
 
 
-def furnace_rhs(p: Mapping[str, float]) -> Callable[[Any, Any], Any]:
+def heater_dead_time_rhs(p: Mapping[str, float]) -> Callable[[Any, Any, Any], Any]:
+    """``dT/dt`` of ``fmus/examples/heater_dead_time/heater_dead_time.py`` (casadi): ``u`` the
+    power as the vessel sees it (applied 40 s before), ``d`` the ambient temperature."""
+    k = constants("heater_dead_time")
+    C = p["C_factor"] * k["C"]
+
+    def rhs(x: Any, u: Any, d: Any) -> Any:
+        dt = x[0] - d[0]
+        return (u[0] - (k["UA0"] + k["UA1"] * ca.fmax(dt, 0.0)) * dt) / C
+    return rhs
+
+
+def furnace_rhs(p: Mapping[str, float]) -> Callable[[Any, Any, Any], Any]:
     """``dT1/dt, dT2/dt`` of ``fmus/examples/furnace/furnace.py`` (casadi)."""
     f = constants("furnace")
     amb, k, c = p["T_amb"] + 273.15, p["K_factor"] * f["K"], p["C_factor"] * f["C"]
 
-    def rhs(x: Any, u: Any) -> Any:
+    def rhs(x: Any, u: Any, _d: Any) -> Any:
         q12 = k * (x[0] - x[1])
         loss = [f["UA"] * (x[i] - p["T_amb"]) + f["E"] * ((x[i] + 273.15) ** 4 - amb ** 4)
                 for i in range(2)]
@@ -99,22 +117,24 @@ def furnace_rhs(p: Mapping[str, float]) -> Callable[[Any, Any], Any]:
 
 #: plant -> (its equations, its parameters' names, RK4 substep [s] of its FMU)
 PLANTS = {"heater": (heater_rhs, ("T_amb", "C_factor"), 2.0),
-          "furnace": (furnace_rhs, ("T_amb", "K_factor", "C_factor"), 2.0)}
+          "furnace": (furnace_rhs, ("T_amb", "K_factor", "C_factor"), 2.0),
+          "heater_dead_time": (heater_dead_time_rhs, ("C_factor",), 2.0)}
 
 
-def rk4_map(rhs: Callable[[Any, Any], Any], n: int, m: int, Ts: float, substep: float
-            ) -> ca.Function:
-    """``F(x, u) → x⁺``: RK4 over ``Ts`` in steps of at most ``substep``, ``u`` held."""
-    x, u = ca.SX.sym("x", n), ca.SX.sym("u", m)
+def rk4_map(rhs: Callable[[Any, Any, Any], Any], n: int, m: int, nd: int, Ts: float,
+            substep: float) -> ca.Function:
+    """``F(x, u, d) → x⁺``: RK4 over ``Ts`` in steps of at most ``substep``, ``u`` (as the
+    plant sees it) and the disturbances ``d`` held."""
+    x, u, d = ca.SX.sym("x", n), ca.SX.sym("u", m), ca.SX.sym("d", nd)
     steps = int(np.ceil(Ts / substep - 1e-9))
     dt, z = Ts / steps, x
     for _ in range(steps):
-        k1 = rhs(z, u)
-        k2 = rhs(z + 0.5 * dt * k1, u)
-        k3 = rhs(z + 0.5 * dt * k2, u)
-        k4 = rhs(z + dt * k3, u)
+        k1 = rhs(z, u, d)
+        k2 = rhs(z + 0.5 * dt * k1, u, d)
+        k3 = rhs(z + 0.5 * dt * k2, u, d)
+        k4 = rhs(z + dt * k3, u, d)
         z = z + dt / 6.0 * (k1 + 2 * k2 + 2 * k3 + k4)
-    return ca.Function("F", [x, u], [z])
+    return ca.Function("F", [x, u, d], [z])
 
 
 class IAEOracle:
@@ -123,67 +143,85 @@ class IAEOracle:
     Parameters
     ----------
     F : casadi.Function
-        The plant's map over one sample, ``x⁺ = F(x, u)`` in physical units (states = the
-        problem's outputs, in their order).
+        The plant's map over one sample, ``x⁺ = F(x, u, d)`` in physical units (states = the
+        problem's outputs, in their order; ``u`` the inputs as the plant sees them, ``d`` the
+        measured disturbances).
     problem : ControlProblem
+        Its inputs' ``delay`` are the dead times ``K``.
     horizon : int
     """
 
     def __init__(self, F: ca.Function, problem: ControlProblem, horizon: int) -> None:
         self.F, self.N, self.n, self.m = F, horizon, problem.p, problem.m
+        self.nd = len(problem.disturbances)
+        self.delays = tuple(int(c.delay) for c in problem.inputs)
+        self.K = max(self.delays, default=0)
         lo, hi = np.array(problem.input_bounds).T
         self.u_lo, self.u_hi = lo, hi
         self.width = np.array([c.max - c.min for c in problem.outputs])
-        self.F_N = F.map(horizon)
-        n, m, N = self.n, self.m, horizon
+        n, m, N, nd, K = self.n, self.m, horizon, self.nd, self.K
         X, U, E = ca.SX.sym("X", n, N + 1), ca.SX.sym("U", m, N), ca.SX.sym("E", n, N)
-        p = ca.SX.sym("p", 2 * n)               # x_k, r
-        err = X[:, 1:] - ca.repmat(p[n:], 1, N)
-        g = ca.vertcat(ca.vec(X[:, 0] - p[:n]), ca.vec(X[:, 1:] - self.F_N(X[:, :N], U)),
-                       ca.vec(E - err), ca.vec(E + err))
+        p = ca.SX.sym("p", 2 * n + nd + K * m)    # x_k, r, d_k, the last K inputs (oldest first)
+        past = ca.reshape(p[2 * n + nd:], m, K) if K else ca.SX(m, 0)
+        seen = ca.vertcat(*(ca.horzcat(past[j, K - kj:], U[j, :N - kj]) if kj else U[j, :]
+                            for j, kj in enumerate(self.delays)))
+        d = p[2 * n:2 * n + nd]
+        err = X[:, 1:] - ca.repmat(p[n:2 * n], 1, N)
+        defects = [X[:, i + 1] - F(X[:, i], seen[:, i], d) for i in range(N)]
+        g = ca.vertcat(ca.vec(X[:, 0] - p[:n]), *defects, ca.vec(E - err), ca.vec(E + err))
         w = ca.diag(ca.DM(1.0 / self.width))
         nlp = {"x": ca.vertcat(ca.vec(X), ca.vec(U), ca.vec(E)), "p": p,
                "f": ca.sum1(ca.sum2(w @ E)), "g": g}
         self.solver = ca.nlpsol("iae_oracle", "ipopt", nlp,
                                 {"ipopt": IPOPT_OPTIONS, "print_time": False})
+        self.seen = ca.Function("seen", [U, p], [seen])
         self.nX, self.nU = n * (N + 1), m * N
         nw = self.nX + self.nU + n * N
         self.lbx, self.ubx = np.full(nw, -np.inf), np.full(nw, np.inf)
         self.lbx[self.nX:self.nX + self.nU] = np.tile(lo, N)
         self.ubx[self.nX:self.nX + self.nU] = np.tile(hi, N)
-        nd = n * (N + 1)                        # equalities, then E ≥ ±err
-        self.lbg = np.zeros(nd + 2 * n * N)
-        self.ubg = np.concatenate([np.zeros(nd), np.full(2 * n * N, np.inf)])
+        neq = n * (N + 1)                       # equalities, then E ≥ ±err
+        self.lbg = np.zeros(neq + 2 * n * N)
+        self.ubg = np.concatenate([np.zeros(neq), np.full(2 * n * N, np.inf)])
 
-    def rollout(self, x: np.ndarray, U: np.ndarray) -> np.ndarray:
-        """States ``(N+1) × n`` of the inputs ``U`` (``N × m``) from ``x``."""
+    def parameters(self, x: np.ndarray, r: np.ndarray, d: np.ndarray,
+                   past: np.ndarray) -> np.ndarray:
+        """The NLP's ``p``: state, set-points, disturbances and the last ``K`` inputs
+        (``K × m``, oldest first)."""
+        return np.concatenate([x, r, d, np.asarray(past, dtype=float).reshape(-1)])
+
+    def rollout(self, x: np.ndarray, U: np.ndarray, pv: np.ndarray) -> np.ndarray:
+        """States ``(N+1) × n`` of the inputs ``U`` (``N × m``) from ``x`` (``pv``: the
+        disturbances and past inputs of :meth:`parameters`)."""
+        seen = np.asarray(self.seen(U.T, pv)).T
+        d = pv[2 * self.n:2 * self.n + self.nd]
         X = [np.asarray(x, dtype=float)]
-        for u in U:
-            X.append(np.asarray(self.F(X[-1], u)).ravel())
+        for u in seen:
+            X.append(np.asarray(self.F(X[-1], u, d)).ravel())
         return np.array(X)
 
-    def solve(self, x: np.ndarray, r: np.ndarray, U0: np.ndarray
-              ) -> tuple[np.ndarray, bool]:
-        """The plan's inputs ``N × m`` from the start ``U0``, and whether it passed the
-        checks."""
-        X0 = self.rollout(x, U0)
+    def solve(self, pv: np.ndarray, U0: np.ndarray) -> tuple[np.ndarray, bool]:
+        """The plan's inputs ``N × m`` from the start ``U0`` at the parameters ``pv``
+        (:meth:`parameters`), and whether it passed the checks."""
+        x, r = pv[:self.n], pv[self.n:2 * self.n]
+        X0 = self.rollout(x, U0, pv)
         E0 = np.abs(X0[1:] - r)
         w0 = np.concatenate([X0.ravel(), U0.ravel(), E0.ravel()])
-        sol = self.solver(x0=w0, p=np.concatenate([x, r]), lbx=self.lbx, ubx=self.ubx,
+        sol = self.solver(x0=w0, p=pv, lbx=self.lbx, ubx=self.ubx,
                           lbg=self.lbg, ubg=self.ubg)
         w = np.asarray(sol["x"]).ravel()
         X = w[:self.nX].reshape(self.N + 1, self.n)
         U = w[self.nX:self.nX + self.nU].reshape(self.N, self.m)
         E = w[self.nX + self.nU:].reshape(self.N, self.n)
-        ok = bool(self.solver.stats()["success"]) and self._check(x, r, X, U, E)
+        ok = bool(self.solver.stats()["success"]) and self._check(pv, X, U, E)
         return U, ok
 
-    def _check(self, x: np.ndarray, r: np.ndarray, X: np.ndarray, U: np.ndarray,
-               E: np.ndarray) -> bool:
+    def _check(self, pv: np.ndarray, X: np.ndarray, U: np.ndarray, E: np.ndarray) -> bool:
         if not all(np.all(np.isfinite(a)) for a in (X, U, E)):
             return False
+        x, r = pv[:self.n], pv[self.n:2 * self.n]
         excess = np.max(np.maximum(self.u_lo - U, U - self.u_hi) / (self.u_hi - self.u_lo))
-        defect = np.max(np.abs(self.rollout(x, U) - X)) / max(1.0, float(np.max(np.abs(X))))
+        defect = np.max(np.abs(self.rollout(x, U, pv) - X)) / max(1.0, float(np.max(np.abs(X))))
         shortfall = np.max(np.abs(X[1:] - r) - E)   # a slack below its |error|
         return bool(max(excess, defect, shortfall) <= CHECK_TOL)
 
@@ -193,10 +231,11 @@ class OracleController(Component):
 
     Parameters
     ----------
-    plant : {"heater", "furnace"}
+    plant : {"heater", "furnace", "heater_dead_time"}
     fmu : path
         The plant FMU: its parameters' values are the start values of its modelDescription,
-        unless ``parameters`` gives them.
+        unless ``parameters`` gives them; so are the inputs it has seen before the run (a
+        dead time's first samples).
     problem : path
         The plant's problem file.
     horizon : int, optional
@@ -215,17 +254,22 @@ class OracleController(Component):
         from cosim.core.fmu_archive import read_model_description
 
         rhs_of, names, substep = PLANTS[plant]
+        self.problem = pr = load(problem)
         md = read_model_description(fmu)
-        start = {v.name: float(v.start) for v in md.modelVariables if v.name in names}
+        start = {v.name: float(v.start) for v in md.modelVariables if v.start is not None
+                 and v.name in (*names, *(c.variable or c.name for c in pr.inputs))}
         params = {**start, **(parameters or {})}
-        self.problem = load(problem)
-        pr = self.problem
-        F = rk4_map(rhs_of(params), pr.p, pr.m, pr.Ts, substep)
+        F = rk4_map(rhs_of(params), pr.p, pr.m, len(pr.disturbances), pr.Ts, substep)
         self.ocp = IAEOracle(F, pr, horizon or HORIZONS[plant])
+        #: what the plant applied before the run (its inputs' start values)
+        self.u_start = np.array([start.get(c.variable or c.name, 0.5 * (c.min + c.max))
+                                 for c in pr.inputs])
+        self.d_default = {c.name: c.offset for c in pr.disturbances}
         self.sample_time = pr.Ts
         self.bounds = pr.bounds()
-        self.inputs = tuple(Signal(c.name, c.unit) for c in pr.outputs) + tuple(
-            Signal(f"ref.{c.name}", c.unit) for c in pr.outputs)
+        self.inputs = (*(Signal(c.name, c.unit) for c in pr.outputs),
+                       *(Signal(f"ref.{c.name}", c.unit) for c in pr.outputs),
+                       *(Signal(f"dist.{c.name}", c.unit) for c in pr.disturbances))
         self.outputs = tuple(Signal(c.name, c.unit) for c in pr.inputs)
         self._values: dict[str, float] = {}
         self.setup(0.0)
@@ -233,6 +277,7 @@ class OracleController(Component):
     def setup(self, t0: float) -> None:
         """Forget the previous run."""
         self._U: np.ndarray | None = None
+        self._past = np.tile(self.u_start, (self.ocp.K, 1))   # K × m, oldest first
         self._next: np.ndarray | None = None   # the plan's state one sample on
         self.failures = self.cold_starts = self.steps = 0
         self.solve_ms: list[float] = []
@@ -242,26 +287,32 @@ class OracleController(Component):
         self._values.update(values)
 
     def step(self, t: float, dt: float) -> None:
-        """Solve from the measured state (the outputs); hold the plan's first input."""
+        """Solve from the measured state (the outputs), the disturbances measured now and
+        the inputs still on their way; hold the plan's first input."""
         pr, ocp = self.problem, self.ocp
         x = np.array([self._values[o] for o in pr.output_names])
         r = np.array([self._values[f"ref.{o}"] for o in pr.output_names])
+        d = np.array([self._values.get(f"dist.{c.name}", self.d_default[c.name])
+                      for c in pr.disturbances])
         if self._next is not None:   # the model against the plant, one sample on
             self.pred_err.append(float(np.max(np.abs(self._next - x))))
+        pv = ocp.parameters(x, r, d, self._past)
         t0 = time.perf_counter()
         middle = np.tile(0.5 * (ocp.u_lo + ocp.u_hi), (ocp.N, 1))
         warm = None if self._U is None else np.vstack([self._U[1:], self._U[-1:]])
-        U, ok = ocp.solve(x, r, warm if warm is not None else middle)
+        U, ok = ocp.solve(pv, warm if warm is not None else middle)
         if not ok and warm is not None:
             self.cold_starts += 1
-            U, ok = ocp.solve(x, r, middle)
+            U, ok = ocp.solve(pv, middle)
         if not ok:
             self.failures += 1
             U = warm if warm is not None else middle
         self.solve_ms.append((time.perf_counter() - t0) * 1e3)
         self.steps += 1
         self._U = np.clip(U, ocp.u_lo, ocp.u_hi)   # IPOPT's bounds are relaxed by ~1e-8
-        self._next = np.asarray(ocp.F(x, self._U[0])).ravel()
+        self._next = ocp.rollout(x, self._U, pv)[1]
+        if ocp.K:
+            self._past = np.vstack([self._past[1:], self._U[:1]])
 
     def get_outputs(self) -> dict[str, float]:
         u = self._U[0] if self._U is not None else 0.5 * (self.ocp.u_lo + self.ocp.u_hi)
@@ -287,7 +338,7 @@ def main(argv: list[str] | None = None) -> int:
     report = json.loads((d / "walkthrough.json").read_text())
     plant = report["plant"]
     if plant not in PLANTS:
-        raise SystemExit(f"oracle_bound: {plant!r} has no oracle here (heater, furnace)")
+        raise SystemExit(f"oracle_bound: {plant!r} has no oracle here ({', '.join(PLANTS)})")
     fmu = next((d / "fmu").glob("*.fmu"))
     problem = ROOT / "fmus" / "examples" / plant / "problem.toml"
     horizon = args.horizon or HORIZONS[plant]

@@ -1,5 +1,6 @@
 """``benchmarks/disturbance_campaign.py`` as a user runs it (its own process), small: both
-campaigns run on the heater with a dead time, and the table is printed."""
+campaigns run on the heater with a dead time, the table is printed, and the IAE oracle runs on
+every run (its model the plant's own: the benchmark stops otherwise)."""
 
 from __future__ import annotations
 
@@ -13,7 +14,7 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_the_campaigns_compare_the_mpc_with_both_pis() -> None:
     proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "disturbance_campaign.py"),
-                           "--runs", "2", "--steps", "2000", "--epochs", "20"],
+                           "--runs", "2", "--steps", "2000", "--epochs", "20", "--oracle"],
                           capture_output=True, text=True, timeout=900, check=False)
     assert proc.returncode == 0, proc.stdout + proc.stderr
     ratios = re.findall(r"MPC summed IAE / PI ([\d.]+), / PI with feedforward ([\d.]+)",
@@ -22,3 +23,8 @@ def test_the_campaigns_compare_the_mpc_with_both_pis() -> None:
     rows = re.findall(r"(mpc|pi-ff|pi) +overshoot median +([\d.]+) %, largest +([\d.]+) %; "
                       r"violating runs (\d+)", proc.stdout)
     assert sorted(r[0] for r in rows) == ["mpc", "mpc", "pi", "pi", "pi-ff", "pi-ff"]
+    oracle = re.findall(r"oracle / PI ([\d.]+) \(the causal bound\), / PI with feedforward "
+                        r"([\d.]+); MPC / oracle ([\d.]+)", proc.stdout)
+    assert len(oracle) == 2, proc.stdout
+    # no causal controller beats the oracle by more than its horizon and local optima allow
+    assert all(0 < float(o) < 1.0 and float(m) > 0.95 for o, _, m in oracle), oracle
