@@ -1,0 +1,168 @@
+"""The controller step's tail on the paper scenario, this tree against an earlier one in the same
+run (issue 48, goal 3: median no slower than the previous release, p99 at most 2 ms).
+
+For each law (the paper's, the default tracking law) the robust MPC runs the paper scenario
+(``scenarios/paper_steps.csv``, 1,601 steps) in closed loop with the four-tank FMU, in a fresh
+process per run, once per round for this tree and for ``--baseline`` (a git revision, unpacked
+with ``git archive`` into a temporary folder; its kernels are compiled into the same cache,
+keyed by their source), alternating which goes first so that the machine's load hits both
+alike. Timed: the whole controller step (``RobustMPCController.step``: observer, governor,
+FHOCP and its answer check), as ``cosim run`` calls it.
+
+Printed per law and tree: median, p90, p99 and max of the step [ms] over all rounds, the
+ratios this / baseline, and what the slowest 1 % of this tree's steps are: their SQP
+iterations, how many hit the iteration cap, how many fall within two samples of a set-point
+change and (the paper's law) how many while its reference governor holds the reference short
+of the set-point; then whether both trees applied the same inputs (largest difference as a
+share of the input box).
+
+Usage::
+
+    .venv/bin/python benchmarks/bench_step_tail.py [--baseline REV] [--rounds 3]
+        [--laws paper,tracking]
+
+The baseline must have ``cosim.api.run`` and ``cosim_adapters.robust_mpc`` (every tree since
+the controller moved into its adapter package).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tarfile
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIO = "scenarios/paper_steps.csv"
+
+#: Run in the tree's folder (its packages first on sys.path): one closed loop, the step timed.
+CHILD = r"""
+import json, sys, time
+import numpy as np
+from cosim import api
+from cosim_adapters.robust_mpc import RobustMPCController
+
+law, plant, out = sys.argv[1], sys.argv[2], sys.argv[3]
+times = []
+original = RobustMPCController.step
+
+def timed(self, t, dt):
+    t0 = time.perf_counter()
+    original(self, t, dt)
+    times.append((time.perf_counter() - t0) * 1e3)
+
+RobustMPCController.step = timed
+run = api.run("scenarios/paper_steps.csv", plant=plant, options={"law": law}, figure=False)
+cols = list(run.result.columns)
+rows = np.asarray(run.result.rows, dtype=float)
+pick = lambda name: rows[:, cols.index(name)].tolist() if name in cols else []
+json.dump({"status": run.status, "ms": times, "time": pick("time"),
+           "iterations": pick("ctrl.iterations"), "governor": pick("ctrl.governor_lambda"),
+           "inputs": {u: pick(f"ctrl.{u}") for u in run.result.inputs},
+           "refs": {r: pick(f"ref.{r}") for r in run.result.references},
+           # an older tree's summary may not carry its options: the largest count seen
+           "max_iter": run.summary["controller_summary"].get("options", {}).get(
+               "max_iter") or int(max(pick("ctrl.iterations")))},
+          open(out, "w"))
+"""
+
+
+def unpack(rev: str, folder: Path) -> Path:
+    """The tree of ``rev`` (``git archive``) in ``folder``."""
+    data = subprocess.run(["git", "-C", str(ROOT), "archive", "--format=tar", rev],
+                          check=True, capture_output=True).stdout
+    tar = folder / "tree.tar"
+    tar.write_bytes(data)
+    tree = folder / "tree"
+    with tarfile.open(tar) as t:
+        t.extractall(tree, filter="data")
+    return tree
+
+
+def one_run(tree: Path, law: str, plant: Path, out: Path) -> dict:
+    """One closed loop of ``law`` with ``tree``'s packages, in a fresh process."""
+    env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1"}
+    proc = subprocess.run([sys.executable, "-c", CHILD, law, str(plant), str(out)], cwd=tree,
+                          env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"bench_step_tail: {tree} law={law} failed:\n{proc.stderr[-2000:]}")
+    found = json.loads(out.read_text())
+    if found["status"] != "ok":
+        raise SystemExit(f"bench_step_tail: {tree} law={law}: run {found['status']}")
+    return found
+
+
+def stats(ms: np.ndarray) -> str:
+    return (f"median {np.median(ms):6.3f}  p90 {np.percentile(ms, 90):6.3f}  "
+            f"p99 {np.percentile(ms, 99):6.3f}  max {ms.max():6.3f} ms")
+
+
+def tail(run: dict) -> str:
+    """What the slowest 1 % of one run's steps are."""
+    ms, it = np.asarray(run["ms"]), np.asarray(run["iterations"])
+    t = np.asarray(run["time"])
+    k = max(1, len(ms) // 100)
+    slow = np.argsort(ms)[-k:]
+    ref = np.column_stack([np.asarray(v) for v in run["refs"].values()])
+    changed = np.flatnonzero(np.any(np.abs(np.diff(ref, axis=0)) > 0, axis=1)) + 1
+    dt = t[1] - t[0]
+    near = sum(bool(np.any((t[i] - t[changed] >= 0) & (t[i] - t[changed] <= 2 * dt)))
+               for i in slow)
+    held = (f", {int(np.sum(np.asarray(run['governor'])[slow] < 1))} with the governor's "
+            "reference short of the set-point (lambda < 1)") if run["governor"] else ""
+    return (f"slowest {k}: iterations median {np.median(it[slow]):.0f} (all steps "
+            f"{np.median(it):.0f}), {int(np.sum(it[slow] >= run['max_iter']))} at the cap of "
+            f"{run['max_iter']}, {near} within two samples of a set-point change{held}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--baseline", default="HEAD", help="git revision (default HEAD)")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--laws", default="paper,tracking")
+    args = parser.parse_args(argv)
+    plant = ROOT / "fmus" / "FourTank.fmu"
+    if not plant.is_file():
+        raise SystemExit(f"bench_step_tail: {plant} missing: run make fmus")
+    laws = args.laws.split(",")
+    with tempfile.TemporaryDirectory(prefix="bench-step-tail-") as tmp:
+        base = unpack(args.baseline, Path(tmp))
+        trees = {"this": ROOT, "baseline": base}
+        runs: dict[tuple[str, str], list[dict]] = {}
+        for r in range(args.rounds):
+            for law in laws:
+                order = ("this", "baseline") if r % 2 == 0 else ("baseline", "this")
+                for name in order:
+                    out = Path(tmp) / f"{name}-{law}-{r}.json"
+                    runs.setdefault((name, law), []).append(
+                        one_run(trees[name], law, plant, out))
+                    print(f"round {r + 1}/{args.rounds} {law:8s} {name:8s} done", flush=True)
+    rev = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", args.baseline],
+                         capture_output=True, text=True).stdout.strip()
+    print(f"\ncontroller step on {SCENARIO}, {args.rounds} rounds; baseline {args.baseline} "
+          f"({rev}); {os.cpu_count()} CPUs")
+    for law in laws:
+        ms = {n: np.concatenate([run["ms"] for run in runs[(n, law)]]) for n in trees}
+        print(f"{law} law")
+        for n in trees:
+            print(f"  {n:8s} {stats(ms[n])}")
+        a, b = ms["this"], ms["baseline"]
+        print(f"  ratio    median {np.median(a) / np.median(b):.2f}x  p99 "
+              f"{np.percentile(a, 99) / np.percentile(b, 99):.2f}x  (aim: median <= 1, "
+              f"p99 <= 2 ms)")
+        print(f"  this tree's {tail(runs[('this', law)][0])}")
+        first = runs[("this", law)][0]["inputs"], runs[("baseline", law)][0]["inputs"]
+        gap = max((np.max(np.abs(np.subtract(first[0][c], first[1][c])))
+                   / max(np.ptp(first[1][c]), 1e-300) for c in first[0]), default=0.0)
+        print(f"  inputs: largest difference between the trees {gap:.1e} of their range")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

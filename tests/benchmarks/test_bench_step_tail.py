@@ -1,0 +1,38 @@
+"""``benchmarks/bench_step_tail.py`` as a user runs it (its own process, one round, the paper's
+law): both trees' closed loops run (the baseline unpacked from git), the step's statistics,
+their ratios and the tail's make-up are printed, and a baseline at HEAD applies this tree's
+inputs to the bit where the controller is unchanged."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+@pytest.mark.slow
+def test_the_benchmark_times_both_trees_and_explains_the_tail() -> None:
+    changed = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--",
+                              "controllers", "cosim", "cosim_adapters"],
+                             capture_output=True, text=True, check=True).stdout.strip()
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_step_tail.py"),
+                           "--rounds", "1", "--laws", "paper"], capture_output=True, text=True,
+                          timeout=900, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    rows = re.findall(r"(this|baseline) +median +([\d.]+) +p90 +([\d.]+) +p99 +([\d.]+) +max "
+                      r"+([\d.]+) ms", proc.stdout)
+    assert [r[0] for r in rows] == ["this", "baseline"]
+    assert all(0 < float(r[1]) <= float(r[2]) <= float(r[3]) <= float(r[4]) for r in rows)
+    assert re.search(r"ratio +median [\d.]+x +p99 [\d.]+x", proc.stdout)
+    tail = re.search(r"slowest (\d+): iterations median (\d+) \(all steps (\d+)\), (\d+) at the "
+                     r"cap of 15, (\d+) within two samples of a set-point change, (\d+) with "
+                     r"the governor", proc.stdout)
+    assert tail and int(tail[1]) == 16 and int(tail[4]) <= 16, proc.stdout
+    gap = float(re.search(r"largest difference between the trees ([\d.e+-]+)", proc.stdout)[1])
+    if not changed:   # the same controller at HEAD: the same inputs
+        assert gap == 0.0
