@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all setup fmus demo test docs lint bench clean
+.PHONY: all setup fmus demo test docs lint bench acados clean
 
 all: fmus
 
@@ -33,7 +33,9 @@ demo: fmus
 # its module-scoped fixtures (a trained model, built FMUs) are made once: under 11 min on 2
 # cores (17 min in one process). JOBS=1 runs it in one process.
 JOBS ?= 2
+# acados (benchmarks/bench_acados.py's test) when PyPI serves it; its test is skipped without.
 test: fmus docs
+	-$(MAKE) --no-print-directory acados
 	$(BIN)/python -m pytest $(if $(filter-out 1,$(JOBS)),-n $(JOBS) --dist loadscope)
 
 # The documentation site (mkdocs.yml, docs/): a strict build, any warning is an error.
@@ -43,8 +45,19 @@ docs: $(STAMP)
 lint: $(STAMP)
 	$(BIN)/ruff check .
 
-bench: fmus
+bench: fmus acados
 	for b in benchmarks/bench_*.py; do $(BIN)/python $$b || exit 1; done
+
+# acados beside the kernel (benchmarks/bench_acados.py) in a venv of its own: the
+# comma-deps-acados wheel (acados, HPIPM, its Python template) vendors its own casadi, which
+# cannot share .venv with the project's.
+ACADOS_VENV := .venv-acados
+acados: $(ACADOS_VENV)/.installed
+
+$(ACADOS_VENV)/.installed:
+	$(PYTHON) -m venv $(ACADOS_VENV)
+	$(ACADOS_VENV)/bin/python -m pip install --quiet comma-deps-acados==0.2.2.post92
+	touch $@
 
 clean:
 	rm -rf fmus/build fmus/*.fmu results site .pytest_cache
