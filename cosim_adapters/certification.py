@@ -24,9 +24,11 @@ the summary says ``certified: false`` with the reason, and the run prints it onc
 (:attr:`Certification.notice`).
 
 A model no mode runs is refused with :class:`NotUsable`, in the words of ``cosim certify``'s
-verdict, *not usable*, whatever the option: ``ν ≥ 1`` (an infinite terminal weight,
-:meth:`controllers.certification.certificates.Certificate.unusable`), or, for the tracking
-law, a measured tightening that leaves no admissible output in the box.
+verdict, *not usable*, whatever the option: ``ν ≥ 1`` with no finite terminal weight,
+proved or measured on its linearisation
+(:meth:`controllers.certification.certificates.Certificate.unusable`), or, for the tracking
+law, a measured tightening that leaves no admissible output in the box, or none that a steady
+state of the model reaches.
 """
 
 from __future__ import annotations

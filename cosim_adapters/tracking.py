@@ -282,7 +282,8 @@ class TrackingLaw:
         design = self.design
         cert_u, tracker, disturbance, _ = tracking_design(self.model, cert, design,
                                                           gains_certified=False, cert=cert)
-        if not tracker.hypotheses["Ys_nonempty"]:
+        h = tracker.hypotheses
+        if not h["Ys_nonempty"]:
             given = design["alpha_c"]
             raise NotUsable(
                 self.component,
@@ -291,8 +292,33 @@ class TrackingLaw:
                 + (f" with alpha_c = {given:g}; fix: a smaller alpha_c" if given is not None
                    else ": the model is too far from the plant to control it; fix: train it "
                    "longer or on more data"))
+        if h["grid_points_admissible"] == 0:   # admissible outputs, maybe none of them steady
+            unreachable = self._unreachable(h["Ys_centre"])
+            if unreachable:
+                raise NotUsable(
+                    self.component,
+                    f"{reason}, and none of the model's steady states at {h['grid_points']} "
+                    "steady inputs across the input box has its output in the box tightened "
+                    f"by its measured prediction error ({margin_text(self.model, cert_u)}), "
+                    f"nor does one reach the middle of it ({unreachable}): it cannot be "
+                    "steered to any output the constraints allow; fix: train it longer or on "
+                    "more data, or widen the output box if the plant allows it")
         return TrackingLaw(self.model, cert_u, tracker, disturbance, design, self.component,
                            certified=False)
+
+    def _unreachable(self, y: Any) -> str:
+        """Why no steady state of the model has the output ``y`` (normalised) with its inputs
+        in the box (the equilibrium search's words, physical units); ``""`` when one has."""
+        from controllers.equilibrium import equilibrium
+        from controllers.errors import SetpointError
+
+        if y is None:
+            return "no admissible output"
+        try:
+            equilibrium(self.model, np.asarray(y, dtype=float))
+        except SetpointError as exc:
+            return str(exc)
+        return ""
 
     def summary(self) -> dict[str, Any]:
         fh = self.fhocp

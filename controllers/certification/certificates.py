@@ -63,7 +63,7 @@ NU_FIX = "train the model with the nu constraint (cosim train keeps nu <= 0.98)"
 
 JSON_KEYS = ("sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r", "nu_o",
              "rho_o", "c_o", "kappa", "L_max", "w_y_bar", "w_bar", "w_L", "a", "b", "e_o0",
-             "e_inf", "s", "alpha", "assumption_1", "recursive_feasibility")
+             "e_inf", "s", "s_measured", "alpha", "assumption_1", "recursive_feasibility")
 
 
 # --------------------------------------------------------------------------------------
@@ -126,6 +126,11 @@ class Certificate:
     #: horizon (``c_s e_d(i)``, lem:held-disturbance), ``None`` without disturbances; the
     #: uncertified design's measured margins hold them already (measured with them held)
     b_held: np.ndarray | None = None
+    #: With an infinite ``s`` (``ν ≥ 1``): ``eq:definition_s`` measured on the model's
+    #: linearisation at its steady states
+    #: (:class:`~controllers.certification.measured_terminal.MeasuredTerminal`), the terminal
+    #: weight of the uncertified design; ``None`` when ``s`` is finite.
+    measured: Any = None
 
     # -- dimensions and derived scalars ----------------------------------------------------
     @property
@@ -137,6 +142,12 @@ class Certificate:
     def q(self) -> int:
         """Number of output constraints (rows of ``L``)."""
         return int(self.L.shape[0])
+
+    @property
+    def s_measured(self) -> float:
+        """The measured terminal weight ``ŝ`` of the uncertified design (:attr:`measured`;
+        ``nan`` when ``s`` is finite and none was measured)."""
+        return math.nan if self.measured is None else float(self.measured.s)
 
     @property
     def e_tilde(self) -> float:
@@ -226,16 +237,38 @@ class Certificate:
         prints and saves and ``cosim run`` refuses with.
 
         With ``ν ≥ 1`` (``th:stability-bonassi``) the contraction ``ρ_s`` of ``lem:Vs`` is
-        ``≥ 1``, so the terminal weight ``s`` of ``eq:definition_s`` is infinite: the FHOCP
-        has no finite cost, and no tightening, the theorem's or the uncertified mode's
-        measured one, makes it so.
+        ``≥ 1``, so the terminal weight ``s`` of ``eq:definition_s`` is infinite; the
+        uncertified design then takes the terminal weight measured on the model's
+        linearisation at its steady states (:attr:`measured`,
+        :mod:`controllers.certification.measured_terminal`). Only when that is infinite too
+        (a steady state whose linearisation is unstable) has the FHOCP no finite cost,
+        certified or not.
         """
         if self.nu < 1 and math.isfinite(self.s):
             return ""
-        return (f"stability index nu = {self.nu:.4g} >= 1 (th:stability-bonassi), so rho_s "
+        found = self.measured
+        if found is not None and math.isfinite(found.s):
+            return ""   # the uncertified design's terminal weight, measured
+        head = (f"stability index nu = {self.nu:.4g} >= 1 (th:stability-bonassi), so rho_s "
                 f"= {self.rho_s:.4g} >= 1 (lem:Vs) and the terminal weight s "
-                "(eq:definition_s) is infinite: the FHOCP has no finite cost, certified or "
-                f"not; fix: {NU_FIX}")
+                "(eq:definition_s) is infinite")
+        if found is None or found.u is None:
+            lin = "and the model has no steady state in the input box to measure one at"
+        else:
+            lin = (f"nor is the cost to go of the model's linearisation finite (spectral "
+                   f"radius {found.radius:.4g} >= 1 at its steady state for "
+                   f"{self._input_text(found.u)})")
+        return f"{head}, {lin}: the FHOCP has no finite cost, certified or not; fix: {NU_FIX}"
+
+    def _input_text(self, u: np.ndarray) -> str:
+        """A steady input (normalised) in the model's names and units."""
+        model = self.model
+        if model is None or getattr(model, "input_names", None) is None:
+            return "u = " + ", ".join(f"{v:.3g}" for v in u) + " (normalised)"
+        phys = model.denormalize_u(np.asarray(u, dtype=float))
+        units = getattr(model, "input_units", None) or [""] * len(phys)
+        return ", ".join(f"{name} = {v:.4g} {unit}".rstrip() for name, v, unit in zip(
+            model.input_names, phys, units, strict=True))
 
     def failures(self, y_bar_norm: Sequence[float] | None = None) -> list[str]:
         """Each failed hypothesis of ``th:feasibility-stability``, as one message each.
@@ -442,13 +475,19 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
 
         b_held = held_error(held, rho_s_, N + K)[K:, None] * cs[None, :]
         b = b + b_held
+    s = terminal_weight(n, Q, rho_s_)
+    measured = None
+    if not math.isfinite(s):   # the uncertified design's, measured (ν ≥ 1)
+        from controllers.certification.measured_terminal import measured_terminal_weight
+
+        measured = measured_terminal_weight(params, Q)
     return Certificate(
         params=params, N=int(N), Q=Q, R=R, L=L, h=h, sigma_z=sz, sigma_r=sr, phi_h=ph,
         nu=nu_, rho_s=rho_s_, c_s=cs, L_z=L_z, L_r=L_r, nu_o=nu_o_, rho_o=rho_o_,
         c_o=cs.copy(), kappa=kap, L_max=lmax, w_y_bar=w_y_bar, w_bar=w_bar,
         w_L=w_L(L, w_y_bar), a=a, b=b, e_o0=float(e_o0), e_inf=e_inf(rho_o_, w_bar),
-        s=terminal_weight(n, Q, rho_s_), gain_scale=gain_scale, model=model,
-        row_names=row_names, b_held=b_held)
+        s=s, gain_scale=gain_scale, model=model, row_names=row_names, b_held=b_held,
+        measured=measured)
 
 
 def uncertified_certificate(cert: Certificate, margins: np.ndarray) -> Certificate:
@@ -468,9 +507,18 @@ def uncertified_certificate(cert: Certificate, margins: np.ndarray) -> Certifica
         raise DesignError(f"margins have shape {margins.shape}, expected {cert.a.shape}")
     margins[0] = -np.inf
     zero = np.zeros_like(cert.L_z)
-    return replace(cert, L_z=zero, L_r=zero.copy(), nu_o=cert.nu, rho_o=cert.rho_s, kappa=0.0,
-                   L_max=0.0, w_bar=0.0, w_L=np.zeros_like(cert.w_L), a=np.zeros_like(cert.a),
-                   b=margins, e_o0=0.0, e_inf=0.0, gain_scale=0.0, tightening="measured")
+    s, rho = cert.s, cert.rho_s
+    if not math.isfinite(s) and cert.measured is not None:
+        # ν ≥ 1: the terminal weight measured on the linearisation, and the contraction
+        # eq:definition_s would need for it (controllers.certification.measured_terminal)
+        from controllers.certification.measured_terminal import equivalent_contraction
+
+        s = cert.measured.s
+        rho = equivalent_contraction(cert.n, cert.Q, s)
+    return replace(cert, L_z=zero, L_r=zero.copy(), nu_o=cert.nu, rho_s=rho, rho_o=rho,
+                   kappa=0.0, L_max=0.0, w_bar=0.0, w_L=np.zeros_like(cert.w_L),
+                   a=np.zeros_like(cert.a), b=margins, e_o0=0.0, e_inf=0.0, gain_scale=0.0,
+                   s=s, tightening="measured")
 
 
 # --------------------------------------------------------------------------------------

@@ -166,7 +166,7 @@ def test_to_json_has_exactly_the_paper_keys(hand_cert: certs.Certificate) -> Non
     assert list(doc) == list(certs.JSON_KEYS)
     assert set(doc) == {"sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r",
                         "nu_o", "rho_o", "c_o", "kappa", "L_max", "w_y_bar", "w_bar", "w_L",
-                        "a", "b", "e_o0", "e_inf", "s", "alpha", "assumption_1",
+                        "a", "b", "e_o0", "e_inf", "s", "s_measured", "alpha", "assumption_1",
                         "recursive_feasibility"}
     json.dumps(doc)  # serialisable
     assert doc["alpha"] == pytest.approx(ALPHA_01) and doc["assumption_1"] is True

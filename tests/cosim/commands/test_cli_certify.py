@@ -18,7 +18,7 @@ from tests.controllers.random_gru import random_gru_model
 
 KEYS = ["sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r", "nu_o", "rho_o",
         "c_o", "kappa", "L_max", "w_y_bar", "w_bar", "w_L", "a", "b", "e_o0", "e_inf", "s",
-        "alpha", "assumption_1", "recursive_feasibility"]
+        "s_measured", "alpha", "assumption_1", "recursive_feasibility"]
 
 
 @pytest.fixture()
@@ -94,19 +94,36 @@ def test_quiet_prints_only_the_verdict_of_an_uncertified_model(model_file: Path,
     assert "not certified (1 hypothesis check(s) failed)" in captured.err
 
 
+def unstable_at_its_steady_states(m: GRUModel) -> None:
+    """``m`` (a random GRU) made ``ν ≥ 1`` and unstable at its steady states: no terminal
+    weight, proved or measured (controllers.certification.measured_terminal)."""
+    n = m.params["U_h"].shape[0]
+    m.params["b_z"] = np.full(n, -4.0)           # the update gate open: x+ = h
+    m.params["U_h"] = 3.0 * np.eye(n)           # h = tanh(3 x + ...): unstable near x = 0
+    m.params["W_h"] = np.zeros_like(m.params["W_h"])
+    m.params["b_h"] = np.zeros(n)
+
+
 def test_non_delta_iss_model_is_not_usable_exit_2(tmp_path: Path, capsys) -> None:
-    """ν ≥ 1: the table, the failing hypothesis with its fix, the verdict NOT USABLE and one
-    line on standard error (exit 2: cosim run refuses it)."""
+    """ν ≥ 1 and unstable at its steady states (no terminal weight, proved or measured): the
+    table, the failing hypothesis with its fix, the verdict NOT USABLE and one line on standard
+    error (exit 2: cosim run refuses it). ν ≥ 1 alone (U_z scaled by 40, stable at its steady
+    states) is usable uncertified: exit 1."""
     m = random_gru_model(0)
     m.params["U_z"] *= 40
     m.w_y_bar = 0.01
     path = tmp_path / "bad.json"
+    m.save(path)
+    assert main(["certify", str(path)]) == 1
+    assert "usable: the robust MPC runs uncertified" in capsys.readouterr().out
+    unstable_at_its_steady_states(m)
     m.save(path)
     assert main(["certify", str(path)]) == 2
     captured = capsys.readouterr()
     assert "th:stability-bonassi" in captured.out
     assert "FAILS: stability (δISS, th:stability-bonassi): stability index nu = " in captured.out
     assert captured.err.startswith("cosim certify: not usable: stability index nu = ")
+    assert "spectral radius" in captured.err and "fix: " in captured.err
     assert captured.err.count("\n") == 1
 
 
@@ -266,13 +283,14 @@ def test_save_writes_the_verdict_certified_or_not(case: str, tmp_path: Path,
                                                   no_admissible_setpoint: Path,
                                                   capsys) -> None:
     """--save always writes what was computed: the gains, w̄_y and the verdict, whose
-    ``certified`` is false with the reasons. Both models are refused by the robust MPC (ν ≥ 1:
-    an infinite terminal weight; a test error wider than the box: no admissible output even
-    with the measured tightening): exit 2, the saved ``usable`` false with the reason, the
-    verdict NOT USABLE, and ``cosim run`` refusing it in the same words."""
+    ``certified`` is false with the reasons. Both models are refused by the robust MPC (ν ≥ 1
+    and unstable at its steady states: no terminal weight; a test error wider than the box: no
+    admissible output even with the measured tightening): exit 2, the saved ``usable`` false
+    with the reason, the verdict NOT USABLE, and ``cosim run`` refusing it in the same
+    words."""
     if case == "nu":  # ν ≥ 1 (th:stability-bonassi fails)
         m = random_gru_model(0)
-        m.params["U_z"] *= 40
+        unstable_at_its_steady_states(m)
         m.w_y_bar = 0.01
         path = tmp_path / "bad.json"
         m.save(path)

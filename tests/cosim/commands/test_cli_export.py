@@ -104,9 +104,9 @@ def test_an_ssp_of_a_controller_that_is_no_fmu_is_one_line(capsys: pytest.Captur
 def test_a_model_no_law_can_control_is_named_in_the_users_terms(
         capsys: pytest.CaptureFixture, tmp_path: Path) -> None:
     """The shipped model with its candidate, recurrent and output weights scaled up by 100
-    (rho_s >= 1: no certificate, and an infinite terminal weight): export-fmu and run refuse
-    it in one line that names the quantity, never a library's internal message (scipy's
-    "Invalid input for linprog"), and write nothing."""
+    (rho_s >= 1: no certificate, and its steady outputs all far outside the box): export-fmu
+    and run refuse it in one line that says why in the user's units, never a library's
+    internal message (scipy's "Invalid input for linprog"), and write nothing."""
     import json
 
     from controllers.model import DEFAULT_MODEL
@@ -122,6 +122,7 @@ def test_a_model_no_law_can_control_is_named_in_the_users_terms(
                  ["run", str(scenario), "--model", str(model), "--out", str(tmp_path / "o")]):
         code, err = _run(capsys, *argv)
         assert code == 2 and err.count("\n") == 1, err
-        assert "the model is not usable" in err and "terminal weight s" in err, err
+        assert "the model is not usable" in err and "cannot be steered" in err, err
+        assert "the closest reachable equilibrium output is h1=" in err, err
         assert "linprog" not in err and "SW" not in err, err
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.csv", "scaled.json"]

@@ -46,7 +46,7 @@ def _saturated(doc: dict) -> None:
 CASES = {
     "certified": (lambda doc: None, "1.2,1.3", 0),
     "uncertified": (lambda doc: None, "1.97,1.0", 1),   # next to the box's edge
-    "recurrent-x10": (_scaled("U_h", by=10.0), "1.2,1.3", 2),             # nu = 9.8
+    "recurrent-x10": (_scaled("U_h", by=10.0), "1.2,1.3", 1),   # nu = 9.8: s measured
     "scaled-x100": (_scaled("W_h", "U_h", "U_o", by=100.0), "1.2,1.3", 2),
     "narrow-box": (_narrow_box, "0.65,0.65", 2),
 }
