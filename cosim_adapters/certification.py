@@ -118,7 +118,12 @@ class NotUsable(CosimError):
 
     def __init__(self, component: str, why: str) -> None:
         super().__init__(f"controller {component!r}: {NOT_USABLE}{why}")
-        self.why = why
+        self.component, self.why = component, why
+
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:
+        """Pickled as its arguments: a refusal raised in a worker process (``cosim tune``'s
+        closed loops, a campaign's) reaches the parent as the same refusal."""
+        return (NotUsable, (self.component, self.why))
 
 
 def go_uncertified(ctrl: Any, reason: str) -> None:

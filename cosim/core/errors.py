@@ -87,6 +87,10 @@ class ParameterError(CosimError):
         self.parameter = parameter
         self.detail = detail
 
+    def __reduce__(self) -> tuple[type, tuple[str, str]]:
+        """Pickled as its arguments (raised in a worker process, re-raised in the parent)."""
+        return (ParameterError, (self.parameter, self.detail))
+
     def as_option(self) -> CosimError:
         """The same error worded for the command line: ``--<parameter>`` with dashes."""
         return CosimError(f"--{self.parameter.replace('_', '-')}{self.detail}")
@@ -113,6 +117,10 @@ class FmuError(SimulationFailed):
         super().__init__(message)
         self.function = function
         self.status = status
+
+    def __reduce__(self) -> tuple[type, tuple[str, str, int | None]]:
+        """Pickled with the FMI function and status (a worker's failure keeps them)."""
+        return (FmuError, (str(self), self.function, self.status))
 
     @property
     def fatal(self) -> bool:

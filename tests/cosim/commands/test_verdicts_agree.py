@@ -1,10 +1,11 @@
 """One verdict read everywhere: for models that fail in different ways, ``cosim certify``
 (its verdict line, exit code and saved ``certificate``), ``cosim run`` and ``cosim
-export-fmu`` agree on whether the robust MPC runs the model, and a refusal is the same
+export-fmu`` (and, for the named cases, ``cosim tune``, ``cosim campaign`` and the exported
+controller FMU) agree on whether the robust MPC runs the model, and a refusal is the same
 sentence everywhere, never a library's message; a usable model runs a scenario with the model
-itself as the plant, without a constraint violation. Named cases, then generated ones
-(hypothesis): the shipped model with a weight array scaled, its gate biases shifted, its
-output box narrowed."""
+itself as the plant, without a constraint violation (the Python controller, a campaign's run
+and the controller FMU alike). Named cases, then generated ones (hypothesis): the shipped
+model with a weight array scaled, its gate biases shifted, its output box narrowed."""
 
 from __future__ import annotations
 
@@ -60,11 +61,17 @@ def _run(capsys: pytest.CaptureFixture, *argv: str) -> tuple[int, str, str]:
     return code, out, err
 
 
+def _violations(summary: Path) -> int:
+    doc = json.loads(summary.read_text())
+    return sum(v["count"] for v in doc["kpis"]["violations"].values())
+
+
 def _agree(doc: dict, setpoint: str, folder: Path, capsys: pytest.CaptureFixture,
-           start: str = "0.65,0.65") -> int:
+           start: str = "0.65,0.65", every_command: bool = False) -> int:
     """certify, run (the model as the plant) and export-fmu on the model ``doc`` with the
-    scenario's second set-point ``setpoint``: the same verdict, the same refusal sentence,
-    no internal message, no violation on a usable model; certify's exit code."""
+    scenario's second set-point ``setpoint`` (``every_command``: tune, a one-run campaign and
+    the exported FMU in closed loop too): the same verdict, the same refusal sentence, no
+    internal message, no violation on a usable model; certify's exit code."""
     model = folder / "model.json"
     model.write_text(json.dumps(doc))
     scenario = folder / "s.csv"
@@ -81,21 +88,39 @@ def _agree(doc: dict, setpoint: str, folder: Path, capsys: pytest.CaptureFixture
         assert "NOT USABLE" in out
         why = err.splitlines()[-1].removeprefix("cosim certify: not usable: ")
         assert why == verdict["unusable_reason"] and "fix: " in why
-    for argv in (["run", str(scenario), "--model", str(model), "--plant", f"model:{model}",
-                  "--out", str(folder / "run"), "--quiet", "--no-figure"],
-                 ["export-fmu", str(model), "--out", str(folder / "C.fmu"), "--quiet"]):
+    commands = [["run", str(scenario), "--model", str(model), "--plant", f"model:{model}",
+                 "--out", str(folder / "run"), "--quiet", "--no-figure"],
+                ["export-fmu", str(model), "--out", str(folder / "C.fmu"), "--quiet"]]
+    if every_command:
+        spec = folder / "campaign.toml"
+        spec.write_text(f'[campaign]\nname = "agree"\nruns = 1\nseed = 1\nscenario = '
+                        f'"{scenario.name}"\nplant = "model:{model.name}"\nmodel = '
+                        f'"{model.name}"\n')
+        commands += [["tune", str(model), "--quiet"],
+                     ["campaign", str(spec), "--out", str(folder / "camp"), "--quiet"]]
+    for argv in commands:
         status, _, err = _run(capsys, *argv)
         assert not any(word in err for word in INTERNAL), err
         if usable:
             assert status == 0, err
+        elif argv[0] == "campaign":   # the refusal after the spec's file:line and variant
+            assert status == 2 and err.startswith(f"cosim campaign: error: {spec}:") and \
+                err.endswith(f"controller 'mpc': the model is not usable: {why}\n"), err
         else:
             assert status == 2 and err == (f"cosim {argv[0]}: error: controller 'mpc': the "
                                            f"model is not usable: {why}\n"), err
     if usable:
-        summary = json.loads((folder / "run" / "summary.json").read_text())
-        assert sum(v["count"] for v in summary["kpis"]["violations"].values()) == 0
+        assert _violations(folder / "run" / "summary.json") == 0
+        if every_command:
+            assert [_violations(f / "summary.json")
+                    for f in sorted((folder / "camp" / "runs").iterdir())] == [0]
+            status, _, err = _run(capsys, "run", str(scenario), "--controller",
+                                  str(folder / "C.fmu"), "--plant", f"model:{model}", "--out",
+                                  str(folder / "fmu"), "--quiet", "--no-figure")
+            assert status == 0 and _violations(folder / "fmu" / "summary.json") == 0, err
     else:
         assert not (folder / "run").exists() and not (folder / "C.fmu").exists()
+        assert not (folder / "camp" / "runs").exists()
     return code
 
 
@@ -106,7 +131,7 @@ def test_certify_run_and_export_agree(case: str, tmp_path: Path,
     edit, setpoint, exit_code = CASES[case]
     doc = json.loads(Path(DEFAULT_MODEL).read_text())
     edit(doc)
-    assert _agree(doc, setpoint, tmp_path, capsys) == exit_code
+    assert _agree(doc, setpoint, tmp_path, capsys, every_command=True) == exit_code
 
 
 WEIGHTS = ("W_z", "U_z", "W_r", "U_r", "W_h", "U_h", "U_o")
