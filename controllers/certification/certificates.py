@@ -270,17 +270,28 @@ class Certificate:
         return ", ".join(f"{name} = {v:.4g} {unit}".rstrip() for name, v, unit in zip(
             model.input_names, phys, units, strict=True))
 
-    def failures(self, y_bar_norm: Sequence[float] | None = None) -> list[str]:
-        """Each failed hypothesis of ``th:feasibility-stability``, as one message each.
-
-        Without a set-point only the design conditions (ν < 1, ν_o < 1) are checked.
-        """
+    def _design_failures(self) -> list[str]:
+        """The design conditions: ν < 1 and ν_o < 1; for the uncertified design
+        (``tightening = "measured"``: no contraction assumed, the observer runs the model),
+        a finite terminal weight, the theorem's or the measured one."""
+        if self.tightening == "measured":
+            return [] if math.isfinite(self.s) else [
+                "the terminal weight s (eq:definition_s) is infinite, proved or measured"]
         out = []
         if not self.nu < 1:
             out.append(f"δISS condition (th:stability-bonassi) fails: nu = {self.nu:.6g} >= 1")
         if not self.nu_o < 1:
             out.append("observer condition (eq:condition-observer-convergence) fails: "
                        f"nu_o = {self.nu_o:.6g} >= 1")
+        return out
+
+    def failures(self, y_bar_norm: Sequence[float] | None = None) -> list[str]:
+        """Each failed hypothesis of ``th:feasibility-stability``, as one message each.
+
+        Without a set-point only the design conditions (ν < 1, ν_o < 1; the uncertified
+        design's: a finite terminal weight) are checked.
+        """
+        out = self._design_failures()
         if y_bar_norm is not None and out:
             out.append("set-point checks (Assumption 1, alpha, eq:condition-recursive-"
                        "feasibility) not evaluated: they need nu < 1 and nu_o < 1")
@@ -331,7 +342,7 @@ class Certificate:
     def ok(self, y_bar_norm: Sequence[float] | None = None) -> bool:
         """``True`` when :meth:`failures` is empty (the same checks, without the messages:
         the reference governor asks at every level)."""
-        if not (self.nu < 1 and self.nu_o < 1):
+        if self._design_failures():
             return False
         if y_bar_norm is None:
             return True

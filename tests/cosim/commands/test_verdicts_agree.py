@@ -205,3 +205,36 @@ def few_samples(tmp_path_factory: pytest.TempPathFactory) -> dict:
 def test_a_model_trained_on_a_handful_of_samples_gets_one_verdict(
         few_samples: dict, tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
     assert _agree(few_samples, "1.0,1.0", tmp_path, capsys, start="0.8,0.8") in (0, 1, 2)
+
+
+@pytest.mark.slow
+def test_the_papers_law_runs_a_model_the_theory_rejects_on_its_measured_weight(
+        tmp_path: Path, capsys: pytest.CaptureFixture) -> None:
+    """The shipped model with U_h scaled by 10 (nu = 9.8) under the paper's law: certify
+    says usable uncertified (exit 1), and the Python controller and its FMU run the set-point
+    step on the model itself without a violation (the uncertified design's set-point checks
+    stand on its measured terminal weight, not on nu < 1)."""
+    doc = json.loads(Path(DEFAULT_MODEL).read_text())
+    _scaled("U_h", by=10.0)(doc)
+    model = tmp_path / "model.json"
+    model.write_text(json.dumps(doc))
+    scenario = tmp_path / "s.csv"
+    scenario.write_text(SCENARIO.format(start="0.65,0.65", h1=1.2, h2=1.3))
+    code, out, err = _run(capsys, "certify", str(model), "--law", "paper", "--setpoint",
+                          "0.65,0.65", "--setpoint", "1.2,1.3")
+    assert code == 1 and "usable: the robust MPC runs uncertified" in out, err
+    paper = ["--option", 'law="paper"']
+    status, _, err = _run(capsys, "run", str(scenario), "--model", str(model), *paper,
+                          "--plant", f"model:{model}", "--out", str(tmp_path / "run"),
+                          "--quiet", "--no-figure")
+    assert status == 0 and _violations(tmp_path / "run" / "summary.json") == 0, err
+    summary = json.loads((tmp_path / "run" / "summary.json").read_text())
+    assert summary["controller_summary"]["certified"] is False
+    assert summary["controller_summary"]["tightening"] == "measured"
+    status, _, err = _run(capsys, "export-fmu", str(model), *paper, "--out",
+                          str(tmp_path / "C.fmu"), "--quiet")
+    assert status == 0, err
+    status, _, err = _run(capsys, "run", str(scenario), "--controller", str(tmp_path / "C.fmu"),
+                          "--plant", f"model:{model}", "--out", str(tmp_path / "fmu"),
+                          "--quiet", "--no-figure")
+    assert status == 0 and _violations(tmp_path / "fmu" / "summary.json") == 0, err
