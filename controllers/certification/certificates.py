@@ -31,7 +31,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -53,6 +53,9 @@ from controllers.certification.bounds import (
 from controllers.certification.design import MAX_HORIZON, gain, horizon, weight
 from controllers.errors import DataError, DesignError, SetpointError
 from controllers.problem import ControlProblem, constraint_names, output_constraints
+
+if TYPE_CHECKING:
+    from controllers.certification.measured_terminal import MeasuredTerminal
 
 __all__ = ["JSON_KEYS", "MAX_HORIZON", "NU_FIX", "Certificate", "Reference", "admissible_ranges",
            "box_bounds", "box_ranges", "compute_certificate", "uncertified_certificate",
@@ -130,7 +133,7 @@ class Certificate:
     #: linearisation at its steady states
     #: (:class:`~controllers.certification.measured_terminal.MeasuredTerminal`), the terminal
     #: weight of the uncertified design; ``None`` when ``s`` is finite.
-    measured: Any = None
+    measured: MeasuredTerminal | None = None
 
     # -- dimensions and derived scalars ----------------------------------------------------
     @property
@@ -249,26 +252,12 @@ class Certificate:
         found = self.measured
         if found is not None and math.isfinite(found.s):
             return ""   # the uncertified design's terminal weight, measured
-        head = (f"stability index nu = {self.nu:.4g} >= 1 (th:stability-bonassi), so rho_s "
-                f"= {self.rho_s:.4g} >= 1 (lem:Vs) and the terminal weight s "
-                "(eq:definition_s) is infinite")
-        if found is None or found.u is None:
-            lin = "and the model has no steady state in the input box to measure one at"
-        else:
-            lin = (f"nor is the cost to go of the model's linearisation finite (spectral "
-                   f"radius {found.radius:.4g} >= 1 at its steady state for "
-                   f"{self._input_text(found.u)})")
-        return f"{head}, {lin}: the FHOCP has no finite cost, certified or not; fix: {NU_FIX}"
-
-    def _input_text(self, u: np.ndarray) -> str:
-        """A steady input (normalised) in the model's names and units."""
-        model = self.model
-        if model is None or getattr(model, "input_names", None) is None:
-            return "u = " + ", ".join(f"{v:.3g}" for v in u) + " (normalised)"
-        phys = model.denormalize_u(np.asarray(u, dtype=float))
-        units = getattr(model, "input_units", None) or [""] * len(phys)
-        return ", ".join(f"{name} = {v:.4g} {unit}".rstrip() for name, v, unit in zip(
-            model.input_names, phys, units, strict=True))
+        lin = ("and the model has no steady state in the input box to measure one at"
+               if found is None else found.why_infinite(self.model))
+        return (f"stability index nu = {self.nu:.4g} >= 1 (th:stability-bonassi), so rho_s = "
+                f"{self.rho_s:.4g} >= 1 (lem:Vs) and the terminal weight s (eq:definition_s) "
+                f"is infinite, {lin}: the FHOCP has no finite cost, certified or not; fix: "
+                f"{NU_FIX}")
 
     def _design_failures(self) -> list[str]:
         """The design conditions: ν < 1 and ν_o < 1; for the uncertified design

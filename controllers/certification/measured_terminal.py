@@ -24,6 +24,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -53,6 +54,23 @@ class MeasuredTerminal:
     s: float
     radius: float
     u: np.ndarray | None
+
+    def why_infinite(self, model: Any = None) -> str:
+        """Why ``ŝ`` is infinite, the steady state in ``model``'s input names and units
+        (normalised without a model); ``""`` when it is finite."""
+        if math.isfinite(self.s):
+            return ""
+        if self.u is None:
+            return "and the model has no steady state in the input box to measure one at"
+        if model is None or getattr(model, "input_names", None) is None:
+            where = "u = " + ", ".join(f"{v:.3g}" for v in self.u) + " (normalised)"
+        else:
+            phys = model.denormalize_u(np.asarray(self.u, dtype=float))
+            units = getattr(model, "input_units", None) or [""] * len(phys)
+            where = ", ".join(f"{name} = {v:.4g} {unit}".rstrip() for name, v, unit in zip(
+                model.input_names, phys, units, strict=True))
+        return (f"nor is the cost to go of the model's linearisation finite (spectral radius "
+                f"{self.radius:.4g} >= 1 at its steady state for {where})")
 
 
 def measured_terminal_weight(params: Mapping[str, np.ndarray], Q: np.ndarray,
