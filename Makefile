@@ -30,8 +30,8 @@ demo: fmus
 	$(BIN)/cosim run scenarios/paper_steps.csv --out results/demo
 
 # The suite in JOBS worker processes (pytest-xdist), each test module in one of them, so that
-# its module-scoped fixtures (a trained model, built FMUs) are made once: under 11 min on 2
-# cores (17 min in one process). JOBS=1 runs it in one process.
+# its module-scoped fixtures (a trained model, built FMUs) are made once: about 12 min on 2
+# cores. JOBS=1 runs it in one process.
 JOBS ?= 2
 # acados (benchmarks/bench_acados.py's test) when PyPI serves it; its test is skipped without.
 test: fmus docs
