@@ -4,8 +4,9 @@ export-fmu`` (and, for the named cases, ``cosim tune``, ``cosim campaign`` and t
 controller FMU) agree on whether the robust MPC runs the model, and a refusal is the same
 sentence everywhere, never a library's message; a usable model runs a scenario with the model
 itself as the plant, without a constraint violation (the Python controller, a campaign's run
-and the controller FMU alike). Named cases, then generated ones (hypothesis): the shipped
-model with a weight array scaled, its gate biases shifted, its output box narrowed."""
+and the controller FMU alike, the FMU's inputs those of the Python controller to the bit).
+Named cases, then generated ones (hypothesis): the shipped model with a weight array scaled,
+its gate biases shifted, its output box narrowed."""
 
 from __future__ import annotations
 
@@ -91,6 +92,8 @@ def _agree(doc: dict, setpoint: str, folder: Path, capsys: pytest.CaptureFixture
     commands = [["run", str(scenario), "--model", str(model), "--plant", f"model:{model}",
                  "--out", str(folder / "run"), "--quiet", "--no-figure"],
                 ["export-fmu", str(model), "--out", str(folder / "C.fmu"), "--quiet"]]
+    if every_command:   # the FMU designed for the scenario's set-points, as cosim run is
+        commands[1][2:2] = ["--scenario", str(scenario)]
     if every_command:
         spec = folder / "campaign.toml"
         spec.write_text(f'[campaign]\nname = "agree"\nruns = 1\nseed = 1\nscenario = '
@@ -118,6 +121,10 @@ def _agree(doc: dict, setpoint: str, folder: Path, capsys: pytest.CaptureFixture
                                   str(folder / "C.fmu"), "--plant", f"model:{model}", "--out",
                                   str(folder / "fmu"), "--quiet", "--no-figure")
             assert status == 0 and _violations(folder / "fmu" / "summary.json") == 0, err
+            python, fmu = (np.genfromtxt(folder / name / "results.csv", delimiter=",",
+                                         names=True) for name in ("run", "fmu"))
+            for column in ("ctrlqa", "ctrlqb"):   # the FMU's inputs are the Python ones
+                assert np.array_equal(python[column], fmu[column]), column
     else:
         assert not (folder / "run").exists() and not (folder / "C.fmu").exists()
         assert not (folder / "camp" / "runs").exists()
