@@ -105,12 +105,11 @@ def _oracle(out: Path, fmu: Path) -> list[float]:
         # the run's drawn plant parameters, applied to the FMU from the start as the
         # campaign applied them, and known to the oracle
         params = {k[len("plant."):]: v for k, v in draw.items() if k.startswith("plant.")}
-        head = ",".join(f"plant.{k}" for k in params)
-        first = ",".join(f"{v!r}" for v in params.values())
+        columns = ["time", "ref.T", "dist.T_in", *(f"plant.{k}" for k in params)]
+        lines = [[*row, *(repr(v) if i == 0 else "" for v in params.values())]
+                 for i, row in enumerate(rows)]
         scenario = folder / "oracle_scenario.csv"
-        scenario.write_text(f"time,ref.T,dist.T_in,{head}\n" + "".join(
-            f"{t},{r},{d},{first if i == 0 else ',' * (len(params) - 1)}\n"
-            for i, (t, r, d) in enumerate(rows)))
+        scenario.write_text("".join(",".join(cells) + "\n" for cells in [columns, *lines]))
         run = cosim.run(scenario, plant=fmu, controller="oracle_bound:OracleController",
                         options={"plant": "heater_dead_time", "fmu": str(fmu),
                                  "problem": str(PROBLEM), "parameters": params},

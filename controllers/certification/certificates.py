@@ -252,8 +252,8 @@ class Certificate:
         found = self.measured
         if found is not None and math.isfinite(found.s):
             return ""   # the uncertified design's terminal weight, measured
-        lin = ("and the model has no steady state in the input box to measure one at"
-               if found is None else found.why_infinite(self.model))
+        lin = ("and none was measured" if found is None   # a certificate made by hand
+               else found.why_infinite(self.model))
         return (f"stability index nu = {self.nu:.4g} >= 1 (th:stability-bonassi), so rho_s = "
                 f"{self.rho_s:.4g} >= 1 (lem:Vs) and the terminal weight s (eq:definition_s) "
                 f"is infinite, {lin}: the FHOCP has no finite cost, certified or not; fix: "
@@ -283,7 +283,7 @@ class Certificate:
         out = self._design_failures()
         if y_bar_norm is not None and out:
             out.append("set-point checks (Assumption 1, alpha, eq:condition-recursive-"
-                       "feasibility) not evaluated: they need nu < 1 and nu_o < 1")
+                       "feasibility) not evaluated: they need the design conditions above")
         elif y_bar_norm is not None:
             a = self.alpha(y_bar_norm)
             if not self.assumption_1(y_bar_norm):
