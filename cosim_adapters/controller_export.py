@@ -77,12 +77,12 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
         description=(f"Robust GRU MPC (Schimperna & Magni), {title}, {certified}: model "
                      f"{Path(ctrl.model_path).name}, problem {pr.name}, N={ctrl.fhocp.N}"),
         sample_time=float(ctrl.sample_time),
-        measured=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
-                       for c in pr.outputs),
-        applied=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
-                      for c in pr.inputs),
-        disturbances=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "")
-                           for c in pr.disturbances),
+        measured=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "",
+                            c.variable) for c in pr.outputs),
+        applied=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "",
+                           c.variable) for c in pr.inputs),
+        disturbances=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "",
+                                c.variable) for c in pr.disturbances),
         parameters=tuple(Parameter(name, "1", low, high, text, start=start)
                          for name, low, high, text, start in parameters(
                              design, pr.input_names, pr.output_names)))

@@ -13,11 +13,13 @@ HELP = "write an SSP file of a plant FMU and a controller FMU connected by name"
 
 DESCRIPTION = """\
 Write an SSP 1.0 archive (SystemStructure.ssd and both FMUs under resources/) of a plant FMU
-and a controller FMU (cosim export-fmu): the controller's inputs named as the plant's outputs
-read them, the plant's inputs named as the controller's outputs read those, the set-points
-ref.<output> are constants of a parameter set (--setpoint NAME=VALUE, default: the middle of
-each output's box), so are a measured disturbance's dist.<name> (its box's middle; the plant's
-variable keeps its own value: --setpoint gives the controller's), so are the controller's
+and a controller FMU (cosim export-fmu): each signal is the plant variable the controller
+records for it (its problem's variable = "..."; else the signal's own name), the controller's
+measured outputs read the plant's outputs and the plant's inputs read the controller's, with
+the conversion between their units where they differ; the set-points ref.<output> are
+constants of a parameter set (--setpoint NAME=VALUE, default: the middle of each output's
+box), so are the measured disturbances dist.<name> (default: the box's middle), whose plant
+variable gets the same value in its own unit (one disturbance for both), so are the controller's
 tunable parameters given a value (--parameter NAME=VALUE: its weights R.<input>,
 du_weight.<input>, offset_weight.<output>, offset_filter; the others keep the design's), and
 the default experiment's fixed step is the controller's sample time. libcosim and other SSP
@@ -82,7 +84,7 @@ def run(args: argparse.Namespace) -> int:
     from cosim.api import plant_path
     from cosim.core.errors import CosimError
     from cosim.core.fmu_archive import read_model_description
-    from cosim.core.ssp import connections, write_ssp
+    from cosim.core.ssp import wiring, write_ssp
 
     plant = plant_path(args.plant)
     if not Path(args.controller).is_file():
@@ -95,11 +97,12 @@ def run(args: argparse.Namespace) -> int:
     parameters = _values(args.parameter, "--parameter")
     out = write_ssp(plant, args.controller, args.out, setpoints, stop, parameters=parameters)
     if not args.quiet:
-        links, _ = connections(plant, Path(args.controller))
+        w = wiring(plant, Path(args.controller))
         tuned = f"; parameters {_listed(parameters)}" if parameters else ""
+        shared = "".join(f"; {name} = plant.{var}" for name, (var, _) in w.disturbances.items())
         print(f"{out}: {plant.name} and {Path(args.controller).name} connected ("
-              + ", ".join(f"{a} -> {b}" for a, b in links) + "); set-points "
-              + _listed(setpoints) + tuned)
+              + ", ".join(f"{a} -> {b}" for a, b, _ in w.links) + "); set-points "
+              + _listed(setpoints) + shared + tuned)
     return 0
 
 

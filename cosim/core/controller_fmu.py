@@ -12,7 +12,9 @@ source: the binary is cached, so a design of the same dimensions and signals, su
 retrained model, needs no compiler) and zips a source-and-binary FMU whose
 ``modelDescription.xml`` declares every variable with its unit (``UnitDefinitions`` with SI
 base units where pint knows the unit), box and description, the default experiment (the
-controller's sample time) and no FMU state (the solver's memory is the instance's own). The
+controller's sample time), the plant variable each signal reads or writes (an annotation,
+:func:`plant_variables`: what ``cosim export-ssp`` connects) and no FMU state (the solver's
+memory is the instance's own). The
 archive is reproducible (fixed time stamps) and written atomically.
 """
 
@@ -41,8 +43,9 @@ from cosim.core.build import (
 )
 from cosim.core.errors import CosimError
 
-__all__ = ["CONTROLLER_DIR", "ControllerInterface", "Parameter", "Port", "build_controller_fmu",
-           "check_interface", "model_description", "names_header"]
+__all__ = ["CONTROLLER_DIR", "PLANT_ANNOTATION", "ControllerInterface", "Parameter", "Port",
+           "build_controller_fmu", "check_interface", "model_description", "names_header",
+           "plant_variables"]
 
 #: The controller model's source (package data of :mod:`fmus`).
 CONTROLLER_DIR = PACKAGE_DIR / "controller"
@@ -53,19 +56,24 @@ DIAGNOSTICS = (("status", "solver status: 0 optimal, 1 infeasible at the estimat
                 "2 infeasible, 3 iteration limit, 4 answer check failed, 5 other"),
                ("fallback", "1: the shifted candidate was applied (the solve was not used)"),
                ("iterations", "SQP iterations of the step"))
+#: The tool of the FMI 2 vendor annotation, the type of the FMI 3 annotation, that record the
+#: plant variable of each signal (:func:`plant_variables`).
+PLANT_ANNOTATION = "org.gru-mpc-cosim.plant-variables"
 CFLAGS = ("-std=gnu99", "-O3", "-fPIC", "-shared", "-pthread", "-fvisibility=hidden", "-DEXPORT=",
           "-Wall", "-Wextra", "-Werror", "-Wno-aggressive-loop-optimizations")
 
 
 @dataclass(frozen=True)
 class Port:
-    """One signal of the controller: name, unit, box and description."""
+    """One signal of the controller: name, unit, box, description and the plant FMU's
+    variable it is (``variable``; empty: the variable of the signal's own name)."""
 
     name: str
     unit: str
     low: float
     high: float
     description: str = ""
+    variable: str = ""
 
 
 @dataclass(frozen=True)
@@ -114,6 +122,14 @@ class ControllerInterface:
         out += [(q.name, "parameter", "tunable", q.unit, q, q.description)
                 for q in self.parameters]
         return out
+
+    def plant_variables(self) -> dict[str, str]:
+        """The plant FMU's variable of each signal the controller exchanges with the plant,
+        by the controller's variable name (a measured output, an input to apply, a measured
+        disturbance's ``dist.<name>``)."""
+        ports = [(p.name, p) for p in (*self.measured, *self.applied)]
+        ports += [(f"dist.{p.name}", p) for p in self.disturbances]
+        return {name: p.variable or p.name for name, p in ports}
 
 
 def _c_string(text: str) -> str:
@@ -200,7 +216,10 @@ def model_description(iface: ControllerInterface, fmi_version: int) -> str:
             'measurements, an unreachable first output"/>\n'
             '    <Category name="logEvents" description="Events"/>\n  </LogCategories>\n')
     experiment = f'  <DefaultExperiment startTime="0" stepSize="{float(iface.sample_time)!r}"/>\n'
-    body = [head, cs, "\n", _units(iface), "\n", logs, "\n", experiment, "\n",
+    vendor = ("" if fmi3 else "  <VendorAnnotations>\n"
+              f"    <Tool name=\"{PLANT_ANNOTATION}\">\n" + _plant_lines(iface, "      ")
+              + "    </Tool>\n  </VendorAnnotations>\n\n")
+    body = [head, cs, "\n", _units(iface), "\n", logs, "\n", experiment, "\n", vendor,
             "  <ModelVariables>\n"]
     if fmi3:
         body.append('    <Float64 name="time" valueReference="0" causality="independent" '
@@ -230,8 +249,51 @@ def model_description(iface: ControllerInterface, fmi_version: int) -> str:
         body.append("    <InitialUnknowns>\n" + "".join(f'      <Unknown index="{i}"/>\n'
                                                         for i in outputs)
                     + "    </InitialUnknowns>\n")
-    body.append("  </ModelStructure>\n\n</fmiModelDescription>\n")
+    body.append("  </ModelStructure>\n\n")
+    if fmi3:
+        body.append(f"  <Annotations>\n    <Annotation type=\"{PLANT_ANNOTATION}\">\n"
+                    + _plant_lines(iface, "      ") + "    </Annotation>\n  </Annotations>\n")
+    body.append("</fmiModelDescription>\n")
     return "".join(body)
+
+
+def _plant_lines(iface: ControllerInterface, indent: str) -> str:
+    """The annotation's one element (FMI 2 allows one per tool): the plant variables."""
+    return (f"{indent}<PlantVariables>\n"
+            + "".join(f"{indent}  <Variable name={quoteattr(name)} plant={quoteattr(var)}/>\n"
+                      for name, var in iface.plant_variables().items())
+            + f"{indent}</PlantVariables>\n")
+
+
+def plant_variables(path: str | Path) -> dict[str, str]:
+    """The plant variable of each signal of the controller FMU ``path``, as its
+    modelDescription records it (:data:`PLANT_ANNOTATION`), by the controller's variable name;
+    empty for an FMU without the record (an export older than it, another tool's): its
+    signals are the plant's variables of their own names.
+
+    Raises
+    ------
+    CosimError
+        ``path`` is no FMU or its modelDescription.xml is no XML.
+    """
+    import xml.etree.ElementTree as ET
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            root = ET.fromstring(zf.read("modelDescription.xml"))
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError) as exc:
+        raise CosimError(f"{path}: cannot read modelDescription.xml: "
+                         f"{' '.join(str(exc).split())}") from None
+    holders = [*root.iterfind("VendorAnnotations/Tool"),
+               *root.iterfind("Annotations/Annotation")]
+    out = {}
+    for holder in holders:
+        if PLANT_ANNOTATION in (holder.get("name"), holder.get("type")):
+            for var in holder.iter("Variable"):
+                name, plant = var.get("name"), var.get("plant")
+                if name and plant:
+                    out[name] = plant
+    return out
 
 
 def _binary(files: dict[str, bytes], glue: str, flags: Sequence[str]) -> bytes:
