@@ -1,14 +1,17 @@
-"""The robust MPC against the PI on the heater with a dead time and a measured disturbance, on
+"""The robust MPC against the PI on plants with measured disturbances (and dead time), on
 campaigns (issue 46; docs: design/disturbances.md, "Measured").
 
-The example plant ``fmus/examples/heater_dead_time`` (its power acts 40 s, two samples, late;
-its ambient temperature ``T_in`` measured), as a user runs it: build the FMU, ``cosim
-generate-data``, ``cosim train`` (its defaults unless ``--epochs``), then two campaigns of
-``--runs`` runs with the heat capacity drawn ±10 % per run, on set-points 40 → 55 → 45 → 60 °C:
-set-point steps only, and with ambient steps (``[disturbances]``: 4 levels in 10–30 °C, each
-held 2000 s). Variants: the robust MPC, the PI with its static feedforward, the PI without.
-Printed per campaign: the MPC's summed IAE over each PI's, each controller's set-point
-overshoot (median and largest, share of the step) and the runs with a constraint violation.
+Two example plants (``--plant``): ``heater_dead_time`` (its power acts 40 s, two samples,
+late; its ambient temperature ``T_in`` measured; set-points 40 -> 55 -> 45 -> 60 degC) and
+``furnace_load`` (the 2 x 2 two-zone furnace with its product throughput ``load`` measured;
+set-points on both zones). As a user runs them: build the FMU, ``cosim generate-data``,
+``cosim train`` (its defaults unless ``--epochs``), then two campaigns of ``--runs`` runs with
+the heat capacity drawn +-10 % per run: set-point steps only, and with disturbance steps
+(``[disturbances]``: levels drawn in the plant's range, the heater's 4 held 2000 s each, the
+furnace's 6 held 1500 s each). Variants: the robust
+MPC, the PI with its static feedforward, the PI without. Printed per campaign: the MPC's
+summed IAE over each PI's, each controller's set-point overshoot (median and largest, share
+of the step) and the runs with a constraint violation.
 
 ``--oracle`` also runs the IAE oracle of ``oracle_bound.py`` on every run of both campaigns
 (the plant's own equations with the run's drawn heat capacity, its true state, the
@@ -19,8 +22,8 @@ how close the MPC comes to it (issue 46's aim: at most 1.15x).
 
 Usage::
 
-    .venv/bin/python benchmarks/disturbance_campaign.py [--runs 20] [--steps 12000]
-        [--epochs N] [--out DIR] [--oracle]
+    .venv/bin/python benchmarks/disturbance_campaign.py [--plant heater_dead_time]
+        [--runs 20] [--steps 12000] [--epochs N] [--out DIR] [--oracle]
 
 An ``--out`` folder keeps the trained model: a second run with it skips identification.
 """
@@ -33,6 +36,7 @@ import importlib.util
 import json
 import sys
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -40,29 +44,76 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-PROBLEM = ROOT / "fmus" / "examples" / "heater_dead_time" / "problem.toml"
-#: (time, set-point) steps; the run stops at the last time
-STEPS = ((0.0, 40.0), (1000.0, 55.0), (4000.0, 45.0), (6000.0, 60.0), (8000.0, None))
+
+
+@dataclass(frozen=True)
+class Case:
+    """A plant of the benchmark: its example name, its set-point steps ``(time, set-points
+    by output)`` (``None``: the run's end), the measured disturbance's name, its value at the
+    start, the range its campaign steps are drawn in, how many and how long each is held."""
+
+    plant: str
+    title: str
+    steps: tuple[tuple[float, dict[str, float] | None], ...]
+    disturbance: str
+    start: float
+    levels: tuple[float, float]
+    count: int
+    hold: float
+
+    @property
+    def problem(self) -> Path:
+        return ROOT / "fmus" / "examples" / self.plant / "problem.toml"
+
+    @property
+    def outputs(self) -> list[str]:
+        first = self.steps[0][1]
+        assert first is not None
+        return list(first)
+
+
+CASES = {c.plant: c for c in (
+    Case("heater_dead_time", "heater with a 40 s dead time, ambient measured",
+         ((0.0, {"T": 40.0}), (1000.0, {"T": 55.0}), (4000.0, {"T": 45.0}),
+          (6000.0, {"T": 60.0}), (8000.0, None)), "T_in", 20.0, (10.0, 30.0), 4, 2000.0),
+    Case("furnace_load", "two-zone furnace, product throughput measured",
+         ((0.0, {"T1": 150.0, "T2": 150.0}), (1000.0, {"T1": 170.0, "T2": 160.0}),
+          (3500.0, {"T1": 155.0, "T2": 170.0}), (6500.0, {"T1": 180.0, "T2": 180.0}),
+          (9000.0, None)), "load", 20.0, (0.0, 50.0), 6, 1500.0),
+)}
 VARIANTS = (("mpc", "robust-mpc", {}), ("pi-ff", "pi", {}),
             ("pi", "pi", {"feedforward": False}))
 
 
-def _build_plant(folder: Path) -> Path:
+def _build_plant(folder: Path, plant: str) -> Path:
     spec = importlib.util.spec_from_file_location("example_plants",
                                                   ROOT / "fmus" / "examples" / "build.py")
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.build("heater_dead_time", folder)
+    return module.build(plant, folder)
 
 
-def _spec(folder: Path, name: str, fmu: Path, model: Path, runs: int, ambient: bool) -> Path:
+def _scenario(case: Case) -> str:
+    """The campaign's scenario: the set-point steps, the disturbance's start value."""
+    refs = [f"ref.{o}" for o in case.outputs]
+    lines = [",".join(["time", *refs, f"dist.{case.disturbance}"])]
+    for i, (t, ys) in enumerate(case.steps):
+        cells = ["" if ys is None else repr(ys[o]) for o in case.outputs]
+        lines.append(",".join([f"{t:g}", *cells, repr(case.start) if i == 0 else ""]))
+    return "\n".join(lines) + "\n"
+
+
+def _spec(folder: Path, case: Case, name: str, fmu: Path, model: Path, runs: int,
+          disturbed: bool) -> Path:
     lines = ["[campaign]", f'name = "{name}"', f"runs = {runs}", "seed = 7",
              'scenario = "steps.csv"', f'plant = "{fmu}"', f'model = "{model}"',
-             f'problem = "{PROBLEM}"', "", "[draw]",
+             f'problem = "{case.problem}"', "", "[draw]",
              '"plant.C_factor" = { uniform = [0.9, 1.1] }', ""]
-    if ambient:
-        lines += ["[disturbances]", "count = 4", "hold = 2000", "T_in = [10.0, 30.0]", ""]
+    if disturbed:
+        low, high = case.levels
+        lines += ["[disturbances]", f"count = {case.count}", f"hold = {case.hold!r}",
+                  f"{case.disturbance} = [{low!r}, {high!r}]", ""]
     for vname, controller, options in VARIANTS:
         lines += ["[[variant]]", f'name = "{vname}"', f'controller = "{controller}"']
         if controller == "pi":
@@ -76,19 +127,27 @@ def _spec(folder: Path, name: str, fmu: Path, model: Path, runs: int, ambient: b
     return path
 
 
-def _overshoot(path: Path) -> float:
-    """The largest overshoot of the run's set-point steps, as a share of each step."""
+def _overshoot(path: Path, case: Case) -> float:
+    """The largest overshoot of the run's set-point steps, as a share of each step (each
+    output where its set-point moved)."""
     with open(path, newline="") as fh:
-        rows = [(float(r["time"]), float(r["plant.T"])) for r in csv.DictReader(fh)]
+        rows = [r for r in csv.DictReader(fh)]
+    time = np.array([float(r["time"]) for r in rows])
     worst = 0.0
-    for (_, a), (t1, b), (t2, _) in zip(STEPS, STEPS[1:], STEPS[2:], strict=False):
-        seg = [y for t, y in rows if t1 <= t < t2]
-        over = (max(seg) - b) if b > a else (b - min(seg))
-        worst = max(worst, over / abs(b - a))
+    for o in case.outputs:
+        y = np.array([float(r[f"plant.{o}"]) for r in rows])
+        for (_, a), (t1, b), (t2, _) in zip(case.steps, case.steps[1:], case.steps[2:],
+                                            strict=False):
+            assert a is not None and b is not None
+            if a[o] == b[o]:
+                continue
+            seg = y[(time >= t1) & (time < t2)]
+            over = (seg.max() - b[o]) if b[o] > a[o] else (b[o] - seg.min())
+            worst = max(worst, over / abs(b[o] - a[o]))
     return worst
 
 
-def _oracle(out: Path, fmu: Path) -> list[float]:
+def _oracle(out: Path, fmu: Path, case: Case) -> list[float]:
     """The oracle's summed IAE on each run of the campaign in ``out`` (the MPC variant's
     set-points, disturbances and drawn heat capacity), in run order."""
     import cosim
@@ -100,20 +159,21 @@ def _oracle(out: Path, fmu: Path) -> list[float]:
         summary = json.loads((folder / "summary.json").read_text())
         draw = {**summary["campaign"]["draws"], **{
             f"plant.{k}": v for k, v in summary["campaign"]["plant_start"].items()}}
+        signals = ["time", *(f"ref.{o}" for o in case.outputs), f"dist.{case.disturbance}"]
         with open(folder / "results.csv", newline="") as fh:
-            rows = [(r["time"], r["ref.T"], r["dist.T_in"]) for r in csv.DictReader(fh)]
+            rows = [[r[c] for c in signals] for r in csv.DictReader(fh)]
         # the run's drawn plant parameters, applied to the FMU from the start as the
         # campaign applied them, and known to the oracle
         params = {k[len("plant."):]: v for k, v in draw.items() if k.startswith("plant.")}
-        columns = ["time", "ref.T", "dist.T_in", *(f"plant.{k}" for k in params)]
+        columns = [*signals, *(f"plant.{k}" for k in params)]
         lines = [[*row, *(repr(v) if i == 0 else "" for v in params.values())]
                  for i, row in enumerate(rows)]
         scenario = folder / "oracle_scenario.csv"
         scenario.write_text("".join(",".join(cells) + "\n" for cells in [columns, *lines]))
         run = cosim.run(scenario, plant=fmu, controller="oracle_bound:OracleController",
-                        options={"plant": "heater_dead_time", "fmu": str(fmu),
-                                 "problem": str(PROBLEM), "parameters": params},
-                        problem=PROBLEM, out=folder.parent.parent / "oracle" / folder.name)
+                        options={"plant": case.plant, "fmu": str(fmu),
+                                 "problem": str(case.problem), "parameters": params},
+                        problem=case.problem, out=folder.parent.parent / "oracle" / folder.name)
         if run.summary["controller_summary"]["prediction_error_max"] > 1e-6:
             raise SystemExit("disturbance_campaign: the oracle's model is not the plant "
                              f"({folder.name}): "
@@ -125,7 +185,7 @@ def _oracle(out: Path, fmu: Path) -> list[float]:
     return found
 
 
-def _campaign(out: Path) -> dict[str, dict[str, list[float]]]:
+def _campaign(out: Path, case: Case) -> dict[str, dict[str, list[float]]]:
     """Per variant: each run's IAE, overshoot and violations."""
     found: dict[str, dict[str, list[float]]] = {}
     for folder in sorted((out / "runs").iterdir()):
@@ -134,7 +194,7 @@ def _campaign(out: Path) -> dict[str, dict[str, list[float]]]:
         kpis = summary["kpis"]
         rec = found.setdefault(variant, {"iae": [], "overshoot": [], "violating": []})
         rec["iae"].append(sum(kpis["iae"].values()))
-        rec["overshoot"].append(_overshoot(folder / "results.csv"))
+        rec["overshoot"].append(_overshoot(folder / "results.csv", case))
         rec["violating"].append(float(any(v["count"] for v in kpis["violations"].values())))
     return found
 
@@ -143,6 +203,7 @@ def main(argv: list[str] | None = None) -> int:
     from cosim.cli import main as cosim
 
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--plant", choices=sorted(CASES), default="heater_dead_time")
     parser.add_argument("--runs", type=int, default=20)
     parser.add_argument("--steps", type=int, default=12000, help="identification samples")
     parser.add_argument("--epochs", type=int, default=None, help="cosim train --epochs")
@@ -150,13 +211,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--oracle", action="store_true",
                         help="run the IAE oracle on every run too (oracle_bound.py)")
     args = parser.parse_args(argv)
+    case = CASES[args.plant]
     with tempfile.TemporaryDirectory(prefix="disturbance-campaign-") as tmp:
         folder = args.out or Path(tmp)
         folder.mkdir(parents=True, exist_ok=True)
-        fmu = _build_plant(folder)
+        fmu = _build_plant(folder, case.plant)
         data, model = folder / "data.csv", folder / "gru.json"
         if not model.is_file():   # an --out folder keeps its model for the next time
-            if cosim(["generate-data", "--plant", str(fmu), "--problem", str(PROBLEM),
+            if cosim(["generate-data", "--plant", str(fmu), "--problem", str(case.problem),
                       "--steps", str(args.steps), "--out", str(data), "--quiet"]) != 0:
                 return 1
             train = ["train", str(data), "--out", str(model), "--quiet"]
@@ -164,21 +226,19 @@ def main(argv: list[str] | None = None) -> int:
                 train += ["--epochs", str(args.epochs)]
             if cosim(train) != 0:
                 return 1
-        (folder / "steps.csv").write_text("time,ref.T,dist.T_in\n" + "".join(
-            f"{t:g},{'' if y is None else y},{20 if t == 0 else ''}\n" for t, y in STEPS))
-        print(f"heater with a 40 s dead time, ambient measured: {args.runs} runs per campaign, "
-              "heat capacity +-10 %")
-        for name, ambient in (("setpoints", False), ("ambient", True)):
-            spec = _spec(folder, name, fmu, model, args.runs, ambient)
+        (folder / "steps.csv").write_text(_scenario(case))
+        print(f"{case.title}: {args.runs} runs per campaign, heat capacity +-10 %")
+        for name, disturbed in (("setpoints", False), (case.disturbance, True)):
+            spec = _spec(folder, case, name, fmu, model, args.runs, disturbed)
             out = folder / f"camp_{name}"
             if cosim(["campaign", str(spec), "--out", str(out), "--force", "--quiet"]) != 0:
                 return 1
-            found = _campaign(out)
+            found = _campaign(out, case)
             mpc = sum(found["mpc"]["iae"])
             print(f"  {name:9s} MPC summed IAE / PI {mpc / sum(found['pi']['iae']):.3f}, "
                   f"/ PI with feedforward {mpc / sum(found['pi-ff']['iae']):.3f}")
             if args.oracle:
-                oracle = sum(_oracle(out, fmu))
+                oracle = sum(_oracle(out, fmu, case))
                 pi = sum(found["pi"]["iae"])
                 print(f"    oracle / PI {oracle / pi:.3f} (the causal bound), "
                       f"/ PI with feedforward {oracle / sum(found['pi-ff']['iae']):.3f}; "

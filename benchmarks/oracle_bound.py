@@ -22,9 +22,10 @@ without IPOPT (shooting defects, input box, slacks), a failed one replaced by a 
 else by the previous plan shifted (counted in ``failures``). It is a benchmark reference, kept
 out of the shipped packages like ``oracle_nmpc.py``.
 
-``heater_dead_time`` (its power 40 s late, its ambient temperature measured) is the plant of
+``heater_dead_time`` (its power 40 s late, its ambient temperature measured) and
+``furnace_load`` (its product throughput measured) are the plants of
 ``disturbance_campaign.py``, which runs this oracle on each of its campaign's runs
-(``--oracle``: the drawn heat capacity, set-points and ambient steps).
+(``--oracle``: the drawn heat capacity, set-points and disturbance steps).
 
 It prints the oracle's summed IAE over the PI's (the best ratio a causal controller could
 reach on this scenario, up to the horizon and the solver's local optima) beside the MPC's,
@@ -58,7 +59,7 @@ CHECK_TOL = 1e-6
 IPOPT_OPTIONS: dict[str, Any] = {"print_level": 0, "tol": 1e-9, "max_iter": 500, "sb": "yes"}
 #: Default horizons [samples]: a few of the slowest time constants (heater 670 s, furnace's
 #: common mode 20-30 min, Ts = 20 s).
-HORIZONS = {"heater": 60, "furnace": 120, "heater_dead_time": 60}
+HORIZONS = {"heater": 60, "furnace": 120, "heater_dead_time": 60, "furnace_load": 120}
 
 
 def constants(plant: str) -> dict[str, float]:
@@ -115,10 +116,27 @@ def furnace_rhs(p: Mapping[str, float]) -> Callable[[Any, Any, Any], Any]:
     return rhs
 
 
+def furnace_load_rhs(p: Mapping[str, float]) -> Callable[[Any, Any, Any], Any]:
+    """``dT1/dt, dT2/dt`` of ``fmus/examples/furnace_load/furnace_load.py`` (casadi): ``d``
+    the product throughput [kg/h]."""
+    f = constants("furnace_load")
+    amb, k, c = p["T_amb"] + 273.15, p["K_factor"] * f["K"], p["C_factor"] * f["C"]
+
+    def rhs(x: Any, u: Any, d: Any) -> Any:
+        g = d[0] * f["CP"] / 3600.0
+        q12 = k * (x[0] - x[1])
+        loss = [f["UA"] * (x[i] - p["T_amb"]) + f["E"] * ((x[i] + 273.15) ** 4 - amb ** 4)
+                for i in range(2)]
+        return ca.vertcat(u[0] - loss[0] - q12 - g * (x[0] - p["T_amb"]),
+                          u[1] - loss[1] + q12 - g * (x[1] - x[0])) / c
+    return rhs
+
+
 #: plant -> (its equations, its parameters' names, RK4 substep [s] of its FMU)
 PLANTS = {"heater": (heater_rhs, ("T_amb", "C_factor"), 2.0),
           "furnace": (furnace_rhs, ("T_amb", "K_factor", "C_factor"), 2.0),
-          "heater_dead_time": (heater_dead_time_rhs, ("C_factor",), 2.0)}
+          "heater_dead_time": (heater_dead_time_rhs, ("C_factor",), 2.0),
+          "furnace_load": (furnace_load_rhs, ("T_amb", "K_factor", "C_factor"), 2.0)}
 
 
 def rk4_map(rhs: Callable[[Any, Any, Any], Any], n: int, m: int, nd: int, Ts: float,
@@ -231,7 +249,7 @@ class OracleController(Component):
 
     Parameters
     ----------
-    plant : {"heater", "furnace", "heater_dead_time"}
+    plant : {"heater", "furnace", "heater_dead_time", "furnace_load"}
     fmu : path
         The plant FMU: its parameters' values are the start values of its modelDescription,
         unless ``parameters`` gives them; so are the inputs it has seen before the run (a

@@ -1,9 +1,9 @@
 """Build the example plants' FMUs with pythonfmu: ``CSTR.fmu``, ``Heater.fmu``,
-``MixingTank.fmu``, ``Furnace.fmu``.
+``HeaterDeadTime.fmu``, ``MixingTank.fmu``, ``Furnace.fmu``, ``FurnaceLoad.fmu``.
 
 Usage::
 
-    python fmus/examples/build.py --out DIR [cstr heater mixing_tank furnace]
+    python fmus/examples/build.py --out DIR [NAME ...]   (names: PLANTS below)
 
 Each FMU (FMI 2.0 Co-Simulation) holds its plant's Python class and the shared
 ``plant_base.py``; it runs in a Python host with pythonfmu installed (the project's venv).
@@ -22,11 +22,12 @@ HERE = Path(__file__).resolve().parent
 PLANTS = {"cstr": HERE / "cstr" / "cstr.py", "heater": HERE / "heater" / "heater.py",
           "heater_dead_time": HERE / "heater_dead_time" / "heater_dead_time.py",
           "mixing_tank": HERE / "mixing_tank" / "mixing_tank.py",
-          "furnace": HERE / "furnace" / "furnace.py"}
+          "furnace": HERE / "furnace" / "furnace.py",
+          "furnace_load": HERE / "furnace_load" / "furnace_load.py"}
 #: Plant name -> FMU file name.
 FMU_NAMES = {"cstr": "CSTR.fmu", "heater": "Heater.fmu",
              "heater_dead_time": "HeaterDeadTime.fmu", "mixing_tank": "MixingTank.fmu",
-             "furnace": "Furnace.fmu"}
+             "furnace": "Furnace.fmu", "furnace_load": "FurnaceLoad.fmu"}
 
 
 def problem_file(name: str) -> Path:

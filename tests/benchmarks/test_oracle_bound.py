@@ -1,5 +1,6 @@
-"""``benchmarks/oracle_bound.py``: the IAE oracle of the example heater in closed loop with
-its FMU (its model is the plant's own, its solves all pass their checks, it tracks)."""
+"""``benchmarks/oracle_bound.py``: the IAE oracle of the example heaters and the furnace with a
+load in closed loop with their FMUs (its model is the plant's own, its solves all pass their
+checks, it tracks)."""
 
 from __future__ import annotations
 
@@ -70,3 +71,34 @@ def test_the_oracle_knows_the_dead_time_and_the_measured_disturbance(
     df = run.to_pandas()
     T = df["plant.T"].to_numpy()
     assert abs(T[59] - 55) < 0.05 and abs(T[-1] - 40) < 0.05   # through the ambient steps
+
+
+def test_the_oracle_knows_the_furnaces_measured_load(tmp_path: Path,
+                                                     monkeypatch: pytest.MonkeyPatch) -> None:
+    """The two-zone furnace with its product throughput stepping (an FMU input) and its heat
+    capacity off nominal: the oracle's one-sample prediction is the plant's to rounding, the
+    load draws heat from zone 1 (its power follows the load), and the oracle tracks through
+    the load steps."""
+    monkeypatch.syspath_prepend(str(BENCH))
+    spec = importlib.util.spec_from_file_location("examples_build",
+                                                  ROOT / "fmus" / "examples" / "build.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    fmu = module.build("furnace_load", tmp_path / "fmu")
+    problem = ROOT / "fmus" / "examples" / "furnace_load" / "problem.toml"
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.T1,ref.T2,dist.load,plant.C_factor\n"
+                        "0,160,150,10,0.9\n600,,,45,\n1200,,,0,\n1800,,,,\n")
+    run = cosim.run(scenario, plant=fmu, controller="oracle_bound:OracleController",
+                    options={"plant": "furnace_load", "fmu": str(fmu),
+                             "problem": str(problem), "horizon": 30,
+                             "parameters": {"C_factor": 0.9}}, problem=problem)
+    assert run.status == "ok", run.reason
+    info = run.summary["controller_summary"]
+    assert info["failures"] == 0 and info["steps"] == 91
+    assert info["prediction_error_max"] < 1e-9
+    df = run.to_pandas()
+    T1, T2, P1 = (df[c].to_numpy() for c in ("plant.T1", "plant.T2", "ctrl.P1"))
+    assert abs(T1[29] - 160) < 0.1 and abs(T2[29] - 150) < 0.1
+    assert abs(T1[-1] - 160) < 0.1 and abs(T2[-1] - 150) < 0.1   # through the load steps
+    assert P1[58] > P1[28] + 500 and P1[88] < P1[28] - 100   # more power for more load
