@@ -40,7 +40,7 @@ class HeldInputs:
     model : GRUModel
         The full model, with its problem.
     tracking : bool
-        The tracking law (the paper's law refuses disturbances and dead time, in words).
+        The tracking law (the paper's law refuses dead time, in words).
 
     Attributes
     ----------
@@ -67,11 +67,10 @@ class HeldInputs:
             raise CosimError(f"controller {name!r}: problem {pr.name!r}: {exc}") from None
         self.lags = np.array([c.delay for c in pr.disturbances], dtype=int)
         delayed = [c.name for c in pr.model_inputs if c.delay]
-        if not tracking and (pr.disturbances or delayed):
-            what = (f"the measured disturbances ({', '.join(pr.disturbance_names)})"
-                    if pr.disturbances else f"the dead time of {', '.join(delayed)}")
-            raise CosimError(f"controller {name!r}: law=\"paper\" does not take {what} of "
-                             f"problem {pr.name!r} yet; use the tracking law (the default)")
+        if not tracking and delayed:
+            raise CosimError(f"controller {name!r}: law=\"paper\" does not take the dead "
+                             f"time of {', '.join(delayed)} of problem {pr.name!r} yet; use "
+                             "the tracking law (the default)")
         if [c.name for c in pr.disturbances if c.preview]:
             raise CosimError(f"controller {name!r}: preview = true on a disturbance of problem "
                              f"{pr.name!r}: the robust MPC holds measured disturbances over "
@@ -83,6 +82,7 @@ class HeldInputs:
         self.names = [f"dist.{c.name}" for c in pr.disturbances]
         self._offset = np.array([c.offset for c in pr.disturbances])
         self._scale = np.array([c.scale for c in pr.disturbances])
+        self._units = [c.unit for c in pr.disturbances]
         self.reset()
 
     def reset(self) -> None:
@@ -128,7 +128,9 @@ class HeldInputs:
         if law is None:
             return
         if self._d_law is not None and not np.array_equal(d, self._d_law):
-            law.disturbance_moved()
+            law.disturbance_moved(", ".join(
+                f"{n[len('dist.'):]}={v:.4g}{(' ' + u) if u else ''}" for n, v, u in zip(
+                    self.names, d * self._scale + self._offset, self._units, strict=True)))
         self._d_law = np.array(d, dtype=float)
 
     def ahead(self, observer: Any, fhocp: Any) -> np.ndarray | None:

@@ -73,6 +73,17 @@ class ControlLaw(Protocol):
         :mod:`controllers.dead_time`)."""
         ...
 
+    def disturbance_moved(self, measured: str) -> None:
+        """The measured disturbances the FHOCP holds moved (the model's biases hold the new
+        values, :class:`controllers.disturbances.BiasShift`; ``measured``: them in the user's
+        names and units, for messages): the law's equilibria follow."""
+        ...
+
+    def restart(self) -> None:
+        """After a fallback whose candidate was infeasible with disturbances measured: what
+        the law starts again from (the tracking law: its steady state)."""
+        ...
+
     def setpoint_reason(self, y: np.ndarray) -> str:
         """Why the certified design does not cover the set-point ``y``, one line naming it
         (:func:`setpoint_text`; empty: it does)."""

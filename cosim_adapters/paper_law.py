@@ -105,6 +105,8 @@ class PaperLaw:
         self.setpoint_changes = 0
         self.governed_steps = 0     # steps with the FHOCP set-point short of the requested
         self.governor_holds = 0     # of which the governor could not move it at all
+        self.moved_refusal = ""     # why the disturbances' last move left no reference
+        self.disturbance_refusals = 0
 
     def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float,
              x_start: np.ndarray | None = None) -> LawStep:
@@ -113,12 +115,46 @@ class PaperLaw:
         if self.d_hat is None:
             self.d_hat = np.zeros_like(y)
         self.candidate = None
+        if self.moved_refusal:
+            self.rejections.append(f"t={t:g} s: {self.moved_refusal}")
+            self.moved_refusal = ""
         rejected = self._update_reference(observer, y_ref, y, t)
         rec = self.mpc.make_step(observer.x_hat, observer.e_o, candidate=self.candidate)
         y_model = self.model.denormalize_y(self.y_model)
         names = self.model.problem.output_names
         return LawStep(rec, rejected, {f"y_model_{n}": float(v)
                                        for n, v in zip(names, y_model, strict=True)}, self.lam)
+
+    def disturbance_moved(self, measured: str = "") -> None:
+        """The reference of the FHOCP's set-point again under the disturbances now held: the
+        equilibrium with the same output (its ``ū`` the nonlinear static feedforward), the
+        plan moved by the same input change; the governor forgets the equilibrium it kept
+        for the request, and a request refused as unreachable is tried again. Where the new
+        disturbances leave the set-point unreachable the last reference is kept, counted
+        (``disturbance_refusals``) and named at the next step (``setpoint_rejections``)."""
+        from controllers.equilibrium import describe
+
+        self.unreachable = None
+        if self.governor is not None:
+            self.governor.forget_target()
+        mpc = self.mpc
+        if self.y_model is None or mpc.u_bar is None:
+            return
+        try:
+            ref = self.cert.reference(self.y_model, kernel=self.fhocp.kernel)
+        except SetpointError:
+            self.disturbance_refusals += 1
+            self.moved_refusal = (f"set-point {describe(self.model, self.y_model)} is not "
+                                  f"reachable at {measured or 'the measured disturbances'}: "
+                                  "the last reference kept")
+            return
+        if mpc.plan is not None:
+            mpc.plan = np.clip(mpc.plan + (ref.u_bar - mpc.u_bar), -1.0, 1.0)
+        mpc.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
+
+    def restart(self) -> None:
+        """Nothing: the paper's law's next solve starts from its shifted plan, as after a
+        set-point change without the governor."""
 
     def setpoint_reason(self, y: np.ndarray) -> str:
         failed = self.cert.failures(y)
@@ -135,6 +171,7 @@ class PaperLaw:
                 "governor_steps": self.governed_steps, "governor_holds": self.governor_holds,
                 "setpoint_changes": self.setpoint_changes,
                 "setpoint_rejected_steps": self.rejected,
+                "disturbance_refusals": self.disturbance_refusals,
                 "setpoint_rejections": self.rejections[:20]}
 
     # -- the set-point handling -------------------------------------------------------------

@@ -25,7 +25,10 @@ section V). Then one of two control laws (option ``law``) gives ``u_k``:
 Measured disturbances (the problem's ``[disturbances]``, controller inputs ``dist.<name>``)
 and dead time (``delay``): the design's model holds the disturbances in its biases, moved to
 the measured value each step, and ``x̂`` is predicted over the dead time before the FHOCP
-starts (:class:`cosim_adapters.held_inputs.HeldInputs`); the tracking law only.
+starts (:class:`cosim_adapters.held_inputs.HeldInputs`). Both laws compute their equilibria
+under the disturbances held (the paper's law its reference ``(x̄, ū, α)`` again when they
+move, :meth:`cosim_adapters.paper_law.PaperLaw.disturbance_moved`); the dead time is the
+tracking law's only.
 
 Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
 (``p > m``) only set-points on the model's ``m``-dimensional surface of equilibrium outputs

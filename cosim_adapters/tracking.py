@@ -201,7 +201,7 @@ class TrackingLaw:
         diag.update({f"d_hat_{n}": float(v) for n, v in zip(names, d_phys, strict=True)})
         return LawStep(rec, False, diag)
 
-    def disturbance_moved(self) -> None:
+    def disturbance_moved(self, measured: str = "") -> None:
         """The measured disturbances moved (the model's biases hold the new values): keep
         the artificial steady state's output where it was, with the steady input the model
         now needs for it (the equilibrium for that output at the new disturbances, the

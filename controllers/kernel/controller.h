@@ -16,7 +16,7 @@
  *                       output y and the set-point yr (normalised), raising CTL_WARN_* bits;
  *                       u comes holding the inputs applied last (left so: they are held)
  *   law_disturbance_moved(ls), law_restart(ls), ls->cand_feasible
- *                       with measured disturbances (CT_NQD > 0; the tracking law only)
+ *                       with measured disturbances (CT_NQD > 0)
  *   law_parameter(ls, i), law_refuse(ls, i, value)
  *                       where tunable parameter i lives (NULL: none), why a value is refused
  *                       (NULL: accepted)

@@ -2,6 +2,9 @@
  * controller.c (see controller.h for what a law file defines). It is the C twin of the Python
  * law, in the same order of kernel calls:
  *
+ *   law_disturbance_moved, law_restart
+ *                   PaperLaw.disturbance_moved (the reference again under the disturbances
+ *                   now held, the plan moved alike) and restart (nothing)
  *   law_step        cosim_adapters/paper_law.py PaperLaw.step and _update_reference: the
  *                   set-point rate limit (setpoint_rate), the offset-free shift by d_hat
  *                   (offset_free), the reference (x_bar, u_bar, alpha) of each new set-point,
@@ -68,8 +71,12 @@ typedef struct law_state {
   double rate;   /* the set-point rate (< 0: none), a parameter when the design has one */
   /* the reference (x_bar, u_bar, alpha) of the FHOCP's set-point */
   double x_bar[NX], u_bar[NU], alpha;
-  /* the robust MPC: the plan, the last input (u_{-1} of the input-rate term) */
-  int has_plan, has_uprev;
+  /* the robust MPC: the plan, the last input (u_{-1} of the input-rate term); whether the
+   * last fallback's candidate was feasible (controller.c reads it with disturbances) */
+  int has_plan, has_uprev, cand_feasible;
+  /* the measured disturbances' last move left the set-point unreachable: the last
+   * reference kept, said at the next step */
+  int moved_refused;
   double plan[NH * NU], uprev[NU], cand[NH * NU];
   /* the reference governor (CT_GOVERNOR): lambda_max, whether its last step moved, the last
    * request refused as unreachable, and the candidate it found feasible this step (the
@@ -319,8 +326,10 @@ static void make_step(law_state *st, const double *xhat, double *u) {
   ctl_result *res = &st->res;
   int use = res->success, fallback = 0;
   const ctl_result *applied = res;
+  st->cand_feasible = 1;
   if (!use) {
     evaluate(st, xhat, cand, CTL_OTHER, &st->chk);
+    st->cand_feasible = st->chk.cv <= CT_FEAS_TOL && st->chk.tv <= CT_FEAS_TOL;
     use = keeps_iterate(res, &st->chk);
     fallback = !use;
     if (!use) applied = &st->chk;
@@ -350,13 +359,42 @@ static void law_reset(law_state *st, gk_ws *ws) {
   st->lam_max = 1.0;
 }
 
+/* PaperLaw.disturbance_moved: the reference of the FHOCP's set-point again under the
+ * disturbances now held in the biases (the kernel's equilibrium with the thread's shift), the
+ * plan moved by the same input change; the request refused as unreachable and the governor's
+ * kept equilibrium forgotten; an unreachable set-point keeps the last reference */
+__attribute__((unused)) static void law_disturbance_moved(law_state *st) {
+  double x[NX], u[NU], alpha;
+  st->has_unreachable = 0;
+  st->has_target = 0;
+  if (!st->has_model || !st->has_reference) return;
+  if (reference_of(st, st->y_model, x, u, &alpha) != 0) {
+    st->moved_refused = 1;
+    return;
+  }
+  if (st->has_plan)
+    for (int i = 0; i < NH; i++)
+      for (int j = 0; j < NU; j++)
+        st->plan[i * NU + j] = gk_clip1(st->plan[i * NU + j] + (u[j] - st->u_bar[j]));
+  memcpy(st->x_bar, x, sizeof x);
+  memcpy(st->u_bar, u, sizeof u);
+  st->alpha = alpha;
+}
+
+/* PaperLaw.restart: nothing (the next solve starts from the shifted plan) */
+__attribute__((unused)) static void law_restart(law_state *st) { (void)st; }
+
 /* PaperLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr; with
  * no admissible set-point to start from, u is left as it came (controller.c: the inputs
  * held, the box's middle before any) */
 static void law_step(law_state *st, const double *xhat, const double *xstart, double e_o,
                      const double *y, const double *yr, double *u, int *warnings) {
-  (void)xstart;   /* the paper's law takes no dead time (RobustMPCController refuses it) */
+  (void)xstart;   /* the paper's law takes no dead time (HeldInputs refuses it) */
   tightened_bounds(e_o, st->bnd);   /* (the governor's feasibility test reads them) */
+  if (st->moved_refused) {
+    *warnings |= CTL_WARN_SETPOINT_REJECTED;
+    st->moved_refused = 0;
+  }
   if (update_reference(st, xhat, y, yr, warnings) != 0) {   /* u as it came: held */
     st->last.status = CTL_OTHER;
     st->last.fallback = 1;

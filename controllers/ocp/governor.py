@@ -108,6 +108,11 @@ class ReferenceGovernor:
         self._moved = False
         self._target: tuple[bytes, tuple[np.ndarray, np.ndarray] | None] | None = None
 
+    def forget_target(self) -> None:
+        """Forget the equilibrium kept for the last request (:meth:`target`): the model's
+        equilibria moved (its biases hold new measured disturbances)."""
+        self._target = None
+
     def newton(self, y: np.ndarray, x0: np.ndarray,
                u0: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
         """:func:`controllers.equilibrium.equilibrium_newton` from ``(x0, u0)``: the FHOCP's

@@ -173,16 +173,19 @@ def test_the_kernels_shift_of_the_biases_is_the_full_models(heater: dict[str, Pa
         assert np.max(np.abs(ctrl.observer.x_hat - want[1])) < 1e-13, d
 
 
-@pytest.mark.parametrize(("edit", "words"), [
-    (("[mpc]", "[mpc]\nlaw = \"paper\""), "law=\"paper\" does not take the measured "
-     "disturbances (T_in)"),
-    (("rate = 0.5", "rate = 0.5\npreview = true"), "preview = true on a disturbance"),
+@pytest.mark.parametrize(("edits", "words"), [
+    ((("[mpc]", "[mpc]\nlaw = \"paper\""), ("hold = [3, 60]", "hold = [3, 60]\ndelay = 1")),
+     "law=\"paper\" does not take the dead time of P"),
+    ((("rate = 0.5", "rate = 0.5\npreview = true"),), "preview = true on a disturbance"),
 ])
 def test_what_the_robust_mpc_does_not_take_yet_is_refused_in_words(
         heater: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str],
-        edit: tuple[str, str], words: str) -> None:
+        edits: tuple[tuple[str, str], ...], words: str) -> None:
     problem = tmp_path / "heater.toml"
-    problem.write_text(PROBLEM.replace(*edit))
+    text = PROBLEM
+    for edit in edits:
+        text = text.replace(*edit)
+    problem.write_text(text)
     model = json.loads(heater["model"].read_text())
     from controllers.problem_file import load
 
@@ -194,6 +197,98 @@ def test_what_the_robust_mpc_does_not_take_yet_is_refused_in_words(
     err = capsys.readouterr().err
     assert code == 2 and words in err and "Traceback" not in err, err
     assert not (tmp_path / "out").exists()
+
+
+#: the paper's law with a horizon for the heater's time constants (its default N = 15 is the
+#: four tanks'), the offset-free set-point
+PAPER = {"law": "paper", "N": 60, "offset_free": True}
+
+
+def test_the_paper_law_holds_the_measured_disturbance(heater: dict[str, Path]) -> None:
+    """The paper's law computes its reference (x_bar, u_bar) again when the measured ambient
+    moves: its power follows at once (the model's static feedforward), the set-point is held
+    through both ambient steps, no constraint is violated, no fallback taken."""
+    import cosim
+
+    run = cosim.run(heater["scenario"], plant=heater["fmu"], model=heater["model"],
+                    options=PAPER, figure=False)
+    assert run.status == "ok", run.reason
+    info = run.summary["controller_summary"]
+    assert info["disturbances"] == ["T_in"] and info["fallbacks"] == 0
+    assert info["disturbance_refusals"] == 0
+    assert all(v["count"] == 0 for v in run.summary["kpis"]["violations"].values())
+    df = run.to_pandas().set_index("time")
+    P, T = df["ctrl.P"], df["plant.T"]
+    # ambient 20 -> 10 degC at 3000 s, 10 -> 30 at 5000 s: the power moves the right way
+    # at once, by hundreds of watts within two samples
+    assert P[3000.0] > P[2980.0] + 50 and P[3040.0] > P[2980.0] + 400
+    assert P[5000.0] < P[4980.0] - 200 and P[5020.0] < P[4980.0] - 800
+    assert abs(T[3000.0:3400.0] - 55.0).max() < 1.0 and abs(T[5000.0:5400.0] - 55.0).max() < 1.0
+    for t in (2900.0, 4900.0, 6900.0):
+        assert abs(T[t] - 55.0) < 0.5, t
+
+
+def test_the_paper_laws_compiled_step_replays_the_python_controller_with_disturbance(
+        heater: dict[str, Path]) -> None:
+    """The paper's law's C step (governor, offset-free set-point) fed what the Python
+    controller saw, ambient steps included, one of which leaves the set-point unreachable
+    (the last reference kept, said in the user's names): its inputs, statuses and fallbacks
+    to the bit, step by step."""
+    from controllers.kernel.controller_source import (
+        CompiledController,
+        ControllerDesign,
+        build,
+        design_data,
+    )
+    from cosim_adapters.robust_mpc import RobustMPCController
+
+    ctrl = RobustMPCController(model=heater["model"], **PAPER)
+    ctrl.expect_setpoints([{"T": 45.0}, {"T": 55.0}, {"T": 60.0}])   # uncertified for them
+    ctrl.setup(0.0)
+    design = ControllerDesign.of_paper(ctrl.law, ctrl.observer, ctrl.model, ctrl._lo,
+                                       ctrl._hi)
+    assert design.q == 1
+    compiled = CompiledController(*build(design), design_data(design), n_inputs=1,
+                                  n_outputs=1, n_disturbances=1)
+    ctrl.setup(0.0)
+    rng = np.random.default_rng(3)
+    y = 45.0
+    for k in range(160):
+        ref = 45.0 if k < 20 else 55.0 if k < 70 else 60.0
+        d = 20.0 if k < 40 else 10.0 if k < 90 else 30.0 if k < 120 else 5.0
+        y = y + 0.3 * (ref - y) * 0.2 + rng.normal(0.0, 0.05)
+        ctrl.set_inputs({"T": y, "ref.T": ref, "dist.T_in": d})
+        ctrl.step(20.0 * k, 20.0)
+        out = compiled.step(np.array([y]), np.array([ref]), np.array([d]))
+        np.testing.assert_array_equal(out["u"], [ctrl.get_outputs()["P"]])
+        diag = ctrl.diagnostics()
+        assert (out["status"], out["fallback"]) == (diag["status"], diag["fallback"]), k
+        np.testing.assert_array_equal(out["y_target"], [diag["y_model_T"]])
+    compiled.close()
+    info = ctrl.law.summary()
+    assert info["disturbance_refusals"] >= 1
+    assert any("is not reachable at T_in=5 degC: the last reference kept" in r
+               for r in info["setpoint_rejections"]), info["setpoint_rejections"]
+
+
+def test_the_paper_laws_controller_fmu_takes_the_disturbance_as_the_python_controller(
+        heater: dict[str, Path], tmp_path: Path) -> None:
+    """``cosim export-fmu --option law="paper"`` of the model with its ambient measured
+    (exported for the scenario's set-points, as cosim run designs for them): in closed loop
+    with the plant, the Python controller's inputs to the bit."""
+    import cosim
+
+    fmu = tmp_path / "Paper.fmu"
+    options = [item for k, v in PAPER.items()
+               for item in ("--option", f"{k}={json.dumps(v)}")]
+    assert main(["export-fmu", str(heater["model"]), *options, "--scenario",
+                 str(heater["scenario"]), "--out", str(fmu), "--quiet"]) == 0
+    py = cosim.run(heater["scenario"], plant=heater["fmu"], model=heater["model"],
+                   options=PAPER, figure=False).to_pandas()
+    run = cosim.run(heater["scenario"], plant=heater["fmu"], controller=str(fmu),
+                    problem=heater["folder"] / "heater.toml", figure=False).to_pandas()
+    np.testing.assert_array_equal(run["ctrl.P"].to_numpy(), py["ctrl.P"].to_numpy())
+    assert np.ptp(run["dist.T_in"].to_numpy()) == 20.0
 
 
 def test_a_scenario_naming_an_unknown_disturbance_is_refused(
