@@ -39,8 +39,6 @@ class HeldInputs:
         The controller's name (messages).
     model : GRUModel
         The full model, with its problem.
-    tracking : bool
-        The tracking law (the paper's law refuses dead time, in words).
 
     Attributes
     ----------
@@ -55,7 +53,7 @@ class HeldInputs:
         Steps whose measured disturbance left its box (held at the edge).
     """
 
-    def __init__(self, name: str, model: Any, tracking: bool) -> None:
+    def __init__(self, name: str, model: Any) -> None:
         from controllers.dead_time import input_delay
         from controllers.disturbances import BiasShift, condition
 
@@ -66,11 +64,6 @@ class HeldInputs:
         except ControllersError as exc:
             raise CosimError(f"controller {name!r}: problem {pr.name!r}: {exc}") from None
         self.lags = np.array([c.delay for c in pr.disturbances], dtype=int)
-        delayed = [c.name for c in pr.model_inputs if c.delay]
-        if not tracking and delayed:
-            raise CosimError(f"controller {name!r}: law=\"paper\" does not take the dead "
-                             f"time of {', '.join(delayed)} of problem {pr.name!r} yet; use "
-                             "the tracking law (the default)")
         if [c.name for c in pr.disturbances if c.preview]:
             raise CosimError(f"controller {name!r}: preview = true on a disturbance of problem "
                              f"{pr.name!r}: the robust MPC holds measured disturbances over "

@@ -110,16 +110,15 @@ class PaperLaw:
 
     def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float,
              x_start: np.ndarray | None = None) -> LawStep:
-        if x_start is not None:
-            raise ValueError("the paper's law takes no dead time")
+        x0 = observer.x_hat if x_start is None else x_start
         if self.d_hat is None:
             self.d_hat = np.zeros_like(y)
         self.candidate = None
         if self.moved_refusal:
             self.rejections.append(f"t={t:g} s: {self.moved_refusal}")
             self.moved_refusal = ""
-        rejected = self._update_reference(observer, y_ref, y, t)
-        rec = self.mpc.make_step(observer.x_hat, observer.e_o, candidate=self.candidate)
+        rejected = self._update_reference(observer, y_ref, y, t, x0)
+        rec = self.mpc.make_step(x0, observer.e_o, candidate=self.candidate)
         y_model = self.model.denormalize_y(self.y_model)
         names = self.model.problem.output_names
         return LawStep(rec, rejected, {f"y_model_{n}": float(v)
@@ -176,8 +175,9 @@ class PaperLaw:
 
     # -- the set-point handling -------------------------------------------------------------
     def _update_reference(self, observer: Any, y_ref: np.ndarray, y: np.ndarray,
-                          t: float) -> bool:
-        """Recompute ``(x̄, ū, α)`` when the set-point changes; ``True`` when rejected."""
+                          t: float, x0: np.ndarray) -> bool:
+        """Recompute ``(x̄, ū, α)`` when the set-point changes (the governor's candidates
+        from ``x0``, the state the FHOCP starts from); ``True`` when rejected."""
         h = self.handling
         target = y_ref
         if h.setpoint_rate is not None and self.y_model is not None:
@@ -193,7 +193,7 @@ class PaperLaw:
             return False
         requested_changed = self.y_ref is None or np.any(y_ref != self.y_ref)
         if self.governor is not None and self.y_model is not None:
-            return self._govern(observer, target, y_ref, requested_changed, t)
+            return self._govern(observer, target, y_ref, requested_changed, t, x0)
         try:
             ref = self.cert.reference(target, kernel=self.fhocp.kernel)
         except SetpointError as exc:
@@ -245,8 +245,9 @@ class PaperLaw:
         self.rejected += 1
 
     def _govern(self, observer: Any, target: np.ndarray, y_ref: np.ndarray,
-                requested_changed: bool, t: float) -> bool:
-        """Move the FHOCP set-point towards an admissible ``target`` with the governor."""
+                requested_changed: bool, t: float, x0: np.ndarray) -> bool:
+        """Move the FHOCP set-point towards an admissible ``target`` with the governor (its
+        candidates rolled out from ``x0``)."""
         from controllers.equilibrium import describe
 
         assert self.governor is not None and self.y_model is not None
@@ -272,7 +273,7 @@ class PaperLaw:
         self.y_ref = y_ref
         self.governed_steps += 1
         last = mpc.records[-1].result.success if mpc.records else None
-        gs = self.governor.govern(observer.x_hat, observer.e_o, self.y_model,
+        gs = self.governor.govern(x0, observer.e_o, self.y_model,
                                   mpc.x_bar, mpc.u_bar, target, mpc.plan, last)
         if gs.lam == 0.0:
             self.lam = 0.0

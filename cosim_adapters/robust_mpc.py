@@ -27,8 +27,8 @@ and dead time (``delay``): the design's model holds the disturbances in its bias
 the measured value each step, and ``x̂`` is predicted over the dead time before the FHOCP
 starts (:class:`cosim_adapters.held_inputs.HeldInputs`). Both laws compute their equilibria
 under the disturbances held (the paper's law its reference ``(x̄, ū, α)`` again when they
-move, :meth:`cosim_adapters.paper_law.PaperLaw.disturbance_moved`); the dead time is the
-tracking law's only.
+move, :meth:`cosim_adapters.paper_law.PaperLaw.disturbance_moved`) and start their FHOCP
+from ``x̂`` predicted over the dead time.
 
 Any numbers of inputs ``m`` and outputs ``p`` (the problem's). With more outputs than inputs
 (``p > m``) only set-points on the model's ``m``-dimensional surface of equilibrium outputs
@@ -199,7 +199,7 @@ class RobustMPCController(Component):
 
         #: the measured disturbances and dead time (:class:`~cosim_adapters.held_inputs.
         #: HeldInputs`)
-        self.held = HeldInputs(self.name, self.full_model, bool(options.tracking))
+        self.held = HeldInputs(self.name, self.full_model)
         self.model = self.held.model
         #: the design (:class:`cosim_adapters.mpc_options.MPCOptions`, defaults filled in;
         #: the problem's ``[mpc]`` under the options given, :meth:`MPCOptions.resolve`)

@@ -170,11 +170,12 @@ static void govern(law_state *st, const double *xhat, const double *target, int 
                    int *warnings);
 
 /* PaperLaw._update_reference: the FHOCP's set-point for the request yr at the measured y
- * (after the first, through the governor when CT_GOVERNOR); raises CTL_WARN_SETPOINT_REJECTED
+ * (after the first, through the governor when CT_GOVERNOR, its candidates from xstart: x_hat
+ * predicted over the inputs' dead time); raises CTL_WARN_SETPOINT_REJECTED
  * once per requested set-point refused. 1 when there is no reference to regulate to (the
  * first set-point and none admissible). */
-static int update_reference(law_state *st, const double *xhat, const double *y,
-                            const double *yr, int *warnings) {
+static int update_reference(law_state *st, const double *xhat, const double *xstart,
+                            const double *y, const double *yr, int *warnings) {
   double target[NY], yh[NY];
   st->has_gcand = 0;
   memcpy(target, yr, sizeof target);
@@ -201,7 +202,7 @@ static int update_reference(law_state *st, const double *xhat, const double *y,
   memcpy(st->y_ref, yr, sizeof st->y_ref);
   st->has_ref = 1;
   if (CT_GOVERNOR && st->has_model) {
-    govern(st, xhat, target, changed, warnings);
+    govern(st, xstart, target, changed, warnings);
     return 0;
   }
   if (reference(st, target) == 0) {
@@ -384,24 +385,24 @@ __attribute__((unused)) static void law_disturbance_moved(law_state *st) {
 /* PaperLaw.restart: nothing (the next solve starts from the shifted plan) */
 __attribute__((unused)) static void law_restart(law_state *st) { (void)st; }
 
-/* PaperLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr; with
- * no admissible set-point to start from, u is left as it came (controller.c: the inputs
- * held, the box's middle before any) */
+/* PaperLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr, the
+ * FHOCP from xstart (x_hat, or x_hat predicted over the inputs' dead time); with no
+ * admissible set-point to start from, u is left as it came (controller.c: the inputs held,
+ * the box's middle before any) */
 static void law_step(law_state *st, const double *xhat, const double *xstart, double e_o,
                      const double *y, const double *yr, double *u, int *warnings) {
-  (void)xstart;   /* the paper's law takes no dead time (HeldInputs refuses it) */
   tightened_bounds(e_o, st->bnd);   /* (the governor's feasibility test reads them) */
   if (st->moved_refused) {
     *warnings |= CTL_WARN_SETPOINT_REJECTED;
     st->moved_refused = 0;
   }
-  if (update_reference(st, xhat, y, yr, warnings) != 0) {   /* u as it came: held */
+  if (update_reference(st, xhat, xstart, y, yr, warnings) != 0) {   /* u as it came: held */
     st->last.status = CTL_OTHER;
     st->last.fallback = 1;
     st->last.iterations = 0;
     return;
   }
-  make_step(st, xhat, u);
+  make_step(st, xstart, u);
   memcpy(st->last.y_target, st->y_model, sizeof st->last.y_target);
 }
 
