@@ -102,9 +102,11 @@ class RunOutput:
 
 
 def open_plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
-               step_timeout: float | None, seed: int, problem: Any = None) -> tuple[Any, str]:
+               step_timeout: float | None, seed: int, problem: Any = None,
+               signals: list[Any] | None = None) -> tuple[Any, str]:
     """The plant component; an FMU's variable map binds ``problem`` to it (the user's
-    ``varmap`` first: :func:`cosim_adapters.problems.bind_plant`)."""
+    ``varmap`` first: :func:`cosim_adapters.problems.bind_plant`), else the ``signals`` a
+    controller FMU records (:meth:`cosim.core.fmu_controller.FmuController.plant_signals`)."""
     from cosim.core.errors import CosimError
     from cosim_adapters.gru_plant import MODEL_PREFIX
 
@@ -116,10 +118,7 @@ def open_plant(plant: str | Path | None, varmap: Any, interface: str, isolate: b
                              "--step-timeout or --interface")
         return GRUPlant.from_file(str(plant), seed=seed), str(plant)
     path = plant_path(plant)
-    if problem is not None:
-        from cosim_adapters.problems import bind_plant
-
-        varmap = bind_plant(problem, path, varmap)
+    varmap = plant_varmap(path, varmap, problem, signals)
     if isolate:
         from cosim.core.isolated import IsolatedFmuComponent
 
@@ -128,6 +127,32 @@ def open_plant(plant: str | Path | None, varmap: Any, interface: str, isolate: b
     from cosim.core.fmu import FmuComponent
 
     return FmuComponent(path, name="plant", interface=interface, varmap=varmap), str(path)
+
+
+def plant_varmap(path: Path, varmap: Any, problem: Any = None,
+                 signals: list[Any] | None = None) -> Any:
+    """The variable map binding the plant FMU ``path`` to ``problem`` (the user's ``varmap``
+    first: :func:`cosim_adapters.problems.bind_plant`), else to the ``signals`` a controller
+    FMU records (:meth:`cosim.core.fmu_controller.FmuController.plant_signals`), else
+    ``varmap`` as it is."""
+    if problem is not None:
+        from cosim_adapters.problems import bind_plant
+
+        return bind_plant(problem, path, varmap)
+    if signals:
+        from cosim.core.binding import bind
+        from cosim.core.fmu_archive import read_model_description
+
+        return bind(signals, read_model_description(path), path, varmap, signals[0].where)
+    return varmap
+
+
+def run_signals(ctrl: Any, bound: Any) -> list[Any] | None:
+    """What a controller without a problem exchanges with the plant, by the plant variables
+    it records (a controller FMU of ``cosim export-fmu``); ``None`` with a problem."""
+    if bound is not None:
+        return None
+    return getattr(ctrl, "plant_signals", lambda: None)()
 
 
 def run(scenario: str | Path, plant: str | Path | None = None,
@@ -242,7 +267,8 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     else:
         if live is not None:
             raise ParameterError("live", ": live options need a live plant (opc.tcp://...)")
-        plant_obj, plant_name = open_plant(plant, vmap, interface, isolate, limit, seed, bound)
+        plant_obj, plant_name = open_plant(plant, vmap, interface, isolate, limit, seed, bound,
+                                           run_signals(ctrl, bound))
         master = Master(plant_obj, ctrl, sc, step=step, seed=seed,
                         disturbances=bound.disturbance_names if bound is not None else None)
         where = {"plant": plant_name, "fmi_version": plant_obj.fmi_version,

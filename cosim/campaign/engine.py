@@ -204,19 +204,15 @@ def _problem_line(spec: CampaignSpec) -> int:
 def _bind(spec: CampaignSpec, name: str, line: int, ctrl: Any, problem: Any,
           user_map: Any) -> Any:
     """The variable map binding the variant's control problem (its controller's, else
-    ``problem``) to the plant FMU (``user_map`` first); ``user_map`` for a GRU-model plant or
-    a controller without a problem."""
-    from cosim.api import run_problem
+    ``problem``; else the plant variables a controller FMU records) to the plant FMU
+    (``user_map`` first); ``user_map`` for a GRU-model plant or a controller with none."""
+    from cosim.api import plant_varmap, run_problem, run_signals
 
     if spec.model_plant:
         return user_map
     bound = run_problem(ctrl, problem)
-    if bound is None:
-        return user_map
-    from cosim_adapters.problems import bind_plant
-
     try:
-        return bind_plant(bound, _plant_file(spec), user_map)
+        return plant_varmap(_plant_file(spec), user_map, bound, run_signals(ctrl, bound))
     except CosimError as exc:
         raise CosimError(f"{spec.path}:{line}: variant '{name}': {exc}") from None
 

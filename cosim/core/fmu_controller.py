@@ -115,6 +115,30 @@ class FmuController(FmuComponent):
                 out.update(dict.fromkeys(family, value))
         return out
 
+    def plant_signals(self) -> list[Any]:
+        """What the FMU exchanges with the plant as :class:`cosim.core.binding.Wanted`: its
+        measured outputs, inputs to apply and measured disturbances, each with the plant
+        variable its modelDescription records (:func:`cosim.core.controller_fmu.
+        plant_variables`, ``cosim export-fmu``'s) and its unit; empty for an FMU without that
+        record (its signals are then the plant's variables of their own names)."""
+        from cosim.core.binding import Wanted
+        from cosim.core.controller_fmu import plant_variables
+        from cosim.core.varmap import variable_unit
+
+        named = plant_variables(self.path)
+        if not named:
+            return []
+        where = f"{self.path.name} (the plant variables it records)"
+        out = []
+        for v in self.md.modelVariables:
+            if v.name not in named or v.causality not in ("input", "output"):
+                continue
+            role = ("disturbance" if v.name.startswith("dist.")
+                    else "output" if v.causality == "input" else "input")
+            out.append(Wanted(v.name.removeprefix("dist."), named[v.name],
+                              variable_unit(v) or "", role, where))
+        return out
+
     def setup(self, t0: float, stop_time: float | None = None) -> None:
         """Load and initialise the FMU (again after a run: a fresh instance)."""
         if self._fmu is not None:

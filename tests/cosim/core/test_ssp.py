@@ -1,7 +1,8 @@
-"""``cosim export-ssp`` of a plant whose problem renames and converts: each controller signal is
-connected to the plant variable its problem names, through the map between their units, and a
-measured disturbance reaches plant and controller as one value; libcosim runs the file as
-fmpy's loop does with the same values."""
+"""A controller FMU of a plant whose problem renames and converts, outside the Python
+controller: ``cosim export-ssp`` connects each signal to the plant variable its problem names,
+through the map between their units, and a measured disturbance reaches plant and controller
+as one value (libcosim runs the file as fmpy's loop does with the same values); ``cosim run``
+binds the plant through the variables the FMU records, without the problem."""
 
 from __future__ import annotations
 
@@ -67,7 +68,7 @@ def kelvin(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
                  "1500", "--out", str(data), "--quiet"]) == 0
     assert main(["train", str(data), "--epochs", "5", "--n", "4", "--out", str(model),
                  "--quiet"]) == 0
-    out = {"plant": fmu}
+    out = {"plant": fmu, "model": model}
     for version in (2, 3):
         out[f"c{version}"] = folder / f"Controller{version}.fmu"
         assert main(["export-fmu", str(model), "--fmi", str(version), "--out",
@@ -157,3 +158,22 @@ def test_a_disturbance_the_plant_lacks_is_refused(kelvin: dict[str, Path], tmp_p
     assert code == 2 and "\n" not in err and "Traceback" not in err
     assert "measured disturbance 'dist.T_in' is the plant's variable 'T_amb'" in err
     assert not (tmp_path / "x.ssp").exists()
+
+
+def test_cosim_run_binds_the_plant_through_the_variables_the_fmu_records(
+        kelvin: dict[str, Path], tmp_path: Path) -> None:
+    """Without --problem, the controller FMU's record renames ``power`` to the plant's ``P``
+    and ``T_in`` to ``T_amb`` and converts kelvin to the plant's degC: the Python
+    controller's inputs to the bit."""
+    import cosim
+
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.T,dist.T_in\n0,318.15,293.15\n600,328.15,\n1200,,283.15\n"
+                        "1800,,\n")
+    fmu = cosim.run(scenario, plant=kelvin["plant"], controller=str(kelvin["c3"]),
+                    figure=False).to_pandas()
+    py = cosim.run(scenario, plant=kelvin["plant"], model=kelvin["model"],
+                   figure=False).to_pandas()
+    np.testing.assert_array_equal(fmu["ctrl.power"].to_numpy(), py["ctrl.power"].to_numpy())
+    np.testing.assert_array_equal(fmu["plant.T"].to_numpy(), py["plant.T"].to_numpy())
+    assert fmu["plant.T"].iloc[-1] > 300.0   # recorded in the problem's kelvin
