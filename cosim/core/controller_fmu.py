@@ -13,8 +13,8 @@ retrained model, needs no compiler) and zips a source-and-binary FMU whose
 ``modelDescription.xml`` declares every variable with its unit (``UnitDefinitions`` with SI
 base units where pint knows the unit), box and description, the default experiment (the
 controller's sample time), the plant variable each signal reads or writes (an annotation,
-:func:`plant_variables`: what ``cosim export-ssp`` connects) and no FMU state (the solver's
-memory is the instance's own). The
+read by :func:`cosim.core.fmu_archive.plant_variables`: what ``cosim export-ssp`` connects
+and ``cosim run`` binds) and no FMU state (the solver's memory is the instance's own). The
 archive is reproducible (fixed time stamps) and written atomically.
 """
 
@@ -42,10 +42,10 @@ from cosim.core.build import (
     run_compiler,
 )
 from cosim.core.errors import CosimError
+from cosim.core.fmu_archive import PLANT_ANNOTATION
 
-__all__ = ["CONTROLLER_DIR", "PLANT_ANNOTATION", "ControllerInterface", "Parameter", "Port",
-           "build_controller_fmu", "check_interface", "model_description", "names_header",
-           "plant_variables"]
+__all__ = ["CONTROLLER_DIR", "ControllerInterface", "Parameter", "Port", "build_controller_fmu",
+           "check_interface", "model_description", "names_header"]
 
 #: The controller model's source (package data of :mod:`fmus`).
 CONTROLLER_DIR = PACKAGE_DIR / "controller"
@@ -56,9 +56,6 @@ DIAGNOSTICS = (("status", "solver status: 0 optimal, 1 infeasible at the estimat
                 "2 infeasible, 3 iteration limit, 4 answer check failed, 5 other"),
                ("fallback", "1: the shifted candidate was applied (the solve was not used)"),
                ("iterations", "SQP iterations of the step"))
-#: The tool of the FMI 2 vendor annotation, the type of the FMI 3 annotation, that record the
-#: plant variable of each signal (:func:`plant_variables`).
-PLANT_ANNOTATION = "org.gru-mpc-cosim.plant-variables"
 CFLAGS = ("-std=gnu99", "-O3", "-fPIC", "-shared", "-pthread", "-fvisibility=hidden", "-DEXPORT=",
           "-Wall", "-Wextra", "-Werror", "-Wno-aggressive-loop-optimizations")
 
@@ -263,37 +260,6 @@ def _plant_lines(iface: ControllerInterface, indent: str) -> str:
             + "".join(f"{indent}  <Variable name={quoteattr(name)} plant={quoteattr(var)}/>\n"
                       for name, var in iface.plant_variables().items())
             + f"{indent}</PlantVariables>\n")
-
-
-def plant_variables(path: str | Path) -> dict[str, str]:
-    """The plant variable of each signal of the controller FMU ``path``, as its
-    modelDescription records it (:data:`PLANT_ANNOTATION`), by the controller's variable name;
-    empty for an FMU without the record (an export older than it, another tool's): its
-    signals are the plant's variables of their own names.
-
-    Raises
-    ------
-    CosimError
-        ``path`` is no FMU or its modelDescription.xml is no XML.
-    """
-    import xml.etree.ElementTree as ET
-
-    try:
-        with zipfile.ZipFile(path) as zf:
-            root = ET.fromstring(zf.read("modelDescription.xml"))
-    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError) as exc:
-        raise CosimError(f"{path}: cannot read modelDescription.xml: "
-                         f"{' '.join(str(exc).split())}") from None
-    holders = [*root.iterfind("VendorAnnotations/Tool"),
-               *root.iterfind("Annotations/Annotation")]
-    out = {}
-    for holder in holders:
-        if PLANT_ANNOTATION in (holder.get("name"), holder.get("type")):
-            for var in holder.iter("Variable"):
-                name, plant = var.get("name"), var.get("plant")
-                if name and plant:
-                    out[name] = plant
-    return out
 
 
 def _binary(files: dict[str, bytes], glue: str, flags: Sequence[str]) -> bytes:

@@ -2,8 +2,9 @@
 
 An ``.fmu`` is a zip archive; :func:`safe_extract` unpacks it after checking every member
 name and the unpacked size, :func:`read_model_description` reads its ``modelDescription.xml``
-(through fmpy) and :func:`check_binary` checks that it has a binary for this platform. Each
-fault is a one-line :class:`~cosim.core.errors.CosimError` naming the FMU.
+(through fmpy), :func:`plant_variables` the plant variables a controller FMU records, and
+:func:`check_binary` checks that it has a binary for this platform. Each fault is a one-line
+:class:`~cosim.core.errors.CosimError` naming the FMU.
 """
 
 from __future__ import annotations
@@ -15,8 +16,8 @@ from typing import Any
 
 from cosim.core.errors import CosimError
 
-__all__ = ["MAX_UNPACKED_BYTES", "check_binary", "read_model_description", "safe_extract",
-           "why_not_valid"]
+__all__ = ["MAX_UNPACKED_BYTES", "PLANT_ANNOTATION", "check_binary", "plant_variables",
+           "read_model_description", "safe_extract", "why_not_valid"]
 
 #: Refuse archives that would unpack to more than this many bytes (zip bombs).
 MAX_UNPACKED_BYTES = 2 * 1024**3
@@ -89,3 +90,39 @@ def why_not_valid(var: Any, value: float) -> str:
     low = float(var.min) if var.min is not None else -math.inf
     high = float(var.max) if var.max is not None else math.inf
     return "" if low <= value <= high else f"outside its range [{low:g}, {high:g}]"
+
+
+#: The tool of the FMI 2 vendor annotation, the type of the FMI 3 annotation, in which a
+#: controller FMU of ``cosim export-fmu`` records the plant variable of each signal.
+PLANT_ANNOTATION = "org.gru-mpc-cosim.plant-variables"
+
+
+def plant_variables(path: str | Path) -> dict[str, str]:
+    """The plant variable of each signal of the controller FMU ``path``, as its
+    modelDescription records it (:data:`PLANT_ANNOTATION`), by the controller's variable name;
+    empty for an FMU without the record (an export older than it, another tool's): its
+    signals are the plant's variables of their own names.
+
+    Raises
+    ------
+    CosimError
+        ``path`` is no FMU or its modelDescription.xml is no XML.
+    """
+    import xml.etree.ElementTree as ET
+
+    try:
+        with zipfile.ZipFile(path) as zf:
+            root = ET.fromstring(zf.read("modelDescription.xml"))
+    except (OSError, KeyError, zipfile.BadZipFile, ET.ParseError) as exc:
+        raise CosimError(f"{path}: cannot read modelDescription.xml: "
+                         f"{' '.join(str(exc).split())}") from None
+    holders = [*root.iterfind("VendorAnnotations/Tool"),
+               *root.iterfind("Annotations/Annotation")]
+    out = {}
+    for holder in holders:
+        if PLANT_ANNOTATION in (holder.get("name"), holder.get("type")):
+            for var in holder.iter("Variable"):
+                name, plant = var.get("name"), var.get("plant")
+                if name and plant:
+                    out[name] = plant
+    return out

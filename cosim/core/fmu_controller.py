@@ -118,11 +118,11 @@ class FmuController(FmuComponent):
     def plant_signals(self) -> list[Any]:
         """What the FMU exchanges with the plant as :class:`cosim.core.binding.Wanted`: its
         measured outputs, inputs to apply and measured disturbances, each with the plant
-        variable its modelDescription records (:func:`cosim.core.controller_fmu.
+        variable its modelDescription records (:func:`cosim.core.fmu_archive.
         plant_variables`, ``cosim export-fmu``'s) and its unit; empty for an FMU without that
         record (its signals are then the plant's variables of their own names)."""
         from cosim.core.binding import Wanted
-        from cosim.core.controller_fmu import plant_variables
+        from cosim.core.fmu_archive import plant_variables
         from cosim.core.varmap import variable_unit
 
         named = plant_variables(self.path)

@@ -2,7 +2,7 @@
 connected by name: ``cosim export-ssp``.
 
 Each signal the controller exchanges with the plant is the plant variable its problem names
-(the controller FMU records it, :func:`cosim.core.controller_fmu.plant_variables`; an FMU
+(the controller FMU records it, :func:`cosim.core.fmu_archive.plant_variables`; an FMU
 without the record: the variable of the signal's own name): the controller's measured
 outputs read the plant's outputs, the plant's inputs read the controller's inputs to apply,
 each connection with the linear map between the two variables' units where they differ
@@ -30,9 +30,8 @@ from xml.sax.saxutils import quoteattr
 from cosim.core.atomicio import replacing
 from cosim.core.binding import Conversion, UnitError, unit_conversion, unit_definitions
 from cosim.core.build import add_member
-from cosim.core.controller_fmu import plant_variables
 from cosim.core.errors import CosimError, SimulationFailed
-from cosim.core.fmu_archive import read_model_description, why_not_valid
+from cosim.core.fmu_archive import plant_variables, read_model_description, why_not_valid
 from cosim.core.varmap import variable_unit
 
 __all__ = ["Wiring", "connections", "rehearse", "system_structure", "wiring", "write_ssp"]

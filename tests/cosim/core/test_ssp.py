@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from cosim.cli import main
-from cosim.core.controller_fmu import plant_variables
+from cosim.core.fmu_archive import plant_variables
 from tests.fmus.fourtank_run import Plant
 
 ROOT = Path(__file__).resolve().parents[3]
