@@ -129,24 +129,36 @@ class PaperLaw:
         equilibrium with the same output (its ``ū`` the nonlinear static feedforward), the
         plan moved by the same input change; the governor forgets the equilibrium it kept
         for the request, and a request refused as unreachable is tried again. Where the new
-        disturbances leave the set-point unreachable the last reference is kept, counted
-        (``disturbance_refusals``) and named at the next step (``setpoint_rejections``)."""
-        from controllers.equilibrium import describe
+        disturbances leave the set-point unreachable, the closest reachable output takes its
+        place (the last reference kept when that one fails the theory's checks), counted
+        (``disturbance_refusals``) and named at the next step (``setpoint_rejections``);
+        the governor moves back towards the request when the disturbances allow it."""
+        from controllers.equilibrium import describe, equilibrium_for_output
 
         self.unreachable = None
         if self.governor is not None:
             self.governor.forget_target()
-        mpc = self.mpc
+        mpc, kernel = self.mpc, self.fhocp.kernel
         if self.y_model is None or mpc.u_bar is None:
             return
         try:
-            ref = self.cert.reference(self.y_model, kernel=self.fhocp.kernel)
+            ref = self.cert.reference(self.y_model, kernel=kernel)
         except SetpointError:
+            x_eq, _ = equilibrium_for_output(self.model.params, self.y_model, kernel)
+            y_eq = (kernel.output(x_eq) if kernel is not None   # the exported controller's
+                    else self.model.params["U_o"] @ x_eq + self.model.params["b_o"])
+            try:
+                ref = self.cert.reference(y_eq, kernel=kernel)
+                instead = f"the closest reachable output, {describe(self.model, y_eq)}, instead"
+            except SetpointError:
+                ref, instead = None, "the last reference kept"
             self.disturbance_refusals += 1
             self.moved_refusal = (f"set-point {describe(self.model, self.y_model)} is not "
                                   f"reachable at {measured or 'the measured disturbances'}: "
-                                  "the last reference kept")
-            return
+                                  f"{instead}")
+            if ref is None:
+                return
+            self.y_model = ref.y_bar
         if mpc.plan is not None:
             mpc.plan = np.clip(mpc.plan + (ref.u_bar - mpc.u_bar), -1.0, 1.0)
         mpc.set_reference(ref.x_bar, ref.u_bar, ref.alpha)

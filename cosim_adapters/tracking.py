@@ -171,6 +171,10 @@ class TrackingLaw:
         self.restarts = 0
         #: per set-point whose target left ``Y_s``: its first time, steps, last target, d̂
         self.outside: dict[int, dict[str, Any]] = {}
+        #: set-points the measured disturbances left unreachable (notes), the last one
+        #: pending its step's time
+        self.moved_notes: list[str] = []
+        self._moved_note = ""
 
     def step(self, observer: Any, y: np.ndarray, y_ref: np.ndarray, t: float,
              x_start: np.ndarray | None = None) -> LawStep:
@@ -182,6 +186,9 @@ class TrackingLaw:
         if self.y_ref is None or np.any(y_ref != self.y_ref):
             self.setpoint_changes += 1
             self.y_ref = y_ref
+        if self._moved_note and len(self.moved_notes) < MAX_NOTES:
+            self.moved_notes.append(f"from t = {t:g} s, {self._moved_note}")
+        self._moved_note = ""
         tracker, model = self.tracker, self.model
         if tracker.u_s is None:   # the equilibrium x̂_0 starts at
             x_s, u_s = equilibrium_for_output(model.params, observer.y_hat(), self.fhocp.kernel)
@@ -207,7 +214,9 @@ class TrackingLaw:
         now needs for it (the equilibrium for that output at the new disturbances, the
         nonlinear static feedforward), and move the plan by the same input change. Without
         it, the steady state would lag behind by the move limit on ``u_s`` and the stage cost
-        would pull the outputs towards that lagging state."""
+        would pull the outputs towards that lagging state. A set-point the new disturbances
+        leave unreachable (``measured``: them in the user's names) is tracked to the closest
+        reachable steady output, as any, and named in :meth:`notes`."""
         from controllers.equilibrium import equilibrium_for_output
 
         tracker, kernel = self.tracker, self.fhocp.kernel
@@ -222,6 +231,11 @@ class TrackingLaw:
             tracker.plan = np.clip(tracker.plan + (u_s - tracker.u_s), -1.0, 1.0)
         tracker.u_s, tracker.x_s = u_s, np.asarray(x_s, dtype=float)
         tracker._guess = None
+        if self.y_ref is not None:   # the request under the new disturbances: said, if lost
+            why = self._unreachable(self.y_ref)
+            if why:
+                self._moved_note = (f"at {measured or 'the measured disturbances'}, the "
+                                    f"{why}: tracked to the closest reachable steady output")
 
     def restart(self) -> None:
         """Start the artificial steady state again at the next step, from the equilibrium
@@ -244,8 +258,9 @@ class TrackingLaw:
         seen.update(steps=seen["steps"] + 1, r=r.copy(), d_hat=d_hat.copy(), y_ref=self.y_ref)
 
     def notes(self) -> list[str]:
-        """One line per set-point whose target left ``Y_s`` (:meth:`_watch_target`), in the
-        problem's names and units: what the run's end prints."""
+        """One line per set-point whose target left ``Y_s`` (:meth:`_watch_target`) and per
+        set-point the measured disturbances left unreachable (:meth:`disturbance_moved`), in
+        the problem's names and units: what the run's end prints."""
         model, names = self.model, self.model.problem.output_names
         units = self.model.problem.output_units
         out = []
@@ -267,7 +282,7 @@ class TrackingLaw:
                     f"{n} {v:+.3g} {u}".rstrip() for n, v, u in zip(names, d, units,
                                                                     strict=True))
                 + f"), outside the certified steady outputs ({ys}){tail}")
-        return out
+        return out + self.moved_notes
 
     def setpoint_reason(self, y: np.ndarray) -> str:
         fh = self.fhocp

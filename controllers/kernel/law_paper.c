@@ -363,15 +363,20 @@ static void law_reset(law_state *st, gk_ws *ws) {
 /* PaperLaw.disturbance_moved: the reference of the FHOCP's set-point again under the
  * disturbances now held in the biases (the kernel's equilibrium with the thread's shift), the
  * plan moved by the same input change; the request refused as unreachable and the governor's
- * kept equilibrium forgotten; an unreachable set-point keeps the last reference */
+ * kept equilibrium forgotten; an unreachable set-point gives way to the closest reachable
+ * output (the last reference kept when that one fails the checks too) */
 __attribute__((unused)) static void law_disturbance_moved(law_state *st) {
   double x[NX], u[NU], alpha;
   st->has_unreachable = 0;
   st->has_target = 0;
   if (!st->has_model || !st->has_reference) return;
   if (reference_of(st, st->y_model, x, u, &alpha) != 0) {
+    double xe[NX], ue[NU], ye[NY];
     st->moved_refused = 1;
-    return;
+    PFX(equilibrium)(st->ws, st->y_model, xe, ue);
+    PFX(output)(xe, ye);
+    if (reference_of(st, ye, x, u, &alpha) != 0) return;
+    memcpy(st->y_model, ye, sizeof ye);
   }
   if (st->has_plan)
     for (int i = 0; i < NH; i++)

@@ -265,8 +265,31 @@ def test_the_paper_laws_compiled_step_replays_the_python_controller_with_disturb
     compiled.close()
     info = ctrl.law.summary()
     assert info["disturbance_refusals"] >= 1
-    assert any("is not reachable at T_in=5 degC: the last reference kept" in r
+    assert any("is not reachable at T_in=5 degC: the closest reachable output" in r
                for r in info["setpoint_rejections"]), info["setpoint_rejections"]
+
+
+@pytest.mark.parametrize("options", [{}, PAPER])
+def test_a_set_point_the_disturbance_puts_out_of_reach_is_said_in_the_users_names(
+        heater: dict[str, Path], tmp_path: Path, options: dict) -> None:
+    """60 degC in a 5 degC room needs more than the heater's 2,000 W: either law goes to the
+    closest reachable temperature at full power, says so in the problem's names and units,
+    and returns to the set-point when the ambient does."""
+    import cosim
+
+    scenario = tmp_path / "steps.csv"
+    scenario.write_text("time,ref.T,dist.T_in\n0,55,20\n1000,60,20\n2000,60,5\n4000,60,20\n"
+                        "5000,,\n")
+    run = cosim.run(scenario, plant=heater["fmu"], model=heater["model"], options=options,
+                    figure=False)
+    assert run.status == "ok", run.reason
+    info = run.summary["controller_summary"]
+    said = info["setpoint_rejections"] if options else info["notes"]
+    assert any("at T_in=5 degC" in line and "T=60" in line and "closest reachable" in line
+               for line in said), said
+    df = run.to_pandas().set_index("time")
+    assert df.loc[2400.0:4000.0, "ctrl.P"].min() > 1990.0          # full power meanwhile
+    assert abs(df.loc[4980.0, "plant.T"] - 60.0) < 0.5             # and back at 60 degC
 
 
 def test_the_paper_laws_controller_fmu_takes_the_disturbance_as_the_python_controller(
