@@ -17,13 +17,18 @@ BENCH = ROOT / "benchmarks"
 PROBLEM = ROOT / "fmus" / "examples" / "heater" / "problem.toml"
 
 
-@pytest.fixture(scope="module")
-def heater_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def _build(plant: str, folder: Path) -> Path:
+    """The example plant's FMU (``fmus/examples/build.py``) in ``folder``."""
     spec = importlib.util.spec_from_file_location("examples_build",
                                                   ROOT / "fmus" / "examples" / "build.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.build("heater", tmp_path_factory.mktemp("heater"))
+    return module.build(plant, folder)
+
+
+@pytest.fixture(scope="module")
+def heater_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return _build("heater", tmp_path_factory.mktemp("heater"))
 
 
 def test_the_oracle_knows_the_plant_and_tracks(heater_fmu: Path, tmp_path: Path,
@@ -51,11 +56,7 @@ def test_the_oracle_knows_the_dead_time_and_the_measured_disturbance(
     capacity off nominal: the oracle's one-sample prediction is the plant's to rounding (the
     power still in the pipe and the ambient temperature measured now), and it tracks."""
     monkeypatch.syspath_prepend(str(BENCH))
-    spec = importlib.util.spec_from_file_location("examples_build",
-                                                  ROOT / "fmus" / "examples" / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    fmu = module.build("heater_dead_time", tmp_path / "fmu")
+    fmu = _build("heater_dead_time", tmp_path / "fmu")
     problem = ROOT / "fmus" / "examples" / "heater_dead_time" / "problem.toml"
     scenario = tmp_path / "steps.csv"
     scenario.write_text("time,ref.T,dist.T_in,plant.C_factor\n0,55,20,0.9\n600,,30,\n"
@@ -80,11 +81,7 @@ def test_the_oracle_knows_the_furnaces_measured_load(tmp_path: Path,
     load draws heat from zone 1 (its power follows the load), and the oracle tracks through
     the load steps."""
     monkeypatch.syspath_prepend(str(BENCH))
-    spec = importlib.util.spec_from_file_location("examples_build",
-                                                  ROOT / "fmus" / "examples" / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    fmu = module.build("furnace_load", tmp_path / "fmu")
+    fmu = _build("furnace_load", tmp_path / "fmu")
     problem = ROOT / "fmus" / "examples" / "furnace_load" / "problem.toml"
     scenario = tmp_path / "steps.csv"
     scenario.write_text("time,ref.T1,ref.T2,dist.load,plant.C_factor\n"

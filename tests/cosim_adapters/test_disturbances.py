@@ -11,7 +11,9 @@ from __future__ import annotations
 import csv
 import importlib.util
 import json
+from collections.abc import Callable
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -194,6 +196,27 @@ def test_what_the_robust_mpc_does_not_take_yet_is_refused_in_words(
     assert not (tmp_path / "out").exists()
 
 
+def _replay(ctrl: Any, compiled: Any, steps: int, ref: Callable[[int], float],
+            dist: Callable[[int], float]) -> None:
+    """Step the Python controller ``ctrl`` and the exported C step ``compiled`` on the same
+    measurements (a first-order response to the set-point ``ref(k)`` with sensor noise, the
+    ambient ``dist(k)``): the same inputs, statuses, fallbacks and targets, to the bit."""
+    ctrl.setup(0.0)
+    rng = np.random.default_rng(3)
+    y = 45.0
+    for k in range(steps):
+        r, d = ref(k), dist(k)
+        y = y + 0.3 * (r - y) * 0.2 + rng.normal(0.0, 0.05)
+        ctrl.set_inputs({"T": y, "ref.T": r, "dist.T_in": d})
+        ctrl.step(20.0 * k, 20.0)
+        out = compiled.step(np.array([y]), np.array([r]), np.array([d]))
+        np.testing.assert_array_equal(out["u"], [ctrl.get_outputs()["P"]])
+        diag = ctrl.diagnostics()
+        assert (out["status"], out["fallback"]) == (diag["status"], diag["fallback"]), k
+        np.testing.assert_array_equal(out["y_target"], [diag["y_model_T"]])
+    compiled.close()
+
+
 #: the paper's law with a horizon for the heater's time constants (its default N = 15 is the
 #: four tanks'), the offset-free set-point
 PAPER = {"law": "paper", "N": 60, "offset_free": True}
@@ -248,21 +271,8 @@ def test_the_paper_laws_compiled_step_replays_the_python_controller_with_disturb
     assert design.q == 1 and design.dead_time == (2 if plant == "dead_time" else 0)
     compiled = CompiledController(*build(design), design_data(design), n_inputs=1,
                                   n_outputs=1, n_disturbances=1)
-    ctrl.setup(0.0)
-    rng = np.random.default_rng(3)
-    y = 45.0
-    for k in range(160):
-        ref = 45.0 if k < 20 else 55.0 if k < 70 else 60.0
-        d = 20.0 if k < 40 else 10.0 if k < 90 else 30.0 if k < 120 else 5.0
-        y = y + 0.3 * (ref - y) * 0.2 + rng.normal(0.0, 0.05)
-        ctrl.set_inputs({"T": y, "ref.T": ref, "dist.T_in": d})
-        ctrl.step(20.0 * k, 20.0)
-        out = compiled.step(np.array([y]), np.array([ref]), np.array([d]))
-        np.testing.assert_array_equal(out["u"], [ctrl.get_outputs()["P"]])
-        diag = ctrl.diagnostics()
-        assert (out["status"], out["fallback"]) == (diag["status"], diag["fallback"]), k
-        np.testing.assert_array_equal(out["y_target"], [diag["y_model_T"]])
-    compiled.close()
+    _replay(ctrl, compiled, 160, lambda k: 45.0 if k < 20 else 55.0 if k < 70 else 60.0,
+            lambda k: 20.0 if k < 40 else 10.0 if k < 90 else 30.0 if k < 120 else 5.0)
     info = ctrl.law.summary()
     assert info["disturbance_refusals"] >= 1
     assert any("is not reachable at T_in=5 degC: the closest reachable output" in r
@@ -470,24 +480,8 @@ def test_the_compiled_step_replays_the_python_controller_with_disturbance_and_de
     assert design.q == 1 and design.dead_time == 2
     compiled = CompiledController(*build(design), design_data(design), n_inputs=1,
                                   n_outputs=1, n_disturbances=1)
-    ctrl.setup(0.0)
-    rng = np.random.default_rng(3)
-    y = 45.0
-    moved = 0
-    for k in range(120):
-        ref = 45.0 if k < 20 else 55.0 if k < 70 else 50.0
-        d = 20.0 if k < 40 else 10.0 if k < 90 else 30.0
-        y = y + 0.3 * (ref - y) * 0.2 + rng.normal(0.0, 0.05)
-        ctrl.set_inputs({"T": y, "ref.T": ref, "dist.T_in": d})
-        ctrl.step(20.0 * k, 20.0)
-        out = compiled.step(np.array([y]), np.array([ref]), np.array([d]))
-        np.testing.assert_array_equal(out["u"], [ctrl.get_outputs()["P"]])
-        diag = ctrl.diagnostics()
-        assert (out["status"], out["fallback"]) == (diag["status"], diag["fallback"]), k
-        np.testing.assert_array_equal(out["y_target"], [diag["y_model_T"]])
-        moved += k in (40, 90)
-    assert moved == 2
-    compiled.close()
+    _replay(ctrl, compiled, 120, lambda k: 45.0 if k < 20 else 55.0 if k < 70 else 50.0,
+            lambda k: 20.0 if k < 40 else 10.0 if k < 90 else 30.0)
 
 
 def test_the_controller_fmu_takes_the_disturbance_as_the_python_controller(
