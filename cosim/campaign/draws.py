@@ -3,13 +3,15 @@
 Every ``[draw]`` key has its own random stream, ``numpy.random.default_rng([seed, run,
 crc32(key)])``: adding or removing one key does not change what the others draw, and a run
 draws the same values whichever worker runs it, in whatever order. Set-point sequences,
-initial states and disturbance steps have streams of their own, and the run's noise seed
+initial states and disturbance levels (steps, or ramps at their rates) have streams of
+their own, and the run's noise seed
 (sensor noise, a GRU plant's output perturbation) is ``[seed, run]`` hashed to 32 bits.
 Variants of a run share all of it: controllers are compared on the same draws.
 """
 
 from __future__ import annotations
 
+import math
 import zlib
 from dataclasses import dataclass, field
 from typing import Any
@@ -86,6 +88,11 @@ class DrawContext:
         Its certificate (default set-point ranges; ``ê_o,0``).
     ranges : dict
         Output → certified admissible ``(lo, hi)`` [physical units].
+    rates : dict
+        Measured disturbance → its largest change per sample [physical units]
+        (:func:`controllers.disturbances.rates`), for ramps (``[disturbances] ramp``).
+    sample_time : float
+        The model's sample time [s] (the ramps' step).
     """
 
     start_time: float
@@ -93,6 +100,8 @@ class DrawContext:
     model: Any = None
     cert: Any = None
     ranges: dict[str, tuple[float, float]] = field(default_factory=dict)
+    rates: dict[str, float] = field(default_factory=dict)
+    sample_time: float = 0.0
 
     @classmethod
     def build(cls, spec: CampaignSpec, start_time: float) -> DrawContext:
@@ -105,7 +114,8 @@ class DrawContext:
             for, or certified set-points (no ranges) of a model whose outputs are not the
             scenario's.
         """
-        needs_model = spec.initial_state is not None or (
+        ramps = spec.disturbances is not None and spec.disturbances.ramp
+        needs_model = ramps or spec.initial_state is not None or (
             spec.setpoints is not None and (not spec.setpoints.ranges
                                             or spec.setpoints.first_certified))
         scenario_refs = _scenario_refs(spec)
@@ -126,6 +136,9 @@ class DrawContext:
         if spec.model_plant and spec.model is None and "model" not in spec.options:
             model_path = spec.plant[len("model:"):]  # type: ignore[index]
         model = GRUModel.load(model_path)
+        rates = _ramp_rates(spec, model, model_path) if ramps else {}
+        if spec.setpoints is None and spec.initial_state is None:
+            return cls(start_time, [], model, rates=rates, sample_time=float(model.problem.Ts))
         if spec.setpoints is not None and (not spec.setpoints.ranges
                                            or spec.setpoints.first_certified) and scenario_refs \
                 and sorted(scenario_refs) != sorted(model.output_names):
@@ -143,7 +156,24 @@ class DrawContext:
             ranges[name] = (lo, hi)
         outputs = list(spec.setpoints.ranges or model.output_names) if spec.setpoints else \
             list(model.output_names)
-        return cls(start_time, outputs, model, cert, ranges)
+        return cls(start_time, outputs, model, cert, ranges, rates, float(model.problem.Ts))
+
+
+def _ramp_rates(spec: CampaignSpec, model: Any, model_path: Any) -> dict[str, float]:
+    """Each ramped disturbance's largest change per sample [its units]: the model's problem's
+    ``rate``, else its data's (:func:`controllers.disturbances.rates`)."""
+    from controllers.disturbances import rates
+
+    assert spec.disturbances is not None
+    per_sample = dict(zip(model.problem.disturbance_names,
+                          rates(model) * np.abs([c.scale for c in model.problem.disturbances]),
+                          strict=True))
+    unknown = [d for d in spec.disturbances.ranges if d not in per_sample]
+    if unknown:
+        raise CosimError(f"{spec.path}: [disturbances] ramp: {unknown[0]!r} is not a measured "
+                         f"disturbance of the model {model_path} (its: "
+                         f"{', '.join(per_sample) or 'none'}), so it has no rate")
+    return per_sample
 
 
 def _scenario_refs(spec: CampaignSpec) -> list[str]:
@@ -209,8 +239,29 @@ def draw_run(spec: CampaignSpec, run: int, ctx: DrawContext) -> RunDraw:
         steps = [(ctx.start_time + j * ds.hold,
                   {name: float(rng.uniform(lo, hi)) for name, (lo, hi) in ds.ranges.items()})
                  for j in range(ds.count)]
+        if ds.ramp:
+            steps = _ramped(steps, ctx.rates, ctx.sample_time)
     return RunDraw(run, run_seed(spec.seed, run), values, tuple(setpoints), stop, plant_start,
                    x_hat0, tuple(steps))
+
+
+def _ramped(steps: list[tuple[float, dict[str, float]]], rates: dict[str, float],
+            ts: float) -> list[tuple[float, dict[str, float]]]:
+    """The level steps ``steps`` as ramps: from each level's time on, every ``ts`` seconds,
+    each disturbance moves towards its level by at most its rate, until it gets there or the
+    next level begins (the first level is the run's start value)."""
+    out = [steps[0]]
+    now = dict(steps[0][1])
+    for j, (t0, levels) in enumerate(steps[1:], start=1):
+        end = steps[j + 1][0] if j + 1 < len(steps) else math.inf
+        k = 0
+        while t0 + k * ts < end and any(now[d] != v for d, v in levels.items()):
+            for d, v in levels.items():
+                now[d] = v if abs(v - now[d]) <= rates[d] else \
+                    now[d] + math.copysign(rates[d], v - now[d])
+            out.append((t0 + k * ts, dict(now)))
+            k += 1
+    return out
 
 
 def _initial_state(spec: CampaignSpec, ctx: DrawContext, run: int,

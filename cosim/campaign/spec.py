@@ -33,6 +33,7 @@ that controllers are compared on the same draws. Example::
     count = 3                          # [disturbances]) replacing the scenario's dist.* columns
     hold = 2000                        # seconds each, from the start; the last to the end
     T_in = [10.0, 30.0]                # range per disturbance (physical units)
+    # ramp = true                      # reach each level at the problem's rate per sample
 
     [initial_state]                    # GRU-model plants ("model:...") only
     output_offset = 0.05               # start at the equilibrium of the first set-point ± this
@@ -99,11 +100,14 @@ class SetpointSpec:
 class DisturbanceSpec:
     """``[disturbances]``: ``count`` levels of each measured disturbance, drawn uniformly in
     its range (physical units), each held ``hold`` seconds from the start (the last to the
-    run's end): steps replacing the scenario's ``dist.*`` columns."""
+    run's end): steps replacing the scenario's ``dist.*`` columns; ``ramp``: each level
+    reached at the disturbance's rate (its problem's ``rate`` per sample) instead of in one
+    step."""
 
     count: int
     hold: float
     ranges: dict[str, tuple[float, float]]
+    ramp: bool = False
 
 
 @dataclass(frozen=True)
@@ -333,11 +337,16 @@ def _setpoints(table: Any, loc: _Locator) -> SetpointSpec:
 
 
 def _disturbances(table: Any, loc: _Locator) -> DisturbanceSpec:
-    count, hold, ranges = _sequence(table, loc, "disturbances", "level", "disturbance", ())
+    count, hold, ranges = _sequence(table, loc, "disturbances", "level", "disturbance",
+                                    ("ramp",))
     if not ranges:
         raise loc.error("[disturbances]: no disturbance ranges (NAME = [low, high])",
                         "disturbances")
-    return DisturbanceSpec(count, hold, ranges)
+    ramp = table.get("ramp", False)
+    if not isinstance(ramp, bool):
+        raise loc.error(f"[disturbances] ramp = {ramp!r}: expected true (each level reached "
+                        "at the disturbance's rate) or false (steps)", "disturbances", "ramp")
+    return DisturbanceSpec(count, hold, ranges, ramp)
 
 
 def _initial_state(table: Any, loc: _Locator) -> InitialState:

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import importlib.util
+import itertools
 import json
 from collections.abc import Callable
 from pathlib import Path
@@ -19,6 +20,7 @@ import numpy as np
 import pytest
 
 from cosim.cli import main
+from cosim.core.errors import CosimError
 
 ROOT = Path(__file__).resolve().parents[2]
 PROBLEM = """\
@@ -458,6 +460,41 @@ def test_a_campaign_draws_disturbance_steps_on_dask(dead_time: dict[str, Path],
                 assert row["dist.T_in"] == levels["T_in"]
             seen[run, variant] = [levels["T_in"] for _, levels in steps]
     assert seen[0, "mpc"] == seen[0, "pi"] != seen[1, "mpc"] == seen[1, "pi"]
+
+
+def test_a_campaign_ramps_the_disturbance_at_its_rate(dead_time: dict[str, Path],
+                                                      tmp_path: Path) -> None:
+    """``[disturbances] ramp = true``: each drawn level is reached at the problem's rate
+    (0.5 degC per 20 s sample), one event per sample, and the levels are the steps' own; a
+    ramp of a disturbance the model does not measure is refused, naming the spec."""
+    from cosim.campaign import draws, spec
+
+    problem = ROOT / "fmus" / "examples" / "heater_dead_time" / "problem.toml"
+    text = (f'[campaign]\nruns = 3\nseed = 5\nscenario = "{dead_time["scenario"]}"\n'
+            f'plant = "{dead_time["fmu"]}"\nmodel = "{dead_time["model"]}"\n'
+            f'problem = "{problem}"\n\n[disturbances]\ncount = 3\nhold = 2400\n'
+            'T_in = [10.0, 30.0]\nramp = true\n\n[[variant]]\nname = "mpc"\n'
+            'controller = "robust-mpc"\n')
+    path = tmp_path / "spec.toml"
+    path.write_text(text)
+    ramped = spec.load(path)
+    (tmp_path / "steps.toml").write_text(text.replace("ramp = true\n", ""))
+    stepped = spec.load(tmp_path / "steps.toml")
+    ctx = draws.DrawContext.build(ramped, 0.0)
+    assert ctx.sample_time == 20.0 and ctx.rates == {"T_in": 0.5}
+    for run in range(3):
+        events = draws.draw_run(ramped, run, ctx).disturbances
+        steps = draws.draw_run(stepped, run, draws.DrawContext.build(stepped, 0.0)).disturbances
+        times = [t for t, _ in events]
+        values = [v["T_in"] for _, v in events]
+        assert events[0] == steps[0] and values[-1] == steps[-1][1]["T_in"]
+        starts = {t for t, _ in steps}
+        assert all(b - a == 20.0 or b in starts for a, b in itertools.pairwise(times))
+        assert np.max(np.abs(np.diff(values))) <= 0.5 + 1e-12 and len(events) > 3
+        assert starts <= set(times)   # each ramp starts at its level's time
+    path.write_text(text.replace("T_in = [10.0, 30.0]", "T_out = [10.0, 30.0]"))
+    with pytest.raises(CosimError, match="'T_out' is not a measured disturbance of the model"):
+        draws.DrawContext.build(spec.load(path), 0.0)
 
 
 def test_the_compiled_step_replays_the_python_controller_with_disturbance_and_dead_time(

@@ -162,6 +162,7 @@ def test_disturbance_steps_are_drawn_per_run_in_their_ranges(tmp_path: Path) -> 
     ("count = 2\nhold = 10\n", "[disturbances]: no disturbance ranges"),
     ("hold = 10\nTin = [2.0, 1.0]\n", "[disturbances] Tin = [2.0, 1.0]: expected a range"),
     ("hold = -1\nTin = [1.0, 2.0]\n", "hold"),
+    ("hold = 10\nTin = [1.0, 2.0]\nramp = 3\n", "[disturbances] ramp = 3: expected true"),
 ])
 def test_bad_disturbance_tables_name_the_line(tmp_path: Path, table: str, message: str) -> None:
     path = write(tmp_path, GOOD + "\n[disturbances]\n" + table)
