@@ -12,7 +12,7 @@ chose the same weighting.
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_tune.py [--plants fourtank,cstr,heater,mixing_tank,furnace]
+    .venv/bin/python benchmarks/bench_tune.py [--plants fourtank,cstr,heater,mixing_tank,furnace,furnace3]
         [--epochs E] [--models DIR]
 """
 
@@ -31,7 +31,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-PLANTS = ("fourtank", "cstr", "heater", "mixing_tank", "furnace")
+PLANTS = ("fourtank", "cstr", "heater", "mixing_tank", "furnace", "furnace3")
 
 
 def model_of(plant: str, folder: Path, epochs: int | None) -> Path:

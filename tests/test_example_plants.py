@@ -1,4 +1,5 @@
-"""The whole pipeline on four plants that are not four tanks, as a user runs it.
+"""The whole pipeline on four plants that are not four tanks, as a user runs it (and the
+three-zone furnace of the tune benchmark, its equations checked).
 
 ``examples/own_plant.py --epochs 150 --runs 3`` on each example plant (``fmus/examples``: a SISO
 heated vessel, a 2 × 2 CSTR in L/min, K and mol/L at Ts = 15 s, a mixing tank with 3 inputs and
@@ -105,3 +106,31 @@ def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(plant: str, tmp_pat
     assert camp["variants"]["robust-mpc-paper"]["violating_runs"] == 0
     table_columns = set(camp["variants"]["robust-mpc"]["quantiles"])
     assert {f"iae.{n}" for n in problem.output_names} <= table_columns
+
+
+def test_the_three_zone_furnace_is_square_and_symmetric(tmp_path: Path) -> None:
+    """``furnace3`` (the 3 x 3 plant of benchmarks/bench_tune.py): its problem is 3 x 3 and
+    named as its FMU; at rest with equal powers its zones are equal, and more power in the
+    middle zone warms both end zones alike and less than the middle one."""
+    import importlib.util
+
+    import fmpy
+
+    spec = importlib.util.spec_from_file_location("example_plants",
+                                                  ROOT / "fmus" / "examples" / "build.py")
+    assert spec is not None and spec.loader is not None
+    examples = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(examples)
+    fmu = examples.build("furnace3", tmp_path)
+    problem = load(examples.problem_file("furnace3"))
+    assert list(problem.input_names) == ["P1", "P2", "P3"]
+    assert list(problem.output_names) == ["T1", "T2", "T3"]
+    names = {v.name for v in fmpy.read_model_description(str(fmu)).modelVariables}
+    assert {"P1", "P2", "P3", "T1", "T2", "T3"} <= names
+    rest = fmpy.simulate_fmu(str(fmu), stop_time=20.0, output_interval=20.0,
+                             output=["T1", "T2", "T3"])[-1]
+    assert rest["T1"] == pytest.approx(rest["T2"]) == pytest.approx(rest["T3"])
+    warm = fmpy.simulate_fmu(str(fmu), stop_time=3000.0, output_interval=20.0,
+                             start_values={"P2": 1500.0}, output=["T1", "T2", "T3"])[-1]
+    assert warm["T1"] == pytest.approx(warm["T3"], rel=1e-9)
+    assert rest["T1"] < warm["T1"] < warm["T2"]

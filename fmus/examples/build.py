@@ -1,5 +1,6 @@
 """Build the example plants' FMUs with pythonfmu: ``CSTR.fmu``, ``Heater.fmu``,
-``HeaterDeadTime.fmu``, ``MixingTank.fmu``, ``Furnace.fmu``, ``FurnaceLoad.fmu``.
+``HeaterDeadTime.fmu``, ``MixingTank.fmu``, ``Furnace.fmu``, ``FurnaceLoad.fmu``,
+``Furnace3.fmu``.
 
 Usage::
 
@@ -23,11 +24,13 @@ PLANTS = {"cstr": HERE / "cstr" / "cstr.py", "heater": HERE / "heater" / "heater
           "heater_dead_time": HERE / "heater_dead_time" / "heater_dead_time.py",
           "mixing_tank": HERE / "mixing_tank" / "mixing_tank.py",
           "furnace": HERE / "furnace" / "furnace.py",
-          "furnace_load": HERE / "furnace_load" / "furnace_load.py"}
+          "furnace_load": HERE / "furnace_load" / "furnace_load.py",
+          "furnace3": HERE / "furnace3" / "furnace3.py"}
 #: Plant name -> FMU file name.
 FMU_NAMES = {"cstr": "CSTR.fmu", "heater": "Heater.fmu",
              "heater_dead_time": "HeaterDeadTime.fmu", "mixing_tank": "MixingTank.fmu",
-             "furnace": "Furnace.fmu", "furnace_load": "FurnaceLoad.fmu"}
+             "furnace": "Furnace.fmu", "furnace_load": "FurnaceLoad.fmu",
+             "furnace3": "Furnace3.fmu"}
 
 
 def problem_file(name: str) -> Path:
