@@ -4,8 +4,8 @@ Every ``[draw]`` key has its own random stream, ``numpy.random.default_rng([seed
 crc32(key)])``: adding or removing one key does not change what the others draw, and a run
 draws the same values whichever worker runs it, in whatever order. Set-point sequences,
 initial states and disturbance levels (steps, or ramps at their rates) have streams of
-their own, and the run's noise seed
-(sensor noise, a GRU plant's output perturbation) is ``[seed, run]`` hashed to 32 bits.
+their own, and the run's noise seed (sensor noise, a GRU plant's output perturbation) is
+``[seed, run]`` hashed to 32 bits.
 Variants of a run share all of it: controllers are compared on the same draws.
 """
 
