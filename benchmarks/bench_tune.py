@@ -1,5 +1,6 @@
 """``cosim tune``'s wall time per example plant, in one process and in parallel workers
-(issue 48; aim: at most 60 s on 2 cores for every example plant, the same choice).
+(issue 48; aim: at most 60 s on 2 cores for every example plant, the 3 x 3 three-zone furnace
+included, the same choice).
 
 For each plant: its FMU built (``fmus/examples``), identification data generated, a GRU
 trained with ``cosim train``'s defaults (``--epochs`` shortens it; ``--models DIR`` keeps
@@ -12,8 +13,8 @@ chose the same weighting.
 
 Usage::
 
-    .venv/bin/python benchmarks/bench_tune.py [--plants fourtank,cstr,heater,mixing_tank,furnace,furnace3]
-        [--epochs E] [--models DIR]
+    .venv/bin/python benchmarks/bench_tune.py
+        [--plants fourtank,cstr,heater,mixing_tank,furnace,furnace3] [--epochs E] [--models DIR]
 """
 
 from __future__ import annotations
