@@ -112,17 +112,12 @@ def test_the_three_zone_furnace_is_square_and_symmetric(tmp_path: Path) -> None:
     """``furnace3`` (the 3 x 3 plant of benchmarks/bench_tune.py): its problem is 3 x 3 and
     named as its FMU; at rest with equal powers its zones are equal, and more power in the
     middle zone warms both end zones alike and less than the middle one."""
-    import importlib.util
-
     import fmpy
 
-    spec = importlib.util.spec_from_file_location("example_plants",
-                                                  ROOT / "fmus" / "examples" / "build.py")
-    assert spec is not None and spec.loader is not None
-    examples = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(examples)
-    fmu = examples.build("furnace3", tmp_path)
-    problem = load(examples.problem_file("furnace3"))
+    from tests import example_builds
+
+    fmu = example_builds.build("furnace3", tmp_path)
+    problem = load(example_builds.problem_file("furnace3"))
     assert list(problem.input_names) == ["P1", "P2", "P3"]
     assert list(problem.output_names) == ["T1", "T2", "T3"]
     names = {v.name for v in fmpy.read_model_description(str(fmu)).modelVariables}

@@ -34,7 +34,7 @@ from cosim.core.errors import CosimError, SimulationFailed
 from cosim.core.fmu_archive import plant_variables, read_model_description, why_not_valid
 from cosim.core.varmap import variable_unit
 
-__all__ = ["Wiring", "connections", "rehearse", "system_structure", "wiring", "write_ssp"]
+__all__ = ["Wiring", "rehearse", "system_structure", "wiring", "write_ssp"]
 
 _NS = ('xmlns:ssd="http://ssp-standard.org/SSP1/SystemStructureDescription" '
        'xmlns:ssc="http://ssp-standard.org/SSP1/SystemStructureCommon" '
@@ -85,20 +85,6 @@ def _check_value(option: str, name: str, value: float, var: Any, fmu: Path) -> N
         raise CosimError(f"{option} {name}={value:g}: {why} in {fmu}")
 
 
-def connections(plant: Path, controller: Path) -> tuple[list[tuple[str, str]], list[str]]:
-    """``(connections, free inputs)``: ``(from "plant.x" or "mpc.x", to ...)``, and the
-    controller inputs no plant output feeds (its set-points and measured disturbances);
-    :func:`wiring` says more.
-
-    Raises
-    ------
-    CosimError
-        As :func:`wiring`.
-    """
-    w = wiring(plant, controller)
-    return [(a, b) for a, b, _ in w.links], w.free
-
-
 def wiring(plant: Path, controller: Path) -> Wiring:
     """How ``plant`` and ``controller`` connect: each controller signal to the plant variable
     the controller records for it (module docstring), with the unit conversion between them.
@@ -106,8 +92,8 @@ def wiring(plant: Path, controller: Path) -> Wiring:
     Raises
     ------
     CosimError
-        A controller output no plant input takes, or no connection at all (the two FMUs do
-        not belong together); a measured disturbance whose plant variable the plant lacks
+        No connection from the plant to the controller or none back (the two FMUs do not
+        belong together); a measured disturbance whose plant variable the plant lacks
         (or has as neither an input nor a tunable parameter); units that cannot be related.
     """
     md = read_model_description(plant)

@@ -4,31 +4,41 @@ checks, it tracks)."""
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
 import cosim
+from tests import example_builds
 
 ROOT = Path(__file__).resolve().parents[2]
 BENCH = ROOT / "benchmarks"
 PROBLEM = ROOT / "fmus" / "examples" / "heater" / "problem.toml"
 
 
-def _build(plant: str, folder: Path) -> Path:
-    """The example plant's FMU (``fmus/examples/build.py``) in ``folder``."""
-    spec = importlib.util.spec_from_file_location("examples_build",
-                                                  ROOT / "fmus" / "examples" / "build.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.build(plant, folder)
-
-
 @pytest.fixture(scope="module")
 def heater_fmu(tmp_path_factory: pytest.TempPathFactory) -> Path:
-    return _build("heater", tmp_path_factory.mktemp("heater"))
+    return example_builds.build("heater", tmp_path_factory.mktemp("heater"))
+
+
+def _disturbed_run(plant: str, folder: Path, scenario: str, steps: int) -> pd.DataFrame:
+    """The oracle of example plant ``plant`` (heat capacity 0.9 of nominal, as the scenario's
+    ``plant.C_factor`` sets it on the FMU) in closed loop on ``scenario``: every solve passes
+    its checks, its one-sample prediction is the plant's to rounding; the results."""
+    fmu = example_builds.build(plant, folder / "fmu")
+    problem = example_builds.problem_file(plant)
+    path = folder / "steps.csv"
+    path.write_text(scenario)
+    run = cosim.run(path, plant=fmu, controller="oracle_bound:OracleController",
+                    options={"plant": plant, "fmu": str(fmu), "problem": str(problem),
+                             "horizon": 30, "parameters": {"C_factor": 0.9}}, problem=problem)
+    assert run.status == "ok", run.reason
+    info = run.summary["controller_summary"]
+    assert info["failures"] == 0 and info["steps"] == steps
+    assert info["prediction_error_max"] < 1e-9
+    return run.to_pandas()
 
 
 def test_the_oracle_knows_the_plant_and_tracks(heater_fmu: Path, tmp_path: Path,
@@ -56,20 +66,9 @@ def test_the_oracle_knows_the_dead_time_and_the_measured_disturbance(
     capacity off nominal: the oracle's one-sample prediction is the plant's to rounding (the
     power still in the pipe and the ambient temperature measured now), and it tracks."""
     monkeypatch.syspath_prepend(str(BENCH))
-    fmu = _build("heater_dead_time", tmp_path / "fmu")
-    problem = ROOT / "fmus" / "examples" / "heater_dead_time" / "problem.toml"
-    scenario = tmp_path / "steps.csv"
-    scenario.write_text("time,ref.T,dist.T_in,plant.C_factor\n0,55,20,0.9\n600,,30,\n"
-                        "1200,40,,\n1600,,10,\n2400,,,\n")
-    run = cosim.run(scenario, plant=fmu, controller="oracle_bound:OracleController",
-                    options={"plant": "heater_dead_time", "fmu": str(fmu),
-                             "problem": str(problem), "horizon": 30,
-                             "parameters": {"C_factor": 0.9}}, problem=problem)
-    assert run.status == "ok", run.reason
-    info = run.summary["controller_summary"]
-    assert info["failures"] == 0 and info["steps"] == 121
-    assert info["prediction_error_max"] < 1e-9
-    df = run.to_pandas()
+    df = _disturbed_run("heater_dead_time", tmp_path,
+                        "time,ref.T,dist.T_in,plant.C_factor\n0,55,20,0.9\n600,,30,\n"
+                        "1200,40,,\n1600,,10,\n2400,,,\n", 121)
     T = df["plant.T"].to_numpy()
     assert abs(T[59] - 55) < 0.05 and abs(T[-1] - 40) < 0.05   # through the ambient steps
 
@@ -81,20 +80,9 @@ def test_the_oracle_knows_the_furnaces_measured_load(tmp_path: Path,
     load draws heat from zone 1 (its power follows the load), and the oracle tracks through
     the load steps."""
     monkeypatch.syspath_prepend(str(BENCH))
-    fmu = _build("furnace_load", tmp_path / "fmu")
-    problem = ROOT / "fmus" / "examples" / "furnace_load" / "problem.toml"
-    scenario = tmp_path / "steps.csv"
-    scenario.write_text("time,ref.T1,ref.T2,dist.load,plant.C_factor\n"
-                        "0,160,150,10,0.9\n600,,,45,\n1200,,,0,\n1800,,,,\n")
-    run = cosim.run(scenario, plant=fmu, controller="oracle_bound:OracleController",
-                    options={"plant": "furnace_load", "fmu": str(fmu),
-                             "problem": str(problem), "horizon": 30,
-                             "parameters": {"C_factor": 0.9}}, problem=problem)
-    assert run.status == "ok", run.reason
-    info = run.summary["controller_summary"]
-    assert info["failures"] == 0 and info["steps"] == 91
-    assert info["prediction_error_max"] < 1e-9
-    df = run.to_pandas()
+    df = _disturbed_run("furnace_load", tmp_path,
+                        "time,ref.T1,ref.T2,dist.load,plant.C_factor\n"
+                        "0,160,150,10,0.9\n600,,,45,\n1200,,,0,\n1800,,,,\n", 91)
     T1, T2, P1 = (df[c].to_numpy() for c in ("plant.T1", "plant.T2", "ctrl.P1"))
     assert abs(T1[29] - 160) < 0.1 and abs(T2[29] - 150) < 0.1
     assert abs(T1[-1] - 160) < 0.1 and abs(T2[-1] - 150) < 0.1   # through the load steps

@@ -162,14 +162,8 @@ def _example_case(tmp_path: Path, plant_name: str, seed: int, steps: str
                   ) -> tuple[Path, Path, Path]:
     """An example plant of ``fmus/examples`` (pythonfmu), a GRU model of its problem, and the
     set-point scenario ``steps``."""
-    import importlib.util
-
-    spec = importlib.util.spec_from_file_location("example_plants",
-                                                  ROOT / "fmus" / "examples" / "build.py")
-    assert spec is not None and spec.loader is not None
-    examples = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(examples)
     from controllers.problem_file import load
+    from tests import example_builds as examples
     from tests.controllers.random_gru import random_gru_model
 
     plant = examples.build(plant_name, tmp_path / "plants")

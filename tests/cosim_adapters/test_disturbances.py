@@ -9,7 +9,6 @@ predicts over the dead time and beats the PI without overshoot."""
 from __future__ import annotations
 
 import csv
-import importlib.util
 import itertools
 import json
 from collections.abc import Callable
@@ -21,6 +20,7 @@ import pytest
 
 from cosim.cli import main
 from cosim.core.errors import CosimError
+from tests import example_builds
 
 ROOT = Path(__file__).resolve().parents[2]
 PROBLEM = """\
@@ -56,21 +56,12 @@ du_weight = 0
 SCENARIO = "time,ref.T,dist.T_in\n0,40,20\n1000,55,20\n3000,55,10\n5000,55,30\n7000,55,30\n"
 
 
-def _examples() -> object:
-    spec = importlib.util.spec_from_file_location("example_plants",
-                                                  ROOT / "fmus" / "examples" / "build.py")
-    assert spec is not None and spec.loader is not None
-    examples = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(examples)
-    return examples
-
-
 @pytest.fixture(scope="module")
 def heater(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The heater FMU, its problem with the ambient measured, data and a briefly trained
     model."""
     folder = tmp_path_factory.mktemp("heater_d")
-    fmu = _examples().build("heater", folder)  # type: ignore[attr-defined]
+    fmu = example_builds.build("heater", folder)
     (folder / "heater.toml").write_text(PROBLEM)
     (folder / "steps.csv").write_text(SCENARIO)
     data, model = folder / "data.csv", folder / "gru.json"
@@ -353,9 +344,8 @@ DEAD_TIME_SCENARIO = ("time,ref.T,dist.T_in\n0,40,20\n1000,55,20\n3000,55,15\n50
 def dead_time(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The heater whose power acts 40 s (two samples) late, data and a brief model."""
     folder = tmp_path_factory.mktemp("heater_dt")
-    examples = _examples()
-    fmu = examples.build("heater_dead_time", folder)  # type: ignore[attr-defined]
-    problem = examples.problem_file("heater_dead_time")  # type: ignore[attr-defined]
+    fmu = example_builds.build("heater_dead_time", folder)
+    problem = example_builds.problem_file("heater_dead_time")
     data, model = folder / "data.csv", folder / "gru.json"
     assert main(["generate-data", "--plant", str(fmu), "--problem", str(problem), "--steps",
                  "4000", "--out", str(data), "--quiet"]) == 0

@@ -6,7 +6,6 @@ binds the plant through the variables the FMU records, without the problem."""
 
 from __future__ import annotations
 
-import importlib.util
 import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
@@ -17,6 +16,7 @@ import pytest
 
 from cosim.cli import main
 from cosim.core.fmu_archive import plant_variables
+from tests import example_builds
 from tests.fmus.fourtank_run import Plant
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -55,12 +55,7 @@ def kelvin(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     """The heater FMU (degC), a briefly trained model of it in kelvin and its controller
     FMUs (FMI 2 and 3)."""
     folder = tmp_path_factory.mktemp("ssp_kelvin")
-    spec = importlib.util.spec_from_file_location("example_plants",
-                                                  ROOT / "fmus" / "examples" / "build.py")
-    assert spec is not None and spec.loader is not None
-    examples = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(examples)
-    fmu = examples.build("heater", folder)
+    fmu = example_builds.build("heater", folder)
     problem = folder / "heater_kelvin.toml"
     problem.write_text(PROBLEM)
     data, model = folder / "data.csv", folder / "gru.json"

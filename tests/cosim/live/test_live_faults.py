@@ -179,15 +179,8 @@ def test_signal_writes_safe_inputs_and_keeps_the_rows(tmp_path: Path, safe_probl
 def test_measured_disturbance_is_read_from_the_plant(tmp_path: Path) -> None:
     """The heater with a measured ambient temperature and a dead time: the run reads the
     disturbance the plant measures (a rehearsal changes it on the served plant)."""
-    import importlib.util
+    from tests import example_builds as examples
 
-    from tests.cosim.live.conftest import ROOT
-
-    spec = importlib.util.spec_from_file_location("example_plants",
-                                                  ROOT / "fmus" / "examples" / "build.py")
-    assert spec is not None and spec.loader is not None
-    examples = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(examples)
     fmu = examples.build("heater_dead_time", tmp_path / "fmu")
     problem = examples.problem_file("heater_dead_time")
     scenario = tmp_path / "heat.csv"
