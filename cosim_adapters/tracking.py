@@ -232,7 +232,7 @@ class TrackingLaw:
         tracker.u_s, tracker.x_s = u_s, np.asarray(x_s, dtype=float)
         tracker._guess = None
         if self.y_ref is not None:   # the request under the new disturbances: said, if lost
-            why = self._unreachable(self.y_ref)
+            why = self._unreachable(self.y_ref, kernel)
             if why:
                 self._moved_note = (f"at {measured or 'the measured disturbances'}, the "
                                     f"{why}: tracked to the closest reachable steady output")
@@ -321,16 +321,17 @@ class TrackingLaw:
         return TrackingLaw(self.model, cert_u, tracker, disturbance, design, self.component,
                            certified=False)
 
-    def _unreachable(self, y: Any) -> str:
+    def _unreachable(self, y: Any, kernel: Any = None) -> str:
         """Why no steady state of the model has the output ``y`` (normalised) with its inputs
-        in the box (the equilibrium search's words, physical units); ``""`` when one has."""
+        in the box (the equilibrium search's words, physical units; ``kernel``: the compiled
+        search, the step's); ``""`` when one has."""
         from controllers.equilibrium import equilibrium
         from controllers.errors import SetpointError
 
         if y is None:
             return "no admissible output"
         try:
-            equilibrium(self.model, np.asarray(y, dtype=float))
+            equilibrium(self.model, np.asarray(y, dtype=float), kernel)
         except SetpointError as exc:
             return str(exc)
         return ""
