@@ -4,8 +4,11 @@ A problem's input or measured disturbance with a dead time of ``K`` samples acts
 outputs ``K`` samples late: the GRU (``eq:gru``) is trained and run on the *model input*
 ``v_k = (u_{k−K_1}, …, d_{k−L_1}, …)`` rather than on the signals themselves
 (:attr:`controllers.problem.ControlProblem.delays`). The GRU then needs no dead time of its own,
-and the controller, which knows the inputs it applied, predicts the first ``K`` samples of
-its horizon from them (docs: design/disturbances.md).
+and the controller, which knows the inputs it applied, predicts the first ``K = min K_j``
+samples of its horizon from them; an input ``j`` whose dead time is ``e_j = K_j − K`` samples
+longer has its first ``e_j`` FHOCP inputs already applied: they are fixed
+(:class:`InputPrefix`), and the input it applies now is its FHOCP input ``e_j`` (docs:
+design/disturbances.md).
 
 :func:`delayed` shifts a record's columns (identification); :class:`DelayLine` holds the last
 ``max K`` values of every signal at run time (the observer's and the prediction's past inputs).
@@ -19,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["DelayLine", "delayed", "input_delay"]
+__all__ = ["DelayLine", "InputPrefix", "delayed", "input_delay", "input_lags"]
 
 
 def delayed(u: np.ndarray, delays: Sequence[int], experiment: np.ndarray | None = None
@@ -57,24 +60,79 @@ def delayed(u: np.ndarray, delays: Sequence[int], experiment: np.ndarray | None 
 
 
 def input_delay(problem: Any) -> int:
-    """The manipulated inputs' common dead time ``K`` [samples] (0 without a problem): the
-    steps the robust MPC predicts before its decisions act, the shift of its tightening.
-
-    Raises
-    ------
-    DesignError
-        The inputs have different dead times (one line naming them).
-    """
-    if problem is None:
+    """The manipulated inputs' shortest dead time ``K = min K_j`` [samples] (0 without a
+    problem): the steps the robust MPC predicts before its decisions act, the shift of its
+    tightening."""
+    if problem is None or not problem.inputs:
         return 0
-    delays = {c.name: c.delay for c in problem.inputs}
-    if len(set(delays.values())) > 1:
-        from controllers.errors import DesignError
+    return min(c.delay for c in problem.inputs)
 
-        raise DesignError("the inputs have different dead times ("
-                          + ", ".join(f"{n} {k}" for n, k in delays.items())
-                          + " samples); the robust MPC takes one dead time for all inputs")
-    return next(iter(delays.values()), 0)
+
+def input_lags(problem: Any) -> tuple[int, ...]:
+    """Each manipulated input's dead time beyond the shortest, ``e_j = K_j − K`` [samples]:
+    how many of its first FHOCP inputs were already applied (:class:`InputPrefix`); ``()``
+    without a problem."""
+    if problem is None:
+        return ()
+    k = input_delay(problem)
+    return tuple(c.delay - k for c in problem.inputs)
+
+
+class InputPrefix:
+    """The FHOCP inputs already applied when the inputs' dead times differ (module
+    docstring): stage ``i`` of input ``j`` is fixed for ``i < e_j`` (``lags``), to the input
+    applied ``e_j − i`` samples ago; the input applied now is stage ``e_j``.
+
+    Without lags (every dead time the same) nothing is fixed and the input applied is stage
+    0: :meth:`impose` returns its argument, :meth:`applied` its first row.
+
+    Parameters
+    ----------
+    lags : sequence of int
+        ``e_j`` per input (:func:`input_lags`), each below the horizon's free stages.
+    """
+
+    def __init__(self, lags: Sequence[int]) -> None:
+        self.lags = np.array([int(e) for e in lags], dtype=int)
+        if self.lags.size and self.lags.min() < 0:
+            raise ValueError("lags must be >= 0")
+        self.depth = int(self.lags.max(initial=0))
+        #: ``values[i, j]``: stage ``i`` of input ``j`` (meaningful for ``i < e_j``)
+        self.values = np.zeros((self.depth, self.lags.size))
+        self.mask = np.arange(self.depth)[:, None] < self.lags[None, :]
+
+    def set(self, past: np.ndarray) -> None:
+        """The inputs applied before now, ``past`` (oldest first, at least ``depth`` rows,
+        normalised): stage ``i`` of input ``j`` is ``past[−e_j + i]``."""
+        if not self.depth:
+            return
+        past = np.asarray(past, dtype=float)
+        rows = past.shape[0] - self.lags[None, :] + np.arange(self.depth)[:, None]
+        cols = np.broadcast_to(np.arange(self.lags.size), rows.shape)
+        self.values = np.where(self.mask, past[np.minimum(rows, past.shape[0] - 1), cols], 0.0)
+
+    def impose(self, u: np.ndarray) -> np.ndarray:
+        """``u`` (N, m) with its fixed stages set (a copy; ``u`` itself without lags)."""
+        if not self.depth:
+            return u
+        out = np.array(u, dtype=float)
+        head = out[: self.depth]
+        head[self.mask] = self.values[self.mask]
+        return out
+
+    def bound(self, lbx: np.ndarray, ubx: np.ndarray, iu: np.ndarray) -> None:
+        """Fix the stages in the solver's bounds ``lbx``, ``ubx`` (``iu``: the inputs'
+        indices in ``w``, (N, m))."""
+        if self.depth:
+            idx = iu[: self.depth][self.mask]
+            lbx[idx] = ubx[idx] = self.values[self.mask]
+
+    def applied(self, u: np.ndarray) -> np.ndarray:
+        """The inputs applied now from the plan ``u`` (N, m): stage ``e_j`` of input ``j``."""
+        u = np.asarray(u, dtype=float)
+        if not self.depth:
+            return u[0].copy()
+        return u[self.lags, np.arange(self.lags.size)].copy()
 
 
 class DelayLine:

@@ -8,10 +8,12 @@ problem with measured disturbances (``[disturbances]``) or dead time (``delay``)
   its biases (:func:`controllers.disturbances.condition`), moved to the measured value each
   step (:class:`controllers.disturbances.BiasShift`) before the observer and the FHOCP use
   them (:meth:`HeldInputs.hold`); when they move, the law's steady state moves with them;
-- the dead time ``K`` of the inputs (one for all) and each disturbance's ``L``: the last ``K``
+- the dead times ``K_j`` of the inputs and each disturbance's ``L``: the last ``max K_j``
   inputs applied and the last ``max L + 1`` disturbances measured, ``x̂`` predicted over the
-  dead time before the FHOCP starts (:meth:`HeldInputs.ahead`), the observer's step with the
-  model input as the model sees it (:meth:`HeldInputs.model_input`).
+  shortest dead time ``K`` before the FHOCP starts (:meth:`HeldInputs.ahead`), the FHOCP's
+  first inputs of an input whose dead time is longer fixed to those it applied
+  (:attr:`HeldInputs.prefix`), the observer's step with the model input as the model sees it
+  (:meth:`HeldInputs.model_input`).
 
 The exported controller's C step does the same in the same order (``controllers/kernel/
 controller.c``: hold, ahead), to the bit. Docs: design/disturbances.md.
@@ -24,7 +26,6 @@ from typing import Any
 
 import numpy as np
 
-from controllers.errors import ControllersError
 from cosim.core.errors import CosimError
 
 __all__ = ["HeldInputs"]
@@ -48,21 +49,24 @@ class HeldInputs:
     shift : BiasShift or None
         Moves those biases (None without disturbances).
     dead_time : int
-        The inputs' dead time ``K`` [samples].
+        The inputs' shortest dead time ``K`` [samples]: the steps predicted before the FHOCP.
+    prefix : InputPrefix
+        The FHOCP's inputs already applied (inputs whose dead time exceeds ``K``), given to
+        the FHOCP (:attr:`controllers.ocp.fhocp.FHOCP.prefix`) and set each step.
     clipped : int
         Steps whose measured disturbance left its box (held at the edge).
     """
 
     def __init__(self, name: str, model: Any) -> None:
-        from controllers.dead_time import input_delay
+        from controllers.dead_time import InputPrefix, input_delay, input_lags
         from controllers.disturbances import BiasShift, condition
 
         pr = model.problem
         self.name = name
-        try:
-            self.dead_time = input_delay(pr)
-        except ControllersError as exc:
-            raise CosimError(f"controller {name!r}: problem {pr.name!r}: {exc}") from None
+        self.dead_time = input_delay(pr)
+        self.delays = np.array([c.delay for c in pr.inputs], dtype=int)
+        self.depth = int(self.delays.max(initial=0))
+        self.prefix = InputPrefix(input_lags(pr))
         self.lags = np.array([c.delay for c in pr.disturbances], dtype=int)
         if [c.name for c in pr.disturbances if c.preview]:
             raise CosimError(f"controller {name!r}: preview = true on a disturbance of problem "
@@ -84,7 +88,7 @@ class HeldInputs:
             self.shift.set(np.zeros(self.shift.q))
         self.clipped = 0
         #: the disturbances the FHOCP held last; the last ``max L + 1`` measured (oldest
-        #: first); the last ``K`` inputs applied (normalised, oldest first)
+        #: first); the last ``max K_j`` inputs applied (normalised, oldest first)
         self._d_law: np.ndarray | None = None
         self._d_past: np.ndarray | None = None
         self._u_past: np.ndarray | None = None
@@ -127,13 +131,14 @@ class HeldInputs:
         self._d_law = np.array(d, dtype=float)
 
     def ahead(self, observer: Any, fhocp: Any) -> np.ndarray | None:
-        """``x̂`` predicted over the inputs' dead time ``K`` (None without one): ``K`` steps
-        of the model with the inputs already applied (``u_{k−K} … u_{k−1}``; before the run,
-        the input that holds the first output estimate) and each disturbance as the model
-        sees it, ``d_{k+i−L}`` while known, then held at ``d_k`` (each step's in the biases,
-        then ``d_k`` again for the FHOCP); the compiled kernel's GRU step when there is one,
-        as the exported controller's."""
-        if not self.dead_time:
+        """``x̂`` predicted over the inputs' shortest dead time ``K`` (None without one): ``K``
+        steps of the model with the inputs already applied (input ``j`` at step ``i``:
+        ``u_{k+i−K_j}``; before the run, the input that holds the first output estimate) and
+        each disturbance as the model sees it, ``d_{k+i−L}`` while known, then held at
+        ``d_k`` (each step's in the biases, then ``d_k`` again for the FHOCP); the compiled
+        kernel's GRU step when there is one, as the exported controller's. The FHOCP's
+        fixed inputs (:attr:`prefix`) are set from the same past."""
+        if not self.depth:
             return None
         from controllers import gru
         from controllers.equilibrium import equilibrium_for_output
@@ -141,16 +146,20 @@ class HeldInputs:
         kernel = fhocp.kernel
         if self._u_past is None:
             _, u0 = equilibrium_for_output(self.model.params, observer.y_hat(), kernel)
-            self._u_past = np.tile(np.clip(u0, -1.0, 1.0), (self.dead_time, 1))
+            self._u_past = np.tile(np.clip(u0, -1.0, 1.0), (self.depth, 1))
+        self.prefix.set(self._u_past)
+        if not self.dead_time:
+            return None
         x = np.asarray(observer.x_hat, dtype=float)
         zero = np.zeros(self.model.n)
+        cols = np.arange(self.delays.size)
         for i in range(self.dead_time):
             if self.shift is not None:
                 d = self._d_past[-1].copy()
                 known = i < self.lags
                 d[known] = self._d_past[-1 - self.lags[known] + i, known.nonzero()[0]]
                 self.hold(d, fhocp)
-            v = self._u_past[i]
+            v = self._u_past[self.depth - self.delays + i, cols]
             x = (kernel.gru_step(x, v, zero, zero) if kernel is not None
                  else gru.step(self.model.params, x, v))
         if self.shift is not None:
@@ -158,21 +167,26 @@ class HeldInputs:
         return x
 
     def model_input(self, u: np.ndarray, fhocp: Any) -> np.ndarray:
-        """The observer's input ``v_k`` as the model sees it: the input applied ``K`` samples
-        ago (``u`` itself without dead time), each disturbance ``L`` samples ago (held in the
-        biases for the observer's step)."""
+        """The observer's input ``v_k`` as the model sees it: input ``j`` as applied ``K_j``
+        samples ago (``u`` itself without dead time), each disturbance ``L`` samples ago
+        (held in the biases for the observer's step)."""
         if self.shift is not None and self.lags.any():
             self.hold(self._d_past[-1 - self.lags, np.arange(self.lags.size)], fhocp)
-        return self._u_past[0] if self.dead_time else u
+        if not self.depth:
+            return u
+        rows = np.minimum(self.depth - self.delays, self.depth - 1)
+        return np.where(self.delays > 0, self._u_past[rows, np.arange(self.delays.size)], u)
 
     def applied(self, u: np.ndarray) -> None:
         """Record the step's input (normalised): the dead time's past."""
-        if self.dead_time:
+        if self.depth:
             self._u_past = np.vstack([self._u_past[1:], u])
 
     def summary(self) -> dict[str, Any]:
         """``disturbances`` and ``disturbance_clipped`` (with disturbances), ``dead_time``."""
         out: dict[str, Any] = {"dead_time": self.dead_time}
+        if self.prefix.depth:
+            out["dead_times"] = self.delays.tolist()
         if self.shift is not None:
             out = {"disturbances": [n[len("dist."):] for n in self.names],
                    "disturbance_clipped": self.clipped, **out}

@@ -208,6 +208,11 @@ class RobustMPCController(Component):
         #: between ``law="tracking"`` and ``law="paper"``
         self.law: ControlLaw
         self.law, failed = self._design(options)
+        try:
+            self.fhocp.use_prefix(self.held.prefix)
+        except ControllersError as exc:
+            raise CosimError(f"controller {self.name!r}: problem {self.problem.name!r}: "
+                             f"{exc}") from None
         # load scipy.optimize (the observer's x̂_0 equilibrium) now, so that the first
         # control step is a normal one (importing scipy.optimize: ~0.2 s)
         import scipy.optimize  # noqa: F401

@@ -19,13 +19,15 @@
  * solver instance included: instances are independent, and nothing is allocated after
  * ctl_new. Normalised units inside, the problem's units at ctl_step.
  *
- * Measured disturbances (CT_NQD of them) and dead time (CT_DEAD samples on the inputs; each
- * disturbance its CT_LAGS): as cosim_adapters/held_inputs.py HeldInputs (measure, hold, ahead,
- * model_input, applied). The disturbances the FHOCP holds are a shift of the biases
- * (controllers/disturbances.py BiasShift: W_d d, CT_WD), the kernel's per-thread shift
- * (rollout.c gk_db), given at every step before the kernel's calls; x_hat is predicted over
- * the dead time with the inputs applied before the FHOCP starts; the observer advances with
- * the model input as the model sees it (u_{k-K}, d_{k-L}).
+ * Measured disturbances (CT_NQD of them) and dead time (CT_U_DELAYS samples on the inputs,
+ * CT_DEAD the shortest; each disturbance its CT_LAGS): as cosim_adapters/held_inputs.py
+ * HeldInputs (measure, hold, ahead, model_input, applied, prefix). The disturbances the FHOCP
+ * holds are a shift of the biases (controllers/disturbances.py BiasShift: W_d d, CT_WD), the
+ * kernel's per-thread shift (rollout.c gk_db), given at every step before the kernel's calls;
+ * x_hat is predicted over the shortest dead time with the inputs applied before the FHOCP
+ * starts; an input whose dead time is longer has its first FHOCP inputs fixed to those it
+ * applied (ctl_prefix); the observer advances with the model input as the model sees it
+ * (u_{k-K_j}, d_{k-L}).
  */
 /* controller_source.py parameters() names the law's tunable parameters, in its order */
 typedef char ctl_parameters_agree[CT_NPARAM == LAW_N_PARAMETERS ? 1 : -1];
@@ -46,11 +48,13 @@ typedef struct ctl_state {
   int has_d, has_shift, has_d_law;
   double d_past[(CT_LAG_MAX + 1) * CT_NQD], d_shift[CT_NQD], db[3 * NX], d_law[CT_NQD];
 #endif
-#if CT_DEAD
-  /* the last CT_DEAD inputs applied (normalised, oldest first) */
+#if CT_U_DEPTH
+  /* the last CT_U_DEPTH inputs applied (normalised, oldest first) */
   int has_u_past;
-  double u_past[CT_DEAD * NU];
+  double u_past[CT_U_DEPTH * NU];
 #endif
+  /* the FHOCP's inputs already applied (controller.h) */
+  ctl_prefix prefix;
 } ctl_state;
 
 #if CT_NQD
@@ -89,10 +93,27 @@ __attribute__((unused)) static double seen(const ctl_state *st, int i, int j) {
 }
 #endif
 
+#if CT_U_DEPTH
+/* the FHOCP's fixed inputs from the inputs applied (HeldInputs.ahead: InputPrefix.set) */
+static void set_prefix(ctl_state *st) {
+#if CT_U_LAG_MAX
+  for (int i = 0; i < CT_U_LAG_MAX; i++)
+    for (int j = 0; j < NU; j++) {
+      int row = CT_U_DEPTH - CT_U_LAGS[j] + i;
+      if (row > CT_U_DEPTH - 1) row = CT_U_DEPTH - 1;
+      st->prefix.known[i * NU + j] = i < CT_U_LAGS[j] ? st->u_past[row * NU + j] : 0.0;
+    }
+#else
+  (void)st;
+#endif
+}
+#endif
+
 #if CT_DEAD
-/* x_hat predicted over the inputs' dead time (HeldInputs.ahead) into x */
+/* x_hat predicted over the inputs' shortest dead time (HeldInputs.ahead) into x: input j at
+ * step i as applied CT_U_DELAYS[j] - i samples ago */
 static void ahead(ctl_state *st, double *x) {
-  double zero[NX] = {0.0}, xn[NX];
+  double zero[NX] = {0.0}, xn[NX], v[NU];
   memcpy(x, st->xhat, NX * sizeof(double));
   for (int i = 0; i < CT_DEAD; i++) {
 #if CT_NQD
@@ -100,7 +121,8 @@ static void ahead(ctl_state *st, double *x) {
     for (int j = 0; j < CT_NQD; j++) d[j] = seen(st, i, j);
     hold(st, d, 0);
 #endif
-    PFX(gru_step)(x, st->u_past + i * NU, zero, zero, xn);
+    for (int j = 0; j < NU; j++) v[j] = st->u_past[(CT_U_DEPTH - CT_U_DELAYS[j] + i) * NU + j];
+    PFX(gru_step)(x, v, zero, zero, xn);
     memcpy(x, xn, sizeof xn);
   }
 #if CT_NQD
@@ -194,22 +216,25 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
       st->warnings |= CTL_WARN_UNREACHABLE_START;
     st->has_xhat = 1;
   }
-#if CT_DEAD
-  double xa[NX];
+#if CT_U_DEPTH
   if (!st->has_u_past) {   /* at rest before the run: the input that holds y_hat */
     double xs0[NX], u0[NU];
     PFX(output)(st->xhat, yh);
     PFX(equilibrium)(st->ws, yh, xs0, u0);
-    for (int i = 0; i < CT_DEAD; i++)
+    for (int i = 0; i < CT_U_DEPTH; i++)
       for (int j = 0; j < NU; j++) st->u_past[i * NU + j] = gk_clip1(u0[j]);
     st->has_u_past = 1;
   }
+  set_prefix(st);
+#endif
+#if CT_DEAD
+  double xa[NX];
   ahead(st, xa);
   xstart = xa;
 #endif
   for (int j = 0; j < NU; j++) u[j] = (st->u_phys[j] - CT_U_OFFSET[j]) / CT_U_SCALE[j];
   /* u: held unless set */
-  law_step(&st->law, st->xhat, xstart, st->e_o, y, yr, u, &st->warnings);
+  law_step(&st->law, st->xhat, xstart, &st->prefix, st->e_o, y, yr, u, &st->warnings);
 #if CT_NQD
   /* a disturbance that moved the steady states beyond the plan: start again */
   if (st->law.last.fallback && !st->law.cand_feasible) law_restart(&st->law);
@@ -217,8 +242,9 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
   /* the model input as the model sees it (HeldInputs.model_input) */
   double um[NU];
   memcpy(um, u, sizeof um);
-#if CT_DEAD
-  memcpy(um, st->u_past, sizeof um);
+#if CT_U_DEPTH
+  for (int j = 0; j < NU; j++)
+    if (CT_U_DELAYS[j] > 0) um[j] = st->u_past[(CT_U_DEPTH - CT_U_DELAYS[j]) * NU + j];
 #endif
 #if CT_NQD
   int lagged = 0;
@@ -245,9 +271,9 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
   PFX(gru_step)(st->xhat, um, dz, dr, xn);
   memcpy(st->xhat, xn, sizeof xn);
   st->e_o = CT_RHO_O * st->e_o + CT_W_BAR;
-#if CT_DEAD
-  memmove(st->u_past, st->u_past + NU, (CT_DEAD - 1) * NU * sizeof(double));
-  memcpy(st->u_past + (CT_DEAD - 1) * NU, u, NU * sizeof(double));
+#if CT_U_DEPTH
+  memmove(st->u_past, st->u_past + NU, (CT_U_DEPTH - 1) * NU * sizeof(double));
+  memcpy(st->u_past + (CT_U_DEPTH - 1) * NU, u, NU * sizeof(double));
 #endif
   for (int j = 0; j < NU; j++) {
     const double v = u[j] * CT_U_SCALE[j] + CT_U_OFFSET[j];

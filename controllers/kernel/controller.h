@@ -10,11 +10,12 @@
  *                       included; with `last` (ctl_last), what its last step gave
  *   LAW_N_PARAMETERS    how many tunable parameters it has (CT_NPARAM must agree)
  *   law_reset(ls, ws)   a new run
- *   law_step(ls, xhat, xstart, e_o, y, yr, u, warnings)
+ *   law_step(ls, xhat, xstart, prefix, e_o, y, yr, u, warnings)
  *                       u_k (normalised) for the estimate x_hat (the FHOCP from xstart: x_hat
- *                       predicted over the inputs' dead time), the bound e_o, the measured
- *                       output y and the set-point yr (normalised), raising CTL_WARN_* bits;
- *                       u comes holding the inputs applied last (left so: they are held)
+ *                       predicted over the inputs' shortest dead time; its inputs already
+ *                       applied in prefix, ctl_prefix), the bound e_o, the measured output y
+ *                       and the set-point yr (normalised), raising CTL_WARN_* bits; u comes
+ *                       holding the inputs applied last (left so: they are held)
  *   law_disturbance_moved(ls), law_restart(ls), ls->cand_feasible
  *                       with measured disturbances (CT_NQD > 0)
  *   law_parameter(ls, i), law_refuse(ls, i, value)
@@ -56,6 +57,54 @@ typedef struct ctl_last {
   double y_pred[NY], y_target[NY];
   int status, fallback, iterations;
 } ctl_last;
+
+/* The FHOCP's inputs already applied (controllers/dead_time.py InputPrefix): with inputs whose
+ * dead time exceeds the shortest (CT_U_LAG_MAX > 0), stage i of input j is fixed for
+ * i < CT_U_LAGS[j] to known[i NU + j], the input applied CT_U_LAGS[j] - i samples ago, and
+ * the input applied now is stage CT_U_LAGS[j]; without, nothing is fixed and it is stage 0.
+ * controller.c sets it each step, the laws read it (prefix_impose, prefix_bound,
+ * prefix_applied). */
+typedef struct ctl_prefix {
+#if CT_U_LAG_MAX
+  double known[CT_U_LAG_MAX * NU];
+#else
+  char none;
+#endif
+} ctl_prefix;
+
+/* InputPrefix.impose: the plan u (NH x NU) with its fixed stages set */
+static void prefix_impose(const ctl_prefix *pf, double *u) {
+#if CT_U_LAG_MAX
+  for (int i = 0; i < CT_U_LAG_MAX; i++)
+    for (int j = 0; j < NU; j++)
+      if (i < CT_U_LAGS[j]) u[i * NU + j] = pf->known[i * NU + j];
+#else
+  (void)pf; (void)u;
+#endif
+}
+
+/* InputPrefix.bound: the fixed stages in the solver's bounds (u_i's entries of w: i NU + j) */
+static void prefix_bound(const ctl_prefix *pf, double *lbx, double *ubx) {
+#if CT_U_LAG_MAX
+  for (int i = 0; i < CT_U_LAG_MAX; i++)
+    for (int j = 0; j < NU; j++)
+      if (i < CT_U_LAGS[j]) lbx[i * NU + j] = ubx[i * NU + j] = pf->known[i * NU + j];
+#else
+  (void)pf; (void)lbx; (void)ubx;
+#endif
+}
+
+/* InputPrefix.applied: the inputs applied now from the plan (NH x NU) into u */
+static void prefix_applied(const ctl_prefix *pf, const double *plan, double *u) {
+  (void)pf;
+  for (int j = 0; j < NU; j++) {
+#if CT_U_LAG_MAX
+    u[j] = plan[CT_U_LAGS[j] * NU + j];
+#else
+    u[j] = plan[j];
+#endif
+  }
+}
 
 /* before any step */
 static void last_reset(ctl_last *l) {

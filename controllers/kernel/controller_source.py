@@ -118,7 +118,10 @@ class ControllerDesign:
     lags : int array
         Each disturbance's dead time [samples].
     dead_time : int
-        The inputs' dead time ``K`` [samples] (:func:`controllers.dead_time.input_delay`).
+        The inputs' shortest dead time ``K`` [samples] (:func:`controllers.dead_time.
+        input_delay`).
+    delays : int array
+        Each input's dead time ``K_j`` [samples] (empty: none).
     """
 
     kernel: KernelProblem
@@ -156,6 +159,7 @@ class ControllerDesign:
     W_d: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))
     lags: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     dead_time: int = 0
+    delays: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
 
     @property
     def q(self) -> int:
@@ -259,7 +263,9 @@ def _measured(model: Any) -> dict[str, Any]:
     condition`)."""
     from controllers.dead_time import input_delay
 
-    out: dict[str, Any] = {"dead_time": input_delay(getattr(model, "problem", None))}
+    problem = getattr(model, "problem", None)
+    out: dict[str, Any] = {"dead_time": input_delay(problem), "delays": np.array(
+        [c.delay for c in problem.inputs] if problem is not None else [], dtype=int)}
     full = getattr(model, "held_from", None)
     if full is None:
         return out
@@ -302,6 +308,10 @@ def controller_constants(d: ControllerDesign) -> Constants:
                             ("CT_WD", d.W_d)):
             c.array(name, value)
         c.array("CT_LAGS", d.lags, "int")
+    if _u_depth(d):   # declared only with dead time (controller.c: #if CT_U_DEPTH)
+        c.array("CT_U_DELAYS", d.delays, "int")
+    if _u_lag_max(d):   # only with dead times that differ (#if CT_U_LAG_MAX)
+        c.array("CT_U_LAGS", d.delays - d.dead_time, "int")
     for name, value in d.law_data.items():
         if isinstance(value, np.ndarray):
             c.array(name, value, finite=False)
@@ -368,6 +378,16 @@ def _rate_tunable(design: ControllerDesign) -> bool:
     return design.law == "paper" and float(design.law_data["CT_SETPOINT_RATE"]) >= 0.0
 
 
+def _u_depth(d: ControllerDesign) -> int:
+    """How many past inputs the step keeps: the longest dead time."""
+    return int(np.max(d.delays, initial=0))
+
+
+def _u_lag_max(d: ControllerDesign) -> int:
+    """The longest dead time beyond the shortest: the FHOCP stages fixed at most."""
+    return _u_depth(d) - int(d.dead_time)
+
+
 def generate_source(design: ControllerDesign) -> str:
     """The C source of the controller step (symbol prefix left as ``@PFX@``): the kernel,
     ``controller.h``, the law's files, ``controller.c`` and the loader of its numbers
@@ -381,6 +401,8 @@ def generate_source(design: ControllerDesign) -> str:
     kernel, own = kernel_constants(problem), controller_constants(design)
     switches = (f"#define CT_NPARAM {_parameter_count(design)}\n"
                 f"#define CT_NQD {design.q}\n#define CT_DEAD {int(design.dead_time)}\n"
+                f"#define CT_U_DEPTH {_u_depth(design)}\n"
+                f"#define CT_U_LAG_MAX {_u_lag_max(design)}\n"
                 f"#define CT_LAG_MAX {int(np.max(design.lags, initial=0))}\n")
     if design.law == "paper":
         switches += (f"#define CT_OFFSET_FREE {int(design.offset_free)}\n"

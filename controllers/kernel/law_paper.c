@@ -64,6 +64,8 @@ enum {
 
 typedef struct law_state {
   gk_ws *ws;
+  /* the FHOCP's inputs already applied (controller.h; given with every step) */
+  const ctl_prefix *prefix;
   /* the set-point handling: the requested set-point, the FHOCP's, the offset estimate d_hat
    * and its gain (a parameter) */
   int has_ref, has_model, has_reference;
@@ -278,6 +280,8 @@ static void write_request(law_state *st, const double *xhat, const double *u_ini
     for (int i = 0; i < NH; i++) memcpy(st->w + i * NU, st->u_bar, NU * sizeof(double));
   }
   for (int c = 0; c < NH * NU; c++) st->w[c] = gk_clip1(st->w[c]);
+  prefix_impose(st->prefix, st->w);
+  prefix_bound(st->prefix, st->lbx, st->ubx);
   const double gap = PFX(terminal_gap)(st->ws, st->w, p);
   st->w[IT] = fmin(fmax(gap, 1e-6), fmax(st->alpha, 0.0));
   for (int c = 0; c < NW; c++) st->lx[c] = st->has_warm ? st->warm_lx[CT_PERM_X[c]] : 0.0;
@@ -323,6 +327,7 @@ static void make_step(law_state *st, const double *xhat, double *u) {
     memcpy(cand, st->gcand, sizeof st->cand);
   else
     shifted_candidate(cand, st->plan, st->has_plan, st->u_bar);
+  prefix_impose(st->prefix, cand);   /* the inputs already applied, as they were */
   solve(st, xhat, st->has_gcand ? st->gcand : 0);
   ctl_result *res = &st->res;
   int use = res->success, fallback = 0;
@@ -337,10 +342,11 @@ static void make_step(law_state *st, const double *xhat, double *u) {
   }
   if (use) {
     memcpy(st->plan, res->u, sizeof st->plan);
-    memcpy(u, res->u, NU * sizeof(double));
+    prefix_applied(st->prefix, res->u, u);
   } else {
     memcpy(st->plan, cand, sizeof st->plan);
-    for (int j = 0; j < NU; j++) u[j] = gk_clip1(cand[j]);
+    prefix_applied(st->prefix, cand, u);
+    for (int j = 0; j < NU; j++) u[j] = gk_clip1(u[j]);
   }
   st->has_plan = 1;
   memcpy(st->uprev, u, sizeof st->uprev);
@@ -391,11 +397,13 @@ __attribute__((unused)) static void law_disturbance_moved(law_state *st) {
 __attribute__((unused)) static void law_restart(law_state *st) { (void)st; }
 
 /* PaperLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr, the
- * FHOCP from xstart (x_hat, or x_hat predicted over the inputs' dead time); with no
- * admissible set-point to start from, u is left as it came (controller.c: the inputs held,
+ * FHOCP from xstart (x_hat, or x_hat predicted over the inputs' shortest dead time) with the
+ * inputs already applied in prefix; with no admissible set-point to start from, u is left as it came (controller.c: the inputs held,
  * the box's middle before any) */
-static void law_step(law_state *st, const double *xhat, const double *xstart, double e_o,
-                     const double *y, const double *yr, double *u, int *warnings) {
+static void law_step(law_state *st, const double *xhat, const double *xstart,
+                     const ctl_prefix *prefix, double e_o, const double *y, const double *yr,
+                     double *u, int *warnings) {
+  st->prefix = prefix;
   tightened_bounds(e_o, st->bnd);   /* (the governor's feasibility test reads them) */
   if (st->moved_refused) {
     *warnings |= CTL_WARN_SETPOINT_REJECTED;

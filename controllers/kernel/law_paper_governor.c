@@ -95,6 +95,7 @@ static double gov_step(law_state *st, const double *xhat, const double *r, doubl
         if (option == 1)
           for (int c = 0; c < NH * NU; c++)
             cand[c] = gk_clip1(cand[c] + (ub[c % NU] - st->u_bar[c % NU]));
+        prefix_impose(st->prefix, cand);   /* the inputs already applied stay as they were */
         if (gov_feasible(st, xhat, cand, xb, alpha)) {
           memcpy(st->y_model, y, sizeof y);
           memcpy(st->x_bar, xb, sizeof xb);

@@ -39,6 +39,8 @@ enum {
 
 typedef struct law_state {
   gk_ws *ws;
+  /* the FHOCP's inputs already applied (controller.h; given with every step) */
+  const ctl_prefix *prefix;
   /* the output-disturbance estimate d_hat (DisturbanceFilter) and its gain (a parameter) */
   double dhat[NY], beta;
   /* the tracking MPC: artificial steady state, plan, last input, next initial guess;
@@ -134,6 +136,7 @@ static void write_request(law_state *st, const double *xhat, const double *rt,
       st->lbx[NUU + j] = fmax(us_centre[j] - CT_US_RATE, -1.0);
       st->ubx[NUU + j] = fmin(us_centre[j] + CT_US_RATE, 1.0);
     }
+  prefix_bound(st->prefix, st->lbx, st->ubx);
   /* the constraint rows: output rows i >= 1 (paired), the terminal rows, Y_s */
   const int r0 = (NH - 1) * NQ;
   for (int c = 0; c < NG; c++) {
@@ -181,6 +184,7 @@ static void solve(law_state *st, const double *xhat, const double *rt, const dou
                   const double *us_centre) {
   double u_init[NH * NU], us_init[NU];
   for (int c = 0; c < NH * NU; c++) u_init[c] = gk_clip1(g_u[c]);
+  prefix_impose(st->prefix, u_init);
   for (int j = 0; j < NU; j++) us_init[j] = gk_clip1(g_us[j]);
   if (x0_violation(xhat, st->bnd) > CT_FEAS_TOL) {
     check(st, xhat, u_init, us_init, rt, xs0, up, CTL_INFEASIBLE_X0, &st->res);
@@ -197,6 +201,7 @@ static void solve(law_state *st, const double *xhat, const double *rt, const dou
 static void make_step(law_state *st, const double *xhat, const double *rt, double *u) {
   double *cand = st->cand;
   shifted_candidate(cand, st->plan, st->has_plan, st->us);
+  prefix_impose(st->prefix, cand);   /* the inputs already applied, as they were */
   double up[NU], us0[NU], xs0[NX];
   memcpy(up, st->has_uprev ? st->uprev : st->us, sizeof up);
   memcpy(us0, st->us, sizeof us0);
@@ -220,10 +225,11 @@ static void make_step(law_state *st, const double *xhat, const double *rt, doubl
     memcpy(st->plan, res->u, sizeof st->plan);
     memcpy(st->us, res->us, sizeof st->us);
     memcpy(st->xs, res->xs, sizeof st->xs);
-    memcpy(u, res->u, NU * sizeof(double));
+    prefix_applied(st->prefix, res->u, u);
   } else {
     memcpy(st->plan, cand, sizeof st->plan);
-    for (int j = 0; j < NU; j++) u[j] = gk_clip1(cand[j]);
+    prefix_applied(st->prefix, cand, u);
+    for (int j = 0; j < NU; j++) u[j] = gk_clip1(u[j]);
   }
   st->has_plan = 1;
   st->has_guess = all_finite(res->xs, NX);
@@ -270,11 +276,14 @@ __attribute__((unused)) static void law_disturbance_moved(law_state *st) {
 __attribute__((unused)) static void law_restart(law_state *st) { st->started = 0; }
 
 /* TrackingLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr, the
- * FHOCP from xstart (x_hat, or x_hat predicted over the inputs' dead time) */
-static void law_step(law_state *st, const double *xhat, const double *xstart, double e_o,
-                     const double *y, const double *yr, double *u, int *warnings) {
+ * FHOCP from xstart (x_hat, or x_hat predicted over the inputs' shortest dead time) with the
+ * inputs already applied in prefix */
+static void law_step(law_state *st, const double *xhat, const double *xstart,
+                     const ctl_prefix *prefix, double e_o, const double *y, const double *yr,
+                     double *u, int *warnings) {
   double yh[NY], rt[NY];
   (void)warnings;
+  st->prefix = prefix;
   if (!st->started) {
     double x_s[NX], u_s[NU];
     PFX(output)(xhat, yh);

@@ -58,6 +58,7 @@ import casadi as ca
 import numpy as np
 
 from controllers import gru
+from controllers.dead_time import InputPrefix
 from controllers.errors import DesignError
 from controllers.kernel.compiled_kernel import KERNEL_SELF_TEST_TOL, for_fhocp
 from controllers.ocp.casadi_callbacks import bind_buffers, quiet_stdout
@@ -206,6 +207,28 @@ class FHOCP:
         self._nlp: Any = None
         self._buffer: tuple | None = None
         self.warm_start: dict[str, np.ndarray] | None = None
+        #: the inputs already applied at the horizon's start (inputs whose dead time exceeds
+        #: the shortest; :meth:`use_prefix`): none by default
+        self.prefix = InputPrefix([0] * self.m)
+
+    def use_prefix(self, prefix: InputPrefix) -> None:
+        """Fix the FHOCP's first inputs of each input whose dead time exceeds the shortest
+        (:class:`controllers.dead_time.InputPrefix`, its values set each step by the
+        controller); the laws apply stage ``e_j`` of input ``j``.
+
+        Raises
+        ------
+        DesignError
+            A lag leaves no free stage of that input (it reaches the control horizon).
+        """
+        free = int(getattr(self.reference, "control_horizon", self.N))
+        if prefix.lags.size != self.m:
+            raise DesignError(f"{prefix.lags.size} input lags for {self.m} inputs")
+        if prefix.depth >= free:
+            raise DesignError(f"an input's dead time exceeds the shortest by {prefix.depth} "
+                              f"samples: the FHOCP needs more than that many free stages "
+                              f"(it has {free}; a longer horizon)")
+        self.prefix = prefix
 
     # -- construction ------------------------------------------------------------------
     def _declare(self, data: Any, du_weight: float | np.ndarray) -> None:

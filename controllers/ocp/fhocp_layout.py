@@ -123,7 +123,7 @@ class FHOCPLayout:
               x_bar: np.ndarray, u_bar: np.ndarray, alpha: float, u_init: np.ndarray | None,
               prev: dict[str, np.ndarray] | None, warm_duals: bool,
               simulate: Callable[[np.ndarray, np.ndarray], Any],
-              u_prev: np.ndarray | None = None) -> np.ndarray:
+              u_prev: np.ndarray | None = None, prefix: Any = None) -> np.ndarray:
         """Fill the solver's argument buffers for one solve; returns the initial inputs.
 
         Parameters
@@ -141,6 +141,9 @@ class FHOCPLayout:
             ``(x̂, u) → x_0 … x_N``: the rollout for the initial ``t`` (and states).
         u_prev : (m,) array, optional
             ``u_{−1}``, written after ``ū`` (only for a problem with an input-rate term).
+        prefix : InputPrefix, optional
+            The inputs already applied (:attr:`controllers.ocp.fhocp.FHOCP.prefix`): fixed in
+            the bounds and in the initial inputs.
         """
         n, m = x_hat.shape[0], self._m
         p = ins["p"]
@@ -170,6 +173,9 @@ class FHOCPLayout:
         else:
             u = np.asarray(u_init, dtype=float).ravel()
         u = np.clip(u, -1.0, 1.0).reshape(-1, m)
+        if prefix is not None:
+            u = prefix.impose(u)
+            prefix.bound(ins["lbx"], ubx, self.iu)
         x = simulate(x_hat, u)
         x0 = ins["x0"]
         x0[:] = 0.0

@@ -211,7 +211,9 @@ class ReferenceGovernor:
                 xb, ub = eq
                 alpha = self.cert.alpha(y)
                 shifted = np.vstack([plan[1:], ub])
-                for cand in (shifted, np.clip(shifted + (ub - u_bar), -1.0, 1.0)):
+                prefix = self.fhocp.prefix   # the inputs already applied stay as they were
+                for cand in (prefix.impose(shifted),
+                             prefix.impose(np.clip(shifted + (ub - u_bar), -1.0, 1.0))):
                     if self.feasible(x_hat, e_o, cand, xb, alpha):
                         return GovernorStep(lam, y, xb, ub, alpha, cand)
             lam *= 0.5

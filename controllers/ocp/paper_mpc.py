@@ -111,7 +111,9 @@ class RobustMPC:
         """
         if self.x_bar is None or self.u_bar is None:
             raise RuntimeError("set_reference() must be called before make_step()")
-        cand = self.candidate() if candidate is None else np.asarray(candidate, dtype=float)
+        prefix = self.fhocp.prefix   # the inputs already applied (dead times beyond the least)
+        cand = prefix.impose(self.candidate() if candidate is None
+                             else np.asarray(candidate, dtype=float))
         # the FHOCP warm-starts from its own last iterate shifted by one stage: the candidate
         # itself after a success, the partially converged iterate after a failure
         t0 = time.perf_counter()
@@ -125,7 +127,7 @@ class RobustMPC:
             res.solve_time = time.perf_counter() - t0
         if res.success:
             self.plan = res.u.copy()
-            rec = StepRecord(u=res.u[0].copy(), result=res, fallback=False)
+            rec = StepRecord(u=prefix.applied(res.u), result=res, fallback=False)
             rec.x_hat, rec.e_o = np.array(x_hat, dtype=float), float(e_o)
             self.records.append(rec)
             self.u_prev = rec.u
@@ -138,11 +140,11 @@ class RobustMPC:
             # suboptimal MPC: a feasible iterate no costlier than the candidate keeps the
             # proof's arguments (feasibility, and the cost decrease the candidate gives)
             self.plan = res.u.copy()
-            rec = StepRecord(u=res.u[0].copy(), result=res, fallback=False, suboptimal=True,
+            rec = StepRecord(u=prefix.applied(res.u), result=res, fallback=False, suboptimal=True,
                              x_hat=np.array(x_hat, dtype=float), e_o=float(e_o))
         else:
             self.plan = cand
-            rec = StepRecord(u=np.clip(cand[0], -1.0, 1.0), result=res, fallback=True,
+            rec = StepRecord(u=np.clip(prefix.applied(cand), -1.0, 1.0), result=res, fallback=True,
                              candidate_feasible=bool(feasible),
                              x_hat=np.array(x_hat, dtype=float), e_o=float(e_o))
         self.records.append(rec)

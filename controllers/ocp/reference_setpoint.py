@@ -103,7 +103,7 @@ class FixedSetpoint(ServesOne):
         self.layout.write(ins, fh.tightened_bounds(e_o), x_hat, request.x_bar,
                           request.u_bar, request.alpha, request.u_init,
                           fh.warm_start if request.warm else None, fh.warm_duals,
-                          fh.rollout, request.u_prev if fh.has_du else None)
+                          fh.rollout, request.u_prev if fh.has_du else None, fh.prefix)
 
     def check_answer(self, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray, e_o: float,
                      request: Setpoint, status: str) -> FHOCPResult:

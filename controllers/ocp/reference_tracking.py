@@ -264,8 +264,8 @@ class ArtificialSteadyState(ServesOne):
         # np.minimum/maximum: np.clip's dispatch costs ~10 µs a call on this hot path
         us_init = np.minimum(np.maximum(np.asarray(us_init, dtype=float).reshape(fh.m),
                                         -1.0), 1.0)
-        u_init = np.minimum(np.maximum(np.asarray(u_init, dtype=float).reshape(
-            fh.N, fh.m), -1.0), 1.0)
+        u_init = fh.prefix.impose(np.minimum(np.maximum(np.asarray(u_init, dtype=float).reshape(
+            fh.N, fh.m), -1.0), 1.0))
         up = us_init if u_prev is None else np.asarray(u_prev, dtype=float).reshape(fh.m)
         return Target(np.asarray(r, dtype=float).reshape(fh.p), u_init, us_init,
                       np.asarray(x_s0, dtype=float).reshape(fh.n), up, warm,
@@ -284,6 +284,7 @@ class ArtificialSteadyState(ServesOne):
             c = request.us_centre
             ins["lbx"][self.ius] = np.maximum(c - self.us_rate, -1.0)
             ins["ubx"][self.ius] = np.minimum(c + self.us_rate, 1.0)
+        fh.prefix.bound(ins["lbx"], ins["ubx"], self.iu)
         w0 = ins["x0"]
         w0[self.iu.ravel()] = request.u_init.ravel()
         w0[self.ius] = np.minimum(np.maximum(request.us_init, ins["lbx"][self.ius]),

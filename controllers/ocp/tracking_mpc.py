@@ -93,7 +93,7 @@ class TrackingMPC:
         if self.u_s is None or self.x_s is None:
             raise RuntimeError("start() must be called before make_step()")
         fh = self.fhocp
-        cand = self.candidate()
+        cand = fh.prefix.impose(self.candidate())   # the inputs already applied, as they were
         up = self.u_prev if self.u_prev is not None else self.u_s
         g_u, g_us, g_xs = self._guess or (cand, self.u_s, self.x_s)
         t0 = time.perf_counter()
@@ -126,10 +126,10 @@ class TrackingMPC:
         if use:
             assert res.u_s is not None and res.x_s is not None
             self.plan, self.u_s, self.x_s = res.u.copy(), res.u_s.copy(), res.x_s.copy()
-            u = res.u[0].copy()
+            u = self.fhocp.prefix.applied(res.u)
         else:
             self.plan = cand
-            u = np.clip(cand[0], -1.0, 1.0)
+            u = np.clip(self.fhocp.prefix.applied(cand), -1.0, 1.0)
         return StepRecord(u=u, result=res, fallback=fallback,
                           candidate_feasible=bool(feasible),
                           suboptimal=bool(use and not res.success),

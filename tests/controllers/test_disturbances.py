@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from controllers import gru
-from controllers.dead_time import DelayLine, delayed
+from controllers.dead_time import DelayLine, InputPrefix, delayed
 from controllers.disturbances import (
     BiasShift,
     condition,
@@ -190,8 +190,7 @@ def test_the_certificate_of_the_conditioned_model_is_the_full_models() -> None:
 def test_dead_time_shifts_the_tightening_by_its_samples() -> None:
     from controllers.certification.certificates import compute_certificate
     from controllers.certification.prediction_error import margins
-    from controllers.dead_time import input_delay
-    from controllers.errors import DesignError
+    from controllers.dead_time import input_delay, input_lags
 
     plain = random_gru_model(0, n=10, problem=heater_problem(rate=0.3))
     late = random_gru_model(0, n=10, problem=ControlProblem(
@@ -210,7 +209,26 @@ def test_dead_time_shifts_the_tightening_by_its_samples() -> None:
     assert margins(profile, np.ones((1, 1)), 4, shift=3)[:, 0].tolist() == [3, 4, 5, 6, 7]
     assert margins(profile, np.ones((1, 1)), 8, shift=3)[-1, 0] == 9.0   # the last holds
     mixed = ControlProblem(name="x", Ts=1.0, inputs=(Channel("a", "1", 0.0, 1.0, delay=1),
-                                                     Channel("b", "1", 0.0, 1.0, delay=2)),
+                                                     Channel("b", "1", 0.0, 1.0, delay=3)),
                            outputs=(Channel("y", "1", 0.0, 1.0),))
-    with pytest.raises(DesignError, match=r"different dead times \(a 1, b 2 samples\)"):
-        input_delay(mixed)
+    assert input_delay(mixed) == 1 and input_lags(mixed) == (0, 2)
+
+
+def test_an_input_prefix_fixes_the_stages_already_applied() -> None:
+    """Input b acts two samples after a: its first two FHOCP inputs are the ones applied two
+    and one samples ago, and the input applied now is its stage 2."""
+    prefix = InputPrefix([0, 2])
+    past = np.array([[0.1, 0.2], [0.3, 0.4], [0.5, 0.6]])   # oldest first
+    prefix.set(past)
+    plan = np.arange(10.0).reshape(5, 2)
+    fixed = prefix.impose(plan)
+    np.testing.assert_array_equal(fixed[:, 1], [0.4, 0.6, 5.0, 7.0, 9.0])
+    np.testing.assert_array_equal(fixed[:, 0], plan[:, 0])
+    np.testing.assert_array_equal(prefix.applied(fixed), [0.0, 5.0])
+    lbx, ubx = np.full(11, -1.0), np.full(11, 1.0)
+    prefix.bound(lbx, ubx, np.arange(10).reshape(5, 2))
+    assert (lbx[[1, 3]] == ubx[[1, 3]]).all() and lbx[1] == 0.4 and lbx[3] == 0.6
+    assert (lbx[[0, 2, 4, 5, 10]] == -1.0).all() and (ubx[[0, 2, 5, 10]] == 1.0).all()
+    none = InputPrefix([0, 0])
+    none.set(past)
+    assert none.impose(plan) is plan and none.applied(plan).tolist() == [0.0, 1.0]
