@@ -153,26 +153,32 @@ def rates(model: Any) -> np.ndarray:
     return np.array(out)
 
 
-def held_error(model: Any, rho_s: float, N: int) -> np.ndarray:
-    """``e_d(i)``, ``i = 0 … N``: a bound of ``‖x_i − x̃_i‖∞`` between the model run with
-    the disturbances held at their value at the prediction's start (what the FHOCP predicts)
-    and with their real values, when each moves at most its :func:`rates` per sample
-    (lem:held-disturbance)::
+def held_error(model: Any, rho_s: float, N: int, K: int = 0) -> np.ndarray:
+    """``e_d(i)``, ``i = 0 … N`` steps after the estimate: a bound of ``‖x_i − x̃_i‖∞``
+    between the model run as the controller predicts (over the inputs' dead time ``K`` each
+    disturbance as the model sees it, ``d_{k+i−L}``, while known, then the FHOCP's stages
+    with it held at ``d_k``) and with the real values, when each moves at most its
+    :func:`rates` per sample (lem:held-disturbance)::
 
-        e_d(0) = 0,   e_d(i + 1) = ρ_s e_d(i) + γ_d δ_i,   δ_i = min(max(0, i − L) δ, Δ)
+        e_d(0) = 0,   e_d(i + 1) = ρ_s e_d(i) + γ_d δ_i,   δ_i = min(s_i δ, Δ)
+        s_i = max(0, i − L_min)                       (i < K: the prediction)
+        s_i = max(i − L_min, L_max − i, 0)            (i ≥ K: the FHOCP, d_k = d̃_L held)
 
     ``δ`` the largest normalised rate, ``Δ`` the largest normalised box width (2 with the
-    default normalisation), ``L`` the shortest dead time of a disturbance (the model sees
-    ``d_{k+i−L}``, known for ``i ≤ L``). Infinite from ``i = 1`` on when ``ρ_s ≥ 1`` and
-    the disturbances can move."""
+    default normalisation), ``L`` the disturbances' dead times (the model sees
+    ``d_{k+i−L}``). A disturbance known ahead (``preview = true``) is held at
+    ``d̃_{max(K, L)}``, nearer the real values at every stage ``i ≥ K``: the bound covers it
+    as it is. Infinite from ``i = 1`` on when ``ρ_s ≥ 1`` and the disturbances can move."""
     problem = model.problem
     delta = float(np.max(rates(model), initial=0.0))
     width = float(max((c.max - c.min) / abs(c.scale) for c in problem.disturbances))
     lag = min(c.delay for c in problem.disturbances)
+    lag_max = max(c.delay for c in problem.disturbances)
     gamma = input_gain(model)
     e = np.zeros(N + 1)
     for i in range(N):
-        step = min(max(0, i - lag) * delta, width)
+        steps = max(0, i - lag) if i < K else max(i - lag, lag_max - i, 0)
+        step = min(steps * delta, width)
         e[i + 1] = rho_s * e[i] + gamma * step if np.isfinite(rho_s) else np.inf
     if rho_s >= 1 and np.any(e > 0):
         e[np.argmax(e > 0):] = np.inf

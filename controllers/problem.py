@@ -65,7 +65,8 @@ class Channel:
         the real disturbance moves from the value the MPC holds over its horizon; ``None``:
         the data's largest change per sample.
     preview : bool
-        Disturbances: known ahead from the scenario (rather than held at the last value).
+        Disturbances: known ahead from the scenario: the robust MPC takes its values to come
+        over the inputs' dead time (rather than its last measured value).
     safe : float or None
         Inputs: the value written to a live plant when its measurements stop coming (the
         watchdog of ``cosim run --plant opc.tcp://...``) and when the run stops; ``None``:

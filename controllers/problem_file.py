@@ -27,7 +27,7 @@ A problem file declares the plant's signals in its own names and units::
     min = 280.0
     max = 320.0
     rate = 0.5                     # optional: largest change per sample (default: the data's)
-    preview = false                # optional: known ahead from the scenario
+    preview = false                # optional: known ahead from the scenario (over dead time)
     delay = 2                      # optional, inputs too: dead time [samples]
     hold = [5, 80]                 # optional: its excitation in cosim generate-data
 

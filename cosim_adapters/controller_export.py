@@ -39,6 +39,10 @@ def _why_not(ctrl: Any) -> str:
     if fhocp.kernel is None or not fhocp._compiled_loop:
         reason = fhocp.kernel_error or "the options select another solver"
         return f"the controller FMU runs the compiled kernel's SQP, unavailable here ({reason})"
+    if ctrl.previewed:
+        return (f"preview = true on {', '.join(ctrl.previewed)}: the controller FMU measures "
+                "its disturbances and is told nothing ahead (declare them without preview to "
+                "export)")
     return ""
 
 

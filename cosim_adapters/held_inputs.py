@@ -13,7 +13,11 @@ problem with measured disturbances (``[disturbances]``) or dead time (``delay``)
   shortest dead time ``K`` before the FHOCP starts (:meth:`HeldInputs.ahead`), the FHOCP's
   first inputs of an input whose dead time is longer fixed to those it applied
   (:attr:`HeldInputs.prefix`), the observer's step with the model input as the model sees it
-  (:meth:`HeldInputs.model_input`).
+  (:meth:`HeldInputs.model_input`);
+- a disturbance known ahead (``preview = true``): its values to come from the run's schedule
+  (:meth:`HeldInputs.set_schedule`, the scenario's ``dist.<name>`` column), used over the
+  inputs' dead time, and held by the FHOCP at the value it will have when the first
+  decision acts (``d_{k+K−L}``) instead of ``d_k``.
 
 The exported controller's C step does the same in the same order (``controllers/kernel/
 controller.c``: hold, ahead), to the bit. Docs: design/disturbances.md.
@@ -21,7 +25,7 @@ controller.c``: hold, ahead), to the bit. Docs: design/disturbances.md.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
@@ -55,6 +59,11 @@ class HeldInputs:
         the FHOCP (:attr:`controllers.ocp.fhocp.FHOCP.prefix`) and set each step.
     clipped : int
         Steps whose measured disturbance left its box (held at the edge).
+    preview : (q,) bool array
+        The disturbances known ahead (``preview = true``).
+    preview_held : int
+        Steps one known ahead was held at its measured value instead, no schedule being
+        given (a live plant, a host without the scenario).
     """
 
     def __init__(self, name: str, model: Any) -> None:
@@ -68,10 +77,8 @@ class HeldInputs:
         self.depth = int(self.delays.max(initial=0))
         self.prefix = InputPrefix(input_lags(pr))
         self.lags = np.array([c.delay for c in pr.disturbances], dtype=int)
-        if [c.name for c in pr.disturbances if c.preview]:
-            raise CosimError(f"controller {name!r}: preview = true on a disturbance of problem "
-                             f"{pr.name!r}: the robust MPC holds measured disturbances over "
-                             "its horizon; previewing them is not built yet (issue 46)")
+        self.preview = np.array([c.preview for c in pr.disturbances], dtype=bool)
+        self.Ts = float(model.Ts)
         self.model, self.shift = model, None
         if pr.disturbances:
             self.model = condition(model)
@@ -86,10 +93,15 @@ class HeldInputs:
         """A new run: the nominal biases (the kernel is built and found for them), no past."""
         if self.shift is not None:
             self.shift.set(np.zeros(self.shift.q))
-        self.clipped = 0
-        #: the disturbances the FHOCP held last; the last ``max L + 1`` measured (oldest
-        #: first); the last ``max K_j`` inputs applied (normalised, oldest first)
+        self.clipped = self.preview_held = 0
+        #: the values to come of those known ahead (a run's own: :meth:`set_schedule`)
+        self._schedule: dict[str, Callable[[float], float]] | None = None
+        #: the disturbances the FHOCP held last, and holds this step; the last ``max L + 1``
+        #: measured (oldest first); the last ``max K_j`` inputs applied (normalised, oldest
+        #: first); the time of the step
         self._d_law: np.ndarray | None = None
+        self._d_fhocp: np.ndarray | None = None
+        self._t = 0.0
         self._d_past: np.ndarray | None = None
         self._u_past: np.ndarray | None = None
 
@@ -113,7 +125,37 @@ class HeldInputs:
         depth = int(self.lags.max(initial=0)) + 1
         self._d_past = (np.tile(d, (depth, 1)) if self._d_past is None
                         else np.vstack([self._d_past[1:], d]))
-        self.hold(d, fhocp, law)
+        self._t = t
+        self._d_fhocp = d
+        if self.preview.any():   # known ahead: the value when the first decision acts
+            if self._schedule is None:
+                self.preview_held += 1
+            self._d_fhocp = np.array([self._value(j, max(self.dead_time - int(L), 0))
+                                      for j, L in enumerate(self.lags)])
+        self.hold(self._d_fhocp, fhocp, law)
+
+    def set_schedule(self, schedule: Mapping[str, Callable[[float], float]] | None) -> None:
+        """The values to come of the disturbances known ahead, for this run (after
+        :meth:`reset`): ``schedule[name](t)``, the value (the problem's units) set on the
+        plant at ``t`` (the master gives the scenario's); ``None``: none, they are held at
+        their measured value (counted in :attr:`preview_held`)."""
+        self._schedule = None if schedule is None else dict(schedule)
+
+    def _value(self, j: int, offset: int) -> float:
+        """Disturbance ``j`` ``offset`` samples from now (normalised): measured for
+        ``offset ≤ 0``; later, the schedule's for one known ahead (held inside its box),
+        else its value now."""
+        if offset <= 0:
+            return float(self._d_past[-1 + offset, j])
+        if not self.preview[j] or self._schedule is None:
+            return float(self._d_past[-1, j])
+        name = self.names[j][len("dist."):]
+        t = self._t + offset * self.Ts
+        v = float(self._schedule[name](t))
+        if not np.isfinite(v):
+            raise CosimError(f"controller {self.name!r}: the schedule of disturbance {name!r} "
+                             f"is not finite at t={t:g} s")
+        return float(np.clip((v - self._offset[j]) / self._scale[j], -1.0, 1.0))
 
     def hold(self, d: np.ndarray, fhocp: Any, law: Any = None) -> None:
         """Hold the disturbances at ``d`` (normalised) in the model's biases, the FHOCP's and
@@ -134,8 +176,9 @@ class HeldInputs:
         """``x̂`` predicted over the inputs' shortest dead time ``K`` (None without one): ``K``
         steps of the model with the inputs already applied (input ``j`` at step ``i``:
         ``u_{k+i−K_j}``; before the run, the input that holds the first output estimate) and
-        each disturbance as the model sees it, ``d_{k+i−L}`` while known, then held at
-        ``d_k`` (each step's in the biases, then ``d_k`` again for the FHOCP); the compiled
+        each disturbance as the model sees it, ``d_{k+i−L}`` while known (measured, or known
+        ahead), then held at ``d_k`` (each step's in the biases, then the FHOCP's again); the
+        compiled
         kernel's GRU step when there is one, as the exported controller's. The FHOCP's
         fixed inputs (:attr:`prefix`) are set from the same past."""
         if not self.depth:
@@ -155,22 +198,20 @@ class HeldInputs:
         cols = np.arange(self.delays.size)
         for i in range(self.dead_time):
             if self.shift is not None:
-                d = self._d_past[-1].copy()
-                known = i < self.lags
-                d[known] = self._d_past[-1 - self.lags[known] + i, known.nonzero()[0]]
-                self.hold(d, fhocp)
+                self.hold(np.array([self._value(j, i - int(L))
+                                    for j, L in enumerate(self.lags)]), fhocp)
             v = self._u_past[self.depth - self.delays + i, cols]
             x = (kernel.gru_step(x, v, zero, zero) if kernel is not None
                  else gru.step(self.model.params, x, v))
         if self.shift is not None:
-            self.hold(self._d_past[-1], fhocp)   # the FHOCP's: d_k
+            self.hold(self._d_fhocp, fhocp)   # the FHOCP's: d_k (known ahead: d_{k+K-L})
         return x
 
     def model_input(self, u: np.ndarray, fhocp: Any) -> np.ndarray:
         """The observer's input ``v_k`` as the model sees it: input ``j`` as applied ``K_j``
         samples ago (``u`` itself without dead time), each disturbance ``L`` samples ago
         (held in the biases for the observer's step)."""
-        if self.shift is not None and self.lags.any():
+        if self.shift is not None and (self.lags.any() or self.preview.any()):
             self.hold(self._d_past[-1 - self.lags, np.arange(self.lags.size)], fhocp)
         if not self.depth:
             return u
@@ -190,4 +231,8 @@ class HeldInputs:
         if self.shift is not None:
             out = {"disturbances": [n[len("dist."):] for n in self.names],
                    "disturbance_clipped": self.clipped, **out}
+        if self.preview.any():
+            out["previewed"] = [n[len("dist."):] for n, p in zip(self.names, self.preview,
+                                                                 strict=True) if p]
+            out["preview_held_steps"] = self.preview_held
         return out

@@ -345,6 +345,19 @@ class RobustMPCController(Component):
         self._u_phys = 0.5 * (self._lo + self._hi)
         self._diag: dict[str, float] = {}
 
+    @property
+    def previewed(self) -> tuple[str, ...]:
+        """The measured disturbances known ahead (``preview = true``): the master gives the
+        run's schedule of each (:meth:`set_schedule`)."""
+        return tuple(c.name for c in self.problem.disturbances if c.preview)
+
+    def set_schedule(self, schedule: Mapping[str, Any] | None) -> None:
+        """The values to come of :attr:`previewed`, for this run (after :meth:`setup`):
+        ``schedule[name](t)``, as set on the plant at ``t`` (the problem's units); without
+        one they are held at their measured value (``preview_held_steps`` in the
+        summary)."""
+        self.held.set_schedule(schedule)
+
     def set_inputs(self, values: Mapping[str, float]) -> None:
         self._values.update({k: float(v) for k, v in values.items()})
 

@@ -7,9 +7,11 @@ temperature is measured (``fmus/examples/heater_dead_time``: its problem file de
 ``[disturbances.T_in]`` and ``delay = 2``), as a user takes it: build the FMU, excite it
 (``cosim generate-data``: the power and the ambient in their boxes), identify a GRU whose
 inputs are both (``cosim train``, a short training), then one scenario of a set-point step
-and two ambient steps with four controllers: the robust MPC (its tracking law), the paper's
-law (a horizon for the vessel's time constant, offset-free set-points), the PI with its
-static feedforward from the model and the PI without it. Prints each one's IAE over the run
+and two ambient steps with five controllers: the robust MPC (its tracking law), the same with
+the ambient known ahead (``preview = true``: the scenario's steps seen over the dead time),
+the paper's law (a horizon for the vessel's time constant, offset-free set-points), the PI
+with its static feedforward from the model and the PI without it. Prints each one's IAE over
+the run
 and after each ambient step, its largest overshoot, and where the files are (each run's
 ``results.csv``, ``summary.json``, ``figure.png`` under ``DIR``, default a temporary folder).
 """
@@ -18,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import tempfile
 from pathlib import Path
 
@@ -28,12 +31,13 @@ ROOT = Path(__file__).resolve().parents[1]
 PLANT = "heater_dead_time"
 #: a set-point step 40 -> 55 degC, then the ambient 20 -> 10 -> 30 degC
 SCENARIO = "time,ref.T,dist.T_in\n0,40,20\n1000,55,20\n3000,55,10\n5000,55,30\n7000,,\n"
-#: (title, its folder under --out, controller, options)
-CONTROLLERS = (("robust MPC", "mpc", "robust-mpc", {}),
+#: (title, its folder under --out, controller, options, the ambient known ahead)
+CONTROLLERS = (("robust MPC", "mpc", "robust-mpc", {}, False),
+               ("MPC, known ahead", "mpc-preview", "robust-mpc", {}, True),
                ("paper's law", "paper", "robust-mpc",
-                {"law": "paper", "N": 60, "offset_free": True}),
-               ("PI + feedforward", "pi-ff", "pi", {}),
-               ("PI", "pi", "pi", {"feedforward": False}))
+                {"law": "paper", "N": 60, "offset_free": True}, False),
+               ("PI + feedforward", "pi-ff", "pi", {}, False),
+               ("PI", "pi", "pi", {"feedforward": False}, False))
 
 
 def _build(folder: Path) -> tuple[Path, Path]:
@@ -64,9 +68,16 @@ def main() -> None:
             raise SystemExit(f"cosim {argv[0]} failed")
     scenario = out / "steps.csv"
     scenario.write_text(SCENARIO)
-    for title, folder, controller, options in CONTROLLERS:
-        run = cosim.run(scenario, plant=fmu, controller=controller, model=model,
-                        options=options, out=out / folder)
+    # the same model, its problem declaring the ambient known ahead (as `preview = true` in
+    # the problem file before generate-data and train would)
+    doc = json.loads(model.read_text())
+    for entry in doc["problem"]["disturbances"]:
+        entry["preview"] = True
+    ahead = out / "gru_preview.json"
+    ahead.write_text(json.dumps(doc))
+    for title, folder, controller, options, known in CONTROLLERS:
+        run = cosim.run(scenario, plant=fmu, controller=controller,
+                        model=ahead if known else model, options=options, out=out / folder)
         df = run.to_pandas().set_index("time")
         err = (df["plant.T"] - df["ref.T"]).abs() * 20.0          # 20 s samples
         overshoot = max(0.0, df.loc[1000.0:3000.0, "plant.T"].max() - 55.0)

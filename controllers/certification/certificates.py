@@ -473,7 +473,7 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
     if held is not None:
         from controllers.disturbances import held_error
 
-        b_held = held_error(held, rho_s_, N + K)[K:, None] * cs[None, :]
+        b_held = held_error(held, rho_s_, N + K, K)[K:, None] * cs[None, :]
         b = b + b_held
     s = terminal_weight(n, Q, rho_s_)
     measured = None

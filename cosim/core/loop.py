@@ -110,6 +110,16 @@ class Run:
             self._apply(events[self.next_event].values, started=True)
             self.next_event += 1
 
+    def _give_schedule(self) -> None:
+        """A controller that knows measured disturbances ahead (``previewed``: ``preview =
+        true``) gets the scenario's value of each at any time (its column, else the value
+        set at the start)."""
+        m = self.m
+        names = tuple(getattr(m.controller, "previewed", ()) or ())
+        if names:
+            m.controller.set_schedule({d: m.scenario.schedule(DIST, d, self.dist[d])
+                                       for d in names})
+
     def _start(self) -> None:
         """Start values and first set-points, then set up plant and controller."""
         m, t = self.m, self.t
@@ -126,6 +136,7 @@ class Run:
                                     if not math.isnan(v)})
             m.controller.expect_setpoints(m.scenario.setpoints())
             m.controller.setup(t)
+            self._give_schedule()
         except (CosimError, SimulationFailed):
             raise
         except Exception as exc:

@@ -26,7 +26,8 @@ Every error is a :class:`~cosim.core.errors.CosimError` that starts with ``file:
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping, Sequence
+import bisect
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -119,6 +120,24 @@ class Scenario:
             if changed and held not in out:
                 out.append(dict(held))
         return out
+
+    def schedule(self, kind: str, target: str, default: float) -> Callable[[float], float]:
+        """The value the run sets for column ``<kind>.<target>`` at any time ``t``: the last
+        row at or before ``t`` that gives it (rows hold until the next), ``default`` before
+        the first (and for a column the file does not have). What a controller that knows a
+        measured disturbance ahead is given (``preview = true``)."""
+        times, values = [], []
+        for event in self.events:
+            for col, value in event.values:
+                if col.kind == kind and col.target == target:
+                    times.append(event.time)
+                    values.append(float(value))
+
+        def at(t: float) -> float:
+            i = bisect.bisect_right(times, t + 1e-9 * max(1.0, abs(t)))
+            return values[i - 1] if i else float(default)
+
+        return at
 
     def perturbation_times(self) -> list[float]:
         """Times (after the start) at which a ``plant.*`` or ``sensor.*`` value changes."""

@@ -179,10 +179,14 @@ def test_the_certificate_of_the_conditioned_model_is_the_full_models() -> None:
     assert e[:2].tolist() == [0.0, 0.0] and np.all(np.diff(e[1:]) > 0)
     assert cert.b_held is not None and np.allclose(cert.b_held, e[:, None] * cert.c_s[None])
     assert input_gain(model) > 0
-    # with a dead time on the disturbance its first samples are known: no term there
+    # with a dead time on the disturbance its first samples are known: predicted over the
+    # inputs' dead time (K = 3) with them, no term there; the FHOCP holds d_k, exact at its
+    # first stage (i = 3 = L), then apart
     late = random_gru_model(0, n=10, problem=heater_problem(rate=0.3, delay=3))
-    assert held_error(late, cert.rho_s, 15)[:5].tolist() == [0.0] * 5
-    assert held_error(late, cert.rho_s, 15)[5] > 0
+    assert held_error(late, cert.rho_s, 15, K=3)[:5].tolist() == [0.0] * 5
+    assert held_error(late, cert.rho_s, 15, K=3)[5] > 0
+    # without input dead time the FHOCP's first stages see d_{k-3} .. d_{k-1}, not d_k
+    assert held_error(late, cert.rho_s, 15)[1] > 0
     # no contraction: the term is infinite once the disturbance can have moved
     assert np.isinf(held_error(model, 1.0, 5)[2:]).all()
 

@@ -158,3 +158,14 @@ def test_with_changes_sets_first_row_replaces_setpoints_and_stop(tmp_path: Path)
         sc.with_changes({"plant": 1.0})
     with pytest.raises(CosimError, match="not after the start time"):
         sc.with_changes(stop_time=0.0)
+
+
+def test_a_columns_schedule_holds_each_row_until_the_next(tmp_path: Path) -> None:
+    """What a controller that knows a disturbance ahead is told: the value at any time, as
+    the run sets it (a blank cell keeps the last; before the first, the default)."""
+    path = tmp_path / "s.csv"
+    path.write_text("time,ref.T,dist.T_in\n0,40,\n100,45,20\n200,50,\n300,50,15\n400,50,\n")
+    at = load(path).schedule(DIST, "T_in", 18.0)
+    assert [at(t) for t in (0.0, 99.9, 100.0, 250.0, 299.9999999999, 300.0, 1e6)] == [
+        18.0, 18.0, 20.0, 20.0, 15.0, 15.0, 15.0]
+    assert load(path).schedule(DIST, "T_out", 7.0)(250.0) == 7.0
