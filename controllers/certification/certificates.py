@@ -23,7 +23,9 @@ Typos of the paper handled here: the terminal cost is ``s ‖x_N − x̄‖∞²
 ``eq:definition_s`` (used here) needs ``(1 − ρ_s²)``.
 
 Pure bounds live in :mod:`controllers.certification.bounds`, the observer-gain design in
-:mod:`controllers.certification.gain_design`.
+:mod:`controllers.certification.gain_design`, the admissible outputs as intervals in
+:mod:`controllers.certification.output_ranges`, ``w̄_y`` measured on data in
+:mod:`controllers.certification.prediction_error`.
 """
 
 from __future__ import annotations
@@ -51,15 +53,15 @@ from controllers.certification.bounds import (
     w_L,
 )
 from controllers.certification.design import MAX_HORIZON, gain, horizon, weight
-from controllers.errors import DataError, DesignError, SetpointError
+from controllers.certification.output_ranges import box_bounds
+from controllers.errors import DesignError, SetpointError
 from controllers.problem import ControlProblem, constraint_names, output_constraints
 
 if TYPE_CHECKING:
     from controllers.certification.measured_terminal import MeasuredTerminal
 
-__all__ = ["JSON_KEYS", "MAX_HORIZON", "NU_FIX", "Certificate", "Reference", "admissible_ranges",
-           "box_bounds", "box_ranges", "compute_certificate", "uncertified_certificate",
-           "w_y_bar_from_data"]
+__all__ = ["JSON_KEYS", "MAX_HORIZON", "NU_FIX", "Certificate", "Reference",
+           "compute_certificate", "uncertified_certificate"]
 
 #: What would make a model with ``ν ≥ 1`` usable (``cosim certify``'s fix, ``cosim run``'s).
 NU_FIX = "train the model with the nu constraint (cosim train keeps nu <= 0.98)"
@@ -445,7 +447,7 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
         w_y_bar = getattr(model, "w_y_bar", None)
         if w_y_bar is None:
             raise DesignError("no w_y_bar: the model file has none; estimate it from data "
-                              "(w_y_bar_from_data) or pass w_y_bar")
+                              "(prediction_error.w_y_bar_from_data) or pass w_y_bar")
     w_y_bar = float(w_y_bar)
     row_names = None
     if L is None or h is None:
@@ -519,98 +521,3 @@ def uncertified_certificate(cert: Certificate, margins: np.ndarray) -> Certifica
                    kappa=0.0, L_max=0.0, w_bar=0.0, w_L=np.zeros_like(cert.w_L),
                    a=np.zeros_like(cert.a), b=margins, e_o0=0.0, e_inf=0.0, gain_scale=0.0,
                    s=s, tightening="measured")
-
-
-# --------------------------------------------------------------------------------------
-# w̄_y from data
-# --------------------------------------------------------------------------------------
-def w_y_bar_from_data(model: Any, u: np.ndarray, y: np.ndarray, split: np.ndarray,
-                      test: str = "test", washout: str | None = "val") -> float:
-    """``w̄_y``: the largest absolute output error of the model on the test data, normalised.
-
-    The model is simulated open loop (``eq:gru``) on the data's inputs; the error
-    ``y_k − ξ_k`` is measured on the rows of the ``test`` split (paper section V: "maximum
-    absolute value of the prediction error on the test dataset in the normalized
-    variables"). The simulation starts at the model equilibrium for the first measured output
-    of the ``washout`` split (the rows just before the test split, default validation), so
-    that the initial state is forgotten (δISS) before the test rows begin; ``washout=None``
-    starts at the first test row.
-
-    Parameters
-    ----------
-    model : GRUModel
-    u, y : (T, m), (T, p) arrays
-        Inputs and outputs in physical units, in the model's signal order.
-    split : (T,) array of str
-        The split of each row (``"train"``, ``"val"``, ``"test"``).
-
-    Raises
-    ------
-    DataError
-        No rows in the ``test`` split.
-    """
-    from controllers.equilibrium import equilibrium_for_output
-    from controllers.gru import simulate
-
-    split = np.asarray(split)
-    keep = split == test
-    if not np.any(keep):
-        raise DataError(f"no rows in split {test!r}")
-    idx = np.flatnonzero(keep)
-    start = idx[0]
-    if washout is not None and np.any(split == washout):
-        w_idx = np.flatnonzero(split == washout)
-        if w_idx[-1] == start - 1:  # contiguous, just before the test rows
-            start = w_idx[0]
-    stop = idx[-1] + 1
-    u_n = model.normalize_u(np.asarray(u, dtype=float)[start:stop])
-    y_n = model.normalize_y(np.asarray(y, dtype=float)[start:stop])
-    x0, _ = equilibrium_for_output(model.params, y_n[0])
-    _, xi = simulate(model.params, x0, u_n)
-    mask = keep[start:stop]
-    return float(np.max(np.abs(y_n[mask] - xi[mask])))
-
-
-def box_bounds(L: np.ndarray, rhs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``{y : L y ≤ rhs}`` of the box rows of ``L`` (one nonzero entry) as bounds per output,
-    ``(lo, hi)`` (normalised): ±∞ where no row bounds an output, NaN where a bound is NaN."""
-    p = np.shape(L)[1]
-    lo, hi = np.full(p, -np.inf), np.full(p, np.inf)
-    for j in range(p):
-        for row, r in zip(L, rhs, strict=True):
-            if row[j] == 0 or np.count_nonzero(row) != 1:
-                continue
-            bound = float(r / row[j])
-            if math.isnan(bound):
-                lo[j] = hi[j] = math.nan
-                break
-            if row[j] > 0:
-                hi[j] = min(hi[j], bound)
-            else:
-                lo[j] = max(lo[j], bound)
-    return lo, hi
-
-
-def box_ranges(model: Any, L: np.ndarray, rhs: np.ndarray
-               ) -> list[tuple[str, float | None, float | None]]:
-    """:func:`box_bounds` as an interval ``(name, lo, hi)`` per output, physical units;
-    ``(name, None, None)`` where it is empty or undefined (a NaN bound)."""
-    out: list[tuple[str, float | None, float | None]] = []
-    for j, (lo, hi) in enumerate(zip(*box_bounds(L, rhs), strict=True)):
-        name = model.output_names[j]
-        a, b = sorted((float(lo * model.y_scale[j] + model.y_offset[j]),
-                       float(hi * model.y_scale[j] + model.y_offset[j])))
-        out.append((name, a, b) if lo <= hi else (name, None, None))
-    return out
-
-
-def admissible_ranges(cert: Certificate,
-                      model: Any) -> list[tuple[str, float | None, float | None]]:
-    """Per-output admissible set-point interval ``(name, lo, hi)`` in physical units.
-
-    :func:`box_ranges` of :meth:`Certificate.admissible_box` (``ass:setpoint`` and
-    ``eq:condition-recursive-feasibility``); ``(name, None, None)`` when it is empty (or
-    undefined: a NaN bound). Whether the model reaches a set-point (``‖ū‖∞ ≤ 1``) is not part of
-    it: :meth:`Certificate.reference` decides that.
-    """
-    return box_ranges(model, cert.L, cert.admissible_box())

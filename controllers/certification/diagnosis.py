@@ -29,7 +29,8 @@ from typing import Any
 
 import numpy as np
 
-from controllers.certification.certificates import NU_FIX, box_ranges
+from controllers.certification.certificates import NU_FIX
+from controllers.certification.output_ranges import box_ranges
 
 __all__ = ["Diagnosis", "Finding", "diagnose", "required_error"]
 

@@ -1,4 +1,5 @@
-"""The model's measured prediction error over a horizon: the tightening of the uncertified mode.
+"""The model's measured prediction error over a horizon: the tightening of the uncertified mode
+(and the paper's ``w̄_y``, the largest output error on the test data: :func:`w_y_bar_from_data`).
 
 The theorem (``th:feasibility-stability``) tightens the output constraints by bounds that hold
 for every plant within ``w̄_y`` of the model: ``w_L`` (the largest output error, kept over
@@ -40,7 +41,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["HORIZON", "QUANTILE", "error_profile", "held_predictions", "margins"]
+from controllers.errors import DataError
+
+__all__ = ["HORIZON", "QUANTILE", "error_profile", "held_predictions", "margins",
+           "w_y_bar_from_data"]
 
 #: Steps ahead measured (beyond, the last value holds).
 HORIZON = 200
@@ -121,3 +125,50 @@ def margins(profile: Any, L: np.ndarray, N: int, shift: int = 0) -> np.ndarray:
     B = np.asarray(profile, dtype=float)
     idx = np.minimum(np.arange(N + 1) + int(shift), B.shape[0] - 1)
     return B[idx] @ np.abs(np.asarray(L, dtype=float)).T
+
+
+def w_y_bar_from_data(model: Any, u: np.ndarray, y: np.ndarray, split: np.ndarray,
+                      test: str = "test", washout: str | None = "val") -> float:
+    """``w̄_y``: the largest absolute output error of the model on the test data, normalised.
+
+    The model is simulated open loop (``eq:gru``) on the data's inputs; the error
+    ``y_k − ξ_k`` is measured on the rows of the ``test`` split (paper section V: "maximum
+    absolute value of the prediction error on the test dataset in the normalized
+    variables"). The simulation starts at the model equilibrium for the first measured output
+    of the ``washout`` split (the rows just before the test split, default validation), so
+    that the initial state is forgotten (δISS) before the test rows begin; ``washout=None``
+    starts at the first test row.
+
+    Parameters
+    ----------
+    model : GRUModel
+    u, y : (T, m), (T, p) arrays
+        Inputs and outputs in physical units, in the model's signal order.
+    split : (T,) array of str
+        The split of each row (``"train"``, ``"val"``, ``"test"``).
+
+    Raises
+    ------
+    DataError
+        No rows in the ``test`` split.
+    """
+    from controllers.equilibrium import equilibrium_for_output
+    from controllers.gru import simulate
+
+    split = np.asarray(split)
+    keep = split == test
+    if not np.any(keep):
+        raise DataError(f"no rows in split {test!r}")
+    idx = np.flatnonzero(keep)
+    start = idx[0]
+    if washout is not None and np.any(split == washout):
+        w_idx = np.flatnonzero(split == washout)
+        if w_idx[-1] == start - 1:  # contiguous, just before the test rows
+            start = w_idx[0]
+    stop = idx[-1] + 1
+    u_n = model.normalize_u(np.asarray(u, dtype=float)[start:stop])
+    y_n = model.normalize_y(np.asarray(y, dtype=float)[start:stop])
+    x0, _ = equilibrium_for_output(model.params, y_n[0])
+    _, xi = simulate(model.params, x0, u_n)
+    mask = keep[start:stop]
+    return float(np.max(np.abs(y_n[mask] - xi[mask])))

@@ -130,6 +130,7 @@ class DrawContext:
             outputs = list(spec.setpoints.ranges) if spec.setpoints else []
             return cls(start_time, outputs)
         from controllers.certification import certificates as certs
+        from controllers.certification.output_ranges import admissible_ranges
         from controllers.model import DEFAULT_MODEL, GRUModel
 
         model_path = spec.options.get("model") or spec.model or DEFAULT_MODEL
@@ -149,7 +150,7 @@ class DrawContext:
                 f"e.g. {scenario_refs[0]} = [low, high]")
         cert = certs.compute_certificate(model)
         ranges = {}
-        for name, lo, hi in certs.admissible_ranges(cert, model):
+        for name, lo, hi in admissible_ranges(cert, model):
             if lo is None or hi is None:
                 raise CosimError(f"{spec.path}: [setpoints]: the certified admissible range "
                                  f"of {name} is empty for {model_path} (give the ranges)")

@@ -173,9 +173,9 @@ def _fmt(v: Any) -> str:
 
 
 def _admissible(cert: Any, model: Any) -> list[tuple[str, float | None, float | None]]:
-    """Per-output admissible set-point interval (:func:`controllers.certification.certificates.
-    admissible_ranges`)."""
-    from controllers.certification.certificates import admissible_ranges
+    """Per-output admissible set-point interval (:func:`controllers.certification.
+    output_ranges.admissible_ranges`)."""
+    from controllers.certification.output_ranges import admissible_ranges
 
     return admissible_ranges(cert, model)
 
@@ -194,7 +194,7 @@ def _admissible_ranges(cert: Any, model: Any) -> list[str]:
 def _w_y_bar_from_csv(model: Any, path: str) -> float:
     """``w̄_y`` from a ``cosim generate-data`` record (``--data``): the full model's (inputs
     and disturbances, each its dead time late)."""
-    from controllers.certification.certificates import w_y_bar_from_data
+    from controllers.certification.prediction_error import w_y_bar_from_data
     from controllers.dead_time import delayed
     from controllers.errors import DataError
     from cosim.core.datagen import read_csv

@@ -16,7 +16,7 @@ from scipy.optimize import linprog, minimize
 from controllers import problem
 from controllers.certification import bounds, gain_design
 from controllers.certification import certificates as certs
-from controllers.errors import ControllersError, DataError
+from controllers.errors import ControllersError
 from controllers.gru import output, step
 from controllers.model import GRUModel
 from controllers.problem import Channel, ControlProblem
@@ -283,27 +283,6 @@ def test_choose_gain_scale_returns_the_largest_passing_scale() -> None:
     # an impossible set-point (on the constraint) fails even with θ = 0
     theta_bad, c_bad = gain_design.choose_gain_scale(m, [m.normalize_y(np.array([2.0, 1.0]))])
     assert theta_bad is None and c_bad.gain_scale == 0.0
-
-
-def test_w_y_bar_from_data_recovers_the_output_perturbation(tmp_path) -> None:
-    """Data made by the model itself plus a known bounded w_y: w̄_y is its maximum."""
-    from controllers.gru import simulate
-
-    m = random_gru_model(2)
-    rng = np.random.default_rng(0)
-    T = 1500
-    u = np.repeat(rng.uniform(-1, 1, (T // 10, 2)), 10, axis=0)
-    _, xi = simulate(m.params, rng.uniform(-0.5, 0.5, 20), u)
-    w = rng.uniform(-0.03, 0.03, xi.shape)
-    split = np.array(["train"] * 500 + ["val"] * 500 + ["test"] * 500)
-    w[split == "test"] *= 0.5
-    w[1234, 1] = 0.04  # the test maximum (normalised); train/val have larger noise
-    y = m.denormalize_y(xi + w)
-    up = m.denormalize_u(u)
-    assert certs.w_y_bar_from_data(m, up, y, split) == pytest.approx(0.04, abs=1e-5)
-    # an inconsistent record (no test rows) is a one-line error naming the split
-    with pytest.raises(DataError, match="no rows in split 'test'"):
-        certs.w_y_bar_from_data(m, up[:1000], y[:1000], split[:1000])
 
 
 def test_alpha_positive_iff_assumption_1() -> None:

@@ -172,7 +172,7 @@ def test_bad_disturbance_tables_name_the_line(tmp_path: Path, table: str, messag
 
 
 def test_setpoints_default_to_certified_reachable_set_points(tmp_path: Path) -> None:
-    from controllers.certification import certificates as certs
+    from controllers.certification.output_ranges import admissible_ranges
 
     path = write(tmp_path, GOOD + "\n[setpoints]\ncount = 3\nhold = 1000\n")
     s = spec.load(path)
@@ -185,7 +185,7 @@ def test_setpoints_default_to_certified_reachable_set_points(tmp_path: Path) -> 
             y = model.normalize_y(np.array([sp["h1"], sp["h2"]]))
             assert cert.failures(y) == []
             cert.reference(y)  # reachable: does not raise
-    ranges = {n: (lo, hi) for n, lo, hi in certs.admissible_ranges(cert, model)}
+    ranges = {n: (lo, hi) for n, lo, hi in admissible_ranges(cert, model)}
     assert ctx.ranges == ranges
 
 
