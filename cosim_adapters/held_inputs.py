@@ -62,8 +62,9 @@ class HeldInputs:
     preview : (q,) bool array
         The disturbances known ahead (``preview = true``).
     preview_held : int
-        Steps one known ahead was held at its measured value instead, no schedule being
-        given (a live plant, a host without the scenario).
+        Steps one known ahead was held at its measured value instead, no schedule of it
+        being given (a run whose scenario does not set it, a host stepping the controller
+        itself).
     """
 
     def __init__(self, name: str, model: Any) -> None:
@@ -128,7 +129,9 @@ class HeldInputs:
         self._t = t
         self._d_fhocp = d
         if self.preview.any():   # known ahead: the value when the first decision acts
-            if self._schedule is None:
+            if self._schedule is None or any(
+                    n[len("dist."):] not in self._schedule
+                    for n, p in zip(self.names, self.preview, strict=True) if p):
                 self.preview_held += 1
             self._d_fhocp = np.array([self._value(j, max(self.dead_time - int(L), 0))
                                       for j, L in enumerate(self.lags)])
@@ -137,8 +140,8 @@ class HeldInputs:
     def set_schedule(self, schedule: Mapping[str, Callable[[float], float]] | None) -> None:
         """The values to come of the disturbances known ahead, for this run (after
         :meth:`reset`): ``schedule[name](t)``, the value (the problem's units) set on the
-        plant at ``t`` (the master gives the scenario's); ``None``: none, they are held at
-        their measured value (counted in :attr:`preview_held`)."""
+        plant at ``t`` (the master gives the scenario's); one without an entry (or
+        ``None``: all) is held at its measured value (counted in :attr:`preview_held`)."""
         self._schedule = None if schedule is None else dict(schedule)
 
     def _value(self, j: int, offset: int) -> float:
@@ -147,9 +150,9 @@ class HeldInputs:
         else its value now."""
         if offset <= 0:
             return float(self._d_past[-1 + offset, j])
-        if not self.preview[j] or self._schedule is None:
-            return float(self._d_past[-1, j])
         name = self.names[j][len("dist."):]
+        if not self.preview[j] or self._schedule is None or name not in self._schedule:
+            return float(self._d_past[-1, j])
         t = self._t + offset * self.Ts
         v = float(self._schedule[name](t))
         if not np.isfinite(v):

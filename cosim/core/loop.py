@@ -110,12 +110,27 @@ class Run:
             self._apply(events[self.next_event].values, started=True)
             self.next_event += 1
 
-    def _give_schedule(self) -> None:
-        """A controller that knows measured disturbances ahead (``previewed``: ``preview =
-        true``) gets the scenario's value of each at any time (its column, else the value
-        set at the start)."""
+    def _first_row(self) -> None:
+        """The scenario's first row (set-points; plant values and disturbances, set on a
+        plant with tunable parameters now, on its inputs once it is set up) and the
+        disturbances' nominal values where the scenario has no column."""
         m = self.m
-        names = tuple(getattr(m.controller, "previewed", ()) or ())
+        self._apply(m.scenario.events[0].values, started=False)
+        self.next_event = 1
+        for d, value in m.dist_defaults.items():
+            self.dist[d] = value
+            if self.set_param is not None:
+                self.set_param(d, value)
+
+    def _setup_controller(self, t: float) -> None:
+        """The controller told the run's set-points, set up at ``t``, and, when it knows
+        measured disturbances ahead (``previewed``: ``preview = true``), given the
+        scenario's value at any time of each it has a column of (the one that sets it)."""
+        m = self.m
+        m.controller.expect_setpoints(m.scenario.setpoints())
+        m.controller.setup(t)
+        columns = {c.target for c in m.scenario.columns_of(DIST)}
+        names = [d for d in getattr(m.controller, "previewed", ()) or () if d in columns]
         if names:
             m.controller.set_schedule({d: m.scenario.schedule(DIST, d, self.dist[d])
                                        for d in names})
@@ -123,20 +138,13 @@ class Run:
     def _start(self) -> None:
         """Start values and first set-points, then set up plant and controller."""
         m, t = self.m, self.t
-        self._apply(m.scenario.events[0].values, started=False)
-        self.next_event = 1
-        for d, value in m.dist_defaults.items():
-            self.dist[d] = value
-            if self.set_param is not None:
-                self.set_param(d, value)
+        self._first_row()
         try:
             m.plant.setup(t)
             if self.set_param is None:
                 m.plant.set_inputs({p: v for p, v in (*self.held.items(), *self.dist.items())
                                     if not math.isnan(v)})
-            m.controller.expect_setpoints(m.scenario.setpoints())
-            m.controller.setup(t)
-            self._give_schedule()
+            self._setup_controller(t)
         except (CosimError, SimulationFailed):
             raise
         except Exception as exc:

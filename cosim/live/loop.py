@@ -94,13 +94,9 @@ class LiveRun(Run):
     # -- start ----------------------------------------------------------------------------
     def _start(self) -> None:
         """Set-points, connect, set up the controller, lock onto the plant's samples."""
-        m = self.m
-        self._apply(m.scenario.events[0].values, started=False)
-        self.next_event = 1
-        self.dist.update(m.dist_defaults)
+        self._first_row()
         self.plant.setup(self.t)
-        m.controller.expect_setpoints(m.scenario.setpoints())
-        m.controller.setup(self.t)
+        self._setup_controller(self.t)
         self.w0 = self._lock_phase()
 
     def _lock_phase(self) -> float:

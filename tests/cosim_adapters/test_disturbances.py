@@ -400,9 +400,9 @@ def test_a_disturbance_known_ahead_is_met_before_it_arrives(
 
 def test_without_a_schedule_a_disturbance_known_ahead_is_held(
         dead_time: dict[str, Path], tmp_path: Path) -> None:
-    """Stepped outside a scenario (no schedule: a live plant, a host), the controller of a
-    disturbance known ahead holds its measured value, as the one that only measures it: the
-    same inputs to the bit, the steps counted."""
+    """Stepped outside a scenario (no schedule: a host stepping it), or in a run whose
+    scenario does not set it, the controller of a disturbance known ahead holds its measured
+    value, as the one that only measures it: the same inputs to the bit, the steps counted."""
     from cosim_adapters.robust_mpc import RobustMPCController
 
     held = RobustMPCController(model=dead_time["model"])
@@ -417,6 +417,14 @@ def test_without_a_schedule_a_disturbance_known_ahead_is_held(
             ctrl.step(20.0 * k, 20.0)
         assert held.get_outputs() == ahead.get_outputs(), k
     assert ahead.summary()["preview_held_steps"] == 40
+    # a scenario that does not set it (the plant's own, a live plant's measured) tells nothing
+    import cosim
+
+    plain = tmp_path / "plain.csv"
+    plain.write_text("time,ref.T\n0,45\n400,45\n")
+    run = cosim.run(plain, plant=dead_time["fmu"], model=_previewed(dead_time["model"],
+                                                                    tmp_path), figure=False)
+    assert run.summary["controller_summary"]["preview_held_steps"] == 21
 
 
 def test_a_controller_fmu_is_not_told_what_comes(dead_time: dict[str, Path], tmp_path: Path,
