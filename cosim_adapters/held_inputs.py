@@ -181,9 +181,8 @@ class HeldInputs:
         ``u_{k+i−K_j}``; before the run, the input that holds the first output estimate) and
         each disturbance as the model sees it, ``d_{k+i−L}`` while known (measured, or known
         ahead), then held at ``d_k`` (each step's in the biases, then the FHOCP's again); the
-        compiled
-        kernel's GRU step when there is one, as the exported controller's. The FHOCP's
-        fixed inputs (:attr:`prefix`) are set from the same past."""
+        compiled kernel's GRU step when there is one, as the exported controller's. The
+        FHOCP's fixed inputs (:attr:`prefix`) are set from the same past."""
         if not self.depth:
             return None
         from controllers import gru
@@ -199,16 +198,27 @@ class HeldInputs:
         x = np.asarray(observer.x_hat, dtype=float)
         zero = np.zeros(self.model.n)
         cols = np.arange(self.delays.size)
+        one_delay = self.depth == self.dead_time   # every input as late: row i (fast path)
         for i in range(self.dead_time):
             if self.shift is not None:
-                self.hold(np.array([self._value(j, i - int(L))
-                                    for j, L in enumerate(self.lags)]), fhocp)
-            v = self._u_past[self.depth - self.delays + i, cols]
+                self.hold(self._seen(i), fhocp)
+            v = self._u_past[i] if one_delay else self._u_past[self.depth - self.delays + i,
+                                                                cols]
             x = (kernel.gru_step(x, v, zero, zero) if kernel is not None
                  else gru.step(self.model.params, x, v))
         if self.shift is not None:
             self.hold(self._d_fhocp, fhocp)   # the FHOCP's: d_k (known ahead: d_{k+K-L})
         return x
+
+    def _seen(self, i: int) -> np.ndarray:
+        """The disturbances as the model sees them ``i`` samples on, ``d_{k+i−L}``: measured
+        while ``i ≤ L``, known ahead from the schedule, else held at ``d_k``."""
+        if self.preview.any():
+            return np.array([self._value(j, i - int(L)) for j, L in enumerate(self.lags)])
+        d = self._d_past[-1].copy()
+        known = i < self.lags
+        d[known] = self._d_past[-1 - self.lags[known] + i, known.nonzero()[0]]
+        return d
 
     def model_input(self, u: np.ndarray, fhocp: Any) -> np.ndarray:
         """The observer's input ``v_k`` as the model sees it: input ``j`` as applied ``K_j``
@@ -218,6 +228,8 @@ class HeldInputs:
             self.hold(self._d_past[-1 - self.lags, np.arange(self.lags.size)], fhocp)
         if not self.depth:
             return u
+        if self.depth == self.dead_time:   # every input as late
+            return self._u_past[0]
         rows = np.minimum(self.depth - self.delays, self.depth - 1)
         return np.where(self.delays > 0, self._u_past[rows, np.arange(self.delays.size)], u)
 
