@@ -398,8 +398,8 @@ __attribute__((unused)) static void law_restart(law_state *st) { (void)st; }
 
 /* PaperLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr, the
  * FHOCP from xstart (x_hat, or x_hat predicted over the inputs' shortest dead time) with the
- * inputs already applied in prefix; with no admissible set-point to start from, u is left as it came (controller.c: the inputs held,
- * the box's middle before any) */
+ * inputs already applied in prefix; with no admissible set-point to start from, u is left as
+ * it came (controller.c: the inputs held, the box's middle before any) */
 static void law_step(law_state *st, const double *xhat, const double *xstart,
                      const ctl_prefix *prefix, double e_o, const double *y, const double *yr,
                      double *u, int *warnings) {
