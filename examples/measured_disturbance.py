@@ -7,13 +7,13 @@ temperature is measured (``fmus/examples/heater_dead_time``: its problem file de
 ``[disturbances.T_in]`` and ``delay = 2``), as a user takes it: build the FMU, excite it
 (``cosim generate-data``: the power and the ambient in their boxes), identify a GRU whose
 inputs are both (``cosim train``, a short training), then one scenario of a set-point step
-and two ambient steps with five controllers: the robust MPC (its tracking law), the same with
-the ambient known ahead (``preview = true``: the scenario's steps seen over the dead time),
-the paper's law (a horizon for the vessel's time constant, offset-free set-points), the PI
-with its static feedforward from the model and the PI without it. Prints each one's IAE over
-the run
-and after each ambient step, its largest overshoot, and where the files are (each run's
-``results.csv``, ``summary.json``, ``figure.png`` under ``DIR``, default a temporary folder).
+and two ambient steps with six controllers: the robust MPC (its tracking law) and the paper's
+law (a horizon for the vessel's time constant, offset-free set-points), each with the ambient
+measured and with it known ahead (``preview = true``: the scenario's steps seen over the dead
+time), the PI with its static feedforward from the model and the PI without it. Prints each
+one's IAE over the run and after each ambient step, its largest overshoot, and where the files
+are (each run's ``results.csv``, ``summary.json``, ``figure.png`` under ``DIR``, default a
+temporary folder).
 """
 
 from __future__ import annotations
@@ -36,6 +36,8 @@ CONTROLLERS = (("robust MPC", "mpc", "robust-mpc", {}, False),
                ("MPC, known ahead", "mpc-preview", "robust-mpc", {}, True),
                ("paper's law", "paper", "robust-mpc",
                 {"law": "paper", "N": 60, "offset_free": True}, False),
+               ("paper, known ahead", "paper-preview", "robust-mpc",
+                {"law": "paper", "N": 60, "offset_free": True}, True),
                ("PI + feedforward", "pi-ff", "pi", {}, False),
                ("PI", "pi", "pi", {"feedforward": False}, False))
 
@@ -81,7 +83,7 @@ def main() -> None:
         df = run.to_pandas().set_index("time")
         err = (df["plant.T"] - df["ref.T"]).abs() * 20.0          # 20 s samples
         overshoot = max(0.0, df.loc[1000.0:3000.0, "plant.T"].max() - 55.0)
-        print(f"{title:17s} status {run.status}, IAE {err.sum():5.0f} degC·s (after the "
+        print(f"{title:18s} status {run.status}, IAE {err.sum():5.0f} degC·s (after the "
               f"ambient fell {err.loc[3000.0:5000.0].sum():4.0f}, rose "
               f"{err.loc[5000.0:].sum():4.0f}), overshoot {overshoot:.2f} degC")
     print(f"files in {out}")
