@@ -25,7 +25,7 @@ local optimum of the nonconvex FHOCP) and the two closed loops against each othe
 Jacobian, f, g and the rest, fits the growth exponents of the step and of its QP, and prints
 the step time one more stage (state) adds, from the smallest size to the largest.
 ``--plain`` adds the do-mpc-style baseline of issue 5 (multiple shooting, IPOPT defaults).
-``--clip`` times the Hessian's eigenvalue clipping, own tred2/tql2 against LAPACK dsyevr.
+``--clip`` times the Hessian's eigenvalue clipping, own eigenpairs against LAPACK dsyevr.
 
 Usage::
 
@@ -421,9 +421,10 @@ def _median_split(split: list[tuple[float, ...]], median: float) -> np.ndarray:
 
 
 def clip_variants(args: argparse.Namespace) -> None:
-    """The Hessian's eigenvalue clipping: own tred2/tql2 against LAPACK dsyevr (the eigenpairs
-    below the margin only), on Hessian-like matrices (eigenvalues 0.05 … 6e4, three below the
-    margin, as the paper scenario's ~2.4 per decomposition), for N m = 30 … 120."""
+    """The Hessian's eigenvalue clipping: the own eigenpairs below the margin (Householder, QL
+    without vectors, inverse iteration) against LAPACK dsyevr's, on Hessian-like matrices
+    (eigenvalues 0.05 … 6e4, three below the margin, as the paper scenario's ~2.4 per
+    decomposition), for N m = 30 … 120."""
     from controllers.kernel import compiled_kernel as ck
     from tests.controllers.kernel.test_compiled_kernel import random_fhocp
 
@@ -476,7 +477,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--plain", action="store_true",
                     help="also time the do-mpc-style multiple-shooting baseline")
     ap.add_argument("--clip", action="store_true",
-                    help="the eigenvalue clipping's two variants instead (own QL, dsyevr)")
+                    help="the eigenvalue clipping's two variants instead (own, dsyevr)")
     args = ap.parse_args(argv)
     if args.clip:
         clip_variants(args)

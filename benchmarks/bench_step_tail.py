@@ -16,10 +16,17 @@ change and (the paper's law) how many while its reference governor holds the ref
 of the set-point; then whether both trees applied the same inputs (largest difference as a
 share of the input box).
 
+``--split`` prints instead, for this tree and the baseline, where the kernel spends a slow
+solve's iterations: the solves of one closed loop of the paper's law that take 12 SQP
+iterations or more, each replayed 20 times from its captured initial guess (the fastest
+kept), per iteration by the SQP's timers: the QP, the Hessian and its eigenvalue clipping
+(a tree without the clipping's own timer counts it in the Hessian), f/g and their
+derivatives, the line search; with the clipping's decompositions where the tree counts them.
+
 Usage::
 
     .venv/bin/python benchmarks/bench_step_tail.py [--baseline REV] [--rounds 3]
-        [--laws paper,tracking]
+        [--laws paper,tracking] [--split]
 
 The baseline must have ``cosim.api.run`` and ``cosim_adapters.robust_mpc`` (every tree since
 the controller moved into its adapter package).
@@ -72,6 +79,64 @@ json.dump({"status": run.status, "ms": times, "time": pick("time"),
           open(out, "w"))
 """
 
+#: Run in this tree: the paper law's solves of >= 12 iterations captured, then replayed.
+CHILD_SPLIT = r"""
+import sys, time
+import numpy as np
+from cosim import api
+from controllers.kernel import kernel_sqp
+
+plant, replays = sys.argv[1], int(sys.argv[2])
+solves, last = [], []
+original = kernel_sqp.KernelSQP.solve
+
+def capture(self):
+    ins = {k: v.copy() for k, v in self.ins.items()}
+    original(self)
+    last[:] = [self]
+    if self.info.iterations >= 12:
+        solves.append(ins)
+
+kernel_sqp.KernelSQP.solve = capture
+api.run("scenarios/paper_steps.csv", plant=plant, options={"law": "paper"}, figure=False)
+kernel_sqp.KernelSQP.solve = original
+sqp = last[0]
+names = ("qp", "hessian", "clip", "derivatives", "line_search")
+ws = getattr(sqp, "workspace", None)   # an older tree's solver does not keep it
+counters = ws.counters if ws is not None else dict
+total, iterations, before = np.zeros(6), 0, counters()
+for ins in solves:
+    best = None
+    for _ in range(replays):
+        for k, v in ins.items():
+            sqp.ins[k][:] = v
+        t0 = time.perf_counter()
+        sqp.solve()
+        wall = time.perf_counter() - t0
+        if best is None or wall < best[0]:
+            i = sqp.info
+            clip = getattr(i, "t_clip", 0.0)
+            best = (wall, i.t_qp, i.t_hessian - clip, clip, i.t_derivatives, i.t_line_search,
+                    i.iterations)
+    total += best[1:6] + (best[0],)
+    iterations += best[6]
+after = counters()
+us = 1e6 * total / max(iterations, 1)
+print(f"  {len(solves)} solves of >= 12 iterations, {iterations} iterations, best of {replays}")
+if not hasattr(sqp.info, "t_clip"):
+    names = ("qp", "hessian (clip included)", "clip", "derivatives", "line_search")
+print("  per iteration [us]: " + ", ".join(f"{n} {v:.1f}" for n, v in zip(names, us[:5])
+                                         if n != "clip" or hasattr(sqp.info, "t_clip"))
+      + f"; the whole solve {us[5]:.1f}")
+if after:
+    runs = max(replays * len(solves), 1)
+    print(f"  clipping per solve: {(after['eig'] - before['eig']) / runs:.1f} decompositions, "
+          f"{(after['eigenvalues_clipped'] - before['eigenvalues_clipped']) / runs:.1f} "
+          f"eigenvalues clipped, "
+          f"{(after.get('full_eig', 0) - before.get('full_eig', 0)) / runs:.2f} "
+          "full decompositions")
+"""
+
 
 def unpack(rev: str, folder: Path) -> Path:
     """The tree of ``rev`` (``git archive``) in ``folder``."""
@@ -96,6 +161,19 @@ def one_run(tree: Path, law: str, plant: Path, out: Path) -> dict:
     if found["status"] != "ok":
         raise SystemExit(f"bench_step_tail: {tree} law={law}: run {found['status']}")
     return found
+
+
+def split(trees: dict[str, Path], plant: Path) -> int:
+    """Print where each tree's kernel spends a slow solve's iterations (``--split``)."""
+    for name, tree in trees.items():
+        env = {**os.environ, "PYTHONPATH": str(tree), "OPENBLAS_NUM_THREADS": "1"}
+        proc = subprocess.run([sys.executable, "-c", CHILD_SPLIT, str(plant), "20"], cwd=tree,
+                              env=env, capture_output=True, text=True)
+        if proc.returncode != 0:
+            raise SystemExit(f"bench_step_tail --split: {tree} failed:\n{proc.stderr[-2000:]}")
+        print(f"{name}: the paper law's slow solves replayed")
+        print(proc.stdout, end="")
+    return 0
 
 
 def stats(ms: np.ndarray) -> str:
@@ -126,6 +204,8 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--baseline", default="HEAD", help="git revision (default HEAD)")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--laws", default="paper,tracking")
+    parser.add_argument("--split", action="store_true",
+                        help="where this tree's kernel spends a slow solve's iterations")
     args = parser.parse_args(argv)
     plant = ROOT / "fmus" / "FourTank.fmu"
     if not plant.is_file():
@@ -134,6 +214,8 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory(prefix="bench-step-tail-") as tmp:
         base = unpack(args.baseline, Path(tmp))
         trees = {"this": ROOT, "baseline": base}
+        if args.split:
+            return split(trees, plant)
         runs: dict[tuple[str, str], list[dict]] = {}
         for r in range(args.rounds):
             for law in laws:

@@ -403,6 +403,7 @@ EXPORT void PFX(counters)(const gk_ws *ws, gk_counters *out) {
   out->eig = ws->mem.n_eig;
   out->clipped = ws->mem.n_clipped;
   out->eigenvalues_clipped = ws->mem.n_evs;
+  out->full_eig = ws->mem.n_full_eig;
 }
 
 EXPORT void PFX(invalidate)(gk_ws *ws) { ws->mem.c_level = -1; }

@@ -247,10 +247,12 @@ def casadi_openblas() -> Path | None:
 
 
 #: LAPACK dsyevr (casadi's OpenBLAS; only the eigenpairs below the clipping margin) for the
-#: eigenvalue clipping when N m >= this, else the own tred2/tql2 (all pairs). On Hessian-like
-#: matrices with 3 eigenvalues below the margin (the paper scenario clips ~2.4 per
-#: decomposition), ``benchmarks/bench_mpc.py --clip``: own / dsyevr 83 / 61 µs at N m = 30,
-#: 366 / 273 µs at 60, 2.6 / 0.86 ms at 120. Not below 80: at N m = 30 (the paper's problem)
+#: eigenvalue clipping when N m >= this, else the own eigenpairs below the margin (Householder,
+#: QL without vectors, inverse iteration; eigen_clip.c). On Hessian-like matrices with 3
+#: eigenvalues below the margin (the paper scenario clips ~2.4 per decomposition),
+#: ``benchmarks/bench_mpc.py --clip`` (2026-12-05): own / dsyevr 33 / 39 µs at N m = 30, 87 /
+#: 92 at 48, 135 / 119 at 60, 744 / 470 at 120 (the own full tred2/tql2 before: 45, 134,
+#: 248, 1,563 µs). Not below 80: at N m = 30 (the paper's problem)
 #: the closed loop showed no difference (p99 9.8 / 10.0 ms over 4 alternating runs), nor at
 #: the tracking law's default N m = 40 on the four-tank (median step 0.79 ms either way), and
 #: a kernel without OpenBLAS gives the same answers on every CPU (OpenBLAS picks its kernels

@@ -67,6 +67,8 @@ class SqpInfo(ctypes.Structure):
     t_qp, t_hessian, t_derivatives, t_line_search : float
         Seconds in the QPs, the Hessians (eigenvalue clipping included), f/∇f/g/∂g (the
         stopping tests' and the iterations') and the line searches' f/g.
+    t_clip : float
+        Of ``t_hessian``, the seconds in the eigenvalue clipping.
     derivative_reuses : int
         Iterations that kept the Jacobian and the Hessian (``reuse_step``), a discarded
         loop's included.
@@ -84,7 +86,7 @@ class SqpInfo(ctypes.Structure):
                 ("t_qp", ctypes.c_double), ("t_hessian", ctypes.c_double),
                 ("t_derivatives", ctypes.c_double), ("t_line_search", ctypes.c_double),
                 ("derivative_reuses", ctypes.c_int), ("fresh_restarts", ctypes.c_int),
-                ("discarded_iterations", ctypes.c_int)]
+                ("discarded_iterations", ctypes.c_int), ("t_clip", ctypes.c_double)]
 
 
 class SqpStatus(IntEnum):
@@ -177,10 +179,11 @@ class Dims(ctypes.Structure):
 class Counters(ctypes.Structure):
     """A solver instance's eigenvalue-clipping counts (C ``gk_counters``, ``PFX(counters)``):
     Hessians clipped (``hess_calls``), eigen-decompositions (``eig``), decompositions that
-    clipped (``clipped``) and eigenvalues clipped (``eigenvalues_clipped``)."""
+    clipped (``clipped``), eigenvalues clipped (``eigenvalues_clipped``) and decompositions
+    that fell back from the eigenpairs below the margin to the full one (``full_eig``)."""
 
     _fields_ = [(name, ctypes.c_long) for name in (
-        "hess_calls", "eig", "clipped", "eigenvalues_clipped")]
+        "hess_calls", "eig", "clipped", "eigenvalues_clipped", "full_eig")]
 
 
 class QpStatus(IntEnum):

@@ -58,6 +58,13 @@ class KernelSQP:
     time_budget : float, optional
         Wall-time budget of one solve [s] (status ``"User_Requested_Stop"`` when it runs out
         before convergence); none by default.
+
+    Attributes
+    ----------
+    workspace : controllers.kernel.kernel_lib.Workspace
+        The solver instance it runs in (its clipping counters: ``workspace.counters()``).
+    info : controllers.kernel.kernel_abi.SqpInfo
+        What the last solve reported (status, iterations, timers).
     """
 
     def __init__(self, workspace: Any, options: Mapping[str, Any],
@@ -70,6 +77,7 @@ class KernelSQP:
                               "SQP (loop=\"kernel\"); use loop=\"casadi\" for sqpmethod's "
                               "other options")
         opts = {**LINE_SEARCH_DEFAULTS, **options}
+        self.workspace = workspace
         nw, ng, npar = workspace.nw, workspace.ng, workspace.npar
         self.ins = {name: np.zeros(size) for name, size in (
             ("x0", nw), ("p", npar), ("lbx", nw), ("ubx", nw), ("lbg", ng), ("ubg", ng),

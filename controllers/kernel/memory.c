@@ -32,8 +32,9 @@
  *                    J_h and A_i; O(N^2 n^2 m) instead of O(N n^3); best for large n.
  *   GK_BACKWARD      W-mode with the Hessian condensed backward (long horizons).
  *   GK_BLAS          the n x n x (n+m) / n x n x K products through dgemm (casadi's OpenBLAS).
- *   GK_LAPACK_EIG    eigenvalue clipping with LAPACK dsyevr (only the eigenpairs below the
- *                    margin) instead of tred2/tql2 (all of them).
+ *   GK_LAPACK_EIG    eigenvalue clipping with LAPACK dsyevr instead of the own Householder
+ *                    reduction, QL and inverse iteration (both: only the eigenpairs below
+ *                    the margin).
  *   GK_TIMERS        in-kernel wall-clock accumulators (PFX(timers)).
  *   GK_NO_CLONES     no AVX2/FMA function clones (target_clones) on x86-64.
  *
@@ -144,7 +145,7 @@ typedef struct gk_mem {
 #if HAS_ASS
   double tw[NY];
 #endif
-  long n_calls, n_eig, n_clipped, n_evs; /* clipping counters (PFX(counters)) */
+  long n_calls, n_eig, n_clipped, n_evs, n_full_eig; /* clipping counters (PFX(counters)) */
 #ifdef GK_TIMERS
   double tk_acc[4];
 #endif
@@ -174,7 +175,8 @@ typedef struct gk_work {
   A32 double Hrm[NW * NW];               /* the casadi Hessian's row-major copy */
   /* eigenvalue clipping (eigen_clip.c) */
   A32 double V[NUA * NUA], Hu[NUA * NUA];
-  double d[NUA], e[NUA];
+  double d[NUA], e[NUA], tau[NUA], td[NUA], te[NUA], lu[4 * NUA];
+  unsigned char piv[NUA];
 #ifdef GK_LAPACK_EIG
   A32 double Z[NUA * NUA], lapack_work[26 * NUA];
   int iwork[10 * NUA], isuppz[2 * NUA];

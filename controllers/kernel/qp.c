@@ -135,7 +135,7 @@ HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const doubl
         for (int i = 0; i < NW; i++) d[i] += t * qz[i];
         if (t2 <= t1) {   /* full step: p joins the working set */
           for (int j = NW - 1; j > q; j--) {
-            const double a = qd[j - 1], b = qd[j], h = hypot(a, b);
+            const double a = qd[j - 1], b = qd[j], h = gk_hypot(a, b);
             if (b == 0.0) continue;
             qd[j - 1] = h;
             qd[j] = 0.0;
@@ -158,7 +158,7 @@ HOT static int qp_solve(gk_ws *ws, const double *H, const double *g, const doubl
       }
       qu[q - 1] = qu[q];
       for (int k = l; k < q - 1; k++) {
-        const double a = qR[k * NW + k], b = qR[(k + 1) * NW + k], h = hypot(a, b);
+        const double a = qR[k * NW + k], b = qR[(k + 1) * NW + k], h = gk_hypot(a, b);
         if (b == 0.0) continue;
         const double c = a / h, sn = b / h;
         qR[k * NW + k] = h;

@@ -34,22 +34,36 @@ static inline void gk_gemm_loops(int ta, int m, int n, int k, const double *A, i
 
 #define GK_CHUNK 16
 
+/* gk_accumulate's entries j0 .. j0 + C - 1 in C registers (C a literal) */
+#define GK_ACCUMULATE_CHUNK(C)                                                  \
+  do {                                                                          \
+    double acc[C];                                                              \
+    for (int t = 0; t < (C); t++) acc[t] = y0[j0 + t];                          \
+    for (int k = (tri && j0 > k0) ? j0 : k0; k < k1; k++) {                     \
+      const double c = a[k], *x = X + k * ldx + j0;                             \
+      for (int t = 0; t < (C); t++) acc[t] += c * x[t];                         \
+    }                                                                           \
+    for (int t = 0; t < (C); t++) y[j0 + t] = acc[t];                           \
+  } while (0)
+
 /* y[j] = y0[j] + sum_{k = k0}^{k1 - 1} a[k] X[k ldx + j], j < n, each entry summed in
  * ascending k (the order of the scalar loop `for k: for j: y[j] += a[k] X[k][j]`, so the same
- * result to the bit), GK_CHUNK entries at a time in registers: the rows of X are only read,
- * y is written once (the scalar loop stores y at every k). y0 may be y. tri: row k of X is
- * zero beyond column k (a triangular inverse), so a chunk from column j0 starts at k = j0. */
+ * result to the bit), GK_CHUNK entries at a time in registers, then chunks of 8 and 4 (the
+ * QP's n = N m + 1 would leave up to 15 entries to the strided scalar loop): the rows of X are
+ * only read, y is written once (the scalar loop stores y at every k). y0 may be y. tri: row
+ * k of X is zero beyond column k (a triangular inverse), so a chunk from column j0 starts at
+ * k = j0. */
 static inline void gk_accumulate(double *y, const double *y0, int n, const double *a,
                                  const double *X, int ldx, int k0, int k1, int tri) {
   int j0 = 0;
-  for (; j0 + GK_CHUNK <= n; j0 += GK_CHUNK) {
-    double acc[GK_CHUNK];
-    for (int t = 0; t < GK_CHUNK; t++) acc[t] = y0[j0 + t];
-    for (int k = (tri && j0 > k0) ? j0 : k0; k < k1; k++) {
-      const double c = a[k], *x = X + k * ldx + j0;
-      for (int t = 0; t < GK_CHUNK; t++) acc[t] += c * x[t];
-    }
-    for (int t = 0; t < GK_CHUNK; t++) y[j0 + t] = acc[t];
+  for (; j0 + GK_CHUNK <= n; j0 += GK_CHUNK) GK_ACCUMULATE_CHUNK(GK_CHUNK);
+  if (j0 + 8 <= n) {
+    GK_ACCUMULATE_CHUNK(8);
+    j0 += 8;
+  }
+  if (j0 + 4 <= n) {
+    GK_ACCUMULATE_CHUNK(4);
+    j0 += 4;
   }
   for (int j = j0; j < n; j++) {
     double acc = y0[j];

@@ -130,8 +130,11 @@ static int iterate(gk_ws *ws, const double *p, const double *lbx, const double *
       info->t_derivatives += sq_now() - t0;
       t0 = sq_now();
       hessian(ws, w, p, 1.0, lam_g, sq_H);
+      const double t1 = sq_now();
       clip_hessian(ws, sq_H);
-      info->t_hessian += sq_now() - t0;
+      const double t2 = sq_now();
+      info->t_hessian += t2 - t0;
+      info->t_clip += t2 - t1;
       *drift = 0.0;
     }
     t0 = sq_now();
@@ -244,8 +247,8 @@ static int sqp_loop(gk_ws *ws, const double *p, const double *lbx, const double 
  * beta, max_iter_ls, time_budget [s], inf: none, checked before each iteration's Hessian,
  * after the stopping tests, tol_du_relative, reuse_step); info (gk_sqp_info) receives the
  * status, the iterations, the QP working-set changes, the line-search failures and the
- * seconds spent in the QP, the Hessian (clipping included), f/grad f/g/jac g and the line
- * search's f/g.
+ * seconds spent in the QP, the Hessian (clipping included; the clipping's share in t_clip),
+ * f/grad f/g/jac g and the line search's f/g.
  *
  * Derivative reuse never costs convergence: a loop that reused derivatives and ended short of
  * "Solve_Succeeded" (at the iteration cap, a step too small, a failed or infeasible QP; not

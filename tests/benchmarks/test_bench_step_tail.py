@@ -36,3 +36,24 @@ def test_the_benchmark_times_both_trees_and_explains_the_tail() -> None:
     gap = float(re.search(r"largest difference between the trees ([\d.e+-]+)", proc.stdout)[1])
     if not changed:   # the same controller at HEAD: the same inputs
         assert gap == 0.0
+
+
+@pytest.mark.slow
+def test_the_split_replays_the_slow_solves_in_both_trees() -> None:
+    """``--split``: the same slow solves of the paper's law in this tree and the baseline
+    (HEAD), each iteration's time split by the SQP's timers, and no clipping that fell back
+    to the full decomposition."""
+    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_step_tail.py"),
+                           "--split"], capture_output=True, text=True, timeout=900, check=False)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    found = re.findall(r"(\d+) solves of >= 12 iterations, (\d+) iterations", proc.stdout)
+    assert len(found) == 2 and int(found[0][0]) > 10, proc.stdout
+    parts = re.search(r"per iteration \[us\]: qp ([\d.]+), hessian ([\d.]+), clip ([\d.]+), "
+                      r"derivatives ([\d.]+), line_search ([\d.]+); the whole solve ([\d.]+)",
+                      proc.stdout)
+    assert parts, proc.stdout
+    values = [float(v) for v in parts.groups()]
+    assert all(v > 0 for v in values) and sum(values[:5]) <= values[5] * 1.05
+    clip = re.search(r"clipping per solve: ([\d.]+) decompositions, ([\d.]+) eigenvalues "
+                     r"clipped, ([\d.]+) full decompositions", proc.stdout)
+    assert clip and float(clip[1]) > 0 and float(clip[3]) == 0.0, proc.stdout

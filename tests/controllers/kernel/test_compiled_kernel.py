@@ -325,6 +325,53 @@ def test_portable_build_gives_the_same_derivatives(tmp_path: Path,
                        nlp.hessian_convex(w, p, np.array([1.0]), lg)[0]) < 1e-12
 
 
+def clipped_reference(H: np.ndarray, margin: float) -> np.ndarray:
+    """numpy's eigenvalue clipping of the kernel's block-diagonal Hessian (the inputs' block
+    and the terminal slack's entry): every eigenvalue below ``margin`` raised to it."""
+    lam, vec = np.linalg.eigh(H[:-1, :-1])
+    out = H.copy()
+    out[:-1, :-1] = (vec * np.maximum(lam, margin)) @ vec.T
+    out[-1, -1] = max(out[-1, -1], margin)
+    return out
+
+
+@needs_cc
+@pytest.mark.parametrize("portable", [False, True])
+def test_clipping_finds_the_eigenpairs_below_the_margin(portable: bool, tmp_path: Path,
+                                                        monkeypatch: pytest.MonkeyPatch
+                                                        ) -> None:
+    """The clipping's own eigenpairs below the margin (Householder to tridiagonal, QL
+    without vectors, inverse iteration; N m = 30, below ``LAPACK_EIG_MIN_NU``) against
+    numpy's full decomposition, on Hessian-like spectra (0.05 … 6e4) with 0 … 8 eigenvalues
+    below the margin, repeated ones, ones 1e-12 apart and one on the margin: the same
+    clipped matrix to 1e-14 of its largest entry, and never the full decomposition's
+    fallback (``full_eig``)."""
+    monkeypatch.setenv("GRU_MPC_KERNEL_CACHE", str(tmp_path))
+    fh = random_fhocp(20, 15, seed=1, kernel="numpy")
+    flags = (*ck.DEFAULT_CFLAGS, "-DGK_NO_CLONES") if portable else None
+    k = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2,
+                                  LUo=fh.LUo), cflags=flags)
+    assert k is not None and "-DGK_LAPACK_EIG" not in k.flags, ck.last_error
+    ws = k.workspace()
+    rng = np.random.default_rng(3)
+    n = k.nw - 1
+    below = [[], [-3.0], [-3.0, -0.1, 0.005], [-0.5, -0.5], [-0.5, -0.5 + 1e-12, -0.5],
+             [1e-2], [-1e-9, 0.0, 1e-9], list(rng.uniform(-3.0, 1e-2, 8))]
+    for low in below:
+        q, _ = np.linalg.qr(rng.normal(size=(n, n)))
+        lam = np.geomspace(0.05, 6e4, n)
+        lam[:len(low)] = low
+        H = np.zeros((k.nw, k.nw))
+        H[:-1, :-1] = (q * lam) @ q.T
+        H[:-1, :-1] = 0.5 * (H[:-1, :-1] + H[:-1, :-1].T)
+        H[-1, -1] = 1e-3
+        got = ws.clip(H)
+        assert np.max(np.abs(got - clipped_reference(H, 1e-2))) < 1e-14 * 6e4, low
+        assert np.min(np.linalg.eigvalsh(got[:-1, :-1])) > 1e-2 - 1e-10
+    counts = ws.counters()   # every spectrum but the first decomposed (the margin's own:
+    assert counts["full_eig"] == 0 and counts["eig"] >= len(below) - 2, counts  # rounding)
+
+
 @needs_cc
 @pytest.mark.parametrize("tracking", [False, True])
 def test_every_variant_compiles_without_a_warning(tracking: bool, tmp_path: Path) -> None:
