@@ -170,8 +170,8 @@ VARIANT_ONLY static int symm_eig(int n, double *V, double *d, double *e) {
  * reflectors, applied to the full trailing block so that every update is a contiguous row):
  * d the diagonal, e[i] = T[i][i-1] (e[0] = 0, tred2's layout), v_k = (0 .. 0, 1,
  * A[k][k+2 .. n-1]) left in row k of A, tau_k in tau[k]; p: n scratch. Q is not formed. */
-VARIANT_ONLY HOT static void householder_tridiagonal(int n, double *A, double *d, double *e, double *tau,
-                                        double *p) {
+VARIANT_ONLY HOT static void householder_tridiagonal(int n, double *A, double *d, double *e,
+                                                     double *tau, double *p) {
   e[0] = 0.0;
   for (int k = 0; k + 2 < n; k++) {
     double *x = A + k * n + k + 1;   /* column k below the diagonal (= row k, symmetric) */
@@ -220,11 +220,13 @@ VARIANT_ONLY HOT static void householder_tridiagonal(int n, double *A, double *d
 /* the eigenvector y (n) of the tridiagonal (d, e: T[i][i-1] = e[i]) for its eigenvalue lam,
  * by inverse iteration (LU of T - lam I with partial pivoting, solves from a fixed start,
  * each orthogonalised against the nvec vectors in prev, rows of n: the eigenvalues below
- * it, as LAPACK dstein does within a cluster), until the residual
- * |T y - lam y|inf <= tol after the second solve or later (0), at most four (else -1). lu: 4 n, piv: n scratch. */
-VARIANT_ONLY static int tridiagonal_eigenvector(int n, const double *d, const double *e, double lam,
-                                   const double *prev, int nvec, double tol, double *y,
-                                   double *lu, unsigned char *piv) {
+ * it, as LAPACK dstein does within a cluster), until the residual |T y - lam y|inf <= tol
+ * after the second solve or later (0), at most four solves (else -1). lu: 4 n, piv: n
+ * scratch. */
+VARIANT_ONLY static int tridiagonal_eigenvector(int n, const double *d, const double *e,
+                                                double lam, const double *prev, int nvec,
+                                                double tol, double *y, double *lu,
+                                                unsigned char *piv) {
   double *a = lu, *b = lu + n, *c = lu + 2 * n, *f = lu + 3 * n;   /* U: a, b, c; L: f */
   const double tiny = fmax(tol / (64.0 * n), 1e-300);   /* eps |T|: a zero pivot's stand-in */
   /* LU of T - lam I, row i: (e[i], d[i] - lam, e[i+1]) */
@@ -301,9 +303,9 @@ VARIANT_ONLY static int tridiagonal_eigenvector(int n, const double *d, const do
  * eigenvector j into row j of Y (n x n); 0, or -1 when QL does not converge or an inverse
  * iteration misses its residual test (then: the full decomposition). e, tau, td, te: n
  * scratch each, lu: 4 n, piv: n. */
-VARIANT_ONLY HOT static int eig_below(int n, double *A, double clip, double *d, double *Y, int *ne,
-                         double *e, double *tau, double *td, double *te, double *lu,
-                         unsigned char *piv) {
+VARIANT_ONLY HOT static int eig_below(int n, double *A, double clip, double *d, double *Y,
+                                      int *ne, double *e, double *tau, double *td, double *te,
+                                      double *lu, unsigned char *piv) {
   householder_tridiagonal(n, A, td, te, tau, lu);
   memcpy(d, td, sizeof(double) * n);
   memcpy(e, te, sizeof(double) * n);
@@ -401,8 +403,9 @@ HOT static int clip_hessian(gk_ws *ws, double *H) {
     memcpy(V, ws->work.Z, sizeof(double) * NUA * ne);
   }
 #else
-  /* the eigenpairs below CLIP only (~2.4 per decomposition on the paper scenario): 2.5x
-   * faster than the full tred2 + tql2 at N m = 30, which remains the fallback */
+  /* the eigenpairs below CLIP only (~2.4 per decomposition on the paper scenario): 33
+   * against 45 us for the full tred2 + tql2 at N m = 30 (benchmarks/bench_mpc.py --clip),
+   * which remains the fallback */
   if (eig_below(NUA, V, CLIP, d, Hu, &ne, ws->work.e, ws->work.tau, ws->work.td, ws->work.te,
                 ws->work.lu, ws->work.piv) == 0) {
     memcpy(V, Hu, sizeof(double) * NUA * ne);

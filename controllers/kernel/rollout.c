@@ -47,12 +47,12 @@ static inline void gk_gemm_loops(int ta, int m, int n, int k, const double *A, i
   } while (0)
 
 /* y[j] = y0[j] + sum_{k = k0}^{k1 - 1} a[k] X[k ldx + j], j < n, each entry summed in
- * ascending k (the order of the scalar loop `for k: for j: y[j] += a[k] X[k][j]`, so the same
- * result to the bit), GK_CHUNK entries at a time in registers, then chunks of 8 and 4 (the
- * QP's n = N m + 1 would leave up to 15 entries to the strided scalar loop): the rows of X are
- * only read, y is written once (the scalar loop stores y at every k). y0 may be y. tri: row
- * k of X is zero beyond column k (a triangular inverse), so a chunk from column j0 starts at
- * k = j0. */
+ * ascending k (the order of the scalar loop `for k: for j: y[j] += a[k] X[k][j]`; the last
+ * bits as the compiler contracts products into FMAs), GK_CHUNK entries at a time in
+ * registers, then chunks of 8 and 4 (the QP's n = N m + 1 would leave up to 15 entries to
+ * the strided scalar loop): the rows of X are only read, y is written once (the scalar loop
+ * stores y at every k). y0 may be y. tri: row k of X is zero beyond column k (a triangular
+ * inverse), so a chunk from column j0 starts at k = j0. */
 static inline void gk_accumulate(double *y, const double *y0, int n, const double *a,
                                  const double *X, int ldx, int k0, int k1, int tri) {
   int j0 = 0;
