@@ -13,8 +13,9 @@ Printed per law and tree: median, p90, p99 and max of the step [ms] over all rou
 ratios this / baseline, and what the slowest 1 % of this tree's steps are: their SQP
 iterations, how many hit the iteration cap, how many fall within two samples of a set-point
 change and (the paper's law) how many while its reference governor holds the reference short
-of the set-point; then whether both trees applied the same inputs (largest difference as a
-share of the input box).
+of the set-point, and where their time goes (the SQP, the paper law's set-point handling
+with its governor, the rest); then whether both trees applied the same inputs (largest
+difference as a share of the input box).
 
 ``--split`` prints instead, for this tree and the baseline, where the kernel spends a slow
 solve's iterations: the solves of one closed loop of the paper's law that take 12 SQP
@@ -56,20 +57,44 @@ from cosim import api
 from cosim_adapters.robust_mpc import RobustMPCController
 
 law, plant, out = sys.argv[1], sys.argv[2], sys.argv[3]
-times = []
+times, acc, parts = [], {"sqp": 0.0, "setpoint": 0.0}, {"sqp": [], "setpoint": []}
 original = RobustMPCController.step
 
+def timing(module, cls, name, key):
+    # acc[key] += the seconds in cls.name, where the tree has it
+    try:
+        owner = getattr(__import__(module, fromlist=[cls]), cls)
+    except (ImportError, AttributeError):
+        return
+    f = getattr(owner, name, None)
+    if f is None:
+        return
+    def g(*a, **k):
+        t0 = time.perf_counter()
+        try:
+            return f(*a, **k)
+        finally:
+            acc[key] += time.perf_counter() - t0
+    setattr(owner, name, g)
+
+timing("controllers.kernel.kernel_sqp", "KernelSQP", "solve", "sqp")
+timing("cosim_adapters.paper_law", "PaperLaw", "_update_reference", "setpoint")
+
 def timed(self, t, dt):
+    acc["sqp"] = acc["setpoint"] = 0.0
     t0 = time.perf_counter()
     original(self, t, dt)
     times.append((time.perf_counter() - t0) * 1e3)
+    for key in parts:
+        parts[key].append(acc[key] * 1e3)
 
 RobustMPCController.step = timed
 run = api.run("scenarios/paper_steps.csv", plant=plant, options={"law": law}, figure=False)
 cols = list(run.result.columns)
 rows = np.asarray(run.result.rows, dtype=float)
 pick = lambda name: rows[:, cols.index(name)].tolist() if name in cols else []
-json.dump({"status": run.status, "ms": times, "time": pick("time"),
+json.dump({"status": run.status, "ms": times, "sqp_ms": parts["sqp"],
+           "setpoint_ms": parts["setpoint"], "time": pick("time"),
            "iterations": pick("ctrl.iterations"), "governor": pick("ctrl.governor_lambda"),
            "inputs": {u: pick(f"ctrl.{u}") for u in run.result.inputs},
            "refs": {r: pick(f"ref.{r}") for r in run.result.references},
@@ -194,9 +219,15 @@ def tail(run: dict) -> str:
                for i in slow)
     held = (f", {int(np.sum(np.asarray(run['governor'])[slow] < 1))} with the governor's "
             "reference short of the set-point (lambda < 1)") if run["governor"] else ""
+    sqp, setpoint = (np.asarray(run.get(k) or np.zeros(len(ms))) for k in
+                     ("sqp_ms", "setpoint_ms"))
+    spent = (f"; their mean {np.mean(ms[slow]):.2f} ms: SQP {np.mean(sqp[slow]):.2f}, "
+             + (f"set-point handling (the governor) {np.mean(setpoint[slow]):.2f}, "
+                if np.any(setpoint) else "")
+             + f"the rest {np.mean(ms[slow] - sqp[slow] - setpoint[slow]):.2f}")
     return (f"slowest {k}: iterations median {np.median(it[slow]):.0f} (all steps "
             f"{np.median(it):.0f}), {int(np.sum(it[slow] >= run['max_iter']))} at the cap of "
-            f"{run['max_iter']}, {near} within two samples of a set-point change{held}")
+            f"{run['max_iter']}, {near} within two samples of a set-point change{held}{spent}")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -16,10 +16,17 @@ by signal), each checked against the box its modelDescription declares before an
 runs. ``cosim run`` and campaigns step it in a worker process of its own
 (:class:`cosim.core.isolated.IsolatedFmuController`); this class runs it in this process
 (a benchmark's baseline).
+
+A live run does not step its controller at a sample without a fresh measurement (the Python
+controller's observer does not advance); an FMU's clock must, so the samples the master
+skipped are stepped first with the measured outputs not finite, on which an exported
+controller holds its inputs and does not advance its observer (docs:
+guide/controller-fmu.md): the same controller state as the Python controller's.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -86,6 +93,10 @@ class FmuController(FmuComponent):
             v.name[len("dist."):]: float(v.start) for v in self.md.modelVariables
             if v.causality == "input" and v.name.startswith("dist.") and v.start is not None}
         self._diag: dict[str, float] = {}
+        #: the measured outputs among its inputs (not a set-point, not a disturbance)
+        self._measured = [s.name for s in self.inputs
+                          if not s.name.startswith(("ref.", "dist."))]
+        self._given: dict[str, float] = {}
 
     def _check_parameter(self, key: str, value: Any) -> None:
         """A finite number inside the box the modelDescription declares for ``key``, else
@@ -143,7 +154,32 @@ class FmuController(FmuComponent):
         """Load and initialise the FMU (again after a run: a fresh instance)."""
         if self._fmu is not None:
             self.terminate()
+        self._given.clear()
         super().setup(t0, stop_time)
+
+    def set_inputs(self, values: Mapping[str, float]) -> None:
+        self._given.update(values)
+        super().set_inputs(values)
+
+    def step(self, t: float, dt: float) -> None:
+        """``doStep(t, dt)``, after the samples the master skipped since the last step
+        (module docstring) were stepped with the measured outputs not finite."""
+        skipped = self._skipped(t, dt)
+        if skipped:
+            now = {n: self._given[n] for n in self._measured if n in self._given}
+            super().set_inputs(dict.fromkeys(self._measured, math.nan))
+            for s in skipped:
+                super().step(s, dt)
+            super().set_inputs(now)
+        super().step(t, dt)
+
+    def _skipped(self, t: float, dt: float) -> list[float]:
+        """The sample instants from the FMU's time up to ``t`` (none when ``t`` is its time,
+        or not a whole number of samples past it: the FMU then answers for itself)."""
+        k = round((t - self._t) / dt) if dt > 0 else 0
+        if k < 1 or abs(t - self._t - k * dt) > 1e-9 * max(dt, abs(t)):
+            return []
+        return [t - (k - i) * dt for i in range(k)]
 
     def get_outputs(self) -> dict[str, float]:
         """The inputs to apply (the diagnostics are kept for :meth:`diagnostics`)."""

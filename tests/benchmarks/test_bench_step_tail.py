@@ -1,7 +1,7 @@
 """``benchmarks/bench_step_tail.py`` as a user runs it (its own process, one round, the paper's
 law): both trees' closed loops run (the baseline unpacked from git), the step's statistics,
-their ratios and the tail's make-up are printed, and a baseline at HEAD applies this tree's
-inputs to the bit where the controller is unchanged."""
+their ratios and the tail's make-up and where its time goes are printed, and a baseline at
+HEAD applies this tree's inputs to the bit where the controller is unchanged."""
 
 from __future__ import annotations
 
@@ -33,6 +33,11 @@ def test_the_benchmark_times_both_trees_and_explains_the_tail() -> None:
                      r"cap of 15, (\d+) within two samples of a set-point change, (\d+) with "
                      r"the governor", proc.stdout)
     assert tail and int(tail[1]) == 16 and int(tail[4]) <= 16, proc.stdout
+    spent = re.search(r"their mean ([\d.]+) ms: SQP ([\d.]+), set-point handling \(the "
+                      r"governor\) ([\d.]+), the rest (-?[\d.]+)", proc.stdout)
+    assert spent, proc.stdout
+    mean, sqp, governor, rest = (float(v) for v in spent.groups())
+    assert sqp > 0 and governor > 0 and abs(sqp + governor + rest - mean) < 0.02
     gap = float(re.search(r"largest difference between the trees ([\d.e+-]+)", proc.stdout)[1])
     if not changed:   # the same controller at HEAD: the same inputs
         assert gap == 0.0

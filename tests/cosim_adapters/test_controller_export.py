@@ -240,6 +240,44 @@ def test_plants_of_other_kinds(plant_name: str, seed: int, steps: str, boxes: di
         UNREACHABLE in reaches), rejections
 
 
+@pytest.mark.parametrize("isolated", [False, True], ids=["in-process", "worker"])
+def test_samples_the_master_skips_hold_the_fmu_as_the_python_controller(
+        isolated: bool, controller_fmus: dict[int, Path]) -> None:
+    """A live run does not step its controller at a sample without a fresh measurement; an
+    FMU's clock cannot skip it: the skipped samples are stepped with the measured outputs
+    not finite, which holds the exported controller as the Python controller that was not
+    stepped (the same inputs after each gap; before, the FMU refused the next doStep)."""
+    from cosim.core.fmu_controller import FmuController
+    from cosim.core.isolated import IsolatedFmuController
+    from cosim_adapters.robust_mpc import RobustMPCController
+
+    fmu = (IsolatedFmuController if isolated else FmuController)(controller_fmus[3])
+    py = RobustMPCController()
+    fmu.setup(0.0)
+    py.setup(0.0)
+    rng = np.random.default_rng(7)
+    y = np.array([0.62, 0.71])
+    boxes = {"qa": 9.05e-4, "qb": 1.11e-3}
+    stepped = 0
+    try:
+        for k in range(40):
+            y = y + rng.normal(0.0, 2e-3, 2)
+            if 10 <= k < 14 or k == 20:      # no fresh measurement: not stepped
+                continue
+            values = {"h1": y[0], "h2": y[1], "ref.h1": 0.65 if k < 25 else 0.9,
+                      "ref.h2": 0.65}
+            for c in (fmu, py):
+                c.set_inputs(values)
+                c.step(25.0 * k, 25.0)
+            a, b = fmu.get_outputs(), py.get_outputs()
+            for name, box in boxes.items():
+                assert abs(a[name] - b[name]) <= TOL * box, (k, name, a[name], b[name])
+            stepped += 1
+    finally:
+        fmu.terminate()
+    assert stepped == 35
+
+
 def test_the_compiled_step_replays_the_python_controller() -> None:
     """:class:`CompiledController` fed the measurements the Python controller saw gives its
     inputs, statuses and fallbacks, step by step."""
