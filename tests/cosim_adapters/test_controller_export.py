@@ -240,9 +240,10 @@ def test_plants_of_other_kinds(plant_name: str, seed: int, steps: str, boxes: di
         UNREACHABLE in reaches), rejections
 
 
-@pytest.mark.parametrize("isolated", [False, True], ids=["in-process", "worker"])
+@pytest.mark.parametrize(("version", "isolated"), [(3, False), (3, True), (2, True)],
+                         ids=["fmi3-in-process", "fmi3-worker", "fmi2-worker"])
 def test_samples_the_master_skips_hold_the_fmu_as_the_python_controller(
-        isolated: bool, controller_fmus: dict[int, Path]) -> None:
+        version: int, isolated: bool, controller_fmus: dict[int, Path]) -> None:
     """A live run does not step its controller at a sample without a fresh measurement; an
     FMU's clock cannot skip it: the skipped samples are stepped with the measured outputs
     not finite, which holds the exported controller as the Python controller that was not
@@ -251,7 +252,7 @@ def test_samples_the_master_skips_hold_the_fmu_as_the_python_controller(
     from cosim.core.isolated import IsolatedFmuController
     from cosim_adapters.robust_mpc import RobustMPCController
 
-    fmu = (IsolatedFmuController if isolated else FmuController)(controller_fmus[3])
+    fmu = (IsolatedFmuController if isolated else FmuController)(controller_fmus[version])
     py = RobustMPCController()
     fmu.setup(0.0)
     py.setup(0.0)
