@@ -4,6 +4,7 @@ the in-process co-simulation (goal: to 1e-6 of each signal's range), tags, bad i
 from __future__ import annotations
 
 import json
+import shutil
 import subprocess
 from pathlib import Path
 
@@ -22,14 +23,24 @@ RANGES = {"plant.h1": 2.0, "plant.h2": 2.0, "ctrl.qa": 9.05e-4, "ctrl.qb": 11.1e
 
 def parity(tmp_path: Path, scenario: Path, controller: str) -> dict:
     """Run ``controller`` against a frozen served plant and in-process; the live summary
-    after checking that both closed loops agree."""
-    with served(tmp_path, "--security", "None", "--speed", str(SPEED), "--frozen",
-                "--record", str(tmp_path / "plant.csv")) as s:
-        live = cosim.run(scenario, plant=s.endpoint, controller=controller,
-                         out=tmp_path / "live", live=LiveOptions(speed=SPEED), figure=False)
+    after checking that both closed loops agree. The parity needs every sample fresh and on
+    time: a live run that a loaded machine delayed (a stale sample or a missed deadline,
+    seen once in a CI run whose other worker was compiling) is run once more."""
+    for attempt in range(2):
+        if attempt:   # the first attempt's folder and record go
+            shutil.rmtree(tmp_path / "live")
+            (tmp_path / "plant.csv").unlink(missing_ok=True)
+        with served(tmp_path, "--security", "None", "--speed", str(SPEED), "--frozen",
+                    "--record", str(tmp_path / "plant.csv")) as s:
+            live = cosim.run(scenario, plant=s.endpoint, controller=controller,
+                             out=tmp_path / "live", live=LiveOptions(speed=SPEED),
+                             figure=False)
+        assert live.status == "ok", live.reason
+        lv = live.summary["live"]
+        if attempt == 0 and (lv["deadline_misses"] or lv["stale"]):
+            continue
+        break
     ref = cosim.run(scenario, controller=controller, out=tmp_path / "ref", figure=False)
-    assert live.status == "ok", live.reason
-    lv = live.summary["live"]
     assert lv["deadline_misses"] == 0 and lv["stale"] == 0 and lv["phase_locked"], lv
     a, b = live.to_pandas(), ref.to_pandas()
     assert len(a) == len(b) == 61
