@@ -17,7 +17,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import tempfile
 from pathlib import Path
@@ -27,15 +26,10 @@ SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
 
 
 def _model(folder: Path, delays: tuple[int, int]) -> Path:
-    """The shipped model with ``delays`` on (qa, qb)."""
-    from controllers.model import DEFAULT_MODEL
+    """The shipped model with ``delays`` on (qa, qb) (the test's helper)."""
+    from tests.cosim_adapters.test_mixed_dead_times import delayed_model
 
-    doc = json.loads(Path(DEFAULT_MODEL).read_text())
-    for entry, k in zip(doc["problem"]["inputs"], delays, strict=True):
-        entry["delay"] = k
-    path = folder / f"gru_{delays[0]}_{delays[1]}.json"
-    path.write_text(json.dumps(doc))
-    return path
+    return delayed_model(folder, f"gru_{delays[0]}_{delays[1]}", delays)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -39,7 +39,15 @@ from controllers.ocp.input_rate import du_gradient, du_hessian
 if TYPE_CHECKING:
     from controllers.ocp.fhocp import FHOCP
 
-__all__ = ["SingleShootingNLP"]
+__all__ = ["SingleShootingNLP", "clip_eigenvalues"]
+
+
+def clip_eigenvalues(H: np.ndarray, margin: float) -> np.ndarray:
+    """The symmetric ``H`` with its eigenvalues below ``margin`` raised to it (LAPACK
+    ``eigh``; ``H`` itself when none is): the SQP's convex QP Hessian, the reference of the
+    compiled kernel's clipping."""
+    ev, V = np.linalg.eigh(H)
+    return H if ev[0] >= margin else (V * np.maximum(ev, margin)) @ V.T
 
 
 class SingleShootingNLP:
@@ -234,9 +242,7 @@ class SingleShootingNLP:
         needs it convex; LAPACK ``eigh``, ~40 µs for 31×31)."""
         H = self.hessian(wv, pv, lf, lg)
         if self.eigen_clip is not None:
-            ev, V = np.linalg.eigh(H)
-            if ev[0] < self.eigen_clip:
-                H = (V * np.maximum(ev, self.eigen_clip)) @ V.T
+            H = clip_eigenvalues(H, self.eigen_clip)
         return [H]
 
     def trajectory(self, wv: np.ndarray, pv: np.ndarray) -> np.ndarray:

@@ -24,8 +24,9 @@ ROOT = Path(__file__).resolve().parents[2]
 SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
 
 
-def _model(folder: Path, name: str, delays: tuple[int, int]) -> Path:
-    """The shipped four-tank model with ``delays`` on (qa, qb)."""
+def delayed_model(folder: Path, name: str, delays: tuple[int, int]) -> Path:
+    """The shipped four-tank model with ``delays`` on (qa, qb), as ``folder/name.json``
+    (``benchmarks/mixed_dead_times.py`` uses it too)."""
     from controllers.model import DEFAULT_MODEL
 
     doc = json.loads(Path(DEFAULT_MODEL).read_text())
@@ -39,7 +40,7 @@ def _model(folder: Path, name: str, delays: tuple[int, int]) -> Path:
 @pytest.fixture(scope="module")
 def models(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("mixed")
-    return {name: _model(folder, name, delays) for name, delays in (
+    return {name: delayed_model(folder, name, delays) for name, delays in (
         ("mixed", (0, 6)), ("none", (0, 0)), ("both", (6, 6)), ("short", (1, 3)))}
 
 

@@ -17,7 +17,7 @@ import pytest
 from controllers.equilibrium import equilibrium, equilibrium_newton
 from controllers.kernel import compiled_kernel as ck
 from controllers.ocp.fhocp import FHOCP, FHOCPData
-from controllers.ocp.nlp_single_shooting import SingleShootingNLP
+from controllers.ocp.nlp_single_shooting import SingleShootingNLP, clip_eigenvalues
 from tests.controllers.random_gru import random_gru_model
 
 needs_cc = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,
@@ -325,16 +325,6 @@ def test_portable_build_gives_the_same_derivatives(tmp_path: Path,
                        nlp.hessian_convex(w, p, np.array([1.0]), lg)[0]) < 1e-12
 
 
-def clipped_reference(H: np.ndarray, margin: float) -> np.ndarray:
-    """numpy's eigenvalue clipping of the kernel's block-diagonal Hessian (the inputs' block
-    and the terminal slack's entry): every eigenvalue below ``margin`` raised to it."""
-    lam, vec = np.linalg.eigh(H[:-1, :-1])
-    out = H.copy()
-    out[:-1, :-1] = (vec * np.maximum(lam, margin)) @ vec.T
-    out[-1, -1] = max(out[-1, -1], margin)
-    return out
-
-
 @needs_cc
 @pytest.mark.parametrize("portable", [False, True])
 def test_clipping_finds_the_eigenpairs_below_the_margin(portable: bool, tmp_path: Path,
@@ -342,10 +332,10 @@ def test_clipping_finds_the_eigenpairs_below_the_margin(portable: bool, tmp_path
                                                         ) -> None:
     """The clipping's own eigenpairs below the margin (Householder to tridiagonal, QL
     without vectors, inverse iteration; N m = 30, below ``LAPACK_EIG_MIN_NU``) against
-    numpy's full decomposition, on Hessian-like spectra (0.05 … 6e4) with 0 … 8 eigenvalues
-    below the margin, repeated ones, ones 1e-12 apart and one on the margin: the same
-    clipped matrix to 1e-14 of its largest entry, and never the full decomposition's
-    fallback (``full_eig``)."""
+    numpy's full decomposition (:func:`clip_eigenvalues`, the numpy path's), on Hessian-like
+    spectra (0.05 … 6e4) with 0 … 8 eigenvalues below the margin, repeated ones, ones 1e-12
+    apart and one on the margin: the same clipped matrix to 1e-14 of its largest entry, and
+    never the full decomposition's fallback (``full_eig``)."""
     monkeypatch.setenv("GRU_MPC_KERNEL_CACHE", str(tmp_path))
     fh = random_fhocp(20, 15, seed=1, kernel="numpy")
     flags = (*ck.DEFAULT_CFLAGS, "-DGK_NO_CLONES") if portable else None
@@ -366,7 +356,7 @@ def test_clipping_finds_the_eigenpairs_below_the_margin(portable: bool, tmp_path
         H[:-1, :-1] = 0.5 * (H[:-1, :-1] + H[:-1, :-1].T)
         H[-1, -1] = 1e-3
         got = ws.clip(H)
-        assert np.max(np.abs(got - clipped_reference(H, 1e-2))) < 1e-14 * 6e4, low
+        assert np.max(np.abs(got - clip_eigenvalues(H, 1e-2))) < 1e-14 * 6e4, low
         assert np.min(np.linalg.eigvalsh(got[:-1, :-1])) > 1e-2 - 1e-10
     counts = ws.counters()   # every spectrum but the first decomposed (the margin's own:
     assert counts["full_eig"] == 0 and counts["eig"] >= len(below) - 2, counts  # rounding)
