@@ -17,12 +17,19 @@ The paper scenario in closed loop with the plant FMU and the robust MPC's paper 
 5. with ``--sweep``: the capped solves and the QP time under other SQP settings (clipping
    margin, ``tol_du``, ``merit_memory``, ``c1``, ``init_feasible``), with ``H + ρ JₐᵀJₐ``
    (active constraints and input bounds) before the clipping on the numpy path, and with
-   other QP solvers or qpOASES options.
+   other QP solvers or qpOASES options;
+6. with ``--paths``: whether the SQP's path chooses the answer (the FHOCP is nonconvex).
+   Every FHOCP of the closed loop solved to convergence (``max_iter=200``) is solved again
+   from the same initial guess and multipliers with another line search (:data:`PATH_LS`):
+   the solves where both converge to first inputs more than :data:`PATH_TOL` apart
+   (normalised), with their costs; then the whole closed loop under that line search
+   against the default's: the largest difference of the answers' first inputs, as a share
+   of their range, and the first step where it exceeds the regression references' 1e-4.
 
 It reads solver internals (the FHOCP's casadi buffer and NLP object) on purpose: it is a
 study, not an API user. Not part of ``make bench`` (it measures no speed target).
 
-Usage: ``.venv/bin/python benchmarks/study_capped_solves.py [--sweep]``
+Usage: ``.venv/bin/python benchmarks/study_capped_solves.py [--sweep] [--paths]``
 """
 
 from __future__ import annotations
@@ -111,7 +118,8 @@ def closed_loop(kernel: str = "auto", max_iter: int = CAP,
         timers = {k: stats.get(f"t_wall_{k}", 0.0) - before[k] for k in TIMERS}
         before.update({k: stats.get(f"t_wall_{k}", 0.0) for k in TIMERS})
         solves.append({"result": res, "iterations": res.iterations, "timers": timers,
-                       "p": ins["p"].copy(), "w": outs["x"].copy()})
+                       "p": ins["p"].copy(), "w": outs["x"].copy(),
+                       "ins": {k: v.copy() for k, v in ins.items()}})
         return res
 
     fh.solve = recorded
@@ -219,20 +227,79 @@ def sweep() -> None:
               f"{summary['fallbacks']}, suboptimal {summary['suboptimal_steps']}")
 
 
+#: Item 6's other line search (the kernel SQP's options) and the difference of two first
+#: inputs (normalised) that counts as another answer.
+PATH_LS = {"max_iter_ls": 10, "beta": 0.5}
+PATH_TOL = 1e-3
+
+
+def first_inputs(ctrl: Any, solves: list[dict[str, Any]]) -> np.ndarray:
+    """Each solve's answer's first input (normalised, ``solves × m``)."""
+    m = ctrl.fhocp.m
+    return np.array([np.asarray(s["result"].u, dtype=float).reshape(-1, m)[0] for s in solves])
+
+
+def report_paths(ctrl: Any, uncapped: list[dict[str, Any]]) -> None:
+    """Item 6 (module docstring): ``uncapped`` is the default closed loop at
+    ``max_iter=200``, ``ctrl`` its controller (its kernel SQP replays the solves)."""
+    from controllers.kernel.kernel_sqp import STATUS
+
+    sqp = ctrl.fhocp._buffer[0]
+    if not hasattr(sqp, "options"):
+        print("6. needs the compiled kernel's SQP (loop=\"kernel\")")
+        return
+    default = {k: getattr(sqp.options, k) for k in PATH_LS}
+    apart = []
+    for k, s in enumerate(uncapped):
+        answers = []
+        for opts in (default, PATH_LS):
+            for key, value in opts.items():
+                setattr(sqp.options, key, value)
+            for key, value in s["ins"].items():
+                sqp.ins[key][:] = value
+            sqp.solve()
+            answers.append((STATUS[sqp.info.status], float(sqp.outs["f"][0]),
+                            sqp.outs["x"][: ctrl.fhocp.m].copy()))
+        (st0, f0, u0), (st1, f1, u1) = answers
+        if st0 == st1 == "Solve_Succeeded" and np.max(np.abs(u0 - u1)) > PATH_TOL:
+            apart.append(f"step {k}: cost {f0:.4f} / {f1:.4f}, first input "
+                         f"{np.max(np.abs(u0 - u1)):.3f} apart")
+    for key, value in default.items():
+        setattr(sqp.options, key, value)
+    label = ", ".join(f"{k}={v:g}" for k, v in PATH_LS.items())
+    print(f"6. the same {len(uncapped)} FHOCPs from the same guesses, to convergence with "
+          f"the default line search and with {label}: {len(apart)} converge to first inputs "
+          f"more than {PATH_TOL:g} apart (normalised){': ' if apart else ''}"
+          + "; ".join(apart[:4]))
+    _, other = closed_loop(max_iter=200, sqp=PATH_LS)
+    a, b = first_inputs(ctrl, uncapped), first_inputs(ctrl, other)
+    span = np.maximum(a.max(axis=0) - a.min(axis=0), 1e-12)
+    share = np.max(np.abs(a - b) / span, axis=1)
+    beyond = np.flatnonzero(share > 1e-4)
+    print(f"6. the closed loop with {label} (max_iter=200): its answers' first inputs differ "
+          f"from the default's by up to {share.max():.2f} of their range"
+          + (f", beyond 1e-4 from step {beyond[0]} on ({beyond.size} steps)" if beyond.size
+             else ""))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sweep", action="store_true", help="also run the SQP-setting sweep")
+    ap.add_argument("--paths", action="store_true",
+                    help="also replay the solves with another line search (item 6)")
     args = ap.parse_args()
     if not (ROOT / "fmus" / "FourTank.fmu").exists():
         raise SystemExit("study_capped_solves: build the plant FMU first (make fmus)")
     ctrl, solves = closed_loop()
-    _, uncapped = closed_loop(max_iter=200)
+    ctrl_free, uncapped = closed_loop(max_iter=200)
     report_iterations(solves, uncapped)
     report_timers(solves)
     report_active_sets(ctrl, solves)
     report_hessian(ctrl, solves)
     if args.sweep:
         sweep()
+    if args.paths:
+        report_paths(ctrl_free, uncapped)
 
 
 if __name__ == "__main__":
