@@ -278,8 +278,8 @@ def report_paths(ctrl: Any, uncapped: list[dict[str, Any]]) -> None:
     beyond = np.flatnonzero(share > 1e-4)
     print(f"6. the closed loop with {label} (max_iter=200): its answers' first inputs differ "
           f"from the default's by up to {share.max():.2f} of their range"
-          + (f", beyond 1e-4 from step {beyond[0]} on ({beyond.size} steps)" if beyond.size
-             else ""))
+          + (f", first beyond 1e-4 at step {beyond[0]} ({beyond.size} steps in all)"
+             if beyond.size else ""))
 
 
 def main() -> None:

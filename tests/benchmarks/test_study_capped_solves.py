@@ -30,5 +30,5 @@ def test_another_path_reaches_other_optima() -> None:
     assert apart, proc.stdout
     assert int(apart[1]) > 1000 and int(apart[2]) >= 1, proc.stdout
     loop = re.search(r"6\. the closed loop with .*differ from the default's by up to "
-                     r"([\d.]+) of their range, beyond 1e-4 from step (\d+)", proc.stdout)
+                     r"([\d.]+) of their range, first beyond 1e-4 at step (\d+)", proc.stdout)
     assert loop and float(loop[1]) > 1e-4, proc.stdout
