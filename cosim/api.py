@@ -150,9 +150,11 @@ def plant_varmap(path: Path, varmap: Any, problem: Any = None,
 def run_signals(ctrl: Any, bound: Any) -> list[Any] | None:
     """What a controller without a problem exchanges with the plant, by the plant variables
     it records (a controller FMU of ``cosim export-fmu``); ``None`` with a problem."""
-    if bound is not None:
+    from cosim.core.component import Capability
+
+    if bound is not None or Capability.PLANT_SIGNALS not in ctrl.capabilities:
         return None
-    return getattr(ctrl, "plant_signals", lambda: None)()
+    return ctrl.plant_signals()
 
 
 def run(scenario: str | Path, plant: str | Path | None = None,
@@ -229,6 +231,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     """
     from cosim.core import outpaths, registry, varmap
     from cosim.core import scenario as scenario_mod
+    from cosim.core.component import Capability
     from cosim.core.errors import ParameterError
     from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
     from cosim.core.master import Master
@@ -246,12 +249,13 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     if out is not None:
         outpaths.out_dir(out, "--out")
     ctrl = registry.create(controller, opts)
-    ctrl.expect_setpoints(sc.setpoints())   # a controller that refuses them: nothing runs
+    if Capability.SETPOINTS in ctrl.capabilities:   # one that refuses them: nothing runs
+        ctrl.expect_setpoints(sc.setpoints())
     if isolate and not ctrl.isolated:
         from cosim.core.isolated import IsolatedController
 
         ctrl = IsolatedController(ctrl, controller, opts)
-    notice = getattr(ctrl, "notice", None)
+    notice = ctrl.notice if Capability.NOTICE in ctrl.capabilities else None
     if notice and on_notice is not None:
         on_notice(notice)
     bound = run_problem(ctrl, opts.get("problem", problem))
@@ -420,7 +424,7 @@ def run_problem(ctrl: Any, problem: Any) -> Any:
     plant is bound through ``--map`` alone, as before problems existed)."""
     from controllers.problem import ControlProblem
 
-    own = getattr(ctrl, "problem", None)
+    own = ctrl.problem
     if isinstance(own, ControlProblem):
         return own
     if problem is None:

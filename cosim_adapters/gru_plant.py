@@ -31,7 +31,7 @@ import numpy as np
 
 from controllers import gru
 from controllers.model import GRUModel
-from cosim.core.component import Component, Signal
+from cosim.core.component import Capability, Component, Signal
 from cosim.core.errors import CosimError
 
 __all__ = ["MODEL_PREFIX", "GRUPlant"]
@@ -59,6 +59,7 @@ class GRUPlant(Component):
     """
 
     direct_feedthrough = False
+    capabilities = frozenset({Capability.TUNABLE})
 
     def __init__(self, model: GRUModel, y0: np.ndarray | None = None, w_y_max: float = 0.0,
                  seed: int = 0, dx0: Sequence[float] | None = None,
@@ -87,6 +88,11 @@ class GRUPlant(Component):
         if path.startswith(MODEL_PREFIX):
             path = path[len(MODEL_PREFIX):]
         return cls(GRUModel.load(path), **kwargs)  # type: ignore[arg-type]
+
+    @property
+    def where(self) -> str:
+        """Messages name the plant by its model file."""
+        return str(self.path)
 
     # -- parameters ---------------------------------------------------------------------
     def settable(self, at_start: bool = False) -> set[str]:

@@ -48,7 +48,7 @@ from controllers.disturbances import condition, feedforward_gain
 from controllers.model import GRUModel
 from controllers.pi_tuning import PITuning
 from controllers.problem import ControlProblem, PILoop
-from cosim.core.component import Component, Signal
+from cosim.core.component import Capability, Component, Signal
 from cosim.core.errors import CosimError
 
 __all__ = ["PIController", "PILoop"]
@@ -220,6 +220,7 @@ class PIController(Component):
     """
 
     direct_feedthrough = True
+    capabilities = frozenset({Capability.DISTURBANCES})
 
     def __init__(self, problem: ControlProblem | str | Path | None = None,
                  model: GRUModel | str | Path | None = None, pairing: str | None = None,

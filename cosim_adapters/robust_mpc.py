@@ -68,7 +68,7 @@ import numpy as np
 from controllers.errors import ControllersError
 from controllers.model import DEFAULT_MODEL
 from controllers.ocp.solve_status import status_code
-from cosim.core.component import Component, Signal
+from cosim.core.component import Capability, Component, Signal
 from cosim.core.errors import CosimError
 from cosim_adapters.certification import Certification, check_setpoints, go_uncertified
 from cosim_adapters.law import ControlLaw
@@ -166,6 +166,8 @@ class RobustMPCController(Component):
     """
 
     direct_feedthrough = True
+    capabilities = frozenset({Capability.SETPOINTS, Capability.DISTURBANCES,
+                              Capability.PREVIEW, Capability.NOTICE})
     #: the options :func:`cosim.core.registry.create` accepts (``--option KEY=VALUE``)
     OPTIONS = ("model", "problem", "options", "name", *MPCOptions.names())
     #: wall-clock diagnostics: written by the master to timings.csv, not results.csv

@@ -13,15 +13,26 @@ Timing convention (zero-order hold, Gauss-Seidel within a step):
 * A component with ``direct_feedthrough = True`` (a sampled controller, a sensor model)
   computes, in ``step(t, dt)``, outputs from the inputs set at ``t``; these outputs are held
   over ``[t, t + dt)``.
+
+What a component offers beyond stepping it **declares** in :attr:`Component.capabilities`
+(:class:`Capability`): the run reads the declaration once when it wires the loop, and the
+isolation proxy (:mod:`cosim.core.isolated`) forwards exactly what is declared to the worker
+process that runs the component. The base class gives every capability's attributes and
+methods a neutral default, so nothing is probed for.
 """
 
 from __future__ import annotations
 
+import bisect
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any
 
-__all__ = ["Component", "Signal"]
+from cosim.core.errors import CosimError
+
+__all__ = ["Capability", "Component", "Schedule", "Setting", "Signal"]
 
 
 @dataclass(frozen=True)
@@ -31,6 +42,74 @@ class Signal:
     name: str
     unit: str = ""
     description: str = ""
+
+
+class Capability(StrEnum):
+    """What a component may offer beyond stepping (:attr:`Component.capabilities`).
+
+    ``TUNABLE``
+        A plant whose parameters (:attr:`Component.tunables`, and any other
+        :meth:`Component.settable` at the start) a scenario sets: :meth:`Component.
+        set_parameter`.
+    ``SIGNAL_CHECK``
+        A plant that checks the signals a run wires to it before the first step:
+        :meth:`Component.check_signals`.
+    ``SETPOINTS``
+        A controller that designs for the run's set-points: :meth:`Component.
+        expect_setpoints`.
+    ``DISTURBANCES``
+        A controller measuring disturbances (inputs ``dist.<name>``) with nominal values
+        for a run that does not set them: :attr:`Component.disturbance_defaults`.
+    ``PREVIEW``
+        A controller told measured disturbances ahead (:attr:`Component.previewed`): the
+        run hands it their :class:`Schedule` (:meth:`Component.set_schedule`).
+    ``PLANT_SIGNALS``
+        A controller that names the plant variables it exchanges:
+        :meth:`Component.plant_signals`.
+    ``NOTICE``
+        A controller with one line to show before the run: :attr:`Component.notice`.
+    ``SETTINGS``
+        Settings that may change between steps, by name (:meth:`Component.settings`,
+        :meth:`Component.set`): weights, limits, modes.
+    """
+
+    TUNABLE = "tunable"
+    SIGNAL_CHECK = "signal-check"
+    SETPOINTS = "setpoints"
+    DISTURBANCES = "disturbances"
+    PREVIEW = "preview"
+    PLANT_SIGNALS = "plant-signals"
+    NOTICE = "notice"
+    SETTINGS = "settings"
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """A piecewise-constant signal as data (picklable: it travels to a worker process):
+    ``times[i]`` the instants its value becomes ``values[i]``, ``default`` before the first.
+    ``schedule(t)`` is its value at ``t`` (a row holds until the next)."""
+
+    times: tuple[float, ...]
+    values: tuple[float, ...]
+    default: float
+
+    def __call__(self, t: float) -> float:
+        i = bisect.bisect_right(self.times, t + 1e-9 * max(1.0, abs(t)))
+        return self.values[i - 1] if i else float(self.default)
+
+
+@dataclass(frozen=True)
+class Setting:
+    """A setting a component changes between steps (:meth:`Component.set`): its ``name``,
+    the range a value must lie in, its ``unit``, what it is (``description``) and its value
+    when the run starts (``start``)."""
+
+    name: str
+    low: float
+    high: float
+    description: str = ""
+    start: float = float("nan")
+    unit: str = ""
 
 
 class Component(ABC):
@@ -56,6 +135,20 @@ class Component(ABC):
         Whether the component runs its steps in a worker process whose every request its
         ``timeout`` attribute bounds (:mod:`cosim.core.isolated`): the master hands such a
         controller the run's step timeout instead of arming ``SIGALRM``.
+    capabilities : frozenset of Capability
+        What it offers beyond stepping (:class:`Capability`); the attributes below belong
+        to one each and are neutral by default.
+    tunables : tuple of str
+        (``TUNABLE``) Parameters a run may set while it runs.
+    disturbance_defaults : mapping of str to float
+        (``DISTURBANCES``) A measured disturbance's value when the scenario does not set it.
+    previewed : tuple of str
+        (``PREVIEW``) The measured disturbances it is told ahead.
+    notice : str or None
+        (``NOTICE``) One line to show before the run.
+    problem : object or None
+        The control problem it is designed for (a :class:`controllers.problem.
+        ControlProblem`), when it has one.
     """
 
     name: str = "component"
@@ -66,15 +159,20 @@ class Component(ABC):
     bounds: dict[str, tuple[float, float]] = {}  # noqa: RUF012 - read-only class default
     timing_diagnostics: frozenset[str] = frozenset()
     isolated: bool = False
+    capabilities: frozenset[Capability] = frozenset()
+    tunables: tuple[str, ...] = ()
+    disturbance_defaults: Mapping[str, float] = {}
+    previewed: tuple[str, ...] = ()
+    notice: str | None = None
+    problem: Any = None
+
+    @property
+    def where(self) -> str:
+        """How messages name the component (a plant FMU: its file)."""
+        return self.name
 
     def setup(self, t0: float) -> None:  # noqa: B027 - optional hook
         """Prepare for a run starting at ``t0`` (instantiate, initialise)."""
-
-    def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:  # noqa: B027
-        """Before :meth:`setup`: the set-points the run will request, in order (each by
-        output name; :meth:`cosim.core.scenario.Scenario.setpoints`), so that a controller can
-        design for them (the robust MPC decides there whether it runs certified). Optional;
-        ignored by default."""
 
     @abstractmethod
     def set_inputs(self, values: Mapping[str, float]) -> None:
@@ -98,3 +196,41 @@ class Component(ABC):
 
     def terminate(self) -> None:  # noqa: B027 - optional hook
         """Release resources. Must be safe to call more than once."""
+
+    # -- capabilities (neutral defaults) -----------------------------------------------------
+    def settable(self, at_start: bool = False) -> set[str]:
+        """Names a scenario may set: the inputs, and (``TUNABLE``) the parameters."""
+        return {s.name for s in self.inputs} | set(self.tunables)
+
+    def set_parameter(self, name: str, value: float) -> None:
+        """(``TUNABLE``) Set a parameter (or an input) while the run runs."""
+        raise CosimError(f"{self.where}: no parameter '{name}'")
+
+    def check_signals(self, inputs: list[str], outputs: list[str],  # noqa: B027
+                      units: Mapping[str, str] | None = None) -> None:
+        """(``SIGNAL_CHECK``) Check the signals a run wires to this plant."""
+
+    def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:  # noqa: B027
+        """(``SETPOINTS``) Before :meth:`setup`: the set-points the run will request, in
+        order (each by output name; :meth:`cosim.core.scenario.Scenario.setpoints`), so that
+        a controller can design for them (the robust MPC decides there whether it runs
+        certified)."""
+
+    def set_schedule(self, schedules: Mapping[str, Schedule] | None) -> None:  # noqa: B027
+        """(``PREVIEW``) After :meth:`setup`: the values to come of :attr:`previewed`, by
+        name."""
+
+    def plant_signals(self) -> Sequence[Any] | None:
+        """(``PLANT_SIGNALS``) What it exchanges with the plant, by the plant variables it
+        records (:class:`cosim.core.binding.Wanted`); ``None`` when it does not say."""
+        return None
+
+    def settings(self) -> Mapping[str, Setting]:
+        """(``SETTINGS``) The settings :meth:`set` takes, by name."""
+        return {}
+
+    def set(self, name: str, value: float) -> str:
+        """(``SETTINGS``) Change setting ``name`` from the next step on; returns what was
+        re-derived (one line, empty when nothing was). A value the component cannot take
+        raises :class:`~cosim.core.errors.CosimError` naming it, the setting unchanged."""
+        raise CosimError(f"{self.where}: no setting '{name}'")

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim.core import fmu_log
-from cosim.core.component import Component, Signal
+from cosim.core.component import Capability, Component, Signal
 from cosim.core.errors import CosimError, FmuError
 from cosim.core.fmu_archive import check_binary, read_model_description, safe_extract
 from cosim.core.varmap import VarMap, variable_unit
@@ -88,6 +88,9 @@ class FmuComponent(Component):
     """
 
     direct_feedthrough = False
+    #: scenarios set its tunable parameters while it runs; the signals a run wires to it
+    #: are checked against its modelDescription before the first step
+    capabilities = frozenset({Capability.TUNABLE, Capability.SIGNAL_CHECK})
 
     def __init__(self, path: str | Path, name: str = "plant", interface: str = "cs",
                  start_values: Mapping[str, float] | None = None,
@@ -135,6 +138,11 @@ class FmuComponent(Component):
         self._t = 0.0
         self._failed = False
         self._fatal = False
+
+    @property
+    def where(self) -> str:
+        """Messages name the FMU by its file."""
+        return str(self.path)
 
     # -- name resolution ----------------------------------------------------------------------
     def variable_of(self, signal: str) -> Any:

@@ -31,6 +31,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from cosim.core.component import Capability, Setting
 from cosim.core.errors import CosimError
 from cosim.core.fmu import FmuComponent
 from cosim.core.fmu_archive import why_not_valid
@@ -63,6 +64,11 @@ class FmuController(FmuComponent):
     """
 
     direct_feedthrough = True
+    #: its measured disturbances' defaults are its inputs' start values; it names the plant
+    #: variables it exchanges (the record ``cosim export-fmu`` writes); its tunable
+    #: parameters are its settings
+    capabilities = frozenset({Capability.DISTURBANCES, Capability.PLANT_SIGNALS,
+                              Capability.SETTINGS})
 
     def __init__(self, path: str | Path, name: str = "ctrl", **parameters: Any) -> None:
         super().__init__(path, name=name, interface="cs")
@@ -149,6 +155,29 @@ class FmuController(FmuComponent):
             out.append(Wanted(v.name.removeprefix("dist."), named[v.name],
                               variable_unit(v) or "", role, where))
         return out
+
+    def settings(self) -> dict[str, Setting]:
+        """Its tunable parameters, with the range its modelDescription declares and their
+        values when the run starts."""
+        out = {}
+        for name in self.tunables:
+            v = self.variable_of(name)
+            low = float(v.min) if v.min is not None else -math.inf
+            high = float(v.max) if v.max is not None else math.inf
+            start = self.start_values.get(name, float(v.start) if v.start is not None
+                                          else math.nan)
+            out[name] = Setting(name, low, high, v.description or "", float(start))
+        return out
+
+    def set(self, name: str, value: float) -> str:
+        """Tunable parameter ``name`` set from the next step on (checked against its box
+        first); the FMU re-derives what depends on it itself."""
+        if name not in self.tunables:
+            raise CosimError(f"{self.path}: no setting '{name}' (settings: "
+                             f"{', '.join(self.tunables) or 'none'})")
+        self._check_parameter(name, value)
+        self.set_parameter(name, float(value))
+        return ""
 
     def setup(self, t0: float, stop_time: float | None = None) -> None:
         """Load and initialise the FMU (again after a run: a fresh instance)."""

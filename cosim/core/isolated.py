@@ -26,15 +26,15 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from cosim.core.component import Component
+from cosim.core.component import Component, Schedule
 from cosim.core.errors import CosimError, ParameterError, SimulationFailed
 from cosim.core.fmu import FmuComponent
 from cosim.core.fmu_controller import FmuController
 from cosim.core.varmap import MappedSignal, VarMap
 from cosim.core.worker import Worker
 
-__all__ = ["DEFAULT_STEP_TIMEOUT", "REHEARSAL_TIMEOUT", "ControllerServer", "FmuServer",
-           "IsolatedController", "IsolatedFmuComponent", "IsolatedFmuController", "rehearse"]
+__all__ = ["DEFAULT_STEP_TIMEOUT", "REHEARSAL_TIMEOUT", "ComponentServer", "IsolatedController",
+           "IsolatedFmuComponent", "IsolatedFmuController", "Isolation", "rehearse"]
 
 #: Step timeout [s] of an isolated FMU when none is given (``cosim run --isolate``, a
 #: controller FMU): far above any healthy step of a process model or a controller, short
@@ -53,60 +53,95 @@ def _call(worker: Worker | None, label: str, what: str, method: str, *args: Any)
     return worker.call(what, method, *args)
 
 
-class FmuServer:  # pragma: no cover - runs in the worker process
-    """An :class:`~cosim.core.fmu.FmuComponent` served by a worker: each request answers with
-    the outputs, in the modelDescription's order."""
+def fmu_component(path: str, name: str, interface: str,
+                  start_values: tuple[tuple[str, float], ...],
+                  mapping: tuple[tuple[str, str, str | None, float, float], ...],
+                  map_path: str, scratch: str) -> FmuComponent:  # pragma: no cover - worker
+    """The :class:`~cosim.core.fmu.FmuComponent` a worker runs (its variable map rebuilt
+    from plain data), extracted into the worker's ``scratch`` folder."""
+    varmap = VarMap(Path(map_path), {m[0]: MappedSignal(*m) for m in mapping})
+    return FmuComponent(path, name=name, interface=interface, start_values=dict(start_values),
+                        varmap=varmap, unpack_dir=scratch)
 
-    def __init__(self, path: str, name: str, interface: str,
-                 start_values: tuple[tuple[str, float], ...],
-                 mapping: tuple[tuple[str, str, str | None, float, float], ...],
-                 map_path: str, scratch: str) -> None:
-        varmap = VarMap(Path(map_path), {m[0]: MappedSignal(*m) for m in mapping})
-        self.comp = FmuComponent(path, name=name, interface=interface,
-                                 start_values=dict(start_values), varmap=varmap,
-                                 unpack_dir=scratch)
 
-    def setup(self, t0: float) -> tuple[tuple[str, float], ...]:
+class ComponentServer:  # pragma: no cover - runs in the worker process
+    """Any component served by a worker (the one server of this module): built from a
+    ``module:function`` and its keyword arguments (``scratch``: the worker's folder, when
+    asked for); each request answers with the outputs, in the order of its ``outputs``."""
+
+    def __init__(self, factory: str, kwargs: dict[str, Any], scratch: str | None = None
+                 ) -> None:
+        module, _, name = factory.partition(":")
+        import importlib
+
+        build = getattr(importlib.import_module(module), name)
+        self.comp = build(**kwargs, **({"scratch": scratch} if scratch else {}))
+
+    def setup(self, t0: float) -> tuple[float, ...] | None:
+        """Set up at ``t0``; a plant's outputs then (a controller has none before its first
+        step)."""
         self.comp.setup(t0)
-        return tuple(self.comp.get_outputs().items())
+        if self.comp.direct_feedthrough:
+            return None
+        return tuple(self.comp.get_outputs().values())
 
     def step(self, t: float, dt: float, inputs: tuple[tuple[str, float], ...]
              ) -> tuple[float, ...]:
+        """A plant's step: inputs, ``step``, the outputs' values."""
         if inputs:
             self.comp.set_inputs(dict(inputs))
         self.comp.step(t, dt)
         return tuple(self.comp.get_outputs().values())
 
+    def control(self, t: float, dt: float, inputs: tuple[tuple[str, float], ...]
+                ) -> tuple[tuple[tuple[str, float], ...], tuple[tuple[str, Any], ...]]:
+        """A controller's step: inputs, ``step``, its outputs and diagnostics."""
+        self.comp.set_inputs(dict(inputs))
+        self.comp.step(t, dt)
+        return tuple(self.comp.get_outputs().items()), tuple(self.comp.diagnostics().items())
+
     def set_parameter(self, name: str, value: float) -> tuple[float, ...]:
         self.comp.set_parameter(name, value)
         return tuple(self.comp.get_outputs().values())
+
+    def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:
+        self.comp.expect_setpoints(setpoints)
+
+    def set_schedule(self, schedules: Mapping[str, Schedule] | None) -> None:
+        self.comp.set_schedule(schedules)
+
+    def set(self, name: str, value: float) -> str:
+        return self.comp.set(name, value)
+
+    def summary(self) -> dict:
+        return dict(self.comp.summary() or {})
 
     def close(self) -> None:
         self.comp.terminate()
 
 
-class IsolatedFmuComponent(FmuComponent):
-    """Same interface as :class:`FmuComponent`; the FMU runs in a worker process.
+class Isolation:
+    """The isolation proxy: a component whose steps run in a worker process (module
+    docstring), and every capability it declares (:class:`~cosim.core.component.
+    Capability`) forwarded there: parameters (``TUNABLE``), the run's set-points
+    (``SETPOINTS``), schedules as data (``PREVIEW``) and settings (``SETTINGS``). What it
+    declares it answers from this process (names, boxes, defaults, its notice).
 
-    Parameters
-    ----------
-    *args, **kwargs
-        As :class:`FmuComponent`.
-    timeout : float, optional
-        Wall-clock limit [s] of every request to the worker (initialisation, each
-        ``doStep``, parameter changes); past it the worker is killed and the request fails.
-        ``None``: wait for ever.
-    """
+    A class mixes it in before the component it isolates and says how the worker builds
+    that component (:meth:`_factory`); :attr:`timeout` bounds every request (``None``:
+    none)."""
 
-    #: The FMU's native code runs in a worker process, whose requests :attr:`timeout` bounds.
     isolated = True
+    #: whether the worker's component is a controller (outputs and diagnostics per step)
+    _controller = False
 
-    def __init__(self, *args: Any, timeout: float | None = None, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
-        self.timeout = timeout
+    def _isolation_init(self, timeout: float | None) -> None:
         self._worker: Worker | None = None
         self._pending: dict[str, float] = {}
         self._outputs: dict[str, float] = {}
+        self._diag: dict[str, Any] = {}
+        self._setpoints: list[dict[str, float]] | None = None
+        self.timeout = timeout
 
     @property
     def timeout(self) -> float | None:
@@ -125,44 +160,47 @@ class IsolatedFmuComponent(FmuComponent):
 
     @property
     def label(self) -> str:
-        """How messages name this FMU."""
-        return self.path.name
+        """How messages name this component."""
+        return f"controller {self.name!r}"
 
-    def setup(self, t0: float, stop_time: float | None = None) -> None:
-        """Start the worker, which extracts, loads and initialises the FMU."""
-        self.terminate()
-        mapping = tuple((m.signal, m.variable, m.unit, m.scale, m.offset)
-                        for m in self.varmap.signals.values())
-        self._worker = Worker(
-            self.label, "cosim.core.isolated:FmuServer",
-            {"path": str(self.path), "name": self.name, "interface": self.interface,
-             "start_values": tuple((k, float(v)) for k, v in self.start_values.items()),
-             "mapping": mapping, "map_path": str(self.varmap.path)},
-            timeout=self.timeout, scratch=True)
-        self._worker.start()
-        self._pending.clear()
-        self._t = t0
-        self._outputs = dict(self._call(f"initialisation at t={t0!r}", "setup", float(t0)))
+    def _factory(self) -> tuple[str, dict[str, Any], bool]:
+        """``(module:function, keyword arguments, scratch)``: how the worker builds the
+        component (``scratch``: it gets a folder of its own)."""
+        raise NotImplementedError
 
     def _call(self, what: str, method: str, *args: Any) -> Any:
         return _call(self._worker, self.label, what, method, *args)
+
+    def _start_worker(self, t0: float, build_timeout: float | None) -> None:
+        """A new worker building the component, told the set-points, set up at ``t0``."""
+        self.terminate()
+        factory, kwargs, scratch = self._factory()
+        self._worker = Worker(self.label, "cosim.core.isolated:ComponentServer",
+                              {"factory": factory, "kwargs": kwargs}, timeout=build_timeout,
+                              scratch=scratch)
+        self._worker.start()
+        if self._setpoints is not None:
+            self._worker.call("expecting the set-points", "expect_setpoints", self._setpoints)
+        self._pending.clear()
+        values = self._worker.call(f"initialisation at t={t0!r}", "setup", float(t0))
+        self._worker.timeout = self.timeout
+        if values is not None:
+            self._outputs = dict(zip(self._out_names, values, strict=True))
 
     def set_inputs(self, values: Mapping[str, float]) -> None:
         """Inputs travel with the next step request."""
         self._pending.update(values)
 
-    def set_parameter(self, name: str, value: float) -> None:
-        """Change a tunable parameter in the worker (or a start value before setup)."""
-        if self._worker is None or not self._worker.alive:
-            self.start_values[name] = value
-            return
-        vals = self._call(f"setting {name}", "set_parameter", name, float(value))
-        self._outputs = dict(zip(self._out_names, vals, strict=True))
-
     def step(self, t: float, dt: float) -> None:
-        """One round trip: inputs, ``doStep``, outputs."""
+        """One round trip: the inputs, the component's step, its outputs (a controller's
+        diagnostics too)."""
         inputs = tuple((k, float(v)) for k, v in self._pending.items())
         self._pending.clear()
+        if self._controller:
+            outputs, diag = self._call(f"step at t={t!r}", "control", float(t), float(dt),
+                                       inputs)
+            self._outputs, self._diag = dict(outputs), dict(diag)
+            return
         vals = self._call(f"doStep at t={t!r}", "step", float(t), float(dt), inputs)
         self._outputs = dict(zip(self._out_names, vals, strict=True))
         self._t = t + dt
@@ -171,16 +209,91 @@ class IsolatedFmuComponent(FmuComponent):
         """Outputs returned by the last request."""
         return dict(self._outputs)
 
+    def diagnostics(self) -> dict[str, Any]:
+        """Diagnostics of the last step (a controller's)."""
+        return dict(self._diag)
+
+    # -- the declared capabilities, forwarded --------------------------------------------------
+    def set_parameter(self, name: str, value: float) -> None:
+        """(``TUNABLE``) In the worker (before it starts: a start value)."""
+        if self._worker is None or not self._worker.alive:
+            self.start_values[name] = value
+            return
+        vals = self._call(f"setting {name}", "set_parameter", name, float(value))
+        self._outputs = dict(zip(self._out_names, vals, strict=True))
+
+    def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:
+        """(``SETPOINTS``) Checked here (a refusal is bad input); handed to the worker when
+        it starts."""
+        super().expect_setpoints(setpoints)  # type: ignore[misc]
+        self._setpoints = [dict(s) for s in setpoints]
+
+    def set_schedule(self, schedules: Mapping[str, Schedule] | None) -> None:
+        """(``PREVIEW``) The schedules, as data, to the worker's component."""
+        self._call("handing over the schedules", "set_schedule",
+                   None if schedules is None else dict(schedules))
+
+    def set(self, name: str, value: float) -> str:
+        """(``SETTINGS``) In the worker's component; what it re-derived."""
+        return self._call(f"setting {name}", "set", name, float(value))
+
+    def summary(self) -> dict:
+        """The worker's component's summary (this process's when the worker is gone)."""
+        worker = self._worker
+        if worker is not None and worker.alive and not worker.busy:
+            try:
+                return worker.call("summarising the run", "summary")
+            except CosimError:
+                pass
+        return dict(super().summary() or {})  # type: ignore[misc]
+
     def terminate(self) -> None:
         """Stop the worker and remove its folder (idempotent).
 
         A worker still busy with a request (the parent was interrupted while waiting) is
-        killed at once; an idle one is asked to terminate the FMU and given
+        killed at once; an idle one is asked to end the component and given
         :data:`cosim.core.worker.TERMINATE_WAIT` seconds.
         """
         worker, self._worker = self._worker, None
         if worker is not None:
             worker.stop()
+
+
+class IsolatedFmuComponent(Isolation, FmuComponent):
+    """Same interface as :class:`FmuComponent`; the FMU runs in a worker process, extracted
+    into the worker's folder.
+
+    Parameters
+    ----------
+    *args, **kwargs
+        As :class:`FmuComponent`.
+    timeout : float, optional
+        Wall-clock limit [s] of every request to the worker (initialisation, each
+        ``doStep``, parameter changes); past it the worker is killed and the request fails.
+        ``None``: wait for ever.
+    """
+
+    def __init__(self, *args: Any, timeout: float | None = None, **kwargs: Any) -> None:
+        FmuComponent.__init__(self, *args, **kwargs)
+        self._isolation_init(timeout)
+
+    @property
+    def label(self) -> str:
+        """How messages name this FMU."""
+        return self.path.name
+
+    def _factory(self) -> tuple[str, dict[str, Any], bool]:
+        mapping = tuple((m.signal, m.variable, m.unit, m.scale, m.offset)
+                        for m in self.varmap.signals.values())
+        return "cosim.core.isolated:fmu_component", {
+            "path": str(self.path), "name": self.name, "interface": self.interface,
+            "start_values": tuple((k, float(v)) for k, v in self.start_values.items()),
+            "mapping": mapping, "map_path": str(self.varmap.path)}, True
+
+    def setup(self, t0: float, stop_time: float | None = None) -> None:
+        """Start the worker, which extracts, loads and initialises the FMU."""
+        self._t = t0
+        self._start_worker(t0, self.timeout)
 
 
 class IsolatedFmuController(FmuController, IsolatedFmuComponent):
@@ -190,7 +303,7 @@ class IsolatedFmuController(FmuController, IsolatedFmuComponent):
     gives a step timeout (``--step-timeout``: the master sets :attr:`timeout`)."""
 
     def __init__(self, path: str | Path, name: str = "ctrl", **parameters: Any) -> None:
-        super().__init__(path, name, **parameters)
+        FmuController.__init__(self, path, name, **parameters)
         self.timeout = DEFAULT_STEP_TIMEOUT
 
     @property
@@ -199,42 +312,14 @@ class IsolatedFmuController(FmuController, IsolatedFmuComponent):
         return f"controller FMU {self.path.name}"
 
 
-class ControllerServer:  # pragma: no cover - runs in the worker process
-    """A controller of the registry (:func:`cosim.core.registry.create`) served by a worker:
-    each step answers with its outputs and diagnostics."""
-
-    def __init__(self, controller: str, options: dict[str, Any]) -> None:
-        from cosim.core import registry
-
-        self.ctrl = registry.create(controller, options)
-
-    def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:
-        self.ctrl.expect_setpoints(setpoints)
-
-    def setup(self, t0: float) -> None:
-        self.ctrl.setup(t0)
-
-    def step(self, t: float, dt: float, inputs: tuple[tuple[str, float], ...]
-             ) -> tuple[tuple[tuple[str, float], ...], tuple[tuple[str, Any], ...]]:
-        self.ctrl.set_inputs(dict(inputs))
-        self.ctrl.step(t, dt)
-        return tuple(self.ctrl.get_outputs().items()), tuple(self.ctrl.diagnostics().items())
-
-    def summary(self) -> dict:
-        return dict(self.ctrl.summary() or {})
-
-    def close(self) -> None:
-        self.ctrl.terminate()
-
-
-class IsolatedController(Component):
+class IsolatedController(Isolation, Component):
     """A controller of the registry whose steps run in a worker process (``cosim run
     --isolate``): a Python controller stuck in native code (a solver, a compiled kernel) or
     crashing in it ends the run as an isolated FMU does.
 
-    The controller is built here too (``local``: its signals, sample time, bounds, notice and
-    problem, and every check of its options, before anything runs), and again in the worker
-    from its registry name and options, which runs it.
+    The controller is built here too (``local``: its signals, sample time, bounds,
+    declarations and every check of its options, before anything runs), and again in the
+    worker from its registry name and options, which runs it.
 
     Parameters
     ----------
@@ -246,7 +331,7 @@ class IsolatedController(Component):
         Its options (picklable: they travel to the worker).
     """
 
-    isolated = True
+    _controller = True
 
     def __init__(self, local: Component, controller: str, options: Mapping[str, Any]) -> None:
         self.local = local
@@ -256,26 +341,29 @@ class IsolatedController(Component):
         self.inputs, self.outputs = local.inputs, local.outputs
         self.direct_feedthrough = local.direct_feedthrough
         self.sample_time = local.sample_time
-        self.bounds = dict(getattr(local, "bounds", {}) or {})
+        self.bounds = dict(local.bounds)
         self.timing_diagnostics = local.timing_diagnostics
-        self.timeout: float | None = DEFAULT_STEP_TIMEOUT
-        self._worker: Worker | None = None
-        self._setpoints: list[dict[str, float]] | None = None
-        self._pending: dict[str, float] = {}
-        self._outputs: dict[str, float] = {}
-        self._diag: dict[str, Any] = {}
-
-    def __getattr__(self, name: str) -> Any:
-        """What else a run asks the controller (its ``notice``, its ``problem``): the local
-        one's."""
-        if name.startswith("_") or name == "local":
-            raise AttributeError(name)
-        return getattr(self.local, name)
+        # what it declares, answered here; what it does, in the worker
+        self.capabilities = local.capabilities
+        self.disturbance_defaults = dict(local.disturbance_defaults)
+        self.previewed = tuple(local.previewed)
+        self.problem = local.problem
+        self._isolation_init(DEFAULT_STEP_TIMEOUT)
 
     @property
-    def label(self) -> str:
-        """How messages name this controller."""
-        return f"controller {self.name!r}"
+    def notice(self) -> str | None:  # type: ignore[override]
+        """(``NOTICE``) The local controller's (its design decides it)."""
+        return self.local.notice
+
+    def plant_signals(self) -> Any:
+        return self.local.plant_signals()
+
+    def settings(self) -> Any:
+        return self.local.settings()
+
+    def _factory(self) -> tuple[str, dict[str, Any], bool]:
+        return "cosim.core.registry:create", {"name": self.controller,
+                                              "options": self.options}, False
 
     def expect_setpoints(self, setpoints: list[dict[str, float]]) -> None:
         """Checked here (a refusal is bad input); handed to the worker at :meth:`setup`."""
@@ -283,40 +371,10 @@ class IsolatedController(Component):
         self._setpoints = [dict(s) for s in setpoints]
 
     def setup(self, t0: float) -> None:
-        """Start the worker, which builds the controller, and set it up at ``t0``."""
-        self.terminate()
-        # building a controller (its certificate, its solver) takes longer than a step
+        """Start the worker, which builds the controller, and set it up at ``t0``
+        (building it, its certificate and solver, takes longer than a step)."""
         build = None if self.timeout is None else max(self.timeout, DEFAULT_STEP_TIMEOUT)
-        self._worker = Worker(self.label, "cosim.core.isolated:ControllerServer",
-                              {"controller": self.controller, "options": self.options},
-                              timeout=build)
-        self._worker.start()
-        if self._setpoints is not None:
-            self._worker.call("expecting the set-points", "expect_setpoints", self._setpoints)
-        self._worker.call(f"setup at t={t0!r}", "setup", float(t0))
-        self._pending.clear()
-
-    def set_inputs(self, values: Mapping[str, float]) -> None:
-        """Inputs travel with the next step request."""
-        self._pending.update(values)
-
-    def step(self, t: float, dt: float) -> None:
-        """One round trip: inputs, the controller's step, outputs and diagnostics."""
-        inputs = tuple((k, float(v)) for k, v in self._pending.items())
-        self._pending.clear()
-        if self._worker is not None:
-            self._worker.timeout = self.timeout
-        outputs, diag = _call(self._worker, self.label, f"step at t={t!r}", "step", float(t),
-                              float(dt), inputs)
-        self._outputs, self._diag = dict(outputs), dict(diag)
-
-    def get_outputs(self) -> dict[str, float]:
-        """Outputs of the last step."""
-        return dict(self._outputs)
-
-    def diagnostics(self) -> dict[str, Any]:
-        """Diagnostics of the last step."""
-        return dict(self._diag)
+        self._start_worker(t0, build)
 
     def summary(self) -> dict:
         """The worker's controller's summary (the local one's when the worker is gone)."""
@@ -330,9 +388,7 @@ class IsolatedController(Component):
 
     def terminate(self) -> None:
         """Stop the worker (idempotent; a busy one is killed at once)."""
-        worker, self._worker = self._worker, None
-        if worker is not None:
-            worker.stop()
+        Isolation.terminate(self)
         self.local.terminate()
 
 

@@ -18,6 +18,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from cosim.core import interrupts
+from cosim.core.component import Capability
 from cosim.core.errors import CosimError, SimulationFailed
 from cosim.core.run_result import PREFIX_CTRL, RowSink, RunResult, communication_times
 from cosim.core.scenario import BIAS, DIST, PLANT, REF, UNIFORM
@@ -64,7 +65,7 @@ class Run:
             step_size=master.dt, start_time=sc.start_time, stop_time=sc.stop_time,
             outputs=list(master.measured), references=list(master.refs),
             inputs=list(master.ctrl_outputs),
-            bounds=dict(getattr(ctrl, "bounds", {}) or {}),
+            bounds=dict(ctrl.bounds),
             units={s.name: s.unit for s in (*ctrl.inputs, *ctrl.outputs) if s.unit},
             perturbation_times=sc.perturbation_times())
         self.refs = {f"ref.{r}": math.nan for r in master.refs}
@@ -72,11 +73,13 @@ class Run:
         self.dist = dict.fromkeys(master.dists, math.nan)
         self.sensor = SensorModel(master.measured, seed=master.seed) if master.use_sensor \
             else None
-        self.set_param = getattr(master.plant, "set_parameter", None)
+        plant = master.plant
+        self.set_param = (plant.set_parameter if Capability.TUNABLE in plant.capabilities
+                          else None)
         self.next_event = 0
         self.diag_names: list[str] = []
         self.diag_index: dict[str, int] = {}
-        self.timing_names = sorted(getattr(ctrl, "timing_diagnostics", ()) or ())
+        self.timing_names = sorted(ctrl.timing_diagnostics)
         self.cin: dict[str, float] = {}
         self.u: dict[str, float] = {}
         self.diag: dict[str, float] = {}
@@ -126,14 +129,16 @@ class Run:
         """The controller told the run's set-points, set up at ``t``, and, when it knows
         measured disturbances ahead (``previewed``: ``preview = true``), given the
         scenario's value at any time of each it has a column of (the one that sets it)."""
-        m = self.m
-        m.controller.expect_setpoints(m.scenario.setpoints())
-        m.controller.setup(t)
+        m, ctrl = self.m, self.m.controller
+        if Capability.SETPOINTS in ctrl.capabilities:
+            ctrl.expect_setpoints(m.scenario.setpoints())
+        ctrl.setup(t)
+        if Capability.PREVIEW not in ctrl.capabilities:
+            return
         columns = {c.target for c in m.scenario.columns_of(DIST)}
-        names = [d for d in getattr(m.controller, "previewed", ()) or () if d in columns]
+        names = [d for d in ctrl.previewed if d in columns]
         if names:
-            m.controller.set_schedule({d: m.scenario.schedule(DIST, d, self.dist[d])
-                                       for d in names})
+            ctrl.set_schedule({d: m.scenario.schedule(DIST, d, self.dist[d]) for d in names})
 
     def _start(self) -> None:
         """Start values and first set-points, then set up plant and controller."""

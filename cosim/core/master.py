@@ -32,7 +32,7 @@ import signal
 from collections.abc import Callable
 
 from cosim.core import interrupts
-from cosim.core.component import Component
+from cosim.core.component import Capability, Component
 from cosim.core.errors import CosimError, ParameterError
 from cosim.core.loop import Run
 from cosim.core.run_result import (
@@ -56,11 +56,13 @@ class Master:
     Parameters
     ----------
     plant : Component
-        A component without direct feedthrough (an FMU); optional methods ``settable(at_start)``
-        (names a scenario may set), ``set_parameter(name, value)`` and ``check_signals``.
+        A component without direct feedthrough (an FMU); what it declares
+        (:attr:`~cosim.core.component.Component.capabilities`: ``TUNABLE``, ``SIGNAL_CHECK``)
+        is used as the loop is wired.
     controller : Component
         A direct-feedthrough component; inputs ``ref.<o>`` and measured plant outputs, outputs
-        plant inputs.
+        plant inputs; what it declares (``SETPOINTS``, ``DISTURBANCES``, ``PREVIEW``) is used
+        as the loop is wired.
     scenario : Scenario
     step : float, optional
         Communication step [s]; default the controller's ``sample_time``. The controller is
@@ -115,7 +117,7 @@ class Master:
     def _wire(self) -> None:
         plant, ctrl, sc = self.plant, self.controller, self.scenario
         # a controller output drives an FMU input, or a tunable parameter (cosim.core.binding)
-        plant_in = {s.name for s in plant.inputs} | set(getattr(plant, "tunables", ()))
+        plant_in = {s.name for s in plant.inputs} | set(plant.tunables)
         plant_out = [s.name for s in plant.outputs]
         self.ctrl_outputs = [s.name for s in ctrl.outputs]
         self.refs = [s.name[4:] for s in ctrl.inputs if s.name.startswith("ref.")]
@@ -126,11 +128,10 @@ class Master:
         self.dists = list(dict.fromkeys([*given, *self.ctrl_dists]))
         self.measured = [s.name for s in ctrl.inputs
                          if not s.name.startswith(("ref.", "dist."))]
-        where = getattr(plant, "path", plant.name)
+        where = plant.where
         units = {s.name: s.unit for s in (*ctrl.inputs, *ctrl.outputs) if s.unit}
-        check = getattr(plant, "check_signals", None)
-        if check is not None:
-            check(self.ctrl_outputs, self.measured, units)
+        if Capability.SIGNAL_CHECK in plant.capabilities:
+            plant.check_signals(self.ctrl_outputs, self.measured, units)
         for u in self.ctrl_outputs:
             if u not in plant_in:
                 raise CosimError(f"{where}: controller output '{u}' is not an input of the plant"
@@ -145,9 +146,7 @@ class Master:
                                  "tunable parameter of the plant (give the problem that binds "
                                  "it, --problem, name its variable with variable = \"...\" "
                                  "there, or use --map)")
-        settable = getattr(plant, "settable", None)
-        at_start = settable(True) if settable else plant_in
-        later = settable(False) if settable else plant_in
+        at_start, later = plant.settable(True), plant.settable(False)
         sc.validate(at_start, self.refs, self.measured, driven=[*self.ctrl_outputs, *self.dists],
                     plant_tunable=later, disturbances=self.dists)
         given = {c.target for c in sc.columns_of(REF)}
@@ -156,7 +155,8 @@ class Master:
                 raise CosimError(f"{sc.path}:1:1: no column 'ref.{r}': the controller needs a "
                                  f"set-point for '{r}'")
         given_d = {c.target for c in sc.columns_of(DIST)}
-        defaults = dict(getattr(ctrl, "disturbance_defaults", None) or {})
+        defaults = (dict(ctrl.disturbance_defaults)
+                    if Capability.DISTURBANCES in ctrl.capabilities else {})
         self.dist_defaults = {}
         for d in self.dists:
             if d in given_d:

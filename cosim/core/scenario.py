@@ -26,12 +26,12 @@ Every error is a :class:`~cosim.core.errors.CosimError` that starts with ``file:
 
 from __future__ import annotations
 
-import bisect
-from collections.abc import Callable, Collection, Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from cosim.core import csvio
+from cosim.core.component import Schedule
 from cosim.core.errors import CosimError
 
 __all__ = ["BIAS", "DIST", "NOISE", "PLANT", "REF", "SCENARIO_WORDING", "SENSOR_KINDS", "UNIFORM",
@@ -121,23 +121,19 @@ class Scenario:
                 out.append(dict(held))
         return out
 
-    def schedule(self, kind: str, target: str, default: float) -> Callable[[float], float]:
-        """The value the run sets for column ``<kind>.<target>`` at any time ``t``: the last
-        row at or before ``t`` that gives it (rows hold until the next), ``default`` before
-        the first (and for a column the file does not have). What a controller that knows a
-        measured disturbance ahead is given (``preview = true``)."""
+    def schedule(self, kind: str, target: str, default: float) -> Schedule:
+        """The value the run sets for column ``<kind>.<target>`` at any time ``t``, as data
+        (:class:`~cosim.core.component.Schedule`): the last row at or before ``t`` that gives
+        it (rows hold until the next), ``default`` before the first (and for a column the
+        file does not have). What a controller that knows a measured disturbance ahead is
+        given (``preview = true``)."""
         times, values = [], []
         for event in self.events:
             for col, value in event.values:
                 if col.kind == kind and col.target == target:
                     times.append(event.time)
                     values.append(float(value))
-
-        def at(t: float) -> float:
-            i = bisect.bisect_right(times, t + 1e-9 * max(1.0, abs(t)))
-            return values[i - 1] if i else float(default)
-
-        return at
+        return Schedule(tuple(times), tuple(values), float(default))
 
     def perturbation_times(self) -> list[float]:
         """Times (after the start) at which a ``plant.*`` or ``sensor.*`` value changes."""

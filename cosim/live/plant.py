@@ -59,6 +59,11 @@ class LivePlant(Component):
         self.clipped = 0
         self.write_failures = 0
 
+    @property
+    def where(self) -> str:
+        """Messages name the plant by its endpoint."""
+        return str(self.path)
+
     def setup(self, t0: float) -> None:
         """Connect and find the tags (:meth:`PlantSession.connect`)."""
         self.session.connect()

@@ -398,6 +398,23 @@ def test_a_disturbance_known_ahead_is_met_before_it_arrives(
     assert held["ctrl.P"][2960.0] < held["ctrl.P"][2940.0] + 50.0
 
 
+def test_isolated_a_disturbance_known_ahead_is_told_as_in_process(
+        dead_time: dict[str, Path], tmp_path: Path) -> None:
+    """``--isolate`` runs the controller in a worker: the scenario's schedule (PREVIEW, a
+    declared capability) travels to it as data, and the run is the in-process run to the
+    bit (before, the proxy told its local copy and the worker held the ambient)."""
+    import cosim
+
+    model = _previewed(dead_time["model"], tmp_path)
+    runs = [cosim.run(dead_time["scenario"], plant=dead_time["fmu"], model=model,
+                      isolate=isolate, figure=False) for isolate in (False, True)]
+    for run in runs:
+        assert run.status == "ok", run.reason
+        assert run.summary["controller_summary"]["preview_held_steps"] == 0
+    assert runs[0].result.columns == runs[1].result.columns
+    assert runs[0].result.rows == runs[1].result.rows
+
+
 def test_without_a_schedule_a_disturbance_known_ahead_is_held(
         dead_time: dict[str, Path], tmp_path: Path) -> None:
     """Stepped outside a scenario (no schedule: a host stepping it), or in a run whose
