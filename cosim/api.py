@@ -26,37 +26,14 @@ from typing import Any
 
 from cosim.core.build import TARGETS
 from cosim.core.master import RunResult
+from cosim.core.plants import PlantContext
 
-__all__ = ["DEFAULT_PLANT", "RunOutput", "export_fmu", "plant_path", "run", "serve_plant"]
+__all__ = ["DEFAULT_PLANT", "RunOutput", "export_fmu", "run", "serve_plant"]
 
 #: The project's plant FMU (FMI 2.0): ``FourTank.fmu`` beside its sources in the ``fmus``
 #: package when that folder is writable (a source checkout: ``fmus/FourTank.fmu``), else in
 #: the user cache (``~/.cache/gru-mpc/fmus``); built on first use (:mod:`cosim.core.build`).
 DEFAULT_PLANT = TARGETS[0].fmu_path
-
-
-def plant_path(arg: str | Path | None) -> Path:
-    """The plant FMU: ``arg``, or the project's, built when missing or stale.
-
-    Raises
-    ------
-    CosimError
-        ``arg`` is a folder or does not exist; the project's FMU cannot be built here.
-    """
-    from cosim.core.build import default_plant
-    from cosim.core.errors import CosimError
-
-    if arg is not None:
-        path = Path(arg)
-        if path.is_dir():
-            raise CosimError(f"{path}: is a folder, not an FMU file (.fmu zip archive)")
-        if not path.is_file():
-            raise CosimError(f"{path}: plant FMU not found")
-        return path
-    path = default_plant()
-    if not path.is_file():
-        raise CosimError(f"{path}: not produced by cosim build-fmu")
-    return path
 
 
 @dataclass
@@ -99,52 +76,6 @@ class RunOutput:
         import pandas as pd
 
         return pd.DataFrame(self.result.timing_rows, columns=self.result.timing_columns)
-
-
-def open_plant(plant: str | Path | None, varmap: Any, interface: str, isolate: bool,
-               step_timeout: float | None, seed: int, problem: Any = None,
-               signals: list[Any] | None = None) -> tuple[Any, str]:
-    """The plant component; an FMU's variable map binds ``problem`` to it (the user's
-    ``varmap`` first: :func:`cosim_adapters.problems.bind_plant`), else the ``signals`` a
-    controller FMU records (:meth:`cosim.core.fmu_controller.FmuController.plant_signals`)."""
-    from cosim.core.errors import CosimError
-    from cosim_adapters.gru_plant import MODEL_PREFIX
-
-    if plant is not None and str(plant).startswith(MODEL_PREFIX):
-        from cosim_adapters.gru_plant import GRUPlant
-
-        if varmap is not None or isolate or interface != "cs":
-            raise CosimError(f"--plant {plant}: a GRU-model plant takes no --map, --isolate, "
-                             "--step-timeout or --interface")
-        return GRUPlant.from_file(str(plant), seed=seed), str(plant)
-    path = plant_path(plant)
-    varmap = plant_varmap(path, varmap, problem, signals)
-    if isolate:
-        from cosim.core.isolated import IsolatedFmuComponent
-
-        return IsolatedFmuComponent(path, name="plant", interface=interface, varmap=varmap,
-                                    timeout=step_timeout), str(path)
-    from cosim.core.fmu import FmuComponent
-
-    return FmuComponent(path, name="plant", interface=interface, varmap=varmap), str(path)
-
-
-def plant_varmap(path: Path, varmap: Any, problem: Any = None,
-                 signals: list[Any] | None = None) -> Any:
-    """The variable map binding the plant FMU ``path`` to ``problem`` (the user's ``varmap``
-    first: :func:`cosim_adapters.problems.bind_plant`), else to the ``signals`` a controller
-    FMU records (:meth:`cosim.core.fmu_controller.FmuController.plant_signals`), else
-    ``varmap`` as it is."""
-    if problem is not None:
-        from cosim_adapters.problems import bind_plant
-
-        return bind_plant(problem, path, varmap)
-    if signals:
-        from cosim.core.binding import bind
-        from cosim.core.fmu_archive import read_model_description
-
-        return bind(signals, read_model_description(path), path, varmap, signals[0].where)
-    return varmap
 
 
 def run_signals(ctrl: Any, bound: Any) -> list[Any] | None:
@@ -229,10 +160,9 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     OutputError
         ``out`` could not be written (the previous files there are intact).
     """
-    from cosim.core import outpaths, registry, varmap
+    from cosim.core import outpaths, plants, registry, varmap
     from cosim.core import scenario as scenario_mod
     from cosim.core.component import Capability
-    from cosim.core.errors import ParameterError
     from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
     from cosim.core.master import Master
 
@@ -259,24 +189,17 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     if notice and on_notice is not None:
         on_notice(notice)
     bound = run_problem(ctrl, opts.get("problem", problem))
-    if is_endpoint(plant):
-        from cosim.core.errors import CosimError
-        from cosim.live.runner import LiveOptions, run_live
-
-        if vmap is not None or interface != "cs":
-            raise CosimError(f"--plant {plant}: a live plant takes no --map or --interface "
-                             "(a tags file maps its names: --tags)")
-        master, where = run_live({"step": step, "seed": seed}, str(plant),
-                                 live or LiveOptions(), sc, ctrl, bound, on_notice)
-    else:
-        if live is not None:
-            raise ParameterError("live", ": live options need a live plant (opc.tcp://...)")
-        plant_obj, plant_name = open_plant(plant, vmap, interface, isolate, limit, seed, bound,
-                                           run_signals(ctrl, bound))
-        master = Master(plant_obj, ctrl, sc, step=step, seed=seed,
-                        disturbances=bound.disturbance_names if bound is not None else None)
-        where = {"plant": plant_name, "fmi_version": plant_obj.fmi_version,
-                 "interface": interface}
+    opened = plants.open_plant(plant, plants.PlantContext(
+        sc, ctrl, bound, vmap, interface, isolate, limit, seed, step, live,
+        run_signals(ctrl, bound), on_notice))
+    try:
+        master = Master(opened.component, ctrl, sc, step=step, seed=seed,
+                        disturbances=bound.disturbance_names if bound is not None else None,
+                        io=opened.io, pacer=opened.pacer)
+    except BaseException:
+        opened.component.terminate()
+        raise
+    where = opened.meta
     meta = {"scenario": str(sc.path), **where,
             "isolated": isolate, "step_timeout": limit,
             "map": str(map) if map is not None else None,
@@ -373,18 +296,14 @@ def serve_plant(plant: str | Path | None = None, problem: Any = None, *,
     from cosim.core import varmap
     from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
     from cosim.live.runner import serve
+    from cosim_adapters.plants import open_fmu
     from cosim_adapters.problems import load_problem
 
     bound = load_problem(problem)
     vmap = varmap.load(map) if map is not None else None
     # the FMU's native code in a worker: a crash or a hang stops the server with one line
-    component, _ = open_plant(plant, vmap, interface, True, DEFAULT_STEP_TIMEOUT, 0, bound)
-    return serve(component, bound, **options)
-
-
-def is_endpoint(plant: object) -> bool:
-    """Whether ``plant`` names a live plant (``opc.tcp://...``) rather than an FMU."""
-    return isinstance(plant, str) and plant.startswith("opc.tcp://")
+    context = PlantContext(None, None, bound, vmap, interface, True, DEFAULT_STEP_TIMEOUT)
+    return serve(open_fmu(plant, context).component, bound, **options)
 
 
 def with_problem(controller: str, options: Mapping[str, Any], problem: Any) -> dict:

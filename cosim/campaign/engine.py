@@ -138,7 +138,7 @@ def _read(path: Path, what: str) -> bytes:
 def _plant_file(spec: CampaignSpec) -> Path:
     if spec.plant is not None and not spec.model_plant:
         return Path(spec.plant)
-    from cosim.api import plant_path
+    from cosim.core.plants import plant_path
 
     return plant_path(None)
 
@@ -206,7 +206,8 @@ def _bind(spec: CampaignSpec, name: str, line: int, ctrl: Any, problem: Any,
     """The variable map binding the variant's control problem (its controller's, else
     ``problem``; else the plant variables a controller FMU records) to the plant FMU
     (``user_map`` first); ``user_map`` for a GRU-model plant or a controller with none."""
-    from cosim.api import plant_varmap, run_problem, run_signals
+    from cosim.api import run_problem, run_signals
+    from cosim_adapters.plants import plant_varmap
 
     if spec.model_plant:
         return user_map

@@ -144,27 +144,27 @@ def _in_dask_worker() -> bool:
 
 
 def _plant(task: dict[str, Any], folder: Path, seed: int) -> Any:
-    from cosim.core import varmap
+    """The run's plant, opened through its kind's opener (:mod:`cosim.core.plants`): the
+    GRU model, or the FMU with the variable map the client bound (or the campaign's map)."""
+    from cosim.core import plants, varmap
+    from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
 
     kind, name = task["plant"]
     if kind == "model":
-        from cosim_adapters.gru_plant import GRUPlant
-
-        return GRUPlant.from_file(str(folder / name), seed=seed)
+        spec = f"model:{folder / name}"
+        return plants.open_plant(spec, plants.PlantContext(None, None, seed=seed)).component
     if task.get("binding") is not None:
         # the plant bound to the control problem by the client (cosim.core.binding), map included
         path, entries = task["binding"]
         vmap = varmap.VarMap(Path(path), {m[0]: varmap.MappedSignal(*m) for m in entries})
     else:
         vmap = varmap.load(folder / task["map"]) if task.get("map") else None
-    if task.get("isolate"):
-        from cosim.core.isolated import DEFAULT_STEP_TIMEOUT, IsolatedFmuComponent
-
-        return IsolatedFmuComponent(folder / name, interface=task["interface"], varmap=vmap,
-                                    timeout=task.get("step_timeout") or DEFAULT_STEP_TIMEOUT)
-    from cosim.core.fmu import FmuComponent
-
-    return FmuComponent(folder / name, interface=task["interface"], varmap=vmap)
+    isolate = bool(task.get("isolate"))
+    context = plants.PlantContext(None, None, varmap=vmap, interface=task["interface"],
+                                  isolate=isolate, seed=seed,
+                                  step_timeout=(task.get("step_timeout") or DEFAULT_STEP_TIMEOUT)
+                                  if isolate else None)
+    return plants.open_plant(folder / name, context).component
 
 
 class _TheoremMonitor:

@@ -81,9 +81,9 @@ def run(args: argparse.Namespace) -> int:
     """Write the SSP file; print what it connects unless ``--quiet``."""
     from pathlib import Path
 
-    from cosim.api import plant_path
     from cosim.core.errors import CosimError
     from cosim.core.fmu_archive import read_model_description
+    from cosim.core.plants import plant_path
     from cosim.core.ssp import wiring, write_ssp
 
     plant = plant_path(args.plant)

@@ -104,7 +104,7 @@ def run(args: argparse.Namespace) -> int:
     if out.suffix.lower() == ".json":
         raise CosimError(f"{out}: --out must not end in .json: that name is the data's JSON "
                          "sidecar (use .csv)")
-    from cosim.api import plant_path as find_plant
+    from cosim.core.plants import plant_path as find_plant
 
     plant_path = find_plant(args.plant)
     user_map = varmap.load(args.map) if args.map else None

@@ -213,9 +213,9 @@ def _live_options(args: argparse.Namespace) -> object:
                                       ("--private-key", args.private_key),
                                       ("--trust", args.trust), ("--user", args.user))
              if value not in (None, [])]
-    from cosim.api import is_endpoint
+    from cosim.core.plants import kind_of
 
-    if not is_endpoint(args.plant):
+    if not kind_of(args.plant).live:
         if given:
             raise CosimError(f"{given[0]}: only for a live plant (--plant opc.tcp://HOST:PORT)")
         return None

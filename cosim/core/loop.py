@@ -1,11 +1,14 @@
 """One execution of a :class:`~cosim.core.master.Master`: the loop state and the step phases.
 
 One communication step ``[t_k, t_k+1)`` is :meth:`Run._apply_events` (scenario events due at
-``t_k``), :meth:`Run._measure` (plant outputs, the non-finite guard, the sensor),
-:meth:`Run._control` (the controller step and its timeout), :meth:`Run._record` (the row,
+``t_k``), the pacer's wait (:mod:`cosim.core.pacing`: nothing in simulated time, the sample's
+instant on the wall clock), :meth:`Run._sample` (the plant's reading through its
+:class:`~cosim.core.pacing.PlantIO`, the sensor, the controller step and its timeout, the
+inputs written when the pacer allows it, or the pacer's answer to a stale reading; the row,
 handed to the :class:`RowSink` too) and :meth:`Run._advance` (the plant step);
 :meth:`Run.execute` maps what goes wrong in any of them, or a signal, onto the result's
-status and never raises.
+status and never raises. The same loop runs a plant FMU in simulated time and a live plant
+on the wall clock: only the plant I/O and the pacer differ.
 """
 
 from __future__ import annotations
@@ -35,17 +38,22 @@ class Run:
 
     Attributes
     ----------
+    io : PlantIO
+        The plant's I/O (the master's).
+    pacer : Pacer
+        When samples happen (the master's).
     own_prefixes : tuple of str
-        Diagnostics named ``<prefix>.<name>`` with one of these prefixes are the loop's own
+        Diagnostics named ``<prefix>.<name>`` with one of these prefixes are the pacer's own
         columns, recorded under that name (a live run's ``live.fresh``); every other
         diagnostic is the controller's, recorded as ``ctrl.<name>``.
     """
 
-    own_prefixes: tuple[str, ...] = ()
-
     def __init__(self, master: Master, record: RowSink | None, step_timeout: float | None,
                  deadline: float | None) -> None:
         self.m = master
+        self.io = master.io
+        self.pacer = master.pacer
+        self.own_prefixes = master.pacer.own_prefixes
         self.sink = record
         self.step_timeout = step_timeout
         self.deadline = deadline
@@ -141,32 +149,55 @@ class Run:
             ctrl.set_schedule({d: m.scenario.schedule(DIST, d, self.dist[d]) for d in names})
 
     def _start(self) -> None:
-        """Start values and first set-points, then set up plant and controller."""
+        """Start values and first set-points, then set up plant and controller; the pacer
+        starts."""
         m, t = self.m, self.t
         self._first_row()
         try:
             m.plant.setup(t)
             if self.set_param is None:
-                m.plant.set_inputs({p: v for p, v in (*self.held.items(), *self.dist.items())
-                                    if not math.isnan(v)})
+                self.io.start_values({**self.held, **self.dist})
             self._setup_controller(t)
         except (CosimError, SimulationFailed):
             raise
         except Exception as exc:
             raise SimulationFailed(f"setup at t={t!r} failed: {exc}") from exc
+        self.pacer.start(self)
 
-    def _measure(self, t: float) -> tuple[dict[str, float], dict[str, float]]:
-        """Plant outputs ``y(t)`` (all finite) and what the controller measures."""
-        y = self.m.plant.get_outputs()
-        if not all(map(math.isfinite, y.values())):
-            bad = next(n for n in self.m.plant_outputs if not math.isfinite(y[n]))
-            raise SimulationFailed(f"plant output '{bad}' is {y[bad]!r} at t={t!r}")
+    def _sensed(self, t: float, y: dict[str, float]) -> dict[str, float]:
+        """What the controller measures: ``y``, through the scenario's sensor model."""
         sensor = self.sensor
         if sensor is None:
-            return y, y
+            return y
         sensor.set_inputs(y)
         sensor.step(t, self.m.dt)
-        return y, sensor.get_outputs()
+        return sensor.get_outputs()
+
+    def _sample(self, k: int, t: float) -> None:
+        """Read, control, write and record sample ``k`` at ``t``: a fresh reading steps the
+        controller (every ``ratio`` samples) and its inputs are written when the pacer
+        allows; a stale one is the pacer's to answer."""
+        pacer = self.pacer
+        reading = pacer.read(self, t)
+        y = reading.values
+        if self.io.reads_disturbances:
+            for d in self.m.dists:
+                self.dist[d] = y.get(d, math.nan)
+        if reading.fresh:
+            ym = self._sensed(t, y)
+            if k % self.m.ratio == 0:
+                u_prev = self.u
+                self._control(t, ym)
+                self._check_interrupt()
+                if pacer.on_time():
+                    pacer.written(self.io.write(self.u))
+                else:   # too late: the previous inputs stay
+                    self.u = u_prev or dict.fromkeys(self.m.ctrl_outputs, math.nan)
+        else:
+            ym = y
+            pacer.stale(self, t, reading)
+        pacer.sampled(self, t, reading)
+        self._record(t, y, ym)
 
     def _control(self, t: float, ym: dict[str, float]) -> None:
         """The controller step: ``u`` and the diagnostics from ``y_m(t)`` and the set-points."""
@@ -248,10 +279,9 @@ class Run:
             guard.check()
 
     def _advance(self, k: int) -> None:
-        """The plant step from ``t_k`` to ``t_k+1`` with ``u_k`` held."""
-        plant, t = self.m.plant, self.times[k]
-        plant.set_inputs(self.u)
-        plant.step(t, self.times[k + 1] - t)
+        """The plant from ``t_k`` to ``t_k+1`` with ``u_k`` held."""
+        t = self.times[k]
+        self.io.advance(t, self.times[k + 1] - t)
 
     def _check_interrupt(self) -> None:
         if self.guard is not None:
@@ -286,7 +316,7 @@ class Run:
             self._finish()
 
     def _loop(self, on_step: Callable[[int], None] | None) -> None:
-        result, ratio, times = self.result, self.m.ratio, self.times
+        result, times, pacer = self.result, self.times, self.pacer
         n = len(times) - 1
         self._start()
         self.loop0 = _time.perf_counter()
@@ -294,11 +324,8 @@ class Run:
         while True:
             self.t = t = times[k]
             self._apply_events(t)
-            y, ym = self._measure(t)
-            if k % ratio == 0:
-                self._control(t, ym)
-                self._check_interrupt()
-            self._record(t, y, ym)
+            pacer.wait(k)
+            self._sample(k, t)
             if k == n:
                 break
             self._advance(k)
@@ -341,6 +368,7 @@ class Run:
         for row in result.rows:
             if len(row) < width:
                 row.extend([math.nan] * (width - len(row)))
+        self.pacer.finish(self)
 
 
 def _as_float(value: object) -> float:

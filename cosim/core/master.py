@@ -35,6 +35,7 @@ from cosim.core import interrupts
 from cosim.core.component import Capability, Component
 from cosim.core.errors import CosimError, ParameterError
 from cosim.core.loop import Run
+from cosim.core.pacing import ComponentIO, Pacer, PlantIO
 from cosim.core.run_result import (
     MAX_STEPS,
     PREFIX_CTRL,
@@ -73,12 +74,20 @@ class Master:
         The problem's measured disturbances (plant inputs or tunable parameters a
         ``dist.<name>`` column sets) besides those the controller measures; ``None`` (no
         problem known): every ``dist.<name>`` column of the scenario names one.
+    io : PlantIO, optional
+        How the loop reads, writes and advances the plant (:mod:`cosim.core.pacing`);
+        default the component's own (:class:`~cosim.core.pacing.ComponentIO`).
+    pacer : Pacer, optional
+        When samples happen; default simulated time (:class:`~cosim.core.pacing.Pacer`).
     """
 
     def __init__(self, plant: Component, controller: Component, scenario: Scenario, *,
                  step: float | None = None, seed: int = 0,
-                 disturbances: tuple[str, ...] | list[str] | None = None) -> None:
+                 disturbances: tuple[str, ...] | list[str] | None = None,
+                 io: PlantIO | None = None, pacer: Pacer | None = None) -> None:
         self.plant = plant
+        self.io: PlantIO = ComponentIO(plant) if io is None else io
+        self.pacer = Pacer() if pacer is None else pacer
         self.controller = controller
         self.scenario = scenario
         if isinstance(seed, bool) or not isinstance(seed, int) or seed < 0:
@@ -93,8 +102,6 @@ class Master:
                                  "sample time; give one")
         self.dt = float(dt)
         self.given_disturbances = None if disturbances is None else tuple(disturbances)
-        #: What executes one run (a live plant's loop replaces it: :mod:`cosim.live.loop`).
-        self.run_class: type[Run] = Run
         ts = controller.sample_time
         self.ratio = 1
         if ts is not None and step is not None:
@@ -223,7 +230,7 @@ class Master:
         if step_timeout is not None and not (math.isfinite(step_timeout) and step_timeout > 0):
             raise ParameterError("step_timeout", f" {step_timeout!r}: expected a positive "
                                  "number of seconds")
-        run = self.run_class(self, record, step_timeout, deadline)
+        run = Run(self, record, step_timeout, deadline)
         own = interrupts.current() is None
         with interrupts.handling_signals() as guard:
             run.guard = guard

@@ -1,6 +1,6 @@
 """What the live commands run: :func:`serve` (``cosim serve-plant``, through
-:func:`cosim.api.serve_plant`) and :func:`run_live` (``cosim run --plant opc.tcp://...``,
-through :func:`cosim.api.run`).
+:func:`cosim.api.serve_plant`), and the options of ``cosim run --plant opc.tcp://...``
+(:class:`LiveOptions`; the plant is opened by :func:`cosim.live.plant.open_live`).
 """
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from cosim.core.errors import CosimError, SimulationFailed
 from cosim.live.security import Security
 from cosim.live.server import DEFAULT_ENDPOINT
 
-__all__ = ["LiveOptions", "ServeSummary", "run_live", "serve"]
+__all__ = ["LiveOptions", "ServeSummary", "check_endpoint", "serve"]
 
 
 class ServeSummary(dict):
@@ -138,69 +138,3 @@ class LiveOptions:
     speed: float = 1.0
     watchdog: int | None = None
     security: Security = field(default_factory=Security)
-
-
-def run_live(master_args: dict, endpoint: str, live: LiveOptions, sc: Any, ctrl: Any,
-             bound: Any, on_notice: Callable[[str], None] | None) -> tuple[Any, dict]:
-    """The master of a run against the live plant at ``endpoint`` (:func:`cosim.api.run`
-    runs it) and what the summary says of the plant.
-
-    Raises
-    ------
-    CosimError
-        A scenario column that would set the plant, bad live options, an unreadable tags
-        file.
-    """
-    from cosim.core.master import Master
-    from cosim.live import tags as tags_mod
-    from cosim.live.loop import LiveConfig, LiveRun, refused_columns
-    from cosim.live.plant import LivePlant
-    from cosim.live.session import PlantSession
-
-    check_endpoint(endpoint, "--plant")
-    if bound is None:   # a controller of its own signals (an FMU): the default problem's
-        from cosim_adapters.problems import load_problem
-
-        bound = load_problem(None)
-    column = refused_columns(sc)
-    if column is not None:
-        raise CosimError(f"{sc.path}:1:1: column '{column}': a live plant is not set by the "
-                         "scenario (its disturbances are measured, its parameters are the "
-                         "plant's); perturb a virtual plant through cosim serve-plant's "
-                         "writable variables")
-    if not (live.speed > 0 and math.isfinite(live.speed)):
-        raise CosimError(f"--speed {live.speed!r}: must be a positive number (the plant's "
-                         "speed-up K)")
-    if live.watchdog is not None and live.watchdog < 1:
-        raise CosimError(f"--watchdog {live.watchdog!r}: must be a whole number of samples "
-                         ">= 1")
-    if master_args.get("step") is not None:
-        raise CosimError("--step: a live run steps at the controller's sample time")
-    signals = [c.name for c in (*bound.inputs, *bound.outputs, *bound.disturbances)]
-    tags = (tags_mod.load(live.tags, signals) if live.tags is not None
-            else tags_mod.Tags())
-    period = bound.Ts / live.speed
-    session = PlantSession(endpoint, reads=[c.name for c in (*bound.outputs,
-                                                             *bound.disturbances)],
-                           writes=[c.name for c in bound.inputs], tags=tags,
-                           folder=bound.name, security=live.security,
-                           max_age=period * (1 + 1e-3) + 0.002,
-                           timeout=min(max(0.5 * period, 0.1), 5.0))
-    plant = LivePlant(bound, session)
-    try:
-        master = Master(plant, ctrl, sc, disturbances=bound.disturbance_names,
-                        **master_args)
-    except BaseException:
-        session.close()
-        raise
-    master.run_class = LiveRun
-    notice = on_notice or (lambda text: None)
-    if not live.security.secure:
-        notice("warning: no security (--security None): the plant's values travel unsigned "
-               "and unencrypted")
-    master.live = LiveConfig(period=period, watchdog=live.watchdog, notice=notice,
-                             describe={"endpoint": endpoint, "speed": live.speed,
-                                       "security": live.security.describe(),
-                                       "tags": str(live.tags) if live.tags else None})
-    return master, {"plant": endpoint, "fmi_version": "OPC UA", "interface": "opc.tcp",
-                    "live": True}

@@ -21,11 +21,11 @@ import math
 import threading
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from datetime import UTC
 from typing import Any
 
 from cosim.core.errors import CosimError
+from cosim.core.pacing import Reading
 from cosim.live import quiet_libraries
 from cosim.live.security import Security, validator
 from cosim.live.tags import Tag, Tags
@@ -36,31 +36,6 @@ __all__ = ["APPLICATION_URI", "PlantSession", "Reading"]
 APPLICATION_URI = "urn:gru-mpc-cosim:client"
 #: Reconnection back-off: first wait and longest wait [s].
 BACKOFF = (0.1, 2.0)
-
-
-@dataclass
-class Reading:
-    """One read of the measured signals.
-
-    Attributes
-    ----------
-    values : dict
-        Each signal's value (NaN where none came).
-    stale : dict
-        Why a signal is not fresh (``"status BadSensorFailure"``, ``"3.2 s old"``,
-        ``"disconnected"``), for those that are not; empty when all are fresh.
-    source_time : float or None
-        The newest source timestamp among them [s since the epoch].
-    """
-
-    values: dict[str, float]
-    stale: dict[str, str] = field(default_factory=dict)
-    source_time: float | None = None
-
-    @property
-    def fresh(self) -> bool:
-        """Whether every signal is fresh (Good status, recent source timestamp)."""
-        return not self.stale
 
 
 class PlantSession:

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-from cosim.core.component import Component, Signal
+from cosim.core.component import Capability, Component, Signal
 
 
 class AmbientP(Component):
@@ -18,6 +18,8 @@ class AmbientP(Component):
     outputs = (Signal("P", "W"),)
     direct_feedthrough = True
     sample_time = 20.0
+    #: it measures a disturbance, whose nominal value it declares
+    capabilities = frozenset({Capability.DISTURBANCES})
     disturbance_defaults = {"T_in": 20.0}   # noqa: RUF012 - read-only
 
     def __init__(self, Kp: float = 100.0, Kff: float = 50.0) -> None:

@@ -1,13 +1,15 @@
-"""The real-time loop of a run against a live plant, and its answer to every fault.
+"""The wall clock of a run against a live plant, and its answer to every fault.
 
-Each sample ``k`` (every ``period = Ts / speed`` seconds of the wall clock): wait for the
-sample's instant, read the outputs and measured disturbances, step the controller, write the
-inputs, record the row. The loop locks its phase to the plant's samples when the plant
-republishes its values every sample (as ``cosim serve-plant`` does): it reads just after the
-plant's new sample and writes before the next one, so that the closed loop is the
-co-simulation master's (zero-order hold) to the bit.
+:class:`WallClock` is the pacer (:mod:`cosim.core.pacing`) of a live run: the run's loop is
+the co-simulation's (:class:`cosim.core.loop.Run`), with the plant's I/O over OPC UA
+(:class:`cosim.live.plant.LivePlant`). Each sample ``k`` (every ``period = Ts / speed``
+seconds of the wall clock): wait for the sample's instant, read the outputs and measured
+disturbances, step the controller, write the inputs, record the row. The clock locks its
+phase to the plant's samples when the plant republishes its values every sample (as
+``cosim serve-plant`` does): it reads just after the plant's new sample and writes before the
+next one, so that the closed loop is the co-simulation master's (zero-order hold) to the bit.
 
-What a live process does, and what the loop does then (each counted in ``summary.json``'s
+What a live process does, and what the run does then (each counted in ``summary.json``'s
 ``live`` and marked in ``results.csv``'s ``live.*`` columns):
 
 ============================  ==============================================================
@@ -42,15 +44,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cosim.core.loop import Run
-from cosim.core.run_result import RowSink
+from cosim.core.pacing import Pacer, Reading
 from cosim.core.scenario import DIST, PLANT
 
 if TYPE_CHECKING:
-    from cosim.core.master import Master
+    from cosim.core.loop import Run
     from cosim.live.plant import LivePlant
 
-__all__ = ["DEADLINE", "LiveConfig", "LiveRun"]
+__all__ = ["DEADLINE", "LiveConfig", "WallClock", "refused_columns"]
 
 #: The fraction of a sample within which the inputs must be written (the rest is the plant's
 #: margin before its next sample).
@@ -71,18 +72,14 @@ class LiveConfig:
     describe: dict = field(default_factory=dict)
 
 
-class LiveRun(Run):
-    """One run of a :class:`~cosim.core.master.Master` against a
-    :class:`~cosim.live.plant.LivePlant` (see the module docstring); ``master.live`` is
-    its :class:`LiveConfig`."""
+class WallClock(Pacer):
+    """The pacer of a live run (module docstring) for the plant ``plant`` and the
+    configuration ``cfg``."""
 
     own_prefixes = ("live",)
 
-    def __init__(self, master: Master, record: RowSink | None, step_timeout: float | None,
-                 deadline: float | None) -> None:
-        super().__init__(master, record, step_timeout, deadline)
-        self.cfg: LiveConfig = master.live   # type: ignore[attr-defined]
-        self.plant: LivePlant = master.plant  # type: ignore[assignment]
+    def __init__(self, plant: LivePlant, cfg: LiveConfig) -> None:
+        self.plant, self.cfg = plant, cfg
         self.counts = dict.fromkeys(("samples", "fresh", "stale", "deadline_misses",
                                      "watchdog_alarms", "safe_writes", "repeated"), 0)
         self.stale_run = 0
@@ -90,122 +87,95 @@ class LiveRun(Run):
         self.lat: list[list[float]] = []     # time, read, compute, write, late [ms]
         self.locked = False
         self.last_source: float | None = None
+        self.w0 = 0.0
+        self._sample: dict[str, float] = {}
 
     # -- start ----------------------------------------------------------------------------
-    def _start(self) -> None:
-        """Set-points, connect, set up the controller, lock onto the plant's samples."""
-        self._first_row()
-        self.plant.setup(self.t)
-        self._setup_controller(self.t)
-        self.w0 = self._lock_phase()
-
-    def _lock_phase(self) -> float:
-        """The instant of sample 0: just after the plant's next new sample when its
-        values are republished every sample (within 2.5 samples), else now."""
+    def start(self, run: Run) -> None:
+        """Lock onto the plant's samples: the instant of sample 0 is just after the plant's
+        next new sample when its values are republished every sample (within 2.5 samples),
+        else now."""
         P = self.cfg.period
-        first = self.plant.read().source_time
+        first = self.plant.read(0.0).source_time
         end = time.perf_counter() + 2.5 * P
         while first is not None and time.perf_counter() < end:
             time.sleep(min(P / 50, 0.01))
-            ts = self.plant.read().source_time
+            ts = self.plant.read(0.0).source_time
             if ts is not None and ts != first:
                 self.locked = True
-                return time.perf_counter() + READ_LAG * P
-        return time.perf_counter()
+                self.w0 = time.perf_counter() + READ_LAG * P
+                return
+        self.w0 = time.perf_counter()
 
-    # -- the loop -----------------------------------------------------------------------------
-    def _loop(self, on_step: Callable[[int], None] | None) -> None:
-        result, times, P = self.result, self.times, self.cfg.period
-        n = len(times) - 1
-        self._start()
-        self.loop0 = time.perf_counter()
-        k = 0
-        while True:
-            self.t = t = times[k]
-            self._apply_events(t)
-            due = self.w0 + k * P
-            wait = due - time.perf_counter()
-            if wait > 0:
-                time.sleep(wait)
-            self._sample(t, due, due + DEADLINE * P)
-            if k == n:
-                break
-            k += 1
-            result.steps = k
-            if on_step is not None:
-                on_step(k)
-            self._check_interrupt()
+    # -- each sample ------------------------------------------------------------------------
+    def wait(self, k: int) -> None:
+        """Until sample ``k``'s instant; its deadline for the inputs follows."""
+        P = self.cfg.period
+        due = self.w0 + k * P
+        wait = due - time.perf_counter()
+        if wait > 0:
+            time.sleep(wait)
+        self.counts["samples"] += 1
+        self._sample = {"due": due, "deadline": due + DEADLINE * P, "on_time": 0.0,
+                        "written": 0.0, "safe": 0.0, "compute": math.nan,
+                        "write": math.nan}
 
-    def _sample(self, t: float, due: float, deadline: float) -> None:
-        """Read, control, write and record sample ``t``."""
-        c = self.counts
-        c["samples"] += 1
-        r0 = time.perf_counter()
-        reading = self._read()
-        r1 = time.perf_counter()
-        y = reading.values
-        for d in self.m.dists:
-            self.dist[d] = y.get(d, math.nan)
-        compute = write = math.nan
-        on_time = written = safe = 0.0
-        if reading.fresh:
-            c["fresh"] += 1
-            if self.cfg.watchdog is not None and self.stale_run >= self.cfg.watchdog:
-                self.cfg.notice(f"alarm cleared at t = {t:g} s: fresh measurements, control "
-                                "resumed")
-            self.stale_run = 0
-            ym = self._sensed(t, y)
-            u_prev = self.u
-            self._control(t, ym)
-            r2 = time.perf_counter()
-            compute = r2 - r1
-            if r2 <= deadline:
-                on_time = 1.0
-                written = float(self.plant.write(self.u))
-                write = time.perf_counter() - r2
-            else:
-                c["deadline_misses"] += 1
-                self.u = u_prev if u_prev else {u: math.nan for u in self.m.ctrl_outputs}
-        else:
-            ym = y
-            c["stale"] += 1
-            self.stale_run += 1
-            for key in {why if not why.endswith(" s old") else "older than a sample"
-                        for why in reading.stale.values()}:
-                self.reasons[key] = self.reasons.get(key, 0) + 1   # samples, per reason
-            self.diag = dict.fromkeys(self.diag, math.nan)
-            if not self.u:
-                self.u = {u: math.nan for u in self.m.ctrl_outputs}
-            safe = float(self._watchdog(t, reading))
-        self.diag = {**self.diag, "live.fresh": float(reading.fresh), "live.on_time": on_time,
-                     "live.written": written, "live.safe": safe}
-        self._record(t, y, ym)
-        ms = 1e3
-        self.lat.append([t, (r1 - r0) * ms, compute * ms, write * ms, (r0 - due) * ms])
-
-    def _read(self) -> Any:
+    def read(self, run: Run, t: float) -> Reading:
         """The plant's measurements; a repeat of the last sample (the plant's next one not
         out yet) is read again for up to a tenth of a sample."""
-        reading = self.plant.read()
+        s = self._sample
+        s["r0"] = time.perf_counter()
+        reading = self.plant.read(t)
         if self.locked and reading.fresh and reading.source_time == self.last_source:
             end = time.perf_counter() + 0.1 * self.cfg.period
             while reading.source_time == self.last_source and time.perf_counter() < end:
                 time.sleep(self.cfg.period / 200)
-                reading = self.plant.read()
+                reading = self.plant.read(t)
             if reading.source_time == self.last_source:
                 self.counts["repeated"] += 1
         self.last_source = reading.source_time
+        s["r1"] = time.perf_counter()
+        if reading.fresh:
+            self._fresh(t)
         return reading
 
-    def _sensed(self, t: float, y: dict[str, float]) -> dict[str, float]:
-        """What the controller measures: ``y``, through the scenario's sensor model."""
-        if self.sensor is None:
-            return y
-        self.sensor.set_inputs(y)
-        self.sensor.step(t, self.m.dt)
-        return self.sensor.get_outputs()
+    def _fresh(self, t: float) -> None:
+        self.counts["fresh"] += 1
+        if self.cfg.watchdog is not None and self.stale_run >= self.cfg.watchdog:
+            self.cfg.notice(f"alarm cleared at t = {t:g} s: fresh measurements, control "
+                            "resumed")
+        self.stale_run = 0
 
-    def _watchdog(self, t: float, reading: Any) -> bool:
+    def on_time(self) -> bool:
+        """Whether the controller's inputs came within the sample's deadline."""
+        s = self._sample
+        s["r2"] = now = time.perf_counter()
+        s["compute"] = now - s["r1"]
+        if now <= s["deadline"]:
+            s["on_time"] = 1.0
+            return True
+        self.counts["deadline_misses"] += 1
+        return False
+
+    def written(self, ok: bool) -> None:
+        s = self._sample
+        s["written"] = float(ok)
+        s["write"] = time.perf_counter() - s["r2"]
+
+    def stale(self, run: Run, t: float, reading: Reading) -> None:
+        """Count the stale sample by reason, hold the inputs, and after ``watchdog`` such
+        samples in a row write the safe inputs with one alarm line."""
+        self.counts["stale"] += 1
+        self.stale_run += 1
+        for key in {why if not why.endswith(" s old") else "older than a sample"
+                    for why in reading.stale.values()}:
+            self.reasons[key] = self.reasons.get(key, 0) + 1   # samples, per reason
+        run.diag = dict.fromkeys(run.diag, math.nan)
+        if not run.u:
+            run.u = dict.fromkeys(run.m.ctrl_outputs, math.nan)
+        self._sample["safe"] = float(self._watchdog(run, t, reading))
+
+    def _watchdog(self, run: Run, t: float, reading: Reading) -> bool:
         """After ``watchdog`` stale samples in a row: the safe inputs and one alarm line."""
         n = self.cfg.watchdog
         if n is None or self.stale_run != n:
@@ -214,7 +184,7 @@ class LiveRun(Run):
         written = self.plant.write_safe()
         if written:
             self.counts["safe_writes"] += 1
-            self.u = {**self.u, **written}
+            run.u = {**run.u, **written}
         units = {s.name: s.unit for s in self.plant.inputs}
         what = (", ".join(f"{k} = {v:g} {units[k]}" for k, v in written.items())
                 if written else "none written (inputs hold their last values)")
@@ -223,12 +193,20 @@ class LiveRun(Run):
                         f"({why}); safe inputs: {what}")
         return bool(written)
 
+    def sampled(self, run: Run, t: float, reading: Reading) -> None:
+        """The sample's ``live.*`` columns and its latencies."""
+        s = self._sample
+        run.diag = {**run.diag, "live.fresh": float(reading.fresh), "live.on_time": s["on_time"],
+                    "live.written": s["written"], "live.safe": s["safe"]}
+        ms = 1e3
+        self.lat.append([t, (s["r1"] - s["r0"]) * ms, s["compute"] * ms, s["write"] * ms,
+                         (s["r0"] - s["due"]) * ms])
+
     # -- the end --------------------------------------------------------------------------------
-    def _finish(self) -> None:
-        """The controller and plant wound up (safe inputs written), then the live summary
-        and the latencies (``timings.csv``)."""
-        super()._finish()
-        result = self.result
+    def finish(self, run: Run) -> None:
+        """The live summary and the latencies (``timings.csv``), after the controller and
+        the plant were wound up (the safe inputs written)."""
+        result = run.result
         lat = np.array(self.lat, dtype=float).reshape(-1, 5)
         ctrl_rows = {row[0]: row[1:] for row in result.timing_rows}
         extra = result.timing_columns[1:]
