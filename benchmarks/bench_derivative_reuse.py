@@ -65,7 +65,7 @@ def capture(seconds: float | None) -> list[dict[str, np.ndarray]]:
 
 def solver(reuse: float) -> kernel_sqp.KernelSQP:
     """The tracking law's kernel SQP with ``reuse_step = reuse``."""
-    fh = registry.create("robust-mpc", OPTIONS).fhocp.setup()
+    fh = registry.create("robust-mpc", OPTIONS).mpc.fhocp.setup()
     sqp = fh._buffer[0]
     if not isinstance(sqp, kernel_sqp.KernelSQP):
         raise SystemExit("bench_derivative_reuse: no compiled kernel (cosim build-kernel)")

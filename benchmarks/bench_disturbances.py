@@ -104,7 +104,7 @@ def closed_loop(model_path: Path, scenario_path: Path) -> list[float]:
     result = Master(plant, ctrl, scenarios.load(scenario_path)).run()
     if result.status != "ok":
         raise SystemExit(f"bench_disturbances: the run failed: {result.reason}")
-    if ctrl.fhocp.kernel is None:
+    if ctrl.mpc.fhocp.kernel is None:
         raise SystemExit("bench_disturbances: no compiled kernel (gcc?)")
     return times
 

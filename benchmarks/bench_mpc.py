@@ -51,6 +51,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from controllers.laws.paper.reference import FixedSetpoint  # noqa: E402
 from controllers.ocp.fhocp import FHOCP  # noqa: E402
 from cosim.core.component import Component  # noqa: E402
 from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
@@ -98,13 +99,13 @@ class TimedController(Component):
         self.ctrl.step(t, dt)
         self.wall_ms.append((time.perf_counter() - w0) * 1e3)
         self.cpu_ms.append((time.thread_time() - c0) * 1e3)
-        mpc = self.ctrl.law.mpc
+        mpc = self.ctrl.mpc.law.mpc
         rec = mpc.records[-1]
         self.u.append(rec.u.copy())
         if self.others:
             self.problems.append((rec.x_hat.copy(), rec.e_o, np.array(mpc.x_bar, copy=True),
                                   np.array(mpc.u_bar, copy=True), mpc.alpha))
-            fh = self.ctrl.fhocp   # the solver's argument buffer still holds its start
+            fh = self.ctrl.mpc.fhocp   # the solver's argument buffer still holds its start
             self.starts.append(fh._buffer[2]["x0"][fh.iu].reshape(fh.N, fh.m).copy())
         for name, fh in self.others.items():
             r = fh.solve(*self.problems[-1])
@@ -127,7 +128,7 @@ def closed_loop(ctrl: RobustMPCController, scenario: Path, plant_kind: str, step
     else:
         from cosim_adapters.gru_plant import GRUPlant
 
-        plant = GRUPlant(ctrl.model, y0=np.array([0.65, 0.65]))
+        plant = GRUPlant(ctrl.mpc.model, y0=np.array([0.65, 0.65]))
     timed = TimedController(ctrl, others)
     result = Master(plant, timed, sc).run()
     if result.status != "ok":
@@ -144,8 +145,8 @@ def compare_kernel(args: argparse.Namespace) -> None:
     plant = args.plant or ("fmu" if (ROOT / "fmus" / "FourTank.fmu").exists() else "model")
     variants = {"compiled": RobustMPCController(law=LAW),
                 "numpy": RobustMPCController(law=LAW, kernel="numpy")}
-    if variants["compiled"].fhocp.kernel is None:
-        reason = variants["compiled"].fhocp.kernel_error
+    if variants["compiled"].mpc.fhocp.kernel is None:
+        reason = variants["compiled"].mpc.fhocp.kernel_error
         raise SystemExit(f"bench_mpc: no compiled kernel ({reason})")
     wall = {k: [] for k in variants}
     cpu = {k: [] for k in variants}
@@ -155,13 +156,14 @@ def compare_kernel(args: argparse.Namespace) -> None:
         for name, ctrl in variants.items():
             others = {}
             if name == "compiled" and args.reference and r == 0:
-                others["ipopt"] = FHOCP.from_certificate(ctrl.cert, solver="ipopt",
+                others["ipopt"] = FHOCP.from_certificate(ctrl.mpc.cert, reference=FixedSetpoint(),
+                                                         solver="ipopt",
                                                          ipopt_options={"tol": 1e-10,
                                                                         "max_iter": 500})
                 others["ipopt"].setup()
             t = closed_loop(ctrl, Path(args.scenario), plant, args.steps, others)
             if others:
-                reference = (t, list(ctrl.law.mpc.records))
+                reference = (t, list(ctrl.mpc.law.mpc.records))
             wall[name] += t.wall_ms
             cpu[name] += t.cpu_ms
             last[name] = t
@@ -169,7 +171,7 @@ def compare_kernel(args: argparse.Namespace) -> None:
                   f"{_p(t.wall_ms, 99):6.2f} ms (wall)", flush=True)
     n = len(last["compiled"].wall_ms)
     print(f"\nplant {plant}; {n} steps × {args.rounds} rounds each; model n="
-          f"{variants['compiled'].model.n}, N={variants['compiled'].fhocp.N}; load average "
+          f"{variants['compiled'].mpc.model.n}, N={variants['compiled'].mpc.fhocp.N}; load average "
           f"{os.getloadavg()[0]:.2f} at the end")
     for metric, data in (("wall", wall), ("thread CPU", cpu)):
         c, b = data["compiled"], data["numpy"]
@@ -191,7 +193,8 @@ def compare_kernel(args: argparse.Namespace) -> None:
     if reference is not None:
         report_reference(*reference)
     if args.plain:
-        plain = FHOCP.from_certificate(variants["numpy"].cert, formulation="multiple-shooting",
+        plain = FHOCP.from_certificate(variants["numpy"].mpc.cert, reference=FixedSetpoint(),
+                                       formulation="multiple-shooting",
                                        ipopt_options=PLAIN_OPTIONS).setup()
         t = closed_loop(RobustMPCController(law=LAW), Path(args.scenario), plant, args.steps,
                         {"plain": plain})
@@ -212,7 +215,7 @@ def report_reference(timed: TimedController, recs: list) -> None:
           f"{len(rel)} steps where both converged: relative cost difference within 1e-6 at "
           f"{np.mean(np.abs(rel) <= 1e-6) * 100:.1f} %, median {np.median(rel):.1e}, "
           f"largest {np.max(rel):.1e} (compiled costlier), {np.min(rel):.1e} (cheaper)")
-    ip = FHOCP.from_certificate(timed.ctrl.cert, solver="ipopt",
+    ip = FHOCP.from_certificate(timed.ctrl.mpc.cert, reference=FixedSetpoint(), solver="ipopt",
                                 ipopt_options={"tol": 1e-10, "max_iter": 500}).setup()
     # the same problem from the same start: tight IPOPT from the compiled solve's own initial
     # guess (cold multipliers), so that both solvers look for the optimum in the same place
@@ -278,7 +281,7 @@ class SplitController(TimedController):
     def step(self, t: float, dt: float) -> None:
         super().step(t, dt)
         try:
-            st = self.ctrl.fhocp._buffer[0].stats()
+            st = self.ctrl.mpc.fhocp._buffer[0].stats()
         except RuntimeError:   # no stats after an aborted solve: the step is left out
             return
         now = np.array([st.get(key, 0.0) * 1e3 for _, key in SPLIT])
@@ -349,7 +352,7 @@ def _scaling_rounds(cases: list[dict[str, Any]], rounds: int) -> None:
         for case in cases:
             for kernel, ctrl in case["ctrls"].items():
                 timed = SplitController(ctrl)
-                result = Master(GRUPlant(ctrl.model, y0=case["y0"]), timed,
+                result = Master(GRUPlant(ctrl.mpc.model, y0=case["y0"]), timed,
                                 case["scenario"]).run()
                 if result.status != "ok" or not timed.wall_ms:
                     raise SystemExit(f"bench_mpc: n={case['n']}, N={case['N']} "
@@ -363,7 +366,7 @@ def _scaling_report(case: dict[str, Any]) -> tuple[Any, ...]:
     """Print one size's medians, p99s and splits; its row for the fits."""
     n, N, ctrls, meds = case["n"], case["N"], case["ctrls"], case["meds"]
     med = {k: (float(np.median(meds[k])), float(np.median(case["p99s"][k]))) for k in ctrls}
-    fh = ctrls["auto"].fhocp
+    fh = ctrls["auto"].mpc.fhocp
     variant = "numpy" if fh.kernel is None else next(
         (name for flag, name in (("-DGK_CONTRACT", "contract"), ("-DGK_BACKWARD", "backward"))
          if flag in fh.kernel.flags), "w")

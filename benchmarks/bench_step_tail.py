@@ -78,7 +78,7 @@ def timing(module, cls, name, key):
     setattr(owner, name, g)
 
 timing("controllers.kernel.kernel_sqp", "KernelSQP", "solve", "sqp")
-timing("cosim_adapters.paper_law", "PaperLaw", "_update_reference", "setpoint")
+timing("controllers.laws.paper.law", "PaperLaw", "_update_reference", "setpoint")
 
 def timed(self, t, dt):
     acc["sqp"] = acc["setpoint"] = 0.0

@@ -107,7 +107,7 @@ def closed_loop(kernel: str = "auto", max_iter: int = CAP,
 
     with sqp_settings(sqp or {}):
         ctrl = RobustMPCController(law="paper", kernel=kernel, max_iter=max_iter)
-    fh, solves, before = ctrl.fhocp, [], dict.fromkeys(TIMERS, 0.0)
+    fh, solves, before = ctrl.mpc.fhocp, [], dict.fromkeys(TIMERS, 0.0)
     solve = fh.solve
 
     def recorded(x_hat: np.ndarray, e_o: float, x_bar: np.ndarray, u_bar: np.ndarray,
@@ -154,9 +154,9 @@ def report_timers(solves: list[dict[str, Any]]) -> None:
 
 
 def report_active_sets(ctrl: Any, solves: list[dict[str, Any]]) -> None:
-    p = ctrl.fhocp._nlp.p
+    p = ctrl.mpc.fhocp._nlp.p
     n_out = (p.N - 1) * p.qr
-    iu = ctrl.fhocp.iu.ravel()
+    iu = ctrl.mpc.fhocp.iu.ravel()
     counts = np.array([[np.sum(np.abs(s["result"].lam_g[n_out:]) > 1e-10),
                         np.sum(np.abs(s["result"].lam_g[:n_out]) > 1e-10),
                         np.sum(np.abs(s["result"].lam_x[iu]) > 1e-10)] for s in solves])
@@ -171,7 +171,7 @@ def report_active_sets(ctrl: Any, solves: list[dict[str, Any]]) -> None:
 def report_hessian(ctrl: Any, solves: list[dict[str, Any]]) -> None:
     k = next(i for i, s in enumerate(solves) if s["iterations"] >= CAP)
     first = solves[k]
-    nlp, w, p = ctrl.fhocp._nlp, first["w"], first["p"]
+    nlp, w, p = ctrl.mpc.fhocp._nlp, first["w"], first["p"]
     lg = first["result"].lam_g
     H = nlp.hessian(w, p, np.array([1.0]), lg)
 
@@ -235,7 +235,7 @@ PATH_TOL = 1e-3
 
 def first_inputs(ctrl: Any, solves: list[dict[str, Any]]) -> np.ndarray:
     """Each solve's answer's first input (normalised, ``solves × m``)."""
-    m = ctrl.fhocp.m
+    m = ctrl.mpc.fhocp.m
     return np.array([np.asarray(s["result"].u, dtype=float).reshape(-1, m)[0] for s in solves])
 
 
@@ -244,7 +244,7 @@ def report_paths(ctrl: Any, uncapped: list[dict[str, Any]]) -> None:
     ``max_iter=200``, ``ctrl`` its controller (its kernel SQP replays the solves)."""
     from controllers.kernel.kernel_sqp import STATUS
 
-    sqp = ctrl.fhocp._buffer[0]
+    sqp = ctrl.mpc.fhocp._buffer[0]
     if not hasattr(sqp, "options"):
         print("6. needs the compiled kernel's SQP (loop=\"kernel\")")
         return
@@ -259,7 +259,7 @@ def report_paths(ctrl: Any, uncapped: list[dict[str, Any]]) -> None:
                 sqp.ins[key][:] = value
             sqp.solve()
             answers.append((STATUS[sqp.info.status], float(sqp.outs["f"][0]),
-                            sqp.outs["x"][: ctrl.fhocp.m].copy()))
+                            sqp.outs["x"][: ctrl.mpc.fhocp.m].copy()))
         (st0, f0, u0), (st1, f1, u1) = answers
         if st0 == st1 == "Solve_Succeeded" and np.max(np.abs(u0 - u1)) > PATH_TOL:
             apart.append(f"step {k}: cost {f0:.4f} / {f1:.4f}, first input "

@@ -25,6 +25,7 @@ __all__ = [
     "FHOCPResult",
     "GRUModel",
     "GRUObserver",
+    "MPCOptions",
     "ReferenceGovernor",
     "RobustMPC",
     "choose_gain_scale",
@@ -43,9 +44,10 @@ _EXPORTS = {
     "equilibrium": ("controllers.equilibrium", "equilibrium"),
     "FHOCP": ("controllers.ocp.fhocp", "FHOCP"),
     "FHOCPResult": ("controllers.ocp.fhocp", "FHOCPResult"),
-    "RobustMPC": ("controllers.ocp.paper_mpc", "RobustMPC"),
+    "RobustMPC": ("controllers.mpc", "RobustMPC"),
+    "MPCOptions": ("controllers.mpc_options", "MPCOptions"),
     "GRUObserver": ("controllers.observer", "GRUObserver"),
-    "ReferenceGovernor": ("controllers.ocp.governor", "ReferenceGovernor"),
+    "ReferenceGovernor": ("controllers.laws.paper.governor", "ReferenceGovernor"),
     "ControllersError": ("controllers.errors", "ControllersError"),
 }
 

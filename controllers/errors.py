@@ -10,8 +10,8 @@ computation that failed (exit 1).
 from __future__ import annotations
 
 __all__ = ["CertificateError", "ControllersError", "DataError", "DesignError",
-           "ModelFileError", "ProblemFileError", "SetpointError", "SolverError",
-           "TrainingError", "UnreachableSetpoint"]
+           "ModelFileError", "OptionError", "ProblemFileError", "SetpointError", "SolverError",
+           "StepInputError", "TrainingError", "UnreachableSetpoint"]
 
 
 class ControllersError(Exception):
@@ -29,6 +29,16 @@ class ProblemFileError(ControllersError, ValueError):
 
 class DesignError(ControllersError, ValueError):
     """A design argument out of range: horizon, weights, observer gains, ``ê_o,0``."""
+
+
+class OptionError(DesignError):
+    """An option of the robust MPC of the wrong type or range, unknown, or of another law
+    (names the option: ``option N=0: ...``)."""
+
+
+class StepInputError(ControllersError, ValueError):
+    """A controller step's input never set or not finite (names the controller and the
+    input)."""
 
 
 class CertificateError(ControllersError, ValueError):

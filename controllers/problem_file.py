@@ -40,7 +40,7 @@ A problem file declares the plant's signals in its own names and units::
     sigma_z_max = 0.9              # cosim train's options (cosim.commands.train)
 
     [mpc]                          # optional: the robust MPC's tuning for this plant
-    Q = "outputs"                  # any robust-mpc option (cosim_adapters.mpc_options)
+    Q = "outputs"                  # any robust-mpc option (controllers.mpc_options)
     R = 0.001
 
 The ``[train]`` and ``[mpc]`` tables hold what was chosen for this plant: ``cosim train``'s
@@ -48,7 +48,7 @@ modelling options and the robust MPC's options (keys as ``--option``'s). They tr
 problem into the data sidecar and the model file, and an option given on the command line
 overrides them. Their keys are checked here for form only (names, TOML values); their meaning
 and values by what takes them (:data:`cosim.commands.train.PROBLEM_OPTIONS`,
-:meth:`cosim_adapters.mpc_options.MPCOptions.resolve`; errors located by :func:`locate_key`).
+:meth:`controllers.mpc_options.MPCOptions.resolve`; errors located by :func:`locate_key`).
 
 Every fault is a :class:`~controllers.errors.ProblemFileError` (exit 2) naming the file and
 line: invalid TOML, an unknown key, a missing ``unit``/``min``/``max``/``Ts``/``name``,

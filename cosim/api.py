@@ -144,7 +144,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         Called with the number of completed steps (progress bars).
     on_notice : callable, optional
         Called, before the run, with the controller's one-line notice when it has one (the
-        robust MPC's: why it runs uncertified, :mod:`cosim_adapters.certification`); a live
+        robust MPC's: why it runs uncertified, :mod:`controllers.certification.grade`); a live
         run's alarms too.
     live : cosim.live.runner.LiveOptions, optional
         How a live plant is met (tags, speed, watchdog, security); default: its defaults.

@@ -1,6 +1,7 @@
 """Tuning the robust MPC on its model: the cost weights chosen as the PI baseline is tuned.
 
-:func:`tune` runs the robust MPC (its tracking law) with the weightings of :data:`CANDIDATES`,
+:func:`tune` runs the robust MPC (its default law, :data:`controllers.laws.DEFAULT`, or the law
+asked for) with the weightings of :data:`CANDIDATES`,
 and the PI baseline tuned from the same model, in closed loop with the GRU model itself as the
 plant (``plant = "model:…"``: no FMU needed) on a set-point scenario (given, else
 :func:`scenario`: steps between four steady outputs of the model, each held six of its slowest
@@ -64,6 +65,8 @@ class TuneResult:
         the default weights.
     hint : str or None
         What to do when no weighting beats the PI (:func:`hint`).
+    law : str or None
+        The law tuned (``None``: the default law, :data:`controllers.laws.DEFAULT`).
     scenario : Path or None
         The scenario given (``None``: the generated one).
     saved : bool
@@ -76,11 +79,13 @@ class TuneResult:
     hint: str | None = None
     scenario: Path | None = None
     saved: bool = False
+    law: str | None = None
 
     @property
     def options(self) -> dict[str, Any]:
-        """The chosen weighting's robust-MPC options."""
-        return dict(CANDIDATES[self.chosen])
+        """The chosen weighting's robust-MPC options (with its law, when not the
+        default)."""
+        return {**({"law": self.law} if self.law else {}), **CANDIDATES[self.chosen]}
 
     def to_dict(self) -> dict[str, Any]:
         """Plain data (``cosim tune --json``)."""
@@ -90,8 +95,9 @@ class TuneResult:
 
 def tune(model: str | Path, scenario_file: str | Path | None = None, *,
          tv_ratio: float = 1.2, save: bool = False, progress: bool = False,
-         workers: int = 0) -> TuneResult:
-    """Tune the robust MPC's weights on ``model`` (module docstring). The closed loops run
+         workers: int = 0, law: str | None = None) -> TuneResult:
+    """Tune the robust MPC's weights on ``model`` (module docstring) for its law ``law``
+    (default: :data:`controllers.laws.DEFAULT`). The closed loops run
     in ``workers`` processes (0: one per CPU, at most one per run, unless the runs are short:
     :data:`WORKER_STEPS`; 1: in this process): the same answer either way. Interrupted
     (Ctrl-C), the workers are stopped and the model file is left as it was.
@@ -107,10 +113,15 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
     OutputError
         ``save``: the model file could not be written (it keeps its previous content).
     """
+    from controllers import laws
     from controllers.errors import ControllersError
     from controllers.model import GRUModel
     from cosim.core.errors import CosimError, ParameterError
 
+    try:
+        law = None if law is None or laws.spec(law).name == laws.DEFAULT else law
+    except ControllersError as exc:
+        raise CosimError(str(exc)) from None
     if not (isinstance(tv_ratio, int | float) and math.isfinite(tv_ratio) and tv_ratio > 0):
         raise ParameterError("tv_ratio", f" must be a positive number, got {tv_ratio!r}")
     if isinstance(workers, bool) or not isinstance(workers, int) or workers < 0:
@@ -125,15 +136,16 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
     square = gru.problem.m == gru.problem.p
     with tempfile.TemporaryDirectory(prefix="cosim-tune-") as tmp:
         sc = Path(scenario_file) if scenario_file else scenario(gru, Path(tmp) / "steps.csv")
-        results = _closed_loops(model, sc, square, progress, workers, gru.problem.Ts)
+        results = _closed_loops(model, sc, square, progress, workers, gru.problem.Ts,
+                                law or laws.DEFAULT)
     base = results.pop("pi") if square else results["defaults"]
     rows = {n: {"iae": r["iae"] / base["iae"],
                 "tv": r["tv"] / base["tv"] if base["tv"] else 0.0,
                 "violations": r["violations"]} for n, r in results.items()}
     best = choose(rows, tv_ratio)
     result = TuneResult(rows, best, "pi" if square else "defaults",
-                        hint(gru, rows, best) if square else None,
-                        Path(scenario_file) if scenario_file else None)
+                        hint(gru, rows, best, law or laws.DEFAULT) if square else None,
+                        Path(scenario_file) if scenario_file else None, law=law)
     if save:
         _save(Path(model), gru, result.options)
         result.saved = True
@@ -141,7 +153,7 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
 
 
 def _closed_loops(model: str | Path, sc: Path, square: bool, progress: bool, workers: int,
-                  ts: float) -> dict[str, dict[str, float]]:
+                  ts: float, law: str) -> dict[str, dict[str, float]]:
     """:func:`_score` of the PI (square plants) and of every candidate, the model as the
     plant: in ``workers`` spawned processes (0: one per CPU, at most one per run, when the
     runs have more than :data:`WORKER_STEPS` steps together, else 1; 1: in this process), one
@@ -156,7 +168,8 @@ def _closed_loops(model: str | Path, sc: Path, square: bool, progress: bool, wor
     runs: dict[str, Any] = {"pi": None, **CANDIDATES} if square else dict(CANDIDATES)
     loaded = scenario_mod.load(sc)
     steps = len(communication_times(loaded.start_time, loaded.stop_time, ts)) - 1
-    jobs = [(name, str(model), str(sc), options) for name, options in runs.items()]
+    jobs = [(name, str(model), str(sc), None if options is None else {"law": law, **options})
+            for name, options in runs.items()]
     if not workers:   # a worker takes about a second to start: not worth it for short runs
         workers = (min(len(jobs), os.cpu_count() or 1) if steps * len(jobs) > WORKER_STEPS
                    else 1)
@@ -187,7 +200,7 @@ def _closed_loop(job: tuple[str, str, str, Any], tick: Any = None) -> dict[str, 
 
     name, model, sc, options = job
     controller = "pi" if options is None else "robust-mpc"
-    opts = {"law": "tracking", **options} if options is not None else {}
+    opts = dict(options) if options is not None else {}
     out = cosim.run(sc, plant=f"model:{model}", controller=controller, model=model,
                     options=opts, seed=0, on_step=tick)
     if out.status != "ok":
@@ -256,7 +269,8 @@ def choose(rows: dict[str, dict[str, float]], tv_ratio: float) -> str:
     return min(ok, key=lambda n: rows[n]["iae"]) if ok else "defaults"
 
 
-def hint(model: Any, rows: dict[str, dict[str, float]], best: str) -> str | None:
+def hint(model: Any, rows: dict[str, dict[str, float]], best: str,
+         law: str | None = None) -> str | None:
     """What to do when no weighting beats the PI on the model (``None`` when one does): with
     a slow certified contraction, the terminal weight ``s = n λ_max(Q) / (1 − ρ_s²)``
     (``eq:definition_s``) makes every horizon's end costly, and only a model trained to
@@ -265,11 +279,11 @@ def hint(model: Any, rows: dict[str, dict[str, float]], best: str) -> str | None
         return None
     from controllers.certification.certificates import compute_certificate
     from controllers.disturbances import condition
-    from cosim_adapters.mpc_options import MPCOptions
-    from cosim_adapters.robust_mpc import design_arguments
+    from controllers.mpc_options import MPCOptions, design_arguments
 
     text = f"no weighting beats the PI on the model (the best: {rows[best]['iae']:.2f}x its IAE)"
-    options = MPCOptions.resolve({"law": "tracking", **CANDIDATES[best]}, model.problem)
+    given = {**({"law": law} if law else {}), **CANDIDATES[best]}
+    options = MPCOptions.resolve(given, model.problem)
     model = condition(model)   # measured disturbances held: the controller's design
     cert = compute_certificate(model, gain_scale=0.0, **design_arguments(options, model))
     if cert.rho_s > RHO_HINT:

@@ -35,7 +35,7 @@ def fmu_identifier(out: str | Path) -> str:
 
 def _why_not(ctrl: Any) -> str:
     """Why ``ctrl`` cannot be exported (empty: it can)."""
-    fhocp = ctrl.fhocp
+    fhocp = ctrl.mpc.fhocp
     if fhocp.kernel is None or not fhocp._compiled_loop:
         reason = fhocp.kernel_error or "the options select another solver"
         return f"the controller FMU runs the compiled kernel's SQP, unavailable here ({reason})"
@@ -51,7 +51,6 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     ``out``. Raises :class:`CosimError` (one line) when it cannot be exported or built."""
     from controllers.kernel.compiled_kernel import PREFIX_PLACEHOLDER, variant_flags
     from controllers.kernel.controller_source import (
-        ControllerDesign,
         design_data,
         generate_source,
         parameters,
@@ -63,23 +62,19 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     why = _why_not(ctrl)
     if why:
         raise CosimError(f"cannot export {ctrl.model_path}: {why}")
-    law = ctrl.law
-    if law.name == "paper":
-        design = ControllerDesign.of_paper(law, ctrl.observer, ctrl.model, ctrl._lo, ctrl._hi)
-        title = "paper's law" + (", offset-free" if law.handling.offset_free else "")
-    else:
-        design = ControllerDesign.of(ctrl.fhocp, ctrl.observer, law.disturbance.beta,
-                                     law.certified, ctrl.model, ctrl._lo, ctrl._hi)
-        title = "tracking law"
+    mpc = ctrl.mpc
+    spec = mpc.options.spec
+    design = mpc.export_design()
+    title = spec.hook("export", "title")(mpc.law)
     source = generate_source(design).replace(PREFIX_PLACEHOLDER, "mpc_")
     flags, _ = variant_flags(design.kernel, (), blas=False)
     pr = ctrl.problem
     digest = hashlib.sha256(source.encode()).hexdigest()
-    certified = "certified" if ctrl.certification.certified else "uncertified"
+    certified = "certified" if mpc.certification.certified else "uncertified"
     iface = ControllerInterface(
         identifier=fmu_identifier(out), token="{" + str(uuid.UUID(hex=digest[:32])) + "}",
         description=(f"Robust GRU MPC (Schimperna & Magni), {title}, {certified}: model "
-                     f"{Path(ctrl.model_path).name}, problem {pr.name}, N={ctrl.fhocp.N}"),
+                     f"{Path(ctrl.model_path).name}, problem {pr.name}, N={mpc.fhocp.N}"),
         sample_time=float(ctrl.sample_time),
         measured=tuple(Port(c.name, c.unit, c.min, c.max, c.description or "",
                             c.variable) for c in pr.outputs),

@@ -61,7 +61,7 @@ def intervals(folder: Path, points: int = 81) -> pd.DataFrame:
         raise SystemExit(f"{folder}: not a campaign with a GRU-model plant")
     ctrl = RobustMPCController(law="tracking", model=spec.plant.removeprefix("model:"),
                                **{k: v for k, v in spec.options.items() if k != "law"})
-    model, fh = ctrl.model, ctrl.fhocp
+    model, fh = ctrl.mpc.model, ctrl.mpc.fhocp
     names = list(ctrl.problem.output_names)
     rhs = fh.reference.ys_bounds
     Y = steady_output_grid(model, points)

@@ -6,7 +6,7 @@ certificates` (every quantity of ``th:feasibility-stability`` for one model and 
 the observer gains (:mod:`~controllers.certification.observer_gains`,
 :mod:`~controllers.certification.gain_design`), the design arguments
 (:mod:`~controllers.certification.design`), the tracking law's hypotheses
-(:mod:`~controllers.certification.tracking_checks`), the verdict in the user's words
+(:mod:`~controllers.laws.tracking.checks`), the verdict in the user's words
 (:mod:`~controllers.certification.diagnosis`) and the measured prediction error of the
 uncertified mode (:mod:`~controllers.certification.prediction_error`).
 """

@@ -10,7 +10,7 @@ answers that for either law of the robust MPC:
   cannot be used (``cosim train`` never writes one);
 - **design**: the paper's law, the observer condition ν_o < 1
   (``eq:condition-observer-convergence``); the tracking law, its hypotheses H3–H6
-  (:mod:`controllers.certification.tracking_checks`);
+  (:mod:`controllers.laws.tracking.checks`);
 - **room in the box**: the output constraints are tightened, at the end of the horizon, by
   the model's output-error bound ``w̄_y`` and by the estimation-error and terminal-set terms;
   what is left is the set of set-points that pass (``Y_s`` for the tracking law, the box of

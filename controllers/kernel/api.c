@@ -408,6 +408,23 @@ EXPORT void PFX(counters)(const gk_ws *ws, gk_counters *out) {
 
 EXPORT void PFX(invalidate)(gk_ws *ws) { ws->mem.c_level = -1; }
 
+/* the instance's cost weights (gk_mem.rw, dw, tw: R, S = diag(dw) with HAS_DU, T = diag(tw)
+ * with HAS_ASS), set between solves (controllers/ocp/fhocp.py FHOCP.set_weight; the exported
+ * controller's tunable parameters write the same memory) */
+EXPORT void PFX(set_weights)(gk_ws *ws, const double *rw, const double *dw, const double *tw) {
+  memcpy(ws->mem.rw, rw, sizeof ws->mem.rw);
+#if HAS_DU
+  memcpy(ws->mem.dw, dw, sizeof ws->mem.dw);
+#else
+  (void)dw;
+#endif
+#if HAS_ASS
+  memcpy(ws->mem.tw, tw, sizeof ws->mem.tw);
+#else
+  (void)tw;
+#endif
+}
+
 EXPORT void PFX(set_bias_shift)(const double *db) {
 #if HAS_SHIFT
   memcpy(gk_db, db, sizeof gk_db);

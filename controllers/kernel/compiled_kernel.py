@@ -116,7 +116,7 @@ class KernelProblem:
         Input-rate weights (:mod:`controllers.ocp.input_rate`; none or all zero: no
         input-rate term, ``HAS_DU 0``).
     offset_weight : (p,) array, optional
-        The tracking law's offset weights T (:mod:`controllers.ocp.reference_tracking`: the
+        The tracking law's offset weights T (:mod:`controllers.laws.tracking.reference`: the
         artificial steady state, ``HAS_ASS 1``; none: the paper's law).
     control_horizon : int, optional
         ``M < N`` (tracking only): the free inputs ``u_0 … u_{M−1}``, the tail held at

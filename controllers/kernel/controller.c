@@ -20,7 +20,7 @@
  * ctl_new. Normalised units inside, the problem's units at ctl_step.
  *
  * Measured disturbances (CT_NQD of them) and dead time (CT_U_DELAYS samples on the inputs,
- * CT_DEAD the shortest; each disturbance its CT_LAGS): as cosim_adapters/held_inputs.py
+ * CT_DEAD the shortest; each disturbance its CT_LAGS): as controllers/held_inputs.py
  * HeldInputs (measure, hold, ahead, model_input, applied, prefix). The disturbances the FHOCP
  * holds are a shift of the biases (controllers/disturbances.py BiasShift: W_d d, CT_WD), the
  * kernel's per-thread shift (rollout.c gk_db), given at every step before the kernel's calls;

@@ -21,10 +21,16 @@
  *   law_parameter(ls, i), law_refuse(ls, i, value)
  *                       where tunable parameter i lives (NULL: none), why a value is refused
  *                       (NULL: accepted)
+ *
+ * The helpers below are marked unused: a law uses those it needs (a law without an FHOCP
+ * solve, tests/controllers/laws/steady/law.c, uses none of them).
  */
 #ifndef CT_NPARAM
 #error "the controller's constants (controller_source.py) must precede controller.h"
 #endif
+
+/* a helper a law may use (unused ones are no warning) */
+#define CTL_HELPER __attribute__((unused)) static
 
 /* the step's status codes: controllers/ocp/solve_status.py status_code */
 enum ctl_status {
@@ -73,7 +79,7 @@ typedef struct ctl_prefix {
 } ctl_prefix;
 
 /* InputPrefix.impose: the plan u (NH x NU) with its fixed stages set */
-static void prefix_impose(const ctl_prefix *pf, double *u) {
+CTL_HELPER void prefix_impose(const ctl_prefix *pf, double *u) {
 #if CT_U_LAG_MAX
   for (int i = 0; i < CT_U_LAG_MAX; i++)
     for (int j = 0; j < NU; j++)
@@ -84,7 +90,7 @@ static void prefix_impose(const ctl_prefix *pf, double *u) {
 }
 
 /* InputPrefix.bound: the fixed stages in the solver's bounds (u_i's entries of w: i NU + j) */
-static void prefix_bound(const ctl_prefix *pf, double *lbx, double *ubx) {
+CTL_HELPER void prefix_bound(const ctl_prefix *pf, double *lbx, double *ubx) {
 #if CT_U_LAG_MAX
   for (int i = 0; i < CT_U_LAG_MAX; i++)
     for (int j = 0; j < NU; j++)
@@ -95,7 +101,7 @@ static void prefix_bound(const ctl_prefix *pf, double *lbx, double *ubx) {
 }
 
 /* InputPrefix.applied: the inputs applied now from the plan (NH x NU) into u */
-static void prefix_applied(const ctl_prefix *pf, const double *plan, double *u) {
+CTL_HELPER void prefix_applied(const ctl_prefix *pf, const double *plan, double *u) {
   (void)pf;
   for (int j = 0; j < NU; j++) {
 #if CT_U_LAG_MAX
@@ -107,7 +113,7 @@ static void prefix_applied(const ctl_prefix *pf, const double *plan, double *u) 
 }
 
 /* before any step */
-static void last_reset(ctl_last *l) {
+CTL_HELPER void last_reset(ctl_last *l) {
   for (int a = 0; a < NY; a++) l->y_pred[a] = l->y_target[a] = NAN;
   l->status = CTL_OTHER;
   l->fallback = l->iterations = 0;
@@ -115,7 +121,7 @@ static void last_reset(ctl_last *l) {
 
 /* the step whose solve gave res and whose applied plan is applied's (res or the candidate's
  * check) */
-static void last_record(ctl_last *l, const ctl_result *res, const ctl_result *applied,
+CTL_HELPER void last_record(ctl_last *l, const ctl_result *res, const ctl_result *applied,
                         int fallback) {
   l->status = res->status;
   l->fallback = fallback;
@@ -123,21 +129,21 @@ static void last_record(ctl_last *l, const ctl_result *res, const ctl_result *ap
   PFX(output)(applied->x + NX, l->y_pred);
 }
 
-static int all_finite(const double *a, int n) {
+CTL_HELPER int all_finite(const double *a, int n) {
   for (int k = 0; k < n; k++)
     if (!isfinite(a[k])) return 0;
   return 1;
 }
 
 /* the status of a failed kernel SQP, as status_code names the solver's own status */
-static int sqp_status_code(int sqp) {
+CTL_HELPER int sqp_status_code(int sqp) {
   if (sqp == GK_SQP_MAXIMUM_ITERATIONS_EXCEEDED || sqp == GK_SQP_USER_REQUESTED_STOP)
     return CTL_LIMIT;
   return CTL_OTHER;
 }
 
 /* the kernel SQP's options of the design (controllers/kernel/kernel_abi.py SqpOptions) */
-static gk_sqp_opts sqp_options(void) {
+CTL_HELPER gk_sqp_opts sqp_options(void) {
   return (gk_sqp_opts){.tol_pr = CT_SQP_TOL_PR, .tol_du = CT_SQP_TOL_DU,
                        .max_iter = CT_SQP_MAX_ITER, .max_iter_ls = CT_SQP_MAX_ITER_LS,
                        .min_step_size = CT_SQP_MIN_STEP, .c1 = CT_SQP_C1,
@@ -148,7 +154,7 @@ static gk_sqp_opts sqp_options(void) {
 
 /* the tightened output bounds h - a_i e_o - b_i - w_L - L b_o (eq:optimization-constraint;
  * controllers/ocp/fhocp.py FHOCP.tightened_bounds, in numpy's order) into bnd (NH x NL) */
-static void tightened_bounds(double e_o, double *bnd) {
+CTL_HELPER void tightened_bounds(double e_o, double *bnd) {
   for (int i = 0; i < NH; i++)
     for (int j = 0; j < NL; j++) {
       double v = CT_H[j] - CT_A[i * NL + j] * e_o;
@@ -159,7 +165,7 @@ static void tightened_bounds(double e_o, double *bnd) {
 }
 
 /* the i = 0 row's violation at x_hat (FHOCP.check_x0): it involves x_hat only */
-static double x0_violation(const double *xhat, const double *bnd) {
+CTL_HELPER double x0_violation(const double *xhat, const double *bnd) {
   double v = -INFINITY;
   for (int j = 0; j < NL; j++) {
     double s = 0.0;
@@ -172,7 +178,7 @@ static double x0_violation(const double *xhat, const double *bnd) {
 /* the row-paired output rows i >= 1 of the single-shooting FHOCP's g (controllers/ocp/
  * fhocp_layout.py FHOCPLayout: D U_o x_i, upper and lower L rows per reduced row) into
  * lbg, ubg (the first (NH - 1) NQ entries) */
-static void output_rows(const double *bnd, double *lbg, double *ubg) {
+CTL_HELPER void output_rows(const double *bnd, double *lbg, double *ubg) {
   for (int i = 1; i < NH; i++)
     for (int r = 0; r < NQ; r++) {
       const int pos = (i - 1) * NQ + r;
@@ -183,7 +189,7 @@ static void output_rows(const double *bnd, double *lbg, double *ubg) {
 
 /* the output rows', input box's and terminal set's violations of an assessment with the
  * terminal radius alpha into r (controllers/ocp/fhocp_result.py set_residuals) */
-static void set_residuals(ctl_result *r, const gk_assessment *out, double alpha) {
+CTL_HELPER void set_residuals(ctl_result *r, const gk_assessment *out, double alpha) {
   r->cv = fmax(fmax(0.0, out->violation_first), fmax(out->violation_rows, out->u_max - 1.0));
   r->tv = fmax(0.0, out->terminal_distance - alpha);
 }
@@ -191,7 +197,7 @@ static void set_residuals(ctl_result *r, const gk_assessment *out, double alpha)
 /* the candidate of the proof of th:feasibility-stability into cand (NH x NU): the plan
  * shifted by one stage with u_end appended (the reference input: u_bar, or the tracking law's
  * u_s), u_end repeated before any plan (RobustMPC.candidate, TrackingMPC.make_step) */
-static void shifted_candidate(double *cand, const double *plan, int has_plan,
+CTL_HELPER void shifted_candidate(double *cand, const double *plan, int has_plan,
                               const double *u_end) {
   if (has_plan) {
     memcpy(cand, plan + NU, (NH - 1) * NU * sizeof(double));
@@ -202,17 +208,17 @@ static void shifted_candidate(double *cand, const double *plan, int has_plan,
 }
 
 /* after a failed solve res, with chk the candidate's check: whether the solver's iterate is
- * applied instead of the candidate (controllers/ocp/paper_mpc.py RobustMPC.make_step,
+ * applied instead of the candidate (controllers/laws/paper/mpc.py RobustMPC.make_step,
  * tracking_mpc.py TrackingMPC.make_step: suboptimal MPC, a feasible iterate no costlier than
  * a feasible candidate) */
-static int keeps_iterate(const ctl_result *res, const ctl_result *chk) {
+CTL_HELPER int keeps_iterate(const ctl_result *res, const ctl_result *chk) {
   const int feasible = chk->cv <= CT_FEAS_TOL && chk->tv <= CT_FEAS_TOL;
   return res->feasible && (!feasible || res->cost <= chk->cost);
 }
 
 /* the answer check's judgement (controllers/ocp/fhocp_result.py set_residuals, judge) of the
  * solver's w into r, the assessment of (u, x) already there; iterations the SQP's */
-static void judge(ctl_result *r, const double *w, int sqp_status, const gk_sqp_info *info) {
+CTL_HELPER void judge(ctl_result *r, const double *w, int sqp_status, const gk_sqp_info *info) {
   const int ok = sqp_status == GK_SQP_SOLVE_SUCCEEDED;
   r->iterations = info->iterations + info->discarded_iterations;
   r->feasible = all_finite(w, NW) && r->cv <= CT_FEAS_TOL && r->tv <= CT_FEAS_TOL &&
@@ -224,7 +230,7 @@ static void judge(ctl_result *r, const double *w, int sqp_status, const gk_sqp_i
 }
 
 /* a (NU x NU) is positive definite: its Cholesky factorisation exists */
-static int positive_definite(const double *a) {
+CTL_HELPER int positive_definite(const double *a) {
   double l[NU * NU];
   for (int j = 0; j < NU; j++)
     for (int k = 0; k <= j; k++) {
@@ -241,7 +247,7 @@ static int positive_definite(const double *a) {
 }
 
 /* why a value of R's diagonal entry j is refused (NULL: R stays positive definite) */
-static const char *refuse_r(const gk_ws *ws, int j, double value) {
+CTL_HELPER const char *refuse_r(const gk_ws *ws, int j, double value) {
   double r[NU * NU];
   memcpy(r, ws->mem.rw, sizeof r);
   r[j * (NU + 1)] = value;

@@ -3,19 +3,19 @@ build and a ctypes handle.
 
 An exported controller (the controller FMU, :mod:`cosim.core.controller_fmu`) runs the step of
 the robust MPC without Python: the GRU observer (``eq:observer``, ``eq:eo-evolution``) and
-one of two laws on the compiled kernel, with its answer check and candidate fallback, in the
-problem's units. The tracking law (``law_tracking.c``): the output-disturbance estimate and
-the tracking FHOCP (``eq:optimization`` with an artificial steady state). The paper's law
-(``law_paper.c``, with its reference governor): the reference ``(x̄, ū, α)`` of each set-point
-checked against the certificate, the FHOCP ``eq:optimization`` and the fallback of ``eq:mpc``.
-:class:`ControllerDesign` is what the C step needs besides the kernel
-(:class:`~controllers.kernel.compiled_kernel.KernelProblem`): scalings, input box, observer
-gains and bound, tightening, the SQP's options, the warm start's permutations and the law's
-own numbers, taken from the Python objects that run the same step (:meth:`ControllerDesign.
-of`, :meth:`ControllerDesign.of_paper`), so that both give the same inputs.
-:func:`generate_source` joins the kernel's source, these constants, ``controller.h``, the
-law's file and ``controller.c``; :func:`build` compiles it (a self-contained library: no
-BLAS) and :class:`CompiledController` steps it from Python (the tests and the benchmark).
+its law on the compiled kernel, with its answer check and candidate fallback, in the
+problem's units. Each law brings its C files (``controllers/laws/<name>/*.c``: the tracking
+law's output-disturbance estimate and tracking FHOCP; the paper's law's reference
+``(x̄, ū, α)`` of each set-point checked against the certificate, its governor, the FHOCP and
+the fallback of ``eq:mpc``) and its numbers, parameters and switches (its ``export``
+module, :mod:`controllers.laws`). :class:`ControllerDesign` is what the C step needs besides
+the kernel (:class:`~controllers.kernel.compiled_kernel.KernelProblem`): scalings, input
+box, observer gains and bound, tightening, the SQP's options, the warm start's permutations
+and the law's own numbers, taken from the Python objects that run the same step
+(:meth:`ControllerDesign.of`), so that both give the same inputs. :func:`generate_source`
+joins the kernel's source, these constants, ``controller.h``, the law's files and
+``controller.c``; :func:`build` compiles it (a self-contained library: no BLAS) and
+:class:`CompiledController` steps it from Python (the tests and the benchmark).
 """
 
 from __future__ import annotations
@@ -65,9 +65,6 @@ CONTROLLER_C = Path(__file__).with_name("controller.c")
 #: What the step and the laws share, and each law's files, joined in this order
 #: (``controller.h`` says what a law defines; the paper's reference governor is its own file).
 CONTROLLER_H = Path(__file__).with_name("controller.h")
-LAW_C = {"tracking": (Path(__file__).with_name("law_tracking.c"),),
-         "paper": (Path(__file__).with_name("law_paper.c"),
-                   Path(__file__).with_name("law_paper_governor.c"))}
 #: Compiler flags of the exported step: the kernel's, warnings as errors.
 CFLAGS = ("-O3", "-fPIC", "-std=gnu99", "-pthread", "-Wall", "-Wextra", "-Werror",
           "-Wno-aggressive-loop-optimizations")
@@ -103,11 +100,11 @@ class ControllerDesign:
         The kernel SQP's options (:class:`controllers.kernel.kernel_abi.SqpOptions` fields).
     feas_tol, defect_tol : float
         The answer check's tolerances.
-    law : {"tracking", "paper"}
-        The law's file (``law_tracking.c``, ``law_paper.c``).
+    law : str
+        The law's name (its C files: :attr:`controllers.laws.LawSpec.c_sources`).
     law_data : mapping
-        The law's own ``CT_*`` numbers (:meth:`of`, :meth:`of_paper` say which); integers
-        are C ``int`` constants.
+        The law's own ``CT_*`` numbers (its ``export_design`` says which); integers are C
+        ``int`` constants.
     offset_free : bool
         The paper's law's ``offset_free`` (compiled: it decides the parameters).
     d_offset, d_scale : arrays
@@ -166,74 +163,24 @@ class ControllerDesign:
         """The number of measured disturbances."""
         return int(np.size(self.d_offset))
     @classmethod
-    def of(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
-           u_lo: np.ndarray, u_hi: np.ndarray) -> ControllerDesign:
-        """The design of an FHOCP with the tracking law set up on its compiled kernel's
-        SQP (:class:`controllers.ocp.reference_tracking.ArtificialSteadyState`), its observer
-        (:class:`controllers.observer.GRUObserver`), the disturbance filter's ``beta``, the
-        model's normalisation and the input box. The law's numbers: ``Y_s``'s right-hand
-        side on ``L U_o x_s`` (``CT_YS_BASE``), the terminal radius (``CT_ALPHA_C``), ``u_s``'s
-        move limit per step (``CT_US_RATE``, −1: none) and the steady state's check
-        tolerance (``CT_XS_CHECK_TOL``)."""
-        from controllers.ocp.reference_tracking import XS_CHECK_TOL
+    def of(cls, law: Any, observer: Any, model: Any, u_lo: np.ndarray,
+           u_hi: np.ndarray) -> ControllerDesign:
+        """The design of the law ``law`` (its FHOCP set up on its compiled kernel's SQP), its
+        observer (:class:`controllers.observer.GRUObserver`), the model's normalisation and
+        the input box: its law's ``export_design`` (:mod:`controllers.laws`), which gives
+        the law's own numbers."""
+        from controllers import laws
 
-        ass = fhocp.reference   # the artificial steady state
-        law_data = {"CT_YS_BASE": np.asarray(ass.ys_base, float),
-                    "CT_ALPHA_C": float(ass.alpha_c),
-                    "CT_US_RATE": -1.0 if ass.us_rate is None else float(ass.us_rate),
-                    "CT_XS_CHECK_TOL": float(XS_CHECK_TOL)}
-        return cls._common(fhocp, observer, beta, certified, model, u_lo, u_hi, ass,
-                           "tracking", law_data)
+        return laws.spec(law.name).hook("export", "export_design")(law, observer, model,
+                                                                   u_lo, u_hi)
 
     @classmethod
-    def of_paper(cls, law: Any, observer: Any, model: Any, u_lo: np.ndarray,
-                 u_hi: np.ndarray) -> ControllerDesign:
-        """The design of the paper's law (:class:`cosim_adapters.paper_law.PaperLaw`, its
-        FHOCP on its compiled kernel's SQP) with its observer, the model's normalisation and
-        the input box. The law's numbers: the certificate's set-point checks
-        (``Certificate.ok``, ``alpha``: its ``L``, ``h``, ``ẽ_o a_N``, ``b_N``, ``w_L``,
-        ``c_s``, the two sides of ``eq:condition-recursive-feasibility`` and whether the
-        design conditions hold), the admissible range per output
-        (``Certificate.admissible_bounds``), the set-point rate (−1: none) and the reference
-        governor's (:class:`controllers.ocp.governor.ReferenceGovernor`: whether it runs, its
-        levels, ``λ_max``'s floor and growth, the Newton's cap and tolerance)."""
-        from controllers.equilibrium import EQ_TOL, NEWTON_MAX_ITER
-        from controllers.ocp.governor import LAM_GROW, LAM_MIN
-
-        cert, h, gov = law.cert, law.handling, law.governor
-        lo, hi = cert.admissible_bounds()
-        design_ok = (cert.nu < 1 and cert.nu_o < 1 and cert.rho_s < 1
-                     and bool(np.isfinite(cert.e_tilde)))
-        # (recursive_feasibility: ρ_s^N (L_max ẽ_o + w̄) ≤ α (1 − ρ_s); never read without
-        # design_ok)
-        rf_lhs = (cert.rho_s ** cert.N * (cert.L_max * cert.e_tilde + cert.w_bar)
-                  if design_ok else 0.0)
-        law_data = {"CT_CERT_L": np.asarray(cert.L, float), "CT_CERT_H": np.asarray(cert.h, float),
-                    "CT_CERT_EAN": np.asarray(cert.e_tilde * cert.a[cert.N], float),
-                    "CT_CERT_BN": np.asarray(cert.b[cert.N], float),
-                    "CT_CERT_WL": np.asarray(cert.w_L, float),
-                    "CT_CERT_CS": np.asarray(cert.c_s, float),
-                    "CT_CERT_RF_LHS": float(rf_lhs),
-                    "CT_CERT_RF_ONE_MINUS_RHO": float(1 - cert.rho_s),
-                    "CT_CERT_DESIGN_OK": int(design_ok), "CT_BOX_LO": lo, "CT_BOX_HI": hi,
-                    "CT_SETPOINT_RATE": -1.0 if h.setpoint_rate is None
-                    else float(h.setpoint_rate),
-                    "CT_GOVERNOR": int(gov is not None),
-                    "CT_GOV_LEVELS": int(gov.levels if gov is not None else 0),
-                    "CT_GOV_LAM_MIN": float(LAM_MIN), "CT_GOV_LAM_GROW": float(LAM_GROW),
-                    "CT_EQ_NEWTON_MAX_ITER": int(NEWTON_MAX_ITER),
-                    "CT_EQ_NEWTON_TOL": float(EQ_TOL)}
-        fhocp = law.fhocp
-        return cls._common(fhocp, observer, h.offset_filter, law.certified, model, u_lo,
-                           u_hi, fhocp.reference.layout, "paper", law_data,
-                           offset_free=bool(h.offset_free))
-
-    @classmethod
-    def _common(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
-                u_lo: np.ndarray, u_hi: np.ndarray, layout: Any, law: str,
-                law_data: dict[str, Any], offset_free: bool = False) -> ControllerDesign:
-        """What every law's design holds; ``layout``: where the warm start's permutations
-        are (``perm_x``, ``perm_g``)."""
+    def common(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
+               u_lo: np.ndarray, u_hi: np.ndarray, layout: Any, law: str,
+               law_data: dict[str, Any], offset_free: bool = False) -> ControllerDesign:
+        """What every law's design holds (a law's ``export_design`` gives it its own numbers
+        ``law_data``); ``layout``: where the warm start's permutations are (``perm_x``,
+        ``perm_g``)."""
         from controllers.kernel.kernel_sqp import KernelSQP
         from controllers.ocp.solver_settings import DEFECT_TOL, FEAS_TOL
 
@@ -331,51 +278,26 @@ def parameters(design: ControllerDesign, inputs: Sequence[str], outputs: Sequenc
                ) -> tuple[tuple[str, float, float, str, float], ...]:
     """The tunable parameters of the C step, in its order (the law file's ``LAW_P_*``), for
     a problem with these input and output names: ``(name, low, high, description, start)``,
-    ``start`` the design's value. Each is the option of its name (``offset_filter``; ``R``,
-    ``du_weight``, ``offset_weight`` by signal: ``R.<input>`` its diagonal entry;
-    ``du_weight`` only when the design has the input-rate term, ``offset_weight`` under the
-    tracking law, ``offset_filter`` under the paper's with ``offset_free`` only,
-    ``setpoint_rate`` under the paper's when the design has a rate). Normalised units, as the
-    options (the set-point rate: each output's units per sample)."""
-    k = design.kernel
-    inf = float("inf")
-    out = []
-    if design.law == "tracking" or design.offset_free:
-        out.append(("offset_filter", 0.0, 1.0, "gain of the output-disturbance estimate "
-                    "d_hat, in (0, 1] (option offset_filter)", float(design.beta)))
-    R = np.asarray(k.R, dtype=float)
-    out += [(f"R.{name}", 0.0, inf, f"input weight R of {name} (diagonal entry; R stays "
-             "positive definite; option R)", float(R[j, j])) for j, name in enumerate(inputs)]
-    if k.has_du:
-        du = np.asarray(k.du_weight, dtype=float)
-        out += [(f"du_weight.{name}", 0.0, inf, f"input-rate weight S of {name}, >= 0 "
-                 "(option du_weight)", float(du[j])) for j, name in enumerate(inputs)]
-    if design.law == "tracking":
-        T = np.asarray(k.offset_weight, dtype=float)
-        out += [(f"offset_weight.{name}", 0.0, inf, f"offset weight T of {name}, > 0 "
-                 "(option offset_weight)", float(T[a])) for a, name in enumerate(outputs)]
-    elif _rate_tunable(design):
-        out.append(("setpoint_rate", 0.0, inf, "largest move of the set-point per sample, "
-                    "> 0, in each output's units (option setpoint_rate)",
-                    float(design.law_data["CT_SETPOINT_RATE"])))
+    ``start`` the design's value; each is the option of its name (``R.<input>``: its
+    diagonal entry) and a setting of :meth:`controllers.mpc.RobustMPC.set`. The law's
+    ``parameters`` say which (:mod:`controllers.laws`). Normalised units, as the options
+    (a set-point rate: each output's units per sample)."""
+    spec = _spec(design)
+    out = tuple(spec.hook("export", "parameters")(design, list(inputs), list(outputs)))
     if len(out) != _parameter_count(design):
         raise ValueError("one name per input and output is needed")
-    return tuple(out)
+    return out
+
+
+def _spec(design: ControllerDesign) -> Any:
+    from controllers import laws
+
+    return laws.spec(design.law)
 
 
 def _parameter_count(design: ControllerDesign) -> int:
     """``LAW_N_PARAMETERS`` of the law's file for ``design``."""
-    k = design.kernel
-    m, p = np.shape(k.params["W_z"])[1], np.shape(k.params["U_o"])[0]
-    rate = m if k.has_du else 0
-    if design.law == "tracking":
-        return 1 + m + rate + p
-    return int(design.offset_free) + m + rate + int(_rate_tunable(design))
-
-
-def _rate_tunable(design: ControllerDesign) -> bool:
-    """The paper's law designed with a set-point rate (``CT_RATE_TUNABLE``)."""
-    return design.law == "paper" and float(design.law_data["CT_SETPOINT_RATE"]) >= 0.0
+    return int(_spec(design).hook("export", "parameter_count")(design))
 
 
 def _u_depth(d: ControllerDesign) -> int:
@@ -395,22 +317,18 @@ def generate_source(design: ControllerDesign) -> str:
     of the same dimensions and law (and, for the paper's, ``offset_free`` and whether it has
     a set-point rate), and
     :func:`design_data` is what a design adds (``PFX(load_data)``)."""
-    problem = design.kernel
-    if (problem.offset_weight is None) != (design.law == "paper"):
-        raise ValueError(f"the {design.law} law's design on another law's kernel")
+    problem, spec = design.kernel, _spec(design)
+    law_switches = spec.hook("export", "c_switches")(design)
     kernel, own = kernel_constants(problem), controller_constants(design)
     switches = (f"#define CT_NPARAM {_parameter_count(design)}\n"
                 f"#define CT_NQD {design.q}\n#define CT_DEAD {int(design.dead_time)}\n"
                 f"#define CT_U_DEPTH {_u_depth(design)}\n"
                 f"#define CT_U_LAG_MAX {_u_lag_max(design)}\n"
-                f"#define CT_LAG_MAX {int(np.max(design.lags, initial=0))}\n")
-    if design.law == "paper":
-        switches += (f"#define CT_OFFSET_FREE {int(design.offset_free)}\n"
-                     f"#define CT_RATE_TUNABLE {int(_rate_tunable(design))}\n")
+                f"#define CT_LAG_MAX {int(np.max(design.lags, initial=0))}\n" + law_switches)
     return "\n".join([kernel_source(problem, kernel),
                       "/* the controller's constants (controller_source.py) */\n"
                       + switches + own.declarations(),
-                      CONTROLLER_H.read_text(), *(f.read_text() for f in LAW_C[design.law]),
+                      CONTROLLER_H.read_text(), *(f.read_text() for f in spec.c_sources),
                       CONTROLLER_C.read_text(), loader_source(kernel + own)])
 
 
@@ -460,6 +378,9 @@ class CompiledController:
             f[name].argtypes = [vp]
         f["ctl_step"].argtypes = [vp, vp, vp, vp]
         f["ctl_outputs"].argtypes = [vp] * 7
+        f["ctl_set_parameter"] = getattr(self.lib, prefix + "ctl_set_parameter")
+        f["ctl_set_parameter"].argtypes = [vp, ctypes.c_int, ctypes.c_double]
+        f["ctl_set_parameter"].restype = ctypes.c_char_p
         self._f = f
         self._st = None
         load_data(self.lib, prefix, data, path)
@@ -492,6 +413,12 @@ class CompiledController:
                 "iterations": int(i[2]), "y_pred": self._yp.copy(),
                 "y_target": self._yt.copy(),
                 "warnings": int(self._f["ctl_take_warnings"](self._st))}
+
+    def set_parameter(self, i: int, value: float) -> str | None:
+        """Tunable parameter ``i`` (:func:`parameters`' order) from the next step on;
+        ``None``, or why the value is refused (nothing changes then)."""
+        why = self._f["ctl_set_parameter"](self._st, int(i), float(value))
+        return None if why is None else why.decode()
 
     def reset(self) -> None:
         self._f["ctl_reset"](self._st)

@@ -48,7 +48,8 @@ _WS_CALLS: dict[str, tuple[list[Any], Any]] = {
     "assess_w": ([_VP, _VP, _VP, _CD, _VP, _VP, _VP, _VP], None),
     "terminal_gap": ([_VP] * 2, _CD),
     "sqp": ([_VP] * 12, _CI), "qp": ([_VP] * 11, _CI), "grad_l": ([_VP] * 5, None),
-    "counters": ([_VP], None), "invalidate": ([], None), "clip": ([_VP], _CI)}
+    "counters": ([_VP], None), "invalidate": ([], None), "clip": ([_VP], _CI),
+    "set_weights": ([_VP] * 3, None)}
 
 
 def load_data(lib: ctypes.CDLL, prefix: str, data: bytes, path: Path) -> None:
@@ -376,3 +377,12 @@ class Workspace:
     def invalidate(self) -> None:
         """Forget the cached rollout."""
         self._c["invalidate"](self._ws)
+
+    def set_weights(self, R: np.ndarray, du: np.ndarray | None, T: np.ndarray | None) -> None:
+        """The instance's cost weights ``R`` (m, m), the input-rate weights ``du`` (m) and the
+        offset weights ``T`` (p), where the variant has them."""
+        rw = np.ascontiguousarray(R, dtype=float)
+        dw = np.ascontiguousarray(du if du is not None else np.zeros(self.m), dtype=float)
+        tw = np.ascontiguousarray(T if T is not None else np.zeros(max(self.kernel.p, 1)),
+                                  dtype=float)
+        self._c["set_weights"](self._ws, rw.ctypes.data, dw.ctypes.data, tw.ctypes.data)

@@ -16,7 +16,7 @@
  * Decision variables w = (u_0 .. u_{N-1}, t) (NW = NH*NU + 1), parameters p = (x_hat, x_bar,
  * u_bar) (NP = 2 NX + NU), then u_prev = u_{-1} when HAS_DU (NP = 2 NX + 2 NU): the cost's
  * input-rate term sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); without it (HAS_DU 0)
- * none of its code is compiled. HAS_ASS 1: the tracking law (controllers/ocp/reference_tracking.py,
+ * none of its code is compiled. HAS_ASS 1: the tracking law (controllers/laws/tracking/reference.py,
  * steady_state.c), w = (u_0 .. u_{NM-1}, u_s, t), p = (x_hat, x_s0, r[, u_prev]), the
  * artificial steady state x_s(u_s) in place of x_bar and u_s in place of u_bar; NM <= NH the
  * control horizon: u_i = u_s for i >= NM (UC, KC, NSC below; NM = NH without one).

@@ -1,7 +1,7 @@
 /* Part of the compiled FHOCP kernel (controllers/kernel/compiled_kernel.py joins the
  * generated header, gru_fhocp.h and the parts into one translation unit): the artificial steady state of
- * the tracking law (HAS_ASS 1; controllers/ocp/reference_tracking.py, the same mathematics as
- * controllers/ocp/steady_state.py and controllers/ocp/nlp_tracking.py).
+ * the tracking law (HAS_ASS 1; controllers/laws/tracking/reference.py, the same mathematics as
+ * controllers/ocp/steady_state.py and controllers/laws/tracking/nlp.py).
  *
  * The decision vector ends with u_s (then t); x_s = x_s(u_s) is the GRU's fixed point
  * x_s = f(x_s, u_s) (unique: f(., u_s) contracts, th:stability-bonassi), found by Newton's

@@ -32,9 +32,9 @@ design/solver.md) lists the alternatives measured and why they won or lost.
 One class for every control law, with a pluggable reference: what differs between the laws
 (the reference and its artificial steady state, the terminal ingredients, the layout of ``w``,
 the answer check) is a strategy object (:class:`controllers.ocp.reference.Reference`): the
-paper's set-point (:class:`~controllers.ocp.reference_setpoint.FixedSetpoint`, the default)
-or the tracking law's artificial steady state
-(:class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`). One solve procedure
+paper's set-point (:class:`~controllers.laws.paper.reference.FixedSetpoint`) or the
+tracking law's artificial steady state
+(:class:`~controllers.laws.tracking.reference.ArtificialSteadyState`). One solve procedure
 serves them all (:meth:`FHOCP.solve`): the ``i = 0`` row, the solver within its budget, the
 reference's independent answer check, the judge and the warm start.
 
@@ -65,7 +65,6 @@ from controllers.ocp.casadi_callbacks import bind_buffers, quiet_stdout
 from controllers.ocp.fhocp_result import FHOCPResult, judge, keeps_warm_start, solver_stats
 from controllers.ocp.input_rate import du_weights
 from controllers.ocp.reference import Reference
-from controllers.ocp.reference_setpoint import FixedSetpoint
 from controllers.ocp.solve_status import SolveStatus
 from controllers.ocp.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
@@ -118,12 +117,11 @@ class FHOCP:
     data : FHOCPData or Certificate
         What the problem is made of (:class:`FHOCPData`'s attributes; a
         :class:`~controllers.certification.certificates.Certificate` has them all).
-    reference : Reference, optional
+    reference : Reference
         The control law's part of the problem (:class:`controllers.ocp.reference.Reference`):
-        default the paper's set-point,
-        :class:`~controllers.ocp.reference_setpoint.FixedSetpoint`; the tracking law's
-        :class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`. The object then
-        serves this problem (as ``reference``).
+        the paper's set-point, :class:`~controllers.laws.paper.reference.FixedSetpoint`, or
+        the tracking law's :class:`~controllers.laws.tracking.reference.
+        ArtificialSteadyState`. The object then serves this problem (as ``reference``).
     formulation : {"single-shooting", "multiple-shooting"}
         Multiple shooting is the plain baseline of the paper's law.
     ipopt_options : dict, optional
@@ -162,14 +160,14 @@ class FHOCP:
         The previous accepted solve's ``w``, ``lam_x``, ``lam_g`` (the next one's warm start).
     """
 
-    def __init__(self, data: FHOCPData | Any, *, reference: Reference | None = None,
+    def __init__(self, data: FHOCPData | Any, *, reference: Reference,
                  formulation: str = "single-shooting",
                  ipopt_options: Mapping[str, Any] | None = None,
                  time_budget: float | None = None,
                  solver: str | None = None,
                  sqp_options: Mapping[str, Any] | None = None, kernel: str = "auto",
                  du_weight: float | np.ndarray = 0.0) -> None:
-        self.reference: Any = FixedSetpoint() if reference is None else reference
+        self.reference: Any = reference
         if formulation not in ("single-shooting", "multiple-shooting"):
             raise DesignError(f"unknown formulation {formulation!r}")
         if formulation not in self.reference.formulations:
@@ -320,6 +318,26 @@ class FHOCP:
         self._build_solver(nlp, opts, "fhocp")
         return self
 
+    def set_weight(self, weight: str, index: int, value: float) -> None:
+        """Change one cost weight between solves (as acados' ``cost_set``): ``"R"`` (the
+        diagonal entry ``index``), ``"du"`` (the input-rate weight of input ``index``; the
+        term must exist) or ``"T"`` (the tracking law's offset weight of output ``index``),
+        in the numpy problem and the compiled kernel's instance alike; the caller checks
+        the value (:meth:`controllers.mpc.RobustMPC.set`)."""
+        if weight == "R":
+            self.R[index, index] = value
+        elif weight == "du" and self.has_du:
+            self.du_weight[index] = value
+        elif weight == "T" and getattr(self.reference, "offset_weight", None) is not None:
+            self.reference.offset_weight[index] = value
+        else:
+            raise DesignError(f"the FHOCP has no weight {weight!r} to set")
+        if self._nlp is not None:
+            self._nlp.weights_changed()
+        if self.kernel is not None:
+            self.kernel.set_weights(self.R, self.du_weight if self.has_du else None,
+                                    getattr(self.reference, "offset_weight", None))
+
     def shift_biases(self, db: np.ndarray, changed: bool) -> None:
         """The measured disturbances held over the horizon moved the model's biases in place
         (:class:`controllers.disturbances.BiasShift`, shift ``db`` from the nominal ones):
@@ -429,9 +447,9 @@ class FHOCP:
         ``args``, ``kwargs``
         (:meth:`Reference.request <controllers.ocp.reference.Reference.request>`): the paper's
         ``(x̄, ū, α[, u_init, warm, u_prev])``
-        (:meth:`~controllers.ocp.reference_setpoint.FixedSetpoint.request`), the tracking law's
+        (:meth:`~controllers.laws.paper.reference.FixedSetpoint.request`), the tracking law's
         ``(r, u_init, us_init, x_s0[, u_prev, warm, us_centre])``
-        (:meth:`~controllers.ocp.reference_tracking.ArtificialSteadyState.request`). See
+        (:meth:`~controllers.laws.tracking.reference.ArtificialSteadyState.request`). See
         :meth:`solve_request`."""
         return self.solve_request(x_hat, e_o, self.reference.request(*args, **kwargs))
 

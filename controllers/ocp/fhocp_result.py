@@ -1,8 +1,8 @@
 """One solve of ``eq:optimization`` (:class:`FHOCPResult`) and the one judge of every answer
 (:func:`judge`, with the solver's statistics read by :func:`solver_stats`, the residuals of
 the compiled check by :func:`set_residuals`): what :mod:`controllers.ocp.fhocp` returns for
-every law (:mod:`controllers.ocp.reference_setpoint`,
-:mod:`controllers.ocp.reference_tracking`) and what the kernel's self-test
+every law (:mod:`controllers.laws.paper.reference`,
+:mod:`controllers.laws.tracking.reference`) and what the kernel's self-test
 (:mod:`controllers.ocp.nlp_single_shooting`) compares, in a module of its own so that none of
 them imports another."""
 
@@ -71,7 +71,7 @@ class FHOCPResult:
     lam_x: np.ndarray | None = field(default=None, repr=False)
     lam_g: np.ndarray | None = field(default=None, repr=False)
     #: the tracking law's artificial steady input and state
-    #: (:mod:`controllers.ocp.reference_tracking`)
+    #: (:mod:`controllers.laws.tracking.reference`)
     u_s: np.ndarray | None = None
     x_s: np.ndarray | None = field(default=None, repr=False)
 

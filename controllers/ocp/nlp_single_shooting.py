@@ -99,6 +99,12 @@ class SingleShootingNLP:
         self._key = None
         self.shoot.refresh()
 
+    def weights_changed(self) -> None:
+        """The problem's cost weights changed in place (:meth:`FHOCP.set_weight`): the
+        input-rate term's constant Hessian again."""
+        fh = self.p
+        self._du_hess = du_hessian(fh.N, fh.du_weight) if fh.has_du else None
+
     # -- one point ----------------------------------------------------------------------
     def rollout(self, wv: np.ndarray, pv: np.ndarray, deriv: bool) -> Any:
         """States (and with ``deriv`` sensitivities) at ``(w, p)``, cached per point."""
@@ -353,7 +359,7 @@ class SingleShootingNLP:
     def _answer_check_pairs(self, kernel: Any, rng: np.random.Generator, u: np.ndarray,
                             pv: np.ndarray, x_np: np.ndarray) -> list[tuple[Any, Any]]:
         """(kernel, numpy) pairs of the answer check at ``(u, p)``: the kernel's rollout, its
-        cost and residuals (:meth:`FixedSetpoint.evaluate <controllers.ocp.reference_setpoint.
+        cost and residuals (:meth:`FixedSetpoint.evaluate <controllers.laws.paper.reference.
         FixedSetpoint.evaluate>`) against the law's ``cost`` and ``residuals``."""
         from controllers.ocp.fhocp_result import FHOCPResult, set_residuals
 

@@ -8,9 +8,9 @@ enum with the kernel) and the warm start. What differs between control laws is a
 object given to that class (its pluggable reference), implementing this protocol:
 
 * **the reference**: the paper's set-point ``(x̄, ū)`` given with every solve
-  (:class:`controllers.ocp.reference_setpoint.FixedSetpoint`), or an artificial steady state
+  (:class:`controllers.laws.paper.reference.FixedSetpoint`), or an artificial steady state
   ``(x_s(u_s), u_s)`` that is a decision variable, with an offset cost towards a target
-  (:class:`controllers.ocp.reference_tracking.ArtificialSteadyState`, the tracking law's);
+  (:class:`controllers.laws.tracking.reference.ArtificialSteadyState`, the tracking law's);
 * **the terminal ingredients**: the set-point's ``α(ȳ)`` per solve, or a constant ``α_c``
   with the steady outputs restricted to ``Y_s``;
 * **the decision vector and the rows beyond the output rows** (its layout: ``nw``, ``iu``,

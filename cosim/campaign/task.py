@@ -188,7 +188,7 @@ class _TheoremMonitor:
             self.violations += 1
 
     def __call__(self, k: int) -> None:
-        obs = self.ctrl.observer
+        obs = self.ctrl.mpc.observer
         self.check(self.plant.x, obs.x_hat, obs.e_o)
 
     def summary(self) -> dict[str, float]:
@@ -199,9 +199,9 @@ class _TheoremMonitor:
         out = {"observer_checks": self.checked, "observer_bound_violations": self.violations,
                "observer_error_max_ratio": self.worst_ratio,
                "observer_error_max_excess": self.worst_excess}
-        mpc, model = getattr(self.ctrl, "mpc", None), self.plant.model
-        if mpc is not None and mpc.x_bar is not None:
-            x_bar = np.asarray(mpc.x_bar)
+        x_bar, model = self.ctrl.mpc.law.steady_state, self.plant.model
+        if x_bar is not None:
+            x_bar = np.asarray(x_bar)
             y = model.denormalize_y(gru.output(model.params, self.plant.x))
             y_bar = model.denormalize_y(gru.output(model.params, x_bar))
             out["final_state_error"] = float(np.max(np.abs(self.plant.x - x_bar)))
@@ -253,6 +253,7 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
     run["phase"] = "building the controller"
     options = dict(task["options"])
     from cosim.core.registry import FMU_CONTROLLER
+    from cosim_adapters.robust_mpc import RobustMPCController
 
     packed = ("model", "problem", "path") if task["controller"] == FMU_CONTROLLER else (
         "model", "problem")
@@ -261,9 +262,9 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
             options[key] = str(folder / options[key])
     run["key"], ctrl = POOL.take(task["controller"], options)
     run["ctrl"] = ctrl
-    if hasattr(ctrl, "initial_estimate"):
+    if isinstance(ctrl, RobustMPCController):   # the observer's start drawn (the theorem)
         x0 = draw["initial_estimate"]
-        ctrl.initial_estimate = None if x0 is None else np.asarray(x0, dtype=float)
+        ctrl.mpc.initial_estimate = None if x0 is None else np.asarray(x0, dtype=float)
     run["phase"] = "loading the plant"
     run["plant"] = plant = _plant(task, folder, draw["seed"])
     if task.get("isolate") and task["plant"][0] == "fmu" and not ctrl.isolated:
@@ -331,7 +332,7 @@ def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
             if draw["initial_estimate"] is not None:
                 # k = 0, before the first step: x_0 against x̂_0 (ê_o,0)
                 monitor.check(plant.x_start, np.asarray(draw["initial_estimate"]),
-                              ctrl.cert.e_o0)
+                              ctrl.mpc.cert.e_o0)
             theorem = monitor.summary()
     except (CosimError, ControllersError) as exc:
         # the words cosim run uses (an unreachable set-point, a bad draw for this plant)

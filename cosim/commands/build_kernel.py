@@ -52,7 +52,7 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # reported below, as an error
         ctrl = registry.create("robust-mpc", options)
-    fhocp = ctrl.fhocp
+    fhocp = ctrl.mpc.fhocp
     if fhocp.kernel is None:
         raise SimulationFailed(f"no compiled kernel: {fhocp.kernel_error}")
     if not args.quiet:

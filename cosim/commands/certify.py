@@ -94,9 +94,10 @@ def register(subparsers: Any) -> None:
     p.add_argument("--N", type=int, default=None,
                    help="prediction horizon N (default: the problem's [mpc] N, else 80, the "
                         "tracking law's; 15 with --law paper)")
-    p.add_argument("--law", choices=("paper", "tracking"), default=None,
-                   help="the robust MPC's law to certify for (default: the problem's [mpc] "
-                        "law, else tracking, as robust-mpc's): tracking also computes and "
+    p.add_argument("--law", default=None, metavar="LAW",
+                   help="the robust MPC's law to certify for (tracking, paper, or a law "
+                        "module; default: the problem's [mpc] law, else tracking, as "
+                        "robust-mpc's): tracking also computes and "
                         "checks the tracking law's hypotheses (its defaults: zero observer "
                         "gains, alpha_c = alpha_min(N) of the design above; docs: "
                         "design/tracking.md); paper: the certificate alone")
@@ -241,6 +242,7 @@ def run(args: argparse.Namespace) -> int:
     """Compute the certificate, print it, check it; returns the exit code."""
     import numpy as np
 
+    from controllers import laws
     from controllers.disturbances import condition
     from controllers.errors import ControllersError
     from controllers.model import GRUModel
@@ -272,29 +274,24 @@ def run(args: argparse.Namespace) -> int:
     per_setpoint, failures = _setpoint_checks(model, cert, setpoints_phys, setpoints)
     if no_theta:
         failures.append(no_theta)
-    tracking = None
-    if args.law == "tracking":
-        tracking, verdict = _tracking(model, cert, kwargs, setpoints, no_theta is None)
-    else:
-        design = [m for m in failures[:n_design] if not m.startswith("δISS")]
-        verdict = _paper_verdict(model, cert, kwargs, setpoints,
-                                 design + ([no_theta] if no_theta else []))
+    spec = laws.spec(args.law)
+    try:
+        law = spec.hook("certify", "certify")(model, cert, kwargs, setpoints, failures,
+                                              n_design, no_theta)
+    except ControllersError as exc:
+        raise CosimError(f"{model.source}: {spec.title}: {exc}") from None
+    verdict = law.verdict
     if verdict.usable and not verdict.certified:
         verdict.unusable = _refusal(args, setpoints_phys)   # the run's own judgement
         verdict.usable = not verdict.unusable
     if args.json:
         docs = [cert.to_json(sp) for _, sp, _, _ in per_setpoint] or [cert.to_json()]
-        if tracking is not None:
-            docs = [{**d, "tracking": tracking} for d in docs]
-        docs = [{**d, "verdict": verdict.to_json()} for d in docs]
+        docs = [{**d, **law.report, "verdict": verdict.to_json()} for d in docs]
         print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1))
     elif not args.quiet:
         _print_table(args.model, model, cert, note, per_setpoint)
-        if tracking is not None:
-            _print_tracking(tracking)
-        if args.law == "paper":
-            for msg in failures:
-                print(f"FAILED: {msg}")
+        for line in law.lines:
+            print(line)
         _print_verdict(verdict)
     if args.plot:
         path = figure(args.plot, model, cert, setpoints_phys)
@@ -315,24 +312,29 @@ def run(args: argparse.Namespace) -> int:
 def _refusal(args: argparse.Namespace, setpoints_phys: list) -> str:
     """Why the robust MPC of the design certified refuses the model in its uncertified mode
     (``""`` when it runs it): the controller ``cosim run`` would build, for these set-points
-    (:class:`cosim_adapters.certification.NotUsable`), so that the verdict and the run never
+    (:class:`controllers.certification.grade.NotUsable`), so that the verdict and the run never
     disagree."""
     import warnings
 
-    from cosim.core import registry
-    from cosim_adapters.certification import NotUsable
+    from controllers.certification.grade import NotUsable
+    from controllers.model import GRUModel
+    from controllers.mpc import RobustMPC
+    from controllers.mpc_options import MPCOptions
+    from cosim_adapters.problems import problem_for
 
-    options: dict[str, Any] = {"model": args.model, "law": args.law, "N": args.N}
-    for key in ("e_o0", "gain_scale", "problem"):
+    options: dict[str, Any] = {"law": args.law, "N": args.N}
+    for key in ("e_o0", "gain_scale"):
         if getattr(args, key, None) is not None:
             options[key] = getattr(args, key)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")   # a slow fallback is not a refusal
-            ctrl = registry.create("robust-mpc", options)
-            names = list(ctrl.model.output_names)
-            ctrl.expect_setpoints([dict(zip(names, map(float, sp), strict=True))
-                                   for sp in setpoints_phys])
+            gru = GRUModel.load(args.model)
+            gru.problem = problem_for(gru, getattr(args, "problem", None))
+            mpc = RobustMPC(gru, MPCOptions.resolve(options, gru.problem))
+            names = list(gru.output_names)
+            mpc.expect_setpoints([dict(zip(names, map(float, sp), strict=True))
+                                  for sp in setpoints_phys])
     except NotUsable as exc:
         return exc.why
     return ""
@@ -360,10 +362,9 @@ def _check_args(args: argparse.Namespace) -> None:
 def _design(args: argparse.Namespace, model: Any) -> dict[str, Any]:
     """The design certified: ``--law``, ``--N`` and ``--e-o0`` over the problem's ``[mpc]``
     table (its ``Q`` and ``R`` too: the weights the run will use), the law's defaults
-    (:meth:`cosim_adapters.mpc_options.MPCOptions.resolve`); sets ``args.law`` and
+    (:meth:`controllers.mpc_options.MPCOptions.resolve`); sets ``args.law`` and
     ``args.N``."""
-    from cosim_adapters.mpc_options import MPCOptions
-    from cosim_adapters.robust_mpc import design_arguments
+    from controllers.mpc_options import MPCOptions, design_arguments
 
     given = {k: v for k, v in (("law", args.law), ("N", args.N), ("e_o0", args.e_o0))
              if v is not None}
@@ -422,19 +423,6 @@ def _save(path: str, model: Any, cert: Any, verdict: Any, setpoints_phys: list,
               f"{str(verdict.certified).lower()}) to {path}", file=sys.stderr)
 
 
-def _paper_verdict(model: Any, cert: Any, kwargs: dict, setpoints: list,
-                   design: list[str]) -> Any:
-    """The paper law's :class:`controllers.certification.diagnosis.Diagnosis`."""
-    from controllers.certification import certificates as certs
-    from controllers.certification.diagnosis import diagnose
-
-    def rhs_at(w: float) -> Any:
-        return certs.compute_certificate(model, L_z=cert.L_z, L_r=cert.L_r, **{
-            **kwargs, "w_y_bar": w}).admissible_box()
-
-    return diagnose(model, cert, "paper", setpoints, cert.admissible_box(), design, rhs_at)
-
-
 def _print_verdict(verdict: Any) -> None:
     word = ("CERTIFIED" if verdict.certified else
             "NOT CERTIFIED (usable: the robust MPC runs uncertified, with the model's measured "
@@ -445,60 +433,6 @@ def _print_verdict(verdict: Any) -> None:
         print(f"  {'holds' if f.holds else 'FAILS'}: {f.hypothesis}: {f.detail}")
         if f.fix:
             print(f"    fix: {f.fix}")
-
-
-def _tracking(model: Any, cert: Any, kwargs: dict, setpoints: list,
-              gains_certified: bool) -> tuple[dict, Any]:
-    """The tracking law's hypotheses (:mod:`controllers.certification.tracking_checks`) with the
-    robust MPC's defaults (``α_c``: the certificate's ``α_min(N)`` when its observer-gain design
-    passes, else :func:`cosim_adapters.tracking.fallback_alpha_c`), and its verdict."""
-    import numpy as np
-
-    from controllers.certification import certificates as certs
-    from controllers.certification.diagnosis import diagnose
-    from controllers.certification.tracking_checks import failures, tracking_hypotheses
-    from controllers.errors import ControllersError
-    from controllers.ocp.fhocp import FHOCP
-    from controllers.ocp.reference_tracking import (
-        DEFAULTS,
-        ArtificialSteadyState,
-        steady_output_bounds,
-    )
-    from cosim_adapters.tracking import fallback_alpha_c
-
-    try:
-        cert_t = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
-        if not cert_t.nu < 1:     # no δISS: no tracking design to check
-            return {}, diagnose(model, cert_t, "tracking", setpoints,
-                                np.full(cert_t.h.shape, -np.inf), [], None)
-        alpha_c = cert.alpha_min() if gains_certified and not cert.failures() else math.nan
-        if not (math.isfinite(alpha_c) and alpha_c > 0):
-            alpha_c = fallback_alpha_c(cert_t)
-        reference = ArtificialSteadyState(DEFAULTS["offset_weight"], alpha_c)
-        fh = FHOCP.from_certificate(cert_t, reference=reference,
-                                    du_weight=DEFAULTS["du_weight"])
-    except ControllersError as exc:
-        raise CosimError(f"{model.source}: tracking law: {exc}") from None
-    h = tracking_hypotheses(fh, cert_t, DEFAULTS["offset_filter"])
-
-    def rhs_at(w: float) -> Any:
-        return steady_output_bounds(certs.compute_certificate(
-            model, gain_scale=0.0, **{**kwargs, "w_y_bar": w}), alpha_c)
-
-    design = [msg for msg in failures(h) if not msg.startswith("no admissible steady")]
-    return h, diagnose(model, cert_t, "tracking", setpoints, fh.reference.ys_bounds, design, rhs_at)
-
-
-def _print_tracking(h: dict) -> None:
-    if not h:
-        return
-    sv = h["steady_gain_min_singular_value"]
-    print(f"tracking law (zero observer gains): alpha_c = {h['alpha_c']:.6g}, alpha_min = "
-          f"{h['alpha_min']:.6g}, eq:condition-recursive-feasibility = "
-          f"{_fmt(h['recursive_feasibility'])}; Y_s not empty = {_fmt(h['Ys_nonempty'])}; "
-          f"admissible steady states on the input grid: {h['grid_points_admissible']} of "
-          f"{h['grid_points']}, smallest singular value of the steady-state gain there: "
-          + ("none" if sv is None else f"{sv:.4g}"))
 
 
 def _print_table(path: str, model: Any, cert: Any, note: str, per_setpoint: list) -> None:

@@ -173,7 +173,7 @@ def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.n
     :func:`controllers.certification.prediction_error.error_profile`: what the uncertified mode
     tightens by) and its summary for the model file, in the outputs' units."""
     from controllers.certification.prediction_error import error_profile
-    from controllers.ocp.reference_tracking import DEFAULTS as TRACKING
+    from controllers.laws.tracking import SPEC as TRACKING
 
     held = np.isin(record.split, ("val", "test"))
     ahead = None
@@ -184,7 +184,7 @@ def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.n
         x = free_run_states(params, record, ev.starts)   # the scored free run's states
         ahead = held_predictions(params, record.u, x, problem.q, record.experiments())
     profile = error_profile(record.y, ev.xi, held if np.any(held) else record.split == "train",
-                            record.experiments(), TRACKING["offset_filter"], ahead=ahead)
+                            record.experiments(), TRACKING.defaults["offset_filter"], ahead=ahead)
     scale = problem.normalization()["y_scale"]
 
     def at(row: int) -> dict[str, float] | None:
@@ -194,7 +194,7 @@ def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.n
                                                         scale, strict=True)}
 
     return profile, {"rows": "val+test" if np.any(held) else "train",
-                     "offset_filter": TRACKING["offset_filter"],
+                     "offset_filter": TRACKING.defaults["offset_filter"],
                      "steps": None if profile is None else int(profile.shape[0]),
                      "at_1_step": None if profile is None else at(min(1, len(profile) - 1)),
                      "at_last_step": None if profile is None else at(-1)}

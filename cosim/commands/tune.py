@@ -56,6 +56,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="worker processes for the closed loops (default 0: one per CPU, at "
                         "most one per run, unless the runs are short; 1: in this process); "
                         "the same choice either way")
+    p.add_argument("--law", default=None, metavar="LAW",
+                   help="the robust MPC's law to tune (tracking, paper, or a law module; "
+                        "default: tracking, the default law)")
     p.add_argument("--json", action="store_true", help="print the table as JSON")
     p.add_argument("--quiet", action="store_true", help="print nothing but errors")
     p.set_defaults(func=run)
@@ -70,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
 
     try:
         result = tune(args.model, args.scenario, tv_ratio=args.tv_ratio, save=args.save,
-                      progress=not args.quiet and sys.stderr.isatty(), workers=args.workers)
+                      progress=not args.quiet and sys.stderr.isatty(), workers=args.workers,
+                      law=args.law)
     except ParameterError as exc:   # worded for the command line: --tv-ratio
         raise exc.as_option() from None
     if args.json:

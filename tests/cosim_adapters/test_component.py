@@ -33,17 +33,17 @@ def write_scenario(tmp_path, rows):
 
 def test_interface(ctrl):
     assert ctrl.direct_feedthrough is True
-    assert ctrl.sample_time == ctrl.model.Ts == 25.0
+    assert ctrl.sample_time == ctrl.mpc.model.Ts == 25.0
     assert ctrl.bounds == FOURTANK.bounds()
     assert [s.name for s in ctrl.inputs] == ["h1", "h2", "ref.h1", "ref.h2"]
     assert [s.name for s in ctrl.outputs] == ["qa", "qb"]
     # the certificate the controller runs on passes its hypotheses at a nominal set-point
-    assert ctrl.cert.ok(ctrl.model.normalize_y(np.array([1.0, 1.0])))
+    assert ctrl.mpc.cert.ok(ctrl.mpc.model.normalize_y(np.array([1.0, 1.0])))
 
 
 def test_short_closed_loop_with_model_as_plant(ctrl, tmp_path):
     sc = write_scenario(tmp_path, ["0,0.8,0.8", "250,1.0,0.9", "1000,,"])
-    plant = GRUPlant(ctrl.model, y0=np.array([0.8, 0.8]))
+    plant = GRUPlant(ctrl.mpc.model, y0=np.array([0.8, 0.8]))
     res = Master(plant, ctrl, sc).run()
     assert res.status == "ok", res.reason
     cols = res.columns
@@ -71,7 +71,7 @@ def test_inadmissible_setpoint_is_held_and_reported(tmp_path):
     nothing and steers towards the closest admissible steady state instead."""
     sc = write_scenario(tmp_path, ["0,0.8,0.8", "100,1.98,0.8", "200,,"])
     ctrl = RobustMPCController(law="paper")
-    plant = GRUPlant(ctrl.model, y0=np.array([0.8, 0.8]))
+    plant = GRUPlant(ctrl.mpc.model, y0=np.array([0.8, 0.8]))
     res = Master(plant, ctrl, sc).run()
     assert res.status == "ok", res.reason
     s = ctrl.summary()
@@ -80,7 +80,7 @@ def test_inadmissible_setpoint_is_held_and_reported(tmp_path):
     assert ctrl.diagnostics()["setpoint_rejected"] == 1.0
     assert ctrl.diagnostics()["y_model_h1"] == pytest.approx(0.8)
     tracking = RobustMPCController()
-    res = Master(GRUPlant(tracking.model, y0=np.array([0.8, 0.8])), tracking, sc).run()
+    res = Master(GRUPlant(tracking.mpc.model, y0=np.array([0.8, 0.8])), tracking, sc).run()
     assert res.status == "ok", res.reason
     assert tracking.summary()["setpoint_rejected_steps"] == 0
     assert 0.8 < tracking.diagnostics()["y_model_h1"] < 1.98   # the closest admissible one
@@ -116,7 +116,7 @@ def test_options_outside_the_theorem(tmp_path):
     """setpoint_rate ramps the FHOCP set-point; offset_free shifts it by the filtered y − ŷ."""
     sc = write_scenario(tmp_path, ["0,0.8,0.8", "100,1.0,0.8", "400,,"])
     ctrl = RobustMPCController(law="paper", setpoint_rate=0.02, offset_free=True)
-    plant = GRUPlant(ctrl.model, y0=np.array([0.8, 0.8]), w_y_max=0.02, seed=2)
+    plant = GRUPlant(ctrl.mpc.model, y0=np.array([0.8, 0.8]), w_y_max=0.02, seed=2)
     res = Master(plant, ctrl, sc).run()
     assert res.status == "ok", res.reason
     cols, rows = res.columns, np.array(res.rows)
@@ -129,7 +129,7 @@ def test_options_outside_the_theorem(tmp_path):
 def _large_step_run(tmp_path, **kw):
     sc = write_scenario(tmp_path, ["0,0.6,0.6", "100,1.4,1.4", "1250,,"])
     ctrl = RobustMPCController(**kw)
-    plant = GRUPlant(ctrl.model, y0=np.array([0.6, 0.6]))
+    plant = GRUPlant(ctrl.mpc.model, y0=np.array([0.6, 0.6]))
     res = Master(plant, ctrl, sc).run()
     assert res.status == "ok", res.reason
     return ctrl, res
@@ -189,26 +189,27 @@ def test_output_stage_cost() -> None:
     weight s follows it (s = n λmax(Q) / (1 − ρ_s²), as for any Q)."""
     default = RobustMPCController(law="paper")
     c = RobustMPCController(law="paper", Q="outputs")
-    Uo = c.model.params["U_o"]
-    assert np.allclose(c.cert.Q, Uo.T @ Uo + 1e-3 * np.eye(c.model.n))
-    assert np.min(np.linalg.eigvalsh(c.cert.Q)) > 0 and c.summary()["options"]["Q"] == "outputs"
-    ratio = np.max(np.linalg.eigvalsh(c.cert.Q)) / np.max(np.linalg.eigvalsh(default.cert.Q))
-    assert c.cert.s == pytest.approx(ratio * default.cert.s, rel=1e-9)
+    Uo = c.mpc.model.params["U_o"]
+    assert np.allclose(c.mpc.cert.Q, Uo.T @ Uo + 1e-3 * np.eye(c.mpc.model.n))
+    assert np.min(np.linalg.eigvalsh(c.mpc.cert.Q)) > 0 and c.summary()["options"]["Q"] == "outputs"
+    ratio = (np.max(np.linalg.eigvalsh(c.mpc.cert.Q))
+             / np.max(np.linalg.eigvalsh(default.mpc.cert.Q)))
+    assert c.mpc.cert.s == pytest.approx(ratio * default.mpc.cert.s, rel=1e-9)
 
 
 def test_solver_option_selects_the_nlp_solver() -> None:
-    assert RobustMPCController().fhocp.solver == "sqp"
-    assert RobustMPCController(solver="ipopt").fhocp.solver == "ipopt"
+    assert RobustMPCController().mpc.fhocp.solver == "sqp"
+    assert RobustMPCController(solver="ipopt").mpc.fhocp.solver == "ipopt"
 
 
 def test_the_observer_uses_the_fhocp_kernel() -> None:
     """The observer's update runs in the FHOCP's compiled kernel when there is one, in numpy
     with kernel="numpy"; the summary says which."""
     c = RobustMPCController()
-    assert c.observer.kernel is c.fhocp.kernel
-    assert c.summary()["kernel"] == ("compiled" if c.fhocp.kernel is not None else "numpy")
+    assert c.mpc.observer.kernel is c.mpc.fhocp.kernel
+    assert c.summary()["kernel"] == ("compiled" if c.mpc.fhocp.kernel is not None else "numpy")
     n = RobustMPCController(kernel="numpy")
-    assert n.observer.kernel is None and n.summary()["kernel"] == "numpy"
+    assert n.mpc.observer.kernel is None and n.summary()["kernel"] == "numpy"
 
 
 def test_gru_plant_start_parameters() -> None:
@@ -242,7 +243,7 @@ def test_reused_controller_gives_the_results_of_a_new_one() -> None:
     sc = load(ROOT / "scenarios" / "paper_steps.csv").with_changes(stop_time=5000.0)
 
     def rows(c: RobustMPCController) -> np.ndarray:
-        return np.asarray(Master(GRUPlant(c.model, y0=np.array([0.7, 0.7])), c, sc).run().rows)
+        return np.asarray(Master(GRUPlant(c.mpc.model, y0=np.array([0.7, 0.7])), c, sc).run().rows)
 
     first, again, fresh = rows(ctrl), rows(ctrl), rows(RobustMPCController())
     assert np.array_equal(first, again, equal_nan=True)

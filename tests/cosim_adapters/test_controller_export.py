@@ -281,24 +281,41 @@ def test_samples_the_master_skips_hold_the_fmu_as_the_python_controller(
 
 def test_the_compiled_step_replays_the_python_controller() -> None:
     """:class:`CompiledController` fed the measurements the Python controller saw gives its
-    inputs, statuses and fallbacks, step by step."""
+    inputs, statuses and fallbacks, step by step; a setting changed between two steps
+    (:meth:`controllers.mpc.RobustMPC.set`: the weights, ``d̂``'s gain) is the C step's
+    tunable parameter of that name: the same inputs to the bit after it, and after a new
+    run (the design's settings again)."""
     from controllers.kernel.controller_source import (
         CompiledController,
-        ControllerDesign,
         build,
         design_data,
+        parameters,
     )
     from cosim_adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController()
-    law = ctrl.law
-    design = ControllerDesign.of(ctrl.fhocp, ctrl.observer, law.disturbance.beta,
-                                 law.certified, ctrl.model, ctrl._lo, ctrl._hi)
+    design = ctrl.mpc.export_design()
     compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
                                   n_outputs=2)
-    ctrl.setup(0.0)
-    for _ in _replayed(ctrl, compiled, [(0.65, 0.65)] * 30 + [(1.3, 1.4)] * 30):
-        pass
+    names = [p[0] for p in parameters(design, ("qa", "qb"), ("h1", "h2"))]
+    assert names == [s[0] for s in ctrl.mpc.settings()]
+    changes = {20: {"R.qa": 0.05, "offset_weight.h2": 300.0},
+               35: {"offset_filter": 0.6, "du_weight.qb": 0.5}}
+    for run in range(2):
+        ctrl.setup(0.0)
+        compiled.reset()
+        refs = [(0.65, 0.65)] * 30 + [(1.3, 1.4)] * 30
+        for k, _ in enumerate(_replayed(ctrl, compiled, refs)):
+            for name, value in changes.get(k, {}).items() if run == 0 else ():
+                assert compiled.set_parameter(names.index(name), value) is None
+                assert ctrl.set(name, value).startswith(f"{name} = {value:g}: ")
+        assert dict((s[0], s[4]) for s in ctrl.mpc.settings())["R.qa"] == (
+            0.05 if run == 0 else 0.01)
+    with pytest.raises(CosimError, match=r"setting R\.qa=-1\.0: must keep R positive definite"):
+        ctrl.set("R.qa", -1.0)
+    assert compiled.set_parameter(names.index("R.qa"), -1.0) is not None
+    with pytest.raises(CosimError, match=r"no setting 'R\.zz'"):
+        ctrl.set("R.zz", 1.0)
     compiled.close()
 
 
@@ -399,7 +416,6 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
     again, and its holds."""
     from controllers.kernel.controller_source import (
         CompiledController,
-        ControllerDesign,
         build,
         design_data,
         parameters,
@@ -409,10 +425,9 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
     ctrl = RobustMPCController(**{**PAPER_LAW, **options})
     if first_outside:
         ctrl.expect_setpoints([{"h1": 3.0, "h2": 0.3}])
-        assert not ctrl.law.certified
+        assert not ctrl.mpc.law.certified
     ctrl.setup(0.0)
-    design = ControllerDesign.of_paper(ctrl.law, ctrl.observer, ctrl.model, ctrl._lo,
-                                       ctrl._hi)
+    design = ctrl.mpc.export_design()
     names = [p[0] for p in parameters(design, ("qa", "qb"), ("h1", "h2"))]
     assert names == (["offset_filter"] if "offset_free" in options else []) + [
         "R.qa", "R.qb"] + (["du_weight.qa", "du_weight.qb"] if "du_weight" in options else []
@@ -421,13 +436,13 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
                                   n_outputs=2)
     refused, fractions = 0, set()
     for k, out in enumerate(_replayed(ctrl, compiled, [r for r in refs for _ in range(25)])):
-        assert bool(out["warnings"] & 4) == (len(ctrl.law.rejections) > refused), k
-        refused = len(ctrl.law.rejections)
-        fractions.add(ctrl.law.lam)
+        assert bool(out["warnings"] & 4) == (len(ctrl.mpc.law.rejections) > refused), k
+        refused = len(ctrl.mpc.law.rejections)
+        fractions.add(ctrl.mpc.law.lam)
     assert refused == named
-    assert ctrl.law.rejected > 0
+    assert ctrl.mpc.law.rejected > 0
     if "governor" in options and not first_outside:   # it moved by fractions of the step
-        assert ctrl.law.governed_steps > 0 and min(fractions - {0.0}) < 0.5, fractions
+        assert ctrl.mpc.law.governed_steps > 0 and min(fractions - {0.0}) < 0.5, fractions
     compiled.close()
 
 
@@ -441,7 +456,6 @@ def test_the_compiled_governor_moves_along_the_surface_of_equilibrium_outputs(
     from controllers.equilibrium import equilibrium_output
     from controllers.kernel.controller_source import (
         CompiledController,
-        ControllerDesign,
         build,
         design_data,
     )
@@ -456,17 +470,16 @@ def test_the_compiled_governor_moves_along_the_surface_of_equilibrium_outputs(
     v, r = model.denormalize_y(v), model.denormalize_y(r)
     ctrl = RobustMPCController(model=tmp_path / "gru_1x2.json", law="paper", N=5)
     ctrl.expect_setpoints([{"h1": a[0], "h2": a[1]} for a in (v, r)])
-    assert ctrl.law.certified
+    assert ctrl.mpc.law.certified
     ctrl.setup(0.0)
-    design = ControllerDesign.of_paper(ctrl.law, ctrl.observer, ctrl.model, ctrl._lo,
-                                       ctrl._hi)
+    design = ctrl.mpc.export_design()
     compiled = CompiledController(*build(design), design_data(design), n_inputs=1,
                                   n_outputs=2)
     refs = [tuple(v)] * 20 + [tuple(r)] * 40 + [tuple((v + r) / 2)] * 10 + [tuple(v)] * 30
-    fractions = {ctrl.law.lam for _ in _replayed(ctrl, compiled, refs)}
+    fractions = {ctrl.mpc.law.lam for _ in _replayed(ctrl, compiled, refs)}
     compiled.close()
-    assert min(fractions - {0.0}) < 0.5 and ctrl.law.governed_steps > 10, fractions
-    assert len(ctrl.law.rejections) == 1 and "is not reachable" in ctrl.law.rejections[0]
+    assert min(fractions - {0.0}) < 0.5 and ctrl.mpc.law.governed_steps > 10, fractions
+    assert len(ctrl.mpc.law.rejections) == 1 and "is not reachable" in ctrl.mpc.law.rejections[0]
     # the FMU of one input, in closed loop with the model as the plant: the Python law's
     steps = tmp_path / "steps.csv"
     steps.write_text("time,ref.h1,ref.h2\n" + "".join(

@@ -153,19 +153,19 @@ def test_the_kernels_shift_of_the_biases_is_the_full_models(heater: dict[str, Pa
     from cosim_adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController(model=heater["model"])
-    full, fh = ctrl.full_model, ctrl.fhocp
+    full, fh = ctrl.mpc.full_model, ctrl.mpc.fhocp
     assert fh.kernel is not None
     u = np.random.default_rng(0).uniform(-1, 1, (fh.N, 1))
     x0 = np.full(full.n, 0.1)
     for d in (0.7, -0.4, 0.0):
-        ctrl.held.hold(np.array([d]), ctrl.fhocp)
+        ctrl.mpc.held.hold(np.array([d]), ctrl.mpc.fhocp)
         want = gru.simulate(full.params, x0, np.hstack([u, np.full((fh.N, 1), d)]))[0]
         assert np.max(np.abs(fh.simulate(x0, u) - want)) < 1e-13, d
-        assert np.max(np.abs(gru.simulate(ctrl.model.params, x0, u)[0] - want)) < 1e-13, d
+        assert np.max(np.abs(gru.simulate(ctrl.mpc.model.params, x0, u)[0] - want)) < 1e-13, d
         # the observer's step (eq:observer, no correction when y = ŷ) at the disturbance too
-        ctrl.observer.reset(x0=x0)
-        ctrl.observer.make_step(u[0], ctrl.observer.y_hat())
-        assert np.max(np.abs(ctrl.observer.x_hat - want[1])) < 1e-13, d
+        ctrl.mpc.observer.reset(x0=x0)
+        ctrl.mpc.observer.make_step(u[0], ctrl.mpc.observer.y_hat())
+        assert np.max(np.abs(ctrl.mpc.observer.x_hat - want[1])) < 1e-13, d
 
 
 def _replay(ctrl: Any, compiled: Any, steps: int, ref: Callable[[int], float],
@@ -229,7 +229,6 @@ def test_the_paper_laws_compiled_step_replays_the_python_controller_with_disturb
     heater = request.getfixturevalue(plant)
     from controllers.kernel.controller_source import (
         CompiledController,
-        ControllerDesign,
         build,
         design_data,
     )
@@ -238,14 +237,13 @@ def test_the_paper_laws_compiled_step_replays_the_python_controller_with_disturb
     ctrl = RobustMPCController(model=heater["model"], **PAPER)
     ctrl.expect_setpoints([{"T": 45.0}, {"T": 55.0}, {"T": 60.0}])   # uncertified for them
     ctrl.setup(0.0)
-    design = ControllerDesign.of_paper(ctrl.law, ctrl.observer, ctrl.model, ctrl._lo,
-                                       ctrl._hi)
+    design = ctrl.mpc.export_design()
     assert design.q == 1 and design.dead_time == (2 if plant == "dead_time" else 0)
     compiled = CompiledController(*build(design), design_data(design), n_inputs=1,
                                   n_outputs=1, n_disturbances=1)
     _replay(ctrl, compiled, 160, lambda k: 45.0 if k < 20 else 55.0 if k < 70 else 60.0,
             lambda k: 20.0 if k < 40 else 10.0 if k < 90 else 30.0 if k < 120 else 5.0)
-    info = ctrl.law.summary()
+    info = ctrl.mpc.law.summary()
     assert info["disturbance_refusals"] >= 1
     assert any("is not reachable at T_in=5 degC: the closest reachable output" in r
                for r in info["setpoint_rejections"]), info["setpoint_rejections"]
@@ -584,16 +582,13 @@ def test_the_compiled_step_replays_the_python_controller_with_disturbance_and_de
     gives its inputs, statuses and fallbacks to the bit, step by step."""
     from controllers.kernel.controller_source import (
         CompiledController,
-        ControllerDesign,
         build,
         design_data,
     )
     from cosim_adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController(model=dead_time["model"])
-    law = ctrl.law
-    design = ControllerDesign.of(ctrl.fhocp, ctrl.observer, law.disturbance.beta,
-                                 law.certified, ctrl.model, ctrl._lo, ctrl._hi)
+    design = ctrl.mpc.export_design()
     assert design.q == 1 and design.dead_time == 2
     compiled = CompiledController(*build(design), design_data(design), n_inputs=1,
                                   n_outputs=1, n_disturbances=1)

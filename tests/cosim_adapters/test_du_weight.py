@@ -18,12 +18,12 @@ ROOT = Path(__file__).resolve().parents[2]
 
 def test_weights_by_input_name_and_in_the_summary() -> None:
     c = RobustMPCController(du_weight={"qb": 5})
-    assert np.array_equal(c.fhocp.du_weight, [0.0, 5.0]) and c.fhocp.has_du
+    assert np.array_equal(c.mpc.fhocp.du_weight, [0.0, 5.0]) and c.mpc.fhocp.has_du
     assert c.summary()["du_weight"] == {"qa": 0.0, "qb": 5.0}
     d = RobustMPCController(law="paper")          # the paper's cost has no input-rate term
-    assert not d.fhocp.has_du and d.summary()["du_weight"] == {"qa": 0.0, "qb": 0.0}
+    assert not d.mpc.fhocp.has_du and d.summary()["du_weight"] == {"qa": 0.0, "qb": 0.0}
     assert RobustMPCController().summary()["du_weight"] == {"qa": 0.05, "qb": 0.05}
-    assert np.array_equal(RobustMPCController(du_weight=2).fhocp.du_weight, [2.0, 2.0])
+    assert np.array_equal(RobustMPCController(du_weight=2).mpc.fhocp.du_weight, [2.0, 2.0])
 
 
 @pytest.fixture(scope="module")

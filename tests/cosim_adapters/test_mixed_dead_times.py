@@ -61,8 +61,9 @@ def test_the_tracking_law_applies_each_input_at_its_own_dead_time(
 
     def step(self: RobustMPCController, t: float, dt: float) -> None:
         original(self, t, dt)
-        if self.held.prefix.depth:
-            plans.append((self.law.records[-1].result.u.copy(), self.held._u_past.copy()))
+        if self.mpc.held.prefix.depth:
+            plans.append((self.mpc.law.records[-1].result.u.copy(),
+                          self.mpc.held._u_past.copy()))
 
     iae = {}
     RobustMPCController.step = step
@@ -104,7 +105,6 @@ def test_the_compiled_step_replays_the_python_controller_with_mixed_dead_times(
     controller saw through set-point steps: its inputs, statuses and fallbacks to the bit."""
     from controllers.kernel.controller_source import (
         CompiledController,
-        ControllerDesign,
         build,
         design_data,
     )
@@ -112,12 +112,7 @@ def test_the_compiled_step_replays_the_python_controller_with_mixed_dead_times(
 
     ctrl = RobustMPCController(model=models["short"], **options)
     ctrl.setup(0.0)
-    if options:
-        design = ControllerDesign.of_paper(ctrl.law, ctrl.observer, ctrl.model, ctrl._lo,
-                                           ctrl._hi)
-    else:
-        design = ControllerDesign.of(ctrl.fhocp, ctrl.observer, ctrl.law.disturbance.beta,
-                                     ctrl.law.certified, ctrl.model, ctrl._lo, ctrl._hi)
+    design = ctrl.mpc.export_design()
     assert design.dead_time == 1 and design.delays.tolist() == [1, 3]
     compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
                                   n_outputs=2)

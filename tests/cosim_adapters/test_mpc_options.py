@@ -1,4 +1,4 @@
-"""The robust MPC's design described once (cosim_adapters.mpc_options.MPCOptions)."""
+"""The robust MPC's design described once (controllers.mpc_options.MPCOptions)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,11 @@ from pathlib import Path
 
 import pytest
 
-from controllers.errors import ProblemFileError
+from controllers import laws
+from controllers.errors import OptionError, ProblemFileError
+from controllers.mpc_options import MPCOptions
 from controllers.problem_file import load, problem_from_dict
 from cosim.core.errors import CosimError
-from cosim_adapters.mpc_options import LAW_DEFAULTS, MPCOptions
 from cosim_adapters.robust_mpc import RobustMPCController
 from tests.fourtank_problem import with_table
 
@@ -19,7 +20,8 @@ from tests.fourtank_problem import with_table
 @pytest.mark.parametrize("law", ["tracking", "paper"])
 def test_the_law_fills_its_defaults(law: str) -> None:
     o = MPCOptions.from_mapping({"law": law})
-    assert {k: getattr(o, k) for k in LAW_DEFAULTS[law]} == LAW_DEFAULTS[law]
+    defaults = laws.spec(law).defaults
+    assert {k: getattr(o, k) for k in defaults} == defaults
     assert MPCOptions.from_mapping({"law": law, "N": 7}).N == 7
 
 
@@ -43,7 +45,7 @@ def test_round_trip_through_plain_data() -> None:
     ({"law": "paper", "offset_filter": 2}, "option offset_filter=2"),
 ])
 def test_bad_options_are_one_line_errors(options: dict, message: str) -> None:
-    with pytest.raises(CosimError, match=message) as err:
+    with pytest.raises(OptionError, match=message) as err:
         MPCOptions.from_mapping(options)
     assert "\n" not in str(err.value)
 
@@ -51,12 +53,12 @@ def test_bad_options_are_one_line_errors(options: dict, message: str) -> None:
 def test_the_controller_takes_the_description_or_its_keys() -> None:
     by_keys = RobustMPCController(law="paper", N=10)
     by_object = RobustMPCController(options=MPCOptions.from_mapping({"law": "paper", "N": 10}))
-    assert by_keys.options == by_object.options and by_keys.fhocp.N == 10
+    assert by_keys.mpc.options == by_object.mpc.options and by_keys.mpc.fhocp.N == 10
     summary = by_keys.summary()
     assert summary["options"]["N"] == 10 and summary["options"]["law"] == "paper"
     json.dumps(summary["options"])
-    over = RobustMPCController(options=by_keys.options, N=12)   # a key over the object
-    assert over.options.N == 12 and over.options.law == "paper"
+    over = RobustMPCController(options=by_keys.mpc.options, N=12)   # a key over the object
+    assert over.mpc.options.N == 12 and over.mpc.options.law == "paper"
 
 
 # -- the problem's [mpc] table: the tuning chosen for the plant ---------------------------------
@@ -68,14 +70,16 @@ def test_the_problems_mpc_table_tunes_the_controller_and_options_override_it(
     assert problem.mpc == {"N": 12, "R": 0.02, "control_horizon": 5}
     assert problem_from_dict(json.loads(json.dumps(problem.to_dict()))) == problem
     tuned = RobustMPCController(problem=path)        # the shipped model's problem, retuned
-    assert (tuned.options.N, tuned.options.R, tuned.options.control_horizon) == (12, 0.02, 5)
-    assert tuned.fhocp.N == 12
+    o = tuned.mpc.options
+    assert (o.N, o.R, o.option("control_horizon")) == (12, 0.02, 5)
+    assert tuned.mpc.fhocp.N == 12
     over = RobustMPCController(problem=path, N=10)   # an option given wins
-    assert (over.options.N, over.options.R) == (10, 0.02)
+    assert (over.mpc.options.N, over.mpc.options.R) == (10, 0.02)
     paper = RobustMPCController(problem=path, law="paper")   # the other law's keys left out
-    assert paper.options.control_horizon is None and paper.options.N == 12
+    assert "control_horizon" not in paper.mpc.options.law_options
+    assert paper.mpc.options.N == 12
     plain = RobustMPCController()                    # the model's own problem: no [mpc]
-    assert LAW_DEFAULTS["tracking"]["N"] == plain.options.N
+    assert laws.spec("tracking").defaults["N"] == plain.mpc.options.N
 
 
 @pytest.mark.parametrize(("table", "anchor", "message"), [
@@ -115,7 +119,7 @@ def test_a_tuned_model_keeps_its_mpc_table_under_a_problem_file_without_one(
     doc["problem"]["mpc"] = {"N": 12}
     model = tmp_path / "tuned.json"
     model.write_text(json.dumps(doc))
-    assert RobustMPCController(model=model).options.N == 12
-    assert RobustMPCController(model=model, problem=PATH).options.N == 12
+    assert RobustMPCController(model=model).mpc.options.N == 12
+    assert RobustMPCController(model=model, problem=PATH).mpc.options.N == 12
     retuned = with_table(tmp_path, "mpc", "N = 14\n")
-    assert RobustMPCController(model=model, problem=retuned).options.N == 14
+    assert RobustMPCController(model=model, problem=retuned).mpc.options.N == 14

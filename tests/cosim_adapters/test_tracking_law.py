@@ -1,7 +1,7 @@
-"""The ``robust-mpc`` component's tracking law (``law = "tracking"``, cosim_adapters.tracking):
-its options and run-time hypotheses, and in closed loop with the four-tank FMU on the paper
-scenario: issue 20's nominal goals against the PI, smoother inputs than the paper's law, no
-violation, no static offset, nothing rejected."""
+"""The ``robust-mpc`` component's tracking law (``law = "tracking"``,
+controllers.laws.tracking.law): its options and run-time hypotheses, and in closed loop with the
+four-tank FMU on the paper scenario: issue 20's nominal goals against the PI, smoother inputs
+than the paper's law, no violation, no static offset, nothing rejected."""
 
 from __future__ import annotations
 
@@ -47,8 +47,8 @@ def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
 
 def test_weights_by_number_or_signal_name() -> None:
     c = RobustMPCController(law="tracking", Q=2.0, R={"qa": 0.001})
-    assert c.fhocp.Q[0, 0] == 2.0 and c.fhocp.Q[0, 1] == 0.0
-    assert c.fhocp.R.tolist() == [[0.001, 0.0], [0.0, 0.01]]
+    assert c.mpc.fhocp.Q[0, 0] == 2.0 and c.mpc.fhocp.Q[0, 1] == 0.0
+    assert c.mpc.fhocp.R.tolist() == [[0.001, 0.0], [0.0, 0.01]]
 
 
 def test_defaults_and_summary() -> None:
@@ -57,17 +57,18 @@ def test_defaults_and_summary() -> None:
     assert s["law"] == "tracking" and s["N"] == 80 and not s["governor"]
     assert s["offset_weight"] == {"h1": 1e4, "h2": 10.0} and s["offset_filter"] == 0.3
     assert s["du_weight"] == {"qa": 0.05, "qb": 0.05} and s["gain_scale"] == 0.0
-    assert s["alpha_c"] == pytest.approx(RobustMPCController(N=80, law="paper").cert.alpha_min())
-    assert c.fhocp.sqp_options["max_iter"] == 40
-    assert s["control_horizon"] == c.fhocp.reference.control_horizon == 20       # ⌈N / 4⌉
-    assert c.fhocp.nw == 20 * 2 + 2 + 1
-    assert RobustMPCController(law="tracking", N=10).fhocp.reference.control_horizon == 3
-    assert RobustMPCController(law="tracking", control_horizon=80).fhocp.nw == 80 * 2 + 2 + 1
-    assert RobustMPCController(law="tracking", max_iter=7).fhocp.sqp_options["max_iter"] == 7
-    assert RobustMPCController(law="paper").fhocp.sqp_options["max_iter"] == 15
+    paper = RobustMPCController(N=80, law="paper")
+    assert s["alpha_c"] == pytest.approx(paper.mpc.cert.alpha_min())
+    assert c.mpc.fhocp.sqp_options["max_iter"] == 40
+    assert s["control_horizon"] == c.mpc.fhocp.reference.control_horizon == 20       # ⌈N / 4⌉
+    assert c.mpc.fhocp.nw == 20 * 2 + 2 + 1
+    assert RobustMPCController(law="tracking", N=10).mpc.fhocp.reference.control_horizon == 3
+    assert RobustMPCController(law="tracking", control_horizon=80).mpc.fhocp.nw == 80 * 2 + 2 + 1
+    assert RobustMPCController(law="tracking", max_iter=7).mpc.fhocp.sqp_options["max_iter"] == 7
+    assert RobustMPCController(law="paper").mpc.fhocp.sqp_options["max_iter"] == 15
     default = RobustMPCController()                # the tracking law is the default
-    assert default.summary()["law"] == "tracking" and default.fhocp.N == 80
-    assert default.fhocp.sqp_options["max_iter"] == 40
+    assert default.summary()["law"] == "tracking" and default.mpc.fhocp.N == 80
+    assert default.mpc.fhocp.sqp_options["max_iter"] == 40
     h = s["tracking_hypotheses"]     # H3-H6 of docs/design/tracking.md, computed at run time
     assert h["recursive_feasibility"] and h["Ys_nonempty"] and h["alpha_c"] == s["alpha_c"]
     assert 0 < h["grid_points_admissible"] < h["grid_points"]

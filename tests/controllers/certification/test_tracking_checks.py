@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from controllers.certification.tracking_checks import _ys_nonempty
+from controllers.laws.tracking.checks import _ys_nonempty
 
 #: The box 0 ≤ y_1, y_2 ≤ 1 as rows of L y ≤ rhs.
 L = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0]])

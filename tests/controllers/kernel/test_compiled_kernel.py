@@ -16,6 +16,7 @@ import pytest
 
 from controllers.equilibrium import equilibrium, equilibrium_newton
 from controllers.kernel import compiled_kernel as ck
+from controllers.laws.paper.reference import FixedSetpoint
 from controllers.ocp.fhocp import FHOCP, FHOCPData
 from controllers.ocp.nlp_single_shooting import SingleShootingNLP, clip_eigenvalues
 from tests.controllers.random_gru import random_gru_model
@@ -39,6 +40,7 @@ def random_fhocp(n: int, N: int, seed: int, m: int = 2, p: int = 2, **kw: object
     q = L.shape[0]
     a = np.linspace(0.0, 0.5, N + 1)[:, None] * np.ones((1, q))
     b = np.linspace(0.0, 0.02, N + 1)[:, None] * np.ones((1, q))
+    kw.setdefault("reference", FixedSetpoint())
     return FHOCP(FHOCPData(model.params, N, np.eye(n), 0.01 * np.eye(m), L, np.full(q, 1.0),
                            np.full(q, 0.002), a, b, float(50 * n)), **kw).setup()
 
@@ -113,8 +115,9 @@ def test_same_solves_as_the_numpy_fhocp(cert) -> None:
     """Same status and iterations, the optimum to 1e-9, from identical warm starts (the
     kernel's derivatives in casadi's SQP loop, as the numpy callbacks; its own loop:
     tests/controllers/kernel/test_kernel_sqp.py)."""
-    a = FHOCP.from_certificate(cert, kernel="numpy").setup()
-    b = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi"}).setup()
+    a = FHOCP.from_certificate(cert, reference=FixedSetpoint(), kernel="numpy").setup()
+    b = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                               sqp_options={"loop": "casadi"}).setup()
     assert a.kernel is None and b.kernel is not None
     for ra, rb in same_start_solves(a, b, cert, [[0.1, 0.1], [0.0, 0.05], [0.1, 0.1]], 3):
         assert (ra.status, ra.iterations) == (rb.status, rb.iterations)
@@ -125,7 +128,7 @@ def test_same_solves_as_the_numpy_fhocp(cert) -> None:
 
 @needs_cc
 def test_compiled_equilibrium_newton_matches_numpy(cert) -> None:
-    fh = FHOCP.from_certificate(cert).setup()
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint()).setup()
     ref = cert.reference(np.array([0.0, 0.0]))
     for y in ([0.1, 0.1], [0.05, -0.05], [3.0, 3.0]):
         a = equilibrium_newton(cert.params, np.array(y), ref.x_bar, ref.u_bar)
@@ -147,7 +150,7 @@ def test_compiled_equilibrium_newton_for_every_shape(m: int, p: int) -> None:
 
     from controllers.equilibrium import equilibrium_output
     from controllers.gru import output, step
-    from controllers.ocp.governor import ReferenceGovernor
+    from controllers.laws.paper.governor import ReferenceGovernor
 
     fh = random_fhocp(9, 6, seed=10 * m + p, m=m, p=p)
     assert fh.kernel is not None, fh.kernel_error
@@ -179,14 +182,14 @@ def test_without_a_compiler_the_numpy_derivatives_give_the_same_answer(
     monkeypatch.setenv("GRU_MPC_KERNEL_CACHE", str(tmp_path))
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        fh = FHOCP.from_certificate(cert).setup()
+        fh = FHOCP.from_certificate(cert, reference=FixedSetpoint()).setup()
     assert fh.kernel is None and "no C compiler 'no-such-compiler-xyz'" in fh.kernel_error
     assert [str(w.message) for w in caught if "kernel" in str(w.message)] == [
         "compiled FHOCP kernel unavailable (no C compiler 'no-such-compiler-xyz' on PATH); "
         "using the numpy derivatives"]
     ref = cert.reference(np.array([0.1, 0.1]))
     r1 = fh.solve(ref.x_bar, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
-    r2 = FHOCP.from_certificate(cert, kernel="numpy").setup().solve(
+    r2 = FHOCP.from_certificate(cert, reference=FixedSetpoint(), kernel="numpy").setup().solve(
         ref.x_bar, 0.02, ref.x_bar, ref.u_bar, ref.alpha)
     assert r1.status == r2.status and np.array_equal(r1.u, r2.u)
 
@@ -195,7 +198,7 @@ def test_disabled_by_the_environment(cert, monkeypatch: pytest.MonkeyPatch) -> N
     monkeypatch.setenv("GRU_MPC_KERNEL", "0")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        fh = FHOCP.from_certificate(cert).setup()
+        fh = FHOCP.from_certificate(cert, reference=FixedSetpoint()).setup()
     assert fh.kernel is None and "disabled by GRU_MPC_KERNEL=0" in fh.kernel_error
 
 
@@ -203,7 +206,7 @@ def test_disabled_by_the_environment(cert, monkeypatch: pytest.MonkeyPatch) -> N
 def test_cache_reuses_a_build_and_keys_on_the_problem(cert, tmp_path: Path,
                                                       monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setenv("GRU_MPC_KERNEL_CACHE", str(tmp_path))
-    fh = FHOCP.from_certificate(cert, kernel="numpy").setup()
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint(), kernel="numpy").setup()
     k1 = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2))
     k2 = ck.build(ck.KernelProblem(fh.params, fh.N, fh.Q, fh.R, fh.DUo, fh.s, 1e-2))
     assert k1 is not None and k1.path == k2.path and len(list(tmp_path.glob("*.c"))) == 1
@@ -220,8 +223,10 @@ def test_cache_reuses_a_build_and_keys_on_the_problem(cert, tmp_path: Path,
 
 
 def test_ipopt_and_multiple_shooting_keep_numpy(cert) -> None:
-    assert FHOCP.from_certificate(cert, solver="ipopt").setup().kernel is None
-    assert FHOCP.from_certificate(cert, formulation="multiple-shooting").setup().kernel is None
+    assert FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                  solver="ipopt").setup().kernel is None
+    assert FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                  formulation="multiple-shooting").setup().kernel is None
 
 
 @needs_cc
@@ -271,8 +276,8 @@ def test_answer_check_and_observer_step_match_numpy(n: int, N: int, m: int, p: i
 def test_compiled_candidate_and_governor_test_match_numpy(cert) -> None:
     """The paper's law's evaluate and assess (the governor's feasibility test) give the
     numpy path's numbers with the kernel."""
-    a = FHOCP.from_certificate(cert, kernel="numpy").setup()
-    b = FHOCP.from_certificate(cert).setup()
+    a = FHOCP.from_certificate(cert, reference=FixedSetpoint(), kernel="numpy").setup()
+    b = FHOCP.from_certificate(cert, reference=FixedSetpoint()).setup()
     assert b.kernel is not None
     ref = cert.reference(np.array([0.1, 0.05]))
     x_hat, _ = equilibrium(cert.params, np.array([0.0, 0.0]))
@@ -291,7 +296,7 @@ def test_compiled_candidate_and_governor_test_match_numpy(cert) -> None:
 
 
 def test_tightened_bounds_are_kept_per_e_o_and_read_only(cert) -> None:
-    fh = FHOCP.from_certificate(cert, kernel="numpy")
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint(), kernel="numpy")
     b1 = fh.tightened_bounds(0.02)
     assert fh.tightened_bounds(0.02) is b1 and not b1.flags.writeable
     b2 = fh.tightened_bounds(0.03)

@@ -12,6 +12,7 @@ from controllers.errors import DesignError
 from controllers.kernel import compiled_kernel as ck
 from controllers.kernel.kernel_abi import QpStatus
 from controllers.kernel.kernel_sqp import KernelSQP
+from controllers.laws.paper.reference import FixedSetpoint
 from controllers.ocp.casadi_callbacks import quiet_stdout
 from controllers.ocp.fhocp import FHOCP
 from tests.controllers.kernel.test_compiled_kernel import needs_cc, random_fhocp, same_start_solves
@@ -136,8 +137,10 @@ def test_kernel_loop_solves_as_casadi_sqpmethod(cert) -> None:
     # 50 iterations: at the default 15 the solves after a set-point change cap, and which of
     # the others do depends on the BLAS kernels the random test problem was certified with
     opts = {"max_iter": 50}
-    a = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi", **opts}).setup()
-    b = FHOCP.from_certificate(cert, sqp_options={"loop": "kernel", **opts}).setup()
+    a = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                               sqp_options={"loop": "casadi", **opts}).setup()
+    b = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                               sqp_options={"loop": "kernel", **opts}).setup()
     assert isinstance(b._solver, KernelSQP) and not isinstance(a._solver, KernelSQP)
     solved = 0
     for ra, rb in same_start_solves(a, b, cert, [[0.1, 0.1], [0.0, 0.05], [-0.1, -0.1],
@@ -156,18 +159,21 @@ def test_kernel_loop_solves_as_casadi_sqpmethod(cert) -> None:
 def test_kernel_loop_needs_the_kernel(cert) -> None:
     """``kernel="numpy"`` keeps casadi's loop (the numpy callbacks have no C loop); an
     unknown loop is a design error."""
-    fh = FHOCP.from_certificate(cert, kernel="numpy", sqp_options={"loop": "kernel"}).setup()
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                kernel="numpy", sqp_options={"loop": "kernel"}).setup()
     assert not isinstance(fh._solver, KernelSQP)
     with pytest.raises(DesignError, match="loop must be"):
-        FHOCP.from_certificate(cert, sqp_options={"loop": "python"})
+        FHOCP.from_certificate(cert, reference=FixedSetpoint(), sqp_options={"loop": "python"})
 
 
 @needs_cc
 def test_kernel_loop_rejects_sqpmethod_options_it_does_not_follow(cert) -> None:
-    fh = FHOCP.from_certificate(cert, sqp_options={"hessian_approximation": "limited-memory"})
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                sqp_options={"hessian_approximation": "limited-memory"})
     with pytest.raises(DesignError, match="'hessian_approximation' is not supported"):
         fh.setup()
-    fh = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi", "min_iter": 1}).setup()
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                sqp_options={"loop": "casadi", "min_iter": 1}).setup()
     assert not isinstance(fh._solver, KernelSQP)
 
 
@@ -177,8 +183,9 @@ def test_derivative_reuse_reaches_the_same_optima(cert) -> None:
     adjoint-corrected gradient stop at the same KKT points (the same statuses, the optimum
     to the stopping test's precision) from the same starts; sqpmethod ignores the option."""
     opts = {"max_iter": 50}    # as above: which solves cap at 15 depends on the BLAS
-    a = FHOCP.from_certificate(cert, sqp_options=opts).setup()
-    b = FHOCP.from_certificate(cert, sqp_options={"reuse_step": 0.1, **opts}).setup()
+    a = FHOCP.from_certificate(cert, reference=FixedSetpoint(), sqp_options=opts).setup()
+    b = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                               sqp_options={"reuse_step": 0.1, **opts}).setup()
     sqp = b._buffer[0]
     solved = reused = 0
     for ra, rb in same_start_solves(a, b, cert, [[0.1, 0.1], [0.0, 0.05], [-0.1, -0.1],
@@ -191,7 +198,8 @@ def test_derivative_reuse_reaches_the_same_optima(cert) -> None:
             assert np.max(np.abs(ra.u - rb.u)) < 1e-4
             assert abs(ra.cost - rb.cost) < 1e-7 * (1 + abs(ra.cost))
     assert solved >= 10 and reused > 0
-    fh = FHOCP.from_certificate(cert, sqp_options={"loop": "casadi", "reuse_step": 0.1})
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                sqp_options={"loop": "casadi", "reuse_step": 0.1})
     assert not isinstance(fh.setup()._solver, KernelSQP)
 
 
@@ -203,8 +211,9 @@ def test_derivative_reuse_never_costs_convergence(cert, max_iter: int) -> None:
     the fresh-derivative solve's, and a restarted answer is that solve's to the bit. Tight
     iteration caps make the reuse loop (more, cheaper iterations) stall where fresh
     derivatives converge, on every BLAS (the fresh solves' counts differ between them)."""
-    a = FHOCP.from_certificate(cert, sqp_options={"max_iter": max_iter}).setup()
-    b = FHOCP.from_certificate(cert, sqp_options={"reuse_step": 0.1,
+    a = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                               sqp_options={"max_iter": max_iter}).setup()
+    b = FHOCP.from_certificate(cert, reference=FixedSetpoint(), sqp_options={"reuse_step": 0.1,
                                                   "max_iter": max_iter}).setup()
     sqp = b._buffer[0]
     restarts = 0

@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from controllers.equilibrium import equilibrium
+from controllers.laws.paper.reference import FixedSetpoint
 from controllers.ocp.fhocp import FHOCP
 from tests.controllers.kernel.test_compiled_kernel import needs_cc
 
@@ -48,7 +49,8 @@ def same(a: list[tuple], b: list[tuple]) -> bool:
 @pytest.mark.parametrize("loop", ["kernel", "casadi"])
 def test_two_fhocps_in_two_threads_solve_as_one_after_the_other(cert, loop: str) -> None:
     def fresh() -> FHOCP:
-        fh = FHOCP.from_certificate(cert, sqp_options={"loop": loop}).setup()
+        fh = FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                    sqp_options={"loop": loop}).setup()
         assert fh.kernel is not None, fh.kernel_error
         return fh
 

@@ -1,19 +1,20 @@
-"""The admissible reference governor (controllers.ocp.governor): equilibria by continuation, and
-every step it takes comes with a sequence that is feasible for the new set-point."""
+"""The admissible reference governor (controllers.laws.paper.governor): equilibria by continuation,
+and every step it takes comes with a sequence that is feasible for the new set-point."""
 
 import numpy as np
 import pytest
 
 from controllers.equilibrium import equilibrium
 from controllers.gru import output, simulate
+from controllers.laws.paper.governor import ReferenceGovernor, equilibrium_newton
+from controllers.laws.paper.reference import FixedSetpoint
 from controllers.ocp.fhocp import FHOCP
-from controllers.ocp.governor import ReferenceGovernor, equilibrium_newton
 from tests.controllers.random_gru import N
 
 
 @pytest.fixture(scope="module")
 def fhocp(cert):
-    return FHOCP.from_certificate(cert).setup()
+    return FHOCP.from_certificate(cert, reference=FixedSetpoint()).setup()
 
 
 def test_equilibrium_by_continuation_matches_least_squares(model):
@@ -75,7 +76,7 @@ def test_governor_for_non_square_problems(m: int, p: int) -> None:
     _, r = equilibrium_output(model.params, np.full(m, 0.3), x0)
     theta, cert = gain_design.choose_gain_scale(model, [v, r], N=10, w_y_bar=0.002)
     assert theta is not None
-    fh = FHOCP.from_certificate(cert).setup()
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint()).setup()
     gov = ReferenceGovernor(cert, fh)
     ref = cert.reference(v)
     x_bar, u_bar, alpha, x = ref.x_bar, ref.u_bar, ref.alpha, ref.x_bar

@@ -14,10 +14,11 @@ import pytest
 from controllers.equilibrium import equilibrium
 from controllers.errors import DesignError
 from controllers.kernel import compiled_kernel as ck
+from controllers.laws.paper.mpc import PaperMPC
+from controllers.laws.paper.reference import FixedSetpoint
 from controllers.ocp.fhocp import FHOCP
 from controllers.ocp.input_rate import du_cost, du_gradient, du_hessian, du_weights
 from controllers.ocp.nlp_single_shooting import SingleShootingNLP
-from controllers.ocp.paper_mpc import RobustMPC
 from tests.controllers.kernel.test_compiled_kernel import random_fhocp, rel
 
 needs_cc = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,
@@ -152,8 +153,8 @@ def test_the_self_test_sees_the_term() -> None:
 def test_zero_weight_is_the_paper_cost_bit_for_bit(cert) -> None:
     """du_weight = 0: the same kernel library as without the option (HAS_DU 0, no u_{−1} in
     p), and identical solves whatever u_prev is passed."""
-    a = FHOCP.from_certificate(cert).setup()
-    b = FHOCP.from_certificate(cert, du_weight=0.0).setup()
+    a = FHOCP.from_certificate(cert, reference=FixedSetpoint()).setup()
+    b = FHOCP.from_certificate(cert, reference=FixedSetpoint(), du_weight=0.0).setup()
     assert not b.has_du and b.npar == 2 * b.n + b.m
     assert a.kernel is not None and a.kernel.path == b.kernel.path
     src = ck.generate_source(ck.KernelProblem(a.params, a.N, a.Q, a.R, a.DUo, a.s, 1e-2,
@@ -175,11 +176,13 @@ def test_the_solvers_agree_on_the_optimum_with_the_term(cert) -> None:
     plain multiple shooting (casadi AD of the term) reach the same optimum."""
     dw = np.array([10.0, 3.0])
     solvers = {
-        "kernel": FHOCP.from_certificate(cert, du_weight=dw),
-        "numpy": FHOCP.from_certificate(cert, du_weight=dw, kernel="numpy"),
-        "ipopt": FHOCP.from_certificate(cert, du_weight=dw, solver="ipopt",
+        "kernel": FHOCP.from_certificate(cert, reference=FixedSetpoint(), du_weight=dw),
+        "numpy": FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                        du_weight=dw, kernel="numpy"),
+        "ipopt": FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                        du_weight=dw, solver="ipopt",
                                         ipopt_options={"tol": 1e-10, "max_iter": 500}),
-        "multiple": FHOCP.from_certificate(cert, du_weight=dw,
+        "multiple": FHOCP.from_certificate(cert, reference=FixedSetpoint(), du_weight=dw,
                                            formulation="multiple-shooting",
                                            ipopt_options={"tol": 1e-10}),
     }
@@ -196,7 +199,8 @@ def test_the_solvers_agree_on_the_optimum_with_the_term(cert) -> None:
         assert np.max(np.abs(res[k].u - best.u)) < 1e-4, k
         assert abs(res[k].cost - best.cost) < 1e-6 * (1 + best.cost), k
     # the term is in the reported cost, at the u_{−1} given
-    plain = FHOCP.from_certificate(cert).reference.cost(best.x, best.u, ref.x_bar, ref.u_bar)
+    plain = FHOCP.from_certificate(cert, reference=FixedSetpoint()).reference.cost(
+        best.x, best.u, ref.x_bar, ref.u_bar)
     assert best.cost == pytest.approx(plain + du_cost(best.u, u_prev, dw), rel=1e-12)
 
 
@@ -206,7 +210,7 @@ def test_a_larger_weight_keeps_the_first_input_nearer_the_previous_one(cert) -> 
     u_prev = ref.u_bar - 0.3
     moves = []
     for dw in (0.0, 1.0, 10.0, 100.0):
-        fh = FHOCP.from_certificate(cert, du_weight=dw, kernel="numpy",
+        fh = FHOCP.from_certificate(cert, reference=FixedSetpoint(), du_weight=dw, kernel="numpy",
                                     sqp_options={"max_iter": 200})
         r = fh.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, u_prev=u_prev)
         assert r.success, r.status
@@ -217,8 +221,8 @@ def test_a_larger_weight_keeps_the_first_input_nearer_the_previous_one(cert) -> 
 def test_the_controller_passes_the_applied_input(cert) -> None:
     """RobustMPC: u_{−1} of each solve is the input applied at the previous step (ū at the
     first), and the step's cost includes the term at it."""
-    fh = FHOCP.from_certificate(cert, du_weight=5.0, kernel="numpy")
-    mpc = RobustMPC(fh)
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint(), du_weight=5.0, kernel="numpy")
+    mpc = PaperMPC(fh)
     ref = cert.reference(np.array([0.1, 0.05]))
     mpc.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     x_hat, _ = equilibrium(cert.params, np.array([0.0, 0.0]))

@@ -6,10 +6,10 @@ import pytest
 
 from controllers.equilibrium import equilibrium
 from controllers.gru import output, simulate, step
+from controllers.laws.paper.mpc import PaperMPC
+from controllers.laws.paper.reference import FixedSetpoint
 from controllers.observer import GRUObserver
 from controllers.ocp.fhocp import FHOCP, FHOCPData
-from controllers.ocp.paper_mpc import RobustMPC
-from controllers.ocp.reference_setpoint import FixedSetpoint
 from controllers.ocp.solver_settings import FEAS_TOL
 from cosim_adapters.gru_plant import GRUPlant
 from tests.controllers.random_gru import N
@@ -17,7 +17,7 @@ from tests.controllers.random_gru import N
 
 def make(cert, max_iter=200, **kw):
     kw.setdefault("ipopt_options", {"max_iter": max_iter})
-    return FHOCP.from_certificate(cert, **kw).setup()
+    return FHOCP.from_certificate(cert, reference=FixedSetpoint(), **kw).setup()
 
 
 @pytest.fixture(scope="module", params=["ipopt", "sqp"])
@@ -25,7 +25,8 @@ def fast(cert, request):
     """The fast single-shooting FHOCP: with IPOPT, and with the default solver (SQP on the
     compiled kernel when a C compiler is found)."""
     if request.param == "sqp":
-        return FHOCP.from_certificate(cert, sqp_options={"max_iter": 200}).setup()
+        return FHOCP.from_certificate(cert, reference=FixedSetpoint(),
+                                      sqp_options={"max_iter": 200}).setup()
     return make(cert)
 
 
@@ -96,7 +97,7 @@ def test_recursive_feasibility_closed_loop_with_bounded_noise(model, cert):
     y_bar = np.array([0.1, 0.1])
     assert cert.ok(y_bar)
     ref = cert.reference(y_bar)
-    ctrl = RobustMPC(make(cert))
+    ctrl = PaperMPC(make(cert))
     ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     plant = GRUPlant(model, y0=model.denormalize_y(np.array([0.0, 0.05])),
                      w_y_max=cert.w_y_bar, seed=3)
@@ -121,7 +122,7 @@ def test_recursive_feasibility_closed_loop_with_bounded_noise(model, cert):
 
 def test_fallback_applies_shifted_previous_solution_when_solver_raises(model, cert):
     fh = make(cert)
-    ctrl = RobustMPC(fh)
+    ctrl = PaperMPC(fh)
     ref = cert.reference(np.array([0.1, 0.1]))
     ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     x = start_state(model, np.array([0.0, 0.05]))
@@ -148,7 +149,7 @@ def test_fallback_applies_shifted_previous_solution_when_solver_raises(model, ce
 @pytest.mark.parametrize("options", [{"ipopt_options": {"max_iter": 0}},
                                      {"time_budget": 0.0}])
 def test_fallback_when_solver_fails(model, cert, options):
-    ctrl = RobustMPC(make(cert, **options), accept_suboptimal=False)
+    ctrl = PaperMPC(make(cert, **options), accept_suboptimal=False)
     ref = cert.reference(np.array([0.1, 0.1]))
     ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     x = start_state(model, np.array([0.0, 0.05]))
@@ -181,7 +182,7 @@ def test_capped_feasible_iterate_is_applied_as_suboptimal(model, cert):
     than the shifted candidate is applied (not the candidate); otherwise the fallback."""
     ref = cert.reference(np.array([0.1, 0.1]))
     x = start_state(model, np.array([0.0, 0.05]))
-    ctrl = RobustMPC(make(cert, max_iter=2))
+    ctrl = PaperMPC(make(cert, max_iter=2))
     ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     rec = ctrl.make_step(x, 0.02)
     assert not rec.result.success and rec.result.status == "Maximum_Iterations_Exceeded"
@@ -231,7 +232,7 @@ def test_sqp_closed_loop_warm_start_and_rejects_wrong_answers(model, cert):
     """Closed loop with the SQP option: warm-started solves succeed in few iterations; a
     solver answer that violates the terminal set is rejected by the residual checks."""
     fh = make(cert, solver="sqp")
-    ctrl = RobustMPC(fh)
+    ctrl = PaperMPC(fh)
     ref = cert.reference(np.array([0.1, 0.1]))
     ctrl.set_reference(ref.x_bar, ref.u_bar, ref.alpha)
     x = start_state(model, np.array([0.0, 0.05]))
@@ -263,10 +264,12 @@ def test_sqp_time_budget_stops_the_solve(model, cert, loop):
 def test_default_solver_is_sqp_unless_ipopt_options_given(cert):
     data = FHOCPData(cert.params, cert.N, cert.Q, cert.R, cert.L, cert.h, cert.w_L, cert.a,
                      cert.b, cert.s)
-    assert FHOCP(data).solver == "sqp"
-    assert FHOCP(data, ipopt_options={"max_iter": 100}).solver == "ipopt"
-    assert FHOCP(data, formulation="multiple-shooting").solver == "ipopt"
-    assert FHOCP(cert).N == FHOCP(data).N == cert.N      # a certificate is such data
+    assert FHOCP(data, reference=FixedSetpoint()).solver == "sqp"
+    assert FHOCP(data, reference=FixedSetpoint(), ipopt_options={"max_iter": 100}).solver == "ipopt"
+    assert FHOCP(data, reference=FixedSetpoint(), formulation="multiple-shooting").solver == "ipopt"
+    # a certificate is such data
+    assert FHOCP(cert, reference=FixedSetpoint()).N == FHOCP(
+        data, reference=FixedSetpoint()).N == cert.N
 
 
 def test_sqp_solver_rejected_for_multiple_shooting(cert):
@@ -301,7 +304,7 @@ def test_one_fhocp_takes_any_reference(model, cert):
     """The FHOCP with another reference object goes through the same procedure and gives the
     default's answer to the bit: the i = 0 row first (the reference's fallback, no solver),
     else write, solve, the reference's answer check, the one judge."""
-    fh = FHOCP.from_certificate(cert).setup()
+    fh = FHOCP.from_certificate(cert, reference=FixedSetpoint()).setup()
     x_hat = start_state(model, np.array([0.05, 0.0]))
     ref = cert.reference(np.array([0.1, 0.1]))
     plain = fh.solve(x_hat, 0.02, ref.x_bar, ref.u_bar, ref.alpha, warm=False)
@@ -321,7 +324,7 @@ def test_a_reference_object_serves_one_fhocp_and_its_formulations(cert):
     """A reference keeps its FHOCP's layout: a second FHOCP refuses it; the tracking law's is
     single shooting only, refused by name for multiple shooting."""
     from controllers.errors import DesignError
-    from controllers.ocp.reference_tracking import ArtificialSteadyState
+    from controllers.laws.tracking.reference import ArtificialSteadyState
 
     reference = FixedSetpoint()
     FHOCP.from_certificate(cert, reference=reference)

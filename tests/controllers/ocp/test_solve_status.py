@@ -8,9 +8,10 @@ import numpy as np
 import pytest
 
 from controllers.certification import certificates as certs
+from controllers.laws.paper.reference import FixedSetpoint
+from controllers.laws.tracking.reference import ArtificialSteadyState
 from controllers.ocp.fhocp import FHOCP
 from controllers.ocp.fhocp_result import FHOCPResult, judge
-from controllers.ocp.reference_tracking import ArtificialSteadyState
 from controllers.ocp.solve_status import OTHER_STATUS, SolveStatus, status_code
 from controllers.ocp.steady_state import steady_state
 from tests.controllers.random_gru import random_gru_model
@@ -63,7 +64,8 @@ def test_both_laws_are_one_problem_class() -> None:
     """One FHOCP: the tracking law's is no subclass (the i = 0 row, its tolerance, the
     solve procedure are the same code)."""
     assert type(_tracking()) is FHOCP is type(FHOCP.from_certificate(
-        certs.compute_certificate(random_gru_model(4, n=6), N=5, w_y_bar=0.01)))
+        certs.compute_certificate(random_gru_model(4, n=6), N=5, w_y_bar=0.01),
+        reference=FixedSetpoint()))
 
 
 def test_a_law_refuses_another_laws_request_by_its_own_arguments() -> None:

@@ -1,7 +1,7 @@
-"""The FHOCP with the tracking law (controllers.ocp.reference_tracking): its steady state, its exact
-derivatives, the compiled kernel's HAS_ASS variant against the numpy twin, and the tracking law
-in the GRU world (any set-point tracked to the closest admissible steady state, offset-free under a
-constant output disturbance)."""
+"""The FHOCP with the tracking law (controllers.laws.tracking.reference): its steady state, its
+exact derivatives, the compiled kernel's HAS_ASS variant against the numpy twin, and the
+tracking law in the GRU world (any set-point tracked to the closest admissible steady state,
+offset-free under a constant output disturbance)."""
 
 from __future__ import annotations
 
@@ -12,11 +12,11 @@ from controllers.certification import certificates as certs
 from controllers.equilibrium import equilibrium, jacobians
 from controllers.errors import DesignError
 from controllers.gru import output, step
+from controllers.laws.tracking.mpc import DisturbanceFilter, TrackingMPC
+from controllers.laws.tracking.reference import ArtificialSteadyState, steady_output_bounds
 from controllers.model import DEFAULT_MODEL, GRUModel
 from controllers.ocp.fhocp import FHOCP
-from controllers.ocp.reference_tracking import ArtificialSteadyState, steady_output_bounds
 from controllers.ocp.steady_state import steady_state
-from controllers.ocp.tracking_mpc import DisturbanceFilter, TrackingMPC
 from tests.controllers.random_gru import random_gru_model
 
 

@@ -485,7 +485,7 @@ def test_auto_gain_scale_without_a_passing_theta(tmp_path: Path, capsys) -> None
     assert main(["certify", str(path), "--auto-gain-scale", "--json", "--law", "paper"]) == 1
     doc = json.loads(capsys.readouterr().out)
     assert doc["kappa"] == 0 and doc["verdict"]["certified"] is False
-    from cosim_adapters.tracking import fallback_alpha_c
+    from controllers.laws.tracking.law import fallback_alpha_c
 
     assert main(["certify", str(path), "--auto-gain-scale", "--json"]) == 0
     doc = json.loads(capsys.readouterr().out)
@@ -560,6 +560,6 @@ def test_certify_takes_the_design_of_the_problems_mpc_table(tmp_path: Path, caps
 
     plain, own = certify(), certify("--problem", str(tuned))
     ctrl = RobustMPCController(problem=tuned)
-    assert own["s"] == pytest.approx(ctrl.cert.s, rel=1e-12) and ctrl.cert.N == 40
+    assert own["s"] == pytest.approx(ctrl.mpc.cert.s, rel=1e-12) and ctrl.mpc.cert.N == 40
     assert own["s"] != pytest.approx(plain["s"], rel=1e-3)   # Q = U_oᵀU_o + εI, not I
     assert len(own["a"]) == 41 and len(certify("--problem", str(tuned), "--N", "30")["a"]) == 31

@@ -34,7 +34,7 @@ def test_tune_runs_every_weighting_chooses_by_the_rule_and_saves(
     assert all(0.0 < r["iae"] < 2.0 and r["tv"] > 0.0 for r in rows.values())
     saved = GRUModel.load(model)
     assert saved.problem.mpc == CANDIDATES[best]
-    assert CANDIDATES[best]["Q"] == RobustMPCController(model=model).options.Q
+    assert CANDIDATES[best]["Q"] == RobustMPCController(model=model).mpc.options.Q
 
 
 def test_the_rule() -> None:

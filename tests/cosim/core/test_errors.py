@@ -8,8 +8,8 @@ import pickle
 
 import pytest
 
+from controllers.certification.grade import NotUsable
 from cosim.core.errors import CosimError, FmuError, ParameterError
-from cosim_adapters.certification import NotUsable
 
 
 @pytest.mark.parametrize("error", [

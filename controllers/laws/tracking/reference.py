@@ -8,7 +8,7 @@
           L(U_o x_s + b_o) ≤ h − ẽ_o a_N − b_N − w_L − α_c c_s                (y_s ∈ Y_s)
 
 The :class:`~controllers.ocp.reference.Reference` of the tracking MPC
-(:mod:`controllers.ocp.tracking_mpc`): the FHOCP (:class:`controllers.ocp.fhocp.FHOCP`) with
+(:mod:`controllers.laws.tracking.mpc`): the FHOCP (:class:`controllers.ocp.fhocp.FHOCP`) with
 the set-point ``(x̄, ū)`` of the paper's law replaced by a decision variable: the steady
 input ``u_s`` and its steady state ``x_s(u_s)`` (:mod:`controllers.ocp.steady_state`), as in
 MPC for tracking (Limon et al., IEEE TAC 2018). The
@@ -21,7 +21,7 @@ Morari & Maeder 2012). One constant terminal radius ``α_c`` replaces ``α(ȳ)``
 paper's recursive-feasibility argument holds with ``x̄ := x_s`` (docs: design/tracking.md).
 
 Single shooting only, solved by the SQP (the compiled kernel with ``HAS_ASS``, its numpy twin
-:class:`controllers.ocp.nlp_tracking.TrackingNLP` otherwise) or IPOPT. Every answer is checked
+:class:`controllers.laws.tracking.nlp.TrackingNLP` otherwise) or IPOPT. Every answer is checked
 independently: numpy rollout, the steady state recomputed, the output rows, the input box,
 the terminal set and ``Y_s``. Build it as ``FHOCP.from_certificate(cert,
 reference=ArtificialSteadyState(offset_weight, alpha_c))`` and solve with ``fhocp.solve(x̂,
@@ -49,7 +49,6 @@ if TYPE_CHECKING:
 
 __all__ = [
     "CONTROL_HORIZON_FRACTION",
-    "DEFAULTS",
     "LINE_SEARCH",
     "SQP_OVERRIDES",
     "US_RATE",
@@ -78,16 +77,6 @@ LINE_SEARCH = {"max_iter_ls": 10, "beta": 0.5}
 #: iteration keeps the first's Jacobian and Hessian, the step 3.0 → 1.5 ms with the same
 #: answers to the stopping test's precision (``benchmarks/bench_derivative_reuse.py``).
 SQP_OVERRIDES = {**LINE_SEARCH, "tol_du_relative": True, "reuse_step": 0.1}
-#: The tracking law's defaults (docs: design/tracking.md, "Recommendation", "The horizon and
-#: the iteration cap"): horizon, offset weight T, Δu weight S, the disturbance filter's β
-#: (normalised units) and the SQP's iteration cap. T = 10⁴ rather than the study's 10⁵
-#: ("The offset weight"). N = 80 rather than 40, with 40 iterations rather than 15,
-#: S = 0.05 and β = 0.3: on the 200 draws of the plant-uncertainty campaign the median
-#: summed IAE 0.796 → 0.742× the PI's (h1 598 → 572, h2 703 → 648 m·s), capped solves plus
-#: fallbacks 2.48 → 0.28 % of the steps: the slow mode reaches the terminal set within 80
-#: samples without the large input moves that capped the SQP at N = 40.
-DEFAULTS = {"N": 80, "offset_weight": 1e4, "du_weight": 0.05, "offset_filter": 0.3,
-            "max_iter": 40}
 #: The default control horizon as a fraction of N (:func:`default_control_horizon`; docs:
 #: design/tracking.md, "The control horizon"): on the plant-uncertainty draws M = 10, 20 and
 #: 40 of N = 80 track as every input free (median summed IAE ÷ PI 0.772–0.776 against 0.773
@@ -234,7 +223,7 @@ class ArtificialSteadyState(ServesOne):
         return {"offset_weight": self.offset_weight, "control_horizon": self.control_horizon}
 
     def nlp(self, kernel: Any) -> Any:
-        from controllers.ocp.nlp_tracking import TrackingNLP
+        from controllers.laws.tracking.nlp import TrackingNLP
 
         return TrackingNLP(self._fh, kernel)
 

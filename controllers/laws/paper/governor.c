@@ -1,8 +1,8 @@
 /* law_paper_governor.c: the paper's law's admissible reference governor in C (CT_GOVERNOR,
  * the Python law's default), joined after law_paper.c (whose law_state, set-point checks and
  * references it uses, and whose update_reference calls govern after the first set-point).
- * It is the C twin of controllers/ocp/governor.py ReferenceGovernor with PaperLaw._govern
- * (cosim_adapters/paper_law.py), in the same order of kernel calls:
+ * It is the C twin of controllers/laws/paper/governor.py ReferenceGovernor with PaperLaw._govern
+ * (controllers/laws/paper/law.py), in the same order of kernel calls:
  *
  *   govern      PaperLaw._govern and ReferenceGovernor.govern: a request outside the theory
  *               or unreachable refused; lambda_max adapted to the last solve

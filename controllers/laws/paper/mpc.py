@@ -1,9 +1,10 @@
-"""The robust MPC law ``eq:mpc``: the FHOCP each step, with the fallback of the proof.
+"""The paper's MPC law ``eq:mpc``: the FHOCP each step, with the fallback of the proof.
 
-:class:`RobustMPC` solves :class:`~controllers.ocp.fhocp.FHOCP` every step from the candidate of
+:class:`PaperMPC` solves :class:`~controllers.ocp.fhocp.FHOCP` every step from the candidate of
 the proof of ``th:feasibility-stability`` (the previous sequence shifted by one stage with
-``ū`` appended) and applies that candidate when a solve fails; :class:`StepRecord` says what
-happened at each step and :func:`solver_summary` sums it up.
+``ū`` appended) and applies that candidate when a solve fails; each step's
+:class:`~controllers.laws.base.StepRecord` says what happened
+(:func:`~controllers.laws.base.solver_summary` sums them up).
 
 With an input-rate term in the cost (``FHOCP(du_weight=…)``, :mod:`controllers.ocp.input_rate`)
 the controller hands the FHOCP the input it applied at the previous step as ``u_{−1}`` (``ū``
@@ -14,43 +15,17 @@ applied, includes the term with the same ``u_{−1}``.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from controllers.ocp.fhocp import FEAS_TOL, FHOCP, FHOCPResult
+from controllers.laws.base import StepRecord, solver_summary
+from controllers.ocp.fhocp import FEAS_TOL, FHOCP
 
-__all__ = ["RobustMPC", "StepRecord", "solver_summary"]
-
-
-@dataclass
-class StepRecord:
-    """What happened at one controller step (normalised units).
-
-    Attributes
-    ----------
-    u : (m,) array
-        Applied input.
-    result : FHOCPResult
-        The solve (its ``status`` says why a fallback happened).
-    fallback : bool
-        The shifted previous solution (``ū`` appended) was applied instead of the optimum.
-    candidate_feasible : bool
-        For a fallback: whether that shifted sequence satisfies the FHOCP constraints at
-        ``x̂_k`` (Theorem 3 says it does when its hypotheses hold).
-    """
-
-    u: np.ndarray
-    result: FHOCPResult
-    fallback: bool
-    candidate_feasible: bool = True
-    suboptimal: bool = False
-    x_hat: np.ndarray | None = None
-    e_o: float = 0.0
+__all__ = ["PaperMPC"]
 
 
-class RobustMPC:
+class PaperMPC:
     """The MPC law ``eq:mpc`` with the fallback of the proof of ``th:feasibility-stability``.
 
     At each step the FHOCP is solved from the candidate of the proof (the previous sequence
@@ -106,8 +81,8 @@ class RobustMPC:
         """Compute ``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``), with the fallback.
 
         ``candidate`` (N, m), optional: a sequence known to be feasible (the reference
-        governor's, :mod:`controllers.ocp.governor`); it is the initial guess of the solve and
-        the fallback, in place of the shifted previous plan.
+        governor's, :mod:`controllers.laws.paper.governor`); it is the initial guess of the
+        solve and the fallback, in place of the shifted previous plan.
         """
         if self.x_bar is None or self.u_bar is None:
             raise RuntimeError("set_reference() must be called before make_step()")
@@ -154,30 +129,3 @@ class RobustMPC:
     def summary(self) -> dict[str, Any]:
         """Solver statistics over the steps so far."""
         return solver_summary(self.records)
-
-
-def solver_summary(records: list[StepRecord]) -> dict[str, Any]:
-    """Median / p99 / max solve time [ms], iterations, failures by status, fallbacks."""
-    if not records:
-        return {"steps": 0}
-    t = np.array([r.result.solve_time for r in records]) * 1e3
-    it = np.array([r.result.iterations for r in records])
-    statuses: dict[str, int] = {}
-    for r in records:
-        if not r.result.success:
-            key = r.result.status.split(":")[0]
-            statuses[key] = statuses.get(key, 0) + 1
-    return {
-        "steps": len(records),
-        "solve_ms_median": float(np.median(t)),
-        "solve_ms_p99": float(np.percentile(t, 99)),
-        "solve_ms_max": float(np.max(t)),
-        "iterations_median": float(np.median(it)),
-        "iterations_max": int(np.max(it)),
-        "failures": int(sum(statuses.values())),
-        "failures_by_status": statuses,
-        "fallbacks": int(sum(r.fallback for r in records)),
-        "suboptimal_steps": int(sum(r.suboptimal for r in records)),
-        "fallback_candidates_infeasible": int(sum(r.fallback and not r.candidate_feasible
-                                                  for r in records)),
-    }

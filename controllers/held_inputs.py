@@ -1,8 +1,8 @@
 """What the robust MPC's model sees of its measured disturbances and of the inputs it applied:
 the disturbances held in the model's biases, the dead time predicted over.
 
-:class:`HeldInputs` is the part of :class:`cosim_adapters.robust_mpc.RobustMPCController` that a
-problem with measured disturbances (``[disturbances]``) or dead time (``delay``) adds:
+:class:`HeldInputs` is the part of :class:`controllers.mpc.RobustMPC` that a problem with
+measured disturbances (``[disturbances]``) or dead time (``delay``) adds:
 
 - the design's model: the full model (inputs and disturbances) with the disturbances held in
   its biases (:func:`controllers.disturbances.condition`), moved to the measured value each
@@ -30,7 +30,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.core.errors import CosimError
+from controllers.errors import StepInputError
 
 __all__ = ["HeldInputs"]
 
@@ -107,18 +107,21 @@ class HeldInputs:
         self._u_past: np.ndarray | None = None
 
     # -- each step, in this order ------------------------------------------------------------
-    def measure(self, values: Mapping[str, float], t: float, fhocp: Any, law: Any) -> None:
-        """Read ``dist.<name>`` (normalised, each held inside its box) and hold it for the
-        FHOCP (:meth:`hold`)."""
-        try:
-            d_phys = np.array([values[n] for n in self.names])
-        except KeyError as exc:
-            raise CosimError(f"controller {self.name!r}: input {exc.args[0]!r} was never set "
-                             f"(wire {', '.join(self.names)})") from None
+    def measure(self, d_phys: np.ndarray, t: float, fhocp: Any) -> str:
+        """Read the measured disturbances ``d_phys`` (the problem's units; normalised, each
+        held inside its box) and hold them for the FHOCP (:meth:`hold`): what moved (the
+        values in the user's names and units, for the law's messages), else ``""``.
+
+        Raises
+        ------
+        StepInputError
+            A disturbance that is not finite.
+        """
+        d_phys = np.asarray(d_phys, dtype=float)
         if not np.all(np.isfinite(d_phys)):
             text = ", ".join(f"{n}={v:g}" for n, v in zip(self.names, d_phys, strict=True))
-            raise CosimError(f"controller {self.name!r}: non-finite measured disturbance at "
-                             f"t={t:g} s ({text})")
+            raise StepInputError(f"controller {self.name!r}: non-finite measured disturbance "
+                                 f"at t={t:g} s ({text})")
         d = (d_phys - self._offset) / self._scale
         if np.any(np.abs(d) > 1.0):
             self.clipped += 1
@@ -135,7 +138,7 @@ class HeldInputs:
                 self.preview_held += 1
             self._d_fhocp = np.array([self._value(j, max(self.dead_time - int(L), 0))
                                       for j, L in enumerate(self.lags)])
-        self.hold(self._d_fhocp, fhocp, law)
+        return self.hold(self._d_fhocp, fhocp, law=True)
 
     def set_schedule(self, schedule: Mapping[str, Callable[[float], float]] | None) -> None:
         """The values to come of the disturbances known ahead, for this run (after
@@ -156,24 +159,28 @@ class HeldInputs:
         t = self._t + offset * self.Ts
         v = float(self._schedule[name](t))
         if not np.isfinite(v):
-            raise CosimError(f"controller {self.name!r}: the schedule of disturbance {name!r} "
-                             f"is not finite at t={t:g} s")
+            raise StepInputError(f"controller {self.name!r}: the schedule of disturbance "
+                                 f"{name!r} is not finite at t={t:g} s")
         return float(np.clip((v - self._offset[j]) / self._scale[j], -1.0, 1.0))
 
-    def hold(self, d: np.ndarray, fhocp: Any, law: Any = None) -> None:
+    def hold(self, d: np.ndarray, fhocp: Any, law: bool = False) -> str:
         """Hold the disturbances at ``d`` (normalised) in the model's biases, the FHOCP's and
         the observer's (the compiled kernel's shift is the thread's: given every time);
-        ``law``: the value the FHOCP holds, whose moves move the law's steady state (None:
-        the observer's model input, or a step of the prediction)."""
+        ``law``: the value the FHOCP holds, whose moves move the law's steady state (False:
+        the observer's model input, or a step of the prediction). Returns what moved since
+        the FHOCP's last (the values in the user's names and units: the law follows them,
+        :meth:`controllers.laws.base.ControlLaw.disturbance_moved`), else ``""``."""
         changed = self.shift.set(d)
         fhocp.shift_biases(self.shift.delta, changed)
-        if law is None:
-            return
+        if not law:
+            return ""
+        moved = ""
         if self._d_law is not None and not np.array_equal(d, self._d_law):
-            law.disturbance_moved(", ".join(
+            moved = ", ".join(
                 f"{n[len('dist.'):]}={v:.4g}{(' ' + u) if u else ''}" for n, v, u in zip(
-                    self.names, d * self._scale + self._offset, self._units, strict=True)))
+                    self.names, d * self._scale + self._offset, self._units, strict=True))
         self._d_law = np.array(d, dtype=float)
+        return moved
 
     def ahead(self, observer: Any, fhocp: Any) -> np.ndarray | None:
         """``x̂`` predicted over the inputs' shortest dead time ``K`` (None without one): ``K``

@@ -5,13 +5,13 @@
  *   law_disturbance_moved, law_restart
  *                   TrackingLaw.disturbance_moved (the steady state kept at its output under
  *                   the disturbances now held, the plan moved alike) and restart
- *   law_step        cosim_adapters/tracking.py TrackingLaw.step: its first steady state (the
+ *   law_step        controllers/laws/tracking/law.py TrackingLaw.step: its first steady state (the
  *                   equilibrium of the estimate's output), the output-disturbance estimate
  *                   d_hat (DisturbanceFilter), the uncertified mode's shift of the output rows
  *                   by L d_hat, the target r = y_ref - d_hat
- *   make_step       controllers/ocp/tracking_mpc.py TrackingMPC.make_step (the candidate, the
+ *   make_step       controllers/laws/tracking/mpc.py TrackingMPC.make_step (the candidate, the
  *                   fallback, the next guess)
- *   solve           controllers/ocp/reference_tracking.py ArtificialSteadyState.request, and
+ *   solve           controllers/laws/tracking/reference.py ArtificialSteadyState.request, and
  *                   controllers/ocp/fhocp.py FHOCP.solve_request: the i = 0 row,
  *                   write_request (ArtificialSteadyState.write), the kernel SQP,
  *                   check_answer (ArtificialSteadyState._check_compiled and

@@ -5,7 +5,7 @@
  *   law_disturbance_moved, law_restart
  *                   PaperLaw.disturbance_moved (the reference again under the disturbances
  *                   now held, the plan moved alike) and restart (nothing)
- *   law_step        cosim_adapters/paper_law.py PaperLaw.step and _update_reference: the
+ *   law_step        controllers/laws/paper/law.py PaperLaw.step and _update_reference: the
  *                   set-point rate limit (setpoint_rate), the offset-free shift by d_hat
  *                   (offset_free), the reference (x_bar, u_bar, alpha) of each new set-point,
  *                   the rejection of one outside the theory (the last admissible one kept)
@@ -19,12 +19,12 @@
  *   govern          (law_paper_governor.c) PaperLaw._govern with controllers/ocp/
  *                   governor.py ReferenceGovernor (CT_GOVERNOR): the admissible reference
  *                   governor after the first set-point
- *   make_step       controllers/ocp/paper_mpc.py RobustMPC.make_step: eq:mpc with the
+ *   make_step       controllers/laws/paper/mpc.py RobustMPC.make_step: eq:mpc with the
  *                   candidate of the proof of th:feasibility-stability as fallback (the
  *                   governor's feasible candidate when it moved), and the suboptimal iterate
  *                   no costlier than it
  *   solve           controllers/ocp/fhocp.py FHOCP.solve_request with the paper's reference
- *                   (controllers/ocp/reference_setpoint.py FixedSetpoint: write, through
+ *                   (controllers/laws/paper/reference.py FixedSetpoint: write, through
  *                   controllers/ocp/fhocp_layout.py FHOCPLayout.write; check_answer and
  *                   fhocp_result.judge; the warm start)
  *   evaluate        FixedSetpoint.evaluate (a given plan's answer check)

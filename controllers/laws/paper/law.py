@@ -1,12 +1,12 @@
-"""The paper's law of the ``robust-mpc`` component (``law="paper"``): :class:`PaperLaw`.
+"""The paper's law (``law="paper"``) of the robust MPC: :class:`PaperLaw`, and :func:`build`.
 
-``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.ocp.paper_mpc.RobustMPC`: the FHOCP
+``u_k = k^MPC(x̂_k, ê_o,k)`` (``eq:mpc``, :class:`controllers.laws.paper.mpc.PaperMPC`: the FHOCP
 ``eq:optimization`` with the shifted-candidate fallback) for the reference ``(x̄, ū, α)`` of
 :meth:`controllers.certification.certificates.Certificate.reference` (Assumption 1, ``eq:condition-
 recursive-feasibility``), and its set-point handling: on a set-point change the rate limit
 (``setpoint_rate``), the offset-free shift by ``d̂`` (``offset_free``), the admissible
-reference governor (:mod:`controllers.ocp.governor`) and the rejection of set-points outside the
-theory. It implements :class:`cosim_adapters.law.ControlLaw`.
+reference governor (:mod:`controllers.laws.paper.governor`) and the rejection of set-points
+outside the theory. It implements :class:`controllers.laws.base.ControlLaw`.
 """
 
 from __future__ import annotations
@@ -17,10 +17,17 @@ from typing import Any
 import numpy as np
 
 from controllers.errors import SetpointError
-from cosim.core.errors import CosimError
-from cosim_adapters.law import LawStep, setpoint_text
+from controllers.laws.base import (
+    LawContext,
+    LawStep,
+    Setting,
+    refuse_r,
+    refuse_weight,
+    setpoint_text,
+)
+from controllers.laws.paper.reference import FixedSetpoint
 
-__all__ = ["PaperLaw", "SetpointHandling", "closest_admissible"]
+__all__ = ["PaperLaw", "SetpointHandling", "build", "closest_admissible", "settings_of"]
 
 
 @dataclass(frozen=True)
@@ -43,6 +50,39 @@ class SetpointHandling:
     offset_free: bool
     offset_filter: float
     setpoint_rate: float | None
+
+
+def build(ctx: LawContext) -> tuple[PaperLaw, list[str]]:
+    """The paper's law of the design ``ctx`` on its certificate (the observer gains of
+    ``ctx.cert``) and the certificate's hypotheses that fail (:mod:`controllers.laws`)."""
+    o = ctx.options
+    rate = o.option("setpoint_rate")
+    handling = SetpointHandling(bool(o.option("governor")), bool(o.option("offset_free")),
+                                float(o.offset_filter), None if rate is None else float(rate))
+    law = PaperLaw(ctx.model, ctx.cert, ctx.fhocp_options, handling, name=ctx.name)
+    return law, ctx.cert.failures()
+
+
+def settings_of(beta: float | None, R: np.ndarray, du: np.ndarray | None,
+                rate: float | None, inputs: list[str]) -> list[Setting]:
+    """The paper's law's settings (the C step's tunable parameters, ``law.c``'s
+    ``LAW_P_*`` order), with these values: the disturbance filter's gain (``beta``: with
+    ``offset_free``), the diagonal of ``R``, the input-rate weights (``du``: with the term),
+    the set-point rate (``rate``: designed with one)."""
+    inf = float("inf")
+    out = []
+    if beta is not None:
+        out.append(("offset_filter", 0.0, 1.0, "gain of the output-disturbance estimate "
+                    "d_hat, in (0, 1] (option offset_filter)", float(beta)))
+    out += [(f"R.{name}", 0.0, inf, f"input weight R of {name} (diagonal entry; R stays "
+             "positive definite; option R)", float(R[j, j])) for j, name in enumerate(inputs)]
+    if du is not None:
+        out += [(f"du_weight.{name}", 0.0, inf, f"input-rate weight S of {name}, >= 0 "
+                 "(option du_weight)", float(du[j])) for j, name in enumerate(inputs)]
+    if rate is not None:
+        out.append(("setpoint_rate", 0.0, inf, "largest move of the set-point per sample, "
+                    "> 0, in each output's units (option setpoint_rate)", float(rate)))
+    return out
 
 
 class PaperLaw:
@@ -68,13 +108,13 @@ class PaperLaw:
 
     def __init__(self, model: Any, cert: Any, fhocp_options: dict[str, Any],
                  handling: SetpointHandling, *, name: str, certified: bool = True) -> None:
+        from controllers.laws.paper.governor import ReferenceGovernor
+        from controllers.laws.paper.mpc import PaperMPC
         from controllers.ocp.fhocp import FHOCP
-        from controllers.ocp.governor import ReferenceGovernor
-        from controllers.ocp.paper_mpc import RobustMPC
 
         self.model, self.cert, self.fhocp_options = model, cert, dict(fhocp_options)
-        self.fhocp = FHOCP.from_certificate(cert, **self.fhocp_options)
-        self.mpc = RobustMPC(self.fhocp)
+        self.fhocp = FHOCP.from_certificate(cert, reference=FixedSetpoint(), **self.fhocp_options)
+        self.mpc = PaperMPC(self.fhocp)
         self.handling = handling
         self.governor = ReferenceGovernor(cert, self.fhocp) if handling.governor else None
         self.component = name
@@ -89,6 +129,10 @@ class PaperLaw:
     @property
     def alpha(self) -> float:
         return self.mpc.alpha
+
+    @property
+    def steady_state(self) -> np.ndarray | None:
+        return self.mpc.x_bar
 
     def reset(self) -> None:
         self.mpc.reset()
@@ -175,6 +219,36 @@ class PaperLaw:
         return PaperLaw(self.model, cert, self.fhocp_options, self.handling,
                         name=self.component, certified=False)
 
+    def settings(self) -> list[Setting]:
+        fh, h = self.fhocp, self.handling
+        return settings_of(h.offset_filter if h.offset_free else None, fh.R,
+                           fh.du_weight if fh.has_du else None, h.setpoint_rate,
+                           list(self.model.problem.input_names))
+
+    def refuse(self, name: str, value: float) -> str:
+        family, _, signal = name.partition(".")
+        if family == "offset_filter":
+            return "" if 0.0 < value <= 1.0 else "must be in (0, 1]"
+        if family == "R":
+            return refuse_r(self.fhocp.R, self.model.problem.input_names.index(signal), value)
+        if family == "setpoint_rate":
+            return "" if np.isfinite(value) and value > 0.0 else "must be a finite rate > 0"
+        return refuse_weight(value, positive=False)
+
+    def set(self, name: str, value: float) -> str:
+        from dataclasses import replace
+
+        family, _, signal = name.partition(".")
+        if family == "offset_filter":
+            self.handling = replace(self.handling, offset_filter=float(value))
+            return "the output-disturbance estimate's gain (outside the theorem)"
+        if family == "setpoint_rate":
+            self.handling = replace(self.handling, setpoint_rate=float(value))
+            return "the set-point's rate limit (outside the theorem)"
+        self.fhocp.set_weight("R" if family == "R" else "du",
+                              self.model.problem.input_names.index(signal), float(value))
+        return "the FHOCP's input cost (th:feasibility-stability holds for any R > 0)"
+
     def summary(self) -> dict[str, Any]:
         h = self.handling
         return {"offset_free": h.offset_free, "setpoint_rate": h.setpoint_rate,
@@ -213,12 +287,14 @@ class PaperLaw:
                 self._reject(exc, y_ref, requested_changed, t)
                 return True
             if self.certified:
-                raise CosimError(f"controller {self.component!r} at t={t:g} s: {exc}") from None
+                raise SetpointError(f"controller {self.component!r} at t={t:g} s: {exc}") \
+                    from None
             # uncertified, a first set-point outside: the closest admissible one, else the
             # closest admissible to the model's equilibrium for the measured output
             ref = self._first_admissible(target, y)
             if ref is None:
-                raise CosimError(f"controller {self.component!r} at t={t:g} s: {exc}") from None
+                raise SetpointError(f"controller {self.component!r} at t={t:g} s: {exc}") \
+                    from None
             self._reject(exc, y_ref, requested_changed, t)
             target = ref.y_bar
         if requested_changed:

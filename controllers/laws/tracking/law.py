@@ -1,12 +1,12 @@
-"""The tracking law of the ``robust-mpc`` component (``law = "tracking"``, its default).
+"""The tracking law (``law = "tracking"``, the default) of the robust MPC.
 
-:class:`cosim_adapters.robust_mpc.RobustMPCController` with ``law="tracking"`` (the default) runs
-:class:`controllers.ocp.tracking_mpc.TrackingMPC` (the tracking FHOCP of
-:mod:`controllers.ocp.reference_tracking`: artificial steady state, offset cost with the disturbance
-estimate ``d̂``, input-rate penalty) instead of the paper's law with its reference governor.
-This module builds it from the model and the problem (:func:`tracking_design`) and runs it
-(:class:`TrackingLaw`, a :class:`cosim_adapters.law.ControlLaw`); the design record is
-docs/design/tracking.md.
+:class:`controllers.mpc.RobustMPC` with ``law="tracking"`` runs
+:class:`controllers.laws.tracking.mpc.TrackingMPC` (the tracking FHOCP of
+:mod:`controllers.laws.tracking.reference`: artificial steady state, offset cost with the
+disturbance estimate ``d̂``, input-rate penalty) instead of the paper's law with its reference
+governor. This module builds it from the model and the problem (:func:`build`,
+:func:`tracking_design`) and runs it (:class:`TrackingLaw`, a :class:`controllers.laws.base.
+ControlLaw`); the design record is docs/design/tracking.md.
 
 Design (defaults):
 
@@ -19,7 +19,7 @@ Design (defaults):
   the radius whose terminal set spans :data:`ALPHA_C_SPAN` of each normalised output; with
   zero gains every ``α_c > 0`` meets ``eq:condition-recursive-feasibility``; ``alpha_c`` sets
   it;
-- ``d̂`` by the filter of :class:`controllers.ocp.tracking_mpc.DisturbanceFilter` (``β`` =
+- ``d̂`` by the filter of :class:`controllers.laws.tracking.mpc.DisturbanceFilter` (``β`` =
   ``offset_filter``, default 0.3), in the cost only.
 """
 
@@ -31,12 +31,18 @@ from typing import Any
 
 import numpy as np
 
-from controllers.errors import ControllersError
-from cosim.core.errors import CosimError
-from cosim_adapters.law import LawStep, setpoint_text
+from controllers.errors import OptionError
+from controllers.laws.base import (
+    LawContext,
+    LawStep,
+    Setting,
+    refuse_r,
+    refuse_weight,
+    setpoint_text,
+)
 
-__all__ = ["ALPHA_C_SPAN", "TrackingLaw", "fallback_alpha_c", "steady_outputs_text",
-           "tracking_design"]
+__all__ = ["ALPHA_C_SPAN", "TrackingLaw", "build", "fallback_alpha_c", "settings_of",
+           "steady_outputs_text", "tracking_design"]
 
 #: How far a target may lie beyond ``Y_s`` (normalised) before it is noted
 #: (:meth:`TrackingLaw._watch_target`).
@@ -62,60 +68,85 @@ def tracking_design(model: Any, cert_gains: Any, design: Mapping[str, Any],
     (module docstring) on ``model`` (and its ``problem``); ``failures``: its hypotheses that
     fail, in words (empty: certified). ``design``: ``kwargs`` (``N``, ``Q``, ``R``,
     ``e_o0``), ``offset_weight``, ``alpha_c``, ``offset_filter`` (``β``), ``fhocp_options``
-    and ``control_horizon`` (``M``; default :func:`controllers.ocp.reference_tracking.
+    and ``control_horizon`` (``M``; default :func:`controllers.laws.tracking.reference.
     default_control_horizon`, at most N). ``cert_gains``: the paper law's certificate, whose
     ``α_min`` is the default ``α_c`` when ``gains_certified`` (its observer-gain scale
     passed), else :func:`fallback_alpha_c`; ``cert``: the design's certificate (default:
     ``gain_scale=0`` of ``kwargs``; the uncertified mode passes
     :func:`controllers.certification.certificates.uncertified_certificate`'s)."""
     from controllers.certification import certificates as certs
-    from controllers.certification.tracking_checks import failures, tracking_hypotheses
+    from controllers.laws.tracking import SPEC
+    from controllers.laws.tracking.checks import failures, tracking_hypotheses
+    from controllers.laws.tracking.mpc import DisturbanceFilter, TrackingMPC
+    from controllers.laws.tracking.reference import ArtificialSteadyState, default_control_horizon
     from controllers.ocp.fhocp import FHOCP
-    from controllers.ocp.reference_tracking import (
-        DEFAULTS,
-        ArtificialSteadyState,
-        default_control_horizon,
-    )
-    from controllers.ocp.tracking_mpc import DisturbanceFilter, TrackingMPC
 
     problem, kwargs = model.problem, design["kwargs"]
     offset_weight, alpha_c = design["offset_weight"], design["alpha_c"]
     beta, control_horizon = design["offset_filter"], design["control_horizon"]
     names = list(problem.output_names)
-    default = float(DEFAULTS["offset_weight"])
+    default = float(SPEC.option("offset_weight").default)
     if offset_weight is None:
         offset_weight = default
     if isinstance(offset_weight, Mapping):
         unknown = sorted(set(offset_weight) - set(names))
         if unknown:
-            raise CosimError(f"option offset_weight: {unknown[0]!r} is not an output of "
-                             f"problem {problem.name!r} ({', '.join(names)})")
+            raise OptionError(f"option offset_weight: {unknown[0]!r} is not an output of "
+                              f"problem {problem.name!r} ({', '.join(names)})")
         T = np.array([float(offset_weight.get(n, default)) for n in names])
     else:
         T = np.full(len(names), float(offset_weight))
     N = int(kwargs["N"])
     M = default_control_horizon(N) if control_horizon is None else control_horizon
     if M > N:
-        raise CosimError(f"option control_horizon={M}: at most the horizon N = {N}")
-    try:
-        if cert is None:
-            cert = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
-        if alpha_c is None:
-            alpha_c = cert_gains.alpha_min() if gains_certified else math.nan
-            if not (math.isfinite(alpha_c) and alpha_c > 0):
-                alpha_c = fallback_alpha_c(cert)
-        reference = ArtificialSteadyState(T, alpha_c, control_horizon=M)
-        fhocp = FHOCP.from_certificate(cert, reference=reference, **design["fhocp_options"])
-    except ControllersError as exc:
-        raise CosimError(str(exc)) from None
+        raise OptionError(f"option control_horizon={M}: at most the horizon N = {N}")
+    if cert is None:
+        cert = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
+    if alpha_c is None:
+        alpha_c = cert_gains.alpha_min() if gains_certified else math.nan
+        if not (math.isfinite(alpha_c) and alpha_c > 0):
+            alpha_c = fallback_alpha_c(cert)
+    reference = ArtificialSteadyState(T, alpha_c, control_horizon=M)
+    fhocp = FHOCP.from_certificate(cert, reference=reference, **design["fhocp_options"])
     hypotheses = tracking_hypotheses(fhocp, cert, beta)
     law = TrackingMPC(fhocp)
     law.hypotheses = hypotheses
     return cert, law, DisturbanceFilter(beta, len(names)), failures(hypotheses)
 
 
+def build(ctx: LawContext) -> tuple[TrackingLaw, list[str]]:
+    """The tracking law of the design ``ctx`` (:func:`tracking_design`: its certificate at
+    zero observer gains, ``α_c`` from the paper law's certificate ``ctx.cert``) and its
+    hypotheses that fail (:mod:`controllers.laws`)."""
+    o = ctx.options
+    design = {"kwargs": ctx.kwargs, "fhocp_options": ctx.fhocp_options,
+              "offset_weight": o.option("offset_weight"), "alpha_c": o.option("alpha_c"),
+              "offset_filter": o.offset_filter, "control_horizon": o.option("control_horizon")}
+    cert, tracker, disturbance, failed = tracking_design(ctx.model, ctx.cert, design,
+                                                         ctx.gains_certified)
+    return TrackingLaw(ctx.model, cert, tracker, disturbance, design, ctx.name), failed
+
+
+def settings_of(beta: float, R: np.ndarray, du: np.ndarray | None, T: np.ndarray,
+                inputs: list[str], outputs: list[str]) -> list[Setting]:
+    """The tracking law's settings (the C step's tunable parameters, ``law.c``'s
+    ``LAW_P_*`` order), with these values: the disturbance filter's gain, the diagonal of
+    ``R``, the input-rate weights (``du``: with the term), the offset weights ``T``."""
+    inf = float("inf")
+    out = [("offset_filter", 0.0, 1.0, "gain of the output-disturbance estimate d_hat, in "
+            "(0, 1] (option offset_filter)", float(beta))]
+    out += [(f"R.{name}", 0.0, inf, f"input weight R of {name} (diagonal entry; R stays "
+             "positive definite; option R)", float(R[j, j])) for j, name in enumerate(inputs)]
+    if du is not None:
+        out += [(f"du_weight.{name}", 0.0, inf, f"input-rate weight S of {name}, >= 0 "
+                 "(option du_weight)", float(du[j])) for j, name in enumerate(inputs)]
+    out += [(f"offset_weight.{name}", 0.0, inf, f"offset weight T of {name}, > 0 "
+             "(option offset_weight)", float(T[a])) for a, name in enumerate(outputs)]
+    return out
+
+
 class TrackingLaw:
-    """The tracking law (module docstring), a :class:`cosim_adapters.law.ControlLaw`.
+    """The tracking law (module docstring), a :class:`controllers.laws.base.ControlLaw`.
 
     Parameters
     ----------
@@ -145,14 +176,6 @@ class TrackingLaw:
         self.certified = certified
         self.reset()
 
-    @classmethod
-    def build(cls, model: Any, cert_gains: Any, design: Mapping[str, Any], name: str,
-              gains_certified: bool) -> tuple[TrackingLaw, list[str]]:
-        """The law of ``design`` (:func:`tracking_design`) and its failing hypotheses."""
-        cert, tracker, disturbance, failed = tracking_design(model, cert_gains, design,
-                                                             gains_certified)
-        return cls(model, cert, tracker, disturbance, design, name), failed
-
     # -- ControlLaw ------------------------------------------------------------------------
     @property
     def records(self) -> list[Any]:
@@ -161,6 +184,10 @@ class TrackingLaw:
     @property
     def alpha(self) -> float:
         return self.fhocp.reference.alpha_c
+
+    @property
+    def steady_state(self) -> np.ndarray | None:
+        return self.tracker.x_s
 
     def reset(self) -> None:
         self.tracker.reset()
@@ -292,7 +319,7 @@ class TrackingLaw:
         return ""
 
     def uncertified(self, cert: Any, reason: str) -> TrackingLaw:
-        from cosim_adapters.certification import NotUsable, margin_text
+        from controllers.certification.grade import NotUsable, margin_text
 
         design = self.design
         cert_u, tracker, disturbance, _ = tracking_design(self.model, cert, design,
@@ -335,6 +362,34 @@ class TrackingLaw:
         except SetpointError as exc:
             return str(exc)
         return ""
+
+    def settings(self) -> list[Setting]:
+        fh, pr = self.fhocp, self.model.problem
+        return settings_of(self.disturbance.beta, fh.R, fh.du_weight if fh.has_du else None,
+                           fh.reference.offset_weight, list(pr.input_names),
+                           list(pr.output_names))
+
+    def refuse(self, name: str, value: float) -> str:
+        family, _, signal = name.partition(".")
+        if family == "offset_filter":
+            return "" if 0.0 < value <= 1.0 else "must be in (0, 1]"
+        if family == "R":
+            return refuse_r(self.fhocp.R, self.model.problem.input_names.index(signal), value)
+        return refuse_weight(value, positive=family == "offset_weight")
+
+    def set(self, name: str, value: float) -> str:
+        family, _, signal = name.partition(".")
+        pr = self.model.problem
+        if family == "offset_filter":
+            self.disturbance.beta = float(value)
+            return "the output-disturbance estimate's gain"
+        if family == "offset_weight":
+            self.fhocp.set_weight("T", pr.output_names.index(signal), float(value))
+            return "the offset cost (the tracking law's hypotheses hold for any T > 0)"
+        self.fhocp.set_weight("R" if family == "R" else "du", pr.input_names.index(signal),
+                              float(value))
+        return ("the FHOCP's input cost (the tracking law's hypotheses hold for any R > 0, "
+                "S >= 0)")
 
     def summary(self) -> dict[str, Any]:
         fh = self.fhocp

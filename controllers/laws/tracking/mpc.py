@@ -1,11 +1,11 @@
 """The tracking MPC law: the tracking FHOCP each step, with the candidate as fallback.
 
 :class:`TrackingMPC` solves the FHOCP with the tracking law
-(:class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`) every step for
+(:class:`~controllers.laws.tracking.reference.ArtificialSteadyState`) every step for
 the target ``r = ȳ − d̂`` from the candidate of the recursive-feasibility argument (the
 previous plan shifted by one stage with the artificial steady input ``u_s`` appended, and the
 same ``u_s``), and applies that candidate when a solve fails. Unlike the paper's law
-(:class:`controllers.ocp.paper_mpc.RobustMPC`) no set-point is ever refused: ``r`` enters the
+(:class:`controllers.laws.paper.mpc.PaperMPC`) no set-point is ever refused: ``r`` enters the
 cost only, so the candidate stays feasible whatever ``r`` does (docs: design/tracking.md,
 claim 1). :class:`DisturbanceFilter` is the offset-free estimate ``d̂``.
 """
@@ -16,9 +16,9 @@ import time
 
 import numpy as np
 
+from controllers.laws.base import StepRecord
 from controllers.ocp.fhocp import FHOCP
 from controllers.ocp.fhocp_result import FHOCPResult
-from controllers.ocp.paper_mpc import StepRecord
 from controllers.ocp.solver_settings import FEAS_TOL
 
 __all__ = ["DisturbanceFilter", "TrackingMPC"]
@@ -49,17 +49,17 @@ class TrackingMPC:
     Parameters
     ----------
     fhocp : controllers.ocp.fhocp.FHOCP
-        With the tracking law (:class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`).
+        With the tracking law (:class:`~controllers.laws.tracking.reference.ArtificialSteadyState`).
     accept_suboptimal : bool
         Apply a feasible iterate of a capped solve that costs no more than the candidate
-        (suboptimal MPC, as :class:`controllers.ocp.paper_mpc.RobustMPC`).
+        (suboptimal MPC, as :class:`controllers.laws.paper.mpc.PaperMPC`).
     """
 
     def __init__(self, fhocp: FHOCP, accept_suboptimal: bool = True) -> None:
         self.fhocp = fhocp
         self.accept_suboptimal = bool(accept_suboptimal)
         #: the design's hypotheses
-        #: (:func:`controllers.certification.tracking_checks.tracking_hypotheses`)
+        #: (:func:`controllers.laws.tracking.checks.tracking_hypotheses`)
         self.hypotheses: dict | None = None
         self.reset()
 

@@ -1,9 +1,8 @@
-"""Graded guarantees of the ``robust-mpc`` component: certified, or uncertified with a measured
-tightening.
+"""Graded guarantees of the robust MPC: certified, or uncertified with a measured tightening.
 
-The robust MPC (:class:`cosim_adapters.robust_mpc.RobustMPCController`) runs **certified** when
+The robust MPC (:class:`controllers.mpc.RobustMPC`) runs **certified** when
 every hypothesis of its law holds: the design's (``th:feasibility-stability`` for the paper's
-law, the tracking law's H3–H6 of :mod:`controllers.certification.tracking_checks`) and, at each
+law, the tracking law's H3–H6 of :mod:`controllers.laws.tracking.checks`) and, at each
 set-point the run will request (:meth:`cosim.core.component.Component.expect_setpoints`), the
 set-point's (Assumption 1 and ``eq:condition-recursive-feasibility`` for the paper's law; the
 set-point inside the admissible steady outputs ``Y_s`` for the tracking law). Its constraint
@@ -11,7 +10,7 @@ tightening is then the theorem's.
 
 Otherwise (option ``certificate = "auto"``, the default) it runs **uncertified**; with
 ``certificate = "require"`` (``cosim run --require-certificate``) it refuses instead
-(:class:`cosim.core.errors.CosimError`, exit 2); with ``certificate = "keep"`` it keeps the
+(:class:`~controllers.errors.CertificateError`, exit 2); with ``certificate = "keep"`` it keeps the
 certified design whatever the set-points (the tracking law tracks one outside ``Y_s`` to the
 closest admissible steady output, the paper's law refuses it; a failing design is an error).
 Uncertified is the same law and cost, with the theorem's tightening (which a model that fails
@@ -38,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from cosim.core.errors import CosimError
+from controllers.errors import CertificateError, ControllersError
 
 __all__ = ["Certification", "check_setpoints", "go_uncertified",
            "margin_text"]
@@ -112,7 +111,7 @@ def margin_text(model: Any, cert: Any) -> str:
 NOT_USABLE = "the model is not usable: "
 
 
-class NotUsable(CosimError):
+class NotUsable(ControllersError, ValueError):
     """The robust MPC refuses the model, certified or not: ``controller 'mpc': the model is not
     usable: <why; fix: ...>`` (:attr:`why`)."""
 
@@ -128,7 +127,7 @@ class NotUsable(CosimError):
 
 def go_uncertified(ctrl: Any, reason: str) -> None:
     """Switch ``ctrl`` to the uncertified design (module docstring): the same law
-    (:meth:`cosim_adapters.law.ControlLaw.uncertified`) on the certificate tightened by the
+    (:meth:`controllers.laws.base.ControlLaw.uncertified`) on the certificate tightened by the
     measured prediction error, zero observer gains; or refuse when it requires a
     certificate, or when no mode runs the model (in the words of ``cosim certify``'s
     verdict)."""
@@ -140,9 +139,9 @@ def go_uncertified(ctrl: Any, reason: str) -> None:
     if unusable:
         raise NotUsable(ctrl.name, unusable)
     if ctrl.certificate_mode != "auto":
-        raise CosimError(f"controller {ctrl.name!r}: the model is not certified for this run "
-                         f"({reason}); with the option certificate=\"auto\" (the default; not "
-                         "--require-certificate) it runs uncertified")
+        raise CertificateError(f"controller {ctrl.name!r}: the model is not certified for this "
+                               f"run ({reason}); with the option certificate=\"auto\" (the "
+                               "default; not --require-certificate) it runs uncertified")
     cert_u = uncertified_certificate(cert, measured_margins(ctrl, cert)[0])
     ctrl.law = ctrl.law.uncertified(cert_u, reason)
     ctrl.observer = GRUObserver.from_certificate(ctrl.cert)

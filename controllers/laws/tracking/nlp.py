@@ -41,7 +41,7 @@ __all__ = ["TrackingNLP"]
 
 class TrackingNLP(SingleShootingNLP):
     """Function and derivative evaluations of an FHOCP with the tracking law's reference
-    (:class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`; see the module
+    (:class:`~controllers.laws.tracking.reference.ArtificialSteadyState`; see the module
     docstring); a kernel workspace as for the parent."""
 
     def __init__(self, fhocp: FHOCP, kernel: Any = None) -> None:
@@ -229,7 +229,7 @@ class TrackingNLP(SingleShootingNLP):
     def _answer_check_pairs(self, kernel: Any, rng: np.random.Generator, u: np.ndarray,
                             pv: np.ndarray, x_np: np.ndarray) -> list[tuple[Any, Any]]:
         """None: the tracking FHOCP's answer check
-        (:meth:`~controllers.ocp.reference_tracking.ArtificialSteadyState.evaluate`) is its
+        (:meth:`~controllers.laws.tracking.reference.ArtificialSteadyState.evaluate`) is its
         own (the plain rollout, compared above, and ``x_s`` verified by a numpy GRU step), not
         the kernel's ``assess``."""
         return []

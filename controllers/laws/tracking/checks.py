@@ -1,7 +1,7 @@
 """The tracking law's hypotheses, computed at run time (docs: design/tracking.md, H3-H6).
 
 What the paper's certificate (:mod:`controllers.certification.certificates`) checks stays; the
-tracking law (:mod:`controllers.ocp.reference_tracking`) adds, once per model and design:
+tracking law (:mod:`controllers.laws.tracking.reference`) adds, once per model and design:
 
 - (H3) the weights: ``Q ≻ 0``, ``R ≻ 0``, ``S ⪰ 0`` (the Δu weights), ``T ≻ 0`` (the offset
   weights), and the terminal weight ``s`` of ``eq:definition_s`` (the certificate's);
@@ -56,7 +56,7 @@ def _ys_nonempty(L: np.ndarray, rhs: np.ndarray) -> tuple[bool, np.ndarray | Non
 def tracking_hypotheses(fhocp: Any, cert: Any, beta: float,
                         grid_points: int = 11) -> dict[str, Any]:
     """The hypotheses of the FHOCP ``fhocp`` with the tracking law's reference (a
-    :class:`~controllers.ocp.reference_tracking.ArtificialSteadyState`) designed from
+    :class:`~controllers.laws.tracking.reference.ArtificialSteadyState`) designed from
     ``cert``, with the disturbance filter's ``beta`` (module docstring)."""
     eig = np.linalg.eigvalsh
     ass = fhocp.reference   # the artificial steady state
