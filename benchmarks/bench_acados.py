@@ -57,7 +57,7 @@ def capture() -> tuple[dict[str, np.ndarray], list[dict], object]:
     arrays for ``acados_fhocp.py``, the SQP's argument buffers per solve, and the FHOCP."""
     import controllers.kernel.kernel_sqp as ks
     from cosim import api
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     solved: list[dict] = []
     original = ks.KernelSQP.solve

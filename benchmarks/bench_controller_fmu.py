@@ -47,7 +47,7 @@ SCENARIO = HERE.parent / "scenarios" / "paper_steps.csv"
 
 def record(scenario: Path, options: dict[str, object]) -> list[dict[str, float]]:
     """The controller's inputs at every step of the closed loop."""
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     seen: list[dict[str, float]] = []
     original = RobustMPCController.set_inputs

@@ -85,10 +85,10 @@ def scenario(path: Path, disturbed: bool) -> Path:
 
 def closed_loop(model_path: Path, scenario_path: Path) -> list[float]:
     """The controller step times [ms] of one closed-loop run."""
+    from cosim.adapters.gru_plant import GRUPlant
+    from cosim.adapters.robust_mpc import RobustMPCController
     from cosim.core import scenario as scenarios
     from cosim.core.master import Master
-    from cosim_adapters.gru_plant import GRUPlant
-    from cosim_adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController(model=model_path)
     times: list[float] = []

@@ -27,10 +27,10 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
+from cosim.adapters.pi import PIController  # noqa: E402
 from cosim.core.fmu import FmuComponent  # noqa: E402
 from cosim.core.master import Master  # noqa: E402
 from cosim.core.scenario import load  # noqa: E402
-from cosim_adapters.pi import PIController  # noqa: E402
 
 
 def bare_loop(fmu_path: Path, steps: int, dt: float, with_pi: bool = True) -> float:

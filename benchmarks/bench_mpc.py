@@ -53,8 +53,8 @@ sys.path.insert(0, str(ROOT))
 
 from controllers.laws.paper.reference import FixedSetpoint  # noqa: E402
 from controllers.ocp.fhocp import FHOCP  # noqa: E402
+from cosim.adapters.robust_mpc import RobustMPCController  # noqa: E402
 from cosim.core.component import Component  # noqa: E402
-from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
 
 #: The robust MPC's law this benchmark times (see the module docstring).
 LAW = "paper"
@@ -126,7 +126,7 @@ def closed_loop(ctrl: RobustMPCController, scenario: Path, plant_kind: str, step
 
         plant = FmuComponent(ROOT / "fmus" / "FourTank.fmu")
     else:
-        from cosim_adapters.gru_plant import GRUPlant
+        from cosim.adapters.gru_plant import GRUPlant
 
         plant = GRUPlant(ctrl.mpc.model, y0=np.array([0.65, 0.65]))
     timed = TimedController(ctrl, others)
@@ -345,8 +345,8 @@ def _scaling_rounds(cases: list[dict[str, Any]], rounds: int) -> None:
     """Round by round over every size and variant (the machine's drift over minutes hits
     all sizes alike instead of biasing the exponents): each round's median, p99 and split
     appended to its case."""
+    from cosim.adapters.gru_plant import GRUPlant
     from cosim.core.master import Master
-    from cosim_adapters.gru_plant import GRUPlant
 
     for _ in range(max(1, rounds)):
         for case in cases:

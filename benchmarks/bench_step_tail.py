@@ -29,8 +29,9 @@ Usage::
     .venv/bin/python benchmarks/bench_step_tail.py [--baseline REV] [--rounds 3]
         [--laws paper,tracking] [--split]
 
-The baseline must have ``cosim.api.run`` and ``cosim_adapters.robust_mpc`` (every tree since
-the controller moved into its adapter package).
+The baseline must have ``cosim.api.run`` and ``cosim.adapters.robust_mpc`` or, before issue
+59, ``cosim_adapters.robust_mpc`` (every tree since the controller moved into its adapter
+package).
 """
 
 from __future__ import annotations
@@ -54,7 +55,10 @@ CHILD = r"""
 import json, sys, time
 import numpy as np
 from cosim import api
-from cosim_adapters.robust_mpc import RobustMPCController
+try:   # the adapters' package: cosim.adapters (issue 59), before it cosim_adapters
+    from cosim.adapters.robust_mpc import RobustMPCController
+except ImportError:
+    from cosim_adapters.robust_mpc import RobustMPCController
 
 law, plant, out = sys.argv[1], sys.argv[2], sys.argv[3]
 times, acc, parts = [], {"sqp": 0.0, "setpoint": 0.0}, {"sqp": [], "setpoint": []}
@@ -79,6 +83,7 @@ def timing(module, cls, name, key):
 
 timing("controllers.kernel.kernel_sqp", "KernelSQP", "solve", "sqp")
 timing("controllers.laws.paper.law", "PaperLaw", "_update_reference", "setpoint")
+timing("cosim_adapters.paper_law", "PaperLaw", "_update_reference", "setpoint")   # before 59
 
 def timed(self, t, dt):
     acc["sqp"] = acc["setpoint"] = 0.0

@@ -51,8 +51,8 @@ ROOT = HERE.parent
 sys.path[:0] = [str(ROOT), str(HERE)]
 
 import cosim  # noqa: E402
+from cosim.adapters.robust_mpc import RobustMPCController  # noqa: E402
 from cosim.core import kpis, results  # noqa: E402
-from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
 #: The controllers compared, in the table's order: name → controller spec for ``cosim.run``.

@@ -27,7 +27,7 @@ SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
 
 def _model(folder: Path, delays: tuple[int, int]) -> Path:
     """The shipped model with ``delays`` on (qa, qb) (the test's helper)."""
-    from tests.cosim_adapters.test_mixed_dead_times import delayed_model
+    from tests.cosim.adapters.test_mixed_dead_times import delayed_model
 
     return delayed_model(folder, f"gru_{delays[0]}_{delays[1]}", delays)
 

@@ -249,8 +249,8 @@ class OracleNMPC(Component):
     def __init__(self, horizon: int = 80, substeps: int = 5, r_weight: float = 0.01,
                  problem: ControlProblem | str | Path | None = None,
                  fmu: str | Path | None = None) -> None:
+        from cosim.adapters.problems import load_problem
         from cosim.api import plant_path
-        from cosim_adapters.problems import load_problem
 
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise ValueError(f"oracle: horizon must be a positive integer, got {horizon!r}")

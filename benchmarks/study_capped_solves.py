@@ -51,7 +51,7 @@ sys.path.insert(0, str(ROOT))
 
 from controllers.ocp import nlp_single_shooting  # noqa: E402
 from controllers.ocp.solver_settings import SQP_OPTIONS  # noqa: E402
-from cosim_adapters.robust_mpc import RobustMPCController  # noqa: E402
+from cosim.adapters.robust_mpc import RobustMPCController  # noqa: E402
 
 SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
 CAP = 15

@@ -3,7 +3,7 @@
 This package knows nothing of FMUs or of co-simulation: it works on arrays in normalised units
 and raises its own errors (:mod:`controllers.errors`), and imports nothing of ``cosim`` (an
 import contract, ``tests/test_layering.py``). Its co-simulation adapters (the robust MPC,
-the PI baseline and the GRU model as a plant) live one layer up, in :mod:`cosim_adapters`.
+the PI baseline and the GRU model as a plant) live one layer up, in :mod:`cosim.adapters`.
 Only :mod:`controllers.identification.training` needs torch.
 
 The main names, importable from here::

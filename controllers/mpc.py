@@ -21,7 +21,7 @@ What may change between steps goes through one setter, :meth:`RobustMPC.set` (it
 :meth:`RobustMPC.settings`), which checks the value against the design and says what it
 re-derived; the exported controller's tunable parameters are the same settings
 (:mod:`controllers.kernel.controller_source`). The co-simulation binds this object as a
-component (:class:`cosim_adapters.robust_mpc.RobustMPCController`); the C step of the
+component (:class:`cosim.adapters.robust_mpc.RobustMPCController`); the C step of the
 controller FMU does the same step to the bit.
 """
 

@@ -63,13 +63,13 @@ class MPCOptions:
         (:func:`controllers.certification.gain_design.choose_gain_scale`).
     offset_free : bool
         ``law="paper"``: offset-free set-point correction (outside the theorem, see
-        :mod:`cosim_adapters.robust_mpc`).
+        :mod:`cosim.adapters.robust_mpc`).
     offset_filter : float, optional
         Filter constant ``β`` of ``d̂ ← d̂ + β (y − ŷ − d̂)`` (default 0.3; 0.05 with
         ``law="paper"``).
     governor : bool, optional
         ``law="paper"``: admissible reference governor after set-point changes (default on; see
-        :mod:`cosim_adapters.robust_mpc` and :mod:`controllers.laws.paper.governor`). ``False``: the
+        :mod:`cosim.adapters.robust_mpc` and :mod:`controllers.laws.paper.governor`). ``False``: the
         paper's FHOCP with the new ``(x̄, ū, α)`` at once.
     setpoint_rate : float, optional
         ``law="paper"``, outside the theorem: move the set-point given to the FHOCP towards

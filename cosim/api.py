@@ -254,9 +254,9 @@ def export_fmu(model: str | Path | None = None, out: str | Path = "Controller.fm
     """
     import warnings
 
+    from cosim.adapters.controller_export import export_fmu as export
     from cosim.core import registry
     from cosim.core.errors import CosimError
-    from cosim_adapters.controller_export import export_fmu as export
 
     if controller is not None:
         name, options = registry.expand(str(controller), options)
@@ -293,11 +293,11 @@ def serve_plant(plant: str | Path | None = None, problem: Any = None, *,
     CosimError
         Bad input (plant, problem, map, options), or the endpoint cannot be listened on.
     """
+    from cosim.adapters.plants import open_fmu
+    from cosim.adapters.problems import load_problem
     from cosim.core import varmap
     from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
     from cosim.live.runner import serve
-    from cosim_adapters.plants import open_fmu
-    from cosim_adapters.problems import load_problem
 
     bound = load_problem(problem)
     vmap = varmap.load(map) if map is not None else None
@@ -338,7 +338,7 @@ def with_problem(controller: str, options: Mapping[str, Any], problem: Any) -> d
 
 def run_problem(ctrl: Any, problem: Any) -> Any:
     """The control problem a run binds its plant FMU to: the controller's own (the robust
-    MPC's and the PI baseline's, :func:`cosim_adapters.problems.problem_for`), else
+    MPC's and the PI baseline's, :func:`cosim.adapters.problems.problem_for`), else
     ``problem`` (``--problem``) loaded, else ``None`` (a controller of its own signals: the
     plant is bound through ``--map`` alone, as before problems existed)."""
     from controllers.problem import ControlProblem
@@ -348,7 +348,7 @@ def run_problem(ctrl: Any, problem: Any) -> Any:
         return own
     if problem is None:
         return None
-    from cosim_adapters.problems import load_problem
+    from cosim.adapters.problems import load_problem
 
     return load_problem(problem)
 

@@ -129,8 +129,8 @@ def plant_setpoints(fmu: Path, problem: Any) -> list[np.ndarray]:
     """Steady outputs of the plant itself (physical units) with its inputs held at the
     points of :data:`SETPOINT_INPUTS` until it settles (300 samples): the set-points a user
     who knows the plant would ask for."""
+    from cosim.adapters.problems import bind_plant
     from cosim.core.fmu import FmuComponent
-    from cosim_adapters.problems import bind_plant
 
     out = []
     for fractions in SETPOINT_INPUTS[problem.m]:

@@ -53,8 +53,8 @@ def intervals(folder: Path, points: int = 81) -> pd.DataFrame:
     (largest row of ``L y_s − rhs``), ``excess`` (how much farther ``y_s`` is from ``r`` than
     the grid's closest admissible steady output), ``reached`` (``y_s`` within 1 mm of ``r``)
     and ``offset`` (the measured output's mean over the last 50 samples against ``ȳ``)."""
+    from cosim.adapters.robust_mpc import RobustMPCController
     from cosim.campaign import load
-    from cosim_adapters.robust_mpc import RobustMPCController
 
     spec = load(json.loads((folder / "campaign.json").read_text())["spec_file"])
     if not (spec.plant or "").startswith("model:"):

@@ -1,6 +1,7 @@
 """The packages import one way (docs: design/architecture.md, "Layers"): the contracts of
-``[tool.importlinter]`` in pyproject.toml hold, every module of ``cosim`` is classified as core
-or application, and no two modules import each other, directly or in a circle."""
+``[tool.importlinter]`` in pyproject.toml hold, every module of ``cosim`` is in one of its three
+layers (core, adapters, applications), no import runs back up from a lower layer or package,
+and no two modules import each other, directly or in a circle."""
 
 from __future__ import annotations
 
@@ -12,10 +13,12 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PACKAGES = ("controllers", "cosim", "cosim_adapters")
+PACKAGES = ("controllers", "cosim")
 #: cosim's application modules: they may use the numerical core and the adapters.
 APPLICATION = ("cosim.api", "cosim.campaign", "cosim.cli", "cosim.commands", "cosim.live",
                "cosim.tuning")
+#: cosim's layers, top down (the layers contract's).
+LAYERS = (APPLICATION, ("cosim.adapters",), ("cosim.core",))
 
 
 def _config() -> dict:
@@ -38,16 +41,41 @@ def test_the_import_contracts_hold() -> None:
     assert "0 broken" in proc.stdout
 
 
-def test_every_cosim_module_is_core_or_application() -> None:
-    """The core is a folder (``cosim/core``), named once in the contract, not a list."""
-    (core,) = [c["source_modules"] for c in _config()["contracts"]
-               if "only through the registry" in c["name"]]
-    assert core == ["cosim.core"]
+def test_every_cosim_module_is_in_a_layer() -> None:
+    """The layers contract names cosim's three layers, and every module of cosim is in one
+    (the package's own ``cosim/__init__.py`` aside: it imports nothing, it names the API)."""
+    (layers,) = [c["layers"] for c in _config()["contracts"] if c.get("type") == "layers"]
+    assert [tuple(p.strip() for p in layer.split(":")) for layer in layers] == list(LAYERS)
     modules = {m for m in _graph().modules if m.startswith("cosim.")}
     unclassified = sorted(m for m in modules if not any(
-        m == a or m.startswith(a + ".") for a in (*core, *APPLICATION)))
-    assert not unclassified, (f"{unclassified}: put them in cosim/core (the co-simulation "
-                              "core) or make them application modules")
+        m == a or m.startswith(a + ".") for layer in LAYERS for a in layer))
+    assert not unclassified, (f"{unclassified}: put them in cosim/core, cosim/adapters or an "
+                              "application package")
+
+
+def test_no_import_runs_back_up() -> None:
+    """Issue 59: no module imports one of a layer above its own (19 imports ran from cosim's
+    applications up to the adapters' package when it stood beside cosim), and controllers
+    imports nothing of cosim."""
+    graph = _graph()
+    rank = {name: r for r, layer in enumerate(LAYERS) for name in layer}
+
+    def layer_of(module: str) -> int | None:
+        if module.startswith("controllers"):
+            return len(LAYERS)   # below cosim
+        return next((r for name, r in rank.items()
+                     if module == name or module.startswith(name + ".")), None)
+
+    up = []
+    for m in sorted(graph.modules):
+        mine = layer_of(m)
+        if mine is None:
+            continue
+        for d in graph.find_modules_directly_imported_by(m):
+            theirs = layer_of(d)
+            if theirs is not None and theirs < mine:
+                up.append(f"{m} -> {d}")
+    assert not up, up
 
 
 def test_no_module_imports_itself_through_others() -> None:

@@ -28,14 +28,14 @@ import pytest
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
-#: What ``pip wheel`` reads: the project's metadata and its three packages.
-SOURCES = ("pyproject.toml", "README.md", "LICENSE", "cosim", "controllers", "cosim_adapters",
+#: What ``pip wheel`` reads: the project's metadata and its packages.
+SOURCES = ("pyproject.toml", "README.md", "LICENSE", "cosim", "controllers",
            "fmus")
 #: Build outputs and caches that a checkout may hold and a wheel must not carry.
 NOT_SOURCES = shutil.ignore_patterns("__pycache__", "*.pyc", "build", "*.egg-info", "*.fmu",
                                      ".*")
 #: The installed packages (made read-only while the commands run).
-PACKAGES = ("cosim", "controllers", "cosim_adapters", "fmus")
+PACKAGES = ("cosim", "controllers", "fmus")
 #: A short scenario (13 steps of 25 s): the written form of scenarios/*.csv.
 SCENARIO = "time,ref.h1,ref.h2\n0,0.65,0.65\n125,0.8,\n325,,\n"
 
@@ -131,8 +131,7 @@ def test_the_wheel_carries_the_package_data(wheel: Path) -> None:
     names = set(zipfile.ZipFile(wheel).namelist())
     missing = sorted(_package_data() - names)
     assert not missing, f"{wheel.name} lacks {missing}"
-    modules = {p.relative_to(ROOT).as_posix() for package in ("cosim", "controllers",
-                                                              "cosim_adapters")
+    modules = {p.relative_to(ROOT).as_posix() for package in ("cosim", "controllers")
                for p in (ROOT / package).rglob("*.py") if "__pycache__" not in p.parts}
     assert not sorted(modules - names), sorted(modules - names)
     stray = sorted(n for n in names if n.startswith(("fmus/thirdparty/", "fmus/build/",

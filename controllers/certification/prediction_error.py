@@ -4,7 +4,7 @@
 The theorem (``th:feasibility-stability``) tightens the output constraints by bounds that hold
 for every plant within ``w̄_y`` of the model: ``w_L`` (the largest output error, kept over
 the whole horizon) plus the observer-error terms ``a_i ê_o + b_i``. When its hypotheses fail
-the robust MPC still runs (the uncertified mode of :mod:`cosim_adapters.robust_mpc`), with a
+the robust MPC still runs (the uncertified mode of :mod:`cosim.adapters.robust_mpc`), with a
 tightening measured instead of proved: how far the outputs of held-back data came from what
 the controller would have predicted.
 

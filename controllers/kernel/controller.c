@@ -6,10 +6,10 @@
  * the paper's), for an exported controller (the controller FMU, fmus/controller/); the
  * numbers are loaded at run time (loader.c, PFX(load_data)), so that one binary serves every
  * design of its dimensions and law. It is the C twin of the Python component's step
- * (cosim_adapters/robust_mpc.py RobustMPCController.step), in the same order: the scalings,
+ * (cosim/adapters/robust_mpc.py RobustMPCController.step), in the same order: the scalings,
  * the observer's first estimate, the law's step, then the observer's update
  * (controllers/observer.py GRUObserver.make_step: eq:observer, eq:eo-evolution), so that the
- * same measurements give the same inputs (tests/cosim_adapters/test_controller_export.py,
+ * same measurements give the same inputs (tests/cosim/adapters/test_controller_export.py,
  * tests/fmus/test_controller_fmu.py). The observer's first estimate is the model equilibrium
  * whose output is closest to the first measured output (paper section V; the kernel's
  * PFX(equilibrium), which the Python component calls too); a first output the inputs' box

@@ -165,7 +165,7 @@ def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, 
     sample = None
     for name, ctrl in variant_controllers.items():
         if spec.model_plant:
-            from cosim_adapters.gru_plant import GRUPlant
+            from cosim.adapters.gru_plant import GRUPlant
 
             plant: Any = GRUPlant.from_file(spec.plant or "")
         else:
@@ -206,8 +206,8 @@ def _bind(spec: CampaignSpec, name: str, line: int, ctrl: Any, problem: Any,
     """The variable map binding the variant's control problem (its controller's, else
     ``problem``; else the plant variables a controller FMU records) to the plant FMU
     (``user_map`` first); ``user_map`` for a GRU-model plant or a controller with none."""
+    from cosim.adapters.plants import plant_varmap
     from cosim.api import run_problem, run_signals
-    from cosim_adapters.plants import plant_varmap
 
     if spec.model_plant:
         return user_map

@@ -252,8 +252,8 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
                          draw.get("disturbances") or None)
     run["phase"] = "building the controller"
     options = dict(task["options"])
+    from cosim.adapters.robust_mpc import RobustMPCController
     from cosim.core.registry import FMU_CONTROLLER
-    from cosim_adapters.robust_mpc import RobustMPCController
 
     packed = ("model", "problem", "path") if task["controller"] == FMU_CONTROLLER else (
         "model", "problem")

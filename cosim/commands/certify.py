@@ -246,7 +246,7 @@ def run(args: argparse.Namespace) -> int:
     from controllers.disturbances import condition
     from controllers.errors import ControllersError
     from controllers.model import GRUModel
-    from cosim_adapters.problems import problem_for
+    from cosim.adapters.problems import problem_for
 
     _check_args(args)
     full = GRUModel.load(args.model)
@@ -320,7 +320,7 @@ def _refusal(args: argparse.Namespace, setpoints_phys: list) -> str:
     from controllers.model import GRUModel
     from controllers.mpc import RobustMPC
     from controllers.mpc_options import MPCOptions
-    from cosim_adapters.problems import problem_for
+    from cosim.adapters.problems import problem_for
 
     options: dict[str, Any] = {"law": args.law, "N": args.N}
     for key in ("e_o0", "gain_scale"):

@@ -75,10 +75,10 @@ def run(args: argparse.Namespace) -> int:
 
     import numpy as np
 
+    from cosim.adapters.problems import bind_plant, load_problem
     from cosim.core import datagen, outpaths, varmap
     from cosim.core.errors import CosimError
     from cosim.core.master import MAX_STEPS
-    from cosim_adapters.problems import bind_plant, load_problem
 
     if args.steps < 10:
         raise CosimError(f"--steps must be at least 10, got {args.steps}")

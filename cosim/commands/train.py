@@ -273,8 +273,8 @@ def _problem(args: argparse.Namespace) -> tuple[Any, bool]:
     default."""
     from controllers.errors import ControllersError
     from controllers.problem_file import problem_from_dict
+    from cosim.adapters.problems import load_problem
     from cosim.core.errors import CosimError
-    from cosim_adapters.problems import load_problem
 
     if args.problem is not None:
         return load_problem(args.problem), True

@@ -5,7 +5,7 @@ The master and its loop (:mod:`cosim.core.master`, :mod:`cosim.core.loop`), the 
 :mod:`cosim.core.isolated`, the sensor), scenarios, variable maps and the binding to a control
 problem, results, KPIs, figures, the regression comparison, data generation and logged data,
 atomic writes and interrupts. It knows controllers only through :mod:`cosim.core.registry` and
-imports nothing of the numerical core (``controllers``), of its adapters (``cosim_adapters``)
+imports nothing of the numerical core (``controllers``), of its adapters (``cosim.adapters``)
 or of the applications that stand on it (:mod:`cosim.api`, :mod:`cosim.cli`,
 :mod:`cosim.commands`, :mod:`cosim.campaign`): the import contracts in ``pyproject.toml``,
 checked by ``tests/test_layering.py``, hold the folder to that.

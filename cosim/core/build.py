@@ -74,7 +74,7 @@ GLUE_DIR = PACKAGE_DIR / "glue"
 #: folder).
 GLUE_FILES = ("instance.h", "instance.c", "fmi2.c", "fmi3.c")
 #: The four-tank's control problem (signals, boxes, Ts, PI loops): the default problem of the
-#: default plant (:mod:`cosim_adapters.problems`).
+#: default plant (:mod:`cosim.adapters.problems`).
 DEFAULT_PROBLEM = SOURCE_DIR / "problem.toml"
 #: The application's name in the user cache folder (the compiled kernels share it).
 CACHE_APP = "gru-mpc"

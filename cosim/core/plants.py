@@ -42,11 +42,11 @@ class PlantKind:
 #: Endpoint schemes (``scheme:...``): a live plant over OPC UA, the GRU model as the plant.
 SCHEMES: dict[str, PlantKind] = {
     "opc.tcp": PlantKind("opc.tcp", "cosim.live.plant:open_live", live=True),
-    "model": PlantKind("model", "cosim_adapters.plants:open_model"),
+    "model": PlantKind("model", "cosim.adapters.plants:open_model"),
 }
 #: File kinds, by suffix: a plant FMU (FMI 2.0 or 3.0).
 FILE_KINDS: dict[str, PlantKind] = {
-    ".fmu": PlantKind(".fmu", "cosim_adapters.plants:open_fmu", scheme=False),
+    ".fmu": PlantKind(".fmu", "cosim.adapters.plants:open_fmu", scheme=False),
 }
 #: The kind of a run without a plant argument (the project's plant FMU).
 DEFAULT_KIND = ".fmu"

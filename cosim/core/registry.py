@@ -22,8 +22,8 @@ __all__ = ["CONTROLLERS", "DEFAULT", "FMU_CONTROLLER", "create", "expand", "pars
 
 #: Built-in controllers.
 CONTROLLERS: dict[str, str] = {
-    "pi": "cosim_adapters.pi:PIController",
-    "robust-mpc": "cosim_adapters.robust_mpc:RobustMPCController",
+    "pi": "cosim.adapters.pi:PIController",
+    "robust-mpc": "cosim.adapters.robust_mpc:RobustMPCController",
 }
 
 #: The component of a controller FMU (``--controller Controller.fmu``): native code, run in a

@@ -153,7 +153,7 @@ def open_live(plant: str, ctx: PlantContext) -> OpenedPlant:
     live = ctx.live or LiveOptions()
     bound = ctx.problem
     if bound is None:   # a controller of its own signals (an FMU): the default problem's
-        from cosim_adapters.problems import load_problem
+        from cosim.adapters.problems import load_problem
 
         bound = load_problem(None)
     sc = ctx.scenario

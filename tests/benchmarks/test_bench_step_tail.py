@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.mark.slow
 def test_the_benchmark_times_both_trees_and_explains_the_tail() -> None:
     changed = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--",
-                              "controllers", "cosim", "cosim_adapters"],
+                              "controllers", "cosim"],
                              capture_output=True, text=True, check=True).stdout.strip()
     proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_step_tail.py"),
                            "--rounds", "1", "--laws", "paper"], capture_output=True, text=True,

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import time
 
-from cosim_adapters.pi import PIController
+from cosim.adapters.pi import PIController
 
 
 class SleepyPI(PIController):

@@ -14,8 +14,8 @@ from pathlib import Path
 import numpy as np
 
 from controllers.model import DEFAULT_MODEL
-from cosim_adapters.pi import PIController
-from cosim_adapters.robust_mpc import RobustMPCController
+from cosim.adapters.pi import PIController
+from cosim.adapters.robust_mpc import RobustMPCController
 
 
 class PIGainUp(PIController):

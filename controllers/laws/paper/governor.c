@@ -16,7 +16,7 @@
  *
  * The equilibria are the kernel's (PFX(eq_newton), PFX(steady), PFX(equilibrium)), which the
  * Python governor calls too, so that the same measurements give the same inputs
- * (tests/cosim_adapters/test_controller_export.py).
+ * (tests/cosim/adapters/test_controller_export.py).
  */
 static const double GOV_ZERO_U[NU];
 

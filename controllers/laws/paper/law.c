@@ -29,7 +29,7 @@
  *                   fhocp_result.judge; the warm start)
  *   evaluate        FixedSetpoint.evaluate (a given plan's answer check)
  *
- * so that the same measurements give the same inputs (tests/cosim_adapters/
+ * so that the same measurements give the same inputs (tests/cosim/adapters/
  * test_controller_export.py).
  *
  * Where the Python component raises (a certified design whose first set-point is outside

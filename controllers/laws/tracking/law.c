@@ -19,7 +19,7 @@
  *   check           ArtificialSteadyState.evaluate (the candidate's answer check)
  *
  * so that the same measurements give the same inputs, to the bit
- * (tests/cosim_adapters/test_controller_export.py, tests/fmus/test_controller_fmu.py).
+ * (tests/cosim/adapters/test_controller_export.py, tests/fmus/test_controller_fmu.py).
  */
 #if !HAS_ASS
 #error "law_tracking.c runs on a tracking FHOCP's kernel (HAS_ASS)"

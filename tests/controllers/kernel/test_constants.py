@@ -1,6 +1,6 @@
 """The numbers of a generated C source as a data file (:mod:`controllers.kernel.constants`):
 the layout's key, the file's bytes (ranges, checksum, values), and the values it refuses.
-What ``loader.c`` refuses when it reads one: ``tests/cosim_adapters/test_controller_export.py``
+What ``loader.c`` refuses when it reads one: ``tests/cosim/adapters/test_controller_export.py``
 (a damaged or edited ``controller.dat``)."""
 
 from __future__ import annotations

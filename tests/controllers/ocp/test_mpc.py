@@ -11,7 +11,7 @@ from controllers.laws.paper.reference import FixedSetpoint
 from controllers.observer import GRUObserver
 from controllers.ocp.fhocp import FHOCP, FHOCPData
 from controllers.ocp.solver_settings import FEAS_TOL
-from cosim_adapters.gru_plant import GRUPlant
+from cosim.adapters.gru_plant import GRUPlant
 from tests.controllers.random_gru import N
 
 

@@ -548,7 +548,7 @@ def test_the_tracking_laws_hypotheses(model_file: Path, capsys) -> None:
 def test_certify_takes_the_design_of_the_problems_mpc_table(tmp_path: Path, capsys) -> None:
     """The problem's [mpc] N, Q and R are the design certified (the controller's), under
     the flags given."""
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
     from tests.fourtank_problem import with_table
 
     tuned = with_table(tmp_path, "mpc", 'Q = "outputs"\nN = 40\n')

@@ -23,7 +23,7 @@ def model(tmp_path: Path) -> Path:
 
 def test_tune_runs_every_weighting_chooses_by_the_rule_and_saves(
         model: Path, capsys: pytest.CaptureFixture) -> None:
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     assert main(["tune", str(model), "--json", "--save"]) == 0
     doc = json.loads(capsys.readouterr().out)

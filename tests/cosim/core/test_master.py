@@ -9,12 +9,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.adapters.pi import PIController
 from cosim.core.component import Component, Signal
 from cosim.core.errors import CosimError, SimulationFailed
 from cosim.core.fmu import FmuComponent
 from cosim.core.master import Master, communication_times
 from cosim.core.scenario import load
-from cosim_adapters.pi import PIController
 
 
 def scenario(tmp_path: Path, text: str) -> object:

@@ -6,23 +6,23 @@ import sys
 
 import pytest
 
+from cosim.adapters.pi import PIController
 from cosim.core.errors import CosimError
 from cosim.core.registry import CONTROLLERS, DEFAULT, create, resolve
-from cosim_adapters.pi import PIController
 
 
 def test_names_and_specs() -> None:
-    assert DEFAULT == "robust-mpc" and CONTROLLERS["pi"] == "cosim_adapters.pi:PIController"
+    assert DEFAULT == "robust-mpc" and CONTROLLERS["pi"] == "cosim.adapters.pi:PIController"
     assert resolve("pi") is PIController
-    assert resolve("cosim_adapters.pi:PIController") is PIController
+    assert resolve("cosim.adapters.pi:PIController") is PIController
     assert isinstance(create("pi"), PIController)
 
 
 @pytest.mark.parametrize(("name", "words"), [
     ("nope", "unknown controller 'nope'"),
     ("no_such_module:X", "cannot import module 'no_such_module'"),
-    ("cosim_adapters.pi:Nothing", "is not a Component class"),
-    ("cosim_adapters.pi:PILoop", "is not a Component class"),
+    ("cosim.adapters.pi:Nothing", "is not a Component class"),
+    ("cosim.adapters.pi:PILoop", "is not a Component class"),
 ])
 def test_errors(name: str, words: str) -> None:
     with pytest.raises(CosimError, match=words):
@@ -58,7 +58,7 @@ def test_create_passes_options_and_names_unknown_ones() -> None:
 def test_constructor_errors_are_one_line(monkeypatch: pytest.MonkeyPatch) -> None:
     import types
 
-    from cosim_adapters.pi import PIController
+    from cosim.adapters.pi import PIController
 
     class Fails(PIController):
         def __init__(self) -> None:

@@ -60,7 +60,7 @@ def short_scenario(tmp_path: Path) -> Path:
 @pytest.fixture
 def safe_problem(tmp_path: Path) -> Path:
     """The four-tank's problem with safe inputs (qa = 0, qb held)."""
-    from cosim_adapters.problems import default_problem_path
+    from cosim.adapters.problems import default_problem_path
 
     text = default_problem_path().read_text()
     text = text.replace('description = "pump a flow"', 'description = "pump a flow"\nsafe = 0.0')

@@ -13,17 +13,17 @@ import pytest
 from controllers import gru
 from controllers.equilibrium import state_equilibrium
 from controllers.model import DEFAULT_MODEL, GRUModel
+from cosim.adapters.gru_plant import GRUPlant
+from cosim.adapters.pi import PIController
 from cosim.cli import main
 from cosim.core import kpis
 from cosim.core.errors import CosimError
 from cosim.core.fmu import FmuComponent
 from cosim.core.master import Master
 from cosim.core.scenario import load
-from cosim_adapters.gru_plant import GRUPlant
-from cosim_adapters.pi import PIController
 from tests.controllers.random_gru import other_problem, random_gru_model
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_steps.csv"
 #: Samples each set-point of the random-plant scenarios is held.
 HOLD = 100

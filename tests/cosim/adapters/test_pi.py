@@ -7,10 +7,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.adapters.pi import PIController, PILoop
 from cosim.core.fmu import FmuComponent
 from cosim.core.master import Master
 from cosim.core.scenario import load
-from cosim_adapters.pi import PIController, PILoop
 from tests.fourtank_problem import FOURTANK
 
 

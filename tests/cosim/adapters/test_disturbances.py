@@ -22,7 +22,7 @@ from cosim.cli import main
 from cosim.core.errors import CosimError
 from tests import example_builds
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PROBLEM = """\
 [problem]
 name = "heater"
@@ -150,7 +150,7 @@ def test_the_robust_mpc_holds_the_measured_disturbance(heater: dict[str, Path],
 
 def test_the_kernels_shift_of_the_biases_is_the_full_models(heater: dict[str, Path]) -> None:
     from controllers import gru
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController(model=heater["model"])
     full, fh = ctrl.mpc.full_model, ctrl.mpc.fhocp
@@ -232,7 +232,7 @@ def test_the_paper_laws_compiled_step_replays_the_python_controller_with_disturb
         build,
         design_data,
     )
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController(model=heater["model"], **PAPER)
     ctrl.expect_setpoints([{"T": 45.0}, {"T": 55.0}, {"T": 60.0}])   # uncertified for them
@@ -418,7 +418,7 @@ def test_without_a_schedule_a_disturbance_known_ahead_is_held(
     """Stepped outside a scenario (no schedule: a host stepping it), or in a run whose
     scenario does not set it, the controller of a disturbance known ahead holds its measured
     value, as the one that only measures it: the same inputs to the bit, the steps counted."""
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     held = RobustMPCController(model=dead_time["model"])
     ahead = RobustMPCController(model=_previewed(dead_time["model"], tmp_path))
@@ -585,7 +585,7 @@ def test_the_compiled_step_replays_the_python_controller_with_disturbance_and_de
         build,
         design_data,
     )
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController(model=dead_time["model"])
     design = ctrl.mpc.export_design()

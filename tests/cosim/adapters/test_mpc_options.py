@@ -12,8 +12,8 @@ from controllers import laws
 from controllers.errors import OptionError, ProblemFileError
 from controllers.mpc_options import MPCOptions
 from controllers.problem_file import load, problem_from_dict
+from cosim.adapters.robust_mpc import RobustMPCController
 from cosim.core.errors import CosimError
-from cosim_adapters.robust_mpc import RobustMPCController
 from tests.fourtank_problem import with_table
 
 

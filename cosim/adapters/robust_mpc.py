@@ -43,7 +43,7 @@ class RobustMPCController(Component):
     problem : str or Path, optional
         A problem file: must be the model's own (a check; its ``[mpc]`` table, the tuning,
         may differ and, when it has one, is the one used), or the problem of a model file
-        that has none (:mod:`cosim_adapters.problems`).
+        that has none (:mod:`cosim.adapters.problems`).
     options : MPCOptions or mapping, optional
         The design (:class:`controllers.mpc_options.MPCOptions`), as an object (used as
         it is) or by key (over the problem's ``[mpc]`` table,
@@ -74,7 +74,7 @@ class RobustMPCController(Component):
                  name: str = "mpc", **option_values: Any) -> None:
         from controllers.model import GRUModel
         from controllers.mpc import RobustMPC
-        from cosim_adapters.problems import problem_for
+        from cosim.adapters.problems import problem_for
 
         if not isinstance(name, str) or not name:
             raise CosimError(f"option name={name!r}: expected a non-empty string")

@@ -18,9 +18,9 @@ import pytest
 
 import cosim
 from cosim.cli import main
-from tests.cosim_adapters.test_controller_export import _replayed
+from tests.cosim.adapters.test_controller_export import _replayed
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
 
 
@@ -54,7 +54,7 @@ def test_the_tracking_law_applies_each_input_at_its_own_dead_time(
     """On the plant whose qb acts six samples after qa, the controller that knows both dead
     times tracks the set-point steps with less IAE than one that takes none or six samples
     for both, without violations; its plans keep qb's first six inputs at those applied."""
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     plans: list[tuple[np.ndarray, np.ndarray]] = []
     original = RobustMPCController.step
@@ -108,7 +108,7 @@ def test_the_compiled_step_replays_the_python_controller_with_mixed_dead_times(
         build,
         design_data,
     )
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController(model=models["short"], **options)
     ctrl.setup(0.0)

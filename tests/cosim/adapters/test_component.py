@@ -10,14 +10,14 @@ import numpy as np
 import pytest
 
 from controllers.model import DEFAULT_MODEL
+from cosim.adapters.gru_plant import GRUPlant
+from cosim.adapters.robust_mpc import RobustMPCController
 from cosim.core import scenario
 from cosim.core.errors import CosimError
 from cosim.core.master import Master
-from cosim_adapters.gru_plant import GRUPlant
-from cosim_adapters.robust_mpc import RobustMPCController
 from tests.fourtank_problem import FOURTANK
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.fixture(scope="module")

@@ -228,7 +228,7 @@ class PIController(Component):
                  initial_inputs: Mapping[str, float] | None = None,
                  tune: bool | None = None, tune_setpoint: Mapping[str, float] | None = None,
                  tune_tau_c: float | None = None, feedforward: bool | None = None) -> None:
-        from cosim_adapters.problems import problem_for
+        from cosim.adapters.problems import problem_for
 
         self.name = "pi"
         gru = model if isinstance(model, GRUModel) else None

@@ -1,7 +1,7 @@
 """The openers of the plant kinds the adapters bring (:mod:`cosim.core.plants`): a plant FMU
 bound to the run's control problem, and the GRU model itself as the plant.
 
-A plant FMU is bound to the problem (:func:`cosim_adapters.problems.bind_plant`: names
+A plant FMU is bound to the problem (:func:`cosim.adapters.problems.bind_plant`: names
 through ``variable`` keys, units converted, checked before the first step), else to the
 signals a controller FMU records, else through the user's ``--map`` alone; it runs in this
 process, or in a worker with ``isolate`` (:class:`cosim.core.isolated.IsolatedFmuComponent`).
@@ -21,11 +21,11 @@ __all__ = ["open_fmu", "open_model", "plant_varmap"]
 def plant_varmap(path: Path, varmap: Any, problem: Any = None,
                  signals: list[Any] | None = None) -> Any:
     """The variable map binding the plant FMU ``path`` to ``problem`` (the user's ``varmap``
-    first: :func:`cosim_adapters.problems.bind_plant`), else to the ``signals`` a controller
+    first: :func:`cosim.adapters.problems.bind_plant`), else to the ``signals`` a controller
     FMU records (:meth:`cosim.core.fmu_controller.FmuController.plant_signals`), else
     ``varmap`` as it is."""
     if problem is not None:
-        from cosim_adapters.problems import bind_plant
+        from cosim.adapters.problems import bind_plant
 
         return bind_plant(problem, path, varmap)
     if signals:
@@ -58,9 +58,9 @@ def open_fmu(plant: str | Path | None, ctx: PlantContext) -> OpenedPlant:
 
 
 def open_model(plant: str | Path, ctx: PlantContext) -> OpenedPlant:
-    """The GRU model of ``model:FILE`` as the plant (:class:`cosim_adapters.gru_plant.
+    """The GRU model of ``model:FILE`` as the plant (:class:`cosim.adapters.gru_plant.
     GRUPlant`), its noise seeded with the run's seed."""
-    from cosim_adapters.gru_plant import GRUPlant
+    from cosim.adapters.gru_plant import GRUPlant
 
     if ctx.varmap is not None or ctx.isolate or ctx.interface != "cs":
         raise CosimError(f"--plant {plant}: a GRU-model plant takes no --map, --isolate, "

@@ -10,10 +10,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cosim.adapters.robust_mpc import RobustMPCController
 from cosim.api import run
-from cosim_adapters.robust_mpc import RobustMPCController
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 def test_weights_by_input_name_and_in_the_summary() -> None:

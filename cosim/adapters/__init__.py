@@ -6,10 +6,10 @@ co-simulation core (master, FMUs, scenarios, results); it knows controllers only
 :class:`~cosim.core.component.Component` classes named in its registry (:mod:`cosim.core.registry`).
 This package turns the one into the other:
 
-- :mod:`cosim_adapters.robust_mpc`: the robust GRU MPC (observer + governor + FHOCP) as the
+- :mod:`cosim.adapters.robust_mpc`: the robust GRU MPC (observer + governor + FHOCP) as the
   ``robust-mpc`` controller;
-- :mod:`cosim_adapters.pi`: the decentralised PI baseline as the ``pi`` controller;
-- :mod:`cosim_adapters.gru_plant`: the GRU model itself as a plant (``model:FILE``).
+- :mod:`cosim.adapters.pi`: the decentralised PI baseline as the ``pi`` controller;
+- :mod:`cosim.adapters.gru_plant`: the GRU model itself as a plant (``model:FILE``).
 
 The import contracts (``[tool.importlinter]`` in pyproject.toml, checked by
 ``tests/test_layering.py``) keep it so: ``controllers`` imports nothing of ``cosim`` or of

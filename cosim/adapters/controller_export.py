@@ -1,4 +1,4 @@
-"""The robust MPC exported as a controller FMU: from a :class:`~cosim_adapters.robust_mpc.
+"""The robust MPC exported as a controller FMU: from a :class:`~cosim.adapters.robust_mpc.
 RobustMPCController` to :func:`cosim.core.controller_fmu.build_controller_fmu`.
 
 The FMU runs the same step as the Python component, in C: the component's own observer,

@@ -25,7 +25,7 @@ import pytest
 import cosim
 from cosim.core.errors import CosimError
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_steps.csv"
 #: The issue's bar: the FMU's inputs within this share of each input's box of the Python
 #: controller's (they are equal to the bit on this machine).
@@ -248,9 +248,9 @@ def test_samples_the_master_skips_hold_the_fmu_as_the_python_controller(
     FMU's clock cannot skip it: the skipped samples are stepped with the measured outputs
     not finite, which holds the exported controller as the Python controller that was not
     stepped (the same inputs after each gap; before, the FMU refused the next doStep)."""
+    from cosim.adapters.robust_mpc import RobustMPCController
     from cosim.core.fmu_controller import FmuController
     from cosim.core.isolated import IsolatedFmuController
-    from cosim_adapters.robust_mpc import RobustMPCController
 
     fmu = (IsolatedFmuController if isolated else FmuController)(controller_fmus[version])
     py = RobustMPCController()
@@ -291,7 +291,7 @@ def test_the_compiled_step_replays_the_python_controller() -> None:
         design_data,
         parameters,
     )
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController()
     design = ctrl.mpc.export_design()
@@ -420,7 +420,7 @@ def test_the_compiled_paper_step_replays_the_python_law(options: dict, refs: tup
         design_data,
         parameters,
     )
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
 
     ctrl = RobustMPCController(**{**PAPER_LAW, **options})
     if first_outside:
@@ -459,7 +459,7 @@ def test_the_compiled_governor_moves_along_the_surface_of_equilibrium_outputs(
         build,
         design_data,
     )
-    from cosim_adapters.robust_mpc import RobustMPCController
+    from cosim.adapters.robust_mpc import RobustMPCController
     from tests.controllers.random_gru import random_gru_model
 
     model = random_gru_model(7, n=8, m=1, p=2)

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
+from cosim.adapters.robust_mpc import RobustMPCController
 from cosim.api import run
 from cosim.core.errors import CosimError
-from cosim_adapters.robust_mpc import RobustMPCController
 
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.mark.parametrize(("options", "words"), [
