@@ -1,7 +1,7 @@
 /* controller.h: what the exported controller's two parts share (controllers/kernel/
  * controller_source.py joins the kernel, the controller's constants, this file, the law's
- * files -- law_tracking.c, or law_paper.c and law_paper_governor.c -- and controller.c into
- * one translation unit).
+ * files -- controllers/laws/<name>/*.c: tracking/law.c, or paper/law.c and paper/governor.c
+ * -- and controller.c into one translation unit).
  *
  * A law file defines, for controller.c:
  *
@@ -208,9 +208,9 @@ CTL_HELPER void shifted_candidate(double *cand, const double *plan, int has_plan
 }
 
 /* after a failed solve res, with chk the candidate's check: whether the solver's iterate is
- * applied instead of the candidate (controllers/laws/paper/mpc.py RobustMPC.make_step,
- * tracking_mpc.py TrackingMPC.make_step: suboptimal MPC, a feasible iterate no costlier than
- * a feasible candidate) */
+ * applied instead of the candidate (controllers/laws/paper/mpc.py PaperMPC.make_step,
+ * controllers/laws/tracking/mpc.py TrackingMPC.make_step: suboptimal MPC, a feasible
+ * iterate no costlier than a feasible candidate) */
 CTL_HELPER int keeps_iterate(const ctl_result *res, const ctl_result *chk) {
   const int feasible = chk->cv <= CT_FEAS_TOL && chk->tv <= CT_FEAS_TOL;
   return res->feasible && (!feasible || res->cost <= chk->cost);

@@ -162,7 +162,7 @@ def summary(result: RunResult, meta: dict | None = None) -> dict:
     ``steps_planned``, ``step_size``, ``start_time``, ``stop_time``, ``wall_time_s``,
     ``signals`` (see :func:`signals`), ``kpis`` (see :func:`cosim.core.kpis.compute`),
     ``controller_summary`` (the controller's own ``summary()``: solver statistics), ``live``
-    (a run against a live plant: :mod:`cosim.live.loop`), plus ``meta`` (scenario, plant,
+    (a run against a live plant: :mod:`cosim.live.clock`), plus ``meta`` (scenario, plant,
     controller, seed...).
     """
     doc = {

@@ -4,7 +4,7 @@ A plant is reached through its control system, and control systems speak OPC UA.
 is the co-simulation's counterpart for that: :mod:`cosim.live.server` serves a plant FMU as an
 OPC UA server stepped on the wall clock (the virtual plant of ``cosim serve-plant``, to
 rehearse on), :mod:`cosim.live.session` is the client that reads a plant's measurements and
-writes its inputs (``cosim run --plant opc.tcp://...``), :mod:`cosim.live.loop` the real-time
+writes its inputs (``cosim run --plant opc.tcp://...``), :mod:`cosim.live.clock` the real-time
 loop that drives any controller through it and answers every fault a live process has
 (stale values, lost links, overrunning steps, signals), :mod:`cosim.live.tags` maps the
 problem's signals onto a real plant's tags, and :mod:`cosim.live.security` holds the

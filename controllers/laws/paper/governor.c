@@ -1,6 +1,7 @@
-/* law_paper_governor.c: the paper's law's admissible reference governor in C (CT_GOVERNOR,
- * the Python law's default), joined after law_paper.c (whose law_state, set-point checks and
- * references it uses, and whose update_reference calls govern after the first set-point).
+/* controllers/laws/paper/governor.c: the paper's law's admissible reference governor in C
+ * (CT_GOVERNOR, the Python law's default), joined after controllers/laws/paper/law.c (whose
+ * law_state, set-point checks and references it uses, and whose update_reference calls govern
+ * after the first set-point).
  * It is the C twin of controllers/laws/paper/governor.py ReferenceGovernor with PaperLaw._govern
  * (controllers/laws/paper/law.py), in the same order of kernel calls:
  *
@@ -8,7 +9,7 @@
  *               or unreachable refused; lambda_max adapted to the last solve
  *   gov_step    ReferenceGovernor.step: the largest fraction of the step, down to
  *               lambda_max / 2^(levels - 1), with an admissible equilibrium and a feasible
- *               candidate (the solve's initial guess and fallback, law_paper.c make_step);
+ *               candidate (the solve's initial guess and fallback, paper/law.c make_step);
  *               with more outputs than inputs along the surface of equilibrium outputs
  *               (gov_target: ReferenceGovernor.target)
  *   gov_newton  ReferenceGovernor.newton: the kernel's PFX(eq_newton)

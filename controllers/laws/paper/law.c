@@ -1,5 +1,5 @@
-/* law_paper.c: the paper's law in C (law="paper"), joined between controller.h and
- * controller.c (see controller.h for what a law file defines). It is the C twin of the Python
+/* controllers/laws/paper/law.c: the paper's law in C (law="paper"), joined between
+ * controller.h and controller.c (see controller.h for what a law file defines). It is the C twin of the Python
  * law, in the same order of kernel calls:
  *
  *   law_disturbance_moved, law_restart
@@ -16,7 +16,7 @@
  *                   PFX(equilibrium), which the Python law calls too)
  *   first_admissible PaperLaw._first_admissible and closest_admissible (the uncertified
  *                   mode's first set-point outside the theory)
- *   govern          (law_paper_governor.c) PaperLaw._govern with controllers/ocp/
+ *   govern          (controllers/laws/paper/governor.c) PaperLaw._govern with controllers/ocp/
  *                   governor.py ReferenceGovernor (CT_GOVERNOR): the admissible reference
  *                   governor after the first set-point
  *   make_step       controllers/laws/paper/mpc.py RobustMPC.make_step: eq:mpc with the
@@ -38,14 +38,14 @@
  * the inputs and raises CTL_WARN_NO_ADMISSIBLE_SETPOINT.
  */
 #if HAS_ASS
-#error "law_paper.c runs on the paper's FHOCP kernel (HAS_ASS 0)"
+#error "controllers/laws/paper/law.c runs on the paper's FHOCP kernel (HAS_ASS 0)"
 #endif
 #if !defined(CT_OFFSET_FREE) || !defined(CT_RATE_TUNABLE)
 #error "the paper's law needs CT_OFFSET_FREE and CT_RATE_TUNABLE (controller_source.py)"
 #endif
 
-/* How far inside the admissible box the closest admissible set-point is put (paper_law.py
- * INSIDE) and the change of the FHOCP's set-point that counts as one (_update_reference). */
+/* How far inside the admissible box the closest admissible set-point is put
+ * (controllers/laws/paper/law.py INSIDE) and the change of the FHOCP's set-point that counts as one (_update_reference). */
 #define PAPER_INSIDE 1e-3
 #define PAPER_SAME_TOL (CT_OFFSET_FREE ? 1e-3 : 1e-12)
 
@@ -167,7 +167,7 @@ static int first_admissible(law_state *st, const double *target, const double *y
   return 1;
 }
 
-/* the reference governor (law_paper_governor.c, joined after this file) */
+/* the reference governor (controllers/laws/paper/governor.c, joined after this file) */
 static void govern(law_state *st, const double *xhat, const double *target, int changed,
                    int *warnings);
 

@@ -1,5 +1,5 @@
-/* law_tracking.c: the robust MPC's tracking law in C (the default law), joined between
- * controller.h and controller.c (see controller.h for what a law file defines). It is the C
+/* controllers/laws/tracking/law.c: the robust MPC's tracking law in C (the default law),
+ * joined between controller.h and controller.c (see controller.h for what a law file defines). It is the C
  * twin of the Python law, line for line and in the same order of kernel calls:
  *
  *   law_disturbance_moved, law_restart
@@ -22,7 +22,7 @@
  * (tests/cosim/adapters/test_controller_export.py, tests/fmus/test_controller_fmu.py).
  */
 #if !HAS_ASS
-#error "law_tracking.c runs on a tracking FHOCP's kernel (HAS_ASS)"
+#error "controllers/laws/tracking/law.c runs on a tracking FHOCP's kernel (HAS_ASS)"
 #endif
 
 /* the tunable parameters (law_parameter), in this order: the disturbance filter's gain
