@@ -216,6 +216,7 @@ class Plc {
 
 async function start(cfg) {
   const pki = fs.mkdtempSync(path.join(os.tmpdir(), "vendor-plc-pki-"));
+  process.on("exit", () => fs.rmSync(pki, { recursive: true, force: true }));
   const manager = new OPCUACertificateManager({
     rootFolder: pki, automaticallyAcceptUnknownCertificate: true,
   });
@@ -231,7 +232,7 @@ async function start(cfg) {
   const plc = new Plc(cfg);
   plc.build(server);
   await server.start();
-  return { server, plc, pki };
+  return { server, plc };
 }
 
 /** Step the PLC every Ts / K seconds of the wall clock, drift-free, until stopped. */
@@ -265,7 +266,7 @@ async function main() {
     process.stderr.write(`vendor-plc: ${err.message}\n`);
     process.exit(2);
   }
-  const { server, plc, pki } = await start(cfg);
+  const { server, plc } = await start(cfg);
   const periodMs = (1000 * cfg.Ts) / cfg.speed;
   const stopTicks = run(plc, periodMs);
   let stopping = false;
@@ -276,7 +277,6 @@ async function main() {
     plc.record.close();
     setTimeout(() => process.exit(0), 2000).unref();
     server.shutdown(0).finally(() => {
-      fs.rmSync(pki, { recursive: true, force: true });
       process.stderr.write(`vendor-plc: stopped (${why}) after ${plc.n} samples, ` +
                            `${plc.overruns} overruns\n`);
       process.exit(0);
