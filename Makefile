@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all setup fmus demo test docs lint bench acados clean
+.PHONY: all setup fmus demo test docs lint bench acados node-opcua clean
 
 all: fmus
 
@@ -33,9 +33,11 @@ demo: fmus
 # its module-scoped fixtures (a trained model, built FMUs) are made once: about 12 min on 2
 # cores. JOBS=1 runs it in one process.
 JOBS ?= 2
-# acados (benchmarks/bench_acados.py's test) when PyPI serves it; its test is skipped without.
+# acados (benchmarks/bench_acados.py's test) when PyPI serves it, node-opcua (the live tests'
+# vendor-style PLC) when npm serves it; their tests are skipped without.
 test: fmus docs
 	-$(MAKE) --no-print-directory acados
+	-$(MAKE) --no-print-directory node-opcua
 	$(BIN)/python -m pytest $(if $(filter-out 1,$(JOBS)),-n $(JOBS) --dist loadscope)
 
 # The documentation site (mkdocs.yml, docs/): a strict build, any warning is an error.
@@ -57,6 +59,17 @@ acados: $(ACADOS_VENV)/.installed
 $(ACADOS_VENV)/.installed:
 	$(PYTHON) -m venv $(ACADOS_VENV)
 	$(ACADOS_VENV)/bin/python -m pip install --quiet comma-deps-acados==0.2.2.post92
+	touch $@
+
+# node-opcua, a second OPC UA stack, for the live tests' vendor-style PLC
+# (tests/cosim/live/vendor_plc/, test_vendor_plc.py): the versions pinned by its
+# package-lock.json, into its git-ignored node_modules (69 MB; no install scripts run). Needs
+# Node.js >= 18 and npm; without them the vendor PLC's tests are skipped.
+VENDOR_PLC := tests/cosim/live/vendor_plc
+node-opcua: $(VENDOR_PLC)/node_modules/.installed
+
+$(VENDOR_PLC)/node_modules/.installed: $(VENDOR_PLC)/package.json $(VENDOR_PLC)/package-lock.json
+	cd $(VENDOR_PLC) && npm ci --no-audit --no-fund --ignore-scripts --loglevel=error
 	touch $@
 
 clean:
