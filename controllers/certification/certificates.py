@@ -52,7 +52,13 @@ from controllers.certification.bounds import (
     tightening_parameters,
     w_L,
 )
-from controllers.certification.design import MAX_HORIZON, gain, horizon, weight
+from controllers.certification.design import (
+    MAX_HORIZON,
+    horizon,
+    observer_gains,
+    scalars,
+    weight,
+)
 from controllers.certification.output_ranges import box_bounds
 from controllers.errors import DesignError, SetpointError
 from controllers.problem import ControlProblem, constraint_names, output_constraints
@@ -61,7 +67,7 @@ if TYPE_CHECKING:
     from controllers.certification.measured_terminal import MeasuredTerminal
 
 __all__ = ["JSON_KEYS", "MAX_HORIZON", "NU_FIX", "Certificate", "Reference",
-           "compute_certificate", "uncertified_certificate"]
+           "compute_certificate"]
 
 #: What would make a model with ``ν ≥ 1`` usable (``cosim certify``'s fix, ``cosim run``'s).
 NU_FIX = "train the model with the nu constraint (cosim train keeps nu <= 0.98)"
@@ -125,7 +131,8 @@ class Certificate:
     model: Any = field(default=None, repr=False)
     row_names: list[str] | None = None
     #: ``"theorem"``: the bounds of ``th:feasibility-stability``; ``"measured"``: the
-    #: uncertified design of :func:`uncertified_certificate` (no guarantee).
+    #: uncertified design of :func:`controllers.certification.grade.uncertified_certificate`
+    #: (no guarantee).
     tightening: str = "theorem"
     #: ``(N + 1, q)``: the part of ``b`` that covers the measured disturbances held over the
     #: horizon (``c_s e_d(i)``, lem:held-disturbance), ``None`` without disturbances; the
@@ -365,7 +372,7 @@ class Certificate:
         return doc
 
 
-def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
+def compute_certificate(model: Any, *, N: int, Q: np.ndarray | None = None,
                         R: np.ndarray | None = None, e_o0: float = 0.02,
                         L_z: np.ndarray | None = None, L_r: np.ndarray | None = None,
                         w_y_bar: float | None = None, gain_scale: float | None = None,
@@ -378,7 +385,8 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
     model : GRUModel
         The δISS GRU (weights and normalisation).
     N : int
-        Prediction horizon (paper: 15).
+        Prediction horizon (the design's: :class:`controllers.mpc_options.MPCOptions`, its
+        default the law's spec; the paper's section V takes 15).
     Q, R : arrays, optional
         Cost weights; default ``I_n`` and ``0.01 I_m`` (paper section V).
     e_o0 : float
@@ -417,32 +425,10 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
                                          for k, v in held.params.items()}
     check_gates(bound, getattr(model, "source", None))
     N = horizon(N)
-    if (isinstance(e_o0, bool) or not isinstance(e_o0, (int, float, np.number))
-            or not (math.isfinite(e_o0) and e_o0 >= 0)):
-        raise DesignError(f"e_o0 must be a non-negative number, got {e_o0!r}")
-    if gain_scale is not None:
-        if (isinstance(gain_scale, bool) or not isinstance(gain_scale, (int, float, np.number))
-                or not (math.isfinite(gain_scale) and gain_scale >= 0)):
-            raise DesignError(f"gain scale must be a non-negative number, got {gain_scale!r}")
-        gain_scale = float(gain_scale)
+    gain_scale = scalars(e_o0, gain_scale)
     Q = weight(Q, "Q", n, 1.0)
     R = weight(R, "R", m, 0.01)
-
-    if (L_z is None) != (L_r is None):
-        raise DesignError("give both observer gains L_z and L_r, or neither")
-    if L_z is not None:
-        L_z, L_r = gain(L_z, "L_z", n, p), gain(L_r, "L_r", n, p)
-        if gain_scale is not None:
-            L_z, L_r = gain_scale * L_z, gain_scale * L_r
-    elif gain_scale is not None or getattr(model, "L_z", None) is None:
-        theta = 1.0 if gain_scale is None else float(gain_scale)
-        from controllers.certification.observer_gains import observer_gains_lp
-
-        Lz_lp, Lr_lp = observer_gains_lp(bound)
-        L_z, L_r, gain_scale = theta * Lz_lp, theta * Lr_lp, theta
-    else:
-        L_z, L_r = gain(model.L_z, "L_z", n, p), gain(model.L_r, "L_r", n, p)
-
+    L_z, L_r, gain_scale = observer_gains(model, bound, L_z, L_r, gain_scale, n, p)
     if w_y_bar is None:
         w_y_bar = getattr(model, "w_y_bar", None)
         if w_y_bar is None:
@@ -454,7 +440,6 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
         L, h = output_constraints(model, problem)
         row_names = constraint_names(model, problem)
     L, h = np.asarray(L, dtype=float), np.asarray(h, dtype=float)
-
     sz, sr, ph = gate_bounds(bound)
     nu_ = nu(bound)
     rho_s_ = contraction(sz, nu_)
@@ -464,19 +449,7 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
     kap = kappa(bound, L_z, L_r)
     lmax = L_max(bound, L_z, L_r)
     w_bar = kap * w_y_bar
-    # with a dead time of K samples the FHOCP's stage i is K + i steps after the estimate:
-    # its tightening is the theorem's K steps on (controllers.dead_time)
-    from controllers.dead_time import input_delay
-
-    K = input_delay(getattr(held, "problem", None) or getattr(model, "problem", None))
-    a, b = tightening_parameters(N + K, rho_o_, rho_s_, lmax, cs, cs, w_bar)
-    a, b = a[K:], b[K:]
-    b_held = None
-    if held is not None:
-        from controllers.disturbances import held_error
-
-        b_held = held_error(held, rho_s_, N + K, K)[K:, None] * cs[None, :]
-        b = b + b_held
+    a, b, b_held = _tightening(model, held, N, rho_o_, rho_s_, lmax, cs, w_bar)
     s = terminal_weight(n, Q, rho_s_)
     measured = None
     if not math.isfinite(s):   # the uncertified design's, measured (ν ≥ 1)
@@ -492,32 +465,21 @@ def compute_certificate(model: Any, *, N: int = 15, Q: np.ndarray | None = None,
         measured=measured)
 
 
-def uncertified_certificate(cert: Certificate, margins: np.ndarray) -> Certificate:
-    """The design of the uncertified mode: ``cert``'s model, weights and terminal weight, with
-    the theorem's tightening ``a_i ê_o + b_i + w_L`` replaced by measured ``margins``
-    (``(N + 1, q)``, :func:`controllers.certification.prediction_error.margins`) and zero
-    observer gains (the observer runs the model). Every row is tightened by ``margins[i]`` at
-    step ``i``: ``a = 0``, ``b = margins``, ``w_L = 0``, ``ê_o = 0``; ``α`` (``eq:def-alpha``)
-    and Assumption 1 use the same margins; no guarantee follows from them
-    (``tightening = "measured"``). The ``i = 0`` rows, on the estimate ``x̂`` alone (no input
-    changes them; the theorem's recursive feasibility, which keeps them satisfied, is what this
-    design lacks), are not enforced: their margin is ``−∞``."""
-    from dataclasses import replace
+def _tightening(model: Any, held: Any, N: int, rho_o: float, rho_s: float, lmax: float,
+                cs: np.ndarray, w_bar: float) -> tuple[np.ndarray, np.ndarray, Any]:
+    """``a``, ``b`` (``eq:constraint_tightening_parameters``; with measured disturbances
+    ``b`` holds ``b_held``, ``lem:held-disturbance``) and ``b_held``. With a dead time of
+    ``K`` samples the FHOCP's stage ``i`` is ``K + i`` steps after the estimate: its
+    tightening is the theorem's ``K`` steps on (:mod:`controllers.dead_time`)."""
+    from controllers.dead_time import input_delay
 
-    margins = np.array(margins, dtype=float)
-    if margins.shape != cert.a.shape:
-        raise DesignError(f"margins have shape {margins.shape}, expected {cert.a.shape}")
-    margins[0] = -np.inf
-    zero = np.zeros_like(cert.L_z)
-    s, rho = cert.s, cert.rho_s
-    if not math.isfinite(s) and cert.measured is not None:
-        # ν ≥ 1: the terminal weight measured on the linearisation, and the contraction
-        # eq:definition_s would need for it (controllers.certification.measured_terminal)
-        from controllers.certification.measured_terminal import equivalent_contraction
+    K = input_delay(getattr(held, "problem", None) or getattr(model, "problem", None))
+    a, b = tightening_parameters(N + K, rho_o, rho_s, lmax, cs, cs, w_bar)
+    a, b = a[K:], b[K:]
+    b_held = None
+    if held is not None:
+        from controllers.disturbances import held_error
 
-        s = cert.measured.s
-        rho = equivalent_contraction(cert.n, cert.Q, s)
-    return replace(cert, L_z=zero, L_r=zero.copy(), nu_o=cert.nu, rho_s=rho, rho_o=rho,
-                   kappa=0.0, L_max=0.0, w_bar=0.0, w_L=np.zeros_like(cert.w_L),
-                   a=np.zeros_like(cert.a), b=margins, e_o0=0.0, e_inf=0.0, gain_scale=0.0,
-                   s=s, tightening="measured")
+        b_held = held_error(held, rho_s, N + K, K)[K:, None] * cs[None, :]
+        b = b + b_held
+    return a, b, b_held

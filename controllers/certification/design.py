@@ -12,7 +12,7 @@ import numpy as np
 
 from controllers.errors import DesignError
 
-__all__ = ["MAX_HORIZON", "gain", "horizon", "weight"]
+__all__ = ["MAX_HORIZON", "gain", "horizon", "observer_gains", "scalars", "weight"]
 
 #: Largest prediction horizon accepted (the FHOCP grows linearly with ``N``).
 MAX_HORIZON = 1000
@@ -56,3 +56,42 @@ def gain(value: Any, name: str, n: int, p: int) -> np.ndarray:
     if arr.shape != (n, p):
         raise DesignError(f"observer gain {name} must have shape {(n, p)}, got {arr.shape}")
     return arr
+
+
+def scalars(e_o0: Any, gain_scale: Any) -> float | None:
+    """``ê_o,0`` and the observer-gain scale ``θ`` checked (non-negative numbers); ``θ`` as a
+    float (``None``: not given)."""
+    def bad(v: Any) -> bool:
+        return (isinstance(v, bool) or not isinstance(v, (int, float, np.number))
+                or not (math.isfinite(v) and v >= 0))
+
+    if bad(e_o0):
+        raise DesignError(f"e_o0 must be a non-negative number, got {e_o0!r}")
+    if gain_scale is None:
+        return None
+    if bad(gain_scale):
+        raise DesignError(f"gain scale must be a non-negative number, got {gain_scale!r}")
+    return float(gain_scale)
+
+
+def observer_gains(model: Any, bound: dict[str, np.ndarray], L_z: Any, L_r: Any,
+                    gain_scale: float | None, n: int, p: int
+                    ) -> tuple[np.ndarray, np.ndarray, float | None]:
+    """The observer gains (``eq:observer``) of :func:`controllers.certification.certificates.
+    compute_certificate`'s arguments (given, scaled by ``gain_scale``; else the LP gains of
+    the model's bounds ``bound`` scaled; else the model file's), and the gain scale they
+    have."""
+    if (L_z is None) != (L_r is None):
+        raise DesignError("give both observer gains L_z and L_r, or neither")
+    if L_z is not None:
+        L_z, L_r = gain(L_z, "L_z", n, p), gain(L_r, "L_r", n, p)
+        if gain_scale is not None:
+            L_z, L_r = gain_scale * L_z, gain_scale * L_r
+        return L_z, L_r, gain_scale
+    if gain_scale is not None or getattr(model, "L_z", None) is None:
+        theta = 1.0 if gain_scale is None else float(gain_scale)
+        from controllers.certification.observer_gains import observer_gains_lp
+
+        Lz_lp, Lr_lp = observer_gains_lp(bound)
+        return theta * Lz_lp, theta * Lr_lp, theta
+    return gain(model.L_z, "L_z", n, p), gain(model.L_r, "L_r", n, p), gain_scale

@@ -54,7 +54,7 @@ def default_setpoints(problem: Any) -> list[tuple[float, ...]]:
 # Design lever: the observer-gain scale
 # --------------------------------------------------------------------------------------
 def choose_gain_scale(model: Any, setpoints_norm: Iterable[Sequence[float]], *,
-                      N: int = 15, Q: np.ndarray | None = None, R: np.ndarray | None = None,
+                      N: int, Q: np.ndarray | None = None, R: np.ndarray | None = None,
                       e_o0: float = 0.02, w_y_bar: float | None = None,
                       L_z: np.ndarray | None = None, L_r: np.ndarray | None = None,
                       grid: Sequence[float] | None = None, iterations: int = 40,

@@ -32,15 +32,16 @@ state of the model reaches.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
-from controllers.errors import CertificateError, ControllersError
+from controllers.errors import CertificateError, ControllersError, DesignError
 
-__all__ = ["Certification", "check_setpoints", "go_uncertified",
-           "margin_text"]
+__all__ = ["Certification", "NotUsable", "check_setpoints", "go_uncertified", "margin_text",
+           "uncertified_certificate"]
 
 
 
@@ -131,7 +132,6 @@ def go_uncertified(ctrl: Any, reason: str) -> None:
     measured prediction error, zero observer gains; or refuse when it requires a
     certificate, or when no mode runs the model (in the words of ``cosim certify``'s
     verdict)."""
-    from controllers.certification.certificates import uncertified_certificate
     from controllers.observer import GRUObserver
 
     cert = ctrl.cert
@@ -146,3 +146,34 @@ def go_uncertified(ctrl: Any, reason: str) -> None:
     ctrl.law = ctrl.law.uncertified(cert_u, reason)
     ctrl.observer = GRUObserver.from_certificate(ctrl.cert)
     ctrl.certification = Certification(False, reason, "measured")
+
+
+def uncertified_certificate(cert: Any, margins: np.ndarray) -> Any:
+    """The design of the uncertified mode: ``cert``'s model, weights and terminal weight, with
+    the theorem's tightening ``a_i ê_o + b_i + w_L`` replaced by measured ``margins``
+    (``(N + 1, q)``, :func:`controllers.certification.prediction_error.margins`) and zero
+    observer gains (the observer runs the model). Every row is tightened by ``margins[i]`` at
+    step ``i``: ``a = 0``, ``b = margins``, ``w_L = 0``, ``ê_o = 0``; ``α`` (``eq:def-alpha``)
+    and Assumption 1 use the same margins; no guarantee follows from them
+    (``tightening = "measured"``). The ``i = 0`` rows, on the estimate ``x̂`` alone (no input
+    changes them; the theorem's recursive feasibility, which keeps them satisfied, is what this
+    design lacks), are not enforced: their margin is ``−∞``."""
+    from dataclasses import replace
+
+    margins = np.array(margins, dtype=float)
+    if margins.shape != cert.a.shape:
+        raise DesignError(f"margins have shape {margins.shape}, expected {cert.a.shape}")
+    margins[0] = -np.inf
+    zero = np.zeros_like(cert.L_z)
+    s, rho = cert.s, cert.rho_s
+    if not math.isfinite(s) and cert.measured is not None:
+        # ν ≥ 1: the terminal weight measured on the linearisation, and the contraction
+        # eq:definition_s would need for it (controllers.certification.measured_terminal)
+        from controllers.certification.measured_terminal import equivalent_contraction
+
+        s = cert.measured.s
+        rho = equivalent_contraction(cert.n, cert.Q, s)
+    return replace(cert, L_z=zero, L_r=zero.copy(), nu_o=cert.nu, rho_s=rho, rho_o=rho,
+                   kappa=0.0, L_max=0.0, w_bar=0.0, w_L=np.zeros_like(cert.w_L),
+                   a=np.zeros_like(cert.a), b=margins, e_o0=0.0, e_inf=0.0, gain_scale=0.0,
+                   s=s, tightening="measured")

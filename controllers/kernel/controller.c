@@ -2,9 +2,9 @@
  *
  * Joined after the kernel (gru_fhocp.h, memory.c ... sqp.c), the declarations of the
  * controller's constants (controllers/kernel/controller_source.py: CT_*), controller.h and
- * the law's C files (controllers/laws/<name>/*.c: tracking/law.c, the default law, or
- * paper/law.c and paper/governor.c, the paper's), for an exported controller (the controller FMU, fmus/controller/); the
- * numbers are loaded at run time (loader.c, PFX(load_data)), so that one binary serves every
+ * the law's C files (of controllers/laws/<name>/: tracking/law.c, the default law, or
+ * paper/law.c and paper/governor.c, the paper's), for an exported controller (the controller
+ * FMU, fmus/controller/); the numbers are loaded at run time (loader.c, PFX(load_data)), so that one binary serves every
  * design of its dimensions and law. It is the C twin of the Python component's step
  * (cosim/adapters/robust_mpc.py RobustMPCController.step), in the same order: the scalings,
  * the observer's first estimate, the law's step, then the observer's update

@@ -1,7 +1,7 @@
 /* controller.h: what the exported controller's two parts share (controllers/kernel/
  * controller_source.py joins the kernel, the controller's constants, this file, the law's
- * files -- controllers/laws/<name>/*.c: tracking/law.c, or paper/law.c and paper/governor.c
- * -- and controller.c into one translation unit).
+ * C files -- of controllers/laws/<name>/: tracking/law.c, or paper/law.c and
+ * paper/governor.c -- and controller.c into one translation unit).
  *
  * A law file defines, for controller.c:
  *

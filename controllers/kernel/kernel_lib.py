@@ -278,8 +278,8 @@ class Workspace:
         ``(u, x, out, x_s)`` with ``u = clip(w_u, −1, 1)`` and ``out.defect`` the defect
         ``max |x_solver − x|`` against the solver's trajectory at ``(w, p)``. A tracking
         FHOCP's kernel (``p = (x̂, x_s0, r[, u_{−1}])``) checks against ``x_s(u_s)`` of the
-        clipped ``u_s``, returned as ``x_s``: ``out.cost`` is :meth:`~controllers.
-        controllers.laws.tracking.reference.ArtificialSteadyState.cost`, ``out.steady_residual`` the fixed-point
+        clipped ``u_s``, returned as ``x_s``: ``out.cost`` is :meth:`~controllers.laws.
+        tracking.reference.ArtificialSteadyState.cost`, ``out.steady_residual`` the fixed-point
         residual ``‖f(x_s, u_s) − x_s‖∞`` (NaN when Newton failed); otherwise ``x_s`` is
         zeros and the residual 0."""
         b, a = self._buf, self._addr

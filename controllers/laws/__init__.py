@@ -43,13 +43,16 @@ from typing import Any
 
 from controllers.errors import OptionError
 
-__all__ = ["BUILTIN", "DEFAULT", "LawSpec", "Option", "known", "register", "spec"]
+__all__ = ["BUILTIN", "DEFAULT", "REFERENCE", "LawSpec", "Option", "known", "register", "spec"]
 
 #: The laws of this package, by name (their ``SPEC`` is imported when first asked for).
 BUILTIN: dict[str, str] = {"tracking": "controllers.laws.tracking",
                            "paper": "controllers.laws.paper"}
 #: The law a design without ``law`` runs.
 DEFAULT = "tracking"
+#: The law whose certificate is the paper's theorem as written (``eq:mpc``, its section V
+#: design): what "certified" means where no law is named (a campaign's drawn set-points).
+REFERENCE = "paper"
 
 
 @dataclass(frozen=True)

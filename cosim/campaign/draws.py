@@ -129,8 +129,10 @@ class DrawContext:
         if not needs_model:
             outputs = list(spec.setpoints.ranges) if spec.setpoints else []
             return cls(start_time, outputs)
+        from controllers import laws
         from controllers.certification import certificates as certs
         from controllers.certification.output_ranges import admissible_ranges
+        from controllers.mpc_options import MPCOptions, design_arguments
         from controllers.model import DEFAULT_MODEL, GRUModel
 
         model_path = spec.options.get("model") or spec.model or DEFAULT_MODEL
@@ -148,7 +150,9 @@ class DrawContext:
                 f"ones of the model {model_path} (outputs {', '.join(model.output_names)}), "
                 f"but the scenario sets {', '.join(scenario_refs)}: give a range per output, "
                 f"e.g. {scenario_refs[0]} = [low, high]")
-        cert = certs.compute_certificate(model)
+        # certified for the paper's theorem as written: the same draws for every law
+        reference = MPCOptions.from_mapping({"law": laws.REFERENCE})
+        cert = certs.compute_certificate(model, **design_arguments(reference, model))
         ranges = {}
         for name, lo, hi in admissible_ranges(cert, model):
             if lo is None or hi is None:

@@ -89,7 +89,7 @@ def _run_lemma3(seed: int, gain_factor: float, steps: int, w_y_bar: float) -> tu
     m = random_gru_model(seed, n=10)
     p = m.params
     Lz, Lr = gain_design.observer_gains_lp(p)
-    cert = certs.compute_certificate(m, L_z=gain_factor * Lz, L_r=gain_factor * Lr,
+    cert = certs.compute_certificate(m, N=15, L_z=gain_factor * Lz, L_r=gain_factor * Lr,
                                  w_y_bar=w_y_bar)
     assert cert.nu_o < 1  # lem:Vo needs it
     rng = np.random.default_rng(100 + seed)
@@ -138,7 +138,7 @@ def test_e_o_bounds_the_estimation_error() -> None:
     """If ‖x_0 − x̂_0‖∞ ≤ ê_o,0, then ‖x_k − x̂_k‖∞ ≤ ê_o,k (eq:eo-evolution, eq:X-mpc)."""
     m = random_gru_model(4, n=10)
     p = m.params
-    cert = certs.compute_certificate(m, w_y_bar=0.2, e_o0=0.3)
+    cert = certs.compute_certificate(m, N=15, w_y_bar=0.2, e_o0=0.3)
     rng = np.random.default_rng(4)
     x = rng.uniform(-0.6, 0.6, 10)
     obs = GRUObserver.from_certificate(cert, x0=x + rng.uniform(-0.3, 0.3, 10))
@@ -155,7 +155,7 @@ def test_e_o_bounds_the_estimation_error() -> None:
 def test_estimation_error_converges_without_perturbation() -> None:
     m = random_gru_model(5, n=10)
     p = m.params
-    cert = certs.compute_certificate(m, w_y_bar=0.0)
+    cert = certs.compute_certificate(m, N=15, w_y_bar=0.0)
     rng = np.random.default_rng(5)
     x = rng.uniform(-1, 1, 10)
     obs = GRUObserver.from_certificate(cert, x0=-x)
@@ -169,7 +169,7 @@ def test_estimation_error_converges_without_perturbation() -> None:
 def test_initialisation_at_the_equilibrium_for_the_first_output() -> None:
     m = random_gru_model(6)
     p = m.params
-    cert = certs.compute_certificate(m, w_y_bar=0.01)
+    cert = certs.compute_certificate(m, N=15, w_y_bar=0.01)
     obs = GRUObserver.from_certificate(cert)
     assert obs.x_hat is None
     y0 = m.normalize_y(np.array([1.1, 0.9]))

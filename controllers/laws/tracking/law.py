@@ -73,7 +73,7 @@ def tracking_design(model: Any, cert_gains: Any, design: Mapping[str, Any],
     ``α_min`` is the default ``α_c`` when ``gains_certified`` (its observer-gain scale
     passed), else :func:`fallback_alpha_c`; ``cert``: the design's certificate (default:
     ``gain_scale=0`` of ``kwargs``; the uncertified mode passes
-    :func:`controllers.certification.certificates.uncertified_certificate`'s)."""
+    :func:`controllers.certification.grade.uncertified_certificate`'s)."""
     from controllers.certification import certificates as certs
     from controllers.laws.tracking import SPEC
     from controllers.laws.tracking.checks import failures, tracking_hypotheses

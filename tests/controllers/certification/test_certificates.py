@@ -196,9 +196,9 @@ def test_explicit_gains_scale_and_missing_w_y_bar() -> None:
     m.L_z, m.L_r = 0.1 * LZ, 0.1 * LR  # saved gains are the default
     assert certs.compute_certificate(m, N=2).L_r == pytest.approx(0.1 * LR)
     with pytest.raises(ControllersError, match="w_y_bar"):
-        certs.compute_certificate(hand_model(w_y_bar=None))
+        certs.compute_certificate(hand_model(w_y_bar=None), N=15)
     with pytest.raises(ControllersError, match="shape"):
-        certs.compute_certificate(m, L_z=np.zeros((3, 1)), L_r=np.zeros((3, 1)))
+        certs.compute_certificate(m, N=15, L_z=np.zeros((3, 1)), L_r=np.zeros((3, 1)))
 
 
 def test_lp_gains_are_optimal() -> None:
@@ -249,7 +249,7 @@ def test_lem_vs_contraction_and_constraint_gain() -> None:
     for seed in range(3):
         m = random_gru_model(seed, n=8)
         p = m.params
-        c = certs.compute_certificate(m, w_y_bar=0.01)
+        c = certs.compute_certificate(m, N=15, w_y_bar=0.01)
         assert c.nu < 1
         worst = 0.0
         for _ in range(2000):
@@ -269,26 +269,26 @@ def test_choose_gain_scale_returns_the_largest_passing_scale() -> None:
     m = random_gru_model(1)
     m.w_y_bar = 0.02  # small model error: the LP gains themselves pass
     setpoints = [m.normalize_y(np.array(s)) for s in ((0.5, 0.5), (1.0, 1.4), (1.5, 1.5))]
-    assert gain_design.choose_gain_scale(m, setpoints)[0] == 1.0
+    assert gain_design.choose_gain_scale(m, setpoints, N=15)[0] == 1.0
     m.w_y_bar = 0.15  # larger error: the LP gains fail, a smaller scale passes (≈ 0.42)
-    theta, c = gain_design.choose_gain_scale(m, setpoints)
+    theta, c = gain_design.choose_gain_scale(m, setpoints, N=15)
     assert theta is not None and 0.1 < theta < 1
-    assert not certs.compute_certificate(m).ok(setpoints[0])
+    assert not certs.compute_certificate(m, N=15).ok(setpoints[0])
     assert c.gain_scale == theta and all(c.ok(y) for y in setpoints)
     Lz, Lr = gain_design.observer_gains_lp(m.params)
     assert c.L_z == pytest.approx(theta * Lz)
     # slightly larger gains fail somewhere (eq. 11 is the binding condition here)
-    c2 = certs.compute_certificate(m, L_z=1.001 * theta * Lz, L_r=1.001 * theta * Lr)
+    c2 = certs.compute_certificate(m, N=15, L_z=1.001 * theta * Lz, L_r=1.001 * theta * Lr)
     assert not all(c2.ok(y) for y in setpoints)
     # an impossible set-point (on the constraint) fails even with θ = 0
-    theta_bad, c_bad = gain_design.choose_gain_scale(m, [m.normalize_y(np.array([2.0, 1.0]))])
+    theta_bad, c_bad = gain_design.choose_gain_scale(m, [m.normalize_y(np.array([2.0, 1.0]))], N=15)
     assert theta_bad is None and c_bad.gain_scale == 0.0
 
 
 def test_alpha_positive_iff_assumption_1() -> None:
     m = random_gru_model(4)
     m.w_y_bar = 0.05
-    c = certs.compute_certificate(m)
+    c = certs.compute_certificate(m, N=15)
     for y in np.random.default_rng(1).uniform(-1, 1, (200, 2)):
         assert (c.alpha(y) > 0) == c.assumption_1(y)
         assert math.isfinite(c.alpha(y))
@@ -299,7 +299,7 @@ def test_ok_is_exactly_no_failures() -> None:
     set-points alike."""
     m = random_gru_model(4)
     m.w_y_bar = 0.05
-    c = certs.compute_certificate(m)
+    c = certs.compute_certificate(m, N=15)
     verdicts = set()
     for y in np.random.default_rng(2).uniform(-1.5, 1.5, (300, 2)):
         assert c.ok(y) == (not c.failures(y))
@@ -312,7 +312,7 @@ def test_reference_gives_equilibrium_and_alpha_or_a_clear_error() -> None:
 
     m = random_gru_model(1)
     m.w_y_bar = 0.02
-    c = certs.compute_certificate(m)
+    c = certs.compute_certificate(m, N=15)
     y = m.normalize_y(np.array([1.0, 1.1]))
     ref = c.reference(y)
     assert ref.alpha == pytest.approx(c.alpha(y))
@@ -330,7 +330,7 @@ def test_tightening_recursion_identity(hand_cert: certs.Certificate) -> None:
     """The step of the recursive-feasibility proof: for every i and ê_o,
     h − a_{i+1} ê − b_{i+1} + c_s ρ_s^i (L_max ê + w̄) = h − a_i (ρ_o ê + w̄) − b_i."""
     rng = np.random.default_rng(0)
-    for c in (hand_cert, certs.compute_certificate(random_gru_model(2), w_y_bar=0.1)):
+    for c in (hand_cert, certs.compute_certificate(random_gru_model(2), N=15, w_y_bar=0.1)):
         for e in rng.uniform(0, 1, 5):
             for i in range(c.N):
                 lhs = (-c.a[i + 1] * e - c.b[i + 1]
@@ -346,7 +346,7 @@ def test_candidate_solution_deviation_bound() -> None:
 
     m = random_gru_model(3, n=10)
     p = m.params
-    c = certs.compute_certificate(m, w_y_bar=0.2)
+    c = certs.compute_certificate(m, N=15, w_y_bar=0.2)
     rng = np.random.default_rng(3)
     worst = 0.0
     for _ in range(200):
@@ -389,7 +389,7 @@ def test_candidate_solution_deviation_bound() -> None:
 ])
 def test_bad_design_parameters_are_one_line_errors(kwargs, message) -> None:
     with pytest.raises(ControllersError) as info:
-        certs.compute_certificate(hand_model(), **kwargs)
+        certs.compute_certificate(hand_model(), **{"N": 15, **kwargs})
     assert str(info.value) == message
 
 
@@ -405,14 +405,14 @@ def test_saturated_or_non_finite_update_gate_is_a_one_line_error() -> None:
     assert math.isfinite(bounds.nu(m.params))
     m.params["b_z"] = np.array([40.0, 1.0])  # ‖·‖∞ = 40.6: σ̄_z == 1.0
     assert bounds.gate_bounds(m.params)[0] == 1.0
-    for call in (lambda: bounds.nu(m.params), lambda: certs.compute_certificate(m),
-                 lambda: gain_design.choose_gain_scale(m, [np.zeros(1)])):
+    for call in (lambda: bounds.nu(m.params), lambda: certs.compute_certificate(m, N=15),
+                 lambda: gain_design.choose_gain_scale(m, [np.zeros(1)], N=15)):
         with pytest.raises(ControllersError, match=r"^sigma_z \(σ̄_z = σ\(‖\[W_z U_z b_z\]‖∞\) = "
                                              r"σ\(40\.6\), th:stability-bonassi\) rounds to 1"):
             call()
     m.source = "m.json"
     with pytest.raises(ControllersError, match=r"^m\.json: sigma_z .* rounds to 1"):
-        certs.compute_certificate(m)
+        certs.compute_certificate(m, N=15)
     m.params["b_z"] = np.array([np.nan, 1.0])
     with pytest.raises(ControllersError, match=r"is undefined: ‖\[W_z U_z b_z\]‖∞ = nan, the "
                                          "weights are not finite"):

@@ -12,6 +12,7 @@ import pytest
 from scipy.linalg import solve_discrete_lyapunov
 
 from controllers.certification import certificates as certs
+from controllers.certification import grade
 from controllers.certification.bounds import terminal_weight
 from controllers.certification.measured_terminal import (
     equivalent_contraction,
@@ -69,13 +70,13 @@ def test_a_model_the_theory_rejects_gets_the_measured_weight(recurrent_x10: GRUM
     assert math.isfinite(cert.s_measured) and cert.unusable() == ""
     assert cert.to_json()["s_measured"] == pytest.approx(cert.s_measured)
     margins = np.full(cert.a.shape, 0.05)
-    cert_u = certs.uncertified_certificate(cert, margins)
+    cert_u = grade.uncertified_certificate(cert, margins)
     assert cert_u.s == cert.s_measured and cert_u.tightening == "measured"
     assert cert_u.rho_s < 1 and cert_u.alpha_min() == 0.0
     # a model the theory accepts keeps its own weight, and measures none
     shipped = certs.compute_certificate(GRUModel.load(DEFAULT_MODEL), N=15)
     assert math.isfinite(shipped.s) and shipped.measured is None
-    assert certs.uncertified_certificate(shipped, margins).s == shipped.s
+    assert grade.uncertified_certificate(shipped, margins).s == shipped.s
 
 
 def test_without_a_stable_steady_state_the_model_is_not_usable(

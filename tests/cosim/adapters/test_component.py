@@ -260,7 +260,7 @@ def _certified_model_file(tmp_path: Path, model, inputs: list) -> tuple[Path, li
 
     model.w_y_bar = 0.01
     ys = [equilibrium_output(model.params, np.asarray(u, dtype=float))[1] for u in inputs]
-    theta, cert = gain_design.choose_gain_scale(model, ys)
+    theta, cert = gain_design.choose_gain_scale(model, ys, N=15)
     assert theta is not None, "test design: the hypotheses must hold"
     model.L_z, model.L_r = cert.L_z, cert.L_r
     path = tmp_path / f"{model.problem.name}.json"

@@ -109,8 +109,7 @@ def test_a_third_law_is_one_object(ctrl: RobustMPCController) -> None:
 
 
 def test_the_uncertified_variant_is_the_same_law(ctrl: RobustMPCController) -> None:
-    from controllers.certification.certificates import uncertified_certificate
-    from controllers.certification.grade import measured_margins
+    from controllers.certification.grade import measured_margins, uncertified_certificate
 
     cert_u = uncertified_certificate(ctrl.mpc.cert, measured_margins(ctrl.mpc, ctrl.mpc.cert)[0])
     law = ctrl.mpc.law.uncertified(cert_u, "a test")

@@ -131,7 +131,7 @@ def test_the_certificate_figure_has_a_panel_per_output_in_its_units(
         Channel("F", "L/min", 2.0, 12.0), Channel("Tc", "K", 280.0, 320.0))[:m])
     model = random_gru_model(3, n=8, problem=problem)
     model.w_y_bar = 0.01
-    cert = certs.compute_certificate(model)
+    cert = certs.compute_certificate(model, N=15)
     middle = [0.5 * (c.min + c.max) for c in outs]
     reachable = np.array([middle, [c.max - 0.1 * (c.max - c.min) for c in outs]])
     figures = keep_figures(monkeypatch)
