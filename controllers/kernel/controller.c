@@ -4,9 +4,9 @@
  * controller's constants (controllers/kernel/controller_source.py: CT_*), controller.h and
  * the law's C files (of controllers/laws/<name>/: tracking/law.c, the default law, or
  * paper/law.c and paper/governor.c, the paper's), for an exported controller (the controller
- * FMU, fmus/controller/); the numbers are loaded at run time (loader.c, PFX(load_data)), so that one binary serves every
- * design of its dimensions and law. It is the C twin of the Python component's step
- * (cosim/adapters/robust_mpc.py RobustMPCController.step), in the same order: the scalings,
+ * FMU, fmus/controller/); the numbers are loaded at run time (loader.c, PFX(load_data)), so
+ * that one binary serves every design of its dimensions and law. It is the C twin of the
+ * Python controller's step (controllers/mpc.py RobustMPC.step), in the same order: the scalings,
  * the observer's first estimate, the law's step, then the observer's update
  * (controllers/observer.py GRUObserver.make_step: eq:observer, eq:eo-evolution), so that the
  * same measurements give the same inputs (tests/cosim/adapters/test_controller_export.py,
