@@ -36,6 +36,7 @@ import numpy as np
 
 from controllers.errors import ControllersError, DesignError, OptionError, StepInputError
 from controllers.mpc_options import MPCOptions, design_arguments, plain
+from controllers.ocp.solve_status import status_code
 
 __all__ = ["RobustMPC", "Step"]
 
@@ -248,8 +249,6 @@ class RobustMPC:
 
     def _diagnostics(self, step: Any, e_o: float) -> dict[str, float]:
         """One step's diagnostics (the law's own last)."""
-        from controllers.ocp.solve_status import status_code
-
         rec = step.record
         res = rec.result
         return {
