@@ -134,7 +134,7 @@ class RobustMPC:
             cert = certs.compute_certificate(self.model, gain_scale=o.gain_scale, **kwargs)
         fhocp_options: dict[str, Any] = dict(
             solver=o.solver, sqp_options={"max_iter": o.max_iter}, kernel=o.kernel,
-            du_weight=self.du_weight,
+            du_weight=self.du_weight, soft=not o.hard_constraints,
             ipopt_options={"max_iter": o.max_iter, **(o.ipopt_options or {})}
             if o.ipopt_options or o.solver == "ipopt" else None)
         context = LawContext(self.model, cert, gains_certified, o, kwargs, fhocp_options,
@@ -198,6 +198,8 @@ class RobustMPC:
             self.law.set(name, value)   # a run starts from the design's settings
         #: the design's values of the settings changed in this run (:meth:`set`)
         self._design_values: dict[str, float] = {}
+        #: when the controller first fell back on the candidate (``None``: never)
+        self.first_fallback_t: float | None = None
         self.fhocp.setup()
         self.observer.kernel = self.fhocp.kernel   # its compiled GRU step (same model)
         self.law.reset()
@@ -242,6 +244,8 @@ class RobustMPC:
             # a measured disturbance moved the steady states beyond the plan: start again
             # from the equilibrium of the output estimate at the disturbance now measured
             law.restart()
+        if rec.fallback and self.first_fallback_t is None:
+            self.first_fallback_t = float(t)
         observer.make_step(held.model_input(rec.u, self.fhocp), yn)
         held.applied(rec.u)
         u = np.clip(model.denormalize_u(rec.u), self.u_lo, self.u_hi)
@@ -260,6 +264,7 @@ class RobustMPC:
             "e_o": e_o,
             "x_hat_error_bound": e_o,
             "active_constraints": float(res.active),
+            "softened": float(res.softened),
             "fallback": float(rec.fallback),
             "suboptimal": float(rec.suboptimal),
             "setpoint_rejected": float(step.rejected),
@@ -321,5 +326,17 @@ class RobustMPC:
             **self.law.summary(),
             "options": plain(self.options.to_dict()),
         })
+        if out.get("fallbacks"):
+            out["shortfall"] = self._shortfall(out)
         return out
+
+    def _shortfall(self, stats: dict[str, Any]) -> dict[str, Any]:
+        """The steps the controller did not serve (``summary.json``'s ``shortfall``, which
+        the run's verdict reads: :func:`cosim.core.run_result.shortfall_verdict`): how many
+        of how many, why (the solves' statuses, most frequent first) and when first."""
+        why = sorted(stats.get("failures_by_status", {}).items(), key=lambda kv: -kv[1])
+        return {"steps": int(stats["fallbacks"]), "of": int(stats["steps"]),
+                "what": "fell back on the candidate plan",
+                "why": ", ".join(f"{status} {count}" for status, count in why[:3]),
+                "first_time": self.first_fallback_t}
 

@@ -112,6 +112,12 @@ class MPCOptions:
         (the tracking law tracks such a set-point to the closest admissible steady output,
         the paper's law refuses it; a design whose hypotheses fail is an error), as before
         graded guarantees (:mod:`controllers.certification.grade`).
+    hard_constraints : bool
+        ``False`` (default): the output rows, the terminal set and the tracking law's
+        ``Y_s`` are softened with an exact penalty (:mod:`controllers.ocp.soft`): the same
+        answer wherever the hard problem is feasible, an answer from every state where it is
+        not. ``True``: the paper's hard FHOCP (a step whose problem has no solution falls
+        back on the candidate).
     max_iter : int, optional
         Iteration cap of one FHOCP solve, the real-time bound (default 40; 15 with
         ``law="paper"``). A solve that reaches it applies its feasible iterate
@@ -133,6 +139,7 @@ class MPCOptions:
     kernel: str = "auto"
     du_weight: float | Mapping[str, float] | None = None
     certificate: str = "auto"
+    hard_constraints: bool = False
     #: the law's own options (:attr:`controllers.laws.LawSpec.options`), its defaults filled
     law_options: Mapping[str, Any] = field(default_factory=dict)
 
@@ -212,6 +219,9 @@ class MPCOptions:
         if self.certificate not in CERTIFICATE_MODES:
             raise OptionError(f"option certificate={self.certificate!r}: expected one of "
                               f"{', '.join(map(repr, CERTIFICATE_MODES))}")
+        if not isinstance(self.hard_constraints, bool):
+            raise OptionError(f"option hard_constraints={self.hard_constraints!r}: expected "
+                              "true or false")
         f = self.offset_filter
         if f is not None and (not _number(f) or not 0 < f <= 1):
             raise OptionError(f"option offset_filter={f!r}: expected a number in (0, 1]")

@@ -217,8 +217,9 @@ def scenario(model: Any, path: Path) -> Path:
     targets, slowest = [], 0.0
     for k in range(len(PATTERN)):
         u = np.array([c.min + PATTERN[(k + j) % len(PATTERN)] * (c.max - c.min)
-                      for j, c in enumerate(problem.inputs)])
-        un = model.normalize_u(u)
+                      for j, c in enumerate(problem.inputs)]
+                     + [0.5 * (c.min + c.max) for c in problem.disturbances])
+        un = model.normalize_u(u)   # the model's inputs: the measured disturbances mid-box
         x, y = equilibrium_output(params, un)
         rho = float(np.max(np.abs(np.linalg.eigvals(jacobians(params, x, un)[0]))))
         slowest = max(slowest, -1.0 / math.log(min(max(rho, 1e-12), 1.0 - 1e-12)))

@@ -32,7 +32,8 @@ import numpy as np
 from controllers.certification.certificates import NU_FIX
 from controllers.certification.output_ranges import box_ranges
 
-__all__ = ["Diagnosis", "Finding", "diagnose", "required_error"]
+__all__ = ["Diagnosis", "Finding", "diagnose", "dominant_part", "required_error",
+           "tightening_parts"]
 
 
 @dataclass
@@ -126,6 +127,56 @@ def _setpoint_text(model: Any, y: np.ndarray) -> str:
         model.output_names, model.denormalize_y(y), model.output_units, strict=True))
 
 
+def tightening_parts(model: Any, cert: Any, tightening: np.ndarray
+                     ) -> list[tuple[str, np.ndarray, str]]:
+    """The parts of the end-of-horizon tightening ``tightening`` (q,; normalised) of the
+    certificate ``cert``, each with what shrinks it: the estimation error ``ẽ_o a_N``
+    (``lem:Vo``), the output error carried over the horizon (``b_N`` of
+    ``eq:constraint_tightening_parameters`` without the held disturbances), the measured
+    disturbances held over the horizon (``lem:held-disturbance``), the output noise ``w_L``,
+    and the rest (the terminal set's ``α c_s``)."""
+    N = cert.N
+    held = (np.zeros_like(cert.w_L) if cert.b_held is None
+            else np.asarray(cert.b_held[N], dtype=float))
+    parts = [
+        ("the estimation error (e_o a_N)", cert.e_tilde * cert.a[N],
+         "observer gains (gain_scale), a smaller e_o0, a model that contracts faster "
+         "(cosim train --sigma-z-max), or a shorter horizon N"),
+        ("the output error carried over the horizon (b_N)", cert.b[N] - held,
+         "a model with a smaller test error, smaller observer gains, or a shorter horizon N"),
+        ("the measured disturbances held over the horizon", held, _held_fix(model)),
+        ("the output noise (w_L)", np.asarray(cert.w_L, dtype=float),
+         "a model with a smaller test error"),
+    ]
+    rest = tightening - sum(p[1] for p in parts)
+    parts.append(("the terminal set", rest, "a smaller terminal radius (alpha_c)"))
+    return parts
+
+
+def dominant_part(model: Any, cert: Any, tightening: np.ndarray) -> tuple[str, float, str]:
+    """``(part, share, what shrinks it)``: the largest part (:func:`tightening_parts`) of the
+    most tightened row and its share of that row's tightening."""
+    row = int(np.argmax(tightening))
+    parts = tightening_parts(model, cert, tightening)
+    name, values, fix = max(parts, key=lambda p: float(p[1][row]))
+    total = float(tightening[row])
+    return name, float(values[row]) / total if total > 0 else 0.0, fix
+
+
+def _held_fix(model: Any) -> str:
+    """What shrinks the held disturbances' term: each one's declared largest change per
+    sample (now the data's, or the whole box), its preview, or a shorter horizon."""
+    full = getattr(model, "held_from", None) or model   # the model with its disturbances
+    dists = list(getattr(getattr(full, "problem", None), "disturbances", ()) or ())
+    if not dists:
+        return "a shorter horizon N"
+    undeclared = [c.name for c in dists if c.rate is None]
+    how = (f"declaring how fast {', '.join(undeclared)} can move ([disturbances.<name>] "
+           f"rate, now the identification data's largest change per sample) or "
+           if undeclared else "a smaller declared rate, ")
+    return f"{how}preview = true, or a shorter horizon N"
+
+
 def diagnose(model: Any, cert: Any, law: str, setpoints: Sequence[np.ndarray],
              admissible_rhs: np.ndarray, design_failures: Sequence[str],
              rhs_at: Callable[[float], np.ndarray] | None = None) -> Diagnosis:
@@ -153,11 +204,13 @@ def diagnose(model: Any, cert: Any, law: str, setpoints: Sequence[np.ndarray],
     ranges = box_ranges(model, cert.L, admissible_rhs)
     box = box_ranges(model, cert.L, cert.h)
     tightening = cert.h - admissible_rhs
+    part, share, shrink = dominant_part(model, cert, tightening)
     room = Finding(
         "room for set-points", all(lo is not None for _, lo, _ in ranges),
         f"the constraints are tightened by the model's largest test error "
-        f"({_units(model, cert.w_y_bar)}) and the estimation-error and terminal-set terms "
-        f"(in all, {_units(model, float(np.max(tightening)))} at most): set-points that "
+        f"({_units(model, cert.w_y_bar)}) and by what the horizon adds to it "
+        f"(in all, {_units(model, float(np.max(tightening)))} at most; "
+        f"{100 * share:.0f} % of it {part}): set-points that "
         f"pass: {_interval_text(ranges, units)}, of the box {_interval_text(box, units)}")
     findings.append(room)
     outside = [y for y in setpoints if np.any(cert.L @ y > admissible_rhs + 1e-12)]
@@ -178,9 +231,10 @@ def diagnose(model: Any, cert: Any, law: str, setpoints: Sequence[np.ndarray],
             fix = (f"a model whose largest test error is below {_units(model, required)} "
                    f"would pass: {fix}")
         elif required is None and rhs_at is not None:
-            fix = ("even an exact model would not pass (the estimation-error and terminal-set "
-                   "terms alone fill the box): a shorter horizon N, a smaller e_o0, or "
-                   "set-points further inside the box")
+            fix = (f"even an exact model would not pass (what the horizon adds fills the box; "
+                   f"its largest part, {part}, shrinks with {shrink})")
+        elif share > 0.5:
+            fix = f"{part} is most of the tightening: it shrinks with {shrink}; or {fix}"
         room.fix = fix if not room.holds else ""
         for y in outside:
             findings.append(Finding(

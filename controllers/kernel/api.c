@@ -138,7 +138,12 @@ EXPORT void PFX(gru_step)(const double *x, const double *u, const double *dz,
  * rows i >= 1 (-inf when none), max |u|, |x_N - x_bar|_inf and the active constraints (output
  * rows i >= 1 and the terminal set within 1e-6, inputs with |u| > 1 - 1e-6, as
  * FHOCP._residuals counts them). bnd: the tightened bounds h - a_i e_o - b_i - w_L - L b_o
- * (NH x NL); alpha the terminal set's radius. */
+ * (NH x NL); alpha the terminal set's radius. SOFT (controllers/ocp/soft.py): the cost is
+ * the plan's price (Slacks.of_plan, plan_terminal): eps_j the largest excess of row j over
+ * i >= 1 beyond SLT (with HAS_ASS also over Y_s's row j, L U_o x_s <= bnd's row NH: bnd is
+ * (NH + 1) x NL), eps_T = max(0, |x_N - x_bar|_inf - alpha - SLT), t = alpha when it is
+ * positive, else |x_N - x_bar|_inf, and rho sum eps + rho2 sum eps^2 (the design's weights,
+ * in either phase). */
 static void assess_core(gk_ws *ws, const double *xh, const double *u, const double *xb,
                         const double *ub, const double *up, const double *bnd, double alpha,
                         double *x, gk_assessment *out) {
@@ -152,6 +157,8 @@ static void assess_core(gk_ws *ws, const double *xh, const double *u, const doub
     if (d > dN || d != d) dN = d;
   }
   double v0 = -INFINITY, v1 = -INFINITY, umax = 0.0;
+  double ex[NL + 1];   /* each row's largest excess over i >= 1 (SOFT) */
+  for (int j = 0; j < NL + 1; j++) ex[j] = 0.0;
   int act = 0;
   for (int i = 0; i < NH; i++)
     for (int j = 0; j < NL; j++) {
@@ -162,6 +169,7 @@ static void assess_core(gk_ws *ws, const double *xh, const double *u, const doub
         if (d > v0) v0 = d;
       } else {
         if (d > v1) v1 = d;
+        if (d > ex[j]) ex[j] = d;
         if (d > -1e-6) act++;
       }
     }
@@ -171,11 +179,30 @@ static void assess_core(gk_ws *ws, const double *xh, const double *u, const doub
     if (a > 1.0 - 1e-6) act++;
   }
   if (dN - alpha > -1e-6) act++;
+#if SOFT
+  const double tN = dN - alpha <= SLT ? dN : fmax(alpha, 0.0);
+#if HAS_ASS
+  for (int j = 0; j < NL; j++) {   /* Y_s's rows on x_s = xb */
+    double s = 0.0;
+    for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * xb[k];
+    if (s - bnd[NH * NL + j] > ex[j]) ex[j] = s - bnd[NH * NL + j];
+  }
+#endif
+  for (int j = 0; j < NL; j++) ex[j] = fmax(0.0, ex[j] - SLT);
+  ex[NL] = fmax(0.0, dN - alpha - SLT);
+#else
+  const double tN = dN;
+#endif
 #if HAS_DU
-  out->cost = acc + SW * dN * dN + du_cost(ws->mem.dw, u, up, NH);
+  out->cost = acc + SW * tN * tN + du_cost(ws->mem.dw, u, up, NH);
 #else
   (void)up;
-  out->cost = acc + SW * dN * dN;
+  out->cost = acc + SW * tN * tN;
+#endif
+#if SOFT
+  out->cost += soft_penalty(SLW, SLQ, ex);
+#else
+  (void)ex;
 #endif
   out->violation_first = v0;
   out->violation_rows = v1;
@@ -260,6 +287,47 @@ EXPORT double PFX(terminal_gap)(gk_ws *ws, const double *w, const double *p) {
     if (e > d || e != e) d = e;
   }
   return d;
+}
+
+/* the instance's softened-row weights: the design's (on, the softened phase) or 0 (the hard
+ * phase, the slacks fixed at 0 by their bounds); controllers/ocp/soft.py */
+EXPORT void PFX(set_soft)(gk_ws *ws, int on) {
+#if SOFT
+  ws->mem.slw = on ? SLW : 0.0;
+  ws->mem.slq = on ? SLQ : 0.0;
+#else
+  (void)ws; (void)on;
+#endif
+}
+
+/* The smallest slacks of the plan at (w, p) into w[IS ..] (SOFT, controllers/ocp/soft.py
+ * Slacks.initial; nothing without SOFT): each row's largest excess over i >= 1 against bnd
+ * (NH x NL, with HAS_ASS one more row: Y_s's on x_s), the terminal set's max(0, gap -
+ * alpha); returns the gap |x_N - x_ref|inf (terminal_gap) */
+EXPORT double PFX(plan_slacks)(gk_ws *ws, double *w, const double *p, const double *bnd,
+                               double alpha) {
+  const double gap = PFX(terminal_gap)(ws, w, p);
+#if SOFT
+  const double *X = ws->mem.X;
+  for (int j = 0; j < NL; j++) {
+    double e = 0.0;
+    for (int i = 1; i < NH; i++) {
+      double s = 0.0;
+      for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * X[i * NX + k];
+      if (s - bnd[i * NL + j] > e) e = s - bnd[i * NL + j];
+    }
+#if HAS_ASS
+    double s = 0.0;
+    for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * ws->mem.xs[k];
+    if (s - bnd[NH * NL + j] > e) e = s - bnd[NH * NL + j];
+#endif
+    w[IS + j] = e;
+  }
+  w[IS + NL] = fmax(0.0, gap - alpha);
+#else
+  (void)w; (void)bnd; (void)alpha;
+#endif
+  return gap;
 }
 
 /* Solve A z = b in place (A n x n, row-major, destroyed; z into b): Gaussian elimination

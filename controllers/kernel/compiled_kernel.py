@@ -57,13 +57,14 @@ from controllers.kernel.cbuild import compile_library, compiler_id, default_cach
 from controllers.kernel.constants import Constants
 from controllers.kernel.kernel_abi import c_declarations
 from controllers.kernel.kernel_lib import Kernel, Workspace
+from controllers.ocp.solver_settings import FEAS_TOL
 
 __all__ = ["GENERATOR_VERSION", "KERNEL_SELF_TEST_TOL", "Kernel", "KernelProblem", "Workspace",
            "build", "default_cache_dir", "for_fhocp", "generate_source", "kernel_constants",
            "last_error", "library_source", "loader_source", "variant_flags"]
 
 #: Bump when the C template or the generated header changes meaning (part of the cache key).
-GENERATOR_VERSION = "gru-fhocp-kernel-15"
+GENERATOR_VERSION = "gru-fhocp-kernel-16"
 #: The C template, joined in this order after the generated header: the interface
 #: (``gru_fhocp.h``), the solver instance's memory, the mathematics bottom-up, the exported
 #: API, the equilibrium for an output (tracking kernels), the QP and the SQP.
@@ -121,6 +122,11 @@ class KernelProblem:
     control_horizon : int, optional
         ``M < N`` (tracking only): the free inputs ``u_0 … u_{M−1}``, the tail held at
         ``u_s`` (``NM``; none: ``N``).
+    soft : (float, float), optional
+        The softened rows' weights ``(ρ, ρ_2)`` (:mod:`controllers.ocp.soft`: ``SOFT 1``, ``SLT``
+        the answer check's tolerance :data:`~controllers.ocp.solver_settings.FEAS_TOL`; one slack
+        per row of ``L`` and the terminal set's, ``DUo`` the unpaired ``LUo``); none: the hard
+        problem.
     bias_shift : bool
         The biases move with measured disturbances (``HAS_SHIFT``: the per-thread shift of
         :meth:`~controllers.kernel.kernel_lib.Kernel.set_bias_shift`, ``rollout.c`` gk_db);
@@ -138,6 +144,7 @@ class KernelProblem:
     du_weight: np.ndarray | None = None
     offset_weight: np.ndarray | None = None
     control_horizon: int | None = None
+    soft: tuple[float, float] | None = None
     bias_shift: bool = False
 
     @property
@@ -153,6 +160,8 @@ class KernelProblem:
         return cls(fhocp.params, fhocp.N, fhocp.Q, fhocp.R, fhocp.DUo, fhocp.s,
                    fhocp.sqp_options.get("hessian_eigen_clip"), fhocp.LUo, fhocp.du_weight,
                    **fhocp.reference.kernel_terms(),
+                   soft=None if fhocp.slacks is None else (fhocp.soft_design.rho,
+                                                           fhocp.soft_design.rho2),
                    bias_shift=bool(getattr(fhocp, "bias_shift", False)))
 
 
@@ -178,7 +187,8 @@ def generate_source(problem: KernelProblem, constants: Constants | None = None) 
            f"#define NY {np.shape(params['U_o'])[0]}\n#define NL {n_l}\n",
            f"#define HAS_DU {int(problem.has_du)}\n"
            f"#define HAS_ASS {int(offset_weight is not None)}\n"
-           f"#define HAS_SHIFT {int(problem.bias_shift)}\n",
+           f"#define HAS_SHIFT {int(problem.bias_shift)}\n"
+           f"#define SOFT {int(problem.soft is not None)}\n",
            f"#define PFX(name) {PREFIX_PLACEHOLDER}##name\n", c_declarations(),
            constants.declarations(),
            f"#define QDIAG {int(np.count_nonzero(Q - np.diag(np.diag(Q))) == 0)}\n"]
@@ -232,6 +242,10 @@ def kernel_constants(problem: KernelProblem) -> Constants:
     if problem.offset_weight is not None:
         c.array("TW", np.asarray(problem.offset_weight, dtype=float).reshape(-1))
     c.scalar("CLIP", -1.0 if problem.clip is None else float(problem.clip))
+    if problem.soft is not None:
+        c.scalar("SLW", float(problem.soft[0]))
+        c.scalar("SLQ", float(problem.soft[1]))
+        c.scalar("SLT", FEAS_TOL)
     return c
 
 

@@ -50,7 +50,7 @@ enum {
  * the artificial steady state (the tracking law) */
 typedef struct ctl_result {
   double u[NH * NU], us[NU], xs[NX], x[(NH + 1) * NX];
-  double cost, cv, tv, defect;
+  double cost, cv, tv, defect, softened;   /* softened: FHOCPResult.softened (SOFT) */
   int success, feasible, status, iterations;
 } ctl_result;
 
@@ -188,10 +188,40 @@ CTL_HELPER void output_rows(const double *bnd, double *lbg, double *ubg) {
 }
 
 /* the output rows', input box's and terminal set's violations of an assessment with the
- * terminal radius alpha into r (controllers/ocp/fhocp_result.py set_residuals) */
-CTL_HELPER void set_residuals(ctl_result *r, const gk_assessment *out, double alpha) {
+ * terminal radius alpha into r (controllers/ocp/fhocp_result.py set_residuals); soften: the
+ * softened phase's answer, whose rows' excess is a price, not a failure (route_softened) */
+CTL_HELPER void set_residuals(ctl_result *r, const gk_assessment *out, double alpha,
+                              int soften) {
   r->cv = fmax(fmax(0.0, out->violation_first), fmax(out->violation_rows, out->u_max - 1.0));
   r->tv = fmax(0.0, out->terminal_distance - alpha);
+  r->softened = 0.0;
+  if (soften) {
+    r->softened = fmax(r->cv, r->tv);
+    r->cv = fmax(0.0, out->u_max - 1.0);
+    r->tv = 0.0;
+  }
+}
+
+/* a row the law adds beyond the output rows and the terminal set (the tracking law's Y_s)
+ * exceeded by excess: a violation, or for the softened phase's answer part of its excess */
+CTL_HELPER void extra_row(ctl_result *r, double excess, int soften) {
+  if (soften) r->softened = fmax(r->softened, excess);
+  else r->cv = fmax(r->cv, excess);
+}
+
+/* the variable bounds of the single-shooting FHOCP: the inputs' box, 0 <= t <= alpha, the
+ * slacks (SOFT) 0 <= eps, free in the softened phase (soften), fixed at 0 in the hard one */
+CTL_HELPER void variable_bounds(double *lbx, double *ubx, double alpha, int soften) {
+  for (int c = 0; c < NW; c++) {
+    lbx[c] = c < IT ? -1.0 : 0.0;
+    ubx[c] = c < IT ? 1.0 : (c == IT ? alpha : (soften ? INFINITY : 0.0));
+  }
+}
+
+/* a softened FHOCP solves its softened phase after the hard one ended so (controllers/ocp/
+ * solve_status.py SOFTEN_AFTER): its QP infeasible or failed */
+CTL_HELPER int soften_after(int sqp_status) {
+  return SOFT && (sqp_status == GK_SQP_QP_INFEASIBLE || sqp_status == GK_SQP_QP_FAILED);
 }
 
 /* the candidate of the proof of th:feasibility-stability into cand (NH x NU): the plan

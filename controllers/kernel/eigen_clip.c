@@ -372,14 +372,16 @@ HOT static int pd_shifted(const double *H, int n, double clip, double *L) {
 }
 
 /* eigenvalues of H below CLIP raised to CLIP: H += sum_j (CLIP - ev_j) v_j v_j^T.
- * H (NW x NW, row-major) is block diagonal: the u-block (NUA x NUA) and H[t, t] (the cost
- * s t^2 does not couple t with u, and no constraint is nonlinear in t), so the u-block is
+ * H (NW x NW, row-major) is block diagonal: the u-block (NUA x NUA), H[t, t] and the slacks'
+ * diagonal (the cost s t^2 + rho (eps + eps^2) does not couple them with u, and no
+ * constraint is nonlinear in them), so the u-block is
  * decomposed alone; same result as the eigendecomposition of the whole matrix. */
 HOT static int clip_hessian(gk_ws *ws, double *H) {
   double *V = ws->work.V, *Hu = ws->work.Hu, *d = ws->work.d;
   ws->mem.n_calls++;
   if (CLIP < 0) return 0;
-  if (H[IT * NW + IT] < CLIP) H[IT * NW + IT] = CLIP;
+  for (int c = IT; c < NW; c++)   /* t and the slacks: diagonal entries */
+    if (H[c * NW + c] < CLIP) H[c * NW + c] = CLIP;
   for (int i = 0; i < NUA; i++)
     for (int j = 0; j < NUA; j++) Hu[i * NUA + j] = H[i * NW + j];
   if (pd_shifted(Hu, NUA, CLIP, V)) return 0;

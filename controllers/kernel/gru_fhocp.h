@@ -73,6 +73,9 @@ void PFX(assess)(gk_ws *ws, const double *xh, const double *u, const double *xb,
                  double *x, gk_assessment *out);
 /* |x_N - x_ref|inf of the rollout at (w, p): the smallest feasible terminal slack. */
 double PFX(terminal_gap)(gk_ws *ws, const double *w, const double *p);
+double PFX(plan_slacks)(gk_ws *ws, double *w, const double *p, const double *bnd,
+                        double alpha);
+void PFX(set_soft)(gk_ws *ws, int on);
 /* States x_0 .. x_N from x0 under u (no cache involved); the rollout at (w, p). */
 void PFX(simulate)(gk_ws *ws, const double *x0, const double *u, double *x);
 void PFX(xtraj)(gk_ws *ws, const double *w, const double *p, double *x);

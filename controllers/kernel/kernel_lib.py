@@ -47,6 +47,8 @@ _WS_CALLS: dict[str, tuple[list[Any], Any]] = {
     "assess": ([_VP] * 6 + [_CD, _VP, _VP], None),
     "assess_w": ([_VP, _VP, _VP, _CD, _VP, _VP, _VP, _VP], None),
     "terminal_gap": ([_VP] * 2, _CD),
+    "plan_slacks": ([_VP, _VP, _VP, _CD], _CD),
+    "set_soft": ([ctypes.c_int], None),
     "sqp": ([_VP] * 12, _CI), "qp": ([_VP] * 11, _CI), "grad_l": ([_VP] * 5, None),
     "counters": ([_VP], None), "invalidate": ([], None), "clip": ([_VP], _CI),
     "set_weights": ([_VP] * 3, None)}
@@ -170,7 +172,7 @@ class Workspace:
         n, m, N = kernel.n, kernel.m, kernel.N
         self._buf = {name: np.zeros(shape) for name, shape in (
             ("x0", n), ("u", (N, m)), ("w", kernel.nw), ("p", kernel.npar), ("xb", n),
-            ("ub", m), ("up", m), ("dz", n), ("dr", n), ("bnd", (N, max(kernel.nl, 1))),
+            ("ub", m), ("up", m), ("dz", n), ("dr", n), ("bnd", (N + 1, max(kernel.nl, 1))),
             ("xs", n),
             ("x", (N + 1, n)), ("uc", (N, m)), ("xn", n), ("y", kernel.p), ("xe", n),
             ("ue", m), ("yp", kernel.p))}
@@ -267,7 +269,7 @@ class Workspace:
         b["xb"][:] = x_bar
         b["ub"][:] = u_bar
         b["up"][:] = 0.0 if u_prev is None else u_prev
-        b["bnd"][:, :self.nl] = bounds
+        b["bnd"][:bounds.shape[0], :self.nl] = bounds
         self._c["assess"](self._ws, a["x0"], a["u"], a["xb"], a["ub"], a["up"], a["bnd"],
                           float(alpha), a["x"], a["out"])
         return b["x"].copy(), Assessment.from_buffer_copy(self._out)
@@ -281,15 +283,34 @@ class Workspace:
         clipped ``u_s``, returned as ``x_s``: ``out.cost`` is :meth:`~controllers.laws.
         tracking.reference.ArtificialSteadyState.cost`, ``out.steady_residual`` the fixed-point
         residual ``‖f(x_s, u_s) − x_s‖∞`` (NaN when Newton failed); otherwise ``x_s`` is
-        zeros and the residual 0."""
+        zeros and the residual 0. ``bounds``: N×q, or (N + 1)×q with ``Y_s``'s right-hand
+        side last (a softened tracking FHOCP's kernel prices its excess)."""
         b, a = self._buf, self._addr
         b["w"][:] = w
         b["p"][:] = p
-        b["bnd"][:, :self.nl] = bounds
+        b["bnd"][:bounds.shape[0], :self.nl] = bounds
         self._c["assess_w"](self._ws, a["w"], a["p"], a["bnd"], float(alpha), a["uc"], a["x"],
                             a["out"], a["xs"])
         return (b["uc"].copy(), b["x"].copy(), Assessment.from_buffer_copy(self._out),
                 b["xs"].copy())
+
+    def plan_slacks(self, w: np.ndarray, p: np.ndarray, bounds: np.ndarray, alpha: float
+                    ) -> float:
+        """The smallest slacks of the plan at ``(w, p)`` written into ``w`` in place (a
+        softened FHOCP's kernel, :meth:`controllers.ocp.soft.Slacks.initial`; ``bounds`` as
+        :meth:`assess_w`'s) and the terminal gap returned (:meth:`terminal_gap`)."""
+        b, a = self._buf, self._addr
+        b["w"][:] = w
+        b["p"][:] = p
+        b["bnd"][:bounds.shape[0], :self.nl] = bounds
+        gap = float(self._c["plan_slacks"](self._ws, a["w"], a["p"], a["bnd"], float(alpha)))
+        w[:] = b["w"]
+        return gap
+
+    def set_soft(self, on: bool) -> None:
+        """This instance's softened-row weights: the design's (``on``) or 0, the hard phase
+        (a softened FHOCP's kernel; :mod:`controllers.ocp.soft`)."""
+        self._c["set_soft"](self._ws, int(on))
 
     def terminal_gap(self, w: np.ndarray, p: np.ndarray) -> float:
         """``‖x_N − x_ref‖∞`` of the rollout at ``(w, p)`` (``x_ref``: ``x̄``, or ``x_s(u_s)``

@@ -13,7 +13,7 @@
  * interface types shared with Python (controllers/kernel/kernel_abi.py: gk_sqp_opts, gk_sqp_info,
  * the gk_sqp_status and gk_qp_status enums), generated from their one definition there.
  *
- * Decision variables w = (u_0 .. u_{N-1}, t) (NW = NH*NU + 1), parameters p = (x_hat, x_bar,
+ * Decision variables w = (u_0 .. u_{N-1}, t[, eps]) (NW = NH*NU + 1 + NSL), parameters p = (x_hat, x_bar,
  * u_bar) (NP = 2 NX + NU), then u_prev = u_{-1} when HAS_DU (NP = 2 NX + 2 NU): the cost's
  * input-rate term sum_i (u_i - u_{i-1})' diag(DW) (u_i - u_{i-1}); without it (HAS_DU 0)
  * none of its code is compiled. HAS_ASS 1: the tracking law (controllers/laws/tracking/reference.py,
@@ -75,8 +75,19 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 #define UC(i) (((i) < NM ? (i) : NM) * NU)
 #define KC(i) (((i) <= NM ? (i) : NM + 1) * NU)
 #define NSC (NUU + (NM < NH ? NU : 0))
-#define IT NUA                     /* the epigraph variable t: the last entry of w */
-#define NW (NUA + 1)
+#define IT NUA                     /* the epigraph variable t */
+/* SOFT 1: the softened rows (controllers/ocp/soft.py): after t, one slack per row of L (NQ
+ * = NL: the rows are not paired), then the terminal set's; their weights SLW, SLQ (rho,
+ * rho2; per instance, gk_mem.slw/slq), SLT the answer check's tolerance of a plan's price */
+#ifndef SOFT
+#define SOFT 0
+#endif
+#if SOFT && NQ != NL
+#error "softened rows are not paired: NQ = NL"
+#endif
+#define NSL (SOFT * (NQ + 1))      /* the slacks */
+#define IS (IT + 1)                /* the first slack */
+#define NW (NUA + 1 + NSL)
 #define NG ((NH - 1) * NQ + 2 * NX + HAS_ASS * NQ)
 #if HAS_ASS
 /* the tracking law (steady_state.c): p = (x_hat, x_s0, r[, u_prev]), the set-point
@@ -145,6 +156,11 @@ typedef struct gk_mem {
 #if HAS_ASS
   double tw[NY];
 #endif
+#if SOFT
+  /* the softened rows' weights a solve reads: SLW, SLQ (rho, rho2), or 0 in the hard phase
+   * (PFX(set_soft); controllers/ocp/soft.py) */
+  double slw, slq;
+#endif
   long n_calls, n_eig, n_clipped, n_evs, n_full_eig; /* clipping counters (PFX(counters)) */
 #ifdef GK_TIMERS
   double tk_acc[4];
@@ -207,6 +223,10 @@ static void ws_default_weights(gk_ws *ws) {
 #endif
 #if HAS_ASS
   memcpy(ws->mem.tw, TW, sizeof ws->mem.tw);
+#endif
+#if SOFT
+  ws->mem.slw = SLW;
+  ws->mem.slq = SLQ;
 #endif
 }
 

@@ -65,6 +65,9 @@ HOT static void lagrangian_gradient(const gk_ws *ws, const double *w, const doub
 #if HAS_ASS
   ass_lagrangian_gradient(ws, w, p, lam_x, lg, gl);
 #endif
+#if SOFT
+  soft_lagrangian_gradient(ws, w, lam_x, lg, gl);
+#endif
 }
 
 /* test hook: lagrangian_gradient at (w, p) in workspace ws */
@@ -148,8 +151,8 @@ static int iterate(gk_ws *ws, const double *p, const double *lbx, const double *
       return qs == GK_QP_INFEASIBLE ? GK_SQP_QP_INFEASIBLE : GK_SQP_QP_FAILED;
     }
     /* l1-merit line search (max_iter_ls > 0), then the multipliers and the step */
-    double lmax = 0.0;
-    for (int j = 0; j < NW; j++) lmax = fabs(sq_lx[j]) > lmax ? fabs(sq_lx[j]) : lmax;
+    double lmax = 0.0;   /* not the slacks' bounds (SOFT): linear, kept along the step */
+    for (int j = 0; j < NW - NSL; j++) lmax = fabs(sq_lx[j]) > lmax ? fabs(sq_lx[j]) : lmax;
     for (int r = 0; r < NG; r++) lmax = fabs(sq_la[r]) > lmax ? fabs(sq_la[r]) : lmax;
     *sigma = fmax(*sigma, 1.01 * lmax);
     const double l1_infeas = sq_viol(w, sq_gz, lbx, ubx, lbg, ubg, 1);
@@ -223,7 +226,7 @@ static int sqp_loop(gk_ws *ws, const double *p, const double *lbx, const double 
     if (du_relative) {
       double lm = 0.0;
       for (int r = 0; r < NG; r++) lm = fmax(lm, fabs(lam_g[r]));
-      for (int j = 0; j < NW; j++) lm = fmax(lm, fabs(lam_x[j]));
+      for (int j = 0; j < NW - NSL; j++) lm = fmax(lm, fabs(lam_x[j]));   /* not eps >= 0's: rho */
       du_scale += lm;
     }
     if (pr < tol_pr && du < tol_du * du_scale) { status = GK_SQP_SOLVE_SUCCEEDED; break; }

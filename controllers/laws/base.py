@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
+from controllers.ocp.solver_settings import FEAS_TOL
+
 if TYPE_CHECKING:
     from controllers.ocp.fhocp_result import FHOCPResult
 
@@ -209,7 +211,10 @@ class StepRecord:
 
 
 def solver_summary(records: list[StepRecord]) -> dict[str, Any]:
-    """Median / p99 / max solve time [ms], iterations, failures by status, fallbacks."""
+    """Median / p99 / max solve time [ms], iterations, failures by status, fallbacks, the
+    steps whose applied plan exceeds a softened row (:mod:`controllers.ocp.soft`) by more
+    than :data:`~controllers.ocp.solver_settings.FEAS_TOL` and the largest such excess
+    (normalised)."""
     if not records:
         return {"steps": 0}
     t = np.array([r.result.solve_time for r in records]) * 1e3
@@ -230,6 +235,9 @@ def solver_summary(records: list[StepRecord]) -> dict[str, Any]:
         "failures_by_status": statuses,
         "fallbacks": int(sum(r.fallback for r in records)),
         "suboptimal_steps": int(sum(r.suboptimal for r in records)),
+        "softened_steps": int(sum(r.result.softened > FEAS_TOL and not r.fallback
+                                  for r in records)),
+        "softened_max": float(max(r.result.softened for r in records)),
         "fallback_candidates_infeasible": int(sum(r.fallback and not r.candidate_feasible
                                                   for r in records)),
     }

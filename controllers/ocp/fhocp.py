@@ -65,7 +65,8 @@ from controllers.ocp.casadi_callbacks import bind_buffers, quiet_stdout
 from controllers.ocp.fhocp_result import FHOCPResult, judge, keeps_warm_start, solver_stats
 from controllers.ocp.input_rate import du_weights
 from controllers.ocp.reference import Reference
-from controllers.ocp.solve_status import SolveStatus
+from controllers.ocp.soft import Slacks
+from controllers.ocp.solve_status import SOFTEN_AFTER, SolveStatus
 from controllers.ocp.solver_settings import FAST_IPOPT_OPTIONS, FEAS_TOL, SQP_OPTIONS
 
 __all__ = ["FHOCP", "KERNEL_SELF_TEST_TOL", "FHOCPData", "FHOCPResult", "bind_buffers"]
@@ -166,8 +167,15 @@ class FHOCP:
                  time_budget: float | None = None,
                  solver: str | None = None,
                  sqp_options: Mapping[str, Any] | None = None, kernel: str = "auto",
-                 du_weight: float | np.ndarray = 0.0) -> None:
+                 du_weight: float | np.ndarray = 0.0, soft: bool = False,
+                 soft_weight: float | None = None) -> None:
         self.reference: Any = reference
+        if soft and formulation != "single-shooting":
+            raise DesignError("soft output constraints are the single-shooting FHOCP's: the "
+                              "multiple-shooting baseline keeps them hard")
+        #: the output rows and the terminal set are softened (:mod:`controllers.ocp.soft`)
+        self.soft = bool(soft)
+        self._soft_weight = soft_weight
         if formulation not in ("single-shooting", "multiple-shooting"):
             raise DesignError(f"unknown formulation {formulation!r}")
         if formulation not in self.reference.formulations:
@@ -200,6 +208,18 @@ class FHOCP:
         self.reference.attach(self, data)   # its layout of w, g and p
         lay = self.reference
         self.nw, self.iu, self.it, self.ix = lay.nw, lay.iu, lay.it, lay.ix
+        #: the slacks ``ε`` of the softened rows: their indices in ``w`` (after ``t``) and
+        #: their weight ``ρ`` (:class:`controllers.ocp.soft.Slacks`), ``None`` when hard
+        self.soft_design = (Slacks.of(self, self._soft_weight, self.it + 1) if self.soft
+                            else None)
+        #: the slacks as the solve in progress has them: the design's, or without weights
+        #: in the hard phase (:meth:`solve_request`)
+        self.slacks = self.soft_design
+        #: the solve in progress is the softened phase (:meth:`solve_request`)
+        self.softening = False
+        #: solve the softened phase alone, every step (the exact penalty's own answers: the
+        #: design record's comparison and its test; off: the hard phase first)
+        self.always_soften = False
         self.ng, self.npar = lay.ng, lay.npar
         self._solver = None
         self._nlp: Any = None
@@ -250,6 +270,8 @@ class FHOCP:
         self.a = self.a[: self.N].reshape(self.N, self.q)
         self.b = self.b[: self.N].reshape(self.N, self.q)
         self.s = float(data.s)
+        #: how many slacks the softened rows add to ``w`` (:mod:`controllers.ocp.soft`)
+        self.nsl = self.q + 1 if self.soft else 0
         self.du_weight = du_weights(du_weight, self.m)
         self.has_du = bool(np.any(self.du_weight > 0))
         self.LUo = self.L @ self.params["U_o"]
@@ -266,8 +288,12 @@ class FHOCP:
         The single-shooting NLP then has one row ``D U_o x_i`` with bounds
         ``[−rhs_k, rhs_j]`` per pair instead of two: a smaller KKT system. ``pair_up[r]`` /
         ``pair_lo[r]`` are the ``L`` rows giving the upper / lower bound of reduced row ``r``
-        (−1: none).
+        (−1: none). Softened rows are not paired: each row has its own slack.
         """
+        if self.soft:
+            self.qr, self.DUo = self.q, self.LUo
+            self.pair_up, self.pair_lo = np.arange(self.q), np.full(self.q, -1)
+            return
         used: set[int] = set()
         rows, up, lo = [], [], []
         for j in range(self.q):
@@ -420,6 +446,24 @@ class FHOCP:
                              else self.L @ np.asarray(d, dtype=float).reshape(self.p))
         self._bounds_eo = float("nan")
 
+    def start_slacks(self, w0: np.ndarray, pv: np.ndarray, x: np.ndarray, x_ref: np.ndarray,
+                     bounds: np.ndarray, alpha: float) -> float:
+        """The initial guess ``w0``'s slacks (softened rows, in place): those of its plan
+        (states ``x`` towards ``x_ref``; ``bounds`` N×q, the tracking law's with ``Y_s``'s
+        row last), so that the SQP starts from a point that keeps every row; returns the
+        plan's terminal gap. The compiled kernel's (its own rollout and reference, the
+        exported controller's numbers; ``x`` unused) when there is one, else numpy's."""
+        assert self.slacks is not None, "start_slacks of a hard FHOCP"
+        if self.kernel is not None:
+            return self.kernel.plan_slacks(w0, pv, bounds, alpha)
+        N = self.N
+        excess = x[1:N] @ self.LUo.T - bounds[1:N]
+        if bounds.shape[0] > N:
+            excess = np.vstack([excess, self.LUo @ x_ref - bounds[N]])
+        gap = float(np.max(np.abs(x[N] - x_ref)))
+        self.slacks.initial(w0, excess, gap, alpha)
+        return gap
+
     def rollout(self, x_hat: np.ndarray, u_seq: np.ndarray) -> np.ndarray:
         """States ``x_0 … x_N`` of ``eq:gru`` from ``x̂`` under ``u_seq`` (N, m)."""
         if self._solver is None:
@@ -459,17 +503,42 @@ class FHOCP:
         called), the request's parameters, bounds and initial guess written, the solver run
         (within the optional time budget), its answer checked independently by the reference,
         judged (:func:`~controllers.ocp.fhocp_result.judge`) and kept as the next
-        warm start. ``solve_time``: the solver and the check."""
+        warm start. ``solve_time``: the solver and the check (both phases').
+
+        Softened (:mod:`controllers.ocp.soft`): the hard phase first, its slacks fixed at 0;
+        when ``x̂`` fails the ``i = 0`` row or the hard phase ends with a status of
+        :data:`~controllers.ocp.solve_status.SOFTEN_AFTER`, the softened phase from the same
+        guess (and the same warm start)."""
         if self._solver is None:
             self.setup()
         t0 = time.perf_counter()
         x_hat = np.asarray(x_hat, dtype=float).reshape(self.n)
-        if self.formulation == "single-shooting" and self.x0_infeasible(x_hat, e_o):
+        outside = self.formulation == "single-shooting" and self.x0_infeasible(x_hat, e_o)
+        if outside and not self.soft:
             res = self.reference.fallback(x_hat, e_o, request, SolveStatus.INFEASIBLE_X0)
             res.solve_time = time.perf_counter() - t0
             return res
+        warm = self.warm_start
+        if not (outside or self.always_soften):
+            res = self._solve_phase(x_hat, e_o, request, False, t0)
+            if not self.soft or res.success or res.status not in SOFTEN_AFTER:
+                return res
+            self.warm_start = warm   # the softened phase starts where the hard one did
+        return self._solve_phase(x_hat, e_o, request, True, t0)
+
+    def _solve_phase(self, x_hat: np.ndarray, e_o: float, request: Any, soften: bool,
+                     t0: float) -> FHOCPResult:
+        """One solver run of :meth:`solve_request`: the hard problem, or with ``soften`` the
+        softened one (its slacks free, their weights on); a hard FHOCP has no phase."""
         buf, trigger, ins, outs = self._buffer
+        if self.soft_design is not None:
+            self._soften(soften)
         self.reference.write(ins, x_hat, e_o, request)
+        if self.soft_design is not None:
+            idx = self.soft_design.idx
+            ins["ubx"][idx] = np.inf if soften else 0.0
+            if not soften:
+                ins["x0"][idx] = 0.0
         self._arm_deadline(t0)
         if self._compiled_loop:
             trigger()   # the compiled SQP: no casadi, nothing printed
@@ -485,6 +554,15 @@ class FHOCP:
         judge(res, stats, wopt)
         self._keep_warm(res, wopt)
         return res
+
+    def _soften(self, on: bool) -> None:
+        """The softened phase's slack weights (``on``) or the hard phase's (none), in the
+        numpy problem and the compiled kernel's instance alike."""
+        assert self.soft_design is not None
+        self.slacks = self.soft_design if on else self.soft_design.off()
+        self.softening = on
+        if self.kernel is not None:
+            self.kernel.set_soft(on)
 
     def solver_trajectory(self, w: np.ndarray, p: np.ndarray) -> np.ndarray:
         """States ``x_0 … x_N`` the solver's own formulation gives at ``(w, p)`` (the answer

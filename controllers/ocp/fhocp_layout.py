@@ -2,8 +2,9 @@
 
 ``w`` holds the decision variables, ``g`` the constraints, ``p = (x̂, x̄, ū)`` the
 parameters, followed by ``u_{−1}`` (the previously applied input) when the cost has an
-input-rate term (``FHOCP.has_du``). Single shooting: ``w = (u_0 … u_{N−1}, t)``, ``g`` = the
-paired output rows ``D U_o x_i`` (``i = 1 … N−1``) then ``x_N − x̄ ∓ t``. Multiple shooting:
+input-rate term (``FHOCP.has_du``). Single shooting: ``w = (u_0 … u_{N−1}, t[, ε])``, ``g`` =
+the paired output rows ``D U_o x_i`` (``i = 1 … N−1``) then ``x_N − x̄ ∓ t`` (softened:
+unpaired rows with their slacks ``ε``, :mod:`controllers.ocp.soft`). Multiple shooting:
 ``w`` in stage order ``(x_0, u_0, x_1, …, x_N, t)``, ``g`` = ``x_0 − x̂``, the dynamics
 defects, the output rows (``i = 0 … N−1``) then the terminal rows.
 
@@ -50,7 +51,7 @@ class FHOCPLayout:
         n, m, N, q, qr = p.n, p.m, p.N, p.q, p.qr
         self.single = single_shooting
         if single_shooting:
-            self.nw = N * m + 1
+            self.nw = N * m + 1 + p.nsl
             self.iu = np.arange(N * m).reshape(N, m)
             self.it = N * m
             self.ix = None
@@ -75,6 +76,7 @@ class FHOCPLayout:
         self.lbx[self.iu.ravel()] = -1.0
         self.ubx[self.iu.ravel()] = 1.0
         self.lbx[self.it] = 0.0
+        self.lbx[self.it + 1:] = 0.0   # the slacks ε ≥ 0 (softened rows)
         self._constraint_rows(p)
         self._shifts(p)
 
@@ -123,7 +125,8 @@ class FHOCPLayout:
               x_bar: np.ndarray, u_bar: np.ndarray, alpha: float, u_init: np.ndarray | None,
               prev: dict[str, np.ndarray] | None, warm_duals: bool,
               simulate: Callable[[np.ndarray, np.ndarray], Any],
-              u_prev: np.ndarray | None = None, prefix: Any = None) -> np.ndarray:
+              u_prev: np.ndarray | None = None, prefix: Any = None,
+              slacks: Callable[..., None] | None = None) -> np.ndarray:
         """Fill the solver's argument buffers for one solve; returns the initial inputs.
 
         Parameters
@@ -144,6 +147,9 @@ class FHOCPLayout:
         prefix : InputPrefix, optional
             The inputs already applied (:attr:`controllers.ocp.fhocp.FHOCP.prefix`): fixed in
             the bounds and in the initial inputs.
+        slacks : callable, optional
+            A softened problem's :meth:`~controllers.ocp.fhocp.FHOCP.start_slacks`: the
+            initial slacks are the initial plan's.
         """
         n, m = x_hat.shape[0], self._m
         p = ins["p"]
@@ -180,7 +186,10 @@ class FHOCPLayout:
         x0 = ins["x0"]
         x0[:] = 0.0
         x0[self._iu_flat] = u.ravel()
-        x0[self.it] = min(max(float(np.max(np.abs(x[-1] - x_bar))), 1e-6), max(alpha, 0.0))
+        gap = float(np.max(np.abs(x[-1] - x_bar)))
+        x0[self.it] = min(max(gap, 1e-6), max(alpha, 0.0))
+        if slacks is not None:
+            slacks(x0, p, x, x_bar, bounds, alpha)
         if self.ix is not None:
             x0[self.ix] = x
         if prev is not None and warm_duals:

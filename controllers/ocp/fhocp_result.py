@@ -16,8 +16,8 @@ import numpy as np
 from controllers.ocp.solve_status import SOLVER_SUCCEEDED, SolveStatus
 from controllers.ocp.solver_settings import DEFECT_TOL, FEAS_TOL
 
-__all__ = ["FHOCPResult", "judge", "keeps_warm_start", "plan_residuals", "set_residuals",
-           "solver_stats"]
+__all__ = ["FHOCPResult", "judge", "keeps_warm_start", "plan_residuals", "route_softened",
+           "set_residuals", "solver_stats"]
 
 
 @dataclass
@@ -52,7 +52,12 @@ class FHOCPResult:
         Number of output / terminal / input constraints active (within 1e-6) at the answer.
     feasible : bool
         The answer satisfies every constraint (a solver that stopped early may still return
-        a feasible, suboptimal sequence).
+        a feasible, suboptimal sequence); with softened rows (:mod:`controllers.ocp.soft`)
+        every hard one: the input box (the softened rows' excess is :attr:`softened`).
+    softened : float
+        With softened rows: the plan's largest excess over a softened row (output rows
+        ``i = 0 … N−1``, the terminal set, ``Y_s``), 0 when it keeps them all; the
+        residuals above then hold the input box's only. 0 for the hard problem.
     """
 
     u: np.ndarray
@@ -68,6 +73,7 @@ class FHOCPResult:
     active: int = 0
     t: float = 0.0
     feasible: bool = False
+    softened: float = 0.0
     lam_x: np.ndarray | None = field(default=None, repr=False)
     lam_g: np.ndarray | None = field(default=None, repr=False)
     #: the tracking law's artificial steady input and state
@@ -77,11 +83,13 @@ class FHOCPResult:
 
 
 def plan_residuals(res: FHOCPResult, x: np.ndarray, LUo: np.ndarray, bounds: np.ndarray,
-                   x_ref: np.ndarray, alpha: float) -> float:
+                   x_ref: np.ndarray, alpha: float, soft: bool = False) -> float:
     """The residuals of the plan ``(res.u, x)`` (``x_0 … x_N``) into ``res``: the output
     rows' ``L U_o x_i ≤ bounds_i`` (``i = 0 … N−1``, ``eq:optimization-constraint``) and
     the input box's violation, the terminal set's ``‖x_N − x_ref‖∞ ≤ α`` and the rows
-    active within 1e-6; returns ``‖x_N − x_ref‖∞``. Every law's numpy answer check."""
+    active within 1e-6; returns ``‖x_N − x_ref‖∞``. Every law's numpy answer check.
+    ``soft``: the output rows and the terminal set are softened (their excess into
+    ``res.softened``, :func:`route_softened`)."""
     N = bounds.shape[0]
     lhs = x[:N] @ LUo.T
     res.constraint_violation = max(0.0, float(np.max(lhs - bounds)),
@@ -90,10 +98,12 @@ def plan_residuals(res: FHOCPResult, x: np.ndarray, LUo: np.ndarray, bounds: np.
     res.terminal_violation = max(0.0, dN - alpha)
     res.active = (int(np.sum(lhs[1:] - bounds[1:] > -1e-6)) + int(dN - alpha > -1e-6)
                   + int(np.sum(np.abs(res.u) > 1 - 1e-6)))
+    if soft:
+        route_softened(res, float(np.max(np.abs(res.u))) - 1.0)
     return dN
 
 
-def set_residuals(res: FHOCPResult, out: Any, alpha: float) -> None:
+def set_residuals(res: FHOCPResult, out: Any, alpha: float, soft: bool = False) -> None:
     """:func:`plan_residuals` from the compiled check's
     :class:`~controllers.kernel.kernel_abi.Assessment`
     (:meth:`controllers.kernel.kernel_lib.Workspace.
@@ -102,6 +112,17 @@ def set_residuals(res: FHOCPResult, out: Any, alpha: float) -> None:
                                    out.u_max - 1.0)
     res.terminal_violation = max(0.0, out.terminal_distance - alpha)
     res.active = int(out.active)
+    if soft:
+        route_softened(res, out.u_max - 1.0)
+
+
+def route_softened(res: FHOCPResult, box: float) -> None:
+    """The softened problem's residuals: the output rows' and the terminal set's excess
+    becomes ``res.softened`` (a price paid in the cost, not a failure), the residuals
+    that judge an answer keep the input box's violation ``box`` only."""
+    res.softened = max(res.softened, res.constraint_violation, res.terminal_violation)
+    res.constraint_violation = max(0.0, box)
+    res.terminal_violation = 0.0
 
 
 def solver_stats(buffer: Any) -> dict[str, Any]:

@@ -12,6 +12,12 @@ states, their sensitivities and the exact Hessian of the Lagrangian come from
 * ``x_N − x̄ − t ≤ 0`` and ``x_N − x̄ + t ≥ 0``: the epigraph of ``‖x_N − x̄‖∞`` (terminal cost
   ``s t²``, terminal set ``0 ≤ t ≤ α``).
 
+Softened (``FHOCP(soft=True)``, :mod:`controllers.ocp.soft`): ``w`` ends with the slacks
+``ε``, the rows are not paired, and the slacks' terms are added to what the law's methods
+compute over the rest of ``w`` (:meth:`SingleShootingNLP.f`, :meth:`~SingleShootingNLP.g`,
+:meth:`~SingleShootingNLP.gradient`, :meth:`~SingleShootingNLP.jacobian`,
+:meth:`~SingleShootingNLP.hessian`).
+
 Parameters ``p = (x̂, x̄, ū)``, and ``u_{−1}`` after them when the cost has the input-rate
 term (:mod:`controllers.ocp.input_rate`: its gradient is added to ∇f, its constant Hessian to the
 input block).
@@ -80,6 +86,8 @@ class SingleShootingNLP:
         self.shoot = GRUShooting(fhocp.params, fhocp.N)
         self.ng = (fhocp.N - 1) * fhocp.qr + 2 * fhocp.n
         self.iu = fhocp.iu.ravel()
+        #: ``w``'s size without the softened rows' slacks
+        self.nwh = fhocp.nw - fhocp.nsl
         self.eigen_clip: float | None = None
         self.deadline = float("inf")
         self._key: tuple[bytes, bytes] | None = None
@@ -92,6 +100,12 @@ class SingleShootingNLP:
         self.callbacks: list[NumpyCallback] = []
         #: the input-rate term's constant Hessian (N m × N m), None without the term
         self._du_hess = du_hessian(fhocp.N, fhocp.du_weight) if fhocp.has_du else None
+
+    @property
+    def slacks(self) -> Any:
+        """The FHOCP's slacks as the solve in progress has them (``None``: a hard FHOCP;
+        :mod:`controllers.ocp.soft`)."""
+        return self.p.slacks
 
     def forget(self) -> None:
         """Drop what was computed at the current biases (moved in place by
@@ -142,10 +156,40 @@ class SingleShootingNLP:
     # f and g are evaluated at trial points that the solver mostly accepts; computing the
     # derivatives there too saves a second rollout when ∇f, ∂g/∂w and the Hessian follow
     def f(self, wv: np.ndarray, pv: np.ndarray) -> list:
-        return [self.objective(wv, pv, self.rollout(wv, pv, True))]
+        f = self.objective(wv, pv, self.rollout(wv, pv, True))
+        return [f if self.slacks is None else f + self.slacks.penalty(wv[self.slacks.idx])]
 
     def g(self, wv: np.ndarray, pv: np.ndarray) -> list:
-        return [self.constraints(wv, pv, self.rollout(wv, pv, True))]
+        g = self.constraints(wv, pv, self.rollout(wv, pv, True))
+        return [g if self.slacks is None else self.slacks.soften(g, wv[self.slacks.idx])]
+
+    def gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[f, ∇f]`` (the law's :meth:`_gradient` with the slacks' terms)."""
+        f, grad = self._gradient(wv, pv)
+        sl = self.slacks
+        if sl is None:
+            return [f, grad]
+        return [f + sl.penalty(wv[sl.idx]), sl.embed(grad, self.p.nw, wv)]
+
+    def jacobian(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[g, ∂g/∂w]`` (the law's :meth:`_jacobian` with the slacks' terms)."""
+        g, J = self._jacobian(wv, pv)
+        sl = self.slacks
+        if sl is None:
+            return [g, J]
+        Js = np.zeros((J.shape[0], self.p.nw))
+        Js[:, :self.nwh] = J
+        sl.jacobian_columns(Js)
+        return [sl.soften(g, wv[sl.idx]), Js]
+
+    def hessian(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
+                lg: np.ndarray) -> np.ndarray:
+        """The exact Hessian of the Lagrangian ``λ_f f + λ_g·g`` (dense, symmetric; the law's
+        :meth:`_hessian` with the slacks' diagonal)."""
+        H = self._hessian(wv, pv, lf, lg)
+        if self.slacks is None:
+            return H
+        return self.slacks.embed(H, self.p.nw, wv, float(lf[0]))
 
     def stage_gradient(self, ro: Any, x_ref: np.ndarray, u_ref: np.ndarray,
                        pv: np.ndarray) -> np.ndarray:
@@ -161,21 +205,21 @@ class SingleShootingNLP:
             g += du_gradient(ro.u, self._u_prev(pv), p.du_weight).ravel()
         return g
 
-    def gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
-        """``[f, ∇f]``."""
+    def _gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[f, ∇f]`` of the hard problem (``w`` without the slacks)."""
         p = self.p
         ro = self.rollout(wv, pv, True)
-        grad = np.zeros(p.nw)
+        grad = np.zeros(self.nwh)
         grad[self.iu] = self.stage_gradient(ro, *self._reference(pv), pv)
         grad[p.it] = 2 * p.s * wv[p.it]
         return [self.objective(wv, pv, ro), grad]
 
-    def jacobian(self, wv: np.ndarray, pv: np.ndarray) -> list:
-        """``[g, ∂g/∂w]``."""
+    def _jacobian(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[g, ∂g/∂w]`` of the hard problem (``w`` without the slacks)."""
         p = self.p
         ro = self.rollout(wv, pv, True)
         N, n, q, iu = p.N, p.n, p.qr, self.iu
-        J = np.zeros((self.ng, p.nw))
+        J = np.zeros((self.ng, self.nwh))
         J[: (N - 1) * q, iu] = np.matmul(p.DUo[None], ro.S[1:N]).reshape((N - 1) * q, N * p.m)
         J[(N - 1) * q:(N - 1) * q + n, iu] = ro.S[N]
         J[(N - 1) * q + n:, iu] = ro.S[N]
@@ -189,14 +233,14 @@ class SingleShootingNLP:
         g, J = self.jacobian(wv, pv)
         return [f, grad, g, J]
 
-    def hessian(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
-                lg: np.ndarray) -> np.ndarray:
-        """The exact Hessian of the Lagrangian ``λ_f f + λ_g·g`` (dense, symmetric)."""
+    def _hessian(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
+                 lg: np.ndarray) -> np.ndarray:
+        """The Hessian of the hard problem's Lagrangian (``w`` without the slacks)."""
         p = self.p
         ro = self.rollout(wv, pv, True)
         x_bar, _ = self._reference(pv)
         lf0 = float(lf[0])
-        H = np.zeros((p.nw, p.nw))
+        H = np.zeros((self.nwh, self.nwh))
         H[np.ix_(self.iu, self.iu)] = self.input_hessian(ro, x_bar, lf0, lg)
         H[p.it, p.it] = 2 * lf0 * p.s
         return H
@@ -351,7 +395,7 @@ class SingleShootingNLP:
     def _self_test_point(self, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
         """A random ``(w, p)`` of :meth:`self_test`."""
         p = self.p
-        wv = np.concatenate([rng.uniform(-1, 1, p.N * p.m), rng.uniform(0, 0.1, 1)])
+        wv = np.concatenate([rng.uniform(-1, 1, p.N * p.m), rng.uniform(0, 0.1, 1 + p.nsl)])
         pv = np.concatenate([rng.uniform(-0.5, 0.5, 2 * p.n),
                              rng.uniform(-1, 1, p.npar - 2 * p.n)])
         return wv, pv
@@ -367,16 +411,17 @@ class SingleShootingNLP:
         e_o, alpha = float(rng.uniform(0, 0.05)), float(rng.uniform(0, 0.5))
         x_bar, u_bar = self._reference(pv)
         u_prev = self._u_prev(pv)
-        x_k, out = kernel.assess(pv[:n], u, x_bar, u_bar, p.tightened_bounds(e_o), alpha,
-                                 u_prev)
+        bounds = p.tightened_bounds(e_o)
+        x_k, out = kernel.assess(pv[:n], u, x_bar, u_bar, bounds, alpha, u_prev)
         ref = FHOCPResult(u=u, x=x_np, cost=0.0, status="", success=False)
-        p.reference.residuals(ref, x_np, p.tightened_bounds(e_o), pv[n:2 * n], alpha)
+        p.reference.residuals(ref, x_np, bounds, pv[n:2 * n], alpha)
         got = FHOCPResult(u=u, x=x_k, cost=0.0, status="", success=False)
         set_residuals(got, out, alpha)
         return [(x_k, x_np),
-                (np.array([out.cost, got.constraint_violation, got.terminal_violation]),
-                 np.array([p.reference.cost(x_np, u, x_bar, u_bar, u_prev=u_prev),
-                           ref.constraint_violation, ref.terminal_violation]))]
+                (np.array([out.cost, got.constraint_violation, got.terminal_violation,
+                           got.softened]),
+                 np.array([p.reference.plan_cost(x_np, u, x_bar, u_bar, bounds, alpha, u_prev),
+                           ref.constraint_violation, ref.terminal_violation, ref.softened]))]
 
     def sqp_functions(self) -> dict[str, NumpyCallback]:
         """``sqpmethod``'s ``jac_fg`` (f, ∇f, g, ∂g/∂w) and full ``hess_lag`` (convexified),

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from enum import StrEnum
 
-__all__ = ["OTHER_STATUS", "SOLVER_SUCCEEDED", "SolveStatus", "status_code"]
+__all__ = ["OTHER_STATUS", "SOFTEN_AFTER", "SOLVER_SUCCEEDED", "SolveStatus", "status_code"]
 
 #: The solvers' success status (casadi ``sqpmethod``, IPOPT and the kernel's SQP alike).
 SOLVER_SUCCEEDED = "Solve_Succeeded"
@@ -42,6 +42,12 @@ class SolveStatus(StrEnum):
     #: not a solve: an input sequence evaluated as given (the fallback candidate)
     CANDIDATE = "candidate"
 
+
+#: The hard phase's statuses after which a softened FHOCP solves its softened problem
+#: (:mod:`controllers.ocp.soft`): the problem had no answer (IPOPT's proof, the SQP's QP
+#: infeasible), or its QP failed (the kernel's, or casadi ``sqpmethod``'s qpOASES).
+SOFTEN_AFTER = frozenset({SolveStatus.INFEASIBLE, "QP_Infeasible", "QP_Failed",
+                          SolveStatus.SOLVER_ABORTED, SolveStatus.STATS_UNAVAILABLE})
 
 #: Codes of :func:`status_code` (the ``status`` output of the controller each step).
 _CODES = {SolveStatus.OPTIMAL: 0, SolveStatus.INFEASIBLE_X0: 1, SolveStatus.INFEASIBLE: 2,

@@ -64,6 +64,7 @@ from cosim.campaign.spec import CampaignSpec, load
 from cosim.campaign.task import Assets
 from cosim.core import interrupts
 from cosim.core.errors import CosimError
+from cosim.core.run_result import COMPLETE
 
 __all__ = ["MAX_TRIES", "CampaignResult", "default_workers", "run_campaign"]
 
@@ -510,7 +511,7 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
             failed_now = [0]
 
             def on_done(status: str) -> None:
-                failed_now[0] += status != "ok"
+                failed_now[0] += status not in COMPLETE
                 if bar is not None:
                     bar.update(1)
                     bar.set_postfix(failed=failed_now[0], refresh=False)

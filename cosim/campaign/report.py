@@ -33,6 +33,7 @@ import numpy as np
 from cosim.core import atomicio, plots
 from cosim.core import kpis as _kpis
 from cosim.core.csvio import read_table
+from cosim.core.run_result import COMPLETE
 
 __all__ = ["KPI_COLUMNS", "THEOREM_COLUMNS", "campaign_figure", "campaign_kpi_panels",
            "clopper_pearson_upper", "kpi_row", "quantile_kpis", "run_folder_name",
@@ -177,11 +178,12 @@ def summarize(table: Any, name: str, planned: int) -> dict[str, Any]:
     """The campaign's ``summary.json`` document from the runs table (a DataFrame)."""
 
     def block(df: Any) -> dict[str, Any]:
-        ok = df[df["status"] == "ok"]
+        ok = df[df["status"].isin(COMPLETE)]
         ran = df[df["status"] != "interrupted"]
         violating = int((ran["violation_count"] > 0).sum())
         out: dict[str, Any] = {
             "runs": len(df), "ok": len(ok), "failed": int((df["status"] == "failed").sum()),
+            "degraded": int((df["status"] == "degraded").sum()),
             "retried_runs": int((df["tries"] > 1).sum()) if "tries" in df else 0,
             "violating_runs": violating,
             "violation_probability_upper_95": clopper_pearson_upper(violating, len(ran)),
@@ -244,7 +246,7 @@ def worst_run(table: Any) -> Any:
     each output's IAE relative to its median over the runs that ended ok (so that outputs
     in other units weigh alike); then the lowest run number, the variants in table order.
     """
-    ok = table[table["status"] == "ok"]
+    ok = table[table["status"].isin(COMPLETE)]
     if not len(ok):
         return None
     score = np.zeros(len(ok))
@@ -268,7 +270,7 @@ def run_signals(runs_dir: Path, table: Any, first: Any = None) -> dict:
     ``{}`` when none has."""
     rows = [] if first is None else [first]
     if len(table):
-        ok = table["status"] == "ok"
+        ok = table["status"].isin(COMPLETE)
         for part in (table[ok], table[~ok]):
             rows += [r for _, r in part.head(SIGNAL_PROBES).iterrows()]
     for row in rows[:SIGNAL_PROBES]:
@@ -352,7 +354,7 @@ def campaign_figure(path: str | Path, title: str, table: Any, violating: Sequenc
     info = {**(signals.get("outputs") or {}), **(signals.get("inputs") or {})}
     units = {k: (v or {}).get("unit") or "" for k, v in info.items()}
     variants = list(dict.fromkeys(table["variant"]))
-    ok = table[table["status"] == "ok"]
+    ok = table[table["status"].isin(COMPLETE)]
     kpis = [(k, t) for k, t in campaign_kpi_panels(outputs, units) if k in table.columns]
     n_top = -(-(1 + len(kpis)) // 3)
     n_signals = max(1, len(outputs) + len(inputs))

@@ -22,6 +22,7 @@ from cosim.campaign.cluster import lost_worker
 from cosim.campaign.spec import CampaignSpec
 from cosim.core import atomicio
 from cosim.core.errors import CosimError
+from cosim.core.run_result import COMPLETE
 
 if TYPE_CHECKING:
     from cosim.campaign.engine import Plan
@@ -42,7 +43,7 @@ def finished(runs_dir: Path, task: dict[str, Any]) -> bool:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return False
-    return doc.get("status") in ("ok", "failed")
+    return doc.get("status") in (*COMPLETE, "failed")
 
 
 def open_folder(plan: Plan, out: Path, resume: bool, force: bool) -> list[dict[str, Any]]:

@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from cosim.campaign.pool import ControllerPool
+from cosim.core.run_result import COMPLETE
 
 __all__ = ["POOL", "START_TOPIC", "Assets", "announce_start", "internal_traceback",
            "run_task"]
@@ -348,7 +349,7 @@ def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
         if run["plant"] is not None and not run.get("ran"):
             with contextlib.suppress(Exception):   # the master did not terminate it
                 run["plant"].terminate()
-    if run["ctrl"] is not None and result.status == "ok":
+    if run["ctrl"] is not None and result.status in COMPLETE:
         POOL.give_back(run["key"], run["ctrl"])
     result.error = None  # exceptions do not travel; the reason (and the traceback) do
     width = len(result.columns)

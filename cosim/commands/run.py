@@ -148,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``cosim run`` through :func:`cosim.api.run`; returns the exit code."""
     from cosim import api
     from cosim.core import registry
-    from cosim.core.errors import EXIT_OK, CosimError, ParameterError, SimulationFailed
+    from cosim.core.errors import CosimError, ParameterError, SimulationFailed
 
     options = registry.parse_options(args.option)
     live = _live_options(args)
@@ -188,8 +188,9 @@ def run(args: argparse.Namespace) -> int:
                  for o, s in output.summary.get("signals", {}).get("outputs", {}).items()}
         iae = ", ".join(f"{o}={v:.4g} {units.get(o, '1')}·s" for o, v in k["iae"].items())
         viol = sum(v["count"] for v in k["violations"].values())
-        print(f"cosim run: ok: {result.steps} steps in {result.wall_time_s:.2f} s; IAE {iae}; "
-              f"{viol} constraint violations; results in {out}")
+        print(f"cosim run: {result.status}: {result.steps} steps in "
+              f"{result.wall_time_s:.2f} s; IAE {iae}; {viol} constraint violations; "
+              f"results in {out}")
         if result.live:
             lv = result.live
             print(f"cosim run: live: {lv['fresh']} of {lv['samples']} samples fresh, "
@@ -198,7 +199,25 @@ def run(args: argparse.Namespace) -> int:
                   f"{(lv['latency_ms']['loop']['p99'] or float('nan')):.3g} ms")
         for note in output.summary.get("controller_summary", {}).get("notes") or []:
             print(f"cosim run: note: {note}")
-    return EXIT_OK
+    return _verdict(result, out)
+
+
+def _verdict(result: object, out: object) -> int:
+    """The last line of a run whose controller did not serve a share of its steps
+    (:func:`cosim.core.run_result.shortfall_verdict`; stderr, also with ``--quiet``) and the
+    exit status: 1 beyond :data:`~cosim.core.run_result.FAILING_SHARE`, else 0."""
+    from cosim.core.errors import EXIT_FAILED, EXIT_OK
+    from cosim.core.run_result import FAILING_SHARE, shortfall_verdict
+
+    verdict = shortfall_verdict(result.controller_summary)  # type: ignore[attr-defined]
+    if result.status != "degraded" or verdict is None:  # type: ignore[attr-defined]
+        return EXIT_OK
+    failing = verdict[0] > FAILING_SHARE
+    end = "; more than half the steps: exit status 1" if failing else ""
+    sys.stdout.flush()   # the last line, after the run's own
+    print(f"cosim run: degraded: {verdict[1]}{end}; results in {out}", file=sys.stderr,
+          flush=True)
+    return EXIT_FAILED if failing else EXIT_OK
 
 
 def _live_options(args: argparse.Namespace) -> object:

@@ -23,7 +23,14 @@ from typing import TYPE_CHECKING
 from cosim.core import interrupts
 from cosim.core.component import Capability
 from cosim.core.errors import CosimError, SimulationFailed
-from cosim.core.run_result import PREFIX_CTRL, RowSink, RunResult, communication_times
+from cosim.core.run_result import (
+    DEGRADED_SHARE,
+    PREFIX_CTRL,
+    RowSink,
+    RunResult,
+    communication_times,
+    shortfall_verdict,
+)
 from cosim.core.scenario import BIAS, DIST, PLANT, REF, UNIFORM
 from cosim.core.sensor import SensorModel
 
@@ -359,6 +366,9 @@ class Run:
             result.controller_summary = dict(m.controller.summary() or {})
         except Exception as exc:
             result.controller_summary = {"error": f"summary failed: {exc}"}
+        verdict = shortfall_verdict(result.controller_summary)
+        if result.status == "ok" and verdict is not None and verdict[0] > DEGRADED_SHARE:
+            result.status, result.reason = "degraded", verdict[1]
         for comp in (m.controller, m.plant):
             with contextlib.suppress(Exception):
                 comp.terminate()

@@ -8,9 +8,9 @@ import math
 from dataclasses import dataclass, field
 from typing import Protocol
 
-__all__ = ["MAX_STEPS", "PREFIX_CTRL", "PREFIX_DIST", "PREFIX_PLANT", "PREFIX_REF",
-           "PREFIX_SENSOR",
-           "RowSink", "RunResult", "communication_times"]
+__all__ = ["COMPLETE", "DEGRADED_SHARE", "FAILING_SHARE", "MAX_STEPS", "PREFIX_CTRL",
+           "PREFIX_DIST", "PREFIX_PLANT", "PREFIX_REF", "PREFIX_SENSOR", "RowSink", "RunResult",
+           "communication_times", "shortfall_verdict"]
 
 #: Column prefixes of recorded signals (results.csv).
 PREFIX_REF, PREFIX_PLANT, PREFIX_SENSOR, PREFIX_CTRL = "ref", "plant", "sensor", "ctrl"
@@ -29,9 +29,11 @@ class RunResult:
     rows : list of list of float
         One row per communication point reached.
     status : str
-        ``"ok"``, ``"failed"`` or ``"interrupted"``.
+        ``"ok"``, ``"degraded"`` (it ran to its end, but its controller did not serve more
+        than :data:`DEGRADED_SHARE` of the steps: :func:`shortfall_verdict`), ``"failed"``
+        or ``"interrupted"``.
     reason : str
-        Why the run failed (empty when ok).
+        Why the run failed or is degraded (empty when ok).
     steps : int
         Plant steps completed.
     steps_planned : int
@@ -67,6 +69,29 @@ class RunResult:
 
 #: Most communication steps one run may take (results are held in memory).
 MAX_STEPS = 1_000_000
+#: A run whose controller did not serve more than this share of its steps (it fell back, its
+#: problem had no answer: the controller summary's ``shortfall``) ends ``"degraded"``.
+DEGRADED_SHARE = 0.1
+#: ... more than this share: the command that ran it exits 1.
+FAILING_SHARE = 0.5
+#: The statuses of a run that ran to its end (its KPIs count in a campaign).
+COMPLETE = ("ok", "degraded")
+
+
+def shortfall_verdict(summary: dict) -> tuple[float, str] | None:
+    """``(share, line)`` of a controller summary's ``shortfall`` (``steps`` not served ``of``
+    how many, ``what`` it did instead, ``why``, ``first_time``), ``None`` without one: the
+    share of steps not served and the line that says so."""
+    short = summary.get("shortfall") if isinstance(summary, dict) else None
+    if not isinstance(short, dict) or not short.get("of"):
+        return None
+    steps, of = int(short.get("steps", 0)), int(short["of"])
+    share = steps / of
+    why = f"; {short['why']}" if short.get("why") else ""
+    first = short.get("first_time")
+    when = f", first at t={first:g} s" if isinstance(first, int | float) else ""
+    return share, (f"the controller {short.get('what', 'did not serve')} at {steps} of {of} "
+                   f"steps ({100 * share:.0f} %{why}){when}")
 
 
 def communication_times(t0: float, stop: float, dt: float) -> list[float]:

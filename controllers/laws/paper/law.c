@@ -237,7 +237,7 @@ static void evaluate(law_state *st, const double *xhat, const double *u, int sta
   PFX(assess)(st->ws, xhat, r->u, st->x_bar, st->u_bar, u_prev(st), st->bnd, st->alpha, r->x,
               &out);
   r->cost = out.cost;
-  set_residuals(r, &out, st->alpha);
+  set_residuals(r, &out, st->alpha, 0);
   r->defect = 0.0;
   r->status = status;
   r->success = r->feasible = 0;
@@ -245,10 +245,12 @@ static void evaluate(law_state *st, const double *xhat, const double *u, int sta
 }
 
 /* FixedSetpoint.write through FHOCPLayout.write: p = (x_hat, x_bar, u_bar[, u_{-1}]), the
- * bounds (t <= alpha), the output and terminal rows, the initial guess (u_init when given:
- * the governor's candidate; else the last answer shifted by one stage with u_bar appended,
- * else u_bar repeated; t its terminal gap) and the multipliers shifted by one stage */
-static void write_request(law_state *st, const double *xhat, const double *u_init) {
+ * bounds (t <= alpha; the slacks free in the softened phase, soften, else 0), the output and
+ * terminal rows, the initial guess (u_init when given: the governor's candidate; else the
+ * last answer shifted by one stage with u_bar appended, else u_bar repeated; t its terminal
+ * gap; the softened phase's slacks its plan's) and the multipliers shifted by one stage */
+static void write_request(law_state *st, const double *xhat, const double *u_init,
+                          int soften) {
   double *p = st->p;
   memcpy(p, xhat, NX * sizeof(double));
   memcpy(p + NX, st->x_bar, NX * sizeof(double));
@@ -256,10 +258,7 @@ static void write_request(law_state *st, const double *xhat, const double *u_ini
 #if HAS_DU
   memcpy(p + 2 * NX + NU, u_prev(st), NU * sizeof(double));
 #endif
-  for (int c = 0; c < NW; c++) {
-    st->lbx[c] = c == IT ? 0.0 : -1.0;
-    st->ubx[c] = c == IT ? st->alpha : 1.0;
-  }
+  variable_bounds(st->lbx, st->ubx, st->alpha, soften);
   for (int c = 0; c < NG; c++) {
     st->lbg[c] = -INFINITY;
     st->ubg[c] = INFINITY;
@@ -282,24 +281,20 @@ static void write_request(law_state *st, const double *xhat, const double *u_ini
   for (int c = 0; c < NH * NU; c++) st->w[c] = gk_clip1(st->w[c]);
   prefix_impose(st->prefix, st->w);
   prefix_bound(st->prefix, st->lbx, st->ubx);
-  const double gap = PFX(terminal_gap)(st->ws, st->w, p);
+  const double gap = soften ? PFX(plan_slacks)(st->ws, st->w, p, st->bnd, st->alpha)
+                            : PFX(terminal_gap)(st->ws, st->w, p);
   st->w[IT] = fmin(fmax(gap, 1e-6), fmax(st->alpha, 0.0));
   for (int c = 0; c < NW; c++) st->lx[c] = st->has_warm ? st->warm_lx[CT_PERM_X[c]] : 0.0;
   for (int c = 0; c < NG; c++) st->lg[c] = st->has_warm ? st->warm_lg[CT_PERM_G[c]] : 0.0;
 }
 
-/* FHOCP.solve_request with the paper's reference, into st->res: the i = 0 row first (a
- * violated one: u_bar repeated, evaluated, status infeasible_x0), then the SQP from u_init
- * (NULL: the warm start), the answer check (FixedSetpoint.check_answer, judge) and the warm
- * start (keeps_warm_start) */
-static void solve(law_state *st, const double *xhat, const double *u_init) {
-  double ubar_seq[NH * NU];
-  if (x0_violation(xhat, st->bnd) > CT_FEAS_TOL) {
-    for (int i = 0; i < NH; i++) memcpy(ubar_seq + i * NU, st->u_bar, NU * sizeof(double));
-    evaluate(st, xhat, ubar_seq, CTL_INFEASIBLE_X0, &st->res);
-    return;
-  }
-  write_request(st, xhat, u_init);
+/* One phase of FHOCP.solve_request (FHOCP._solve_phase) into st->res: the hard problem, or
+ * the softened one (soften), the SQP from u_init (NULL: the warm start), the answer check
+ * (FixedSetpoint.check_answer, judge) and the warm start (keeps_warm_start); the SQP's
+ * status */
+static int solve_phase(law_state *st, const double *xhat, const double *u_init, int soften) {
+  PFX(set_soft)(st->ws, soften);
+  write_request(st, xhat, u_init, soften);
   const int status = PFX(sqp)(st->ws, st->p, st->lbx, st->ubx, st->lbg, st->ubg, st->w, st->lx,
                               st->lg, st->g, &st->f, &st->opts, &st->info);
   ctl_result *r = &st->res;
@@ -307,7 +302,7 @@ static void solve(law_state *st, const double *xhat, const double *u_init) {
   PFX(assess_w)(st->ws, st->w, st->p, st->bnd, st->alpha, r->u, r->x, &out, 0);
   r->cost = out.cost;
   r->defect = out.defect;
-  set_residuals(r, &out, st->alpha);
+  set_residuals(r, &out, st->alpha, soften);
   judge(r, st->w, status, &st->info);
   if (r->success || (all_finite(st->w, NW) && all_finite(st->lg, NG) && all_finite(st->lx, NW))) {
     memcpy(st->warm_w, st->w, sizeof st->warm_w);
@@ -315,6 +310,42 @@ static void solve(law_state *st, const double *xhat, const double *u_init) {
     memcpy(st->warm_lg, st->lg, sizeof st->warm_lg);
     st->has_warm = 1;
   }
+  return status;
+}
+
+/* FHOCP.solve_request with the paper's reference, into st->res: the i = 0 row first (a
+ * violated one: u_bar repeated, evaluated, status infeasible_x0; with SOFT the softened phase
+ * at once), then the hard phase, and with SOFT the softened one when the hard one had no
+ * answer (soften_after), from the same guess and warm start */
+static void solve(law_state *st, const double *xhat, const double *u_init) {
+  if (x0_violation(xhat, st->bnd) > CT_FEAS_TOL) {
+    if (SOFT) {
+      solve_phase(st, xhat, u_init, 1);
+      return;
+    }
+    double ubar_seq[NH * NU];
+    for (int i = 0; i < NH; i++) memcpy(ubar_seq + i * NU, st->u_bar, NU * sizeof(double));
+    evaluate(st, xhat, ubar_seq, CTL_INFEASIBLE_X0, &st->res);
+    return;
+  }
+#if SOFT
+  double w0[NW], lx0[NW], lg0[NG];   /* the warm start, for the softened phase */
+  const int had_warm = st->has_warm;
+  memcpy(w0, st->warm_w, sizeof w0);
+  memcpy(lx0, st->warm_lx, sizeof lx0);
+  memcpy(lg0, st->warm_lg, sizeof lg0);
+#endif
+  const int status = solve_phase(st, xhat, u_init, 0);
+#if SOFT
+  if (st->res.success || !soften_after(status)) return;
+  st->has_warm = had_warm;
+  memcpy(st->warm_w, w0, sizeof w0);
+  memcpy(st->warm_lx, lx0, sizeof lx0);
+  memcpy(st->warm_lg, lg0, sizeof lg0);
+  solve_phase(st, xhat, u_init, 1);
+#else
+  (void)status;
+#endif
 }
 
 /* RobustMPC.make_step: u_k = k^MPC(x_hat, e_o) (eq:mpc), the candidate of the proof (the

@@ -103,7 +103,8 @@ class FixedSetpoint(ServesOne):
         self.layout.write(ins, fh.tightened_bounds(e_o), x_hat, request.x_bar,
                           request.u_bar, request.alpha, request.u_init,
                           fh.warm_start if request.warm else None, fh.warm_duals,
-                          fh.rollout, request.u_prev if fh.has_du else None, fh.prefix)
+                          fh.rollout, request.u_prev if fh.has_du else None, fh.prefix,
+                          fh.start_slacks if fh.softening else None)
 
     def check_answer(self, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray, e_o: float,
                      request: Setpoint, status: str) -> FHOCPResult:
@@ -116,15 +117,16 @@ class FixedSetpoint(ServesOne):
                                               request.alpha)
             res = FHOCPResult(u=u, x=x, cost=out.cost, status=status, success=False, t=t,
                               defect=out.defect)
-            set_residuals(res, out, request.alpha)
+            set_residuals(res, out, request.alpha, fh.softening)
             return res
         u = np.clip(wopt[self.iu], -1.0, 1.0)
         x = fh.simulate(x_hat, u)
-        res = FHOCPResult(u=u, x=x, cost=self.cost(x, u, request.x_bar, request.u_bar,
-                                                   u_prev=request.u_prev),
+        bounds = fh.tightened_bounds(e_o)
+        res = FHOCPResult(u=u, x=x, cost=self.plan_cost(x, u, request.x_bar, request.u_bar,
+                                                        bounds, request.alpha, request.u_prev),
                           status=status, success=False, t=t,
                           defect=float(np.max(np.abs(fh.solver_trajectory(wopt, pv) - x))))
-        self.residuals(res, x, fh.tightened_bounds(e_o), request.x_bar, request.alpha)
+        self.residuals(res, x, bounds, request.x_bar, request.alpha, fh.softening)
         return res
 
     def fallback(self, x_hat: np.ndarray, e_o: float, request: Setpoint,
@@ -150,10 +152,12 @@ class FixedSetpoint(ServesOne):
             set_residuals(res, out, alpha)
             return res
         x = fh.simulate(np.asarray(x_hat, dtype=float), u_seq)
-        tN = float(np.max(np.abs(x[-1] - x_bar)))
-        res = FHOCPResult(u=u_seq, x=x, cost=self.cost(x, u_seq, x_bar, u_bar, tN, u_prev),
-                          status=SolveStatus.CANDIDATE, success=False, t=tN)
-        self.residuals(res, x, fh.tightened_bounds(e_o), x_bar, alpha)
+        bounds = fh.tightened_bounds(e_o)
+        res = FHOCPResult(u=u_seq, x=x, cost=self.plan_cost(x, u_seq, x_bar, u_bar, bounds,
+                                                            alpha, u_prev),
+                          status=SolveStatus.CANDIDATE, success=False,
+                          t=float(np.max(np.abs(x[-1] - x_bar))))
+        self.residuals(res, x, bounds, x_bar, alpha)
         return res
 
     def assess(self, x_hat: np.ndarray, u_seq: np.ndarray, x_bar: np.ndarray, e_o: float,
@@ -185,12 +189,27 @@ class FixedSetpoint(ServesOne):
         return J
 
     def residuals(self, res: FHOCPResult, x: np.ndarray, bounds: np.ndarray,
-                  x_bar: np.ndarray, alpha: float) -> None:
+                  x_bar: np.ndarray, alpha: float, soft: bool = False) -> None:
         """The output rows' (right-hand sides ``bounds``, N×q: :meth:`~controllers.ocp.
         fhocp.FHOCP.tightened_bounds`), input box's and terminal set's violations of
         ``(res.u, x)``, and the active rows, into ``res``
         (:func:`~controllers.ocp.fhocp_result.plan_residuals` around ``x̄``)."""
-        plan_residuals(res, x, self._fh.LUo, bounds, x_bar, alpha)
+        plan_residuals(res, x, self._fh.LUo, bounds, x_bar, alpha, soft)
+
+    def plan_cost(self, x: np.ndarray, u: np.ndarray, x_bar: np.ndarray, u_bar: np.ndarray,
+                  bounds: np.ndarray, alpha: float, u_prev: np.ndarray | None = None
+                  ) -> float:
+        """The cost of a plan ``(x, u)`` (:meth:`cost` with ``t = ‖x_N − x̄‖∞``); with
+        softened rows (:mod:`controllers.ocp.soft`) ``t = min(‖x_N − x̄‖∞, α)`` and the
+        penalty of the plan's smallest slacks (right-hand sides ``bounds``, N×q)."""
+        fh = self._fh
+        dN = float(np.max(np.abs(x[fh.N] - x_bar)))
+        sl = fh.soft_design
+        if sl is None:
+            return self.cost(x, u, x_bar, u_bar, dN, u_prev)
+        eps = sl.of_plan(x[1:fh.N] @ fh.LUo.T - bounds[1:], dN, alpha)
+        return (self.cost(x, u, x_bar, u_bar, sl.plan_terminal(dN, alpha), u_prev)
+                + sl.penalty(eps))
 
     def u_prev(self, u_prev: np.ndarray | None, u_bar: np.ndarray) -> np.ndarray:
         """``u_{−1}`` (m,): ``u_prev``, else ``ū`` (before any input was applied)."""

@@ -52,12 +52,14 @@ typedef struct law_state {
   double warm_lx[NW], warm_lg[NG];
   /* the solver's buffers */
   double p[NP], lbx[NW], ubx[NW], lbg[NG], ubg[NG], w[NW], lx[NW], lg[NG], g[NG], f;
-  double bnd[NH * NL], ys_rhs[NL], shift[NL], cand[NH * NU];
+  /* the tightened bounds (NH x NL), then Y_s's right-hand side (YS_RHS) */
+  double bnd[(NH + 1) * NL], shift[NL], cand[NH * NU];
   ctl_result res, chk;
   gk_sqp_opts opts;
   gk_sqp_info info;
   ctl_last last;   /* what the last step gave */
 } law_state;
+#define YS_RHS(st) ((st)->bnd + NH * NL)
 
 /* the tightened bounds (controller.h), in the uncertified mode around y + d_hat, and Y_s's
  * right-hand side */
@@ -67,13 +69,14 @@ static void tighten(law_state *st, double e_o) {
     for (int i = 0; i < NH; i++)
       for (int j = 0; j < NL; j++) st->bnd[i * NL + j] -= st->shift[j];
   for (int j = 0; j < NL; j++)
-    st->ys_rhs[j] = CT_CERTIFIED ? CT_YS_BASE[j] : CT_YS_BASE[j] - st->shift[j];
+    YS_RHS(st)[j] = CT_CERTIFIED ? CT_YS_BASE[j] : CT_YS_BASE[j] - st->shift[j];
 }
 
 /* the answer check of (w, p) into r (ArtificialSteadyState._check_compiled): the kernel's plain
  * rollout, x_s(u_s) from p's x_s0 with its fixed point verified, cost and residuals (output
  * rows, input box, terminal set, Y_s) */
-static void assess(law_state *st, const double *w, const double *p, ctl_result *r) {
+static void assess(law_state *st, const double *w, const double *p, ctl_result *r,
+                   int soften) {
   gk_assessment out;
   PFX(assess_w)(st->ws, w, p, st->bnd, CT_ALPHA_C, r->u, r->x, &out, r->xs);
   for (int j = 0; j < NU; j++) r->us[j] = gk_clip1(w[NUU + j]);
@@ -82,14 +85,17 @@ static void assess(law_state *st, const double *w, const double *p, ctl_result *
   if (!(out.steady_residual <= CT_XS_CHECK_TOL)) {
     for (int k = 0; k < NX; k++) r->xs[k] = NAN;
     r->cv = r->tv = INFINITY;
+    r->softened = 0.0;
     return;
   }
-  set_residuals(r, &out, CT_ALPHA_C);
+  set_residuals(r, &out, CT_ALPHA_C, soften);
+  double excess = -INFINITY;
   for (int j = 0; j < NL; j++) {
     double s = 0.0;
     for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * r->xs[k];
-    r->cv = fmax(r->cv, s - st->ys_rhs[j]);
+    excess = fmax(excess, s - YS_RHS(st)[j]);
   }
+  extra_row(r, excess, soften);
 }
 
 /* p = (x_hat, x_s0, r[, u_prev]) */
@@ -114,7 +120,7 @@ static void check(law_state *st, const double *xhat, const double *u_in, const d
   for (int c = 0; c < NUU; c++) w[c] = gk_clip1(u_in[c]);
   for (int j = 0; j < NU; j++) w[NUU + j] = gk_clip1(us_in[j]);
   parameters(p, xhat, xs0, rt, up);
-  assess(st, w, p, r);
+  assess(st, w, p, r, 0);
   r->defect = 0.0;
   r->status = status;
   r->success = r->feasible = 0;
@@ -124,13 +130,10 @@ static void check(law_state *st, const double *xhat, const double *u_in, const d
 /* the solver's buffers for the target rt (ArtificialSteadyState.write) */
 static void write_request(law_state *st, const double *xhat, const double *rt,
                           const double *u_init, const double *us_init, const double *xs0,
-                          const double *up, const double *us_centre) {
+                          const double *up, const double *us_centre, int soften) {
   double *p = st->p;
   parameters(p, xhat, xs0, rt, up);
-  for (int c = 0; c < NW; c++) {
-    st->lbx[c] = c == IT ? 0.0 : -1.0;
-    st->ubx[c] = c == IT ? CT_ALPHA_C : 1.0;
-  }
+  variable_bounds(st->lbx, st->ubx, CT_ALPHA_C, soften);
   if (CT_US_RATE > 0.0)
     for (int j = 0; j < NU; j++) {
       st->lbx[NUU + j] = fmax(us_centre[j] - CT_US_RATE, -1.0);
@@ -149,14 +152,16 @@ static void write_request(law_state *st, const double *xhat, const double *rt,
     st->lbg[r0 + NX + k] = 0.0;
   }
   for (int r = 0; r < NQ; r++) {
-    st->ubg[r0 + 2 * NX + r] = st->ys_rhs[CT_PAIR_UP[r]];
-    if (CT_PAIR_LO[r] >= 0) st->lbg[r0 + 2 * NX + r] = -st->ys_rhs[CT_PAIR_LO[r]];
+    st->ubg[r0 + 2 * NX + r] = YS_RHS(st)[CT_PAIR_UP[r]];
+    if (CT_PAIR_LO[r] >= 0) st->lbg[r0 + 2 * NX + r] = -YS_RHS(st)[CT_PAIR_LO[r]];
   }
   /* the initial guess: the candidate, t its terminal gap, the multipliers shifted */
   memcpy(st->w, u_init, NUU * sizeof(double));
   for (int j = 0; j < NU; j++)
     st->w[NUU + j] = fmin(fmax(us_init[j], st->lbx[NUU + j]), st->ubx[NUU + j]);
-  const double gap = PFX(terminal_gap)(st->ws, st->w, p);
+  for (int c = IT + 1; c < NW; c++) st->w[c] = 0.0;   /* the slacks (SOFT) */
+  const double gap = soften ? PFX(plan_slacks)(st->ws, st->w, p, st->bnd, CT_ALPHA_C)
+                            : PFX(terminal_gap)(st->ws, st->w, p);
   st->w[IT] = fmin(fmax(gap, 1e-6), CT_ALPHA_C);
   for (int c = 0; c < NW; c++) st->lx[c] = st->has_warm ? st->warm_lx[CT_PERM_X[c]] : 0.0;
   for (int c = 0; c < NG; c++) st->lg[c] = st->has_warm ? st->warm_lg[CT_PERM_G[c]] : 0.0;
@@ -164,9 +169,9 @@ static void write_request(law_state *st, const double *xhat, const double *rt,
 
 /* the answer check of the solver's w (ArtificialSteadyState._check_compiled) and its judgement
  * (fhocp_result.judge) into st->res */
-static void check_answer(law_state *st, int sqp_status) {
+static void check_answer(law_state *st, int sqp_status, int soften) {
   ctl_result *r = &st->res;
-  assess(st, st->w, st->p, r);
+  assess(st, st->w, st->p, r, soften);
   judge(r, st->w, sqp_status, &st->info);
   /* the warm start (fhocp_result.keeps_warm_start) */
   if (r->success || (all_finite(st->w, NW) && all_finite(st->lg, NG) && all_finite(st->lx, NW))) {
@@ -177,8 +182,11 @@ static void check_answer(law_state *st, int sqp_status) {
 }
 
 /* one solve for the target rt from the guess (ArtificialSteadyState.request, FHOCP.
- * solve_request) against the bounds tighten() wrote: the i = 0 row first, then the SQP and
- * its answer check, into st->res */
+ * solve_request) against the bounds tighten() wrote, into st->res: the i = 0 row first (a
+ * violated one: the candidate evaluated, status infeasible_x0; with SOFT the softened phase
+ * at once), then the hard phase's SQP and its answer check, and with SOFT the softened
+ * phase's when the hard one had no answer (soften_after), from the same guess and warm
+ * start */
 static void solve(law_state *st, const double *xhat, const double *rt, const double *g_u,
                   const double *g_us, const double *xs0, const double *up,
                   const double *us_centre) {
@@ -186,14 +194,30 @@ static void solve(law_state *st, const double *xhat, const double *rt, const dou
   for (int c = 0; c < NH * NU; c++) u_init[c] = gk_clip1(g_u[c]);
   prefix_impose(st->prefix, u_init);
   for (int j = 0; j < NU; j++) us_init[j] = gk_clip1(g_us[j]);
-  if (x0_violation(xhat, st->bnd) > CT_FEAS_TOL) {
+  const int outside = x0_violation(xhat, st->bnd) > CT_FEAS_TOL;
+  if (outside && !SOFT) {
     check(st, xhat, u_init, us_init, rt, xs0, up, CTL_INFEASIBLE_X0, &st->res);
     return;
   }
-  write_request(st, xhat, rt, u_init, us_init, xs0, up, us_centre);
-  const int status = PFX(sqp)(st->ws, st->p, st->lbx, st->ubx, st->lbg, st->ubg, st->w, st->lx,
-                              st->lg, st->g, &st->f, &st->opts, &st->info);
-  check_answer(st, status);
+#if SOFT
+  double lx0[NW], lg0[NG];   /* the warm start, for the softened phase */
+  const int had_warm = st->has_warm;
+  memcpy(lx0, st->warm_lx, sizeof lx0);
+  memcpy(lg0, st->warm_lg, sizeof lg0);
+#endif
+  for (int soften = outside; soften <= SOFT; soften++) {
+    PFX(set_soft)(st->ws, soften);
+    write_request(st, xhat, rt, u_init, us_init, xs0, up, us_centre, soften);
+    const int status = PFX(sqp)(st->ws, st->p, st->lbx, st->ubx, st->lbg, st->ubg, st->w,
+                                st->lx, st->lg, st->g, &st->f, &st->opts, &st->info);
+    check_answer(st, status, soften);
+    if (soften || st->res.success || !soften_after(status)) return;
+#if SOFT
+    st->has_warm = had_warm;   /* the softened phase starts where the hard one did */
+    memcpy(st->warm_lx, lx0, sizeof lx0);
+    memcpy(st->warm_lg, lg0, sizeof lg0);
+#endif
+  }
 }
 
 /* ---------------------------------------------------------------- the law */

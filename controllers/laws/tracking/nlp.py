@@ -67,7 +67,7 @@ class TrackingNLP(SingleShootingNLP):
         self._E: np.ndarray | None = None   # None: w_N = w (no control horizon)
         if ass.control_horizon < N:
             src = np.concatenate([fhocp.iu.ravel(), ass.ius, [fhocp.it]])
-            self._E = np.zeros((self._nwf, fhocp.nw))
+            self._E = np.zeros((self._nwf, self.nwh))
             self._E[np.arange(self._nwf), src] = 1.0
 
     def forget(self) -> None:
@@ -138,8 +138,8 @@ class TrackingNLP(SingleShootingNLP):
             grad[self._iuf[-p.m:]] += d
             grad[self._iusf] -= d
 
-    def gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
-        """``[f, ∇f]``."""
+    def _gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[f, ∇f]`` of the hard problem."""
         p = self.p
         ro = self.rollout(wv, pv, True)
         xs, Xs = self.steady(wv, pv)
@@ -149,8 +149,8 @@ class TrackingNLP(SingleShootingNLP):
         grad[self._itf] = 2 * p.s * wv[p.it]
         return [self.objective(wv, pv, ro), grad if self._E is None else grad @ self._E]
 
-    def jacobian(self, wv: np.ndarray, pv: np.ndarray) -> list:
-        """``[g, ∂g/∂w]``."""
+    def _jacobian(self, wv: np.ndarray, pv: np.ndarray) -> list:
+        """``[g, ∂g/∂w]`` of the hard problem."""
         p = self.p
         ro = self.rollout(wv, pv, True)
         _, Xs = self.steady(wv, pv)
@@ -167,9 +167,9 @@ class TrackingNLP(SingleShootingNLP):
         J[r0 + 2 * n:, ius] = p.DUo @ Xs
         return [self.constraints(wv, pv, ro), J if self._E is None else J @ self._E]
 
-    def hessian(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
-                lg: np.ndarray) -> np.ndarray:
-        """The exact Hessian of the Lagrangian (dense, symmetric)."""
+    def _hessian(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
+                 lg: np.ndarray) -> np.ndarray:
+        """The exact Hessian of the hard problem's Lagrangian (dense, symmetric)."""
         p = self.p
         ro = self.rollout(wv, pv, True)
         xs, Xs = self.steady(wv, pv)
@@ -221,7 +221,7 @@ class TrackingNLP(SingleShootingNLP):
         us = rng.uniform(-0.8, 0.8, m)
         x0 = rng.uniform(-0.3, 0.3, n)
         wv = np.concatenate([rng.uniform(-1, 1, p.reference.control_horizon * m), us,
-                             rng.uniform(0, 0.1, 1)])
+                             rng.uniform(0, 0.1, 1 + p.nsl)])
         pv = np.concatenate([x0, x0 + rng.normal(0, 0.01, n),
                              rng.uniform(-1, 1, p.npar - 2 * n)])
         return wv, pv

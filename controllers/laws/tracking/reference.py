@@ -198,7 +198,7 @@ class ArtificialSteadyState(ServesOne):
         """The layout of ``w``, ``g`` and ``p``, the static bounds and the warm start's
         permutations."""
         n, m, N, qr, M = fh.n, fh.m, fh.N, fh.qr, self.control_horizon
-        self.nw = M * m + m + 1
+        self.nw = M * m + m + 1 + fh.nsl
         self.ius = np.arange(M * m, M * m + m)
         self.iu = np.vstack([np.arange(M * m).reshape(M, m),
                              np.tile(self.ius, (N - M, 1))]).astype(int)
@@ -278,7 +278,11 @@ class ArtificialSteadyState(ServesOne):
         w0[self.iu.ravel()] = request.u_init.ravel()
         w0[self.ius] = np.minimum(np.maximum(request.us_init, ins["lbx"][self.ius]),
                                   ins["ubx"][self.ius])
-        if fh.kernel is not None:   # the rollout stays cached for the solve
+        if fh.softening:   # the slacks of the candidate's plan
+            x = None if fh.kernel is not None else fh.simulate(x_hat, request.u_init)
+            gap = fh.start_slacks(w0, pv, x, request.x_s0, self.steady_bounds(e_o),
+                                  self.alpha_c)
+        elif fh.kernel is not None:   # the rollout stays cached for the solve
             gap = fh.kernel.terminal_gap(w0, pv)
         else:
             gap = float(np.max(np.abs(fh.simulate(x_hat, request.u_init)[-1]
@@ -298,9 +302,9 @@ class ArtificialSteadyState(ServesOne):
         :meth:`evaluate` with the defect against the solver's own trajectory."""
         fh = self._fh
         if fh.kernel is not None:
-            return self._check_compiled(wopt, pv, e_o, status)
+            return self._check_compiled(wopt, pv, e_o, status, fh.softening)
         res = self.evaluate(x_hat, wopt[self.iu], wopt[self.ius], e_o, request.r,
-                            request.x_s0, request.u_prev, status)
+                            request.x_s0, request.u_prev, status, soft=fh.softening)
         res.defect = float(np.max(np.abs(fh.solver_trajectory(wopt, pv) - res.x)))
         return res
 
@@ -329,10 +333,12 @@ class ArtificialSteadyState(ServesOne):
 
     def evaluate(self, x_hat: np.ndarray, u: np.ndarray, u_s: np.ndarray, e_o: float,
                  r: np.ndarray, x_s0: np.ndarray, u_prev: np.ndarray | None = None,
-                 status: str = SolveStatus.CANDIDATE) -> FHOCPResult:
+                 status: str = SolveStatus.CANDIDATE, *, soft: bool = False) -> FHOCPResult:
         """Evaluate ``(u, u_s)`` independently of the solver: rollout, ``x_s`` recomputed,
-        cost and residuals (output rows, input box, terminal set, ``Y_s``). With a kernel the
-        answer check of the solver's answers in one compiled call (:meth:`_check_compiled`,
+        cost and residuals (output rows, input box, terminal set, ``Y_s``; ``soft``: the
+        softened phase's answer, :func:`~controllers.ocp.fhocp_result.route_softened`). With
+        a kernel the answer check of the solver's answers in one compiled call
+        (:meth:`_check_compiled`,
         the exported controller's too; ``u`` in the control horizon's form, its rows from M
         on equal to ``u_s``, as every candidate is), else numpy (Newton for ``x_s``)."""
         fh = self._fh
@@ -344,7 +350,7 @@ class ArtificialSteadyState(ServesOne):
             w[self.ius] = u_s
             pv = np.zeros(self.npar)
             self._write_parameters(pv, x_hat, x_s0, r, u_s if u_prev is None else u_prev)
-            res = self._check_compiled(w, pv, e_o, status)
+            res = self._check_compiled(w, pv, e_o, status, soft)
             res.defect = 0.0   # no solver trajectory to compare with
             return res
         x = fh.simulate(np.asarray(x_hat, dtype=float), u)
@@ -354,18 +360,52 @@ class ArtificialSteadyState(ServesOne):
         if not ok:
             res.constraint_violation = res.terminal_violation = float("inf")
             return res
-        self._residuals(res, x, x_s, e_o)
-        res.cost = self.cost(x, u, u_s, x_s, r, u_prev=u_prev)
+        self._residuals(res, x, x_s, e_o, soft)
+        res.cost = self.plan_cost(x, u, u_s, x_s, r, e_o, u_prev)
         return res
 
-    def _residuals(self, res: FHOCPResult, x: np.ndarray, x_s: np.ndarray, e_o: float
-                   ) -> None:
+    def plan_cost(self, x: np.ndarray, u: np.ndarray, u_s: np.ndarray, x_s: np.ndarray,
+                  r: np.ndarray, e_o: float, u_prev: np.ndarray | None = None) -> float:
+        """The cost of a plan (:meth:`cost` with ``t = ‖x_N − x_s‖∞``); softened
+        (:mod:`controllers.ocp.soft`): ``t = min(‖x_N − x_s‖∞, α_c)`` and the penalty of the
+        plan's smallest slacks (the output rows and ``Y_s``'s)."""
+        fh = self._fh
+        dN = float(np.max(np.abs(x[fh.N] - x_s)))
+        sl = fh.soft_design
+        if sl is None:
+            return self.cost(x, u, u_s, x_s, r, dN, u_prev)
+        eps = sl.of_plan(self._excess(x, x_s, e_o), dN, self.alpha_c)
+        return (self.cost(x, u, u_s, x_s, r, sl.plan_terminal(dN, self.alpha_c), u_prev)
+                + sl.penalty(eps))
+
+    def _excess(self, x: np.ndarray, x_s: np.ndarray, e_o: float) -> np.ndarray:
+        """The rows' excess of a plan: stages ``1 … N−1`` then ``Y_s`` (N × q)."""
+        fh = self._fh
+        return np.vstack([x[1:fh.N] @ fh.LUo.T - fh.tightened_bounds(e_o)[1:],
+                          fh.LUo @ x_s - self.ys_rhs])
+
+    def steady_bounds(self, e_o: float) -> np.ndarray:
+        """The tightened bounds with ``Y_s``'s right-hand side as one more row ((N + 1) × q:
+        what a softened kernel prices)."""
+        return np.vstack([self._fh.tightened_bounds(e_o), self.ys_rhs])
+
+    def _residuals(self, res: FHOCPResult, x: np.ndarray, x_s: np.ndarray, e_o: float,
+                   soft: bool) -> None:
         """:func:`~controllers.ocp.fhocp_result.plan_residuals` around ``x_s`` with
         ``α_c``, and ``Y_s``'s violation, into ``res`` (``res.t``: ``‖x_N − x_s‖∞``)."""
         fh = self._fh
-        res.t = plan_residuals(res, x, fh.LUo, fh.tightened_bounds(e_o), x_s, self.alpha_c)
-        res.constraint_violation = max(res.constraint_violation,
-                                       float(np.max(fh.LUo @ x_s - self.ys_rhs)))
+        res.t = plan_residuals(res, x, fh.LUo, fh.tightened_bounds(e_o), x_s, self.alpha_c,
+                               soft)
+        self._steady_rows(res, x_s, soft)
+
+    def _steady_rows(self, res: FHOCPResult, x_s: np.ndarray, soft: bool) -> None:
+        """``Y_s``'s excess at ``x_s`` into ``res``: a violation, or for the softened phase's
+        answer (``soft``, :mod:`controllers.ocp.soft`) part of ``res.softened``."""
+        excess = float(np.max(self._fh.LUo @ x_s - self.ys_rhs))
+        if soft:
+            res.softened = max(res.softened, excess)
+        else:
+            res.constraint_violation = max(res.constraint_violation, excess)
 
     def steady_state(self, u_s: np.ndarray, x0: np.ndarray) -> tuple[np.ndarray, bool]:
         """``(x_s(u_s), ok)``: the compiled kernel's Newton when there is one (its answer a
@@ -380,14 +420,16 @@ class ArtificialSteadyState(ServesOne):
         x_s, _, ok = steady_state(fh.params, u_s, x0)
         return x_s, ok
 
-    def _check_compiled(self, w: np.ndarray, p: np.ndarray, e_o: float, status: str
-                        ) -> FHOCPResult:
+    def _check_compiled(self, w: np.ndarray, p: np.ndarray, e_o: float, status: str,
+                        soft: bool) -> FHOCPResult:
         """:meth:`evaluate` of the solver's answer ``w`` in one compiled call (the kernel's
         plain rollout and a fixed-point test of its ``x_s``, apart from the solver's
         derivatives: :meth:`controllers.kernel.kernel_lib.Workspace.assess_w`), plus the defect
         against the solver's own trajectory."""
         fh = self._fh
-        u, x, out, x_s = fh.kernel.assess_w(w, p, fh.tightened_bounds(e_o), self.alpha_c)
+        # softened: Y_s's right-hand side as one more row, the kernel prices its excess
+        bounds = self.steady_bounds(e_o) if fh.soft else fh.tightened_bounds(e_o)
+        u, x, out, x_s = fh.kernel.assess_w(w, p, bounds, self.alpha_c)
         res = FHOCPResult(u=u, x=x, cost=out.cost, status=status, success=False,
                           t=out.terminal_distance, defect=out.defect)
         res.u_s, res.x_s = np.minimum(np.maximum(w[self.ius], -1.0), 1.0), x_s
@@ -395,9 +437,8 @@ class ArtificialSteadyState(ServesOne):
             res.x_s = np.full(fh.n, np.nan)
             res.constraint_violation = res.terminal_violation = float("inf")
             return res
-        set_residuals(res, out, self.alpha_c)
-        res.constraint_violation = max(res.constraint_violation,
-                                       float(np.max(fh.LUo @ x_s - self.ys_rhs)))
+        set_residuals(res, out, self.alpha_c, soft)
+        self._steady_rows(res, x_s, soft)
         return res
 
     # -- the solver's buffers ------------------------------------------------------------
@@ -458,6 +499,7 @@ class ArtificialSteadyState(ServesOne):
         lbx = np.full(self.nw, -1.0)
         ubx = np.full(self.nw, 1.0)
         lbx[self.it], ubx[self.it] = 0.0, self.alpha_c
+        lbx[self.it + 1:], ubx[self.it + 1:] = 0.0, np.inf   # the slacks (softened rows)
         self._lbx, self._ubx = lbx, ubx
         px = np.arange(self.nw)
         free = self.iu[:self.control_horizon]

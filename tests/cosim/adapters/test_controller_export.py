@@ -319,13 +319,14 @@ def test_the_compiled_step_replays_the_python_controller() -> None:
     compiled.close()
 
 
-def _replayed(ctrl: object, compiled: object, refs: list[tuple[float, float]]
-              ) -> Iterator[dict]:
+def _replayed(ctrl: object, compiled: object, refs: list[tuple[float, float]],
+              y0: tuple[float, float] = (0.62, 0.71)) -> Iterator[dict]:
     """Step a Python controller ``ctrl`` of the four-tank's outputs and its compiled step on
-    the same noisy measurements with the set-points ``refs`` (one per step): the same inputs (to the
-    bit), statuses and fallbacks at every step; yields the compiled step's outputs."""
+    the same noisy measurements (a random walk from ``y0``) with the set-points ``refs`` (one
+    per step): the same inputs (to the bit), statuses and fallbacks at every step; yields the
+    compiled step's outputs."""
     rng = np.random.default_rng(5)
-    y = np.array([0.62, 0.71])
+    y = np.array(y0, dtype=float)
     inputs = ctrl.problem.input_names
     for k, ref in enumerate(np.array(refs, dtype=float)):
         y = y + rng.normal(0.0, 2e-3, 2)
@@ -672,3 +673,24 @@ def test_a_tuned_models_weights_are_the_fmus(tmp_path: Path) -> None:
     _same_inputs(cosim.run(scenario, controller=str(fmu), figure=False), py, boxes)
     default = cosim.run(scenario, figure=False).to_pandas()
     assert not np.array_equal(default["ctrl.qa"], py.to_pandas()["ctrl.qa"])
+
+
+@pytest.mark.parametrize("law", [{}, PAPER_LAW], ids=["tracking", "paper"])
+def test_the_compiled_step_replays_the_softened_phase(law: dict) -> None:
+    """Measurements at the top of h1's box, where the estimated state fails the tightened
+    rows at the first step: the Python controller solves its softened problem
+    (:mod:`controllers.ocp.soft`) instead of falling back, and the compiled step gives the
+    same inputs (to the bit), statuses and fallbacks."""
+    from controllers.kernel.controller_source import CompiledController, build, design_data
+    from cosim.adapters.robust_mpc import RobustMPCController
+
+    ctrl = RobustMPCController(**law)
+    ctrl.setup(0.0)
+    design = ctrl.mpc.export_design()
+    compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
+                                  n_outputs=2)
+    softened = [ctrl.diagnostics()["softened"]
+                for _ in _replayed(ctrl, compiled, [(1.0, 0.9)] * 12, y0=(1.99, 0.9))]
+    assert softened[0] > 0.0, softened   # the estimate starts from the first measurement
+    assert ctrl.mpc.summary()["fallbacks"] == 0
+    compiled.close()
