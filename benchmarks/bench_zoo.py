@@ -14,7 +14,8 @@ heater of issue 62), what a user types, each command a ``cosim`` subprocess
    epochs, or ``--epochs``), timed;
 3. ``cosim certify --auto-gain-scale --save`` at the scenario's set-points: the verdict and
    rho_s, the contraction rate of V_s (``lem:Vs``);
-4. ``cosim tune --save``;
+4. ``cosim tune --save`` (when it fails, the robust MPC's default weights; ``zoo.json``
+   says why);
 5. ``cosim run scenario.csv`` with the robust MPC and with the PI tuned from the model;
 6. ``cosim campaign campaign.toml`` with ``runs`` = ``--runs``: both on the same draws.
 
@@ -128,6 +129,15 @@ def campaign(files: dict[str, Path], problem: Any) -> dict[str, Any]:
     return result
 
 
+def tune(model: Path) -> dict[str, Any]:
+    """``cosim tune --save``; when it fails, why (its last line), and the walk-through goes on
+    with the robust MPC's default weights, as a user would."""
+    try:
+        return own_plant.tune(model)
+    except SystemExit as exc:
+        return {"failed": str(exc).strip().splitlines()[-1]}
+
+
 def walkthrough(plant: str, work: Path, runs: int, epochs: int | None, steps: int,
                 seed: int) -> dict[str, Any]:
     """The default walk-through on ``plant`` in ``work``: the numbers of its table row."""
@@ -142,7 +152,7 @@ def walkthrough(plant: str, work: Path, runs: int, epochs: int | None, steps: in
         "plant": plant, "problem": problem.describe(), "steps": steps, "epochs": epochs,
         "train_s": round(train_s, 1),
         "certify": own_plant.certify(model, problem, setpoints, unusable_ok=True)}
-    report["tune"] = own_plant.tune(model)
+    report["tune"] = tune(model)
     runs_dir = work / "runs"
     report["pi"] = closed_loop(files, model, "pi", runs_dir / "pi", problem)
     if not report["certify"]["usable"]:        # no robust MPC runs this model
@@ -198,6 +208,9 @@ def main(argv: list[str] | None = None) -> int:
         reports.append(walkthrough(plant, out / plant, args.runs, args.epochs, args.steps,
                                    args.seed))
         print(row(reports[-1]), flush=True)
+        if "failed" in reports[-1]["tune"]:
+            print(f"  {plant}: cosim tune failed ({reports[-1]['tune']['failed']}): the "
+                  "walk-through went on with the robust MPC's default weights", flush=True)
         (out / "zoo.json").write_text(json.dumps(reports, indent=1) + "\n")
     print(f"files in {out}; every number in {out / 'zoo.json'}")
     return 0
