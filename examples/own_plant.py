@@ -68,12 +68,17 @@ HOLD = 60
 HOLDS = {"furnace": 120}
 
 
-def build_plant(name: str, folder: Path) -> Path:
-    """``fmus/examples/build.py``: the plant's FMU into ``folder``."""
+def examples_build() -> Any:
+    """``fmus/examples/build.py`` as a module (a script beside the plants)."""
     spec = importlib.util.spec_from_file_location("examples_build", EXAMPLES / "build.py")
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
-    return module.build(name, folder)
+    return module
+
+
+def build_plant(name: str, folder: Path) -> Path:
+    """``fmus/examples/build.py``: the plant's FMU into ``folder``."""
+    return examples_build().build(name, folder)
 
 
 def cosim_command(*args: Any) -> None:
@@ -86,10 +91,12 @@ def cosim_command(*args: Any) -> None:
 
 
 def identify(fmu: Path, problem: Path, work: Path, epochs: int | None,
-             seed: int, train_args: tuple[str, ...] = ()) -> tuple[Path, float]:
-    """generate-data and train; the model file and the training's wall time [s]."""
+             seed: int, train_args: tuple[str, ...] = (), steps: int = STEPS
+             ) -> tuple[Path, float]:
+    """generate-data (``steps`` samples) and train; the model file and the training's wall
+    time [s]."""
     data, model = work / "data" / "plant.csv", work / "models" / "plant_gru.json"
-    cosim_command("generate-data", "--plant", fmu, "--problem", problem, "--steps", STEPS,
+    cosim_command("generate-data", "--plant", fmu, "--problem", problem, "--steps", steps,
                   "--seed", seed, "--out", data, "--quiet")
     extra = [] if epochs is None else ["--epochs", epochs]
     t0 = time.perf_counter()
@@ -98,21 +105,31 @@ def identify(fmu: Path, problem: Path, work: Path, epochs: int | None,
     return model, time.perf_counter() - t0
 
 
-def certify(model: Path, problem: Any, setpoints: list[np.ndarray]) -> dict[str, Any]:
+def certify(model: Path, problem: Any, setpoints: list[np.ndarray],
+            unusable_ok: bool = False) -> dict[str, Any]:
     """``cosim certify --auto-gain-scale --save`` at the set-points the runs will use: its
-    exit code (0 certified, 1 not) and the verdict it saved."""
+    exit code (0 certified, 1 not, 2 not usable: an error unless ``unusable_ok``), the
+    verdict it saved and the contraction rate rho_s of V_s (``lem:Vs``) it printed."""
     named = [",".join(f"{n}={v:.6g}" for n, v in zip(problem.output_names, y, strict=True))
              for y in setpoints]
     proc = subprocess.run([sys.executable, "-m", "cosim.cli", "certify", str(model),
-                           "--auto-gain-scale", "--save",
+                           "--auto-gain-scale", "--save", "--json",
                            *(a for sp in named for a in ("--setpoint", sp))],
                           capture_output=True, text=True, check=False)
-    if proc.returncode not in (0, 1):
+    try:
+        printed = json.loads(proc.stdout)
+    except json.JSONDecodeError:
+        printed = None
+    if printed is None or proc.returncode not in (0, 1, 2) or (proc.returncode == 2
+                                                               and not unusable_ok):
         raise SystemExit(f"cosim certify failed (exit {proc.returncode}): {proc.stderr}")
-    verdict = json.loads(model.read_text())["certificate"]
+    doc = printed[0] if isinstance(printed, list) else printed
+    verdict = doc["verdict"]                     # as --save wrote it into the model file
     return {"exit": proc.returncode, "certified": verdict["certified"],
-            "reasons": [f["detail"] for f in verdict["findings"] if not f["holds"]],
-            "admissible": verdict["admissible_setpoints"]}
+            "usable": verdict["usable"],
+            "reasons": [f["detail"] for f in verdict["findings"] if not f["holds"]]
+            + ([verdict["unusable_reason"]] if verdict["unusable_reason"] else []),
+            "admissible": verdict["admissible_setpoints"], "rho_s": doc["rho_s"]}
 
 
 def tune(model: Path) -> dict[str, Any]:
@@ -219,8 +236,6 @@ def campaign(name: str, fmu: Path, model: Path, problem: Path, scenario: Path, w
     """A campaign with the plant's parameters drawn per run, every controller on the same
     draws: failed and violating runs per variant and, for a square plant, the median over the
     draws of the robust MPC's summed IAE and total variation divided by the PI's."""
-    import pandas as pd
-
     from controllers.problem_file import load
 
     draws = "\n".join(f'"plant.{k}" = {{ uniform = [{lo}, {hi}] }}'
@@ -251,9 +266,18 @@ name = "robust-mpc-paper"
 options = {{ law = "paper"{", " + mpc if mpc else ""} }}
 {pi}""")
     cosim_command("campaign", spec, "--out", work / "campaign", "--force", "--quiet")
-    summary = json.loads((work / "campaign" / "summary.json").read_text())
-    table = pd.read_parquet(work / "campaign" / "runs.parquet")
-    prob = load(problem)
+    return campaign_results(work / "campaign", load(problem), square)
+
+
+def campaign_results(folder: Path, prob: Any, square: bool) -> dict[str, Any]:
+    """What a user reads of the campaign in ``folder`` (problem ``prob``): failed and
+    violating runs per variant, each run's summed IAE and total variation (each signal over
+    its box width) and, for a square plant, the median over the draws of the robust MPC's
+    divided by the PI's."""
+    import pandas as pd
+
+    summary = json.loads((folder / "summary.json").read_text())
+    table = pd.read_parquet(folder / "runs.parquet")
     out: dict[str, Any] = {"status": "ok" if summary.get("failed") == 0 else "failed",
                            "runs": summary.get("runs"),
                            "violating_runs": summary.get("violating_runs"),

@@ -10,7 +10,7 @@ from types import ModuleType
 
 ROOT = Path(__file__).resolve().parents[1]
 
-__all__ = ["build", "problem_file"]
+__all__ = ["build", "fmu_name", "problem_file"]
 
 
 @cache
@@ -31,3 +31,8 @@ def build(plant: str, folder: Path) -> Path:
 def problem_file(plant: str) -> Path:
     """The control problem of example plant ``plant``."""
     return _script().problem_file(plant)
+
+
+def fmu_name(plant: str) -> str:
+    """The FMU file name of example plant ``plant``."""
+    return _script().FMU_NAMES[plant]

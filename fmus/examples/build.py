@@ -1,6 +1,8 @@
 """Build the example plants' FMUs with pythonfmu: ``CSTR.fmu``, ``Heater.fmu``,
 ``HeaterDeadTime.fmu``, ``MixingTank.fmu``, ``Furnace.fmu``, ``FurnaceLoad.fmu``,
-``Furnace3.fmu``.
+``Furnace3.fmu`` and the zoo of the field's benchmark plants: ``WoodBerry.fmu``,
+``ShellFractionator.fmu``, ``PHNeutralisation.fmu``, ``VanDeVusse.fmu``, ``SlowThermal.fmu``,
+``AirHeater.fmu``.
 
 Usage::
 
@@ -26,11 +28,19 @@ PLANTS = {"cstr": HERE / "cstr" / "cstr.py", "heater": HERE / "heater" / "heater
           "furnace": HERE / "furnace" / "furnace.py",
           "furnace_load": HERE / "furnace_load" / "furnace_load.py",
           "furnace3": HERE / "furnace3" / "furnace3.py"}
+#: The zoo: the field's benchmark plants, built from their published equations (each
+#: folder also holds the plant's ``scenario.csv`` and ``campaign.toml``).
+ZOO = ("wood_berry", "shell_fractionator", "ph_neutralisation", "van_de_vusse",
+       "slow_thermal", "air_heater")
+PLANTS.update({name: HERE / name / f"{name}.py" for name in ZOO})
 #: Plant name -> FMU file name.
 FMU_NAMES = {"cstr": "CSTR.fmu", "heater": "Heater.fmu",
              "heater_dead_time": "HeaterDeadTime.fmu", "mixing_tank": "MixingTank.fmu",
              "furnace": "Furnace.fmu", "furnace_load": "FurnaceLoad.fmu",
-             "furnace3": "Furnace3.fmu"}
+             "furnace3": "Furnace3.fmu", "wood_berry": "WoodBerry.fmu",
+             "shell_fractionator": "ShellFractionator.fmu",
+             "ph_neutralisation": "PHNeutralisation.fmu", "van_de_vusse": "VanDeVusse.fmu",
+             "slow_thermal": "SlowThermal.fmu", "air_heater": "AirHeater.fmu"}
 
 
 def problem_file(name: str) -> Path:

@@ -26,22 +26,19 @@ V, RHO, CP, DH, E_R, K0, UA = 100.0, 1000.0, 0.239, -2.0e4, 8750.0, 7.2e10, 5.0e
 class CSTR(ExamplePlant):
     """Jacketed exothermic CSTR: feed flow and coolant temperature -> CA and T."""
 
-    author = "gru-mpc-cosim examples"
     description = "Exothermic CSTR, F [L/min] and Tc [K] -> CA [mol/L] and T [K] (pythonfmu)"
-    INPUTS = (("F", "L/min", 100.0, "feed flow"),
-              ("Tc", "K", 320.0, "coolant temperature"))
-    OUTPUTS = (("CA", "mol/L", 0.8, "concentration of A"),
-               ("T", "K", 330.0, "reactor temperature"))
-    PARAMETERS = (("k0_factor", "1", 1.0, "multiplies the rate constant k0"),
-                  ("UA_factor", "1", 1.0, "multiplies the heat transfer UA of the jacket"),
-                  ("CAf", "mol/L", 1.0, "feed concentration"),
-                  ("Tf", "K", 340.0, "feed temperature"))
-    STATES = 2
+    SIGNALS = """
+        input      F          L/min  100.0  feed flow
+        input      Tc         K      320.0  coolant temperature
+        output     CA         mol/L  0.8    concentration of A
+        output     T          K      330.0  reactor temperature
+        parameter  k0_factor  1      1.0    multiplies the rate constant k0
+        parameter  UA_factor  1      1.0    multiplies the heat transfer UA of the jacket
+        parameter  CAf        mol/L  1.0    feed concentration
+        parameter  Tf         K      340.0  feed temperature
+    """
     MAX_SUBSTEP = 0.5
     SETTLE = 3000.0
-
-    def x_guess(self) -> list[float]:
-        return [0.8, 330.0]
 
     def rhs(self, x: list[float]) -> list[float]:
         ca, t = x
@@ -54,6 +51,3 @@ class CSTR(ExamplePlant):
 
     def clamp(self, x: list[float]) -> list[float]:
         return [max(0.0, x[0]), max(1.0, x[1])]
-
-    def out(self, x: list[float]) -> dict[str, float]:
-        return {"CA": x[0], "T": x[1]}

@@ -25,23 +25,20 @@ C, UA, K, E = 1.0e4, 5.0, 12.0, 1.2e-8
 class Furnace3(ExamplePlant):
     """Three-zone furnace: heater powers -> zone temperatures."""
 
-    author = "gru-mpc-cosim examples"
     description = "Three-zone furnace, P1, P2, P3 [W] -> T1, T2, T3 [degC] (pythonfmu)"
-    INPUTS = (("P1", "W", 1000.0, "heater power of zone 1"),
-              ("P2", "W", 1000.0, "heater power of zone 2"),
-              ("P3", "W", 1000.0, "heater power of zone 3"))
-    OUTPUTS = (("T1", "degC", 150.0, "temperature of zone 1"),
-               ("T2", "degC", 150.0, "temperature of zone 2"),
-               ("T3", "degC", 150.0, "temperature of zone 3"))
-    PARAMETERS = (("T_amb", "degC", 20.0, "room temperature"),
-                  ("K_factor", "1", 1.0, "multiplies the heat exchange between the zones"),
-                  ("C_factor", "1", 1.0, "multiplies the zones' heat capacity"))
-    STATES = 3
+    SIGNALS = """
+        input      P1        W     1000.0  heater power of zone 1
+        input      P2        W     1000.0  heater power of zone 2
+        input      P3        W     1000.0  heater power of zone 3
+        output     T1        degC  150.0   temperature of zone 1
+        output     T2        degC  150.0   temperature of zone 2
+        output     T3        degC  150.0   temperature of zone 3
+        parameter  T_amb     degC  20.0    room temperature
+        parameter  K_factor  1     1.0     multiplies the heat exchange between the zones
+        parameter  C_factor  1     1.0     multiplies the zones' heat capacity
+    """
     MAX_SUBSTEP = 2.0
     SETTLE = 20000.0
-
-    def x_guess(self) -> list[float]:
-        return [150.0, 150.0, 150.0]
 
     def rhs(self, x: list[float]) -> list[float]:
         amb = self.T_amb + 273.15
@@ -56,6 +53,3 @@ class Furnace3(ExamplePlant):
                 q += k * (x[i + 1] - t)
             out.append(q / c)
         return out
-
-    def out(self, x: list[float]) -> dict[str, float]:
-        return {"T1": x[0], "T2": x[1], "T3": x[2]}

@@ -31,23 +31,20 @@ C, UA, K, E, CP = 1.0e4, 5.0, 12.0, 1.2e-8, 500.0
 class FurnaceLoad(ExamplePlant):
     """Two-zone furnace with a measured product throughput."""
 
-    author = "gru-mpc-cosim examples"
     description = ("Two-zone furnace with a load, P1, P2 [W], F_load [kg/h] -> T1, T2 [degC] "
                    "(pythonfmu)")
-    INPUTS = (("P1", "W", 1000.0, "heater power of zone 1"),
-              ("P2", "W", 1000.0, "heater power of zone 2"),
-              ("F_load", "kg/h", 10.0, "product throughput (the load), measured"))
-    OUTPUTS = (("T1", "degC", 150.0, "temperature of zone 1"),
-               ("T2", "degC", 150.0, "temperature of zone 2"))
-    PARAMETERS = (("T_amb", "degC", 20.0, "room temperature, the product's inlet"),
-                  ("K_factor", "1", 1.0, "multiplies the heat exchange between the zones"),
-                  ("C_factor", "1", 1.0, "multiplies the zones' heat capacity"))
-    STATES = 2
+    SIGNALS = """
+        input      P1        W     1000.0  heater power of zone 1
+        input      P2        W     1000.0  heater power of zone 2
+        input      F_load    kg/h  10.0    product throughput (the load), measured
+        output     T1        degC  150.0   temperature of zone 1
+        output     T2        degC  150.0   temperature of zone 2
+        parameter  T_amb     degC  20.0    room temperature, the product's inlet
+        parameter  K_factor  1     1.0     multiplies the heat exchange between the zones
+        parameter  C_factor  1     1.0     multiplies the zones' heat capacity
+    """
     MAX_SUBSTEP = 2.0
     SETTLE = 20000.0
-
-    def x_guess(self) -> list[float]:
-        return [150.0, 150.0]
 
     def rhs(self, x: list[float]) -> list[float]:
         t1, t2 = x
@@ -61,6 +58,3 @@ class FurnaceLoad(ExamplePlant):
               - E * ((t2 + 273.15) ** 4 - amb ** 4) - g * (t2 - t1))
         c = self.C_factor * C
         return [d1 / c, d2 / c]
-
-    def out(self, x: list[float]) -> dict[str, float]:
-        return {"T1": x[0], "T2": x[1]}

@@ -21,22 +21,16 @@ C, UA0, UA1 = 2.0e4, 30.0, 0.3
 class Heater(ExamplePlant):
     """Heated vessel: power [W] -> temperature [degC]."""
 
-    author = "gru-mpc-cosim examples"
     description = "Heated vessel, P [W] -> T [degC] (pythonfmu)"
-    INPUTS = (("P", "W", 1000.0, "heater power"),)
-    OUTPUTS = (("T", "degC", 45.0, "vessel temperature"),)
-    PARAMETERS = (("T_amb", "degC", 20.0, "ambient temperature"),
-                  ("C_factor", "1", 1.0, "multiplies the heat capacity"))
-    STATES = 1
+    SIGNALS = """
+        input      P         W     1000.0  heater power
+        output     T         degC  45.0    vessel temperature
+        parameter  T_amb     degC  20.0    ambient temperature
+        parameter  C_factor  1     1.0     multiplies the heat capacity
+    """
     MAX_SUBSTEP = 2.0
     SETTLE = 20000.0
-
-    def x_guess(self) -> list[float]:
-        return [45.0]
 
     def rhs(self, x: list[float]) -> list[float]:
         d = x[0] - self.T_amb
         return [(self.P - (UA0 + UA1 * max(d, 0.0)) * d) / (self.C_factor * C)]
-
-    def out(self, x: list[float]) -> dict[str, float]:
-        return {"T": x[0]}

@@ -25,23 +25,17 @@ C, UA0, UA1 = 2.0e4, 30.0, 0.3
 class HeaterDeadTime(ExamplePlant):
     """Heated vessel with a 40 s transport delay on its power."""
 
-    author = "gru-mpc-cosim examples"
     description = "Heated vessel, P [W] (40 s dead time) -> T [degC] (pythonfmu)"
-    INPUTS = (("P", "W", 1000.0, "heater power, reaching the vessel 40 s later"),)
-    OUTPUTS = (("T", "degC", 45.0, "vessel temperature"),)
-    PARAMETERS = (("T_amb", "degC", 20.0, "ambient temperature"),
-                  ("C_factor", "1", 1.0, "multiplies the heat capacity"))
+    SIGNALS = """
+        input      P         W     1000.0  heater power, reaching the vessel 40 s later
+        output     T         degC  45.0    vessel temperature
+        parameter  T_amb     degC  20.0    ambient temperature
+        parameter  C_factor  1     1.0     multiplies the heat capacity
+    """
     DEAD_TIME: ClassVar[dict[str, float]] = {"P": 40.0}
-    STATES = 1
     MAX_SUBSTEP = 2.0
     SETTLE = 20000.0
-
-    def x_guess(self) -> list[float]:
-        return [45.0]
 
     def rhs(self, x: list[float]) -> list[float]:
         d = x[0] - self.T_amb
         return [(self.P - (UA0 + UA1 * max(d, 0.0)) * d) / (self.C_factor * C)]
-
-    def out(self, x: list[float]) -> dict[str, float]:
-        return {"T": x[0]}

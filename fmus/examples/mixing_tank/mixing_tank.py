@@ -26,23 +26,20 @@ AREA, CV = 0.25, 3.0e-3
 class MixingTank(ExamplePlant):
     """Mixing tank: hot, cold and warm feeds -> level and temperature."""
 
-    author = "gru-mpc-cosim examples"
     description = "Mixing tank, Fh, Fc, Fw [L/s] -> h [m] and T [degC] (pythonfmu)"
-    INPUTS = (("Fh", "L/s", 0.9, "hot water flow"),
-              ("Fc", "L/s", 0.9, "cold water flow"),
-              ("Fw", "L/s", 0.9, "warm water flow"))
-    OUTPUTS = (("h", "m", 0.8, "level"),
-               ("T", "degC", 41.7, "temperature"))
-    PARAMETERS = (("T_hot", "degC", 70.0, "hot water temperature"),
-                  ("T_cold", "degC", 15.0, "cold water temperature"),
-                  ("T_warm", "degC", 40.0, "warm water temperature"),
-                  ("Cv_factor", "1", 1.0, "multiplies the outlet coefficient"))
-    STATES = 2
+    SIGNALS = """
+        input      Fh         L/s   0.9   hot water flow
+        input      Fc         L/s   0.9   cold water flow
+        input      Fw         L/s   0.9   warm water flow
+        output     h          m     0.8   level
+        output     T          degC  41.7  temperature
+        parameter  T_hot      degC  70.0  hot water temperature
+        parameter  T_cold     degC  15.0  cold water temperature
+        parameter  T_warm     degC  40.0  warm water temperature
+        parameter  Cv_factor  1     1.0   multiplies the outlet coefficient
+    """
     MAX_SUBSTEP = 1.0
     SETTLE = 6000.0
-
-    def x_guess(self) -> list[float]:
-        return [0.8, 41.7]
 
     def rhs(self, x: list[float]) -> list[float]:
         h, t = max(x[0], 1e-3), x[1]
@@ -54,6 +51,3 @@ class MixingTank(ExamplePlant):
 
     def clamp(self, x: list[float]) -> list[float]:
         return [max(1e-3, x[0]), x[1]]
-
-    def out(self, x: list[float]) -> dict[str, float]:
-        return {"h": x[0], "T": x[1]}
