@@ -132,8 +132,8 @@ class DrawContext:
         from controllers import laws
         from controllers.certification import certificates as certs
         from controllers.certification.output_ranges import admissible_ranges
-        from controllers.mpc_options import MPCOptions, design_arguments
         from controllers.model import DEFAULT_MODEL, GRUModel
+        from controllers.mpc_options import MPCOptions, design_arguments
 
         model_path = spec.options.get("model") or spec.model or DEFAULT_MODEL
         if spec.model_plant and spec.model is None and "model" not in spec.options:

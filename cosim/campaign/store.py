@@ -24,7 +24,7 @@ from cosim.core import atomicio
 from cosim.core.errors import CosimError
 
 if TYPE_CHECKING:
-    from cosim.campaign.engine import Plan
+    from cosim.campaign.plan import Plan
 
 __all__ = ["CAMPAIGN_FILES", "TRACEBACK_FILE", "build_report", "finished", "open_folder",
            "write_run"]
