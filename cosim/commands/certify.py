@@ -18,6 +18,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from cosim.commands import add_model_argument, add_problem_argument
 from cosim.commands.certify_report import figure, print_table, print_verdict
 from cosim.core.errors import (
     EXIT_FAILED,
@@ -77,16 +78,12 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser("certify", help="compute and check the paper's certificates",
                               description=HELP, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("model", nargs="?", default=None,
-                   help="GRU model file (default: the shipped controllers/models/"
-                        "fourtank_gru.json)")
+    add_model_argument(p)
     p.add_argument("--setpoint", action="append", metavar="NAME=VALUE,...", default=[],
                    help="set-point in the problem's units, every output once by name "
                         "(e.g. h1=1.0,h2=0.8), or the values in the problem's output order "
                         "(1.0,0.8); repeat for several")
-    p.add_argument("--problem", metavar="PROBLEM.toml", default=None,
-                   help="control problem file: must agree with the model's own (checked), "
-                        "or gives the problem of a model file without one")
+    add_problem_argument(p)
     p.add_argument("--quiet", action="store_true",
                    help="print nothing but errors and the one-line verdict of an uncertified "
                         "model (the exit status says certified: 0, uncertified: 1)")
