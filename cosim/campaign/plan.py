@@ -32,7 +32,6 @@ TIMEOUT_BASE = 60.0
 TIMEOUT_PER_STEP = 0.5
 
 
-
 @dataclass
 class Plan:
     """A checked campaign ready to run (:func:`prepare`): the spec, the files the workers
