@@ -139,6 +139,13 @@ class PILoop:
         return {"output": self.y, "input": self.u, "K": self.K, "Ti": self.Ti, "Tt": self.Tt}
 
 
+def _column(kind: str, field_name: str, doc: str | None = None) -> Any:
+    """A read-only attribute of :class:`ControlProblem`: ``field_name`` of each
+    :class:`Channel` of ``kind`` (an attribute, such as ``"inputs"``), as a tuple."""
+    return property(lambda problem: tuple(getattr(c, field_name)
+                                          for c in getattr(problem, kind)), doc=doc)
+
+
 @dataclass(frozen=True)
 class ControlProblem:
     """Manipulated inputs and controlled outputs with their boxes, sample time and
@@ -196,51 +203,26 @@ class ControlProblem:
         return len(self.disturbances)
 
     @property
-    def input_names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.inputs)
-
-    @property
-    def disturbance_names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.disturbances)
-
-    @property
     def model_inputs(self) -> tuple[Channel, ...]:
         """The model's inputs: the manipulated inputs, then the measured disturbances."""
         return (*self.inputs, *self.disturbances)
-
-    @property
-    def model_input_names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.model_inputs)
-
-    @property
-    def delays(self) -> tuple[int, ...]:
-        """The dead time of each model input [samples] (:attr:`model_inputs`' order)."""
-        return tuple(c.delay for c in self.model_inputs)
 
     @property
     def signals(self) -> tuple[Channel, ...]:
         """Every signal: inputs, outputs, disturbances."""
         return (*self.inputs, *self.outputs, *self.disturbances)
 
-    @property
-    def output_names(self) -> tuple[str, ...]:
-        return tuple(c.name for c in self.outputs)
-
-    @property
-    def input_units(self) -> tuple[str, ...]:
-        return tuple(c.unit for c in self.inputs)
-
-    @property
-    def output_units(self) -> tuple[str, ...]:
-        return tuple(c.unit for c in self.outputs)
-
-    @property
-    def input_bounds(self) -> tuple[tuple[float, float], ...]:
-        return tuple(c.bounds for c in self.inputs)
-
-    @property
-    def output_bounds(self) -> tuple[tuple[float, float], ...]:
-        return tuple(c.bounds for c in self.outputs)
+    # one field of each signal of a kind, in the kind's order
+    input_names = _column("inputs", "name")
+    output_names = _column("outputs", "name")
+    disturbance_names = _column("disturbances", "name")
+    model_input_names = _column("model_inputs", "name")
+    input_units = _column("inputs", "unit")
+    output_units = _column("outputs", "unit")
+    input_bounds = _column("inputs", "bounds")
+    output_bounds = _column("outputs", "bounds")
+    delays = _column("model_inputs", "delay", "The dead time of each model input [samples] "
+                     "(:attr:`model_inputs`' order).")
 
     def bounds(self) -> dict[str, tuple[float, float]]:
         """All boxes by signal name (inputs, outputs, disturbances)."""

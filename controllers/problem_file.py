@@ -64,32 +64,28 @@ from __future__ import annotations
 import math
 import re
 import tomllib
-from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from controllers.errors import ProblemFileError
 from controllers.problem import Channel, ControlProblem, PILoop
+from controllers.problem_signals import (
+    Where,
+    channel,
+    number,
+    require,
+    table_name,
+    text,
+)
 
 __all__ = ["load", "loads", "locate", "locate_key", "problem_from_dict"]
 
 _TOP = {"problem", "inputs", "outputs", "disturbances", "pi", "train", "mpc"}
 _PROBLEM = {"name", "Ts", "description"}
-_CHANNEL = {"unit", "min", "max", "variable", "description", "normalization"}
-_INPUT = _CHANNEL | {"hold", "levels", "delay", "safe"}
-_DISTURBANCE = (_INPUT - {"safe"}) | {"rate", "preview"}
-#: The longest dead time a signal may declare [samples].
-MAX_DELAY = 50
 #: The signal tables: the problem's attribute and JSON key; whether one is needed.
 _KINDS = (("inputs", True), ("outputs", True), ("disturbances", False))
-_NORM = {"offset", "scale"}
 _PI = {"pairing", "pairings"}
 _LOOP = {"output", "input", "K", "Ti", "Tt"}
-#: Names a signal may have (they become column names: ``ref.<name>``, ``iae.<name>``).
-NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
-
-#: ``where(table, key)`` → the message prefix locating ``key`` of ``table``.
-Where = Callable[[str, "str | None"], str]
 
 
 class _Locator:
@@ -236,44 +232,20 @@ def _known(table: dict, allowed: set[str], what: str, where: Any, name: str) -> 
                                f"{', '.join(sorted(allowed))})")
 
 
-def _number(value: Any, at: str, key: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise ProblemFileError(f"{at}: '{key}' must be a number, got {value!r}")
-    if not math.isfinite(value):
-        raise ProblemFileError(f"{at}: '{key}' must be finite, got {value!r}")
-    return float(value)
-
-
-def _pair(value: Any, at: str, key: str, integer: bool = False) -> tuple[float, float]:
-    if not isinstance(value, list) or len(value) != 2:
-        raise ProblemFileError(f"{at}: '{key}' must be a list of two numbers [low, high]")
-    if integer and not all(isinstance(v, int) and not isinstance(v, bool) for v in value):
-        raise ProblemFileError(f"{at}: '{key}' must be two whole numbers of samples")
-    lo, hi = (_number(v, at, key) for v in value)
-    return lo, hi
-
-
 def _build(doc: dict[str, Any], where: Where, toml: bool) -> ControlProblem:
     head = doc.get("problem")
     if not isinstance(head, dict):
         raise ProblemFileError(f"{where('problem')}: no [problem] table (name, Ts)")
     if toml:
         _known(head, _PROBLEM, "[problem]", where, "problem")
-    for key in ("name", "Ts"):
-        if key not in head:
-            raise ProblemFileError(f"{where('problem')}: [problem] has no '{key}'")
-    name = head["name"]
-    if not isinstance(name, str) or not name.strip():
-        raise ProblemFileError(f"{where('problem', 'name')}: 'name' must be a non-empty "
-                               "string")
-    Ts = _number(head["Ts"], where("problem", "Ts"), "Ts")
+    require(head, ("name", "Ts"), where("problem"), "[problem]")
+    name = text(head["name"], where("problem", "name"), "name")
+    Ts = number(head["Ts"], where("problem", "Ts"), "Ts")
     if Ts <= 0:
         raise ProblemFileError(f"{where('problem', 'Ts')}: 'Ts' must be positive [s], "
                                f"got {Ts:g}")
-    description = head.get("description", "")
-    if not isinstance(description, str):
-        raise ProblemFileError(f"{where('problem', 'description')}: 'description' must be "
-                               "a string")
+    description = text(head.get("description", ""), where("problem", "description"),
+                       "description", empty=True)
     seen: dict[str, str] = {}
     kinds = {}
     for kind, needed in _KINDS:
@@ -283,147 +255,22 @@ def _build(doc: dict[str, Any], where: Where, toml: bool) -> ControlProblem:
                                    f"([{kind}.NAME] tables)")
         chans = []
         for i, entry in enumerate(entries):
-            chans.append(_channel(entry, kind, i, where, toml))
+            chans.append(channel(entry, kind, i, where, toml))
             c = chans[-1]
             for label, value in (("name", c.name), ("variable", c.variable)):
                 other = seen.get(f"{label}:{value}")
                 if other is not None:
-                    raise ProblemFileError(f"{where(_table(kind, c.name, i, toml))}: "
+                    raise ProblemFileError(f"{where(table_name(kind, c.name, i, toml))}: "
                                            f"{label} '{value}' is used twice ({other} and "
                                            f"{kind})")
                 seen[f"{label}:{value}"] = kind
         kinds[kind] = tuple(chans)
     pairings, pairing = _pi(doc.get("pi"), kinds["inputs"], kinds["outputs"], where, toml)
-    return ControlProblem(name=name.strip(), Ts=Ts, inputs=kinds["inputs"],
+    return ControlProblem(name=name, Ts=Ts, inputs=kinds["inputs"],
                           outputs=kinds["outputs"], disturbances=kinds["disturbances"],
                           pairings=pairings, pairing=pairing,
                           description=description, train=_options(doc, "train", where),
                           mpc=_options(doc, "mpc", where))
-
-
-def _table(kind: str, name: Any, index: int, toml: bool) -> str:
-    return f"{kind}.{name}" if toml else f"{kind}[{index}]"
-
-
-def _channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Channel:
-    if not isinstance(entry, dict):
-        raise ProblemFileError(f"{where(kind)}: {kind} entry {index} must be a table")
-    name = entry.get("name")
-    table = _table(kind, name, index, toml)
-    if not isinstance(name, str) or not NAME.match(name):
-        raise ProblemFileError(f"{where(table)}: signal name {name!r} must start with a "
-                               "letter and hold only letters, digits and '_' (it names "
-                               "columns such as ref.<name>)")
-    allowed = ({"inputs": _INPUT, "outputs": _CHANNEL, "disturbances": _DISTURBANCE}[kind]
-               | ({"name"} if not toml else set()))
-    unknown = [k for k in entry if k not in allowed and k != "name"]
-    if unknown:
-        extra = {"hold": " (hold, levels and delay are for inputs and disturbances)",
-                 "rate": " (rate and preview are for disturbances)"}.get(
-            {"levels": "hold", "delay": "hold", "preview": "rate"}.get(unknown[0], unknown[0]),
-            "")
-        raise ProblemFileError(f"{where(table, unknown[0])}: unknown key '{unknown[0]}' in "
-                               f"[{kind}.{name}]{extra} (known: "
-                               f"{', '.join(sorted(allowed - {'name'}))})")
-    for key in ("unit", "min", "max"):
-        if key not in entry:
-            raise ProblemFileError(f"{where(table)}: [{kind}.{name}] has no '{key}'")
-    unit = entry["unit"]
-    if not isinstance(unit, str) or not unit.strip():
-        raise ProblemFileError(f"{where(table, 'unit')}: 'unit' must be a non-empty string "
-                               "(e.g. \"m3/s\", \"K\", \"1\" for none)")
-    lo = _number(entry["min"], where(table, "min"), "min")
-    hi = _number(entry["max"], where(table, "max"), "max")
-    if not lo < hi:
-        raise ProblemFileError(f"{where(table, 'max')}: [{kind}.{name}] needs min < max, got "
-                               f"min = {lo:g}, max = {hi:g}")
-    variable = entry.get("variable", name)
-    if not isinstance(variable, str) or not variable:
-        raise ProblemFileError(f"{where(table, 'variable')}: 'variable' must be the FMU "
-                               "variable's name")
-    description = entry.get("description", "")
-    if not isinstance(description, str):
-        raise ProblemFileError(f"{where(table, 'description')}: 'description' must be a "
-                               "string")
-    kw = {**_normalization(entry, where, table), **_excitation(entry, where, table, lo, hi),
-          **_dynamics(entry, where, table, lo, hi)}
-    if "safe" in entry:
-        safe = _number(entry["safe"], where(table, "safe"), "safe")
-        if not lo <= safe <= hi:
-            raise ProblemFileError(f"{where(table, 'safe')}: 'safe' (the value written to a "
-                                   f"live plant when its measurements stop) must be in the "
-                                   f"box [{lo:g}, {hi:g}], got {safe:g}")
-        kw["safe"] = safe
-    return Channel(name=name, unit=unit.strip(), min=lo, max=hi, variable=variable,
-                   description=description, **kw)
-
-
-def _normalization(entry: dict[str, Any], where: Where, table: str) -> dict[str, float]:
-    """A signal's ``normalization = { offset, scale }`` as keyword arguments (none when
-    absent)."""
-    norm = entry.get("normalization")
-    if norm is None:
-        return {}
-    at = where(table, "normalization")
-    if not isinstance(norm, dict):
-        raise ProblemFileError(f"{at}: 'normalization' must be {{ offset = ..., scale = ... }}")
-    bad = [k for k in norm if k not in _NORM]
-    if bad or set(norm) != _NORM:
-        raise ProblemFileError(f"{at}: 'normalization' takes exactly 'offset' and 'scale'")
-    offset = _number(norm["offset"], at, "normalization.offset")
-    scale = _number(norm["scale"], at, "normalization.scale")
-    if scale == 0:
-        raise ProblemFileError(f"{at}: 'normalization.scale' must not be 0")
-    return {"offset": offset, "scale": scale}
-
-
-def _excitation(entry: dict[str, Any], where: Where, table: str, lo: float, hi: float
-                ) -> dict[str, tuple[Any, Any]]:
-    """An input's data-generation ``hold`` (samples) and ``levels`` as keyword arguments
-    (those given)."""
-    kw: dict[str, tuple[Any, Any]] = {}
-    if "hold" in entry:
-        at = where(table, "hold")
-        h0, h1 = _pair(entry["hold"], at, "hold", integer=True)
-        if not 1 <= h0 <= h1:
-            raise ProblemFileError(f"{at}: 'hold' must satisfy 1 <= low <= high samples, got "
-                                   f"[{h0:g}, {h1:g}]")
-        kw["hold"] = (int(h0), int(h1))
-    if "levels" in entry:
-        at = where(table, "levels")
-        l0, l1 = _pair(entry["levels"], at, "levels")
-        if not lo <= l0 < l1 <= hi:
-            raise ProblemFileError(f"{at}: 'levels' must satisfy min <= low < high <= max "
-                                   f"({lo:g}, {hi:g}), got [{l0:g}, {l1:g}]")
-        kw["levels"] = (l0, l1)
-    return kw
-
-
-def _dynamics(entry: dict[str, Any], where: Where, table: str, lo: float, hi: float
-              ) -> dict[str, Any]:
-    """A signal's ``delay`` [samples], and a disturbance's ``rate`` and ``preview``, as
-    keyword arguments (those given)."""
-    kw: dict[str, Any] = {}
-    if "delay" in entry:
-        delay = entry["delay"]
-        if (isinstance(delay, bool) or not isinstance(delay, int)
-                or not 0 <= delay <= MAX_DELAY):
-            raise ProblemFileError(f"{where(table, 'delay')}: 'delay' must be a whole number "
-                                   f"of samples from 0 to {MAX_DELAY}, got {delay!r}")
-        kw["delay"] = delay
-    if "rate" in entry:
-        rate = _number(entry["rate"], where(table, "rate"), "rate")
-        if not 0 < rate <= hi - lo:
-            raise ProblemFileError(f"{where(table, 'rate')}: 'rate' (the largest change per "
-                                   f"sample) must be in (0, max - min = {hi - lo:g}], got "
-                                   f"{rate:g}")
-        kw["rate"] = rate
-    if "preview" in entry:
-        if not isinstance(entry["preview"], bool):
-            raise ProblemFileError(f"{where(table, 'preview')}: 'preview' must be true or "
-                                   "false")
-        kw["preview"] = entry["preview"]
-    return kw
 
 
 def _pi(doc: Any, inputs: tuple[Channel, ...], outputs: tuple[Channel, ...], where: Where,
@@ -463,9 +310,9 @@ def _pi(doc: Any, inputs: tuple[Channel, ...], outputs: tuple[Channel, ...], whe
                                        f"{lp['output']!r} with {lp['input']!r}: not an output "
                                        f"({', '.join(out_names)}) and an input "
                                        f"({', '.join(in_names)})")
-            K = _number(lp["K"], sat, "K")
-            Ti = _number(lp["Ti"], sat, "Ti")
-            Tt = _number(lp.get("Tt", Ti), sat, "Tt")
+            K = number(lp["K"], sat, "K")
+            Ti = number(lp["Ti"], sat, "Ti")
+            Tt = number(lp.get("Tt", Ti), sat, "Tt")
             if K == 0 or Ti <= 0 or Tt <= 0:
                 raise ProblemFileError(f"{sat}: loop {k} of '{set_name}' needs K != 0, "
                                        "Ti > 0 and Tt > 0 [s]")

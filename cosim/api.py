@@ -160,9 +160,8 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     OutputError
         ``out`` could not be written (the previous files there are intact).
     """
-    from cosim.core import outpaths, plants, registry, varmap
+    from cosim.core import plants, varmap
     from cosim.core import scenario as scenario_mod
-    from cosim.core.component import Capability
     from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
     from cosim.core.master import Master
 
@@ -174,20 +173,8 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     opts = dict(options or {})
     if model is not None:
         opts["model"] = str(model)
-    controller, opts = registry.expand(controller, opts)   # a controller file read
-    opts = with_problem(controller, opts, problem)
-    if out is not None:
-        outpaths.out_dir(out, "--out")
-    ctrl = registry.create(controller, opts)
-    if Capability.SETPOINTS in ctrl.capabilities:   # one that refuses them: nothing runs
-        ctrl.expect_setpoints(sc.setpoints())
-    if isolate and not ctrl.isolated:
-        from cosim.core.isolated import IsolatedController
-
-        ctrl = IsolatedController(ctrl, controller, opts)
-    notice = ctrl.notice if Capability.NOTICE in ctrl.capabilities else None
-    if notice and on_notice is not None:
-        on_notice(notice)
+    controller, opts, ctrl = _controller(controller, opts, problem, out, sc, isolate,
+                                         on_notice)
     bound = run_problem(ctrl, opts.get("problem", problem))
     opened = plants.open_plant(plant, plants.PlantContext(
         sc, ctrl, bound, vmap, interface, isolate, limit, seed, step, live,
@@ -206,29 +193,63 @@ def run(scenario: str | Path, plant: str | Path | None = None,
             "problem": bound.name if bound is not None else None,
             "problem_source": (bound.source or None) if bound is not None else None,
             "controller": controller, "controller_options": opts, "seed": seed}
-    bar = None
-    if progress:
-        import sys
-
-        from tqdm import tqdm
-
-        from cosim.core.master import communication_times
-
-        total = len(communication_times(sc.start_time, sc.stop_time, master.dt)) - 1
-        bar = tqdm(total=total, unit="step", desc=sc.path.stem, file=sys.stderr,
-                   dynamic_ncols=True)
-        user_step = on_step
-
-        def on_step(k: int) -> None:
-            bar.update(1)
-            if user_step is not None:
-                user_step(k)
-
+    bar, on_step = _progress(progress, master, sc, on_step)
     try:
         return _execute(master, meta, out, figure, on_step, limit)
     finally:
         if bar is not None:
             bar.close()
+
+
+def _controller(controller: str, opts: dict, problem: Any, out: str | Path | None, sc: Any,
+                isolate: bool, on_notice: Callable[[str], None] | None
+                ) -> tuple[str, dict, Any]:
+    """The run's controller: its name and options (a controller file read, ``problem``
+    added), built once ``out`` is known to be usable, checked against the scenario's
+    set-points (one that refuses them: nothing runs), in a worker when ``isolate``; its
+    notice handed to ``on_notice``."""
+    from cosim.core import outpaths, registry
+    from cosim.core.component import Capability
+
+    controller, opts = registry.expand(controller, opts)   # a controller file read
+    opts = with_problem(controller, opts, problem)
+    if out is not None:
+        outpaths.out_dir(out, "--out")
+    ctrl = registry.create(controller, opts)
+    if Capability.SETPOINTS in ctrl.capabilities:   # one that refuses them: nothing runs
+        ctrl.expect_setpoints(sc.setpoints())
+    if isolate and not ctrl.isolated:
+        from cosim.core.isolated import IsolatedController
+
+        ctrl = IsolatedController(ctrl, controller, opts)
+    notice = ctrl.notice if Capability.NOTICE in ctrl.capabilities else None
+    if notice and on_notice is not None:
+        on_notice(notice)
+    return controller, opts, ctrl
+
+
+def _progress(shown: bool, master: Any, sc: Any, on_step: Callable[[int], None] | None
+              ) -> tuple[Any, Callable[[int], None] | None]:
+    """A progress bar over the run's steps on standard error when ``shown`` (else
+    ``None``), and the step callback that moves it before calling ``on_step``."""
+    if not shown:
+        return None, on_step
+    import sys
+
+    from tqdm import tqdm
+
+    from cosim.core.master import communication_times
+
+    total = len(communication_times(sc.start_time, sc.stop_time, master.dt)) - 1
+    bar = tqdm(total=total, unit="step", desc=sc.path.stem, file=sys.stderr,
+               dynamic_ncols=True)
+
+    def step(k: int) -> None:
+        bar.update(1)
+        if on_step is not None:
+            on_step(k)
+
+    return bar, step
 
 
 def export_fmu(model: str | Path | None = None, out: str | Path = "Controller.fmu", *,

@@ -30,7 +30,9 @@ from hypothesis import HealthCheck, given, settings  # noqa: E402
 from hypothesis import strategies as st  # noqa: E402
 
 from controllers.errors import ControllersError  # noqa: E402
+from cosim.core import scenario, varmap  # noqa: E402
 from cosim.core.errors import CosimError, SimulationFailed  # noqa: E402
+from cosim.core.logdata import read_log  # noqa: E402
 from tests.cosim.pyfmu_models import MAP  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -124,12 +126,21 @@ LOG = "time,qa,qb,h1,h2,split\n" + "".join(
     for k in range(40))
 
 
-@SETTINGS
-@given(bad(SCENARIO))
-def test_the_scenario_reader(text: str) -> None:
-    from cosim.core import scenario
+#: The file readers fed with damage: a valid file's text, its name, the reader.
+FILES = {
+    "scenario": (SCENARIO, "sc.csv", scenario.load),
+    "map": (MAP, "plant.map.toml", varmap.load),
+    "log": (LOG, "log.csv", lambda path: read_log(path, ["qa", "qb"], ["h1", "h2"], Ts=25.0,
+                                                  problem="fourtank")),
+}
 
-    _read(_file(text, "sc.csv"), scenario.load)
+
+@pytest.mark.parametrize("kind", FILES)
+@SETTINGS
+@given(data=st.data())
+def test_the_file_readers(kind: str, data: st.DataObject) -> None:
+    text, name, read = FILES[kind]
+    _read(_file(data.draw(bad(text)), name), read)
 
 
 @SETTINGS
@@ -138,23 +149,6 @@ def test_the_problem_reader(text: str) -> None:
     from controllers import problem_file
 
     _bad_input(lambda: problem_file.loads(text, "problem.toml"))
-
-
-@SETTINGS
-@given(bad(MAP))
-def test_the_map_reader(text: str) -> None:
-    from cosim.core import varmap
-
-    _read(_file(text, "plant.map.toml"), varmap.load)
-
-
-@SETTINGS
-@given(bad(LOG))
-def test_the_log_reader(text: str) -> None:
-    from cosim.core.logdata import read_log
-
-    _read(_file(text, "log.csv"),
-          lambda path: read_log(path, ["qa", "qb"], ["h1", "h2"], Ts=25.0, problem="fourtank"))
 
 
 MODEL = json.loads((ROOT / "controllers" / "models" / "fourtank_gru.json").read_text())

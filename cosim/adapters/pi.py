@@ -83,19 +83,8 @@ def _tuned(gru: Any, problem: ControlProblem, setpoint: Any, tau_c: Any) -> PITu
                          f"got {tau_c!r}")
     target = None
     if setpoint is not None:
-        if not isinstance(setpoint, Mapping):
-            raise CosimError(f"controller 'pi': tune_setpoint must map outputs to numbers, "
-                             f"got {setpoint!r}")
-        target = [0.5 * (c.min + c.max) for c in problem.outputs]
-        for name, value in setpoint.items():
-            if name not in problem.output_names:
-                raise CosimError(f"controller 'pi': tune_setpoint: unknown output {name!r} "
-                                 f"(outputs: {', '.join(problem.output_names)})")
-            if (isinstance(value, bool) or not isinstance(value, int | float)
-                    or not math.isfinite(value)):
-                raise CosimError(f"controller 'pi': tune_setpoint: {name} must be a finite "
-                                 f"number, got {value!r}")
-            target[problem.output_names.index(name)] = float(value)
+        given = _by_name("tune_setpoint", setpoint, problem.output_names, "output")
+        target = [given.get(c.name, 0.5 * (c.min + c.max)) for c in problem.outputs]
     if gru.problem is None:  # a model file without a problem: the one it was checked against
         gru = replace(gru, problem=problem)
     gru = condition(gru)
@@ -137,17 +126,23 @@ def _initial_inputs(values: Any, problem: ControlProblem) -> dict[str, float]:
     """Check the ``initial_inputs`` option: plant input name → finite number."""
     if values is None:
         return {}
+    return _by_name("initial_inputs", values, problem.input_names, "input")
+
+
+def _by_name(option: str, values: Any, names: Sequence[str], kind: str) -> dict[str, float]:
+    """The option ``option``: a map of the problem's ``kind`` signals (``names``) to finite
+    numbers."""
     if not isinstance(values, Mapping):
-        raise CosimError(f"controller 'pi': initial_inputs must map inputs to numbers, "
+        raise CosimError(f"controller 'pi': {option} must map {kind}s to numbers, "
                          f"got {values!r}")
     out = {}
     for name, value in values.items():
-        if name not in problem.input_names:
-            raise CosimError(f"controller 'pi': initial_inputs: unknown input {name!r} "
-                             f"(inputs: {', '.join(problem.input_names)})")
+        if name not in names:
+            raise CosimError(f"controller 'pi': {option}: unknown {kind} {name!r} "
+                             f"({kind}s: {', '.join(names)})")
         if (isinstance(value, bool) or not isinstance(value, int | float)
                 or not math.isfinite(value)):
-            raise CosimError(f"controller 'pi': initial_inputs: {name} must be a finite "
+            raise CosimError(f"controller 'pi': {option}: {name} must be a finite "
                              f"number, got {value!r}")
         out[name] = float(value)
     return out

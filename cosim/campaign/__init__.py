@@ -6,9 +6,11 @@ sequences, initial states) and once per controller variant, on a local Dask clus
 existing one, and reports a violation probability with a confidence bound, KPI
 distributions and the failed runs grouped by reason.
 
-Modules: :mod:`~cosim.campaign.spec` (the TOML file), :mod:`~cosim.campaign.draws` (what each
-run draws), :mod:`~cosim.campaign.task` (one run, on a worker), :mod:`~cosim.campaign.engine`
-(Dask, the output folder), :mod:`~cosim.campaign.report` (tables and figures).
+Modules: :mod:`~cosim.campaign.spec` (the TOML file, its lines and values located by
+:mod:`~cosim.campaign.spec_values`), :mod:`~cosim.campaign.draws` (what each run draws),
+:mod:`~cosim.campaign.plan` (the campaign checked and drawn before any run),
+:mod:`~cosim.campaign.task` (one run, on a worker), :mod:`~cosim.campaign.engine` (Dask, the
+output folder), :mod:`~cosim.campaign.report` (tables and figures).
 """
 
 from cosim.campaign.engine import CampaignResult, run_campaign

@@ -166,7 +166,7 @@ class Starts:
 
 class Submitter:
     """Submits runs (and the campaign's files they depend on) to a Dask client; ``plan`` is
-    the campaign's :class:`~cosim.campaign.engine.Plan`."""
+    the campaign's :class:`~cosim.campaign.plan.Plan`."""
 
     def __init__(self, client: Any, plan: Any) -> None:
         self.client, self.plan = client, plan

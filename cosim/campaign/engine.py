@@ -6,7 +6,8 @@ one thread each, as many as asked, default the number of cores), or an existing 
 number of worker processes and threads each: :mod:`cosim.campaign.cluster`). No filesystem
 is shared: the client sends the campaign's files once (:class:`~cosim.campaign.task.Assets`)
 and each task returns its results as data; this process writes every file under the output
-folder:
+folder. The campaign is checked and drawn first, before the folder is touched
+(:func:`cosim.campaign.plan.prepare`); then:
 
 * ``campaign.json``: the spec, its fingerprint (spec text and input files), the plan;
 * ``runs/<run>-<variant>/results.csv`` and ``summary.json`` as ``cosim run`` writes them (and
@@ -48,20 +49,18 @@ runs still waiting not run (:class:`~cosim.campaign.cluster.Watchdog`): it never
 from __future__ import annotations
 
 import contextlib
-import hashlib
 import math
 import os
 import sys
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from cosim.campaign import cluster, report, store
-from cosim.campaign.draws import DrawContext, RunDraw, draw_run
+from cosim.campaign.plan import Plan, prepare
 from cosim.campaign.spec import CampaignSpec, load
-from cosim.campaign.task import Assets
 from cosim.core import interrupts
 from cosim.core.errors import CosimError
 from cosim.core.run_result import COMPLETE
@@ -72,9 +71,6 @@ __all__ = ["MAX_TRIES", "CampaignResult", "default_workers", "run_campaign"]
 MAX_TRIES = 3
 #: Most submissions of one run in all, tries and losses before it started together.
 MAX_SUBMISSIONS = 20
-#: Seconds a run may take by default: this much plus :data:`TIMEOUT_PER_STEP` per step.
-TIMEOUT_BASE = 60.0
-TIMEOUT_PER_STEP = 0.5
 
 
 @dataclass
@@ -110,207 +106,6 @@ def default_workers() -> int:
         return max(1, len(os.sched_getaffinity(0)))
     except AttributeError:  # pragma: no cover - not Linux
         return max(1, os.cpu_count() or 1)
-
-
-# ---------------------------------------------------------------------------------------------
-# Preparation (client side, before any run): everything a bad spec can get wrong fails here
-# ---------------------------------------------------------------------------------------------
-
-@dataclass
-class Plan:
-    """A checked campaign ready to run (:func:`prepare`): the spec, the files the workers
-    get, one task per (run, variant) with its draws, the fingerprint ``--resume`` compares,
-    and the run timeout [s]."""
-
-    spec: CampaignSpec
-    assets: Assets
-    tasks: list[dict[str, Any]]      # one per (run, variant), draws included
-    fingerprint: str
-    timeout: float
-
-
-def _read(path: Path, what: str) -> bytes:
-    try:
-        return path.read_bytes()
-    except OSError as exc:
-        raise CosimError(f"{path}: cannot read the {what}: {exc.strerror}") from None
-
-
-def _plant_file(spec: CampaignSpec) -> Path:
-    if spec.plant is not None and not spec.model_plant:
-        return Path(spec.plant)
-    from cosim.core.plants import plant_path
-
-    return plant_path(None)
-
-
-def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, Any],
-              varmaps: dict[str, Any] | None = None) -> float:
-    """Wire run 0 of every variant (as a worker will: its plant bound through
-    ``varmaps[variant]``) and return the controller sample time.
-
-    Raises :class:`CosimError` naming the spec's line for a draw key the plant or the
-    scenario does not know.
-    """
-    from cosim.campaign.spec import _Locator
-    from cosim.core import scenario as scenario_mod
-    from cosim.core.master import Master
-
-    varmaps = varmaps or {}
-    sc = scenario_mod.load(spec.scenario)
-    at_start = dict(draw.values)
-    at_start.update({f"plant.{k}": v for k, v in draw.plant_start.items()})
-    loc = _Locator(spec.path, spec.text)
-    sc = sc.with_changes(at_start, list(draw.setpoints) or None, draw.stop_time,
-                         list(draw.disturbances) or None)
-    sample = None
-    for name, ctrl in variant_controllers.items():
-        if spec.model_plant:
-            from cosim.adapters.gru_plant import GRUPlant
-
-            plant: Any = GRUPlant.from_file(spec.plant or "")
-        else:
-            from cosim.core.fmu import FmuComponent
-
-            plant = FmuComponent(_plant_file(spec), interface=spec.interface,
-                                 varmap=varmaps.get(name))
-        settable = plant.settable(True) if hasattr(plant, "settable") else set()
-        measured = {s.name for s in plant.outputs}
-        for key in draw.values:
-            parts = key.split(".")
-            if parts[0] == "plant" and key[len("plant."):] not in settable:
-                raise loc.error(f"draw '{key}': the plant has no input or parameter "
-                                f"'{key[len('plant.'):]}'", "draw", key)
-            if parts[0] == "sensor" and ".".join(parts[1:-1]) not in measured:
-                raise loc.error(f"draw '{key}': the plant has no output "
-                                f"'{'.'.join(parts[1:-1])}'", "draw", key)
-        try:
-            Master(plant, ctrl, sc, seed=draw.seed)
-        except CosimError as exc:
-            raise CosimError(f"{spec.path}: variant '{name}': {exc}") from None
-        sample = sample or getattr(ctrl, "sample_time", None)
-    return float(sample or 1.0)
-
-
-def _problem_line(spec: CampaignSpec) -> int:
-    """The line of the spec's ``problem`` key (1 without one): where a default variant's
-    faults of the problem are reported."""
-    if spec.problem is None:
-        return 1
-    from cosim.campaign.spec import _Locator
-
-    return _Locator(spec.path, spec.text).line("campaign", "problem")
-
-
-def _bind(spec: CampaignSpec, name: str, line: int, ctrl: Any, problem: Any,
-          user_map: Any) -> Any:
-    """The variable map binding the variant's control problem (its controller's, else
-    ``problem``; else the plant variables a controller FMU records) to the plant FMU
-    (``user_map`` first); ``user_map`` for a GRU-model plant or a controller with none."""
-    from cosim.adapters.plants import plant_varmap
-    from cosim.api import run_problem, run_signals
-
-    if spec.model_plant:
-        return user_map
-    bound = run_problem(ctrl, problem)
-    try:
-        return plant_varmap(_plant_file(spec), user_map, bound, run_signals(ctrl, bound))
-    except CosimError as exc:
-        raise CosimError(f"{spec.path}:{line}: variant '{name}': {exc}") from None
-
-
-def prepare(spec: CampaignSpec) -> Plan:
-    """Check the spec against the real plant and controllers, draw every run, pack the
-    files; raises :class:`CosimError` (exit 2) before anything runs."""
-    from cosim.core import registry, varmap
-    from cosim.core import scenario as scenario_mod
-
-    files: dict[str, bytes] = {"scenario.csv": _read(spec.scenario, "scenario")}
-    if spec.model_plant:
-        plant = ("model", "plant_model.json")
-        files["plant_model.json"] = _read(Path(spec.plant[len("model:"):]),  # type: ignore[index]
-                                          "plant model")
-    else:
-        plant = ("fmu", "plant.fmu")
-        files["plant.fmu"] = _read(_plant_file(spec), "plant FMU")
-    user_map = None
-    if spec.map is not None:
-        files["plant.map.toml"] = _read(spec.map, "variable map")
-        user_map = varmap.load(spec.map)
-    sc = scenario_mod.load(spec.scenario)
-    ctx = DrawContext.build(spec, sc.start_time)
-    draws = [draw_run(spec, i, ctx) for i in range(spec.runs)]
-    controllers, variant_options, varmaps, names = {}, {}, {}, {}
-    for k, v in enumerate(spec.variants):
-        line = v.line or _problem_line(spec)
-        names[v.name], options, local = _variant_options(spec, k, v, line, files)
-        try:
-            controllers[v.name] = ctrl = registry.create(names[v.name], local)
-        except CosimError as exc:
-            raise CosimError(f"{spec.path}:{line}: variant '{v.name}': {exc}") from None
-        variant_options[v.name] = options
-        varmaps[v.name] = _bind(spec, v.name, line, ctrl, local.get("problem", spec.problem),
-                                user_map)
-    sample = _validate(spec, draws[0], controllers, varmaps)
-    duration = (draws[0].stop_time or sc.stop_time) - sc.start_time
-    timeout = spec.timeout or TIMEOUT_BASE + TIMEOUT_PER_STEP * duration / sample
-    assets = Assets.of(files)
-    fingerprint = hashlib.sha256(spec.text.encode() + assets.digest.encode()).hexdigest()
-    tasks = []
-    for d in draws:
-        for v in spec.variants:
-            tasks.append({
-                "run": d.run, "variant": v.name, "controller": names[v.name],
-                "options": variant_options[v.name], "draw": asdict(d),
-                "scenario": "scenario.csv", "scenario_name": str(spec.scenario),
-                "plant": plant, "map": "plant.map.toml" if spec.map else None,
-                "binding": _entries(varmaps[v.name]), "interface": spec.interface,
-                "isolate": spec.isolate,
-                "step_timeout": spec.step_timeout, "timeout": timeout,
-            })
-    return Plan(spec, assets, tasks, fingerprint, timeout)
-
-
-def _variant_options(spec: CampaignSpec, k: int, v: Any, line: int, files: dict[str, bytes]
-                     ) -> tuple[str, dict[str, Any], dict[str, Any]]:
-    """Variant ``v``'s controller name and options, a controller file read
-    (:func:`cosim.core.registry.expand`), the default model and the campaign's problem
-    added: ``(name, options for the tasks, options here)``; the files the options name are
-    packed into ``files`` (``model_<k>.json``, ``problem_<k>.toml``, a controller FMU's
-    ``path_<k>.fmu``) and named so in the
-    tasks' options, so that a worker on another machine needs none of this one's files."""
-    from controllers.model import DEFAULT_MODEL
-    from cosim.api import with_problem
-    from cosim.core import registry
-
-    name, options = registry.expand(v.controller, v.options)
-    if "model" not in options and registry.CONTROLLERS.get(name) == \
-            registry.CONTROLLERS["robust-mpc"]:
-        options["model"] = str(DEFAULT_MODEL)
-    try:
-        options = with_problem(name, options,
-                               str(spec.problem) if spec.problem is not None else None)
-    except CosimError as exc:
-        raise CosimError(f"{spec.path}:{line}: variant '{v.name}': {exc}") from None
-    local = dict(options)
-    for key, what, ext in (("model", "model file", "json"), ("problem", "problem file", "toml"),
-                           ("path", "controller FMU", "fmu")):
-        if key == "path" and name != registry.FMU_CONTROLLER:
-            continue
-        if isinstance(options.get(key), str | Path):
-            packed = f"{key}_{k}.{ext}"
-            files[packed] = _read(Path(options[key]), what)
-            options[key] = packed
-    return name, options, local
-
-
-def _entries(vmap: Any) -> tuple[str, tuple[tuple[Any, ...], ...]] | None:
-    """A variable map as plain data for the task (its path and its entries), ``None`` for
-    none: the worker rebuilds it without reading the FMU again (:mod:`cosim.campaign.task`)."""
-    if vmap is None:
-        return None
-    return (str(vmap.path), tuple((m.signal, m.variable, m.unit, m.scale, m.offset)
-                                  for m in vmap.signals.values()))
 
 
 # ---------------------------------------------------------------------------------------------
@@ -485,14 +280,7 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
 
     if not isinstance(spec, CampaignSpec):
         spec = load(spec)
-    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
-                                or workers < 1):
-        raise CosimError(f"--workers {workers!r}: expected a positive integer")
-    if worker_timeout is not None and not (isinstance(worker_timeout, (int, float))
-                                           and math.isfinite(worker_timeout)
-                                           and worker_timeout > 0):
-        raise CosimError(f"--worker-timeout {worker_timeout!r}: expected a positive number "
-                         "of seconds")
+    _check_arguments(workers, worker_timeout)
     out = Path(out) if out is not None else Path("results") / "campaigns" / spec.name
     plan = prepare(spec)
     workers = workers or default_workers()
@@ -502,45 +290,71 @@ def run_campaign(spec: CampaignSpec | str | Path, out: str | Path | None = None,
         client = stack.enter_context(cluster.connect(None, scheduler)) if scheduler else None
         with RunFolder(out, "--out") as folder:
             pending = store.open_folder(plan, folder.path, resume, force)
-            bar = None
-            if progress and pending:
-                from tqdm import tqdm
-
-                bar = tqdm(total=len(pending), unit="run", desc=spec.name, file=sys.stderr,
-                           dynamic_ncols=True)
-            failed_now = [0]
-
-            def on_done(status: str) -> None:
-                failed_now[0] += status not in COMPLETE
-                if bar is not None:
-                    bar.update(1)
-                    bar.set_postfix(failed=failed_now[0], refresh=False)
-
+            bar = _Progress(len(pending), spec.name, progress)
             ran = 0
             t0 = time.perf_counter()
             try:
                 if pending:
                     ran = _execute(plan, pending, folder.path, workers, scheduler,
-                                   on_done, client=client,
+                                   bar.done, client=client,
                                    worker_timeout=worker_timeout).done
             except (KeyboardInterrupt, cluster.NoWorkers) as exc:
                 error = exc
             finally:
-                if bar is not None:
-                    bar.close()
-            guard = interrupts.current()
-            with guard.deferred() if guard is not None else contextlib.nullcontext():
-                table, summary = store.build_report(spec, folder.path)
-                summary["wall_time_s"] = round(time.perf_counter() - t0, 3)
-                summary["workers"] = scheduler or workers
-                report.write_summary(summary, folder.path / "summary.json")
+                bar.close()
+            table, summary = _write_report(spec, folder.path, t0, scheduler or workers)
     complete = summary.get("runs", 0) == spec.runs * len(spec.variants)
     status = ("interrupted" if error is not None or not complete
               else "failed" if summary.get("failed", 0) else "ok")
     return CampaignResult(folder.path, table, summary, status, ran, error)
 
 
-def _fmt(value: Any) -> str:
-    if value is None or (isinstance(value, float) and not math.isfinite(value)):
-        return "-"
-    return f"{value:.3g}" if isinstance(value, float) else str(value)
+def _check_arguments(workers: Any, worker_timeout: Any) -> None:
+    """Reject a ``workers`` that is not a positive integer and a ``worker_timeout`` that is
+    not a positive number of seconds (their command-line flags named)."""
+    if workers is not None and (isinstance(workers, bool) or not isinstance(workers, int)
+                                or workers < 1):
+        raise CosimError(f"--workers {workers!r}: expected a positive integer")
+    if worker_timeout is not None and not (isinstance(worker_timeout, (int, float))
+                                           and math.isfinite(worker_timeout)
+                                           and worker_timeout > 0):
+        raise CosimError(f"--worker-timeout {worker_timeout!r}: expected a positive number "
+                         "of seconds")
+
+
+class _Progress:
+    """The progress bar over a campaign's runs on standard error (none unless ``shown`` and
+    there are runs to do), with the runs failed so far."""
+
+    def __init__(self, total: int, name: str, shown: bool) -> None:
+        self.failed = 0
+        self.bar = None
+        if shown and total:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=total, unit="run", desc=name, file=sys.stderr,
+                            dynamic_ncols=True)
+
+    def done(self, status: str) -> None:
+        """One run written, with its ``status``."""
+        self.failed += status not in COMPLETE
+        if self.bar is not None:
+            self.bar.update(1)
+            self.bar.set_postfix(failed=self.failed, refresh=False)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def _write_report(spec: CampaignSpec, folder: Path, t0: float, workers: Any
+                  ) -> tuple[Any, dict]:
+    """The campaign's tables from the runs on disk, and its ``summary.json`` (with the wall
+    time since ``t0`` and the ``workers``), a signal deferred while they are written."""
+    guard = interrupts.current()
+    with guard.deferred() if guard is not None else contextlib.nullcontext():
+        table, summary = store.build_report(spec, folder)
+        summary["wall_time_s"] = round(time.perf_counter() - t0, 3)
+        summary["workers"] = workers
+        report.write_summary(summary, folder / "summary.json")
+    return table, summary

@@ -50,13 +50,13 @@ error is a :class:`~cosim.core.errors.CosimError` ``file:line: message`` (exit 2
 
 from __future__ import annotations
 
-import math
 import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from cosim.campaign.spec_values import Locator, file, finite, number, resolve
 from cosim.core.errors import CosimError
 
 __all__ = ["CampaignSpec", "Distribution", "DisturbanceSpec", "InitialState", "SetpointSpec",
@@ -162,91 +162,14 @@ class CampaignSpec:
         return self.plant is not None and self.plant.startswith("model:")
 
 
-class _Locator:
-    """``file:line`` of keys in a TOML text (tomllib gives no positions)."""
-
-    def __init__(self, path: Path, text: str) -> None:
-        self.path = path
-        self.lines = text.splitlines()
-
-    def line(self, table: str | None, key: str | None = None, nth: int = 0) -> int:
-        """Line of ``key`` in ``[table]`` (the ``nth`` ``[[table]]``), or of the header."""
-        current, count, header = None, -1, 0
-        for i, raw in enumerate(self.lines, start=1):
-            s = raw.strip()
-            m = re.match(r"^\[\[\s*([^\]]+?)\s*\]\]", s) or re.match(r"^\[\s*([^\]]+?)\s*\]", s)
-            if m:
-                current = m.group(1).replace('"', "").replace(" ", "")
-                if current == table:
-                    count += 1
-                    if count == nth:
-                        header = i
-                continue
-            if key is None or current != table or count != nth:
-                continue
-            k = re.match(r'^("([^"]*)"|([A-Za-z0-9_.-]+))\s*=', s)
-            if k and (k.group(2) if k.group(2) is not None else k.group(3)) == key:
-                return i
-        if table is None and key is not None:
-            k = re.escape(key)
-            for i, raw in enumerate(self.lines, start=1):
-                if re.match(rf'^\s*("?{k}"?\s*=|\[\[?\s*"?{k}"?\s*[\].])', raw):
-                    return i
-        return header or 1
-
-    def error(self, message: str, table: str | None, key: str | None = None,
-              nth: int = 0) -> CosimError:
-        return CosimError(f"{self.path}:{self.line(table, key, nth)}: {message}")
-
-
-def _resolve(raw: str, base: Path) -> Path:
-    path = Path(raw).expanduser()
-    if path.is_absolute():
-        return path
-    beside = base / path
-    return beside if beside.exists() or not path.exists() else path
-
-
-def _number(value: Any, loc: _Locator, table: str, key: str, *, low: float | None = None,
-            integer: bool = False, positive: bool = False) -> float:
-    ok = isinstance(value, int | float) and not isinstance(value, bool)
-    if ok and integer:
-        ok = isinstance(value, int)
-    if ok and not math.isfinite(value):
-        ok = False
-    if ok and low is not None and value < low:
-        ok = False
-    if ok and positive and value <= 0:
-        ok = False
-    if not ok:
-        what = "an integer" if integer else "a number"
-        if positive:
-            what = f"a positive {what.split()[-1]}"
-        elif low is not None:
-            what = f"{what} >= {low:g}"
-        raise loc.error(f"{key} = {value!r}: expected {what}", table, key)
-    return value
-
-
-def _file(value: Any, loc: _Locator, table: str, key: str, kind: str) -> Path:
-    if not isinstance(value, str) or not value:
-        raise loc.error(f"{key}: expected the path of the {kind} as a string", table, key)
-    path = _resolve(value, loc.path.parent)
-    if not path.is_file():
-        raise loc.error(f"{key} = {value!r}: {kind} not found (looked beside the spec, "
-                        f"{loc.path.parent}, and in the current folder)", table, key)
-    return path
-
-
-def _controller_file(name: str, loc: _Locator, table: str, index: int = 0) -> str:
+def _controller_file(name: str, loc: Locator, table: str, index: int = 0) -> str:
     """A controller file (``*.json``, :mod:`cosim.core.controller_file`) or a controller FMU
     (``*.fmu``) as an absolute path, checked now (found beside the spec or in the current
     folder); a controller name as is."""
     from cosim.core import controller_file
-    from cosim.core.errors import CosimError
 
     if name.lower().endswith(".fmu"):
-        path = _resolve(name, loc.path.parent)
+        path = resolve(name, loc.path.parent)
         if not path.is_file():
             raise loc.error(f"controller = {name!r}: controller FMU not found (looked beside "
                             f"the spec, {loc.path.parent}, and in the current folder)", table,
@@ -254,7 +177,7 @@ def _controller_file(name: str, loc: _Locator, table: str, index: int = 0) -> st
         return str(path)
     if not controller_file.is_controller_file(name):
         return name
-    path = _resolve(name, loc.path.parent)
+    path = resolve(name, loc.path.parent)
     try:
         controller_file.load(path)
     except CosimError as exc:
@@ -262,9 +185,9 @@ def _controller_file(name: str, loc: _Locator, table: str, index: int = 0) -> st
     return str(path)
 
 
-def _distribution(key: str, value: Any, loc: _Locator) -> Distribution:
+def _distribution(key: str, value: Any, loc: Locator) -> Distribution:
     if isinstance(value, int | float) and not isinstance(value, bool):
-        return Distribution(key, "constant", (float(_number(value, loc, "draw", key)),))
+        return Distribution(key, "constant", (float(number(value, loc, "draw", key)),))
     if not isinstance(value, dict) or len(value) != 1:
         raise loc.error(f"draw '{key}': expected a number or one of "
                         "{ uniform = [low, high] }, { normal = [mean, sd] }, "
@@ -273,9 +196,7 @@ def _distribution(key: str, value: Any, loc: _Locator) -> Distribution:
     if kind not in DISTRIBUTIONS:
         raise loc.error(f"draw '{key}': unknown distribution '{kind}' (known: "
                         f"{', '.join(DISTRIBUTIONS)})", "draw", key)
-    if not isinstance(params, list) or not params or not all(
-            isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-            for v in params):
+    if not isinstance(params, list) or not params or not all(finite(v) for v in params):
         raise loc.error(f"draw '{key}': {kind} needs a list of finite numbers", "draw", key)
     want = DISTRIBUTIONS[kind]
     if want is not None and len(params) != want:
@@ -290,7 +211,7 @@ def _distribution(key: str, value: Any, loc: _Locator) -> Distribution:
     return Distribution(key, kind, tuple(float(v) for v in params))
 
 
-def _draw_key(key: str, loc: _Locator) -> None:
+def _draw_key(key: str, loc: Locator) -> None:
     parts = key.split(".")
     ok = ((parts[0] == "plant" and len(parts) >= 2 and all(parts[1:]))
           or (parts[0] == "sensor" and len(parts) >= 3 and all(parts[1:])
@@ -301,32 +222,31 @@ def _draw_key(key: str, loc: _Locator) -> None:
                         "sensor.<output>.bias|noise|uniform or ref.<output>", "draw", key)
 
 
-def _sequence(table: Any, loc: _Locator, name: str, held: str, signal: str,
+def _sequence(table: Any, loc: Locator, name: str, held: str, signal: str,
               keys: tuple[str, ...]) -> tuple[int, float, dict[str, tuple[float, float]]]:
     """``(count, hold, ranges)`` of a table of drawn levels (``[setpoints]``,
     ``[disturbances]``): its own keys ``keys`` besides ``count`` and ``hold`` are skipped, every
     other one is a ``signal``'s range ``[low, high]``."""
     if not isinstance(table, dict):
         raise loc.error(f"[{name}] must be a table", name)
-    count = int(_number(table.get("count", 1), loc, name, "count", integer=True,
-                        positive=True))
+    count = int(number(table.get("count", 1), loc, name, "count", integer=True,
+                       positive=True))
     if "hold" not in table:
         raise loc.error(f"[{name}]: 'hold' (seconds each {held} is held) is missing", name)
-    hold = float(_number(table["hold"], loc, name, "hold", positive=True))
+    hold = float(number(table["hold"], loc, name, "hold", positive=True))
     ranges = {}
     for key, value in table.items():
         if key in ("count", "hold", *keys):
             continue
-        if (not isinstance(value, list) or len(value) != 2 or not all(
-                isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v)
-                for v in value) or value[0] > value[1]):
+        if (not isinstance(value, list) or len(value) != 2
+                or not all(finite(v) for v in value) or value[0] > value[1]):
             raise loc.error(f"[{name}] {key} = {value!r}: expected a range [low, high] of "
                             f"the {signal} (physical units)", name, key)
         ranges[key] = (float(value[0]), float(value[1]))
     return count, hold, ranges
 
 
-def _setpoints(table: Any, loc: _Locator) -> SetpointSpec:
+def _setpoints(table: Any, loc: Locator) -> SetpointSpec:
     count, hold, ranges = _sequence(table, loc, "setpoints", "set-point", "output", ("first",))
     first = table.get("first", "drawn")
     if first not in ("drawn", "certified"):
@@ -336,7 +256,7 @@ def _setpoints(table: Any, loc: _Locator) -> SetpointSpec:
     return SetpointSpec(count, hold, ranges, first == "certified")
 
 
-def _disturbances(table: Any, loc: _Locator) -> DisturbanceSpec:
+def _disturbances(table: Any, loc: Locator) -> DisturbanceSpec:
     count, hold, ranges = _sequence(table, loc, "disturbances", "level", "disturbance",
                                     ("ramp",))
     if not ranges:
@@ -349,7 +269,7 @@ def _disturbances(table: Any, loc: _Locator) -> DisturbanceSpec:
     return DisturbanceSpec(count, hold, ranges, ramp)
 
 
-def _initial_state(table: Any, loc: _Locator) -> InitialState:
+def _initial_state(table: Any, loc: Locator) -> InitialState:
     if not isinstance(table, dict):
         raise loc.error("[initial_state] must be a table", "initial_state")
     unknown = set(table) - {"output_offset", "observer_error"}
@@ -357,15 +277,15 @@ def _initial_state(table: Any, loc: _Locator) -> InitialState:
         key = sorted(unknown)[0]
         raise loc.error(f"[initial_state]: unknown key '{key}' (known: output_offset, "
                         "observer_error)", "initial_state", key)
-    offset = float(_number(table.get("output_offset", 0.0), loc, "initial_state",
+    offset = float(number(table.get("output_offset", 0.0), loc, "initial_state",
                            "output_offset", low=0.0))
     err = table.get("observer_error")
     if err is not None:
-        err = float(_number(err, loc, "initial_state", "observer_error", low=0.0))
+        err = float(number(err, loc, "initial_state", "observer_error", low=0.0))
     return InitialState(offset, err)
 
 
-def _variants(items: Any, loc: _Locator, controller: str,
+def _variants(items: Any, loc: Locator, controller: str,
               options: dict[str, Any]) -> tuple[Variant, ...]:
     if not isinstance(items, list):
         raise loc.error("variant: use [[variant]] tables", None, "variant")
@@ -397,7 +317,7 @@ def _variants(items: Any, loc: _Locator, controller: str,
                             "variant", "options", k)
         merged = {**(options if ctrl == controller else {}), **own}
         if "model" in item:
-            merged["model"] = str(_file(item["model"], loc, "variant", "model", "model file"))
+            merged["model"] = str(file(item["model"], loc, "variant", "model", "model file"))
         out.append(Variant(name, ctrl, merged, line))
     return tuple(out)
 
@@ -419,7 +339,7 @@ def _read(path: Path) -> tuple[str, dict]:
         raise CosimError(f"{path}:1: invalid TOML: nested too deeply") from None
 
 
-def _campaign_table(doc: dict, loc: _Locator) -> dict:
+def _campaign_table(doc: dict, loc: Locator) -> dict:
     """The ``[campaign]`` table, with no unknown table or key and its required keys."""
     unknown = set(doc) - _TOP_KEYS
     if unknown:
@@ -440,7 +360,7 @@ def _campaign_table(doc: dict, loc: _Locator) -> dict:
     return camp
 
 
-def _plant(plant: Any, loc: _Locator) -> str | None:
+def _plant(plant: Any, loc: Locator) -> str | None:
     """``plant``: an FMU path or ``model:FILE``, the file checked to exist."""
     if plant is None:
         return None
@@ -448,12 +368,12 @@ def _plant(plant: Any, loc: _Locator) -> str | None:
         raise loc.error("plant: expected an FMU path or model:<model file>", "campaign",
                         "plant")
     if plant.startswith("model:"):
-        return "model:" + str(_file(plant[len("model:"):], loc, "campaign", "plant",
+        return "model:" + str(file(plant[len("model:"):], loc, "campaign", "plant",
                                     "model file"))
-    return str(_file(plant, loc, "campaign", "plant", "plant FMU"))
+    return str(file(plant, loc, "campaign", "plant", "plant FMU"))
 
 
-def _controller_options(doc: dict, loc: _Locator, model: Path | None) -> dict:
+def _controller_options(doc: dict, loc: Locator, model: Path | None) -> dict:
     """``[controller.options]`` (with the campaign's ``model``)."""
     ctrl_table = doc.get("controller", {})
     if not isinstance(ctrl_table, dict) or set(ctrl_table) - {"options"}:
@@ -464,7 +384,7 @@ def _controller_options(doc: dict, loc: _Locator, model: Path | None) -> dict:
     return {**options, "model": str(model)} if model is not None else options
 
 
-def _draws(doc: dict, loc: _Locator) -> list:
+def _draws(doc: dict, loc: Locator) -> list:
     """The ``[draw]`` table's distributions, by column."""
     draws_table = doc.get("draw", {})
     if not isinstance(draws_table, dict):
@@ -482,6 +402,37 @@ def _draws(doc: dict, loc: _Locator) -> list:
     return draws
 
 
+def _controller(camp: dict, loc: Locator) -> str:
+    """The campaign's ``controller``: a name, a controller file or a controller FMU."""
+    controller = camp.get("controller", "robust-mpc")
+    if not isinstance(controller, str) or not controller:
+        raise loc.error(f"controller = {controller!r}: expected a controller name",
+                        "campaign", "controller")
+    return _controller_file(controller, loc, "campaign")
+
+
+def _execution(camp: dict, loc: Locator) -> dict[str, Any]:
+    """How each run is executed: ``interface``, ``timeout``, ``step_timeout`` (it implies
+    ``isolate``), ``isolate`` and ``figures``, as :class:`CampaignSpec`'s keywords."""
+    interface = camp.get("interface", "cs")
+    if interface not in ("cs", "me"):
+        raise loc.error(f"interface = {interface!r}: expected \"cs\" or \"me\"", "campaign",
+                        "interface")
+    limits = {}
+    for key in ("timeout", "step_timeout"):
+        value = camp.get(key)
+        limits[key] = (None if value is None
+                       else float(number(value, loc, "campaign", key, positive=True)))
+    flags = {}
+    for key in ("isolate", "figures"):
+        value = camp.get(key, False)
+        if not isinstance(value, bool):
+            raise loc.error(f"{key} = {value!r}: expected true or false", "campaign", key)
+        flags[key] = value
+    return {"interface": interface, **limits, "figures": flags["figures"],
+            "isolate": flags["isolate"] or limits["step_timeout"] is not None}
+
+
 def load(path: str | Path) -> CampaignSpec:
     """Read and check a campaign specification.
 
@@ -493,45 +444,24 @@ def load(path: str | Path) -> CampaignSpec:
     """
     path = Path(path)
     text, doc = _read(path)
-    loc = _Locator(path, text)
+    loc = Locator(path, text)
     camp = _campaign_table(doc, loc)
     name = camp.get("name", path.stem)
     if not isinstance(name, str) or not _NAME.match(name):
         raise loc.error(f"name = {name!r}: expected a name of letters, digits and _ . + -",
                         "campaign", "name")
-    runs = int(_number(camp["runs"], loc, "campaign", "runs", integer=True, positive=True))
+    runs = int(number(camp["runs"], loc, "campaign", "runs", integer=True, positive=True))
     if runs > MAX_RUNS:
         raise loc.error(f"runs = {runs}: at most {MAX_RUNS}", "campaign", "runs")
-    seed = int(_number(camp.get("seed", 0), loc, "campaign", "seed", integer=True, low=0))
-    scenario = _file(camp["scenario"], loc, "campaign", "scenario", "scenario")
-    controller = camp.get("controller", "robust-mpc")
-    if not isinstance(controller, str) or not controller:
-        raise loc.error(f"controller = {controller!r}: expected a controller name",
-                        "campaign", "controller")
-    controller = _controller_file(controller, loc, "campaign")
+    seed = int(number(camp.get("seed", 0), loc, "campaign", "seed", integer=True, low=0))
+    scenario = file(camp["scenario"], loc, "campaign", "scenario", "scenario")
+    controller = _controller(camp, loc)
     plant = _plant(camp.get("plant"), loc)
-    vmap = _file(camp["map"], loc, "campaign", "map", "variable map") if "map" in camp else None
-    model = (_file(camp["model"], loc, "campaign", "model", "model file")
-             if "model" in camp else None)
-    problem = (_file(camp["problem"], loc, "campaign", "problem", "problem file")
-               if "problem" in camp else None)
-    interface = camp.get("interface", "cs")
-    if interface not in ("cs", "me"):
-        raise loc.error(f"interface = {interface!r}: expected \"cs\" or \"me\"", "campaign",
-                        "interface")
-    timeout = camp.get("timeout")
-    if timeout is not None:
-        timeout = float(_number(timeout, loc, "campaign", "timeout", positive=True))
-    step_timeout = camp.get("step_timeout")
-    if step_timeout is not None:
-        step_timeout = float(_number(step_timeout, loc, "campaign", "step_timeout",
-                                     positive=True))
-    flags = {}
-    for key in ("isolate", "figures"):
-        value = camp.get(key, False)
-        if not isinstance(value, bool):
-            raise loc.error(f"{key} = {value!r}: expected true or false", "campaign", key)
-        flags[key] = value
+    vmap, model, problem = (file(camp[key], loc, "campaign", key, kind) if key in camp
+                            else None for key, kind in (("map", "variable map"),
+                                                        ("model", "model file"),
+                                                        ("problem", "problem file")))
+    execution = _execution(camp, loc)
     options = _controller_options(doc, loc, model)
     draws = _draws(doc, loc)
     setpoints = _setpoints(doc["setpoints"], loc) if "setpoints" in doc else None
@@ -543,12 +473,8 @@ def load(path: str | Path) -> CampaignSpec:
                         "initial_state")
     variants = (_variants(doc["variant"], loc, controller, options) if "variant" in doc
                 else (Variant(controller, controller, dict(options)),))
-    spec = CampaignSpec(
+    return CampaignSpec(
         path=path, name=name, runs=runs, seed=seed, scenario=scenario, controller=controller,
         options=dict(options), plant=plant, map=vmap, model=model, problem=problem,
-        interface=interface,
-        timeout=timeout, isolate=flags["isolate"] or step_timeout is not None,
-        step_timeout=step_timeout, figures=flags["figures"], draws=tuple(draws),
-        setpoints=setpoints, disturbances=disturbances, initial_state=initial,
-        variants=variants, text=text)
-    return spec
+        **execution, draws=tuple(draws), setpoints=setpoints, disturbances=disturbances,
+        initial_state=initial, variants=variants, text=text)

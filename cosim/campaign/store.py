@@ -25,7 +25,7 @@ from cosim.core.errors import CosimError
 from cosim.core.run_result import COMPLETE
 
 if TYPE_CHECKING:
-    from cosim.campaign.engine import Plan
+    from cosim.campaign.plan import Plan
 
 __all__ = ["CAMPAIGN_FILES", "TRACEBACK_FILE", "build_report", "finished", "open_folder",
            "write_run"]

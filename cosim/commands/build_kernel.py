@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from cosim.commands import add_design_arguments
+from cosim.commands import add_design_arguments, add_model_argument
 from cosim.core.errors import exit_codes_help
 
 __all__ = ["DESCRIPTION", "HELP", "register", "run"]
@@ -28,9 +28,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("build-kernel", help=HELP, description=DESCRIPTION,
                               epilog=exit_codes_help(),
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--model", metavar="FILE", default=None,
-                   help="GRU model file (default: the shipped controllers/models/"
-                        "fourtank_gru.json)")
+    add_model_argument(p, "--model", "FILE")
     add_design_arguments(p, "robust-mpc option that changes the problem (e.g. N=20), repeatable")
     p.add_argument("--quiet", action="store_true", help="print nothing on success")
     p.set_defaults(func=run)

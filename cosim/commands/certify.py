@@ -18,6 +18,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from cosim.commands import add_model_argument, add_problem_argument
+from cosim.commands.certify_report import figure, print_table, print_verdict
 from cosim.core.errors import (
     EXIT_FAILED,
     EXIT_INPUT_ERROR,
@@ -76,16 +78,12 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser("certify", help="compute and check the paper's certificates",
                               description=HELP, epilog=EPILOG,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("model", nargs="?", default=None,
-                   help="GRU model file (default: the shipped controllers/models/"
-                        "fourtank_gru.json)")
+    add_model_argument(p)
     p.add_argument("--setpoint", action="append", metavar="NAME=VALUE,...", default=[],
                    help="set-point in the problem's units, every output once by name "
                         "(e.g. h1=1.0,h2=0.8), or the values in the problem's output order "
                         "(1.0,0.8); repeat for several")
-    p.add_argument("--problem", metavar="PROBLEM.toml", default=None,
-                   help="control problem file: must agree with the model's own (checked), "
-                        "or gives the problem of a model file without one")
+    add_problem_argument(p)
     p.add_argument("--quiet", action="store_true",
                    help="print nothing but errors and the one-line verdict of an uncertified "
                         "model (the exit status says certified: 0, uncertified: 1)")
@@ -162,36 +160,6 @@ def _parse_setpoint(text: str, names: list[str]) -> list[float]:
     return out
 
 
-def _fmt(v: Any) -> str:
-    import numpy as np
-
-    if isinstance(v, bool):
-        return "yes" if v else "NO"
-    if isinstance(v, float | int | np.floating):
-        return f"{float(v):.6g}"
-    arr = np.asarray(v, dtype=float)
-    return "[" + ", ".join(f"{x:.4g}" for x in arr.ravel()) + "]"
-
-
-def _admissible(cert: Any, model: Any) -> list[tuple[str, float | None, float | None]]:
-    """Per-output admissible set-point interval (:func:`controllers.certification.
-    output_ranges.admissible_ranges`)."""
-    from controllers.certification.output_ranges import admissible_ranges
-
-    return admissible_ranges(cert, model)
-
-
-def _admissible_ranges(cert: Any, model: Any) -> list[str]:
-    """Per-output admissible set-point interval (physical units), as text."""
-    out = []
-    for j, (name, lo, hi) in enumerate(_admissible(cert, model)):
-        if lo is None or hi is None:
-            out.append(f"{name}: none")
-        else:
-            out.append(f"{name} ∈ [{lo:.4g}, {hi:.4g}] {model.output_units[j]}".rstrip())
-    return out
-
-
 def _w_y_bar_from_csv(model: Any, path: str) -> float:
     """``w̄_y`` from a ``cosim generate-data`` record (``--data``): the full model's (inputs
     and disturbances, each its dead time late)."""
@@ -242,7 +210,6 @@ def run(args: argparse.Namespace) -> int:
     """Compute the certificate, print it, check it; returns the exit code."""
     import numpy as np
 
-    from controllers import laws
     from controllers.disturbances import condition
     from controllers.errors import ControllersError
     from controllers.model import GRUModel
@@ -270,8 +237,37 @@ def run(args: argparse.Namespace) -> int:
             raise CosimError(str(exc)) from None
         raise CosimError(f"{args.model}: {exc}") from None
 
-    n_design = len(cert.failures())
     per_setpoint, failures = _setpoint_checks(model, cert, setpoints_phys, setpoints)
+    law = _law_verdict(args, model, cert, kwargs, setpoints, setpoints_phys, failures,
+                       no_theta)
+    verdict = law.verdict
+    if args.json:
+        docs = [cert.to_json(sp) for _, sp, _, _ in per_setpoint] or [cert.to_json()]
+        docs = [{**d, **law.report, "verdict": verdict.to_json()} for d in docs]
+        print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1))
+    elif not args.quiet:
+        print_table(args.model, model, cert, note, per_setpoint)
+        for line in law.lines:
+            print(line)
+        print_verdict(verdict)
+    if args.plot:
+        path = figure(args.plot, model, cert, setpoints_phys)
+        print(f"figure written to {path}", file=sys.stderr)
+    if args.save:
+        _save(args.model, full, cert, verdict, setpoints_phys, args.quiet)
+    return _exit_code(verdict)
+
+
+def _law_verdict(args: argparse.Namespace, model: Any, cert: Any, kwargs: dict,
+                 setpoints: list, setpoints_phys: list, failures: list[str],
+                 no_theta: str | None) -> Any:
+    """The law's judgement of the certificate (its ``certify`` hook: the verdict, what its
+    JSON adds, its lines), with ``failures`` (and the failed ``--auto-gain-scale``); an
+    uncertified design that the run would refuse is not usable (:func:`_refusal`)."""
+    from controllers import laws
+    from controllers.errors import ControllersError
+
+    n_design = len(cert.failures())
     if no_theta:
         failures.append(no_theta)
     spec = laws.spec(args.law)
@@ -284,20 +280,12 @@ def run(args: argparse.Namespace) -> int:
     if verdict.usable and not verdict.certified:
         verdict.unusable = _refusal(args, setpoints_phys)   # the run's own judgement
         verdict.usable = not verdict.unusable
-    if args.json:
-        docs = [cert.to_json(sp) for _, sp, _, _ in per_setpoint] or [cert.to_json()]
-        docs = [{**d, **law.report, "verdict": verdict.to_json()} for d in docs]
-        print(json.dumps(docs[0] if len(docs) == 1 else docs, indent=1))
-    elif not args.quiet:
-        _print_table(args.model, model, cert, note, per_setpoint)
-        for line in law.lines:
-            print(line)
-        _print_verdict(verdict)
-    if args.plot:
-        path = figure(args.plot, model, cert, setpoints_phys)
-        print(f"figure written to {path}", file=sys.stderr)
-    if args.save:
-        _save(args.model, full, cert, verdict, setpoints_phys, args.quiet)
+    return law
+
+
+def _exit_code(verdict: Any) -> int:
+    """0 certified, 1 usable but not certified, 2 not usable; the reason on standard
+    error."""
     if not verdict.usable:
         print(f"cosim certify: not usable: {verdict.unusable}", file=sys.stderr)
         return EXIT_INPUT_ERROR
@@ -378,6 +366,7 @@ def _setpoint_checks(model: Any, cert: Any, setpoints_phys: list, setpoints: lis
     """Each set-point's label, normalised value, equilibrium input and failed hypotheses,
     and every failure in words (the design's first, then each set-point's, then an empty
     admissible set)."""
+    from controllers.certification.output_ranges import admissible_ranges
     from controllers.equilibrium import equilibrium
     from controllers.errors import UnreachableSetpoint
 
@@ -396,7 +385,7 @@ def _setpoint_checks(model: Any, cert: Any, setpoints_phys: list, setpoints: lis
             f.append(f"equilibrium: {exc}")
         per_setpoint.append((label, sp, u_bar, f))
         failures += [f"set-point {label}: {msg}" for msg in f]
-    empty = [name for name, lo, _ in _admissible(cert, model) if lo is None]
+    empty = [name for name, lo, _ in admissible_ranges(cert, model) if lo is None]
     if empty:
         failures.append("admissible set-points (ass:setpoint and eq:condition-recursive-"
                         f"feasibility): none for {', '.join(empty)}")
@@ -421,79 +410,3 @@ def _save(path: str, model: Any, cert: Any, verdict: Any, setpoints_phys: list,
     if not quiet:
         print(f"saved L_z, L_r, w_y_bar and the verdict (certified: "
               f"{str(verdict.certified).lower()}) to {path}", file=sys.stderr)
-
-
-def _print_verdict(verdict: Any) -> None:
-    word = ("CERTIFIED" if verdict.certified else
-            "NOT CERTIFIED (usable: the robust MPC runs uncertified, with the model's measured "
-            "error as its tightening)" if verdict.usable else
-            "NOT USABLE (the robust MPC refuses this model, certified or not)")
-    print(f"verdict ({verdict.law} law): {word}")
-    for f in verdict.findings:
-        print(f"  {'holds' if f.holds else 'FAILS'}: {f.hypothesis}: {f.detail}")
-        if f.fix:
-            print(f"    fix: {f.fix}")
-
-
-def _print_table(path: str, model: Any, cert: Any, note: str, per_setpoint: list) -> None:
-    from controllers.certification.bounds import inf_norm
-
-    N = cert.N
-    rows = [
-        ("sigma_z", cert.sigma_z, "σ̄_z, th:stability-bonassi"),
-        ("sigma_r", cert.sigma_r, "σ̄_r, th:stability-bonassi"),
-        ("phi_h", cert.phi_h, "φ̄_h, th:stability-bonassi"),
-        ("nu", cert.nu, "ν < 1, eq:condition-deltaiss-gru"),
-        ("rho_s", cert.rho_s, "ρ_s, lem:Vs"),
-        ("c_s", cert.c_s, "c_s(j) = ‖(L U_o)_(j*)‖∞, lem:Vs"),
-        ("‖L_z‖∞", inf_norm(cert.L_z), f"eq:observer ({note})"),
-        ("‖L_r‖∞", inf_norm(cert.L_r), f"eq:observer ({note})"),
-        ("nu_o", cert.nu_o, "ν_o < 1, eq:condition-observer-convergence"),
-        ("rho_o", cert.rho_o, "ρ_o, lem:Vo"),
-        ("c_o", cert.c_o, "c_o, lem:Vo"),
-        ("kappa", cert.kappa, "κ, lem:Vo"),
-        ("L_max", cert.L_max, "L_max, eq:lyap-observer-max-gain"),
-        ("w_y_bar", cert.w_y_bar, "w̄_y, max test-set output error (normalised)"),
-        ("w_bar", cert.w_bar, "w̄ = κ w̄_y, eq:w-bar"),
-        ("w_L", cert.w_L, "w_L(j) = Σ_k |L_jk| w̄_y, eq:optimization"),
-        ("a_0", cert.a[0], "eq:constraint_tightening_parameters"),
-        (f"a_N (N={N})", cert.a[N], "eq:constraint_tightening_parameters"),
-        (f"b_N (N={N})", cert.b[N], "eq:constraint_tightening_parameters"),
-        ("e_o0", cert.e_o0, "ê_o,0, eq:eo-evolution"),
-        ("e_inf", cert.e_inf, "ē_∞ = w̄/(1 − ρ_o), eq:eo-evolution"),
-        ("e_tilde", cert.e_tilde, "ẽ_o = max(ê_o,0, ē_∞), eq:def-alpha"),
-        ("s", cert.s, "s = n λ_max(Q)/(1 − ρ_s²), eq:definition_s"),
-        ("alpha_min", cert.alpha_min(),
-         "ρ_s^N (L_max ẽ_o + w̄)/(1 − ρ_s), eq:condition-recursive-feasibility"),
-    ]
-    print(f"certificate of {path} (n={model.n}, m={model.m}, p={model.p}, N={N}, "
-          f"normalised units)")
-    width = max(len(r[0]) for r in rows) + 2
-    vwidth = max(len(_fmt(r[1])) for r in rows) + 2
-    for name, value, ref in rows:
-        print(f"  {name:<{width}}{_fmt(value):<{vwidth}}{ref}")
-    print("admissible set-points (ass:setpoint and eq:condition-recursive-feasibility): "
-          + "; ".join(_admissible_ranges(cert, model)))
-    for label, sp, u_bar, _ in per_setpoint:
-        ubar = ("unreachable" if u_bar is None else ", ".join(
-            f"{n}={v:.4g}" for n, v in zip(model.input_names, u_bar, strict=True)))
-        print(f"set-point {label}: alpha = {cert.alpha(sp):.6g} (eq:def-alpha), "
-              f"assumption_1 = {_fmt(cert.assumption_1(sp))}, "
-              f"recursive_feasibility = {_fmt(cert.recursive_feasibility(sp))}, "
-              f"ū: {ubar}")
-
-
-def figure(path: str | Path, model: Any, cert: Any, setpoints: list) -> Path:
-    """The ``--plot`` figure (:func:`cosim.core.plots.certificate_figure`), with the output bounds
-    and, for one or two outputs, the edge of the reachable set
-    (:func:`controllers.equilibrium.reachable_boundary`: physical outputs ``(k, p)``, an
-    open curve for one input, a closed path for two outputs and two or more inputs)."""
-    from controllers.equilibrium import reachable_boundary
-    from cosim.core import plots
-
-    reachable = reachable_boundary(model) if model.p <= 2 else None
-    return plots.certificate_figure(path, model, cert, setpoints, _bounds(model), reachable)
-
-
-def _bounds(model: Any) -> list[tuple[float, float]]:
-    return [model.problem.channel(n).bounds for n in model.output_names]

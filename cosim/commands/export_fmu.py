@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from cosim.commands import add_design_arguments
+from cosim.commands import add_design_arguments, add_model_argument
 from cosim.core.errors import exit_codes_help
 
 __all__ = ["DESCRIPTION", "HELP", "register", "run"]
@@ -36,9 +36,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("export-fmu", help=HELP, description=DESCRIPTION,
                               epilog=exit_codes_help(),
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("model", metavar="MODEL.json", nargs="?", default=None,
-                   help="GRU model file (default: the shipped controllers/models/"
-                        "fourtank_gru.json)")
+    add_model_argument(p, metavar="MODEL.json")
     add_design_arguments(p, "robust-mpc option, as for cosim run (e.g. N=40), repeatable")
     p.add_argument("--controller", metavar="CONTROLLER.json", default=None,
                    help="a run's controller.json: the robust MPC it describes (its model and "

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+from typing import Any
 
 from cosim.core.errors import exit_codes_help
 
@@ -78,28 +79,10 @@ def run(args: argparse.Namespace) -> int:
     from cosim.adapters.problems import bind_plant, load_problem
     from cosim.core import datagen, outpaths, varmap
     from cosim.core.errors import CosimError
-    from cosim.core.master import MAX_STEPS
 
-    if args.steps < 10:
-        raise CosimError(f"--steps must be at least 10, got {args.steps}")
-    if args.steps > MAX_STEPS:
-        raise CosimError(f"--steps must be at most {MAX_STEPS}, got {args.steps}")
-    if args.seed < 0:
-        raise CosimError(f"--seed must be a non-negative integer, got {args.seed}")
-    for flag, value in (("--hold-min", args.hold_min), ("--hold-max", args.hold_max)):
-        if value is not None and not 1 <= value <= MAX_STEPS:
-            raise CosimError(f"{flag} must be in [1, {MAX_STEPS}] samples, got {value}")
+    _check_numbers(args)
     problem = load_problem(args.problem)
-    holds = []
-    for c in problem.model_inputs:
-        lo, hi = c.hold if c.hold is not None else DEFAULT_HOLD
-        lo = args.hold_min if args.hold_min is not None else lo
-        hi = args.hold_max if args.hold_max is not None else hi
-        if not 1 <= lo <= hi:
-            raise CosimError(f"{_kind(problem, c.name)} {c.name}: hold times must satisfy "
-                             f"1 <= min <= max, got "
-                             f"{lo} and {hi} (--hold-min, --hold-max or the problem's 'hold')")
-        holds.append((lo, hi))
+    holds = _holds(args, problem)
     out = outpaths.out_file(args.out, "--out")
     if out.suffix.lower() == ".json":
         raise CosimError(f"{out}: --out must not end in .json: that name is the data's JSON "
@@ -134,5 +117,39 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _kind(problem, name: str) -> str:
+def _check_numbers(args: argparse.Namespace) -> None:
+    """``--steps`` in [10, MAX_STEPS], ``--seed`` not negative, the hold times in samples."""
+    from cosim.core.errors import CosimError
+    from cosim.core.master import MAX_STEPS
+
+    if args.steps < 10:
+        raise CosimError(f"--steps must be at least 10, got {args.steps}")
+    if args.steps > MAX_STEPS:
+        raise CosimError(f"--steps must be at most {MAX_STEPS}, got {args.steps}")
+    if args.seed < 0:
+        raise CosimError(f"--seed must be a non-negative integer, got {args.seed}")
+    for flag, value in (("--hold-min", args.hold_min), ("--hold-max", args.hold_max)):
+        if value is not None and not 1 <= value <= MAX_STEPS:
+            raise CosimError(f"{flag} must be in [1, {MAX_STEPS}] samples, got {value}")
+
+
+def _holds(args: argparse.Namespace, problem: Any) -> list[tuple[int, int]]:
+    """Each model input's hold times [samples]: ``--hold-min``/``--hold-max`` over its
+    ``hold`` in the problem, over :data:`DEFAULT_HOLD`."""
+    from cosim.core.errors import CosimError
+
+    holds = []
+    for c in problem.model_inputs:
+        lo, hi = c.hold if c.hold is not None else DEFAULT_HOLD
+        lo = args.hold_min if args.hold_min is not None else lo
+        hi = args.hold_max if args.hold_max is not None else hi
+        if not 1 <= lo <= hi:
+            raise CosimError(f"{_kind(problem, c.name)} {c.name}: hold times must satisfy "
+                             f"1 <= min <= max, got "
+                             f"{lo} and {hi} (--hold-min, --hold-max or the problem's 'hold')")
+        holds.append((lo, hi))
+    return holds
+
+
+def _kind(problem: Any, name: str) -> str:
     return "disturbance" if name in problem.disturbance_names else "input"

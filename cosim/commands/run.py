@@ -69,6 +69,18 @@ def register(subparsers: argparse._SubParsersAction) -> None:
         description=DESCRIPTION, epilog=EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("scenario", metavar="SCENARIO", help="scenario CSV file")
+    _plant_arguments(p)
+    _controller_arguments(p)
+    _execution_arguments(p)
+    _live_arguments(p)
+    p.add_argument("--no-figure", action="store_true", help="do not draw figure.png")
+    p.add_argument("--quiet", action="store_true",
+                   help="no progress bar and no summary line (for scripts)")
+    p.set_defaults(func=run)
+
+
+def _plant_arguments(p: argparse.ArgumentParser) -> None:
+    """``--plant``, ``--map`` and ``--problem``: the plant and what binds it."""
     p.add_argument("--plant", metavar="FMU", default=None,
                    help="plant FMU, FMI 2.0 or 3.0 (default: the project's "
                         "FourTank.fmu, built if missing, see cosim build-fmu), or "
@@ -86,6 +98,10 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "four-tank's (fmus/fourtank/problem.toml). The plant FMU is bound to "
                         "it: variables by name or the problem's 'variable' keys, units "
                         "converted, checked before the first step")
+
+
+def _controller_arguments(p: argparse.ArgumentParser) -> None:
+    """``--controller``, ``--model`` and ``--option``: the controller and its options."""
     p.add_argument("--controller", metavar="NAME", default=None,
                    help="controller: 'robust-mpc' (default), 'pi', module:Class, or a "
                         "controller file (FILE.json: the controller.json a run writes, its "
@@ -97,6 +113,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="controller constructor option, repeatable; VALUE is read as JSON "
                         "when it parses (e.g. --option du_weight=0.5 --option N=40 "
                         "--option 'law=\"paper\"')")
+
+
+def _execution_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the results go and how the loop runs: ``--out``, ``--interface``, ``--step``,
+    ``--isolate``, ``--step-timeout``, ``--require-certificate``, ``--seed``."""
     p.add_argument("--out", metavar="DIR", default=None,
                    help="output folder (default: results/<scenario name>)")
     p.add_argument("--interface", choices=("cs", "me"), default="cs",
@@ -120,6 +141,11 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "(same as --option 'certificate=\"require\"')")
     p.add_argument("--seed", metavar="N", type=int, default=0,
                    help="seed of the measurement noise (default 0)")
+
+
+def _live_arguments(p: argparse.ArgumentParser) -> None:
+    """The options of a live plant (``--plant opc.tcp://...``): its tags, speed, watchdog
+    and the connection's security."""
     live = p.add_argument_group("a live plant (--plant opc.tcp://HOST:PORT; docs: Run on a "
                                 "live process)")
     live.add_argument("--tags", metavar="TAGS.toml", default=None,
@@ -134,10 +160,6 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     from cosim.live.security import add_arguments
 
     add_arguments(p, "client")
-    p.add_argument("--no-figure", action="store_true", help="do not draw figure.png")
-    p.add_argument("--quiet", action="store_true",
-                   help="no progress bar and no summary line (for scripts)")
-    p.set_defaults(func=run)
 
 
 #: The options of this command that name a library parameter (their errors are reworded).

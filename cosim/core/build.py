@@ -338,10 +338,9 @@ def build_fmus(force: bool = False) -> list[Path]:
 
     Raises
     ------
-    CosimError
-        gcc is missing, the platform is not x86_64 Linux, or compilation failed.
-    OutputError
-        :data:`FMU_DIR` cannot be written (the previous FMUs, if any, are intact).
+    CosimError, OutputError
+        As :func:`build_fmu`, for the first FMU that fails (the previous FMUs, if any, are
+        intact).
     """
     for target in TARGETS:
         build_fmu(target, force=force)

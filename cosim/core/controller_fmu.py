@@ -187,40 +187,66 @@ def _attrs(port: Port | Parameter | None, causality: str, unit: str) -> str:
     return " ".join(out)
 
 
+#: The log categories of the FMU's messages (``fmus/glue/instance.c`` logs under them).
+_LOG_CATEGORIES = (
+    "  <LogCategories>\n"
+    '    <Category name="logStatusError" description="Errors: refused calls and failed '
+    'steps"/>\n'
+    '    <Category name="logStatusWarning" description="Warnings: non-finite '
+    'measurements, an unreachable first output"/>\n'
+    '    <Category name="logEvents" description="Events"/>\n  </LogCategories>\n')
+
+
 def model_description(iface: ControllerInterface, fmi_version: int) -> str:
     """The ``modelDescription.xml`` of the controller FMU for FMI ``fmi_version`` (2 or 3)."""
     fmi3 = fmi_version == 3
-    ident, q = iface.identifier, quoteattr
-    head = ('<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription\n'
-            f'  fmiVersion="{"3.0" if fmi3 else "2.0"}"\n  modelName={q(ident)}\n'
+    experiment = f'  <DefaultExperiment startTime="0" stepSize="{float(iface.sample_time)!r}"/>\n'
+    vendor = ("" if fmi3 else "  <VendorAnnotations>\n"
+              f"    <Tool name=\"{PLANT_ANNOTATION}\">\n" + _plant_lines(iface, "      ")
+              + "    </Tool>\n  </VendorAnnotations>\n\n")
+    variables, outputs = _model_variables(iface, fmi3)
+    body = [_head(iface, fmi3), _co_simulation(iface.identifier, fmi3), "\n", _units(iface),
+            "\n", _LOG_CATEGORIES, "\n", experiment, "\n", vendor, *variables,
+            _model_structure(outputs, fmi3)]
+    if fmi3:
+        body.append(f"  <Annotations>\n    <Annotation type=\"{PLANT_ANNOTATION}\">\n"
+                    + _plant_lines(iface, "      ") + "    </Annotation>\n  </Annotations>\n")
+    body.append("</fmiModelDescription>\n")
+    return "".join(body)
+
+
+def _head(iface: ControllerInterface, fmi3: bool) -> str:
+    """The XML declaration and the ``fmiModelDescription`` element's attributes."""
+    q = quoteattr
+    return ('<?xml version="1.0" encoding="UTF-8"?>\n<fmiModelDescription\n'
+            f'  fmiVersion="{"3.0" if fmi3 else "2.0"}"\n  modelName={q(iface.identifier)}\n'
             + (f"  instantiationToken={q(iface.token)}\n" if fmi3 else f"  guid={q(iface.token)}\n")
             + f"  description={q(iface.description)}\n"
             f"  generationTool={q(iface.generation_tool)}\n"
             '  variableNamingConvention="structured"'
             + ("" if fmi3 else '\n  numberOfEventIndicators="0"') + ">\n\n")
+
+
+def _co_simulation(ident: str, fmi3: bool) -> str:
+    """The ``CoSimulation`` element: no FMU state; FMI 2's lists the source files."""
     state = "FMUState" if fmi3 else "FMUstate"
-    cs = (f'  <CoSimulation modelIdentifier={q(ident)} '
-          f'canHandleVariableCommunicationStepSize="true" canGetAndSet{state}="false" '
-          f'canSerialize{state}="false"'
-          + ("/>\n" if fmi3 else ">\n    <SourceFiles>\n"
-             + "".join(f'      <File name="{f}"/>\n' for f in ("model.c", "controller_step.c",
-                                                                "instance.c", "fmi2.c"))
-             + "    </SourceFiles>\n  </CoSimulation>\n"))
-    logs = ("  <LogCategories>\n"
-            '    <Category name="logStatusError" description="Errors: refused calls and failed '
-            'steps"/>\n'
-            '    <Category name="logStatusWarning" description="Warnings: non-finite '
-            'measurements, an unreachable first output"/>\n'
-            '    <Category name="logEvents" description="Events"/>\n  </LogCategories>\n')
-    experiment = f'  <DefaultExperiment startTime="0" stepSize="{float(iface.sample_time)!r}"/>\n'
-    vendor = ("" if fmi3 else "  <VendorAnnotations>\n"
-              f"    <Tool name=\"{PLANT_ANNOTATION}\">\n" + _plant_lines(iface, "      ")
-              + "    </Tool>\n  </VendorAnnotations>\n\n")
-    body = [head, cs, "\n", _units(iface), "\n", logs, "\n", experiment, "\n", vendor,
-            "  <ModelVariables>\n"]
+    return (f'  <CoSimulation modelIdentifier={quoteattr(ident)} '
+            f'canHandleVariableCommunicationStepSize="true" canGetAndSet{state}="false" '
+            f'canSerialize{state}="false"'
+            + ("/>\n" if fmi3 else ">\n    <SourceFiles>\n"
+               + "".join(f'      <File name="{f}"/>\n' for f in ("model.c", "controller_step.c",
+                                                                  "instance.c", "fmi2.c"))
+               + "    </SourceFiles>\n  </CoSimulation>\n"))
+
+
+def _model_variables(iface: ControllerInterface, fmi3: bool) -> tuple[list[str], list[int]]:
+    """The ``ModelVariables`` element's lines (FMI 3 declares the time too), and the value
+    references of the outputs (FMI 2 indexes the variables from 1 in this order: the same)."""
+    q = quoteattr
+    lines = ["  <ModelVariables>\n"]
     if fmi3:
-        body.append('    <Float64 name="time" valueReference="0" causality="independent" '
-                    'variability="continuous" description="Simulation time" unit="s"/>\n')
+        lines.append('    <Float64 name="time" valueReference="0" causality="independent" '
+                     'variability="continuous" description="Simulation time" unit="s"/>\n')
     outputs = []
     for vr, (name, causality, variability, unit, port, text) in enumerate(
             iface.variables(), start=1):
@@ -230,27 +256,27 @@ def model_description(iface: ControllerInterface, fmi_version: int) -> str:
         common = (f"name={q(name)} valueReference=\"{vr}\" causality=\"{causality}\" "
                   f"variability=\"{variability}\"{initial} description={q(text)}")
         if fmi3:
-            body.append(f"    <Float64 {common} {attrs}/>\n")
+            lines.append(f"    <Float64 {common} {attrs}/>\n")
         else:
-            body.append(f"    <ScalarVariable {common}>\n      <Real {attrs}/>\n"
-                        "    </ScalarVariable>\n")
+            lines.append(f"    <ScalarVariable {common}>\n      <Real {attrs}/>\n"
+                         "    </ScalarVariable>\n")
         if causality == "output":
-            outputs.append(vr)   # FMI 2 indexes the variables from 1 in this order: = vr
-    body.append("  </ModelVariables>\n\n  <ModelStructure>\n")
+            outputs.append(vr)
+    lines.append("  </ModelVariables>\n\n")
+    return lines, outputs
+
+
+def _model_structure(outputs: list[int], fmi3: bool) -> str:
+    """The ``ModelStructure`` element: every output is an initial unknown too."""
+    body = ["  <ModelStructure>\n"]
     if fmi3:
         body += [f'    <Output valueReference="{vr}"/>\n' for vr in outputs]
         body += [f'    <InitialUnknown valueReference="{vr}"/>\n' for vr in outputs]
     else:
-        body.append("    <Outputs>\n" + "".join(f'      <Unknown index="{i}"/>\n'
-                                                for i in outputs) + "    </Outputs>\n")
-        body.append("    <InitialUnknowns>\n" + "".join(f'      <Unknown index="{i}"/>\n'
-                                                        for i in outputs)
-                    + "    </InitialUnknowns>\n")
+        unknowns = "".join(f'      <Unknown index="{i}"/>\n' for i in outputs)
+        body.append("    <Outputs>\n" + unknowns + "    </Outputs>\n")
+        body.append("    <InitialUnknowns>\n" + unknowns + "    </InitialUnknowns>\n")
     body.append("  </ModelStructure>\n\n")
-    if fmi3:
-        body.append(f"  <Annotations>\n    <Annotation type=\"{PLANT_ANNOTATION}\">\n"
-                    + _plant_lines(iface, "      ") + "    </Annotation>\n  </Annotations>\n")
-    body.append("</fmiModelDescription>\n")
     return "".join(body)
 
 

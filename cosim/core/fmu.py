@@ -11,7 +11,7 @@ ctypes buffers.
 An FMU call that fails raises :class:`~cosim.core.errors.FmuError` (a
 :class:`~cosim.core.errors.SimulationFailed`) carrying the FMI status it returned. The archive
 and the modelDescription are read by :mod:`cosim.core.fmu_archive`; the FMU's log messages are
-routed by :mod:`cosim.core.fmu_log`.
+routed by :mod:`cosim.core.fmu_log`; Model Exchange is integrated by :mod:`cosim.core.fmu_me`.
 
 Several components may live in one process and be stepped from several threads at once (a
 campaign worker with two threads): each has its own instance, extracted folder and buffers;
@@ -24,7 +24,6 @@ from __future__ import annotations
 import contextlib
 import ctypes
 import itertools
-import math
 import os
 import shutil
 import tempfile
@@ -38,6 +37,7 @@ from cosim.core import fmu_log
 from cosim.core.component import Capability, Component, Signal
 from cosim.core.errors import CosimError, FmuError
 from cosim.core.fmu_archive import check_binary, read_model_description, safe_extract
+from cosim.core.fmu_me import ModelExchange
 from cosim.core.varmap import VarMap, variable_unit
 
 __all__ = ["FmuComponent", "libraries_loaded"]
@@ -131,6 +131,7 @@ class FmuComponent(Component):
         self._out_names = [s.name for s in self.outputs]
         self._out_maps = [self.varmap.lookup(n) for n in self._out_names]
         self._fmu: Any = None
+        self._me: ModelExchange | None = None
         self._tmpdir: Path | None = None
         self._log: deque[str] = deque(maxlen=20)
         self._instance_name = ""
@@ -265,7 +266,7 @@ class FmuComponent(Component):
                 self._fmu.enterInitializationMode()
             self._fmu.exitInitializationMode()
             if self.interface == "me":
-                self._init_me(t0)
+                self._me = ModelExchange(self._fmu, self.md, fmi3_, t0, self.rtol)
         self._t = t0
 
     def _set_start_values(self) -> None:
@@ -363,37 +364,6 @@ class FmuComponent(Component):
         if status > 1:
             self._check(self._set_name, status)
 
-    def _init_me(self, t0: float) -> None:
-        from fmpy.sundials import CVodeSolver
-
-        self._event_update()
-        self._fmu.enterContinuousTimeMode()
-        nx = self.md.numberOfContinuousStates
-        fmu = self._fmu
-
-        class _NoInput:
-            def apply(self, *args: object, **kwargs: object) -> None:
-                return None
-
-        self._solver = CVodeSolver(
-            nx=nx, nz=self.md.numberOfEventIndicators,
-            get_x=fmu.getContinuousStates, set_x=fmu.setContinuousStates,
-            get_dx=fmu.getContinuousStateDerivatives if self._fmi3 else fmu.getDerivatives,
-            get_z=fmu.getEventIndicators,
-            get_nominals=fmu.getNominalsOfContinuousStates, set_time=fmu.setTime,
-            input=_NoInput(), startTime=t0, relativeTolerance=self.rtol, maxNumSteps=100000)
-        self._next_event: float | None = None
-
-    def _event_update(self) -> None:
-        """Iterate discrete states to convergence (FMU in event/initialisation mode left)."""
-        update = self._fmu.updateDiscreteStates if self._fmi3 else self._fmu.newDiscreteStates
-        needed = True
-        while needed:
-            needed, terminate, _, _, defined, next_time = update()
-            if terminate:
-                raise RuntimeError("the FMU requested termination")
-        self._next_event = next_time if defined else None
-
     # -- stepping -----------------------------------------------------------------------------
     def set_inputs(self, values: Mapping[str, float]) -> None:
         """Set inputs by project name (converted through the variable map).
@@ -403,10 +373,7 @@ class FmuComponent(Component):
         """
         with self._guard(lambda: f"setting inputs at t={self._t!r}"):
             if self.interface == "me" and not self._tunable_set.isdisjoint(values):
-                self._fmu.enterEventMode()
-                self._set_many(values)
-                self._event_update()
-                self._fmu.enterContinuousTimeMode()
+                self._me.in_event_mode(lambda: self._set_many(values))
             else:
                 self._set_many(values)
         self._dirty = True
@@ -418,10 +385,7 @@ class FmuComponent(Component):
             return
         if self.interface == "me":
             try:
-                self._fmu.enterEventMode()
-                self._set_var(name, value)
-                self._event_update()
-                self._fmu.enterContinuousTimeMode()
+                self._me.in_event_mode(lambda: self._set_var(name, value))
             except Exception as exc:
                 raise self._fail(f"setting {name} at t={self._t!r}", exc) from None
             self._dirty = True
@@ -444,34 +408,11 @@ class FmuComponent(Component):
                     if status > 1:
                         self._check("fmi2DoStep", status)
             else:
-                self._step_me(t, t + dt)
+                self._me.step(t, t + dt, restart=self._dirty)
+                self._dirty = False
         except Exception as exc:
             raise self._fail(f"doStep at t={t!r}", exc) from None
         self._t = t + dt
-
-    def _step_me(self, t: float, t_end: float) -> None:
-        fmu, solver = self._fmu, self._solver
-        if self._dirty:
-            solver.reset(t)
-            self._dirty = False
-        time = t
-        while time < t_end and not math.isclose(time, t_end, rel_tol=1e-12, abs_tol=1e-12):
-            target = t_end
-            if self._next_event is not None and time < self._next_event < t_end:
-                target = self._next_event
-            state_event, _, time = solver.step(time, target)
-            fmu.setTime(time)
-            step_event = False
-            if self.md.modelExchange.needsCompletedIntegratorStep:
-                step_event, terminate = fmu.completedIntegratorStep()
-                if terminate:
-                    raise RuntimeError("the FMU requested termination")
-            time_event = self._next_event is not None and math.isclose(time, self._next_event)
-            if state_event or step_event or time_event:
-                fmu.enterEventMode()
-                self._event_update()
-                fmu.enterContinuousTimeMode()
-                solver.reset(time)
 
     def get_outputs(self) -> dict[str, float]:
         """Outputs at the current time, by project name."""

@@ -238,14 +238,19 @@ class Isolation:
         return self._call(f"setting {name}", "set", name, float(value))
 
     def summary(self) -> dict:
-        """The worker's component's summary (this process's when the worker is gone)."""
+        """The worker's component's summary (:meth:`_summary_here` when the worker is
+        gone)."""
         worker = self._worker
         if worker is not None and worker.alive and not worker.busy:
             try:
                 return worker.call("summarising the run", "summary")
             except CosimError:
                 pass
-        return dict(super().summary() or {})  # type: ignore[misc]
+        return dict(self._summary_here() or {})
+
+    def _summary_here(self) -> dict | None:
+        """The summary this process knows (the component's own class's)."""
+        return super().summary()  # type: ignore[misc]
 
     def terminate(self) -> None:
         """Stop the worker and remove its folder (idempotent).
@@ -376,15 +381,10 @@ class IsolatedController(Isolation, Component):
         build = None if self.timeout is None else max(self.timeout, DEFAULT_STEP_TIMEOUT)
         self._start_worker(t0, build)
 
-    def summary(self) -> dict:
-        """The worker's controller's summary (the local one's when the worker is gone)."""
-        worker = self._worker
-        if worker is not None and worker.alive and not worker.busy:
-            try:
-                return worker.call("summarising the run", "summary")
-            except CosimError:
-                pass
-        return dict(self.local.summary() or {})
+    def _summary_here(self) -> dict | None:
+        """The local controller's summary (:meth:`Isolation.summary` when the worker is
+        gone)."""
+        return self.local.summary()
 
     def terminate(self) -> None:
         """Stop the worker (idempotent; a busy one is killed at once)."""

@@ -32,14 +32,14 @@ from __future__ import annotations
 import hashlib
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cosim.core import csvio
-from cosim.core.datagen import SPLITS, Dataset, split_sizes
+from cosim.core.datagen import DATA_WORDING, SPLITS, Dataset, split_sizes
 from cosim.core.errors import CosimError
 
 __all__ = ["EXPERIMENT_COLUMN", "LOG_WORDING", "MISSING", "SPLIT_COLUMN", "TIME_COLUMN",
@@ -54,13 +54,10 @@ TS_TOLERANCE = 0.01
 #: Cells of an input or output that mark a missing sample (case-insensitive, stripped).
 MISSING = frozenset({"", "nan", "na", "n/a", "null"})
 
-#: How logged data files word the errors of :class:`~cosim.core.csvio.CsvReader`.
-LOG_WORDING = csvio.Wording(
-    not_found="{path}: cannot read data file ({strerror})",
-    is_folder="{path}: cannot read data file ({strerror})",
-    unreadable="{path}: cannot read data file ({strerror})",
-    not_text="{path}:{line}: not a text CSV file (byte {start} of a read block is not UTF-8)",
-    malformed="{path}:{line}: malformed CSV ({error})",
+#: How logged data files word the errors of :class:`~cosim.core.csvio.CsvReader`: as data
+#: sets do (:data:`~cosim.core.datagen.DATA_WORDING`) the file, its cells by column.
+LOG_WORDING = replace(
+    DATA_WORDING,
     empty="{path}:1: empty file, expected a header row (time, inputs, outputs)",
     cell_count="{path}:{line}:{col}: {cells} cells, the header has {expected}",
     empty_value="{path}:{line}:{col}: empty value in column '{name}'",

@@ -292,9 +292,8 @@ def certificate_figure(path: str | Path, model: Any, cert: Any, setpoints: list,
 def _admissible_panel(fig: Any, ax: Any, model: Any, cert: Any, setpoints: list,
                       bounds: Sequence[tuple[float, float]],
                       reachable: np.ndarray | None) -> None:
-    """The admissible set-points of :func:`certificate_figure` (see there)."""
-    names, units = list(model.output_names), list(model.output_units)
-    p = len(bounds)
+    """The admissible set-points of :func:`certificate_figure` (see there): a map of ``α``
+    over the set-points of two outputs, else its profiles along each output's box."""
     lo = np.array([b[0] for b in bounds], dtype=float)
     hi = np.array([b[1] for b in bounds], dtype=float)
     amin = cert.alpha_min()
@@ -303,28 +302,46 @@ def _admissible_panel(fig: Any, ax: Any, model: Any, cert: Any, setpoints: list,
     def alpha(y: np.ndarray) -> float:
         return float(cert.alpha(model.normalize_y(y)))
 
-    if p == 2:
-        g1, g2 = np.linspace(lo[0], hi[0], 121), np.linspace(lo[1], hi[1], 121)
-        A = np.array([[alpha(np.array([a, b])) for a in g1] for b in g2])
-        top = max(float(np.nanmax(A)), 1e-9)
-        im = ax.pcolormesh(g1, g2, np.clip(A, 0, None), shading="auto", cmap="viridis",
-                           vmin=0, vmax=top)
-        fig.colorbar(im, ax=ax, label="α (eq:def-alpha, normalised)")
-        ax.contour(g1, g2, A, levels=[0.0], colors="red", linewidths=1.2)
-        if amin is not None:
-            ax.contour(g1, g2, A, levels=[amin], colors="white", linewidths=1.2,
-                       linestyles="--")
-        if reachable is not None:
-            ax.plot(reachable[:, 0], reachable[:, 1], color="orange", lw=1.5)
-        for sp in setpoints:
-            ax.plot(sp[0], sp[1], "k+", ms=10)
-        ax.set_xlabel(label(f"{names[0]} set-point", units[0]))
-        ax.set_ylabel(label(f"{names[1]} set-point", units[1]))
-        ax.set_title("α; red: α = 0 (ass:setpoint); white: α = α_min\n"
-                     "(eq:condition-recursive-feasibility)"
-                     + ("; orange: reachable, ‖u‖∞ ≤ 1" if reachable is not None else ""),
-                     fontsize=9)
-        return
+    if len(bounds) == 2:
+        _alpha_map(fig, ax, model, alpha, lo, hi, amin, setpoints, reachable)
+    else:
+        _alpha_profiles(ax, model, alpha, lo, hi, amin, setpoints, reachable)
+
+
+def _alpha_map(fig: Any, ax: Any, model: Any, alpha: Any, lo: np.ndarray, hi: np.ndarray,
+               amin: float | None, setpoints: list, reachable: np.ndarray | None) -> None:
+    """``α`` (eq:def-alpha) over the set-points of two outputs, with its contours ``α = 0``
+    (ass:setpoint) and ``α = α_min`` (eq:condition-recursive-feasibility), the edge of the
+    reachable set and the set-points checked."""
+    names, units = list(model.output_names), list(model.output_units)
+    g1, g2 = np.linspace(lo[0], hi[0], 121), np.linspace(lo[1], hi[1], 121)
+    A = np.array([[alpha(np.array([a, b])) for a in g1] for b in g2])
+    top = max(float(np.nanmax(A)), 1e-9)
+    im = ax.pcolormesh(g1, g2, np.clip(A, 0, None), shading="auto", cmap="viridis",
+                       vmin=0, vmax=top)
+    fig.colorbar(im, ax=ax, label="α (eq:def-alpha, normalised)")
+    ax.contour(g1, g2, A, levels=[0.0], colors="red", linewidths=1.2)
+    if amin is not None:
+        ax.contour(g1, g2, A, levels=[amin], colors="white", linewidths=1.2,
+                   linestyles="--")
+    if reachable is not None:
+        ax.plot(reachable[:, 0], reachable[:, 1], color="orange", lw=1.5)
+    for sp in setpoints:
+        ax.plot(sp[0], sp[1], "k+", ms=10)
+    ax.set_xlabel(label(f"{names[0]} set-point", units[0]))
+    ax.set_ylabel(label(f"{names[1]} set-point", units[1]))
+    ax.set_title("α; red: α = 0 (ass:setpoint); white: α = α_min\n"
+                 "(eq:condition-recursive-feasibility)"
+                 + ("; orange: reachable, ‖u‖∞ ≤ 1" if reachable is not None else ""),
+                 fontsize=9)
+
+
+def _alpha_profiles(ax: Any, model: Any, alpha: Any, lo: np.ndarray, hi: np.ndarray,
+                    amin: float | None, setpoints: list, reachable: np.ndarray | None) -> None:
+    """``α`` (eq:def-alpha) along each output's box, the others at its middle (one output:
+    over its set-points, with the reachable ones and the set-points checked)."""
+    names, units = list(model.output_names), list(model.output_units)
+    p = len(lo)
     s = np.linspace(0.0, 1.0, 121)
     middle = 0.5 * (lo + hi)
     for k in range(p):

@@ -422,19 +422,24 @@ Status instance_set_continuous_states(Instance *inst, const char *function, cons
     return STATUS_OK;
 }
 
+/* A vector of N_STATES values the model gives in any state (its states, their derivatives):
+ * checked as check_vector does, then filled by get. */
+static Status get_vector(Instance *inst, const char *function, double v[], const char *v_name,
+                         size_t nx, const char *nx_label,
+                         void (*get)(const ModelData *m, double *v)) {
+    if (!check_vector(inst, function, ANY_STATE, v, v_name, nx, nx_label)) return STATUS_ERROR;
+    get(&inst->model, v);
+    return STATUS_OK;
+}
+
 Status instance_get_continuous_states(Instance *inst, const char *function, double x[],
                                       const char *x_name, size_t nx, const char *nx_label) {
-    if (!check_vector(inst, function, ANY_STATE, x, x_name, nx, nx_label)) return STATUS_ERROR;
-    model_get_states(&inst->model, x);
-    return STATUS_OK;
+    return get_vector(inst, function, x, x_name, nx, nx_label, model_get_states);
 }
 
 Status instance_get_derivatives(Instance *inst, const char *function, double dx[],
                                 const char *dx_name, size_t nx, const char *nx_label) {
-    if (!check_vector(inst, function, ANY_STATE, dx, dx_name, nx, nx_label))
-        return STATUS_ERROR;
-    model_get_derivatives(&inst->model, dx);
-    return STATUS_OK;
+    return get_vector(inst, function, dx, dx_name, nx, nx_label, model_get_derivatives);
 }
 
 Status instance_get_nominals(Instance *inst, const char *function, double nominals[],

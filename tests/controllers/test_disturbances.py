@@ -23,31 +23,10 @@ from controllers.errors import ProblemFileError
 from controllers.problem import Channel, ControlProblem
 from controllers.problem_file import load, loads, problem_from_dict
 from tests.controllers.random_gru import random_gru_model
+from tests.heater_problem import HEATER
 
-TOML = """\
-[problem]
-name = "heater"
-Ts = 20.0
-
-[inputs.P]
-unit = "W"
-min = 0.0
-max = 2000.0
-delay = 2
-
-[outputs.T]
-unit = "degC"
-min = 15.0
-max = 80.0
-
-[disturbances.T_in]
-unit = "degC"
-min = 5.0
-max = 35.0
-variable = "T_amb"
-rate = 0.5
-hold = [5, 80]
-"""
+#: the heater whose power acts two samples late
+TOML = HEATER.replace("hold = [3, 60]", "delay = 2")
 
 
 def heater_problem(**dist: object) -> ControlProblem:

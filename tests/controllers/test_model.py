@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import functools
 import json
 import math
+import operator
 
 import numpy as np
 import pytest
@@ -64,34 +66,39 @@ def test_missing_file(tmp_path):
         GRUModel.load(tmp_path / "nope.json")
 
 
-def test_missing_array(tmp_path):
+#: An edited or damaged model file: the place changed (keys and indices), the value put
+#: there (:data:`DELETE`: the key removed), the message that refuses it by name.
+DELETE = object()
+DAMAGED = {
+    "missing array": (("U_h",), DELETE, "missing array 'U_h'"),
+    "wrong shape": (("U_r",), [[0.0] * 5] * 4,
+                    r"'U_r' has shape \(4, 5\), expected \(5, 5\)"),
+    # json.dumps writes NaN, json.loads reads it back
+    "nan value": (("b_h", 2), math.nan, "'b_h' has a non-finite value"),
+    # a weight far beyond what training gives: refused as the controller FMU's data file
+    # refuses it
+    "absurd weight": (("U_h", 1, 3), -2e6, r"'U_h' has the value -2000000\.0, beyond the "
+                                           r"plausible ±1e\+06 of a GRU weight"),
+    "missing normalization": (("normalization",), DELETE, "missing object 'normalization'"),
+    "zero scale": (("normalization", "u_scale"), [1.0, 0.0],
+                   "'normalization.u_scale' has a zero entry"),
+    "short offset": (("normalization", "y_offset"), [1.0],
+                     "'normalization.y_offset' must have 2 entries"),
+    "text offset": (("normalization", "u_offset"), "abc",
+                    "'normalization.u_offset' is not a numeric array"),
+}
+
+
+@pytest.mark.parametrize(("where", "value", "message"), DAMAGED.values(), ids=DAMAGED)
+def test_a_damaged_model_file_is_refused_by_name(tmp_path, where, value, message):
     doc = make_model().to_dict()
-    del doc["U_h"]
-    with pytest.raises(ModelFileError, match="missing array 'U_h'"):
-        GRUModel.load(write(tmp_path, doc))
-
-
-def test_wrong_shape(tmp_path):
-    doc = make_model().to_dict()
-    doc["U_r"] = doc["U_r"][:-1]
-    with pytest.raises(ModelFileError, match=r"'U_r' has shape \(4, 5\), expected \(5, 5\)"):
-        GRUModel.load(write(tmp_path, doc))
-
-
-def test_nan_value(tmp_path):
-    doc = make_model().to_dict()
-    doc["b_h"][2] = math.nan  # json.dumps writes NaN, json.loads reads it back
-    with pytest.raises(ModelFileError, match="'b_h' has a non-finite value"):
-        GRUModel.load(write(tmp_path, doc))
-
-
-def test_an_absurd_weight_is_refused(tmp_path):
-    """A weight far beyond what training gives (an edited or damaged file): refused by name,
-    as the controller FMU's data file refuses it."""
-    doc = make_model().to_dict()
-    doc["U_h"][1][3] = -2e6
-    with pytest.raises(ModelFileError, match=r"'U_h' has the value -2000000\.0, beyond the "
-                                             r"plausible ±1e\+06 of a GRU weight"):
+    *parents, last = where
+    target = functools.reduce(operator.getitem, parents, doc)
+    if value is DELETE:
+        del target[last]
+    else:
+        target[last] = value
+    with pytest.raises(ModelFileError, match=message):
         GRUModel.load(write(tmp_path, doc))
 
 
@@ -107,25 +114,6 @@ def test_a_model_that_would_not_load_is_not_written(tmp_path):
             model.save(path)
         assert path.read_bytes() == before
     assert [p.name for p in tmp_path.iterdir()] == ["m.json"]
-
-
-@pytest.mark.parametrize(("key", "value", "message"), [
-    ("u_scale", [1.0, 0.0], "'normalization.u_scale' has a zero entry"),
-    ("y_offset", [1.0], "'normalization.y_offset' must have 2 entries"),
-    ("u_offset", "abc", "'normalization.u_offset' is not a numeric array"),
-])
-def test_bad_normalization(tmp_path, key, value, message):
-    doc = make_model().to_dict()
-    doc["normalization"][key] = value
-    with pytest.raises(ModelFileError, match=message):
-        GRUModel.load(write(tmp_path, doc))
-
-
-def test_missing_normalization(tmp_path):
-    doc = make_model().to_dict()
-    del doc["normalization"]
-    with pytest.raises(ModelFileError, match="missing object 'normalization'"):
-        GRUModel.load(write(tmp_path, doc))
 
 
 def test_error_messages_are_one_line_and_name_the_file(tmp_path):

@@ -1,9 +1,10 @@
-"""Drive the four-tank FMUs through fmpy's low-level API (helpers for the FMU tests)."""
+"""Drive the four-tank FMUs through fmpy's low-level API, and an SSP file through libcosim
+(helpers for the FMU tests)."""
 
 from __future__ import annotations
 
 import shutil
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
@@ -124,3 +125,24 @@ def run_cs(path: Path, u: np.ndarray, ts: float = 25.0, **start_values: float) -
         return y
     finally:
         plant.close()
+
+
+def libcosim_run(ssp: Path, plant_fmu: Path, names: Sequence[str], steps: int) -> np.ndarray:
+    """The SSP file ``ssp`` run by libcosim (an FMI engine not written here), its instance
+    ``plant`` being ``plant_fmu``: that FMU's variables ``names`` after each of ``steps``
+    steps, ``(steps, len(names))``."""
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimObserver import CosimObserver
+
+    log_output_level(CosimLogLevel.ERROR)
+    execution = CosimExecution.from_ssp_file(str(ssp))
+    observer = CosimObserver.create_last_value()
+    execution.add_observer(observer)
+    index = execution.slave_index_from_instance_name("plant")
+    vr = {v.name: v.valueReference for v in read_model_description(str(plant_fmu)).modelVariables}
+    out = np.empty((steps, len(names)))
+    for k in range(steps):
+        assert execution.step()
+        out[k] = observer.last_real_values(index, [vr[name] for name in names])
+    return out

@@ -15,7 +15,7 @@ import fmpy
 import numpy as np
 import pytest
 
-from tests.fmus.fourtank_run import LEVELS, Plant
+from tests.fmus.fourtank_run import LEVELS, Plant, libcosim_run
 
 TS = 25.0
 REFS = [(0, (0.65, 0.65)), (40, (1.3, 1.4)), (90, (0.9, 1.2))]   # (from step, (h1, h2))
@@ -162,10 +162,6 @@ def test_an_ssp_file_of_plant_and_controller_runs_in_libcosim(
     """``cosim export-ssp``: libcosim loads the archive unchanged (connections, set-points,
     the controller's tuned weights, fixed step from the file) and runs the trajectory of fmpy's
     loop stepping the same way."""
-    from libcosimpy.CosimExecution import CosimExecution
-    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
-    from libcosimpy.CosimObserver import CosimObserver
-
     from cosim.cli import main
 
     ssp = tmp_path / "loop.ssp"
@@ -174,18 +170,8 @@ def test_an_ssp_file_of_plant_and_controller_runs_in_libcosim(
                  str(controller_fmus[2]), "--setpoint", "ref.h1=1.3", "--setpoint",
                  "ref.h2=1.4", "--parameter", "R.qa=0.05", "--parameter",
                  "offset_weight.h1=1000", "--out", str(ssp), "--quiet"]) == 0
-    log_output_level(CosimLogLevel.ERROR)
-    execution = CosimExecution.from_ssp_file(str(ssp))
-    observer = CosimObserver.create_last_value()
-    execution.add_observer(observer)
-    plant = execution.slave_index_from_instance_name("plant")
-    vr = {v.name: v.valueReference for v in fmpy.read_model_description(
-        str(fmu2_path)).modelVariables}
     steps = 50
-    h_cosim = np.empty((steps, 2))
-    for k in range(steps):
-        assert execution.step()
-        h_cosim[k] = observer.last_real_values(plant, [vr["h1"], vr["h2"]])
+    h_cosim = libcosim_run(ssp, fmu2_path, ["h1", "h2"], steps)
     h = _jacobi(fmu2_path, controller_fmus[2], lambda k: (1.3, 1.4), steps, tuned)
     np.testing.assert_array_equal(h_cosim, h)
     default = _jacobi(fmu2_path, controller_fmus[2], lambda k: (1.3, 1.4), steps)

@@ -21,31 +21,10 @@ import pytest
 from cosim.cli import main
 from cosim.core.errors import CosimError
 from tests import example_builds
+from tests.heater_problem import HEATER
 
 ROOT = Path(__file__).resolve().parents[3]
-PROBLEM = """\
-[problem]
-name = "heater"
-Ts = 20.0
-
-[inputs.P]
-unit = "W"
-min = 0.0
-max = 2000.0
-hold = [3, 60]
-
-[outputs.T]
-unit = "degC"
-min = 15.0
-max = 80.0
-
-[disturbances.T_in]
-unit = "degC"
-min = 5.0
-max = 35.0
-variable = "T_amb"
-rate = 0.5
-hold = [5, 80]
+PROBLEM = HEATER + """\
 
 [mpc]
 Q = "outputs"

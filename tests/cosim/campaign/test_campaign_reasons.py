@@ -26,12 +26,22 @@ from cosim.core.errors import CosimError
 SHORT = "time,ref.h1,ref.h2\n0,0.6,0.6\n500,0.7,\n1000,,\n"
 
 
-def run_in_process(spec_text: str, tmp_path: Path) -> tuple[object, dict]:
+def spec(tmp_path: Path, controller: str, tables: str = "", runs: int = 1,
+         seed: int | None = None) -> Path:
+    """A campaign of ``runs`` runs of :data:`SHORT` (seeded with ``seed`` when given) with
+    ``controller``, ``tables`` after its ``[campaign]``, written in ``tmp_path``."""
+    (tmp_path / "short.csv").write_text(SHORT)
+    path = tmp_path / "spec.toml"
+    seeded = f"seed = {seed}\n" if seed is not None else ""
+    path.write_text(f'[campaign]\nruns = {runs}\n{seeded}scenario = "short.csv"\n'
+                    f'controller = "{controller}"\n' + (f"\n{tables}" if tables else ""))
+    return path
+
+
+def run_in_process(spec_path: Path) -> tuple[object, dict]:
     """Every run of the spec, as the engine runs and writes it (no Dask): the runs table
     and the campaign's summary document."""
-    (tmp_path / "short.csv").write_text(SHORT)
-    spec_path = tmp_path / "spec.toml"
-    spec_path.write_text(spec_text)
+    tmp_path = spec_path.parent
     plan = engine.prepare(load(spec_path))
     out = tmp_path / "out"
     for task in store.open_folder(plan, out, resume=False, force=False):
@@ -44,13 +54,7 @@ def run_dir(tmp_path: Path, run: int, variant: str) -> Path:
 
 
 def test_an_unreachable_first_setpoint_is_named_as_cosim_run_names_it(tmp_path: Path) -> None:
-    table, summary = run_in_process("""\
-[campaign]
-runs = 2
-seed = 4242
-scenario = "short.csv"
-controller = "robust-mpc"
-
+    table, summary = run_in_process(spec(tmp_path, "robust-mpc", """\
 [controller.options]
 law = "paper"                   # the tracking law refuses no set-point
 
@@ -59,7 +63,7 @@ count = 4
 hold = 2500
 h1 = [0.6, 1.4]
 h2 = [0.6, 1.4]
-""", tmp_path)
+""", runs=2, seed=4242))
     table = table.sort_values("run")
     assert list(table["status"]) == ["failed", "ok"]
     reason = table["reason"].iloc[0]
@@ -85,12 +89,7 @@ def test_a_failed_certificate_hypothesis_is_named_as_cosim_run_names_it(
     """A set-point that fails the theorem's hypotheses: with certificate = "require" the run is
     refused, in the campaign as by cosim.run, with the same reason; without it the run is
     uncertified and says why."""
-    table, _ = run_in_process("""\
-[campaign]
-runs = 1
-scenario = "short.csv"
-controller = "robust-mpc"
-
+    table, _ = run_in_process(spec(tmp_path, "robust-mpc", """\
 [controller.options]
 law = "paper"
 certificate = "require"
@@ -98,7 +97,7 @@ certificate = "require"
 [draw]
 "ref.h1" = 0.4
 "ref.h2" = 0.4
-""", tmp_path)
+"""))
     scenario = tmp_path / "low.csv"
     scenario.write_text("time,ref.h1,ref.h2\n0,0.4,0.4\n1000,,\n")
     with pytest.raises(CosimError) as cosim_run:
@@ -120,18 +119,13 @@ certificate = "require"
 
 def test_a_bug_met_by_the_master_names_the_step_and_keeps_the_traceback(
         tmp_path: Path) -> None:
-    table, summary = run_in_process("""\
-[campaign]
-runs = 2
-scenario = "short.csv"
-controller = "tests.cosim.sleepy:ForgetfulPI"
-
+    table, summary = run_in_process(spec(tmp_path, "tests.cosim.sleepy:ForgetfulPI", """\
 [controller.options]
 forget_at = 500.0
 
 [draw]
 "sensor.h1.bias" = { uniform = [-0.01, 0.01] }
-""", tmp_path)
+""", runs=2))
     assert list(table["status"]) == ["failed", "failed"]
     for run in (0, 1):
         reason = table["reason"].iloc[run]
@@ -148,15 +142,10 @@ forget_at = 500.0
 
 
 def test_a_bug_in_the_controller_step_keeps_the_traceback(tmp_path: Path) -> None:
-    table, _ = run_in_process("""\
-[campaign]
-runs = 1
-scenario = "short.csv"
-controller = "tests.cosim.sleepy:BuggyPI"
-
+    table, _ = run_in_process(spec(tmp_path, "tests.cosim.sleepy:BuggyPI", """\
 [controller.options]
 fail_at = 250.0
-""", tmp_path)
+"""))
     assert table["reason"].iloc[0] == ("controller 'pi': step at t=250.0 failed: IndexError: "
                                        "list index out of range")
     folder = run_dir(tmp_path, 0, "tests.cosim.sleepy:BuggyPI")
@@ -165,12 +154,7 @@ fail_at = 250.0
 
 
 def test_a_bug_before_the_run_names_its_phase(tmp_path: Path) -> None:
-    table, _ = run_in_process("""\
-[campaign]
-runs = 1
-scenario = "short.csv"
-controller = "tests.cosim.sleepy:ReadOnlyEstimatePI"
-""", tmp_path)
+    table, _ = run_in_process(spec(tmp_path, "tests.cosim.sleepy:ReadOnlyEstimatePI"))
     assert table["reason"].iloc[0] == ("building the controller: RuntimeError: "
                                        "initial_estimate is read-only")
     folder = run_dir(tmp_path, 0, "tests.cosim.sleepy:ReadOnlyEstimatePI")
@@ -179,10 +163,7 @@ controller = "tests.cosim.sleepy:ReadOnlyEstimatePI"
 
 
 def test_a_rerun_without_a_bug_removes_the_old_traceback(tmp_path: Path) -> None:
-    (tmp_path / "short.csv").write_text(SHORT)
-    spec_path = tmp_path / "spec.toml"
-    spec_path.write_text('[campaign]\nruns = 1\nscenario = "short.csv"\ncontroller = "pi"\n')
-    plan = engine.prepare(load(spec_path))
+    plan = engine.prepare(load(spec(tmp_path, "pi")))
     out = tmp_path / "out"
     task = store.open_folder(plan, out, resume=False, force=False)[0]
     folder = out / "runs" / "000000-pi"
@@ -194,14 +175,7 @@ def test_a_rerun_without_a_bug_removes_the_old_traceback(tmp_path: Path) -> None
 
 def test_a_run_takes_a_controller_of_its_own_and_gives_back_only_after_ok(
         tmp_path: Path) -> None:
-    (tmp_path / "short.csv").write_text(SHORT)
-    spec_path = tmp_path / "spec.toml"
-    spec_path.write_text("""\
-[campaign]
-runs = 1
-scenario = "short.csv"
-controller = "pi"
-
+    plan = engine.prepare(load(spec(tmp_path, "pi", """\
 [[variant]]
 name = "ok"
 
@@ -209,8 +183,7 @@ name = "ok"
 name = "buggy"
 controller = "tests.cosim.sleepy:BuggyPI"
 options = { fail_at = 250.0 }
-""")
-    plan = engine.prepare(load(spec_path))
+""")))
     ok_task, buggy_task = plan.tasks
     POOL.clear()
     first = run_task(ok_task, plan.assets)

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -21,13 +22,22 @@ KEYS = ["sigma_z", "sigma_r", "phi_h", "nu", "rho_s", "c_s", "L_z", "L_r", "nu_o
         "s_measured", "alpha", "assumption_1", "recursive_feasibility"]
 
 
+def saved_model(path: Path, w_y_bar: float | None = 0.01,
+                edit: Callable[[GRUModel], None] | None = None) -> GRUModel:
+    """The random GRU of seed 0, ``edit`` applied to it, with ``w̄_y`` (``None``: none), saved
+    at ``path``."""
+    m = random_gru_model(0)
+    if edit is not None:
+        edit(m)
+    m.w_y_bar = w_y_bar
+    m.save(path)
+    return m
+
+
 @pytest.fixture()
 def model_file(tmp_path: Path) -> Path:
-    m = random_gru_model(0)
-    m.w_y_bar = 0.01
-    path = tmp_path / "model.json"
-    m.save(path)
-    return path
+    saved_model(tmp_path / "model.json")
+    return tmp_path / "model.json"
 
 
 def test_table_passes_with_exit_0(model_file: Path, capsys) -> None:
@@ -109,11 +119,11 @@ def test_non_delta_iss_model_is_not_usable_exit_2(tmp_path: Path, capsys) -> Non
     table, the failing hypothesis with its fix, the verdict NOT USABLE and one line on standard
     error (exit 2: cosim run refuses it). ν ≥ 1 alone (U_z scaled by 40, stable at its steady
     states) is usable uncertified: exit 1."""
-    m = random_gru_model(0)
-    m.params["U_z"] *= 40
-    m.w_y_bar = 0.01
+    def not_delta_iss(m: GRUModel) -> None:
+        m.params["U_z"] *= 40
+
     path = tmp_path / "bad.json"
-    m.save(path)
+    m = saved_model(path, edit=not_delta_iss)
     assert main(["certify", str(path)]) == 1
     assert "usable: the robust MPC runs uncertified" in capsys.readouterr().out
     unstable_at_its_steady_states(m)
@@ -141,9 +151,8 @@ def test_bad_setpoint_and_missing_w_y_bar_exit_2(tmp_path: Path, model_file: Pat
                                                  capsys) -> None:
     assert main(["certify", str(model_file), "--setpoint", "1.0"]) == 2
     assert "--setpoint" in capsys.readouterr().err
-    m = random_gru_model(0)
     path = tmp_path / "now.json"
-    m.save(path)
+    saved_model(path, None)
     assert main(["certify", str(path)]) == 2
     assert "--data" in capsys.readouterr().err
 
@@ -233,11 +242,11 @@ def test_model_with_other_signal_names_names_the_file(tmp_path: Path, capsys) ->
 
 def test_saturated_update_gate_exit_2_naming_sigma_z(tmp_path: Path, capsys) -> None:
     """b_z = 40: σ̄_z rounds to 1, so ν = … /(1 − σ̄_z) is undefined (was ZeroDivisionError)."""
-    m = random_gru_model(0)
-    m.params["b_z"][:] = 40.0
-    m.w_y_bar = 0.01
+    def saturate(m: GRUModel) -> None:
+        m.params["b_z"][:] = 40.0
+
     path = tmp_path / "saturated.json"
-    m.save(path)
+    m = saved_model(path, edit=saturate)
     for extra in ([], ["--json"], ["--auto-gain-scale"], ["--gain-scale", "0.5"]):
         assert main(["certify", str(path), *extra]) == 2
         captured = capsys.readouterr()
@@ -253,11 +262,8 @@ def test_saturated_update_gate_exit_2_naming_sigma_z(tmp_path: Path, capsys) -> 
 def no_admissible_setpoint(tmp_path: Path) -> Path:
     """ν, ν_o < 1 but w̄_y = 1.2 > the half-width of the normalised output box: the tightened
     bounds cross and no set-point is admissible."""
-    m = random_gru_model(0)
-    m.w_y_bar = 1.2
-    path = tmp_path / "wide.json"
-    m.save(path)
-    return path
+    saved_model(tmp_path / "wide.json", 1.2)
+    return tmp_path / "wide.json"
 
 
 def test_empty_admissible_range_exits_1(no_admissible_setpoint: Path, capsys) -> None:
@@ -289,11 +295,8 @@ def test_save_writes_the_verdict_certified_or_not(case: str, tmp_path: Path,
     with the reason, the verdict NOT USABLE, and ``cosim run`` refusing it in the same
     words."""
     if case == "nu":  # ν ≥ 1 (th:stability-bonassi fails)
-        m = random_gru_model(0)
-        unstable_at_its_steady_states(m)
-        m.w_y_bar = 0.01
         path = tmp_path / "bad.json"
-        m.save(path)
+        saved_model(path, edit=unstable_at_its_steady_states)
         extra: list[str] = []
     else:
         path, extra = no_admissible_setpoint, ["--gain-scale", "0"]
@@ -470,10 +473,8 @@ def test_auto_gain_scale_without_a_passing_theta(tmp_path: Path, capsys) -> None
     observer has zero gains anyway: its terminal radius falls back to the one of the model's
     output map (no default depends on the failed gain design), and it is certified for the
     set-points inside its admissible steady outputs."""
-    m = random_gru_model(0)
-    m.w_y_bar = 0.6
     path = tmp_path / "noisy.json"
-    m.save(path)
+    saved_model(path, 0.6)
     assert main(["certify", str(path), "--auto-gain-scale", "--save", "--law", "paper"]) == 1
     captured = capsys.readouterr()
     assert "LP gains × θ = 0 (no θ in [0, 1] passes)" in captured.out

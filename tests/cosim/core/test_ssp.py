@@ -10,14 +10,13 @@ import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
-import fmpy
 import numpy as np
 import pytest
 
 from cosim.cli import main
 from cosim.core.fmu_archive import plant_variables
 from tests import example_builds
-from tests.fmus.fourtank_run import Plant
+from tests.fmus.fourtank_run import Plant, libcosim_run
 
 ROOT = Path(__file__).resolve().parents[3]
 #: the example heater in kelvin, its ambient temperature measured under another name
@@ -87,10 +86,6 @@ def _ssd(path: Path) -> ET.Element:
 
 def test_libcosim_runs_the_ssp_with_units_converted_and_one_disturbance(
         kelvin: dict[str, Path], tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
-    from libcosimpy.CosimExecution import CosimExecution
-    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
-    from libcosimpy.CosimObserver import CosimObserver
-
     ssp = tmp_path / "loop.ssp"
     assert main(["export-ssp", "--plant", str(kelvin["plant"]), "--controller",
                  str(kelvin["c2"]), "--setpoint", "dist.T_in=285.15", "--setpoint",
@@ -110,18 +105,8 @@ def test_libcosim_runs_the_ssp_with_units_converted_and_one_disturbance(
                     for p in c.iter(f"{SSV}Parameter")}
     assert plant_values == {"T_amb": pytest.approx(12.0)}   # 285.15 K in the plant's degC
 
-    log_output_level(CosimLogLevel.ERROR)
-    execution = CosimExecution.from_ssp_file(str(ssp))
-    observer = CosimObserver.create_last_value()
-    execution.add_observer(observer)
-    index = execution.slave_index_from_instance_name("plant")
-    vr = {v.name: v.valueReference for v in fmpy.read_model_description(
-        str(kelvin["plant"])).modelVariables}
     steps = 40
-    cosim = np.empty((steps, 3))
-    for k in range(steps):
-        assert execution.step()
-        cosim[k] = observer.last_real_values(index, [vr["T"], vr["P"], vr["T_amb"]])
+    cosim = libcosim_run(ssp, kelvin["plant"], ["T", "P", "T_amb"], steps)
 
     # fmpy's loop stepping both from the last communication point (libcosim's algorithm)
     plant, ctrl = Plant(kelvin["plant"], "cs"), Plant(kelvin["c2"], "cs")

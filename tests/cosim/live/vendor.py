@@ -14,18 +14,17 @@ from __future__ import annotations
 
 import json
 import shutil
-import signal
 import subprocess
 import time
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 import pytest
 
-from cosim.live.process import free_port
+from cosim.live.process import ServedPlant, free_port
 
 __all__ = ["VENDOR_DIR", "VendorPlc", "missing", "start_vendor_plc", "vendor_plc_fixture"]
 
@@ -48,28 +47,18 @@ def missing() -> str | None:
 
 
 @dataclass
-class VendorPlc:
-    """A running vendor PLC: its endpoint, the namespace index of its tags, its case, its
-    record (CSV) and log, its process."""
+class VendorPlc(ServedPlant):
+    """A running vendor PLC: a live plant's server process as ``cosim serve-plant``'s is (its
+    endpoint and port, its process, its log; stopped the same way), with the namespace index
+    of its tags, its case and its record (CSV)."""
 
-    endpoint: str
-    port: int
-    namespace_index: int
-    case: dict
-    record: Path
-    log: Path
-    proc: subprocess.Popen
+    namespace_index: int = 0
+    case: dict = field(default_factory=dict)
+    record: Path = Path()
 
     def stop(self, timeout: float = 10.0) -> int:
         """SIGTERM, then SIGKILL after ``timeout`` seconds; the exit status."""
-        if self.proc.poll() is None:
-            self.proc.send_signal(signal.SIGTERM)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait(5)
-        return self.proc.returncode
+        return super().stop(timeout)
 
     def node_id(self, signal_name: str) -> str:
         """The full node id of a signal's tag in this case (``ns=3;s=PLC1.LT101.PV``)."""
@@ -136,7 +125,7 @@ def _launch(tmp: Path, case: Mapping[str, Any], name: str, wait: float) -> Vendo
         proc = subprocess.Popen([str(shutil.which("node")), str(VENDOR_DIR / "server.js"),
                                  "--config", str(config)], cwd=VENDOR_DIR, stdout=fh,
                                 stderr=fh, stdin=subprocess.DEVNULL, start_new_session=True)
-    plc = VendorPlc("", port, 0, dict(doc), Path(doc["record"]), log, proc)
+    plc = VendorPlc("", port, proc, log, 0, dict(doc), Path(doc["record"]))
     end = time.monotonic() + wait
     while True:
         line = next((ln for ln in plc.stderr().splitlines() if ln.startswith(LISTENING)),
