@@ -289,47 +289,6 @@ EXPORT double PFX(terminal_gap)(gk_ws *ws, const double *w, const double *p) {
   return d;
 }
 
-/* the instance's softened-row weights: the design's (on, the softened phase) or 0 (the hard
- * phase, the slacks fixed at 0 by their bounds); controllers/ocp/soft.py */
-EXPORT void PFX(set_soft)(gk_ws *ws, int on) {
-#if SOFT
-  ws->mem.slw = on ? SLW : 0.0;
-  ws->mem.slq = on ? SLQ : 0.0;
-#else
-  (void)ws; (void)on;
-#endif
-}
-
-/* The smallest slacks of the plan at (w, p) into w[IS ..] (SOFT, controllers/ocp/soft.py
- * Slacks.initial; nothing without SOFT): each row's largest excess over i >= 1 against bnd
- * (NH x NL, with HAS_ASS one more row: Y_s's on x_s), the terminal set's max(0, gap -
- * alpha); returns the gap |x_N - x_ref|inf (terminal_gap) */
-EXPORT double PFX(plan_slacks)(gk_ws *ws, double *w, const double *p, const double *bnd,
-                               double alpha) {
-  const double gap = PFX(terminal_gap)(ws, w, p);
-#if SOFT
-  const double *X = ws->mem.X;
-  for (int j = 0; j < NL; j++) {
-    double e = 0.0;
-    for (int i = 1; i < NH; i++) {
-      double s = 0.0;
-      for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * X[i * NX + k];
-      if (s - bnd[i * NL + j] > e) e = s - bnd[i * NL + j];
-    }
-#if HAS_ASS
-    double s = 0.0;
-    for (int k = 0; k < NX; k++) s += LUO[j * NX + k] * ws->mem.xs[k];
-    if (s - bnd[NH * NL + j] > e) e = s - bnd[NH * NL + j];
-#endif
-    w[IS + j] = e;
-  }
-  w[IS + NL] = fmax(0.0, gap - alpha);
-#else
-  (void)w; (void)bnd; (void)alpha;
-#endif
-  return gap;
-}
-
 /* Solve A z = b in place (A n x n, row-major, destroyed; z into b): Gaussian elimination
  * with partial pivoting, as LAPACK gesv. 0, or 2 on a zero pivot. Always inlined into
  * eq_newton's clones: compiled once per clone, the same arithmetic (FMA contraction

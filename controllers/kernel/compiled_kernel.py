@@ -69,8 +69,8 @@ GENERATOR_VERSION = "gru-fhocp-kernel-16"
 #: (``gru_fhocp.h``), the solver instance's memory, the mathematics bottom-up, the exported
 #: API, the equilibrium for an output (tracking kernels), the QP and the SQP.
 TEMPLATE_PARTS = tuple(Path(__file__).with_name(name) for name in (
-    "gru_fhocp.h", "memory.c", "rollout.c", "steady_state.c", "derivatives.c", "hessian.c",
-    "eigen_clip.c", "api.c", "equilibrium.c", "qp.c", "sqp.c"))
+    "gru_fhocp.h", "memory.c", "rollout.c", "steady_state.c", "soft.c", "derivatives.c",
+    "hessian.c", "eigen_clip.c", "api.c", "equilibrium.c", "qp.c", "sqp.c"))
 #: The loader of a library's numbers (:func:`loader_source`), joined after every use.
 LOADER_C = Path(__file__).with_name("loader.c")
 DEFAULT_CFLAGS = ("-O3", "-fPIC", "-shared", "-fvisibility=hidden", "-std=gnu99")

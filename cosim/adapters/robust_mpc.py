@@ -18,7 +18,7 @@ CosimError`: a design or a first set-point outside the theory is a configuration
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -63,7 +63,8 @@ class RobustMPCController(Component):
 
     direct_feedthrough = True
     capabilities = frozenset({Capability.SETPOINTS, Capability.DISTURBANCES,
-                              Capability.PREVIEW, Capability.NOTICE, Capability.SETTINGS})
+                              Capability.PREVIEW, Capability.NOTICE, Capability.SETTINGS,
+                              Capability.ESTIMATE})
     #: the options :func:`cosim.core.registry.create` accepts (``--option KEY=VALUE``)
     OPTIONS = ("model", "problem", "options", "name", *MPCOptions.names())
     #: wall-clock diagnostics: written by the master to timings.csv, not results.csv
@@ -187,6 +188,17 @@ class RobustMPCController(Component):
             return self.mpc.set(name, value)
         except ControllersError as exc:
             raise _as_cosim(exc) from None
+
+    def set_initial_estimate(self, x0: Sequence[float] | None) -> float:
+        """The observer's start (:attr:`controllers.mpc.RobustMPC.initial_estimate`; a
+        campaign's drawn ``x̂_0``) and its bound ``ê_o,0``."""
+        self.mpc.initial_estimate = None if x0 is None else np.asarray(x0, dtype=float)
+        return float(self.mpc.cert.e_o0)
+
+    def estimate(self) -> tuple[Any, float, Any]:
+        """The observer's ``x̂`` and ``ê_o``, and the law's steady state."""
+        obs = self.mpc.observer
+        return obs.x_hat, obs.e_o, self.mpc.law.steady_state
 
     def summary(self) -> dict:
         out = self.mpc.summary()

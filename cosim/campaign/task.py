@@ -49,6 +49,7 @@ from typing import Any
 import numpy as np
 
 from cosim.campaign.pool import ControllerPool
+from cosim.core.component import Capability
 from cosim.core.run_result import COMPLETE
 
 __all__ = ["POOL", "START_TOPIC", "Assets", "announce_start", "internal_traceback",
@@ -189,8 +190,8 @@ class _TheoremMonitor:
             self.violations += 1
 
     def __call__(self, k: int) -> None:
-        obs = self.ctrl.mpc.observer
-        self.check(self.plant.x, obs.x_hat, obs.e_o)
+        x_hat, bound, _ = self.ctrl.estimate()
+        self.check(self.plant.x, x_hat, bound)
 
     def summary(self) -> dict[str, float]:
         """The checks, and where the true state ended: ``‖x_N − x̄‖∞`` (normalised) and
@@ -200,7 +201,7 @@ class _TheoremMonitor:
         out = {"observer_checks": self.checked, "observer_bound_violations": self.violations,
                "observer_error_max_ratio": self.worst_ratio,
                "observer_error_max_excess": self.worst_excess}
-        x_bar, model = self.ctrl.mpc.law.steady_state, self.plant.model
+        x_bar, model = self.ctrl.estimate()[2], self.plant.model
         if x_bar is not None:
             x_bar = np.asarray(x_bar)
             y = model.denormalize_y(gru.output(model.params, self.plant.x))
@@ -253,7 +254,6 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
                          draw.get("disturbances") or None)
     run["phase"] = "building the controller"
     options = dict(task["options"])
-    from cosim.adapters.robust_mpc import RobustMPCController
     from cosim.core.registry import FMU_CONTROLLER
 
     packed = ("model", "problem", "path") if task["controller"] == FMU_CONTROLLER else (
@@ -263,9 +263,8 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
             options[key] = str(folder / options[key])
     run["key"], ctrl = POOL.take(task["controller"], options)
     run["ctrl"] = ctrl
-    if isinstance(ctrl, RobustMPCController):   # the observer's start drawn (the theorem)
-        x0 = draw["initial_estimate"]
-        ctrl.mpc.initial_estimate = None if x0 is None else np.asarray(x0, dtype=float)
+    if Capability.ESTIMATE in ctrl.capabilities:   # the observer's start drawn (the theorem)
+        run["e_o0"] = ctrl.set_initial_estimate(draw["initial_estimate"])
     run["phase"] = "loading the plant"
     run["plant"] = plant = _plant(task, folder, draw["seed"])
     if task.get("isolate") and task["plant"][0] == "fmu" and not ctrl.isolated:
@@ -317,7 +316,7 @@ def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
         master = _start(task, assets, run)
         plant, ctrl = run["plant"], run["ctrl"]
         monitor = None
-        if task["plant"][0] == "model" and hasattr(ctrl, "observer"):
+        if task["plant"][0] == "model" and Capability.ESTIMATE in ctrl.capabilities:
             monitor = _TheoremMonitor(plant, ctrl)
         if _in_dask_worker():
             watchdog = threading.Timer(task["timeout"] + WATCHDOG_GRACE, os._exit,
@@ -333,7 +332,7 @@ def run_task(task: dict[str, Any], assets: Assets) -> dict[str, Any]:
             if draw["initial_estimate"] is not None:
                 # k = 0, before the first step: x_0 against x̂_0 (ê_o,0)
                 monitor.check(plant.x_start, np.asarray(draw["initial_estimate"]),
-                              ctrl.mpc.cert.e_o0)
+                              run["e_o0"])
             theorem = monitor.summary()
     except (CosimError, ControllersError) as exc:
         # the words cosim run uses (an unreachable set-point, a bad draw for this plant)

@@ -71,6 +71,10 @@ class Capability(StrEnum):
     ``SETTINGS``
         Settings that may change between steps, by name (:meth:`Component.settings`,
         :meth:`Component.set`): weights, limits, modes.
+    ``ESTIMATE``
+        A controller with a state estimate whose start may be given
+        (:meth:`Component.set_initial_estimate`) and which says where it stands
+        (:meth:`Component.estimate`): the campaigns' theorem checks on a model plant.
     """
 
     TUNABLE = "tunable"
@@ -81,6 +85,7 @@ class Capability(StrEnum):
     PLANT_SIGNALS = "plant-signals"
     NOTICE = "notice"
     SETTINGS = "settings"
+    ESTIMATE = "estimate"
 
 
 @dataclass(frozen=True)
@@ -228,6 +233,16 @@ class Component(ABC):
     def settings(self) -> Mapping[str, Setting]:
         """(``SETTINGS``) The settings :meth:`set` takes, by name."""
         return {}
+
+    def set_initial_estimate(self, x0: Sequence[float] | None) -> float:
+        """(``ESTIMATE``) Before :meth:`setup`: the state estimate to start from (``None``:
+        the controller's own start); returns the error bound it starts with."""
+        raise CosimError(f"{self.where}: no state estimate")
+
+    def estimate(self) -> tuple[Any, float, Any]:
+        """(``ESTIMATE``) ``(x̂, its error bound, the steady state it steers to)`` now
+        (normalised; ``None`` where there is none yet)."""
+        raise CosimError(f"{self.where}: no state estimate")
 
     def set(self, name: str, value: float) -> str:
         """(``SETTINGS``) Change setting ``name`` from the next step on; returns what was

@@ -8,6 +8,7 @@ from __future__ import annotations
 import time
 
 from cosim.adapters.pi import PIController
+from cosim.core.component import Capability
 
 
 class SleepyPI(PIController):
@@ -71,15 +72,13 @@ class ForgetfulPI(PIController):
 
 
 class ReadOnlyEstimatePI(PIController):
-    """The PI baseline with a read-only ``initial_estimate`` (campaigns set it on the
-    controllers that have one: an internal error before the run starts)."""
+    """The PI baseline declaring a state estimate it cannot start from (campaigns give its
+    drawn start to the controllers that declare one: an internal error before the run
+    starts)."""
 
-    @property
-    def initial_estimate(self) -> None:
-        return None
+    capabilities = PIController.capabilities | {Capability.ESTIMATE}
 
-    @initial_estimate.setter
-    def initial_estimate(self, value: object) -> None:
+    def set_initial_estimate(self, x0: object) -> float:
         raise RuntimeError("initial_estimate is read-only")
 
 

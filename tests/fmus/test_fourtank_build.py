@@ -129,7 +129,7 @@ def test_output_folder_is_the_package_folder_or_the_user_cache(tmp_path, monkeyp
 
 
 def test_default_plant_is_built_and_kept_up_to_date(sandbox, monkeypatch):
-    from cosim.api import plant_path
+    from cosim.core.plants import plant_path
 
     fmu = plant_path(None)
     assert fmu == sandbox / "FourTank.fmu" and fmu.is_file()

@@ -20,7 +20,8 @@ from typing import Any
 import numpy as np
 
 from controllers.laws.base import StepRecord, solver_summary
-from controllers.ocp.fhocp import FEAS_TOL, FHOCP
+from controllers.ocp.fhocp import FHOCP
+from controllers.ocp.solver_settings import FEAS_TOL
 
 __all__ = ["PaperMPC"]
 
