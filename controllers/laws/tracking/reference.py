@@ -369,7 +369,7 @@ class ArtificialSteadyState(TrackingLayout, ServesOne):
         return x_s, ok
 
     def _check_compiled(self, w: np.ndarray, p: np.ndarray, e_o: float, status: str,
-                        soft: bool) -> FHOCPResult:
+                        soft: bool = False) -> FHOCPResult:
         """:meth:`evaluate` of the solver's answer ``w`` in one compiled call (the kernel's
         plain rollout and a fixed-point test of its ``x_s``, apart from the solver's
         derivatives: :meth:`controllers.kernel.kernel_lib.Workspace.assess_w`), plus the defect
