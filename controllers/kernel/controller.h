@@ -246,6 +246,36 @@ CTL_HELPER int keeps_iterate(const ctl_result *res, const ctl_result *chk) {
   return res->feasible && (!feasible || res->cost <= chk->cost);
 }
 
+/* keeps_iterate after a failed solve res, chk the candidate's check, with what the law
+ * records: whether the candidate was feasible (StepRecord.candidate_feasible) and whether it
+ * falls back on it */
+CTL_HELPER int take_iterate(const ctl_result *res, const ctl_result *chk, int *cand_feasible,
+                            int *fallback) {
+  *cand_feasible = chk->cv <= CT_FEAS_TOL && chk->tv <= CT_FEAS_TOL;
+  const int use = keeps_iterate(res, chk);
+  *fallback = !use;
+  return use;
+}
+
+/* a law's step is done: the input applied now (u_{-1} of the next step's input-rate term)
+ * and what the step gave (last_record) */
+CTL_HELPER void step_done(double *uprev, int *has_uprev, const double *u, ctl_last *last,
+                          const ctl_result *res, const ctl_result *applied, int fallback) {
+  memcpy(uprev, u, NU * sizeof(double));
+  *has_uprev = 1;
+  last_record(last, res, applied, fallback);
+}
+
+/* the plan the law keeps (the solver's, or the candidate on a fallback, whose input is
+ * clipped to the box) into plan, and the input applied now into u (prefix_applied) */
+CTL_HELPER void keep_plan(double *plan, const ctl_prefix *pf, const double *chosen,
+                          int candidate, double *u) {
+  memcpy(plan, chosen, NH * NU * sizeof(double));
+  prefix_applied(pf, chosen, u);
+  if (candidate)
+    for (int j = 0; j < NU; j++) u[j] = gk_clip1(u[j]);
+}
+
 /* the answer check's judgement (controllers/ocp/fhocp_result.py set_residuals, judge) of the
  * solver's w into r, the assessment of (u, x) already there; iterations the SQP's */
 CTL_HELPER void judge(ctl_result *r, const double *w, int sqp_status, const gk_sqp_info *info) {

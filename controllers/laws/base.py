@@ -97,6 +97,18 @@ def refuse_weight(value: float, positive: bool) -> str:
     return "" if ok else f"must be a finite weight {'>' if positive else '>='} 0"
 
 
+def refuse_shared(name: str, value: float, R: np.ndarray, inputs: list[str]) -> str | None:
+    """Why ``value`` cannot be setting ``name`` when it is one every law has (``""``: it can):
+    ``offset_filter`` (the output-disturbance estimate's gain, in (0, 1]) or ``R.<input>``
+    (:func:`refuse_r`); ``None`` for a law's own setting."""
+    family, _, signal = name.partition(".")
+    if family == "offset_filter":
+        return "" if 0.0 < value <= 1.0 else "must be in (0, 1]"
+    if family == "R":
+        return refuse_r(R, inputs.index(signal), value)
+    return None
+
+
 def setpoint_text(model: Any, y: np.ndarray) -> str:
     """``"set-point CA=0.5 mol/L, T=345 K"``: the normalised ``y`` in the problem's names and
     units (``model.problem``'s)."""

@@ -265,6 +265,24 @@ class ExamplePlant(Fmi2Slave):
         return root
 
 
+class FurnacePlant(ExamplePlant):
+    """Heated zones of one electric furnace (the furnace, furnace_load and furnace3 examples):
+    their constants (heat capacity ``C`` [J/K], losses to the room ``UA`` [W/K], exchange
+    between neighbouring zones ``K`` [W/K], radiation ``E`` [W/K^4]), their tunable room
+    temperature and factors (:data:`PARAMETERS`, appended to each plant's own signals) and
+    their integration settings; each plant writes its zones' equations."""
+
+    C, UA, K, E = 1.0e4, 5.0, 12.0, 1.2e-8
+    #: the furnaces' tunable parameters (``T_amb`` described by :data:`AMBIENT`)
+    PARAMETERS = """
+        parameter  K_factor  1     1.0     multiplies the heat exchange between the zones
+        parameter  C_factor  1     1.0     multiplies the zones' heat capacity
+    """
+    AMBIENT = "        parameter  T_amb     degC  20.0    room temperature"
+    MAX_SUBSTEP = 2.0
+    SETTLE = 20000.0
+
+
 class TransferFunctionPlant(ExamplePlant):
     """A plant of first-order-plus-dead-time channels around an operating point::
 

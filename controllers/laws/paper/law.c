@@ -366,23 +366,12 @@ static void make_step(law_state *st, const double *xhat, double *u) {
   st->cand_feasible = 1;
   if (!use) {
     evaluate(st, xhat, cand, CTL_OTHER, &st->chk);
-    st->cand_feasible = st->chk.cv <= CT_FEAS_TOL && st->chk.tv <= CT_FEAS_TOL;
-    use = keeps_iterate(res, &st->chk);
-    fallback = !use;
+    use = take_iterate(res, &st->chk, &st->cand_feasible, &fallback);
     if (!use) applied = &st->chk;
   }
-  if (use) {
-    memcpy(st->plan, res->u, sizeof st->plan);
-    prefix_applied(st->prefix, res->u, u);
-  } else {
-    memcpy(st->plan, cand, sizeof st->plan);
-    prefix_applied(st->prefix, cand, u);
-    for (int j = 0; j < NU; j++) u[j] = gk_clip1(u[j]);
-  }
+  keep_plan(st->plan, st->prefix, use ? res->u : cand, !use, u);
   st->has_plan = 1;
-  memcpy(st->uprev, u, sizeof st->uprev);
-  st->has_uprev = 1;
-  last_record(&st->last, res, applied, fallback);
+  step_done(st->uprev, &st->has_uprev, u, &st->last, res, applied, fallback);
 }
 
 /* ---------------------------------------------------------------- the law's interface */

@@ -21,7 +21,7 @@ from controllers.laws.base import (
     LawContext,
     LawStep,
     Setting,
-    refuse_r,
+    refuse_shared,
     refuse_weight,
     setpoint_text,
 )
@@ -117,8 +117,7 @@ class PaperLaw:
         self.mpc = PaperMPC(self.fhocp)
         self.handling = handling
         self.governor = ReferenceGovernor(cert, self.fhocp) if handling.governor else None
-        self.component = name
-        self.certified = certified
+        self.certified, self.component = certified, name
         self.reset()
 
     # -- ControlLaw ------------------------------------------------------------------------
@@ -226,12 +225,10 @@ class PaperLaw:
                            list(self.model.problem.input_names))
 
     def refuse(self, name: str, value: float) -> str:
-        family, _, signal = name.partition(".")
-        if family == "offset_filter":
-            return "" if 0.0 < value <= 1.0 else "must be in (0, 1]"
-        if family == "R":
-            return refuse_r(self.fhocp.R, self.model.problem.input_names.index(signal), value)
-        if family == "setpoint_rate":
+        shared = refuse_shared(name, value, self.fhocp.R, list(self.model.problem.input_names))
+        if shared is not None:
+            return shared
+        if name == "setpoint_rate":
             return "" if np.isfinite(value) and value > 0.0 else "must be a finite rate > 0"
         return refuse_weight(value, positive=False)
 

@@ -240,21 +240,14 @@ static void make_step(law_state *st, const double *xhat, const double *rt, doubl
   st->cand_feasible = 1;
   if (!use) {
     check(st, xhat, cand, us0, rt, xs0, up, CTL_OTHER, &st->chk);
-    st->cand_feasible = st->chk.cv <= CT_FEAS_TOL && st->chk.tv <= CT_FEAS_TOL;
-    use = keeps_iterate(res, &st->chk);
-    fallback = !use;
+    use = take_iterate(res, &st->chk, &st->cand_feasible, &fallback);
     if (!use) applied = &st->chk;
   }
   if (use) {
-    memcpy(st->plan, res->u, sizeof st->plan);
     memcpy(st->us, res->us, sizeof st->us);
     memcpy(st->xs, res->xs, sizeof st->xs);
-    prefix_applied(st->prefix, res->u, u);
-  } else {
-    memcpy(st->plan, cand, sizeof st->plan);
-    prefix_applied(st->prefix, cand, u);
-    for (int j = 0; j < NU; j++) u[j] = gk_clip1(u[j]);
   }
+  keep_plan(st->plan, st->prefix, use ? res->u : cand, !use, u);
   st->has_plan = 1;
   st->has_guess = all_finite(res->xs, NX);
   if (st->has_guess) {
@@ -263,18 +256,16 @@ static void make_step(law_state *st, const double *xhat, const double *rt, doubl
     memcpy(st->g_us, res->us, sizeof st->g_us);
     memcpy(st->g_xs, res->xs, sizeof st->g_xs);
   }
-  memcpy(st->uprev, u, sizeof st->uprev);
-  st->has_uprev = 1;
-  last_record(&st->last, res, applied, fallback);
+  step_done(st->uprev, &st->has_uprev, u, &st->last, res, applied, fallback);
 }
 
 /* ---------------------------------------------------------------- the law's interface */
 static void law_reset(law_state *st, gk_ws *ws) {
   memset(st, 0, sizeof *st);
-  st->ws = ws;
   st->opts = sqp_options();
-  last_reset(&st->last);
+  st->ws = ws;
   st->beta = CT_BETA;
+  last_reset(&st->last);
 }
 
 /* TrackingLaw.disturbance_moved: the steady state's output kept under the disturbances now in

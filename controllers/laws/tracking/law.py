@@ -36,7 +36,7 @@ from controllers.laws.base import (
     LawContext,
     LawStep,
     Setting,
-    refuse_r,
+    refuse_shared,
     refuse_weight,
     setpoint_text,
 )
@@ -178,12 +178,12 @@ class TrackingLaw:
 
     # -- ControlLaw ------------------------------------------------------------------------
     @property
-    def records(self) -> list[Any]:
-        return self.tracker.records
-
-    @property
     def alpha(self) -> float:
         return self.fhocp.reference.alpha_c
+
+    @property
+    def records(self) -> list[Any]:
+        return self.tracker.records
 
     @property
     def steady_state(self) -> np.ndarray | None:
@@ -370,12 +370,10 @@ class TrackingLaw:
                            list(pr.output_names))
 
     def refuse(self, name: str, value: float) -> str:
-        family, _, signal = name.partition(".")
-        if family == "offset_filter":
-            return "" if 0.0 < value <= 1.0 else "must be in (0, 1]"
-        if family == "R":
-            return refuse_r(self.fhocp.R, self.model.problem.input_names.index(signal), value)
-        return refuse_weight(value, positive=family == "offset_weight")
+        shared = refuse_shared(name, value, self.fhocp.R, list(self.model.problem.input_names))
+        if shared is not None:
+            return shared
+        return refuse_weight(value, positive=name.startswith("offset_weight."))
 
     def set(self, name: str, value: float) -> str:
         family, _, signal = name.partition(".")

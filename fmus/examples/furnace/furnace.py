@@ -17,12 +17,10 @@ half from cold to hot. Tunable parameters: ``T_amb`` [degC], ``K_factor`` (multi
 
 from __future__ import annotations
 
-from plant_base import ExamplePlant
-
-C, UA, K, E = 1.0e4, 5.0, 12.0, 1.2e-8
+from plant_base import FurnacePlant
 
 
-class Furnace(ExamplePlant):
+class Furnace(FurnacePlant):
     """Two-zone furnace: heater powers -> zone temperatures."""
 
     description = "Two-zone furnace, P1, P2 [W] -> T1, T2 [degC] (pythonfmu)"
@@ -31,21 +29,13 @@ class Furnace(ExamplePlant):
         input      P2        W     1000.0  heater power of zone 2
         output     T1        degC  150.0   temperature of zone 1
         output     T2        degC  150.0   temperature of zone 2
-        parameter  T_amb     degC  20.0    room temperature
-        parameter  K_factor  1     1.0     multiplies the heat exchange between the zones
-        parameter  C_factor  1     1.0     multiplies the zones' heat capacity
-    """
-    MAX_SUBSTEP = 2.0
-    SETTLE = 20000.0
+    """ + FurnacePlant.AMBIENT + FurnacePlant.PARAMETERS
 
     def rhs(self, x: list[float]) -> list[float]:
         t1, t2 = x
         amb = self.T_amb + 273.15
-        k = self.K_factor * K
-        q12 = k * (t1 - t2)
-        d1 = (self.P1 - UA * (t1 - self.T_amb) - q12
-              - E * ((t1 + 273.15) ** 4 - amb ** 4))
-        d2 = (self.P2 - UA * (t2 - self.T_amb) + q12
-              - E * ((t2 + 273.15) ** 4 - amb ** 4))
-        c = self.C_factor * C
-        return [d1 / c, d2 / c]
+        q12 = self.K_factor * self.K * (t1 - t2)
+        ua, e = self.UA, self.E
+        d1 = self.P1 - ua * (t1 - self.T_amb) - q12 - e * ((t1 + 273.15) ** 4 - amb ** 4)
+        d2 = self.P2 - ua * (t2 - self.T_amb) + q12 - e * ((t2 + 273.15) ** 4 - amb ** 4)
+        return [d1 / (self.C_factor * self.C), d2 / (self.C_factor * self.C)]

@@ -17,12 +17,10 @@ with both others, the zones settle in 10-30 min. Tunable parameters: ``T_amb`` [
 
 from __future__ import annotations
 
-from plant_base import ExamplePlant
-
-C, UA, K, E = 1.0e4, 5.0, 12.0, 1.2e-8
+from plant_base import FurnacePlant
 
 
-class Furnace3(ExamplePlant):
+class Furnace3(FurnacePlant):
     """Three-zone furnace: heater powers -> zone temperatures."""
 
     description = "Three-zone furnace, P1, P2, P3 [W] -> T1, T2, T3 [degC] (pythonfmu)"
@@ -33,20 +31,15 @@ class Furnace3(ExamplePlant):
         output     T1        degC  150.0   temperature of zone 1
         output     T2        degC  150.0   temperature of zone 2
         output     T3        degC  150.0   temperature of zone 3
-        parameter  T_amb     degC  20.0    room temperature
-        parameter  K_factor  1     1.0     multiplies the heat exchange between the zones
-        parameter  C_factor  1     1.0     multiplies the zones' heat capacity
-    """
-    MAX_SUBSTEP = 2.0
-    SETTLE = 20000.0
+    """ + FurnacePlant.AMBIENT + FurnacePlant.PARAMETERS
 
     def rhs(self, x: list[float]) -> list[float]:
         amb = self.T_amb + 273.15
-        k, c = self.K_factor * K, self.C_factor * C
+        k, c = self.K_factor * self.K, self.C_factor * self.C
         power = (self.P1, self.P2, self.P3)
         out = []
         for i, t in enumerate(x):
-            q = power[i] - UA * (t - self.T_amb) - E * ((t + 273.15) ** 4 - amb ** 4)
+            q = power[i] - self.UA * (t - self.T_amb) - self.E * ((t + 273.15) ** 4 - amb ** 4)
             if i > 0:
                 q += k * (x[i - 1] - t)
             if i < 2:

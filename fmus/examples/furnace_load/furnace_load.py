@@ -23,12 +23,12 @@ Tunable parameters: ``T_amb`` [degC], ``K_factor``, ``C_factor``. The control pr
 
 from __future__ import annotations
 
-from plant_base import ExamplePlant
+from plant_base import FurnacePlant
 
-C, UA, K, E, CP = 1.0e4, 5.0, 12.0, 1.2e-8, 500.0
+CP = 500.0   # the product's heat capacity [J/(kg K)]
 
 
-class FurnaceLoad(ExamplePlant):
+class FurnaceLoad(FurnacePlant):
     """Two-zone furnace with a measured product throughput."""
 
     description = ("Two-zone furnace with a load, P1, P2 [W], F_load [kg/h] -> T1, T2 [degC] "
@@ -39,22 +39,14 @@ class FurnaceLoad(ExamplePlant):
         input      F_load    kg/h  10.0    product throughput (the load), measured
         output     T1        degC  150.0   temperature of zone 1
         output     T2        degC  150.0   temperature of zone 2
-        parameter  T_amb     degC  20.0    room temperature, the product's inlet
-        parameter  K_factor  1     1.0     multiplies the heat exchange between the zones
-        parameter  C_factor  1     1.0     multiplies the zones' heat capacity
-    """
-    MAX_SUBSTEP = 2.0
-    SETTLE = 20000.0
+        parameter  T_amb     degC  20.0    room temperature, the product's inlet""" + (
+        FurnacePlant.PARAMETERS)
 
     def rhs(self, x: list[float]) -> list[float]:
         t1, t2 = x
-        amb = self.T_amb + 273.15
-        k = self.K_factor * K
-        g = self.F_load * CP / 3600.0
-        q12 = k * (t1 - t2)
-        d1 = (self.P1 - UA * (t1 - self.T_amb) - q12
-              - E * ((t1 + 273.15) ** 4 - amb ** 4) - g * (t1 - self.T_amb))
-        d2 = (self.P2 - UA * (t2 - self.T_amb) + q12
-              - E * ((t2 + 273.15) ** 4 - amb ** 4) - g * (t2 - t1))
-        c = self.C_factor * C
-        return [d1 / c, d2 / c]
+        amb, g = self.T_amb + 273.15, self.F_load * CP / 3600.0
+        q12 = self.K_factor * self.K * (t1 - t2)
+        rad1, rad2 = ((t + 273.15) ** 4 - amb ** 4 for t in (t1, t2))
+        d1 = self.P1 - self.UA * (t1 - self.T_amb) - q12 - self.E * rad1 - g * (t1 - self.T_amb)
+        d2 = self.P2 - self.UA * (t2 - self.T_amb) + q12 - self.E * rad2 - g * (t2 - t1)
+        return [d1 / (self.C_factor * self.C), d2 / (self.C_factor * self.C)]
