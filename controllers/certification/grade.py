@@ -82,17 +82,45 @@ def check_setpoints(ctrl: Any, setpoints: list[dict[str, float]]) -> str:
     return ""
 
 
+#: The uncertified tightening of a row is at most this share of the box's width along it
+#: (``rem:uncertified-cap``, docs: design/soft-constraints.md): a model whose measured
+#: prediction error over the horizon is wider (the zoo's Wood–Berry column: 1.9 mol% of a
+#: 2.4 mol% box, most of it its feed flow moving while the prediction holds it) left no
+#: admissible output and was refused; capped, it runs, and the softened FHOCP answers where
+#: a prediction leaves the capped rows. Measured on its scenario: a quarter of the width
+#: kept xB = 0.5 mol% out of the admissible steady outputs (a static offset, IAE of xB 0.17×
+#: the PI's), a tenth admits it (0.09×), both with no violation (the PI: 115 samples).
+MARGIN_CAP = 0.1
+
+
 def measured_margins(ctrl: Any, cert: Any) -> tuple[np.ndarray, str]:
     """The uncertified tightening of ``cert``'s rows over its horizon, and where it came from:
-    the model file's ``prediction_error``, else its ``w̄_y`` at every step."""
+    the model file's ``prediction_error``, else its ``w̄_y`` at every step; what the horizon
+    adds to the first stage's capped at :data:`MARGIN_CAP` of the box's width along the row
+    (:func:`row_widths`): a model whose error one step ahead fills the box stays refused."""
     from controllers.certification.prediction_error import margins
     from controllers.dead_time import input_delay
 
     profile = ctrl.model.prediction_error
     if profile is not None:
-        return margins(profile, cert.L, cert.N, input_delay(ctrl.problem)), "prediction_error"
-    w = float(ctrl.model.w_y_bar if ctrl.model.w_y_bar is not None else cert.w_y_bar)
-    return np.full(cert.a.shape, w) * np.abs(cert.L).sum(axis=1), "w_y_bar"
+        found = margins(profile, cert.L, cert.N, input_delay(ctrl.problem)), "prediction_error"
+    else:
+        w = float(ctrl.model.w_y_bar if ctrl.model.w_y_bar is not None else cert.w_y_bar)
+        found = np.full(cert.a.shape, w) * np.abs(cert.L).sum(axis=1), "w_y_bar"
+    cap = np.maximum(MARGIN_CAP * row_widths(cert.L, cert.h), found[0][min(1, cert.N)])
+    return np.minimum(found[0], cap), found[1]
+
+
+def row_widths(L: np.ndarray, h: np.ndarray) -> np.ndarray:
+    """The width of the output set ``{y : L y ≤ h}`` along each row (``h_j + h_k`` for a row
+    ``k`` opposite to ``j``, a box's; ``inf`` for a row without one)."""
+    L, h = np.atleast_2d(np.asarray(L, dtype=float)), np.asarray(h, dtype=float)
+    out = np.full(h.shape, np.inf)
+    for j in range(L.shape[0]):
+        for k in range(L.shape[0]):
+            if np.allclose(L[k], -L[j], rtol=0, atol=1e-15):
+                out[j] = h[j] + h[k]
+    return out
 
 
 def margin_text(model: Any, cert: Any) -> str:
@@ -157,7 +185,17 @@ def uncertified_certificate(cert: Any, margins: np.ndarray) -> Any:
     and Assumption 1 use the same margins; no guarantee follows from them
     (``tightening = "measured"``). The ``i = 0`` rows, on the estimate ``x̂`` alone (no input
     changes them; the theorem's recursive feasibility, which keeps them satisfied, is what this
-    design lacks), are not enforced: their margin is ``−∞``."""
+    design lacks), are not enforced: their margin is ``−∞``.
+
+    The terminal weight is the smaller of the theorem's ``s`` (``eq:definition_s``) and the one
+    measured on the model's linearisation at its steady states
+    (:mod:`controllers.certification.measured_terminal`, ``ŝ``; ``rem:measured-terminal`` in
+    docs: design/soft-constraints.md): both bound the cost to go from the horizon's end, the
+    theorem's for every state of the box with the worst-case contraction ``ρ_s``, the measured
+    one near the steady states the controller steers to. With ``ρ_s`` near 1 the theorem's is
+    the larger by far (the zoo's air heater: 266,163 against 4,080), and a terminal weight that
+    large holds the artificial steady state to where the horizon's end can reach: it crawls
+    after a set-point step the plant can only follow slowly."""
     from dataclasses import replace
 
     margins = np.array(margins, dtype=float)
@@ -165,15 +203,20 @@ def uncertified_certificate(cert: Any, margins: np.ndarray) -> Any:
         raise DesignError(f"margins have shape {margins.shape}, expected {cert.a.shape}")
     margins[0] = -np.inf
     zero = np.zeros_like(cert.L_z)
-    s, rho = cert.s, cert.rho_s
-    if not math.isfinite(s) and cert.measured is not None:
-        # ν ≥ 1: the terminal weight measured on the linearisation, and the contraction
-        # eq:definition_s would need for it (controllers.certification.measured_terminal)
+    s, rho, measured = cert.s, cert.rho_s, cert.measured
+    if measured is None:
+        from controllers.certification.measured_terminal import measured_terminal_weight
+
+        measured = measured_terminal_weight(cert.params, cert.Q)
+    if math.isfinite(measured.s) and not measured.s >= s:
+        # the terminal weight measured on the linearisation (ν ≥ 1: the only one), and the
+        # contraction eq:definition_s would need for it (controllers.certification.
+        # measured_terminal)
         from controllers.certification.measured_terminal import equivalent_contraction
 
-        s = cert.measured.s
+        s = measured.s
         rho = equivalent_contraction(cert.n, cert.Q, s)
     return replace(cert, L_z=zero, L_r=zero.copy(), nu_o=cert.nu, rho_s=rho, rho_o=rho,
                    kappa=0.0, L_max=0.0, w_bar=0.0, w_L=np.zeros_like(cert.w_L),
                    a=np.zeros_like(cert.a), b=margins, e_o0=0.0, e_inf=0.0, gain_scale=0.0,
-                   s=s, tightening="measured")
+                   s=s, tightening="measured", measured=measured)

@@ -41,8 +41,8 @@ from controllers.laws.base import (
     setpoint_text,
 )
 
-__all__ = ["ALPHA_C_SPAN", "TrackingLaw", "build", "fallback_alpha_c", "settings_of",
-           "steady_outputs_text", "tracking_design"]
+__all__ = ["ALPHA_C_SPAN", "UNCERTIFIED_ALPHA_C", "TrackingLaw", "build", "fallback_alpha_c",
+           "settings_of", "steady_outputs_text", "tracking_design"]
 
 #: How far a target may lie beyond ``Y_s`` (normalised) before it is noted
 #: (:meth:`TrackingLaw._watch_target`).
@@ -53,6 +53,13 @@ MAX_NOTES = 5
 #: passes, or the uncertified mode): the one whose terminal set spans this much of every
 #: normalised output (``α_c max_j c_s(j)``; the normalised box is 2 wide).
 ALPHA_C_SPAN = 0.05
+#: The uncertified mode's terminal radius (``‖x_N − x_s‖∞``; GRU states lie in the unit box,
+#: so 2 bounds nothing): without a guarantee to keep, the terminal set only held the
+#: artificial steady state to where the horizon's slowest hidden modes could reach, and it
+#: crawled after a set-point step (the zoo's air heater: the steady output 60 °C for a 45 °C
+#: set-point, the terminal set active; docs: design/soft-constraints.md,
+#: ``rem:uncertified-terminal``). The terminal cost ``s t²`` (the measured weight) stays.
+UNCERTIFIED_ALPHA_C = 2.0
 
 
 def fallback_alpha_c(cert: Any) -> float:
@@ -62,7 +69,7 @@ def fallback_alpha_c(cert: Any) -> float:
 
 
 def tracking_design(model: Any, cert_gains: Any, design: Mapping[str, Any],
-                    gains_certified: bool = True, cert: Any = None
+                    gains_certified: bool = True, cert: Any = None, measured: bool = False
                     ) -> tuple[Any, Any, Any, list[str]]:
     """``(certificate, TrackingMPC, DisturbanceFilter, failures)`` of the tracking law
     (module docstring) on ``model`` (and its ``problem``); ``failures``: its hypotheses that
@@ -73,7 +80,11 @@ def tracking_design(model: Any, cert_gains: Any, design: Mapping[str, Any],
     ``α_min`` is the default ``α_c`` when ``gains_certified`` (its observer-gain scale
     passed), else :func:`fallback_alpha_c`; ``cert``: the design's certificate (default:
     ``gain_scale=0`` of ``kwargs``; the uncertified mode passes
-    :func:`controllers.certification.grade.uncertified_certificate`'s)."""
+    :func:`controllers.certification.grade.uncertified_certificate`'s). ``measured``: that
+    uncertified design: the terminal radius :data:`UNCERTIFIED_ALPHA_C` unless one is given,
+    and ``Y_s`` the box tightened by the measured margin alone (``h − b_N``, no ``α_c c_s``:
+    that term keeps the theorem's terminal set inside the constraints, which the uncertified
+    mode does not claim)."""
     from controllers.certification import certificates as certs
     from controllers.laws.tracking import SPEC
     from controllers.laws.tracking.checks import failures, tracking_hypotheses
@@ -102,11 +113,14 @@ def tracking_design(model: Any, cert_gains: Any, design: Mapping[str, Any],
         raise OptionError(f"option control_horizon={M}: at most the horizon N = {N}")
     if cert is None:
         cert = certs.compute_certificate(model, gain_scale=0.0, **kwargs)
-    if alpha_c is None:
+    if alpha_c is None and measured:
+        alpha_c = UNCERTIFIED_ALPHA_C
+    elif alpha_c is None:
         alpha_c = cert_gains.alpha_min() if gains_certified else math.nan
         if not (math.isfinite(alpha_c) and alpha_c > 0):
             alpha_c = fallback_alpha_c(cert)
-    reference = ArtificialSteadyState(T, alpha_c, control_horizon=M)
+    ys = cert.h - cert.b[cert.N] if measured else None
+    reference = ArtificialSteadyState(T, alpha_c, ys_bounds=ys, control_horizon=M)
     fhocp = FHOCP.from_certificate(cert, reference=reference, **design["fhocp_options"])
     hypotheses = tracking_hypotheses(fhocp, cert, beta)
     law = TrackingMPC(fhocp)
@@ -323,7 +337,8 @@ class TrackingLaw:
 
         design = self.design
         cert_u, tracker, disturbance, _ = tracking_design(self.model, cert, design,
-                                                          gains_certified=False, cert=cert)
+                                                          gains_certified=False, cert=cert,
+                                                          measured=True)
         h = tracker.hypotheses
         if not h["Ys_nonempty"]:
             given = design["alpha_c"]
