@@ -185,6 +185,7 @@ class FHOCP(Solving):
         #: the slacks as the solve in progress has them: the design's, or without weights
         #: in the hard phase (:meth:`solve_request`)
         self.slacks = self.soft_design
+        self._soft_off = None if self.soft_design is None else self.soft_design.off()
         #: the solve in progress is the softened phase (:meth:`solve_request`)
         self.softening = False
         #: solve the softened phase alone, every step (the exact penalty's own answers: the

@@ -165,7 +165,7 @@ class Solving:
         """The softened phase's slack weights (``on``) or the hard phase's (none), in the
         numpy problem and the compiled kernel's instance alike."""
         assert self.soft_design is not None
-        self.slacks = self.soft_design if on else self.soft_design.off()
+        self.slacks = self.soft_design if on else self._soft_off
         self.softening = on
         if self.kernel is not None:
             self.kernel.set_soft(on)
