@@ -24,8 +24,9 @@ RANGES = {"plant.h1": 2.0, "plant.h2": 2.0, "ctrl.qa": 9.05e-4, "ctrl.qb": 11.1e
 def parity(tmp_path: Path, scenario: Path, controller: str) -> dict:
     """Run ``controller`` against a frozen served plant and in-process; the live summary
     after checking that both closed loops agree. The parity needs every sample fresh and on
-    time: a live run that a loaded machine delayed (a stale sample or a missed deadline,
-    seen once in a CI run whose other worker was compiling) is run once more."""
+    time: a live run that a loaded machine delayed (a stale sample, a missed deadline, a
+    plant sample read twice: seen in CI runs whose other worker was compiling) is run once
+    more."""
     for attempt in range(2):
         if attempt:   # the first attempt's folder and record go
             shutil.rmtree(tmp_path / "live")
