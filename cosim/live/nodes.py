@@ -90,12 +90,12 @@ async def walk(start: Any, path: Sequence[tuple[int | None, str]], what: str) ->
     return node
 
 
-async def find(client: Any, base: Any, signal: str, tag: Tag, endpoint: str) -> Any:
-    """The node of ``signal``'s ``tag``: its node id, or its browse path from Objects or
-    ``base`` (the root; ``None`` only when no tag needs it)."""
+async def find(client: Any, base: Any, label: str, tag: Tag, endpoint: str) -> Any:
+    """The node of ``tag`` (``label`` names it: ``signal 'h1'``): its node id, or its browse
+    path from Objects or ``base`` (the root; ``None`` only when no tag needs it)."""
     from asyncua import ua
 
-    what = f"signal '{signal}' ({tag.describe()}{', ' + tag.where if tag.where else ''})"
+    what = f"{label} ({tag.describe()}{', ' + tag.where if tag.where else ''})"
     if tag.node_id is not None:
         node = client.get_node(tag.node_id)
         try:

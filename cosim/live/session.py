@@ -190,7 +190,8 @@ class PlantSession:
                         "for a plant laid out otherwise)"))
         found = {}
         for signal, tag in tags.items():
-            node = await nodes_mod.find(client, base, signal, tag, self.endpoint)
+            label = "--heartbeat" if signal == HEARTBEAT else f"signal '{signal}'"
+            node = await nodes_mod.find(client, base, label, tag, self.endpoint)
             info = await nodes_mod.describe(node, signal, tag, signal not in self.reads)
             if signal == HEARTBEAT:
                 info = _heartbeat(info, self.endpoint)
