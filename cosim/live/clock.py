@@ -112,14 +112,21 @@ class WallClock(Pacer):
 
     # -- start ----------------------------------------------------------------------------
     def start(self, run: Run) -> None:
-        """Lock onto the plant's samples: the instant of sample 0 is just after the plant's
-        next new sample when its values are republished every sample (within 2.5 samples),
-        else now."""
+        """Once connected, before the first write: one warning line when the problem
+        declares no safe input value; then lock onto the plant's samples: the instant of
+        sample 0 is just after the plant's next new sample when its values are republished
+        every sample (within 2.5 samples), else now."""
+        problem = self.plant.problem
+        if not self.plant.safe:
+            self.cfg.notice(f"warning: the problem {problem.source or problem.name} declares "
+                            "no safe input value (safe = VALUE in [inputs.NAME]): the "
+                            "watchdog and the run's end leave the plant's inputs as they are")
         P = self.cfg.period
+        session = self.plant.session
         first = self.plant.read(0.0).source_time
         end = time.perf_counter() + 2.5 * P
         while first is not None and time.perf_counter() < end:
-            time.sleep(min(P / 50, 0.01))
+            session.idle(time.perf_counter() + min(P / 50, 0.01))
             ts = self.plant.read(0.0).source_time
             if ts is not None and ts != first:
                 self.locked = True
@@ -132,9 +139,7 @@ class WallClock(Pacer):
         """Until sample ``k``'s instant; its deadline for the inputs follows."""
         P = self.cfg.period
         due = self.w0 + k * P
-        wait = due - time.perf_counter()
-        if wait > 0:
-            time.sleep(wait)
+        self.plant.session.idle(due)     # the connection lives meanwhile
         self.counts["samples"] += 1
         self.plant.begin_sample(k)
         self._sample = {"due": due, "deadline": due + DEADLINE * P, "on_time": 0.0,
@@ -152,7 +157,7 @@ class WallClock(Pacer):
         if self.locked and last is not None and reading.source_time == last:
             end = time.perf_counter() + REPEAT_WAIT * self.cfg.period
             while reading.source_time == last and time.perf_counter() < end:
-                time.sleep(self.cfg.period / 200)
+                self.plant.session.idle(time.perf_counter() + self.cfg.period / 200)
                 reading = self.plant.read(t)
             if reading.source_time == last:
                 self.counts["repeated"] += 1

@@ -206,9 +206,7 @@ class LivePlant(Component):
 def open_live(plant: str, ctx: PlantContext) -> OpenedPlant:
     """The live plant at the endpoint ``plant`` (``opc.tcp://...``), bound to the run's
     problem, on the wall clock (:class:`cosim.live.clock.WallClock`): the opener of the
-    ``opc.tcp`` scheme (:mod:`cosim.core.plants`), which :func:`cosim.api.run` runs. A
-    problem without any safe input value is said in one warning line, before anything is
-    written.
+    ``opc.tcp`` scheme (:mod:`cosim.core.plants`), which :func:`cosim.api.run` runs.
 
     Raises
     ------
@@ -257,10 +255,6 @@ def open_live(plant: str, ctx: PlantContext) -> OpenedPlant:
     if not live.security.secure:
         notice("warning: no security (--security None): the plant's values travel unsigned "
                "and unencrypted")
-    if not component.safe:
-        notice(f"warning: the problem {bound.source or bound.name} declares no safe input "
-               "value (safe = VALUE in [inputs.NAME]): the watchdog and the run's end leave "
-               "the plant's inputs as they are")
     clock = WallClock(component, LiveConfig(
         period=period, watchdog=live.watchdog, notice=notice,
         min_controlled=live.min_controlled,

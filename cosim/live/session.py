@@ -1,11 +1,14 @@
 """The OPC UA client of a live run: connect, find the tags, read measurements, write inputs.
 
-:class:`PlantSession` keeps asyncua's client in an event loop of its own thread, so that the
-run's loop stays in the main thread, on its clock and reachable by signals; every request is
-bounded in time. A sample costs two service calls, their requests built once at connection:
-one Read of every measurement (values, status, both timestamps) and one Write of every input
-(and the heartbeat), each value in its tag's unit and data type (:mod:`cosim.live.tags`,
-:mod:`cosim.live.nodes`). What a live process does to a connection is answered here:
+:class:`PlantSession` runs asyncua's client on an event loop of its own, in the run's thread:
+during each request (bounded in time) and while the run waits for its next sample
+(:meth:`PlantSession.idle`, where keep-alives and reconnections go on), never in another
+thread, so that a request costs no hand-over between threads; signals reach the run between
+requests (:mod:`cosim.core.interrupts`). A sample costs two service calls, their requests
+built once at connection: one Read of every measurement (values, status, both timestamps)
+and one Write of every input (and the heartbeat), each value in its tag's unit and data type
+(:mod:`cosim.live.tags`, :mod:`cosim.live.nodes`). What a live process does to a
+connection is answered here:
 
 * the first connection fails (unreachable, refused certificate or user, a tag the server
   lacks or in another unit, an input it cannot carry): one line naming the endpoint and why
@@ -27,12 +30,12 @@ import asyncio
 import contextlib
 import dataclasses
 import math
-import threading
 import time
 from collections.abc import Mapping, Sequence
 from datetime import UTC
 from typing import Any
 
+from cosim.core import interrupts
 from cosim.core.errors import CosimError
 from cosim.core.pacing import Reading
 from cosim.live import nodes as nodes_mod
@@ -51,6 +54,8 @@ BACKOFF = (0.1, 2.0)
 HEARTBEAT = "live.heartbeat"
 #: Why a write did not reach the plant when the connection is down.
 LINK_DOWN = "link down"
+#: The longest stretch [s] the event loop runs between two looks for a signal while idle.
+IDLE_SLICE = 0.05
 
 
 class PlantSession:
@@ -110,19 +115,29 @@ class PlantSession:
         self._closing = False
         self._loop = asyncio.new_event_loop()
         self._loop.set_exception_handler(lambda loop, context: None)
-        self._thread = threading.Thread(target=self._loop.run_forever, name="opcua",
-                                        daemon=True)
-        self._thread.start()
         quiet_libraries()
 
-    # -- calls into the session's thread --------------------------------------------------
+    # -- running the session's event loop -------------------------------------------------
     def _call(self, coro: Any, timeout: float) -> Any:
-        future = asyncio.run_coroutine_threadsafe(coro, self._loop)
-        try:
-            return future.result(timeout)
-        except BaseException:
-            future.cancel()
-            raise
+        """Run ``coro`` on the session's event loop, in the calling thread (no hop into
+        another thread: a sample's two calls cost what the messages cost), for at most
+        ``timeout`` seconds; a signal meanwhile is recorded, not raised inside asyncua, and
+        raised by the run's next check (:mod:`cosim.core.interrupts`)."""
+        guard = interrupts.current()
+        with guard.deferred() if guard is not None else contextlib.nullcontext():
+            return self._loop.run_until_complete(asyncio.wait_for(coro, timeout))
+
+    def idle(self, until: float) -> None:
+        """Let the connection live until ``time.perf_counter()`` reaches ``until`` (its
+        keep-alive, a reconnection in progress); a signal ends the wait and is raised here
+        (:class:`~cosim.core.interrupts.Interrupted`)."""
+        guard = interrupts.current()
+        with guard.deferred() if guard is not None else contextlib.nullcontext():
+            while (left := until - time.perf_counter()) > 0 and \
+                    (guard is None or guard.signum is None):
+                self._loop.run_until_complete(asyncio.sleep(min(left, IDLE_SLICE)))
+        if guard is not None:
+            guard.check()
 
     # -- connecting ---------------------------------------------------------------------------
     def connect(self) -> None:
@@ -329,13 +344,15 @@ class PlantSession:
         self.connected = False
         client, self._client = self._client, None
         if client is not None:
-            asyncio.run_coroutine_threadsafe(_quietly(client.disconnect()), self._loop)
+            self._loop.create_task(_quietly(client.disconnect()))
         self._start_reconnect()
 
     def _start_reconnect(self) -> None:
+        """A reconnection in the background: it goes on whenever the loop runs (the waits
+        between samples, :meth:`idle`)."""
         task = self._reconnecting
         if (task is None or task.done()) and not self._closing:
-            self._reconnecting = asyncio.run_coroutine_threadsafe(self._reconnect(), self._loop)
+            self._reconnecting = self._loop.create_task(self._reconnect())
 
     async def _reconnect(self) -> None:
         delay = BACKOFF[0]
@@ -350,17 +367,21 @@ class PlantSession:
             return
 
     def close(self) -> None:
-        """Disconnect and stop the session's thread; safe to call more than once."""
+        """Disconnect and close the session's event loop; safe to call more than once."""
         if self._closing:
             return
         self._closing = True
         client, self._client = self._client, None
         self.connected = False
-        if client is not None:
-            with contextlib.suppress(Exception):
+        with contextlib.suppress(Exception):
+            if client is not None:
                 self._call(_quietly(client.disconnect()), 2.0)
-        self._loop.call_soon_threadsafe(self._loop.stop)
-        self._thread.join(2.0)
+            pending = asyncio.all_tasks(self._loop)
+            for task in pending:
+                task.cancel()
+            self._loop.run_until_complete(asyncio.wait_for(
+                asyncio.gather(*pending, return_exceptions=True), 2.0))
+        self._loop.close()
 
 
 async def _quietly(coro: Any) -> None:

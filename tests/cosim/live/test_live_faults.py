@@ -130,8 +130,8 @@ def test_lost_connection_reconnects_and_resumes(tmp_path: Path, safe_problem: Pa
                         problem=safe_problem, figure=False, on_notice=notices.append,
                         out=tmp_path / "run",
                         live=LiveOptions(speed=SPEED, watchdog=5, min_controlled=0.0))
-        thread.join(40)
-    finally:
+    finally:   # the restart may still be under way: bounded (30 s to listen, 20 s to write)
+        thread.join(120)
         for server in servers:
             server.stop()
     lv = out.summary["live"]

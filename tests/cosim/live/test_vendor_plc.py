@@ -93,6 +93,16 @@ def fresh_run(tmp: Path, start: Any, case: dict,
     return plc, run
 
 
+#: Why a sample may be stale on a loaded machine (a PLC tick or its answer late).
+LATE = {"older than a sample", "no answer within 0.1 s"}
+
+
+def assert_fresh_but_late(lv: dict, most: int = 3) -> None:
+    """Every sample fresh but at most ``most`` that a loaded machine made late."""
+    assert lv["samples"] == SAMPLES and lv["fresh"] >= SAMPLES - most, lv
+    assert set(lv["stale_reasons"]) <= LATE, lv["stale_reasons"]
+
+
 def assert_delivered(results: pd.DataFrame, writes: pd.DataFrame, signal: str,
                      rtol: float = 0.0, raw: Callable[[np.ndarray], np.ndarray] | None = None
                      ) -> None:
@@ -165,7 +175,8 @@ def test_vendor_plc_looks_like_a_vendors(vendor_plc: Any) -> None:
 
 def test_double_tags_reach_the_plant(tmp_path: Path, vendor_plc: Any) -> None:
     """``cosim run`` with a tags file (string and numeric node ids, a browse path below the
-    PLC's root): exit 0, every sample fresh, the PLC received exactly what the run wrote."""
+    PLC's root): exit 0, every sample fresh (but a few a loaded machine made late), the PLC
+    received exactly what the run wrote."""
     def go(folder: Path, plc: VendorPlc) -> Run:
         ns = plc.namespace_index
         return run_cli(folder, plc, plc.tags_file(folder / "plc.tags.toml", paths={
@@ -174,11 +185,11 @@ def test_double_tags_reach_the_plant(tmp_path: Path, vendor_plc: Any) -> None:
     plc, run = fresh_run(tmp_path, vendor_plc, {"speed": SPEED, "frozen": True}, go)
     assert run.code == 0, run.stderr
     lv, ns = run.live, plc.namespace_index
-    assert run.summary["status"] == "ok" and lv["samples"] == lv["fresh"] == SAMPLES, lv
-    assert lv["write_failures"] == 0 and lv["stale_reasons"] == {}
+    assert run.summary["status"] == "ok" and lv["write_failures"] == 0, lv
+    assert_fresh_but_late(lv)
     samples, writes = plc.records()
     res = run.results
-    assert (res["live.fresh"] == 1).all()
+    assert (res["live.fresh"] == 1).sum() == lv["fresh"]
     for signal in ("qa", "qb"):
         assert_delivered(res, writes, signal)
     assert set(writes["type"]) == {"Double"}
@@ -202,7 +213,8 @@ def test_float_tags_reach_the_plant(tmp_path: Path, vendor_plc: Any) -> None:
     plc, run = fresh_run(tmp_path, vendor_plc, {"speed": SPEED, "frozen": True, "tags": {
         name: {"type": "Float"} for name in ("h1", "h2", "qa", "qb")}}, go)
     lv = run.live
-    assert run.code == 0 and lv["fresh"] == SAMPLES and lv["write_failures"] == 0, lv
+    assert run.code == 0 and lv["write_failures"] == 0, lv
+    assert_fresh_but_late(lv)
     samples, writes = plc.records()
     assert set(writes["type"]) == {"Float"}
     for signal in ("qa", "qb"):
@@ -230,8 +242,10 @@ def test_deleted_nodes_hold_the_inputs_and_the_run_says_it_did_not_control(
     assert last.startswith("cosim run: degraded: the controller computed the inputs "), last
     assert "--min-controlled 50 %" in last and "1 watchdog alarm (at t = " in last, last
     assert "safe inputs never written: qb: refused (BadNodeIdUnknown)" in last, last
-    # (a loaded machine may add a lone sample older than a sample)
-    assert lv["stale_reasons"].get("status BadNodeIdUnknown", 0) >= SAMPLES - 26, lv
+    # (a loaded machine may add a sample older than a sample, or without an answer)
+    reasons = lv["stale_reasons"]
+    assert reasons["status BadNodeIdUnknown"] >= SAMPLES - 29 and set(reasons) <= {
+        "status BadNodeIdUnknown", *LATE}, lv
     fresh = res["live.fresh"].to_numpy()
     assert not fresh[26:].any() and fresh[:25].sum() >= 22, fresh
     assert lv["refused"]["qb"] >= 12 and "qa" not in lv["refused"], lv
@@ -266,7 +280,8 @@ def test_tags_in_the_plants_units_reach_it_with_a_heartbeat(tmp_path: Path,
         "qa": {"unit": "%", "type": "Int16"}}}, go)
     assert run.code == 0, run.stderr[-800:]
     lv, res = run.live, run.results
-    assert run.summary["status"] == "ok" and lv["fresh"] >= SAMPLES - 2, lv
+    assert run.summary["status"] == "ok", lv
+    assert_fresh_but_late(lv)
     nodes = lv["nodes"]
     assert (nodes["h1"]["unit"], nodes["h1"]["scale"], nodes["h1"]["eurange"]) == (
         "%", 50.0, [0.0, 100.0])
