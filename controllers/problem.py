@@ -63,7 +63,9 @@ class Channel:
     rate : float or None
         Disturbances: the largest change per sample (problem units), which bounds how far
         the real disturbance moves from the value the MPC holds over its horizon; ``None``:
-        the data's largest change per sample.
+        the data's largest change per sample. Outputs: the largest change per sample a
+        measurement can make; a live run does not use one that moves faster (a spike, a
+        transmitter fault); ``None``: no such check.
     preview : bool
         Disturbances: known ahead from the scenario: the robust MPC takes its values to come
         over the inputs' dead time (rather than its last measured value).
@@ -71,6 +73,14 @@ class Channel:
         Inputs: the value written to a live plant when its measurements stop coming (the
         watchdog of ``cosim run --plant opc.tcp://...``) and when the run stops; ``None``:
         hold the last value written.
+    valid : (float, float) or None
+        Outputs and disturbances: the range a measurement can have (a transmitter's span,
+        wider than the box: the box is a constraint, this is what is plausible); a live run
+        does not use a value outside it; ``None``: no such check.
+    frozen : int
+        Outputs and disturbances: a live run does not use a measurement that stayed the same
+        to the bit for this many samples in a row (a frozen transmitter; for noisy signals
+        only); 0: no such check.
     """
 
     name: str
@@ -87,6 +97,8 @@ class Channel:
     rate: float | None = None
     preview: bool = False
     safe: float | None = None
+    valid: tuple[float, float] | None = None
+    frozen: int = 0
 
     def __post_init__(self) -> None:
         if not self.variable:
@@ -121,6 +133,10 @@ class Channel:
             doc["preview"] = True
         if self.safe is not None:
             doc["safe"] = self.safe
+        if self.valid is not None:
+            doc["valid"] = list(self.valid)
+        if self.frozen:
+            doc["frozen"] = self.frozen
         return doc
 
 

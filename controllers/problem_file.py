@@ -16,11 +16,16 @@ A problem file declares the plant's signals in its own names and units::
     normalization = { offset = 100.0, scale = 50.0 }   # optional (default: the box)
     hold = [2, 40]                 # optional: excitation hold times [samples]
     levels = [60.0, 140.0]         # optional: excitation levels (default: the box)
+    safe = 100.0                   # optional: written to a live plant by its watchdog
 
     [outputs.CA]                   # a measured, controlled output (eq:output-constraint)
     unit = "mol/L"
     min = 0.2
     max = 1.0
+    valid = [0.0, 5.0]             # optional, live runs: the range a measurement can have
+    rate = 0.3                     # optional, live runs: its largest change per sample
+    frozen = 5                     # optional, live runs: the same to the bit for 5 samples
+                                   #   is a frozen transmitter (noisy signals only)
 
     [disturbances.Tin]             # optional: a measured disturbance (the FMU input or
     unit = "K"                     #   tunable parameter "Tin"), not moved by the controller
@@ -30,6 +35,7 @@ A problem file declares the plant's signals in its own names and units::
     preview = false                # optional: known ahead from the scenario (over dead time)
     delay = 2                      # optional, inputs too: dead time [samples]
     hold = [5, 80]                 # optional: its excitation in cosim generate-data
+                                   # (valid and frozen as for an output)
 
     [pi]                           # optional: the PI baseline's loops (square plants)
     pairing = "main"
@@ -53,8 +59,9 @@ and values by what takes them (:data:`cosim.commands.train.PROBLEM_OPTIONS`,
 Every fault is a :class:`~controllers.errors.ProblemFileError` (exit 2) naming the file and
 line: invalid TOML, an unknown key, a missing ``unit``/``min``/``max``/``Ts``/``name``,
 ``min ≥ max``, a non-finite number, a name used twice, a ``delay`` that is not a whole
-number of samples in ``[0, MAX_DELAY]``, a ``rate`` not in ``(0, max − min]``, no inputs or
-no outputs, a bad loop.
+number of samples in ``[0, MAX_DELAY]``, a ``rate`` not in ``(0, max − min]``, a ``safe``
+value outside its box, a ``valid`` range that is not ``[low, high]``, a ``frozen`` count that
+is not a whole number of samples, no inputs or no outputs, a bad loop.
 Checks against a plant FMU (a signal it lacks, the wrong causality, a unit it contradicts)
 belong to the co-simulation side (:mod:`cosim.core.binding`).
 """

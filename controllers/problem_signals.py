@@ -4,7 +4,9 @@ A signal table (``[inputs.NAME]``, ``[outputs.NAME]``, ``[disturbances.NAME]`` i
 channel lists of the JSON form) becomes a :class:`~controllers.problem.Channel`: its name, unit
 and box, the FMU variable it is, its normalisation, its excitation in ``cosim generate-data``
 (``hold``, ``levels``), its dead time (``delay``, at most :data:`MAX_DELAY` samples), a
-disturbance's ``rate`` and ``preview``, an input's ``safe`` value. Every fault is one
+disturbance's ``rate`` and ``preview``, an input's ``safe`` value, and what a live run takes
+for a plausible measurement (``valid``, an output's ``rate``, ``frozen``: at most
+:data:`MAX_FROZEN` samples). Every fault is one
 :class:`~controllers.errors.ProblemFileError` (exit 2) located by ``where(table, key)``: a
 file's line, or the key's path in the JSON form. The checks of single values (a finite
 number, a pair, a required key, a non-empty string) serve the file's other tables too
@@ -21,15 +23,20 @@ from typing import Any
 from controllers.errors import ProblemFileError
 from controllers.problem import Channel
 
-__all__ = ["MAX_DELAY", "NAME", "Where", "channel", "number", "pair", "require", "table_name",
-           "text"]
+__all__ = ["MAX_DELAY", "MAX_FROZEN", "NAME", "Where", "channel", "number", "pair", "require",
+           "table_name", "text"]
 
-#: The keys of an output's table; an input's and a disturbance's add theirs.
+#: The keys of every signal's table; each kind adds its own.
 _CHANNEL = {"unit", "min", "max", "variable", "description", "normalization"}
+#: What a live run takes for a plausible measurement (outputs, disturbances).
+_PLAUSIBLE = {"valid", "frozen"}
+_OUTPUT = _CHANNEL | _PLAUSIBLE | {"rate"}
 _INPUT = _CHANNEL | {"hold", "levels", "delay", "safe"}
-_DISTURBANCE = (_INPUT - {"safe"}) | {"rate", "preview"}
+_DISTURBANCE = (_INPUT - {"safe"}) | _PLAUSIBLE | {"rate", "preview"}
 #: The longest dead time a signal may declare [samples].
 MAX_DELAY = 50
+#: The most samples ``frozen`` may count.
+MAX_FROZEN = 10_000
 #: The keys of ``normalization = { offset, scale }``.
 _NORM = {"offset", "scale"}
 #: Names a signal may have (they become column names: ``ref.<name>``, ``iae.<name>``).
@@ -94,14 +101,16 @@ def channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Chan
         raise ProblemFileError(f"{where(table)}: signal name {name!r} must start with a "
                                "letter and hold only letters, digits and '_' (it names "
                                "columns such as ref.<name>)")
-    allowed = ({"inputs": _INPUT, "outputs": _CHANNEL, "disturbances": _DISTURBANCE}[kind]
+    allowed = ({"inputs": _INPUT, "outputs": _OUTPUT, "disturbances": _DISTURBANCE}[kind]
                | ({"name"} if not toml else set()))
     unknown = [k for k in entry if k not in allowed and k != "name"]
     if unknown:
         extra = {"hold": " (hold, levels and delay are for inputs and disturbances)",
-                 "rate": " (rate and preview are for disturbances)"}.get(
-            {"levels": "hold", "delay": "hold", "preview": "rate"}.get(unknown[0], unknown[0]),
-            "")
+                 "preview": " (preview is for disturbances)",
+                 "valid": " (valid, frozen and rate are for outputs and disturbances)",
+                 "safe": " (safe is for inputs)"}.get(
+            {"levels": "hold", "delay": "hold", "frozen": "valid", "rate": "valid"}.get(
+                unknown[0], unknown[0]), "")
         raise ProblemFileError(f"{where(table, unknown[0])}: unknown key '{unknown[0]}' in "
                                f"[{kind}.{name}]{extra} (known: "
                                f"{', '.join(sorted(allowed - {'name'}))})")
@@ -120,7 +129,7 @@ def channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Chan
     description = text(entry.get("description", ""), where(table, "description"),
                        "description", empty=True)
     kw = {**_normalization(entry, where, table), **_excitation(entry, where, table, lo, hi),
-          **_dynamics(entry, where, table, lo, hi)}
+          **_dynamics(entry, where, table, lo, hi), **_plausible(entry, where, table)}
     if "safe" in entry:
         safe = number(entry["safe"], where(table, "safe"), "safe")
         if not lo <= safe <= hi:
@@ -197,4 +206,25 @@ def _dynamics(entry: dict[str, Any], where: Where, table: str, lo: float, hi: fl
             raise ProblemFileError(f"{where(table, 'preview')}: 'preview' must be true or "
                                    "false")
         kw["preview"] = entry["preview"]
+    return kw
+
+
+def _plausible(entry: dict[str, Any], where: Where, table: str) -> dict[str, Any]:
+    """A measurement's ``valid`` range and ``frozen`` count as keyword arguments (those
+    given): what a live run takes for a plausible value."""
+    kw: dict[str, Any] = {}
+    if "valid" in entry:
+        at = where(table, "valid")
+        lo, hi = pair(entry["valid"], at, "valid")
+        if not lo < hi:
+            raise ProblemFileError(f"{at}: 'valid' (the range a measurement can have) must "
+                                   f"be [low, high] with low < high, got [{lo:g}, {hi:g}]")
+        kw["valid"] = (lo, hi)
+    if "frozen" in entry:
+        n = entry["frozen"]
+        if (isinstance(n, bool) or not isinstance(n, int) or n == 1
+                or not 0 <= n <= MAX_FROZEN):
+            raise ProblemFileError(f"{where(table, 'frozen')}: 'frozen' must be 0 (off) or a "
+                                   f"whole number of samples from 2 to {MAX_FROZEN}, got {n!r}")
+        kw["frozen"] = n
     return kw

@@ -4,10 +4,13 @@ A problem file (:mod:`controllers.problem_file`) travels with the model trained 
 model file holds it (:attr:`controllers.model.GRUModel.problem`). The rules, the same for
 every command and controller:
 
-- a model with a problem: that problem; a ``--problem`` given as well must be the same
-  (otherwise one line naming both and what differs, exit 2), but for its ``[mpc]`` table
-  (the robust MPC's tuning, which may change after training): the given one's, when it
-  has one, is used;
+- a model with a problem: that problem; a ``--problem`` given as well must agree with it
+  on what the model was trained on (the signals' names, units, boxes, variables,
+  normalisation and dead times, the sample time: :meth:`ControlProblem.differences`;
+  otherwise one line naming both and what differs, exit 2), and is then the one used:
+  what the model does not depend on (an input's ``safe`` value, a measurement's ``valid``
+  range, ``rate`` and ``frozen``, the PI loops, every key added later) comes from it, and
+  its ``[mpc]`` and ``[train]`` tables when it has them (else the model's);
 - a model without one (written before problems existed): the ``--problem`` given, or the
   default plant's, checked against the model's signals, sample time and normalisation;
 - no model (the PI baseline, ``generate-data``): the ``--problem`` given, or the default
@@ -80,8 +83,11 @@ def problem_for(model: Any, arg: str | Path | ControlProblem | None = None) -> C
                 raise CosimError(f"{_name(arg, given)} contradicts the problem of "
                                  f"{model.source or 'the model'} ({own.name!r}): "
                                  f"{'; '.join(diff[:3])}")
-            if given.mpc and given.mpc != own.mpc:   # the tuning, located in the given file
-                return dataclasses.replace(own, mpc=dict(given.mpc), source=given.source)
+            return dataclasses.replace(given, mpc=dict(given.mpc or own.mpc),
+                                       train=dict(given.train or own.train),
+                                       pairings=given.pairings or own.pairings,
+                                       pairing=given.pairing or own.pairing,
+                                       source=given.source)
         return own
     problem = load_problem(arg)
     if model is not None:

@@ -35,8 +35,10 @@ a DIR that a run is still writing is refused.
 
 With --plant opc.tcp://HOST:PORT the plant is a live process: its control system's OPC UA
 server (or cosim serve-plant), met on the wall clock, each sample read, stepped, written;
-stale values, lost links, late steps and signals each have their answer, written into the
-results (docs: "Run on a live process").
+stale or implausible values, lost links, late steps and signals each have their answer,
+written into the results (docs: "Run on a live process"); a live run that did not control the
+plant (it never wrote an input, or wrote inputs computed from fresh data at less than
+--min-controlled of its samples) exits 1.
 
 An FMU is native code. A controller FMU always runs in a worker process of its own: a crash,
 abort() or exit() in it fails the run (exit 1, partial results kept), a hung step is stopped
@@ -57,7 +59,7 @@ examples:
   cosim run scenarios/paper_steps.csv --model my_gru.json --option 'law="paper"'
   cosim run cstr_steps.csv --plant cstr.fmu --problem cstr.toml --controller pi
   cosim run scenarios/paper_steps.csv --plant opc.tcp://127.0.0.1:4840 --speed 100 \\
-      --security None --watchdog 3
+      --security None --watchdog 3 --problem problem_safe.toml --tags plc.tags.toml
 
 """ + exit_codes_help()
 
@@ -155,8 +157,17 @@ def _live_arguments(p: argparse.ArgumentParser) -> None:
                       help="the plant's speed-up: one sample every Ts/K seconds of the wall "
                            "clock (default 1; cosim serve-plant's --speed)")
     live.add_argument("--watchdog", metavar="N", type=int, default=None,
-                      help="after N samples in a row without a fresh measurement, write the "
-                           "problem's safe inputs (safe = VALUE) and raise one alarm line")
+                      help="after N samples in a row without a fresh measurement, raise one "
+                           "alarm line and write the problem's safe inputs (safe = VALUE), "
+                           "again each sample until the plant reads them back")
+    live.add_argument("--heartbeat", metavar="NODE", default=None,
+                      help="write a counter to this node (a node id or browse path, as in a "
+                           "tags file) every sample, so that the control system sheds the "
+                           "controller when it stops")
+    live.add_argument("--min-controlled", metavar="SHARE", type=float, default=None,
+                      help="the least share of its samples at which the run must write "
+                           "inputs computed from fresh data (default 0.5); a run below it, or "
+                           "that never wrote an input, ends with exit 1")
     from cosim.live.security import add_arguments
 
     add_arguments(p, "client")
@@ -197,7 +208,8 @@ def run(args: argparse.Namespace) -> int:
     if result.error is not None:
         if isinstance(result.error, KeyboardInterrupt):
             raise result.error
-        raise SimulationFailed(f"{result.reason} (partial results: {result.steps} of "
+        what = "results" if result.steps == result.steps_planned else "partial results"
+        raise SimulationFailed(f"{result.reason} ({what}: {result.steps} of "
                                f"{result.steps_planned} steps in {out})")
     from cosim.core import interrupts
 
@@ -225,18 +237,30 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _verdict(result: object, out: object) -> int:
-    """The last line of a run whose controller did not serve a share of its steps
-    (:func:`cosim.core.run_result.shortfall_verdict`; stderr, also with ``--quiet``) and the
-    exit status: 1 beyond :data:`~cosim.core.run_result.FAILING_SHARE`, else 0."""
+    """The last line (stderr, also with ``--quiet``) and the exit status of a run whose
+    controller did not serve a share of its steps
+    (:func:`cosim.core.run_result.shortfall_verdict`: 1 beyond
+    :data:`~cosim.core.run_result.FAILING_SHARE`), of a live run that did not control the
+    plant (:class:`cosim.live.clock.WallClock`: 1), and of a live run with a watchdog alarm
+    (which its last line says), else 0."""
     from cosim.core.errors import EXIT_FAILED, EXIT_OK
     from cosim.core.run_result import FAILING_SHARE, shortfall_verdict
 
+    live = getattr(result, "live", None) or {}
     verdict = shortfall_verdict(result.controller_summary)  # type: ignore[attr-defined]
+    if live.get("failing"):
+        verdict = (1.0, result.reason)  # type: ignore[attr-defined]
+    elif verdict is not None and live.get("alarms"):
+        verdict = (verdict[0], f"{verdict[1]}; {live['alarms']}")
+    sys.stdout.flush()   # the last line, after the run's own
     if result.status != "degraded" or verdict is None:  # type: ignore[attr-defined]
+        if live.get("alarms"):
+            print(f"cosim run: live: {live['alarms']}; results in {out}", file=sys.stderr,
+                  flush=True)
         return EXIT_OK
     failing = verdict[0] > FAILING_SHARE
-    end = "; more than half the steps: exit status 1" if failing else ""
-    sys.stdout.flush()   # the last line, after the run's own
+    end = ("; exit status 1" if live.get("failing") else
+           "; more than half the steps: exit status 1" if failing else "")
     print(f"cosim run: degraded: {verdict[1]}{end}; results in {out}", file=sys.stderr,
           flush=True)
     return EXIT_FAILED if failing else EXIT_OK
@@ -249,6 +273,8 @@ def _live_options(args: argparse.Namespace) -> object:
 
     given = [flag for flag, value in (("--tags", args.tags), ("--speed", args.speed),
                                       ("--watchdog", args.watchdog),
+                                      ("--heartbeat", args.heartbeat),
+                                      ("--min-controlled", args.min_controlled),
                                       ("--security", args.security),
                                       ("--certificate", args.certificate),
                                       ("--private-key", args.private_key),
@@ -265,4 +291,6 @@ def _live_options(args: argparse.Namespace) -> object:
 
     sec = security.from_args(args, "client")
     return LiveOptions(tags=args.tags, speed=args.speed if args.speed is not None else 1.0,
-                       watchdog=args.watchdog, security=sec)
+                       watchdog=args.watchdog, security=sec, heartbeat=args.heartbeat,
+                       **({"min_controlled": args.min_controlled}
+                          if args.min_controlled is not None else {}))

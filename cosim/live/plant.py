@@ -2,11 +2,13 @@
 
 :class:`LivePlant` is a :class:`~cosim.core.component.Component` (its signals, for the
 wiring) and the run's plant I/O (:class:`cosim.core.pacing.PlantIO`): its readings are the
-measurements read over OPC UA, fresh or not (:meth:`LivePlant.read`), its inputs are written
-to the plant (:meth:`LivePlant.write`), never outside their box, and it does not advance (the
-plant runs on its own clock). Its measured disturbances are read like its outputs.
-:meth:`LivePlant.terminate` writes the safe inputs (once the run has written to the plant)
-and closes the session.
+measurements read over OPC UA, fresh or not (:meth:`LivePlant.read`; the problem's
+plausibility checks, :mod:`cosim.live.screen`, once a sample: :meth:`LivePlant.screen`), its
+inputs are written to the plant (:meth:`LivePlant.write`), never outside their box, with the
+heartbeat's counter when one is asked for, and it does not advance (the plant runs on its own
+clock). Its measured disturbances are read like its outputs. :meth:`LivePlant.write_safe`
+writes the safe inputs and reads them back; :meth:`LivePlant.terminate` writes them (once the
+run has written to the plant) and closes the session.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ from cosim.core.component import Component, Signal
 from cosim.core.errors import CosimError
 from cosim.core.pacing import Reading
 from cosim.core.plants import OpenedPlant, PlantContext
-from cosim.live.session import PlantSession
+from cosim.live.screen import Screen
+from cosim.live.session import HEARTBEAT, INTEGER_RANGES, LINK_DOWN, PlantSession
 
 __all__ = ["LivePlant", "open_live"]
 
@@ -31,7 +34,7 @@ class LivePlant(Component):
     ----------
     problem : ControlProblem
         Inputs (written, with their boxes and ``safe`` values), outputs and measured
-        disturbances (read).
+        disturbances (read, with their ``valid``, ``rate`` and ``frozen`` checks).
     session : PlantSession
         Not yet connected (:meth:`setup` connects).
 
@@ -42,7 +45,15 @@ class LivePlant(Component):
     clipped : int
         Values the controller asked for outside their box (written at the box's edge).
     write_failures : int
-        Writes that did not reach the plant.
+        Writes (of inputs or of the heartbeat) that did not all reach the plant.
+    refused : dict
+        Per input (and ``heartbeat``), the writes of it that did not reach the plant.
+    heartbeats : int
+        Heartbeats written.
+    reached : bool
+        Whether the last :meth:`write` brought at least one input to the plant.
+    end : str
+        What :meth:`terminate` did to the inputs.
     """
 
     name = "plant"
@@ -65,6 +76,13 @@ class LivePlant(Component):
         self.written: dict[str, float] = {}
         self.clipped = 0
         self.write_failures = 0
+        self.refused: dict[str, int] = {}
+        self.heartbeats = 0
+        self.reached = False
+        self.end = ""
+        self.screen = Screen((*problem.outputs, *problem.disturbances), problem.Ts,
+                             problem.output_names)
+        self._beat: int | None = None
 
     @property
     def where(self) -> str:
@@ -97,9 +115,30 @@ class LivePlant(Component):
     def step(self, t: float, dt: float) -> None:
         """Nothing: a live plant runs on its own clock."""
 
+    # -- the heartbeat --------------------------------------------------------------------
+    def begin_sample(self, k: int) -> None:
+        """Sample ``k`` begins: its heartbeat is due (with the inputs, else alone)."""
+        if self.session.heartbeat is not None:
+            self._beat = k
+
+    def end_sample(self) -> None:
+        """The heartbeat of the sample, when no input write carried it."""
+        if self._beat is not None:
+            self._write({})
+
+    def _counter(self, k: int) -> float:
+        """The heartbeat's value at sample ``k``: a counter that wraps within the node's
+        type (a Boolean toggles)."""
+        type_name = self.session.nodes[HEARTBEAT].type_name
+        if type_name == "Boolean":
+            return float(k % 2)
+        top = INTEGER_RANGES.get(type_name, (0, 2 ** 24 - 1))[1]
+        return float(k % (min(top, 2 ** 31 - 1) + 1))
+
+    # -- writing ------------------------------------------------------------------------------
     def write(self, values: Mapping[str, float]) -> bool:
         """Write the inputs among ``values``, each clipped to its box (a NaN is not
-        written); ``False`` when the write did not reach the plant."""
+        written); whether they all reached the plant."""
         out = {}
         for name, value in values.items():
             box = self.boxes.get(name)
@@ -109,25 +148,58 @@ class LivePlant(Component):
             if v != value:
                 self.clipped += 1
             out[name] = v
-        ok = self.session.write(out)
-        if ok:
-            self.written.update(out)
-        elif out:
-            self.write_failures += 1
-        return ok
+        failed = self._write(out)
+        self.reached = any(name not in failed for name in out)
+        return bool(out) and not any(name in failed for name in out)
 
-    def write_safe(self) -> dict[str, float]:
-        """Write the inputs' safe values (inputs without one hold their last); the values
-        written, empty when none are declared or the write failed."""
-        if self.safe and self.write(self.safe):
-            return dict(self.safe)
-        return {}
+    def _write(self, out: dict[str, float]) -> dict[str, str]:
+        """Write ``out`` (and the heartbeat when due) in one call; what did not reach the
+        plant, counted."""
+        beat = self._beat
+        if beat is not None:
+            out = {**out, HEARTBEAT: self._counter(beat)}
+            self._beat = None
+        if not out:
+            return {}
+        failed = self.session.write(out)
+        self.written.update((k, v) for k, v in out.items()
+                            if k not in failed and k != HEARTBEAT)
+        if beat is not None and HEARTBEAT not in failed:
+            self.heartbeats += 1
+        if failed:
+            self.write_failures += 1
+            for name in failed:
+                key = "heartbeat" if name == HEARTBEAT else name
+                self.refused[key] = self.refused.get(key, 0) + 1
+        return failed
+
+    def write_safe(self) -> tuple[dict[str, float], str]:
+        """Write the inputs' safe values (inputs without one hold their last) and read them
+        back: the values that reached the plant, and ``""`` when the plant holds them all
+        now, else why not (``"link down"``, a refusal, a value read back)."""
+        if not self.safe:
+            return {}, "no safe inputs declared"
+        failed = self._write(dict(self.safe))
+        written = {k: v for k, v in self.safe.items() if k not in failed}
+        if failed:
+            whys = sorted(set(failed.values()))
+            return written, (LINK_DOWN if whys == [LINK_DOWN] else
+                             "; ".join(f"{k}: {w}" for k, w in failed.items()))
+        return written, self.session.read_back(self.safe)
 
     def terminate(self) -> None:
         """Write the safe inputs, when this run has written to the plant (one that never
-        took control leaves it as it was), and close the session; safe to call twice."""
-        if self.session.connected and self.written:
-            self.write_safe()
+        took control leaves it as it was), and close the session; safe to call twice.
+        :attr:`end` says what it did."""
+        if not self.end:
+            if not self.written:
+                self.end = "nothing written: the run never wrote to the plant"
+            elif not self.safe:
+                self.end = "no safe inputs declared: the inputs hold their last values"
+            else:
+                why = self.write_safe()[1] if self.session.connected else LINK_DOWN
+                self.end = "safe inputs written" if not why else \
+                    f"safe inputs not written: {why}"
         self.session.close()
 
 
@@ -148,9 +220,10 @@ def open_live(plant: str, ctx: PlantContext) -> OpenedPlant:
 
     if ctx.varmap is not None or ctx.interface != "cs":
         raise CosimError(f"--plant {plant}: a live plant takes no --map or --interface "
-                         "(a tags file maps its names: --tags)")
+                         "(a tags file maps its names and units: --tags)")
     check_endpoint(plant, "--plant")
     live = ctx.live or LiveOptions()
+    live.check()
     bound = ctx.problem
     if bound is None:   # a controller of its own signals (an FMU): the default problem's
         from cosim.adapters.problems import load_problem
@@ -163,21 +236,20 @@ def open_live(plant: str, ctx: PlantContext) -> OpenedPlant:
                          "scenario (its disturbances are measured, its parameters are the "
                          "plant's); perturb a virtual plant through cosim serve-plant's "
                          "writable variables")
-    if not (live.speed > 0 and math.isfinite(live.speed)):
-        raise CosimError(f"--speed {live.speed!r}: must be a positive number (the plant's "
-                         "speed-up K)")
-    if live.watchdog is not None and live.watchdog < 1:
-        raise CosimError(f"--watchdog {live.watchdog!r}: must be a whole number of samples "
-                         ">= 1")
     if ctx.step is not None:
         raise CosimError("--step: a live run steps at the controller's sample time")
-    signals = [c.name for c in (*bound.inputs, *bound.outputs, *bound.disturbances)]
-    tags = tags_mod.load(live.tags, signals) if live.tags is not None else tags_mod.Tags()
+    units = bound.units()
+    tags = (tags_mod.load(live.tags, list(units), units) if live.tags is not None
+            else tags_mod.Tags())
+    heartbeat = (tags_mod.tag_of("heartbeat", live.heartbeat, "--heartbeat")
+                 if live.heartbeat is not None else None)
     period = bound.Ts / live.speed
     session = PlantSession(plant, reads=[c.name for c in (*bound.outputs, *bound.disturbances)],
-                           writes=[c.name for c in bound.inputs], tags=tags, folder=bound.name,
+                           writes=list(bound.input_names), tags=tags, folder=bound.name,
                            security=live.security, max_age=period * (1 + 1e-3) + 0.002,
-                           timeout=min(max(0.5 * period, 0.1), 5.0))
+                           timeout=min(max(0.5 * period, 0.1), 5.0), units=units,
+                           boxes=dict(zip(bound.input_names, bound.input_bounds, strict=True)),
+                           heartbeat=heartbeat)
     component = LivePlant(bound, session)
     notice = ctx.on_notice or (lambda text: None)
     if not live.security.secure:
@@ -185,9 +257,11 @@ def open_live(plant: str, ctx: PlantContext) -> OpenedPlant:
                "and unencrypted")
     clock = WallClock(component, LiveConfig(
         period=period, watchdog=live.watchdog, notice=notice,
+        min_controlled=live.min_controlled,
         describe={"endpoint": plant, "speed": live.speed,
                   "security": live.security.describe(),
-                  "tags": str(live.tags) if live.tags else None}))
+                  "tags": str(live.tags) if live.tags else None,
+                  "heartbeat": live.heartbeat}))
     return OpenedPlant(component, io=component, pacer=clock,
                        meta={"plant": plant, "fmi_version": "OPC UA", "interface": "opc.tcp",
                              "live": True})

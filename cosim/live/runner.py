@@ -132,9 +132,35 @@ class LiveOptions:
         Stale samples in a row before the safe inputs are written.
     security : Security
         Default: no security (the command asks for it explicitly).
+    heartbeat : str, optional
+        A node (node id or browse path, as in a tags file) written with a counter every
+        sample, so that the control system sheds the controller when it stops.
+    min_controlled : float
+        The least share of its samples at which a run must have written inputs its
+        controller computed from fresh data; a run below it, or that never wrote an input,
+        did not control the plant and ends with exit 1 (:class:`cosim.live.clock.WallClock`).
     """
 
     tags: str | Path | None = None
     speed: float = 1.0
     watchdog: int | None = None
     security: Security = field(default_factory=Security)
+    heartbeat: str | None = None
+    min_controlled: float = 0.5
+
+    def check(self) -> None:
+        """Refuse options out of their range (one line naming the option).
+
+        Raises
+        ------
+        CosimError
+        """
+        if not (self.speed > 0 and math.isfinite(self.speed)):
+            raise CosimError(f"--speed {self.speed!r}: must be a positive number (the "
+                             "plant's speed-up K)")
+        if self.watchdog is not None and self.watchdog < 1:
+            raise CosimError(f"--watchdog {self.watchdog!r}: must be a whole number of "
+                             "samples >= 1")
+        if not 0.0 <= self.min_controlled <= 1.0:
+            raise CosimError(f"--min-controlled {self.min_controlled!r}: must be a share "
+                             "from 0 to 1 of the run's samples")

@@ -1,13 +1,24 @@
 """The OPC UA client of a live run: connect, find the tags, read measurements, write inputs.
 
-:class:`PlantSession` keeps asyncua's client in an event loop of its own thread, so that the
-run's loop stays in the main thread, on its clock and reachable by signals; every request is
-bounded in time. What a live process does to a connection is answered here:
+:class:`PlantSession` runs asyncua's client on an event loop of its own, in the run's thread:
+during each request (bounded in time) and while the run waits for its next sample
+(:meth:`PlantSession.idle`, where keep-alives and reconnections go on), never in another
+thread, so that a request costs no hand-over between threads; signals reach the run between
+requests (:mod:`cosim.core.interrupts`). A sample costs two service calls, their requests
+built once at connection: one Read of every measurement (values, status, both timestamps)
+and one Write of every input (and the heartbeat), each value in its tag's unit and data type
+(:mod:`cosim.live.tags`, :mod:`cosim.live.nodes`). What a live process does to a
+connection is answered here:
 
-* the first connection fails (unreachable, refused certificate or user): one line naming the
-  endpoint and why (:class:`~cosim.core.errors.CosimError`, exit 2), nothing written;
-* a read that fails, or finds a value whose status is not Good or whose source timestamp is
-  older than ``max_age``: that signal is *not fresh*, and :class:`Reading` says why;
+* the first connection fails (unreachable, refused certificate or user, a tag the server
+  lacks or in another unit, an input it cannot carry): one line naming the endpoint and why
+  (:class:`~cosim.core.errors.CosimError`, exit 2), nothing written;
+* a read that fails, or finds a value whose status is not Good, whose source timestamp is
+  older than ``max_age`` or further than ``max_age`` in the future, that is not finite or
+  lies outside its node's EURange: that signal is *not fresh*, and :class:`Reading` says
+  why;
+* a write that a node refuses: the others are written, the refused ones named
+  (:meth:`PlantSession.write`);
 * the connection drops: reads say "disconnected" while a background task reconnects with
   back-off (0.1 s doubling to 2 s) and finds the tags again; :attr:`PlantSession.reconnects`
   counts the times it came back.
@@ -17,25 +28,34 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import math
-import threading
 import time
 from collections.abc import Mapping, Sequence
 from datetime import UTC
 from typing import Any
 
+from cosim.core import interrupts
 from cosim.core.errors import CosimError
 from cosim.core.pacing import Reading
+from cosim.live import nodes as nodes_mod
 from cosim.live import quiet_libraries
+from cosim.live.nodes import INTEGER_RANGES, Node
 from cosim.live.security import Security, validator
 from cosim.live.tags import Tag, Tags
 
-__all__ = ["APPLICATION_URI", "PlantSession", "Reading"]
+__all__ = ["APPLICATION_URI", "HEARTBEAT", "LINK_DOWN", "PlantSession", "Reading"]
 
 #: The application URI of ``cosim run``'s client (its certificate must carry it).
 APPLICATION_URI = "urn:gru-mpc-cosim:client"
 #: Reconnection back-off: first wait and longest wait [s].
 BACKOFF = (0.1, 2.0)
+#: The heartbeat's name among the values written (not a signal's: it has a dot).
+HEARTBEAT = "live.heartbeat"
+#: Why a write did not reach the plant when the connection is down.
+LINK_DOWN = "link down"
+#: The longest stretch [s] the event loop runs between two looks for a signal while idle.
+IDLE_SLICE = 0.05
 
 
 class PlantSession:
@@ -49,58 +69,87 @@ class PlantSession:
         The signals read each sample (outputs, then measured disturbances) and written
         (the inputs).
     tags : Tags
-        Where each signal lives (:mod:`cosim.live.tags`).
+        Where each signal lives, and in what unit (:mod:`cosim.live.tags`).
     folder : str
         The folder below Objects where untagged signals are looked up (the problem's name),
         unless the tags file sets a root.
     security : Security
     max_age : float
-        A value whose source timestamp is older than this [s] is not fresh.
+        A value whose source timestamp is older than this [s], or further in the future, is
+        not fresh.
     timeout : float
         Longest wait for one request [s].
+    units : mapping, optional
+        The problem's unit of each signal (what a tag without a unit must be in).
+    boxes : mapping, optional
+        Each input's box (what an integer node must carry).
+    heartbeat : Tag, optional
+        A node written with a counter every sample (:data:`HEARTBEAT` among the values).
+
+    Attributes
+    ----------
+    nodes : dict of str to Node
+        Each signal's node as the server described it at the last connection.
     """
 
     def __init__(self, endpoint: str, *, reads: Sequence[str], writes: Sequence[str],
                  tags: Tags, folder: str, security: Security, max_age: float,
-                 timeout: float) -> None:
+                 timeout: float, units: Mapping[str, str] | None = None,
+                 boxes: Mapping[str, tuple[float, float]] | None = None,
+                 heartbeat: Tag | None = None) -> None:
         if not endpoint.startswith("opc.tcp://"):
             raise CosimError(f"--plant {endpoint}: an OPC UA endpoint starts with opc.tcp://")
         self.endpoint = endpoint
         self.reads, self.writes = list(reads), list(writes)
         self.tags, self.folder, self.security = tags, folder, security
         self.max_age, self.timeout = float(max_age), float(timeout)
+        self.units, self.boxes = dict(units or {}), dict(boxes or {})
+        self.heartbeat = heartbeat
         self.reconnects = 0
         self.connected = False
+        self.nodes: dict[str, Node] = {}
         self._client: Any = None
-        self._nodes: dict[str, Any] = {}
-        self._types: dict[str, Any] = {}
+        self._requests: dict[tuple[str, ...], tuple[Any, list[Any]]] = {}
+        self._read: Any = None
         self._reconnecting: Any = None
         self._closing = False
         self._loop = asyncio.new_event_loop()
         self._loop.set_exception_handler(lambda loop, context: None)
-        self._thread = threading.Thread(target=self._loop.run_forever, name="opcua",
-                                        daemon=True)
-        self._thread.start()
         quiet_libraries()
 
-    # -- calls into the session's thread --------------------------------------------------
+    # -- running the session's event loop -------------------------------------------------
     def _call(self, coro: Any, timeout: float) -> Any:
-        future = asyncio.run_coroutine_threadsafe(coro, self._loop)
-        try:
-            return future.result(timeout)
-        except BaseException:
-            future.cancel()
-            raise
+        """Run ``coro`` on the session's event loop, in the calling thread (no hop into
+        another thread: a sample's two calls cost what the messages cost), for at most
+        ``timeout`` seconds; a signal meanwhile is recorded, not raised inside asyncua, and
+        raised by the run's next check (:mod:`cosim.core.interrupts`)."""
+        guard = interrupts.current()
+        with guard.deferred() if guard is not None else contextlib.nullcontext():
+            return self._loop.run_until_complete(asyncio.wait_for(coro, timeout))
+
+    def idle(self, until: float) -> None:
+        """Let the connection live until ``time.perf_counter()`` reaches ``until`` (its
+        keep-alive, a reconnection in progress); a signal ends the wait and is raised here
+        (:class:`~cosim.core.interrupts.Interrupted`)."""
+        guard = interrupts.current()
+        with guard.deferred() if guard is not None else contextlib.nullcontext():
+            while (left := until - time.perf_counter()) > 0 and \
+                    (guard is None or guard.signum is None):
+                self._loop.run_until_complete(asyncio.sleep(min(left, IDLE_SLICE)))
+        if guard is not None:
+            guard.check()
 
     # -- connecting ---------------------------------------------------------------------------
     def connect(self) -> None:
-        """Connect and find every tag (the run's first connection).
+        """Connect, find every tag and check its node (:func:`cosim.live.nodes.check`): the
+        run's first connection.
 
         Raises
         ------
         CosimError
-            Unreachable endpoint, refused certificate or user, a tag the server lacks or an
-            input it does not let this user write.
+            Unreachable endpoint, refused certificate or user, a tag the server lacks, in
+            another unit or of a type the signal cannot be, an input it does not let this
+            user write.
         """
         try:
             self._call(self._open(), 4 * self.timeout + 10.0)
@@ -141,120 +190,169 @@ class PlantSession:
         self.connected = True
 
     async def _resolve(self, client: Any) -> None:
-        """Find every signal's node, its data type and (inputs) that it is writable."""
-        from asyncua import ua
-
-        objects = client.nodes.objects
-        root = self.tags.root
-        base = (await _walk(objects, root, "the tags file's root") if root is not None
-                else await _walk(objects, ((None, self.folder),),
-                                 f"the folder '{self.folder}' (the problem's name; give a "
-                                 "tags file for a plant laid out otherwise)"))
-        nodes, types = {}, {}
-        for signal in dict.fromkeys([*self.reads, *self.writes]):
-            tag = self.tags.tag(signal)
-            node = await self._node(client, objects, base, signal, tag)
-            dtype = await node.read_data_type()
-            types[signal] = _variant_type(dtype)
-            nodes[signal] = node
-            if signal in self.writes:
-                level = await node.read_attribute(ua.AttributeIds.UserAccessLevel)
-                if not int(level.Value.Value) & ua.AccessLevel.CurrentWrite.mask:
-                    raise CosimError(f"--plant {self.endpoint}: input '{signal}' "
-                                     f"({tag.describe()}) is not writable by this user")
-        self._nodes, self._types = nodes, types
-
-    async def _node(self, client: Any, objects: Any, base: Any, signal: str, tag: Tag) -> Any:
-        from asyncua import ua
-
-        what = f"signal '{signal}' ({tag.describe()}{', ' + tag.where if tag.where else ''})"
-        if tag.node_id is not None:
-            node = client.get_node(tag.node_id)
-            try:
-                await node.read_browse_name()
-            except ua.UaStatusCodeError:
-                raise CosimError(f"--plant {self.endpoint}: {what}: no such node") from None
-            return node
-        return await _walk(objects if tag.absolute else base, tag.path, what)
+        """Find and check every signal's node (and the heartbeat's); build the requests."""
+        signals = list(dict.fromkeys([*self.reads, *self.writes]))
+        tags = {s: self.tags.tag(s) for s in signals}
+        if self.heartbeat is not None:
+            tags[HEARTBEAT] = self.heartbeat
+        base = None
+        if any(t.node_id is None and not t.absolute for t in tags.values()):
+            root = self.tags.root
+            base = (await nodes_mod.walk(client.nodes.objects, root, "the tags file's root")
+                    if root is not None else await nodes_mod.walk(
+                        client.nodes.objects, ((None, self.folder),),
+                        f"the folder '{self.folder}' (the problem's name; give a tags file "
+                        "for a plant laid out otherwise)"))
+        found = {}
+        for signal, tag in tags.items():
+            label = "--heartbeat" if signal == HEARTBEAT else f"signal '{signal}'"
+            node = await nodes_mod.find(client, base, label, tag, self.endpoint)
+            info = await nodes_mod.describe(node, signal, tag, signal not in self.reads)
+            if signal == HEARTBEAT:
+                info = _heartbeat(info, self.endpoint)
+            else:
+                nodes_mod.check(info, self.units.get(signal, ""), self.boxes.get(signal),
+                                self.endpoint)
+            found[signal] = info
+        self.nodes, self._requests = found, {}
+        self._read = _read_request([found[s] for s in self.reads])
 
     # -- reading and writing -----------------------------------------------------------------
     def read(self) -> Reading:
-        """The measured signals now; never raises (a failure makes them not fresh)."""
-        if not self.connected:
-            self._start_reconnect()
-            return self._nothing("disconnected")
+        """The measured signals now, in the problem's units; never raises (a failure makes
+        them not fresh)."""
+        data = self._service(self._read) if self.connected else None
+        if isinstance(data, str) or data is None:
+            return self._nothing(data or "disconnected")
+        return self._reading(data)
+
+    def _service(self, request: Any) -> Any:
+        """One Read or Write service call: its results, or why none came (a string)."""
+        from asyncua import ua
+
+        client = self._client
+        call = (client.uaclient.read if isinstance(request, ua.ReadParameters)
+                else client.uaclient.write)
         try:
-            values = self._call(self._client.read_attributes(
-                [self._nodes[s] for s in self.reads]), self.timeout)
+            return self._call(call(request), self.timeout)
         except TimeoutError:
-            return self._nothing(f"no answer within {self.timeout:g} s")
+            return f"no answer within {self.timeout:g} s"
         except Exception:
             self._lost()
-            return self._nothing("disconnected")
-        return self._reading(values)
+            return "disconnected"
 
     def _nothing(self, why: str) -> Reading:
         """A read that brought no value: every signal NaN, not fresh for ``why``."""
+        if not self.connected:
+            self._start_reconnect()
         return Reading(dict.fromkeys(self.reads, math.nan), dict.fromkeys(self.reads, why))
 
     def _reading(self, data: list[Any]) -> Reading:
-        now = time.time()
+        now, limit = time.time(), self.max_age
         out, stale, newest = {}, {}, None
         for signal, dv in zip(self.reads, data, strict=True):
+            node = self.nodes[signal]
             value = dv.Value.Value if dv.Value is not None else None
             try:
-                out[signal] = float(value)
+                raw = float(value)
             except (TypeError, ValueError):
-                out[signal] = math.nan
+                raw = math.nan
+            out[signal] = node.tag.from_plant(raw)
             status = dv.StatusCode
             source = dv.SourceTimestamp or dv.ServerTimestamp
             ts = source.replace(tzinfo=source.tzinfo or UTC).timestamp() if source else None
+            rng = node.eurange
             if status is not None and not status.is_good():
                 stale[signal] = f"status {status.name}"
             elif ts is None:
                 stale[signal] = "no timestamp"
-            elif now - ts > self.max_age:
-                stale[signal] = f"{now - ts:.3g} s old"
-            elif not math.isfinite(out[signal]):
+            elif now - ts > limit:
+                stale[signal] = f"older than a sample ({now - ts:.3g} s)"
+            elif ts - now > limit:
+                stale[signal] = f"stamped in the future ({ts - now:.3g} s ahead)"
+            elif not math.isfinite(raw):
                 stale[signal] = f"value {value!r}"
+            elif rng is not None and not rng[0] <= raw <= rng[1]:
+                stale[signal] = (f"outside its EURange ({raw:g} not in [{rng[0]:g}, "
+                                 f"{rng[1]:g}] {node.unit or ''})".replace(" )", ")"))
             if ts is not None and (newest is None or ts > newest):
                 newest = ts
         return Reading(out, stale, newest)
 
-    def write(self, values: Mapping[str, float]) -> bool:
-        """Write ``values`` (already in the input box) to the inputs; ``False`` when the
-        write did not reach the plant (disconnected, refused, no answer)."""
-        if not self.connected or not values:
-            return False
-        from asyncua import ua
+    def write(self, values: Mapping[str, float]) -> dict[str, str]:
+        """Write ``values`` (the problem's units, already in the input box; the heartbeat's
+        counter under :data:`HEARTBEAT`) in one Write call, each in its tag's unit and type;
+        the names that did not reach the plant, with why (empty: all did)."""
+        if not values:
+            return {}
+        if not self.connected:
+            return dict.fromkeys(values, LINK_DOWN)
+        names = tuple(values)
+        request, variants = self._write_request(names)
+        for name, variant in zip(names, variants, strict=True):
+            variant.Value = self._raw(name, values[name])
+        results = self._service(request)
+        if isinstance(results, str):
+            return dict.fromkeys(names, LINK_DOWN if results == "disconnected" else results)
+        return {n: f"refused ({st.name})" for n, st in zip(names, results, strict=True)
+                if not st.is_good()}
 
+    def read_back(self, values: Mapping[str, float]) -> str:
+        """Whether the plant's input nodes hold ``values`` now (as written: in their types):
+        ``""`` when they do, else why not."""
         names = list(values)
-        dvs = [ua.DataValue(ua.Variant(_as(self._types[n], values[n]), self._types[n]))
-               for n in names]
-        try:
-            self._call(self._client.write_values([self._nodes[n] for n in names], dvs),
-                       self.timeout)
-        except TimeoutError:
-            return False
-        except ua.UaStatusCodeError:
-            return False
-        except Exception:
-            self._lost()
-            return False
-        return True
+        data = self._service(_read_request([self.nodes[n] for n in names])) \
+            if self.connected else LINK_DOWN
+        if isinstance(data, str):
+            return LINK_DOWN if data == "disconnected" else data
+        for name, dv in zip(names, data, strict=True):
+            want = float(self._raw(name, values[name]))
+            got = dv.Value.Value if dv.Value is not None else None
+            if not (isinstance(got, int | float) and math.isclose(float(got), want,
+                                                                  rel_tol=1e-6)):
+                return f"{name} reads back {got!r}, not {want:g}"
+        return ""
+
+    def _write_request(self, names: tuple[str, ...]) -> tuple[Any, list[Any]]:
+        """The Write request of ``names`` (built once per set of names) and its variants."""
+        cached = self._requests.get(names)
+        if cached is None:
+            from asyncua import ua
+
+            items = [ua.WriteValue(NodeId=self.nodes[n].node.nodeid,
+                                   AttributeId=ua.AttributeIds.Value,
+                                   Value=ua.DataValue(ua.Variant(0, self.nodes[n].vtype)))
+                     for n in names]
+            cached = (ua.WriteParameters(NodesToWrite=items), [w.Value.Value for w in items])
+            self._requests[names] = cached
+        return cached
+
+    def _raw(self, name: str, value: float) -> float | int | bool:
+        """``value`` as its node takes it: in the tag's unit, rounded and kept within range
+        for an integer type."""
+        node = self.nodes[name]
+        if node.type_name == "Boolean":
+            return bool(value)
+        raw = node.tag.to_plant(value)
+        limits = INTEGER_RANGES.get(node.type_name)
+        if limits is None:
+            return float(raw)
+        return min(max(round(raw), limits[0]), limits[1])
 
     # -- losing and finding the connection ---------------------------------------------------
     def _lost(self) -> None:
         self.connected = False
         client, self._client = self._client, None
         if client is not None:
-            asyncio.run_coroutine_threadsafe(_quietly(client.disconnect()), self._loop)
+            self._loop.create_task(_quietly(client.disconnect()))
         self._start_reconnect()
 
     def _start_reconnect(self) -> None:
+        """A reconnection in the background: it goes on whenever the loop runs (the waits
+        between samples, :meth:`idle`)."""
         task = self._reconnecting
         if (task is None or task.done()) and not self._closing:
-            self._reconnecting = asyncio.run_coroutine_threadsafe(self._reconnect(), self._loop)
+            self._reconnecting = self._loop.create_task(self._reconnect())
 
     async def _reconnect(self) -> None:
         delay = BACKOFF[0]
@@ -269,33 +367,21 @@ class PlantSession:
             return
 
     def close(self) -> None:
-        """Disconnect and stop the session's thread; safe to call more than once."""
+        """Disconnect and close the session's event loop; safe to call more than once."""
         if self._closing:
             return
         self._closing = True
         client, self._client = self._client, None
         self.connected = False
-        if client is not None:
-            with contextlib.suppress(Exception):
+        with contextlib.suppress(Exception):
+            if client is not None:
                 self._call(_quietly(client.disconnect()), 2.0)
-        self._loop.call_soon_threadsafe(self._loop.stop)
-        self._thread.join(2.0)
-
-
-async def _walk(start: Any, path: Sequence[tuple[int | None, str]], what: str) -> Any:
-    """The node at browse ``path`` below ``start`` (a segment without a namespace index
-    matches any)."""
-    node = start
-    for ns, name in path:
-        for child in await node.get_children():
-            q = await child.read_browse_name()
-            if q.Name == name and (ns is None or q.NamespaceIndex == ns):
-                node = child
-                break
-        else:
-            raise CosimError(f"{what}: no node '{name}' below "
-                             f"'{(await node.read_browse_name()).Name}'")
-    return node
+            pending = asyncio.all_tasks(self._loop)
+            for task in pending:
+                task.cancel()
+            self._loop.run_until_complete(asyncio.wait_for(
+                asyncio.gather(*pending, return_exceptions=True), 2.0))
+        self._loop.close()
 
 
 async def _quietly(coro: Any) -> None:
@@ -303,23 +389,35 @@ async def _quietly(coro: Any) -> None:
         await coro
 
 
-def _variant_type(dtype: Any) -> Any:
-    """The variant type to write a node whose DataType is ``dtype`` (Double by default)."""
+def _read_request(nodes: Sequence[Node]) -> Any:
+    """One Read request of the values of ``nodes``, with both timestamps."""
     from asyncua import ua
 
-    V = ua.VariantType
-    numeric = (V.Double, V.Float, V.SByte, V.Byte, V.Int16, V.UInt16, V.Int32, V.UInt32,
-               V.Int64, V.UInt64)
-    if dtype.NamespaceIndex == 0:
-        with contextlib.suppress(ValueError):
-            vt = V(dtype.Identifier)
-            if vt in numeric:
-                return vt
-    return V.Double
+    return ua.ReadParameters(
+        TimestampsToReturn=ua.TimestampsToReturn.Both,
+        NodesToRead=[ua.ReadValueId(NodeId=n.node.nodeid, AttributeId=ua.AttributeIds.Value)
+                     for n in nodes])
 
 
-def _as(vt: Any, value: float) -> Any:
-    return float(value) if vt.name in ("Double", "Float") else round(value)
+def _heartbeat(node: Node, endpoint: str) -> Node:
+    """The heartbeat's node, checked: writable, a number or a Boolean.
+
+    Raises
+    ------
+    CosimError
+        It is neither, or this user may not write it.
+    """
+    from asyncua import ua
+
+    what = f"--heartbeat {node.tag.describe()}: at {endpoint}"
+    if not node.writable:
+        raise CosimError(f"{what}: the node is not writable by this user")
+    if node.type_name == "Boolean":
+        return dataclasses.replace(node, vtype=ua.VariantType.Boolean)
+    if node.vtype is None:
+        raise CosimError(f"{what}: its data type {node.type_name} is neither a number nor a "
+                         "Boolean")
+    return node
 
 
 def _why(exc: BaseException, security: Security) -> str:

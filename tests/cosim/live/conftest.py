@@ -9,14 +9,14 @@ from __future__ import annotations
 import contextlib
 import os
 import sys
-from collections.abc import Iterator
+from collections.abc import Iterator, Mapping
 from pathlib import Path
 
 import pytest
 
 from cosim.live.process import ServedPlant, free_port, start_served_plant
 
-__all__ = ["ROOT", "cosim", "env", "free_port", "served", "start"]
+__all__ = ["ROOT", "cosim", "env", "free_port", "problem_with", "served", "start"]
 
 ROOT = Path(__file__).resolve().parents[3]
 
@@ -57,13 +57,22 @@ def short_scenario(tmp_path: Path) -> Path:
     return path
 
 
-@pytest.fixture
-def safe_problem(tmp_path: Path) -> Path:
-    """The four-tank's problem with safe inputs (qa = 0, qb held)."""
+def problem_with(path: Path, keys: Mapping[str, str]) -> Path:
+    """The four-tank's problem file with more keys in the tables of some signals (``{"qa":
+    "safe = 0.0", "h1": "frozen = 3"}``), written to ``path``."""
     from cosim.adapters.problems import default_problem_path
 
     text = default_problem_path().read_text()
-    text = text.replace('description = "pump a flow"', 'description = "pump a flow"\nsafe = 0.0')
-    path = tmp_path / "problem_safe.toml"
+    for signal, line in keys.items():
+        kind = "inputs" if signal.startswith("q") else "outputs"
+        header = f"[{kind}.{signal}]\n"
+        assert header in text, header
+        text = text.replace(header, f"{header}{line}\n")
     path.write_text(text)
     return path
+
+
+@pytest.fixture
+def safe_problem(tmp_path: Path) -> Path:
+    """The four-tank's problem with safe inputs (qa = 0, qb held)."""
+    return problem_with(tmp_path / "problem_safe.toml", {"qa": "safe = 0.0"})

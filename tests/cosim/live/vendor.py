@@ -26,7 +26,8 @@ import pytest
 
 from cosim.live.process import ServedPlant, free_port
 
-__all__ = ["VENDOR_DIR", "VendorPlc", "missing", "start_vendor_plc", "vendor_plc_fixture"]
+__all__ = ["HEARTBEAT_ID", "VENDOR_DIR", "VendorPlc", "missing", "start_vendor_plc",
+           "vendor_plc_fixture"]
 
 #: The PLC's sources, its package.json and (installed by ``make node-opcua``) node_modules.
 VENDOR_DIR = Path(__file__).resolve().parent / "vendor_plc"
@@ -35,6 +36,8 @@ LISTENING = "vendor-plc listening "
 #: The tags the problem's signals are, by default (vendor_plc/config.js's DEFAULT_TAGS).
 DEFAULT_IDS = {"h1": "s=PLC1.LT101.PV", "h2": "i=1002", "qa": "s=PLC1.P101.OUT",
                "qb": "i=2002"}
+#: The node id of its heartbeat node, writable Int32 (below the PLC's namespace).
+HEARTBEAT_ID = "s=PLC1.APC.WD"
 
 
 def missing() -> str | None:
@@ -66,14 +69,22 @@ class VendorPlc(ServedPlant):
         return f"ns={self.namespace_index};{given or DEFAULT_IDS[signal_name]}"
 
     def tags_file(self, path: Path, paths: Mapping[str, str] | None = None,
-                  root: str | None = "PLC1") -> Path:
+                  root: str | None = "PLC1",
+                  units: Mapping[str, Mapping[str, Any]] | None = None) -> Path:
         """A tags file mapping h1, h2, qa and qb onto this PLC's node ids (or onto the browse
-        ``paths`` given), with ``root`` its PLC1 folder (``None``: no root)."""
+        ``paths`` given), with ``root`` its PLC1 folder (``None``: no root); a signal in
+        ``units`` gets the table form (``h1 = { node = ..., unit = "%", scale = 50.0 }``)."""
         lines = [f'root = "{self.namespace_index}:{root}"'] if root else []
         lines.append("[tags]")
         for name in ("h1", "h2", "qa", "qb"):
             tag = (paths or {}).get(name) or self.node_id(name)
-            lines.append(f'{name} = "{tag}"')
+            keys = (units or {}).get(name)
+            if keys is None:
+                lines.append(f'{name} = "{tag}"')
+            else:
+                lines.append(f'{name} = {{ node = "{tag}", '
+                             + ", ".join(f"{k} = {json.dumps(v)}" for k, v in keys.items())
+                             + " }")
         path.write_text("\n".join(lines) + "\n")
         return path
 
@@ -87,6 +98,13 @@ class VendorPlc(ServedPlant):
         samples = rec[rec["event"] == "sample"].reset_index(drop=True)
         writes = rec[rec["event"] == "write"].reset_index(drop=True)
         return samples, writes
+
+    def heartbeats(self) -> pd.DataFrame:
+        """Stop the PLC; the writes its heartbeat node (``PLC1/APC/WD``) received, in order
+        (``wall_time``, ``sample``, ``type``, ``heartbeat``)."""
+        self.stop()
+        rec = pd.read_csv(self.record)
+        return rec[rec["event"] == "heartbeat"].reset_index(drop=True)
 
     def stderr(self) -> str:
         """What the PLC printed."""

@@ -20,7 +20,8 @@
  * stops on SIGTERM or SIGINT and by itself after `duration` seconds (exit 0); a bad case is
  * one line on stderr, exit 2. Its record (CSV, flushed per row) is what reached the plant:
  * one "sample" row per step (time, the raw values published and received, the process in SI
- * units) and one "write" row per value written by a client, with its wall-clock time.
+ * units), one "write" row per value written by a client, with its wall-clock time, and one
+ * "heartbeat" row per write of the APC heartbeat node (PLC1/APC/WD, Int32).
  */
 
 const fs = require("fs");
@@ -45,7 +46,7 @@ class Record {
   constructor(file) {
     this.fd = file ? fs.openSync(file, "w") : null;
     this.columns = ["event", "wall_time", "sample", "time", "source_time", "node", "type",
-                    ...SIGNALS.map((s) => `raw.${s}`), ...SIGNALS];
+                    ...SIGNALS.map((s) => `raw.${s}`), ...SIGNALS, "heartbeat"];
     this.write(this.columns);
   }
 
@@ -189,11 +190,33 @@ class Plc {
     const plc = ns.addFolder(addressSpace.rootFolder.objects,
                              { nodeId: "s=PLC1", browseName: "PLC1" });
     const folders = {};
-    for (const name of ["Levels", "Pumps"]) {
+    for (const name of ["Levels", "Pumps", "APC"]) {
       folders[name] = ns.addFolder(plc, { nodeId: `s=PLC1.${name}`, browseName: name });
     }
     this.publish();
     for (const s of SIGNALS) this.nodes[s] = this.analogItem(ns, folders, this.tags[s]);
+    this.watchdogNode(ns, folders.APC);
+  }
+
+  /** APC/WD (ns=<i>;s=PLC1.APC.WD, Int32, writable): the heartbeat an APC application
+   * writes every sample; each write recorded ("heartbeat" rows). */
+  watchdogNode(ns, folder) {
+    let value = new DataValue({ value: new Variant({ dataType: DataType.Int32, value: 0 }),
+                                sourceTimestamp: this.now() });
+    ns.addVariable({
+      componentOf: folder, nodeId: "s=PLC1.APC.WD", browseName: "WD", dataType: "Int32",
+      accessLevel: "CurrentRead | CurrentWrite", userAccessLevel: "CurrentRead | CurrentWrite",
+      value: {
+        timestamped_get: () => value,
+        timestamped_set: async (dv) => {
+          value = new DataValue({ value: dv.value, sourceTimestamp: this.now() });
+          this.record.row({ event: "heartbeat", wall_time: Date.now() / 1000, sample: this.n,
+                            time: this.n * this.cfg.Ts, node: "s=PLC1.APC.WD",
+                            type: DataType[dv.value.dataType], heartbeat: dv.value.value });
+          return StatusCodes.Good;
+        },
+      },
+    });
   }
 
   analogItem(ns, folders, tag) {
