@@ -71,6 +71,15 @@ class Channel:
         Inputs: the value written to a live plant when its measurements stop coming (the
         watchdog of ``cosim run --plant opc.tcp://...``) and when the run stops; ``None``:
         hold the last value written.
+    max_move : float or None
+        Inputs: the largest move per sample (problem units) of every input the controller
+        writes, in every mode (the move limit of APC products): a constraint on consecutive
+        inputs of the FHOCP and the rate of an input's operator limit
+        (:mod:`controllers.operator`); ``None``: the box width (no limit).
+    limit_rate : float or None
+        Outputs: how fast an active operator limit narrows towards a new one (problem units
+        per sample; :mod:`controllers.operator`); ``None``: as fast as the controller's
+        present plan allows.
     """
 
     name: str
@@ -87,6 +96,8 @@ class Channel:
     rate: float | None = None
     preview: bool = False
     safe: float | None = None
+    max_move: float | None = None
+    limit_rate: float | None = None
 
     def __post_init__(self) -> None:
         if not self.variable:
@@ -119,8 +130,9 @@ class Channel:
             doc["rate"] = self.rate
         if self.preview:
             doc["preview"] = True
-        if self.safe is not None:
-            doc["safe"] = self.safe
+        for key in ("safe", "max_move", "limit_rate"):
+            if getattr(self, key) is not None:
+                doc[key] = getattr(self, key)
         return doc
 
 

@@ -16,11 +16,13 @@ A problem file declares the plant's signals in its own names and units::
     normalization = { offset = 100.0, scale = 50.0 }   # optional (default: the box)
     hold = [2, 40]                 # optional: excitation hold times [samples]
     levels = [60.0, 140.0]         # optional: excitation levels (default: the box)
+    max_move = 5.0                 # optional: largest move per sample (default: the box)
 
     [outputs.CA]                   # a measured, controlled output (eq:output-constraint)
     unit = "mol/L"
     min = 0.2
     max = 1.0
+    limit_rate = 0.01              # optional: how fast an operator limit narrows [/sample]
 
     [disturbances.Tin]             # optional: a measured disturbance (the FMU input or
     unit = "K"                     #   tunable parameter "Tin"), not moved by the controller

@@ -26,8 +26,9 @@ __all__ = ["MAX_DELAY", "NAME", "Where", "channel", "number", "pair", "require",
 
 #: The keys of an output's table; an input's and a disturbance's add theirs.
 _CHANNEL = {"unit", "min", "max", "variable", "description", "normalization"}
-_INPUT = _CHANNEL | {"hold", "levels", "delay", "safe"}
-_DISTURBANCE = (_INPUT - {"safe"}) | {"rate", "preview"}
+_OUTPUT = _CHANNEL | {"limit_rate"}
+_INPUT = _CHANNEL | {"hold", "levels", "delay", "safe", "max_move"}
+_DISTURBANCE = (_INPUT - {"safe", "max_move"}) | {"rate", "preview"}
 #: The longest dead time a signal may declare [samples].
 MAX_DELAY = 50
 #: The keys of ``normalization = { offset, scale }``.
@@ -94,7 +95,7 @@ def channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Chan
         raise ProblemFileError(f"{where(table)}: signal name {name!r} must start with a "
                                "letter and hold only letters, digits and '_' (it names "
                                "columns such as ref.<name>)")
-    allowed = ({"inputs": _INPUT, "outputs": _CHANNEL, "disturbances": _DISTURBANCE}[kind]
+    allowed = ({"inputs": _INPUT, "outputs": _OUTPUT, "disturbances": _DISTURBANCE}[kind]
                | ({"name"} if not toml else set()))
     unknown = [k for k in entry if k not in allowed and k != "name"]
     if unknown:
@@ -128,8 +129,25 @@ def channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Chan
                                    f"live plant when its measurements stop) must be in the "
                                    f"box [{lo:g}, {hi:g}], got {safe:g}")
         kw["safe"] = safe
+    kw.update(_operating(entry, where, table, lo, hi))
     return Channel(name=name, unit=unit, min=lo, max=hi, variable=variable,
                    description=description, **kw)
+
+
+def _operating(entry: dict[str, Any], where: Where, table: str, lo: float, hi: float
+               ) -> dict[str, float]:
+    """An input's ``max_move`` and an output's ``limit_rate`` (problem units per sample, in
+    ``(0, max − min]``) as keyword arguments (those given)."""
+    kw: dict[str, float] = {}
+    for key, what in (("max_move", "the largest move per sample"),
+                      ("limit_rate", "how fast an operator limit narrows, per sample")):
+        if key in entry:
+            value = number(entry[key], where(table, key), key)
+            if not 0 < value <= hi - lo:
+                raise ProblemFileError(f"{where(table, key)}: '{key}' ({what}) must be in "
+                                       f"(0, max - min = {hi - lo:g}], got {value:g}")
+            kw[key] = value
+    return kw
 
 
 def _normalization(entry: dict[str, Any], where: Where, table: str) -> dict[str, float]:

@@ -80,8 +80,11 @@ def problem_for(model: Any, arg: str | Path | ControlProblem | None = None) -> C
                 raise CosimError(f"{_name(arg, given)} contradicts the problem of "
                                  f"{model.source or 'the model'} ({own.name!r}): "
                                  f"{'; '.join(diff[:3])}")
+            operating = _operating(own, given)
             if given.mpc and given.mpc != own.mpc:   # the tuning, located in the given file
-                return dataclasses.replace(own, mpc=dict(given.mpc), source=given.source)
+                return dataclasses.replace(operating, mpc=dict(given.mpc),
+                                           source=given.source)
+            return operating
         return own
     problem = load_problem(arg)
     if model is not None:
@@ -91,6 +94,20 @@ def problem_for(model: Any, arg: str | Path | ControlProblem | None = None) -> C
             hint = "" if arg is not None else " (it has no problem of its own: give --problem)"
             raise CosimError(f"{_name(arg, problem)} does not fit {where}{hint}: {bad}")
     return problem
+
+
+def _operating(own: ControlProblem, given: ControlProblem) -> ControlProblem:
+    """``own`` with the operating limits of ``given`` (inputs' ``max_move``, outputs'
+    ``limit_rate``), which, like the ``[mpc]`` tuning, may change after training."""
+    def merged(a: tuple, b: tuple, key: str) -> tuple:
+        return tuple(dataclasses.replace(ca, **{key: getattr(cb, key)})
+                     for ca, cb in zip(a, b, strict=True))
+
+    inputs = merged(own.inputs, given.inputs, "max_move")
+    outputs = merged(own.outputs, given.outputs, "limit_rate")
+    if inputs == own.inputs and outputs == own.outputs:
+        return own
+    return dataclasses.replace(own, inputs=inputs, outputs=outputs, source=given.source)
 
 
 def _name(arg: Any, problem: ControlProblem) -> str:
