@@ -223,7 +223,7 @@ class Run:
         pacer.sampled(self, t, reading)
         self._record(t, y, ym)
         if self.desk is not None:
-            self.desk.sampled(t)
+            self.desk.sampled(t, self.u, self.computed or self.u)
 
     def _control(self, t: float, ym: dict[str, float]) -> None:
         """The controller step: ``u`` and the diagnostics from ``y_m(t)`` and the set-points."""

@@ -85,6 +85,9 @@ class OperatorDesk:
         self._values = {name: s.start for name, s in self._catalog.items()}
         #: called after each sample with the desk (a faceplate publishes its status)
         self.listeners: list[Callable[[OperatorDesk], None]] = []
+        #: the last sample's inputs the plant got and the controller computed, by input
+        self.applied: dict[str, float] = {}
+        self.computed: dict[str, float] = {}
 
     def _declared(self) -> dict[str, Setting]:
         """The controller's settings and the run's set-points, by name."""
@@ -174,9 +177,12 @@ class OperatorDesk:
         self.rows.append((float(t), who, name, old, new, result))
         return answer
 
-    def sampled(self, t: float) -> None:
-        """After the loop's sample at ``t``: the listeners (a faceplate's status)."""
+    def sampled(self, t: float, applied: Mapping[str, float],
+                computed: Mapping[str, float]) -> None:
+        """After the loop's sample at ``t`` (the inputs the plant got, ``applied``, and the
+        controller computed): the listeners (a faceplate's status)."""
         self.t = t
+        self.applied, self.computed = dict(applied), dict(computed)
         for listener in list(self.listeners):
             listener(self)
 
