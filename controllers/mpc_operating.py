@@ -125,7 +125,7 @@ class Operating:
         b_o = fh.params["b_o"]
         scale, offset = np.asarray(model.y_scale), np.asarray(model.y_offset)
         a, b = (lo_n + b_o) * scale + offset, (hi_n + b_o) * scale + offset
-        return np.minimum(a, b), np.maximum(a, b)
+        return np.where(scale > 0, a, b), np.where(scale > 0, b, a)   # lo > hi: empty
 
     def _admissible(self, ref: np.ndarray) -> np.ndarray:
         """The set-points of the outputs whose operator limits are narrowed taken inside the

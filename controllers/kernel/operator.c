@@ -240,8 +240,8 @@ __attribute__((unused)) static void op_steady_box(const double box[][2], double 
   for (int a = 0; a < NY; a++) {
     const double p = (lo_n[a] + BO[a]) * CT_Y_SCALE[a] + CT_Y_OFFSET[a];
     const double q = (hi_n[a] + BO[a]) * CT_Y_SCALE[a] + CT_Y_OFFSET[a];
-    lo[a] = fmin(p, q);
-    hi[a] = fmax(p, q);
+    lo[a] = CT_Y_SCALE[a] > 0.0 ? p : q;   /* lo > hi: empty */
+    hi[a] = CT_Y_SCALE[a] > 0.0 ? q : p;
   }
 #else
   (void)box; (void)lo; (void)hi;
