@@ -19,8 +19,8 @@ from tests.fourtank_problem import PATH
 
 QA, QB = 9.05e-4, 11.1e-4
 MAX_MOVE = 5e-5   # qa's move limit [m3/s per sample]
-SCENARIO = """time,ref.h1,ref.h2,op.mode,op.manual.qa,op.service.qb,op.max.qa,op.control.h2,op.max.h1
-0,0.8,0.8,manual,3e-4,,,,
+SCENARIO = ("time,ref.h1,ref.h2,op.mode,op.manual.qa,op.service.qb,op.max.qa,op.control.h2,"
+            "op.max.h1\n") + """0,0.8,0.8,manual,3e-4,,,,
 250,,,auto,,,,,
 500,,,,,0,,,
 750,,,,,1,6e-4,,

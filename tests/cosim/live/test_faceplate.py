@@ -33,7 +33,7 @@ async def _operate(port: int) -> dict:
             client.set_password("olga-secret")
             await client.connect()
             break
-        except (OSError, asyncio.TimeoutError):
+        except (TimeoutError, OSError):
             client = None
             await asyncio.sleep(0.3)
     assert client is not None, "the faceplate never listened"
