@@ -156,7 +156,8 @@ class Scenario:
     def with_changes(self, at_start: Mapping[str, float] | None = None,
                      setpoints: Sequence[tuple[float, Mapping[str, float]]] | None = None,
                      stop_time: float | None = None,
-                     disturbances: Sequence[tuple[float, Mapping[str, float]]] | None = None
+                     disturbances: Sequence[tuple[float, Mapping[str, float]]] | None = None,
+                     operator: Sequence[tuple[float, Mapping[str, float]]] | None = None
                      ) -> Scenario:
         """A copy with values set in the first row, the set-points replaced, or a new stop.
 
@@ -172,6 +173,8 @@ class Scenario:
             New stop time; later events are dropped.
         disturbances : sequence of (time, {disturbance: value}), optional
             Replace every ``dist.*`` value of the scenario by these changes.
+        operator : sequence of (time, {op.<setting>: value}), optional
+            Operator actions added to the scenario's (a campaign's ``[operator]`` events).
 
         Raises
         ------
@@ -190,6 +193,8 @@ class Scenario:
             names += [f"ref.{o}" for _, values in setpoints for o in values]
         if disturbances:
             names += [f"dist.{d}" for _, values in disturbances for d in values]
+        if operator:
+            names += [name for _, values in operator for name in values]
         new = [n for n in dict.fromkeys(names) if n not in by_name]
         if new:
             parsed = _parse_header(self.path, ["time", *new])
@@ -209,11 +214,11 @@ class Scenario:
                         or (disturbances and col.kind == DIST)):
                     row[col.name] = value
         table.setdefault(start, {}).update(at_start or {})
-        for prefix, changes in (("ref", setpoints), ("dist", disturbances)):
+        for prefix, changes in (("ref.", setpoints), ("dist.", disturbances), ("", operator)):
             for t, values in changes or ():
                 if start <= t < stop:
                     table.setdefault(float(t), {}).update(
-                        {f"{prefix}.{o}": v for o, v in values.items()})
+                        {f"{prefix}{o}": v for o, v in values.items()})
         table.setdefault(stop, {})
         events = []
         for t in sorted(table):
