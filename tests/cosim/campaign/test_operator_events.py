@@ -46,7 +46,7 @@ def test_events_are_drawn_per_run_within_their_ranges(tmp_path: Path) -> None:
     assert len({repr(r) for r in runs}) == 6
     for events in runs:
         assert all(150.0 <= t < 1500.0 for t, _ in events)   # after a tenth of the run
-        for t, change in events:
+        for _, change in events:
             (name, value), = change.items()
             assert (name, value) in {("op.service.qb", 0.0), ("op.service.qb", 1.0),
                                      ("op.max.h1", 2.0)} or (name == "op.max.h1"
