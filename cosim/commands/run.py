@@ -21,6 +21,8 @@ set-points and perturbations. Writes into DIR (--out):
   figure.png    outputs vs set-points with constraint bounds, inputs with bounds,
                 perturbation times marked
   timings.csv   wall-clock diagnostics of the controller (solve times), when it has any
+  operator.csv  the operator's actions (op.* columns, faceplate writes): time, who, what,
+                old, new, accepted or why refused
   controller.json  the controller and the options it was given, its model file
                 fingerprinted: --controller controller.json runs the same controller again
 
@@ -46,7 +48,8 @@ in workers too, and --step-timeout so that a hung one is stopped sooner (it impl
 """
 
 EPILOG = """\
-scenario CSV: time,ref.<output>,plant.<variable>,sensor.<output>.bias|noise|uniform
+scenario CSV: time,ref.<output>,plant.<variable>,sensor.<output>.bias|noise|uniform,
+  op.<setting> (op.mode auto|manual, op.service.<input>, op.manual.<input>, op.min.<signal>, ...)
   piecewise constant; a blank cell keeps the previous value; the last row's time is the
   stop time (see docs/guide/running.md, "Scenarios").
 
