@@ -51,6 +51,9 @@ class Step:
     u: np.ndarray
     record: Any
     diagnostics: dict[str, float] = field(default_factory=dict)
+    #: what the law computed (problem units; the operator's settings may give the plant
+    #: other inputs, :mod:`controllers.mpc_operating`): ``u`` itself when they do not
+    computed: np.ndarray | None = None
 
 
 class RobustMPC:
@@ -104,6 +107,10 @@ class RobustMPC:
         self._expected: list[dict[str, float]] | None = None
         if failed:
             go_uncertified(self, "; ".join(failed))
+        from controllers.mpc_operating import Operating
+
+        #: the operator's settings and what they re-derive (:mod:`controllers.mpc_operating`)
+        self.operating = Operating(self)
         self.reset()
 
     def _design(self, o: MPCOptions) -> tuple[Any, list[str]]:
@@ -114,7 +121,7 @@ class RobustMPC:
         from controllers.certification import certificates as certs
         from controllers.certification import gain_design
         from controllers.laws.base import LawContext
-        from controllers.ocp.input_rate import du_weights
+        from controllers.ocp.input_rate import du_weights, move_limit
 
         inputs = list(self.problem.input_names)
         try:
@@ -135,6 +142,7 @@ class RobustMPC:
         fhocp_options: dict[str, Any] = dict(
             solver=o.solver, sqp_options={"max_iter": o.max_iter}, kernel=o.kernel,
             du_weight=self.du_weight, soft=not o.hard_constraints,
+            max_move=move_limit([c.max_move for c in self.problem.inputs], self.problem.inputs),
             ipopt_options={"max_iter": o.max_iter, **(o.ipopt_options or {})}
             if o.ipopt_options or o.solver == "ipopt" else None)
         context = LawContext(self.model, cert, gains_certified, o, kwargs, fhocp_options,
@@ -203,6 +211,7 @@ class RobustMPC:
         self.fhocp.setup()
         self.observer.kernel = self.fhocp.kernel   # its compiled GRU step (same model)
         self.law.reset()
+        self.operating.reset()
 
     def set_schedule(self, schedule: Mapping[str, Callable[[float], float]] | None) -> None:
         """The values to come of :attr:`previewed`, for this run (after :meth:`reset`):
@@ -235,8 +244,14 @@ class RobustMPC:
                 law.disturbance_moved(moved)
         if observer.x_hat is None:
             observer.init_from_output(yn)
+        operating = self.operating
+        engaged = operating.operator.engaged
+        if engaged or self.fhocp.operator is not None:
+            ref = operating.before(ref, t)
+            y_ref = model.normalize_y(ref)
         e_o = observer.e_o
         x_start = held.ahead(observer, self.fhocp)
+        x0 = np.array(observer.x_hat if x_start is None else x_start, dtype=float)
         step = (law.step(observer, yn, y_ref, t) if x_start is None
                 else law.step(observer, yn, y_ref, t, x_start=x_start))
         rec = step.record
@@ -246,10 +261,17 @@ class RobustMPC:
             law.restart()
         if rec.fallback and self.first_fallback_t is None:
             self.first_fallback_t = float(t)
-        observer.make_step(held.model_input(rec.u, self.fhocp), yn)
-        held.applied(rec.u)
-        u = np.clip(model.denormalize_u(rec.u), self.u_lo, self.u_hi)
-        return Step(u, rec, self._diagnostics(step, e_o))
+        computed = np.clip(model.denormalize_u(rec.u), self.u_lo, self.u_hi)
+        u, un = computed, rec.u
+        if engaged:   # the plant's inputs: the operator's, held, limited
+            u, un = operating.after(rec.u)
+        else:
+            operating.operator.last = computed
+        observer.make_step(held.model_input(un, self.fhocp), yn)
+        held.applied(un)
+        out = Step(u, rec, self._diagnostics(step, e_o), computed)
+        operating.record(out, y, un, x0, t)
+        return out
 
     def _diagnostics(self, step: Any, e_o: float) -> dict[str, float]:
         """One step's diagnostics (the law's own last)."""
@@ -300,6 +322,24 @@ class RobustMPC:
         self._design_values.setdefault(name, known[name][4])
         return f"{name} = {value:g}: {self.law.set(name, value)}"
 
+    def operator_settings(self) -> list[Any]:
+        """The operator's settings (:meth:`controllers.operator.Operator.settings`): mode,
+        inputs in service and in manual, outputs controlled, operator limits."""
+        return self.operating.operator.settings()
+
+    def operate(self, name: str, value: float) -> str:
+        """Operator setting ``name`` (``op.*``) from the next step on, checked against the
+        design and the certificate (:meth:`controllers.mpc_operating.Operating.operate`);
+        what it re-derived, in one line. The settings hold for the run: :meth:`reset`
+        restores auto with the engineer's box.
+
+        Raises
+        ------
+        OptionError
+            A value refused in the user's words (nothing changes).
+        """
+        return self.operating.operate(name, value)
+
     def export_design(self) -> Any:
         """The numbers of its step in C (:meth:`controllers.kernel.controller_source.
         ControllerDesign.of`: the exported controller FMU's), its FHOCP set up."""
@@ -326,6 +366,10 @@ class RobustMPC:
             **self.law.summary(),
             "options": plain(self.options.to_dict()),
         })
+        operating = self.operating.summary()
+        out["operator"] = operating
+        if operating["notes"]:
+            out["notes"] = [*out.get("notes", []), *operating["notes"]]
         if out.get("fallbacks"):
             out["shortfall"] = self._shortfall(out)
         return out

@@ -81,6 +81,15 @@ class Channel:
         Outputs and disturbances: a live run does not use a measurement that stayed the same
         to the bit for this many samples in a row (a frozen transmitter; for noisy signals
         only); 0: no such check.
+    max_move : float or None
+        Inputs: the largest move per sample (problem units) of every input the controller
+        writes, in every mode (the move limit of APC products): a constraint on consecutive
+        inputs of the FHOCP and the rate of an input's operator limit
+        (:mod:`controllers.operator`); ``None``: the box width (no limit).
+    limit_rate : float or None
+        Outputs: how fast an active operator limit narrows towards a new one (problem units
+        per sample; :mod:`controllers.operator`); ``None``: as fast as the controller's
+        present plan allows.
     """
 
     name: str
@@ -99,6 +108,8 @@ class Channel:
     safe: float | None = None
     valid: tuple[float, float] | None = None
     frozen: int = 0
+    max_move: float | None = None
+    limit_rate: float | None = None
 
     def __post_init__(self) -> None:
         if not self.variable:
@@ -131,8 +142,9 @@ class Channel:
             doc["rate"] = self.rate
         if self.preview:
             doc["preview"] = True
-        if self.safe is not None:
-            doc["safe"] = self.safe
+        for key in ("safe", "max_move", "limit_rate"):
+            if getattr(self, key) is not None:
+                doc[key] = getattr(self, key)
         if self.valid is not None:
             doc["valid"] = list(self.valid)
         if self.frozen:

@@ -17,6 +17,7 @@ A problem file declares the plant's signals in its own names and units::
     hold = [2, 40]                 # optional: excitation hold times [samples]
     levels = [60.0, 140.0]         # optional: excitation levels (default: the box)
     safe = 100.0                   # optional: written to a live plant by its watchdog
+    max_move = 5.0                 # optional: largest move per sample (default: the box)
 
     [outputs.CA]                   # a measured, controlled output (eq:output-constraint)
     unit = "mol/L"
@@ -26,6 +27,7 @@ A problem file declares the plant's signals in its own names and units::
     rate = 0.3                     # optional, live runs: its largest change per sample
     frozen = 5                     # optional, live runs: the same to the bit for 5 samples
                                    #   is a frozen transmitter (noisy signals only)
+    limit_rate = 0.01              # optional: how fast an operator limit narrows [/sample]
 
     [disturbances.Tin]             # optional: a measured disturbance (the FMU input or
     unit = "K"                     #   tunable parameter "Tin"), not moved by the controller

@@ -30,9 +30,9 @@ __all__ = ["MAX_DELAY", "MAX_FROZEN", "NAME", "Where", "channel", "number", "pai
 _CHANNEL = {"unit", "min", "max", "variable", "description", "normalization"}
 #: What a live run takes for a plausible measurement (outputs, disturbances).
 _PLAUSIBLE = {"valid", "frozen"}
-_OUTPUT = _CHANNEL | _PLAUSIBLE | {"rate"}
-_INPUT = _CHANNEL | {"hold", "levels", "delay", "safe"}
-_DISTURBANCE = (_INPUT - {"safe"}) | _PLAUSIBLE | {"rate", "preview"}
+_OUTPUT = _CHANNEL | _PLAUSIBLE | {"rate", "limit_rate"}
+_INPUT = _CHANNEL | {"hold", "levels", "delay", "safe", "max_move"}
+_DISTURBANCE = (_INPUT - {"safe", "max_move"}) | _PLAUSIBLE | {"rate", "preview"}
 #: The longest dead time a signal may declare [samples].
 MAX_DELAY = 50
 #: The most samples ``frozen`` may count.
@@ -137,8 +137,25 @@ def channel(entry: Any, kind: str, index: int, where: Where, toml: bool) -> Chan
                                    f"live plant when its measurements stop) must be in the "
                                    f"box [{lo:g}, {hi:g}], got {safe:g}")
         kw["safe"] = safe
+    kw.update(_operating(entry, where, table, lo, hi))
     return Channel(name=name, unit=unit, min=lo, max=hi, variable=variable,
                    description=description, **kw)
+
+
+def _operating(entry: dict[str, Any], where: Where, table: str, lo: float, hi: float
+               ) -> dict[str, float]:
+    """An input's ``max_move`` and an output's ``limit_rate`` (problem units per sample, in
+    ``(0, max − min]``) as keyword arguments (those given)."""
+    kw: dict[str, float] = {}
+    for key, what in (("max_move", "the largest move per sample"),
+                      ("limit_rate", "how fast an operator limit narrows, per sample")):
+        if key in entry:
+            value = number(entry[key], where(table, key), key)
+            if not 0 < value <= hi - lo:
+                raise ProblemFileError(f"{where(table, key)}: '{key}' ({what}) must be in "
+                                       f"(0, max - min = {hi - lo:g}], got {value:g}")
+            kw[key] = value
+    return kw
 
 
 def _normalization(entry: dict[str, Any], where: Where, table: str) -> dict[str, float]:

@@ -95,7 +95,8 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         step: float | None = None, isolate: bool = False, step_timeout: float | None = None,
         seed: int = 0, figure: bool = True, progress: bool = False,
         on_step: Callable[[int], None] | None = None,
-        on_notice: Callable[[str], None] | None = None, live: Any = None) -> RunOutput:
+        on_notice: Callable[[str], None] | None = None, live: Any = None,
+        mode: str | None = None, faceplate: Any = None) -> RunOutput:
     """Run a scenario in closed loop (the Python twin of ``cosim run``).
 
     Parameters
@@ -148,6 +149,13 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         run's alarms too.
     live : cosim.live.runner.LiveOptions, optional
         How a live plant is met (tags, speed, watchdog, security); default: its defaults.
+    mode : {"auto", "manual"}, optional
+        The operator's mode from the start (``op.mode`` in the scenario's first row, over
+        its own): ``"manual"`` is the commissioning in shadow (docs: guide/operating.md).
+    faceplate : cosim.live.faceplate.FaceplateOptions, optional
+        Serve the controller's OPC UA faceplate while the run goes (:mod:`cosim.live.
+        faceplate`: the operator's settings, set-points and predictions, writes checked
+        by :class:`cosim.core.operator.OperatorDesk`).
 
     Returns
     -------
@@ -165,7 +173,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     from cosim.core.isolated import DEFAULT_STEP_TIMEOUT
     from cosim.core.master import Master
 
-    sc = scenario_mod.load(scenario)
+    sc = _with_mode(scenario_mod.load(scenario), mode)
     vmap = varmap.load(map) if map is not None else None
     isolate = bool(isolate or step_timeout is not None)
     limit = step_timeout if step_timeout is not None else (
@@ -194,11 +202,41 @@ def run(scenario: str | Path, plant: str | Path | None = None,
             "problem_source": (bound.source or None) if bound is not None else None,
             "controller": controller, "controller_options": opts, "seed": seed}
     bar, on_step = _progress(progress, master, sc, on_step)
+    served = _faceplate(faceplate, master, on_notice)
     try:
         return _execute(master, meta, out, figure, on_step, limit)
     finally:
+        if served is not None:
+            served.stop()
         if bar is not None:
             bar.close()
+
+
+def _with_mode(sc: Any, mode: str | None) -> Any:
+    """The scenario with ``op.mode`` set in its first row (``--mode``)."""
+    from cosim.core.errors import ParameterError
+    from cosim.core.operator import MODE_WORDS
+
+    if mode is None:
+        return sc
+    if mode not in MODE_WORDS:
+        raise ParameterError("mode", f" {mode!r}: expected {' or '.join(MODE_WORDS)}")
+    return sc.with_changes(at_start={"op.mode": MODE_WORDS[mode]})
+
+
+def _faceplate(options: Any, master: Any, on_notice: Callable[[str], None] | None) -> Any:
+    """The faceplate served over ``master``'s operator desk (started), or ``None``."""
+    if options is None:
+        return None
+    from cosim.core.errors import CosimError
+    from cosim.live.faceplate import Faceplate
+
+    if master.desk is None:
+        raise CosimError(f"--faceplate: controller '{master.controller.name}' takes no "
+                         "operator settings")
+    served = Faceplate(master.desk, master.controller, options, notice=on_notice or print)
+    served.start()
+    return served
 
 
 def _controller(controller: str, opts: dict, problem: Any, out: str | Path | None, sc: Any,

@@ -131,6 +131,9 @@ class KernelProblem:
         The biases move with measured disturbances (``HAS_SHIFT``: the per-thread shift of
         :meth:`~controllers.kernel.kernel_lib.Kernel.set_bias_shift`, ``rollout.c`` gk_db);
         without them the kernel has no thread-local state at all.
+    move : bool
+        The move limit's rows ``eq:move-constraint`` end ``g`` (``HAS_MOVE``:
+        :class:`controllers.ocp.input_rate.MoveRows`, their bounds the caller's).
     """
 
     params: Mapping[str, np.ndarray]
@@ -146,6 +149,7 @@ class KernelProblem:
     control_horizon: int | None = None
     soft: tuple[float, float] | None = None
     bias_shift: bool = False
+    move: bool = False
 
     @property
     def has_du(self) -> bool:
@@ -162,7 +166,8 @@ class KernelProblem:
                    **fhocp.reference.kernel_terms(),
                    soft=None if fhocp.slacks is None else (fhocp.soft_design.rho,
                                                            fhocp.soft_design.rho2),
-                   bias_shift=bool(getattr(fhocp, "bias_shift", False)))
+                   bias_shift=bool(getattr(fhocp, "bias_shift", False)),
+                   move=fhocp.move is not None)
 
 
 def generate_source(problem: KernelProblem, constants: Constants | None = None) -> str:
@@ -188,7 +193,8 @@ def generate_source(problem: KernelProblem, constants: Constants | None = None) 
            f"#define HAS_DU {int(problem.has_du)}\n"
            f"#define HAS_ASS {int(offset_weight is not None)}\n"
            f"#define HAS_SHIFT {int(problem.bias_shift)}\n"
-           f"#define SOFT {int(problem.soft is not None)}\n",
+           f"#define SOFT {int(problem.soft is not None)}\n"
+           f"#define HAS_MOVE {int(problem.move)}\n",
            f"#define PFX(name) {PREFIX_PLACEHOLDER}##name\n", c_declarations(),
            constants.declarations(),
            f"#define QDIAG {int(np.count_nonzero(Q - np.diag(np.diag(Q))) == 0)}\n"]

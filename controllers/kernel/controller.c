@@ -55,6 +55,9 @@ typedef struct ctl_state {
 #endif
   /* the FHOCP's inputs already applied (controller.h) */
   ctl_prefix prefix;
+  /* the operator's settings and this step's terms (operator.c); what the law computed */
+  ctl_operator op;
+  double computed[NU];
 } ctl_state;
 
 #if CT_NQD
@@ -140,7 +143,9 @@ EXPORT void PFX(ctl_reset)(ctl_state *st) {
   ws_default_weights(ws);
   st->e_o = CT_E_O0;
   law_reset(&st->law, ws);
-  for (int j = 0; j < NU; j++) st->u_phys[j] = 0.5 * (CT_U_LO[j] + CT_U_HI[j]);
+  op_reset(&st->op);
+  for (int j = 0; j < NU; j++)
+    st->u_phys[j] = st->computed[j] = 0.5 * (CT_U_LO[j] + CT_U_HI[j]);
   for (int a = 0; a < NY; a++) st->y_pred[a] = st->y_target[a] = NAN;
 }
 
@@ -177,9 +182,35 @@ EXPORT void PFX(ctl_free)(ctl_state *st) {
  * plan) and y_target (the steady output the FHOCP steers the model to); advances the
  * observer. A non-finite y, ref or d changes nothing (the last inputs are held) and sets
  * CTL_WARN_NONFINITE_INPUT; returns 1 then, else 0. */
+/* Operating.before: the limits ramped (the law's room), the set-points r (problem units, in
+ * place) inside the active output limits, the FHOCP's terms; the plant at rest first (the
+ * equilibrium input of the first output estimate) when no input was applied yet */
+static void operate_before(ctl_state *st, double *r) {
+  ctl_operator *o = &st->op;
+  if (!op_engaged(o)) {
+    o->ops.active = 0;
+    return;
+  }
+  if (!o->has_last && !o->has_start) {
+    double yh[NY], xs0[NX], u0[NU];
+    PFX(output)(st->xhat, yh);
+    PFX(equilibrium)(st->ws, yh, xs0, u0);
+    for (int j = 0; j < NU; j++) {
+      const double v = gk_clip1(u0[j]) * CT_U_SCALE[j] + CT_U_OFFSET[j];
+      o->start[j] = fmin(fmax(v, CT_U_LO[j]), CT_U_HI[j]);
+    }
+    o->has_start = 1;
+  }
+  double slack[NL];
+  const int have = law_room(&st->law, slack);
+  op_ramp(o, have || o->mode != 1.0 ? slack : 0);
+  op_setpoint(o, r);
+  op_terms(o);
+}
+
 EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_phys,
                          const double *d_phys) {
-  double y[NY], yr[NY], yh[NY], u[NU], dz[NX], dr[NX], xn[NX], d[NY];
+  double y[NY], yr[NY], yh[NY], u[NU], dz[NX], dr[NX], xn[NX], d[NY], r_op[NY];
   const double *xstart = st->xhat;
   (void)d_phys;
   if (!all_finite(y_phys, NY) || !all_finite(r_phys, NY)
@@ -216,6 +247,12 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
       st->warnings |= CTL_WARN_UNREACHABLE_START;
     st->has_xhat = 1;
   }
+  const int engaged = op_engaged(&st->op);
+  if (engaged || st->op.ops.active) {   /* the operator's settings (operate_before) */
+    memcpy(r_op, r_phys, sizeof r_op);
+    operate_before(st, r_op);
+    for (int a = 0; a < NY; a++) yr[a] = (r_op[a] - CT_Y_OFFSET[a]) / CT_Y_SCALE[a];
+  }
 #if CT_U_DEPTH
   if (!st->has_u_past) {   /* at rest before the run: the input that holds y_hat */
     double xs0[NX], u0[NU];
@@ -234,7 +271,22 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
 #endif
   for (int j = 0; j < NU; j++) u[j] = (st->u_phys[j] - CT_U_OFFSET[j]) / CT_U_SCALE[j];
   /* u: held unless set */
-  law_step(&st->law, st->xhat, xstart, &st->prefix, st->e_o, y, yr, u, &st->warnings);
+  law_step(&st->law, st->xhat, xstart, &st->prefix, &st->op.ops, st->e_o, y, yr, u,
+           &st->warnings);
+  /* what the law computed, and what the plant gets (Operating.after) */
+  for (int j = 0; j < NU; j++) {
+    const double v = u[j] * CT_U_SCALE[j] + CT_U_OFFSET[j];
+    st->computed[j] = v < CT_U_LO[j] ? CT_U_LO[j] : (v > CT_U_HI[j] ? CT_U_HI[j] : v);
+  }
+  if (engaged) {
+    double applied[NU];
+    op_applied(&st->op, st->computed, applied);
+    for (int j = 0; j < NU; j++) u[j] = (applied[j] - CT_U_OFFSET[j]) / CT_U_SCALE[j];
+    law_applied(&st->law, u);
+  } else {
+    memcpy(st->op.last, st->computed, sizeof st->op.last);
+    st->op.has_last = 1;
+  }
 #if CT_NQD
   /* a disturbance that moved the steady states beyond the plan: start again */
   if (st->law.last.fallback && !st->law.cand_feasible) law_restart(&st->law);
@@ -275,10 +327,7 @@ EXPORT int PFX(ctl_step)(ctl_state *st, const double *y_phys, const double *r_ph
   memmove(st->u_past, st->u_past + NU, (CT_U_DEPTH - 1) * NU * sizeof(double));
   memcpy(st->u_past + (CT_U_DEPTH - 1) * NU, u, NU * sizeof(double));
 #endif
-  for (int j = 0; j < NU; j++) {
-    const double v = u[j] * CT_U_SCALE[j] + CT_U_OFFSET[j];
-    st->u_phys[j] = v < CT_U_LO[j] ? CT_U_LO[j] : (v > CT_U_HI[j] ? CT_U_HI[j] : v);
-  }
+  memcpy(st->u_phys, engaged ? st->op.last : st->computed, sizeof st->u_phys);
   for (int a = 0; a < NY; a++) {
     st->y_pred[a] = st->law.last.y_pred[a] * CT_Y_SCALE[a] + CT_Y_OFFSET[a];
     st->y_target[a] = st->law.last.y_target[a] * CT_Y_SCALE[a] + CT_Y_OFFSET[a];
@@ -301,6 +350,25 @@ EXPORT const char *PFX(ctl_set_parameter)(ctl_state *st, int i, double value) {
   if (why) return why;
   *v = value;
   return 0;
+}
+
+/* Operator setting i (operator.c: op.mode, op.service.*, op.manual.*, op.min.*, op.max.*)
+ * from the next step on: NULL, or why the value is refused (then nothing changes). */
+EXPORT const char *PFX(ctl_set_operator)(ctl_state *st, int i, double value) {
+  const char *why = op_refuse(&st->op, i, value);
+  if (why) return why;
+  op_set(&st->op, i, value);
+  return 0;
+}
+
+/* Operator setting i's value now (an operator limit: its target); NaN for an unknown one */
+EXPORT double PFX(ctl_get_operator)(const ctl_state *st, int i) {
+  return op_value(&st->op, i);
+}
+
+/* what the law computed at the last step (NU, the problem's units; in manual: in shadow) */
+EXPORT void PFX(ctl_computed)(const ctl_state *st, double *u_phys) {
+  memcpy(u_phys, st->computed, sizeof st->computed);
 }
 
 /* the warnings raised since the last call (CTL_WARN_* bits), cleared */

@@ -315,3 +315,70 @@ CTL_HELPER const char *refuse_r(const gk_ws *ws, int j, double value) {
     return "must keep R positive definite (a finite diagonal weight > 0)";
   return 0;
 }
+
+/* ---------------------------------------------------------------- the operator
+ * What the operator's settings impose on one solve (controllers/ocp/operator_terms.py
+ * OperatorTerms, built by operator.c): u_0 in [lo0, hi0], the other free inputs and u_s
+ * (HAS_ASS) in [lo, hi], the output rows' narrowing dh (eq:operator-rows); active: the
+ * settings are engaged (else the FHOCP as designed) */
+typedef struct ctl_ops {
+  double lo0[NU], hi0[NU], lo[NU], hi[NU], dh[NL];
+  int active;
+} ctl_ops;
+
+/* OperatorTerms.bound: the operator's bounds intersected with the solver's (in place) */
+CTL_HELPER void ops_bound(const ctl_ops *o, double *lbx, double *ubx) {
+  if (!o || !o->active) return;
+  for (int i = 0; i < NM; i++)
+    for (int j = 0; j < NU; j++) {
+      const double lo = i == 0 ? o->lo0[j] : o->lo[j], hi = i == 0 ? o->hi0[j] : o->hi[j];
+      lbx[i * NU + j] = fmax(lbx[i * NU + j], lo);
+      ubx[i * NU + j] = fmin(ubx[i * NU + j], hi);
+    }
+#if HAS_ASS
+  for (int j = 0; j < NU; j++) {
+    lbx[NUU + j] = fmax(lbx[NUU + j], o->lo[j]);
+    ubx[NUU + j] = fmin(ubx[NUU + j], o->hi[j]);
+  }
+#endif
+}
+
+/* OperatorTerms.clip: the first NM stages of a plan w inside the operator's bounds */
+CTL_HELPER void ops_clip(const ctl_ops *o, double *w) {
+  if (!o || !o->active) return;
+  for (int i = 0; i < NM; i++)
+    for (int j = 0; j < NU; j++) {
+      const double lo = i == 0 ? o->lo0[j] : o->lo[j], hi = i == 0 ? o->hi0[j] : o->hi[j];
+      w[i * NU + j] = fmin(fmax(w[i * NU + j], lo), hi);
+    }
+}
+
+/* the tightened output bounds under the operator's narrowing: h - dh in place of h
+ * (FHOCP.tightened_bounds with FHOCP.narrowing), in numpy's order */
+CTL_HELPER void operator_bounds(const ctl_ops *o, double e_o, double *bnd) {
+  if (!o || !o->active) {
+    tightened_bounds(e_o, bnd);
+    return;
+  }
+  for (int i = 0; i < NH; i++)
+    for (int j = 0; j < NL; j++) {
+      double v = (CT_H[j] - o->dh[j]) - CT_A[i * NL + j] * e_o;
+      v = v - CT_B[i * NL + j];
+      v = v - CT_WL[j];
+      bnd[i * NL + j] = v - CT_LBO[j];
+    }
+}
+
+/* the move limit's rows (HAS_MOVE, eq:move-constraint; controllers/ocp/input_rate.py
+ * MoveRows): their bounds +-Delta, the last NMV rows of g */
+CTL_HELPER void move_rows(double *lbg, double *ubg) {
+#if HAS_MOVE
+  for (int i = 0; i < NM; i++)
+    for (int j = 0; j < NU; j++) {
+      lbg[RMV + i * NU + j] = -CT_MOVE_DELTA[j];
+      ubg[RMV + i * NU + j] = CT_MOVE_DELTA[j];
+    }
+#else
+  (void)lbg; (void)ubg;
+#endif
+}

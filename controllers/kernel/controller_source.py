@@ -57,11 +57,15 @@ __all__ = [
     "controller_constants",
     "design_data",
     "generate_source",
+    "operator_names",
     "parameters",
 ]
 
-#: The C step (joined after the kernel, the constants, ``controller.h`` and the law's file).
+#: The C step (joined after the kernel, the constants, ``controller.h``, the law's files and
+#: ``operator.c``).
 CONTROLLER_C = Path(__file__).with_name("controller.c")
+#: The operator's settings of the C step (:mod:`controllers.operator`'s twin).
+OPERATOR_C = Path(__file__).with_name("operator.c")
 #: What the step and the laws share, and each law's files, joined in this order
 #: (``controller.h`` says what a law defines; the paper's reference governor is its own file).
 CONTROLLER_H = Path(__file__).with_name("controller.h")
@@ -119,6 +123,16 @@ class ControllerDesign:
         input_delay`).
     delays : int array
         Each input's dead time ``K_j`` [samples] (empty: none).
+    y_lo, y_hi : arrays
+        The output box in the problem's units (the operator's limits lie inside it).
+    max_move : array
+        Each input's move limit (the problem's units; the box width where none is
+        declared); ``moves``: whether one is declared (:mod:`controllers.operator`).
+    limit_rate : array
+        How fast each output's operator limit narrows (``inf``: as the plan allows).
+    output_limits : bool
+        The law takes operator limits on its outputs (:attr:`controllers.laws.base.
+        ControlLaw.output_limits`).
     """
 
     kernel: KernelProblem
@@ -157,6 +171,12 @@ class ControllerDesign:
     lags: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
     dead_time: int = 0
     delays: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=int))
+    y_lo: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    y_hi: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    max_move: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    moves: bool = False
+    limit_rate: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    output_limits: bool = False
 
     @property
     def q(self) -> int:
@@ -177,10 +197,11 @@ class ControllerDesign:
     @classmethod
     def common(cls, fhocp: Any, observer: Any, beta: float, certified: bool, model: Any,
                u_lo: np.ndarray, u_hi: np.ndarray, layout: Any, law: str,
-               law_data: dict[str, Any], offset_free: bool = False) -> ControllerDesign:
+               law_data: dict[str, Any], offset_free: bool = False,
+               output_limits: bool = False) -> ControllerDesign:
         """What every law's design holds (a law's ``export_design`` gives it its own numbers
         ``law_data``); ``layout``: where the warm start's permutations are (``perm_x``,
-        ``perm_g``)."""
+        ``perm_g``); ``output_limits``: the law takes operator limits on its outputs."""
         from controllers.kernel.kernel_sqp import KernelSQP
         from controllers.ocp.solver_settings import DEFECT_TOL, FEAS_TOL
 
@@ -201,7 +222,30 @@ class ControllerDesign:
             L=fhocp.L, h=fhocp.h, a=fhocp.a, b=fhocp.b, w_L=fhocp.w_L, Lbo=fhocp.Lbo,
             pair_up=fhocp.pair_up, pair_lo=fhocp.pair_lo, perm_x=layout.perm_x,
             perm_g=layout.perm_g, sqp=sqp, feas_tol=FEAS_TOL, defect_tol=DEFECT_TOL,
-            law=law, law_data=law_data, offset_free=offset_free, **extra)
+            law=law, law_data=law_data, offset_free=offset_free, **extra,
+            **_operating(model.problem, output_limits))
+
+
+def _operating(problem: Any, output_limits: bool) -> dict[str, Any]:
+    """The operator's numbers of the design (:class:`controllers.operator.Operator`'s)."""
+    from controllers.operator import Operator
+
+    op = Operator(problem)
+    return {"y_lo": op.y_box[:, 0].copy(), "y_hi": op.y_box[:, 1].copy(),
+            "max_move": op.max_move.copy(), "moves": bool(op.moves),
+            "limit_rate": op.limit_rate.copy(), "output_limits": bool(output_limits)}
+
+
+def operator_names(design: ControllerDesign, inputs: Sequence[str],
+                   outputs: Sequence[str]) -> list[str]:
+    """The C step's operator settings, in ``operator.c``'s order (the controller FMU's inputs
+    of these names): ``op.mode``, ``op.service.<input>``, ``op.manual.<input>``, then
+    ``op.min.<signal>`` and ``op.max.<signal>`` of the inputs and (a law that takes them) the
+    outputs."""
+    signals = [*inputs, *(outputs if design.output_limits else [])]
+    return ["op.mode", *(f"op.service.{u}" for u in inputs),
+            *(f"op.manual.{u}" for u in inputs), *(f"op.min.{s}" for s in signals),
+            *(f"op.max.{s}" for s in signals)]
 
 
 def _measured(model: Any) -> dict[str, Any]:
@@ -232,7 +276,9 @@ def controller_constants(d: ControllerDesign) -> Constants:
     c = Constants()
     for name, value in (("CT_Y_OFFSET", d.y_offset), ("CT_Y_SCALE", d.y_scale),
                         ("CT_U_OFFSET", d.u_offset), ("CT_U_SCALE", d.u_scale),
-                        ("CT_U_LO", d.u_lo), ("CT_U_HI", d.u_hi), ("CT_LZ", d.L_z),
+                        ("CT_U_LO", d.u_lo), ("CT_U_HI", d.u_hi), ("CT_Y_LO", d.y_lo),
+                        ("CT_Y_HI", d.y_hi), ("CT_MAX_MOVE", d.max_move),
+                        ("CT_LIMIT_RATE", d.limit_rate), ("CT_LZ", d.L_z),
                         ("CT_LR", d.L_r), ("CT_L", d.L), ("CT_H", d.h), ("CT_A", d.a),
                         ("CT_B", d.b), ("CT_WL", d.w_L), ("CT_LBO", d.Lbo)):
         c.array(name, value, finite=False)   # an unbounded row: +-inf (uncertified mode)
@@ -246,7 +292,10 @@ def controller_constants(d: ControllerDesign) -> Constants:
                         ("CT_SQP_MIN_STEP", s["min_step_size"]), ("CT_SQP_C1", s["c1"]),
                         ("CT_SQP_BETA", s["beta"]), ("CT_SQP_REUSE_STEP", s["reuse_step"])):
         c.scalar(name, float(value))
-    for name, value in (("CT_CERTIFIED", int(d.certified)), ("CT_SQP_MAX_ITER", s["max_iter"]),
+    if d.kernel.move:   # the move rows' bounds (eq:move-constraint, normalised)
+        c.array("CT_MOVE_DELTA", d.max_move / np.abs(d.u_scale[:d.max_move.size]))
+    for name, value in (("CT_CERTIFIED", int(d.certified)), ("CT_MOVES", int(d.moves)),
+                        ("CT_SQP_MAX_ITER", s["max_iter"]),
                         ("CT_SQP_MAX_ITER_LS", s["max_iter_ls"]),
                         ("CT_SQP_TOL_DU_RELATIVE", s["tol_du_relative"])):
         c.scalar(name, int(value), "int")
@@ -324,12 +373,14 @@ def generate_source(design: ControllerDesign) -> str:
                 f"#define CT_NQD {design.q}\n#define CT_DEAD {int(design.dead_time)}\n"
                 f"#define CT_U_DEPTH {_u_depth(design)}\n"
                 f"#define CT_U_LAG_MAX {_u_lag_max(design)}\n"
-                f"#define CT_LAG_MAX {int(np.max(design.lags, initial=0))}\n" + law_switches)
+                f"#define CT_LAG_MAX {int(np.max(design.lags, initial=0))}\n"
+                f"#define CT_OUT_LIMITS {int(design.output_limits)}\n" + law_switches)
     return "\n".join([kernel_source(problem, kernel),
                       "/* the controller's constants (controller_source.py) */\n"
                       + switches + own.declarations(),
                       CONTROLLER_H.read_text(), *(f.read_text() for f in spec.c_sources),
-                      CONTROLLER_C.read_text(), loader_source(kernel + own)])
+                      OPERATOR_C.read_text(), CONTROLLER_C.read_text(),
+                      loader_source(kernel + own)])
 
 
 def design_data(design: ControllerDesign) -> bytes:
@@ -378,9 +429,12 @@ class CompiledController:
             f[name].argtypes = [vp]
         f["ctl_step"].argtypes = [vp, vp, vp, vp]
         f["ctl_outputs"].argtypes = [vp] * 7
-        f["ctl_set_parameter"] = getattr(self.lib, prefix + "ctl_set_parameter")
-        f["ctl_set_parameter"].argtypes = [vp, ctypes.c_int, ctypes.c_double]
-        f["ctl_set_parameter"].restype = ctypes.c_char_p
+        for name in ("ctl_set_parameter", "ctl_set_operator"):
+            f[name] = getattr(self.lib, prefix + name)
+            f[name].argtypes = [vp, ctypes.c_int, ctypes.c_double]
+            f[name].restype = ctypes.c_char_p
+        f["ctl_computed"] = getattr(self.lib, prefix + "ctl_computed")
+        f["ctl_computed"].argtypes = [vp, vp]
         self._f = f
         self._st = None
         load_data(self.lib, prefix, data, path)
@@ -409,10 +463,18 @@ class CompiledController:
         size = ctypes.sizeof(ctypes.c_int)
         self._f["ctl_outputs"](self._st, self._u.ctypes.data, base, base + size,
                                base + 2 * size, self._yp.ctypes.data, self._yt.ctypes.data)
+        computed = np.zeros(self.m)
+        self._f["ctl_computed"](self._st, computed.ctypes.data)
         return {"u": self._u.copy(), "status": int(i[0]), "fallback": int(i[1]),
                 "iterations": int(i[2]), "y_pred": self._yp.copy(),
-                "y_target": self._yt.copy(),
+                "y_target": self._yt.copy(), "computed": computed,
                 "warnings": int(self._f["ctl_take_warnings"](self._st))}
+
+    def set_operator(self, i: int, value: float) -> str | None:
+        """Operator setting ``i`` (:func:`operator_names`' order) from the next step on;
+        ``None``, or why the value is refused (nothing changes then)."""
+        why = self._f["ctl_set_operator"](self._st, int(i), float(value))
+        return None if why is None else why.decode()
 
     def set_parameter(self, i: int, value: float) -> str | None:
         """Tunable parameter ``i`` (:func:`parameters`' order) from the next step on;

@@ -78,6 +78,29 @@ HOT static double cost(const gk_ws *ws, const double *w, const double *p) {
 #endif
 }
 
+#if HAS_MOVE
+/* the move rows (MoveRows.rows): v_{i+1} - v_i along u_0 .. u_{NM-1}, u_end */
+static void move_constraints(const double *w, const double *p, double *g) {
+  const double *end = UREF(w, p);
+  (void)p;
+  for (int i = 0; i < NM; i++)
+    for (int j = 0; j < NU; j++) {
+      const double next = i + 1 < NM ? w[(i + 1) * NU + j] : end[j];
+      g[RMV + i * NU + j] = next - w[i * NU + j];
+    }
+}
+
+/* their columns of the column-major NG x NW Jacobian (MoveRows.jacobian) */
+static void move_jacobian(double *J) {
+  for (int i = 0; i < NM; i++)
+    for (int j = 0; j < NU; j++) {
+      const int r = RMV + i * NU + j;
+      J[(i * NU + j) * NG + r] = -1.0;
+      if (i + 1 < NM || HAS_ASS) J[((i + 1) * NU + j) * NG + r] = 1.0;
+    }
+}
+#endif
+
 HOT static void constraints(const gk_ws *ws, const double *w, const double *p, double *g) {
   const double *xb = XREF(ws, p), t = w[IT], *X = ws->mem.X;
   for (int i = 1; i < NH; i++)
@@ -97,6 +120,9 @@ HOT static void constraints(const gk_ws *ws, const double *w, const double *p, d
 #endif
 #if SOFT
   soft_constraints(w + IS, g);
+#endif
+#if HAS_MOVE
+  move_constraints(w, p, g);
 #endif
 }
 
@@ -171,6 +197,9 @@ HOT static void jacobian(const gk_ws *ws, double *J) {
 #endif
 #if SOFT
   soft_jacobian(J);
+#endif
+#if HAS_MOVE
+  move_jacobian(J);
 #endif
 }
 

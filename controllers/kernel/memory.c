@@ -88,7 +88,14 @@ static double tk_now(void) { struct timespec t; clock_gettime(CLOCK_MONOTONIC, &
 #define NSL (SOFT * (NQ + 1))      /* the slacks */
 #define IS (IT + 1)                /* the first slack */
 #define NW (NUA + 1 + NSL)
-#define NG ((NH - 1) * NQ + 2 * NX + HAS_ASS * NQ)
+#ifndef HAS_MOVE
+#define HAS_MOVE 0
+#endif
+/* the move limit's rows (controllers/ocp/input_rate.py MoveRows, eq:move-constraint): the
+ * consecutive moves of u_0 .. u_{NM-1}, u_end (u_bar of p, or u_s of w), the last of g */
+#define NMV (HAS_MOVE * NUU)
+#define NG ((NH - 1) * NQ + 2 * NX + HAS_ASS * NQ + NMV)
+#define RMV (NG - NMV)             /* the first move row */
 #if HAS_ASS
 /* the tracking law (steady_state.c): p = (x_hat, x_s0, r[, u_prev]), the set-point
  * reference x_bar = x_s(u_s) and u_bar = u_s of the decision vector */

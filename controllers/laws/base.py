@@ -126,6 +126,9 @@ class ControlLaw(Protocol):
     fhocp: Any
     #: the certificate its tightening comes from
     cert: Any
+    #: whether it takes operator limits on its outputs and lets an output leave its cost
+    #: (``op.min``/``op.max`` of an output, ``op.control``; :mod:`controllers.mpc_operating`)
+    output_limits: bool
 
     @property
     def records(self) -> list[Any]:
@@ -193,6 +196,18 @@ class ControlLaw(Protocol):
 
     def refuse(self, name: str, value: float) -> str:
         """Why setting ``name`` cannot take ``value`` (``""``: it can)."""
+        ...
+
+    def applied(self, u: np.ndarray) -> None:
+        """The inputs the plant got this step (normalised; the operator's, held or limited
+        ones may differ from the law's, :mod:`controllers.operator`): its ``u_{−1}`` of the
+        next step."""
+        ...
+
+    def control(self, controlled: np.ndarray) -> str:
+        """Keep in the cost only the outputs ``controlled`` (a bool mask; ``op.control``):
+        what changed, or why the law refuses it (raises
+        :class:`~controllers.errors.OptionError`)."""
         ...
 
 

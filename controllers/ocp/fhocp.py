@@ -145,6 +145,10 @@ class FHOCP(Solving):
     du_weight : float or (m,) array
         Diagonal of the input-rate weight ``S`` (normalised units; one number: every input).
         0 (default): no input-rate term, the paper's cost.
+    max_move : (m,) array, optional
+        ``Δ``, the largest move of each input per stage (normalised): the rows
+        ``eq:move-constraint`` (:class:`controllers.ocp.input_rate.MoveRows`) of the
+        single-shooting FHOCP; ``None`` (default): none.
 
     Attributes
     ----------
@@ -158,6 +162,11 @@ class FHOCP(Solving):
         (:class:`controllers.ocp.reference.Reference`).
     warm_start : dict or None
         The previous accepted solve's ``w``, ``lam_x``, ``lam_g`` (the next one's warm start).
+    move : MoveRows or None
+        The move limit's rows (the last ``nmv`` rows of ``g``), ``None`` without one.
+    operator : OperatorTerms or None
+        What the operator's settings impose on the next solve
+        (:class:`controllers.ocp.operator_terms.OperatorTerms`), ``None``: nothing.
     """
 
     def __init__(self, data: FHOCPData | Any, *, reference: Reference,
@@ -167,8 +176,16 @@ class FHOCP(Solving):
                  solver: str | None = None,
                  sqp_options: Mapping[str, Any] | None = None, kernel: str = "auto",
                  du_weight: float | np.ndarray = 0.0, soft: bool = False,
-                 soft_weight: float | None = None) -> None:
+                 soft_weight: float | None = None,
+                 max_move: np.ndarray | None = None) -> None:
         self.reference: Any = reference
+        if max_move is not None and formulation != "single-shooting":
+            raise DesignError("max_move is the single-shooting FHOCP's: the "
+                              "multiple-shooting baseline has no move rows")
+        self.max_move = None if max_move is None else np.asarray(max_move, dtype=float)
+        self.move: Any = None
+        self.nmv = 0
+        self.operator: Any = None
         self._choose_solver(formulation, solver, ipopt_options, sqp_options, kernel, soft)
         #: the output rows and the terminal set are softened (:mod:`controllers.ocp.soft`)
         self.soft = bool(soft)
@@ -285,6 +302,8 @@ class FHOCP(Solving):
         self.Lbo = self.L @ self.params["b_o"]
         #: ``L d`` of :meth:`set_output_shift` (``None``: the rows as declared)
         self.output_shift: np.ndarray | None = None
+        #: ``δ`` of the operator's limits (:attr:`operator`) the bounds were computed with
+        self._narrowing: np.ndarray | None = None
         self._bounds_eo = float("nan")
         self._bounds = np.zeros((self.N, self.q))
         self._pair_rows()
@@ -325,6 +344,34 @@ class FHOCP(Solving):
         weights, constraints, tightening and terminal weight); ``options`` as the
         constructor's keyword arguments (``reference``, ``formulation``, ``solver``, ...)."""
         return cls(cert, **options)
+
+    def move_rows(self, free: np.ndarray, end_w: np.ndarray | None,
+                  end_p: np.ndarray | None, nw: int) -> int:
+        """The move limit's rows of a layout (:class:`~controllers.ocp.input_rate.MoveRows`
+        along ``free`` ended by ``end_w`` or ``end_p``; a reference's :meth:`attach` calls
+        it): how many rows they add to ``g`` (0 without ``max_move``)."""
+        from controllers.ocp.input_rate import MoveRows
+
+        if self.max_move is None:
+            return 0
+        self.move = MoveRows(np.broadcast_to(self.max_move, (self.m,)), free, end_w, end_p, nw)
+        self.nmv = self.move.count
+        return self.nmv
+
+    def set_operator(self, terms: Any) -> None:
+        """What the operator's settings impose on the next solves
+        (:class:`controllers.ocp.operator_terms.OperatorTerms`; ``None``: nothing); a new
+        narrowing of the output rows recomputes the tightened bounds."""
+        self.operator = terms
+        narrowing = None if terms is None or not np.any(terms.narrowing) else terms.narrowing
+        if not _same(narrowing, self._narrowing):
+            self._narrowing = None if narrowing is None else np.array(narrowing, dtype=float)
+            self._bounds_eo = float("nan")
+
+    @property
+    def narrowing(self) -> np.ndarray | None:
+        """``δ`` of the operator's limits in force (``eq:operator-rows``), ``None``: none."""
+        return self._narrowing
 
     def setup(self) -> FHOCP:
         """Build the solver (a few ms; again after :meth:`setup` to restart it exactly).
@@ -428,3 +475,10 @@ class FHOCP(Solving):
             return self.kernel.simulate(np.asarray(x_hat, dtype=float),
                                         np.asarray(u_seq, dtype=float))
         return gru.simulate(self.params, x_hat, u_seq)[0]
+
+
+def _same(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    """Both ``None``, or equal arrays."""
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))

@@ -56,6 +56,7 @@ class FHOCPLayout:
             self.it = N * m
             self.ix = None
             self.ng = (N - 1) * qr + 2 * n
+            self.ng += p.move_rows(self.iu, None, np.arange(2 * n, 2 * n + m), self.nw)
         else:
             idx = 0
             ix, iu = [], []
@@ -101,6 +102,9 @@ class FHOCPLayout:
         self._rows = slice(off - self._up_idx.size, off)
         self._ubg0[off: off + n] = 0.0
         self._lbg0[off + n: off + 2 * n] = 0.0
+        if p.move is not None:   # eq:move-constraint: the last rows
+            self._lbg0[-p.nmv:] = p.move.lower
+            self._ubg0[-p.nmv:] = p.move.upper
 
     def _shifts(self, p: FHOCP) -> None:
         """Permutations that shift ``w`` and the multipliers by one stage (the last stage
@@ -116,6 +120,8 @@ class FHOCPLayout:
         if self.single:
             blk = np.arange((N - 1) * qr).reshape(N - 1, qr)
             pg[: (N - 1) * qr] = np.vstack([blk[1:], blk[-1:]]).ravel()
+        if p.move is not None:
+            pg[self.ng - p.nmv:] = self.ng - p.nmv + p.move.permutation()
         self.perm_g = pg
         self._u_next = iu[1:].ravel()  # u_1 … u_{N−1} of the previous solution
         self._iu_flat = iu.ravel()
@@ -126,7 +132,7 @@ class FHOCPLayout:
               prev: dict[str, np.ndarray] | None, warm_duals: bool,
               simulate: Callable[[np.ndarray, np.ndarray], Any],
               u_prev: np.ndarray | None = None, prefix: Any = None,
-              slacks: Callable[..., None] | None = None) -> np.ndarray:
+              slacks: Callable[..., None] | None = None, operator: Any = None) -> np.ndarray:
         """Fill the solver's argument buffers for one solve; returns the initial inputs.
 
         Parameters
@@ -150,6 +156,9 @@ class FHOCPLayout:
         slacks : callable, optional
             A softened problem's :meth:`~controllers.ocp.fhocp.FHOCP.start_slacks`: the
             initial slacks are the initial plan's.
+        operator : OperatorTerms, optional
+            The operator's bounds on the inputs (:attr:`controllers.ocp.fhocp.FHOCP.
+            operator`), before the inputs already applied; the initial inputs inside them.
         """
         n, m = x_hat.shape[0], self._m
         p = ins["p"]
@@ -179,6 +188,9 @@ class FHOCPLayout:
         else:
             u = np.asarray(u_init, dtype=float).ravel()
         u = np.clip(u, -1.0, 1.0).reshape(-1, m)
+        if operator is not None:   # the operator's settings (controllers.ocp.operator_terms)
+            operator.bound(ins["lbx"], ubx, self.iu)
+            u = operator.clip(u)
         if prefix is not None:
             u = prefix.impose(u)
             prefix.bound(ins["lbx"], ubx, self.iu)

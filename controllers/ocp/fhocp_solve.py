@@ -32,10 +32,12 @@ class Solving:
     def tightened_bounds(self, e_o: float) -> np.ndarray:
         """Right-hand sides ``h − a_i ê_o − b_i − w_L − L b_o`` for ``i = 0 … N−1`` (N×q,
         read-only: the last one is kept, ``ê_o`` settles at its fixed point), minus ``L d``
-        of :meth:`set_output_shift`."""
+        of :meth:`set_output_shift`; ``h − δ`` under the operator's limits
+        (:attr:`narrowing`, ``eq:operator-rows``)."""
         e_o = float(e_o)
         if self._bounds_eo != e_o:
-            bounds = self.h - self.a * e_o - self.b - self.w_L - self.Lbo
+            h = self.h if self._narrowing is None else self.h - self._narrowing
+            bounds = h - self.a * e_o - self.b - self.w_L - self.Lbo
             if self.output_shift is not None:
                 bounds = bounds - self.output_shift
             bounds.flags.writeable = False

@@ -27,7 +27,7 @@ import numpy as np
 
 from controllers.errors import DesignError
 
-__all__ = ["du_cost", "du_gradient", "du_hessian", "du_weights"]
+__all__ = ["MoveRows", "du_cost", "du_gradient", "du_hessian", "du_weights", "move_limit"]
 
 
 def du_weights(value: Any, m: int, names: Sequence[str] | None = None) -> np.ndarray:
@@ -91,3 +91,66 @@ def du_hessian(N: int, weights: np.ndarray) -> np.ndarray:
     m = weights.shape[0]
     D = np.eye(N * m) - np.eye(N * m, k=-m)
     return 2.0 * D.T @ (np.tile(weights, N)[:, None] * D)
+
+
+class MoveRows:
+    """The move limit of the FHOCP (issue 61, ``max_move``; docs: design/operating.md,
+    ``eq:move-constraint``): ``|v_{i+1} − v_i| ≤ Δ`` element-wise along the chain
+    ``v = (u_0 … u_{M−1}, u_end)`` of the free inputs in ``w`` ended by the input the plan
+    settles at (the paper's ``ū``, a parameter; the tracking law's ``u_s``, a variable), so
+    that the candidate of ``th:feasibility-stability`` (the plan shifted with ``u_end``
+    appended) keeps every row. Linear rows appended after the law's own rows of ``g``; the
+    first move ``u_0 − u_{−1}`` is a bound on ``u_0`` (the operator's terms,
+    :class:`controllers.ocp.operator_terms.OperatorTerms`).
+
+    Parameters
+    ----------
+    delta : (m,) array
+        ``Δ`` per input (normalised, > 0).
+    free : (M, m) int array
+        The indices of ``u_0 … u_{M−1}`` in ``w``.
+    end_w, end_p : (m,) int array or None
+        The indices of ``u_end`` in ``w`` (the tracking law's ``u_s``) or in ``p`` (the
+        paper's ``ū``); one of them.
+    nw : int
+        The size of ``w``.
+    """
+
+    def __init__(self, delta: np.ndarray, free: np.ndarray, end_w: np.ndarray | None,
+                 end_p: np.ndarray | None, nw: int) -> None:
+        self.delta = np.asarray(delta, dtype=float)
+        self.free, self.end_w, self.end_p = np.asarray(free, dtype=int), end_w, end_p
+        M, m = self.free.shape
+        self.count = M * m
+        J = np.zeros((self.count, nw))
+        rows = np.arange(self.count).reshape(M, m)
+        J[rows.ravel(), self.free.ravel()] = -1.0
+        if M > 1:
+            J[rows[:-1].ravel(), self.free[1:].ravel()] = 1.0
+        if end_w is not None:
+            J[rows[-1], end_w] = 1.0
+        self.jacobian = J
+        self.lower = -np.tile(self.delta, M)
+        self.upper = np.tile(self.delta, M)
+
+    def rows(self, wv: np.ndarray, pv: np.ndarray) -> np.ndarray:
+        """``v_{i+1} − v_i`` for ``i = 0 … M−1`` (M m,), stage after stage."""
+        u = wv[self.free]
+        end = wv[self.end_w] if self.end_w is not None else pv[self.end_p]
+        return (np.vstack([u[1:], end[None]]) - u).ravel()
+
+    def permutation(self) -> np.ndarray:
+        """The warm start's shift of their multipliers by one stage (the last kept)."""
+        M, m = self.free.shape
+        blk = np.arange(M * m).reshape(M, m)
+        return np.vstack([blk[1:], blk[-1:]]).ravel()
+
+
+def move_limit(max_move: Any, inputs: Sequence[Any]) -> np.ndarray | None:
+    """``Δ`` (normalised, per input) of the problem's inputs' ``max_move`` (problem units;
+    an input without one: its box width, 2), ``None`` when no input declares one (no rows:
+    the FHOCP as before)."""
+    if max_move is None or all(v is None for v in max_move):
+        return None
+    return np.array([2.0 if v is None else float(v) / abs(float(c.scale))
+                     for v, c in zip(max_move, inputs, strict=True)])

@@ -84,7 +84,9 @@ class SingleShootingNLP:
         self.p = fhocp
         self.kernel = kernel
         self.shoot = GRUShooting(fhocp.params, fhocp.N)
-        self.ng = (fhocp.N - 1) * fhocp.qr + 2 * fhocp.n
+        self.ng = fhocp.ng
+        #: the law's own rows (without the move limit's, appended by :meth:`g`)
+        self.ng_law = fhocp.ng - fhocp.nmv
         self.iu = fhocp.iu.ravel()
         #: ``w``'s size without the softened rows' slacks
         self.nwh = fhocp.nw - fhocp.nsl
@@ -161,7 +163,14 @@ class SingleShootingNLP:
 
     def g(self, wv: np.ndarray, pv: np.ndarray) -> list:
         g = self.constraints(wv, pv, self.rollout(wv, pv, True))
-        return [g if self.slacks is None else self.slacks.soften(g, wv[self.slacks.idx])]
+        g = g if self.slacks is None else self.slacks.soften(g, wv[self.slacks.idx])
+        return [self._with_moves(g, wv, pv)]
+
+    def _with_moves(self, g: np.ndarray, wv: np.ndarray, pv: np.ndarray) -> np.ndarray:
+        """``g`` with the move limit's rows after it (``eq:move-constraint``), when the
+        FHOCP has them."""
+        move = self.p.move
+        return g if move is None else np.concatenate([g, move.rows(wv, pv)])
 
     def gradient(self, wv: np.ndarray, pv: np.ndarray) -> list:
         """``[f, ∇f]`` (the law's :meth:`_gradient` with the slacks' terms)."""
@@ -175,12 +184,15 @@ class SingleShootingNLP:
         """``[g, ∂g/∂w]`` (the law's :meth:`_jacobian` with the slacks' terms)."""
         g, J = self._jacobian(wv, pv)
         sl = self.slacks
-        if sl is None:
+        if sl is not None:
+            Js = np.zeros((J.shape[0], self.p.nw))
+            Js[:, :self.nwh] = J
+            sl.jacobian_columns(Js)
+            g, J = sl.soften(g, wv[sl.idx]), Js
+        move = self.p.move
+        if move is None:
             return [g, J]
-        Js = np.zeros((J.shape[0], self.p.nw))
-        Js[:, :self.nwh] = J
-        sl.jacobian_columns(Js)
-        return [sl.soften(g, wv[sl.idx]), Js]
+        return [self._with_moves(g, wv, pv), np.vstack([J, move.jacobian])]
 
     def hessian(self, wv: np.ndarray, pv: np.ndarray, lf: np.ndarray,
                 lg: np.ndarray) -> np.ndarray:
@@ -219,7 +231,7 @@ class SingleShootingNLP:
         p = self.p
         ro = self.rollout(wv, pv, True)
         N, n, q, iu = p.N, p.n, p.qr, self.iu
-        J = np.zeros((self.ng, self.nwh))
+        J = np.zeros((self.ng_law, self.nwh))
         J[: (N - 1) * q, iu] = np.matmul(p.DUo[None], ro.S[1:N]).reshape((N - 1) * q, N * p.m)
         J[(N - 1) * q:(N - 1) * q + n, iu] = ro.S[N]
         J[(N - 1) * q + n:, iu] = ro.S[N]

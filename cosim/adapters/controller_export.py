@@ -46,6 +46,20 @@ def _why_not(ctrl: Any) -> str:
     return ""
 
 
+def _operator_ports(ctrl: Any, design: Any) -> tuple[Parameter, ...]:
+    """The FMU's operator inputs (:func:`controllers.kernel.controller_source.
+    operator_names`, ``operator.c``'s order) with their ranges, units and defaults (the
+    Python controller's :meth:`~cosim.adapters.robust_mpc.RobustMPCController.settings`)."""
+    from controllers.kernel.controller_source import operator_names
+
+    pr = ctrl.problem
+    settings = ctrl.settings()
+    return tuple(Parameter(name, settings[name].unit or "1", settings[name].low,
+                           settings[name].high, settings[name].description,
+                           start=settings[name].start)
+                 for name in operator_names(design, pr.input_names, pr.output_names))
+
+
 def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
     """Build the controller FMU of ``ctrl`` (a robust MPC) at ``out`` (FMI 2 or 3); returns
     ``out``. Raises :class:`CosimError` (one line) when it cannot be exported or built."""
@@ -84,6 +98,7 @@ def export_fmu(ctrl: Any, out: str | Path, fmi_version: int = 3) -> Path:
                                 c.variable) for c in pr.disturbances),
         parameters=tuple(Parameter(name, "1", low, high, text, start=start)
                          for name, low, high, text, start in parameters(
-                             design, pr.input_names, pr.output_names)))
+                             design, pr.input_names, pr.output_names)),
+        operator=_operator_ports(ctrl, design))
     return build_controller_fmu(iface, source, design_data(design), out,
                                 fmi_version=fmi_version, flags=flags)

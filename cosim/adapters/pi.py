@@ -31,6 +31,13 @@ d_0)``, ``K_ff = −G_u⁺ G_d`` from the model's steady-state gains at the oper
 (the middle of their boxes); ``feedforward=False`` gives the plain PI, which sees a
 disturbance only once it has moved the outputs. The loops are tuned on the model with the
 disturbances held at ``d_0``.
+
+An operator runs it as the robust MPC (:mod:`controllers.operator`, ``op.*`` settings): in
+manual, for an input out of service or an output not controlled (its loop opened) the
+plant gets the operator's or the held input and the loop's integrator is back-calculated to
+it (``I = u − K e − K_ff (d − d_0)``: the transfer back is bumpless); an input limit narrows
+its saturation (anti-windup as above); ``max_move`` limits each move. Its outputs are
+unconstrained: operator limits on them are refused.
 """
 
 from __future__ import annotations
@@ -48,7 +55,7 @@ from controllers.disturbances import condition, feedforward_gain
 from controllers.model import GRUModel
 from controllers.pi_tuning import PITuning
 from controllers.problem import ControlProblem, PILoop
-from cosim.core.component import Capability, Component, Signal
+from cosim.core.component import Capability, Component, Setting, Signal
 from cosim.core.errors import CosimError
 
 __all__ = ["PIController", "PILoop"]
@@ -215,7 +222,7 @@ class PIController(Component):
     """
 
     direct_feedthrough = True
-    capabilities = frozenset({Capability.DISTURBANCES})
+    capabilities = frozenset({Capability.DISTURBANCES, Capability.OPERATOR})
 
     def __init__(self, problem: ControlProblem | str | Path | None = None,
                  model: GRUModel | str | Path | None = None, pairing: str | None = None,
@@ -270,6 +277,11 @@ class PIController(Component):
                                  for c in problem.disturbances)
         self.disturbance_defaults = {c.name: c.offset for c in problem.disturbances}
         self._values: dict[str, float] = {}
+        from controllers.operator import Operator
+
+        #: the operator's settings (:mod:`controllers.operator`)
+        self.operator = Operator(problem, "pi", no_output_limits=(
+            "the PI baseline constrains no output (its loops track set-points only)"))
         self.setup(0.0)
 
     def setup(self, t0: float) -> None:
@@ -279,8 +291,10 @@ class PIController(Component):
             lo, hi = self.bounds[loop.u]
             self._I[loop.u] = self.initial_inputs.get(loop.u, 0.5 * (lo + hi))
         self._u = dict(self._I)
+        self._computed = dict(self._I)
         self._sat_steps = dict.fromkeys(self._u, 0)
         self._steps = 0
+        self.operator.reset()
 
     def set_inputs(self, values: Mapping[str, float]) -> None:
         """Measured outputs and set-points (``ref.<y>``)."""
@@ -290,6 +304,9 @@ class PIController(Component):
         """One PI update per loop; ``dt`` is the sample interval."""
         vals = self._values
         ff = self._feedforward(vals)
+        if self.operator.engaged:
+            self._operated_step(vals, ff, dt)
+            return
         for loop in self.loops:
             e = vals[f"ref.{loop.y}"] - vals[loop.y]
             v = self._I[loop.u] + loop.K * e + ff.get(loop.u, 0.0)
@@ -300,6 +317,52 @@ class PIController(Component):
             self._I[loop.u] += loop.K * dt / loop.Ti * e + dt / loop.Tt * (u - v)
             self._u[loop.u] = u
         self._steps += 1
+        self._computed = dict(self._u)
+        self.operator.last = np.array([self._u[u] for u in self.problem.input_names])
+
+    def _operated_step(self, vals: Mapping[str, float], ff: dict[str, float],
+                       dt: float) -> None:
+        """One update under the operator's settings (module docstring): each loop's
+        saturated output, the inputs the plant gets (:meth:`controllers.operator.Operator.
+        applied`; an opened loop's input held), the integrators back-calculated."""
+        op, names = self.operator, list(self.problem.input_names)
+        start = np.array([self._u[u] for u in names])
+        box = op.input_box(start)
+        e, v, computed = {}, {}, np.empty(len(names))
+        for loop in self.loops:
+            j = names.index(loop.u)
+            e[loop.u] = vals[f"ref.{loop.y}"] - vals[loop.y]
+            v[loop.u] = self._I[loop.u] + loop.K * e[loop.u] + ff.get(loop.u, 0.0)
+            computed[j] = min(max(v[loop.u], box[j, 0]), box[j, 1])
+        opened = {lp.u for lp in self.loops
+                  if not op.control[self.problem.output_names.index(lp.y)]}
+        hold = np.array([u in opened for u in names])
+        applied = op.applied(np.where(hold, start, computed), start)
+        for loop in self.loops:
+            j, u = names.index(loop.u), loop.u
+            if applied[j] != v[u]:
+                self._sat_steps[u] += 1
+            if op.writing[j] and not hold[j]:   # anti-windup towards the input applied
+                self._I[u] += loop.K * dt / loop.Ti * e[u] + dt / loop.Tt * (applied[j] - v[u])
+            else:   # tracking: the integrator that gives the input applied (bumpless)
+                self._I[u] = applied[j] - loop.K * e[u] - ff.get(u, 0.0)
+            self._u[u], self._computed[u] = float(applied[j]), float(computed[j])
+        self._steps += 1
+
+    def settings(self) -> dict[str, Setting]:
+        """The operator's settings (:meth:`controllers.operator.Operator.settings`)."""
+        units = self.problem.units()
+        return {name: Setting(name, lo, hi, text, value,
+                              units.get(name.split(".")[-1], "") if name.startswith(
+                                  ("op.min", "op.max", "op.manual")) else "", role="operator")
+                for name, lo, hi, text, value in self.operator.settings()}
+
+    def set(self, name: str, value: float) -> str:
+        """An operator's setting from the next step on; refused in the user's words."""
+        why = self.operator.refuse(name, value)
+        if why:
+            raise CosimError(f"controller 'pi': {name}={value!r}: {why}")
+        return f"{name} = {float(value):g}: {self.operator.set(name, value)}"
 
     def _feedforward(self, vals: Mapping[str, float]) -> dict[str, float]:
         """``K_ff (d − d_0)`` by input (physical units); empty without feedforward."""
@@ -315,8 +378,10 @@ class PIController(Component):
         return dict(self._u)
 
     def diagnostics(self) -> dict[str, float]:
-        """Integrator states ``int_<u>`` [input units]."""
-        return {f"int_{u}": i for u, i in self._I.items()}
+        """Integrator states ``int_<u>`` [input units] and what the loops computed,
+        ``computed.<u>``."""
+        return {**{f"int_{u}": i for u, i in self._I.items()},
+                **{f"computed.{u}": c for u, c in self._computed.items()}}
 
     def summary(self) -> dict:
         """Loop pairing, gains, whether they were tuned from the model (then the tuning's
@@ -331,4 +396,5 @@ class PIController(Component):
                    "disturbances": list(self.problem.disturbance_names)}}
         if self.tuning is not None:
             doc["tuning"] = self.tuning.to_dict()
-        return {**doc, "steps": self._steps, "saturated_steps": dict(self._sat_steps)}
+        return {**doc, "steps": self._steps, "saturated_steps": dict(self._sat_steps),
+                "operator": {"final": self.operator.summary()}}

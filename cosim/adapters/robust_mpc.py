@@ -9,7 +9,9 @@ in the problem's units (for the four-tank: levels ``h1``, ``h2`` in metres, pump
 ``qa``, ``qb`` in m³/s). It declares what it offers (:class:`cosim.core.component.
 Capability`): it designs for the run's set-points (certified or not), measures disturbances
 with nominal defaults, is told those known ahead, says why it runs uncertified, and takes its
-settings between steps by name (:meth:`RobustMPCController.set`).
+settings between steps by name (:meth:`RobustMPCController.set`): the engineer's weights and
+the operator's ``op.*`` settings (:mod:`controllers.operator`: its outputs are then the
+inputs the plant gets, its diagnostics ``computed.<input>`` what the law computed).
 
 Its errors are the numerical core's, in the same words, as :class:`cosim.core.errors.
 CosimError`: a design or a first set-point outside the theory is a configuration error
@@ -64,7 +66,7 @@ class RobustMPCController(Component):
     direct_feedthrough = True
     capabilities = frozenset({Capability.SETPOINTS, Capability.DISTURBANCES,
                               Capability.PREVIEW, Capability.NOTICE, Capability.SETTINGS,
-                              Capability.ESTIMATE})
+                              Capability.ESTIMATE, Capability.OPERATOR})
     #: the options :func:`cosim.core.registry.create` accepts (``--option KEY=VALUE``)
     OPTIONS = ("model", "problem", "options", "name", *MPCOptions.names())
     #: wall-clock diagnostics: written by the master to timings.csv, not results.csv
@@ -171,23 +173,45 @@ class RobustMPCController(Component):
             step = self.mpc.step(y, r, d, t)
         except ControllersError as exc:
             raise _as_cosim(exc) from None
-        self._u_phys, self._diag = step.u, step.diagnostics
+        self._u_phys, self._diag = step.u, dict(step.diagnostics)
+        self._diag.update({f"computed.{n}": float(v)
+                           for n, v in zip(self._u_names, step.computed, strict=True)})
 
     def diagnostics(self) -> dict[str, float]:
         return dict(self._diag)
 
     def settings(self) -> dict[str, Setting]:
-        """What :meth:`set` takes (:meth:`controllers.mpc.RobustMPC.settings`)."""
-        return {name: Setting(name, low, high, text, value)
-                for name, low, high, text, value in self.mpc.settings()}
+        """What :meth:`set` takes: the law's (:meth:`controllers.mpc.RobustMPC.settings`)
+        and the operator's (:meth:`controllers.mpc.RobustMPC.operator_settings`, role
+        ``"operator"``)."""
+        units = self.problem.units()
+        out = {name: Setting(name, low, high, text, value)
+               for name, low, high, text, value in self.mpc.settings()}
+        for name, low, high, text, value in self.mpc.operator_settings():
+            signal = name.split(".")[2] if name.count(".") == 2 else ""
+            unit = units.get(signal, "") if name.startswith(("op.min", "op.max",
+                                                              "op.manual")) else ""
+            out[name] = Setting(name, low, high, text, value, unit, role="operator")
+        return out
 
     def set(self, name: str, value: float) -> str:
-        """Setting ``name`` from the next step on (:meth:`controllers.mpc.RobustMPC.set`);
-        what was re-derived."""
+        """Setting ``name`` from the next step on: an operator's (``op.*``,
+        :meth:`controllers.mpc.RobustMPC.operate`) or the law's
+        (:meth:`controllers.mpc.RobustMPC.set`); what was re-derived."""
         try:
+            if name.startswith("op."):
+                return self.mpc.operate(name, value)
             return self.mpc.set(name, value)
         except ControllersError as exc:
             raise _as_cosim(exc) from None
+
+    def operator_status(self) -> dict[str, Any]:
+        """The outputs the last plan predicts over the horizon and the RMS of the k-step
+        errors so far (:class:`controllers.shadow.PredictionWatch`), by output."""
+        watch = self.mpc.operating.watch
+        errors = watch.summary()["outputs"]
+        return {"prediction": watch.last_prediction(),
+                "prediction_error": {y: e["rms"] for y, e in errors.items()}}
 
     def set_initial_estimate(self, x0: Sequence[float] | None) -> float:
         """The observer's start (:attr:`controllers.mpc.RobustMPC.initial_estimate`; a

@@ -70,6 +70,9 @@ class RunDraw:
     plant_start: dict[str, float] = field(default_factory=dict)
     initial_estimate: list[float] | None = None
     disturbances: tuple[tuple[float, dict[str, float]], ...] = ()
+    #: ``(time, {op.<setting>: value})`` the operator's drawn events
+    #: (:mod:`cosim.campaign.operator_events`), added to the scenario's
+    operator: tuple[tuple[float, dict[str, float]], ...] = ()
 
 
 @dataclass
@@ -247,7 +250,42 @@ def draw_run(spec: CampaignSpec, run: int, ctx: DrawContext) -> RunDraw:
         if ds.ramp:
             steps = _ramped(steps, ctx.rates, ctx.sample_time)
     return RunDraw(run, run_seed(spec.seed, run), values, tuple(setpoints), stop, plant_start,
-                   x_hat0, tuple(steps))
+                   x_hat0, tuple(steps), _operator(spec, ctx, run, stop))
+
+
+def _operator(spec: CampaignSpec, ctx: DrawContext, run: int, stop: float | None
+              ) -> tuple[tuple[float, dict[str, float]], ...]:
+    """Run ``run``'s operator events (:func:`cosim.campaign.operator_events.draw`), from the
+    end of the first hold (a set-point's, else a tenth of the run) to the run's end."""
+    from cosim.campaign import operator_events
+    from cosim.core import scenario
+
+    if spec.operator is None:
+        return ()
+    end = stop if stop is not None else scenario.load(spec.scenario).stop_time
+    settle = spec.setpoints.hold if spec.setpoints is not None else 0.1 * (end - ctx.start_time)
+    return tuple(operator_events.draw(spec.operator, _stream(spec.seed, run, "operator"),
+                                      ctx.start_time, end, settle, _boxes(spec)))
+
+
+def _boxes(spec: CampaignSpec) -> dict[str, tuple[float, float]]:
+    """The engineer's box of every signal of the campaign's problem (the ``[operator]``
+    limits' values at the end of their events)."""
+    from cosim.adapters.problems import problem_for
+    from cosim.core.errors import CosimError
+
+    model = spec.options.get("model") or spec.model
+    try:
+        gru = None
+        if model is not None:
+            from controllers.model import GRUModel
+
+            gru = GRUModel.load(model)
+        problem = problem_for(gru, spec.problem)
+    except Exception as exc:   # a model the campaign will refuse anyway: said now
+        raise CosimError(f"{spec.path}: [operator]: no problem to take the limits' boxes "
+                         f"from: {exc}") from None
+    return problem.bounds()
 
 
 def _ramped(steps: list[tuple[float, dict[str, float]]], rates: dict[str, float],

@@ -77,7 +77,7 @@ def _validate(spec: CampaignSpec, draw: RunDraw, variant_controllers: dict[str, 
     at_start.update({f"plant.{k}": v for k, v in draw.plant_start.items()})
     loc = Locator(spec.path, spec.text)
     sc = sc.with_changes(at_start, list(draw.setpoints) or None, draw.stop_time,
-                         list(draw.disturbances) or None)
+                         list(draw.disturbances) or None, list(draw.operator) or None)
     sample = None
     for name, ctrl in variant_controllers.items():
         if spec.model_plant:

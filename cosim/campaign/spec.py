@@ -35,6 +35,12 @@ that controllers are compared on the same draws. Example::
     T_in = [10.0, 30.0]                # range per disturbance (physical units)
     # ramp = true                      # reach each level at the problem's rate per sample
 
+    [operator]                         # operator events per run (cosim.campaign.
+    count = 2                          # operator_events): an input out of service, a limit
+    duration = [250.0, 1000.0]         # narrowed, for a drawn while
+    service = ["qa"]
+    "max.h1" = [1.0, 1.4]
+
     [initial_state]                    # GRU-model plants ("model:...") only
     output_offset = 0.05               # start at the equilibrium of the first set-point ± this
     # observer_error = 0.02            # ‖x_0 − x̂_0‖∞ drawn up to this (default ê_o,0)
@@ -69,7 +75,7 @@ DISTRIBUTIONS = {"uniform": 2, "normal": 2, "choice": None}
 _CAMPAIGN_KEYS = {"name", "runs", "seed", "scenario", "controller", "plant", "map", "model",
                   "problem", "interface", "timeout", "isolate", "step_timeout", "figures"}
 _TOP_KEYS = {"campaign", "controller", "draw", "setpoints", "disturbances", "initial_state",
-             "variant"}
+             "variant", "operator"}
 _VARIANT_KEYS = {"name", "controller", "options", "model"}
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
@@ -155,6 +161,8 @@ class CampaignSpec:
     initial_state: InitialState | None = None
     variants: tuple[Variant, ...] = ()
     text: str = ""
+    #: ``[operator]``'s events (:class:`cosim.campaign.operator_events.OperatorSpec`)
+    operator: Any = None
 
     @property
     def model_plant(self) -> bool:
@@ -473,8 +481,11 @@ def load(path: str | Path) -> CampaignSpec:
                         "initial_state")
     variants = (_variants(doc["variant"], loc, controller, options) if "variant" in doc
                 else (Variant(controller, controller, dict(options)),))
+    from cosim.campaign import operator_events
+
+    operator = (operator_events.parse(doc["operator"], loc) if "operator" in doc else None)
     return CampaignSpec(
         path=path, name=name, runs=runs, seed=seed, scenario=scenario, controller=controller,
         options=dict(options), plant=plant, map=vmap, model=model, problem=problem,
         **execution, draws=tuple(draws), setpoints=setpoints, disturbances=disturbances,
-        initial_state=initial, variants=variants, text=text)
+        initial_state=initial, variants=variants, text=text, operator=operator)

@@ -113,7 +113,8 @@ def write_run(out: Path, spec: CampaignSpec, task: dict[str, Any],
                      "tries": tries, "draws": draw["values"], "setpoints": draw["setpoints"],
                      "plant_start": draw["plant_start"],
                      **({"disturbances": draw["disturbances"]} if draw.get("disturbances")
-                        else {})},
+                        else {}),
+                     **({"operator": draw["operator"]} if draw.get("operator") else {})},
     }
     folder = out / "runs" / report.run_folder_name(task["run"], task["variant"])
     if theorem is not None:

@@ -251,7 +251,7 @@ def _start(task: dict[str, Any], assets: Assets, run: dict[str, Any]) -> Any:
     at_start = dict(draw["values"])
     at_start.update({f"plant.{k}": v for k, v in draw["plant_start"].items()})
     sc = sc.with_changes(at_start, draw["setpoints"] or None, draw["stop_time"],
-                         draw.get("disturbances") or None)
+                         draw.get("disturbances") or None, draw.get("operator") or None)
     run["phase"] = "building the controller"
     options = dict(task["options"])
     from cosim.core.registry import FMU_CONTROLLER

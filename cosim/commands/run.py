@@ -21,6 +21,8 @@ set-points and perturbations. Writes into DIR (--out):
   figure.png    outputs vs set-points with constraint bounds, inputs with bounds,
                 perturbation times marked
   timings.csv   wall-clock diagnostics of the controller (solve times), when it has any
+  operator.csv  the operator's actions (op.* columns, faceplate writes): time, who, what,
+                old, new, accepted or why refused
   controller.json  the controller and the options it was given, its model file
                 fingerprinted: --controller controller.json runs the same controller again
 
@@ -48,7 +50,8 @@ in workers too, and --step-timeout so that a hung one is stopped sooner (it impl
 """
 
 EPILOG = """\
-scenario CSV: time,ref.<output>,plant.<variable>,sensor.<output>.bias|noise|uniform
+scenario CSV: time,ref.<output>,plant.<variable>,sensor.<output>.bias|noise|uniform,
+  op.<setting> (op.mode auto|manual, op.service.<input>, op.manual.<input>, op.min.<signal>, ...)
   piecewise constant; a blank cell keeps the previous value; the last row's time is the
   stop time (see docs/guide/running.md, "Scenarios").
 
@@ -75,6 +78,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _controller_arguments(p)
     _execution_arguments(p)
     _live_arguments(p)
+    _operator_arguments(p)
     p.add_argument("--no-figure", action="store_true", help="do not draw figure.png")
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar and no summary line (for scripts)")
@@ -173,8 +177,27 @@ def _live_arguments(p: argparse.ArgumentParser) -> None:
     add_arguments(p, "client")
 
 
+def _operator_arguments(p: argparse.ArgumentParser) -> None:
+    """``--mode`` and the faceplate's options (docs: "Operating the controller")."""
+    g = p.add_argument_group("the operator (docs: Operating the controller)")
+    g.add_argument("--mode", choices=("auto", "manual"), default=None,
+                   help="the controller's mode from the start: manual is the commissioning "
+                        "in shadow (it writes nothing of its own, predicts against the plant; "
+                        "op.mode in the scenario's first row)")
+    g.add_argument("--faceplate", metavar="URL", default=None,
+                   help="serve the controller's OPC UA faceplate at opc.tcp://127.0.0.1:PORT "
+                        "while the run goes: mode, inputs in service and manual, outputs "
+                        "controlled, operator limits, set-points, predictions; writes checked "
+                        "as scenario rows and logged in operator.csv (same --security options "
+                        "as --plant)")
+    g.add_argument("--faceplate-users", metavar="USERS.toml", default=None,
+                   help="the faceplate's users and roles (operator: mode, service, limits, "
+                        "set-points; engineer: also the weights), each password read from the "
+                        "environment variable its entry names; without: read-only")
+
+
 #: The options of this command that name a library parameter (their errors are reworded).
-FLAGS = ("seed", "step", "step_timeout")
+FLAGS = ("seed", "step", "step_timeout", "mode")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -198,7 +221,8 @@ def run(args: argparse.Namespace) -> int:
                          model=args.model, options=options, problem=args.problem, out=out,
                          interface=args.interface, step=args.step, isolate=args.isolate,
                          step_timeout=args.step_timeout, seed=args.seed,
-                         figure=not args.no_figure, live=live,
+                         figure=not args.no_figure, live=live, mode=args.mode,
+                         faceplate=_faceplate_options(args),
                          progress=not args.quiet and sys.stderr.isatty(),
                          on_notice=lambda text: print(f"cosim run: {text}", file=sys.stderr,
                                                       flush=True))
@@ -264,6 +288,22 @@ def _verdict(result: object, out: object) -> int:
     print(f"cosim run: degraded: {verdict[1]}{end}; results in {out}", file=sys.stderr,
           flush=True)
     return EXIT_FAILED if failing else EXIT_OK
+
+
+def _faceplate_options(args: argparse.Namespace) -> object:
+    """The faceplate's options (``--faceplate``: its users read, their passwords from the
+    environment), or ``None``; with the run's ``--security`` options (the same as the
+    plant's connection; ``None`` when not given)."""
+    from cosim.core.errors import CosimError
+
+    if args.faceplate is None:
+        if args.faceplate_users is not None:
+            raise CosimError("--faceplate-users: only with --faceplate URL")
+        return None
+    from cosim.live import faceplate, security
+
+    sec = security.from_args(args, "server") if args.security is not None else None
+    return faceplate.FaceplateOptions.of(args.faceplate, args.faceplate_users, sec)
 
 
 def _live_options(args: argparse.Namespace) -> object:

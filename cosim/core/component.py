@@ -75,6 +75,13 @@ class Capability(StrEnum):
         A controller with a state estimate whose start may be given
         (:meth:`Component.set_initial_estimate`) and which says where it stands
         (:meth:`Component.estimate`): the campaigns' theorem checks on a model plant.
+    ``OPERATOR``
+        A controller an operator runs (:mod:`controllers.operator`): its
+        :meth:`Component.settings` include the operator's (``op.mode``, ``op.service.<u>``,
+        ``op.manual.<u>``, ``op.control.<y>``, ``op.min.<s>``, ``op.max.<s>``; role
+        ``"operator"``), which :meth:`Component.set` takes like any; its outputs are the
+        inputs the plant gets, its diagnostics ``computed.<input>`` what it computed (in
+        manual: in shadow), and :meth:`Component.operator_status` what it predicts.
     """
 
     TUNABLE = "tunable"
@@ -86,6 +93,7 @@ class Capability(StrEnum):
     NOTICE = "notice"
     SETTINGS = "settings"
     ESTIMATE = "estimate"
+    OPERATOR = "operator"
 
 
 @dataclass(frozen=True)
@@ -106,8 +114,10 @@ class Schedule:
 @dataclass(frozen=True)
 class Setting:
     """A setting a component changes between steps (:meth:`Component.set`): its ``name``,
-    the range a value must lie in, its ``unit``, what it is (``description``) and its value
-    when the run starts (``start``)."""
+    the range a value must lie in, its ``unit``, what it is (``description``), its value
+    when the run starts (``start``) and who may change it (``role``: ``"engineer"``, the
+    design's weights and gains; ``"operator"``, the operator's ``op.*`` settings, which an
+    engineer may change too)."""
 
     name: str
     low: float
@@ -115,6 +125,7 @@ class Setting:
     description: str = ""
     start: float = float("nan")
     unit: str = ""
+    role: str = "engineer"
 
 
 class Component(ABC):
@@ -249,3 +260,9 @@ class Component(ABC):
         re-derived (one line, empty when nothing was). A value the component cannot take
         raises :class:`~cosim.core.errors.CosimError` naming it, the setting unchanged."""
         raise CosimError(f"{self.where}: no setting '{name}'")
+
+    def operator_status(self) -> dict[str, Any]:
+        """(``OPERATOR``) What it predicts now: ``prediction`` (by output, the outputs its
+        plan predicts over the horizon, problem units) and ``prediction_error`` (by
+        output, the RMS of its k-step errors so far); empty by default."""
+        return {}

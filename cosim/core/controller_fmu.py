@@ -97,6 +97,9 @@ class ControllerInterface:
     parameters: tuple[Parameter, ...] = ()
     generation_tool: str = "gru-mpc-cosim (cosim export-fmu)"
     disturbances: tuple[Port, ...] = ()
+    #: the operator's settings (inputs ``op.*``, :mod:`controllers.operator`), their start
+    #: values the defaults (``Parameter.start``)
+    operator: tuple[Parameter, ...] = ()
 
     def variables(self) -> list[tuple[str, str, str, str, Port | Parameter | None, str]]:
         """``(name, causality, variability, unit, port, description)`` in value-reference
@@ -107,6 +110,7 @@ class ControllerInterface:
                 for p in self.measured]
         out += [(f"dist.{p.name}", "input", "continuous", p.unit, p,
                  p.description or f"measured disturbance {p.name}") for p in self.disturbances]
+        out += [(p.name, "input", "discrete", p.unit, p, p.description) for p in self.operator]
         out += [(p.name, "output", "discrete", p.unit, p, p.description or f"input {p.name}")
                 for p in self.applied]
         out += [(name, "output", "discrete", "1", None, text) for name, text in DIAGNOSTICS]
@@ -116,6 +120,11 @@ class ControllerInterface:
                  f"steady {p.name} the controller steers the model to (the paper's law: its "
                  "governed set-point; the tracking law: the artificial steady state's)")
                 for p in self.measured]
+        out += [(f"computed.{p.name}", "output", "discrete", p.unit, None,
+                 f"{p.name} the controller computed (in manual: what it would have written)")
+                for p in self.applied]
+        out += [("op.refused", "output", "discrete", "1", None,
+                 "operator settings refused so far (each kept as it was; the log says why)")]
         out += [(q.name, "parameter", "tunable", q.unit, q, q.description)
                 for q in self.parameters]
         return out
@@ -144,6 +153,7 @@ def names_header(iface: ControllerInterface) -> str:
         f"#define INSTANTIATION_TOKEN {_c_string(iface.token)}\n"
         f"#define CTL_NY {len(iface.measured)}\n#define CTL_NU {len(iface.applied)}\n"
         f"#define CTL_ND {len(iface.disturbances)}\n"
+        f"#define CTL_NOP {len(iface.operator)}\n"
         f"#define CTL_NPARAM {len(iface.parameters)}\n"
         f"#define CTL_TS ({float(iface.sample_time)!r})\n"
         f"static const char *const CTL_NAMES[] = {{{', '.join(map(_c_string, names))}}};\n"
@@ -181,7 +191,8 @@ def _attrs(port: Port | Parameter | None, causality: str, unit: str) -> str:
         if math.isfinite(port.high):   # no upper bound (a weight): no max
             out.append(f'max="{float(port.high)!r}"')
         if isinstance(port, Parameter):
-            out.append(f'start="{float(port.start)!r}"')
+            start = float(port.start)
+            out.append(f'start="{"NaN" if math.isnan(start) else repr(start)}"')
         elif causality == "input":
             out.append(f'start="{0.5 * (port.low + port.high)!r}"')
     return " ".join(out)

@@ -35,6 +35,7 @@ from cosim.core.component import Capability, Setting
 from cosim.core.errors import CosimError
 from cosim.core.fmu import FmuComponent
 from cosim.core.fmu_archive import why_not_valid
+from cosim.core.varmap import variable_unit
 
 __all__ = ["DIAGNOSTIC_OUTPUTS", "FmuController"]
 
@@ -44,7 +45,8 @@ DIAGNOSTIC_OUTPUTS = frozenset({"status", "fallback", "iterations"})
 
 
 def _diagnostic(name: str) -> bool:
-    return name in DIAGNOSTIC_OUTPUTS or name.startswith(("pred.", "target."))
+    return (name in DIAGNOSTIC_OUTPUTS or name == "op.refused"
+            or name.startswith(("pred.", "target.", "computed.")))
 
 
 class FmuController(FmuComponent):
@@ -99,6 +101,11 @@ class FmuController(FmuComponent):
             v.name[len("dist."):]: float(v.start) for v in self.md.modelVariables
             if v.causality == "input" and v.name.startswith("dist.") and v.start is not None}
         self._diag: dict[str, float] = {}
+        #: its operator settings (inputs ``op.*``: set through :meth:`set`, not wired)
+        self._op_names = [s.name for s in self.inputs if s.name.startswith("op.")]
+        self.inputs = tuple(s for s in self.inputs if not s.name.startswith("op."))
+        if self._op_names:
+            self.capabilities = type(self).capabilities | {Capability.OPERATOR}
         #: the measured outputs among its inputs (not a set-point, not a disturbance)
         self._measured = [s.name for s in self.inputs
                           if not s.name.startswith(("ref.", "dist."))]
@@ -167,11 +174,29 @@ class FmuController(FmuComponent):
             start = self.start_values.get(name, float(v.start) if v.start is not None
                                           else math.nan)
             out[name] = Setting(name, low, high, v.description or "", float(start))
+        for name in self._op_names:   # the operator's (OPERATOR)
+            v = self.variable_of(name)
+            low = float(v.min) if v.min is not None else -math.inf
+            high = float(v.max) if v.max is not None else math.inf
+            start = float(v.start) if v.start is not None else math.nan
+            unit = variable_unit(v) or ""
+            out[name] = Setting(name, low, high, v.description or "", start,
+                                "" if unit == "1" else unit, role="operator")
         return out
 
     def set(self, name: str, value: float) -> str:
         """Tunable parameter ``name`` set from the next step on (checked against its box
-        first); the FMU re-derives what depends on it itself."""
+        first); the FMU re-derives what depends on it itself. An operator setting (its
+        input ``op.*``) the FMU refuses is kept as it was (its output ``op.refused``
+        counts it): :class:`CosimError`."""
+        if name in self._op_names:
+            before = super().get_outputs().get("op.refused", 0.0)
+            self.set_parameter(name, float(value))
+            if super().get_outputs().get("op.refused", 0.0) > before:
+                raise CosimError(f"{self.path.name}: {name}={value!r}: refused by the "
+                                 "controller (kept as it was: an operator limit that crosses "
+                                 "the other, or leaves no admissible steady output)")
+            return f"{name} = {float(value):g}"
         if name not in self.tunables:
             raise CosimError(f"{self.path}: no setting '{name}' (settings: "
                              f"{', '.join(self.tunables) or 'none'})")

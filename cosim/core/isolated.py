@@ -113,6 +113,9 @@ class ComponentServer:  # pragma: no cover - runs in the worker process
     def set(self, name: str, value: float) -> str:
         return self.comp.set(name, value)
 
+    def operator_status(self) -> dict:
+        return dict(self.comp.operator_status() or {})
+
     def summary(self) -> dict:
         return dict(self.comp.summary() or {})
 
@@ -236,6 +239,10 @@ class Isolation:
     def set(self, name: str, value: float) -> str:
         """(``SETTINGS``) In the worker's component; what it re-derived."""
         return self._call(f"setting {name}", "set", name, float(value))
+
+    def operator_status(self) -> dict[str, Any]:
+        """(``OPERATOR``) The worker's component's predictions."""
+        return self._call("reading the operator status", "operator_status")
 
     def summary(self) -> dict:
         """The worker's component's summary (:meth:`_summary_here` when the worker is

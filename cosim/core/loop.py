@@ -31,7 +31,7 @@ from cosim.core.run_result import (
     communication_times,
     shortfall_verdict,
 )
-from cosim.core.scenario import BIAS, DIST, PLANT, REF, UNIFORM
+from cosim.core.scenario import BIAS, DIST, OP, PLANT, REF, UNIFORM
 from cosim.core.sensor import SensorModel
 
 if TYPE_CHECKING:
@@ -97,7 +97,14 @@ class Run:
         self.timing_names = sorted(ctrl.timing_diagnostics)
         self.cin: dict[str, float] = {}
         self.u: dict[str, float] = {}
+        #: what the controller computed (``computed.<u>`` of an operator's controller; the
+        #: inputs it wrote otherwise)
+        self.computed: dict[str, float] = {}
         self.diag: dict[str, float] = {}
+        #: the operator's desk (:mod:`cosim.core.operator`), its lock around each step
+        self.desk = master.desk
+        self.lock = self.desk.lock if self.desk is not None else contextlib.nullcontext()
+        self._first_ops: list[tuple] = []
         self.t = self.times[0]
         self.loop0: float | None = None
 
@@ -108,6 +115,11 @@ class Run:
             kind = col.kind
             if kind == REF:
                 self.refs["ref." + col.target] = value
+            elif kind == OP:   # after the controller's set-up at the first row
+                if started:
+                    self.desk.act(self.t, "scenario", col.target, value, "engineer")
+                else:
+                    self._first_ops.append((col, value))
             elif kind in (PLANT, DIST):
                 (self.held if kind == PLANT else self.dist)[col.target] = value
                 if self.set_param is not None:
@@ -124,9 +136,10 @@ class Run:
     def _apply_events(self, t: float) -> None:
         events = self.m.scenario.events
         tol = 1e-9 * max(1.0, abs(t))
-        while self.next_event < len(events) and events[self.next_event].time <= t + tol:
-            self._apply(events[self.next_event].values, started=True)
-            self.next_event += 1
+        with self.lock:
+            while self.next_event < len(events) and events[self.next_event].time <= t + tol:
+                self._apply(events[self.next_event].values, started=True)
+                self.next_event += 1
 
     def _first_row(self) -> None:
         """The scenario's first row (set-points; plant values and disturbances, set on a
@@ -148,6 +161,10 @@ class Run:
         if Capability.SETPOINTS in ctrl.capabilities:
             ctrl.expect_setpoints(m.scenario.setpoints())
         ctrl.setup(t)
+        if self.desk is not None:   # the first row's operator actions, on the set-up one
+            self.desk.attach(self.refs)
+            with self.lock:
+                self._apply(tuple(self._first_ops), started=True)
         if Capability.PREVIEW not in ctrl.capabilities:
             return
         columns = {c.target for c in m.scenario.columns_of(DIST)}
@@ -205,6 +222,8 @@ class Run:
             pacer.stale(self, t, reading)
         pacer.sampled(self, t, reading)
         self._record(t, y, ym)
+        if self.desk is not None:
+            self.desk.sampled(t, self.u, self.computed or self.u)
 
     def _control(self, t: float, ym: dict[str, float]) -> None:
         """The controller step: ``u`` and the diagnostics from ``y_m(t)`` and the set-points."""
@@ -218,9 +237,10 @@ class Run:
         t0 = _time.perf_counter()
         try:
             if limit is None:
-                self._controller_step(t)
+                with self.lock:
+                    self._controller_step(t)
             else:
-                with interrupts.alarm(limit) as fired:
+                with interrupts.alarm(limit) as fired, self.lock:
                     self._controller_step(t)
         except (CosimError, SimulationFailed):
             raise
@@ -238,6 +258,10 @@ class Run:
         ctrl.step(t, self.m.dt * self.m.ratio)
         self.u = ctrl.get_outputs()
         diag = ctrl.diagnostics()
+        if self.desk is not None:   # what it computed (in manual: in shadow)
+            diag = dict(diag)
+            self.computed = {u: _as_float(diag.pop(f"computed.{u}", self.u[u]))
+                             for u in self.m.ctrl_outputs}
         if self.timing_names:
             diag = dict(diag)
             self.result.timing_rows.append(
@@ -258,6 +282,7 @@ class Run:
         if self.sensor is not None:
             row += map(ym.__getitem__, m.measured)
         row += map(self.u.__getitem__, m.ctrl_outputs)
+        row += map((self.computed or self.u).__getitem__, m.ctrl_outputs)
         diag = self.diag
         if diag:
             names = self.diag_names
@@ -374,6 +399,8 @@ class Run:
                 comp.terminate()
         if self.timing_names:
             result.timing_columns = ["time", *(f"{PREFIX_CTRL}.{d}" for d in self.timing_names)]
+        if self.desk is not None:
+            result.operator_rows = list(self.desk.rows)
         width = len(result.columns)
         for row in result.rows:
             if len(row) < width:

@@ -35,6 +35,7 @@ from cosim.core import interrupts
 from cosim.core.component import Capability, Component
 from cosim.core.errors import CosimError, ParameterError
 from cosim.core.loop import Run
+from cosim.core.operator import OperatorDesk
 from cosim.core.pacing import ComponentIO, Pacer, PlantIO
 from cosim.core.run_result import (
     MAX_STEPS,
@@ -154,8 +155,14 @@ class Master:
                                  "it, --problem, name its variable with variable = \"...\" "
                                  "there, or use --map)")
         at_start, later = plant.settable(True), plant.settable(False)
+        #: the one checked entry of operator actions (:mod:`cosim.core.operator`), for a
+        #: controller an operator runs; ``None`` otherwise
+        self.desk = (OperatorDesk(ctrl) if Capability.OPERATOR in ctrl.capabilities
+                     else None)
+        check = (None if self.desk is None else
+                 lambda name, value: self.desk.check(name, value, "engineer")[0])
         sc.validate(at_start, self.refs, self.measured, driven=[*self.ctrl_outputs, *self.dists],
-                    plant_tunable=later, disturbances=self.dists)
+                    plant_tunable=later, disturbances=self.dists, operator=check)
         given = {c.target for c in sc.columns_of(REF)}
         for r in self.refs:
             if r not in given:
@@ -186,6 +193,10 @@ class Master:
         sets, then every plant output), ``sensor.<o>`` (measured values seen by the controller,
         only when the scenario perturbs them), ``ctrl.<u>`` (controller outputs, i.e. the plant
         inputs it drives), then ``ctrl.<d>`` per controller diagnostic.
+
+        ``plant.<u>`` (before ``ctrl.<u>``): the input the plant actually got each sample
+        (the controller's in auto, the operator's in manual, the held value of an input out
+        of service: :mod:`cosim.core.operator`); ``ctrl.<u>`` what the controller computed.
         """
         cols = ["time"]
         cols += [f"{PREFIX_REF}.{r}" for r in self.refs]
@@ -194,6 +205,7 @@ class Master:
         cols += [f"{PREFIX_PLANT}.{y}" for y in self.plant_outputs]
         if self.use_sensor:
             cols += [f"{PREFIX_SENSOR}.{m}" for m in self.measured]
+        cols += [f"{PREFIX_PLANT}.{u}" for u in self.ctrl_outputs]
         cols += [f"{PREFIX_CTRL}.{u}" for u in self.ctrl_outputs]
         return cols
 

@@ -86,7 +86,8 @@ def signal_panel(ax: Any, t: np.ndarray, column: Any, kind: str, name: str,
         ``column(name)``: the recorded column of that name, or ``None``.
     kind : str
         ``"y"``: an output (``plant.<name>``, ``sensor.<name>`` if perturbed, the set-point
-        ``ref.<name>`` as a step line); ``"u"``: an input (``ctrl.<name>``, held).
+        ``ref.<name>`` as a step line); ``"u"``: an input (``ctrl.<name>``, held; and
+        ``plant.<name>``, what the plant got, where it differs: the operator's).
     name, unit : str
         The signal and its unit (the y label).
     bounds : (lo, hi)
@@ -108,6 +109,10 @@ def signal_panel(ax: Any, t: np.ndarray, column: Any, kind: str, name: str,
         u = column(f"ctrl.{name}")
         if u is not None:
             ax.step(t, u, where="post", color="C1", lw=1.0, label=name)
+        got = column(f"plant.{name}")
+        if got is not None and u is not None and not np.array_equal(got, u, equal_nan=True):
+            ax.step(t, got, where="post", color="C0", lw=1.0, ls="-.",
+                    label=f"{name} the plant got")
     lo, hi = bounds
     if lo is not None and hi is not None:
         span = (hi - lo) or 1.0
@@ -157,9 +162,14 @@ def run_figure(path: str | Path, result: RunResult, title: str = "") -> Path:
     def column(name: str) -> np.ndarray | None:
         return data[:, index[name]] if name in index else None
 
+    errors = ((result.controller_summary or {}).get("operator") or {}).get(
+        "prediction_error") or {}
     for ax, (kind, name) in zip(axes[:, 0], panels, strict=False):
         signal_panel(ax, t, column, kind, name, result.units.get(name),
                      result.bounds.get(name, (None, None)), result.perturbation_times)
+        if kind == "y":
+            _prediction_note(ax, (errors.get("outputs") or {}).get(name),
+                             result.units.get(name))
     axes[-1, 0].set_xlabel("time [s]")
     status = "" if result.status == "ok" else f" — {result.status}: {result.reason[:80]}"
     fig.suptitle(f"{title}{status}", fontsize=9)
@@ -167,6 +177,17 @@ def run_figure(path: str | Path, result: RunResult, title: str = "") -> Path:
     path = Path(path)
     save(fig, path, dpi=110)
     return path
+
+
+def _prediction_note(ax: Any, error: dict | None, unit: str | None) -> None:
+    """The controller's k-step prediction error of an output (its summary's
+    ``operator.prediction_error``, :mod:`controllers.shadow`) written in its panel."""
+    if not error or error.get("rms") is None or not error.get("rms_by_step"):
+        return
+    by_step, u = error["rms_by_step"], f" {unit}" if unit else ""
+    ax.text(0.01, 0.04, f"prediction error RMS {error['rms']:.3g}{u} (1 step ahead "
+            f"{by_step[0]:.3g}, {len(by_step)} ahead {by_step[-1]:.3g}; mean "
+            f"{error['mean']:+.3g})", transform=ax.transAxes, fontsize=7, color="0.25")
 
 
 # --------------------------------------------------------------------------------------------

@@ -1,4 +1,5 @@
-"""Writing a run to disk: ``results.csv``, ``timings.csv``, ``summary.json``, ``figure.png``.
+"""Writing a run to disk: ``results.csv``, ``timings.csv``, ``operator.csv``, ``summary.json``,
+``figure.png``.
 
 While a run goes, :class:`ResultsStream` streams its rows into ``results.csv.part`` in the
 output folder, flushed to disk at least once a second of wall time: a run killed outright
@@ -17,8 +18,11 @@ the column names in double quotes,
 exactly), one row per communication point, no comments.
 Column names are ``<source>.<signal>``: ``ref.h1`` (set-point), ``plant.h1`` (true plant
 output, or a plant input/parameter the scenario sets), ``sensor.h1`` (measured value the
-controller saw, only when the scenario perturbs it), ``ctrl.qa`` (controller output = plant
-input), ``ctrl.<diagnostic>`` (controller diagnostics; ``nan`` where a step had none).
+controller saw, only when the scenario perturbs it), ``plant.qa`` (the input the plant got),
+``ctrl.qa`` (what the controller computed: the same but in manual, out of service or under an
+operator limit), ``ctrl.<diagnostic>`` (controller diagnostics; ``nan`` where a step had none).
+``operator.csv`` (a run with operator actions, :mod:`cosim.core.operator`): one row per action,
+``time, who, what, old, new, result``.
 """
 
 from __future__ import annotations
@@ -40,7 +44,7 @@ __all__ = ["PART_SUFFIX", "RUN_FILES", "ResultsStream", "jsonable", "signals", "
            "write_csv"]
 
 #: Every file a run writes into its folder.
-RUN_FILES = ("results.csv", "timings.csv", "summary.json", "figure.png")
+RUN_FILES = ("results.csv", "timings.csv", "operator.csv", "summary.json", "figure.png")
 #: Suffix of the file ``results.csv`` is streamed into while the run goes.
 PART_SUFFIX = ".part"
 #: Most seconds of wall time between two flushes of the streamed rows.
@@ -276,6 +280,8 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
     if result.timing_columns:
         attempt("timings.csv", write_csv, out / "timings.csv", result.timing_columns,
                 result.timing_rows)
+    if result.operator_rows:
+        attempt("operator.csv", _write_audit, out / "operator.csv", result.operator_rows)
     doc = summary(result, meta)
     if figure:
         attempt("figure.png", _figure, out / "figure.png", result, doc, _title(meta, doc))
@@ -291,6 +297,22 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
     if errors:
         raise errors[0]
     return doc
+
+
+def _write_audit(path: Path, rows: list[tuple]) -> None:
+    """``operator.csv``: the operator's actions (:data:`cosim.core.operator.AUDIT_COLUMNS`),
+    one row each, numbers in full precision."""
+    import csv
+    import io
+
+    from cosim.core.operator import AUDIT_COLUMNS
+
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(AUDIT_COLUMNS)
+    for t, who, what, old, new, result in rows:
+        writer.writerow([repr(float(t)), who, what, repr(float(old)), repr(float(new)), result])
+    atomicio.write_text(path, buf.getvalue())
 
 
 def _title(meta: dict | None, doc: dict) -> str:

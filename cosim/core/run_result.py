@@ -62,6 +62,8 @@ class RunResult:
     live: dict = field(default_factory=dict)
     timing_columns: list[str] = field(default_factory=list)
     timing_rows: list[list[float]] = field(default_factory=list)
+    #: the operator's actions (:mod:`cosim.core.operator`): ``operator.csv``'s rows
+    operator_rows: list[tuple] = field(default_factory=list)
     wall_time_s: float = 0.0
     loop_time_s: float = 0.0
     error: BaseException | None = None

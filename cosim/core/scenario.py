@@ -17,7 +17,10 @@ Format (one file per scenario)::
   a variable-map signal), ``sensor.<output>.bias`` an additive measurement bias and
   ``sensor.<output>.noise`` the standard deviation of seeded Gaussian measurement noise,
   ``sensor.<output>.uniform`` the half-width ``a`` of seeded measurement noise uniform in
-  ``[−a, a]`` (a bounded perturbation, as ``w_y`` in the paper).
+  ``[−a, a]`` (a bounded perturbation, as ``w_y`` in the paper), ``op.<setting>`` an operator
+  action on the controller (``op.mode``: ``auto`` or ``manual``; ``op.service.<input>``,
+  ``op.manual.<input>``, ``op.control.<output>``, ``op.min.<signal>``, ``op.max.<signal>``:
+  :mod:`controllers.operator`), checked and recorded by :mod:`cosim.core.operator`.
 * Comma separated, header names may be quoted (FMI cross-check CSV conventions).
 
 Every error is a :class:`~cosim.core.errors.CosimError` that starts with ``file:line:column``
@@ -26,21 +29,24 @@ Every error is a :class:`~cosim.core.errors.CosimError` that starts with ``file:
 
 from __future__ import annotations
 
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from cosim.core import csvio
 from cosim.core.component import Schedule
 from cosim.core.errors import CosimError
+from cosim.core.operator import MODE_WORDS
 
-__all__ = ["BIAS", "DIST", "NOISE", "PLANT", "REF", "SCENARIO_WORDING", "SENSOR_KINDS", "UNIFORM",
-           "Column", "Event", "Scenario", "load"]
+__all__ = ["BIAS", "DIST", "NOISE", "OP", "PLANT", "REF", "SCENARIO_WORDING", "SENSOR_KINDS",
+           "UNIFORM", "Column", "Event", "Scenario", "load"]
 
 #: Column kinds.
 REF, PLANT, BIAS, NOISE, UNIFORM = "ref", "plant", "bias", "noise", "uniform"
 #: ``dist.<name>``: a measured disturbance, set on the plant and measured by the controller.
 DIST = "dist"
+#: ``op.<setting>``: an operator action on the controller (its target: the setting's name).
+OP = "op"
 #: The suffixes of ``sensor.<output>.<suffix>`` columns, by kind.
 SENSOR_KINDS = {"bias": BIAS, "noise": NOISE, "uniform": UNIFORM}
 
@@ -139,7 +145,7 @@ class Scenario:
         """Times (after the start) at which a ``plant.*`` or ``sensor.*`` value changes."""
         times = []
         for event in self.events[1:-1]:
-            if any(col.kind != REF for col, _ in event.values):
+            if any(col.kind not in (REF, OP) for col, _ in event.values):
                 times.append(event.time)
         return times
 
@@ -150,22 +156,25 @@ class Scenario:
     def with_changes(self, at_start: Mapping[str, float] | None = None,
                      setpoints: Sequence[tuple[float, Mapping[str, float]]] | None = None,
                      stop_time: float | None = None,
-                     disturbances: Sequence[tuple[float, Mapping[str, float]]] | None = None
+                     disturbances: Sequence[tuple[float, Mapping[str, float]]] | None = None,
+                     operator: Sequence[tuple[float, Mapping[str, float]]] | None = None
                      ) -> Scenario:
         """A copy with values set in the first row, the set-points replaced, or a new stop.
 
         Parameters
         ----------
         at_start : mapping, optional
-            Column name (``plant.a1``, ``sensor.h1.noise``, ``ref.h1``) → value applied at
-            the start time, replacing the first row's value of an existing column or adding
-            a column; later rows keep their values.
+            Column name (``plant.a1``, ``sensor.h1.noise``, ``ref.h1``, ``op.mode``) → value
+            applied at the start time, replacing the first row's value of an existing column or
+            adding a column; later rows keep their values.
         setpoints : sequence of (time, {output: value}), optional
             Replace every ``ref.*`` value of the scenario by these set-point changes.
         stop_time : float, optional
             New stop time; later events are dropped.
         disturbances : sequence of (time, {disturbance: value}), optional
             Replace every ``dist.*`` value of the scenario by these changes.
+        operator : sequence of (time, {op.<setting>: value}), optional
+            Operator actions added to the scenario's (a campaign's ``[operator]`` events).
 
         Raises
         ------
@@ -184,6 +193,8 @@ class Scenario:
             names += [f"ref.{o}" for _, values in setpoints for o in values]
         if disturbances:
             names += [f"dist.{d}" for _, values in disturbances for d in values]
+        if operator:
+            names += [name for _, values in operator for name in values]
         new = [n for n in dict.fromkeys(names) if n not in by_name]
         if new:
             parsed = _parse_header(self.path, ["time", *new])
@@ -203,11 +214,11 @@ class Scenario:
                         or (disturbances and col.kind == DIST)):
                     row[col.name] = value
         table.setdefault(start, {}).update(at_start or {})
-        for prefix, changes in (("ref", setpoints), ("dist", disturbances)):
+        for prefix, changes in (("ref.", setpoints), ("dist.", disturbances), ("", operator)):
             for t, values in changes or ():
                 if start <= t < stop:
                     table.setdefault(float(t), {}).update(
-                        {f"{prefix}.{o}": v for o, v in values.items()})
+                        {f"{prefix}{o}": v for o, v in values.items()})
         table.setdefault(stop, {})
         events = []
         for t in sorted(table):
@@ -226,8 +237,9 @@ class Scenario:
         driven: Collection[str] = (),
         plant_tunable: Collection[str] | None = None,
         disturbances: Collection[str] = (),
+        operator: Callable[[str, float], str] | None = None,
     ) -> None:
-        """Check every column name against the run's signals.
+        """Check every column name against the run's signals, and every operator action.
 
         Parameters
         ----------
@@ -244,11 +256,17 @@ class Scenario:
             tunable parameters); default: all of ``plant_settable``.
         disturbances : collection of str
             The measured disturbances a ``dist.<name>`` column may set (the problem's).
+        operator : callable, optional
+            Why an operator action ``op.<setting>`` = value is refused before the controller
+            sees it (:meth:`cosim.core.operator.OperatorDesk.check`; ``""``: it is not);
+            ``None``: the controller takes none.
 
         Raises
         ------
         CosimError
-            ``file:1:col: unknown ...`` for the first column that names nothing known.
+            ``file:1:col: unknown ...`` for the first column that names nothing known;
+            ``file:line:col: ...`` for an operator action refused (a value outside the
+            engineer's box, a switch other than 0/1).
         """
         for col in self.columns:
             where = f"{self.path}:1:{col.index}"
@@ -271,6 +289,7 @@ class Scenario:
                 known = ", ".join(sorted(measured)) or "none"
                 raise CosimError(f"{where}: unknown measured output in '{col.name}' "
                                  f"(measured: {known})")
+        self._check_operator(operator)
         if plant_tunable is None:
             return
         for event in self.events[1:]:
@@ -280,6 +299,19 @@ class Scenario:
                         f"{self.path}:{event.line}:{col.index}: column '{col.name}': "
                         f"'{col.target}' can only be set in the first row (before "
                         "initialisation); it is not an input or tunable parameter")
+
+
+    def _check_operator(self, check: Callable[[str, float], str] | None) -> None:
+        """Every ``op.*`` cell against ``check`` (``Scenario.validate``'s ``operator``)."""
+        for event in self.events:
+            for col, value in event.values:
+                if col.kind != OP:
+                    continue
+                where = f"{self.path}:{event.line}:{col.index}"
+                why = ("the controller takes no operator settings" if check is None
+                       else check(col.target, value))
+                if why:
+                    raise CosimError(f"{where}: column '{col.name}': {why}")
 
 
 def _parse_header(path: Path, header: list[str]) -> tuple[Column, ...]:
@@ -307,11 +339,14 @@ def _parse_header(path: Path, header: list[str]) -> tuple[Column, ...]:
         elif (parts[0] == "sensor" and len(parts) >= 3 and parts[-1] in SENSOR_KINDS
               and all(parts[1:-1])):
             columns.append(Column(i, name, SENSOR_KINDS[parts[-1]], ".".join(parts[1:-1])))
+        elif parts[0] == "op" and (name == "op.mode" or (len(parts) == 3 and all(parts))):
+            columns.append(Column(i, name, OP, name))
         else:
             raise CosimError(
                 f"{where}: unknown signal '{name}': expected ref.<output>, dist.<disturbance>, "
-                "plant.<variable>, sensor.<output>.bias, sensor.<output>.noise or "
-                "sensor.<output>.uniform")
+                "plant.<variable>, sensor.<output>.bias, sensor.<output>.noise, "
+                "sensor.<output>.uniform or op.<setting> (op.mode, op.service.<input>, "
+                "op.manual.<input>, op.control.<output>, op.min.<signal>, op.max.<signal>)")
     return tuple(columns)
 
 
@@ -371,7 +406,9 @@ def load(path: str | Path) -> Scenario:
                         raise CosimError(f"{path}:{line}:{col.index}: column '{col.name}': "
                                          "a reference needs a value in the first row")
                     continue
-                v = f.number(cell, line, col.index, col.name)
+                word = cell.lower()
+                v = (MODE_WORDS[word] if col.kind == OP and word in MODE_WORDS
+                     else f.number(cell, line, col.index, col.name))
                 if col.kind in (NOISE, UNIFORM) and v < 0:
                     what = ("standard deviation" if col.kind == NOISE else "half-width")
                     raise CosimError(f"{path}:{line}:{col.index}: column '{col.name}': noise "

@@ -23,6 +23,8 @@
 void model_set_defaults(ModelData *m) {
     m->time = 0.0;
     m->warnings = 0;
+    m->refused = 0;
+    m->refusal = NULL;
     for (int a = 0; a < CTL_NY; a++) {
         m->y[a] = CTL_Y_START[a];
         m->ref[a] = CTL_Y_START[a];
@@ -94,7 +96,13 @@ double model_get(const ModelData *m, unsigned vr) {
     if (vr >= VR_PARAM) return mpc_ctl_get_parameter(m->ctl, (int)(vr - VR_PARAM));
     if (vr < VR_REF) return m->y[vr - VR_Y];
     if (vr < VR_D) return m->ref[vr - VR_REF];
-    if (vr < VR_U) return m->d[vr - VR_D];
+    if (vr < VR_OP) return m->d[vr - VR_D];
+    if (vr < VR_U) return mpc_ctl_get_operator(m->ctl, (int)(vr - VR_OP));
+    if (vr == VR_REFUSED) return m->refused;
+    if (vr >= VR_COMPUTED && vr < VR_REFUSED) {
+        mpc_ctl_computed(m->ctl, u);
+        return u[vr - VR_COMPUTED];
+    }
     mpc_ctl_outputs(m->ctl, u, &status, &fallback, &iterations, pred, target);
     if (vr < VR_STATUS) return u[vr - VR_U];
     if (vr == VR_STATUS) return status;
@@ -114,8 +122,16 @@ const char *model_set(ModelData *m, unsigned vr, double value, bool initialized)
         m->ref[vr - VR_REF] = value;
         return NULL;
     }
-    if (vr >= VR_D && vr < VR_U) {
+    if (vr >= VR_D && vr < VR_OP) {
         m->d[vr - VR_D] = value;
+        return NULL;
+    }
+    if (vr >= VR_OP && vr < VR_U) {   /* refused: kept as it was, counted, logged */
+        const char *why = mpc_ctl_set_operator(m->ctl, (int)(vr - VR_OP), value);
+        if (why) {
+            m->refused++;
+            m->refusal = why;
+        }
         return NULL;
     }
     if (vr >= VR_PARAM && vr < N_VARIABLES)
@@ -151,8 +167,13 @@ const char *model_do_step(ModelData *m, double step, char *msg, size_t n) {
 }
 
 /* the warnings the step raised, one per call (the glue logs each until NULL), the most
- * serious first */
+ * serious first; a refused operator setting's reason before them */
 const char *model_warning(ModelData *m, char *msg, size_t n) {
+    if (m->refusal) {
+        snprintf(msg, n, "an operator setting was refused (kept as it was): %s", m->refusal);
+        m->refusal = NULL;
+        return msg;
+    }
     const int w = m->warnings;
     const int bit = w & WARN_NONFINITE_INPUT         ? WARN_NONFINITE_INPUT
                     : w & WARN_NO_ADMISSIBLE_SETPOINT ? WARN_NO_ADMISSIBLE_SETPOINT

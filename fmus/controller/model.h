@@ -15,10 +15,15 @@
  *
  * Value references: 0 time; then the measured outputs (inputs of the FMU, named as the
  * plant's outputs), their set-points ref.<output>, the measured disturbances dist.<name>
- * (CTL_ND of them, none for most designs), the inputs to apply (outputs of the FMU,
- * named as the plant's inputs), status, fallback, iterations, the predicted outputs
- * pred.<output>, and the tunable parameters (the law file's LAW_P_*: offset_filter, the
- * diagonal of R, du_weight, offset_weight by signal, as the law has them).
+ * (CTL_ND of them, none for most designs), the operator's settings (CTL_NOP inputs, op.mode,
+ * op.service.<input>, op.manual.<input>, op.min.<signal>, op.max.<signal>: controllers/
+ * kernel/operator.c), the inputs to apply (outputs of the FMU, named as the plant's inputs),
+ * status, fallback, iterations, the predicted outputs pred.<output>, the steady outputs
+ * target.<output>, what the law computed computed.<input> (in manual: in shadow), the
+ * number of operator settings refused op.refused, and the tunable parameters (the law
+ * file's LAW_P_*: offset_filter, the diagonal of R, du_weight, offset_weight by signal, as
+ * the law has them). An operator setting the controller refuses is kept as it was (the
+ * FMI call succeeds; op.refused counts it, the next step logs why).
  */
 #ifndef CONTROLLER_MODEL_H
 #define CONTROLLER_MODEL_H
@@ -45,13 +50,16 @@
 #define VR_Y 1                              /* CTL_NY measured outputs */
 #define VR_REF (VR_Y + CTL_NY)              /* CTL_NY set-points */
 #define VR_D (VR_REF + CTL_NY)              /* CTL_ND measured disturbances */
-#define VR_U (VR_D + CTL_ND)                /* CTL_NU inputs to apply */
+#define VR_OP (VR_D + CTL_ND)               /* CTL_NOP operator settings */
+#define VR_U (VR_OP + CTL_NOP)              /* CTL_NU inputs to apply */
 #define VR_STATUS (VR_U + CTL_NU)
 #define VR_FALLBACK (VR_STATUS + 1)
 #define VR_ITERATIONS (VR_FALLBACK + 1)
 #define VR_PRED (VR_ITERATIONS + 1)         /* CTL_NY predicted outputs */
 #define VR_TARGET (VR_PRED + CTL_NY)        /* CTL_NY steady outputs the FHOCP steers to */
-#define VR_PARAM (VR_TARGET + CTL_NY)       /* CTL_NPARAM tunable parameters */
+#define VR_COMPUTED (VR_TARGET + CTL_NY)    /* CTL_NU inputs the law computed */
+#define VR_REFUSED (VR_COMPUTED + CTL_NU)   /* operator settings refused so far */
+#define VR_PARAM (VR_REFUSED + 1)           /* CTL_NPARAM tunable parameters */
 #define N_VARIABLES (VR_PARAM + CTL_NPARAM)
 
 /* the controller step (controller_step.c: controllers/kernel/controller.c, loader.c) */
@@ -65,6 +73,9 @@ int mpc_ctl_step(ctl_state *st, const double *y_phys, const double *r_phys,
 int mpc_ctl_take_warnings(ctl_state *st);
 double mpc_ctl_get_parameter(const ctl_state *st, int i);
 const char *mpc_ctl_set_parameter(ctl_state *st, int i, double value);
+const char *mpc_ctl_set_operator(ctl_state *st, int i, double value);
+double mpc_ctl_get_operator(const ctl_state *st, int i);
+void mpc_ctl_computed(const ctl_state *st, double *u_phys);
 void mpc_ctl_outputs(const ctl_state *st, double *u_phys, int *status, int *fallback,
                     int *iterations, double *y_pred, double *y_target);
 
@@ -75,6 +86,8 @@ typedef struct {
     double d[CTL_ND > 0 ? CTL_ND : 1];   /* the measured disturbances */
     ctl_state *ctl;           /* the controller (model_acquire) */
     int warnings;             /* raised by the last step, not yet logged (model_warning) */
+    int refused;              /* operator settings refused so far */
+    const char *refusal;      /* why the last one was, not yet logged (model_warning) */
 } ModelData;
 
 void model_set_defaults(ModelData *m);

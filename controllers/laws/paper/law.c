@@ -64,8 +64,10 @@ enum {
 
 typedef struct law_state {
   gk_ws *ws;
-  /* the FHOCP's inputs already applied (controller.h; given with every step) */
+  /* the FHOCP's inputs already applied and the operator's terms (controller.h; given with
+   * every step) */
   const ctl_prefix *prefix;
+  const ctl_ops *ops;
   /* the set-point handling: the requested set-point, the FHOCP's, the offset estimate d_hat
    * and its gain (a parameter) */
   int has_ref, has_model, has_reference;
@@ -269,6 +271,7 @@ static void write_request(law_state *st, const double *xhat, const double *u_ini
     st->ubg[r0 + k] = 0.0;
     st->lbg[r0 + NX + k] = 0.0;
   }
+  move_rows(st->lbg, st->ubg);
   for (int c = 0; c < NW; c++) st->w[c] = 0.0;
   if (u_init) {
     memcpy(st->w, u_init, NH * NU * sizeof(double));
@@ -279,6 +282,8 @@ static void write_request(law_state *st, const double *xhat, const double *u_ini
     for (int i = 0; i < NH; i++) memcpy(st->w + i * NU, st->u_bar, NU * sizeof(double));
   }
   for (int c = 0; c < NH * NU; c++) st->w[c] = gk_clip1(st->w[c]);
+  ops_bound(st->ops, st->lbx, st->ubx);   /* the operator's bounds (FHOCPLayout.write) */
+  ops_clip(st->ops, st->w);
   prefix_impose(st->prefix, st->w);
   prefix_bound(st->prefix, st->lbx, st->ubx);
   const double gap = soften ? PFX(plan_slacks)(st->ws, st->w, p, st->bnd, st->alpha)
@@ -416,15 +421,29 @@ __attribute__((unused)) static void law_disturbance_moved(law_state *st) {
 /* PaperLaw.restart: nothing (the next solve starts from the shifted plan) */
 __attribute__((unused)) static void law_restart(law_state *st) { (void)st; }
 
+/* PaperLaw.applied: the inputs the plant got (normalised), u_{-1} of the next step */
+static void law_applied(law_state *st, const double *u) {
+  memcpy(st->uprev, u, sizeof st->uprev);
+  st->has_uprev = 1;
+}
+
+/* the paper's law takes no operator limits on its outputs (mpc_operating.py): no room */
+static int law_room(const law_state *st, double *slack) {
+  (void)st; (void)slack;
+  return 0;
+}
+
 /* PaperLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr, the
  * FHOCP from xstart (x_hat, or x_hat predicted over the inputs' shortest dead time) with the
- * inputs already applied in prefix; with no admissible set-point to start from, u is left as
- * it came (controller.c: the inputs held, the box's middle before any) */
+ * inputs already applied in prefix and the operator's terms ops; with no admissible set-point
+ * to start from, u is left as it came (controller.c: the inputs held, the box's middle
+ * before any) */
 static void law_step(law_state *st, const double *xhat, const double *xstart,
-                     const ctl_prefix *prefix, double e_o, const double *y, const double *yr,
-                     double *u, int *warnings) {
+                     const ctl_prefix *prefix, const ctl_ops *ops, double e_o, const double *y,
+                     const double *yr, double *u, int *warnings) {
   st->prefix = prefix;
-  tightened_bounds(e_o, st->bnd);   /* (the governor's feasibility test reads them) */
+  st->ops = ops;
+  operator_bounds(ops, e_o, st->bnd);   /* (the governor's feasibility test reads them) */
   if (st->moved_refused) {
     *warnings |= CTL_WARN_SETPOINT_REJECTED;
     st->moved_refused = 0;

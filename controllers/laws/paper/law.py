@@ -105,6 +105,8 @@ class PaperLaw:
     """
 
     name = "paper"
+    #: operator limits on its outputs and outputs out of its cost (controllers.mpc_operating)
+    output_limits = False
 
     def __init__(self, model: Any, cert: Any, fhocp_options: dict[str, Any],
                  handling: SetpointHandling, *, name: str, certified: bool = True) -> None:
@@ -245,6 +247,17 @@ class PaperLaw:
         self.fhocp.set_weight("R" if family == "R" else "du",
                               self.model.problem.input_names.index(signal), float(value))
         return "the FHOCP's input cost (th:feasibility-stability holds for any R > 0)"
+
+    def applied(self, u: np.ndarray) -> None:
+        self.mpc.u_prev = np.array(u, dtype=float)
+
+    def control(self, controlled: np.ndarray) -> str:
+        from controllers.errors import OptionError
+
+        if not np.all(controlled):
+            raise OptionError("the paper's law regulates to the equilibrium of every output "
+                              "(eq:mpc): an output cannot leave its cost; use law=tracking")
+        return "every output controlled"
 
     def summary(self) -> dict[str, Any]:
         h = self.handling

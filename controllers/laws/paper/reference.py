@@ -104,7 +104,7 @@ class FixedSetpoint(ServesOne):
                           request.u_bar, request.alpha, request.u_init,
                           fh.warm_start if request.warm else None, fh.warm_duals,
                           fh.rollout, request.u_prev if fh.has_du else None, fh.prefix,
-                          fh.start_slacks if fh.softening else None)
+                          fh.start_slacks if fh.softening else None, fh.operator)
 
     def check_answer(self, wopt: np.ndarray, pv: np.ndarray, x_hat: np.ndarray, e_o: float,
                      request: Setpoint, status: str) -> FHOCPResult:

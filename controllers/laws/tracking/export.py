@@ -31,7 +31,8 @@ def export_design(law: Any, observer: Any, model: Any, u_lo: np.ndarray,
                 "CT_US_RATE": -1.0 if ass.us_rate is None else float(ass.us_rate),
                 "CT_XS_CHECK_TOL": float(XS_CHECK_TOL)}
     return ControllerDesign.common(fhocp, observer, law.disturbance.beta, law.certified, model,
-                                   u_lo, u_hi, ass, "tracking", law_data)
+                                   u_lo, u_hi, ass, "tracking", law_data,
+                                   output_limits=law.output_limits)
 
 
 def title(law: Any) -> str:

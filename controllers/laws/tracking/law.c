@@ -39,8 +39,10 @@ enum {
 
 typedef struct law_state {
   gk_ws *ws;
-  /* the FHOCP's inputs already applied (controller.h; given with every step) */
+  /* the FHOCP's inputs already applied and the operator's terms (controller.h; given with
+   * every step) */
   const ctl_prefix *prefix;
+  const ctl_ops *ops;
   /* the output-disturbance estimate d_hat (DisturbanceFilter) and its gain (a parameter) */
   double dhat[NY], beta;
   /* the tracking MPC: artificial steady state, plan, last input, next initial guess;
@@ -64,12 +66,14 @@ typedef struct law_state {
 /* the tightened bounds (controller.h), in the uncertified mode around y + d_hat, and Y_s's
  * right-hand side */
 static void tighten(law_state *st, double e_o) {
-  tightened_bounds(e_o, st->bnd);
+  operator_bounds(st->ops, e_o, st->bnd);
   if (!CT_CERTIFIED)
     for (int i = 0; i < NH; i++)
       for (int j = 0; j < NL; j++) st->bnd[i * NL + j] -= st->shift[j];
-  for (int j = 0; j < NL; j++)
-    YS_RHS(st)[j] = CT_CERTIFIED ? CT_YS_BASE[j] : CT_YS_BASE[j] - st->shift[j];
+  for (int j = 0; j < NL; j++) {   /* narrowed by the operator's limits (ys_rhs) */
+    const double base = st->ops->active ? CT_YS_BASE[j] - st->ops->dh[j] : CT_YS_BASE[j];
+    YS_RHS(st)[j] = CT_CERTIFIED ? base : base - st->shift[j];
+  }
 }
 
 /* the answer check of (w, p) into r (ArtificialSteadyState._check_compiled): the kernel's plain
@@ -134,11 +138,15 @@ static void write_request(law_state *st, const double *xhat, const double *rt,
   double *p = st->p;
   parameters(p, xhat, xs0, rt, up);
   variable_bounds(st->lbx, st->ubx, CT_ALPHA_C, soften);
+  const ctl_ops *ops = st->ops;
   if (CT_US_RATE > 0.0)
     for (int j = 0; j < NU; j++) {
-      st->lbx[NUU + j] = fmax(us_centre[j] - CT_US_RATE, -1.0);
-      st->ubx[NUU + j] = fmin(us_centre[j] + CT_US_RATE, 1.0);
+      const double c = ops->active ? fmin(fmax(us_centre[j], ops->lo[j]), ops->hi[j])
+                                   : us_centre[j];
+      st->lbx[NUU + j] = fmax(c - CT_US_RATE, -1.0);
+      st->ubx[NUU + j] = fmin(c + CT_US_RATE, 1.0);
     }
+  ops_bound(ops, st->lbx, st->ubx);
   prefix_bound(st->prefix, st->lbx, st->ubx);
   /* the constraint rows: output rows i >= 1 (paired), the terminal rows, Y_s */
   const int r0 = (NH - 1) * NQ;
@@ -155,8 +163,13 @@ static void write_request(law_state *st, const double *xhat, const double *rt,
     st->ubg[r0 + 2 * NX + r] = YS_RHS(st)[CT_PAIR_UP[r]];
     if (CT_PAIR_LO[r] >= 0) st->lbg[r0 + 2 * NX + r] = -YS_RHS(st)[CT_PAIR_LO[r]];
   }
+  move_rows(st->lbg, st->ubg);
   /* the initial guess: the candidate, t its terminal gap, the multipliers shifted */
   memcpy(st->w, u_init, NUU * sizeof(double));
+  if (ops->active) {   /* inside the operator's bounds, the inputs already applied kept */
+    ops_clip(ops, st->w);
+    prefix_impose(st->prefix, st->w);
+  }
   for (int j = 0; j < NU; j++)
     st->w[NUU + j] = fmin(fmax(us_init[j], st->lbx[NUU + j]), st->ubx[NUU + j]);
   for (int c = IT + 1; c < NW; c++) st->w[c] = 0.0;   /* the slacks (SOFT) */
@@ -290,15 +303,46 @@ __attribute__((unused)) static void law_disturbance_moved(law_state *st) {
 /* TrackingLaw.restart: the steady state starts again at the next step */
 __attribute__((unused)) static void law_restart(law_state *st) { st->started = 0; }
 
+/* TrackingLaw.applied: the inputs the plant got (normalised), u_{-1} of the next step */
+static void law_applied(law_state *st, const double *u) {
+  memcpy(st->uprev, u, sizeof st->uprev);
+  st->has_uprev = 1;
+}
+
+/* Operating.room: the last plan's slack in each row, its stages i = 1 .. N-1 at its bounds
+ * and its steady state in Y_s (L (U_o x + b_o) against bnd + L b_o), into slack (NL, >= 0);
+ * 0 after a fallback (no plan to keep feasible) */
+static int law_room(const law_state *st, double *slack) {
+  double y[NY];
+  if (st->last.fallback || !st->has_plan) return 0;
+  for (int r = 0; r < NL; r++) slack[r] = INFINITY;
+  for (int i = 1; i < NH; i++) {
+    PFX(output)(st->res.x + i * NX, y);
+    for (int r = 0; r < NL; r++) {
+      double ly = 0.0;
+      for (int a = 0; a < NY; a++) ly += y[a] * CT_L[r * NY + a];
+      slack[r] = fmin(slack[r], (st->bnd[i * NL + r] + CT_LBO[r]) - ly);
+    }
+  }
+  PFX(output)(st->xs, y);
+  for (int r = 0; r < NL; r++) {
+    double ly = 0.0;
+    for (int a = 0; a < NY; a++) ly += y[a] * CT_L[r * NY + a];
+    slack[r] = fmax(fmin(slack[r], (YS_RHS(st)[r] + CT_LBO[r]) - ly), 0.0);
+  }
+  return 1;
+}
+
 /* TrackingLaw.step: u (normalised) at x_hat, e_o for the measured y and the set-point yr, the
  * FHOCP from xstart (x_hat, or x_hat predicted over the inputs' shortest dead time) with the
- * inputs already applied in prefix */
+ * inputs already applied in prefix and the operator's terms ops */
 static void law_step(law_state *st, const double *xhat, const double *xstart,
-                     const ctl_prefix *prefix, double e_o, const double *y, const double *yr,
-                     double *u, int *warnings) {
+                     const ctl_prefix *prefix, const ctl_ops *ops, double e_o, const double *y,
+                     const double *yr, double *u, int *warnings) {
   double yh[NY], rt[NY];
   (void)warnings;
   st->prefix = prefix;
+  st->ops = ops;
   if (!st->started) {
     double x_s[NX], u_s[NU];
     PFX(output)(xhat, yh);

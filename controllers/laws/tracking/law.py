@@ -180,12 +180,17 @@ class TrackingLaw:
     """
 
     name = "tracking"
+    #: operator limits on its outputs and outputs out of its cost (controllers.mpc_operating)
+    output_limits = True
 
     def __init__(self, model: Any, cert: Any, tracker: Any, disturbance: Any,
                  design: Mapping[str, Any], name: str, certified: bool = True) -> None:
         self.model, self.cert, self.tracker, self.disturbance = model, cert, tracker, disturbance
         self.fhocp = tracker.fhocp
         self.design = dict(design)
+        #: the outputs in the offset cost (``op.control``), and the engineer's ``T``
+        self.controlled = np.ones(model.problem.p, dtype=bool)
+        self._offset_weights = np.array(self.fhocp.reference.offset_weight, dtype=float)
         self.component = name
         self.certified = certified
         self.reset()
@@ -381,7 +386,7 @@ class TrackingLaw:
     def settings(self) -> list[Setting]:
         fh, pr = self.fhocp, self.model.problem
         return settings_of(self.disturbance.beta, fh.R, fh.du_weight if fh.has_du else None,
-                           fh.reference.offset_weight, list(pr.input_names),
+                           self._offset_weights, list(pr.input_names),
                            list(pr.output_names))
 
     def refuse(self, name: str, value: float) -> str:
@@ -397,12 +402,29 @@ class TrackingLaw:
             self.disturbance.beta = float(value)
             return "the output-disturbance estimate's gain"
         if family == "offset_weight":
-            self.fhocp.set_weight("T", pr.output_names.index(signal), float(value))
+            a = pr.output_names.index(signal)
+            self._offset_weights[a] = float(value)
+            if self.controlled[a]:   # an output not controlled keeps T = 0 until it returns
+                self.fhocp.set_weight("T", a, float(value))
             return "the offset cost (the tracking law's hypotheses hold for any T > 0)"
         self.fhocp.set_weight("R" if family == "R" else "du", pr.input_names.index(signal),
                               float(value))
         return ("the FHOCP's input cost (the tracking law's hypotheses hold for any R > 0, "
                 "S >= 0)")
+
+    def applied(self, u: np.ndarray) -> None:
+        self.tracker.u_prev = np.array(u, dtype=float)
+
+    def control(self, controlled: np.ndarray) -> str:
+        """An output not controlled leaves the offset cost (its weight ``T`` 0, the
+        engineer's kept for its return); its rows, and ``Y_s``'s, stay."""
+        fh, names = self.fhocp, self.model.problem.output_names
+        for a, keep in enumerate(controlled):
+            fh.set_weight("T", a, float(self._offset_weights[a]) if keep else 0.0)
+        self.controlled = np.array(controlled, dtype=bool)
+        dropped = [n for n, c in zip(names, self.controlled, strict=True) if not c]
+        return ("the offset cost without " + ", ".join(dropped) if dropped
+                else "every output in the offset cost")
 
     def summary(self) -> dict[str, Any]:
         fh = self.fhocp

@@ -37,6 +37,7 @@ class TrackingLayout:
         self.it = M * m + m
         self.ix = None
         self.ng = (N - 1) * qr + 2 * n + qr
+        self.ng += fh.move_rows(self.iu[:M], self.ius, None, self.nw)   # eq:move-constraint
         self.npar = 2 * n + fh.p + (m if fh.has_du else 0)
         self.ys_base = self.ys_bounds - fh.Lbo          # Y_s: L U_o x_s <= rhs
         self._g_for: np.ndarray | None = None   # the bounds _lbg, _ubg were written for
@@ -52,24 +53,29 @@ class TrackingLayout:
         pv = ins["p"]
         self._write_parameters(pv, x_hat, request.x_s0, request.r, request.u_prev)
         self._write_bounds(ins, e_o)
+        op = fh.operator   # the operator's settings (controllers.ocp.operator_terms)
         if self.us_rate is not None:   # the steady input moves at most us_rate per step
-            c = request.us_centre
+            c = request.us_centre if op is None else np.minimum(np.maximum(
+                request.us_centre, op.lo), op.hi)
             ins["lbx"][self.ius] = np.maximum(c - self.us_rate, -1.0)
             ins["ubx"][self.ius] = np.minimum(c + self.us_rate, 1.0)
+        u_init = request.u_init
+        if op is not None:
+            op.bound(ins["lbx"], ins["ubx"], self.iu, self.ius)
+            u_init = fh.prefix.impose(op.clip(u_init))
         fh.prefix.bound(ins["lbx"], ins["ubx"], self.iu)
         w0 = ins["x0"]
-        w0[self.iu.ravel()] = request.u_init.ravel()
+        w0[self.iu.ravel()] = u_init.ravel()
         w0[self.ius] = np.minimum(np.maximum(request.us_init, ins["lbx"][self.ius]),
                                   ins["ubx"][self.ius])
         if fh.softening:   # the slacks of the candidate's plan
-            x = None if fh.kernel is not None else fh.simulate(x_hat, request.u_init)
+            x = None if fh.kernel is not None else fh.simulate(x_hat, u_init)
             gap = fh.start_slacks(w0, pv, x, request.x_s0, self.steady_bounds(e_o),
                                   self.alpha_c)
         elif fh.kernel is not None:   # the rollout stays cached for the solve
             gap = fh.kernel.terminal_gap(w0, pv)
         else:
-            gap = float(np.max(np.abs(fh.simulate(x_hat, request.u_init)[-1]
-                                      - request.x_s0)))
+            gap = float(np.max(np.abs(fh.simulate(x_hat, u_init)[-1] - request.x_s0)))
         w0[self.it] = min(max(gap, 1e-6), self.alpha_c)
         warm = fh.warm_start
         if request.warm and warm is not None and fh.warm_duals:
@@ -101,10 +107,11 @@ class TrackingLayout:
             self._ubg[up_pos] = flat[up_idx]
             self._lbg[lo_pos] = -flat[lo_idx]
             r0 = (fh.N - 1) * fh.qr + 2 * fh.n      # the Y_s rows
+            ys = slice(r0, r0 + fh.qr)
             rhs = self.ys_rhs
-            self._ubg[r0:] = rhs[fh.pair_up]
-            self._lbg[r0:] = np.where(fh.pair_lo >= 0, -rhs[np.maximum(fh.pair_lo, 0)],
-                                      -np.inf)
+            self._ubg[ys] = rhs[fh.pair_up]
+            self._lbg[ys] = np.where(fh.pair_lo >= 0, -rhs[np.maximum(fh.pair_lo, 0)],
+                                     -np.inf)
             self._g_for = bounds
         ins["lbg"][:] = self._lbg
         ins["ubg"][:] = self._ubg
@@ -121,6 +128,8 @@ class TrackingLayout:
         r0 = (N - 1) * qr
         ubg[r0:r0 + n] = 0.0
         lbg[r0 + n:r0 + 2 * n] = 0.0                  # the Y_s rows: _write_bounds
+        if fh.move is not None:                       # eq:move-constraint: the last rows
+            lbg[-fh.nmv:], ubg[-fh.nmv:] = fh.move.lower, fh.move.upper
         self._lbg, self._ubg = lbg, ubg
         stage = np.arange(1, N)[:, None] * q
         up_idx = (stage + fh.pair_up[None, :]).ravel()
@@ -149,4 +158,6 @@ class TrackingLayout:
         if N > 1:
             blk = np.arange((N - 1) * qr).reshape(N - 1, qr)
             pg[: (N - 1) * qr] = np.vstack([blk[1:], blk[-1:]]).ravel()
+        if fh.move is not None:
+            pg[self.ng - fh.nmv:] = self.ng - fh.nmv + fh.move.permutation()
         self.perm_g = pg

@@ -48,7 +48,6 @@ class TrackingNLP(SingleShootingNLP):
         super().__init__(fhocp, kernel)
         ass = fhocp.reference   # the artificial steady state
         self.p: Any = fhocp
-        self.ng = fhocp.ng
         self.ius = ass.ius
         #: the offset weights ``T``
         self.T = ass.offset_weight
@@ -156,7 +155,7 @@ class TrackingNLP(SingleShootingNLP):
         _, Xs = self.steady(wv, pv)
         N, n, q, iu, ius, it = p.N, p.n, p.qr, self._iuf, self._iusf, self._itf
         r0 = (N - 1) * q
-        J = np.zeros((self.ng, self._nwf))
+        J = np.zeros((self.ng_law, self._nwf))
         J[:r0, iu] = np.matmul(p.DUo[None], ro.S[1:N]).reshape(r0, N * p.m)
         J[r0:r0 + n, iu] = ro.S[N]
         J[r0 + n:r0 + 2 * n, iu] = ro.S[N]
@@ -205,7 +204,7 @@ class TrackingNLP(SingleShootingNLP):
         N, n, q = p.N, p.n, p.qr
         r0 = (N - 1) * q
         lx = lf * self._dcost_dxs(ro, xs, pv) - lg[r0:r0 + n] - lg[r0 + n:r0 + 2 * n] + (
-            p.DUo.T @ lg[r0 + 2 * n:])
+            p.DUo.T @ lg[r0 + 2 * n:r0 + 2 * n + q])
         A, _ = jacobians(p.params, xs, wv[self.ius])
         mu = np.linalg.solve((np.eye(n) - A).T, lx)
         one = self._one_stage.rollout(xs, wv[self.ius][None], derivatives=True)

@@ -197,10 +197,12 @@ class ArtificialSteadyState(TrackingLayout, ServesOne):
 
     @property
     def ys_rhs(self) -> np.ndarray:
-        """Right-hand side of ``Y_s`` on ``L U_o x_s`` (shifted by the FHOCP's
-        :meth:`~controllers.ocp.fhocp.FHOCP.set_output_shift`)."""
-        shift = self._fh.output_shift
-        return self.ys_base if shift is None else self.ys_base - shift
+        """Right-hand side of ``Y_s`` on ``L U_o x_s`` (narrowed by the operator's limits,
+        :attr:`~controllers.ocp.fhocp.FHOCP.narrowing`, ``eq:operator-rows``; shifted by
+        the FHOCP's :meth:`~controllers.ocp.fhocp.FHOCP.set_output_shift`)."""
+        fh = self._fh
+        base = self.ys_base if fh.narrowing is None else self.ys_base - fh.narrowing
+        return base if fh.output_shift is None else base - fh.output_shift
 
     def kernel_terms(self) -> dict[str, Any]:
         """The kernel's artificial steady state (``HAS_ASS``) and control horizon."""

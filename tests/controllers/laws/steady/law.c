@@ -24,11 +24,18 @@ __attribute__((unused)) static void law_disturbance_moved(law_state *st) { (void
 
 __attribute__((unused)) static void law_restart(law_state *st) { (void)st; }
 
+static void law_applied(law_state *st, const double *u) { (void)st; (void)u; }
+
+static int law_room(const law_state *st, double *slack) {
+  (void)st; (void)slack;
+  return 0;
+}
+
 static void law_step(law_state *st, const double *xhat, const double *xstart,
-                     const ctl_prefix *prefix, double e_o, const double *y, const double *yr,
-                     double *u, int *warnings) {
+                     const ctl_prefix *prefix, const ctl_ops *ops, double e_o, const double *y,
+                     const double *yr, double *u, int *warnings) {
   double x[NX];
-  (void)xhat; (void)xstart; (void)prefix; (void)e_o; (void)y; (void)warnings;
+  (void)xhat; (void)xstart; (void)prefix; (void)ops; (void)e_o; (void)y; (void)warnings;
   PFX(equilibrium)(st->ws, yr, x, u);
   for (int j = 0; j < NU; j++) u[j] = gk_clip1(u[j]);
   st->last.status = CTL_OPTIMAL;

@@ -26,6 +26,8 @@ class SteadyLaw:
     """``u = ū(ȳ)`` (module docstring)."""
 
     name = "steady"
+    #: no operator limits on its outputs, no output out of its cost (controllers.mpc_operating)
+    output_limits = False
 
     def __init__(self, model: Any, cert: Any, fhocp: Any, certified: bool = True) -> None:
         self.model, self.cert, self.fhocp, self.certified = model, cert, fhocp, certified
@@ -76,3 +78,9 @@ class SteadyLaw:
 
     def set(self, name: str, value: float) -> str:
         raise AssertionError("never called: it has no settings")
+
+    def applied(self, u: np.ndarray) -> None:
+        """Nothing: its next input does not depend on the last."""
+
+    def control(self, controlled: np.ndarray) -> str:
+        raise AssertionError("never called: output_limits is False")
