@@ -99,6 +99,16 @@ static void move_jacobian(double *J) {
       if (i + 1 < NM || HAS_ASS) J[((i + 1) * NU + j) * NG + r] = 1.0;
     }
 }
+
+/* their share of the Lagrangian's gradient, J' lam_g over the move rows (the columns above) */
+static void move_lagrangian_gradient(const double *lg, double *gl) {
+  for (int i = 0; i < NM; i++)
+    for (int j = 0; j < NU; j++) {
+      const double l = lg[RMV + i * NU + j];
+      gl[i * NU + j] -= l;
+      if (i + 1 < NM || HAS_ASS) gl[(i + 1) * NU + j] += l;
+    }
+}
 #endif
 
 HOT static void constraints(const gk_ws *ws, const double *w, const double *p, double *g) {

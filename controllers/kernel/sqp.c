@@ -68,6 +68,9 @@ HOT static void lagrangian_gradient(const gk_ws *ws, const double *w, const doub
 #if SOFT
   soft_lagrangian_gradient(ws, w, lam_x, lg, gl);
 #endif
+#if HAS_MOVE
+  move_lagrangian_gradient(lg, gl);
+#endif
 }
 
 /* test hook: lagrangian_gradient at (w, p) in workspace ws */
