@@ -3,18 +3,22 @@
 One candidate model (one size, one seed) is fitted by :func:`fit_candidate`:
 
 * **Windows with free initial states.** The training rows are cut into windows (each training
-  stretch whole up to :data:`MAX_WINDOW` rows, else in pieces of :data:`LONG_WINDOW`), and
-  each window's initial state ``x_0`` is a decision variable beside the weights (bounded to
-  the GRU's state box [−1, 1]). The loss is the squared simulation error over every sample of
-  every window: the model is never asked to reproduce a transient from ``x = 0`` that the
-  plant did not have, which on a short record (the transient of a slow plant is a large share
-  of a thousand samples) is what a washout of a tenth of a subsequence cannot prevent.
+  stretch whole up to :data:`MAX_WINDOW` rows, else in equal pieces of about
+  :data:`LONG_WINDOW`), and each window's initial state ``x_0`` is a decision variable beside
+  the weights (bounded to the GRU's state box [−1, 1]). The loss is the squared simulation
+  error over every sample of every window: the model is never asked to reproduce a transient
+  from ``x = 0`` that the plant did not have, which on a short record (the transient of a slow
+  plant is a large share of a thousand samples) is what a washout of a tenth of a subsequence
+  cannot prevent.
 * **δISS at every step.** The weights are those of
-:func:`controllers.identification.training.constrain`:
-  ν ≤ 1 − margin exactly (``th:stability-bonassi``), by projection, as the paper's training.
+  :func:`controllers.identification.training.constrain`: ν ≤ 1 − margin exactly
+  (``th:stability-bonassi``), by projection, as the paper's training, and the contraction
+  ρ_s = σ̄_z + (1 − σ̄_z) ν of ``lem:Vs`` at most :attr:`SimOptions.rho_max`
+  (:mod:`controllers.identification.contraction`).
 * **The gradient in C.** Loss and gradient come from :mod:`controllers.identification.
   sim_loss` (backpropagation through time, some hundred times torch's autograd); torch maps
-  them through the projection and runs Adam.
+  them through the projection and runs Adam on batches of the windows, then L-BFGS on all of
+  them (:mod:`controllers.identification.polish`: Adam finds the basin, L-BFGS settles in it).
 * **Selection on simulation.** Every :attr:`SimOptions.eval_every` steps the model is run
   free over the whole record, each experiment from an initial state estimated from its first
   samples (:mod:`controllers.identification.initial_state`), read through the sensor limits;
@@ -45,21 +49,29 @@ from controllers.identification.initial_state import (
 from controllers.identification.record import SPLITS, Record
 from controllers.identification.sim_loss import SimLoss, unpack
 
-__all__ = ["LONG_WINDOW", "MAX_WINDOW", "STEPS_PER_EPOCH", "Candidate", "SimOptions",
-           "default_epochs", "fit_candidate", "free_run_states", "rms", "simulate",
-           "training_windows"]
+__all__ = ["LONG_WINDOW", "MAX_WINDOW", "POLISH", "STEPS_PER_EPOCH", "Candidate", "SimOptions",
+           "default_epochs", "default_polish", "fit_candidate", "free_run_states", "rms",
+           "simulate", "single_threaded", "training_windows"]
 
 #: A training stretch up to this many rows is one window...
 MAX_WINDOW = 2000
-#: ... a longer one is cut into windows of this many rows (the last one longer).
+#: ... a longer one is cut into windows of about this many rows (as many whole ones as fit,
+#: the stretch shared equally between them: windows of one length waste no padding when
+#: simulated side by side).
 LONG_WINDOW = 1000
 #: Adam steps per epoch (the paper's recipe: 30 subsequences in batches of 5).
 STEPS_PER_EPOCH = 6
-#: Default epochs: :data:`SHORT_EPOCHS` for a record of at most :data:`SHORT_ROWS` training
-#: rows (one window, one cheap step: a short record needs the steps, not the time; measured
-#: on a 1,000-sample heater record, 3,000 epochs against 1,000: validation RMS 0.12 against
-#: 0.22 degC), else :data:`LONG_EPOCHS` (each step sees a sixth of many windows).
-SHORT_ROWS, SHORT_EPOCHS, LONG_EPOCHS = 5000, 3000, 1000
+#: Default epochs: :data:`EPOCH_ROWS` row-passes over the training rows, at least
+#: :data:`MIN_EPOCHS`, at most :data:`MAX_EPOCHS` (a short record needs the steps, not the
+#: time: measured on a 1,000-sample heater record, 3,000 epochs against 1,000: validation RMS
+#: 0.12 against 0.22 degC).
+EPOCH_ROWS, MIN_EPOCHS, MAX_EPOCHS = 1_000_000, 150, 3000
+#: L-BFGS iterations after Adam by default (:mod:`controllers.identification.polish`):
+#: :data:`POLISH_ROWS` row-passes over the training rows, inside [:data:`MIN_POLISH`,
+#: :data:`POLISH`] ...
+POLISH_ROWS, MIN_POLISH, POLISH = 9_000_000, 500, 2000
+#: ... stopped after this many without a better validation score.
+POLISH_PATIENCE = 1000
 #: Evaluations of the validation free run over a training (an evaluation costs some hundred
 #: steps: the initial states' estimates and a free run of the whole record) ...
 EVALUATIONS = 200
@@ -78,6 +90,12 @@ class SimOptions:
     epochs : int
         Passes over the training windows, each of :data:`STEPS_PER_EPOCH` Adam steps on a
         batch of the windows (a sixth of them; all of them, when there are fewer than six).
+    polish : int
+        L-BFGS iterations on all the windows after Adam (:mod:`controllers.identification.
+        polish`; 0: none), stopped after :data:`POLISH_PATIENCE` without a better score.
+    rho_max : float
+        Keep ρ_s ≤ rho_max (``lem:Vs``; 0: no cap), as
+        :class:`controllers.identification.training.TrainOptions`.
     lr, lr_final : float
         Adam's learning rate, decayed geometrically to ``lr_final`` over the steps.
     window : int
@@ -101,17 +119,25 @@ class SimOptions:
     window: int = 0
     nu_margin: float = 0.02
     sigma_z_max: float = 0.0
+    rho_max: float = 0.0
     train_uz: bool = False
     bz_init: float = 2.0
     x0_samples: int = DEFAULT_SAMPLES
     eval_every: int = 0
     patience: int = 0
+    polish: int = POLISH
     seed: int = 0
 
     @property
     def steps(self) -> int:
         """Adam steps: ``epochs`` × :data:`STEPS_PER_EPOCH`."""
         return self.epochs * STEPS_PER_EPOCH
+
+    @property
+    def total(self) -> int:
+        """Adam steps and L-BFGS iterations, at most: what :func:`fit_candidate`'s progress
+        counts to."""
+        return self.steps + self.polish
 
 
 @dataclass
@@ -129,15 +155,24 @@ class Candidate:
 
 
 def default_epochs(record: Record) -> int:
-    """:data:`SHORT_EPOCHS` or :data:`LONG_EPOCHS`, by the record's training rows."""
-    rows = int(np.count_nonzero(record.split == "train"))
-    return SHORT_EPOCHS if rows <= SHORT_ROWS else LONG_EPOCHS
+    """:data:`EPOCH_ROWS` over the record's training rows, inside
+    [:data:`MIN_EPOCHS`, :data:`MAX_EPOCHS`]."""
+    rows = max(1, int(np.count_nonzero(record.split == "train")))
+    return int(min(MAX_EPOCHS, max(MIN_EPOCHS, round(EPOCH_ROWS / rows))))
+
+
+def default_polish(record: Record) -> int:
+    """:data:`POLISH_ROWS` over the record's training rows, inside [:data:`MIN_POLISH`,
+    :data:`POLISH`]: an iteration simulates every training row."""
+    rows = max(1, int(np.count_nonzero(record.split == "train")))
+    return int(min(POLISH, max(MIN_POLISH, round(POLISH_ROWS / rows))))
 
 
 def training_windows(record: Record, window: int = 0) -> list[tuple[int, int]]:
     """``(start, end)`` rows of the training windows: each training stretch whole when it
-    has at most ``window`` rows (0: :data:`MAX_WINDOW`), else cut into pieces of ``window``
-    (0: :data:`LONG_WINDOW`) rows, the remainder joined to the last."""
+    has at most ``window`` rows (0: :data:`MAX_WINDOW`), else cut into ``k`` windows of equal
+    length (to a row), ``k`` the number of whole ``window``-row pieces (0:
+    :data:`LONG_WINDOW`) it holds."""
     whole = window or MAX_WINDOW
     piece = window or LONG_WINDOW
     out = []
@@ -146,7 +181,7 @@ def training_windows(record: Record, window: int = 0) -> list[tuple[int, int]]:
             out.append((a, b))
             continue
         k = (b - a) // piece
-        cuts = [a + i * piece for i in range(k)] + [b]
+        cuts = [a + (i * (b - a)) // k for i in range(k)] + [b]
         out.extend(itertools.pairwise(cuts))
     return out
 
@@ -237,55 +272,100 @@ def _descend(r: dict[str, Any], q: dict[str, Any], x0: Any, idx: np.ndarray,
 def fit_candidate(record: Record, options: SimOptions | None = None,
                   progress: Callable[[int], None] | None = None,
                   init: dict[str, np.ndarray] | None = None) -> Candidate:
-    """Fit one candidate (module docstring); ``progress`` is called with the number of Adam
-    steps done after each evaluation; ``init``: initial weights (default
+    """Fit one candidate (module docstring): Adam over :attr:`SimOptions.steps` steps, then
+    L-BFGS over :attr:`SimOptions.polish` iterations (:mod:`controllers.identification.
+    polish`), the best evaluation of both kept; ``progress`` is called with the number of
+    steps and iterations done after each evaluation; ``init``: initial weights (default
     :func:`controllers.identification.training.init_params`)."""
     import torch
 
-    from controllers.identification.training import (
-        constrain,
-        init_params,
-        project,
-        trainable_params,
-    )
+    from controllers.identification.training import init_params, trainable_params
 
     opt = options or SimOptions()
-    torch.set_num_threads(1)
+    single_threaded()
     torch.manual_seed(opt.seed)
-    dtype = torch.float64
-    target = 1.0 - opt.nu_margin
-    m, p, n = record.m, record.p, opt.n
     U, Y, W, S = window_arrays(record, opt.window)
-    B = U.shape[0]
+    params = trainable_params(init or init_params(opt.n, record.m, record.p, opt.seed,
+                                                  opt.bz_init),
+                              opt.train_uz, 1.0 - opt.nu_margin, opt.sigma_z_max, opt.rho_max)
+    x0 = torch.zeros(U.shape[0], opt.n, dtype=torch.float64, requires_grad=True)
+    judge = _Judge(record, opt, progress)
+    _adam(params, x0, (U, Y, W, S), opt, judge)
+    if opt.polish > 0 and judge.best.params is not None:
+        from controllers.identification.polish import polish
+
+        stop = opt.steps + opt.polish
+
+        def offer(it: int, qn: dict[str, np.ndarray]) -> bool:
+            step = opt.steps + it
+            if it % MIN_EVAL_EVERY and step != stop:
+                return False
+            judge(step, qn, None)
+            return step - judge.best.step >= POLISH_PATIENCE
+
+        polish((U, Y, W, S), judge.best.params, judge.best.x0, judge.effective, opt.train_uz,
+               opt.polish, offer)
+    best = judge.best
+    chosen = best.params if best.params is not None else judge.last
+    return Candidate(params=chosen, nu=nu_numpy(chosen), score=best.score,
+                     best_step=best.step, steps_run=best.history[-1]["step"],
+                     wall_time=time.perf_counter() - judge.t0, options=asdict(opt),
+                     history=best.history)
+
+
+def single_threaded() -> None:
+    """One thread for torch and for the OpenBLAS libraries numpy and scipy loaded (Linux;
+    elsewhere torch only): a candidate is one thread's work, and on a machine with as many
+    busy workers as cores, OpenBLAS's idle threads slowed scipy's L-BFGS-B of the initial
+    states 2-20-fold (measured with 2 workers on 2 cores)."""
+    import ctypes
+
+    import scipy.optimize  # noqa: F401  (loads scipy's OpenBLAS, which L-BFGS-B calls)
+    import torch
+
+    torch.set_num_threads(1)
+    try:
+        with open("/proc/self/maps", encoding="utf-8") as maps:
+            paths = {line.split()[-1] for line in maps if "openblas" in line.lower()}
+    except OSError:
+        return
+    for path in sorted(paths):
+        try:
+            lib = ctypes.CDLL(path)
+        except OSError:
+            continue
+        for name in ("openblas_set_num_threads", "scipy_openblas_set_num_threads",
+                     "openblas_set_num_threads64_", "scipy_openblas_set_num_threads64_"):
+            setter = getattr(lib, name, None)
+            if setter is not None:
+                setter(1)
+                break
+
+
+def _adam(params: dict[str, Any], x0: Any, arrays: tuple[np.ndarray, ...], opt: SimOptions,
+          judge: _Judge) -> None:
+    """The Adam phase of :func:`fit_candidate`: :attr:`SimOptions.steps` steps, each on a
+    batch of the windows ``arrays`` (``U, Y, W, S``), evaluated by ``judge`` every so often
+    (early stop after :attr:`SimOptions.patience` epochs without a better score)."""
+    import torch
+
+    from controllers.identification.training import project
+
+    U, Y, W, S = arrays
+    B, n, m, p = U.shape[0], opt.n, U.shape[2], Y.shape[2]
     rng = np.random.default_rng(opt.seed)
     n_batches = min(STEPS_PER_EPOCH, B)
-
-    params = trainable_params(init or init_params(n, m, p, opt.seed, opt.bz_init),
-                              opt.train_uz, target, opt.sigma_z_max)
-    x0 = torch.zeros(B, n, dtype=dtype, requires_grad=True)
-    steps = opt.steps
+    steps, target = opt.steps, 1.0 - opt.nu_margin
     adam, scheduler = _optimiser([v for v in params.values() if v.requires_grad] + [x0], opt)
-    scored = _scored(record)
-
-    def weights() -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-        q, _ = constrain(params, target, opt.sigma_z_max)
-        return q, {k: v.detach().numpy().copy() for k, v in q.items()}
-
-    best = _Selection()
     patience = opt.patience * STEPS_PER_EPOCH
     every = opt.eval_every or max(MIN_EVAL_EVERY, steps // EVALUATIONS)
     batches: list[np.ndarray] = []
-    starts: dict[int, np.ndarray] = {}     # the evaluations' initial states, warm started
-    t0 = time.perf_counter()
     for step in range(steps + 1):
-        q, qn = weights()
+        q = judge.effective(params)
+        qn = {k: v.detach().numpy().copy() for k, v in q.items()}
         if step % every == 0 or step == steps:
-            xi = simulate(qn, record, opt.x0_samples, starts)
-            best.offer(step, qn, float(np.mean(rms(record, xi)[scored])),
-                       time.perf_counter() - t0)
-            if progress is not None:
-                progress(step)
-            if patience and step - best.step >= patience:
+            judge(step, qn, x0.detach().numpy())
+            if patience and step - judge.best.step >= patience:
                 break
         if step == steps:
             break
@@ -296,14 +376,41 @@ def fit_candidate(record: Record, options: SimOptions | None = None,
         loss = SimLoss(U[idx], Y[idx], w / w.sum(), S[idx])
         _descend(loss(qn, x0.detach().numpy()[idx]), q, x0, idx, (n, m, p), adam)
         scheduler.step()
-        project(params, target, opt.sigma_z_max)
+        project(params, target, opt.sigma_z_max, opt.rho_max)
         with torch.no_grad():
             x0.clamp_(-1.0, 1.0)
-    chosen = best.params if best.params is not None else weights()[1]
-    return Candidate(params=chosen, nu=nu_numpy(chosen), score=best.score,
-                     best_step=best.step, steps_run=best.history[-1]["step"],
-                     wall_time=time.perf_counter() - t0, options=asdict(opt),
-                     history=best.history)
+
+
+class _Judge:
+    """The evaluations of one candidate: the validation free run of a set of weights
+    (:func:`simulate`, warm started from the last estimates), the selection, the progress."""
+
+    def __init__(self, record: Record, opt: SimOptions,
+                 progress: Callable[[int], None] | None) -> None:
+        self.record, self.opt, self.progress = record, opt, progress
+        self.scored = _scored(record)
+        self.starts: dict[int, np.ndarray] = {}
+        self.best = _Selection()
+        self.last: dict[str, np.ndarray] = {}
+        self.t0 = time.perf_counter()
+
+    def effective(self, params: dict[str, Any]) -> dict[str, Any]:
+        """The weights the model runs: ``params`` through the δISS and contraction caps
+        (:func:`controllers.identification.training.constrain`)."""
+        from controllers.identification.training import constrain
+
+        o = self.opt
+        return constrain(params, 1.0 - o.nu_margin, o.sigma_z_max, o.rho_max)[0]
+
+    def __call__(self, step: int, qn: dict[str, np.ndarray], x0: np.ndarray | None) -> None:
+        """Score ``qn`` at ``step`` (``x0``: the training windows' initial states, kept with
+        the best weights; ``None``: the best's are kept) and report the progress."""
+        xi = simulate(qn, self.record, self.opt.x0_samples, self.starts)
+        self.last = qn
+        self.best.offer(step, qn, float(np.mean(rms(self.record, xi)[self.scored])),
+                        time.perf_counter() - self.t0, x0)
+        if self.progress is not None:
+            self.progress(step)
 
 
 def _optimiser(trainable: list[Any], opt: SimOptions) -> tuple[Any, Any]:
@@ -325,9 +432,15 @@ class _Selection:
     score: float = math.inf
     step: int = -1
     history: list[dict[str, Any]] = field(default_factory=list)
+    #: the training windows' initial states with the best weights
+    x0: np.ndarray | None = None
 
-    def offer(self, step: int, qn: dict[str, np.ndarray], score: float, t: float) -> None:
-        """Record the evaluation at ``step`` and keep ``qn`` when it is the best yet."""
+    def offer(self, step: int, qn: dict[str, np.ndarray], score: float, t: float,
+              x0: np.ndarray | None = None) -> None:
+        """Record the evaluation at ``step`` and keep ``qn`` (and ``x0``, when given) when it
+        is the best yet."""
         self.history.append({"step": step, "score": score, "time": t})
         if math.isfinite(score) and score < self.score and nu_numpy(qn) < 1.0:
             self.params, self.score, self.step = qn, score, step
+            if x0 is not None:
+                self.x0 = np.array(x0, dtype=float)

@@ -41,6 +41,7 @@ from controllers import gru
 from controllers.certification.bounds import nu as nu_numpy
 from controllers.errors import DataError, DesignError, TrainingError
 from controllers.identification import metrics, sequences
+from controllers.identification.contraction import sigma_cap
 
 __all__ = ["CONSTRAINED", "TrainOptions", "TrainResult", "build_model", "constrain", "init_params",
            "nu_torch", "subsequences", "train"]
@@ -82,6 +83,9 @@ class TrainOptions:
         Initial update-gate bias (z ≈ σ(bz_init) near 1: slow tank dynamics).
     patience : int
         Early stopping: epochs without a better validation FIT (0 = off).
+    rho_max : float
+        With ``project``: also keep ρ_s = σ̄_z + (1 − σ̄_z) ν ≤ rho_max (0 = no cap;
+        ``lem:Vs``; :func:`constrain`).
     sigma_z_max : float
         With ``project``: also keep σ̄_z ≤ sigma_z_max (0 = no cap). σ̄_z sets the
         contraction rates ρ_s, ρ_o of ``lem:Vs``/``lem:Vo``, hence the MPC's tightening.
@@ -112,6 +116,7 @@ class TrainOptions:
     bz_init: float = 2.0
     patience: int = 0
     sigma_z_max: float = 0.0
+    rho_max: float = 0.0
     train_uz: bool = False
     eval_washout: int = 1000
     seed: int = 0
@@ -151,30 +156,40 @@ def nu_torch(p: dict[str, Any]) -> Any:
             + 0.25 * (1 + p_h) / (1 - s_z) * norm(p["U_z"]))
 
 
-def constrain(p: dict[str, Any], target: float, sigma_z_max: float = 0.0
-              ) -> tuple[dict[str, Any], Any]:
-    """Rescale the weights so that ν ≤ ``target`` (and σ̄_z ≤ ``sigma_z_max`` when > 0).
+def constrain(p: dict[str, Any], target: float, sigma_z_max: float = 0.0,
+              rho_max: float = 0.0) -> tuple[dict[str, Any], Any]:
+    """Rescale the weights so that ν ≤ ``target`` (``th:stability-bonassi``), σ̄_z ≤
+    ``sigma_z_max`` when > 0, and ρ_s = σ̄_z + (1 − σ̄_z) ν ≤ ``rho_max`` when > 0 (``lem:Vs``).
 
-    First, when ``sigma_z_max`` is set, every row of ``[W_z U_z b_z]`` whose absolute sum
-    exceeds ``logit(sigma_z_max)`` is scaled down to it (so σ̄_z ≤ sigma_z_max). Then
-    ``U_h`` and ``U_z`` are multiplied by ``s = min(1, target/ν)``: ν is linear in ‖U_h‖∞
-    and super-linear in ‖U_z‖∞ (through σ̄_z and φ̄_h), so the result has ν ≤ target.
-    Differentiable (almost everywhere): used in the forward pass of :func:`train`.
+    First, every row of ``[W_z U_z b_z]`` whose absolute sum exceeds ``logit(cap)`` is scaled
+    down to it (so σ̄_z ≤ cap), the cap the smaller of ``sigma_z_max`` and, with
+    ``rho_max``, :func:`controllers.identification.contraction.sigma_cap`. Then ``U_h`` and
+    ``U_z`` are multiplied by ``s = min(1, ν_max/ν)`` with ``ν_max = target``, or with
+    ``rho_max`` the smaller of ``target`` and ``(rho_max − σ̄_z)/(1 − σ̄_z)``: ν is linear in
+    ‖U_h‖∞ and super-linear in ‖U_z‖∞ (through σ̄_z and φ̄_h, which only shrink), so the
+    result has ν ≤ ν_max. Differentiable (almost everywhere): used in the forward pass of
+    :func:`train` and :func:`controllers.identification.simulation.fit_candidate`.
 
     Returns the rescaled weights and ν before the ν-rescaling.
     """
     import torch
 
     q = dict(p)
-    if sigma_z_max > 0:
-        cap = math.log(sigma_z_max / (1.0 - sigma_z_max))
+    caps = [c for c in (sigma_z_max, sigma_cap(rho_max) if rho_max > 0 else 0.0) if c > 0]
+    if caps:
+        cap = math.log(min(caps) / (1.0 - min(caps)))
         rows = (p["W_z"].abs().sum(dim=1) + p["U_z"].abs().sum(dim=1) + p["b_z"].abs())
-        k = torch.clamp(cap / rows, max=1.0)
+        k = torch.clamp(cap / torch.clamp(rows, min=1e-300), max=1.0)
         q["W_z"] = p["W_z"] * k.reshape(-1, 1)
         q["U_z"] = p["U_z"] * k.reshape(-1, 1)
         q["b_z"] = p["b_z"] * k
     v = nu_torch(q)
-    s = torch.clamp(target / v, max=1.0)
+    allowed: Any = target
+    if rho_max > 0:   # ρ_s = σ̄_z + (1 − σ̄_z) ν ≤ rho_max (lem:Vs)
+        sz = torch.sigmoid(torch.cat([q["W_z"], q["U_z"], q["b_z"].reshape(-1, 1)],
+                                     dim=1).abs().sum(dim=1).max())
+        allowed = torch.clamp((rho_max - sz) / (1.0 - sz), min=0.0, max=target)
+    s = torch.clamp(allowed / v, max=1.0)
     q["U_h"] = q["U_h"] * s
     q["U_z"] = q["U_z"] * s
     return q, v
@@ -318,7 +333,8 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
     target = 1.0 - opt.nu_margin
     p0 = init or init_params(opt.n, u_train.shape[1], y_train.shape[1], opt.seed, opt.bz_init)
     params = trainable_params(p0, opt.train_uz,
-                              target if opt.constraint == "project" else None, opt.sigma_z_max)
+                              target if opt.constraint == "project" else None, opt.sigma_z_max,
+                              opt.rho_max)
     split_all = np.asarray(split_all)
     U, Y = _subsequences(u_train, y_train, u_all, y_all, split_all, experiment, opt)
     optimiser = torch.optim.Adam([v for v in params.values() if v.requires_grad], lr=opt.lr)
@@ -358,19 +374,20 @@ def train(u_train: np.ndarray, y_train: np.ndarray, u_all: np.ndarray, y_all: np
                        history=history, options=asdict(opt))
 
 
-def project(params: dict[str, Any], target: float, sigma_z_max: float) -> None:
-    """Project the trainable weights onto ``ν ≤ target`` (and ``σ̄_z ≤ sigma_z_max``) in
-    place: :func:`constrain` of :data:`CONSTRAINED`."""
+def project(params: dict[str, Any], target: float, sigma_z_max: float,
+            rho_max: float = 0.0) -> None:
+    """Project the trainable weights onto ``ν ≤ target`` (and ``σ̄_z ≤ sigma_z_max``,
+    ``ρ_s ≤ rho_max``) in place: :func:`constrain` of :data:`CONSTRAINED`."""
     import torch
 
     with torch.no_grad():
-        q, _ = constrain(params, target, sigma_z_max)
+        q, _ = constrain(params, target, sigma_z_max, rho_max)
         for k in CONSTRAINED:
             params[k].copy_(q[k])
 
 
 def trainable_params(p0: dict[str, np.ndarray], train_uz: bool, target: float | None,
-                     sigma_z_max: float = 0.0) -> dict[str, Any]:
+                     sigma_z_max: float = 0.0, rho_max: float = 0.0) -> dict[str, Any]:
     """The trainable float64 tensors from the weights ``p0``: ``U_z = 0`` (not trained)
     unless ``train_uz``; projected onto ``ν ≤ target`` unless ``target`` is None."""
     import torch
@@ -380,7 +397,7 @@ def trainable_params(p0: dict[str, np.ndarray], train_uz: bool, target: float | 
     if not train_uz:
         params["U_z"] = torch.zeros_like(params["U_z"])
     if target is not None:
-        project(params, target, sigma_z_max)
+        project(params, target, sigma_z_max, rho_max)
     return params
 
 
@@ -388,7 +405,7 @@ def _effective(params: dict[str, Any], opt: TrainOptions, target: float
                ) -> tuple[dict[str, Any], Any]:
     """The weights the loss sees and their ν: projected, or as they are (penalty mode)."""
     if opt.constraint == "project":
-        return constrain(params, target, opt.sigma_z_max)
+        return constrain(params, target, opt.sigma_z_max, opt.rho_max)
     return params, nu_torch(params)
 
 
@@ -421,7 +438,7 @@ def _epoch(params: dict[str, Any], U: Any, Y: Any, optimiser: Any,
         (loss + reg).backward()
         optimiser.step()
         if opt.constraint == "project":
-            project(params, target, opt.sigma_z_max)
+            project(params, target, opt.sigma_z_max, opt.rho_max)
     return total / n_batches
 
 

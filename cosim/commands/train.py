@@ -29,7 +29,8 @@ LEARNING_RATES = {"simulation": (0.03, 0.003), "truncated": (0.02, 0.0005)}
 #: line overrides them (their flags default to absent: the table's value, else
 #: :func:`_option_defaults`).
 PROBLEM_OPTIONS: dict[str, type] = {"epochs": int, "n": int, "sizes": list, "seeds": int,
-                                    "sigma_z_max": float, "nu_margin": float}
+                                    "sigma_z_max": float, "rho_max": float,
+                                    "nu_margin": float}
 #: Options of ``--method truncated`` only.
 TRUNCATED_ONLY = ("seq_len", "stride", "batch", "washout", "constraint", "penalty_weight",
                   "uo_weight")
@@ -55,22 +56,26 @@ are wholly validation or test data (a separate experiment of the plant); the DAT
 train whole unless they have a 'split' column.
 
 --method simulation (default): the model is fitted on its free-run simulation error over
-windows of the training rows (a training stretch whole up to 2,000 rows, else 1,000-row
-windows), each window starting from an initial state fitted with the weights, never from
-x = 0. Several sizes (--sizes, default 4,8,16) and seeds (--seeds, default 2) are fitted in
-parallel worker processes (--workers) and the one that simulates the validation rows best is
-kept (each experiment from the state estimated from its first --x0-samples samples). An
-output that sits at its largest or smallest value for many samples is a sensor limit: a
-prediction beyond it is no error, and simulations are read through it. An epoch is six Adam
-steps. --method truncated: the paper's recipe (truncated subsequences from x = 0 with a
-washout, the epoch with the best validation FIT).
+windows of the training rows (a training stretch whole up to 2,000 rows, else equal windows
+of about 1,000 rows), each window starting from an initial state fitted with the weights,
+never from x = 0: Adam (an epoch is six steps), then L-BFGS on all the windows (--polish).
+The certified contraction rho_s (lem:Vs) is kept below a cap read from the ARX baseline's
+slowest pole (a model time constant at most twice the plant's); the same candidates are also
+fitted without it, and the capped model is kept unless the other is 20% better (--rho-max
+sets a cap of its own). Sizes (--sizes, default 4,8,16) grow per seed (--seeds, default 2)
+while a larger one lowers the validation RMS by 5%; the seeds' lanes run in parallel worker
+processes (--workers) and the candidate that simulates the validation rows best is kept (each
+experiment from the state estimated from its first --x0-samples samples). An output that
+sits at its largest or smallest value for many samples is a sensor limit: a prediction beyond
+it is no error, and simulations are read through it. --method truncated: the paper's recipe
+(truncated subsequences from x = 0 with a washout, the epoch with the best validation FIT).
 
 At the end, per split and per experiment: the free-run RMS in the outputs' units and the FIT,
 next to an ARX model fitted on the same training rows (orders chosen on validation); a model
 worse than that linear baseline on validation says so. The model file records it all.
 
-The problem file's [train] table may set --epochs, --n, --sizes, --seeds, --sigma-z-max and
---nu-margin for its plant (sigma_z_max = 0.9); the command line overrides it.
+The problem file's [train] table may set --epochs, --n, --sizes, --seeds, --sigma-z-max,
+--rho-max and --nu-margin for its plant (sigma_z_max = 0.9); the command line overrides it.
 
 The model file goes to --out, by default models/<DATA stem>_gru.json in the CURRENT folder
 (data/fourtank.csv -> models/fourtank_gru.json). The shipped model
@@ -126,8 +131,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=d.seed,
                         help=f"random seed, the first of --seeds ({d.seed})")
     parser.add_argument("--epochs", type=int, default=argparse.SUPPRESS,
-                        help=f"maximum epochs, at most {MAX_EPOCHS} (simulation: 3000 for "
-                             "at most 5,000 training rows, else 1000; truncated "
+                        help=f"maximum epochs, at most {MAX_EPOCHS} (simulation: "
+                             "1,000,000 / training rows, in 150..3000; truncated "
                              f"{EPOCHS['truncated']})")
     parser.add_argument("--n", type=int, default=argparse.SUPPRESS,
                         help=f"GRU states, at most {MAX_STATES}: one size (default: --sizes; "
@@ -146,6 +151,7 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         help="training window length (default: a stretch whole up to 2,000 "
                              "rows, else 1,000-row windows)")
     _training_arguments(parser)
+    _contraction_arguments(parser)
     parser.add_argument("--quiet", action="store_true", help="no progress bar or summary")
     parser.set_defaults(func=run)
 
@@ -203,13 +209,27 @@ def _training_arguments(parser: argparse.ArgumentParser) -> None:
                         "(0 = off)")
 
 
+def _contraction_arguments(parser: argparse.ArgumentParser) -> None:
+    """The certified contraction's cap and the L-BFGS stretch after Adam (simulation)."""
+    parser.add_argument("--rho-max", type=float, default=argparse.SUPPRESS,
+                        help="keep the certified contraction rho_s = sigma_z_bar + (1 - "
+                             "sigma_z_bar) nu <= this (default, simulation: from the ARX "
+                             "baseline's slowest pole, a time constant at most twice the "
+                             "plant's, kept unless the uncapped fit is 20%% better; 0 = no "
+                             "cap)")
+    parser.add_argument("--polish", type=int, default=None,
+                        help="simulation: L-BFGS iterations after Adam (default "
+                             "9,000,000 / training rows, in 500..2000, in proportion when "
+                             "--epochs is below its default; 0 = none)")
+
+
 def _option_defaults() -> dict[str, Any]:
     """The defaults of :data:`PROBLEM_OPTIONS` (``None``: chosen later, from the record)."""
     from controllers.identification.training import TrainOptions
 
     d = TrainOptions()
     return {"epochs": None, "n": None, "sizes": None, "seeds": None,
-            "sigma_z_max": d.sigma_z_max, "nu_margin": d.nu_margin}
+            "sigma_z_max": d.sigma_z_max, "rho_max": None, "nu_margin": d.nu_margin}
 
 
 def _problem_options(args: argparse.Namespace, problem: Any) -> None:
@@ -353,7 +373,7 @@ def _check_options(args: argparse.Namespace) -> None:
             "--patience": (args.patience, 0), "--seed": (args.seed, 0),
             "--stride": (args.stride, 1), "--seeds": (args.seeds, 1),
             "--workers": (args.workers, 0), "--x0-samples": (args.x0_samples, 1),
-            "--window": (args.window, 0)}
+            "--window": (args.window, 0), "--polish": (args.polish, 0)}
     for option, (value, low) in ints.items():
         if value is not None and value < low:
             raise CosimError(f"{option} must be an integer >= {low}, got {value}")
@@ -374,6 +394,8 @@ def _check_options(args: argparse.Namespace) -> None:
         raise CosimError(f"--bz-init must be a finite number, got {args.bz_init}")
     if not 0 <= args.sigma_z_max < 1:
         raise CosimError(f"--sigma-z-max must be in [0, 1), got {args.sigma_z_max}")
+    if args.rho_max is not None and not (args.rho_max == 0 or 0.5 < args.rho_max < 1):
+        raise CosimError(f"--rho-max must be 0 (no cap) or in (0.5, 1), got {args.rho_max}")
     if not 0 < args.nu_margin < 1:
         raise CosimError(f"--nu-margin must be in (0, 1), got {args.nu_margin}")
     args.size_list = _sizes(args)

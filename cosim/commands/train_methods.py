@@ -58,37 +58,69 @@ def simulation(args: argparse.Namespace, data: Any, record: Any, problem: Any,
     """Candidates of sizes and seeds fitted on simulation error, the best on validation
     (:func:`controllers.identification.search.search`)."""
     from controllers.identification.search import DEFAULT_SEEDS, candidates, search
-    from controllers.identification.simulation import SimOptions, default_epochs
+    from controllers.identification.simulation import (
+        SimOptions,
+        default_epochs,
+        default_polish,
+    )
 
     init = _init(args, problem)
     epochs = args.epochs if args.epochs is not None else default_epochs(record)
+    # the polish follows a shorter --epochs in proportion (a quick run stays quick)
+    polish = (round(default_polish(record) * min(1.0, epochs / default_epochs(record)))
+              if args.polish is None else args.polish)
     sizes = [int(init["W_z"].shape[0])] if init is not None else args.size_list
     seeds = args.seeds or (1 if init is not None or args.n is not None else DEFAULT_SEEDS)
+    rho_max, contraction, arx = _contraction(args, record)
     base = SimOptions(epochs=epochs, lr=args.lr, lr_final=args.lr_final,
                       window=args.window, nu_margin=args.nu_margin,
-                      sigma_z_max=args.sigma_z_max, train_uz=args.train_uz,
+                      sigma_z_max=args.sigma_z_max, rho_max=rho_max, train_uz=args.train_uz,
                       bz_init=args.bz_init, x0_samples=args.x0_samples,
-                      patience=args.patience, seed=args.seed)
-    todo = candidates(base, sizes, seeds)
-    bar = _bar(len(todo) * base.steps, progress, "step")
+                      patience=args.patience,
+                      polish=polish, seed=args.seed)
+    # a derived cap is tried beside none: kept unless the uncapped fit is much better
+    loose = 0.0 if contraction["source"] == "ARX baseline" and rho_max > 0 else None
+    todo = candidates(base, sizes, seeds, loose)
+    bar = _bar(len(todo) * base.total, progress, "step")
     try:
         res = search(record, base, sizes, seeds, args.workers,
-                     progress=lambda done: bar.update(done - bar.n), init=init)
+                     progress=lambda done: bar.update(done - bar.n), init=init, loose=loose)
     finally:
         bar.close()
     best = res.best
-    history = ["n,seed,step,time_s,score_rms\n"] + [
-        f"{t['n']},{t['seed']},{h['step']},{h['time']:.2f},{h['score']:.6e}\n"
+    history = ["n,seed,rho_max,step,time_s,score_rms\n"] + [
+        f"{t['n']},{t['seed']},{t['rho_max']:g},{h['step']},{h['time']:.2f},{h['score']:.6e}\n"
         for t in res.tried for h in t["history"]]
     tried = [{k: v for k, v in t.items() if k != "history"} for t in res.tried]
+    adam = base.steps
     rec = {"method": "simulation", "options": best.options, "best_step": best.best_step,
-           "steps_run": best.steps_run, "epochs_run": best.steps_run // 6,
-           "best_epoch": best.best_step // 6, "candidates": tried,
+           "steps_run": best.steps_run, "epochs_run": min(best.steps_run, adam) // 6,
+           "best_epoch": min(best.best_step, adam) // 6,
+           "polish_iterations": max(0, best.steps_run - adam),
+           "contraction": {**contraction, **res.caps}, "candidates": tried,
            "selection": ("lowest validation RMS of the free run (normalised, averaged over "
                          "the outputs)" if record.has("val") else
                          "lowest training RMS of the free run (no validation rows)")}
-    label = f"GRU n={best.options['n']} (best of {len(todo)} candidates)"
-    return Trained(best.params, best.nu, rec, history, label)
+    label = f"GRU n={best.options['n']} (best of {len(tried)} candidates)"
+    return Trained(best.params, best.nu, rec, history, label,
+                   {} if arx is False else {"arx": arx})
+
+
+def _contraction(args: argparse.Namespace, record: Any
+                 ) -> tuple[float, dict[str, Any], Any]:
+    """The contraction cap ρ_max of the training (``lem:Vs``): ``--rho-max`` (or the problem's
+    ``[train] rho_max``) when given, else derived from the ARX baseline's slowest pole
+    (:func:`controllers.identification.contraction.rho_max`); its record for the model file;
+    the ARX baseline (``False``: not fitted here)."""
+    from controllers.identification import contraction, linear
+
+    if args.rho_max is not None:
+        return float(args.rho_max), {"rho_max": float(args.rho_max), "source": "given"}, False
+    arx = linear.fit_arx(record)
+    rho = contraction.rho_max(arx)
+    pole = None if arx is None else contraction.slowest_pole(arx)
+    return rho, {"rho_max": rho, "source": "ARX baseline", "slowest_pole": pole,
+                 "slack": contraction.SLACK}, arx
 
 
 def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
@@ -120,8 +152,8 @@ def truncated(args: argparse.Namespace, data: Any, record: Any, problem: Any,
         epochs=args.epochs, lr=args.lr, lr_final=args.lr_final, washout=auto.washout,
         nu_margin=args.nu_margin, constraint=args.constraint, penalty_weight=penalty,
         uo_weight=args.uo_weight, uo_max=args.uo_max, bz_init=args.bz_init,
-        patience=args.patience, sigma_z_max=args.sigma_z_max, train_uz=args.train_uz,
-        seed=args.seed)
+        patience=args.patience, sigma_z_max=args.sigma_z_max, rho_max=args.rho_max or 0.0,
+        train_uz=args.train_uz, seed=args.seed)
     init = _init(args, problem)
     if init is not None and init["W_z"].shape[0] != opts.n:
         raise CosimError(f"{args.init}: model has n={init['W_z'].shape[0]}, but --n is "
@@ -279,7 +311,7 @@ def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, train
     from cosim.core.atomicio import output_error, replacing
 
     ev = train_report.evaluate(trained.params, record, problem, data.experiment_names,
-                               args.x0_samples)
+                               args.x0_samples, trained.extra.get("arx", False))
     err = np.abs(record.y - ev.xi)[record.split == _scored_split(record)]
     doc = _model_record(args, data, record, trained, ev, wall, command, sidecar)
     profile, doc["prediction_error"] = _prediction_error(record, ev, problem, trained.params)

@@ -38,9 +38,12 @@ class Evaluation:
 
 
 def evaluate(params: dict[str, np.ndarray], record: Any, problem: Any,
-             experiment_names: list[str | None], x0_samples: int) -> Evaluation:
+             experiment_names: list[str | None], x0_samples: int,
+             arx: Any = False) -> Evaluation:
     """Score the model and fit and score its ARX baseline on ``record``
-    (:class:`controllers.identification.record.Record`, normalised by ``problem``)."""
+    (:class:`controllers.identification.record.Record`, normalised by ``problem``); ``arx``:
+    the baseline when it was fitted already (``None``: the record has too few rows for one),
+    ``False``: fit it here."""
     from controllers.identification import linear, report
     from controllers.identification.simulation import simulate
 
@@ -49,7 +52,7 @@ def evaluate(params: dict[str, np.ndarray], record: Any, problem: Any,
     starts: dict[int, np.ndarray] = {}
     xi = simulate(params, record, x0_samples, starts)
     ours = report.scores(record, xi, scale, names, experiment_names)
-    arx = linear.fit_arx(record)
+    arx = linear.fit_arx(record) if arx is False else arx
     theirs = bxi = orders = None
     if arx is not None:
         bxi = linear.simulate(arx, record)

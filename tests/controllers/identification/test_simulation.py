@@ -5,6 +5,8 @@ worker processes fit the candidates."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
@@ -42,13 +44,13 @@ def record() -> Record:
 
 def test_windows_follow_the_training_stretches(record: Record) -> None:
     assert training_windows(record) == [(0, 225), (300, 525)]
-    assert training_windows(record, window=100) == [(0, 100), (100, 225), (300, 400),
-                                                    (400, 525)]
+    assert training_windows(record, window=100) == [(0, 112), (112, 225), (300, 412),
+                                                    (412, 525)]
     assert record.limits.upper[0] is not None       # the plateau was found
 
 
 def test_the_fit_improves_the_free_run_stays_delta_iss_and_repeats(record: Record) -> None:
-    opt = SimOptions(n=6, epochs=60, seed=3)
+    opt = SimOptions(n=6, epochs=60, seed=3, polish=0)
     start = init_params(6, 1, 1, 3)
     before = rms(record, simulate(start, record))["val"][0]
     cand = fit_candidate(record, opt)
@@ -60,14 +62,30 @@ def test_the_fit_improves_the_free_run_stays_delta_iss_and_repeats(record: Recor
     assert all(np.array_equal(cand.params[k], again.params[k]) for k in cand.params)
 
 
+def test_lbfgs_after_adam_lowers_the_score_within_the_contraction_cap(record: Record) -> None:
+    """The polish (controllers.identification.polish) continues from Adam's best: a lower
+    validation score, every evaluation δISS with ρ_s ≤ rho_max (lem:Vs)."""
+    from controllers.certification.bounds import rho_s
+
+    opt = SimOptions(n=4, epochs=20, seed=1, rho_max=0.9, polish=0)
+    adam = fit_candidate(record, opt)
+    both = fit_candidate(record, replace(opt, polish=150))
+    assert both.score < 0.8 * adam.score and both.best_step > opt.steps
+    assert rho_s(both.params) <= 0.9 + 1e-12 and rho_s(adam.params) <= 0.9 + 1e-12
+    assert opt.steps < both.steps_run <= opt.total + 150
+
+
 def test_the_search_answer_does_not_depend_on_the_workers(record: Record) -> None:
-    base = SimOptions(epochs=4, seed=5)
-    todo = candidates(base, (3, 2), 2)
-    assert [(o.n, o.seed) for o in todo] == [(2, 5), (2, 6), (3, 5), (3, 6)]
+    """Each seed's lane grows the size while it pays (here never: the lanes stop after their
+    second size), the same candidates whatever the workers."""
+    base = SimOptions(epochs=4, seed=5, polish=10)
+    todo = candidates(base, (3, 2, 4), 2)
+    assert [(o.n, o.seed) for o in todo][:4] == [(2, 5), (2, 6), (3, 5), (3, 6)]
     steps: list[int] = []
-    one = search(record, base, (3, 2), 2, workers=1, progress=steps.append)
-    two = search(record, base, (3, 2), 2, workers=2)
+    one = search(record, base, (3, 2, 4), 2, workers=1, progress=steps.append, growth=1.0)
+    two = search(record, base, (3, 2, 4), 2, workers=2, growth=1.0)
+    assert [(t["n"], t["seed"]) for t in one.tried] == [(2, 5), (2, 6), (3, 5), (3, 6)]
     assert [t["score"] for t in one.tried] == [t["score"] for t in two.tried]
     assert one.best.score == min(t["score"] for t in one.tried)
     assert all(np.array_equal(one.best.params[k], two.best.params[k]) for k in one.best.params)
-    assert steps[-1] == 4 * base.steps
+    assert steps[-1] == 6 * base.total

@@ -70,6 +70,22 @@ def test_constrain_enforces_the_bound_and_is_differentiable():
     assert torch.equal(q2["U_h"], small["U_h"])
 
 
+@pytest.mark.parametrize("rho_max", [0.8, 0.95])
+def test_constrain_caps_the_contraction_rate(rho_max):
+    """With ``rho_max``: ρ_s = σ̄_z + (1 − σ̄_z) ν ≤ rho_max (lem:Vs), σ̄_z at most
+    ``sigma_cap(rho_max)``, the gradient reaching the gates through the cap."""
+    from controllers.identification.contraction import sigma_cap
+
+    p = random_params(5)
+    pt = {k: torch.tensor(v, dtype=torch.float64, requires_grad=True) for k, v in p.items()}
+    q, _ = training.constrain(pt, 0.98, 0.0, rho_max)
+    qn = {k: t.detach().numpy() for k, t in q.items()}
+    assert bounds.rho_s(p) > rho_max and bounds.rho_s(qn) <= rho_max + 1e-12
+    assert bounds.gate_bounds(qn)[0] <= sigma_cap(rho_max) + 1e-12
+    q["U_h"].sum().backward()
+    assert torch.any(pt["b_z"].grad != 0)   # ν's room depends on σ̄_z
+
+
 def test_init_params_are_delta_iss():
     for seed in range(3):
         assert bounds.nu(training.init_params(20, 2, 2, seed)) <= 0.5 + 1e-12

@@ -57,6 +57,8 @@ TRUNCATED = ["--method", "truncated", "--epochs", "1", "--seq-len", "20", "--was
     (["--uo-max", "-1"], "--uo-max must be a non-negative number, got -1.0"),
     (["--bz-init", "inf"], "--bz-init must be a finite number, got inf"),
     (["--sigma-z-max", "1"], "--sigma-z-max must be in [0, 1), got 1.0"),
+    (["--rho-max", "0.5"], "--rho-max must be 0 (no cap) or in (0.5, 1), got 0.5"),
+    (["--polish", "-1"], "--polish must be an integer >= 0, got -1"),
 ])
 def test_bad_numeric_options_exit_2(args: list[str], message: str, data: Path, tmp_path: Path,
                                     capsys: pytest.CaptureFixture) -> None:
@@ -164,8 +166,10 @@ def test_history_is_replaced_only_when_training_ends(data: Path, tmp_path: Path,
     assert main(["train", str(data), *FAST_SMALL, "--epochs", "10", "--out", str(out),
                  "--history", str(history)]) == 0
     lines = history.read_text().splitlines()
-    assert lines[0] == "n,seed,step,time_s,score_rms"
-    assert [line.split(",")[2] for line in lines[1:]] == ["0", "25", "50", "60"]
+    assert lines[0] == "n,seed,rho_max,step,time_s,score_rms"
+    caps = [line.split(",")[2] for line in lines[1:]]   # the derived cap, then none
+    assert caps[5:] == ["0"] * 5 and float(caps[0]) > 0.5 and len(set(caps[:5])) == 1
+    assert [line.split(",")[3] for line in lines[1:]] == ["0", "25", "50", "60", "67"] * 2
 
 
 def test_deeply_nested_sidecar_and_init_model(data: Path, tmp_path: Path,
@@ -188,18 +192,22 @@ def test_deeply_nested_sidecar_and_init_model(data: Path, tmp_path: Path,
 
 def test_the_problems_train_table_sets_options_the_command_line_overrides(
         data: Path, tmp_path: Path) -> None:
-    problem = with_table(tmp_path, "train", "n = 2\nepochs = 1\nsigma_z_max = 0.9\n")
+    problem = with_table(tmp_path, "train",
+                         "n = 2\nepochs = 1\nsigma_z_max = 0.9\nrho_max = 0.95\n")
     out = tmp_path / "a.json"
     assert main(["train", str(data), "--problem", str(problem), "--out", str(out),
                  "--quiet"]) == 0
     model = GRUModel.load(out)
-    assert model.n == 2 and model.problem.train == {"n": 2, "epochs": 1, "sigma_z_max": 0.9}
+    assert model.n == 2 and model.problem.train == {"n": 2, "epochs": 1, "sigma_z_max": 0.9,
+                                                    "rho_max": 0.95}
     assert model.training["options"]["sigma_z_max"] == 0.9
+    assert model.training["contraction"] == {"rho_max": 0.95, "source": "given"}
     out = tmp_path / "b.json"
     assert main(["train", str(data), "--problem", str(problem), "--out", str(out), "--n", "3",
-                 "--sigma-z-max", "0", "--quiet"]) == 0
+                 "--sigma-z-max", "0", "--rho-max", "0", "--quiet"]) == 0
     model = GRUModel.load(out)
     assert model.n == 3 and model.training["options"]["sigma_z_max"] == 0.0
+    assert model.training["options"]["rho_max"] == 0.0
     sizes = with_table(tmp_path, "train", "sizes = [2, 5]\nseeds = 1\nepochs = 1\n")
     out = tmp_path / "c.json"
     assert main(["train", str(data), "--problem", str(sizes), "--out", str(out), "--n", "3",
