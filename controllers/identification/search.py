@@ -19,8 +19,10 @@ A contraction cap derived from the data (``rho_max``,
 heater's capped candidates simulated as well as the uncapped ones, with ρ_s = 0.97 instead of
 0.9994) but may cost a nonlinear one much (a saturating GRU state contracts faster than its
 worst-case bound says: on the 1,000-sample Wiener heater of the tests, capped at 0.94, twice the
-validation RMS). ``loose`` therefore fits the same lanes without the cap (or with another), and
-the capped model is kept unless the other is better by :data:`PREFER_CAPPED`.
+validation RMS). With ``loose``, each lane therefore fits its smallest size both with the cap
+and without it (or with another), grows under the cap unless the other was better by more
+than :data:`PREFER_CAPPED`, and the same rule picks the model kept among all: a tighter
+certificate where it costs (almost) no accuracy.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from controllers.identification.simulation import Candidate, SimOptions, fit_can
 from controllers.workers import map_in_workers
 
 __all__ = ["DEFAULT_SEEDS", "DEFAULT_SIZES", "GROWTH", "PREFER_CAPPED", "SearchResult",
-           "candidates", "search"]
+           "candidates", "planned_steps", "search"]
 
 #: GRU sizes tried by default.
 DEFAULT_SIZES = (4, 8, 16)
@@ -45,10 +47,10 @@ DEFAULT_SEEDS = 2
 #: A lane tries its next size only when its last one lowered the lane's best validation RMS by
 #: at least this share.
 GROWTH = 0.05
-#: With a contraction cap and an alternative (``search``'s ``loose``), the best candidate of
-#: the alternative is kept only when it simulates the validation rows better than the best
-#: capped one by at least this share.
-PREFER_CAPPED = 0.2
+#: With a contraction cap and an alternative (``search``'s ``loose``), a candidate under the
+#: alternative is preferred only when it simulates the validation rows better than the capped
+#: one by more than this share.
+PREFER_CAPPED = 0.05
 
 
 @dataclass
@@ -62,34 +64,57 @@ class SearchResult:
     caps: dict[str, Any] = field(default_factory=dict)
 
 
-def candidates(base: SimOptions, sizes: Sequence[int], seeds: int,
-               loose: float | None = None) -> list[SimOptions]:
+def candidates(base: SimOptions, sizes: Sequence[int], seeds: int) -> list[SimOptions]:
     """Every ``(size, seed)`` combination of ``base``, the seeds ``base.seed …
-    base.seed + seeds − 1``, smallest size first; with ``loose``, the same again with the
-    contraction cap ``rho_max = loose`` (0: none)."""
-    caps = (base.rho_max,) if loose is None else (base.rho_max, loose)
-    return [replace(base, n=int(n), seed=base.seed + k, rho_max=c) for c in caps
-            for n in sorted(set(sizes)) for k in range(seeds)]
+    base.seed + seeds − 1``, smallest size first."""
+    return [replace(base, n=int(n), seed=base.seed + k) for n in sorted(set(sizes))
+            for k in range(seeds)]
 
 
-def _lane(args: tuple[Record, list[SimOptions], Any, float], progress: Callable[[int], None]
-          ) -> list[Candidate]:
-    """One seed's ladder of sizes (module docstring; ``growth``: :data:`GROWTH`): the
-    candidates it fitted, in order; ``progress`` gets the lane's steps done, every candidate's
-    :attr:`SimOptions.total` counted once it is over (fitted or skipped)."""
-    record, ladder, init, growth = args
-    fitted: list[Candidate] = []
-    done, best = 0, math.inf
-    for opt in ladder:
-        cand = fit_candidate(record, opt, lambda it, done=done: progress(done + it), init)
-        fitted.append(cand)
+def planned_steps(base: SimOptions, sizes: Sequence[int], seeds: int,
+                  loose: float | None = None) -> int:
+    """The most steps and iterations :func:`search` runs: every candidate's
+    :attr:`SimOptions.total`, and the smallest size's once more per seed with ``loose``."""
+    todo = candidates(base, sizes, seeds)
+    extra = [o for o in todo if o.n == min(sizes)] if loose is not None else []
+    return sum(o.total for o in todo + extra)
+
+
+def _prefer_loose(loose: float, capped: float) -> bool:
+    """Whether a score without the cap (``loose``) beats the capped one by
+    :data:`PREFER_CAPPED`."""
+    return math.isfinite(loose) and not loose >= (1.0 - PREFER_CAPPED) * capped
+
+
+def _lane(args: tuple[Record, list[SimOptions], Any, float, float | None],
+          progress: Callable[[int], None]) -> list[tuple[SimOptions, Candidate]]:
+    """One seed's ladder of sizes (module docstring; ``growth``: :data:`GROWTH`; ``loose``:
+    the alternative cap, tried at the smallest size): the candidates it fitted, in order;
+    ``progress`` gets the lane's steps done, its whole plan counted once it is over."""
+    record, ladder, init, growth, loose = args
+    fitted: list[tuple[SimOptions, Candidate]] = []
+    done = 0
+
+    def fit(opt: SimOptions) -> Candidate:
+        nonlocal done
+        cand = fit_candidate(record, opt, lambda it, at=done: progress(at + it), init)
         done += opt.total
         progress(done)
-        grew = cand.score < best * (1.0 - growth)
-        best = min(best, cand.score)
-        if len(fitted) > 1 and not grew:
+        fitted.append((opt, cand))
+        return cand
+
+    cap, best = ladder[0].rho_max, fit(ladder[0]).score
+    if loose is not None:
+        other = fit(replace(ladder[0], rho_max=loose)).score
+        if _prefer_loose(other, best):
+            cap, best = loose, other
+    for opt in ladder[1:]:
+        score = fit(replace(opt, rho_max=cap)).score
+        grew = score < best * (1.0 - growth)
+        best = min(best, score)
+        if not grew:
             break
-    progress(sum(o.total for o in ladder))
+    progress(sum(o.total for o in ladder) + (ladder[0].total if loose is not None else 0))
     return fitted
 
 
@@ -113,13 +138,12 @@ def search(record: Record, base: SimOptions, sizes: Sequence[int] = DEFAULT_SIZE
         The share by which a size must lower its lane's best score for the lane to try the
         next size (:data:`GROWTH`; 0: every size whenever it is better).
     loose : float, optional
-        An alternative contraction cap (0: none) fitted beside ``base.rho_max``, in lanes of
-        its own; its best is kept only when it is better by :data:`PREFER_CAPPED`.
+        An alternative contraction cap (0: none) to ``base.rho_max``: each lane fits its
+        smallest size under both and grows under the one kept (the alternative when better by
+        :data:`PREFER_CAPPED`); the same rule picks the best of all.
     """
-    todo = candidates(base, sizes, seeds, loose)
-    caps = sorted({o.rho_max for o in todo}, key=lambda c: c != base.rho_max)
-    lanes = [[o for o in todo if o.seed == base.seed + k and o.rho_max == c] for c in caps
-             for k in range(seeds)]
+    todo = candidates(base, sizes, seeds)
+    lanes = [[o for o in todo if o.seed == base.seed + k] for k in range(seeds)]
     workers = workers or min(len(lanes), os.cpu_count() or 1)
     done_steps = [0] * len(lanes)
 
@@ -128,20 +152,20 @@ def search(record: Record, base: SimOptions, sizes: Sequence[int] = DEFAULT_SIZE
         if progress is not None:
             progress(sum(done_steps))
 
-    jobs = [(record, lane, init, growth) for lane in lanes]
+    jobs = [(record, lane, init, growth, loose) for lane in lanes]
     if workers <= 1:
         fitted = [_lane(job, lambda it, i=i: tick(i, it)) for i, job in enumerate(jobs)]
     else:
         fitted = map_in_workers(_lane, jobs, workers, tick)
-    results = [(o, c) for lane, cands in zip(lanes, fitted, strict=True)
-               for o, c in zip(lane, cands, strict=False)]
-    results.sort(key=lambda r: (caps.index(r[0].rho_max), r[0].n, r[0].seed))
+    caps = [base.rho_max] + ([] if loose is None or loose == base.rho_max else [loose])
+    results = sorted((r for lane in fitted for r in lane),
+                     key=lambda r: (caps.index(r[0].rho_max), r[0].n, r[0].seed))
     tried = [{"n": o.n, "seed": o.seed, "rho_max": o.rho_max, "score": c.score,
               "best_step": c.best_step, "nu": c.nu, "wall_time_s": round(c.wall_time, 2),
               "history": c.history} for o, c in results]
     best = [_best([r for r in results if r[0].rho_max == c]) for c in caps]
     kept = best[0]
-    if len(best) > 1 and best[1][1].score < (1.0 - PREFER_CAPPED) * best[0][1].score:
+    if len(best) > 1 and _prefer_loose(best[1][1].score, best[0][1].score):
         kept = best[1]
     summary = {} if len(caps) < 2 else {
         "scores": {f"{c:g}": b[1].score for c, b in zip(caps, best, strict=True)},

@@ -131,8 +131,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     parser.add_argument("--seed", type=int, default=d.seed,
                         help=f"random seed, the first of --seeds ({d.seed})")
     parser.add_argument("--epochs", type=int, default=argparse.SUPPRESS,
-                        help=f"maximum epochs, at most {MAX_EPOCHS} (simulation: "
-                             "1,000,000 / training rows, in 150..3000; truncated "
+                        help=f"maximum epochs, at most {MAX_EPOCHS} (simulation: Adam's "
+                             "steps simulate 1,000,000 rows, in 150..3000 epochs; truncated "
                              f"{EPOCHS['truncated']})")
     parser.add_argument("--n", type=int, default=argparse.SUPPRESS,
                         help=f"GRU states, at most {MAX_STATES}: one size (default: --sizes; "

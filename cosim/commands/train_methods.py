@@ -57,7 +57,7 @@ def simulation(args: argparse.Namespace, data: Any, record: Any, problem: Any,
                progress: bool) -> Trained:
     """Candidates of sizes and seeds fitted on simulation error, the best on validation
     (:func:`controllers.identification.search.search`)."""
-    from controllers.identification.search import DEFAULT_SEEDS, candidates, search
+    from controllers.identification.search import DEFAULT_SEEDS, planned_steps, search
     from controllers.identification.simulation import (
         SimOptions,
         default_epochs,
@@ -65,9 +65,10 @@ def simulation(args: argparse.Namespace, data: Any, record: Any, problem: Any,
     )
 
     init = _init(args, problem)
-    epochs = args.epochs if args.epochs is not None else default_epochs(record)
+    default = default_epochs(record, args.window)
+    epochs = args.epochs if args.epochs is not None else default
     # the polish follows a shorter --epochs in proportion (a quick run stays quick)
-    polish = (round(default_polish(record) * min(1.0, epochs / default_epochs(record)))
+    polish = (round(default_polish(record) * min(1.0, epochs / default))
               if args.polish is None else args.polish)
     sizes = [int(init["W_z"].shape[0])] if init is not None else args.size_list
     seeds = args.seeds or (1 if init is not None or args.n is not None else DEFAULT_SEEDS)
@@ -78,10 +79,9 @@ def simulation(args: argparse.Namespace, data: Any, record: Any, problem: Any,
                       bz_init=args.bz_init, x0_samples=args.x0_samples,
                       patience=args.patience,
                       polish=polish, seed=args.seed)
-    # a derived cap is tried beside none: kept unless the uncapped fit is much better
+    # a derived cap is tried beside none: kept unless the uncapped fit is better
     loose = 0.0 if contraction["source"] == "ARX baseline" and rho_max > 0 else None
-    todo = candidates(base, sizes, seeds, loose)
-    bar = _bar(len(todo) * base.total, progress, "step")
+    bar = _bar(planned_steps(base, sizes, seeds, loose), progress, "step")
     try:
         res = search(record, base, sizes, seeds, args.workers,
                      progress=lambda done: bar.update(done - bar.n), init=init, loose=loose)

@@ -89,3 +89,20 @@ def test_the_search_answer_does_not_depend_on_the_workers(record: Record) -> Non
     assert one.best.score == min(t["score"] for t in one.tried)
     assert all(np.array_equal(one.best.params[k], two.best.params[k]) for k in one.best.params)
     assert steps[-1] == 6 * base.total
+
+
+def test_a_lane_tries_the_cap_and_none_at_its_smallest_size(record: Record) -> None:
+    """With ``loose``: the smallest size fitted under the cap and without it, the lane grown
+    under the one kept; the model kept is the capped one unless the other is better by
+    PREFER_CAPPED."""
+    from controllers.identification.search import PREFER_CAPPED, planned_steps
+
+    base = SimOptions(epochs=4, seed=2, polish=10, rho_max=0.9)
+    res = search(record, base, (2, 3), 1, workers=1, loose=0.0)
+    first = [(t["n"], t["rho_max"]) for t in res.tried if t["n"] == 2]
+    assert sorted(first) == [(2, 0.0), (2, 0.9)] and len(res.tried) <= 3
+    scores = {float(k): v for k, v in res.caps["scores"].items()}
+    loose_wins = scores[0.0] < (1 - PREFER_CAPPED) * scores[0.9]
+    assert res.caps["kept"] == (0.0 if loose_wins else 0.9)
+    assert res.best.score == scores[res.caps["kept"]]
+    assert planned_steps(base, (2, 3), 1, 0.0) == 3 * base.total

@@ -168,8 +168,8 @@ def test_history_is_replaced_only_when_training_ends(data: Path, tmp_path: Path,
     lines = history.read_text().splitlines()
     assert lines[0] == "n,seed,rho_max,step,time_s,score_rms"
     caps = [line.split(",")[2] for line in lines[1:]]   # the derived cap, then none
-    assert caps[5:] == ["0"] * 5 and float(caps[0]) > 0.5 and len(set(caps[:5])) == 1
-    assert [line.split(",")[3] for line in lines[1:]] == ["0", "25", "50", "60", "67"] * 2
+    assert caps[6:] == ["0"] * 6 and float(caps[0]) > 0.5 and len(set(caps[:6])) == 1
+    assert [line.split(",")[3] for line in lines[1:]] == ["0", "25", "50", "60", "85", "96"] * 2
 
 
 def test_deeply_nested_sidecar_and_init_model(data: Path, tmp_path: Path,
