@@ -140,20 +140,7 @@ class Master:
         units = {s.name: s.unit for s in (*ctrl.inputs, *ctrl.outputs) if s.unit}
         if Capability.SIGNAL_CHECK in plant.capabilities:
             plant.check_signals(self.ctrl_outputs, self.measured, units)
-        for u in self.ctrl_outputs:
-            if u not in plant_in:
-                raise CosimError(f"{where}: controller output '{u}' is not an input of the plant"
-                                 " (use --map to map it onto the plant's variable)")
-        for y in self.measured:
-            if y not in plant_out:
-                raise CosimError(f"{where}: controller input '{y}' is not an output of the plant"
-                                 " (use --map to map it onto the plant's variable)")
-        for d in self.dists:
-            if d not in plant_in:
-                raise CosimError(f"{where}: measured disturbance '{d}' is not an input or "
-                                 "tunable parameter of the plant (give the problem that binds "
-                                 "it, --problem, name its variable with variable = \"...\" "
-                                 "there, or use --map)")
+        self._check_bindings(plant_in, plant_out, where)
         at_start, later = plant.settable(True), plant.settable(False)
         #: the one checked entry of operator actions (:mod:`cosim.core.operator`), for a
         #: controller an operator runs; ``None`` otherwise
@@ -184,6 +171,24 @@ class Master:
         self.scenario_plant = [c.target for c in sc.columns_of(PLANT)]
         self.use_sensor = bool(sc.columns_of(BIAS) or sc.columns_of(NOISE)
                                or sc.columns_of(UNIFORM))
+
+    def _check_bindings(self, plant_in: set[str], plant_out: list[str], where: str) -> None:
+        """Every controller output and measured disturbance drives a plant input or tunable
+        parameter, every measured controller input is a plant output."""
+        for u in self.ctrl_outputs:
+            if u not in plant_in:
+                raise CosimError(f"{where}: controller output '{u}' is not an input of the plant"
+                                 " (use --map to map it onto the plant's variable)")
+        for y in self.measured:
+            if y not in plant_out:
+                raise CosimError(f"{where}: controller input '{y}' is not an output of the plant"
+                                 " (use --map to map it onto the plant's variable)")
+        for d in self.dists:
+            if d not in plant_in:
+                raise CosimError(f"{where}: measured disturbance '{d}' is not an input or "
+                                 "tunable parameter of the plant (give the problem that binds "
+                                 "it, --problem, name its variable with variable = \"...\" "
+                                 "there, or use --map)")
 
     def columns(self) -> list[str]:
         """Recorded columns, diagnostics excluded (they are appended as they appear).
