@@ -27,7 +27,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CANDIDATES", "RHO_HINT", "TuneResult", "choose", "hint", "scenario", "tune"]
+__all__ = ["CANDIDATES", "RHO_HINT", "TuneResult", "choose", "faster_contraction", "hint",
+           "scenario", "tune"]
 
 #: The weightings tried (robust-MPC options; ``Q``, ``R``, ``du_weight`` in normalised units).
 CANDIDATES: dict[str, dict[str, Any]] = {
@@ -288,12 +289,21 @@ def hint(model: Any, rows: dict[str, dict[str, float]], best: str,
     model = condition(model)   # measured disturbances held: the controller's design
     cert = compute_certificate(model, gain_scale=0.0, **design_arguments(options, model))
     if cert.rho_s > RHO_HINT:
+        cap = faster_contraction(cert.rho_s)
         text += (f": the certified terminal weight s = {cert.s:,.0f} (rho_s = "
                  f"{cert.rho_s:.4f}) makes ending a horizon away from the steady state costly, "
                  "so every weighting approaches it slowly; a model trained to contract faster "
-                 "has a smaller one: cosim train --sigma-z-max 0.9 (or [train] sigma_z_max = "
-                 "0.9 in the problem file)")
+                 f"has at most a tenth of it: cosim train --rho-max {cap:.3f} (or [train] "
+                 f"rho_max = {cap:.3f} in the problem file), then compare on the plant: "
+                 "cosim campaign")
     return text
+
+
+def faster_contraction(rho_s: float) -> float:
+    """The contraction cap whose terminal weight is at most a tenth of ``rho_s``'s
+    (``s ∝ 1/(1 − ρ_s²)``, ``eq:definition_s``): ``√(1 − 10 (1 − ρ_s²))``, inside
+    [0.8, 0.99]."""
+    return float(min(0.99, max(0.8, (max(0.0, 1.0 - 10.0 * (1.0 - rho_s ** 2))) ** 0.5)))
 
 
 def _save(path: Path, model: Any, options: dict[str, Any]) -> None:

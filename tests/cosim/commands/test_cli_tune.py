@@ -80,7 +80,10 @@ def test_the_hint_points_at_the_training_when_no_weighting_beats_the_pi() -> Non
     text = hint(model, rows, "output cost")
     assert text.startswith("no weighting beats the PI on the model (the best: 1.30x its IAE)")
     assert "certified terminal weight s = " in text and "rho_s = 0.99" in text
-    assert "cosim train --sigma-z-max 0.9" in text
+    cap = float(text.split("cosim train --rho-max ")[1].split()[0])
+    assert 0.8 <= cap < 0.9997 and f"[train] rho_max = {cap:.3f}" in text
+    rho_s = float(text.split("rho_s = ")[1].split(")")[0])
+    assert (1 - rho_s ** 2) / (1 - cap ** 2) <= 0.1 + 1e-9   # s ÷ 10 at least
     rows["output cost"]["iae"] = 0.9
     assert hint(model, rows, "output cost") is None
 
