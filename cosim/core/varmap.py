@@ -31,7 +31,7 @@ from pathlib import Path
 
 from cosim.core.errors import CosimError
 
-__all__ = ["MappedSignal", "VarMap", "load", "variable_unit"]
+__all__ = ["Affine", "MappedSignal", "VarMap", "load", "variable_unit"]
 
 _KEYS = {"variable", "unit", "scale", "offset"}
 #: Causalities a map entry may point at (what a run sets or reads).
@@ -40,8 +40,24 @@ _MAPPABLE = ("input", "output", "parameter")
 _REAL_TYPES = ("Real", "Float64")
 
 
+class Affine:
+    """``plant_value = scale * project_value + offset``: a map entry's and a live tag's
+    conversion (the class defines ``scale`` and ``offset``)."""
+
+    scale: float
+    offset: float
+
+    def to_plant(self, value: float) -> float:
+        """Project value → the plant's value."""
+        return self.scale * value + self.offset
+
+    def from_plant(self, value: float) -> float:
+        """The plant's value → project value."""
+        return (value - self.offset) / self.scale
+
+
 @dataclass(frozen=True)
-class MappedSignal:
+class MappedSignal(Affine):
     """One project signal mapped onto an FMU variable (affine unit conversion)."""
 
     signal: str
@@ -49,14 +65,6 @@ class MappedSignal:
     unit: str | None = None
     scale: float = 1.0
     offset: float = 0.0
-
-    def to_plant(self, value: float) -> float:
-        """Project value → FMU value."""
-        return self.scale * value + self.offset
-
-    def from_plant(self, value: float) -> float:
-        """FMU value → project value."""
-        return (value - self.offset) / self.scale
 
 
 @dataclass(frozen=True)

@@ -214,9 +214,9 @@ class Faceplate:
 
     # -- the server --------------------------------------------------------------------------
     async def _server(self) -> Any:
-        from asyncua import Server, ua
+        from asyncua import Server
 
-        from cosim.live.security import validator
+        from cosim.live.security import secure_server
 
         users = _Users(self.options.users) if self.options.users else None
         server = Server(user_manager=users)
@@ -224,17 +224,7 @@ class Faceplate:
         server.set_endpoint(self.options.endpoint)
         server.set_server_name("cosim run: the controller's faceplate")
         await server.set_application_uri(APPLICATION_URI)
-        sec = self.options.security
-        if sec.secure:
-            server.set_security_policy(
-                [getattr(ua.SecurityPolicyType, f"{sec.policy}_{sec.mode}")])
-            await server.load_certificate(str(sec.certificate))
-            await server.load_private_key(str(sec.private_key))
-            server.set_certificate_validator(await validator(sec, "client"))
-        else:
-            server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
-        server.set_identity_tokens([ua.UserNameIdentityToken] if users is not None
-                                   else [ua.AnonymousIdentityToken])
+        await secure_server(server, self.options.security, users is not None)
         await self._address_space(server)
         service = server.iserver.attribute_service
         original = service.write
@@ -285,12 +275,7 @@ class Faceplate:
                         writable: bool) -> None:
         from asyncua import ua
 
-        if isinstance(value, list):
-            variant = ua.Variant([float(v) for v in value], ua.VariantType.Double)
-        elif isinstance(value, str):
-            variant = ua.Variant(value, ua.VariantType.String)
-        else:
-            variant = ua.Variant(float(value), ua.VariantType.Double)
+        variant = _variant(value)
         node = await parent.add_variable(ua.NodeId(ident, self.idx),
                                          ua.QualifiedName(browse, self.idx), variant)
         if writable:
@@ -331,14 +316,7 @@ class Faceplate:
     async def _set(self, ident: str, value: Any) -> None:
         from asyncua import ua
 
-        node = self._nodes[ident]
-        if isinstance(value, list):
-            variant = ua.Variant([float(v) for v in value], ua.VariantType.Double)
-        elif isinstance(value, str):
-            variant = ua.Variant(value, ua.VariantType.String)
-        else:
-            variant = ua.Variant(float(value), ua.VariantType.Double)
-        await node.write_value(ua.DataValue(variant))
+        await self._nodes[ident].write_value(ua.DataValue(_variant(value)))
 
     def _sampled(self, desk: Any) -> None:
         """After each of the run's samples (the loop's thread): the status, published."""
@@ -391,3 +369,14 @@ class _Users:
         if entry is not None and password == entry[1]:
             return User(role=UserRole.User, name=username)
         return None
+
+
+def _variant(value: Any) -> Any:
+    """A faceplate value as an OPC UA variant: a list of doubles, a string or a double."""
+    from asyncua import ua
+
+    if isinstance(value, list):
+        return ua.Variant([float(v) for v in value], ua.VariantType.Double)
+    if isinstance(value, str):
+        return ua.Variant(value, ua.VariantType.String)
+    return ua.Variant(float(value), ua.VariantType.Double)

@@ -217,6 +217,24 @@ async def validator(security: Security, peer: str) -> Any:
     return CertificateValidator(options, store)
 
 
+async def secure_server(server: Any, security: Security, users: bool) -> None:
+    """An asyncua ``server``'s endpoint policy, certificate, client validator (the trust
+    list) and identity tokens (user names with ``users``, else anonymous) from ``security``:
+    the virtual plant's and the faceplate's."""
+    from asyncua import ua
+
+    if security.secure:
+        server.set_security_policy(
+            [getattr(ua.SecurityPolicyType, f"{security.policy}_{security.mode}")])
+        await server.load_certificate(str(security.certificate))
+        await server.load_private_key(str(security.private_key))
+        server.set_certificate_validator(await validator(security, "client"))
+    else:
+        server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
+    server.set_identity_tokens([ua.UserNameIdentityToken] if users
+                               else [ua.AnonymousIdentityToken])
+
+
 def make_certificate(folder: str | Path, name: str, uri: str, *, server: bool,
                      host: str = "localhost", days: int = 365) -> tuple[Path, Path]:
     """A self-signed application certificate ``folder/name.der`` and its key ``name.pem``.

@@ -43,7 +43,7 @@ from typing import Any
 
 from cosim.core.component import Component
 from cosim.live import quiet_libraries
-from cosim.live.security import Security, validator
+from cosim.live.security import Security, secure_server
 
 __all__ = ["APPLICATION_URI", "DEFAULT_ENDPOINT", "VirtualPlant"]
 
@@ -103,7 +103,7 @@ class VirtualPlant:
 
     # -- the address space ----------------------------------------------------------------
     async def _server(self) -> Any:
-        from asyncua import Server, ua
+        from asyncua import Server
 
         users = _OneUser(self.security) if self.security.user is not None else None
         server = Server(user_manager=users)
@@ -111,17 +111,7 @@ class VirtualPlant:
         server.set_endpoint(self.endpoint)
         server.set_server_name(f"cosim serve-plant: {self.problem.name}")
         await server.set_application_uri(APPLICATION_URI)
-        sec = self.security
-        if sec.secure:
-            server.set_security_policy(
-                [getattr(ua.SecurityPolicyType, f"{sec.policy}_{sec.mode}")])
-            await server.load_certificate(str(sec.certificate))
-            await server.load_private_key(str(sec.private_key))
-            server.set_certificate_validator(await validator(sec, "client"))
-        else:
-            server.set_security_policy([ua.SecurityPolicyType.NoSecurity])
-        server.set_identity_tokens([ua.UserNameIdentityToken] if users is not None
-                                   else [ua.AnonymousIdentityToken])
+        await secure_server(server, self.security, users is not None)
         self._aspace = server.iserver.aspace
         await self._address_space(server)
         server.subscribe_server_callback(_post_write(), self._on_write)

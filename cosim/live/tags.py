@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any
 
 from cosim.core.errors import CosimError
+from cosim.core.varmap import Affine
 
 __all__ = ["TABLE_KEYS", "Tag", "Tags", "load", "parse_path", "tag_of"]
 
@@ -53,7 +54,7 @@ TABLE_KEYS = ("node", "unit", "scale", "offset")
 
 
 @dataclass(frozen=True)
-class Tag:
+class Tag(Affine):
     """Where one signal lives: a node id, or a browse path of ``(namespace or None, name)``
     segments (``absolute``: from Objects, else below the root); the tag's ``unit``
     (``None``: the problem's) and ``plant_value = scale * project_value + offset``."""
@@ -65,14 +66,6 @@ class Tag:
     unit: str | None = None
     scale: float = 1.0
     offset: float = 0.0
-
-    def to_plant(self, value: float) -> float:
-        """Project value → the tag's value."""
-        return self.scale * value + self.offset
-
-    def from_plant(self, value: float) -> float:
-        """The tag's value → project value."""
-        return (value - self.offset) / self.scale
 
     def describe(self) -> str:
         """The tag as written (``ns=2;s=LIC101.PV`` or ``2:Tanks/2:LT102``)."""

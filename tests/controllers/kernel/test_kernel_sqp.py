@@ -118,13 +118,18 @@ def test_qp_reports_infeasibility_and_an_indefinite_hessian(kernel: ck.Workspace
 def test_lagrangian_gradient_by_adjoints_matches_the_jacobian(kernel: ck.Workspace) -> None:
     """The stopping test's ∇L (one adjoint sweep through the GRU stages) is ∇f + Jᵀλ_g + λ_x
     of the explicit derivatives."""
-    rng = np.random.default_rng(2)
-    jac = kernel.external("jac_fg")
-    for _ in range(5):
-        w = rng.uniform(-1, 1, kernel.nw)
-        p = rng.normal(scale=0.5, size=kernel.npar)
-        lx, lg = rng.normal(size=kernel.nw), rng.normal(size=kernel.ng)
-        out = kernel.grad_l(w, p, lx, lg)
+    check_lagrangian_gradient(kernel, np.random.default_rng(2), 5)
+
+
+def check_lagrangian_gradient(ws: ck.Workspace, rng: np.random.Generator, draws: int) -> None:
+    """``ws.grad_l`` against ``∇f + Jᵀλ_g + λ_x`` of the explicit derivatives at ``draws``
+    random points and multipliers (also test_move_rows')."""
+    jac = ws.external("jac_fg")
+    for _ in range(draws):
+        w = rng.uniform(-1, 1, ws.nw)
+        p = rng.normal(scale=0.5, size=ws.npar)
+        lx, lg = rng.normal(size=ws.nw), rng.normal(size=ws.ng)
+        out = ws.grad_l(w, p, lx, lg)
         _, gf, _, J = (np.array(v) for v in jac(w, p))
         expected = gf.ravel() + J.T @ lg + lx
         assert np.max(np.abs(out - expected)) < 1e-12 * max(1.0, np.max(np.abs(expected)))

@@ -17,6 +17,7 @@ from controllers.laws.paper.reference import FixedSetpoint
 from controllers.laws.tracking.reference import ArtificialSteadyState
 from controllers.ocp.fhocp import FHOCP
 from controllers.ocp.operator_terms import OperatorTerms
+from tests.controllers.kernel.test_kernel_sqp import check_lagrangian_gradient
 
 needs_cc = pytest.mark.skipif(shutil.which(os.environ.get("CC", "gcc")) is None,
                               reason="no C compiler")
@@ -40,7 +41,9 @@ def test_kernel_rows_match_numpy_and_a_plan_keeps_them(cert, law: str) -> None:
     nlp = fh.numpy_nlp()
     assert nlp.self_test(fh.kernel, fh.sqp_options.get("hessian_eigen_clip")) \
         < ck.KERNEL_SELF_TEST_TOL   # g and ∂g/∂w, the move rows among them
-    _check_lagrangian_gradient(fh.kernel)
+    # the stopping test's ∇L with the move rows' multipliers in it (without them every solve
+    # a move limit bound stalled short of its dual test)
+    check_lagrangian_gradient(fh.kernel, np.random.default_rng(3), 3)
     x_hat, u0 = equilibrium(cert.params, np.array([0.0, 0.0]))
     last = np.clip(u0, -1, 1)
     fh.set_operator(OperatorTerms(np.maximum(last - DELTA, -1), np.minimum(last + DELTA, 1),
@@ -60,21 +63,6 @@ def test_kernel_rows_match_numpy_and_a_plan_keeps_them(cert, law: str) -> None:
     # lem:move-candidate: the plan shifted with u_end appended keeps every row
     cand = np.vstack([res.u[0], res.u[1:M], end, end])
     assert np.all(np.abs(np.diff(cand, axis=0)) <= DELTA + 1e-9)
-
-
-def _check_lagrangian_gradient(ws) -> None:
-    """The stopping test's ∇L is ∇f + Jᵀλ_g + λ_x with the move rows' multipliers in it (the
-    SQP stalled short of its dual test at every solve a move limit bound without them)."""
-    rng = np.random.default_rng(3)
-    jac = ws.external("jac_fg")
-    for _ in range(3):
-        w = rng.uniform(-1, 1, ws.nw)
-        p = rng.normal(scale=0.5, size=ws.npar)
-        lx, lg = rng.normal(size=ws.nw), rng.normal(size=ws.ng)
-        _, gf, _, J = (np.array(v) for v in jac(w, p))
-        expected = gf.ravel() + J.T @ lg + lx
-        assert np.max(np.abs(ws.grad_l(w, p, lx, lg) - expected)) \
-            < 1e-12 * max(1.0, np.max(np.abs(expected)))
 
 
 def test_no_rows_without_a_move_limit(cert) -> None:
