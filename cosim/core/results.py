@@ -39,8 +39,9 @@ from cosim.core.master import RunResult
 __all__ = ["PART_SUFFIX", "RUN_FILES", "ResultsStream", "jsonable", "signals", "summary", "write",
            "write_csv"]
 
-#: Every file a run writes into its folder.
-RUN_FILES = ("results.csv", "timings.csv", "summary.json", "figure.png")
+#: Every file a run writes into its folder (``operator.csv``: the requests of its page's
+#: operator, :mod:`cosim.hmi.actions`).
+RUN_FILES = ("results.csv", "timings.csv", "summary.json", "figure.png", "operator.csv")
 #: Suffix of the file ``results.csv`` is streamed into while the run goes.
 PART_SUFFIX = ".part"
 #: Most seconds of wall time between two flushes of the streamed rows.
@@ -221,7 +222,8 @@ def jsonable(obj: object) -> object:
 
 
 def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
-          figure: bool = True, stream: ResultsStream | None = None) -> dict:
+          figure: bool = True, stream: ResultsStream | None = None,
+          kept: tuple[str, ...] = ()) -> dict:
     """Write a run into ``out_dir``: ``results.csv``, ``timings.csv``, ``summary.json``,
     ``figure.png``, each atomically; remove the files of an earlier run it does not write.
 
@@ -234,6 +236,9 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
     stream : ResultsStream, optional
         The stream the run's rows went to; it is finished (renamed onto ``results.csv``)
         instead of writing the rows again.
+    kept : tuple of str
+        Files of :data:`RUN_FILES` this run wrote itself as it went (an ``operator.csv``):
+        kept, where an earlier run's are removed.
 
     Returns
     -------
@@ -254,7 +259,7 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
     """
     out = Path(out_dir)
     errors: list[OutputError] = []
-    written: set[str] = set()
+    written: set[str] = set(kept)
 
     def attempt(name: str, fn: object, *args: object) -> None:
         try:
