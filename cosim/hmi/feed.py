@@ -232,6 +232,11 @@ class Feed:
         """The index of a column in the rows (``None``: the run has none)."""
         return self.index.get(name)
 
+    def last(self, name: str) -> float:
+        """The last row's value of column ``name`` (``nan`` before the first row)."""
+        rows = self.rows
+        return self.value(rows[-1], name) if rows else math.nan
+
     def value(self, row: Sequence[float], name: str) -> float:
         """A row's value of column ``name`` (``nan`` where it has none)."""
         j = self.index.get(name)

@@ -19,12 +19,20 @@ from typing import Any
 
 from cosim.hmi.actions import Action, User
 from cosim.hmi.feed import Feed
-from cosim.hmi.panels import COLORS, WINDOW, ErrorPanel, InputPanel, OutputPanel, fmt
+from cosim.hmi.panels import (
+    COLORS,
+    WINDOW,
+    ErrorPanel,
+    InputPanel,
+    OutputPanel,
+    fmt,
+    set_text,
+)
 
 __all__ = ["MAX_POINTS", "PERIOD_MS", "RunPage", "run_page", "status_items"]
 
 #: How often a session is brought up to date [ms].
-PERIOD_MS = 250
+PERIOD_MS = 500
 #: Most samples of a trend one push carries.
 MAX_POINTS = 120
 #: The robust MPC's step status (its ``status`` diagnostic, :func:`controllers.ocp.
@@ -159,10 +167,11 @@ class Switches:
         for ticket in [t for t in self.pending if t in replies]:
             name, reply = self.pending.pop(ticket), replies[ticket]
             state = "accepted" if reply.accepted else "refused"
-            self.reply.text = (f'<span data-state="{state}" style="color:'
-                               f'{COLORS["normal"] if reply.accepted else COLORS["past"]}">'
-                               f"{html.escape(name)}: {state}"
-                               f"{': ' + html.escape(reply.text) if reply.text else ''}</span>")
+            set_text(self.reply, (
+                f'<span data-state="{state}" style="color:'
+                f'{COLORS["normal"] if reply.accepted else COLORS["past"]}">'
+                f"{html.escape(name)}: {state}"
+                f"{': ' + html.escape(reply.text) if reply.text else ''}</span>"))
         for a in self.feed.actions:
             if a.name in self.fields and a.value != self.shown[a.name]:
                 self.fields[a.name].value = _number(a.value)
@@ -199,14 +208,15 @@ class RunPage:
         from bokeh.layouts import column, row
         from bokeh.models import DataRange1d, Div, Slider
 
-        self.feed, self.user, self.live = feed, user, live
+        self.doc, self.feed, self.user, self.live = doc, feed, user, live
         x_range = DataRange1d(range_padding=0.02)
         lay = feed.layout
         self.outputs = [OutputPanel(o, x_range) for o in lay.outputs]
         self.inputs = [InputPanel(u, x_range) for u in lay.inputs]
         self.error = ErrorPanel(lay.outputs, x_range)
         self.header = Div(text=_header(lay.title, user, live), sizing_mode="stretch_width")
-        self.status = Div(text="", css_classes=["hmi-status"], sizing_mode="stretch_width")
+        self.status = Div(text="", css_classes=["hmi-status"], sizing_mode="stretch_width",
+                          height=64)
         self.audit = Div(text="", css_classes=["hmi-audit"], width=280)
         self.switches = Switches(feed, user) if live and feed.actions else None
         self.sent, self.errors_sent, self.plan_shown = 0, 0, None
@@ -239,7 +249,14 @@ class RunPage:
             self.show(len(feed.rows) - 1)
 
     def tick(self) -> None:
-        """Bring the session up to date with the run (live)."""
+        """Bring the session up to date with the run (live), every change in one message."""
+        self.doc.hold("combine")
+        try:
+            self._tick()
+        finally:
+            self.doc.unhold()
+
+    def _tick(self) -> None:
         feed, n = self.feed, len(self.feed.rows)
         if n > self.sent:
             new = thin(feed.rows[max(self.sent, n - WINDOW):n], MAX_POINTS)
@@ -272,7 +289,7 @@ class RunPage:
         """The readouts and the status strip at row ``i``."""
         feed = self.feed
         if i < 0:
-            self.status.text = _badges(status_items(feed, []))
+            set_text(self.status, _badges(status_items(feed, [])))
             return
         last, before = rows[i], rows[i - 1] if i > 0 else None
         error = feed.errors[-1][1] if feed.errors and self.live else {}
@@ -285,8 +302,8 @@ class RunPage:
             service = next((str(a.value) for a in feed.actions
                             if a.name == f"service.{q.info.name}"), "in service")
             q.show_value(feed, last, before, service)
-        self.status.text = _badges(status_items(feed, rows[:i + 1]))
-        self.audit.text = _audit(feed.audit.rows, last[0])
+        set_text(self.status, _badges(status_items(feed, rows[:i + 1])))
+        set_text(self.audit, _audit(feed.audit.rows, last[0]))
 
 
 def _header(title: str, user: User | None, live: bool) -> str:

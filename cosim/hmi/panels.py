@@ -20,7 +20,8 @@ from typing import Any
 from cosim.core.component import Prediction
 from cosim.hmi.feed import Feed, SignalInfo
 
-__all__ = ["COLORS", "NEAR", "WINDOW", "ErrorPanel", "InputPanel", "OutputPanel", "level"]
+__all__ = ["COLORS", "NEAR", "WINDOW", "ErrorPanel", "InputPanel", "OutputPanel", "level",
+           "set_text"]
 
 #: Samples a trend shows (older ones scroll out).
 WINDOW = 400
@@ -84,8 +85,15 @@ def _box(fig: Any, info: SignalInfo, color: str = "#d62728", dash: str = "dashed
 def _readout(kind: str, name: str) -> Any:
     from bokeh.models import Div
 
-    return Div(text="", css_classes=["hmi-readout", f"hmi-{kind}-{name}"],
+    return Div(text="", css_classes=["hmi-readout", f"hmi-{kind}-{name}"], height=22,
                sizing_mode="stretch_width")
+
+
+def set_text(div: Any, text: str) -> None:
+    """A text shown, sent to the browser only when it changed (each change lays the page
+    out again there)."""
+    if div.text != text:
+        div.text = text
 
 
 class OutputPanel:
@@ -155,13 +163,13 @@ class OutputPanel:
         plan = feed.prediction
         horizon = len(plan[1].outputs.get(o, ())) if plan is not None else 0
         unit = html.escape(info.unit)
-        self.readout.text = (
+        set_text(self.readout, (
             f'<span class="hmi-value" data-signal="{html.escape(o)}" data-t="{row[0]!r}" '
             f'data-value="{y!r}" data-setpoint="{ref!r}" data-level="{lv}" '
             f'data-horizon="{horizon}" style="color:{COLORS[lv]}">'
             f"<b>{html.escape(o)} {fmt(y)} {unit}</b></span> · set-point {fmt(ref)} {unit} · "
             f"box [{fmt(info.low)}, {fmt(info.high)}] · prediction error {fmt(error)} {unit}"
-            f" · {horizon} predicted samples")
+            f" · {horizon} predicted samples"))
         self.now.location = row[0]
 
 
@@ -206,12 +214,12 @@ class InputPanel:
         move = value - feed.value(before, f"ctrl.{u}") if before is not None else math.nan
         lv = level(value, info.low, info.high)
         unit = html.escape(info.unit)
-        self.readout.text = (
+        set_text(self.readout, (
             f'<span class="hmi-value" data-signal="{html.escape(u)}" data-t="{row[0]!r}" '
             f'data-value="{value!r}" data-level="{lv}" data-service="{html.escape(service)}" '
             f'style="color:{COLORS[lv]}"><b>{html.escape(u)} {fmt(value)} {unit}</b></span>'
             f" · rate {fmt(move)} {unit}/sample · {html.escape(service)} · "
-            f"box [{fmt(info.low)}, {fmt(info.high)}]")
+            f"box [{fmt(info.low)}, {fmt(info.high)}]"))
 
 
 class ErrorPanel:

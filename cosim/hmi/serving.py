@@ -78,7 +78,7 @@ def watching(master: Any, meta: Mapping[str, Any], out: Path | None, options: Hm
     feed = Feed(Layout.of_run(master, meta), master.controller)
     feed.operator = operator_for(
         master.controller, master.refs, {o.name: (o.low, o.high) for o in feed.layout.outputs},
-        {o.name: o.unit for o in feed.layout.outputs}, lambda o: _setpoint_now(feed, o))
+        {o.name: o.unit for o in feed.layout.outputs}, lambda o: feed.last(f"ref.{o}"))
     feed.audit = Audit(out / AUDIT_FILE if out is not None else None)
     server = options.server({"/": run_page(feed, live=True)}).start()
     if on_notice is not None:
@@ -90,11 +90,6 @@ def watching(master: Any, meta: Mapping[str, Any], out: Path | None, options: Hm
             feed.finish("interrupted")
         time.sleep(2 * PERIOD_MS / 1000)   # the pages' last update: the run's end
         server.stop()
-
-
-def _setpoint_now(feed: Feed, output: str) -> float:
-    rows = feed.rows
-    return feed.value(rows[-1], f"ref.{output}") if rows else math.nan
 
 
 def serve_folder(folder: str | Path, options: HmiOptions, duration: float | None = None,
