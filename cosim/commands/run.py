@@ -179,10 +179,9 @@ FLAGS = ("seed", "step", "step_timeout")
 def run(args: argparse.Namespace) -> int:
     """Execute ``cosim run`` through :func:`cosim.api.run`; returns the exit code."""
     from cosim import api
+    from cosim.commands import hmi_options
     from cosim.core import registry
     from cosim.core.errors import CosimError, ParameterError, SimulationFailed
-
-    from cosim.commands import hmi_options
 
     options = registry.parse_options(args.option)
     live = _live_options(args)

@@ -4,16 +4,16 @@
 A :class:`Feed` is the one place the page reads from. During a run it is the run's
 :class:`~cosim.core.run_result.RunWatcher` (:meth:`cosim.core.master.Master.run`'s
 ``watch``): from the loop's thread it keeps each row (a reference, not a copy), the
-controller's plan of each step (:attr:`~cosim.core.component.Capability.PREDICTION`) and
-the one-step prediction error it gives (the measured output against the plan of the step
-before), and between two steps it answers the page's requests through the run's
+controller's plan (:attr:`~cosim.core.component.Capability.PREDICTION`, read a few times a
+second) and the one-step prediction error of each plan read (the next sample's measured
+outputs against it), and between two steps it answers the page's requests through the run's
 :class:`~cosim.hmi.actions.Operator` and audits them. The page's sessions read it from the
 server's thread: nothing there touches the controller. After a run (:func:`cosim.hmi.replay.
 load`) it holds the finished run's rows, read from its folder.
 
-The loop's share is a list append and a few dictionary reads per row (plus the plan, when
-the controller declares one): what the page costs the run's step time is measured by
-``benchmarks/bench_hmi.py``.
+The loop's share is a list append and a clock read per row, and the controller's plan read
+a few times a second (:data:`PLAN_EVERY_S`): what the page costs the run's step time is
+measured by ``benchmarks/bench_hmi.py``.
 """
 
 from __future__ import annotations
@@ -31,10 +31,12 @@ from cosim.core.component import Capability, Component, Prediction
 from cosim.core.run_result import RunResult
 from cosim.hmi.actions import Action, Audit, Operator, Reply, User
 
-__all__ = ["ACTIONS_S", "Feed", "Layout", "SignalInfo"]
+__all__ = ["ACTIONS_S", "PLAN_EVERY_S", "Feed", "Layout", "SignalInfo"]
 
 #: How often the switches' values are read again during a run [s].
 ACTIONS_S = 0.5
+#: How often the controller's plan is read during a run [s of the wall clock].
+PLAN_EVERY_S = 0.2
 
 
 @dataclass(frozen=True)
@@ -115,11 +117,16 @@ class Feed:
         The run's switches (``None``: none, a finished run).
     audit : Audit, optional
         Where the requests are written (``operator.csv``).
+    plan_every : float
+        Seconds of the wall clock between two reads of the controller's plan (0: every
+        row); the prediction error is that of the plans read, one sample ahead.
     """
 
     def __init__(self, layout: Layout, controller: Component | None = None,
-                 operator: Operator | None = None, audit: Audit | None = None) -> None:
+                 operator: Operator | None = None, audit: Audit | None = None,
+                 plan_every: float = PLAN_EVERY_S) -> None:
         self.layout = layout
+        self.plan_every = float(plan_every)
         self.ctrl = controller
         self.operator = operator
         self.audit = audit if audit is not None else Audit(None)
@@ -143,7 +150,7 @@ class Feed:
         self._tickets = itertools.count(1)
         self._plans = controller is not None and Capability.PREDICTION in controller.capabilities
         self._last = math.nan
-        self._actions_at = -math.inf
+        self._actions_at = self._plan_at = -math.inf
         self.ended = threading.Event()
 
     # -- the run's side (its loop's thread) -----------------------------------------------
@@ -154,7 +161,8 @@ class Feed:
             self.actions = self.operator.actions()
 
     def append(self, row: list[float], columns: list[str]) -> None:
-        """One row: kept, timed, and the controller's plan read."""
+        """One row: kept and timed; the one-step error of the last plan when this row is
+        the sample it predicted; a new plan every :attr:`plan_every` seconds."""
         now = time.perf_counter()
         if self.rows:
             self.loop_s.append(now - self._last)
@@ -163,29 +171,35 @@ class Feed:
             self.columns = list(columns)
             self.index = {c: i for i, c in enumerate(columns)}
         self.rows.append(row)
-        if self._plans:
+        if not self._plans:
+            return
+        last = self.prediction
+        if last is not None and abs(row[0] - last[0] - last[1].step) <= 1e-9 * max(
+                1.0, abs(row[0])):
+            self._error(row, last[1])
+        if now - self._plan_at >= self.plan_every:
+            self._plan_at = now
             self._plan(row)
 
+    def _error(self, row: list[float], plan: Prediction) -> None:
+        """The measured outputs of ``row`` against what ``plan`` predicted for them."""
+        index, errors = self.index, {}
+        for o, values in plan.outputs.items():
+            j = index.get(f"plant.{o}")
+            if j is not None and len(values) > 1:
+                errors[o] = row[j] - values[1]
+        self.errors.append((row[0], errors))
+
     def _plan(self, row: list[float]) -> None:
-        """The controller's plan at this row, and the error of the last one's next sample."""
+        """The controller's plan at this row."""
         try:
             plan = self.ctrl.prediction()  # type: ignore[union-attr]
         except Exception as exc:   # the page must not end the run: it stops asking
             self._plans, self.reason = False, f"the controller's plan: {exc}"
             return
-        if plan is None:
-            return
-        t, last = row[0], self.prediction
-        if last is not None and abs(t - last[0] - last[1].step) <= 1e-9 * max(1.0, abs(t)):
-            index = self.index
-            errors = {}
-            for o, values in last[1].outputs.items():
-                j = index.get(f"plant.{o}")
-                if j is not None and len(values) > 1:
-                    errors[o] = row[j] - values[1]
-            self.errors.append((t, errors))
-        if last is None or plan != last[1]:   # not a step of the controller: the same plan
-            self.prediction = (t, plan)
+        last = self.prediction
+        if plan is not None and (last is None or plan != last[1]):   # a new step's plan
+            self.prediction = (row[0], plan)
 
     def between(self, t: float) -> Mapping[str, float]:
         """The page's requests, answered and audited; the set-points they changed. The

@@ -29,7 +29,7 @@ from cosim.hmi.panels import (
     set_text,
 )
 
-__all__ = ["MAX_POINTS", "PERIOD_MS", "RunPage", "run_page", "status_items"]
+__all__ = ["MAX_POINTS", "PERIOD_MS", "RunPage", "Tally", "run_page", "status_items"]
 
 #: How often a session is brought up to date [ms].
 PERIOD_MS = 500
@@ -50,15 +50,44 @@ def thin(rows: Sequence[Any], most: int) -> list[Any]:
     return list(rows[(n - 1) % k::k])
 
 
-def _count(feed: Feed, rows: Sequence[Sequence[float]], name: str,
-           test: Callable[[float], bool] = lambda v: v == 1.0) -> int:
-    j = feed.column(name)
-    return 0 if j is None else sum(1 for r in rows if j < len(r) and test(r[j]))
+class Tally:
+    """The counts of the status strip over a run's rows, each row counted once: steps that
+    fell back, that were softened, deadline misses and safe writes (a live run's)."""
+
+    def __init__(self, feed: Feed) -> None:
+        self.feed = feed
+        self.n = 0
+        self.counts = {"fallbacks": 0, "softened": 0, "misses": 0, "alarms": 0}
+
+    def update(self, rows: Sequence[Sequence[float]], upto: int) -> Tally:
+        """Count rows ``n … upto − 1``; a tally past ``upto`` (a slider moved back) starts
+        over."""
+        if upto < self.n:
+            self.n, self.counts = 0, dict.fromkeys(self.counts, 0)
+        col, c = self.feed.column, self.counts
+        jb, js, jf, jo, jw, ja = (col(n) for n in (
+            "ctrl.fallback", "ctrl.softened", "live.fresh", "live.on_time", "ctrl.status",
+            "live.safe"))
+        for r in rows[self.n:upto]:
+            width = len(r)
+            if jb is not None and jb < width and r[jb] == 1.0:
+                c["fallbacks"] += 1
+            if js is not None and js < width and r[js] > 0:
+                c["softened"] += 1
+            if None not in (jf, jo, jw) and max(jf, jo, jw) < width and r[jf] == 1.0 \
+                    and r[jo] == 0.0 and math.isfinite(r[jw]):   # type: ignore[index]
+                c["misses"] += 1
+            if ja is not None and ja < width and r[ja] == 1.0:
+                c["alarms"] += 1
+        self.n = max(self.n, upto)
+        return self
 
 
-def status_items(feed: Feed, rows: Sequence[Sequence[float]]) -> list[tuple[str, str, str]]:
-    """The status strip of the run up to the last of ``rows``: ``(key, text, level)``."""
-    lay, last = feed.layout, rows[-1] if rows else None
+def status_items(feed: Feed, last: Sequence[float] | None,
+                 tally: Tally) -> list[tuple[str, str, str]]:
+    """The status strip of the run at its row ``last`` (``None``: before the first), the
+    counts up to it in ``tally``: ``(key, text, level)``."""
+    lay, counts = feed.layout, tally.counts
     t = last[0] if last is not None else lay.start_time
     state = "running" if feed.status == "running" else f"ended {feed.status}"
     items = [("run", f"{state} · t = {fmt(t)} of {fmt(lay.stop_time)} s",
@@ -79,11 +108,16 @@ def status_items(feed: Feed, rows: Sequence[Sequence[float]]) -> list[tuple[str,
     for key, column, word in (("fallbacks", "ctrl.fallback", "fallbacks"),
                               ("softened", "ctrl.softened", "softened steps")):
         if feed.column(column) is not None:
-            n = _count(feed, rows, column, (lambda v: v > 0) if key == "softened" else
-                       (lambda v: v == 1.0))
+            n = counts[key]
             items.append((key, f"{n} {word}", "normal" if n == 0 else "near"))
     if lay.live and last is not None:
-        items += _live_items(feed, rows, last)
+        fresh = feed.value(last, "live.fresh") == 1.0
+        misses, alarms = counts["misses"], counts["alarms"]
+        watchdog = "ALARM" if feed.value(last, "live.safe") == 1.0 else "ok"
+        items += [("fresh", "fresh" if fresh else "stale", "normal" if fresh else "past"),
+                  ("deadline", f"{misses} deadline misses", "normal" if not misses else "near"),
+                  ("watchdog", f"watchdog {watchdog} ({alarms} safe writes)",
+                   "normal" if not alarms else "past")]
     return items
 
 
@@ -98,21 +132,6 @@ def _step_text(feed: Feed) -> str:
         loop = sorted(feed.loop_s)[len(feed.loop_s) // 2]
         parts.append(f"loop {fmt(loop * 1e3)} ms")
     return " · ".join(p for p in parts if p) or "–"
-
-
-def _live_items(feed: Feed, rows: Sequence[Sequence[float]],
-                last: Sequence[float]) -> list[tuple[str, str, str]]:
-    """Fresh or stale, deadline misses, the watchdog (a live run's ``live.*`` columns)."""
-    fresh = feed.value(last, "live.fresh") == 1.0
-    jf, jo = feed.column("live.fresh"), feed.column("live.on_time")
-    jw = feed.column("ctrl.status")
-    misses = 0 if None in (jf, jo, jw) else sum(
-        1 for r in rows if r[jf] == 1.0 and r[jo] == 0.0 and math.isfinite(r[jw]))
-    alarms = _count(feed, rows, "live.safe")
-    return [("fresh", "fresh" if fresh else "stale", "normal" if fresh else "past"),
-            ("deadline", f"{misses} deadline misses", "normal" if misses == 0 else "near"),
-            ("watchdog", f"watchdog {'ALARM' if feed.value(last, 'live.safe') == 1.0 else 'ok'}"
-             f" ({alarms} safe writes)", "normal" if alarms == 0 else "past")]
 
 
 def _badges(items: list[tuple[str, str, str]]) -> str:
@@ -220,6 +239,7 @@ class RunPage:
         self.audit = Div(text="", css_classes=["hmi-audit"], width=280)
         self.switches = Switches(feed, user) if live and feed.actions else None
         self.sent, self.errors_sent, self.plan_shown = 0, 0, None
+        self.tally = Tally(feed)
         self.slider = None
         panels: list[Any] = []
         for p in (*self.outputs, *self.inputs):
@@ -289,7 +309,7 @@ class RunPage:
         """The readouts and the status strip at row ``i``."""
         feed = self.feed
         if i < 0:
-            set_text(self.status, _badges(status_items(feed, [])))
+            set_text(self.status, _badges(status_items(feed, None, self.tally)))
             return
         last, before = rows[i], rows[i - 1] if i > 0 else None
         error = feed.errors[-1][1] if feed.errors and self.live else {}
@@ -302,7 +322,8 @@ class RunPage:
             service = next((str(a.value) for a in feed.actions
                             if a.name == f"service.{q.info.name}"), "in service")
             q.show_value(feed, last, before, service)
-        set_text(self.status, _badges(status_items(feed, rows[:i + 1])))
+        tally = self.tally.update(rows, i + 1)
+        set_text(self.status, _badges(status_items(feed, last, tally)))
         set_text(self.audit, _audit(feed.audit.rows, last[0]))
 
 

@@ -1,6 +1,7 @@
 """What the page reads, from a real run without a browser: the robust MPC's declared plan
-(in process and from its worker), the one-step prediction error the feed derives from it,
-and the operator's requests answered between two steps, applied and audited."""
+(in process and from its worker), the one-step prediction error the feed derives from it
+(every step's plan read here; a page reads a few a second), and the operator's requests
+answered between two steps, applied and audited."""
 
 from __future__ import annotations
 
@@ -53,7 +54,7 @@ def _watched_run(tmp_path: Path, isolate: bool, requests: list[tuple[str, float]
         ctrl = IsolatedController(ctrl, "robust-mpc", {})
     opened = plants.open_plant(None, plants.PlantContext(sc, ctrl, ctrl.problem))
     master = Master(opened.component, ctrl, sc, io=opened.io, pacer=opened.pacer)
-    feed = Recorder(Layout.of_run(master, {}), ctrl)
+    feed = Recorder(Layout.of_run(master, {}), ctrl, plan_every=0.0)   # every step's plan
     feed.operator = operator_for(ctrl, master.refs, {"h1": (0.0, 2.0), "h2": (0.0, 2.0)},
                                  {"h1": "m", "h2": "m"},
                                  lambda o: feed.last(f"ref.{o}"))

@@ -54,7 +54,8 @@ def test_a_port_in_use_is_refused(capsys: pytest.CaptureFixture, tmp_path: Path,
         line = one_line(capsys, ["run", str(scenario), "--hmi", str(port), "--out",
                                  str(tmp_path / "o")])
         view = one_line(capsys, ["view", str(tmp_path), "--hmi", str(port)])
-    assert line == f"cosim run: error: --hmi 127.0.0.1:{port}: cannot listen: Address already in use"
+    assert line == (f"cosim run: error: --hmi 127.0.0.1:{port}: cannot listen: "
+                    "Address already in use")
     assert view.startswith(f"cosim view: error: RESULTS_DIR {tmp_path}: not a run's folder")
     assert not (tmp_path / "o").exists()
 
