@@ -4,7 +4,7 @@ VENV   := .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed
 
-.PHONY: all setup fmus demo test docs lint bench acados node-opcua clean
+.PHONY: all setup fmus demo test docs lint bench acados node-opcua browser clean
 
 all: fmus
 
@@ -34,10 +34,12 @@ demo: fmus
 # cores. JOBS=1 runs it in one process.
 JOBS ?= 2
 # acados (benchmarks/bench_acados.py's test) when PyPI serves it, node-opcua (the live tests'
-# vendor-style PLC) when npm serves it; their tests are skipped without.
+# vendor-style PLC) when npm serves it, Debian's chromium (the run's page in a browser) when
+# apt can install it; their tests are skipped without.
 test: fmus docs
 	-$(MAKE) --no-print-directory acados
 	-$(MAKE) --no-print-directory node-opcua
+	-$(MAKE) --no-print-directory browser
 	$(BIN)/python -m pytest $(if $(filter-out 1,$(JOBS)),-n $(JOBS) --dist loadscope)
 
 # The documentation site (mkdocs.yml, docs/): a strict build, any warning is an error.
@@ -71,6 +73,17 @@ node-opcua: $(VENDOR_PLC)/node_modules/.installed
 $(VENDOR_PLC)/node_modules/.installed: $(VENDOR_PLC)/package.json $(VENDOR_PLC)/package-lock.json
 	cd $(VENDOR_PLC) && npm ci --no-audit --no-fund --ignore-scripts --loglevel=error
 	touch $@
+
+# A browser for the tests of the run's page (tests/cosim/hmi): Debian's chromium, driven by
+# Playwright (the dev extra) through its executable, never Playwright's own download. Installed
+# with apt-get when missing (as root, or with sudo that asks for no password); elsewhere
+# install it yourself (or point $$COSIM_CHROMIUM at a Chromium) or those tests are skipped.
+browser:
+	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || \
+	  { if [ "$$(id -u)" = 0 ]; then SUDO=; elif sudo -n true 2>/dev/null; then SUDO=sudo; \
+	    else echo "make browser: no chromium and no root to install it: the page's browser tests are skipped"; exit 1; fi; \
+	    DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q chromium >/dev/null || \
+	    { $$SUDO apt-get update -q >/dev/null && DEBIAN_FRONTEND=noninteractive $$SUDO apt-get install -y -q chromium >/dev/null; }; }
 
 clean:
 	rm -rf fmus/build fmus/*.fmu results site .pytest_cache

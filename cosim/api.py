@@ -96,7 +96,7 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         seed: int = 0, figure: bool = True, progress: bool = False,
         on_step: Callable[[int], None] | None = None,
         on_notice: Callable[[str], None] | None = None, live: Any = None,
-        mode: str | None = None, faceplate: Any = None) -> RunOutput:
+        mode: str | None = None, faceplate: Any = None, hmi: Any = None) -> RunOutput:
     """Run a scenario in closed loop (the Python twin of ``cosim run``).
 
     Parameters
@@ -156,6 +156,10 @@ def run(scenario: str | Path, plant: str | Path | None = None,
         Serve the controller's OPC UA faceplate while the run goes (:mod:`cosim.live.
         faceplate`: the operator's settings, set-points and predictions, writes checked
         by :class:`cosim.core.operator.OperatorDesk`).
+    hmi : cosim.hmi.serving.HmiOptions or str, optional
+        Serve the run's page while it runs (``"[HOST:]PORT"``, or the options with the
+        users who may operate it, :mod:`cosim.hmi`); its address is handed to
+        ``on_notice``. Requests from the page are audited in ``out``'s ``operator.csv``.
 
     Returns
     -------
@@ -204,7 +208,14 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     bar, on_step = _progress(progress, master, sc, on_step)
     served = _faceplate(faceplate, master, on_notice)
     try:
-        return _execute(master, meta, out, figure, on_step, limit)
+        if hmi is None:
+            return _execute(master, meta, out, figure, on_step, limit)
+        return _watched(master, meta, out, figure, on_step, limit, hmi, on_notice)
+    except BaseException:
+        if hmi is not None:
+            master.plant.terminate()
+            master.controller.terminate()
+        raise
     finally:
         if served is not None:
             served.stop()
@@ -412,33 +423,58 @@ def run_problem(ctrl: Any, problem: Any) -> Any:
     return load_problem(problem)
 
 
-def _execute(master: Any, meta: dict, out: str | Path | None, figure: bool,
-             on_step: Callable[[int], None] | None, limit: float | None) -> RunOutput:
-    """Run ``master`` (writing into ``out`` when given) and wrap the result."""
+def _watched(master: Any, meta: dict, out: str | Path | None, figure: bool,
+             on_step: Callable[[int], None] | None, limit: float | None, hmi: Any,
+             on_notice: Callable[[str], None] | None) -> RunOutput:
+    """:func:`_execute` with the run's page served (:func:`cosim.hmi.serving.watching`)."""
+    from cosim.core.runfolder import RunFolder
+    from cosim.hmi.serving import HmiOptions, watching
+
+    options = hmi if isinstance(hmi, HmiOptions) else HmiOptions.parse(hmi)
+    with contextlib.ExitStack() as stack:
+        folder = stack.enter_context(RunFolder(out, "--out")) if out is not None else None
+        feed = stack.enter_context(watching(
+            master, meta, folder.path if folder is not None else None, options, on_notice))
+        return _execute(master, meta, folder, figure, on_step, limit, feed)
+
+
+def _execute(master: Any, meta: dict, out: Any, figure: bool,
+             on_step: Callable[[int], None] | None, limit: float | None,
+             feed: Any = None) -> RunOutput:
+    """Run ``master`` (writing into ``out`` when given: a path, or a locked
+    :class:`~cosim.core.runfolder.RunFolder`) and wrap the result; ``feed``: the run's page
+    (:class:`cosim.hmi.feed.Feed`), told how it ended."""
     from cosim.core import interrupts, results
     from cosim.core.errors import CosimError, SimulationFailed
+    from cosim.core.runfolder import RunFolder
 
     if out is None:
-        result = master.run(on_step=on_step, step_timeout=limit)
+        result = master.run(on_step=on_step, step_timeout=limit, watch=feed)
+        if feed is not None:
+            feed.finish(result.status, result.reason)
         _raise_load_error(result, CosimError, SimulationFailed)
         return RunOutput(result, results.summary(result, meta), None, meta)
 
-    from cosim.core.runfolder import RunFolder
-
     guard = interrupts.current()
-    with RunFolder(out, "--out") as folder, \
+    held = contextlib.nullcontext(out) if isinstance(out, RunFolder) else None
+    with held or RunFolder(out, "--out") as folder, \
             guard.deferred() if guard is not None else contextlib.nullcontext():
         # signals raise only inside the master's step loop; around it (set-up, writing the
         # results) they are recorded and acted on once everything is on disk
         stream = results.ResultsStream(folder.path / "results.csv")
         try:
-            result = master.run(on_step=on_step, record=stream, step_timeout=limit)
+            result = master.run(on_step=on_step, record=stream, step_timeout=limit,
+                                watch=feed)
         except BaseException:
             stream.close()
             raise
+        if feed is not None:
+            feed.finish(result.status, result.reason)
         _raise_load_error(result, CosimError, SimulationFailed)
         described = _describe_controller(meta)
-        doc = results.write(folder.path, result, meta, figure=figure, stream=stream)
+        kept = ("operator.csv",) if feed is not None and feed.audit.written else ()
+        doc = results.write(folder.path, result, meta, figure=figure, stream=stream,
+                            kept=kept)
         if described is not None:   # after the results: a failed write keeps them on disk
             from cosim.core import controller_file
 

@@ -39,6 +39,7 @@ __all__ = ["COMMANDS", "build_parser", "entry", "main"]
 #: ``func`` so that ``--help`` stays fast.
 COMMANDS = (
     "cosim.commands.run",
+    "cosim.commands.view",
     "cosim.commands.serve_plant",
     "cosim.commands.make_certificate",
     "cosim.commands.build_fmu",

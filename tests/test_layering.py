@@ -15,8 +15,8 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("controllers", "cosim")
 #: cosim's application modules: they may use the numerical core and the adapters.
-APPLICATION = ("cosim.api", "cosim.campaign", "cosim.cli", "cosim.commands", "cosim.live",
-               "cosim.tuning")
+APPLICATION = ("cosim.api", "cosim.campaign", "cosim.cli", "cosim.commands", "cosim.hmi",
+               "cosim.live", "cosim.tuning")
 #: cosim's layers, top down (the layers contract's).
 LAYERS = (APPLICATION, ("cosim.adapters",), ("cosim.core",))
 

@@ -8,10 +8,11 @@ problem (the model file's, :class:`controllers.problem.ControlProblem`), their s
 in the problem's units (for the four-tank: levels ``h1``, ``h2`` in metres, pump flows
 ``qa``, ``qb`` in m³/s). It declares what it offers (:class:`cosim.core.component.
 Capability`): it designs for the run's set-points (certified or not), measures disturbances
-with nominal defaults, is told those known ahead, says why it runs uncertified, and takes its
+with nominal defaults, is told those known ahead, says why it runs uncertified, takes its
 settings between steps by name (:meth:`RobustMPCController.set`): the engineer's weights and
 the operator's ``op.*`` settings (:mod:`controllers.operator`: its outputs are then the
-inputs the plant gets, its diagnostics ``computed.<input>`` what the law computed).
+inputs the plant gets, its diagnostics ``computed.<input>`` what the law computed), and says
+what it plans (:meth:`RobustMPCController.prediction`).
 
 Its errors are the numerical core's, in the same words, as :class:`cosim.core.errors.
 CosimError`: a design or a first set-point outside the theory is a configuration error
@@ -29,7 +30,7 @@ import numpy as np
 from controllers.errors import ControllersError
 from controllers.model import DEFAULT_MODEL
 from controllers.mpc_options import MPCOptions
-from cosim.core.component import Capability, Component, Setting, Signal
+from cosim.core.component import Capability, Component, Prediction, Setting, Signal
 from cosim.core.errors import CosimError
 
 __all__ = ["RobustMPCController"]
@@ -66,7 +67,8 @@ class RobustMPCController(Component):
     direct_feedthrough = True
     capabilities = frozenset({Capability.SETPOINTS, Capability.DISTURBANCES,
                               Capability.PREVIEW, Capability.NOTICE, Capability.SETTINGS,
-                              Capability.ESTIMATE, Capability.OPERATOR})
+                              Capability.ESTIMATE, Capability.OPERATOR,
+                              Capability.PREDICTION})
     #: the options :func:`cosim.core.registry.create` accepts (``--option KEY=VALUE``)
     OPTIONS = ("model", "problem", "options", "name", *MPCOptions.names())
     #: wall-clock diagnostics: written by the master to timings.csv, not results.csv
@@ -224,6 +226,36 @@ class RobustMPCController(Component):
         obs = self.mpc.observer
         return obs.x_hat, obs.e_o, self.mpc.law.steady_state
 
+    def prediction(self) -> Prediction | None:
+        """The last step's plan in the problem's units: the law's last solve (its states
+        ``x_0 … x_N`` through the output map, plus the offset-free estimate ``d̂`` the law
+        aims off by, so that they compare with the measurements), its inputs, and the
+        tightened output rows ``eq:optimization-constraint`` at ``ê_o`` of that step, read
+        as each output's box; ``None`` before the first step."""
+        mpc = self.mpc
+        records = mpc.law.records
+        if not records:
+            return None
+        rec = records[-1]
+        res, fh, model = rec.result, mpc.fhocp, mpc.model
+        scale = np.asarray(model.y_scale, dtype=float)
+        d = np.array([self._diag.get(f"d_hat_{n}", 0.0) for n in self._y_names],
+                     dtype=float) / np.abs(scale)
+        y = model.denormalize_y(res.x @ fh.params["U_o"].T + fh.params["b_o"] + d)
+        u = np.clip(model.denormalize_u(res.u), self.mpc.u_lo, self.mpc.u_hi)
+        low, high = _output_rows(fh, fh.tightened_bounds(rec.e_o), d)
+        low, high = model.denormalize_y(low), model.denormalize_y(high)
+        flip = scale < 0   # a negative scale swaps the ends
+        low[:, flip], high[:, flip] = high[:, flip], low[:, flip].copy()
+        names = self._y_names
+        return Prediction(
+            step=float(model.Ts),
+            outputs={n: tuple(map(float, y[:, j])) for j, n in enumerate(names)},
+            inputs={n: tuple(map(float, u[:, j])) for j, n in enumerate(self._u_names)},
+            low={n: tuple(map(float, low[:, j])) for j, n in enumerate(names)},
+            high={n: tuple(map(float, high[:, j])) for j, n in enumerate(names)},
+            fallback=bool(rec.fallback))
+
     def summary(self) -> dict:
         out = self.mpc.summary()
         law = out.pop("law")
@@ -231,6 +263,27 @@ class RobustMPCController(Component):
 
     def terminate(self) -> None:
         """Nothing to release (the solver is freed with the object)."""
+
+
+def _output_rows(fh: Any, bounds: np.ndarray, d: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rows ``L U_o x_i ≤ bounds_i`` of ``eq:optimization-constraint`` (``i = 0 … N−1``)
+    read as the box each output keeps, normalised: the row ``+y_j`` an upper end, ``−y_j`` a
+    lower one (``nan`` where the problem has no such row), plus ``b_o`` and the offset ``d``
+    the prediction carries. The four-tank's ``L`` holds both rows of every output
+    (:func:`controllers.problem.output_constraints`)."""
+    L = np.asarray(fh.L, dtype=float)
+    N, p = bounds.shape[0], L.shape[1]
+    low, high = np.full((N, p), np.nan), np.full((N, p), np.nan)
+    offset = np.asarray(fh.params["b_o"], dtype=float) + d
+    for r, row in enumerate(L):
+        j = int(np.argmax(np.abs(row)))
+        if np.count_nonzero(row) != 1 or abs(abs(row[j]) - 1.0) > 1e-12:
+            continue
+        if row[j] > 0:
+            high[:, j] = bounds[:, r] + offset[j]
+        else:
+            low[:, j] = -bounds[:, r] + offset[j]
+    return low, high
 
 
 def _as_cosim(exc: ControllersError) -> CosimError:

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import argparse
 
-__all__ = ["add_design_arguments", "add_model_argument", "add_problem_argument"]
+__all__ = ["add_design_arguments", "add_hmi_arguments", "add_model_argument",
+           "add_problem_argument", "hmi_options"]
 
 #: The help of a GRU model file argument.
 MODEL_HELP = "GRU model file (default: the shipped controllers/models/fourtank_gru.json)"
@@ -35,3 +36,37 @@ def add_design_arguments(p: argparse.ArgumentParser, option_help: str) -> None:
     add_problem_argument(p)
     p.add_argument("--option", metavar="KEY=VALUE", action="append", default=[],
                    help=option_help)
+
+
+def add_hmi_arguments(p: argparse.ArgumentParser, what: str, default: str | None = None) -> None:
+    """``--hmi [HOST:]PORT`` and ``--hmi-users FILE``: where ``what`` (a run's page, a
+    campaign's) is served and who may operate it (:mod:`cosim.hmi`); ``default``: the
+    address without ``--hmi`` (``None``: no page)."""
+    when = f"default {default}" if default else "default: no page"
+    p.add_argument("--hmi", metavar="[HOST:]PORT", default=default,
+                   help=f"serve {what} in a web browser at http://HOST:PORT/ (HOST "
+                        f"127.0.0.1 unless given; {when}); updates are pushed, every script "
+                        "is served by cosim itself")
+    p.add_argument("--hmi-users", metavar="USERS.toml", default=None,
+                   help="who may log in to operate the page: names, roles (operator, "
+                        "engineer) and password hashes (python -m cosim.hmi.users writes "
+                        "them); viewing on 127.0.0.1 needs no login, any other host does")
+
+
+def hmi_options(args: argparse.Namespace) -> object:
+    """The page's options of ``--hmi`` and ``--hmi-users`` (``None`` without a page).
+
+    Raises
+    ------
+    CosimError
+        A bad address or users file, or ``--hmi-users`` without ``--hmi``.
+    """
+    from cosim.core.errors import CosimError
+
+    if args.hmi is None:
+        if args.hmi_users is not None:
+            raise CosimError("--hmi-users: only with --hmi (the page it logs in to)")
+        return None
+    from cosim.hmi.serving import HmiOptions
+
+    return HmiOptions.parse(args.hmi, args.hmi_users)

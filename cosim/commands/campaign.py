@@ -87,18 +87,37 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     g.add_argument("--force", action="store_true",
                    help="start over in a DIR that holds a campaign (its runs are removed)")
     p.add_argument("--quiet", action="store_true", help="no progress bar and no summary")
+    from cosim.commands import add_hmi_arguments
+
+    add_hmi_arguments(p, "the campaign's page (its runs and their KPIs as they finish, each "
+                         "linked to its page)")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``cosim campaign``; returns the exit code."""
+    import contextlib
+    from pathlib import Path
+
     from cosim.campaign import engine
+    from cosim.campaign.spec import load
+    from cosim.commands import hmi_options
     from cosim.core.errors import EXIT_FAILED, EXIT_OK
 
-    result = engine.run_campaign(args.spec, args.out, workers=args.workers,
-                                 scheduler=args.scheduler, resume=args.resume,
-                                 force=args.force, worker_timeout=args.worker_timeout,
-                                 progress=not args.quiet and sys.stderr.isatty())
+    hmi = hmi_options(args)
+    spec = load(args.spec)
+    page = contextlib.nullcontext()
+    if hmi is not None:
+        from cosim.hmi.serving import serving_campaign
+
+        out = Path(args.out) if args.out else Path("results") / "campaigns" / spec.name
+        page = serving_campaign(out, hmi, lambda text: print(f"cosim campaign: {text}",
+                                                             file=sys.stderr, flush=True))
+    with page:
+        result = engine.run_campaign(spec, args.out, workers=args.workers,
+                                     scheduler=args.scheduler, resume=args.resume,
+                                     force=args.force, worker_timeout=args.worker_timeout,
+                                     progress=not args.quiet and sys.stderr.isatty())
     if not args.quiet:
         _print_summary(result)
     if result.error is not None:

@@ -35,6 +35,12 @@ renamed into place: a full disk leaves the previous file intact. A rerun into th
 replaces the earlier run's files and removes those it does not write again; a second run into
 a DIR that a run is still writing is refused.
 
+With --hmi [HOST:]PORT the run's page is served while it runs (docs: "Watch it live"): a
+panel per output (measured, set-point, limits, the MPC's prediction over its horizon and the
+tightened constraint), per input, the status strip and the prediction error, pushed to the
+browser; a user of --hmi-users logs in to change set-points (operator) and the controller's
+settings (engineer), each request answered and written to DIR/operator.csv.
+
 With --plant opc.tcp://HOST:PORT the plant is a live process: its control system's OPC UA
 server (or cosim serve-plant), met on the wall clock, each sample read, stepped, written;
 stale or implausible values, lost links, late steps and signals each have their answer,
@@ -63,6 +69,7 @@ examples:
   cosim run cstr_steps.csv --plant cstr.fmu --problem cstr.toml --controller pi
   cosim run scenarios/paper_steps.csv --plant opc.tcp://127.0.0.1:4840 --speed 100 \\
       --security None --watchdog 3 --problem problem_safe.toml --tags plc.tags.toml
+  cosim run scenarios/paper_steps.csv --hmi 8050 --hmi-users users.toml
 
 """ + exit_codes_help()
 
@@ -79,6 +86,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     _execution_arguments(p)
     _live_arguments(p)
     _operator_arguments(p)
+    from cosim.commands import add_hmi_arguments
+
+    add_hmi_arguments(p, "the run's page")
     p.add_argument("--no-figure", action="store_true", help="do not draw figure.png")
     p.add_argument("--quiet", action="store_true",
                    help="no progress bar and no summary line (for scripts)")
@@ -203,11 +213,13 @@ FLAGS = ("seed", "step", "step_timeout", "mode")
 def run(args: argparse.Namespace) -> int:
     """Execute ``cosim run`` through :func:`cosim.api.run`; returns the exit code."""
     from cosim import api
+    from cosim.commands import hmi_options
     from cosim.core import registry
     from cosim.core.errors import CosimError, ParameterError, SimulationFailed
 
     options = registry.parse_options(args.option)
     live = _live_options(args)
+    hmi = hmi_options(args)
     if args.require_certificate:
         options["certificate"] = "require"
     out = Path(args.out) if args.out else None
@@ -222,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
                          interface=args.interface, step=args.step, isolate=args.isolate,
                          step_timeout=args.step_timeout, seed=args.seed,
                          figure=not args.no_figure, live=live, mode=args.mode,
-                         faceplate=_faceplate_options(args),
+                         faceplate=_faceplate_options(args), hmi=hmi,
                          progress=not args.quiet and sys.stderr.isatty(),
                          on_notice=lambda text: print(f"cosim run: {text}", file=sys.stderr,
                                                       flush=True))

@@ -32,7 +32,7 @@ from typing import Any
 
 from cosim.core.errors import CosimError
 
-__all__ = ["Capability", "Component", "Schedule", "Setting", "Signal"]
+__all__ = ["Capability", "Component", "Prediction", "Schedule", "Setting", "Signal"]
 
 
 @dataclass(frozen=True)
@@ -82,6 +82,10 @@ class Capability(StrEnum):
         ``"operator"``), which :meth:`Component.set` takes like any; its outputs are the
         inputs the plant gets, its diagnostics ``computed.<input>`` what it computed (in
         manual: in shadow), and :meth:`Component.operator_status` what it predicts.
+    ``PREDICTION``
+        A predictive controller that says what it plans at its last step
+        (:meth:`Component.prediction`): the outputs it predicts over its horizon, the inputs
+        it plans and the constraints its plan keeps (a live page of the run, :mod:`cosim.hmi`).
     """
 
     TUNABLE = "tunable"
@@ -94,6 +98,7 @@ class Capability(StrEnum):
     SETTINGS = "settings"
     ESTIMATE = "estimate"
     OPERATOR = "operator"
+    PREDICTION = "prediction"
 
 
 @dataclass(frozen=True)
@@ -126,6 +131,36 @@ class Setting:
     start: float = float("nan")
     unit: str = ""
     role: str = "engineer"
+
+
+@dataclass(frozen=True)
+class Prediction:
+    """What a predictive controller plans at its last step (:meth:`Component.prediction`),
+    in the problem's units; picklable (it travels from a worker process).
+
+    Attributes
+    ----------
+    step : float
+        Seconds between two predicted samples (the controller's sample time); sample ``i``
+        of the plan is ``i * step`` after the step's instant.
+    outputs : mapping of str to tuple of float
+        Each controlled output's predicted values, samples ``0 … N``.
+    inputs : mapping of str to tuple of float
+        Each input's planned values, samples ``0 … N−1``.
+    low, high : mapping of str to tuple of float
+        Each output's constraint as the plan keeps it at samples ``0 … N−1`` (the robust
+        MPC's tightened box; ``nan`` where a side has none).
+    fallback : bool
+        The plan is not the last solve's answer (the controller fell back on an earlier
+        plan); ``outputs`` then show the solve it did not apply.
+    """
+
+    step: float
+    outputs: Mapping[str, tuple[float, ...]]
+    inputs: Mapping[str, tuple[float, ...]]
+    low: Mapping[str, tuple[float, ...]]
+    high: Mapping[str, tuple[float, ...]]
+    fallback: bool = False
 
 
 class Component(ABC):
@@ -254,6 +289,10 @@ class Component(ABC):
         """(``ESTIMATE``) ``(x̂, its error bound, the steady state it steers to)`` now
         (normalised; ``None`` where there is none yet)."""
         raise CosimError(f"{self.where}: no state estimate")
+
+    def prediction(self) -> Prediction | None:
+        """(``PREDICTION``) The plan of the last step (``None`` before the first)."""
+        return None
 
     def set(self, name: str, value: float) -> str:
         """(``SETTINGS``) Change setting ``name`` from the next step on; returns what was

@@ -116,6 +116,9 @@ class ComponentServer:  # pragma: no cover - runs in the worker process
     def operator_status(self) -> dict:
         return dict(self.comp.operator_status() or {})
 
+    def prediction(self) -> Any:
+        return self.comp.prediction()
+
     def summary(self) -> dict:
         return dict(self.comp.summary() or {})
 
@@ -127,7 +130,8 @@ class Isolation:
     """The isolation proxy: a component whose steps run in a worker process (module
     docstring), and every capability it declares (:class:`~cosim.core.component.
     Capability`) forwarded there: parameters (``TUNABLE``), the run's set-points
-    (``SETPOINTS``), schedules as data (``PREVIEW``) and settings (``SETTINGS``). What it
+    (``SETPOINTS``), schedules as data (``PREVIEW``), settings (``SETTINGS``) and the plan
+    (``PREDICTION``). What it
     declares it answers from this process (names, boxes, defaults, its notice).
 
     A class mixes it in before the component it isolates and says how the worker builds
@@ -243,6 +247,10 @@ class Isolation:
     def operator_status(self) -> dict[str, Any]:
         """(``OPERATOR``) The worker's component's predictions."""
         return self._call("reading the operator status", "operator_status")
+
+    def prediction(self) -> Any:
+        """(``PREDICTION``) The worker's component's plan of its last step."""
+        return self._call("reading the plan", "prediction")
 
     def summary(self) -> dict:
         """The worker's component's summary (:meth:`_summary_here` when the worker is

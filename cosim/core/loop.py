@@ -5,7 +5,8 @@ One communication step ``[t_k, t_k+1)`` is :meth:`Run._apply_events` (scenario e
 instant on the wall clock), :meth:`Run._sample` (the plant's reading through its
 :class:`~cosim.core.pacing.PlantIO`, the sensor, the controller step and its timeout, the
 inputs written when the pacer allows it, or the pacer's answer to a stale reading; the row,
-handed to the :class:`RowSink` too) and :meth:`Run._advance` (the plant step);
+handed to the :class:`RowSink` and a :class:`~cosim.core.run_result.RunWatcher` too) and
+:meth:`Run._advance` (the plant step); between two steps the watcher may change set-points;
 :meth:`Run.execute` maps what goes wrong in any of them, or a signal, onto the result's
 status and never raises. The same loop runs a plant FMU in simulated time and a live plant
 on the wall clock: only the plant I/O and the pacer differ.
@@ -28,6 +29,7 @@ from cosim.core.run_result import (
     PREFIX_CTRL,
     RowSink,
     RunResult,
+    RunWatcher,
     communication_times,
     shortfall_verdict,
 )
@@ -56,8 +58,9 @@ class Run:
     """
 
     def __init__(self, master: Master, record: RowSink | None, step_timeout: float | None,
-                 deadline: float | None) -> None:
+                 deadline: float | None, watch: RunWatcher | None = None) -> None:
         self.m = master
+        self.watch = watch
         self.io = master.io
         self.pacer = master.pacer
         self.own_prefixes = master.pacer.own_prefixes
@@ -187,6 +190,8 @@ class Run:
         except Exception as exc:
             raise SimulationFailed(f"setup at t={t!r} failed: {exc}") from exc
         self.pacer.start(self)
+        if self.watch is not None:
+            self.watch.start(self.result)
 
     def _sensed(self, t: float, y: dict[str, float]) -> dict[str, float]:
         """What the controller measures: ``y``, through the scenario's sensor model."""
@@ -307,6 +312,8 @@ class Run:
             self.result.rows.append(row)
             if self.sink is not None:
                 self.sink.append(row, self.result.columns)
+            if self.watch is not None:
+                self.watch.append(row, self.result.columns)
         if guard is not None:
             guard.check()
 
@@ -365,7 +372,18 @@ class Run:
             result.steps = k
             if on_step is not None:
                 on_step(k)
+            if self.watch is not None:
+                self._watched(times[k])
             self._check_interrupt()
+
+    def _watched(self, t: float) -> None:
+        """The set-points the watcher changes from the sample at ``t`` on (those the run
+        has)."""
+        refs = self.refs
+        for name, value in self.watch.between(t).items():  # type: ignore[union-attr]
+            key = "ref." + name
+            if key in refs:
+                refs[key] = float(value)
 
     def _interrupted(self, exc: KeyboardInterrupt) -> None:
         if not isinstance(exc, interrupts.Interrupted):

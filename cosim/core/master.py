@@ -46,6 +46,7 @@ from cosim.core.run_result import (
     PREFIX_SENSOR,
     RowSink,
     RunResult,
+    RunWatcher,
     communication_times,
 )
 from cosim.core.scenario import BIAS, DIST, NOISE, PLANT, REF, UNIFORM, Scenario
@@ -217,7 +218,7 @@ class Master:
     # -- run ----------------------------------------------------------------------------------
     def run(self, on_step: Callable[[int], None] | None = None, *,
             record: RowSink | None = None, step_timeout: float | None = None,
-            deadline: float | None = None) -> RunResult:
+            deadline: float | None = None, watch: RunWatcher | None = None) -> RunResult:
         """Run the scenario; never raises for a fault inside the run (see ``result.error``).
 
         Parameters
@@ -238,6 +239,9 @@ class Master:
         deadline : float, optional
             ``time.monotonic()`` value past which the run stops with status ``failed``
             (checked between steps: the whole-run timeout of campaigns).
+        watch : RunWatcher, optional
+            Follows the run from its loop (:class:`~cosim.core.run_result.RunWatcher`: a
+            live page, :mod:`cosim.hmi`): each row, and set-points changed between steps.
 
         Raises
         ------
@@ -247,7 +251,7 @@ class Master:
         if step_timeout is not None and not (math.isfinite(step_timeout) and step_timeout > 0):
             raise ParameterError("step_timeout", f" {step_timeout!r}: expected a positive "
                                  "number of seconds")
-        run = Run(self, record, step_timeout, deadline)
+        run = Run(self, record, step_timeout, deadline, watch)
         own = interrupts.current() is None
         with interrupts.handling_signals() as guard:
             run.guard = guard

@@ -43,7 +43,8 @@ from cosim.core.master import RunResult
 __all__ = ["PART_SUFFIX", "RUN_FILES", "ResultsStream", "jsonable", "signals", "summary", "write",
            "write_csv"]
 
-#: Every file a run writes into its folder.
+#: Every file a run writes into its folder (``operator.csv``: the operator's actions, from the
+#: scenario, the faceplate or the run's page: :mod:`cosim.core.operator`).
 RUN_FILES = ("results.csv", "timings.csv", "operator.csv", "summary.json", "figure.png")
 #: Suffix of the file ``results.csv`` is streamed into while the run goes.
 PART_SUFFIX = ".part"
@@ -225,7 +226,8 @@ def jsonable(obj: object) -> object:
 
 
 def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
-          figure: bool = True, stream: ResultsStream | None = None) -> dict:
+          figure: bool = True, stream: ResultsStream | None = None,
+          kept: tuple[str, ...] = ()) -> dict:
     """Write a run into ``out_dir``: ``results.csv``, ``timings.csv``, ``summary.json``,
     ``figure.png``, each atomically; remove the files of an earlier run it does not write.
 
@@ -238,6 +240,9 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
     stream : ResultsStream, optional
         The stream the run's rows went to; it is finished (renamed onto ``results.csv``)
         instead of writing the rows again.
+    kept : tuple of str
+        Files of :data:`RUN_FILES` this run wrote itself as it went (an ``operator.csv``):
+        kept, where an earlier run's are removed.
 
     Returns
     -------
@@ -258,7 +263,7 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
     """
     out = Path(out_dir)
     errors: list[OutputError] = []
-    written: set[str] = set()
+    written: set[str] = set(kept)
 
     def attempt(name: str, fn: object, *args: object) -> None:
         try:

@@ -5,12 +5,13 @@ communication times: shared by the master (:mod:`cosim.core.master`) and its loo
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
 __all__ = ["COMPLETE", "DEGRADED_SHARE", "FAILING_SHARE", "MAX_STEPS", "PREFIX_CTRL",
            "PREFIX_DIST", "PREFIX_PLANT", "PREFIX_REF", "PREFIX_SENSOR", "RowSink", "RunResult",
-           "communication_times", "shortfall_verdict"]
+           "RunWatcher", "communication_times", "shortfall_verdict"]
 
 #: Column prefixes of recorded signals (results.csv).
 PREFIX_REF, PREFIX_PLANT, PREFIX_SENSOR, PREFIX_CTRL = "ref", "plant", "sensor", "ctrl"
@@ -112,3 +113,21 @@ class RowSink(Protocol):
 
     def append(self, row: list[float], columns: list[str]) -> None:
         """Take one row; ``columns`` names its cells (it grows when diagnostics appear)."""
+
+
+class RunWatcher(RowSink, Protocol):
+    """What follows a run from inside its loop (a live page of the run, :mod:`cosim.hmi`):
+    shown the run's record before the first step, handed each row as a :class:`RowSink` is,
+    and asked between two steps for the set-points that change from the next sample on.
+    Every call comes from the loop's thread, between the controller's steps (the only place
+    a component may be asked anything), and returns at once; what the watcher raises ends
+    the run as a sink's error does."""
+
+    def start(self, result: RunResult) -> None:
+        """Before the first step: the run's record, which grows as the run goes (its
+        ``timing_rows``: the controller's wall-clock diagnostics, one row per step)."""
+
+    def between(self, t: float) -> Mapping[str, float]:
+        """Before the sample at ``t``: the set-points to change, by output name (recorded
+        in ``ref.<output>`` from that sample on, until the next request or scenario row
+        sets them); empty for none."""

@@ -1,0 +1,143 @@
+"""What the run's page costs the run: the step time of a run with ``--hmi`` and the page open
+in a browser, against the same run without, in the same process.
+
+The paper's scenario (1,600 steps of the robust MPC, four-tank FMU in process, nothing
+written to disk) is run ``--repeats`` times each way, alternately: without the page; with it
+served and nobody looking (the run's own share: the feed in its loop, the server idle);
+with it open in a headless Chromium (Debian's ``chromium``, driven by Playwright) for the
+whole run, so that the server pushes every update (:data:`cosim.hmi.page.PERIOD_MS`). The
+browser runs twice: niced (``nice -n 19``: meant to draw only on what the run leaves; on
+loaded cores it does not quite) and beside the run at the same priority (on a machine of two
+cores it then takes one of them). Neither separates the server's pushes (a thread of the
+run's process) from the browser's drawing. The step time is the wall
+time from the end of the first step (which waits until the browser shows the page) to the
+end of the last, per step. Prints the median of each way and its ratio to the run without
+the page (goal: ≤ 1.05).
+
+Usage: ``python benchmarks/bench_hmi.py [--repeats R] [--scenario CSV]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import shutil
+import statistics
+import sys
+import tempfile
+import threading
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+import cosim  # noqa: E402
+from cosim.hmi.serving import HmiOptions  # noqa: E402
+from cosim.live.process import free_port  # noqa: E402
+
+
+@contextlib.contextmanager
+def viewer(url_box: list[str], nice: int = 0) -> Iterator[threading.Event | None]:
+    """A headless Chromium that opens the page once its address is in ``url_box`` and keeps
+    it open until the event is set (``nice``: its processes' niceness); ``None`` without a
+    browser."""
+    chromium = shutil.which("chromium") or shutil.which("chromium-browser")
+    try:
+        from playwright.sync_api import sync_playwright
+    except ImportError:
+        chromium = None
+    if chromium is None:
+        yield None
+        return
+    done, opened = threading.Event(), threading.Event()
+
+    folder = tempfile.mkdtemp()
+    launcher = Path(folder) / "chromium"
+    launcher.write_text(f'#!/bin/sh\nexec nice -n {nice} "{chromium}" "$@"\n')
+    launcher.chmod(0o755)
+
+    def view() -> None:
+        with sync_playwright() as pw:
+            browser = pw.chromium.launch(executable_path=str(launcher), headless=True,
+                                         args=["--no-sandbox", "--disable-dev-shm-usage"])
+            page = browser.new_page(viewport={"width": 1280, "height": 1400})
+            while not url_box and not done.is_set():
+                time.sleep(0.01)
+            if url_box:
+                page.goto(url_box[0])
+                page.wait_for_selector(".hmi-value", timeout=120_000)
+                opened.set()
+                done.wait()
+            browser.close()
+
+    thread = threading.Thread(target=view, daemon=True)
+    thread.start()
+    try:
+        yield opened
+    finally:
+        done.set()
+        thread.join(60)
+        shutil.rmtree(folder, ignore_errors=True)
+
+
+def one_run(scenario: Path, page: bool, browse: bool = True, nice: int = 0) -> float:
+    """Seconds per step of one run, with the page (and a browser on it) or without: the wall
+    time from the end of its first step to the end of its last, over the steps between (the
+    first step waits until the browser shows the page)."""
+    url: list[str] = []
+    marks: list[float] = []
+
+    def notice(text: str) -> None:
+        if text.startswith("the run's page: "):
+            url.append(text.rsplit(" ", 1)[1])
+
+    with viewer(url, nice) if page and browse else contextlib.nullcontext(None) as opened:
+        def step(k: int) -> None:
+            if k == 1 and opened is not None:
+                opened.wait(120)
+            marks.append(time.perf_counter())
+
+        hmi = HmiOptions("127.0.0.1", free_port()) if page else None
+        out = cosim.run(scenario, figure=False, hmi=hmi, on_notice=notice, on_step=step)
+    assert out.status == "ok", out.reason
+    return (marks[-1] - marks[0]) / (len(marks) - 1)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--repeats", type=int, default=3)
+    parser.add_argument("--scenario", default=str(ROOT / "scenarios" / "paper_steps.csv"))
+    parser.add_argument("--no-browser", action="store_true",
+                        help="serve the page with nobody looking (the run's own share only)")
+    args = parser.parse_args(argv)
+    scenario = Path(args.scenario)
+    one_run(scenario, False)   # warm up: the kernel compiled and loaded, the FMU built
+    has_browser = False
+    if not args.no_browser:
+        with viewer([]) as probe:
+            has_browser = probe is not None
+    # (label, page served, browser, its niceness)
+    ways = [("without the page", False, False, 0), ("page, nobody looking", True, False, 0)]
+    if has_browser:
+        ways += [("page open, browser niced", True, True, 19),
+                 ("page open, browser beside", True, True, 0)]
+    times: dict[str, list[float]] = {w[0]: [] for w in ways}
+    for _ in range(args.repeats):
+        for label, page, browse, nice in ways:
+            times[label].append(one_run(scenario, page, browse, nice))
+    base = statistics.median(times[ways[0][0]])
+    print(f"{scenario.name}: step time, median of {args.repeats} runs each way, alternately"
+          + ("" if has_browser or args.no_browser else " (no browser installed)"))
+    for label, *_ in ways:
+        m = statistics.median(times[label])
+        print(f"{label:28s} {m * 1e3:8.3f} ms  ratio {m / base:5.3f}  (runs: "
+              f"{', '.join(f'{x * 1e3:.3f}' for x in times[label])})")
+    print("goal: ratio <= 1.05 with the page open (the browser niced: as on the operator's "
+          "own computer; beside: on this machine's cores at the run's priority)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
