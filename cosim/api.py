@@ -159,7 +159,8 @@ def run(scenario: str | Path, plant: str | Path | None = None,
     hmi : cosim.hmi.serving.HmiOptions or str, optional
         Serve the run's page while it runs (``"[HOST:]PORT"``, or the options with the
         users who may operate it, :mod:`cosim.hmi`); its address is handed to
-        ``on_notice``. Requests from the page are audited in ``out``'s ``operator.csv``.
+        ``on_notice``. Requests from the page go through the run's operator desk (rows of
+        ``operator.csv``), as the faceplate's writes and the scenario's ``op.*`` cells do.
 
     Returns
     -------
@@ -239,10 +240,11 @@ def _faceplate(options: Any, master: Any, on_notice: Callable[[str], None] | Non
     """The faceplate served over ``master``'s operator desk (started), or ``None``."""
     if options is None:
         return None
+    from cosim.core.component import Capability
     from cosim.core.errors import CosimError
     from cosim.live.faceplate import Faceplate
 
-    if master.desk is None:
+    if Capability.OPERATOR not in master.controller.capabilities:
         raise CosimError(f"--faceplate: controller '{master.controller.name}' takes no "
                          "operator settings")
     served = Faceplate(master.desk, master.controller, options, notice=on_notice or print)
@@ -427,23 +429,18 @@ def _watched(master: Any, meta: dict, out: str | Path | None, figure: bool,
              on_step: Callable[[int], None] | None, limit: float | None, hmi: Any,
              on_notice: Callable[[str], None] | None) -> RunOutput:
     """:func:`_execute` with the run's page served (:func:`cosim.hmi.serving.watching`)."""
-    from cosim.core.runfolder import RunFolder
     from cosim.hmi.serving import HmiOptions, watching
 
     options = hmi if isinstance(hmi, HmiOptions) else HmiOptions.parse(hmi)
-    with contextlib.ExitStack() as stack:
-        folder = stack.enter_context(RunFolder(out, "--out")) if out is not None else None
-        feed = stack.enter_context(watching(
-            master, meta, folder.path if folder is not None else None, options, on_notice))
-        return _execute(master, meta, folder, figure, on_step, limit, feed)
+    with watching(master, meta, options, on_notice) as feed:
+        return _execute(master, meta, out, figure, on_step, limit, feed)
 
 
 def _execute(master: Any, meta: dict, out: Any, figure: bool,
              on_step: Callable[[int], None] | None, limit: float | None,
              feed: Any = None) -> RunOutput:
-    """Run ``master`` (writing into ``out`` when given: a path, or a locked
-    :class:`~cosim.core.runfolder.RunFolder`) and wrap the result; ``feed``: the run's page
-    (:class:`cosim.hmi.feed.Feed`), told how it ended."""
+    """Run ``master`` (writing into the folder ``out`` when given) and wrap the result;
+    ``feed``: the run's page (:class:`cosim.hmi.feed.Feed`), told how it ended."""
     from cosim.core import interrupts, results
     from cosim.core.errors import CosimError, SimulationFailed
     from cosim.core.runfolder import RunFolder
@@ -456,8 +453,7 @@ def _execute(master: Any, meta: dict, out: Any, figure: bool,
         return RunOutput(result, results.summary(result, meta), None, meta)
 
     guard = interrupts.current()
-    held = contextlib.nullcontext(out) if isinstance(out, RunFolder) else None
-    with held or RunFolder(out, "--out") as folder, \
+    with RunFolder(out, "--out") as folder, \
             guard.deferred() if guard is not None else contextlib.nullcontext():
         # signals raise only inside the master's step loop; around it (set-up, writing the
         # results) they are recorded and acted on once everything is on disk
@@ -472,9 +468,7 @@ def _execute(master: Any, meta: dict, out: Any, figure: bool,
             feed.finish(result.status, result.reason)
         _raise_load_error(result, CosimError, SimulationFailed)
         described = _describe_controller(meta)
-        kept = ("operator.csv",) if feed is not None and feed.audit.written else ()
-        doc = results.write(folder.path, result, meta, figure=figure, stream=stream,
-                            kept=kept)
+        doc = results.write(folder.path, result, meta, figure=figure, stream=stream)
         if described is not None:   # after the results: a failed write keeps them on disk
             from cosim.core import controller_file
 

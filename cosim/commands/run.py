@@ -38,8 +38,9 @@ a DIR that a run is still writing is refused.
 With --hmi [HOST:]PORT the run's page is served while it runs (docs: "Watch it live"): a
 panel per output (measured, set-point, limits, the MPC's prediction over its horizon and the
 tightened constraint), per input, the status strip and the prediction error, pushed to the
-browser; a user of --hmi-users logs in to change set-points (operator) and the controller's
-settings (engineer), each request answered and written to DIR/operator.csv.
+browser; a user of --hmi-users logs in to change set-points and op.* settings (operator)
+and the controller's settings (engineer), each request checked as an op.* cell or a
+faceplate write, answered, and a row of DIR/operator.csv.
 
 With --plant opc.tcp://HOST:PORT the plant is a live process: its control system's OPC UA
 server (or cosim serve-plant), met on the wall clock, each sample read, stepped, written;

@@ -6,7 +6,8 @@ instant on the wall clock), :meth:`Run._sample` (the plant's reading through its
 :class:`~cosim.core.pacing.PlantIO`, the sensor, the controller step and its timeout, the
 inputs written when the pacer allows it, or the pacer's answer to a stale reading; the row,
 handed to the :class:`RowSink` and a :class:`~cosim.core.run_result.RunWatcher` too) and
-:meth:`Run._advance` (the plant step); between two steps the watcher may change set-points;
+:meth:`Run._advance` (the plant step); between two steps the watcher may act on the run
+through its operator desk (:mod:`cosim.core.operator`);
 :meth:`Run.execute` maps what goes wrong in any of them, or a signal, onto the result's
 status and never raises. The same loop runs a plant FMU in simulated time and a live plant
 on the wall clock: only the plant I/O and the pacer differ.
@@ -106,7 +107,9 @@ class Run:
         self.diag: dict[str, float] = {}
         #: the operator's desk (:mod:`cosim.core.operator`), its lock around each step
         self.desk = master.desk
-        self.lock = self.desk.lock if self.desk is not None else contextlib.nullcontext()
+        self.lock = self.desk.lock
+        #: a controller an operator runs: what it computed is its ``computed.<u>``
+        self.operated = Capability.OPERATOR in ctrl.capabilities
         self._first_ops: list[tuple] = []
         self.t = self.times[0]
         self.loop0: float | None = None
@@ -164,10 +167,9 @@ class Run:
         if Capability.SETPOINTS in ctrl.capabilities:
             ctrl.expect_setpoints(m.scenario.setpoints())
         ctrl.setup(t)
-        if self.desk is not None:   # the first row's operator actions, on the set-up one
-            self.desk.attach(self.refs)
-            with self.lock:
-                self._apply(tuple(self._first_ops), started=True)
+        self.desk.attach(self.refs)   # the first row's operator actions, on the set-up one
+        with self.lock:
+            self._apply(tuple(self._first_ops), started=True)
         if Capability.PREVIEW not in ctrl.capabilities:
             return
         columns = {c.target for c in m.scenario.columns_of(DIST)}
@@ -227,8 +229,7 @@ class Run:
             pacer.stale(self, t, reading)
         pacer.sampled(self, t, reading)
         self._record(t, y, ym)
-        if self.desk is not None:
-            self.desk.sampled(t, self.u, self.computed or self.u)
+        self.desk.sampled(t, self.u, self.computed or self.u)
 
     def _control(self, t: float, ym: dict[str, float]) -> None:
         """The controller step: ``u`` and the diagnostics from ``y_m(t)`` and the set-points."""
@@ -263,7 +264,7 @@ class Run:
         ctrl.step(t, self.m.dt * self.m.ratio)
         self.u = ctrl.get_outputs()
         diag = ctrl.diagnostics()
-        if self.desk is not None:   # what it computed (in manual: in shadow)
+        if self.operated:   # what it computed (in manual: in shadow)
             diag = dict(diag)
             self.computed = {u: _as_float(diag.pop(f"computed.{u}", self.u[u]))
                              for u in self.m.ctrl_outputs}
@@ -377,13 +378,9 @@ class Run:
             self._check_interrupt()
 
     def _watched(self, t: float) -> None:
-        """The set-points the watcher changes from the sample at ``t`` on (those the run
-        has)."""
-        refs = self.refs
-        for name, value in self.watch.between(t).items():  # type: ignore[union-attr]
-            key = "ref." + name
-            if key in refs:
-                refs[key] = float(value)
+        """The watcher's turn before the sample at ``t`` (a page's requests, through the
+        desk)."""
+        self.watch.between(t)  # type: ignore[union-attr]
 
     def _interrupted(self, exc: KeyboardInterrupt) -> None:
         if not isinstance(exc, interrupts.Interrupted):
@@ -417,8 +414,7 @@ class Run:
                 comp.terminate()
         if self.timing_names:
             result.timing_columns = ["time", *(f"{PREFIX_CTRL}.{d}" for d in self.timing_names)]
-        if self.desk is not None:
-            result.operator_rows = list(self.desk.rows)
+        result.operator_rows = list(self.desk.rows)
         width = len(result.columns)
         for row in result.rows:
             if len(row) < width:

@@ -143,11 +143,11 @@ class Master:
             plant.check_signals(self.ctrl_outputs, self.measured, units)
         self._check_bindings(plant_in, plant_out, where)
         at_start, later = plant.settable(True), plant.settable(False)
-        #: the one checked entry of operator actions (:mod:`cosim.core.operator`), for a
-        #: controller an operator runs; ``None`` otherwise
-        self.desk = (OperatorDesk(ctrl) if Capability.OPERATOR in ctrl.capabilities
-                     else None)
-        check = (None if self.desk is None else
+        #: the one checked entry of operator actions (:mod:`cosim.core.operator`): the
+        #: set-points, the settings a controller declares and, for a controller an operator
+        #: runs (``OPERATOR``), its ``op.*`` settings, which a scenario may act on
+        self.desk = OperatorDesk(ctrl)
+        check = (None if Capability.OPERATOR not in ctrl.capabilities else
                  lambda name, value: self.desk.check(name, value, "engineer")[0])
         sc.validate(at_start, self.refs, self.measured, driven=[*self.ctrl_outputs, *self.dists],
                     plant_tunable=later, disturbances=self.dists, operator=check)

@@ -2,7 +2,8 @@
 controller (issue 61; docs: guide/operating.md).
 
 A scenario row's ``op.*`` cells, a write on the controller's OPC UA faceplate
-(:mod:`cosim.live.faceplate`) and a web page all go through :meth:`OperatorDesk.act`: the
+(:mod:`cosim.live.faceplate`) and a request from the run's page (:mod:`cosim.hmi.actions`)
+all go through :meth:`OperatorDesk.act`: the
 action is checked against the user's role and the setting's range (a value outside it is
 refused before the controller sees it), handed to the controller
 (:meth:`cosim.core.component.Component.set`: it refuses, in the user's words, what its
@@ -15,9 +16,12 @@ operator's ``op.*`` settings, role ``"operator"``; the engineer's weights, role
 ``"engineer"``) and the run's set-points (``ref.<output>``, role ``"operator"``, inside the
 output's box). An operator may change what is the operator's, an engineer everything.
 
-The desk is shared between the run's loop and a faceplate's server thread: :attr:`lock` is
-held by the loop while it applies events and steps the controller, and by every
-:meth:`act`, so that an action lands between two steps.
+Every run has its desk (:attr:`cosim.core.master.Master.desk`); a set-point accepted is
+the loop's from the next sample on (:meth:`attach`: the desk's set-points are the loop's
+dict). The desk is shared between the run's loop (the scenario's cells, the page's requests,
+answered between two steps) and a faceplate's server thread: :attr:`lock` is held by the
+loop while it applies events and steps the controller, and by every :meth:`act`, so that
+an action lands between two steps.
 """
 
 from __future__ import annotations
@@ -31,14 +35,19 @@ from typing import Any
 from cosim.core.component import Capability, Component, Setting
 from cosim.core.errors import CosimError
 
-__all__ = ["AUDIT_COLUMNS", "MODE_WORDS", "ROLES", "Answer", "OperatorDesk", "mode_words"]
+__all__ = ["AUDIT_COLUMNS", "AUDIT_FILE", "MODE_WORDS", "ROLES", "SWITCHES", "Answer",
+           "OperatorDesk", "mode_words"]
 
 #: ``op.mode``'s words (a scenario cell, a faceplate's string) and their values.
 MODE_WORDS = {"auto": 1.0, "manual": 0.0}
 #: The roles, each with what it may change (the settings' roles).
 ROLES = {"operator": ("operator",), "engineer": ("operator", "engineer")}
-#: The audit log's columns (``operator.csv``).
+#: The audit log in a run's folder, and its columns.
+AUDIT_FILE = "operator.csv"
 AUDIT_COLUMNS = ("time", "who", "what", "old", "new", "result")
+#: The settings that are switches (1 or 0): the mode, an input in service, an output
+#: controlled (a name, or the prefix of the names).
+SWITCHES = ("op.mode", "op.service.", "op.control.")
 
 
 def mode_words(value: Any) -> Any:
@@ -68,8 +77,8 @@ class OperatorDesk:
     Parameters
     ----------
     controller : Component
-        A controller declaring :attr:`~cosim.core.component.Capability.OPERATOR` (or
-        ``SETTINGS`` alone: then only its settings, and the set-points).
+        The run's controller: one declaring :attr:`~cosim.core.component.Capability.
+        OPERATOR` or ``SETTINGS`` has its settings here; any has the run's set-points.
     """
 
     def __init__(self, controller: Component) -> None:
@@ -143,8 +152,7 @@ class OperatorDesk:
         if not (math.isfinite(number) and setting.low <= number <= setting.high):
             return (f"{name}: {number:g}{unit} is outside [{setting.low:g}, "
                     f"{setting.high:g}]{unit}", False)
-        if name.startswith(("op.mode", "op.service.", "op.control.")) and number not in (
-                0.0, 1.0):
+        if name.startswith(SWITCHES) and number not in (0.0, 1.0):
             return f"{name}: {number:g} is not 1 or 0", False
         return "", False
 

@@ -226,10 +226,10 @@ def jsonable(obj: object) -> object:
 
 
 def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
-          figure: bool = True, stream: ResultsStream | None = None,
-          kept: tuple[str, ...] = ()) -> dict:
-    """Write a run into ``out_dir``: ``results.csv``, ``timings.csv``, ``summary.json``,
-    ``figure.png``, each atomically; remove the files of an earlier run it does not write.
+          figure: bool = True, stream: ResultsStream | None = None) -> dict:
+    """Write a run into ``out_dir``: ``results.csv``, ``timings.csv``, ``operator.csv``,
+    ``summary.json``, ``figure.png``, each atomically; remove the files of an earlier run it
+    does not write.
 
     Wall-clock diagnostics (the controller's ``timing_diagnostics``, e.g. solve times) go to
     ``timings.csv`` (``time`` then one column each, one row per controller step), so that
@@ -240,9 +240,6 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
     stream : ResultsStream, optional
         The stream the run's rows went to; it is finished (renamed onto ``results.csv``)
         instead of writing the rows again.
-    kept : tuple of str
-        Files of :data:`RUN_FILES` this run wrote itself as it went (an ``operator.csv``):
-        kept, where an earlier run's are removed.
 
     Returns
     -------
@@ -263,7 +260,7 @@ def write(out_dir: str | Path, result: RunResult, meta: dict | None = None,
     """
     out = Path(out_dir)
     errors: list[OutputError] = []
-    written: set[str] = set(kept)
+    written: set[str] = set()
 
     def attempt(name: str, fn: object, *args: object) -> None:
         try:

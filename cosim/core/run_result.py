@@ -5,7 +5,6 @@ communication times: shared by the master (:mod:`cosim.core.master`) and its loo
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Protocol
 
@@ -118,7 +117,8 @@ class RowSink(Protocol):
 class RunWatcher(RowSink, Protocol):
     """What follows a run from inside its loop (a live page of the run, :mod:`cosim.hmi`):
     shown the run's record before the first step, handed each row as a :class:`RowSink` is,
-    and asked between two steps for the set-points that change from the next sample on.
+    and given a turn between two steps, where it may act on the run through the master's
+    operator desk (:attr:`cosim.core.master.Master.desk`: its set-points are the loop's).
     Every call comes from the loop's thread, between the controller's steps (the only place
     a component may be asked anything), and returns at once; what the watcher raises ends
     the run as a sink's error does."""
@@ -127,7 +127,6 @@ class RunWatcher(RowSink, Protocol):
         """Before the first step: the run's record, which grows as the run goes (its
         ``timing_rows``: the controller's wall-clock diagnostics, one row per step)."""
 
-    def between(self, t: float) -> Mapping[str, float]:
-        """Before the sample at ``t``: the set-points to change, by output name (recorded
-        in ``ref.<output>`` from that sample on, until the next request or scenario row
-        sets them); empty for none."""
+    def between(self, t: float) -> None:
+        """Before the sample at ``t`` (and its scenario row): what the watcher does to the
+        run, from that sample on."""

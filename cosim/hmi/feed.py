@@ -7,9 +7,10 @@ A :class:`Feed` is the one place the page reads from. During a run it is the run
 controller's plan (:attr:`~cosim.core.component.Capability.PREDICTION`, read a few times a
 second) and the one-step prediction error of each plan read (the next sample's measured
 outputs against it), and between two steps it answers the page's requests through the run's
-:class:`~cosim.hmi.actions.Operator` and audits them. The page's sessions read it from the
-server's thread: nothing there touches the controller. After a run (:func:`cosim.hmi.replay.
-load`) it holds the finished run's rows, read from its folder.
+:class:`~cosim.hmi.actions.Operator` (the run's operator desk, which audits them). The
+page's sessions read it from the server's thread: nothing there touches the controller.
+After a run (:func:`cosim.hmi.replay.load`) it holds the finished run's rows and operator
+actions, read from its folder.
 
 The loop's share is a list append and a clock read per row, and the controller's plan read
 a few times a second (:data:`PLAN_EVERY_S`): what the page costs the run's step time is
@@ -29,7 +30,7 @@ from typing import Any
 
 from cosim.core.component import Capability, Component, Prediction
 from cosim.core.run_result import RunResult
-from cosim.hmi.actions import Action, Audit, Operator, Reply, User
+from cosim.hmi.actions import Action, Operator, Reply, User
 
 __all__ = ["ACTIONS_S", "PLAN_EVERY_S", "Feed", "Layout", "SignalInfo"]
 
@@ -115,21 +116,24 @@ class Feed:
         ``None`` for a finished run.
     operator : Operator, optional
         The run's switches (``None``: none, a finished run).
-    audit : Audit, optional
-        Where the requests are written (``operator.csv``).
+    audit : sequence of tuple, optional
+        The operator's actions (``operator.csv``'s rows): a finished run's; default the
+        operator's audit, as it grows (none without an operator).
     plan_every : float
         Seconds of the wall clock between two reads of the controller's plan (0: every
         row); the prediction error is that of the plans read, one sample ahead.
     """
 
     def __init__(self, layout: Layout, controller: Component | None = None,
-                 operator: Operator | None = None, audit: Audit | None = None,
+                 operator: Operator | None = None,
+                 audit: Sequence[tuple[Any, ...]] | None = None,
                  plan_every: float = PLAN_EVERY_S) -> None:
         self.layout = layout
         self.plan_every = float(plan_every)
         self.ctrl = controller
         self.operator = operator
-        self.audit = audit if audit is not None else Audit(None)
+        self.audit: Sequence[tuple[Any, ...]] = (
+            audit if audit is not None else operator.rows if operator is not None else [])
         self.rows: list[list[float]] = []
         self.columns: list[str] = []
         self.index: dict[str, int] = {}
@@ -201,25 +205,21 @@ class Feed:
         if plan is not None and (last is None or plan != last[1]):   # a new step's plan
             self.prediction = (row[0], plan)
 
-    def between(self, t: float) -> Mapping[str, float]:
-        """The page's requests, answered and audited; the set-points they changed. The
-        switches' values are read again every :data:`ACTIONS_S` seconds."""
+    def between(self, t: float) -> None:
+        """The page's requests, answered (and audited) by the operator from the sample at
+        ``t`` on. The switches' values are read again every :data:`ACTIONS_S` seconds."""
         operator = self.operator
         if operator is None:
-            return {}
+            return
         if not self._requests:
             now = time.monotonic()
             if now - self._actions_at >= ACTIONS_S:
                 self.actions, self._actions_at = operator.actions(), now
-            return {}
+            return
         while self._requests:
             ticket, action, value, user = self._requests.popleft()
-            old = next((a.value for a in self.actions if a.name == action), math.nan)
-            reply = operator.request(action, value, user)
-            self.audit.record(t, user.name, action, old, value, reply)
-            self.replies[ticket] = reply
-            self.actions = operator.actions()
-        return operator.setpoints()
+            self.replies[ticket] = operator.request(action, value, user, t)
+        self.actions = operator.actions()
 
     # -- the page's side (the server's thread) --------------------------------------------
     def request(self, action: str, value: float | str, user: User) -> int:
@@ -238,7 +238,6 @@ class Feed:
         while self._requests:
             ticket = self._requests.popleft()[0]
             self.replies[ticket] = Reply(False, f"the run has ended ({status})")
-        self.audit.close()
         self.ended.set()
 
     # -- reading ------------------------------------------------------------------------------

@@ -92,7 +92,7 @@ def status_items(feed: Feed, last: Sequence[float] | None,
     state = "running" if feed.status == "running" else f"ended {feed.status}"
     items = [("run", f"{state} · t = {fmt(t)} of {fmt(lay.stop_time)} s",
               "normal" if feed.status in ("running", "ok") else "past")]
-    mode = next((str(a.value) for a in feed.actions if a.name == "mode"), "auto")
+    mode = "manual" if _switch(feed, "op.mode") == 0.0 else "auto"
     items.append(("mode", mode, "normal" if mode == "auto" else "near"))
     if lay.certificate:
         certified = lay.certificate == "certified"
@@ -215,7 +215,14 @@ def _number(value: float | str) -> float | None:
     return v if math.isfinite(v) else None
 
 
+def _switch(feed: Feed, name: str) -> float | None:
+    """The value now of the operator's setting ``name`` (``None``: the run has none)."""
+    return next((_number(a.value) for a in feed.actions if a.name == name), None)
+
+
 def _step(a: Action) -> float:
+    if a.choices:   # a switch: 1 or 0
+        return 1.0
     v = _number(a.value) or (a.high - a.low if math.isfinite(a.high - a.low) else 1.0)
     return 10.0 ** (math.floor(math.log10(abs(v))) - 1) if v else 0.01
 
@@ -319,12 +326,11 @@ class RunPage:
             p.show_limits(*(limits.get(f"op.{s}.{p.info.name}") or math.nan
                             for s in ("min", "max")))
         for q in self.inputs:
-            service = next((str(a.value) for a in feed.actions
-                            if a.name == f"service.{q.info.name}"), "in service")
-            q.show_value(feed, last, before, service)
+            out = _switch(feed, f"op.service.{q.info.name}") == 0.0
+            q.show_value(feed, last, before, "out of service" if out else "in service")
         tally = self.tally.update(rows, i + 1)
         set_text(self.status, _badges(status_items(feed, last, tally)))
-        set_text(self.audit, _audit(feed.audit.rows, last[0]))
+        set_text(self.audit, _audit(feed.audit, last[0]))
 
 
 def _header(title: str, user: User | None, live: bool) -> str:

@@ -13,7 +13,7 @@ import numpy as np
 
 from cosim.core.csvio import read_table
 from cosim.core.errors import CosimError
-from cosim.hmi.actions import AUDIT_FILE, Audit, read_audit
+from cosim.core.operator import AUDIT_FILE
 from cosim.hmi.feed import Feed, Layout, SignalInfo
 
 __all__ = ["is_run_folder", "load", "read_summary"]
@@ -93,12 +93,30 @@ def load(folder: str | Path, flag: str = "RESULTS_DIR") -> Feed:
                     start_time=float(doc.get("start_time") or rows[0][0]),
                     stop_time=float(doc.get("stop_time") or rows[-1][0]),
                     live=bool(doc.get("live")), certificate=grade, timing=timing)
-    audit = Audit(None)
-    for r in read_audit(folder / AUDIT_FILE):
-        audit.rows.append((float(r.get("time") or "nan"), r.get("who", ""), r.get("what", ""),
-                           r.get("old", ""), r.get("new", ""), r.get("result", "")))
+    audit = [(float(r.get("time") or "nan"), r.get("who", ""), r.get("what", ""),
+              r.get("old", ""), r.get("new", ""), r.get("result", ""))
+             for r in _read_audit(folder / AUDIT_FILE)]
     feed = Feed(layout, audit=audit)
     feed.columns, feed.index = columns, {c: i for i, c in enumerate(columns)}
     feed.rows, feed.timing_rows = rows, timing_rows
     feed.finish(str(doc.get("status", "ok")), str(doc.get("reason") or ""))
     return feed
+
+
+def _read_audit(path: Path) -> list[dict[str, str]]:
+    """The rows of an ``operator.csv``; empty when there is none.
+
+    Raises
+    ------
+    CosimError
+        The file exists but cannot be read.
+    """
+    import csv
+
+    if not path.exists():
+        return []
+    try:
+        with open(path, encoding="utf-8", newline="") as fh:
+            return list(csv.DictReader(fh))
+    except (OSError, UnicodeDecodeError, csv.Error) as exc:
+        raise CosimError(f"{path}: cannot read: {exc}") from None

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from cosim.hmi.actions import AUDIT_FILE, Audit, operator_for
+from cosim.hmi.actions import operator_for
 from cosim.hmi.feed import Feed, Layout
 from cosim.hmi.page import PERIOD_MS, run_page
 from cosim.hmi.server import PageServer, parse_address
@@ -63,10 +63,11 @@ class HmiOptions:
 
 
 @contextlib.contextmanager
-def watching(master: Any, meta: Mapping[str, Any], out: Path | None, options: HmiOptions,
+def watching(master: Any, meta: Mapping[str, Any], options: HmiOptions,
              on_notice: Callable[[str], None] | None = None) -> Iterator[Feed]:
     """The page of the run of ``master`` for the ``with`` block: its feed (the run's
-    watcher), served at ``options``' address; the requests audited into ``out``'s
+    watcher), served at ``options``' address; the requests go through the run's operator
+    desk (:func:`cosim.hmi.actions.operator_for`), whose audit is the run's
     ``operator.csv``. Once the block ends (after :meth:`Feed.finish`) the pages get the
     run's end, then the server stops.
 
@@ -75,11 +76,7 @@ def watching(master: Any, meta: Mapping[str, Any], out: Path | None, options: Hm
     CosimError
         The address cannot be listened on (nothing has run).
     """
-    feed = Feed(Layout.of_run(master, meta), master.controller)
-    feed.operator = operator_for(
-        master.controller, master.refs, {o.name: (o.low, o.high) for o in feed.layout.outputs},
-        {o.name: o.unit for o in feed.layout.outputs}, lambda o: feed.last(f"ref.{o}"))
-    feed.audit = Audit(out / AUDIT_FILE if out is not None else None)
+    feed = Feed(Layout.of_run(master, meta), master.controller, operator_for(master))
     server = options.server({"/": run_page(feed, live=True)}).start()
     if on_notice is not None:
         on_notice(f"the run's page: {server.url}")

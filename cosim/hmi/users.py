@@ -2,7 +2,7 @@
 
 Writing from the page needs a login (viewing on the loopback interface needs none). The
 users are a TOML file (``--hmi-users USERS.toml``) that holds, for each name, its role
-(:data:`cosim.hmi.actions.ROLES`) and the scrypt hash of its password, never the password::
+(:data:`cosim.core.operator.ROLES`) and the scrypt hash of its password, never the password::
 
     [users.ops]
     role = "operator"
@@ -26,7 +26,8 @@ from pathlib import Path
 
 from cosim.core import atomicio
 from cosim.core.errors import CosimError
-from cosim.hmi.actions import ROLES, User
+from cosim.core.operator import ROLES
+from cosim.hmi.actions import User
 
 __all__ = ["PASSWORD_ENV", "Users", "hash_password", "main"]
 

@@ -1,7 +1,8 @@
 """What the page reads, from a real run without a browser: the robust MPC's declared plan
 (in process and from its worker), the one-step prediction error the feed derives from it
 (every step's plan read here; a page reads a few a second), and the operator's requests
-answered between two steps, applied and audited."""
+answered between two steps by the run's operator desk, applied and audited in the one
+operator.csv the scenario's op.* cells are rows of too."""
 
 from __future__ import annotations
 
@@ -16,7 +17,8 @@ import pytest
 import cosim
 from cosim.core.component import Capability, Prediction
 from cosim.core.errors import CosimError
-from cosim.hmi.actions import AUDIT_FILE, User
+from cosim.core.operator import AUDIT_COLUMNS, AUDIT_FILE
+from cosim.hmi.actions import User
 from cosim.hmi.feed import Feed, Layout
 
 SCENARIO = "time,ref.h1,ref.h2\n0,0.65,0.65\n500,0.9,\n1000,,1.0\n2500,,\n"
@@ -44,7 +46,7 @@ def _watched_run(tmp_path: Path, isolate: bool, requests: list[tuple[str, float]
     from cosim.core import plants, registry, scenario
     from cosim.core.isolated import IsolatedController
     from cosim.core.master import Master
-    from cosim.hmi.actions import Audit, operator_for
+    from cosim.hmi.actions import operator_for
 
     path = tmp_path / "steps.csv"
     path.write_text(SCENARIO)
@@ -54,11 +56,8 @@ def _watched_run(tmp_path: Path, isolate: bool, requests: list[tuple[str, float]
         ctrl = IsolatedController(ctrl, "robust-mpc", {})
     opened = plants.open_plant(None, plants.PlantContext(sc, ctrl, ctrl.problem))
     master = Master(opened.component, ctrl, sc, io=opened.io, pacer=opened.pacer)
-    feed = Recorder(Layout.of_run(master, {}), ctrl, plan_every=0.0)   # every step's plan
-    feed.operator = operator_for(ctrl, master.refs, {"h1": (0.0, 2.0), "h2": (0.0, 2.0)},
-                                 {"h1": "m", "h2": "m"},
-                                 lambda o: feed.last(f"ref.{o}"))
-    feed.audit = Audit(tmp_path / AUDIT_FILE)
+    feed = Recorder(Layout.of_run(master, {}), ctrl, operator_for(master),
+                    plan_every=0.0)   # every step's plan
     user = User("eng", "engineer")
 
     def ask() -> None:
@@ -78,8 +77,7 @@ def _watched_run(tmp_path: Path, isolate: bool, requests: list[tuple[str, float]
 @pytest.fixture(scope="module")
 def watched(tmp_path_factory: pytest.TempPathFactory) -> tuple[object, Recorder, Path]:
     tmp = tmp_path_factory.mktemp("watched")
-    result, feed = _watched_run(tmp, False, [("ref.h1", 0.8), ("setting.R.qa", 0.0),
-                                             ("ref.h2", 7.0)])
+    result, feed = _watched_run(tmp, False, [("ref.h1", 0.8), ("R.qa", 0.0), ("ref.h2", 7.0)])
     return result, feed, tmp
 
 
@@ -118,18 +116,18 @@ def test_the_prediction_error_is_the_measurement_against_the_last_plan(watched: 
 
 
 def test_requests_are_answered_between_steps_applied_and_audited(watched: tuple) -> None:
-    result, feed, tmp = watched
+    result, feed, _ = watched
     replies = [feed.replies[k] for k in sorted(feed.replies)]
     assert [r.accepted for r in replies] == [True, False, False]
     assert "positive definite" in replies[1].text and "outside [0, 2]" in replies[2].text
-    with open(tmp / AUDIT_FILE, newline="") as fh:
-        rows = list(csv.DictReader(fh))
-    assert [(r["who"], r["what"], r["new"]) for r in rows] == [
-        ("eng", "ref.h1", "0.8"), ("eng", "setting.R.qa", "0.0"), ("eng", "ref.h2", "7.0")]
-    assert rows[0]["result"] == "accepted" and rows[1]["result"] == replies[1].text
+    rows = result.operator_rows   # the desk's audit: operator.csv's rows
+    assert feed.audit is feed.operator.desk.rows and list(feed.audit) == rows
+    assert [(who, what, new) for _, who, what, _, new, _ in rows] == [
+        ("eng", "ref.h1", 0.8), ("eng", "R.qa", 0.0), ("eng", "ref.h2", 7.0)]
+    assert rows[0][5] == "accepted" and rows[1][5] == f"refused: {replies[1].text}"
     # the plant got it: ref.h1 is 0.8 from the sample the request was answered at, and the
     # level went there (the scenario's own 0.9 at t = 500 s came before it)
-    t0 = float(rows[0]["time"])
+    t0 = rows[0][0]
     ref, h1 = (result.columns.index(c) for c in ("ref.h1", "plant.h1"))
     after = [row for row in result.rows if row[0] >= t0]
     assert t0 > 0 and all(row[ref] == 0.8 for row in after)
@@ -183,6 +181,53 @@ def test_the_api_serves_the_page_and_stops_it(tmp_path: Path) -> None:
     assert not (tmp_path / "out" / AUDIT_FILE).exists()   # no request, no audit
     with pytest.raises(OSError):
         urllib.request.urlopen(f"http://127.0.0.1:{port}/", timeout=2)
+
+
+def test_the_pages_operator_acts_through_the_desk_into_one_operator_csv(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The page's requests (an operator's op.* limit and set-point, an engineer's setting
+    the operator may not change) and the scenario's op.* cell are rows of one operator.csv
+    with the desk's columns, written once with the run's files."""
+    from cosim.hmi import serving
+    from cosim.live.process import free_port
+
+    feeds: list[Feed] = []
+
+    class Kept(Feed):
+        def __init__(self, *args: object, **kw: object) -> None:
+            super().__init__(*args, **kw)  # type: ignore[arg-type]
+            feeds.append(self)
+
+    def ask(k: int) -> None:   # the loop's thread, before its turn to the watcher
+        if k == 3:
+            ops = User("ops", "operator")
+            for action, value in (("op.max.qa", 6e-4), ("ref.h2", 0.7), ("R.qa", 1.0)):
+                feeds[0].request(action, value, ops)
+
+    monkeypatch.setattr(serving, "Feed", Kept)
+    path = tmp_path / "ops.csv"
+    path.write_text("time,ref.h1,ref.h2,op.mode\n0,0.65,0.65,auto\n250,,,\n")
+    out = cosim.run(path, out=tmp_path / "out", hmi=str(free_port()), figure=False,
+                    on_step=ask, on_notice=lambda _text: None)
+    assert out.status == "ok", out.summary.get("reason")
+    feed = feeds[0]
+    actions = {a.name: a for a in feed.actions}
+    assert {"op.mode", "op.max.qa", "op.service.qb", "ref.h1", "R.qa"} <= set(actions)
+    assert actions["op.max.qa"].value == 6e-4 and actions["op.mode"].choices == ("0", "1")
+    assert actions["R.qa"].role == "engineer" and actions["op.max.qa"].role == "operator"
+    with open(tmp_path / "out" / AUDIT_FILE, newline="") as fh:
+        reader = csv.reader(fh)
+        assert tuple(next(reader)) == AUDIT_COLUMNS
+        rows = list(reader)
+    assert [(who, what, new, result.split(":")[0]) for _, who, what, _, new, result in rows] == [
+        ("scenario", "op.mode", "1.0", "accepted"), ("ops", "op.max.qa", "0.0006", "accepted"),
+        ("ops", "ref.h2", "0.7", "accepted"), ("ops", "R.qa", "1.0", "refused")]
+    assert "engineer's to change" in rows[3][5]
+    t0 = float(rows[1][0])
+    df = out.to_pandas()
+    assert (df.loc[df.time >= t0, "ref.h2"] == 0.7).all()
+    assert (df.loc[df.time < t0, "ref.h2"] == 0.65).all()
+    assert out.summary["controller_summary"]["operator"]["final"]["limits"]["qa"][1] == 6e-4
 
 
 def _scenario(tmp_path: Path) -> Path:

@@ -113,8 +113,8 @@ def test_an_engineer_moves_a_set_point_and_a_refused_setting_says_why(
     switch.fill("0.8")
     page.click(".hmi-apply-ref-h1 button")
     page.wait_for_selector(".hmi-reply [data-state=accepted]", timeout=WAIT * 1000)
-    page.locator(".hmi-switch-setting-R-qa input").fill("0")
-    page.click(".hmi-apply-setting-R-qa button")
+    page.locator(".hmi-switch-R-qa input").fill("0")
+    page.click(".hmi-apply-R-qa button")
     refused = page.wait_for_selector(".hmi-reply [data-state=refused]", timeout=WAIT * 1000)
     assert "positive definite" in refused.inner_text()
     # the plant goes there: then the run is stopped (Ctrl-C), its rows kept
@@ -143,7 +143,7 @@ def test_what_the_page_showed_is_what_the_run_recorded(live: dict[str, Any]) -> 
     with open(tmp / "run" / "operator.csv", newline="") as fh:
         audit = list(csv.DictReader(fh))
     assert [(r["who"], r["what"], float(r["new"]), r["result"] == "accepted")
-            for r in audit] == [("eng", "ref.h1", 0.8, True), ("eng", "setting.R.qa", 0.0, False)]
+            for r in audit] == [("eng", "ref.h1", 0.8, True), ("eng", "R.qa", 0.0, False)]
     assert "positive definite" in audit[1]["result"]
     t0 = float(audit[0]["time"])
     ref, h1 = table.column("ref.h1"), table.column("plant.h1")
