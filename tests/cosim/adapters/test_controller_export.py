@@ -24,6 +24,7 @@ import pytest
 
 import cosim
 from cosim.core.errors import CosimError
+from tests.toml_text import campaign_spec
 
 ROOT = Path(__file__).resolve().parents[3]
 PAPER = ROOT / "scenarios" / "paper_steps.csv"
@@ -502,30 +503,13 @@ def test_a_campaign_qualifies_the_fmu_on_the_python_controllers_draws(
     the spec) runs on a Dask worker on the draws of the Python variant: plant uncertainty and
     sensor noise, the same inputs and levels run by run."""
     (tmp_path / "Mpc.fmu").write_bytes(controller_fmus[3].read_bytes())
-    spec = tmp_path / "spec.toml"
-    spec.write_text(f"""[campaign]
-name = "fmu-vs-python"
-runs = 2
-seed = 7
-scenario = "{PAPER.as_posix()}"
-controller = "robust-mpc"
-
-[draw]
-"plant.a1" = {{ uniform = [1.2445e-4, 1.3755e-4] }}
-"plant.gamma_a" = {{ uniform = [0.27, 0.33] }}
-"sensor.h1.noise" = {{ uniform = [0.0, 0.005] }}
-
-[setpoints]
-count = 2
-hold = 500
-
-[[variant]]
-name = "python"
-
-[[variant]]
-name = "fmu"
-controller = "Mpc.fmu"
-""")
+    spec = campaign_spec(tmp_path, name="fmu-vs-python", runs=2, seed=7, scenario=PAPER,
+                         controller="robust-mpc",
+                         draw={"plant.a1": {"uniform": [1.2445e-4, 1.3755e-4]},
+                               "plant.gamma_a": {"uniform": [0.27, 0.33]},
+                               "sensor.h1.noise": {"uniform": [0.0, 0.005]}},
+                         tables={"setpoints": {"count": 2, "hold": 500}},
+                         variants=[{"name": "python"}, {"name": "fmu", "controller": "Mpc.fmu"}])
     import pandas as pd
 
     result = cosim.run_campaign(spec, tmp_path / "out", workers=1)
