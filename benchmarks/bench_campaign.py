@@ -49,41 +49,29 @@ sys.path.insert(0, str(ROOT))
 from cosim.campaign import engine, store  # noqa: E402
 from cosim.campaign.spec import load  # noqa: E402
 from cosim.campaign.task import run_task  # noqa: E402
+from tests.toml_text import campaign_spec  # noqa: E402
 
 #: The robust MPC's law the runs use: the paper's, on which the documented numbers were
 #: measured (the default tracking law's step is ~2x as long: ``bench_tracking.py``).
 LAW = "paper"
-SPEC = """\
-[campaign]
-name = "bench"
-runs = {runs}
-seed = 5
-scenario = "{scenario}"
-controller = "robust-mpc"
 
-[controller.options]
-law = "{law}"
 
-[draw]
-"plant.gamma_b" = {{ uniform = [0.38, 0.42] }}
-"""
+def write_spec(path: Path, runs: int, scenario: str, variants: tuple = ()) -> Path:
+    """The benchmark's campaign at ``path``: ``runs`` draws of the valve split ``gamma_b`` for
+    the robust MPC's :data:`LAW` on ``scenario``, its ``[[variant]]`` tables ``variants``."""
+    return campaign_spec(path.parent, file=path.name, name="bench", runs=runs, seed=5,
+                         scenario=scenario, controller="robust-mpc", options={"law": LAW},
+                         draw={"plant.gamma_b": {"uniform": [0.38, 0.42]}}, variants=variants)
 
 
 #: ``--kernel-gain``: the same draws with the compiled kernel and with the numpy derivatives
-KERNEL_VARIANTS = """
-[[variant]]
-name = "compiled"
-
-[[variant]]
-name = "numpy"
-options = { kernel = "numpy" }
-"""
+KERNEL_VARIANTS = ({"name": "compiled"}, {"name": "numpy", "options": {"kernel": "numpy"}})
 
 
 def kernel_gain(work: Path, runs: int, scenario: str) -> int:
     """In-process runs per minute of the two kernel variants on the same draws."""
     spec_path = work / "kernels.toml"
-    spec_path.write_text(SPEC.format(runs=runs, scenario=scenario, law=LAW) + KERNEL_VARIANTS)
+    write_spec(spec_path, runs, scenario, KERNEL_VARIANTS)
     plan = engine.prepare(load(spec_path))
     spent: dict[str, float] = {}
     counts: dict[str, int] = {}
@@ -141,7 +129,7 @@ def thread_gain(work: Path, runs: int, scenario: str, repeats: int) -> int:
     from cosim.campaign import cluster
 
     spec_path = work / "threads.toml"
-    spec_path.write_text(SPEC.format(runs=runs, scenario=scenario, law=LAW))
+    write_spec(spec_path, runs, scenario)
     plan = engine.prepare(load(spec_path))
     n = len(plan.tasks)
     print(f"{n} robust-mpc runs of {Path(scenario).name}; layouts: worker processes x threads")
@@ -212,7 +200,7 @@ def main() -> int:
         if args.threads:
             return thread_gain(work, args.runs, args.scenario, args.repeats)
         spec_path = work / "bench.toml"
-        spec_path.write_text(SPEC.format(runs=args.runs, scenario=args.scenario, law=LAW))
+        write_spec(spec_path, args.runs, args.scenario)
         plan = engine.prepare(load(spec_path))
         n = len(plan.tasks)
         print(f"{n} robust-mpc runs of {Path(args.scenario).name}")

@@ -55,20 +55,18 @@ sys.path.insert(0, str(ROOT))
 #: Samples of the validation record every method sees before its free run is scored.
 SEEN = 50
 
-TANKS_PROBLEM = """[problem]
-name = "tanks"
-Ts = 4.0
-[inputs.u]
-unit = "V"
-min = 0.0
-max = 10.0
-description = "pump voltage"
-[outputs.y]
-unit = "V"
-min = 0.0
-max = 10.0
-description = "lower tank level"
-"""
+
+def siso_problem(name: str, Ts: float, u: dict[str, Any], y: dict[str, Any]) -> str:
+    """The problem file of a record ``u`` -> ``y`` (each a table: unit, min, max, ...)."""
+    from tests.toml_text import toml_text
+
+    return toml_text({"problem": {"name": name, "Ts": Ts}, "inputs.u": u, "outputs.y": y})
+
+
+#: The cascaded tanks' problem: the pump voltage to the lower tank's level.
+TANKS_PROBLEM = siso_problem(
+    "tanks", 4.0, {"unit": "V", "min": 0.0, "max": 10.0, "description": "pump voltage"},
+    {"unit": "V", "min": 0.0, "max": 10.0, "description": "lower tank level"})
 
 
 def tanks_record(seed: int, samples: int = 1024) -> tuple[np.ndarray, np.ndarray]:
@@ -200,11 +198,9 @@ def real_records(raw: Path, work: Path) -> dict[str, Path]:
         for v in (np.concatenate(us), np.concatenate(ys)):
             lo, hi = float(v.min()), float(v.max())
             box.append((lo - 0.1 * (hi - lo), hi + 0.1 * (hi - lo)))
-        uu, yu = spec["units"]
-        (folder / "problem.toml").write_text(
-            f'[problem]\nname = "{name}"\nTs = {spec["Ts"]!r}\n'
-            f'[inputs.u]\nunit = "{uu}"\nmin = {box[0][0]!r}\nmax = {box[0][1]!r}\n'
-            f'[outputs.y]\nunit = "{yu}"\nmin = {box[1][0]!r}\nmax = {box[1][1]!r}\n')
+        (folder / "problem.toml").write_text(siso_problem(name, spec["Ts"], *(
+            {"unit": unit, "min": lo, "max": hi}
+            for unit, (lo, hi) in zip(spec["units"], box, strict=True))))
         out[name] = folder
     return out
 

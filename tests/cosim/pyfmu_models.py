@@ -19,7 +19,11 @@ These FMUs run inside a Python host that has pythonfmu's runtime (the project ve
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
+
+from tests.toml_text import campaign_spec
 
 SWAPIN = '''
 import math
@@ -111,23 +115,26 @@ class {cls}(Fmi2Slave):
         return True
 '''
 
-FAILING = _TANK.format(cls="Failing", what="raises", at=500.0,
-                       action='            raise RuntimeError("tank ruptured")')
-SEGFAULT = _TANK.format(cls="Segfault", what="segfaults", at=500.0,
-                        action="            os.kill(os.getpid(), signal.SIGSEGV)")
-EXITS = _TANK.format(cls="Exits", what="ends its process", at=500.0,
-                     action="            os._exit(3)")
-HANG = _TANK.format(cls="Hang", what="spins for ever", at=500.0,
-                    action="            while True:\n                pass")
-NATIVE_HANG = _TANK.format(cls="NativeHang", what="blocks in native code", at=500.0,
-                           action="            ctypes.CDLL(None).pause()")
-NAN = _TANK.format(cls="Nan", what="turns NaN", at=500.0,
-                   action='            self.h1 = float("nan")\n            return True')
-SLOW = _TANK.format(cls="Slow", what="sleeps 20 ms per step", at=0.0,
-                    action="            time.sleep(0.02)")
+#: The single tanks by kind: (class, what it does, from when [s], what ``do_step`` runs then).
+_TANKS = {
+    "failing": ("Failing", "raises", 500.0, 'raise RuntimeError("tank ruptured")'),
+    "segfault": ("Segfault", "segfaults", 500.0, "os.kill(os.getpid(), signal.SIGSEGV)"),
+    "exits": ("Exits", "ends its process", 500.0, "os._exit(3)"),
+    "hang": ("Hang", "spins for ever", 500.0, "while True:\n    pass"),
+    "native_hang": ("NativeHang", "blocks in native code", 500.0, "ctypes.CDLL(None).pause()"),
+    "nan": ("Nan", "turns NaN", 500.0, 'self.h1 = float("nan")\nreturn True'),
+    "slow": ("Slow", "sleeps 20 ms per step", 0.0, "time.sleep(0.02)"),
+}
 
-CRASHY = _TANK.format(cls="Crashy", what="segfaults from crash_at", at="self.crash_at",
-                      action="            os.kill(os.getpid(), signal.SIGSEGV)").replace(
+
+def _tank(cls: str, what: str, at: object, action: str) -> str:
+    """The source of single tank ``cls`` whose ``do_step`` runs ``action`` once ``t >= at``."""
+    return _TANK.format(cls=cls, what=what, at=at, action="\n".join(
+        " " * 12 + line for line in action.splitlines()))
+
+
+CRASHY = _tank("Crashy", "segfaults from crash_at", "self.crash_at",
+               "os.kill(os.getpid(), signal.SIGSEGV)").replace(
     """        for name in ("h1", "h2"):
             self.register_variable(Real(name, causality=Fmi2Causality.output))""",
     """        for name in ("h1", "h2"):
@@ -139,12 +146,8 @@ CRASHY = _TANK.format(cls="Crashy", what="segfaults from crash_at", at="self.cra
     "from pythonfmu import Fmi2Causality, Fmi2Slave, Fmi2Variability, Real")
 
 #: Test FMU kinds: (script name, source). The FMU is named after the class.
-KINDS = {
-    "swapin": ("quadtank.py", SWAPIN), "failing": ("failing.py", FAILING),
-    "segfault": ("segfault.py", SEGFAULT), "exits": ("exits.py", EXITS),
-    "hang": ("hang.py", HANG), "native_hang": ("nativehang.py", NATIVE_HANG),
-    "nan": ("nan.py", NAN), "slow": ("slow.py", SLOW), "crashy": ("crashy.py", CRASHY),
-}
+KINDS = {"swapin": ("quadtank.py", SWAPIN), "crashy": ("crashy.py", CRASHY)} | {
+    kind: (f"{cls.lower()}.py", _tank(cls, *rest)) for kind, (cls, *rest) in _TANKS.items()}
 
 MAP = '''\
 [signals.qa]
@@ -185,27 +188,25 @@ def build(kind: str, dest: Path) -> Path:
     return Path(FmuBuilder.build_FMU(script, dest=dest))
 
 
-#: A short set-point scenario of the four-tank stand-ins (2,000 s).
-SHORT_SCENARIO = "time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,\n2000,,\n"
+#: Set-point scenarios of the four-tank stand-ins, by file name: 2,000 s and 2,500 s.
+SCENARIOS = {"short.csv": "time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,\n2000,,\n",
+             "long.csv": "time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,\n2500,,\n"}
+SHORT_SCENARIO = SCENARIOS["short.csv"]
+
+
+def pi_campaign(folder: Path, plant: Path, draw: Mapping[str, Any], *, file: str,
+                scenario: str = "short.csv", **campaign: Any) -> Path:
+    """A PI campaign (the diagonal pairing) on the stand-in FMU ``plant``, ``draw`` drawn per
+    run, the ``[campaign]`` keys ``campaign``: ``folder/file``, its scenario (a name of
+    :data:`SCENARIOS`) written beside; the spec's path."""
+    (folder / scenario).write_text(SCENARIOS[scenario])
+    return campaign_spec(folder, file=file, scenario=scenario, controller="pi", plant=plant,
+                         options={"pairing": "diagonal"}, draw=draw, **campaign)
 
 
 def crashy_campaign(folder: Path, pyfmu_dir: Path, runs: int, seed: int) -> Path:
     """A PI campaign on the Crashy FMU (``folder/crashy.toml`` and its ``short.csv``) whose
     draws segfault at t = 300 s or never (``plant.crash_at``); the spec's path."""
-    (folder / "short.csv").write_text(SHORT_SCENARIO)
-    spec = folder / "crashy.toml"
-    spec.write_text(f"""\
-[campaign]
-runs = {runs}
-seed = {seed}
-scenario = "short.csv"
-controller = "pi"
-plant = "{pyfmu_dir / 'Crashy.fmu'}"
-
-[controller.options]
-pairing = "diagonal"
-
-[draw]
-"plant.crash_at" = {{ choice = [300.0, 1e9] }}
-""")
-    return spec
+    return pi_campaign(folder, pyfmu_dir / "Crashy.fmu",
+                       {"plant.crash_at": {"choice": [300.0, 1e9]}}, file="crashy.toml",
+                       runs=runs, seed=seed)

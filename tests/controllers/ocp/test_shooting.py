@@ -24,13 +24,18 @@ def setup():
     return P, n, m, F
 
 
+def _shooting(setup, N: int, seed: int, spread: float):
+    """The shooting of ``N`` steps of the test GRU, a state drawn in ``[-spread, spread]``,
+    inputs in ``[-1, 1]`` and the generator that drew them."""
+    P, n, m, _ = setup
+    rng = np.random.default_rng(seed)
+    return GRUShooting(P, N), rng.uniform(-spread, spread, n), rng.uniform(-1, 1, (N, m)), rng
+
+
 def test_stage_derivatives_match_casadi(setup):
-    P, n, m, F = setup
+    _, n, _, F = setup
     N = 4
-    sh = GRUShooting(P, N)
-    rng = np.random.default_rng(0)
-    x0 = rng.uniform(-0.8, 0.8, n)
-    u = rng.uniform(-1, 1, (N, m))
+    sh, x0, u, rng = _shooting(setup, N, seed=0, spread=0.8)
     mu = rng.normal(size=(N, n))
     ro = sh.rollout(x0, u)
     W = sh.stage_hessians(ro, mu)
@@ -43,12 +48,8 @@ def test_stage_derivatives_match_casadi(setup):
 
 
 def test_sensitivities_match_finite_differences(setup):
-    P, n, m, _ = setup
-    N = 5
-    sh = GRUShooting(P, N)
-    rng = np.random.default_rng(1)
-    x0 = rng.uniform(-0.5, 0.5, n)
-    u = rng.uniform(-1, 1, (N, m))
+    m, N = setup[2], 5
+    sh, x0, u, _ = _shooting(setup, N, seed=1, spread=0.5)
     S = sh.rollout(x0, u).S
     eps = 1e-6
     for j in range(N * m):

@@ -38,6 +38,8 @@ import pytest
 from cosim.campaign import run_campaign
 from cosim.campaign.engine import MAX_TRIES
 from tests.cosim import pyfmu_models
+from tests.cosim.pyfmu_models import pi_campaign
+from tests.toml_text import campaign_spec
 
 pytestmark = pytest.mark.slow
 
@@ -49,26 +51,19 @@ NOT_COMPARED = ("wall_time_s", "step_ms_p99", "tries")
 WAIT = 240.0
 
 SHORT = pyfmu_models.SHORT_SCENARIO
-MPC_SPEC = """\
-[campaign]
-name = "deployments"
-runs = 5
-seed = 5
-scenario = "short.csv"
-controller = "robust-mpc"
 
-[draw]
-"plant.gamma_a" = { uniform = [0.28, 0.32] }
-"plant.a1" = { normal = [1.31e-4, 2e-6] }
-"sensor.h1.bias" = { uniform = [-0.01, 0.01] }
 
-[[variant]]
-name = "mpc"
-
-[[variant]]
-name = "mpc-paper"                   # the paper's law: its own kernel and workspace
-options = { law = "paper" }
-"""
+def mpc_spec(folder: Path) -> Path:
+    """The MPC campaign, ``folder/spec.toml`` and its ``short.csv``: drawn valve split, outlet
+    area and sensor bias; the tracking law and the paper's (its own kernel and workspace)."""
+    (folder / "short.csv").write_text(SHORT)
+    return campaign_spec(folder, name="deployments", runs=5, seed=5, scenario="short.csv",
+                         controller="robust-mpc",
+                         draw={"plant.gamma_a": {"uniform": [0.28, 0.32]},
+                               "plant.a1": {"normal": [1.31e-4, 2e-6]},
+                               "sensor.h1.bias": {"uniform": [-0.01, 0.01]}},
+                         variants=[{"name": "mpc"},
+                                   {"name": "mpc-paper", "options": {"law": "paper"}}])
 
 
 class Cluster:
@@ -167,9 +162,7 @@ def cluster(tmp_path: Path) -> Iterator[Cluster]:
 def mpc_local(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Any]:
     """The MPC campaign's spec and its result on the local engine (the reference)."""
     folder = tmp_path_factory.mktemp("mpc")
-    (folder / "short.csv").write_text(SHORT)
-    spec = folder / "spec.toml"
-    spec.write_text(MPC_SPEC)
+    spec = mpc_spec(folder)
     local = run_campaign(spec, folder / "local", workers=2)
     assert local.status == "ok" and len(local.table) == 10
     return spec, local
@@ -270,22 +263,12 @@ def test_a_worker_that_joins_after_the_campaign_started(
     assert_same_runs(local, finish(thread, box))
 
 
-SLOW_SPEC = """\
-[campaign]
-name = "lost-worker"
-runs = 4
-seed = 2
-scenario = "long.csv"
-controller = "pi"
-plant = "{plant}"
-
-[controller.options]
-pairing = "diagonal"
-
-[draw]
-"sensor.h1.bias" = {{ uniform = [-0.01, 0.01] }}
-"sensor.h2.noise" = {{ uniform = [0.0, 0.002] }}
-"""
+def lost_worker_spec(folder: Path, plant: Path, scenario: str = "long.csv") -> Path:
+    """``folder/slow.toml``: four PI runs on the stand-in ``plant`` (sensor bias and noise
+    drawn), long enough to lose a worker in one."""
+    return pi_campaign(folder, plant, {"sensor.h1.bias": {"uniform": [-0.01, 0.01]},
+                                       "sensor.h2.noise": {"uniform": [0.0, 0.002]}},
+                       file="slow.toml", scenario=scenario, name="lost-worker", runs=4, seed=2)
 
 
 def _executing(dask_worker: Any) -> tuple[int, list[str]]:
@@ -320,9 +303,7 @@ def test_a_worker_killed_mid_run_costs_a_try_not_the_run(
     is run again on a worker and the campaign ends ok with the local engine's KPIs."""
     from distributed import Client
 
-    (tmp_path / "long.csv").write_text("time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,\n2500,,\n")
-    spec = tmp_path / "slow.toml"
-    spec.write_text(SLOW_SPEC.format(plant=pyfmu_dir / "Slow.fmu"))
+    spec = lost_worker_spec(tmp_path, pyfmu_dir / "Slow.fmu")
     local = run_campaign(spec, tmp_path / "local", workers=2)
     env = ({} if allowed_failures is None else
            {"DASK_DISTRIBUTED__SCHEDULER__ALLOWED_FAILURES": str(allowed_failures)})
@@ -377,10 +358,7 @@ def test_a_cluster_without_workers_stops_the_campaign_then_resume_runs_it(
         cluster: Cluster, tmp_path: Path, pyfmu_dir: Path) -> None:
     from cosim.campaign.cluster import NoWorkers
 
-    (tmp_path / "short.csv").write_text(SHORT)
-    spec = tmp_path / "spec.toml"
-    spec.write_text(SLOW_SPEC.format(plant=pyfmu_dir / "Crashy.fmu").replace(
-        '"long.csv"', '"short.csv"'))
+    spec = lost_worker_spec(tmp_path, pyfmu_dir / "Crashy.fmu", "short.csv")
     t0 = time.monotonic()
     result = run_campaign(spec, tmp_path / "out", scheduler=cluster.address,
                           worker_timeout=3.0)
@@ -409,9 +387,7 @@ def test_a_cluster_without_workers_stops_the_campaign_then_resume_runs_it(
 def test_worker_timeout_must_be_a_positive_number(tmp_path: Path) -> None:
     from cosim.core.errors import CosimError
 
-    spec = tmp_path / "spec.toml"
-    spec.write_text(MPC_SPEC)
-    (tmp_path / "short.csv").write_text(SHORT)
+    spec = mpc_spec(tmp_path)
     with pytest.raises(CosimError, match=r"--worker-timeout -1: expected a positive number"):
         run_campaign(spec, tmp_path / "out", worker_timeout=-1)
     assert not (tmp_path / "out").exists()

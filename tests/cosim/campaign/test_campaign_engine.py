@@ -19,6 +19,7 @@ import pytest
 
 from cosim.campaign import run_campaign
 from tests.cosim import pyfmu_models
+from tests.toml_text import campaign_spec
 
 HERE = Path(__file__).resolve().parent
 ROOT = HERE.parents[2]
@@ -27,28 +28,16 @@ WALL_CLOCK = ("wall_time_s", "step_ms_p99")
 SHORT = pyfmu_models.SHORT_SCENARIO
 
 
-def spec_text(tmp_path: Path, runs: int = 3, extra: str = "") -> str:
+def engine_spec(tmp_path: Path) -> Path:
+    """``tmp_path/spec.toml`` and its ``short.csv``: three runs of the robust MPC and the PI on
+    drawn valve split, outlet area and sensor noise."""
     (tmp_path / "short.csv").write_text(SHORT)
-    return f"""\
-[campaign]
-name = "engine-test"
-runs = {runs}
-seed = 11
-scenario = "short.csv"
-controller = "robust-mpc"
-{extra}
-[draw]
-"plant.gamma_b" = {{ uniform = [0.38, 0.42] }}
-"plant.a1" = {{ normal = [1.31e-4, 2e-6] }}
-"sensor.h1.noise" = {{ uniform = [0.0, 0.002] }}
-
-[[variant]]
-name = "mpc"
-
-[[variant]]
-name = "pi"
-controller = "pi"
-"""
+    return campaign_spec(tmp_path, name="engine-test", runs=3, seed=11, scenario="short.csv",
+                         controller="robust-mpc",
+                         draw={"plant.gamma_b": {"uniform": [0.38, 0.42]},
+                               "plant.a1": {"normal": [1.31e-4, 2e-6]},
+                               "sensor.h1.noise": {"uniform": [0.0, 0.002]}},
+                         variants=[{"name": "mpc"}, {"name": "pi", "controller": "pi"}])
 
 
 def kpis(table: pd.DataFrame) -> pd.DataFrame:
@@ -102,8 +91,7 @@ def dask_scheduler(tmp_path_factory: pytest.TempPathFactory) -> Iterator[str]:
 @pytest.mark.slow
 def test_external_cluster_gives_the_local_engines_kpis(tmp_path: Path, dask_scheduler: str,
                                                         monkeypatch: pytest.MonkeyPatch) -> None:
-    spec = tmp_path / "spec.toml"
-    spec.write_text(spec_text(tmp_path))
+    spec = engine_spec(tmp_path)
     # the local workers' temporary folder is this test's own: other tests' campaigns, running
     # at the same time in other processes, do not show in it
     private = tmp_path / "tmp"
@@ -166,21 +154,9 @@ def test_segfaulting_draws_fail_and_the_campaign_goes_on(tmp_path: Path,
 @pytest.mark.slow
 def test_sigterm_keeps_finished_runs_and_resume_runs_the_rest(tmp_path: Path,
                                                                pyfmu_dir: Path) -> None:
-    (tmp_path / "long.csv").write_text("time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,\n2500,,\n")
-    spec = tmp_path / "slow.toml"
-    spec.write_text(f"""\
-[campaign]
-runs = 10
-scenario = "long.csv"
-controller = "pi"
-plant = "{pyfmu_dir / 'Slow.fmu'}"
-
-[controller.options]
-pairing = "diagonal"
-
-[draw]
-"sensor.h1.bias" = {{ uniform = [-0.01, 0.01] }}
-""")
+    spec = pyfmu_models.pi_campaign(tmp_path, pyfmu_dir / "Slow.fmu",
+                                    {"sensor.h1.bias": {"uniform": [-0.01, 0.01]}},
+                                    file="slow.toml", scenario="long.csv", runs=10)
     out = tmp_path / "out"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT), os.environ.get(
         "PYTHONPATH", "")]))

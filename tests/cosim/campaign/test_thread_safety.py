@@ -16,6 +16,7 @@ from cosim.campaign.spec import load
 from cosim.campaign.task import run_task
 from cosim.core import fmu_log, interrupts
 from cosim.core.fmu import FmuComponent
+from tests.toml_text import campaign_spec
 
 U = {"qa": 6.0e-4, "qb": 4.0e-4}
 
@@ -95,18 +96,10 @@ def test_two_runs_side_by_side_give_the_numbers_of_one_after_the_other(
     """A worker with two threads: two robust-MPC runs at once, each on a controller of its
     own, give what the same runs give one after the other."""
     (tmp_path / "short.csv").write_text("time,ref.h1,ref.h2\n0,0.6,0.6\n500,0.7,\n1000,,\n")
-    spec = tmp_path / "spec.toml"
-    spec.write_text("""\
-[campaign]
-runs = 2
-seed = 9
-scenario = "short.csv"
-controller = "robust-mpc"
-
-[draw]
-"plant.gamma_a" = { uniform = [0.28, 0.32] }
-"sensor.h1.bias" = { uniform = [-0.01, 0.01] }
-""")
+    spec = campaign_spec(tmp_path, runs=2, seed=9, scenario="short.csv",
+                         controller="robust-mpc",
+                         draw={"plant.gamma_a": {"uniform": [0.28, 0.32]},
+                               "sensor.h1.bias": {"uniform": [-0.01, 0.01]}})
     plan = engine.prepare(load(spec))
     alone = [run_task(task, plan.assets)["result"] for task in plan.tasks]
     together = side_by_side(lambda i: run_task(plan.tasks[i], plan.assets)["result"])

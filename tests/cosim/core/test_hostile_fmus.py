@@ -33,6 +33,7 @@ from tests.cosim.core.test_run_faults import (
     wait_for_rows,
 )
 from tests.cosim.hostile import FAULTS
+from tests.toml_text import campaign_spec
 
 #: 80 samples of 25 s; the faults start at t = 500 s (sample 20).
 SCENARIO = "time,ref.h1,ref.h2\n0,0.6,0.6\n1000,0.7,0.7\n2000,,\n"
@@ -212,21 +213,10 @@ def test_a_campaign_goes_on_past_a_crashing_controller_fmu(tmp_path: Path,
     ok."""
     (tmp_path / "Hostile.fmu").write_bytes((hostile_dir / "HostileController.fmu").read_bytes())
     _scenario(tmp_path)
-    spec = tmp_path / "spec.toml"
-    spec.write_text(f"""[campaign]
-name = "hostile"
-runs = 2
-seed = 1
-scenario = "sc.csv"
-controller = "Hostile.fmu"
-
-[[variant]]
-name = "healthy"
-
-[[variant]]
-name = "crashing"
-options = {{ fault = {FAULTS["segfault"]}, fault_time = {FAULT_TIME} }}
-""")
+    spec = campaign_spec(tmp_path, name="hostile", runs=2, seed=1, scenario="sc.csv",
+                         controller="Hostile.fmu",
+                         variants=[{"name": "healthy"}, {"name": "crashing", "options": {
+                             "fault": FAULTS["segfault"], "fault_time": FAULT_TIME}}])
     result = cosim.run_campaign(spec, tmp_path / "out", workers=1)
     assert result.status != "ok"
     assert result.summary["retried_runs"] == 0 and set(result.table["tries"]) == {1}
@@ -248,16 +238,8 @@ def test_a_campaign_with_isolate_goes_on_past_a_crashing_plant(tmp_path: Path,
     Python controller (in a worker of its own) and the campaign go on."""
     (tmp_path / "Hostile.fmu").write_bytes((hostile_dir / "HostilePlant.fmu").read_bytes())
     _scenario(tmp_path, "segfault")
-    spec = tmp_path / "spec.toml"
-    spec.write_text("""[campaign]
-name = "hostile-plant"
-runs = 3
-seed = 1
-scenario = "sc.csv"
-plant = "Hostile.fmu"
-controller = "pi"
-isolate = true
-""")
+    spec = campaign_spec(tmp_path, name="hostile-plant", runs=3, seed=1, scenario="sc.csv",
+                         plant="Hostile.fmu", controller="pi", isolate=True)
     result = cosim.run_campaign(spec, tmp_path / "out", workers=1)
     assert result.status != "ok"
     assert result.summary["retried_runs"] == 0 and set(result.table["tries"]) == {1}

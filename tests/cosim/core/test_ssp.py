@@ -17,33 +17,26 @@ from cosim.cli import main
 from cosim.core.fmu_archive import plant_variables
 from tests import example_builds
 from tests.fmus.fourtank_run import Plant, libcosim_run
+from tests.heater_problem import heater_doc
+from tests.toml_text import toml_text
 
 ROOT = Path(__file__).resolve().parents[3]
+
+
+def _kelvin_problem() -> str:
+    """The example heater in kelvin, its power named ``power`` and its ambient temperature
+    measured (no rate)."""
+    doc = heater_doc()
+    doc["problem"]["name"] = "heater_kelvin"
+    doc["inputs.power"] = {**doc.pop("inputs.P"), "variable": "P"}
+    doc["outputs.T"] |= {"unit": "K", "min": 288.15, "max": 353.15}
+    del doc["disturbances.T_in"]["rate"]
+    doc["disturbances.T_in"] |= {"unit": "K", "min": 278.15, "max": 308.15}
+    return toml_text(doc)
+
+
 #: the example heater in kelvin, its ambient temperature measured under another name
-PROBLEM = """\
-[problem]
-name = "heater_kelvin"
-Ts = 20.0
-
-[inputs.power]
-unit = "W"
-min = 0.0
-max = 2000.0
-variable = "P"
-hold = [3, 60]
-
-[outputs.T]
-unit = "K"
-min = 288.15
-max = 353.15
-
-[disturbances.T_in]
-unit = "K"
-min = 278.15
-max = 308.15
-variable = "T_amb"
-hold = [5, 80]
-"""
+PROBLEM = _kelvin_problem()
 SSD = "{http://ssp-standard.org/SSP1/SystemStructureDescription}"
 SSC = "{http://ssp-standard.org/SSP1/SystemStructureCommon}"
 SSV = "{http://ssp-standard.org/SSP1/SystemStructureParameterValues}"
