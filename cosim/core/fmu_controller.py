@@ -27,6 +27,7 @@ guide/controller-fmu.md): the same controller state as the Python controller's.
 from __future__ import annotations
 
 import math
+from collections import Counter
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -110,6 +111,7 @@ class FmuController(FmuComponent):
         self._measured = [s.name for s in self.inputs
                           if not s.name.startswith(("ref.", "dist."))]
         self._given: dict[str, float] = {}
+        self._served = _Served()
 
     def _check_parameter(self, key: str, value: Any) -> None:
         """A finite number inside the box the modelDescription declares for ``key``, else
@@ -209,6 +211,7 @@ class FmuController(FmuComponent):
         if self._fmu is not None:
             self.terminate()
         self._given.clear()
+        self._served = _Served()
         super().setup(t0, stop_time)
 
     def set_inputs(self, values: Mapping[str, float]) -> None:
@@ -226,6 +229,7 @@ class FmuController(FmuComponent):
                 super().step(s, dt)
             super().set_inputs(now)
         super().step(t, dt)
+        self._served.stepped(t)
 
     def _skipped(self, t: float, dt: float) -> list[float]:
         """The sample instants from the FMU's time up to ``t`` (none when ``t`` is its time,
@@ -239,6 +243,7 @@ class FmuController(FmuComponent):
         """The inputs to apply (the diagnostics are kept for :meth:`diagnostics`)."""
         values = super().get_outputs()
         self._diag = {n: values[n] for n in self._diag_names}
+        self._served.read(self._diag)
         return {n: values[n] for n in self._u_names}
 
     def diagnostics(self) -> dict[str, float]:
@@ -246,4 +251,42 @@ class FmuController(FmuComponent):
 
     def summary(self) -> dict:
         return {"controller": "fmu", "fmu": str(self.path),
-                "description": self.md.description or "", "parameters": dict(self.start_values)}
+                "description": self.md.description or "", "parameters": dict(self.start_values),
+                **self._served.summary()}
+
+
+class _Served:
+    """The steps an exported robust MPC fell back on its candidate plan (its ``fallback``
+    output), counted as the Python controller counts them (``controllers.mpc``: the summary's
+    ``fallbacks`` and ``shortfall``, which the run's verdict reads)."""
+
+    def __init__(self) -> None:
+        self.steps = self.fallbacks = 0
+        self.first: float | None = None
+        self.codes: Counter[int] = Counter()
+        self._due: float | None = None
+
+    def stepped(self, t: float) -> None:
+        """A step at ``t`` was taken; its outputs are read next."""
+        self.steps += 1
+        self._due = t
+
+    def read(self, diagnostics: Mapping[str, float]) -> None:
+        """The outputs after a step: a fallback counted once, with its status code."""
+        t, self._due = self._due, None
+        if t is None or not diagnostics.get("fallback", 0.0) >= 0.5:
+            return
+        self.fallbacks += 1
+        self.codes[int(diagnostics.get("status", -1))] += 1
+        if self.first is None:
+            self.first = t
+
+    def summary(self) -> dict[str, Any]:
+        """``fallbacks`` and ``shortfall`` (none when it never fell back)."""
+        if not self.fallbacks:
+            return {}
+        why = ", ".join(f"status code {c} {n}" for c, n in self.codes.most_common(3))
+        return {"fallbacks": self.fallbacks,
+                "shortfall": {"steps": self.fallbacks, "of": self.steps,
+                              "what": "fell back on the candidate plan", "why": why,
+                              "first_time": self.first}}
