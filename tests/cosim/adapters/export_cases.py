@@ -25,8 +25,9 @@ FOUR_TANKS = {"qa": (0.0, 9.05e-4), "qb": (0.0, 1.11e-3)}
 
 def same_inputs(fmu_run: cosim.RunOutput, py_run: cosim.RunOutput, inputs: dict) -> None:
     """Both runs end alike (ok, or degraded where the Python controller fell back at more
-    than a tenth of its steps: the FMU's fallback output counts them too) and as long, the FMU's ``inputs`` (name -> box) within :data:`TOL` of
-    their boxes of the Python controller's, the same statuses, fallbacks and targets."""
+    than a tenth of its steps: the FMU's fallback output counts them too) and as long, the
+    FMU's ``inputs`` (name -> box) within :data:`TOL` of their boxes of the Python
+    controller's, the same statuses, fallbacks and targets."""
     a, b = fmu_run.to_pandas(), py_run.to_pandas()
     assert fmu_run.status == py_run.status in ("ok", "degraded"), (fmu_run.reason,
                                                                    py_run.reason)
