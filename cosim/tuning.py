@@ -195,7 +195,9 @@ def _closed_loops(model: str | Path, sc: Path, square: bool, progress: bool, wor
 
 
 def _closed_loop(job: tuple[str, str, str, Any], tick: Any = None) -> dict[str, float]:
-    """One tuning run (the PI when ``options`` is ``None``), scored."""
+    """One tuning run (the PI when ``options`` is ``None``), scored; a run that ended
+    degraded (its controller did not serve a tenth of the steps) scores an infinite IAE and
+    input motion, so that it is never chosen."""
     import cosim
     from cosim.core.errors import SimulationFailed
 
@@ -204,6 +206,8 @@ def _closed_loop(job: tuple[str, str, str, Any], tick: Any = None) -> dict[str, 
     opts = dict(options) if options is not None else {}
     out = cosim.run(sc, plant=f"model:{model}", controller=controller, model=model,
                     options=opts, seed=0, on_step=tick)
+    if out.status == "degraded":   # not a candidate: its controller did not serve
+        return {"iae": math.inf, "tv": math.inf, "violations": 0}
     if out.status != "ok":
         raise SimulationFailed(f"{name}: the run {out.status}: {out.reason}")
     return _score(out.summary)

@@ -141,14 +141,15 @@ def tightening_parts(model: Any, cert: Any, tightening: np.ndarray
     parts = [
         ("the estimation error (e_o a_N)", cert.e_tilde * cert.a[N],
          "observer gains (gain_scale), a smaller e_o0, a model that contracts faster "
-         "(cosim train --sigma-z-max), or a shorter horizon N"),
+         "(cosim train --rho-max), or a shorter horizon N"),
         ("the output error carried over the horizon (b_N)", cert.b[N] - held,
          "a model with a smaller test error, smaller observer gains, or a shorter horizon N"),
         ("the measured disturbances held over the horizon", held, _held_fix(model)),
         ("the output noise (w_L)", np.asarray(cert.w_L, dtype=float),
          "a model with a smaller test error"),
     ]
-    rest = tightening - sum(p[1] for p in parts)
+    with np.errstate(invalid="ignore", over="ignore"):   # a model with no bound: inf - inf
+        rest = tightening - sum(p[1] for p in parts)
     parts.append(("the terminal set", rest, "a smaller terminal radius (alpha_c)"))
     return parts
 

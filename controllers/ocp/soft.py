@@ -59,14 +59,16 @@ QUADRATIC = 1e-4
 def default_weight(fhocp: FHOCP) -> float:
     """``ρ = SOFT_MARGIN × max(1, s, N λ_max(Q), N λ_max(R), max T)``: the exact penalty's
     weight from the scale of the cost's terms (normalised units; ``T`` the tracking law's
-    offset weights)."""
+    offset weights; the finite ones)."""
     N = fhocp.N
     scale = [1.0, fhocp.s, N * float(np.max(np.linalg.eigvalsh(fhocp.Q))),
              N * float(np.max(np.linalg.eigvalsh(fhocp.R)))]
     T = getattr(fhocp.reference, "offset_weight", None)
     if T is not None:
         scale.append(float(np.max(T)))
-    return SOFT_MARGIN * max(scale)
+    # a model the theory gives no terminal weight (s = inf) is refused by the design's own
+    # checks, in the user's words: the weight here must not stand in their way
+    return SOFT_MARGIN * max(v for v in scale if np.isfinite(v))
 
 
 @dataclass(frozen=True)

@@ -53,7 +53,8 @@ class Wiring:
         c)``: ``c`` maps the controller's value to the plant's (``plant = scale · controller
         + offset``).
     free : list of str
-        The controller inputs no plant output feeds (set-points, measured disturbances).
+        The controller inputs no plant output feeds (set-points, measured disturbances, the
+        operator's ``op.*`` settings).
     disturbances : dict
         ``dist.<name>`` → (the plant's variable, the same :class:`Conversion`).
     plant_vars, controller_vars : dict
@@ -195,7 +196,8 @@ def _check_values(w: Wiring, plant: Path, controller: Path, setpoints: Mapping[s
                          f"(parameters: {', '.join(tunable) or 'none'})")
     for name, value in parameters.items():
         _check_value("--parameter", name, value, cv[name], controller)
-    missing = sorted(set(w.free) - set(setpoints))
+    # the operator's settings (op.*, cosim.core.operator) keep their start values unless given
+    missing = sorted(n for n in set(w.free) - set(setpoints) if not n.startswith("op."))
     if missing:
         raise CosimError(f"{controller}: input {missing[0]!r} is fed by no plant output: give "
                          f"it a value (--setpoint {missing[0]}=VALUE)")

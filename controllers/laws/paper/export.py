@@ -29,8 +29,9 @@ def export_design(law: Any, observer: Any, model: Any, u_lo: np.ndarray,
 
     cert, h, gov = law.cert, law.handling, law.governor
     lo, hi = cert.admissible_bounds()
-    design_ok = (cert.nu < 1 and cert.nu_o < 1 and cert.rho_s < 1
-                 and bool(np.isfinite(cert.e_tilde)))
+    # Certificate.ok's design conditions (the uncertified design's: a finite terminal weight,
+    # not nu < 1) and what eq:condition-recursive-feasibility needs to be evaluated at all
+    design_ok = (not cert.failures() and cert.rho_s < 1 and bool(np.isfinite(cert.e_tilde)))
     # (recursive_feasibility: ρ_s^N (L_max ẽ_o + w̄) ≤ α (1 − ρ_s); never read without
     # design_ok)
     rf_lhs = (cert.rho_s ** cert.N * (cert.L_max * cert.e_tilde + cert.w_bar)

@@ -24,7 +24,6 @@ ROOT = Path(__file__).resolve().parents[3]
     ({"law": "tracking", "offset_weight": -1}, "option offset_weight=-1: expected a positive"),
     ({"law": "tracking", "offset_weight": {"h3": 1.0}}, "'h3' is not an output of problem"),
     ({"law": "tracking", "alpha_c": 0}, "option alpha_c=0: expected a positive number"),
-    ({"law": "tracking", "alpha_c": 1.0}, "no admissible steady output: Y_s is empty"),
     ({"R": {"qc": 1.0}}, "option R: 'qc' is not one of qa, qb"),
     ({"Q": [[1.0, 0.0]]}, "option Q: expected a number or a 20x20 matrix, got shape (1, 2)"),
     ({"law": "tracking", "offset_filter": 1.5}, "offset_filter=1.5: expected a number in"),
@@ -45,6 +44,15 @@ def test_bad_options_are_one_line_errors(options: dict, words: str) -> None:
     assert words in str(err.value) and "\n" not in str(err.value)
 
 
+def test_a_terminal_set_that_empties_y_s_runs_uncertified() -> None:
+    """alpha_c = 1 leaves the certified design no admissible steady output: the controller
+    runs uncertified, its tightening measured, and says why (issue 62: an answer at every
+    step; before, a refusal)."""
+    s = RobustMPCController(law="tracking", alpha_c=1.0).summary()
+    assert s["certified"] is False and s["tightening"] == "measured"
+    assert s["certificate_reason"].startswith("no admissible steady output: Y_s is empty")
+
+
 def test_weights_by_number_or_signal_name() -> None:
     c = RobustMPCController(law="tracking", Q=2.0, R={"qa": 0.001})
     assert c.mpc.fhocp.Q[0, 0] == 2.0 and c.mpc.fhocp.Q[0, 1] == 0.0
@@ -61,9 +69,11 @@ def test_defaults_and_summary() -> None:
     assert s["alpha_c"] == pytest.approx(paper.mpc.cert.alpha_min())
     assert c.mpc.fhocp.sqp_options["max_iter"] == 40
     assert s["control_horizon"] == c.mpc.fhocp.reference.control_horizon == 20       # ⌈N / 4⌉
-    assert c.mpc.fhocp.nw == 20 * 2 + 2 + 1
+    slacks = c.mpc.fhocp.q + 1   # one per row of L and the terminal set's (controllers.ocp.soft)
+    assert c.mpc.fhocp.nw == 20 * 2 + 2 + 1 + slacks
     assert RobustMPCController(law="tracking", N=10).mpc.fhocp.reference.control_horizon == 3
-    assert RobustMPCController(law="tracking", control_horizon=80).mpc.fhocp.nw == 80 * 2 + 2 + 1
+    assert RobustMPCController(law="tracking", control_horizon=80).mpc.fhocp.nw == \
+        80 * 2 + 2 + 1 + slacks
     assert RobustMPCController(law="tracking", max_iter=7).mpc.fhocp.sqp_options["max_iter"] == 7
     assert RobustMPCController(law="paper").mpc.fhocp.sqp_options["max_iter"] == 15
     default = RobustMPCController()                # the tracking law is the default

@@ -245,3 +245,8 @@ def test_the_papers_law_runs_a_model_the_theory_rejects_on_its_measured_weight(
                           "--plant", f"model:{model}", "--out", str(tmp_path / "fmu"),
                           "--quiet", "--no-figure")
     assert status == 0 and _violations(tmp_path / "fmu" / "summary.json") == 0, err
+    # the exported law admits the set-points the Python law admits (it held its inputs at
+    # every step, unseen, while its design check asked nu < 1 of the uncertified design)
+    py, fmu = (np.loadtxt(tmp_path / r / "results.csv", delimiter=",", skiprows=1,
+                          usecols=(7, 8)) for r in ("run", "fmu"))   # ctrl.qa, ctrl.qb
+    assert np.allclose(py, fmu, rtol=0, atol=1e-9)

@@ -53,8 +53,8 @@ def column(result: Any, name: str) -> np.ndarray:
 def test_m1_p1_a_heater(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     result, doc, axes = run(tmp_path, HEATER, HeaterController(), HEATER_SCENARIO,
                             monkeypatch)
-    assert result.columns[:6] == ["time", "ref.temp", "plant.q_loss", "plant.temp",
-                                  "sensor.temp", "ctrl.power"]
+    assert result.columns[:7] == ["time", "ref.temp", "plant.q_loss", "plant.temp",
+                                  "sensor.temp", "plant.power", "ctrl.power"]
     assert doc["signals"] == {"outputs": {"temp": {"unit": "K", "min": 290.0, "max": 350.0}},
                               "inputs": {"power": {"unit": "kW", "min": 0.0, "max": 5.0}}}
     k = doc["kpis"]

@@ -79,8 +79,8 @@ def test_events_sensor_and_recording(tmp_path: Path, fmu2_path: Path) -> None:
     assert result.status == "ok" and result.error is None
     assert result.steps == result.steps_planned == 10
     assert result.columns == ["time", "ref.h1", "plant.qd1", "plant.a1", "plant.h1", "plant.h2",
-                              "plant.h3", "plant.h4", "sensor.h1", "ctrl.qa", "ctrl.qb",
-                              "ctrl.calls", "ctrl.late"]
+                              "plant.h3", "plant.h4", "sensor.h1", "plant.qa", "plant.qb",
+                              "ctrl.qa", "ctrl.qb", "ctrl.calls", "ctrl.late"]
     c = table(result)
     assert list(c["time"]) == [25.0 * k for k in range(11)]
     # set-point and leak change exactly at t = 100; the 160 s event waits for t = 175
