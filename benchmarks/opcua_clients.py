@@ -55,13 +55,16 @@ class SessionClient:
     name = "session"
 
     def __init__(self, plant: Plant) -> None:
+        from controllers.problem_file import load
+        from cosim.core.build import DEFAULT_PROBLEM
         from cosim.live.session import PlantSession
         from cosim.live.tags import Tag, Tags
 
         tags = Tags(root=plant.root, tags={s: Tag(node_id=plant.ids[s]) for s in plant.ids})
         self.session = PlantSession(plant.endpoint, reads=READS, writes=WRITES, tags=tags,
                                     folder="fourtank", security=plant.security,
-                                    max_age=1e9, timeout=5.0)
+                                    max_age=1e9, timeout=5.0,
+                                    units=load(DEFAULT_PROBLEM).units())
         self.session.connect()
 
     def read(self) -> Answer:
@@ -69,8 +72,9 @@ class SessionClient:
         return Answer(tuple(r.values[s] for s in READS), r.fresh, r.source_time or 0.0)
 
     def write(self, values: tuple[float, ...]) -> None:
-        if not self.session.write(dict(zip(WRITES, values, strict=True))):
-            raise RuntimeError("session: the write did not reach the plant")
+        failed = self.session.write(dict(zip(WRITES, values, strict=True)))
+        if failed:
+            raise RuntimeError(f"session: the write did not reach the plant: {failed}")
 
     def close(self) -> None:
         self.session.close()

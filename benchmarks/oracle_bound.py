@@ -63,21 +63,30 @@ HORIZONS = {"heater": 60, "furnace": 120, "heater_dead_time": 60, "furnace_load"
 
 
 def constants(plant: str) -> dict[str, float]:
-    """The module-level numbers of ``fmus/examples/<plant>/<plant>.py`` (``C, UA0, UA1 =
-    ...``), read from its source: importing it here would shadow the module of that name the
-    pythonfmu plant loads in this process."""
-    tree = ast.parse((ROOT / "fmus" / "examples" / plant / f"{plant}.py").read_text())
+    """The numbers ``fmus/examples/<plant>/<plant>.py`` assigns (``C, UA0, UA1 = ...``) at
+    module level or in a class body, over those of ``fmus/examples/plant_base.py`` (the
+    furnaces' ``C, UA, K, E``), read from their sources: importing the plant here would shadow
+    the module of that name the pythonfmu plant loads in this process."""
     out: dict[str, float] = {}
-    for node in tree.body:
-        if isinstance(node, ast.Assign) and isinstance(node.targets[0], ast.Tuple | ast.Name):
-            names = node.targets[0].elts if isinstance(node.targets[0], ast.Tuple) else [
-                node.targets[0]]
-            values = node.value.elts if isinstance(node.value, ast.Tuple) else [node.value]
-            for name, value in zip(names, values, strict=False):
-                if isinstance(name, ast.Name) and isinstance(value, ast.Constant) and \
-                        isinstance(value.value, int | float):
-                    out[name.id] = float(value.value)
+    for path in (ROOT / "fmus" / "examples" / "plant_base.py",
+                 ROOT / "fmus" / "examples" / plant / f"{plant}.py"):
+        tree = ast.parse(path.read_text())
+        for node in tree.body:
+            body = node.body if isinstance(node, ast.ClassDef) else [node]
+            for stmt in body:
+                out.update(_assigned_numbers(stmt))
     return out
+
+
+def _assigned_numbers(node: ast.stmt) -> dict[str, float]:
+    """``{name: number}`` of an assignment of numeric constants (one or a tuple)."""
+    if not isinstance(node, ast.Assign) or not isinstance(node.targets[0], ast.Tuple | ast.Name):
+        return {}
+    names = node.targets[0].elts if isinstance(node.targets[0], ast.Tuple) else [node.targets[0]]
+    values = node.value.elts if isinstance(node.value, ast.Tuple) else [node.value]
+    return {name.id: float(value.value) for name, value in zip(names, values, strict=False)
+            if isinstance(name, ast.Name) and isinstance(value, ast.Constant)
+            and isinstance(value.value, int | float)}
 
 
 def heater_rhs(p: Mapping[str, float]) -> Callable[[Any, Any, Any], Any]:

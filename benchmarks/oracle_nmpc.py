@@ -250,7 +250,7 @@ class OracleNMPC(Component):
                  problem: ControlProblem | str | Path | None = None,
                  fmu: str | Path | None = None) -> None:
         from cosim.adapters.problems import load_problem
-        from cosim.api import plant_path
+        from cosim.core.plants import plant_path
 
         if isinstance(horizon, bool) or not isinstance(horizon, int) or horizon < 1:
             raise ValueError(f"oracle: horizon must be a positive integer, got {horizon!r}")

@@ -18,7 +18,7 @@ import pytest
 
 import cosim
 from cosim.cli import main
-from tests.cosim.adapters.test_controller_export import _replayed
+from tests.cosim.adapters.export_cases import replayed
 
 ROOT = Path(__file__).resolve().parents[3]
 SCENARIO = ROOT / "scenarios" / "paper_steps.csv"
@@ -117,7 +117,7 @@ def test_the_compiled_step_replays_the_python_controller_with_mixed_dead_times(
     compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
                                   n_outputs=2)
     refs = [(0.65, 0.65)] * 20 + [(1.0, 1.1)] * 30 + [(0.7, 0.9)] * 30
-    for _ in _replayed(ctrl, compiled, refs):
+    for _ in replayed(ctrl, compiled, refs):
         pass
     compiled.close()
 
