@@ -69,7 +69,13 @@ def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(plant: str, tmp_pat
     for law in ("robust-mpc", "robust-mpc-paper"):
         mpc = report[law]
         assert mpc["status"] == "ok", law
-        assert mpc["certified"] is verdict["certified"], law   # uncertified where certify says
+        # certify's verdict is the default (tracking) law's; the paper's law adds a condition
+        # per set-point (eq:condition-recursive-feasibility), so it may run uncertified where
+        # the verdict is certified (the heater's T = 29.16 degC: alpha 0.2185 < 0.2194)
+        if law == "robust-mpc":
+            assert mpc["certified"] is verdict["certified"], law
+        else:
+            assert verdict["certified"] or not mpc["certified"], law
         assert max(mpc["box_violation"].values()) == 0.0, (law, mpc["box_violation"])
         assert set(mpc["iae"]) == set(problem.output_names)
         assert set(mpc["tv"]) == set(problem.input_names)
