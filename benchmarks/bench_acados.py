@@ -3,9 +3,10 @@
 or better).
 
 The robust MPC with the paper's law runs the paper scenario (``scenarios/paper_steps.csv``)
-in closed loop with the four-tank FMU; every FHOCP its SQP solves is captured (``x̂``, the
-set-point's ``x̄, ū``, the tightened output rows' bounds, the terminal radius α, the initial
-guess). Then, in this run:
+in closed loop with the four-tank FMU, its constraints hard (``hard_constraints``: the
+paper's FHOCP, without the slacks of ``controllers.ocp.soft``); every FHOCP its SQP solves
+is captured (``x̂``, the set-point's ``x̄, ū``, the tightened output rows' bounds, the
+terminal radius α, the initial guess). Then, in this run:
 
 * **kernel**: each captured problem solved again by the compiled kernel's SQP
   (:class:`controllers.kernel.kernel_sqp.KernelSQP`, the controller's options: exact
@@ -73,12 +74,12 @@ def capture() -> tuple[dict[str, np.ndarray], list[dict], object]:
 
     def remember(self: RobustMPCController, t0: float) -> None:
         make(self, t0)
-        fhocps.append(self.fhocp)
+        fhocps.append(self.mpc.fhocp)
 
     RobustMPCController.setup = remember
     try:
-        run = api.run(ROOT / "scenarios" / "paper_steps.csv", options={"law": "paper"},
-                      figure=False)
+        run = api.run(ROOT / "scenarios" / "paper_steps.csv",
+                      options={"law": "paper", "hard_constraints": True}, figure=False)
     finally:
         ks.KernelSQP.solve, RobustMPCController.setup = original, make
     if run.status != "ok":
