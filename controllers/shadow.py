@@ -17,7 +17,6 @@ when they were held, the error the model's own.
 
 from __future__ import annotations
 
-from collections import deque
 from typing import Any
 
 import numpy as np
@@ -44,34 +43,46 @@ class PredictionWatch:
     def reset(self) -> None:
         """A new run."""
         p = len(self.outputs)
-        self._pending: deque[np.ndarray] = deque(maxlen=self.N)
+        # the last N predictions in a ring: the one made at step s in slot s % N, its rows
+        # beyond its length not filled
+        self._ring = np.zeros((self.N, self.N, p))
+        self._filled = np.zeros((self.N, self.N), dtype=bool)
         self._sum = np.zeros((self.N, p))
         self._sq = np.zeros((self.N, p))
         self._count = np.zeros(self.N, dtype=int)
+        self._ages = np.arange(self.N)
         self.steps = 0
 
     def measure(self, y: np.ndarray) -> None:
         """The plant's outputs now (problem units): scored against each prediction of
-        them still pending (made ``1 … N`` steps ago)."""
+        them still pending (made ``1 … N`` steps ago), all at once (one add per age, as
+        one at a time would)."""
         y = np.asarray(y, dtype=float)
-        for age, pred in enumerate(reversed(self._pending)):   # age 0: made last step
-            if age < pred.shape[0]:
-                e = y - pred[age]
-                self._sum[age] += e
-                self._sq[age] += e * e
-                self._count[age] += 1
+        ages = self._ages[:min(self.steps, self.N)]          # age 0: made last step
+        slots = (self.steps - 1 - ages) % self.N
+        scored = ages[self._filled[slots, ages]]
+        if scored.size == 0:
+            return
+        e = y - self._ring[(self.steps - 1 - scored) % self.N, scored]
+        self._sum[scored] += e
+        self._sq[scored] += e * e
+        self._count[scored] += 1
 
     def predict(self, y_pred: np.ndarray) -> None:
         """This step's predictions (``N'`` × p, ``N' ≤ N``: ``ŷ_{k+1|k} …``)."""
-        self._pending.append(np.asarray(y_pred, dtype=float)[:self.N])
+        pred = np.asarray(y_pred, dtype=float)[:self.N]
+        slot = self.steps % self.N
+        self._ring[slot, :pred.shape[0]] = pred
+        self._filled[slot] = self._ages < pred.shape[0]
         self.steps += 1
 
     def last_prediction(self) -> dict[str, list[float]]:
         """The last step's predictions ``ŷ_{k+1|k} … ŷ_{k+N|k}`` by output (empty before
         the first)."""
-        if not self._pending:
+        if not self.steps:
             return {}
-        last = self._pending[-1]
+        slot = (self.steps - 1) % self.N
+        last = self._ring[slot, self._filled[slot]]
         return {name: last[:, j].tolist() for j, name in enumerate(self.outputs)}
 
     def summary(self) -> dict[str, Any]:
