@@ -179,7 +179,7 @@ def compare_kernel(args: argparse.Namespace) -> None:
         print(f"{metric:10s} compiled median {np.median(c):7.2f}  p99 {_p(c, 99):7.2f} ms")
         print(f"{metric:10s} speed-up median {np.median(b) / np.median(c):5.2f}x  p99 "
               f"{_p(b, 99) / _p(c, 99):5.2f}x   (targets >= 4x, >= 5x)")
-    solve = {k: [r.result.solve_time * 1e3 for r in v.law.mpc.records]
+    solve = {k: [r.result.solve_time * 1e3 for r in v.mpc.law.mpc.records]
              for k, v in variants.items()}
     c, b = solve["compiled"], solve["numpy"]
     print(f"FHOCP solve only (timings.csv solve_ms, last round): numpy median {np.median(b):.2f}"
