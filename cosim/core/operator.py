@@ -28,20 +28,44 @@ from __future__ import annotations
 
 import math
 import threading
+import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from cosim.core.component import Capability, Component, Setting
 from cosim.core.errors import CosimError
 
 __all__ = ["AUDIT_COLUMNS", "AUDIT_FILE", "MODE_WORDS", "ROLES", "SWITCHES", "Answer",
-           "OperatorDesk", "mode_words"]
+           "OperatorDesk", "mode_words", "users_table"]
 
 #: ``op.mode``'s words (a scenario cell, a faceplate's string) and their values.
 MODE_WORDS = {"auto": 1.0, "manual": 0.0}
 #: The roles, each with what it may change (the settings' roles).
 ROLES = {"operator": ("operator",), "engineer": ("operator", "engineer")}
+
+
+def users_table(path: Path, flag: str, keys: str) -> dict[str, Any]:
+    """The ``[users.<name>]`` tables of the users file at ``path`` (given by option
+    ``flag``; ``keys``: what each table holds, for the error), for the page's and the
+    faceplate's readers.
+
+    Raises
+    ------
+    CosimError
+        The file is missing, not TOML, or has no user: one line naming the file.
+    """
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise CosimError(f"{flag} {path}: no such file") from None
+    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
+        raise CosimError(f"{flag} {path}: cannot read it: {exc}") from None
+    table = doc.get("users")
+    if not isinstance(table, dict) or not table:
+        raise CosimError(f"{path}: expected [users.<name>] tables with {keys}")
+    return table
 #: The audit log in a run's folder, and its columns.
 AUDIT_FILE = "operator.csv"
 AUDIT_COLUMNS = ("time", "who", "what", "old", "new", "result")

@@ -20,13 +20,12 @@ import hmac
 import os
 import secrets
 import sys
-import tomllib
 from collections.abc import Sequence
 from pathlib import Path
 
 from cosim.core import atomicio
 from cosim.core.errors import CosimError
-from cosim.core.operator import ROLES
+from cosim.core.operator import ROLES, users_table
 from cosim.hmi.actions import User
 
 __all__ = ["PASSWORD_ENV", "Users", "hash_password", "main"]
@@ -76,15 +75,7 @@ class Users:
             naming the file (and the user).
         """
         path = Path(path)
-        try:
-            doc = tomllib.loads(path.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise CosimError(f"{flag} {path}: no such file") from None
-        except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-            raise CosimError(f"{flag} {path}: cannot read: {exc}") from None
-        table = doc.get("users")
-        if not isinstance(table, dict) or not table:
-            raise CosimError(f"{path}: no [users.<name>] table")
+        table = users_table(path, flag, "role and password")
         users = {}
         for name, entry in table.items():
             role = entry.get("role") if isinstance(entry, dict) else None

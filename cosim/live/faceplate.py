@@ -44,7 +44,6 @@ import contextlib
 import math
 import os
 import threading
-import tomllib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -106,18 +105,10 @@ def read_users(path: str | Path) -> dict[str, tuple[str, str]]:
         A missing or malformed file, an unknown role, a password variable not set (one
         line naming the file and user).
     """
-    from cosim.core.operator import ROLES
+    from cosim.core.operator import ROLES, users_table
 
     path = Path(path)
-    try:
-        doc = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise CosimError(f"--faceplate-users {path}: file not found") from None
-    except (OSError, UnicodeDecodeError, tomllib.TOMLDecodeError) as exc:
-        raise CosimError(f"--faceplate-users {path}: cannot read it: {exc}") from None
-    table = doc.get("users")
-    if not isinstance(table, dict) or not table:
-        raise CosimError(f"{path}: expected [users.<name>] tables with role and password_env")
+    table = users_table(path, "--faceplate-users", "role and password_env")
     out = {}
     for name, entry in table.items():
         where = f"{path}: [users.{name}]"

@@ -5,23 +5,17 @@ issue 61: at most 2; a benchmark's number, not asserted here)."""
 from __future__ import annotations
 
 import re
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.benchmarks.running import bench
 
 
 @pytest.mark.slow
 def test_the_benchmark_times_the_step_with_and_without_operator_changes() -> None:
-    proc = subprocess.run([sys.executable, str(ROOT / "benchmarks" / "bench_operator.py"),
-                           "--steps", "40"], capture_output=True, text=True, timeout=900,
-                          check=False)
-    assert proc.returncode == 0, proc.stdout + proc.stderr
+    out = bench("bench_operator.py", "--steps", "40")
     rows = re.findall(r"(baseline|changes) +median ([\d.]+) p90 ([\d.]+) p99 ([\d.]+) max "
-                      r"([\d.]+) ms over 40 steps", proc.stdout)
-    assert [r[0] for r in rows] == ["baseline", "changes"], proc.stdout
+                      r"([\d.]+) ms over 40 steps", out)
+    assert [r[0] for r in rows] == ["baseline", "changes"], out
     assert all(0 < float(r[1]) <= float(r[2]) <= float(r[3]) <= float(r[4]) for r in rows)
-    assert re.search(r"ratio p99 [\d.]+x \(target <= 2\)", proc.stdout)
+    assert re.search(r"ratio p99 [\d.]+x \(target <= 2\)", out)

@@ -12,6 +12,7 @@ import pytest
 
 from cosim.core.csvio import read_table
 from cosim.live.process import free_port
+from tests.cosim.commands.test_cli_campaign import SPEC  # two runs of the PI, a bias drawn
 from tests.cosim.hmi.browser import (
     browser,
     cosim,
@@ -25,15 +26,6 @@ from tests.cosim.hmi.browser import (
 
 pytestmark = pytest.mark.slow
 
-SPEC = """\
-[campaign]
-runs = 2
-scenario = "short.csv"
-controller = "pi"
-
-[draw]
-"sensor.h1.bias" = { uniform = [-0.01, 0.01] }
-"""
 
 
 def test_the_campaigns_runs_with_their_kpis_and_pages(tmp_path: Path) -> None:
