@@ -11,9 +11,9 @@ loaded cores it does not quite) and beside the run at the same priority (on a ma
 cores it then takes one of them). Neither separates the server's pushes (a thread of the
 run's process) from the browser's drawing; a third way does, as on the operator's own
 computer: the run (with its server's threads) held to core 0, the browser (and Playwright's
-driver) to core 1, against the run without the page held to core 0 alike. The step time is the wall
-time from the end of the first step (which waits until the browser shows the page) to the
-end of the last, per step. Prints the median of each way and its ratio to the run without
+driver) to core 1, against the run without the page held to core 0 alike. The step time is
+the wall time from the end of the first step (which waits until the browser shows the page)
+to the end of the last, per step. Prints the median of each way and its ratio to the run without
 the page (goal: ≤ 1.05).
 
 Usage: ``python benchmarks/bench_hmi.py [--repeats R] [--scenario CSV]``

@@ -66,6 +66,8 @@ def users_table(path: Path, flag: str, keys: str) -> dict[str, Any]:
     if not isinstance(table, dict) or not table:
         raise CosimError(f"{path}: expected [users.<name>] tables with {keys}")
     return table
+
+
 #: The audit log in a run's folder, and its columns.
 AUDIT_FILE = "operator.csv"
 AUDIT_COLUMNS = ("time", "who", "what", "old", "new", "result")
