@@ -13,8 +13,10 @@ run's process) from the browser's drawing; a third way does, as on the operator'
 computer: the run (with its server's threads) held to core 0, the browser (and Playwright's
 driver) to core 1, against the run without the page held to core 0 alike. The step time is
 the wall time from the end of the first step (which waits until the browser shows the page)
-to the end of the last, per step. Prints the median of each way and its ratio to the run without
-the page (goal: ≤ 1.05).
+to the end of the last, per step. Prints the median of each way and its ratio to the run
+without the page (goal: ≤ 1.05), then the CPU time per step of the run's other threads (its
+server's, with the browser driver's thread left out: :func:`server_cpu`), the page's cost
+measured directly where the wall clock of a shared machine scatters.
 
 Usage: ``python benchmarks/bench_hmi.py [--repeats R] [--scenario CSV]``
 """
@@ -32,6 +34,7 @@ import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
@@ -66,6 +69,7 @@ def viewer(url_box: list[str], nice: int = 0,
     launcher.chmod(0o755)
 
     def view() -> None:
+        opened.tid = threading.get_native_id()   # type: ignore[attr-defined]
         if core is not None:   # this thread, and what it starts, on that core alone
             os.sched_setaffinity(0, {core})
         with sync_playwright() as pw:
@@ -99,6 +103,7 @@ def one_run(scenario: Path, page: bool, browse: bool = True, nice: int = 0,
     browser on core 1."""
     url: list[str] = []
     marks: list[float] = []
+    others: list[float] = []   # the CPU seconds of the run's other threads: its server's
 
     def notice(text: str) -> None:
         if text.startswith("the run's page: "):
@@ -111,6 +116,8 @@ def one_run(scenario: Path, page: bool, browse: bool = True, nice: int = 0,
             if k == 1 and opened is not None:
                 opened.wait(120)
             marks.append(time.perf_counter())
+            if k == 1:
+                others.append(server_cpu(opened))
 
         hmi = HmiOptions("127.0.0.1", free_port()) if page else None
         if pin:   # the run's thread, and the server threads it starts, on core 0
@@ -119,8 +126,28 @@ def one_run(scenario: Path, page: bool, browse: bool = True, nice: int = 0,
             out = cosim.run(scenario, figure=False, hmi=hmi, on_notice=notice, on_step=step)
         finally:
             os.sched_setaffinity(0, every)
+        others.append(server_cpu(opened))
     assert out.status == "ok", out.reason
-    return (marks[-1] - marks[0]) / (len(marks) - 1)
+    steps = len(marks) - 1
+    SERVER[(page, browse, nice, pin)] = (others[-1] - others[0]) / steps
+    return (marks[-1] - marks[0]) / steps
+
+
+#: the server's CPU seconds per step of the last run of each way
+SERVER: dict[tuple, float] = {}
+
+
+def server_cpu(viewer_event: Any) -> float:
+    """CPU seconds of this process's threads but the run's (this one) and the browser's
+    driver thread (``viewer_event.tid``): the page's server, from the first step on to the
+    run's end (its last pushes included)."""
+    cpu = time.process_time() - time.thread_time()
+    tid = getattr(viewer_event, "tid", None)
+    if tid is not None:
+        with contextlib.suppress(OSError), open(f"/proc/self/task/{tid}/stat") as f:
+            fields = f.read().rsplit(")", 1)[1].split()
+            cpu -= (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return cpu
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -145,10 +172,13 @@ def main(argv: list[str] | None = None) -> int:
     pinned = has_browser and len(os.sched_getaffinity(0)) >= 2
     if pinned:
         ways += [(PINNED_BASE, False, False, 0, True), (PINNED, True, True, 0, True)]
+
     times: dict[str, list[float]] = {w[0]: [] for w in ways}
+    server: dict[str, list[float]] = {w[0]: [] for w in ways}
     for _ in range(args.repeats):
         for label, page, browse, nice, pin in ways:
             times[label].append(one_run(scenario, page, browse, nice, pin))
+            server[label].append(SERVER[(page, browse, nice, pin)])
     base = statistics.median(times[ways[0][0]])
     print(f"{scenario.name}: step time, median of {args.repeats} runs each way, alternately"
           + ("" if has_browser or args.no_browser else " (no browser installed)"))
@@ -157,6 +187,11 @@ def main(argv: list[str] | None = None) -> int:
         ref = statistics.median(times[PINNED_BASE]) if label == PINNED else base
         print(f"{label:34s} {m * 1e3:8.3f} ms  ratio {m / ref:5.3f}  (runs: "
               f"{', '.join(f'{x * 1e3:.3f}' for x in times[label])})")
+    print("the other threads' CPU per step (the page's server; the browser's driver thread "
+          "left out), against the step without the page:")
+    for label, *_ in ways:
+        c = statistics.median(server[label])
+        print(f"  {label:34s} {c * 1e3:8.3f} ms  {100 * c / base:5.1f} %")
     print("goal: ratio <= 1.05 with the page open (the browser on core 1: as on the "
           "operator's own computer, its ratio against the run on core 0 without the page; "
           "niced or beside: on this machine's cores)")
