@@ -96,11 +96,12 @@ def viewer(url_box: list[str], nice: int = 0,
 
 
 def one_run(scenario: Path, page: bool, browse: bool = True, nice: int = 0,
-            pin: bool = False) -> float:
+            pin: bool = False) -> tuple[float, float]:
     """Seconds per step of one run, with the page (and a browser on it) or without: the wall
     time from the end of its first step to the end of its last, over the steps between (the
-    first step waits until the browser shows the page). ``pin``: the run on core 0, the
-    browser on core 1."""
+    first step waits until the browser shows the page), and the CPU seconds per step of the
+    run's other threads (:func:`server_cpu`). ``pin``: the run on core 0, the browser on
+    core 1."""
     url: list[str] = []
     marks: list[float] = []
     others: list[float] = []   # the CPU seconds of the run's other threads: its server's
@@ -129,12 +130,7 @@ def one_run(scenario: Path, page: bool, browse: bool = True, nice: int = 0,
         others.append(server_cpu(opened))
     assert out.status == "ok", out.reason
     steps = len(marks) - 1
-    SERVER[(page, browse, nice, pin)] = (others[-1] - others[0]) / steps
-    return (marks[-1] - marks[0]) / steps
-
-
-#: the server's CPU seconds per step of the last run of each way
-SERVER: dict[tuple, float] = {}
+    return (marks[-1] - marks[0]) / steps, (others[-1] - others[0]) / steps
 
 
 def server_cpu(viewer_event: Any) -> float:
@@ -177,8 +173,9 @@ def main(argv: list[str] | None = None) -> int:
     server: dict[str, list[float]] = {w[0]: [] for w in ways}
     for _ in range(args.repeats):
         for label, page, browse, nice, pin in ways:
-            times[label].append(one_run(scenario, page, browse, nice, pin))
-            server[label].append(SERVER[(page, browse, nice, pin)])
+            step, cpu = one_run(scenario, page, browse, nice, pin)
+            times[label].append(step)
+            server[label].append(cpu)
     base = statistics.median(times[ways[0][0]])
     print(f"{scenario.name}: step time, median of {args.repeats} runs each way, alternately"
           + ("" if has_browser or args.no_browser else " (no browser installed)"))

@@ -60,10 +60,11 @@ class PredictionWatch:
         y = np.asarray(y, dtype=float)
         ages = self._ages[:min(self.steps, self.N)]          # age 0: made last step
         slots = (self.steps - 1 - ages) % self.N
-        scored = ages[self._filled[slots, ages]]
+        kept = self._filled[slots, ages]
+        scored = ages[kept]
         if scored.size == 0:
             return
-        e = y - self._ring[(self.steps - 1 - scored) % self.N, scored]
+        e = y - self._ring[slots[kept], scored]
         self._sum[scored] += e
         self._sq[scored] += e * e
         self._count[scored] += 1

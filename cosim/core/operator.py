@@ -46,6 +46,14 @@ MODE_WORDS = {"auto": 1.0, "manual": 0.0}
 ROLES = {"operator": ("operator",), "engineer": ("operator", "engineer")}
 
 
+#: The audit log in a run's folder, and its columns.
+AUDIT_FILE = "operator.csv"
+AUDIT_COLUMNS = ("time", "who", "what", "old", "new", "result")
+#: The settings that are switches (1 or 0): the mode, an input in service, an output
+#: controlled (a name, or the prefix of the names).
+SWITCHES = ("op.mode", "op.service.", "op.control.")
+
+
 def users_table(path: Path, flag: str, keys: str) -> dict[str, Any]:
     """The ``[users.<name>]`` tables of the users file at ``path`` (given by option
     ``flag``; ``keys``: what each table holds, for the error), for the page's and the
@@ -66,14 +74,6 @@ def users_table(path: Path, flag: str, keys: str) -> dict[str, Any]:
     if not isinstance(table, dict) or not table:
         raise CosimError(f"{path}: expected [users.<name>] tables with {keys}")
     return table
-
-
-#: The audit log in a run's folder, and its columns.
-AUDIT_FILE = "operator.csv"
-AUDIT_COLUMNS = ("time", "who", "what", "old", "new", "result")
-#: The settings that are switches (1 or 0): the mode, an input in service, an output
-#: controlled (a name, or the prefix of the names).
-SWITCHES = ("op.mode", "op.service.", "op.control.")
 
 
 def mode_words(value: Any) -> Any:
