@@ -1,7 +1,7 @@
 """The default walk-through on the zoo of the field's benchmark plants (issue 62, goal 5).
 
     python benchmarks/bench_zoo.py [--plants wood_berry,air_heater,...] [--runs N]
-        [--epochs E] [--steps S] [--seed S] [--out DIR]
+        [--epochs E] [--steps S] [--seed S] [--out DIR] [--reuse]
 
 For each plant of the zoo (``fmus/examples/build.py``'s ``ZOO``: Wood-Berry, the Shell
 fractionator, pH neutralisation, the van de Vusse CSTR, a slow thermal process, the air
@@ -139,18 +139,22 @@ def tune(model: Path) -> dict[str, Any]:
 
 
 def walkthrough(plant: str, work: Path, runs: int, epochs: int | None, steps: int,
-                seed: int) -> dict[str, Any]:
-    """The default walk-through on ``plant`` in ``work``: the numbers of its table row."""
+                seed: int, reuse: bool = False) -> dict[str, Any]:
+    """The default walk-through on ``plant`` in ``work``: the numbers of its table row;
+    ``reuse``: the model ``work`` holds from an earlier run, not trained again (its training
+    time then ``None``)."""
     from controllers.problem_file import load
 
     files = prepare(plant, work, runs)
     problem = load(files["problem"])
-    model, train_s = own_plant.identify(files["fmu"], files["problem"], work, epochs, seed,
-                                        steps=steps)
+    model, train_s = work / "models" / "plant_gru.json", None
+    if not (reuse and model.is_file()):
+        model, train_s = own_plant.identify(files["fmu"], files["problem"], work, epochs,
+                                            seed, steps=steps)
     setpoints = scenario_setpoints(files["scenario"], problem)
     report: dict[str, Any] = {
         "plant": plant, "problem": problem.describe(), "steps": steps, "epochs": epochs,
-        "train_s": round(train_s, 1),
+        "train_s": None if train_s is None else round(train_s, 1),
         "certify": own_plant.certify(model, problem, setpoints, unusable_ok=True)}
     report["tune"] = tune(model)
     runs_dir = work / "runs"
@@ -174,7 +178,8 @@ def row(r: dict[str, Any]) -> str:
     violating = ("-" if not camp else
                  f"{camp['variants']['robust-mpc']['violating']}/"
                  f"{camp['variants']['pi']['violating']} runs")
-    return (f"{r['plant']:<19} {r['train_s']:>8.0f} {verdict:>12} {v['rho_s']:>9.5f} "
+    train = "reused" if r["train_s"] is None else f"{r['train_s']:.0f}"
+    return (f"{r['plant']:<19} {train:>8} {verdict:>12} {v['rho_s']:>9.5f} "
             f"{mpc.get('infeasible_after_N', '-'):>11} "
             f"{camp.get('iae_ratio', math.nan):>10.3f} {violating:>13} "
             f"{mpc.get('violation', math.nan):>9.3g}")
@@ -196,6 +201,9 @@ def main(argv: list[str] | None = None) -> int:
                         help=f"cosim generate-data --steps (default {own_plant.STEPS})")
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--reuse", action="store_true",
+                        help="keep the model an earlier run left in --out (certify, tune, "
+                             "runs and campaign again; no data or training)")
     args = parser.parse_args(argv)
     plants = args.plants.split(",") if args.plants else list(zoo())
     unknown = [p for p in plants if p not in zoo()]
@@ -206,7 +214,7 @@ def main(argv: list[str] | None = None) -> int:
     reports = []
     for plant in plants:
         reports.append(walkthrough(plant, out / plant, args.runs, args.epochs, args.steps,
-                                   args.seed))
+                                   args.seed, args.reuse))
         print(row(reports[-1]), flush=True)
         if "failed" in reports[-1]["tune"]:
             print(f"  {plant}: cosim tune failed ({reports[-1]['tune']['failed']}): the "

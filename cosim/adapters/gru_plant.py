@@ -19,7 +19,11 @@ Parameters a scenario may set in its first row (``plant.<name>``), before the pl
 * ``w_y_max``: the normalised noise bound (default 0, or the constructor's);
 * ``dx_<i>`` (``dx_1`` … ``dx_n``): an offset added to that equilibrium state, so that an
   observer started at the equilibrium has an initial error ``‖dx‖∞``;
-* ``seed``: the noise seed.
+* ``seed``: the noise seed;
+* ``gain_<input>`` (``gain_qa``): the plant's gain on that input, a factor on its move from
+  where the run starts (``v ← v₀ + g (v − v₀)``, normalised; default 1): the model with a
+  multiplicative input uncertainty, what ``cosim tune`` checks a weighting's robustness on
+  (:mod:`cosim.tuning`).
 """
 
 from __future__ import annotations
@@ -80,6 +84,8 @@ class GRUPlant(Component):
         self.dx0 = np.zeros(model.n) if dx0 is None else np.asarray(dx0, dtype=float).copy()
         self._start_names = [f"{n}_start" for n in model.output_names]
         self._dx_names = [f"dx_{i + 1}" for i in range(model.n)]
+        self._gain_names = [f"gain_{n}" for n in model.input_names]
+        self.gains = np.ones(len(self._gain_names))
         self.setup(0.0)
 
     @classmethod
@@ -99,7 +105,8 @@ class GRUPlant(Component):
         """Plant inputs, and at the start the parameters of the module docstring."""
         names = {s.name for s in self.inputs}
         if at_start:
-            names |= {*self._start_names, *self._dx_names, "w_y_max", "seed"}
+            names |= {*self._start_names, *self._dx_names, *self._gain_names, "w_y_max",
+                      "seed"}
         return names
 
     def set_parameter(self, name: str, value: float) -> None:
@@ -113,6 +120,8 @@ class GRUPlant(Component):
             self.y0[self._start_names.index(name)] = float(value)
         elif name in self._dx_names:
             self.dx0[self._dx_names.index(name)] = float(value)
+        elif name in self._gain_names:
+            self.gains[self._gain_names.index(name)] = float(value)
         elif name == "w_y_max":
             if value < 0:
                 raise CosimError(f"{self.path}: plant parameter 'w_y_max' = {value!r} is "
@@ -141,6 +150,7 @@ class GRUPlant(Component):
         self.x_start = x_eq + self.dx0
         self.x = self.x_start.copy()
         self.u = u0
+        self._v0 = u0.copy()   # the inputs the gains act around
         problem = model.problem
         self._line = DelayLine(problem.delays) if problem is not None and any(
             problem.delays) else None
@@ -166,6 +176,8 @@ class GRUPlant(Component):
         if self._line is not None:   # each input as the model sees it, its dead time late
             self._line.push(self.u)
             v = self._line.current()
+        if np.any(self.gains != 1.0):
+            v = self._v0 + self.gains * (v - self._v0)
         self.x = gru.step(self.model.params, self.x, v)
         self._draw()
 

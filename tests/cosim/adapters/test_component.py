@@ -421,3 +421,31 @@ def test_cosim_run_on_another_problem_names_it(tmp_path: Path) -> None:
     for name in ("ref.CA", "ref.T", "plant.CA", "plant.T", "ctrl.F", "ctrl.Tc",
                  "ctrl.y_model_CA", "ctrl.y_model_T"):
         assert name in header, name
+
+
+def test_the_model_as_a_plant_with_an_input_gain_off(ctrl):
+    """``gain_<input>``: the plant's gain on one input a factor on its move from where the
+    run starts (what ``cosim tune`` checks robustness on); 1 is the model, the others'
+    moves unchanged."""
+    model = ctrl.mpc.model
+
+    def levels(gains: dict[str, float], qa: float) -> np.ndarray:
+        plant = GRUPlant(model, y0=np.array([0.8, 0.8]))
+        for name, g in gains.items():
+            plant.set_parameter(f"gain_{name}", g)
+        plant.setup(0.0)
+        start = model.denormalize_u(plant.u)
+        plant.set_inputs({"qa": start[0] * (1.0 + qa)})
+        for _ in range(40):
+            plant.step(0.0, model.Ts)
+        return model.normalize_y(np.array(list(plant.get_outputs().values())))
+
+    rest = levels({}, 0.0)
+    assert np.allclose(levels({"qa": 1.7}, 0.0), rest)          # no move: no effect
+    base = levels({}, 0.1) - rest
+    assert np.allclose(levels({"qa": 1.0, "qb": 3.0}, 0.1) - rest, base)
+    # gain 1.5 on qa: the levels as the model's for 1.5 x the move
+    assert np.allclose(levels({"qa": 1.5}, 0.1) - rest, levels({}, 0.15) - rest, atol=1e-12)
+    assert "gain_qb" in GRUPlant(model).settable(at_start=True)
+    with pytest.raises(CosimError, match="no plant parameter 'gain_q'"):
+        GRUPlant(model).set_parameter("gain_q", 1.0)
