@@ -29,7 +29,6 @@ from controllers.problem_file import load
 
 ROOT = Path(__file__).resolve().parents[1]
 SCRIPT = ROOT / "examples" / "own_plant.py"
-PLANTS = ("heater", "cstr", "mixing_tank", "furnace")
 #: Floors of the quick walk-through (the full one: docs/guide/own-plant.md).
 FIT_FLOOR = 80.0                # test FIT of each output [%]
 TRACKING = 0.02                 # error at the end of each set-point, share of the output's box
@@ -42,10 +41,34 @@ IAE_RATIO = {"cstr": 0.7, "heater": 1.05, "furnace": 1.03}
 TV_RATIO = 1.2                  # the MPC's summed input total variation over the PI's
 
 
+# One class per plant: each its own scope under ``pytest --dist loadscope`` (the Makefile's),
+# so that the four walk-throughs, two to three minutes each, share the workers.
 @pytest.mark.slow
-@pytest.mark.parametrize("plant", PLANTS)
-def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(plant: str, tmp_path: Path
-                                                               ) -> None:
+class TestHeater:
+    def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(self, tmp_path: Path) -> None:
+        walk_through("heater", tmp_path)
+
+
+@pytest.mark.slow
+class TestCSTR:
+    def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(self, tmp_path: Path) -> None:
+        walk_through("cstr", tmp_path)
+
+
+@pytest.mark.slow
+class TestMixingTank:
+    def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(self, tmp_path: Path) -> None:
+        walk_through("mixing_tank", tmp_path)
+
+
+@pytest.mark.slow
+class TestFurnace:
+    def test_the_pipeline_runs_on_a_plant_that_is_not_four_tanks(self, tmp_path: Path) -> None:
+        walk_through("furnace", tmp_path)
+
+
+def walk_through(plant: str, tmp_path: Path) -> None:
+    """The walk-through on ``plant``, asserted (module docstring)."""
     out = tmp_path / "walk"
     proc = subprocess.run([sys.executable, str(SCRIPT), "--plant", plant, "--epochs", "150",
                            "--runs", "3", "--out", str(out)], cwd=tmp_path,
