@@ -124,19 +124,17 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
          tv_ratio: float = 1.2, save: bool = False, progress: bool = False,
          workers: int = 0, law: str | None = None,
          gain_uncertainty: float = GAIN_UNCERTAINTY) -> TuneResult:
-    """Tune the robust MPC's weights on ``model`` (module docstring) for its law ``law``
-    (default: :data:`controllers.laws.DEFAULT`), each weighting also run with each
-    manipulated input's gain ``1 + gain_uncertainty`` times the model's (0: the model
-    alone). The closed
-    loops run
-    in ``workers`` processes (0: one per CPU, at most one per run, unless the runs are short:
-    :data:`WORKER_STEPS`; 1: in this process): the same answer either way. Interrupted
-    (Ctrl-C), the workers are stopped and the model file is left as it was.
+    """Tune the robust MPC's weights on ``model`` (module docstring) for its law ``law`` (default:
+    :data:`controllers.laws.DEFAULT`), each weighting also run with each manipulated input's
+    gain ``1 + gain_uncertainty`` times the model's (0: the model alone). The closed loops
+    run in ``workers`` processes (0: one per CPU, at most one per run, unless the runs are
+    short: :data:`WORKER_STEPS`; 1: in this process): the same answer either way.
+    Interrupted (Ctrl-C), the workers are stopped and the model file is left as it was.
 
     Raises
     ------
     ParameterError
-        A bad ``tv_ratio``.
+        A bad ``tv_ratio`` or ``gain_uncertainty``.
     CosimError
         A model file without a control problem, a bad scenario (one line).
     SimulationFailed
