@@ -208,22 +208,27 @@ def perturbed(sc: Path, inputs: tuple[str, ...] | list[str], uncertainty: float,
     """The scenario ``sc`` once per perturbed plant (module docstring), written into
     ``folder``: ``gain_<input>`` at ``1 + uncertainty`` in its first row, the sensors'
     noise off (none when ``uncertainty`` is 0)."""
+    import csv
+
+    from cosim.core.csvio import CsvReader
+    from cosim.core.scenario import SCENARIO_WORDING
+
     if not uncertainty:
         return {}
-    lines = sc.read_text(encoding="utf-8-sig").splitlines()
-    header, first = lines[0].split(","), lines[1].split(",")
-    first += [""] * (len(header) - len(first))
-    for j, column in enumerate(header):   # no sensor noise: the gain's effect alone
-        if column.strip().startswith("sensor.") and column.strip().endswith(".noise"):
-            first[j] = "0"
+    with CsvReader(sc, SCENARIO_WORDING, encoding="utf-8-sig", whole_file=True) as f:
+        header = f.header()
+        rows = [cells for _, cells in f.rows(len(header))]
+    first = ["0" if c.strip().startswith("sensor.") and c.strip().endswith(".noise") else v
+             for c, v in zip(header, rows[0], strict=True)]   # no noise: the gain alone
     gain = 1.0 + uncertainty
     out = {}
     for name in inputs:
-        rows = [f"{lines[0]},plant.gain_{name}", ",".join(first) + f",{gain:g}",
-                *(r + "," if r.strip() else r for r in lines[2:])]
         key = f"gain_{name}={gain:g}"
         out[key] = folder / f"{len(out)}.csv"
-        out[key].write_text("\n".join(rows) + "\n", encoding="utf-8")
+        with out[key].open("w", newline="", encoding="utf-8") as fh:
+            csv.writer(fh, lineterminator="\n").writerows(
+                [[*header, f"plant.gain_{name}"], [*first, f"{gain:g}"],
+                 *([*r, ""] for r in rows[1:])])
     return out
 
 
