@@ -44,3 +44,23 @@ def controller_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]
     for version, path in fmus.items():
         assert main(["export-fmu", "--fmi", str(version), "--out", str(path), "--quiet"]) == 0
     return fmus
+
+
+#: The test modules that take minutes, in the order they start: ``pytest -n 2 --dist
+#: loadscope`` (the Makefile's) hands the workers their scopes in collection order, and one
+#: of these collected last keeps a worker busy for minutes while the other has finished.
+SLOW_FIRST = ("tests/test_example_plants.py", "tests/benchmarks/test_disturbance_campaign.py",
+              "tests/test_wheel.py", "tests/cosim/commands/test_verdicts_agree.py",
+              "tests/benchmarks/test_bench_tune.py", "tests/cosim/commands/test_cli_tune.py",
+              "tests/cosim/campaign/test_campaign_engine.py",
+              "tests/benchmarks/test_bench_zoo.py", "tests/cosim/live/test_faceplate.py")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The modules of :data:`SLOW_FIRST` first, in its order; every other test after them,
+    in the order collected (the order within a module kept)."""
+    def rank(item: pytest.Item) -> int:
+        path = item.nodeid.split("::")[0]
+        return SLOW_FIRST.index(path) if path in SLOW_FIRST else len(SLOW_FIRST)
+
+    items.sort(key=rank)
