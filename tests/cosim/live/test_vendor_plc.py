@@ -384,7 +384,9 @@ def test_a_clock_an_hour_off_never_controls_and_fails(tmp_path: Path, vendor_plc
 def test_node_ids_alone_need_no_root(tmp_path: Path, vendor_plc: Any) -> None:
     """A tags file that names every signal by node id needs no root (the PLC has no folder
     named for the problem)."""
-    plc = vendor_plc({"speed": SPEED, "frozen": True})
-    run = run_cli(tmp_path, plc, plc.tags_file(tmp_path / "ids.tags.toml", root=None))
+    def go(folder: Path, plc: VendorPlc) -> Run:
+        return run_cli(folder, plc, plc.tags_file(folder / "ids.tags.toml", root=None))
+
+    plc, run = fresh_run(tmp_path, vendor_plc, {"speed": SPEED, "frozen": True}, go)
     assert run.code == 0, run.stderr[-500:]
     assert_delivered(run.results, plc.records()[1], "qa")
