@@ -15,6 +15,7 @@ Usage::
 
     .venv/bin/python benchmarks/bench_tune.py
         [--plants fourtank,cstr,heater,mixing_tank,furnace,furnace3] [--epochs E] [--models DIR]
+        [--gain-uncertainty U]
 """
 
 from __future__ import annotations
@@ -62,11 +63,13 @@ def model_of(plant: str, folder: Path, epochs: int | None) -> Path:
     return out
 
 
-def timed_tune(model: Path, workers: int) -> tuple[float, str]:
+def timed_tune(model: Path, workers: int, gain_uncertainty: float | None
+               ) -> tuple[float, str]:
     from cosim.tuning import tune
 
+    more = {} if gain_uncertainty is None else {"gain_uncertainty": gain_uncertainty}
     t0 = time.perf_counter()
-    result = tune(model, workers=workers)
+    result = tune(model, workers=workers, **more)
     return time.perf_counter() - t0, result.chosen
 
 
@@ -78,12 +81,16 @@ def main() -> None:
                         help="training epochs (default: cosim train's)")
     parser.add_argument("--models", metavar="DIR", default=None,
                         help="keep the trained models there, and use those found there")
+    parser.add_argument("--gain-uncertainty", type=float, default=None,
+                        help="cosim tune's --gain-uncertainty (default: its default; 0 times "
+                             "the runs on the model alone)")
     args = parser.parse_args()
     plants = [p.strip() for p in args.plants.split(",") if p.strip()]
     bad = [p for p in plants if p not in PLANTS]
     if bad:
         raise SystemExit(f"--plants: unknown {bad[0]!r} (known: {', '.join(PLANTS)})")
-    print(f"cosim tune per plant, {os.cpu_count()} CPUs; training: "
+    gains = "tune's" if args.gain_uncertainty is None else f"{args.gain_uncertainty:g}"
+    print(f"cosim tune per plant, {os.cpu_count()} CPUs, gain uncertainty {gains}; training: "
           f"{'cosim train defaults' if args.epochs is None else f'{args.epochs} epochs'}")
     print(f"{'plant':12s} {'m x p':>5s} {'first':>8s} {'1 process':>10s} {'workers':>9s} "
           f"{'ratio':>6s}  same choice")
@@ -96,9 +103,9 @@ def main() -> None:
 
             model = model_of(plant, folder, args.epochs)
             pr = GRUModel.load(model).problem
-            first, chosen = timed_tune(model, 0)
-            one, chosen_one = timed_tune(model, 1)
-            par, chosen_par = timed_tune(model, 0)
+            first, chosen = timed_tune(model, 0, args.gain_uncertainty)
+            one, chosen_one = timed_tune(model, 1, args.gain_uncertainty)
+            par, chosen_par = timed_tune(model, 0, args.gain_uncertainty)
             worst = max(worst, first, par)
             same = "yes" if chosen == chosen_one == chosen_par else "NO"
             print(f"{plant:12s} {pr.m:>2d} x {pr.p:<2d} {first:6.1f} s {one:8.1f} s "

@@ -46,14 +46,20 @@ def controller_fmus(tmp_path_factory: pytest.TempPathFactory) -> dict[int, Path]
     return fmus
 
 
-#: The test modules that take minutes, in the order they start: ``pytest -n 2 --dist
-#: loadscope`` (the Makefile's) hands the workers their scopes in collection order, and one
-#: of these collected last keeps a worker busy for minutes while the other has finished.
-SLOW_FIRST = ("tests/test_example_plants.py", "tests/benchmarks/test_disturbance_campaign.py",
-              "tests/test_wheel.py", "tests/cosim/commands/test_verdicts_agree.py",
-              "tests/benchmarks/test_bench_tune.py", "tests/cosim/commands/test_cli_tune.py",
+#: The test modules that take minutes, longest first (measured on 2 cores: the verdicts' 5
+#: cases about 4 min together, each example plant's walk-through 2.5 to 3.5 min, the others 1 to
+#: 2.5 min): ``pytest -n 2 --dist loadscope --no-loadscope-reorder`` (the Makefile's) hands the
+#: workers their scopes in collection order, so these start first, and a worker that finishes
+#: early takes the short modules left instead of waiting while the other runs a long one.
+SLOW_FIRST = ("tests/cosim/commands/test_verdicts_agree.py", "tests/test_example_plants.py",
+              "tests/benchmarks/test_disturbance_campaign.py", "tests/test_wheel.py",
+              "tests/cosim/live/test_vendor_plc.py",
+              "tests/cosim/campaign/test_campaign_deployments.py",
+              "tests/benchmarks/test_bench_tune.py", "tests/regression/test_robustness.py",
+              "tests/regression/test_scenarios.py",
               "tests/cosim/campaign/test_campaign_engine.py",
-              "tests/benchmarks/test_bench_zoo.py", "tests/cosim/live/test_faceplate.py")
+              "tests/cosim/commands/test_cli_tune.py", "tests/cosim/live/test_faceplate.py",
+              "tests/benchmarks/test_bench_zoo.py")
 
 
 def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
