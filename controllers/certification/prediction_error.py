@@ -37,19 +37,74 @@ held-back rows as it has in a running controller.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from controllers.errors import DataError
 
-__all__ = ["HORIZON", "QUANTILE", "error_profile", "held_predictions", "margins",
-           "w_y_bar_from_data"]
+__all__ = ["BETA_MIN", "HORIZON", "QUANTILE", "OffsetFilter", "error_profile",
+           "held_predictions", "margins", "offset_filter", "w_y_bar_from_data"]
 
 #: Steps ahead measured (beyond, the last value holds).
 HORIZON = 200
 #: The quantile of the held-back errors taken as the tightening (1: the largest).
 QUANTILE = 0.95
+#: The smallest offset filter :func:`offset_filter` gives (the paper law's default).
+BETA_MIN = 0.05
+
+
+@dataclass(frozen=True)
+class OffsetFilter:
+    """The offset filter measured on a model's residual (:func:`offset_filter`): ``beta``,
+    and per output the sensor noise's and the mismatch's per-sample standard deviations
+    (normalised)."""
+
+    beta: float
+    noise: np.ndarray
+    drift: np.ndarray
+
+
+def offset_filter(y: np.ndarray, xi: np.ndarray, rows: np.ndarray,
+                  experiments: list[tuple[int, int]]) -> OffsetFilter | None:
+    """The offset filter ``β`` of the tracking law's ``d̂ ← d̂ + β (y − ŷ − d̂)`` measured on
+    the residual ``r = y − ξ`` of the model's free run ``xi`` over ``rows`` (a boolean mask;
+    ``None`` with fewer than three rows in a row of one experiment).
+
+    ``d̂`` estimates an output disturbance that the law assumes constant over its horizon:
+    a random walk ``d_k = d_{k−1} + w_k`` (variance ``q`` a sample) seen through white sensor
+    noise ``v_k`` (variance ``ρ``), ``r_k = d_k + v_k``. Then ``Δr_k = w_k + v_k − v_{k−1}``:
+    ``E[Δr_k²] = q + 2ρ`` and ``E[Δr_k Δr_{k−1}] = −ρ``, which give ``ρ`` and ``q`` by their
+    sample moments (``ρ ≥ 0``; a mismatch that drifts smoothly, as a model's error on
+    noise-free data, has a positive lag-one covariance and ``ρ = 0``), and the filter's
+    steady-state Kalman gain ``β = 2 / (1 + √(1 + 4ρ/q))``: 1 without noise, the whole error
+    taken each sample; smaller where the noise is larger than the mismatch's motion. One
+    ``β`` for every output: the smallest, at least :data:`BETA_MIN`."""
+    r = np.asarray(y, dtype=float) - np.asarray(xi, dtype=float)
+    rows = np.asarray(rows, dtype=bool)
+    d0, d1 = [], []
+    for a, b in experiments:
+        for start, stop in _runs(rows[a:b]):
+            dr = np.diff(r[a + start:a + stop], axis=0)
+            if len(dr) >= 2:
+                d0.append(dr[1:] * dr[1:])
+                d1.append(dr[1:] * dr[:-1])
+    if not d0:
+        return None
+    c0, c1 = np.mean(np.concatenate(d0), axis=0), np.mean(np.concatenate(d1), axis=0)
+    noise = np.maximum(-c1, 0.0)
+    drift = np.maximum(c0 - 2.0 * noise, 0.0)
+    ratio = np.divide(noise, drift, out=np.full_like(noise, np.inf), where=drift > 0)
+    ratio[noise == 0] = 0.0
+    beta = float(np.min(2.0 / (1.0 + np.sqrt(1.0 + 4.0 * ratio))))
+    return OffsetFilter(max(beta, BETA_MIN), np.sqrt(noise), np.sqrt(drift))
+
+
+def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
+    """``(start, stop)`` of the runs of ``True`` in ``mask``."""
+    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(int), [0]))))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
 def held_predictions(params: dict[str, np.ndarray], u: np.ndarray, x: np.ndarray, q: int,

@@ -203,11 +203,18 @@ def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.n
                       ) -> tuple[Any, dict[str, Any]]:
     """The model's measured prediction error on held-back rows (val and test, else train;
     :func:`controllers.certification.prediction_error.error_profile`: what the uncertified mode
-    tightens by) and its summary for the model file, in the outputs' units."""
-    from controllers.certification.prediction_error import error_profile
+    tightens by) with the offset filter measured on the whole record
+    (:func:`~controllers.certification.prediction_error.offset_filter`; the law's default
+    where it cannot be), and its summary for the model file, in the outputs' units."""
+    from controllers.certification.prediction_error import error_profile, offset_filter
     from controllers.laws.tracking import SPEC as TRACKING
 
     held = np.isin(record.split, ("val", "test"))
+    rows = held if np.any(held) else record.split == "train"
+    # every row: the free run does not follow the noise on the rows it was fitted to either
+    measured = offset_filter(record.y, ev.xi, np.ones(len(record.y), dtype=bool),
+                             record.experiments())
+    beta = measured.beta if measured else TRACKING.defaults["offset_filter"]
     ahead = None
     if problem.q:   # the controller's prediction holds the measured disturbances
         from controllers.certification.prediction_error import held_predictions
@@ -215,21 +222,36 @@ def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.n
 
         x = free_run_states(params, record, ev.starts)   # the scored free run's states
         ahead = held_predictions(params, record.u, x, problem.q, record.experiments())
-    profile = error_profile(record.y, ev.xi, held if np.any(held) else record.split == "train",
-                            record.experiments(), TRACKING.defaults["offset_filter"], ahead=ahead)
+    profile = error_profile(record.y, ev.xi, rows, record.experiments(), beta, ahead=ahead)
     scale = problem.normalization()["y_scale"]
 
-    def at(row: int) -> dict[str, float] | None:
-        if profile is None:
+    def units(values: Any) -> dict[str, float] | None:
+        if values is None:
             return None
-        return {n: float(v * abs(s)) for n, v, s in zip(problem.output_names, profile[row],
-                                                        scale, strict=True)}
+        return {n: float(v * abs(s)) for n, v, s in zip(problem.output_names, values, scale,
+                                                        strict=True)}
 
     return profile, {"rows": "val+test" if np.any(held) else "train",
-                     "offset_filter": TRACKING.defaults["offset_filter"],
+                     "offset_filter": beta,
+                     "offset_filter_from": "measured" if measured else "default",
+                     "sensor_noise": units(measured.noise) if measured else None,
+                     "mismatch_drift": units(measured.drift) if measured else None,
                      "steps": None if profile is None else int(profile.shape[0]),
-                     "at_1_step": None if profile is None else at(min(1, len(profile) - 1)),
-                     "at_last_step": None if profile is None else at(-1)}
+                     "at_1_step": None if profile is None else units(profile[min(1, len(profile)
+                                                                                 - 1)]),
+                     "at_last_step": None if profile is None else units(profile[-1])}
+
+
+def _with_offset_filter(problem: Any, summary: dict[str, Any]) -> Any:
+    """``problem`` with the measured offset filter in its ``[mpc]`` table, which every run of
+    the model reads (:meth:`controllers.mpc_options.MPCOptions.resolve`), unless the problem
+    file gives one (its own choice kept)."""
+    import dataclasses
+
+    if summary["offset_filter_from"] != "measured" or "offset_filter" in problem.mpc:
+        return problem
+    return dataclasses.replace(problem, mpc={**problem.mpc,
+                                             "offset_filter": summary["offset_filter"]})
 
 
 def _rates(data: Any, problem: Any) -> dict[str, float]:
@@ -315,6 +337,7 @@ def finish(args: argparse.Namespace, data: Any, record: Any, problem: Any, train
     err = np.abs(record.y - ev.xi)[record.split == _scored_split(record)]
     doc = _model_record(args, data, record, trained, ev, wall, command, sidecar)
     profile, doc["prediction_error"] = _prediction_error(record, ev, problem, trained.params)
+    problem = _with_offset_filter(problem, doc["prediction_error"])
     if problem.q:
         doc["disturbance_rates"] = _rates(data, problem)
     model = training.build_model(trained.params, problem, doc, w_y_bar=float(np.max(err)))

@@ -30,3 +30,31 @@ def test_w_y_bar_from_data_recovers_the_output_perturbation(tmp_path) -> None:
     # an inconsistent record (no test rows) is a one-line error naming the split
     with pytest.raises(DataError, match="no rows in split 'test'"):
         w_y_bar_from_data(m, up[:1000], y[:1000], split[:1000])
+
+
+def test_offset_filter_is_the_kalman_gain_of_the_measured_noise_and_drift() -> None:
+    """A residual that is a random walk (σ_w = 0.01 a sample) seen through white noise
+    (σ_v = 0.02), in two experiments: ``ρ`` and ``q`` measured to a few percent and ``β`` the
+    local-level model's steady-state Kalman gain; the same drift without noise: ``β = 1``; the
+    noise alone: :data:`BETA_MIN`; one ``β``, the smallest of the outputs'."""
+    from controllers.certification.prediction_error import BETA_MIN, offset_filter
+
+    rng = np.random.default_rng(3)
+    T = 40000
+    walk = np.cumsum(rng.normal(0, 0.01, (T, 2)), axis=0)
+    noise = rng.normal(0, 0.02, (T, 2))
+    rows, experiments = np.ones(T, bool), [(0, T // 2), (T // 2, T)]
+    rows[T // 4: T // 4 + 10] = False                   # gaps split a run, never bridged
+    measured = offset_filter(walk + noise, np.zeros((T, 2)), rows, experiments)
+    assert measured is not None
+    np.testing.assert_allclose(measured.noise, 0.02, rtol=0.05)
+    np.testing.assert_allclose(measured.drift, 0.01, rtol=0.1)
+    lam = (0.02 / 0.01) ** 2
+    assert measured.beta == pytest.approx(2 / (1 + np.sqrt(1 + 4 * lam)), rel=0.1)
+    smooth = np.cumsum(np.cumsum(rng.normal(0, 1e-4, (T, 2)), axis=0), axis=0)
+    assert offset_filter(smooth, np.zeros((T, 2)), rows, experiments).beta == 1.0
+    assert offset_filter(noise, np.zeros((T, 2)), rows, experiments).beta == BETA_MIN
+    mixed = np.column_stack([smooth[:, 0], (walk + noise)[:, 1]])
+    assert offset_filter(mixed, np.zeros((T, 2)), rows, experiments).beta == pytest.approx(
+        measured.beta, rel=0.1)
+    assert offset_filter(walk[:2], np.zeros((2, 2)), rows[:2], [(0, 2)]) is None

@@ -233,3 +233,22 @@ def test_a_bad_train_table_names_the_problem_file_and_line(
     err = capsys.readouterr().err
     assert err.startswith(f"cosim train: error: {problem}:{line}: {message}"), err
     assert err.count("\n") == 1 and not out.exists()
+
+
+def test_the_measured_offset_filter_goes_into_the_models_mpc_table(data: Path,
+                                                                    tmp_path: Path) -> None:
+    """White outputs (the data's levels drawn anew each sample): the residual is noise, the
+    offset filter measured the smallest (``BETA_MIN``), written into the model's ``[mpc]``
+    table and the training record; a problem file's own ``offset_filter`` is kept."""
+    from controllers.certification.prediction_error import BETA_MIN
+
+    out = tmp_path / "a.json"
+    assert main(["train", str(data), "--out", str(out), *FAST]) == 0
+    model = GRUModel.load(out)
+    record = model.training["prediction_error"]
+    assert record["offset_filter_from"] == "measured" and record["offset_filter"] == BETA_MIN
+    assert model.problem.mpc == {"offset_filter": BETA_MIN}
+    assert set(record["sensor_noise"]) == {"h1", "h2"}
+    problem = with_table(tmp_path, "mpc", "offset_filter = 0.7\n")
+    assert main(["train", str(data), "--problem", str(problem), "--out", str(out), *FAST]) == 0
+    assert GRUModel.load(out).problem.mpc == {"offset_filter": 0.7}
