@@ -69,8 +69,9 @@ class OffsetFilter:
 def offset_filter(y: np.ndarray, xi: np.ndarray, rows: np.ndarray,
                   experiments: list[tuple[int, int]]) -> OffsetFilter | None:
     """The offset filter ``β`` of the tracking law's ``d̂ ← d̂ + β (y − ŷ − d̂)`` measured on
-    the residual ``r = y − ξ`` of the model's free run ``xi`` over ``rows`` (a boolean mask;
-    ``None`` with fewer than three rows in a row of one experiment).
+    the residual ``r = y − ξ`` of the model's free run ``xi`` over ``rows`` (a boolean mask:
+    the moments over each run of consecutive rows within one experiment; ``None`` when no
+    run has three rows).
 
     ``d̂`` estimates an output disturbance that the law assumes constant over its horizon:
     a random walk ``d_k = d_{k−1} + w_k`` (variance ``q`` a sample) seen through white sensor

@@ -224,6 +224,7 @@ def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.n
         ahead = held_predictions(params, record.u, x, problem.q, record.experiments())
     profile = error_profile(record.y, ev.xi, rows, record.experiments(), beta, ahead=ahead)
     scale = problem.normalization()["y_scale"]
+    last = 0 if profile is None else len(profile) - 1
 
     def units(values: Any) -> dict[str, float] | None:
         if values is None:
@@ -237,8 +238,7 @@ def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.n
                      "sensor_noise": units(measured.noise) if measured else None,
                      "mismatch_drift": units(measured.drift) if measured else None,
                      "steps": None if profile is None else int(profile.shape[0]),
-                     "at_1_step": None if profile is None else units(profile[min(1, len(profile)
-                                                                                 - 1)]),
+                     "at_1_step": None if profile is None else units(profile[min(1, last)]),
                      "at_last_step": None if profile is None else units(profile[-1])}
 
 
