@@ -6,9 +6,9 @@ and the PI baseline tuned from the same model, in closed loop with the GRU model
 plant (``plant = "model:…"``: no FMU needed) on a set-point scenario (given, else
 :func:`scenario`: steps between four steady outputs of the model, inside the box by a
 twentieth of it or two of the noise's standard deviations, each held six of its slowest
-time constants, with Gaussian sensor noise whose standard deviation is the model's measured
-one-step prediction error: an upper estimate of the sensors' noise, so that a weighting that
-passes noise on to the inputs loses where the data were noisy).
+time constants, with Gaussian sensor noise whose standard deviation is the one ``cosim
+train`` measured on the data, else the model's measured one-step prediction error, an upper
+estimate: a weighting that passes noise on to the inputs loses where the data were noisy).
 
 The plant is never the model: each weighting also runs on the model with one manipulated
 input's gain ``1 + gain_uncertainty`` times the model's (default :data:`GAIN_UNCERTAINTY`,
@@ -341,9 +341,14 @@ def scenario(model: Any, path: Path) -> Path:
 
 
 def _noise(model: Any) -> np.ndarray:
-    """Sensor noise std per output [its unit]: the measured one-step prediction error (its
-    95th percentile, :mod:`controllers.certification.prediction_error`), else ``w̄_y``, else
-    none; an upper estimate on purpose (module docstring)."""
+    """Sensor noise std per output [its unit]: the one ``cosim train`` measured on the free
+    run's residual (``training.prediction_error.sensor_noise``,
+    :func:`controllers.certification.prediction_error.offset_filter`), else the measured
+    one-step prediction error (its 95th percentile), else ``w̄_y``, else none: the last two
+    upper estimates, model error taken for noise (module docstring)."""
+    measured = ((model.training or {}).get("prediction_error") or {}).get("sensor_noise")
+    if measured:
+        return np.array([float(measured[n]) for n in model.problem.output_names])
     profile = model.prediction_error
     if profile is not None and len(profile) > 1:
         err = np.asarray(profile[1], dtype=float)
