@@ -66,12 +66,13 @@ class OffsetFilter:
     drift: np.ndarray
 
 
-def offset_filter(y: np.ndarray, xi: np.ndarray, rows: np.ndarray,
-                  experiments: list[tuple[int, int]]) -> OffsetFilter | None:
+def offset_filter(y: np.ndarray, xi: np.ndarray, spans: list[tuple[int, int]]
+                  ) -> OffsetFilter | None:
     """The offset filter ``β`` of the tracking law's ``d̂ ← d̂ + β (y − ŷ − d̂)`` measured on
-    the residual ``r = y − ξ`` of the model's free run ``xi`` over ``rows`` (a boolean mask:
-    the moments over each run of consecutive rows within one experiment; ``None`` when no
-    run has three rows).
+    the residual ``r = y − ξ`` of the model's free run ``xi`` over ``spans`` (row ranges
+    ``(start, end)`` of consecutive rows, such as :meth:`Record.experiments
+    <controllers.identification.record.Record.experiments>` or ``stretches``; the
+    differences never cross from one to the next; ``None`` when no span has three rows).
 
     ``d̂`` estimates an output disturbance that the law assumes constant over its horizon:
     a random walk ``d_k = d_{k−1} + w_k`` (variance ``q`` a sample) seen through white sensor
@@ -83,14 +84,12 @@ def offset_filter(y: np.ndarray, xi: np.ndarray, rows: np.ndarray,
     taken each sample; smaller where the noise is larger than the mismatch's motion. One
     ``β`` for every output: the smallest, at least :data:`BETA_MIN`."""
     r = np.asarray(y, dtype=float) - np.asarray(xi, dtype=float)
-    rows = np.asarray(rows, dtype=bool)
     d0, d1 = [], []
-    for a, b in experiments:
-        for start, stop in _runs(rows[a:b]):
-            dr = np.diff(r[a + start:a + stop], axis=0)
-            if len(dr) >= 2:
-                d0.append(dr[1:] * dr[1:])
-                d1.append(dr[1:] * dr[:-1])
+    for a, b in spans:
+        dr = np.diff(r[a:b], axis=0)
+        if len(dr) >= 2:
+            d0.append(dr[1:] * dr[1:])
+            d1.append(dr[1:] * dr[:-1])
     if not d0:
         return None
     c0, c1 = np.mean(np.concatenate(d0), axis=0), np.mean(np.concatenate(d1), axis=0)
@@ -101,11 +100,6 @@ def offset_filter(y: np.ndarray, xi: np.ndarray, rows: np.ndarray,
     beta = float(np.min(2.0 / (1.0 + np.sqrt(1.0 + 4.0 * ratio))))
     return OffsetFilter(max(beta, BETA_MIN), np.sqrt(noise), np.sqrt(drift))
 
-
-def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
-    """``(start, stop)`` of the runs of ``True`` in ``mask``."""
-    edges = np.flatnonzero(np.diff(np.concatenate(([0], mask.astype(int), [0]))))
-    return list(zip(edges[::2].tolist(), edges[1::2].tolist(), strict=True))
 
 
 def held_predictions(params: dict[str, np.ndarray], u: np.ndarray, x: np.ndarray, q: int,

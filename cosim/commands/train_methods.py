@@ -212,8 +212,7 @@ def _prediction_error(record: Any, ev: Any, problem: Any, params: dict[str, np.n
     held = np.isin(record.split, ("val", "test"))
     rows = held if np.any(held) else record.split == "train"
     # every row: the free run does not follow the noise on the rows it was fitted to either
-    measured = offset_filter(record.y, ev.xi, np.ones(len(record.y), dtype=bool),
-                             record.experiments())
+    measured = offset_filter(record.y, ev.xi, record.experiments())
     beta = measured.beta if measured else TRACKING.defaults["offset_filter"]
     ahead = None
     if problem.q:   # the controller's prediction holds the measured disturbances

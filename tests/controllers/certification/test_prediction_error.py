@@ -43,18 +43,17 @@ def test_offset_filter_is_the_kalman_gain_of_the_measured_noise_and_drift() -> N
     T = 40000
     walk = np.cumsum(rng.normal(0, 0.01, (T, 2)), axis=0)
     noise = rng.normal(0, 0.02, (T, 2))
-    rows, experiments = np.ones(T, bool), [(0, T // 2), (T // 2, T)]
-    rows[T // 4: T // 4 + 10] = False                   # gaps split a run, never bridged
-    measured = offset_filter(walk + noise, np.zeros((T, 2)), rows, experiments)
+    spans = [(0, T // 4), (T // 4 + 10, T // 2), (T // 2, T)]   # never bridged
+    measured = offset_filter(walk + noise, np.zeros((T, 2)), spans)
     assert measured is not None
     np.testing.assert_allclose(measured.noise, 0.02, rtol=0.05)
     np.testing.assert_allclose(measured.drift, 0.01, rtol=0.1)
     lam = (0.02 / 0.01) ** 2
     assert measured.beta == pytest.approx(2 / (1 + np.sqrt(1 + 4 * lam)), rel=0.1)
     smooth = np.cumsum(np.cumsum(rng.normal(0, 1e-4, (T, 2)), axis=0), axis=0)
-    assert offset_filter(smooth, np.zeros((T, 2)), rows, experiments).beta == 1.0
-    assert offset_filter(noise, np.zeros((T, 2)), rows, experiments).beta == BETA_MIN
+    assert offset_filter(smooth, np.zeros((T, 2)), spans).beta == 1.0
+    assert offset_filter(noise, np.zeros((T, 2)), spans).beta == BETA_MIN
     mixed = np.column_stack([smooth[:, 0], (walk + noise)[:, 1]])
-    assert offset_filter(mixed, np.zeros((T, 2)), rows, experiments).beta == pytest.approx(
+    assert offset_filter(mixed, np.zeros((T, 2)), spans).beta == pytest.approx(
         measured.beta, rel=0.1)
-    assert offset_filter(walk[:2], np.zeros((2, 2)), rows[:2], [(0, 2)]) is None
+    assert offset_filter(walk[:2], np.zeros((2, 2)), [(0, 2)]) is None
