@@ -19,16 +19,16 @@ from the same model, in closed loop with the GRU model itself as the plant (no F
 on a set-point scenario: --scenario, else steps between four steady outputs of the model
 (inside the box by a twentieth of it, or two noise standard deviations where that is more),
 each held six of its slowest time constants, with Gaussian sensor noise whose standard
-deviation is the model's measured one-step prediction error (its 95th percentile, else the
-largest error w_y_bar: an upper estimate of the sensors' noise, so that a weighting that
-passes the noise on to the inputs loses where the data were noisy). The plant is never the
-model: each weighting runs again with one manipulated input's gain 1 + U times the model's
-(--gain-uncertainty, default 0.5) at a time, without the noise, m runs more for each
-weighting within the bound below. Of the weightings whose input total variation is at most
---tv-ratio times the PI's (default 1.2), or the defaults' where they move more (none: the
-defaults), keep those with the fewest runs that leave the output box, and of them the lowest
-summed IAE over every run (each output's IAE over its box width). A plant that is not square
-has no PI baseline: the defaults are the reference then.
+deviation is the one cosim train measured on the data (else the model's one-step prediction
+error, its 95th percentile, or the largest error w_y_bar: upper estimates, so that a
+weighting that passes the noise on to the inputs loses where the data were noisy). The plant
+is never the model: each weighting runs again with one manipulated input's gain 1 + U times
+the model's (--gain-uncertainty, default 0.5) at a time, without the noise, m runs more for
+each weighting within the bound below. Of the weightings whose input total variation is at
+most --tv-ratio times the PI's (default 1.2), or the defaults' where they move more (none:
+the defaults), keep those with the fewest runs that leave the output box, and of them the
+lowest summed IAE over every run (each output's IAE over its box width). A plant that is not
+square has no PI baseline: the defaults are the reference then.
 
 The candidates, in normalised units: the defaults (Q = I, R = 0.01 I, S = 0.05); the stage
 cost on the outputs (Q = "outputs"); the same with light input weights (R = 0.001, S =
