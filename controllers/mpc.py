@@ -85,13 +85,8 @@ class RobustMPC:
         self.model = self.held.model
         #: the design (:class:`controllers.mpc_options.MPCOptions`, defaults filled in)
         self.options = options
-        #: the control law (:class:`controllers.laws.base.ControlLaw`)
-        self.law, failed = self._design(options)
-        try:
-            self.fhocp.use_prefix(self.held.prefix)
-        except ControllersError as exc:
-            raise DesignError(f"controller {name!r}: problem {self.problem.name!r}: "
-                              f"{exc}") from None
+        law, failed = self._design(options)
+        self.law = law
         # load scipy.optimize (the observer's x̂_0 equilibrium) now, so that the first
         # control step is a normal one (importing scipy.optimize: ~0.2 s)
         import scipy.optimize  # noqa: F401
@@ -150,6 +145,25 @@ class RobustMPC:
         return o.spec.hook("law", "build")(context)
 
     # -- what the law holds ----------------------------------------------------------------
+    @property
+    def law(self) -> Any:
+        """The control law (:class:`controllers.laws.base.ControlLaw`)."""
+        return self._law
+
+    @law.setter
+    def law(self, law: Any) -> None:
+        """Every law this controller runs, the design's and the uncertified one that may
+        replace it (:func:`controllers.certification.grade.go_uncertified`), predicts with the
+        inputs already applied (:attr:`held`'s prefix: the dead times beyond the shortest);
+        an FHOCP without them applied its first stage of every input, which the plant sees
+        ``e_j`` samples later than the plan has it."""
+        try:
+            law.fhocp.use_prefix(self.held.prefix)
+        except ControllersError as exc:
+            raise DesignError(f"controller {self.name!r}: problem {self.problem.name!r}: "
+                              f"{exc}") from None
+        self._law = law
+
     @property
     def fhocp(self) -> Any:
         """The law's optimal-control problem."""

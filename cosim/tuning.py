@@ -24,12 +24,12 @@ suppression, are there for those (docs: guide/own-plant.md, "The zoo", for what 
 :func:`choose` keeps, among the weightings whose input total variation is at most
 ``tv_ratio`` times the PI's (or the default weights', where they move more: those are always
 a candidate), those with the fewest runs that leave the output box (over the nominal and the
-perturbed runs), and of them the one with the lowest summed IAE over every run (each
-output's IAE over its box width); a plant that is not square has no PI baseline, and the
-default weights are the reference. ``save=True`` writes the choice into the model file's
-problem as its ``[mpc]`` table (:attr:`controllers.problem.ControlProblem.mpc`), which every
-later run of the model uses under its own options. ``cosim tune`` is its command
-(:mod:`cosim.commands.tune`).
+perturbed runs), of them those with the fewest samples outside it, and of those the one with
+the lowest summed IAE over every run (each output's IAE over its box width); a plant that
+is not square has no PI baseline, and the default weights are the reference. ``save=True``
+writes the choice into the model file's problem as its ``[mpc]`` table
+(:attr:`controllers.problem.ControlProblem.mpc`), which every later run of the model uses
+under its own options. ``cosim tune`` is its command (:mod:`cosim.commands.tune`).
 """
 
 from __future__ import annotations
@@ -82,8 +82,9 @@ class TuneResult:
     ----------
     rows : dict
         Candidate name → ``iae`` and ``tv`` (summed, over the reference's) and ``violations``
-        on the model; ``violating_runs`` (of the nominal and perturbed runs) and
-        ``iae_all`` (summed over every run, over the reference's nominal), ``None`` for a
+        on the model; ``violating_runs`` (of the nominal and perturbed runs),
+        ``violations_all`` (their samples outside the box) and ``iae_all`` (summed over
+        every run, over the reference's nominal), ``None`` for a
         weighting outside the TV bound (:func:`within`: not run perturbed).
     chosen : str
         The candidate :func:`choose` picked.
@@ -193,13 +194,15 @@ def tune(model: str | Path, scenario_file: str | Path | None = None, *,
 def _row(runs: dict[str, dict[str, float]], base: dict[str, float], plants: int = 1
          ) -> dict[str, Any]:
     """A candidate's row of the table from its runs (``""``: on the model; the others
-    perturbed) against the reference's run on the model; ``violating_runs`` and ``iae_all``
-    ``None`` when it did not run on all ``plants`` (outside the TV bound)."""
+    perturbed) against the reference's run on the model; ``violating_runs``,
+    ``violations_all`` (the samples outside the box over every run) and ``iae_all`` ``None``
+    when it did not run on all ``plants`` (outside the TV bound)."""
     nominal, done = runs[""], len(runs) == plants
     return {"iae": nominal["iae"] / base["iae"],
             "tv": nominal["tv"] / base["tv"] if base["tv"] else 0.0,
             "violations": nominal["violations"],
             "violating_runs": sum(1 for r in runs.values() if r["violations"]) if done else None,
+            "violations_all": sum(r["violations"] for r in runs.values()) if done else None,
             "iae_all": sum(r["iae"] for r in runs.values()) / base["iae"] if done else None}
 
 
@@ -377,11 +380,13 @@ def within(rows: dict[str, dict[str, Any]], tv_ratio: float) -> list[str]:
 
 def choose(rows: dict[str, dict[str, Any]], tv_ratio: float) -> str:
     """The candidate of ``rows`` (name → ratios to the PI: ``iae``, ``tv`` and
-    ``violations`` on the model, ``violating_runs`` and ``iae_all`` over every run; the last
-    two default to the first's) within the TV bound (``tv_ratio``, or the defaults' input
-    motion where that is more: the default weights are always a candidate, and a weighting
-    that moves the inputs less than they do is too): of those with the fewest violating
-    runs, the lowest ``iae_all``; ``"defaults"`` when none is within the bound."""
+    ``violations`` on the model, ``violating_runs``, ``violations_all`` and ``iae_all`` over
+    every run; the last three default to the first's) within the TV bound (``tv_ratio``, or
+    the defaults' input motion where that is more: the default weights are always a
+    candidate, and a weighting that moves the inputs less than they do is too): of those
+    with the fewest violating runs, those with the fewest samples outside the box over every
+    run (where every weighting leaves it somewhere: the one that stays out the least), and
+    of them the lowest ``iae_all``; ``"defaults"`` when none is within the bound."""
     ok = within(rows, tv_ratio)
     if not ok:
         return "defaults"
@@ -389,8 +394,13 @@ def choose(rows: dict[str, dict[str, Any]], tv_ratio: float) -> str:
     def runs(n: str) -> float:
         return rows[n].get("violating_runs", float(rows[n]["violations"] > 0))
 
+    def outside(n: str) -> float:
+        return rows[n].get("violations_all", rows[n]["violations"])
+
     fewest = min(runs(n) for n in ok)
-    return min((n for n in ok if runs(n) == fewest),
+    tied = [n for n in ok if runs(n) == fewest]
+    least = min(outside(n) for n in tied)
+    return min((n for n in tied if outside(n) == least),
                key=lambda n: rows[n].get("iae_all", rows[n]["iae"]))
 
 

@@ -26,9 +26,10 @@ is never the model: each weighting runs again with one manipulated input's gain 
 the model's (--gain-uncertainty, default 0.5) at a time, without the noise, m runs more for
 each weighting within the bound below. Of the weightings whose input total variation is at
 most --tv-ratio times the PI's (default 1.2), or the defaults' where they move more (none:
-the defaults), keep those with the fewest runs that leave the output box, and of them the
-lowest summed IAE over every run (each output's IAE over its box width). A plant that is not
-square has no PI baseline: the defaults are the reference then.
+the defaults), keep those with the fewest runs that leave the output box, of them those with
+the fewest samples outside it, and of those the lowest summed IAE over every run (each
+output's IAE over its box width). A plant that is not square has no PI baseline: the
+defaults are the reference then.
 
 The candidates, in normalised units: the defaults (Q = I, R = 0.01 I, S = 0.05); the stage
 cost on the outputs (Q = "outputs"); the same with light input weights (R = 0.001, S =
@@ -98,8 +99,9 @@ def run(args: argparse.Namespace) -> int:
     for name, r in result.rows.items():
         mark = "  <- chosen" if name == result.chosen else ""
         robust = ("(not run with the gains: too much input motion)"
-                  if r["iae_all"] is None else f"runs leaving the box {r['violating_runs']}  "
-                  f"IAE of every run {r['iae_all']:.3f}")
+                  if r["iae_all"] is None else f"runs leaving the box {r['violating_runs']}"
+                  + (f" ({r['violations_all']} samples)" if r["violating_runs"] else "")
+                  + f"  IAE of every run {r['iae_all']:.3f}")
         print(f"  {name:26s} IAE {r['iae']:.3f}  TV {r['tv']:.3f}  violations "
               f"{r['violations']:<4d} {robust}{mark}")
     if result.hint:

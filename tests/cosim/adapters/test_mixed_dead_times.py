@@ -87,6 +87,25 @@ def test_the_tracking_law_applies_each_input_at_its_own_dead_time(
         np.testing.assert_allclose(u[1:7, 1], past[:, 1], rtol=0.0, atol=1e-12)
 
 
+def test_an_uncertified_run_applies_each_input_at_its_own_dead_time(
+        models: dict[str, Path], tmp_path: Path) -> None:
+    """A set-point next to the box's edge makes the run uncertified, the law replaced by the
+    one on the measured tightening: that law's FHOCP fixes qb's first six inputs too, so on
+    the model itself its one-step prediction is exact (before, it applied the first stage of
+    both inputs, and predicted qb six samples early)."""
+    sc = tmp_path / "edge.csv"
+    sc.write_text("time,ref.h1,ref.h2\n0,0.65,0.65\n100,1.97,1.0\n600,,\n")
+    run = cosim.run(sc, plant=f"model:{models['mixed']}", model=models["mixed"],
+                    figure=False)
+    assert run.status == "ok", run.reason
+    info = run.summary["controller_summary"]
+    assert info["certified"] is False and info["dead_times"] == [0, 6]
+    first = [out["rms_by_step"][0] for out in
+             info["operator"]["prediction_error"]["outputs"].values()]
+    assert max(first) < 1e-9, first
+    assert all(v["count"] == 0 for v in run.summary["kpis"]["violations"].values())
+
+
 def test_the_paper_law_applies_each_input_at_its_own_dead_time(
         models: dict[str, Path]) -> None:
     """The paper's law with the horizon lengthened by qb's extra dead time: no violation,
@@ -98,11 +117,15 @@ def test_the_paper_law_applies_each_input_at_its_own_dead_time(
     assert all(v["count"] == 0 for v in run.summary["kpis"]["violations"].values())
 
 
-@pytest.mark.parametrize("options", [{}, {"law": "paper"}], ids=["tracking", "paper"])
+@pytest.mark.parametrize("options, edge", [({}, False), ({"law": "paper"}, False), ({}, True)],
+                         ids=["tracking", "paper", "tracking-uncertified"])
 def test_the_compiled_step_replays_the_python_controller_with_mixed_dead_times(
-        models: dict[str, Path], options: dict) -> None:
+        models: dict[str, Path], options: dict, edge: bool) -> None:
     """The C step of a design whose inputs act 1 and 3 samples late, fed what the Python
-    controller saw through set-point steps: its inputs, statuses and fallbacks to the bit."""
+    controller saw through set-point steps: its inputs, statuses and fallbacks to the bit;
+    also made uncertified by a set-point next to the box's edge (``edge``: the law on the
+    measured tightening, whose FHOCP must fix the slower input's first stages as the C step
+    does)."""
     from controllers.kernel.controller_source import (
         CompiledController,
         build,
@@ -112,11 +135,15 @@ def test_the_compiled_step_replays_the_python_controller_with_mixed_dead_times(
 
     ctrl = RobustMPCController(model=models["short"], **options)
     ctrl.setup(0.0)
+    refs = [(0.65, 0.65)] * 20 + [(1.97, 1.0) if edge else (1.0, 1.1)] * 30 + [(0.7, 0.9)] * 30
+    if edge:
+        ctrl.mpc.expect_setpoints([{"h1": 1.97, "h2": 1.0}])
+        assert not ctrl.mpc.certification.certified
+        ctrl.setup(0.0)   # the run starts on the law it was switched to
     design = ctrl.mpc.export_design()
     assert design.dead_time == 1 and design.delays.tolist() == [1, 3]
     compiled = CompiledController(*build(design), design_data(design), n_inputs=2,
                                   n_outputs=2)
-    refs = [(0.65, 0.65)] * 20 + [(1.0, 1.1)] * 30 + [(0.7, 0.9)] * 30
     for _ in replayed(ctrl, compiled, refs):
         pass
     compiled.close()
