@@ -397,11 +397,7 @@ def choose(rows: dict[str, dict[str, Any]], tv_ratio: float) -> str:
     def outside(n: str) -> float:
         return rows[n].get("violations_all", rows[n]["violations"])
 
-    fewest = min(runs(n) for n in ok)
-    tied = [n for n in ok if runs(n) == fewest]
-    least = min(outside(n) for n in tied)
-    return min((n for n in tied if outside(n) == least),
-               key=lambda n: rows[n].get("iae_all", rows[n]["iae"]))
+    return min(ok, key=lambda n: (runs(n), outside(n), rows[n].get("iae_all", rows[n]["iae"])))
 
 
 def hint(model: Any, rows: dict[str, dict[str, float]], best: str,

@@ -6,6 +6,7 @@ and its controller FMU gives the Python law's inputs to the bit."""
 from __future__ import annotations
 
 import shutil
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +17,19 @@ from controllers.model import DEFAULT_MODEL
 from cosim.cli import main
 
 LAW = "tests.controllers.laws.steady"
+
+
+@pytest.fixture(scope="module", autouse=True)
+def _registry() -> Iterator[None]:
+    """The laws registered before this module, again after it: the toy law, registered when
+    its module is named, would otherwise be listed by every later test of the worker (the
+    unknown-law message names the known laws)."""
+    from controllers import laws
+
+    before = dict(laws._REGISTERED)
+    yield
+    laws._REGISTERED.clear()
+    laws._REGISTERED.update(before)
 
 
 @pytest.fixture(scope="module")

@@ -18,9 +18,7 @@ ROOT = Path(__file__).resolve().parents[3]
 
 
 @pytest.mark.parametrize(("options", "words"), [
-    # the registered laws, the shipped ones first (a test that loaded the toy law of
-    # tests/controllers/laws in this process has it listed too)
-    ({"law": "fast"}, "option law='fast': expected one of 'paper', "),
+    ({"law": "fast"}, "option law='fast': expected one of 'paper', 'tracking'"),
     ({"law": "tracking", "governor": True}, "option governor=True belongs to law=\"paper\""),
     ({"law": "tracking", "offset_free": True}, "option offset_free=True belongs to"),
     ({"law": "tracking", "offset_weight": -1}, "option offset_weight=-1: expected a positive"),
