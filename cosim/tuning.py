@@ -1,35 +1,36 @@
 """Tuning the robust MPC on its model: the cost weights chosen as the PI baseline is tuned.
 
-:func:`tune` runs the robust MPC (its default law, :data:`controllers.laws.DEFAULT`, or the law
-asked for) with the weightings of :data:`CANDIDATES`,
-and the PI baseline tuned from the same model, in closed loop with the GRU model itself as the
-plant (``plant = "model:…"``: no FMU needed) on a set-point scenario (given, else
-:func:`scenario`: steps between four steady outputs of the model, inside the box by a
-twentieth of it or two of the noise's standard deviations, each held six of its slowest
-time constants, with Gaussian sensor noise whose standard deviation is the one ``cosim
-train`` measured on the data, else the model's measured one-step prediction error, an upper
+:func:`tune` runs the robust MPC (its default law, :data:`controllers.laws.DEFAULT`, or the
+law asked for) with the weightings of :data:`CANDIDATES`, and the PI baseline tuned from the
+same model, in closed loop with the GRU model itself as the plant (``plant = "model:…"``: no
+FMU needed) on a set-point scenario (given, else :func:`scenario`: steps between four steady
+outputs the model reaches with its inputs inside their box, inside the output box by a
+twentieth of it or two of the noise's standard deviations, each held six of its slowest time
+constants, with Gaussian sensor noise whose standard deviation is the one ``cosim train``
+measured on the data, else the model's measured one-step prediction error, an upper
 estimate: a weighting that passes noise on to the inputs loses where the data were noisy).
 
 The plant is never the model: each weighting also runs on the model with one manipulated
-input's gain ``1 + gain_uncertainty`` times the model's (default :data:`GAIN_UNCERTAINTY`,
-the plant's ``gain_<input>``: :class:`cosim.adapters.gru_plant.GRUPlant`), ``m`` runs more
-for each weighting within the TV bound below (the others cannot be chosen), the
-multiplicative input uncertainty of robust control, without the sensor noise (the gain's
-effect alone; the run on the model has the noise). A weighting that is fast on the model can
-be unstable on a plant whose gains differ from it: on the zoo's Shell fractionator (the
-workshop's gain uncertainty, ``|eps| ≤ 1``) the default weights left the box in 12 of 20
-campaign runs, four of them oscillating across it, and on its Wood–Berry column (gains
-within 10 %) xB dipped under its bound in 20 of 20; the ``moves`` candidates, heavier move
-suppression, are there for those (docs: guide/own-plant.md, "The zoo", for what they did).
-:func:`choose` keeps, among the weightings whose input total variation is at most
-``tv_ratio`` times the PI's (or the default weights', where they move more: those are always
-a candidate), those with the fewest runs that leave the output box (over the nominal and the
-perturbed runs), of them those with the fewest samples outside it, and of those the one with
-the lowest summed IAE over every run (each output's IAE over its box width); a plant that
-is not square has no PI baseline, and the default weights are the reference. ``save=True``
-writes the choice into the model file's problem as its ``[mpc]`` table
-(:attr:`controllers.problem.ControlProblem.mpc`), which every later run of the model uses
-under its own options. ``cosim tune`` is its command (:mod:`cosim.commands.tune`).
+input's gain ``1 + gain_uncertainty`` times the model's, then ``1 − gain_uncertainty`` times
+(default :data:`GAIN_UNCERTAINTY`, the plant's ``gain_<input>``:
+:class:`cosim.adapters.gru_plant.GRUPlant`), ``2 m`` runs more for each weighting within the
+TV bound below (the others cannot be chosen), the multiplicative input uncertainty of robust
+control, without the sensor noise (the gain's effect alone; the run on the model has the
+noise). A weighting that is fast on the model can be unstable on a plant whose gains differ
+from it: on the zoo's Shell fractionator (the workshop's gain uncertainty, ``|eps| ≤ 1``)
+the default weights left the box in 12 of 20 campaign runs, four of them oscillating across
+it, and on its Wood–Berry column (gains within 10 %) xB dipped under its bound in 20 of 20;
+the ``moves`` candidates, heavier move suppression, are there for those (docs:
+guide/own-plant.md, "The zoo", for what they did). :func:`choose` keeps, among the
+weightings whose input total variation is at most ``tv_ratio`` times the PI's (or the
+default weights', where they move more: those are always a candidate), those with the fewest
+samples outside the output box (over the nominal and the perturbed runs), of them those with
+the fewest runs that leave it, and of those the one with the lowest summed IAE over every
+run (each output's IAE over its box width); a plant that is not square has no PI baseline,
+and the default weights are the reference. ``save=True`` writes the choice into the model
+file's problem as its ``[mpc]`` table (:attr:`controllers.problem.ControlProblem.mpc`),
+which every later run of the model uses under its own options. ``cosim tune`` is its command
+(:mod:`cosim.commands.tune`).
 """
 
 from __future__ import annotations
@@ -57,8 +58,9 @@ CANDIDATES: dict[str, dict[str, Any]] = {
     "slowest moves": {"Q": 1.0, "R": 0.01, "du_weight": 50.0},
 }
 #: The input-gain uncertainty every weighting is run against (module docstring): each
-#: manipulated input's gain times ``1 + GAIN_UNCERTAINTY`` in turn (a gain larger than the
-#: model's is what makes a fast weighting oscillate).
+#: manipulated input's gain times ``1 + GAIN_UNCERTAINTY``, then ``1 − GAIN_UNCERTAINTY``,
+#: in turn (a gain larger than the model's is what makes a fast weighting oscillate, a
+#: smaller one what makes a slow weighting trail a disturbance out of the box).
 GAIN_UNCERTAINTY = 0.5
 #: Where the inputs are held for the generated scenario's set-points (fractions of each
 #: input's box; input j takes the pattern shifted by j).
@@ -223,15 +225,15 @@ def perturbed(sc: Path, inputs: tuple[str, ...] | list[str], uncertainty: float,
         rows = [cells for _, cells in f.rows(len(header))]
     first = ["0" if c.strip().startswith("sensor.") and c.strip().endswith(".noise") else v
              for c, v in zip(header, rows[0], strict=True)]   # no noise: the gain alone
-    gain = 1.0 + uncertainty
     out = {}
-    for name in inputs:
-        key = f"gain_{name}={gain:g}"
-        out[key] = folder / f"{len(out)}.csv"
-        with out[key].open("w", newline="", encoding="utf-8") as fh:
-            csv.writer(fh, lineterminator="\n").writerows(
-                [[*header, f"plant.gain_{name}"], [*first, f"{gain:g}"],
-                 *([*r, ""] for r in rows[1:])])
+    for gain in (1.0 + uncertainty, 1.0 - uncertainty):
+        for name in inputs:
+            key = f"gain_{name}={gain:g}"
+            out[key] = folder / f"{len(out)}.csv"
+            with out[key].open("w", newline="", encoding="utf-8") as fh:
+                csv.writer(fh, lineterminator="\n").writerows(
+                    [[*header, f"plant.gain_{name}"], [*first, f"{gain:g}"],
+                     *([*r, ""] for r in rows[1:])])
     return out
 
 
@@ -325,11 +327,11 @@ def scenario(model: Any, path: Path) -> Path:
         u = np.array([c.min + PATTERN[(k + j) % len(PATTERN)] * (c.max - c.min)
                       for j, c in enumerate(problem.inputs)]
                      + [0.5 * (c.min + c.max) for c in problem.disturbances])
-        un = model.normalize_u(u)   # the model's inputs: the measured disturbances mid-box
-        x, y = equilibrium_output(params, un)
+        un, y = _reachable(model, u, lo + inset, hi - inset)
+        x = equilibrium_output(params, un)[0]
         rho = float(np.max(np.abs(np.linalg.eigvals(jacobians(params, x, un)[0]))))
         slowest = max(slowest, -1.0 / math.log(min(max(rho, 1e-12), 1.0 - 1e-12)))
-        targets.append(np.clip(model.denormalize_y(y), lo + inset, hi - inset))
+        targets.append(np.clip(y, lo + inset, hi - inset))
     hold = int(min(max(math.ceil(HOLD_TIME_CONSTANTS * slowest), HOLD_MIN), HOLD_MAX))
     names = problem.output_names
     header = ["time", *(f"ref.{o}" for o in names), *(f"sensor.{o}.noise" for o in names)]
@@ -341,6 +343,34 @@ def scenario(model: Any, path: Path) -> Path:
     rows.append(",".join([f"{len(targets) * hold * problem.Ts:g}"] + [""] * (2 * len(names))))
     path.write_text("\n".join(rows) + "\n", encoding="utf-8")
     return path
+
+
+def _reachable(model: Any, u: np.ndarray, lo: np.ndarray, hi: np.ndarray,
+               halvings: int = 12) -> tuple[np.ndarray, np.ndarray]:
+    """The inputs ``u`` (physical; the measured disturbances last, left where they are)
+    drawn toward the middle of the input box until the model's steady output lies in
+    ``[lo, hi]``, by bisection on the fraction of the way kept, and that output: a set-point
+    the model reaches with its inputs inside their box, where clipping an output outside the
+    box could ask for one it cannot reach (normalised inputs and the output returned)."""
+    from controllers.equilibrium import equilibrium_output
+
+    mid = u.copy()
+    mid[:model.m_u] = [0.5 * (c.min + c.max) for c in model.problem.inputs]
+
+    def at(fraction: float) -> tuple[np.ndarray, np.ndarray, bool]:
+        un = model.normalize_u(mid + fraction * (u - mid))
+        y = model.denormalize_y(equilibrium_output(model.params, un)[1])
+        return un, y, bool(np.all((y >= lo) & (y <= hi)))
+
+    best = at(1.0)
+    inside, outside = 0.0, 1.0
+    for _ in range(halvings if not best[2] else 0):
+        trial = at(0.5 * (inside + outside))
+        if trial[2]:
+            inside, best = 0.5 * (inside + outside), trial
+        else:
+            outside = 0.5 * (inside + outside)
+    return (best if best[2] else at(0.0))[:2]
 
 
 def _noise(model: Any) -> np.ndarray:
@@ -384,9 +414,10 @@ def choose(rows: dict[str, dict[str, Any]], tv_ratio: float) -> str:
     every run; the last three default to the first's) within the TV bound (``tv_ratio``, or
     the defaults' input motion where that is more: the default weights are always a
     candidate, and a weighting that moves the inputs less than they do is too): of those
-    with the fewest violating runs, those with the fewest samples outside the box over every
-    run (where every weighting leaves it somewhere: the one that stays out the least), and
-    of them the lowest ``iae_all``; ``"defaults"`` when none is within the bound."""
+    with the fewest samples outside the box over every run (where every weighting leaves it
+    somewhere: the one that stays out the least), of them those with the fewest violating
+    runs, and of those the lowest ``iae_all``; ``"defaults"`` when none is within the
+    bound."""
     ok = within(rows, tv_ratio)
     if not ok:
         return "defaults"
@@ -397,7 +428,7 @@ def choose(rows: dict[str, dict[str, Any]], tv_ratio: float) -> str:
     def outside(n: str) -> float:
         return rows[n].get("violations_all", rows[n]["violations"])
 
-    return min(ok, key=lambda n: (runs(n), outside(n), rows[n].get("iae_all", rows[n]["iae"])))
+    return min(ok, key=lambda n: (outside(n), runs(n), rows[n].get("iae_all", rows[n]["iae"])))
 
 
 def hint(model: Any, rows: dict[str, dict[str, float]], best: str,

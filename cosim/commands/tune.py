@@ -16,18 +16,19 @@ HELP = "choose the robust MPC's cost weights on the model itself, against the PI
 DESCRIPTION = """\
 Run the robust MPC (its tracking law) with a few cost weightings, and the PI baseline tuned
 from the same model, in closed loop with the GRU model itself as the plant (no FMU needed)
-on a set-point scenario: --scenario, else steps between four steady outputs of the model
-(inside the box by a twentieth of it, or two noise standard deviations where that is more),
-each held six of its slowest time constants, with Gaussian sensor noise whose standard
-deviation is the one cosim train measured on the data (else the model's one-step prediction
-error, its 95th percentile, or the largest error w_y_bar: upper estimates, so that a
-weighting that passes the noise on to the inputs loses where the data were noisy). The plant
-is never the model: each weighting runs again with one manipulated input's gain 1 + U times
-the model's (--gain-uncertainty, default 0.5) at a time, without the noise, m runs more for
-each weighting within the bound below. Of the weightings whose input total variation is at
-most --tv-ratio times the PI's (default 1.2), or the defaults' where they move more (none:
-the defaults), keep those with the fewest runs that leave the output box, of them those with
-the fewest samples outside it, and of those the lowest summed IAE over every run (each
+on a set-point scenario: --scenario, else steps between four steady outputs the model
+reaches with its inputs inside their box (inside the output box by a twentieth of it, or two
+noise standard deviations where that is more), each held six of its slowest time constants,
+with Gaussian sensor noise whose standard deviation is the one cosim train measured on the
+data (else the model's one-step prediction error, its 95th percentile, or the largest error
+w_y_bar: upper estimates, so that a weighting that passes the noise on to the inputs loses
+where the data were noisy). The plant is never the model: each weighting runs again with one
+manipulated input's gain 1 + U times the model's, then 1 - U times (--gain-uncertainty,
+default 0.5), one input at a time, without the noise: 2 m runs more for each weighting
+within the bound below. Of the weightings whose input total variation is at most --tv-ratio
+times the PI's (default 1.2), or the defaults' where they move more (none: the defaults),
+keep those with the fewest samples outside the output box over all runs, of them those with
+the fewest runs that leave it, and of those the lowest summed IAE over every run (each
 output's IAE over its box width). A plant that is not square has no PI baseline: the
 defaults are the reference then.
 
@@ -99,8 +100,8 @@ def run(args: argparse.Namespace) -> int:
     for name, r in result.rows.items():
         mark = "  <- chosen" if name == result.chosen else ""
         robust = ("(not run with the gains: too much input motion)"
-                  if r["iae_all"] is None else f"runs leaving the box {r['violating_runs']}"
-                  + (f" ({r['violations_all']} samples)" if r["violating_runs"] else "")
+                  if r["iae_all"] is None else f"samples out of the box {r['violations_all']}"
+                  + (f" (in {r['violating_runs']} runs)" if r["violating_runs"] else "")
                   + f"  IAE of every run {r['iae_all']:.3f}")
         print(f"  {name:26s} IAE {r['iae']:.3f}  TV {r['tv']:.3f}  violations "
               f"{r['violations']:<4d} {robust}{mark}")
