@@ -313,7 +313,7 @@ def _closed_loop(job: tuple[str, str, str, str, Any], tick: Any = None) -> dict[
 
 def scenario(model: Any, path: Path) -> Path:
     """Write the generated scenario (module docstring) of ``model`` to ``path``."""
-    from controllers.equilibrium import equilibrium_output, jacobians
+    from controllers.equilibrium import jacobians
 
     problem, params = model.problem, model.params
     lo, hi = np.array(problem.output_bounds).T
@@ -327,8 +327,7 @@ def scenario(model: Any, path: Path) -> Path:
         u = np.array([c.min + PATTERN[(k + j) % len(PATTERN)] * (c.max - c.min)
                       for j, c in enumerate(problem.inputs)]
                      + [0.5 * (c.min + c.max) for c in problem.disturbances])
-        un, y = _reachable(model, u, lo + inset, hi - inset)
-        x = equilibrium_output(params, un)[0]
+        un, x, y = _reachable(model, u, lo + inset, hi - inset)
         rho = float(np.max(np.abs(np.linalg.eigvals(jacobians(params, x, un)[0]))))
         slowest = max(slowest, -1.0 / math.log(min(max(rho, 1e-12), 1.0 - 1e-12)))
         targets.append(np.clip(y, lo + inset, hi - inset))
@@ -346,31 +345,38 @@ def scenario(model: Any, path: Path) -> Path:
 
 
 def _reachable(model: Any, u: np.ndarray, lo: np.ndarray, hi: np.ndarray,
-               halvings: int = 12) -> tuple[np.ndarray, np.ndarray]:
+               halvings: int = 12) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The inputs ``u`` (physical; the measured disturbances last, left where they are)
     drawn toward the middle of the input box until the model's steady output lies in
-    ``[lo, hi]``, by bisection on the fraction of the way kept, and that output: a set-point
-    the model reaches with its inputs inside their box, where clipping an output outside the
-    box could ask for one it cannot reach (normalised inputs and the output returned)."""
+    ``[lo, hi]``, by bisection on the fraction of the way kept: a set-point the model
+    reaches with its inputs inside their box, where clipping an output outside the box could
+    ask for one it cannot reach. Returns the normalised inputs, the steady state and its
+    output (physical); the middle of the box where no fraction puts the output inside."""
     from controllers.equilibrium import equilibrium_output
 
     mid = u.copy()
     mid[:model.m_u] = [0.5 * (c.min + c.max) for c in model.problem.inputs]
 
-    def at(fraction: float) -> tuple[np.ndarray, np.ndarray, bool]:
+    def at(fraction: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         un = model.normalize_u(mid + fraction * (u - mid))
-        y = model.denormalize_y(equilibrium_output(model.params, un)[1])
-        return un, y, bool(np.all((y >= lo) & (y <= hi)))
+        x, y = equilibrium_output(model.params, un)
+        return un, x, model.denormalize_y(y)
+
+    def inside_box(point: tuple[np.ndarray, np.ndarray, np.ndarray]) -> bool:
+        return bool(np.all((point[2] >= lo) & (point[2] <= hi)))
 
     best = at(1.0)
-    inside, outside = 0.0, 1.0
-    for _ in range(halvings if not best[2] else 0):
-        trial = at(0.5 * (inside + outside))
-        if trial[2]:
-            inside, best = 0.5 * (inside + outside), trial
+    if inside_box(best):
+        return best
+    inside, outside, best = 0.0, 1.0, at(0.0)
+    for _ in range(halvings):
+        fraction = 0.5 * (inside + outside)
+        trial = at(fraction)
+        if inside_box(trial):
+            inside, best = fraction, trial
         else:
-            outside = 0.5 * (inside + outside)
-    return (best if best[2] else at(0.0))[:2]
+            outside = fraction
+    return best
 
 
 def _noise(model: Any) -> np.ndarray:

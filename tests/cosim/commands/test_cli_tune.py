@@ -219,10 +219,11 @@ def test_the_generated_setpoints_are_steady_outputs_inside_the_box(tmp_path: Pat
     gru.problem = dataclasses.replace(gru.problem, outputs=box)
     lo, hi = np.full(2, 0.6), np.full(2, 1.1)
     far = np.array([c.max for c in gru.problem.inputs])      # both pumps full: past 1.2 m
-    un, y = _reachable(gru, far, lo, hi)
+    un, x, y = _reachable(gru, far, lo, hi)
     inputs = gru.denormalize_u(un)
     assert np.all((inputs >= 0) & (inputs < far)) and np.all((y >= lo) & (y <= hi))
-    assert np.allclose(y, gru.denormalize_y(equilibrium_output(gru.params, un)[1]))
+    steady_x, steady_y = equilibrium_output(gru.params, un)
+    assert np.allclose(x, steady_x) and np.allclose(y, gru.denormalize_y(steady_y))
     assert np.isclose(y, hi, atol=1e-3).any()     # as far out as the box allows
     assert scenario_mod.load(scenario(gru, tmp_path / "steps.csv")).stop_time > 0
     table = np.loadtxt(tmp_path / "steps.csv", delimiter=",", skiprows=1, usecols=(1, 2),
